@@ -1,0 +1,1 @@
+"""Reading and writing calibration, measurement and error-table files."""

@@ -1,0 +1,162 @@
+"""The postproc calibration file: JSON text, versioned, units explicit.
+
+Layout (see the README, "Calibration file")::
+
+    {
+      "format": "postproc calibration",
+      "version": 1,
+      "method": "static",                 # engine name, see engine/registry.py
+      "name": "s500-demo",                # free text, recorded in corrected programs
+      "units": {"length": "mm", "angle": "rad"},
+      "volume_mm": [[xmin, ymin, zmin], [xmax, ymax, zmax]],   # calibrated volume in q
+      "model": {...},                     # method-specific parameters
+      "effects": [{"name": "backlash:X", "params": {...}}, ...],  # optional
+      "fit": {...},                       # optional: how it was made (rms, n_points, sources)
+      "created_by": "postproc 0.1.0"
+    }
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from postproc import __version__
+from postproc.engine.base import Engine
+from postproc.engine.registry import engine_class
+from postproc.errors import CalibrationError
+
+FORMAT = "postproc calibration"
+VERSION = 1
+UNITS = {"length": "mm", "angle": "rad"}
+
+
+@dataclass
+class Calibration:
+    engine: Engine
+    name: str
+    sha256: str = ""
+    path: str | None = None
+    effects: list = field(default_factory=list)
+    fit: dict = field(default_factory=dict)
+
+    @property
+    def method(self) -> str:
+        return self.engine.method
+
+
+def _check_finite(obj, path: str, where: str = "model") -> None:
+    """Every number in the model must be finite: NaN or inf in a calibration is corrupt."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            _check_finite(v, path, f"{where}.{k}")
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            _check_finite(v, path, f"{where}[{i}]")
+    elif isinstance(obj, float) and not math.isfinite(obj):
+        raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+
+
+def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) -> dict:
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "method": engine.method,
+        "name": name,
+        "units": dict(UNITS),
+        "volume_mm": engine.volume_mm.tolist(),
+        "model": engine.model_to_dict(),
+        "effects": list(effects or []),
+        "fit": dict(fit or {}),
+        "created_by": f"postproc {__version__}",
+    }
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to a temporary file beside ``path``, then rename it into place."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_calibration(path, engine: Engine, *, name: str | None = None, effects=None, fit=None) -> None:
+    name = name or Path(path).stem
+    text = json.dumps(calibration_to_dict(engine, name=name, effects=effects, fit=fit), indent=2)
+    atomic_write_text(path, text + "\n")
+
+
+def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") -> Calibration:
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise CalibrationError(
+            "not a postproc calibration file (no \"format\": \"postproc calibration\")",
+            path=path,
+            hint="make one with 'postproc fit'",
+        )
+    if data.get("version") != VERSION:
+        raise CalibrationError(
+            f"calibration version {data.get('version')!r} is not supported (this postproc reads {VERSION})",
+            path=path,
+        )
+    units = data.get("units")
+    if units != UNITS:
+        raise CalibrationError(
+            f"calibration units {units!r}: expected {UNITS}",
+            path=path,
+            hint="calibration files hold lengths in mm and angles in rad; refit or convert it",
+        )
+    for key in ("method", "volume_mm", "model"):
+        if key not in data:
+            raise CalibrationError(f"calibration has no {key!r}", path=path)
+    _check_finite(data["model"], path or "", "model")
+    cls = engine_class(data["method"])
+    try:
+        engine = cls.model_from_dict(data["model"], data["volume_mm"])
+    except CalibrationError as exc:
+        raise exc.at(path=path) from None
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise CalibrationError(
+            f"malformed {data['method']} model: {type(exc).__name__}: {exc}", path=path
+        ) from None
+    effects = data.get("effects") or []
+    if effects:
+        from postproc.effects import compose  # only calibrations with effects need them
+
+        try:
+            engine = compose(engine, effects)
+        except CalibrationError as exc:
+            raise exc.at(path=path) from None
+    return Calibration(
+        engine=engine,
+        name=str(data.get("name") or (Path(path).stem if path else "calibration")),
+        sha256=sha256,
+        path=path,
+        effects=effects,
+        fit=data.get("fit") or {},
+    )
+
+
+def load_calibration(path) -> Calibration:
+    path = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise CalibrationError(f"cannot read calibration: {exc.strerror}", path=path) from None
+    sha = hashlib.sha256(raw).hexdigest()
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(f"calibration is not UTF-8 text ({exc.reason})", path=path) from None
+    except json.JSONDecodeError as exc:
+        raise CalibrationError(f"calibration is not valid JSON: {exc.msg}", path=path, lineno=exc.lineno, col=exc.colno) from None
+    return calibration_from_dict(data, path=path, sha256=sha)

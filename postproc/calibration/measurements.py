@@ -1,0 +1,133 @@
+"""Point measurements (formats.md section 1): laser tracker, probing, any 3D instrument."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from postproc.calibration.csvfile import CsvTable, format_csv, length_scale, read_csv
+from postproc.errors import MeasurementError
+
+MAGIC = "postproc measurements v1"
+LENGTH_COLUMNS = ("X", "Y", "Z", "mx", "my", "mz", "tx", "ty", "tz")
+KNOWN = set(LENGTH_COLUMNS) | {"dirx", "diry", "dirz"}
+
+
+@dataclass
+class Measurements:
+    """Commanded ``q``, measured ``m`` and tool vectors ``r`` (N, 3) in mm.
+
+    ``direction`` (N, 3) holds the approach direction of each axis (1, -1, 0) or is
+    None when the file has no dir columns. ``context`` maps every other numeric
+    column (``t``, ``temp*``, ``load``, anything else) to an (N,) array.
+    """
+
+    q: np.ndarray
+    m: np.ndarray
+    r: np.ndarray
+    direction: np.ndarray | None = None
+    context: dict[str, np.ndarray] = field(default_factory=dict)
+    path: str = ""
+    meta: dict[str, str] = field(default_factory=dict)
+    linenos: np.ndarray | None = None
+    has_tool_columns: bool = True
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    def context_full(self) -> dict[str, np.ndarray]:
+        """Context including the approach directions as ``dirx``, ``diry``, ``dirz``."""
+        ctx = dict(self.context)
+        if self.direction is not None:
+            for j, name in enumerate(("dirx", "diry", "dirz")):
+                ctx[name] = self.direction[:, j]
+        return ctx
+
+    @staticmethod
+    def concat(items: list[Measurements]) -> Measurements:
+        """Several files at once: context columns present in only some files are dropped."""
+        if len(items) == 1:
+            return items[0]
+        common = set.intersection(*(set(m.context) for m in items))
+        direction = None
+        if all(m.direction is not None for m in items):
+            direction = np.vstack([m.direction for m in items])
+        return Measurements(
+            q=np.vstack([m.q for m in items]),
+            m=np.vstack([m.m for m in items]),
+            r=np.vstack([m.r for m in items]),
+            direction=direction,
+            context={k: np.concatenate([m.context[k] for m in items]) for k in sorted(common)},
+            path=",".join(m.path for m in items),
+            meta={},
+            linenos=None,
+        )
+
+
+def measurements_from_table(table: CsvTable) -> Measurements:
+    scale = length_scale(table)
+    cols = {c: table.numeric(c) * scale for c in ("X", "Y", "Z", "mx", "my", "mz")}
+    tool = {c: table.numeric(c, default=0.0) * scale for c in ("tx", "ty", "tz")}
+    direction = None
+    if any(table.has(c) for c in ("dirx", "diry", "dirz")):
+        direction = np.column_stack([table.numeric(c, default=0.0) for c in ("dirx", "diry", "dirz")])
+        bad = ~np.isin(direction, (-1.0, 0.0, 1.0))
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            name = ("dirx", "diry", "dirz")[j]
+            raise MeasurementError(
+                f"column {name!r}: {direction[i, j]:g} is not 1, -1 or 0",
+                path=table.path,
+                lineno=table.linenos[i],
+                col=table.col_starts[i][table.header.index(name)],
+            )
+    context = {}
+    for name in table.header:
+        if name in KNOWN:
+            continue
+        try:
+            context[name] = table.numeric(name)
+        except MeasurementError:
+            continue  # a text column is kept out of the numeric context
+    if len(table.rows) == 0:
+        raise MeasurementError("no measurement rows", path=table.path, lineno=table.header_lineno)
+    return Measurements(
+        q=np.column_stack([cols["X"], cols["Y"], cols["Z"]]),
+        m=np.column_stack([cols["mx"], cols["my"], cols["mz"]]),
+        r=np.column_stack([tool["tx"], tool["ty"], tool["tz"]]),
+        direction=direction,
+        context=context,
+        path=table.path,
+        meta=table.meta,
+        linenos=np.asarray(table.linenos),
+        has_tool_columns=any(table.has(c) for c in ("tx", "ty", "tz")),
+    )
+
+
+def read_measurements(path) -> Measurements:
+    return measurements_from_table(read_csv(path))
+
+
+def format_measurements(meas: Measurements, *, comments: list[str] | None = None, decimals: int = 6) -> str:
+    """Render in the formats.md form (lengths in mm)."""
+    header = ["X", "Y", "Z", "mx", "my", "mz", "tx", "ty", "tz"]
+    cols = [meas.q, meas.m, meas.r]
+    if meas.direction is not None:
+        header += ["dirx", "diry", "dirz"]
+    names = list(meas.context)
+    header += names
+    fmt = f"{{:.{decimals}f}}"
+
+    def num(v: float) -> str:
+        s = fmt.format(v)
+        return s[1:] if s.startswith("-") and float(s) == 0 else s
+
+    rows = []
+    for i in range(len(meas)):
+        row = [num(v) for c in cols for v in c[i]]
+        if meas.direction is not None:
+            row += [str(int(v)) for v in meas.direction[i]]
+        row += [repr(float(meas.context[n][i])) for n in names]
+        rows.append(row)
+    return format_csv([MAGIC, "units: length=mm", *(comments or [])], header, rows)

@@ -1,0 +1,54 @@
+"""Tell which formats.md file a path holds, from its magic line or its header."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from postproc.errors import MeasurementError
+
+KINDS = {
+    "postproc measurements v1": "measurements",
+    "postproc axis error tables v1": "tables",
+    "postproc squareness v1": "squareness",
+}
+
+
+def sniff(path) -> str:
+    """Return "measurements", "tables" or "squareness"."""
+    path = str(path)
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            head = [fh.readline() for _ in range(50)]
+    except OSError as exc:
+        raise MeasurementError(f"cannot read file: {exc.strerror}", path=path) from None
+    except UnicodeDecodeError as exc:
+        raise MeasurementError(f"not UTF-8 text ({exc.reason})", path=path) from None
+    for line in head:
+        if line.startswith("#"):
+            body = line[1:].strip()
+            if body in KINDS:
+                return KINDS[body]
+            continue
+        if not line.strip():
+            continue
+        cols = {c.strip() for c in line.split(",")}
+        if {"X", "Y", "Z", "mx", "my", "mz"} <= cols:
+            return "measurements"
+        if {"axis", "position"} <= cols:
+            return "tables"
+        if {"name", "value"} <= cols:
+            return "squareness"
+        break
+    raise MeasurementError(
+        "cannot tell what this file holds: not point measurements, axis error tables or squareness",
+        path=path,
+        lineno=1,
+        col=1,
+        hint=f"start it with one of: {'; '.join('# ' + k for k in KINDS)}",
+    )
+
+
+def suffix_squareness(path) -> Path:
+    """``tables.csv`` -> ``tables_squareness.csv`` (formats.md's default companion)."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}_squareness{p.suffix or '.csv'}")

@@ -1,0 +1,82 @@
+"""The postproc command line. Only this package prints, exits and reads options.
+
+Each command lives in its own module and is imported only when it runs (or when the
+command list is shown), so ``postproc correct`` does not pay for plotting or fitting.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+import click
+
+from postproc import __version__
+from postproc.errors import EXIT_INTERNAL, PostprocError
+
+#: command name -> "module:attribute" (a click.Command)
+COMMANDS = {
+    "correct": "postproc.cli.correct:correct",
+    "diff": "postproc.cli.diff:diff",
+    "fit": "postproc.cli.fit:fit",
+    "orders": "postproc.cli.orders:orders",
+    "simulate": "postproc.cli.simulate:simulate",
+    "verify": "postproc.cli.verify:verify",
+    "check": "postproc.cli.check:check",
+    "mirror": "postproc.cli.mirror:mirror",
+    "predict": "postproc.cli.predict:predict",
+}
+
+
+class LazyGroup(click.Group):
+    def list_commands(self, ctx):
+        return sorted(name for name in COMMANDS if self._spec_exists(name))
+
+    @staticmethod
+    def _spec_exists(name: str) -> bool:
+        module = COMMANDS[name].partition(":")[0]
+        return importlib.util.find_spec(module) is not None
+
+    def get_command(self, ctx, name):
+        if name not in COMMANDS or not self._spec_exists(name):
+            return None
+        module, _, attr = COMMANDS[name].partition(":")
+        return getattr(importlib.import_module(module), attr)
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except PostprocError as exc:
+            click.echo(f"postproc: error: {exc}", err=True)
+            ctx.exit(exc.exit_code)
+        except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt):
+            raise
+        except BrokenPipeError:
+            # The reader went away (e.g. `| head`): not an error of ours.
+            sys.stderr.close()
+            ctx.exit(0)
+        except Exception as exc:  # a bug: say so plainly, no traceback unless asked
+            if os.environ.get("POSTPROC_DEBUG"):
+                raise
+            click.echo(
+                f"postproc: internal error: {type(exc).__name__}: {exc}\n"
+                "  hint: this is a bug in postproc; rerun with POSTPROC_DEBUG=1 for the traceback "
+                "and report it. No output file was written.",
+                err=True,
+            )
+            ctx.exit(EXIT_INTERNAL)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="postproc")
+def main() -> None:
+    """Correct CNC G-code programs for a machine's measured geometric errors.
+
+    Fit a calibration from measurements (fit), correct programs with it (correct),
+    see what moved (diff), and hold the model against measurements (check, verify).
+
+    Example:
+
+        postproc correct samples/pocket.nc -c calibrations/s500_static.json -o pocket_corrected.nc
+    """

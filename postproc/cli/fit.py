@@ -1,0 +1,90 @@
+"""postproc fit: make a calibration from measurements or axis error tables."""
+
+from __future__ import annotations
+
+import click
+
+from postproc.cli.options import parse_vector
+
+
+@click.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.option("-m", "--method", type=click.Choice(["static", "interval", "grid", "parametric"]),
+              default=None, help="Model to fit. Default: parametric for axis error tables, static for points.")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="Calibration file to write (JSON text), whatever its name.")
+@click.option("--name", default=None, help="Calibration name recorded in corrected programs (default: output stem).")
+@click.option("--squareness", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Squareness file for axis error tables (default: TABLES_squareness.csv if present).")
+@click.option("--intervals", default=None, metavar="SPEC",
+              help="Interval method: partition, e.g. 'X=0,100,200,315;Y=3;Z=2' (edges, or a count per axis).")
+@click.option("--step", default=None, metavar="MM",
+              help="Grid method: grid step u1,u2,u3 in mm (default: the lattice step of the data).")
+@click.option("--screw-pitch", "screw_pitch", multiple=True, metavar="AXIS=P",
+              help="Declared lead-screw pitch (mm) of an axis, to warn about grid steps that alias it.")
+@click.option("--knot-spacing", "knot_spacing", type=float, default=None, metavar="MM",
+              help="Parametric identification: B-spline knot spacing (default: from the data).")
+@click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
+              help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
+@click.option("--effect", "effects", multiple=True, metavar="NAME",
+              help="Add a physical effect to the model, named as 'postproc check' prints it "
+                   "(e.g. backlash:X, periodic:Y, thermal:t, load:load). Repeatable.")
+def fit(files, method, output, name, squareness, intervals, step, screw_pitch, knot_spacing,
+        tool_vector, effects):
+    """Fit a calibration from point measurements or axis error tables.
+
+    FILES are formats.md CSV files: point measurements (several files are fitted
+    together), or axis error tables with their squareness file. The calibration is
+    written to OUTPUT atomically; a summary of the fit (residual, rank,
+    undetermined parameters) is printed.
+
+    Example:
+
+        postproc fit samples/tracker_6points.csv --method static -o my_static.json
+    """
+    from postproc.calibration.calfile import save_calibration
+    from postproc.calibration.measurements import read_measurements
+    from postproc.calibration.sniff import sniff
+    from postproc.engine.registry import fitter
+    from postproc.errors import MeasurementError
+
+    kinds = [sniff(f) for f in files]
+    options = {
+        "intervals": intervals,
+        "step": step,
+        "screw_pitch": list(screw_pitch) or None,
+        "knot_spacing": knot_spacing,
+    }
+    options = {k: v for k, v in options.items() if v is not None}
+    if "tables" in kinds:
+        if any(k != "tables" for k in kinds):
+            raise MeasurementError("axis error tables cannot be fitted together with point files",
+                                   path=files[kinds.index("measurements")] if "measurements" in kinds else files[0])
+        if method not in (None, "parametric"):
+            raise click.UsageError("axis error tables make a parametric calibration; drop --method or use parametric")
+        from postproc.engine.parametric_tables import fit_tables
+
+        result = fit_tables(list(files), squareness=squareness, **options)
+    else:
+        method = method or "static"
+        data = [read_measurements(f) for f in files]
+        if tool_vector is not None:
+            r = parse_vector(tool_vector, "--tool-vector")
+            for d in data:
+                if not d.has_tool_columns:
+                    d.r[:] = r
+        if effects:
+            from postproc.diagnose.refit import fit_with_effects
+
+            result = fit_with_effects(method, data, list(effects), **options)
+        else:
+            result = fitter(method)(data, **options)
+    for line in result.report:
+        click.echo(line, err=True)
+    click.echo(
+        f"fit residual: RMS {result.rms_mm * 1000:.2f} um, max {result.max_mm * 1000:.2f} um "
+        f"over {len(result.residuals_mm)} points",
+        err=True,
+    )
+    save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
+    click.echo(f"wrote {output}", err=True)

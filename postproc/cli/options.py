@@ -1,0 +1,70 @@
+"""Parsers for option values shared by several commands (they raise click.BadParameter)."""
+
+from __future__ import annotations
+
+import re
+
+import click
+
+_AXES = "XYZ"
+
+
+def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
+    """``"0,0,-100"`` -> (0.0, 0.0, -100.0)."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise click.BadParameter(f"{what} must be three numbers X,Y,Z, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+)$", re.IGNORECASE)
+
+
+def parse_offset(text: str) -> tuple[str, dict[str, float]]:
+    """``"G54=X100,Y50,Z-300"`` -> ("G54", {"X": 100, "Y": 50, "Z": -300}).
+
+    Values are machine-frame offsets in mm, or in inches when the list ends with
+    ``in`` (``G55=X1,Y2,Z3in``), whatever units the program itself uses.
+    """
+    name, sep, rest = text.partition("=")
+    name = name.strip().upper().replace(" ", "")
+    if not sep or not _OFFSET_NAME.match(name):
+        raise click.BadParameter(
+            f"{text!r}: expected NAME=X..,Y..,Z.. with NAME one of G54..G59, G59.1..G59.3, G54.1P<n>"
+        )
+    scale = 1.0
+    rest = rest.strip()
+    if rest.lower().endswith("in"):
+        scale, rest = 25.4, rest[:-2]
+    values: dict[str, float] = {}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        m = re.fullmatch(r"([XYZABCxyzabc])\s*([-+]?(?:\d+\.?\d*|\.\d+))", item)
+        if not m:
+            raise click.BadParameter(f"{text!r}: {item!r} is not an axis letter and a number")
+        values[m.group(1).upper()] = float(m.group(2)) * scale
+    return name, values
+
+
+def parse_tool_length(text: str) -> tuple[int, float]:
+    """``"1=100.5"`` or ``"H1=100.5"`` -> (1, 100.5) (mm)."""
+    key, sep, value = text.partition("=")
+    key = key.strip().upper().lstrip("HT")
+    try:
+        return int(key), float(value)
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: expected H=L, e.g. 1=100.5 or H1=100.5 (mm)") from None
+
+
+def parse_context(text: str) -> tuple[str, float]:
+    """``"temp=21.5"`` -> ("temp", 21.5)."""
+    key, sep, value = text.partition("=")
+    try:
+        if not sep or not key.strip():
+            raise ValueError
+        return key.strip(), float(value)
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: expected NAME=VALUE, e.g. temp=21.5") from None

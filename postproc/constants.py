@@ -1,0 +1,27 @@
+"""Named tolerances, each with the reason for its value."""
+
+# Inverse solvers stop when |F(q) - p*| is below this: a hundred times finer than the
+# best machine-tool positioning resolution (0.1 um), so it never shows in a program.
+SOLVER_TOL_MM = 1e-6
+
+# Most iterations a converged solver may take before it reports failure. Newton on a
+# smooth error field with corrections << 1 mm converges in 2-4; 50 means something is wrong.
+SOLVER_MAX_ITER = 50
+
+# Default bound on any single correction; a unit mistake (um read as mm) must not move
+# a machine by millimetres.
+DEFAULT_MAX_CORRECTION_MM = 1.0
+
+# Default path tolerance between the emitted and the corrected ideal path.
+DEFAULT_TOLERANCE_MM = 0.001
+
+# Controller arc check: endpoint radii must agree within this absolute difference ...
+ARC_RADIUS_ABS_MM = 0.002
+# ... or this relative difference (LinuxCNC's rule: 0.002 mm or 0.1 %).
+ARC_RADIUS_REL = 0.001
+
+# Relative slack on calibrated-volume bounds so a point measured exactly at the edge and
+# re-read from text with rounding is still inside.
+VOLUME_EDGE_SLACK_MM = 1e-6
+
+MM_PER_INCH = 25.4

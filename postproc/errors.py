@@ -1,0 +1,103 @@
+"""Project exceptions. Every error about user input names its place.
+
+``str(err)`` is ``path:line:col: message`` (the parts that are known), followed
+by a hint line saying what to do. Only :mod:`postproc.cli` turns these into exit
+codes; library code raises them and never prints.
+"""
+
+from __future__ import annotations
+
+# Exit codes, documented in the README. The CLI maps exceptions to them.
+EXIT_OK = 0
+EXIT_INTERNAL = 1  # a bug: please report it
+EXIT_USAGE = 2  # bad command-line usage (click's own code)
+EXIT_INPUT = 3  # a G-code, measurement or table file cannot be read as given
+EXIT_CALIBRATION = 4  # a calibration file is malformed, in the wrong units or unfit
+EXIT_SAFETY = 5  # a safety rule refused the job (bound, volume, missing offset, twice)
+
+
+class PostprocError(Exception):
+    """Base of every error caused by user input or a refused job."""
+
+    exit_code = EXIT_INPUT
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | None = None,
+        lineno: int | None = None,
+        col: int | None = None,
+        hint: str | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.message = message
+        self.path = path
+        self.lineno = lineno
+        self.col = col
+        self.hint = hint
+
+    @property
+    def place(self) -> str:
+        parts = [str(p) for p in (self.path, self.lineno, self.col) if p is not None]
+        return ":".join(parts)
+
+    def __str__(self) -> str:
+        head = f"{self.place}: {self.message}" if self.place else self.message
+        return f"{head}\n  hint: {self.hint}" if self.hint else head
+
+    def at(self, path: str | None = None, lineno: int | None = None, col: int | None = None):
+        """Fill in a place that was not known where the error was raised."""
+        if self.path is None and path is not None:
+            self.path = path
+        if self.lineno is None and lineno is not None:
+            self.lineno = lineno
+        if self.col is None and col is not None:
+            self.col = col
+        return self
+
+
+class GcodeSyntaxError(PostprocError):
+    """A character or word that is not G-code."""
+
+
+class UnsupportedGcodeError(PostprocError):
+    """Valid G-code that postproc refuses to correct (macros, subprograms, ...)."""
+
+
+class MeasurementError(PostprocError):
+    """A measurement or error-table file that does not follow formats.md."""
+
+
+class CalibrationError(PostprocError):
+    """A calibration file that is malformed, in the wrong units, or unusable."""
+
+    exit_code = EXIT_CALIBRATION
+
+
+class SafetyError(PostprocError):
+    """A safety rule refused the job; nothing was written."""
+
+    exit_code = EXIT_SAFETY
+
+
+class OutOfVolumeError(SafetyError):
+    """A target lies outside the calibrated volume."""
+
+
+class CorrectionTooLargeError(SafetyError):
+    """A correction exceeds --max-correction."""
+
+
+class MissingSetupError(SafetyError):
+    """A work offset or tool length that the program uses was not given."""
+
+
+class AlreadyCorrectedError(SafetyError):
+    """The program already carries a postproc header."""
+
+
+class SolverError(PostprocError):
+    """An inverse solver did not converge within its tolerance."""
+
+    exit_code = EXIT_SAFETY
