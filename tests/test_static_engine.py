@@ -68,7 +68,9 @@ def test_calibration_round_trip_and_validation(tmp_path):
     path = tmp_path / "cal.anyname"
     save_calibration(path, eng, name="demo")
     cal = load_calibration(path)
-    assert cal.name == "demo" and cal.method == "static" and len(cal.sha256) == 64
+    assert cal.name == "demo"
+    assert cal.method == "static"
+    assert len(cal.sha256) == 64
     assert_allclose(cal.engine.G, eng.G)
     data = json.loads(path.read_text())
     data["units"]["length"] = "um"
