@@ -1,0 +1,135 @@
+"""postproc simulate: measure a virtual machine with simulated instruments."""
+
+from __future__ import annotations
+
+import click
+
+from postproc.cli.options import parse_context, parse_vector
+
+
+def _parse_volume(text: str) -> list[list[float]]:
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        v = [float(p) for p in parts]
+    except ValueError:
+        v = []
+    if len(v) != 6:
+        raise click.BadParameter(f"--volume must be six numbers xmin,ymin,zmin,xmax,ymax,zmax, got {text!r}")
+    return [v[:3], v[3:]]
+
+
+def _parse_floats(text: str, what: str) -> list[float]:
+    try:
+        return [float(p) for p in text.split(",") if p.strip()]
+    except ValueError:
+        raise click.BadParameter(f"{what} must be comma-separated numbers, got {text!r}") from None
+
+
+@click.command()
+@click.argument("machine", type=click.Path(exists=True, dir_okay=False))
+@click.option("--grid", "grid_step", default=None, metavar="STEP",
+              help="Tracker grid over the volume with this step in mm (one value or SX,SY,SZ).")
+@click.option("--random", "n_random", type=int, default=None, metavar="N",
+              help="N tracker points drawn uniformly in the volume.")
+@click.option("--static-set", "static", is_flag=True,
+              help="The static method's six points: two per axis (low corner and each axis end).")
+@click.option("--tables", "tables", is_flag=True,
+              help="Interferometer axis error tables; the squareness goes to OUTPUT_squareness.csv.")
+@click.option("--step", "step", type=float, default=5.0, show_default=True, metavar="MM",
+              help="Position step of the interferometer tables.")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="File to write (formats.md CSV), written atomically.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the instrument noise.")
+@click.option("--no-noise", "no_noise", is_flag=True, help="Exact values, no instrument noise.")
+@click.option("--volume", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
+              help="Measure this part of the travel (mm); default: the machine's whole volume.")
+@click.option("--tool-vector", "tool_vectors", multiple=True, metavar="X,Y,Z",
+              help="Reflector/tool vector from the gauge point (mm); repeat to measure the set "
+                   "with each. Default 0,0,0.")
+@click.option("--approach", type=click.Choice(["positive", "both"]), default="positive", show_default=True,
+              help="Approach each point moving + on every axis, or both + and -.")
+@click.option("--repeats", type=int, default=1, show_default=True,
+              help="Shots per point (the seed averaged 12); each is its own row.")
+@click.option("--time-span", "time_span", type=float, default=None, metavar="S",
+              help="Spread the rows evenly over S seconds and write a t column.")
+@click.option("--temp-profile", "temp_profile", default=None, metavar="T|T0:T1|T0:T1:TAU",
+              help="Write a temp column: constant, linear ramp over the run, or warm-up from T0 "
+                   "towards T1 with time constant TAU s.")
+@click.option("--load-values", "load_values", default=None, metavar="L1,L2,...",
+              help="Measure the set once per load value and write a load column.")
+@click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
+              help="A constant context column (repeatable).")
+def simulate(machine, grid_step, n_random, static, tables, step, output, seed, no_noise, volume,
+             tool_vectors, approach, repeats, time_span, temp_profile, load_values, contexts):
+    """Measure a virtual machine: tracker points or interferometer tables.
+
+    MACHINE is a machine definition (JSON, "format": "postproc machine"; see
+    docs/virtual-machine.md). Choose one of --grid, --random, --static-set or
+    --tables. Point files carry X,Y,Z, the measured mx,my,mz (machine forward model
+    plus tracker noise), tool vectors, approach directions and any context asked for;
+    they are read back by 'postproc fit' like any instrument's file. --seed makes the
+    noise reproducible.
+
+    Example:
+
+        postproc simulate calibrations/s500.machine.json --static-set --repeats 12 -o six.csv
+    """
+    import numpy as np
+
+    from postproc.calibration.calfile import atomic_write_text
+    from postproc.calibration.measurements import format_measurements
+    from postproc.simulate import load_machine
+    from postproc.simulate.points import (
+        grid_points,
+        measurement_plan,
+        random_points,
+        simulate_plan,
+        static_set,
+    )
+
+    chosen = [name for name, on in (("--grid", grid_step is not None), ("--random", n_random is not None),
+                                    ("--static-set", static), ("--tables", tables)) if on]
+    if len(chosen) != 1:
+        raise click.UsageError("choose exactly one of --grid, --random, --static-set, --tables"
+                               + (f" (got {', '.join(chosen)})" if chosen else ""))
+    mach = load_machine(machine)
+    rng = np.random.default_rng(seed)
+    vol = _parse_volume(volume) if volume else mach.volume_mm.tolist()
+    comments = [f"simulated by postproc from machine {mach.name!r} ({machine})",
+                f"seed: {seed}", f"noise: {'off' if no_noise else 'on'}"]
+
+    if tables:
+        from postproc.calibration.sniff import suffix_squareness
+        from postproc.simulate.tables import simulate_tables
+        from postproc.simulate.tables_io import axis_errors_text
+
+        ctx = dict(parse_context(c) for c in contexts)
+        tabs, sq = simulate_tables(mach, step, rng, noise=not no_noise, context=ctx)
+        sq_path = suffix_squareness(output)
+        text, sq_text = axis_errors_text(tabs, sq, comments=comments + [f"step: {step:g} mm"])
+        atomic_write_text(sq_path, sq_text)
+        atomic_write_text(output, text)
+        click.echo(f"wrote {output} ({sum(len(t.position) for t in tabs.values())} rows) and {sq_path}",
+                   err=True)
+        return
+
+    if grid_step is not None:
+        points = grid_points(vol, _parse_floats(grid_step, "--grid"))
+        comments.append(f"grid step: {grid_step} mm")
+    elif n_random is not None:
+        points = random_points(vol, n_random, rng)
+    else:
+        points = static_set(vol)
+    plan = measurement_plan(
+        points,
+        tool_vectors=[parse_vector(t, "--tool-vector") for t in tool_vectors] or None,
+        approach=approach,
+        repeats=repeats,
+        time_span_s=time_span,
+        temp_profile=temp_profile,
+        load_values=_parse_floats(load_values, "--load-values") if load_values else None,
+        context=dict(parse_context(c) for c in contexts),
+    )
+    meas = simulate_plan(mach, plan, rng, noise=not no_noise)
+    atomic_write_text(output, format_measurements(meas, comments=comments))
+    click.echo(f"wrote {output}: {len(meas)} rows ({len(points)} points)", err=True)
