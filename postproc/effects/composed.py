@@ -1,0 +1,101 @@
+"""A base engine plus physical effects: ``forward = base.forward + sum of displacements``.
+
+The inverse solves ``base.forward(q) + D(q) = p*`` by a fixed-point iteration around
+the base inverse, ``q_{k+1} = base.inverse(p* - D(q_k))``; it converges because the
+effects' displacements change by far less than the step in q (|dD/dq| << 1), and it
+stops when ``|F(q) - p*| < SOLVER_TOL_MM``.
+
+Context: effects read their columns from ``context`` (``dirx/diry/dirz`` from the
+pipeline, ``t``, ``temp``, ``load``... from ``--context NAME=VALUE``). A missing
+value raises MissingSetupError naming the ``--context`` to give.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
+from postproc.effects.base import Effect, context_hint
+from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
+from postproc.errors import CalibrationError, MissingSetupError
+
+
+class ComposedEngine(Engine):
+    """``base`` with ``effects``; serialises as the base model (effects go in "effects")."""
+
+    affine = False
+
+    def __init__(self, base: Engine, effects: list[Effect]) -> None:
+        super().__init__(base.volume_mm)
+        self.base = base
+        self.effects = list(effects)
+        self.method = base.method  # the calibration file's method is the base's
+
+    @property
+    def needs(self) -> list[str]:
+        out: list[str] = []
+        for e in self.effects:
+            out += [c for c in e.needs if c not in out]
+        return out
+
+    def effects_dicts(self) -> list[dict]:
+        return [e.to_dict() for e in self.effects]
+
+    def check_context(self, names) -> None:
+        """Refuse early, before a program is processed, when a needed value is missing."""
+        names = set(names or ())
+        for e in self.effects:
+            for c in e.needs:
+                if c not in names:
+                    raise MissingSetupError(
+                        f"the calibration's effect {e.name} needs the context value {c!r}, which was not given",
+                        hint=context_hint(c),
+                    )
+
+    def displacement(self, q, r=None, context=None) -> np.ndarray:
+        q = check_points(q, "q")
+        rr = check_tool_vectors(r, len(q))
+        d = np.zeros_like(q)
+        for e in self.effects:
+            d += e.displacement(q, rr, context)
+        return d
+
+    def forward(self, q, r=None, context=None) -> np.ndarray:
+        q = check_points(q, "q")
+        rr = check_tool_vectors(r, len(q))
+        return self.base.forward(q, rr, context) + self.displacement(q, rr, context)
+
+    def inverse(self, p, r=None, context=None) -> InverseResult:
+        p = check_points(p, "p")
+        rr = check_tool_vectors(r, len(p))
+        res = self.base.inverse(p, rr, context)
+        q = res.q
+        iters = np.zeros(len(p), dtype=int)
+        resid = np.linalg.norm(self.forward(q, rr, context) - p, axis=1)
+        for _ in range(SOLVER_MAX_ITER):
+            todo = resid >= SOLVER_TOL_MM
+            if not todo.any():
+                break
+            sub = _subset_context(context, todo, len(p))
+            d = self.displacement(q[todo], rr[todo], sub)
+            q[todo] = self.base.inverse(p[todo] - d, rr[todo], sub).q
+            iters[todo] += 1
+            resid[todo] = np.linalg.norm(self.forward(q[todo], rr[todo], sub) - p[todo], axis=1)
+        return InverseResult(q, resid, iters)
+
+    def model_to_dict(self) -> dict:
+        return self.base.model_to_dict()
+
+    @classmethod
+    def model_from_dict(cls, model: dict, volume_mm) -> Engine:
+        raise CalibrationError("a composed engine is loaded as its base method plus \"effects\"")
+
+
+def _subset_context(context, mask: np.ndarray, n: int):
+    if context is None:
+        return None
+    out = {}
+    for k, v in context.items():
+        a = np.asarray(v)
+        out[k] = a[mask] if a.ndim == 1 and a.shape[0] == n else v
+    return out

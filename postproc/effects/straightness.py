@@ -1,0 +1,71 @@
+"""Higher-order straightness of one axis's motion (bow and S-shape).
+
+Physics: a guideway that is not straight makes the moving axis deviate sideways; the
+linear part of that deviation is a squareness/tilt that affine models already hold,
+what remains is a bow (quadratic) and an S-shape (cubic). For ``straightness:X`` the
+deviations in Y and in Z as functions of X, with ``u`` the position scaled to [-1, 1]
+over the travel (``config["center_mm"]``, ``config["half_travel_mm"]``)::
+
+    dy = bow_y * u^2 + s_y * u^3,   dz = bow_z * u^2 + s_z * u^3
+
+Parameters are the deviations at the end of the travel, mm. Compensable from position.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.effects.base import AXES, Effect
+
+# Fewer distinct positions along the axis than this cannot show a cubic shape beside
+# the affine terms of the model.
+MIN_DISTINCT_POSITIONS = 5
+
+
+class Straightness(Effect):
+    kind = "straightness"
+    meaning = "bow and S-shape of an axis's straightness"
+
+    @property
+    def axis(self) -> int:
+        return AXES.index(self.target)
+
+    @property
+    def others(self) -> tuple[int, int]:
+        a = self.axis
+        return tuple(j for j in range(3) if j != a)  # type: ignore[return-value]
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        o1, o2 = (AXES[j] for j in self.others)
+        return (f"bow_{o1.lower()}_mm", f"s_{o1.lower()}_mm", f"bow_{o2.lower()}_mm", f"s_{o2.lower()}_mm")
+
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        parts = []
+        for j in self.others:
+            a = AXES[j].lower()
+            parts.append(f"in {a.upper()}: bow {p[f'bow_{a}_mm'] * 1000:+.2f} um, "
+                         f"S {p[f's_{a}_mm'] * 1000:+.2f} um")
+        return f"straightness of {self.target} (at end of travel) " + "; ".join(parts)
+
+    def untestable_reason(self, q, r, ctx) -> str | None:
+        n = len(np.unique(np.round(np.asarray(q)[:, self.axis], 6)))
+        if n < MIN_DISTINCT_POSITIONS:
+            return f"only {n} distinct {self.target} positions"
+        return None
+
+    def basis(self, q, r, ctx) -> np.ndarray:
+        c = float(self.config.get("center_mm", 0.0))
+        h = float(self.config.get("half_travel_mm", 1.0))
+        u = (q[:, self.axis] - c) / h
+        B = np.zeros((len(q), 3, 4))
+        o1, o2 = self.others
+        B[:, o1, 0], B[:, o1, 1] = u**2, u**3
+        B[:, o2, 2], B[:, o2, 3] = u**2, u**3
+        return B
+
+    def prepare(self, q, r, ctx, resid) -> Straightness:
+        x = np.asarray(q)[:, self.axis]
+        lo, hi = float(np.min(x)), float(np.max(x))
+        return self.copy(config={"center_mm": 0.5 * (lo + hi), "half_travel_mm": max(0.5 * (hi - lo), 1e-3)})

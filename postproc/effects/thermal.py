@@ -1,0 +1,113 @@
+"""Thermal drift: the machine grows as it warms up, or with its temperature.
+
+``thermal:t`` (needs ``t``, seconds since the start of the warm-up): a first-order
+lag towards a steady state. Each axis's zero point migrates by ``d`` (``dx_mm``,
+``dy_mm``, ``dz_mm``, the growth once warm) with time constant ``tau_s``::
+
+    displacement = (dx, dy, dz) * (1 - exp(-t / tau))
+
+``tau`` is a non-linear setting found by a 1-D search (log-spaced, least squares on
+the residual); with ``tau`` much longer than the campaign the drift is linear in t.
+
+``thermal:temp`` (or any column named ``temp...``, needs it): linear in temperature
+about the ISO 1 reference temperature of 20 °C::
+
+    displacement = (kx, ky, kz) * (T - 20)          k in mm per °C
+
+Compensable in a program only at a known state: ``--context t=SECONDS`` (time since
+the warm-up started when the program runs) or ``--context temp=°C``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.effects.base import Effect, context_column, lstsq_with_offset
+
+# Time constants searched, as fractions of the time span of the data: from a lag that
+# is over after the first few percent of the campaign (it looks like a step) to one
+# several times longer than the campaign (it looks linear).
+TAU_MIN_SPAN_FRACTION = 0.02
+TAU_MAX_SPAN_FRACTION = 5.0
+# Number of log-spaced time constants tried: adjacent ones differ by ~12 %, finer
+# than the time constant is ever determined by noisy data.
+TAU_GRID_POINTS = 48
+
+# ISO 1: the standard reference temperature for geometrical measurements.
+REFERENCE_TEMPERATURE_C = 20.0
+
+
+class ThermalTime(Effect):
+    kind = "thermal"
+    meaning = "warm-up drift: zero points migrate along a first-order lag in time"
+
+    @property
+    def needs(self) -> tuple[str, ...]:
+        return ("t",)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return ("dx_mm", "dy_mm", "dz_mm")
+
+    @property
+    def compensable_reason(self) -> str:
+        return "compensated at the warm-up time given as --context t=SECONDS"
+
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        tau = self.config.get("tau_s", float("nan"))
+        return ("warm-up drift (growth when warm) "
+                + " ".join(f"{a} {p[k] * 1000:+.2f} um" for a, k in zip("XYZ", self.param_names, strict=True))
+                + f", time constant {tau / 60:.1f} min")
+
+    def basis(self, q, r, ctx) -> np.ndarray:
+        t = context_column(ctx, "t", len(q), self.name)
+        tau = float(self.config.get("tau_s", 0.0))
+        if tau <= 0:
+            from postproc.errors import CalibrationError
+
+            raise CalibrationError(f"effect {self.name} has no tau_s > 0 in its config")
+        g = 1.0 - np.exp(-np.clip(t, 0.0, None) / tau)
+        return np.einsum("n,jk->njk", g, np.eye(3))
+
+    def prepare(self, q, r, ctx, resid) -> ThermalTime:
+        t = np.asarray(ctx["t"], dtype=float)
+        span = max(float(np.max(t)), float(np.ptp(t)))
+        taus = np.geomspace(TAU_MIN_SPAN_FRACTION * span, TAU_MAX_SPAN_FRACTION * span, TAU_GRID_POINTS)
+        best, best_sse = taus[0], np.inf
+        for tau in taus:
+            B = self.copy(config={"tau_s": float(tau)}).basis(q, r, ctx)
+            _, sse = lstsq_with_offset(B, resid)
+            if sse < best_sse:
+                best, best_sse = tau, sse
+        return self.copy(config={"tau_s": float(best)})
+
+
+class ThermalTemperature(Effect):
+    kind = "thermal"
+    meaning = "thermal growth linear in temperature (about 20 °C)"
+
+    @property
+    def needs(self) -> tuple[str, ...]:
+        return (self.target,)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return ("kx_mm_per_C", "ky_mm_per_C", "kz_mm_per_C")
+
+    @property
+    def compensable_reason(self) -> str:
+        return f"compensated at the temperature given as --context {self.target}=°C"
+
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        return (f"thermal growth per °C of {self.target} "
+                + " ".join(f"{a} {p[k] * 1000:+.2f} um/°C" for a, k in zip("XYZ", self.param_names, strict=True)))
+
+    def basis(self, q, r, ctx) -> np.ndarray:
+        T = context_column(ctx, self.target, len(q), self.name)
+        ref = float(self.config.get("reference_C", REFERENCE_TEMPERATURE_C))
+        return np.einsum("n,jk->njk", T - ref, np.eye(3))
+
+    def prepare(self, q, r, ctx, resid) -> ThermalTemperature:
+        return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})

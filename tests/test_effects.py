@@ -1,0 +1,132 @@
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.effects import candidate_names, compose, effect_from_dict, get_effect
+from postproc.effects.composed import ComposedEngine
+from postproc.engine.static import StaticEngine
+from postproc.errors import CalibrationError, MissingSetupError
+
+RNG = np.random.default_rng(11)
+VOLUME = [[0, 0, 0], [300, 300, 300]]
+
+
+def base_engine():
+    G = np.eye(3) + np.array([[80e-6, -50e-6, 30e-6], [0, 60e-6, -40e-6], [0, 0, -20e-6]])
+    return StaticEngine(G, [0.02, -0.01, 0.005], VOLUME)
+
+
+ALL_EFFECTS = [
+    get_effect("backlash:X", params={"b_mm": 0.012}),
+    get_effect("periodic:Y", config={"pitch_mm": 10.0}, params={"cos_mm": 0.003, "sin_mm": -0.002}),
+    get_effect("thermal:t", config={"tau_s": 1800.0}, params={"dx_mm": 0.004, "dz_mm": 0.01}),
+    get_effect("thermal:temp", params={"kz_mm_per_C": 0.003}),
+    get_effect("load:load", params={"cz_mm_per_unit": -2e-5}),
+    get_effect("abbe:tilt", params={"wx_rad": 2e-5, "wy_rad": -1e-5}),
+    get_effect("abbe:Y", params={"wx_rad_per_mm": 5e-8}),
+    get_effect("squareness:XY", params={"EC0Y_rad": 3e-5}),
+    get_effect("scale:Z", params={"scale": 2e-5}),
+    get_effect("straightness:X", config={"center_mm": 150, "half_travel_mm": 150},
+               params={"bow_y_mm": 0.004, "s_z_mm": -0.003}),
+    get_effect("lever:XZ", params={"EAX_rad_per_mm": 1e-7, "EBX_rad_per_mm": -5e-8}),
+    get_effect("linear:humidity", config={"reference": 50}, params={"ax_mm_per_unit": 1e-4}),
+]
+
+
+def full_context(n):
+    return {
+        "dirx": RNG.choice([-1.0, 1.0], n), "t": RNG.uniform(0, 7200, n),
+        "temp": RNG.uniform(19, 23, n), "load": RNG.uniform(0, 500, n), "humidity": RNG.uniform(30, 70, n),
+    }
+
+
+def test_displacement_is_basis_times_params():
+    q = RNG.uniform(0, 300, (50, 3))
+    r = RNG.uniform(-100, 100, (50, 3))
+    ctx = full_context(50)
+    for e in ALL_EFFECTS:
+        B = e.basis(q, r, ctx)
+        assert B.shape == (50, 3, len(e.param_names)), e.name
+        assert_allclose(e.displacement(q, r, ctx), B @ e.param_vector(), err_msg=e.name)
+        assert np.abs(e.displacement(q, r, ctx)).max() > 0, e.name
+
+
+def test_backlash_is_half_reversal_along_its_axis():
+    e = get_effect("backlash:Y", params={"b_mm": 0.01})
+    q = np.zeros((2, 3))
+    d = e.displacement(q, None, {"diry": np.array([1.0, -1.0])})
+    assert_allclose(d, [[0, 0.005, 0], [0, -0.005, 0]])
+    assert e.needs == ("diry",)
+
+
+def test_dict_round_trip_and_unknown_names():
+    for e in ALL_EFFECTS:
+        back = effect_from_dict(e.to_dict())
+        assert back.name == e.name
+        assert back.config == e.config
+        assert back.params == e.params
+    with pytest.raises(CalibrationError, match="unknown effect"):
+        get_effect("wobble:X")
+    with pytest.raises(CalibrationError, match="unknown effect"):
+        get_effect("backlash:W")
+    with pytest.raises(CalibrationError, match="unknown parameter"):
+        get_effect("backlash:X", params={"gap": 1})
+
+
+def test_compose_inverse_round_trip_with_backlash_context():
+    eng = compose(base_engine(), [e.to_dict() for e in ALL_EFFECTS])
+    n = 500
+    p = RNG.uniform(0, 300, (n, 3))
+    r = np.array([0, 0, -120.0])
+    ctx = full_context(n)
+    res = eng.inverse(p, r, ctx)
+    assert res.residual_mm.max() < 1e-6
+    assert_allclose(eng.forward(res.q, r, ctx), p, atol=1e-6)
+    # scalars from --context broadcast like per-point arrays
+    ctx_scalar = dict(ctx, t=3600.0, temp=21.0, load=100.0, humidity=55.0)
+    res2 = eng.inverse(p, r, ctx_scalar)
+    assert_allclose(eng.forward(res2.q, r, ctx_scalar), p, atol=1e-6)
+    # the correction differs between approach directions by the backlash
+    one = np.array([[100.0, 100, 100]] * 2)
+    res3 = eng.inverse(one, r, dict(ctx_scalar, dirx=np.array([1.0, -1.0])))
+    assert res3.q[1, 0] - res3.q[0, 0] == pytest.approx(0.012 * eng.base.G_inv[0, 0], abs=1e-6)
+
+
+def test_compose_refuses_thermal_without_context():
+    eng = compose(base_engine(), [ALL_EFFECTS[2].to_dict()])
+    p = RNG.uniform(0, 300, (5, 3))
+    with pytest.raises(MissingSetupError, match="thermal:t") as exc:
+        eng.inverse(p, None, {"dirx": np.ones(5)})
+    assert "--context t=" in str(exc.value)
+    with pytest.raises(MissingSetupError, match="--context t="):
+        eng.check_context({"dirx"})
+    eng.check_context({"t"})
+
+
+def test_calibration_file_carries_effects(tmp_path):
+    eng = base_engine()
+    effs = [ALL_EFFECTS[0].to_dict(), ALL_EFFECTS[1].to_dict()]
+    path = tmp_path / "cal.json"
+    save_calibration(path, eng, effects=effs)
+    cal = load_calibration(path)
+    assert isinstance(cal.engine, ComposedEngine)
+    assert cal.method == "static"
+    q = RNG.uniform(0, 300, (20, 3))
+    ctx = {"dirx": RNG.choice([-1.0, 1.0], 20)}
+    expected = eng.forward(q) + ALL_EFFECTS[0].displacement(q, None, ctx) + ALL_EFFECTS[1].displacement(q)
+    assert_allclose(cal.engine.forward(q, None, ctx), expected, atol=1e-12)
+    # a composed engine saves as its base model plus its effects
+    path2 = tmp_path / "again.json"
+    save_calibration(path2, cal.engine, effects=cal.engine.effects_dicts())
+    assert_allclose(load_calibration(path2).engine.forward(q, None, ctx), expected, atol=1e-12)
+
+
+def test_candidates_cover_context_columns():
+    names = candidate_names(["t", "temp_spindle", "load", "dirx", "humidity"])
+    assert "thermal:temp_spindle" in names
+    assert "linear:humidity" in names
+    assert "linear:t" not in names
+    assert "linear:dirx" not in names
+    for n in names:
+        assert get_effect(n).name == n
