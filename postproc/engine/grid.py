@@ -1,0 +1,419 @@
+"""Quasi-differential tangential method (seed 000, chapter 2, formula 2).
+
+A laser tracker measures the functional point at the nodes of a regular lattice of
+commanded positions ``q_ijk = q0 + (i u1, j u2, k u3)``. The physical axes are curved:
+their tangent direction cosines, scaled by the axis' own step ratio, are read off
+differences of measured node positions ``P_ijk`` (tool vector removed)::
+
+    Q1_i    = (P[i+1, 0, 0] - P[i, 0, 0]) / u1          X along the line Y = Z = 0
+    Q2_ij   = (P[i, j+1, 0] - P[i, j, 0]) / u2          Y at that X, on Z = 0
+    Q3_ijk  = (P[i, j, k+1] - P[i, j, k]) / u3          Z at that X, Y
+
+so ``Q1`` depends on ``q1``, ``Q2`` on ``(q1, q2)`` and ``Q3`` on ``(q1, q2, q3)`` as in the
+seed. The curvilinear integral along the path "X first, then Y at that X, then Z at
+that X, Y" becomes the sums::
+
+    R(M) = r_O1 + u1 sum_{i<M1} Q1_i + u2 sum_{j<M2} Q2_{M1 j} + u3 sum_{k<M3} Q3_{M1 M2 k}
+
+which reproduce the measured node ``P[M]`` (the sums telescope). The seed's ``Q`` are
+unit direction cosines; here they keep their length ``|Q| = 1 + scale error`` so the
+sums also carry each axis' positioning error, which unit vectors would drop.
+
+Inside the cell ``M`` the tangent matrix ``G_M = [Q1 Q2 Q3]`` at node ``M`` (the cell's
+own edges from its lower corner) gives formula (2)::
+
+    q = G_M^-1 (p* - R(M)) + q0 + [u1 M1, u2 M2, u3 M3]
+
+Two forward models are offered:
+
+- ``"trilinear"`` (default): trilinear interpolation of the nodes. It is continuous
+  across cells, passes through every measured node, and its tangent matrix at the
+  cell's lower corner is exactly ``G_M``. The inverse starts with formula (2) in the
+  cell of ``p*`` and repeats it with the tangent matrix at the current point (Newton
+  on the interpolated field) until ``|F(q) - p*|`` is below the solver tolerance.
+- ``"cell"``: the seed's piecewise-affine model ``p = R(M) + G_M (q - q_M)``, exact
+  at the four nodes on the cell's lower-corner edges but discontinuous at the upper
+  faces. The inverse is formula (2) with the cell walk and border rule of
+  :func:`postproc.engine._tangents.piecewise_inverse`.
+
+Tool vector: the model describes the motion of the functional point for the tool
+vectors used in the measurement; a different tool vector at correction time is added
+unrotated (``p = P(q) + r``), as in the static method, so angular errors acting on the
+difference of tool vectors are not corrected.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
+from postproc.engine._tangents import (
+    AXES,
+    LATTICE_TOL_MM,
+    cell_index,
+    distinct_positions,
+    format_node,
+    parse_screw_pitch,
+    parse_step,
+    piecewise_inverse,
+    step_warnings,
+)
+from postproc.engine.base import (
+    Engine,
+    FitResult,
+    InverseResult,
+    check_points,
+    check_tool_vectors,
+)
+from postproc.errors import CalibrationError, MeasurementError, PostprocError, SolverError
+
+MODELS = ("trilinear", "cell")
+
+# Newton on the interpolated field stops a hundred times below the solver tolerance:
+# the extra iteration costs microseconds and keeps the answer far from the limit.
+NEWTON_TOL_MM = SOLVER_TOL_MM / 100
+
+# A step detected from the data must repeat within this relative difference to count as
+# a regular lattice (commanded positions are exact to 1 nm, steps >= 1 mm).
+STEP_REL_TOL = 1e-4
+
+# Missing nodes named in an error message; the rest are counted.
+MAX_NODES_NAMED = 8
+
+# The interpolation check predicts every other node from a grid of twice the step; it
+# needs at least this many nodes per axis to leave some nodes to predict.
+MIN_NODES_FOR_CHECK = 5
+
+
+def nodes_from_tangents(r_O1, Q1, Q2, Q3, step) -> np.ndarray:
+    """The seed's sums ``R`` at every node: (n1, n2, n3, 3)."""
+    Q1, Q2, Q3 = (np.asarray(a, dtype=float) for a in (Q1, Q2, Q3))
+    u = np.asarray(step, dtype=float)
+    n1, n2, n3 = len(Q1) + 1, Q2.shape[1] + 1, Q3.shape[2] + 1
+    line = np.zeros((n1, 3))
+    line[1:] = np.cumsum(u[0] * Q1, axis=0)
+    plane = np.zeros((n1, n2, 3))
+    plane[:, 1:] = np.cumsum(u[1] * Q2, axis=1)
+    plane += line[:, None, :]
+    P = np.zeros((n1, n2, n3, 3))
+    P[:, :, 1:] = np.cumsum(u[2] * Q3, axis=2)
+    P += plane[:, :, None, :]
+    return P + np.asarray(r_O1, dtype=float)
+
+
+def tangents_from_nodes(P: np.ndarray, step) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(r_O1, Q1, Q2, Q3)`` along the seed's path from node positions (n1, n2, n3, 3)."""
+    u = np.asarray(step, dtype=float)
+    Q1 = np.diff(P[:, 0, 0], axis=0) / u[0]
+    Q2 = np.diff(P[:, :, 0], axis=1) / u[1]
+    Q3 = np.diff(P, axis=2) / u[2]
+    return P[0, 0, 0].copy(), Q1, Q2, Q3
+
+
+class GridEngine(Engine):
+    method = "grid"
+    affine = False
+
+    def __init__(self, origin_q_mm, step_mm, r_O1, Q1, Q2, Q3, volume_mm=None, model: str = "trilinear") -> None:
+        self.q0 = np.asarray(origin_q_mm, dtype=float)
+        self.step = np.asarray(step_mm, dtype=float)
+        Q1, Q2, Q3 = (np.asarray(a, dtype=float) for a in (Q1, Q2, Q3))
+        if self.q0.shape != (3,) or self.step.shape != (3,) or np.any(self.step <= 0):
+            raise CalibrationError("grid model needs origin_q_mm (3,) and positive step_mm (3,)")
+        if model not in MODELS:
+            raise CalibrationError(f"grid interpolation {model!r} is not one of {', '.join(MODELS)}")
+        n1 = len(Q1) + 1
+        if Q1.ndim != 2 or Q2.ndim != 3 or Q3.ndim != 4 or Q1.shape[1:] != (3,):
+            raise CalibrationError("grid model: Q1, Q2, Q3 must have shapes (n1-1, 3), (n1, n2-1, 3), (n1, n2, n3-1, 3)")
+        n2 = Q2.shape[1] + 1
+        n3 = Q3.shape[2] + 1
+        if Q2.shape != (n1, n2 - 1, 3) or Q3.shape != (n1, n2, n3 - 1, 3) or min(n1, n2, n3) < 2:
+            raise CalibrationError(
+                f"grid model: inconsistent tangent shapes Q1 {Q1.shape}, Q2 {Q2.shape}, Q3 {Q3.shape}"
+            )
+        self.shape = np.array([n1, n2, n3])
+        self.model = model
+        self.r_O1 = np.asarray(r_O1, dtype=float)
+        self.Q1, self.Q2, self.Q3 = Q1, Q2, Q3
+        self.nodes = nodes_from_tangents(self.r_O1, Q1, Q2, Q3, self.step)
+        self.edges = [self.q0[j] + self.step[j] * np.arange(self.shape[j]) for j in range(3)]
+        if volume_mm is None:
+            volume_mm = [self.q0, self.q0 + self.step * (self.shape - 1)]
+        super().__init__(volume_mm)
+        # Tangent matrix of each cell's lower corner (the cell's own edges), for formula (2).
+        P = self.nodes
+        G = np.empty((n1 - 1, n2 - 1, n3 - 1, 3, 3))
+        G[..., 0] = (P[1:, :-1, :-1] - P[:-1, :-1, :-1]) / self.step[0]
+        G[..., 1] = (P[:-1, 1:, :-1] - P[:-1, :-1, :-1]) / self.step[1]
+        G[..., 2] = (P[:-1, :-1, 1:] - P[:-1, :-1, :-1]) / self.step[2]
+        det = np.linalg.det(G)
+        if not np.all(np.isfinite(det)) or np.any(det < 0.5):
+            bad = np.argwhere(~(det >= 0.5))[0]
+            raise CalibrationError(
+                f"grid cell at {format_node(self.q0 + bad * self.step)} has tangent determinant "
+                f"{det[tuple(bad)]:.3g}: its axes are not independent directions",
+                hint="the measured node positions there are wrong (swapped columns or a bad point)",
+            )
+        self.G_cells = G
+        self.G_cells_inv = np.linalg.inv(G)
+
+    # -- interpolation ----------------------------------------------------------------
+    def _local(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = (q - self.q0) / self.step
+        cells = np.clip(np.floor(s).astype(int), 0, self.shape - 2)
+        return cells, s - cells
+
+    def _trilinear(self, q: np.ndarray, jacobian: bool = False):
+        cells, t = self._local(q)
+        i, j, k = cells.T
+        P = self.nodes
+        value = np.zeros((len(q), 3))
+        jac = np.zeros((len(q), 3, 3)) if jacobian else None
+        for a in (0, 1):
+            wa = t[:, 0] if a else 1 - t[:, 0]
+            for b in (0, 1):
+                wb = t[:, 1] if b else 1 - t[:, 1]
+                for c in (0, 1):
+                    wc = t[:, 2] if c else 1 - t[:, 2]
+                    corner = P[i + a, j + b, k + c]
+                    value += (wa * wb * wc)[:, None] * corner
+                    if jacobian:
+                        sa, sb, sc = (1 if a else -1), (1 if b else -1), (1 if c else -1)
+                        jac[:, :, 0] += (sa * wb * wc)[:, None] * corner
+                        jac[:, :, 1] += (wa * sb * wc)[:, None] * corner
+                        jac[:, :, 2] += (wa * wb * sc)[:, None] * corner
+        if jacobian:
+            jac /= self.step[None, None, :]
+        return value, jac
+
+    def _cell_affine(self, q: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        i, j, k = cells.T
+        corner_q = self.q0 + cells * self.step
+        G = self.G_cells[i, j, k]
+        return self.nodes[i, j, k] + np.einsum("nab,nb->na", G, q - corner_q)
+
+    def position(self, q) -> np.ndarray:
+        """Model position of the measured point (tool vector of the measurement removed)."""
+        q = check_points(q, "q")
+        if self.model == "cell":
+            return self._cell_affine(q, cell_index(q, self.edges))
+        return self._trilinear(q)[0]
+
+    def forward(self, q, r=None, context=None) -> np.ndarray:
+        q = check_points(q, "q")
+        return self.position(q) + check_tool_vectors(r, len(q))
+
+    def _formula2(self, cells: np.ndarray, target: np.ndarray) -> np.ndarray:
+        i, j, k = cells.T
+        return (
+            np.einsum("nab,nb->na", self.G_cells_inv[i, j, k], target - self.nodes[i, j, k])
+            + self.q0 + cells * self.step
+        )
+
+    def inverse(self, p, r=None, context=None) -> InverseResult:
+        p = check_points(p, "p")
+        rr = check_tool_vectors(r, len(p))
+        target = p - rr
+        # The cell M is where the target projects on the commanded axes (seed: the
+        # intervals of Ox, Oy, Oz holding the target point).
+        first = cell_index(target, self.edges)
+        if self.model == "cell":
+            q, iters = piecewise_inverse(target, first, self._formula2, self.edges)
+        else:
+            q, iters = self._newton(target, self._formula2(first, target))
+        resid = np.linalg.norm(self.forward(q, rr) - p, axis=1)
+        return InverseResult(q, resid, iters)
+
+    def _newton(self, target: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Formula (2) repeated with the tangent matrix at the current point."""
+        iters = np.ones(len(q), dtype=int)  # the first step was formula (2) itself
+        active = np.arange(len(q))
+        for _ in range(SOLVER_MAX_ITER):
+            value, jac = self._trilinear(q[active], jacobian=True)
+            err = target[active] - value
+            done = np.linalg.norm(err, axis=1) < NEWTON_TOL_MM
+            active, err, jac = active[~done], err[~done], jac[~done]
+            if len(active) == 0:
+                return q, iters
+            q[active] += np.linalg.solve(jac, err[..., None])[..., 0]
+            iters[active] += 1
+        raise SolverError(
+            f"quasi-differential inverse did not converge for {len(active)} point(s), "
+            f"first target {format_node(target[active[0]])}",
+            hint="the grid calibration is probably corrupt; refit it",
+        )
+
+    # -- serialisation ----------------------------------------------------------------
+    def model_to_dict(self) -> dict:
+        return {
+            "interpolation": self.model,
+            "origin_q_mm": self.q0.tolist(),
+            "step_mm": self.step.tolist(),
+            "shape": self.shape.tolist(),
+            "r_O1_mm": self.r_O1.tolist(),
+            "Q1": self.Q1.tolist(),
+            "Q2": self.Q2.tolist(),
+            "Q3": self.Q3.tolist(),
+        }
+
+    @classmethod
+    def model_from_dict(cls, model: dict, volume_mm) -> GridEngine:
+        eng = cls(
+            model["origin_q_mm"], model["step_mm"], model["r_O1_mm"],
+            model["Q1"], model["Q2"], model["Q3"], volume_mm,
+            model=model.get("interpolation", "trilinear"),
+        )
+        if list(eng.shape) != list(model.get("shape", eng.shape)):
+            raise CalibrationError(f"grid model: shape {model['shape']} does not match its tangents {eng.shape.tolist()}")
+        return eng
+
+    @classmethod
+    def from_nodes(cls, origin_q_mm, step_mm, nodes, volume_mm=None, model: str = "trilinear") -> GridEngine:
+        r_O1, Q1, Q2, Q3 = tangents_from_nodes(np.asarray(nodes, dtype=float), step_mm)
+        return cls(origin_q_mm, step_mm, r_O1, Q1, Q2, Q3, volume_mm, model=model)
+
+
+# -- fitting --------------------------------------------------------------------------
+
+def detect_lattice(q: np.ndarray, step: np.ndarray | None, path: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lattice origin, step and node count per axis from commanded positions.
+
+    Without ``step`` the data must lie on a regular lattice (equal spacing per axis).
+    With ``step`` the lattice starts at the smallest commanded position and points that
+    are not on it are left out (a finer grid can be fitted at a coarser step).
+    """
+    origin = q.min(axis=0)
+    steps = np.empty(3)
+    counts = np.empty(3, dtype=int)
+    for j in range(3):
+        pos = distinct_positions(q[:, j])
+        if len(pos) < 2:
+            raise MeasurementError(
+                f"the grid has a single commanded {AXES[j]} position ({pos[0]:.3f}): "
+                "the quasi-differential method needs a 3-D lattice",
+                path=path or None,
+                hint="measure at least two positions along each axis (a step of 10-20 mm is typical)",
+            )
+        if step is None:
+            d = np.diff(pos)
+            if np.ptp(d) > STEP_REL_TOL * d.mean() + LATTICE_TOL_MM:
+                raise MeasurementError(
+                    f"commanded {AXES[j]} positions are not evenly spaced (steps from "
+                    f"{d.min():.3f} to {d.max():.3f} mm): not a regular grid",
+                    path=path or None,
+                    hint="give the grid step with --step, points off that lattice are then left out",
+                )
+            steps[j] = d.mean()
+        else:
+            steps[j] = step[j]
+        counts[j] = int(np.floor((pos[-1] - origin[j]) / steps[j] + LATTICE_TOL_MM / steps[j])) + 1
+        if counts[j] < 2:
+            raise MeasurementError(
+                f"grid step {steps[j]:g} mm on {AXES[j]} is longer than the measured travel "
+                f"{pos[-1] - origin[j]:.3f} mm",
+                path=path or None,
+                hint="choose a smaller --step",
+            )
+    return origin, steps, counts
+
+
+def node_means(q, p, origin, step, counts, path: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Average the points at each lattice node (repeated shots); returns (nodes, index, on_lattice).
+
+    Raises MeasurementError naming missing nodes.
+    """
+    s = (q - origin) / step
+    idx = np.rint(s).astype(int)
+    on = np.all(np.abs(s - idx) * step < LATTICE_TOL_MM, axis=1) & np.all((idx >= 0) & (idx < counts), axis=1)
+    flat = np.ravel_multi_index(idx[on].T, counts)
+    total = np.zeros((int(np.prod(counts)), 3))
+    n = np.zeros(int(np.prod(counts)))
+    np.add.at(total, flat, p[on])
+    np.add.at(n, flat, 1.0)
+    missing = np.flatnonzero(n == 0)
+    if len(missing):
+        names = [format_node(origin + np.array(np.unravel_index(m, counts)) * step) for m in missing[:MAX_NODES_NAMED]]
+        more = f" and {len(missing) - MAX_NODES_NAMED} more" if len(missing) > MAX_NODES_NAMED else ""
+        raise MeasurementError(
+            f"incomplete grid: {len(missing)} of {len(n)} nodes of the "
+            f"{counts[0]} x {counts[1]} x {counts[2]} lattice (step "
+            f"{', '.join(f'{u:g}' for u in step)} mm) have no measurement: {'; '.join(names)}{more}",
+            path=path or None,
+            hint="measure the missing nodes, or fit a coarser --step or a smaller region",
+        )
+    nodes = (total / n[:, None]).reshape(*counts, 3)
+    return nodes, idx, on
+
+
+def _interpolation_check(origin, step, nodes) -> str | None:
+    """Predict every other node from the grid of twice the step (how smooth the field is)."""
+    if np.any(np.array(nodes.shape[:3]) < MIN_NODES_FOR_CHECK):
+        return None
+    coarse_nodes = nodes[::2, ::2, ::2]
+    coarse = GridEngine.from_nodes(origin, 2 * step, coarse_nodes)
+    n = np.array(nodes.shape[:3])
+    reach = (np.array(coarse_nodes.shape[:3]) - 1) * 2  # nodes the coarse grid spans
+    idx = np.stack(np.meshgrid(*[np.arange(reach[j] + 1) for j in range(3)], indexing="ij"), -1).reshape(-1, 3)
+    skipped = idx[np.any(idx % 2 == 1, axis=1) & np.all(idx < n, axis=1)]
+    pred = coarse.position(origin + skipped * step)
+    err = np.linalg.norm(pred - nodes[tuple(skipped.T)], axis=1)
+    return (
+        f"interpolation check: a grid of twice the step predicts the {len(skipped)} skipped nodes "
+        f"to RMS {np.sqrt(np.mean(err**2)) * 1000:.1f} um, max {err.max() * 1000:.1f} um "
+        "(includes twice the node noise; the interpolation error of smooth errors falls as the step squared)"
+    )
+
+
+def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", **options) -> FitResult:
+    """Fit the quasi-differential model from tracker points on a regular lattice.
+
+    Options: ``step`` ("15" or "15,15,10" mm; default: the lattice step of the data),
+    ``screw_pitch`` (["X=5", ...] mm, for the aliasing warning), ``model``
+    ("trilinear" or "cell").
+    """
+    from postproc.calibration.measurements import Measurements
+
+    if model not in MODELS:
+        raise PostprocError(f"grid model {model!r} is not one of {', '.join(MODELS)}")
+    items = list(measurements)
+    meas = Measurements.concat(items)
+    path = meas.path
+    steps = parse_step(step)
+    pitches = parse_screw_pitch(screw_pitch)
+    P_obs = meas.m - meas.r
+    origin, steps, counts = detect_lattice(meas.q, steps, path)
+    nodes, idx, on = node_means(meas.q, P_obs, origin, steps, counts, path)
+    engine = GridEngine.from_nodes(origin, steps, nodes, model=model)
+    resid = P_obs[on] - nodes[tuple(idx[on].T)]
+    result = FitResult(engine=engine, residuals_mm=resid)
+    span = steps * (counts - 1)
+    shots = on.sum() / np.prod(counts)
+    report = [
+        f"quasi-differential ({model}) fit: {counts[0]} x {counts[1]} x {counts[2]} nodes, step "
+        f"{', '.join(f'{u:g}' for u in steps)} mm, from {on.sum()} points ({shots:.3g} per node)",
+        "calibrated volume (mm): " + "  ".join(
+            f"{AXES[j]} {origin[j]:.3f}..{origin[j] + span[j]:.3f}" for j in range(3)
+        ),
+    ]
+    if (~on).sum():
+        report.append(f"left out {(~on).sum()} points that are not on the lattice")
+    lengths = [np.linalg.norm(engine.Q1, axis=-1), np.linalg.norm(engine.Q2, axis=-1), np.linalg.norm(engine.Q3, axis=-1)]
+    report.append(
+        "tangent length - 1 (ppm, min..max): " + "  ".join(
+            f"{AXES[j]} {(lengths[j].min() - 1) * 1e6:+.0f}..{(lengths[j].max() - 1) * 1e6:+.0f}" for j in range(3)
+        )
+    )
+    report.append("the model passes through the node means: the fit residual is the scatter of repeated shots")
+    check = _interpolation_check(origin, steps, nodes)
+    if check:
+        report.append(check)
+    report += step_warnings(steps, span, pitches)
+    unused = sorted(k for k, v in options.items() if v is not None)
+    if unused:
+        report.append(f"note: option(s) {', '.join(unused)} do not apply to the grid method and were ignored")
+    result.report = report
+    result.info = {
+        "n_points": int(on.sum()), "n_nodes": int(np.prod(counts)), "step_mm": steps.tolist(),
+        "rms_mm": result.rms_mm, "max_mm": result.max_mm, "sources": [m.path for m in items],
+    }
+    return result
