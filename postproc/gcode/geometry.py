@@ -1,0 +1,74 @@
+"""Points along moves: straight lines and (helical, multi-turn, spiral) arcs.
+
+An arc is parametrised by ``s`` in [0, 1]: angle ``theta0 + s * sweep`` around the
+centre in the plane, radius from the start radius to the end radius (a controller
+draws this spiral when they differ slightly), and the normal axis linear in ``s``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from postproc.gcode.interp import Arc
+from postproc.gcode.state import PLANES
+
+TWO_PI = 2.0 * math.pi
+# Start and end closer than this in the plane make a full circle (I/J/K arcs).
+FULL_CIRCLE_MM = 1e-9
+
+
+def arc_params(arc: Arc, q0, q1) -> tuple[tuple[int, int, int], float, float, float, float]:
+    """``((a1, a2, an), theta0, sweep, r0, r1)`` of an arc from q0 to q1 (signed sweep)."""
+    (a1, a2, an), _ = PLANES[arc.plane]
+    c1, c2 = arc.center[a1], arc.center[a2]
+    t0 = math.atan2(q0[a2] - c2, q0[a1] - c1)
+    t1 = math.atan2(q1[a2] - c2, q1[a1] - c1)
+    r0 = math.hypot(q0[a1] - c1, q0[a2] - c2)
+    r1 = math.hypot(q1[a1] - c1, q1[a2] - c2)
+    if arc.clockwise:
+        sweep = -((t0 - t1) % TWO_PI)
+    else:
+        sweep = (t1 - t0) % TWO_PI
+    if abs(sweep) < 1e-12 or math.hypot(q1[a1] - q0[a1], q1[a2] - q0[a2]) < FULL_CIRCLE_MM:
+        sweep = -TWO_PI if arc.clockwise else TWO_PI
+    extra = (arc.turns - 1) * TWO_PI
+    sweep += -extra if arc.clockwise else extra
+    return (a1, a2, an), t0, sweep, r0, r1
+
+
+def arc_points(arc: Arc, q0, q1, s: np.ndarray) -> np.ndarray:
+    """Nominal points (k, 3) at parameters ``s`` along the arc."""
+    (a1, a2, an), t0, sweep, r0, r1 = arc_params(arc, q0, q1)
+    s = np.asarray(s, dtype=float)
+    th = t0 + s * sweep
+    rad = r0 + (r1 - r0) * s
+    out = np.empty((len(s), 3))
+    out[:, a1] = arc.center[a1] + rad * np.cos(th)
+    out[:, a2] = arc.center[a2] + rad * np.sin(th)
+    out[:, an] = q0[an] + (q1[an] - q0[an]) * s
+    return out
+
+
+def arc_length(arc: Arc, q0, q1) -> float:
+    (a1, a2, an), _t0, sweep, r0, r1 = arc_params(arc, q0, q1)
+    planar = abs(sweep) * 0.5 * (r0 + r1)
+    return math.hypot(planar, q1[an] - q0[an])
+
+
+def line_points(q0, q1, s: np.ndarray) -> np.ndarray:
+    q0 = np.asarray(q0, dtype=float)
+    q1 = np.asarray(q1, dtype=float)
+    s = np.asarray(s, dtype=float)[:, None]
+    return q0 + (q1 - q0) * s
+
+
+def arc_chord_steps(arc: Arc, q0, q1, tol_mm: float) -> int:
+    """Number of equal chords whose sagitta is below ``tol_mm``."""
+    (_, _, _), _t0, sweep, r0, r1 = arc_params(arc, q0, q1)
+    r = max(r0, r1)
+    if r <= tol_mm:
+        return max(1, math.ceil(abs(sweep) / (math.pi / 2)))
+    dtheta = 2.0 * math.acos(max(-1.0, 1.0 - tol_mm / r))
+    return max(1, math.ceil(abs(sweep) / dtheta))

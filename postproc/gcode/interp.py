@@ -1,0 +1,554 @@
+"""Table-driven modal interpreter: one line in, the state advanced, a :class:`Move` out.
+
+Semantics follow LinuxCNC (rs274ngc) where they matter to geometry:
+
+- machine gauge position = program value x units + work offset + G92 offset + tool
+  length offset (G43, along Z); G53 values are machine positions of the gauge point
+  (no work, G92 or tool length offset: LinuxCNC's G53);
+- within a block, modal settings (units, distance mode, plane, offsets, G43/G49,
+  G92) take effect before the motion;
+- G2 is clockwise seen from the positive end of the plane's normal axis (G17: Z,
+  G18: Y, G19: X); P on an arc counts turns.
+
+Anything that changes geometry in a way not modelled here is refused with
+UnsupportedGcodeError naming line, column and construct.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
+from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
+from postproc.gcode import lexer
+from postproc.gcode.state import (
+    ARC_CCW,
+    ARC_CW,
+    BEFORE_MOTION_M,
+    CANNED_CYCLES,
+    LINE,
+    MOTION_CODES,
+    NAN,
+    NEUTRAL_G,
+    P_SYSTEMS,
+    PLANES,
+    RAPID,
+    REFUSED_G,
+    REFUSED_M,
+    WORK_SYSTEMS,
+    ModalState,
+)
+
+AXES = "XYZ"
+ROTARY = "ABC"
+# Letters accepted as plain parameters of other words (checked where used).
+PARAM_LETTERS = set("DFHIJKLNPQRST")
+# A degenerate arc (start, end and centre within this) is not an arc.
+MIN_ARC_RADIUS_MM = 1e-6
+
+
+@dataclass(slots=True)
+class Arc:
+    """An arc in machine gauge coordinates: centre (3,), plane triple, direction, turns."""
+
+    center: tuple[float, float, float]
+    plane: int
+    clockwise: bool
+    turns: int
+    offset_idx: tuple[int, int]  # word indices of the two centre offsets, or -1
+    r_idx: int  # word index of R, or -1
+
+
+@dataclass(slots=True)
+class Move:
+    """A motion block: where the gauge point goes and how to rewrite the line.
+
+    ``q0``/``q1``: nominal gauge positions (mm, machine frame; NaN = unknown);
+    ``r``: tool vector; ``shift``: machine = program x ``unit`` + ``shift`` for absolute
+    words (work + G92 + tool length offsets, or 0 under G53).
+    """
+
+    lineno: int
+    kind: int
+    q0: tuple[float, float, float]
+    q1: tuple[float, float, float]
+    r: tuple[float, float, float]
+    shift: tuple[float, float, float]
+    unit: float
+    incremental: bool
+    arc_absolute: bool
+    words: list[tuple[str, str, int, int]]
+    axis_idx: tuple[int, int, int]
+    feed_idx: int
+    inverse_time: bool
+    feed: float
+    rotary: dict[str, float]
+    arc: Arc | None = None
+    prefix_words: list[str] = field(default_factory=list)
+    stays: bool = False  # a tool-change line: must not be split
+
+
+def _gkey(text: str) -> int:
+    return int(round(float(text) * 10))
+
+
+def _symbol_construct(tok: lexer.Token, prev: lexer.Token | None) -> str:
+    t = tok.text
+    if t == "#":
+        return "macro variable '#'"
+    if t in "[]":
+        return "expression '[ ]'"
+    if t in "@^":
+        return "polar coordinate word '@'/'^'"
+    if t == "<":
+        return "named O-word or parameter '< >'"
+    return ""
+
+
+class Interpreter:
+    """Advance a :class:`ModalState` line by line; see the module docstring."""
+
+    def __init__(self, setup, path: str | None = None) -> None:
+        self.setup = setup
+        self.path = path
+        self.state = ModalState()
+        self.offsets = {k: _offset_tuple(v) for k, v in (setup.offsets or {}).items()}
+        self.program_offsets: dict[str, list[float]] = {}  # set by G10 L2/L20
+        self.implicit_g54 = False  # a move ran in G54 that the user did not give
+        self.used_rotary: set[str] = set()
+        self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
+
+    # -- helpers -----------------------------------------------------------------------
+    def _err(self, cls, msg, lineno, col, hint=None):
+        return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
+
+    def _work_offset(self, lineno: int, col: int) -> list[float]:
+        st = self.state
+        name = st.work
+        if name in self.program_offsets:
+            return self.program_offsets[name]
+        if name in self.offsets:
+            return list(self.offsets[name])
+        if name == "G54" and not st.work_explicit:
+            # Documented default: a program that never names a work offset runs in
+            # G54 taken as zero (program coordinates = machine coordinates); flagged.
+            self.implicit_g54 = True
+            return [0.0, 0.0, 0.0]
+        raise self._err(
+            MissingSetupError, f"work offset {name} is used but its value was not given",
+            lineno, col, hint=f"give it with --offset {name}=X..,Y..,Z.. (machine-frame mm)")
+
+    def shift(self, g53: bool, lineno: int, col: int) -> tuple[float, float, float]:
+        if g53:
+            return (0.0, 0.0, 0.0)
+        st = self.state
+        w = self._work_offset(lineno, col)
+        return (w[0] + st.g92[0], w[1] + st.g92[1], w[2] + st.g92[2] + st.tlo)
+
+    def tool_r(self) -> tuple[float, float, float]:
+        if self.tool_vector is not None:
+            return self.tool_vector
+        st = self.state
+        return (0.0, 0.0, -st.tlo) if st.tlo_active else (0.0, 0.0, 0.0)
+
+    # -- the block ---------------------------------------------------------------------
+    def feed_line(self, lineno: int, line: str) -> Move | None:
+        """Interpret one line (with its ending); return the Move it makes, if any."""
+        words = lexer.scan_words(line)
+        block_delete = False
+        if words is None:
+            words, block_delete = self._slow_words(lineno, line)
+        if not words:
+            return None
+        return self._block(lineno, words, block_delete)
+
+    def _slow_words(self, lineno: int, line: str):
+        tokens = lexer.lex(line, self.path, lineno)
+        words = []
+        block_delete = False
+        seen_content = False
+        prev = None
+        for tok in tokens:
+            kind = tok.kind
+            if kind in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE):
+                pass
+            elif kind == lexer.PERCENT:
+                if seen_content or any(t.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL, lexer.NUMBER) for t in tokens):
+                    raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
+            elif kind == lexer.SLASH:
+                if seen_content:
+                    raise self._err(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
+                                    lineno, tok.col)
+                block_delete = True
+            elif kind == lexer.OPEN_COMMENT:
+                raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
+                                hint="add the closing ')'")
+            elif kind == lexer.WORD:
+                seen_content = True
+                start = tok.col - 1 + tok.number_offset
+                num = tok.number_text
+                words.append((tok.letter, num, start, start + len(num)))
+            elif kind == lexer.LETTER:
+                if tok.letter == "O":
+                    raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
+                                    hint="expand subroutines and loops in the CAM system before correcting")
+                raise self._err(UnsupportedGcodeError,
+                                f"word {tok.letter} without a plain number (macro, expression or parameter)",
+                                lineno, tok.col, hint="expand macros and expressions before correcting")
+            elif kind == lexer.SYMBOL:
+                what = _symbol_construct(tok, prev)
+                if what:
+                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col,
+                                    hint="expand macros, parameters and expressions before correcting")
+                raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
+            elif kind == lexer.NUMBER:
+                raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
+            prev = tok
+        return words, block_delete
+
+    def _block(self, lineno: int, words, block_delete: bool) -> Move | None:  # noqa: C901
+        st = self.state
+        gcodes: list[tuple[int, int]] = []  # (key, word index)
+        mcodes: list[tuple[int, int]] = []
+        vals: dict[str, tuple[float, int]] = {}
+        for i, (letter, num, start, _end) in enumerate(words):
+            if letter == "G":
+                gcodes.append((_gkey(num), i))
+            elif letter == "M":
+                mcodes.append((_gkey(num), i))
+            else:
+                if letter in vals:
+                    raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
+                                    lineno, start)
+                if letter == "O":
+                    raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, start,
+                                    hint="expand subroutines and loops in the CAM system before correcting")
+                if letter in "UVWE":
+                    raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
+                                    lineno, start)
+                vals[letter] = (float(num), i)
+        def col_of(i: int) -> int:
+            # 0-based start of the number = 1-based column of its letter (when adjacent)
+            return max(words[i][2], 1)
+
+        # M codes
+        tool_change = False
+        before_m: list[str] = []
+        for key, i in mcodes:
+            if key % 10:
+                raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
+            m = key // 10
+            if m in REFUSED_M:
+                raise self._err(UnsupportedGcodeError, REFUSED_M[m], lineno, col_of(i),
+                                hint="expand subprograms in the CAM system before correcting")
+            if m > 199:
+                raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
+            if m in BEFORE_MOTION_M:
+                before_m.append(f"M{words[i][1]}")
+            if m == 6:
+                tool_change = True
+            if m == 61:
+                if "Q" not in vals:
+                    raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, col_of(i))
+                st.spindle_tool = int(vals["Q"][0])
+
+        if "T" in vals:
+            st.tool = int(vals["T"][0])
+        if tool_change:
+            st.spindle_tool = st.tool
+
+        motion_key = None
+        g53 = False
+        g92 = None
+        g10 = False
+        work_name = None
+        prefix: list[str] = []
+        for key, i in gcodes:
+            gtext = f"G{words[i][1]}"
+            if key in MOTION_CODES:
+                if motion_key is not None:
+                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
+                motion_key = key
+            elif key in CANNED_CYCLES:
+                raise self._err(UnsupportedGcodeError, f"canned cycle G{words[i][1]}", lineno, col_of(i),
+                                hint="postproc does not correct canned cycles; post the holes as G0/G1 moves")
+            elif key in REFUSED_G:
+                raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i))
+            elif key in PLANES:
+                st.plane = key
+                prefix.append(gtext)
+            elif key in (200, 210):
+                st.inch = key == 200
+                prefix.append(gtext)
+            elif key in (900, 910):
+                st.incremental = key == 910
+                prefix.append(gtext)
+            elif key in (901, 911):
+                st.arc_absolute = key == 901
+                prefix.append(gtext)
+            elif key in (930, 940, 950):
+                st.inverse_time = key == 930
+                prefix.append(gtext)
+            elif key in WORK_SYSTEMS:
+                work_name = WORK_SYSTEMS[key]
+                prefix.append(gtext)
+            elif key == 541:
+                if "P" not in vals:
+                    raise self._err(GcodeSyntaxError, "G54.1 needs a P word", lineno, col_of(i))
+                work_name = f"G54.1P{int(vals['P'][0])}"
+                prefix.append(f"{gtext} P{words[vals['P'][1]][1]}")
+            elif key == 430:
+                prefix.append(gtext + (f" H{words[vals['H'][1]][1]}" if "H" in vals else ""))
+                self._g43(vals, lineno, col_of(i))
+            elif key == 490:
+                st.tlo, st.tlo_active = 0.0, False
+                prefix.append(gtext)
+            elif key == 530:
+                g53 = True
+                prefix.append(gtext)
+            elif key in (920, 921, 922):
+                g92 = key
+            elif key == 100:
+                g10 = True
+            elif key == 40:
+                pass  # dwell: P is seconds, no geometry
+            elif key in NEUTRAL_G:
+                pass
+            else:
+                raise self._err(UnsupportedGcodeError, f"G{words[i][1]} (unknown G code)", lineno, col_of(i))
+
+        if work_name is not None:
+            st.work = work_name
+            st.work_explicit = True
+        if g10:
+            self._g10(vals, lineno, col_of(next(i for k, i in gcodes if k == 100)))
+            return None
+        if g92 is not None:
+            self._g92(g92, vals, lineno, col_of(next(i for k, i in gcodes if k in (920, 921, 922))))
+            return None
+        if "F" in vals:
+            st.feed = vals["F"][0]
+
+        unit = st.unit_mm
+        # Rotary axes: passed through, tracked for the engine's context.
+        rotary_changed = False
+        for a in ROTARY:
+            if a in vals:
+                v = vals[a][0]
+                self.used_rotary.add(a)
+                if st.incremental:
+                    st.rotary[a] = st.rotary.get(a, 0.0) + v
+                else:
+                    st.rotary[a] = v
+                rotary_changed = True
+
+        has_axes = any(a in vals for a in AXES)
+        if motion_key is not None:
+            st.motion = MOTION_CODES[motion_key]
+        if not has_axes:
+            arc_words = [vals[k][1] for k in "IJKR" if k in vals]
+            if motion_key in (ARC_CW, ARC_CCW) or (arc_words and st.motion in (ARC_CW, ARC_CCW)):
+                i = arc_words[0] if arc_words else next(i for k, i in gcodes if k == motion_key)
+                raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i))
+            if not rotary_changed:
+                return None
+        first_axis_col = col_of(min(vals[a][1] for a in AXES + ROTARY if a in vals))
+        if st.motion is None:
+            raise self._err(GcodeSyntaxError, "axis words with no motion mode (G0/G1/G2/G3) active",
+                            lineno, first_axis_col)
+        if g53 and st.motion not in (RAPID, LINE):
+            raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
+        if g53 and st.incremental:
+            raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
+                            first_axis_col)
+
+        shift = self.shift(g53, lineno, first_axis_col)
+        q0 = tuple(st.pos)
+        q1 = list(q0)
+        axis_idx = [-1, -1, -1]
+        for k, a in enumerate(AXES):
+            if a in vals:
+                v, i = vals[a]
+                axis_idx[k] = i
+                if st.incremental:
+                    if math.isnan(q1[k]):
+                        raise self._err(
+                            MissingSetupError,
+                            f"incremental move on {a} from an unknown position (no absolute move on {a} before)",
+                            lineno, col_of(i),
+                            hint="position every axis with a G90 move before the first G91 move")
+                    q1[k] = q1[k] + v * unit
+                else:
+                    q1[k] = v * unit + shift[k]
+        if block_delete and st.incremental:
+            raise self._err(UnsupportedGcodeError, "block-delete '/' on an incremental move", lineno, 1,
+                            hint="the result would depend on the block-delete switch")
+
+        arc = None
+        if st.motion in (ARC_CW, ARC_CCW):
+            arc = self._arc(lineno, words, vals, q0, q1, shift, unit, gcodes)
+        elif any(k in vals for k in "IJK") or ("R" in vals and st.motion in (RAPID, 10)):
+            letter = next(k for k in "IJKR" if k in vals)
+            raise self._err(GcodeSyntaxError, f"{letter} word on a straight move", lineno, col_of(vals[letter][1]))
+        if st.inverse_time and st.motion != RAPID and "F" not in vals:
+            raise self._err(GcodeSyntaxError, "G93 inverse-time feed needs an F word on every feed move",
+                            lineno, first_axis_col)
+
+        st.pos = q1
+        move = Move(
+            lineno=lineno, kind=st.motion, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift,
+            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+            axis_idx=tuple(axis_idx), feed_idx=vals["F"][1] if "F" in vals else -1,
+            inverse_time=st.inverse_time, feed=st.feed,
+            rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
+            prefix_words=prefix + (["S" + words[vals["S"][1]][1]] if "S" in vals else []) + before_m,
+            stays=tool_change or "T" in vals or g53,
+        )
+        return move
+
+    def _g43(self, vals, lineno, col) -> None:
+        st = self.state
+        if "H" in vals:
+            h = int(vals["H"][0])
+        else:
+            h = st.spindle_tool if st.spindle_tool is not None else st.tool
+            if h is None:
+                raise self._err(MissingSetupError, "G43 without H and no tool selected (T word)", lineno, col,
+                                hint="add H<n> to the G43 block or select the tool with T<n> M6")
+        if h == 0:
+            st.tlo, st.tlo_active = 0.0, True
+            return
+        lengths = self.setup.tool_lengths or {}
+        if h not in lengths:
+            raise self._err(MissingSetupError, f"tool length of tool {h} is used (G43) but was not given",
+                            lineno, col, hint=f"give it with --tool-length {h}=L (mm) or --tool-table FILE")
+        st.tlo, st.tlo_active = float(lengths[h]), True
+
+    def _g92(self, key, vals, lineno, col) -> None:
+        st = self.state
+        if key in (921, 922):
+            st.g92 = [0.0, 0.0, 0.0]
+            return
+        if not any(a in vals for a in AXES):
+            raise self._err(GcodeSyntaxError, "G92 needs at least one axis word", lineno, col)
+        unit = st.unit_mm
+        for k, a in enumerate(AXES):
+            if a in vals:
+                if math.isnan(st.pos[k]):
+                    raise self._err(MissingSetupError, f"G92 on {a} at an unknown position", lineno,
+                                    col, hint="position the axis with a G90 move before G92")
+                st.g92[k] = 0.0
+                w = self._work_offset(lineno, col)
+                st.g92[k] = st.pos[k] - (w[k] + (st.tlo if k == 2 else 0.0)) - vals[a][0] * unit
+
+    def _g10(self, vals, lineno, col) -> None:
+        st = self.state
+        L = int(vals["L"][0]) if "L" in vals else None
+        if L not in (2, 20) or "R" in vals:
+            raise self._err(UnsupportedGcodeError, "G10 other than L2/L20 work offset setting (or with R rotation)",
+                            lineno, col)
+        p = int(vals["P"][0]) if "P" in vals else 0
+        name = st.work if p == 0 else P_SYSTEMS.get(p)
+        if name is None:
+            raise self._err(GcodeSyntaxError, f"G10 P{p}: no such coordinate system", lineno, col)
+        current = None
+        if name in self.program_offsets:
+            current = list(self.program_offsets[name])
+        elif name in self.offsets:
+            current = list(self.offsets[name])
+        unit = st.unit_mm
+        new = list(current) if current else [NAN, NAN, NAN]
+        for k, a in enumerate(AXES):
+            if a in vals:
+                v = vals[a][0] * unit
+                if L == 2:
+                    new[k] = v
+                else:
+                    if math.isnan(st.pos[k]):
+                        raise self._err(MissingSetupError, f"G10 L20 on {a} at an unknown position", lineno, col)
+                    new[k] = st.pos[k] - st.g92[k] - (st.tlo if k == 2 else 0.0) - v
+        if any(math.isnan(v) for v in new):
+            raise self._err(MissingSetupError, f"G10 sets only some axes of {name}, whose other values were not given",
+                            lineno, col, hint=f"give --offset {name}=X..,Y..,Z..")
+        self.program_offsets[name] = new
+
+    def _arc(self, lineno, words, vals, q0, q1, shift, unit, gcodes) -> Arc:
+        st = self.state
+        (a1, a2, an), (l1, l2) = PLANES[st.plane]
+        col = words[min(vals[a][1] for a in AXES if a in vals)][2]
+        if math.isnan(q0[a1]) or math.isnan(q0[a2]) or math.isnan(q0[an]):
+            raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
+                            hint="position all axes with a G90 move before the first arc")
+        turns = 1
+        if "P" in vals:
+            turns = int(vals["P"][0])
+            if turns < 1 or turns != vals["P"][0]:
+                raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno,
+                                words[vals["P"][1]][2])
+        clockwise = st.motion == ARC_CW
+        s1, s2 = q0[a1], q0[a2]
+        e1, e2 = q1[a1], q1[a2]
+        plane_letters = {"I": 0, "J": 1, "K": 2}
+        wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
+        if wrong:
+            raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
+                            words[vals[wrong[0]][1]][2])
+        del plane_letters
+        if "R" in vals:
+            if l1 in vals or l2 in vals:
+                raise self._err(GcodeSyntaxError, "arc with both R and centre offsets", lineno, col)
+            R = vals["R"][0] * unit
+            dx, dy = e1 - s1, e2 - s2
+            chord = math.hypot(dx, dy)
+            if chord < MIN_ARC_RADIUS_MM:
+                raise self._err(GcodeSyntaxError, "R arc with start = end (a full circle needs I/J/K)", lineno, col)
+            half = chord / 2
+            if abs(R) < half:
+                if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
+                    raise self._err(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
+                                    lineno, words[vals["R"][1]][2])
+                h = 0.0
+            else:
+                h = math.sqrt(R * R - half * half)
+            # centre to the left of start->end for CCW short arcs
+            sign = 1.0 if (not clockwise) else -1.0
+            if R < 0:
+                sign = -sign
+            mx, my = (s1 + e1) / 2, (s2 + e2) / 2
+            c1 = mx - sign * h * dy / chord
+            c2 = my + sign * h * dx / chord
+            idx = (-1, -1)
+            r_idx = vals["R"][1]
+        else:
+            if l1 not in vals and l2 not in vals:
+                raise self._err(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, col)
+            o1 = vals[l1][0] * unit if l1 in vals else 0.0
+            o2 = vals[l2][0] * unit if l2 in vals else 0.0
+            if st.arc_absolute:
+                c1 = (vals[l1][0] * unit + shift[a1]) if l1 in vals else s1
+                c2 = (vals[l2][0] * unit + shift[a2]) if l2 in vals else s2
+            else:
+                c1, c2 = s1 + o1, s2 + o2
+            rs = math.hypot(s1 - c1, s2 - c2)
+            re_ = math.hypot(e1 - c1, e2 - c2)
+            if rs < MIN_ARC_RADIUS_MM:
+                raise self._err(GcodeSyntaxError, "arc of zero radius", lineno, col)
+            if abs(rs - re_) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * rs):
+                raise self._err(GcodeSyntaxError,
+                                f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm",
+                                lineno, col, hint="a controller refuses this arc; fix it in the CAM system")
+            idx = (vals[l1][1] if l1 in vals else -1, vals[l2][1] if l2 in vals else -1)
+            r_idx = -1
+        center = [0.0, 0.0, 0.0]
+        center[a1], center[a2], center[an] = c1, c2, q0[an]
+        return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
+
+
+def _offset_tuple(v) -> tuple[float, float, float]:
+    if isinstance(v, dict):
+        return (float(v.get("X", 0.0)), float(v.get("Y", 0.0)), float(v.get("Z", 0.0)))
+    t = tuple(float(x) for x in v)
+    if len(t) != 3:
+        raise ValueError(f"work offset needs 3 values, got {v!r}")
+    return t

@@ -1,0 +1,150 @@
+"""Lossless G-code tokenizer.
+
+Every token keeps its exact source text, so ``tokens_to_src(lex(text)) == text`` for
+any text that lexes. Only characters that cannot appear in G-code outside a comment
+(control characters other than tab, form feed and line endings; non-ASCII) raise a
+:class:`GcodeSyntaxError` naming ``path:line:col``. Everything else becomes a token;
+the interpreter decides what it supports.
+
+Two scanners share the same grammar:
+
+- :func:`lex` (the reference): full token list with kinds and columns;
+- :func:`scan_words` (the fast path): one compiled regex over a line made only of
+  words and blanks, giving ``(letter, number_text, start, end)`` spans. It returns
+  ``None`` for any other line, which then goes through :func:`lex`. Tests check that
+  both agree on every line the fast path accepts.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from postproc.errors import GcodeSyntaxError
+
+# Token kinds
+WORD = "word"  # letter + number, e.g. "X 10.5"
+LETTER = "letter"  # a letter not followed by a number (X#1, O<sub>, G[...])
+NUMBER = "number"  # a number without a letter (inside expressions)
+SPACE = "space"
+COMMENT = "comment"  # ( ... )
+OPEN_COMMENT = "open_comment"  # '(' without ')' before the end of the line
+LINE_COMMENT = "line_comment"  # ; to the end of the line
+PERCENT = "percent"
+SLASH = "slash"  # block delete (or division inside an expression)
+SYMBOL = "symbol"  # # [ ] = * < > @ ^ and other printable ASCII
+NEWLINE = "newline"
+
+NUMBER_RE = r"[+-]?(?:\d+\.?\d*|\.\d+)"
+
+_MASTER = re.compile(
+    r"(?P<newline>\r\n|\n|\r)"
+    r"|(?P<space>[ \t\f\v]+)"
+    r"|(?P<comment>\([^)\r\n]*\))"
+    r"|(?P<open_comment>\([^)\r\n]*)"
+    r"|(?P<line_comment>;[^\r\n]*)"
+    rf"|(?P<word>[A-Za-z][ \t]*{NUMBER_RE})"
+    r"|(?P<letter>[A-Za-z])"
+    rf"|(?P<number>{NUMBER_RE})"
+    r"|(?P<percent>%)"
+    r"|(?P<slash>/)"
+    r"|(?P<symbol>[!-~])"
+)
+
+_WORD_PARTS = re.compile(rf"([A-Za-z])[ \t]*({NUMBER_RE})")
+
+
+@dataclass(frozen=True, slots=True)
+class Token:
+    """One token: its kind, exact source text, and where it starts (1-based)."""
+
+    kind: str
+    text: str
+    lineno: int
+    col: int
+
+    @property
+    def letter(self) -> str:
+        """Upper-case letter of a WORD or LETTER token."""
+        return self.text[0].upper()
+
+    @property
+    def number_text(self) -> str:
+        """Raw number text of a WORD token (no letter, no blanks)."""
+        m = _WORD_PARTS.match(self.text)
+        return m.group(2) if m else ""
+
+    @property
+    def number_offset(self) -> int:
+        """Offset of the number text inside the token text."""
+        m = _WORD_PARTS.match(self.text)
+        return m.start(2) if m else len(self.text)
+
+    @property
+    def value(self) -> float:
+        return float(self.number_text)
+
+
+def lex(text: str, path: str | None = None, lineno: int = 1) -> list[Token]:
+    """Split ``text`` (any number of lines) into tokens that join back to ``text``."""
+    tokens: list[Token] = []
+    pos, n = 0, len(text)
+    line_start = 0
+    match = _MASTER.match
+    while pos < n:
+        m = match(text, pos)
+        if m is None:
+            ch = text[pos]
+            raise GcodeSyntaxError(
+                f"character {ch!r} (U+{ord(ch):04X}) is not G-code",
+                path=path,
+                lineno=lineno,
+                col=pos - line_start + 1,
+                hint="non-ASCII text and control characters may appear only inside comments",
+            )
+        kind = m.lastgroup
+        tokens.append(Token(kind, m.group(), lineno, pos - line_start + 1))
+        pos = m.end()
+        if kind == NEWLINE:
+            lineno += 1
+            line_start = pos
+    return tokens
+
+
+def tokens_to_src(tokens: list[Token]) -> str:
+    """Exact inverse of :func:`lex`."""
+    return "".join(t.text for t in tokens)
+
+
+_LINE_SPLIT = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)|[^\r\n]+$")
+
+
+def split_lines(text: str) -> list[str]:
+    """Lines with their own endings (LF, CRLF, CR or none at end of text)."""
+    return _LINE_SPLIT.findall(text)
+
+
+# A line made only of words and blanks (the overwhelming majority of CAM output).
+_FAST_LINE = re.compile(rf"[ \t]*(?:[A-Za-z][ \t]*{NUMBER_RE}[ \t]*)*(?:\r\n|\n|\r)?")
+
+
+def scan_words(line: str) -> list[tuple[str, str, int, int]] | None:
+    """Fast path: ``[(LETTER, number_text, start, end), ...]`` or None if not simple.
+
+    ``start:end`` is the span of the number text in ``line``; None means the line
+    has comments, symbols or anything else and must go through :func:`lex`.
+    """
+    if _FAST_LINE.fullmatch(line) is None:
+        return None
+    return [(m.group(1).upper(), m.group(2), m.start(2), m.end(2)) for m in _WORD_PARTS.finditer(line)]
+
+
+def words_from_tokens(tokens: list[Token]) -> list[tuple[str, str, int, int]]:
+    """The same ``(LETTER, number_text, start, end)`` list, from :func:`lex` tokens of one line."""
+    out = []
+    for t in tokens:
+        if t.kind == WORD:
+            start = t.col - 1 + t.number_offset
+            num = t.number_text
+            out.append((t.letter, num, start, start + len(num)))
+    return out

@@ -1,0 +1,163 @@
+"""The nominal path of a program: points along every move, in the machine frame.
+
+``program_path(source, setup)`` runs the modal interpreter and samples every move
+(lines and arcs) at most ``max_step_mm`` apart. Points are *functional-point*
+positions ``p = q + r`` (after units, work offsets, G92 and tool length); ``tool_mm``
+is the tool vector ``r``, so ``q = points_mm - tool_mm`` is what the controller
+commands and ``machine.forward(q, tool_mm, context)`` is where the tool really goes.
+
+Axes not yet positioned when a program starts take the value of their next known
+position (the first move of most programs is a retract on one axis).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from postproc.errors import MissingSetupError, PostprocError
+from postproc.gcode.geometry import arc_length, arc_points, line_points
+from postproc.gcode.interp import Interpreter
+from postproc.gcode.state import RAPID
+
+DEFAULT_MAX_STEP_MM = 0.5
+
+
+@dataclass
+class Setup:
+    """What the controller knows that the program does not say.
+
+    ``offsets``: work offsets by name (``"G54"``, ``"G59.1"``, ``"G54.1P3"``) as
+    (x, y, z) mm in the machine frame (or a dict ``{"X":.., "Y":.., "Z":..}``);
+    ``tool_lengths``: tool number -> length (mm) for G43; ``tool_vector``: the tool
+    vector r (mm) overriding ``(0, 0, -length)``; ``context``: constant context
+    values passed to the engine (e.g. ``{"temp": 21.5}``).
+    """
+
+    offsets: dict = field(default_factory=dict)
+    tool_lengths: dict = field(default_factory=dict)
+    tool_vector: tuple | None = None
+    context: dict = field(default_factory=dict)
+
+
+@dataclass
+class ProgramPath:
+    points_mm: np.ndarray  # (N, 3) nominal functional-point positions
+    tool_mm: np.ndarray  # (N, 3) tool vector r at each sample
+    lineno: np.ndarray  # (N,) source line of each sample
+    rapid: np.ndarray  # (N,) bool, True on G0 moves
+    context: dict = field(default_factory=dict)  # dirx, diry, dirz, A/B/C when used
+
+    def __len__(self) -> int:
+        return len(self.points_mm)
+
+
+_LINE_RE = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)|[^\r\n]+$")
+
+
+def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
+    """``(path_or_None, iterator of lines with endings)`` for a path or G-code text."""
+    if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source
+                                          and "\r" not in source and Path(source).is_file()):
+        path = str(source)
+
+        def gen():
+            try:
+                with open(path, encoding="utf-8", errors="surrogateescape", newline="") as fh:
+                    yield from fh
+            except OSError as exc:
+                raise PostprocError(f"cannot read program: {exc.strerror}", path=path) from None
+
+        return path, gen()
+    return None, iter(_LINE_RE.findall(str(source)))
+
+
+def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.ndarray:
+    """Replace NaN (not yet positioned) by the next known value of the same axis."""
+    q = q.copy()
+    for k in range(3):
+        col = q[:, k]
+        bad = np.isnan(col)
+        if not bad.any():
+            continue
+        good = np.flatnonzero(~bad)
+        if len(good) == 0:
+            raise MissingSetupError(
+                f"axis {'XYZ'[k]} is never positioned by the program, so the correction cannot be evaluated",
+                path=path, lineno=int(lineno[0]) if len(lineno) else None,
+                hint=f"add an absolute move on {'XYZ'[k]} (e.g. G0 {'XYZ'[k]}..) near the start")
+        idx = np.searchsorted(good, np.flatnonzero(bad))
+        if np.any(idx >= len(good)):
+            raise MissingSetupError(f"axis {'XYZ'[k]} is not positioned before the end of the program",
+                                    path=path, lineno=int(lineno[np.flatnonzero(bad)[-1]]))
+        col[bad] = col[good[idx]]
+    return q
+
+
+def motion_signs(q: np.ndarray, initial=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Sign of each axis's motion into each point; the previous sign where it does not move."""
+    d = np.diff(np.vstack([q[:1], q]), axis=0)
+    sign = np.sign(np.where(np.abs(d) > MOTION_EPS_MM, d, 0.0))
+    out = np.empty_like(sign)
+    for k in range(3):
+        col = sign[:, k]
+        nz = col != 0
+        idx = np.where(nz, np.arange(len(col)), -1)
+        np.maximum.accumulate(idx, out=idx)
+        out[:, k] = np.where(idx >= 0, col[np.maximum(idx, 0)], initial[k])
+    return out
+
+
+# Motions smaller than this do not change an axis's approach direction (float noise).
+MOTION_EPS_MM = 1e-9
+
+
+def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEFAULT_MAX_STEP_MM) -> ProgramPath:
+    """Sample the nominal path of a program (path or text); see the module docstring."""
+    setup = setup or Setup()
+    path, lines = iter_source_lines(source)
+    interp = Interpreter(setup, path)
+    qs: list[np.ndarray] = []
+    rs: list[np.ndarray] = []
+    lns: list[np.ndarray] = []
+    rapid: list[np.ndarray] = []
+    rot: list[dict] = []
+    for lineno, line in enumerate(lines, start=1):
+        mv = interp.feed_line(lineno, line)
+        if mv is None:
+            continue
+        q0, q1 = mv.q0, mv.q1
+        if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
+            pts = np.array([q1], dtype=float)
+        elif mv.arc is not None:
+            n = max(1, math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm))
+            pts = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+        else:
+            n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
+            pts = line_points(q0, q1, np.arange(1, n + 1) / n)
+        qs.append(pts)
+        rs.append(np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape))
+        lns.append(np.full(len(pts), lineno))
+        rapid.append(np.full(len(pts), mv.kind == RAPID))
+        rot.append((len(pts), mv.rotary))
+    if not qs:
+        empty = np.zeros((0, 3))
+        return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
+                           {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
+    q = np.vstack(qs)
+    lineno_arr = np.concatenate(lns)
+    q = backfill_unknown(q, lineno_arr, path)
+    r = np.vstack(rs)
+    signs = motion_signs(q)
+    context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
+    for a in sorted(interp.used_rotary):
+        context[a] = np.concatenate([np.full(n, d.get(a, 0.0)) for n, d in rot])
+    for k, v in (setup.context or {}).items():
+        context[k] = np.full(len(q), float(v))
+    return ProgramPath(q + r, r, lineno_arr, np.concatenate(rapid), context)

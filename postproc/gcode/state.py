@@ -1,0 +1,95 @@
+"""The modal state of the interpreter and the tables that drive it.
+
+G-code numbers are keyed as integers ``round(10 * value)`` (G1 -> 10, G90.1 -> 901,
+G59.3 -> 593) so that ``G01``, ``g1`` and ``G1.0`` are the same code.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from postproc.constants import MM_PER_INCH
+
+NAN = math.nan
+
+# Motion modes (group 1)
+RAPID, LINE, ARC_CW, ARC_CCW = 0, 10, 20, 30
+MOTION_CODES = {0: RAPID, 10: LINE, 20: ARC_CW, 30: ARC_CCW}
+CANNED_CYCLES = {730, 760, 810, 820, 830, 840, 850, 860, 870, 880, 890}
+
+# Planes: (first axis, second axis, normal axis) as right-handed triples, the
+# offset letters of the first and second axis. G2 is clockwise seen from +normal.
+PLANES = {
+    170: ((0, 1, 2), ("I", "J")),
+    180: ((2, 0, 1), ("K", "I")),
+    190: ((1, 2, 0), ("J", "K")),
+}
+
+# Work coordinate systems: code -> name; G54.1 Pn is handled apart.
+WORK_SYSTEMS = {540: "G54", 550: "G55", 560: "G56", 570: "G57", 580: "G58", 590: "G59",
+                591: "G59.1", 592: "G59.2", 593: "G59.3"}
+# G10 L2 P numbers -> system name (P0 = current)
+P_SYSTEMS = {1: "G54", 2: "G55", 3: "G56", 4: "G57", 5: "G58", 6: "G59",
+             7: "G59.1", 8: "G59.2", 9: "G59.3"}
+
+# Codes accepted without effect on geometry (pass through): path control, spindle
+# speed modes, retract modes, dwell, cutter-comp cancel, stored positions, rotation cancel.
+NEUTRAL_G = {40, 610, 611, 640, 960, 970, 980, 990, 281, 301, 690, 800, 150, 500}
+
+# Codes refused with the construct's name: they change geometry in ways this
+# postprocessor does not model.
+REFUSED_G = {
+    50: "G5 cubic spline", 51: "G5.1 quadratic spline", 52: "G5.2 NURBS",
+    70: "G7 lathe diameter mode", 80: "G8 lathe radius mode",
+    280: "G28 return to home", 300: "G30 return to stored position",
+    330: "G33 spindle-synchronised motion", 331: "G33.1 rigid tapping",
+    382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing", 385: "G38.5 probing",
+    410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
+    411: "G41.1 dynamic cutter compensation", 421: "G42.1 dynamic cutter compensation",
+    431: "G43.1 dynamic tool length offset", 432: "G43.2 additional tool length offset",
+    160: "G16 polar coordinates", 511: "G51 scaling", 510: "G51 scaling",
+    520: "G52 local offset", 680: "G68 coordinate rotation", 923: "G92.3 restore offsets",
+    171: "G17.1 plane", 181: "G18.1 plane", 191: "G19.1 plane", 600: "G60 directional positioning",
+    760: "G76 threading cycle",
+}
+
+# M codes refused: subprograms and modal-state restore change what follows.
+REFUSED_M = {98: "M98 subprogram call", 99: "M99 subprogram return",
+             71: "M71 modal state restore", 72: "M72 modal state restore",
+             73: "M73 modal state save/autorestore"}
+
+# M codes acting before the motion of their block: copied to the first line inserted
+# before a split move so the whole move runs with them (spindle, coolant, synced outputs).
+BEFORE_MOTION_M = {3, 4, 7, 8, 62, 63, 64, 65}
+
+
+@dataclass
+class ModalState:
+    """Controller state advanced block by block (lengths in mm, machine frame).
+
+    ``pos`` is the nominal commanded position of the spindle gauge point in machine
+    coordinates (NaN while an axis has not been positioned yet).
+    """
+
+    motion: int | None = None  # no motion mode until a G0/G1/G2/G3 is read
+    plane: int = 170
+    incremental: bool = False
+    arc_absolute: bool = False  # G90.1
+    inch: bool = False
+    inverse_time: bool = False  # G93
+    feed: float = NAN
+    work: str = "G54"
+    work_explicit: bool = False
+    g92: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    tlo: float = 0.0  # active tool length offset along Z (mm)
+    tlo_active: bool = False
+    tool: int | None = None  # selected tool (T word)
+    spindle_tool: int | None = None  # tool loaded by M6 / M61
+    pos: list[float] = field(default_factory=lambda: [NAN, NAN, NAN])
+    rotary: dict[str, float] = field(default_factory=dict)
+    dirs: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    @property
+    def unit_mm(self) -> float:
+        return MM_PER_INCH if self.inch else 1.0
