@@ -1,0 +1,129 @@
+"""postproc verify: run programs or control points through a virtual machine."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from postproc.cli.options import parse_context, parse_offset, parse_tool_length, parse_vector
+
+
+@click.command()
+@click.argument("program", required=False, type=click.Path(exists=True, dir_okay=False))
+@click.option("-c", "--calibration", "calibrations", multiple=True, type=click.Path(exists=True, dir_okay=False),
+              help="Calibration file (repeatable: with --points, one column per calibration).")
+@click.option("--machine", "machine_path", required=True, type=click.Path(exists=True, dir_okay=False),
+              help="Machine definition (JSON, \"format\": \"postproc machine\").")
+@click.option("--points", "points", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Control points CSV (X,Y,Z targets): print a Table-1 style report instead.")
+@click.option("--corrected", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Already corrected program to run instead of correcting PROGRAM in-process.")
+@click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
+              help="Tool vector (mm) from the gauge point to the functional point.")
+@click.option("--offset", "offsets", multiple=True, metavar="G54=X..,Y..,Z..",
+              help="Work offset in machine coordinates (repeatable).")
+@click.option("--tool-length", "tool_lengths", multiple=True, metavar="H=L",
+              help="Tool length of offset number H in mm (repeatable).")
+@click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
+              help="Context value during the run (temp=21.5, load=300 ...; repeatable).")
+@click.option("--max-step", "max_step", type=float, default=0.5, show_default=True, metavar="MM",
+              help="Sampling step along the program's moves.")
+@click.option("--shots", type=int, default=12, show_default=True,
+              help="With --points: tracker shots averaged per point.")
+@click.option("--seed", type=int, default=0, show_default=True, help="With --points: seed of the tracker noise.")
+@click.option("--no-noise", "no_noise", is_flag=True, help="With --points: exact positions, no tracker noise.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
+              help="PNG of the deviation along the program (needs matplotlib).")
+def verify(program, calibrations, machine_path, points, corrected, tool_vector, offsets, tool_lengths,
+           contexts, max_step, shots, seed, no_noise, as_json, plot):
+    """Run a program, or control points, on a virtual machine and report the errors.
+
+    PROGRAM mode: the original program and its corrected version (corrected here with
+    each -c calibration, or --corrected FILE) are sampled along every move and run
+    through the machine; the deviation of the actual tool point from the nominal
+    path is reported (max and RMS over feed moves, the worst lines), before and after.
+
+    --points mode: for each control point, Delta = |actual - target| uncorrected and
+    with each calibration, their sums and the improvement in percent, in the layout
+    of seed 000's Tables 1 and 5. The tracker is simulated (--shots averaged, --seed).
+
+    Example:
+
+        postproc verify --points samples/s500_control_points.csv -c calibrations/s500_static.json --machine calibrations/s500.machine.json
+    """
+    import numpy as np
+
+    from postproc.calibration.calfile import load_calibration
+    from postproc.simulate import load_machine
+
+    machine = load_machine(machine_path)
+    ctx = dict(parse_context(c) for c in contexts)
+    tool = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
+    if points is not None:
+        if program is not None or corrected is not None:
+            raise click.UsageError("give either PROGRAM or --points, not both")
+        from postproc.simulate.control import (
+            control_experiment,
+            format_control_report,
+            read_control_points,
+        )
+
+        cps = read_control_points(points)
+        cals = [load_calibration(c) for c in calibrations]
+        r = cps.tool if cps.tool is not None else (np.asarray(tool) if tool is not None else None)
+        report = control_experiment(machine, cps.targets, [(_label(c), c.engine) for c in cals], r, ctx,
+                                    np.random.default_rng(seed), shots=shots, noise=not no_noise)
+        if as_json:
+            click.echo(json.dumps(report.to_dict(), indent=2))
+            return
+        shot_text = (f"tracker {report.shots} shots averaged per point (sigma {report.sigma_mm * 1000:g} um "
+                     f"per shot), seed {seed}" if report.shots else "no tracker noise")
+        tool_text = ("per-point tool vectors" if cps.tool is not None
+                     else f"tool vector {','.join(f'{v:g}' for v in (tool or (0, 0, 0)))}")
+        click.echo(f"machine {machine.name}: {len(cps.targets)} control points from {points}; {tool_text}; "
+                   f"{shot_text}")
+        click.echo("D = |actual - target| in mm")
+        click.echo(format_control_report(report), nl=False)
+        for note in report.notes:
+            click.echo(f"note: {note}", err=True)
+        return
+
+    if program is None:
+        raise click.UsageError("give a PROGRAM to verify, or --points CONTROL.csv")
+    if corrected is not None and len(calibrations) > 1:
+        raise click.UsageError("--corrected takes one program: give at most one -c with it")
+    if corrected is None and not calibrations:
+        raise click.UsageError("give -c CALIBRATION to correct PROGRAM with, or --corrected FILE")
+    from postproc.simulate.program import verify_program
+
+    setup_args = {"offsets": dict(parse_offset(o) for o in offsets),
+                  "tool_lengths": dict(parse_tool_length(t) for t in tool_lengths),
+                  "tool_vector": tool, "context": ctx}
+    cals = [load_calibration(c) for c in calibrations]
+    report = verify_program(program, machine, cals, setup_args, corrected=corrected, max_step_mm=max_step)
+    if plot:
+        from postproc.simulate.verify import plot_deviation
+
+        ax = plot_deviation(report, title=f"{program} on {machine.name}")
+        ax.figure.savefig(plot, dpi=120, bbox_inches="tight")
+    if as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2))
+        return
+    click.echo(f"{program} on machine {machine.name}: deviation of the tool point from the nominal path "
+               "(feed moves)")
+    for run in report.runs:
+        click.echo(f"  {run.label:<28} max {run.max_mm * 1000:9.2f} um   RMS {run.rms_mm * 1000:9.2f} um   "
+                   f"({int(np.count_nonzero(run.feed))} samples)")
+    for run in report.runs:
+        worst = ", ".join(f"line {ln} ({d * 1000:.1f} um)" for ln, d in run.worst_lines())
+        click.echo(f"  worst lines, {run.label}: {worst}")
+    for note in report.notes:
+        click.echo(f"note: {note}", err=True)
+    if plot:
+        click.echo(f"wrote {plot}", err=True)
+
+
+def _label(cal) -> str:
+    return f"{cal.method} ({cal.name})" if cal.name and cal.name != cal.method else cal.method

@@ -1,0 +1,68 @@
+"""verify PROGRAM: the original and the corrected program on a virtual machine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from postproc.errors import PostprocError
+from postproc.simulate.machine import Machine
+from postproc.simulate.verify import (
+    NOMINAL_STEP_MM,
+    RUN_STEP_MM,
+    VerifyReport,
+    evaluate_run,
+    nominal_polyline,
+)
+
+
+def make_setup(setup_args: dict | None):
+    """A :class:`postproc.gcode.path.Setup` from offsets, tool lengths, tool vector, context."""
+    from postproc.gcode.path import Setup
+
+    args = dict(setup_args or {})
+    offsets = {name: (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0)) if isinstance(v, dict) else v
+               for name, v in (args.get("offsets") or {}).items()}
+    return Setup(offsets=offsets, tool_lengths=dict(args.get("tool_lengths") or {}),
+                 tool_vector=args.get("tool_vector"), context=dict(args.get("context") or {}))
+
+
+def correct_program_text(text: str, calibration, setup, path: str | None = None) -> str:
+    """The program corrected in-process with the correction pipeline (default options)."""
+    from postproc.gcode.pipeline import correct_text
+
+    result = correct_text(text, calibration, setup, path=path)
+    return result if isinstance(result, str) else result.text
+
+
+def verify_program(program, machine: Machine, calibrations: list, setup_args: dict | None = None, *,
+                   corrected=None, max_step_mm: float = RUN_STEP_MM) -> VerifyReport:
+    """Deviation from the nominal path of the original program and of each corrected one.
+
+    ``calibrations``: loaded :class:`Calibration` objects, each used to correct
+    ``program`` in-process, unless ``corrected`` (a path) gives the corrected program.
+    """
+    from postproc.gcode.path import program_path
+
+    if max_step_mm <= 0:
+        raise PostprocError(f"sampling step must be positive, got {max_step_mm}")
+    setup = make_setup(setup_args)
+    program = str(program)
+    nominal = program_path(program, setup, max_step_mm=NOMINAL_STEP_MM)
+    if len(nominal) < 2:
+        raise PostprocError("the program has no moves to verify", path=program)
+    poly = nominal_polyline(nominal)
+    report = VerifyReport()
+    original = program_path(program, setup, max_step_mm=max_step_mm)
+    report.runs.append(evaluate_run("uncorrected", machine, original, poly, nominal.lineno))
+    if corrected is not None:
+        label = f"corrected ({Path(corrected).name})"
+        path = program_path(str(corrected), setup, max_step_mm=max_step_mm)
+        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
+        return report
+    text = Path(program).read_text(encoding="utf-8", errors="surrogateescape")
+    for cal in calibrations:
+        fixed = correct_program_text(text, cal, setup, path=program)
+        path = program_path(fixed, setup, max_step_mm=max_step_mm)
+        label = f"corrected, {cal.method}" + (f" ({cal.name})" if cal.name != cal.method else "")
+        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
+    return report
