@@ -1,0 +1,291 @@
+"""The 21-parameter model of a three-axis machine (seed 000, chapter 3) as an engine.
+
+For commanded positions ``q = (X, Y, Z)`` and tool vector ``r`` (formats.md signs)::
+
+    rho(q) = sum_i (EX_i, EY_i, EZ_i)(q_i) + (-EC0Y*Y + EB0Z*Z, -EA0Z*Z, 0)
+    eps(q) = sum_i (EA_i, EB_i, EC_i)(q_i)              = (A, B, C)
+
+    first  (formula 3):  p = q + r + rho + eps x r
+    second (formula 4):  p = q + r + rho + s (v + 0.5 eps x v),   v = eps x r,
+                         s = 1 / (1 + |eps|^2 / 4)
+    exact:               p = q + rho + R(eps) r                   (Rodrigues-Hamilton)
+
+Formula (4) with the nominal angles is the Cayley form of the finite rotation: it
+agrees with the exact rotation to third order in the angles. The seed's interval
+terms (products of the per-axis angles with undetermined signs) give the bounds
+``delta+`` and ``delta-`` of :meth:`ParametricEngine.second_order_bounds`.
+
+Interpolation between table rows is piecewise cubic Hermite with monotone
+(Fritsch-Carlson, "pchip") slopes by default: it passes through every measured row,
+never overshoots between two rows (a noisy interferometer table does not turn into
+oscillations, as an interpolating natural spline would make of it), and is C1, so
+the inverse's Jacobian is continuous and Newton converges quadratically. ``linear``
+(what controllers do with compensation tables) is available too.
+
+Outside the table ranges the engine never fails: with ``extrapolate="clamp"`` (the
+default) each function keeps its end value; with ``"linear"`` it continues with its
+end slope. Squareness terms are linear in q and stay so. The calibrated volume is
+the table ranges; the correction pipeline refuses points outside it unless asked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from postproc.constants import VOLUME_EDGE_SLACK_MM
+from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
+from postproc.engine.parametric_tables import AXES, AxisTables, Squareness
+from postproc.errors import CalibrationError
+
+ORDERS = ("first", "second", "exact")
+SOLVERS = ("newton", "astatic")
+INTERPOLATIONS = ("pchip", "linear")
+EXTRAPOLATIONS = ("clamp", "linear")
+
+
+@dataclass(frozen=True)
+class AstaticSettings:
+    """KMTPP astatic control law (seed 000, chapter 4): grid step u, gain K, step l.
+
+    Defaults are the seed's best values: u = 2 mm, K = 1.5, l = 0.1.
+    """
+
+    grid_step_mm: float = 2.0
+    gain: float = 1.5
+    time_step: float = 0.1
+    max_iter: int = 2000
+
+    def __post_init__(self) -> None:
+        kl = self.gain * self.time_step
+        if not (self.grid_step_mm > 0 and 0 < kl < 2 and self.max_iter > 0):
+            raise CalibrationError(
+                f"astatic settings u={self.grid_step_mm}, K={self.gain}, l={self.time_step}: "
+                "need u > 0 and 0 < K*l < 2 (otherwise the iteration does not approach the target)"
+            )
+
+    def to_dict(self) -> dict:
+        return {"grid_step_mm": self.grid_step_mm, "gain": self.gain, "time_step": self.time_step,
+                "max_iter": self.max_iter}
+
+
+class AxisFunctions:
+    """The six error functions of one axis, interpolated from its table rows."""
+
+    def __init__(self, position_mm: np.ndarray, values: np.ndarray, interpolation: str,
+                 extrapolate: str) -> None:
+        self.x = np.asarray(position_mm, dtype=float)
+        self.values = np.asarray(values, dtype=float)
+        self.interpolation = interpolation
+        self.extrapolate = extrapolate
+        if interpolation == "pchip":
+            self._f = PchipInterpolator(self.x, self.values, axis=0, extrapolate=True)
+            self._df = self._f.derivative()
+        else:
+            self._slopes = np.diff(self.values, axis=0) / np.diff(self.x)[:, None]
+
+    def _linear(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        idx = np.clip(np.searchsorted(self.x, t, side="right") - 1, 0, len(self.x) - 2)
+        w = (t - self.x[idx]) / (self.x[idx + 1] - self.x[idx])
+        v = self.values[idx] * (1 - w)[:, None] + self.values[idx + 1] * w[:, None]
+        return v, self._slopes[idx]
+
+    def evaluate(self, t, derivative: bool = False):
+        """Values (N, 6) at positions t (N,), and their derivatives when asked."""
+        t = np.asarray(t, dtype=float)
+        tc = np.clip(t, self.x[0], self.x[-1])
+        if self.interpolation == "pchip":
+            v, dv = self._f(tc), (self._df(tc) if (derivative or self.extrapolate == "linear") else None)
+        else:
+            v, dv = self._linear(tc)
+        outside = t != tc
+        if self.extrapolate == "linear":
+            v = v + (t - tc)[:, None] * dv
+        elif derivative and outside.any():
+            dv = np.where(outside[:, None], 0.0, dv)
+        return (v, dv) if derivative else v
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (N, 3) arrays (faster than np.cross for 3-vectors)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def rotate(eps: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """R(eps) r for rotation vectors eps (N, 3), via Rodrigues-Hamilton parameters.
+
+    lambda0 = cos(theta/2), lambda = sin(theta/2) eps/theta; R r = r + 2 lambda0 (lambda x r)
+    + 2 lambda x (lambda x r). Written with sinc so it is exact and stable at theta -> 0.
+    """
+    theta = np.linalg.norm(eps, axis=1)
+    lam0 = np.cos(theta / 2)
+    lam = 0.5 * np.sinc(theta / (2 * np.pi))[:, None] * eps  # sin(theta/2)/theta * eps
+    lr = cross(lam, r)
+    return r + 2 * lam0[:, None] * lr + 2 * cross(lam, lr)
+
+
+def second_order_displacement(eps: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Formula (4) angular part: s (v + 0.5 eps x v), v = eps x r."""
+    v = cross(eps, r)
+    return s[:, None] * (v + 0.5 * cross(eps, v))
+
+
+class ParametricEngine(Engine):
+    """Forward model from axis error tables and squareness, with two inverse solvers.
+
+    ``order``: "first" (formula 3), "second" (formula 4, nominal angles) or "exact"
+    (finite rotation). ``solver``: "newton" (converged to SOLVER_TOL_MM) or "astatic"
+    (KMTPP, seed 000 chapter 4). ``volume_mm`` defaults to the table ranges.
+    """
+
+    method = "parametric"
+    affine = False
+
+    def __init__(self, tables: AxisTables, squareness: Squareness | None = None, volume_mm=None, *,
+                 order: str = "first", solver: str = "newton", interpolation: str = "pchip",
+                 extrapolate: str = "clamp", astatic: AstaticSettings | dict | None = None) -> None:
+        table_volume = tables.volume_mm
+        super().__init__(table_volume if volume_mm is None else volume_mm)
+        if np.any(self.volume_mm[0] < table_volume[0] - VOLUME_EDGE_SLACK_MM) or np.any(
+            self.volume_mm[1] > table_volume[1] + VOLUME_EDGE_SLACK_MM
+        ):
+            raise CalibrationError(
+                f"calibrated volume {self.volume_mm.tolist()} reaches beyond the table ranges "
+                f"{table_volume.tolist()}",
+                hint="the calibrated volume of a parametric model is at most its table ranges",
+            )
+        for name, value, allowed in (("order", order, ORDERS), ("solver", solver, SOLVERS),
+                                     ("interpolation", interpolation, INTERPOLATIONS),
+                                     ("extrapolate", extrapolate, EXTRAPOLATIONS)):
+            if value not in allowed:
+                raise CalibrationError(f"parametric {name} {value!r} is not one of {', '.join(allowed)}")
+        self.tables = tables
+        self.squareness = squareness or Squareness()
+        self.order, self.solver = order, solver
+        self.interpolation, self.extrapolate = interpolation, extrapolate
+        if isinstance(astatic, dict):
+            astatic = AstaticSettings(**astatic)
+        self.astatic = astatic or AstaticSettings()
+        self._functions = [AxisFunctions(tables.position_mm[a], tables.errors[a], interpolation, extrapolate)
+                           for a in AXES]
+        sq = self.squareness
+        # Squareness as a constant matrix: rho += S q.
+        self._S = np.array([[0.0, -sq.EC0Y, sq.EB0Z], [0.0, 0.0, -sq.EA0Z], [0.0, 0.0, 0.0]])
+
+    def with_options(self, **changes) -> ParametricEngine:
+        """A copy with other order / solver / interpolation / extrapolate / astatic settings."""
+        opts = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
+                "extrapolate": self.extrapolate, "astatic": self.astatic}
+        unknown = set(changes) - set(opts)
+        if unknown:
+            raise CalibrationError(f"unknown parametric option(s) {', '.join(sorted(unknown))}")
+        opts.update({k: v for k, v in changes.items() if v is not None})
+        if isinstance(opts["astatic"], dict):
+            opts["astatic"] = replace(self.astatic, **opts["astatic"])
+        return ParametricEngine(self.tables, self.squareness, self.volume_mm, **opts)
+
+    # -- the error functions -----------------------------------------------------------
+    def errors_at(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """Summed linear errors rho (N, 3) mm (squareness included) and angles eps (N, 3) rad."""
+        q = check_points(q, "q")
+        total = np.zeros((len(q), 6))
+        for i, f in enumerate(self._functions):
+            total += f.evaluate(q[:, i])
+        return total[:, :3] + q @ self._S.T, total[:, 3:]
+
+    def error_derivatives(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """d rho / dq and d eps / dq as (N, 3, 3) arrays (column i: derivative along axis i)."""
+        q = check_points(q, "q")
+        drho = np.empty((len(q), 3, 3))
+        deps = np.empty((len(q), 3, 3))
+        for i, f in enumerate(self._functions):
+            _, d = f.evaluate(q[:, i], derivative=True)
+            drho[:, :, i] = d[:, :3]
+            deps[:, :, i] = d[:, 3:]
+        return drho + self._S, deps
+
+    # -- the model -----------------------------------------------------------------------
+    def forward(self, q, r=None, context=None) -> np.ndarray:
+        return self.forward_order(q, r, self.order)
+
+    def forward_order(self, q, r=None, order: str | None = None) -> np.ndarray:
+        """Forward model with an explicit order ("first", "second", "exact")."""
+        q = check_points(q, "q")
+        r = check_tool_vectors(r, len(q))
+        rho, eps = self.errors_at(q)
+        order = order or self.order
+        if order == "first":
+            return q + r + rho + cross(eps, r)
+        if order == "second":
+            s = 1.0 / (1.0 + 0.25 * np.sum(eps**2, axis=1))
+            return q + r + rho + second_order_displacement(eps, r, s)
+        if order == "exact":
+            return q + rho + rotate(eps, r)
+        raise CalibrationError(f"parametric order {order!r} is not one of {', '.join(ORDERS)}")
+
+    def second_order_bounds(self, q, r=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Volumetric error vectors (delta+, delta-, delta first order), each (N, 3), mm.
+
+        Formula (4) with the interval numbers A, B, C of seed 000: each angle sum gains
+        half the products of the per-axis angles of the two other components with all
+        signs + (delta+) or all signs - (delta-). Summed over the nine axis pairs these
+        products are A' = A +- B C / 2, B' = B +- A C / 2, C' = C +- A B / 2. (The seed's
+        B line lists eps_xz*eps_zy where the pattern of all three lines, every pair of
+        a-type and c-type angles, has eps_yz*eps_zx; the pattern is followed here.)
+        s is the seed's Rodrigues factor of the plain sums.
+        """
+        q = check_points(q, "q")
+        r = check_tool_vectors(r, len(q))
+        rho, eps = self.errors_at(q)
+        A, B, C = eps.T
+        s = 1.0 / (1.0 + 0.25 * np.sum(eps**2, axis=1))
+        pair = 0.5 * np.column_stack([B * C, A * C, A * B])
+        plus = rho + second_order_displacement(eps + pair, r, s)
+        minus = rho + second_order_displacement(eps - pair, r, s)
+        return plus, minus, rho + cross(eps, r)
+
+    def jacobian(self, q, r=None) -> np.ndarray:
+        """dF/dq (N, 3, 3) of the first-order model (the other orders differ by O(|eps|^2))."""
+        q = check_points(q, "q")
+        r = check_tool_vectors(r, len(q))
+        drho, deps = self.error_derivatives(q)
+        J = drho + np.eye(3)
+        for i in range(3):
+            J[:, :, i] += cross(deps[:, :, i], r)
+        return J
+
+    def inverse(self, p, r=None, context=None, *, solver: str | None = None) -> InverseResult:
+        from postproc.engine import parametric_solvers
+
+        p = check_points(p, "p")
+        r = check_tool_vectors(r, len(p))
+        solver = solver or self.solver
+        if solver == "newton":
+            return parametric_solvers.newton_inverse(self, p, r)
+        if solver == "astatic":
+            return parametric_solvers.astatic_inverse(self, p, r, self.astatic)
+        raise CalibrationError(f"parametric solver {solver!r} is not one of {', '.join(SOLVERS)}")
+
+    # -- serialisation ---------------------------------------------------------------
+    def model_to_dict(self) -> dict:
+        return {
+            "order": self.order,
+            "solver": self.solver,
+            "interpolation": self.interpolation,
+            "extrapolate": self.extrapolate,
+            "astatic": self.astatic.to_dict(),
+            "squareness_rad": self.squareness.as_dict(),
+            "tables": self.tables.to_dict(),
+        }
+
+    @classmethod
+    def model_from_dict(cls, model: dict, volume_mm) -> ParametricEngine:
+        tables = AxisTables.from_dict(model["tables"])
+        sq = Squareness(**{k: float(v) for k, v in model.get("squareness_rad", {}).items()})
+        return cls(tables, sq, volume_mm, order=model.get("order", "first"),
+                   solver=model.get("solver", "newton"), interpolation=model.get("interpolation", "pchip"),
+                   extrapolate=model.get("extrapolate", "clamp"), astatic=model.get("astatic"))

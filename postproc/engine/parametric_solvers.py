@@ -1,0 +1,120 @@
+"""Inverse solvers of the parametric model: find q with F(q, r) = p*.
+
+``newton_inverse``: vectorised Newton with the analytic Jacobian of the first-order
+model, converged to a hundredth of SOLVER_TOL_MM; a point that does not reach
+SOLVER_TOL_MM raises SolverError naming it.
+
+``astatic_inverse``: the KMTPP iteration of seed 000 (chapter 4) as the seed
+describes it. The workspace is split into a grid of step u from the lower corner of
+the calibrated volume (the tables' origin O1). A model point starts there, at the
+actual position R = F(q_0, r), and moves by the astatic control law
+
+    qdot_m = -K (q_m - q_d),   q_{m+1} = q_m + l qdot_m,     q_d = p* - r
+
+(q_d: the nominal axis coordinates of the target). Its actual position is
+accumulated along the path through the curved field, quasi-differentially:
+R_{m+1} = R_m + G_M (q_{m+1} - q_m), with G_M the direction-cosine matrix of the grid
+cell M holding q_m (column i: the secant of the model along axis i over one grid
+step from the cell's node, the rotations composed by Rodrigues-Hamilton parameters
+when the engine's order is "exact"). The iteration stops when R is within one grid
+step of the target on every axis; then formula (2) gives
+q = q_m + G_M^-1 (p* - R) with the last G. The result is not iterated further: its
+residual |F(q) - p*| is what the method achieves, and is returned, not assumed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
+from postproc.engine.base import InverseResult
+from postproc.errors import SolverError
+
+# Newton stops at a hundredth of the tolerance: one more cheap iteration puts the
+# residual far below anything a controller can resolve, and leaves margin for the
+# rounding of the emitted coordinates.
+NEWTON_STOP_MM = SOLVER_TOL_MM / 100
+
+
+def _solver_error(what: str, idx: int, p: np.ndarray, resid: float, n: int) -> SolverError:
+    x, y, z = p[idx]
+    err = SolverError(
+        f"{what} did not converge for point #{idx} (target {x:.4f}, {y:.4f}, {z:.4f} mm): "
+        f"residual {resid * 1000:.4g} um after {n} iterations",
+        hint="check that the target lies in the calibrated volume and that the error tables are sane "
+             "(no jumps of millimetres between rows)",
+    )
+    err.point_index = idx
+    return err
+
+
+def newton_inverse(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLVER_TOL_MM,
+                   max_iter: int = SOLVER_MAX_ITER) -> InverseResult:
+    """Newton iteration q <- q - J^-1 (F(q) - p*), per point, from q = p* - r."""
+    n = len(p)
+    q = p - r
+    iterations = np.zeros(n, dtype=int)
+    resid = np.full(n, np.inf)
+    active = np.arange(n)
+    for k in range(max_iter + 1):
+        f = engine.forward(q[active], r[active]) - p[active]
+        res = np.linalg.norm(f, axis=1)
+        resid[active] = res
+        keep = ~(res <= NEWTON_STOP_MM)
+        active, f = active[keep], f[keep]
+        if not len(active) or k == max_iter:
+            break
+        J = engine.jacobian(q[active], r[active])
+        q[active] -= np.linalg.solve(J, f[:, :, None])[:, :, 0]
+        iterations[active] += 1
+    bad = np.flatnonzero(~(resid <= tol_mm))
+    if len(bad):
+        worst = bad[np.argmax(np.where(np.isfinite(resid[bad]), resid[bad], np.inf))]
+        raise _solver_error("Newton inverse", int(worst), p, float(resid[worst]), int(iterations[worst]))
+    return InverseResult(q, resid, iterations)
+
+
+def cell_matrix(engine, node: np.ndarray, r: np.ndarray, step_mm: float) -> np.ndarray:
+    """G_M (N, 3, 3): column i = (F(node + u e_i) - F(node)) / u, the axis directions of the cell."""
+    f0 = engine.forward(node, r)
+    G = np.empty((len(node), 3, 3))
+    for i in range(3):
+        shifted = node.copy()
+        shifted[:, i] += step_mm
+        G[:, :, i] = (engine.forward(shifted, r) - f0) / step_mm
+    return G
+
+
+def astatic_inverse(engine, p: np.ndarray, r: np.ndarray, settings) -> InverseResult:
+    """KMTPP astatic iteration (see the module docstring), vectorised over points."""
+    u, K, dt = settings.grid_step_mm, settings.gain, settings.time_step
+    n = len(p)
+    origin = engine.volume_mm[0].copy()
+    q_d = p - r
+    q_m = np.tile(origin, (n, 1))
+    R = engine.forward(q_m, r)
+    iterations = np.zeros(n, dtype=int)
+    G_last = np.empty((n, 3, 3))
+    active = np.arange(n)
+    for _ in range(settings.max_iter):
+        node = origin + np.floor((q_m[active] - origin) / u) * u
+        G = cell_matrix(engine, node, r[active], u)
+        G_last[active] = G
+        close = np.all(np.abs(R[active] - p[active]) <= u, axis=1)
+        active = active[~close]
+        if not len(active):
+            break
+        G = G[~close]
+        step = dt * (-K * (q_m[active] - q_d[active]))
+        R[active] += np.einsum("nij,nj->ni", G, step)
+        q_m[active] += step
+        iterations[active] += 1
+    else:
+        if len(active):
+            dist = np.max(np.abs(R[active] - p[active]), axis=1)
+            worst = int(active[np.argmax(dist)])
+            raise _solver_error("astatic iteration", worst, p, float(dist.max()), settings.max_iter)
+    # Formula (2) with the last G: one linear step from the model point to the target.
+    q = q_m + np.linalg.solve(G_last, (p - R)[:, :, None])[:, :, 0]
+    resid = np.linalg.norm(engine.forward(q, r) - p, axis=1)
+    return InverseResult(q, resid, iterations + 1)
