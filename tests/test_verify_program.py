@@ -1,0 +1,87 @@
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from numpy.testing import assert_allclose
+
+from postproc.cli import main
+from postproc.simulate import AxisErrors, Machine, MachineGeometry, save_machine, simulate_points
+from postproc.simulate.program import verify_program
+from postproc.simulate.verify import NOMINAL_STEP_MM, Polyline, point_segment_distance
+
+REPO = Path(__file__).parents[1]
+POCKET = REPO / "samples" / "pocket.nc"
+VOLUME = [[0, 0, 0], [315, 315, 315]]
+# The nominal path's arcs are chords of NOMINAL_STEP_MM: a point on the smallest arc of
+# the pocket (R = 5 mm) is up to h^2 / (8 R) = 10 nm from them.
+CHORD_MM = NOMINAL_STEP_MM**2 / (8 * 5.0)
+
+
+def offset_machine(offset):
+    s = np.array([0.0, 315.0])
+    v = np.zeros((2, 6))
+    v[:, :3] = offset
+    return Machine(MachineGeometry({"X": AxisErrors(s, v)}, {}, VOLUME))
+
+
+def test_polyline_nearest_is_exact():
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 20, 800)
+    pts = np.column_stack([10 * np.cos(t), 10 * np.sin(t), t])
+    poly = Polyline(pts)
+    p = pts[rng.integers(0, 800, 300)] + rng.normal(0, 0.5, (300, 3))
+    d, seg = poly.nearest(p)
+    brute = np.array([point_segment_distance(np.repeat(x[None], 799, 0), pts[:-1], pts[1:]) for x in p])
+    assert_allclose(d, brute.min(axis=1), atol=1e-12)
+    assert_allclose(d, brute[np.arange(300), seg], atol=1e-12)
+
+
+def test_ideal_machine_runs_the_program_on_its_path():
+    rep = verify_program(POCKET, offset_machine([0, 0, 0]), [], corrected=POCKET)
+    for run in rep.runs:
+        assert run.max_mm <= CHORD_MM + 1e-12
+
+
+def test_a_lift_of_the_tool_shows_as_its_height_and_names_lines():
+    # Every feed move of the pocket lies in a plane or runs along Z: a 10 um shift in Z is
+    # a 10 um deviation everywhere except on the plunges, which it slides along.
+    rep = verify_program(POCKET, offset_machine([0, 0, 0.010]), [], corrected=POCKET)
+    run = rep.runs[0]
+    assert run.max_mm == pytest.approx(0.010, abs=CHORD_MM)
+    plunges = {6, 18, 27}  # file lines of N60, N150, N240 (G1 Z.. plunges)
+    lines = {ln for ln, _ in run.worst_lines()}
+    assert not lines & plunges
+    # A shift along X leaves the X-direction moves on their line and moves the others.
+    run_x = verify_program(POCKET, offset_machine([0.010, 0, 0]), [], corrected=POCKET).runs[0]
+    on_line = run_x.deviation_mm[run_x.feed] <= CHORD_MM
+    assert on_line.any()
+    assert (~on_line).any()
+    assert run_x.max_mm == pytest.approx(0.010, abs=CHORD_MM)
+
+
+def test_verify_program_cli_json_and_plot(tmp_path):
+    mpath = tmp_path / "lift.machine.json"
+    save_machine(mpath, offset_machine([0, 0, 0.004]))
+    png = tmp_path / "dev.png"
+    res = CliRunner().invoke(main, ["verify", str(POCKET), "--corrected", str(POCKET), "--machine",
+                                    str(mpath), "--json", "--plot", str(png)])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert [r["label"] for r in data["runs"]] == ["uncorrected", "corrected (pocket.nc)"]
+    assert data["runs"][0]["max_mm"] == pytest.approx(0.004, abs=CHORD_MM)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    res = CliRunner().invoke(main, ["verify", str(POCKET), "--machine", str(mpath)])
+    assert res.exit_code == 2
+    assert "-c CALIBRATION" in res.output
+
+
+def test_machine_with_backlash_effect_depends_on_approach():
+    m = offset_machine([0, 0, 0])
+    m = Machine(m.geometry, effects=[{"name": "backlash:X", "config": {}, "params": {"b_mm": 0.02}}])
+    q = np.array([[100.0, 50, 50]] * 2)
+    meas = simulate_points(m, q, None, None, direction=[[1, 1, 1], [-1, 1, 1]], noise=False)
+    assert_allclose(meas.m[0] - meas.m[1], [0.02, 0, 0], atol=1e-12)
+    res = m.inverse(meas.m, None, {"dirx": np.array([1.0, -1.0])})
+    assert_allclose(res.q, q, atol=1e-6)
