@@ -24,9 +24,9 @@ from postproc.engine.base import Engine, check_points, check_tool_vectors
 from postproc.errors import SolverError
 from postproc.simulate.machine import Machine
 
-# A calibration's inverse must reach its own model's target this closely, or the
-# experiment would measure the solver instead of the calibration.
-INVERSE_RESIDUAL_LIMIT_MM = 1e-4
+# A calibration whose inverse misses its own model's target by more than this gets a
+# note: the experiment then measures the solver (e.g. an approximate astatic law) too.
+INVERSE_RESIDUAL_NOTE_MM = 1e-4
 
 
 @dataclass
@@ -106,12 +106,12 @@ def control_experiment(machine: Machine, targets, calibrations: list[tuple[str, 
     names, notes = [], []
     for name, engine in calibrations:
         res = engine.inverse(p, rr, ctx)
+        if not np.all(np.isfinite(res.q)):
+            raise SolverError(f"calibration {name}: its inverse gave no finite position",
+                              hint="are the control points inside the calibrated volume?")
         worst = float(np.max(res.residual_mm))
-        if not np.isfinite(worst) or worst > INVERSE_RESIDUAL_LIMIT_MM:
-            raise SolverError(
-                f"calibration {name}: its inverse misses its own target by {worst * 1000:.1f} um",
-                hint="are the control points inside the calibrated volume?",
-            )
+        if not np.isfinite(worst) or worst > INVERSE_RESIDUAL_NOTE_MM:
+            notes.append(f"{name}: its inverse misses its own model's target by up to {worst * 1000:.1f} um")
         outside = int(np.count_nonzero(~engine.inside(res.q)))
         if outside:
             notes.append(f"{name}: {outside} point(s) outside its calibrated volume")
