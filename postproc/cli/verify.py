@@ -117,8 +117,9 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
         click.echo(f"  {run.label:<28} max {run.max_mm * 1000:9.2f} um   RMS {run.rms_mm * 1000:9.2f} um   "
                    f"({int(np.count_nonzero(run.feed))} samples)")
     for run in report.runs:
-        worst = ", ".join(f"line {ln} ({d * 1000:.1f} um)" for ln, d in run.worst_lines())
-        click.echo(f"  worst lines, {run.label}: {worst}")
+        click.echo(f"  worst lines, {run.label}:")
+        for ln, d in run.worst_lines():
+            click.echo(f"    {d * 1000:9.2f} um  line {ln}: {report.line_text(ln)}")
     for note in report.notes:
         click.echo(f"note: {note}", err=True)
     if plot:

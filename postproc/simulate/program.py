@@ -51,7 +51,8 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     if len(nominal) < 2:
         raise PostprocError("the program has no moves to verify", path=program)
     poly = nominal_polyline(nominal)
-    report = VerifyReport()
+    text = Path(program).read_text(encoding="utf-8", errors="surrogateescape")
+    report = VerifyReport(source_lines=text.splitlines())
     original = program_path(program, setup, max_step_mm=max_step_mm)
     report.runs.append(evaluate_run("uncorrected", machine, original, poly, nominal.lineno))
     if corrected is not None:
@@ -59,7 +60,6 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
         path = program_path(str(corrected), setup, max_step_mm=max_step_mm)
         report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
         return report
-    text = Path(program).read_text(encoding="utf-8", errors="surrogateescape")
     for cal in calibrations:
         fixed = correct_program_text(text, cal, setup, path=program)
         path = program_path(fixed, setup, max_step_mm=max_step_mm)

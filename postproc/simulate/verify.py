@@ -128,9 +128,22 @@ class Run:
 class VerifyReport:
     runs: list[Run] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: text of the original program's lines (index 0 = line 1), to show the worst ones
+    source_lines: list[str] = field(default_factory=list)
+
+    def line_text(self, lineno: int) -> str:
+        if 1 <= lineno <= len(self.source_lines):
+            return self.source_lines[lineno - 1].strip()
+        return ""
 
     def to_dict(self) -> dict:
-        return {"runs": [r.to_dict() for r in self.runs], "notes": list(self.notes)}
+        runs = []
+        for r in self.runs:
+            d = r.to_dict()
+            for w in d["worst_lines"]:
+                w["text"] = self.line_text(w["line"])
+            runs.append(d)
+        return {"runs": runs, "notes": list(self.notes)}
 
 
 def machine_run(machine: Machine, path) -> np.ndarray:
