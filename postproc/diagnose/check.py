@@ -1,0 +1,152 @@
+"""``postproc check``: hold a calibration against measurements.
+
+Residuals of the calibration as it is (measured - model), a noise floor, a
+cross-validated refit of its method (so a flexible model cannot hide a misfit),
+where the residual sits (points, regions, approach directions, time, context), and
+which physical effect would explain it (:mod:`postproc.diagnose.rank`).
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
+from postproc.diagnose.data import Dataset
+from postproc.diagnose.models import base_model
+from postproc.diagnose.noise import NoiseFloor, noise_floor
+from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Ranking, rank_effects
+from postproc.diagnose.where import components, where_it_fails
+from postproc.effects import candidate_names, effect_from_dict
+from postproc.effects.composed import ComposedEngine
+from postproc.errors import MeasurementError, MissingSetupError, PostprocError
+
+#: methods ``postproc fit`` can refit from points (its --method choices)
+FIT_METHODS = ("static", "interval", "grid", "parametric")
+
+
+@dataclass
+class CheckResult:
+    cal_path: str
+    method: str
+    files: list[str]
+    ds: Dataset
+    resid: np.ndarray  # measured - calibration (as it is)
+    summary: dict
+    noise: NoiseFloor
+    where: dict
+    ranking: Ranking | None
+    cv_note: str = ""
+    existing: list[str] = field(default_factory=list)
+
+    @property
+    def suggestions(self) -> list[dict]:
+        if self.ranking is None:
+            return []
+        out, names = [], list(self.existing)
+        for c in self.ranking.selected:
+            names.append(c.name)
+            eff = c.effect
+            out.append({
+                "effect": c.name,
+                "explained": c.explained,
+                "rms_after_mm": c.rms_after_mm,
+                "p_value": c.p_value,
+                "parameters": dict(eff.params) if eff else {},
+                "config": dict(eff.config) if eff else {},
+                "description": eff.describe() if eff else "",
+                "meaning": c.meaning,
+                "compensable": eff.compensable_reason if eff else "",
+                "command": self.fit_command(names),
+            })
+        return out
+
+    def fit_command(self, names: list[str]) -> str | None:
+        if self.method not in FIT_METHODS:
+            return None
+        stem = Path(self.cal_path).stem if self.cal_path else "calibration"
+        added = [n for n in names if n not in self.existing]
+        out = f"{stem}_{'_'.join(n.replace(':', '_') for n in added)}.json"
+        args = ["postproc", "fit", *self.files, "--method", self.method]
+        for n in names:
+            args += ["--effect", n]
+        return shlex.join([*args, "-o", out])
+
+    def to_json(self) -> dict:
+        rk = self.ranking
+        return {
+            "calibration": self.cal_path,
+            "method": self.method,
+            "effects_in_calibration": list(self.existing),
+            "n_points": len(self.ds),
+            "rms_mm": self.summary["rms_mm"],
+            "max_mm": self.summary["max_mm"],
+            "rms_xyz_mm": self.summary["rms_xyz_mm"],
+            "max_xyz_mm": self.summary["max_xyz_mm"],
+            "noise_floor_mm": self.noise.rms_mm,
+            "noise_floor_source": self.noise.source,
+            "cv_folds": rk.folds if rk else 0,
+            "cv_rms_mm": rk.base_cv_rms_mm if rk else None,
+            "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
+            "cv_note": self.cv_note,
+            "significance_p": SIGNIFICANCE_P,
+            "suggestions": self.suggestions,
+            "candidates": [
+                {"effect": c.name, "status": c.status, "explained": c.explained,
+                 "rms_after_mm": c.rms_after_mm, "p_value": c.p_value, "reason": c.reason,
+                 "round": c.round}
+                for c in ((rk.rounds[-1] if rk.rounds else []) + rk.untestable + rk.in_model)
+            ] if rk else [],
+            "where": self.where,
+        }
+
+
+def json_safe(obj):
+    """Plain JSON data: numpy scalars to Python, NaN/inf to null."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def measured_residual(engine, ds: Dataset) -> np.ndarray:
+    try:
+        return ds.m - engine.forward(ds.q, ds.r, ds.ctx)
+    except MissingSetupError as exc:
+        raise MeasurementError(
+            f"the measurements lack a column the calibration needs: {exc.message}",
+            path=",".join(ds.paths),
+            hint="measure with that column (dirx/diry/dirz, t, temp, load ...) or check a calibration without the effect",
+        ) from None
+
+
+def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
+              candidates: list[str] | None = None, max_selected: int = MAX_SELECTED) -> CheckResult:
+    """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``."""
+    ds = Dataset.from_measurements(data)
+    engine = cal.engine
+    base_engine = engine.base if isinstance(engine, ComposedEngine) else engine
+    existing = [effect_from_dict(d) for d in (cal.effects or [])]
+    resid = measured_residual(engine, ds)
+    noise = noise_floor(ds, sigma_mm)
+    where = where_it_fails(ds, resid)
+    ranking, note = None, ""
+    try:
+        model = base_model(cal.method, {}, engine=base_engine)
+        groups = ds.repeat_groups()
+        fold_masks = make_folds(groups, folds)
+        names = candidates if candidates is not None else candidate_names(ds.ctx)
+        ranking = rank_effects(model, ds, existing, names, fold_masks, max_selected=max_selected)
+        note = f"{len(fold_masks)} folds; {model.description}"
+    except PostprocError as exc:
+        note = f"cross-validation not possible: {exc.message}"
+    return CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
+                       ranking, note, [e.name for e in existing])

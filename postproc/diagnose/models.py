@@ -1,0 +1,210 @@
+"""A base model (the calibration's method) fitted jointly with effects.
+
+Three ways, chosen by the method:
+
+- ``LinearStatic``: the static model ``p = r_O1 + G q + r`` is linear in its 12
+  parameters, so base and effects are one least-squares problem (exact joint fit).
+- ``Refit``: any other method with a point fitter (interval, grid, parametric):
+  alternate (fit the base to measured - effects; fit the effects to the base's
+  residual) ``ALTERNATIONS`` times.
+- ``Fixed``: a method that cannot be refitted from points (identity, tables): the
+  base is held as calibrated and the effects are fitted to its residual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from postproc.diagnose.data import Dataset
+from postproc.effects import Effect
+from postproc.effects.periodic import Periodic
+from postproc.effects.thermal import ThermalTime
+from postproc.engine.base import Engine
+from postproc.errors import CalibrationError, PostprocError
+
+# Alternating fits of a non-linear base and the effects: the effects are small and
+# nearly orthogonal to the base's own shapes, so the second pass changes the effect
+# parameters by a few percent and the third by less than the noise.
+ALTERNATIONS = 3
+
+# An effect column whose part outside the base model's span is below this fraction of
+# its norm is already modelled by the base (e.g. scale:X in the static model).
+REDUNDANT_FRACTION = 1e-6
+
+#: effects whose ``prepare`` searches a non-linear setting on the residual
+SEARCHING = (Periodic, ThermalTime)
+
+
+def stacked(B: np.ndarray) -> np.ndarray:
+    """(N, 3, k) -> (3N, k), rows ordered point by point (x, y, z)."""
+    n, _, k = B.shape
+    return B.reshape(3 * n, k)
+
+
+def effects_basis(effects: list[Effect], ds: Dataset) -> np.ndarray:
+    if not effects:
+        return np.zeros((len(ds), 3, 0))
+    return np.concatenate([e.basis(ds.q, ds.r, ds.ctx) for e in effects], axis=2)
+
+
+def split_params(effects: list[Effect], coef: np.ndarray) -> list[Effect]:
+    out, i = [], 0
+    for e in effects:
+        k = len(e.param_names)
+        out.append(e.copy(params=coef[i:i + k]))
+        i += k
+    return out
+
+
+@dataclass
+class Fitted:
+    """A fitted base engine and effects with their parameters."""
+
+    engine: Engine
+    effects: list[Effect]
+    report: list[str]
+
+    def predict(self, ds: Dataset) -> np.ndarray:
+        p = self.engine.forward(ds.q, ds.r, ds.ctx)
+        for e in self.effects:
+            p = p + e.displacement(ds.q, ds.r, ds.ctx)
+        return p
+
+
+class BaseModel:
+    kind = ""
+    description = ""
+
+    def fit(self, ds: Dataset, effects: list[Effect]) -> Fitted:
+        raise NotImplementedError
+
+    def span(self, ds: Dataset) -> np.ndarray | None:
+        """(3N, m) columns the base can absorb exactly, for the redundancy test."""
+        return None
+
+    def redundant(self, ds: Dataset, effect: Effect) -> bool:
+        A = self.span(ds)
+        if A is None:
+            return False
+        ready = effect.prepare(ds.q, ds.r, ds.ctx, np.zeros_like(ds.m))  # any pitch or lag will do
+        B = stacked(ready.basis(ds.q, ds.r, ds.ctx))
+        coef, *_ = np.linalg.lstsq(A, B, rcond=None)
+        rest = np.linalg.norm(B - A @ coef, axis=0)
+        return bool(np.all(rest <= REDUNDANT_FRACTION * np.maximum(np.linalg.norm(B, axis=0), 1e-300)))
+
+    def prepare(self, ds: Dataset, effects: list[Effect]) -> list[Effect]:
+        """Set every effect's non-linear config on ``ds``, in order, each on the residual
+        of the model with the effects before it."""
+        done: list[Effect] = []
+        for e in effects:
+            resid = None
+            if isinstance(e, SEARCHING):
+                resid = ds.m - self.fit(ds, done).predict(ds)
+            done.append(e.prepare(ds.q, ds.r, ds.ctx, resid))
+        return done
+
+
+def static_design(ds: Dataset) -> np.ndarray:
+    """(3N, 12): for component j the columns [1, X, Y, Z] of the static model."""
+    n = len(ds)
+    A = np.zeros((3 * n, 12))
+    base = np.column_stack([np.ones(n), ds.q])
+    for j in range(3):
+        A[j::3, 4 * j:4 * j + 4] = base
+    return A
+
+
+class LinearStatic(BaseModel):
+    kind = "static"
+    description = "static model fitted jointly with the effects (one least-squares problem)"
+
+    def span(self, ds: Dataset) -> np.ndarray:
+        return static_design(ds)
+
+    def fit(self, ds: Dataset, effects: list[Effect]) -> Fitted:
+        from postproc.engine.static import StaticEngine, fit_affine
+
+        if not effects:
+            G, origin, _ = fit_affine(ds.q, ds.m - ds.r)
+        else:
+            fit_affine(ds.q, ds.m - ds.r)  # the same refusal of points that do not span 3 axes
+            A = np.hstack([static_design(ds), stacked(effects_basis(effects, ds))])
+            coef, *_ = np.linalg.lstsq(A, (ds.m - ds.r).reshape(-1), rcond=None)
+            block = coef[:12].reshape(3, 4)
+            origin, G = block[:, 0], block[:, 1:]
+            effects = split_params(effects, coef[12:])
+        volume = np.vstack([ds.q.min(axis=0), ds.q.max(axis=0)])
+        engine = StaticEngine(G, origin, volume)
+        return Fitted(engine, effects, static_summary(G, origin))
+
+
+def static_summary(G: np.ndarray, origin: np.ndarray) -> list[str]:
+    u = G / np.linalg.norm(G, axis=0)
+    sq = [(a, (np.arccos(np.clip(u[:, i] @ u[:, j], -1, 1)) - np.pi / 2) * 1e6)
+          for a, i, j in (("XY", 0, 1), ("XZ", 0, 2), ("YZ", 1, 2))]
+    scale = (np.linalg.norm(G, axis=0) - 1.0) * 1e6
+    return [
+        f"axis scale errors (ppm): X {scale[0]:+.1f}  Y {scale[1]:+.1f}  Z {scale[2]:+.1f}",
+        "out-of-squareness (urad): " + "  ".join(f"{a} {v:+.1f}" for a, v in sq),
+        f"origin r_O1 (mm): {origin[0]:+.4f} {origin[1]:+.4f} {origin[2]:+.4f}",
+    ]
+
+
+def _lstsq_effects(effects: list[Effect], ds: Dataset, resid: np.ndarray) -> list[Effect]:
+    if not effects:
+        return []
+    coef, *_ = np.linalg.lstsq(stacked(effects_basis(effects, ds)), resid.reshape(-1), rcond=None)
+    return split_params(effects, coef)
+
+
+class Refit(BaseModel):
+    """A method with a point fitter; effects by alternation."""
+
+    def __init__(self, method: str, fitter, options: dict | None = None) -> None:
+        self.kind = method
+        self.fitter = fitter
+        self.options = dict(options or {})
+        self.description = f"{method} model refitted, alternating with the effects ({ALTERNATIONS} passes)"
+
+    def fit(self, ds: Dataset, effects: list[Effect]) -> Fitted:
+        shift = np.zeros_like(ds.m)
+        res = None
+        for _ in range(ALTERNATIONS if effects else 1):
+            res = self.fitter([ds.with_m(ds.m - shift).to_measurements()], **self.options)
+            resid = ds.m - res.engine.forward(ds.q, ds.r, ds.ctx)
+            effects = _lstsq_effects(effects, ds, resid)
+            shift = sum((e.displacement(ds.q, ds.r, ds.ctx) for e in effects), np.zeros_like(ds.m))
+        return Fitted(res.engine, effects, list(res.report))
+
+
+class Fixed(BaseModel):
+    """The calibration held as it is; effects fitted to its residual."""
+
+    def __init__(self, engine: Engine, why: str) -> None:
+        self.kind = engine.method
+        self.engine = engine
+        self.description = f"{engine.method} calibration held fixed ({why})"
+
+    def fit(self, ds: Dataset, effects: list[Effect]) -> Fitted:
+        resid = ds.m - self.engine.forward(ds.q, ds.r, ds.ctx)
+        return Fitted(self.engine, _lstsq_effects(effects, ds, resid), [])
+
+
+def base_model(method: str, options: dict | None = None, engine: Engine | None = None) -> BaseModel:
+    """The base model for ``method``: joint for static, alternating for other fitters,
+    held fixed (needs ``engine``) when the method cannot be refitted from points."""
+    if method == "static":
+        return LinearStatic()
+    from postproc.engine.registry import fitter
+
+    try:
+        fit = fitter(method)
+    except (PostprocError, ImportError, AttributeError) as exc:
+        if engine is None:
+            msg = exc.message if isinstance(exc, PostprocError) else str(exc)
+            raise CalibrationError(f"the {method} method cannot be refitted from points: {msg}",
+                                   hint="use --method static, interval or grid") from None
+        return Fixed(engine, f"the {method} method has no point fitter")
+    return Refit(method, fit, options)

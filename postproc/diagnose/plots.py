@@ -1,0 +1,103 @@
+"""Plots of a check (matplotlib is imported only here, inside each function).
+
+Each ``plot_*(..., ax=None) -> ax``; :func:`write_plots` saves the set as PNGs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from postproc.effects.base import AXES
+from postproc.effects.periodic import periodogram, search_frequencies
+
+
+def _axes(ax, projection=None):
+    if ax is not None:
+        return ax
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 5), layout="constrained")
+    return fig.add_subplot(projection=projection) if projection else fig.add_subplot()
+
+
+def plot_residual_vectors(q: np.ndarray, resid: np.ndarray, ax=None):
+    """Residual vectors at the commanded points, scaled so the largest is 10 % of the volume."""
+    ax = _axes(ax, "3d")
+    span = float(np.max(np.ptp(q, axis=0))) or 1.0
+    norm = np.linalg.norm(resid, axis=1)
+    k = 0.1 * span / (float(norm.max()) or 1.0)
+    ax.quiver(q[:, 0], q[:, 1], q[:, 2], resid[:, 0] * k, resid[:, 1] * k, resid[:, 2] * k,
+              arrow_length_ratio=0.2, linewidth=0.8)
+    ax.set_xlabel("X mm")
+    ax.set_ylabel("Y mm")
+    ax.set_zlabel("Z mm")
+    ax.set_title(f"residual vectors (x{k:.0f}; largest {norm.max() * 1000:.1f} um)")
+    return ax
+
+
+def plot_residual_vs(values: np.ndarray, resid: np.ndarray, name: str, ax=None):
+    """Residual components (um) against one variable."""
+    ax = _axes(ax)
+    for j, a in enumerate(AXES):
+        ax.plot(values, resid[:, j] * 1000, ".", ms=3, label=f"{a.lower()} residual")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel(name)
+    ax.set_ylabel("residual um")
+    ax.legend(loc="best", fontsize="small")
+    ax.set_title(f"residual vs {name}")
+    return ax
+
+
+def plot_periodogram(x: np.ndarray, y: np.ndarray, axis: str, ax=None):
+    """Periodogram of the residual along an axis against that axis's position, by pitch."""
+    ax = _axes(ax)
+    freqs = search_frequencies(x)
+    if len(freqs):
+        ax.plot(1.0 / freqs, periodogram(x, y, freqs) * 1e6)
+        ax.set_xscale("log")
+    ax.set_xlabel(f"pitch (mm of {axis} travel)")
+    ax.set_ylabel("power um^2")
+    ax.set_title(f"periodogram of the {axis} residual along {axis}")
+    return ax
+
+
+def plot_before_after(labels: list[str], rms_mm: list[float], floor_mm: float | None, ax=None):
+    """Cross-validated RMS before and after each added effect, with the noise floor."""
+    ax = _axes(ax)
+    ax.bar(range(len(labels)), [v * 1000 for v in rms_mm])
+    ax.set_xticks(range(len(labels)), labels, rotation=20, ha="right")
+    if floor_mm:
+        ax.axhline(floor_mm * 1000, color="r", ls="--", label="noise floor")
+        ax.legend()
+    ax.set_ylabel("cross-validated RMS um")
+    ax.set_title("before / after")
+    return ax
+
+
+def write_plots(res, directory) -> list[Path]:
+    """Write the check's plots as PNG files in ``directory``; returns their paths."""
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    ds, resid = res.ds, res.resid
+    written = []
+
+    def save(ax, name):
+        path = d / name
+        ax.figure.savefig(path, dpi=100)
+        written.append(path)
+
+    save(plot_residual_vectors(ds.q, resid), "residual_vectors.png")
+    for j, a in enumerate(AXES):
+        save(plot_residual_vs(ds.q[:, j], resid, f"{a} mm"), f"residual_vs_{a}.png")
+        save(plot_periodogram(ds.q[:, j], resid[:, j], a), f"periodogram_{a}.png")
+    for name, v in sorted(ds.ctx.items()):
+        if np.ptp(v) > 0:
+            save(plot_residual_vs(v, resid, name), f"residual_vs_{name}.png")
+    rk = res.ranking
+    if rk is not None:
+        labels = ["calibration"] + [f"+ {c.name}" for c in rk.selected]
+        values = [rk.base_cv_rms_mm] + [c.rms_after_mm for c in rk.selected]
+        save(plot_before_after(labels, values, res.noise.rms_mm), "before_after.png")
+    return written

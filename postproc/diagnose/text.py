@@ -1,0 +1,117 @@
+"""The readable ``postproc check`` report (lines of text; the CLI prints them)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.diagnose.check import CheckResult
+from postproc.diagnose.rank import SIGNIFICANCE_P
+from postproc.effects.base import AXES
+
+# A reversal between +1 and -1 approaches larger than this many standard errors is
+# marked as a finding (3 sigma: one false mark in ~700 clean axes).
+REVERSAL_FLAG_SIGMAS = 3.0
+
+
+def um(v: float) -> str:
+    return f"{v * 1000:.2f}"
+
+
+def vec_um(v, signed: bool = True) -> str:
+    fmt = "{:+.2f}" if signed else "{:.2f}"
+    return " ".join(f"{a.lower()} {fmt.format(x * 1000)}" for a, x in zip(AXES, v, strict=True))
+
+
+def vec_g(v) -> str:
+    return " ".join(f"{a.lower()} {x:+.3g}" for a, x in zip(AXES, v, strict=True))
+
+
+def format_report(res: CheckResult) -> list[str]:
+    s, nf, rk = res.summary, res.noise, res.ranking
+    eff = f", effects {', '.join(res.existing)}" if res.existing else ""
+    out = [f"check of {res.cal_path} ({res.method}{eff}) against {len(res.ds)} points "
+           f"from {', '.join(res.files)}"]
+    out.append(f"residual (measured - model): RMS {um(s['rms_mm'])} um, max {um(s['max_mm'])} um")
+    out.append(f"  per axis RMS (um): {vec_um(s['rms_xyz_mm'], False)};  mean: {vec_um(s['mean_xyz_mm'])}")
+    if nf.source == "repeats":
+        out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS from repeated points, {nf.dof} degrees of freedom)")
+    elif nf.source == "declared":
+        meas = f"; repeats say {um(nf.measured_rms_mm)} um" if nf.measured_rms_mm else ""
+        out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")
+    else:
+        out.append("noise floor: unknown (no repeated points; give --sigma MM, the instrument's sigma per axis)")
+    if rk is not None:
+        ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
+        out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
+    else:
+        out.append(res.cv_note)
+    out += ["", "where it fails:"] + _where(res)
+    out += [""] + _ranking(res)
+    return out
+
+
+def _where(res: CheckResult) -> list[str]:
+    w = res.where
+    out = ["  worst points:"]
+    for p in w["worst"]:
+        q = p["q_mm"]
+        out.append(f"    {p['place']}  X {q[0]:.3f} Y {q[1]:.3f} Z {q[2]:.3f}  "
+                   f"residual {vec_um(p['residual_mm'])} um (|{um(p['norm_mm'])}| um)")
+    out.append("  by region (RMS um in quarters of the points along each axis):")
+    for a, bins in w["by_region"].items():
+        worst = max(bins, key=lambda b: b["rms_mm"])
+        cells = " | ".join(f"{b['from']:.0f}..{b['to']:.0f}: {um(b['rms_mm'])}" for b in bins)
+        out.append(f"    {a}: {cells}   (worst {worst['from']:.0f}..{worst['to']:.0f} mm)")
+    if w["by_direction"]:
+        out.append("  by approach direction (mean residual along the axis):")
+        for a, d in w["by_direction"].items():
+            flag = ("  <- reversal error" if abs(d["reversal_mm"]) > REVERSAL_FLAG_SIGMAS * d["stderr_mm"]
+                    else "")
+            out.append(f"    {a}: +1 {um(d['mean_plus_mm'])} um, -1 {um(d['mean_minus_mm'])} um: "
+                       f"difference {um(d['reversal_mm'])} +- {um(d['stderr_mm'])} um{flag}")
+    else:
+        out.append("  by approach direction: no dirx/diry/dirz columns")
+    if w["along_time"]:
+        out.append("  along time t (mean residual um per quarter of the campaign):")
+        for b in w["along_time"]:
+            out.append(f"    t {b['from']:.0f}..{b['to']:.0f} s: {vec_um(b['mean_xyz_mm'])}")
+    for name, c in w["context"].items():
+        r = c["correlation_xyz"]
+        flag = "  <- correlated" if c["flagged"] else ""
+        out.append(f"  against {name}: slope (um per unit) {vec_g(np.asarray(c['slope_xyz_mm_per_unit']) * 1000)}; "
+                   f"correlation {' '.join(f'{v:+.2f}' for v in r)}{flag}")
+    return out
+
+
+def _ranking(res: CheckResult) -> list[str]:
+    rk = res.ranking
+    if rk is None:
+        return ["missing effects: not ranked (no cross-validation)"]
+    out = [f"missing effects (each added to the model and cross-validated; significant at p < {SIGNIFICANCE_P:g}):"]
+    sug = res.suggestions
+    if not sug:
+        out.append("  none: no candidate effect explains the residual significantly")
+    for i, (c, sgg) in enumerate(zip(rk.selected, sug, strict=True), 1):
+        out.append(f"  {i}. {c.name}: explains {c.explained * 100:.1f} % of the residual variance, "
+                   f"RMS after {um(c.rms_after_mm)} um (p = {c.p_value:.1g})")
+        out.append(f"     {sgg['description']}")
+        out.append(f"     {sgg['meaning']}; {sgg['compensable']}")
+        out.append(f"     add it: {sgg['command']}" if sgg["command"] else
+                   f"     the {res.method} method cannot be refitted from points: add it to a static fit")
+    last = rk.rounds[-1] if rk.rounds else []
+    if last and sug:
+        nxt = last[0]
+        out.append(f"  next best, not significant: {nxt.name} explains {nxt.explained * 100:.1f} % (p = {nxt.p_value:.2g})")
+    elif last:
+        out.append("  best tried: " + ", ".join(
+            f"{c.name} {c.explained * 100:+.1f} % (p = {c.p_value:.2g})" for c in last[:3]))
+    if sug and res.noise.rms_mm:
+        out.append(f"  with all suggestions: cross-validated RMS {um(rk.final_cv_rms_mm)} um = "
+                   f"{rk.final_cv_rms_mm / res.noise.rms_mm:.2f} x the noise floor")
+    if rk.untestable:
+        out.append("untestable with this data:")
+        out += [f"  {c.name}: {c.reason}" for c in rk.untestable]
+    if rk.in_model:
+        out.append("already in the model: " + ", ".join(c.name for c in rk.in_model))
+    return out
+

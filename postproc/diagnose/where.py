@@ -1,0 +1,111 @@
+"""Where a model fails: residual statistics by point, region, direction, time, context.
+
+Every function takes a :class:`Dataset` and its residuals ``measured - model`` (N, 3)
+and returns plain data (dicts/lists) that the text and JSON reports render.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.diagnose.data import Dataset
+from postproc.effects.base import AXES, DIR_COLUMNS
+
+# Worst points listed in the report.
+N_WORST = 5
+# Bins along each axis and along time: 4 bins of ~N/4 points each keep the bin means
+# within noise/sqrt(N/4) while still showing where along the travel the error sits.
+N_BINS = 4
+# A correlation between a residual component and a context column above this (in
+# absolute value) is flagged; for N = 100 points |r| > 0.33 has p < 0.001 by chance.
+CORRELATION_FLAG = 0.33
+
+
+def components(resid: np.ndarray) -> dict:
+    norm = np.linalg.norm(resid, axis=1)
+    return {
+        "rms_mm": float(np.sqrt(np.mean(norm**2))) if len(norm) else 0.0,
+        "max_mm": float(np.max(norm)) if len(norm) else 0.0,
+        "rms_xyz_mm": [float(v) for v in np.sqrt(np.mean(resid**2, axis=0))],
+        "max_xyz_mm": [float(v) for v in np.max(np.abs(resid), axis=0)],
+        "mean_xyz_mm": [float(v) for v in np.mean(resid, axis=0)],
+    }
+
+
+def worst_points(ds: Dataset, resid: np.ndarray, n: int = N_WORST) -> list[dict]:
+    norm = np.linalg.norm(resid, axis=1)
+    out = []
+    for i in np.argsort(-norm)[:n]:
+        out.append({
+            "place": ds.place(int(i)), "q_mm": ds.q[i].tolist(), "residual_mm": resid[i].tolist(),
+            "norm_mm": float(norm[i]),
+        })
+    return out
+
+
+def binned(values: np.ndarray, resid: np.ndarray, n_bins: int = N_BINS) -> list[dict]:
+    """Residual statistics in equal-count bins of ``values``."""
+    order = np.argsort(values, kind="stable")
+    out = []
+    for chunk in np.array_split(order, min(n_bins, len(order))):
+        if len(chunk) == 0:
+            continue
+        r = resid[chunk]
+        out.append({
+            "from": float(values[chunk].min()), "to": float(values[chunk].max()), "n": int(len(chunk)),
+            "rms_mm": float(np.sqrt(np.mean(np.sum(r**2, axis=1)))),
+            "mean_xyz_mm": [float(v) for v in r.mean(axis=0)],
+        })
+    return out
+
+
+def by_region(ds: Dataset, resid: np.ndarray) -> dict:
+    return {a: binned(ds.q[:, j], resid) for j, a in enumerate(AXES) if np.ptp(ds.q[:, j]) > 0}
+
+
+def by_direction(ds: Dataset, resid: np.ndarray) -> dict:
+    """Mean residual along each axis for +1 and -1 approaches: their difference is the
+    reversal error the model misses (ISO 230-2 'B')."""
+    out = {}
+    for j, col in enumerate(DIR_COLUMNS):
+        if col not in ds.ctx:
+            continue
+        d = ds.ctx[col]
+        plus, minus = resid[d > 0, j], resid[d < 0, j]
+        if len(plus) < 2 or len(minus) < 2:
+            continue
+        diff = float(plus.mean() - minus.mean())
+        se = float(np.sqrt(plus.var(ddof=1) / len(plus) + minus.var(ddof=1) / len(minus)))
+        out[AXES[j]] = {"mean_plus_mm": float(plus.mean()), "mean_minus_mm": float(minus.mean()),
+                        "n_plus": int(len(plus)), "n_minus": int(len(minus)),
+                        "reversal_mm": diff, "stderr_mm": se}
+    return out
+
+
+def against_context(ds: Dataset, resid: np.ndarray) -> dict:
+    """Slope and correlation of each residual component against every context column."""
+    out = {}
+    for name, v in sorted(ds.ctx.items()):
+        if name in DIR_COLUMNS or np.ptp(v) == 0:
+            continue
+        vc = v - v.mean()
+        slopes, corr = [], []
+        for j in range(3):
+            rc = resid[:, j] - resid[:, j].mean()
+            den = float(np.sqrt(np.sum(vc**2) * np.sum(rc**2)))
+            slopes.append(float(np.sum(vc * rc) / np.sum(vc**2)))
+            corr.append(float(np.sum(vc * rc) / den) if den > 0 else 0.0)
+        out[name] = {"slope_xyz_mm_per_unit": slopes, "correlation_xyz": corr,
+                     "flagged": bool(max(abs(c) for c in corr) > CORRELATION_FLAG),
+                     "bins": binned(v, resid)}
+    return out
+
+
+def where_it_fails(ds: Dataset, resid: np.ndarray) -> dict:
+    return {
+        "worst": worst_points(ds, resid),
+        "by_region": by_region(ds, resid),
+        "by_direction": by_direction(ds, resid),
+        "along_time": binned(ds.ctx["t"], resid) if "t" in ds.ctx and np.ptp(ds.ctx["t"]) > 0 else [],
+        "context": against_context(ds, resid),
+    }
