@@ -116,3 +116,22 @@ def test_verify_points_cli_table_and_json(tmp_path):
         100 * (s["uncorrected"] - s["static (st)"]) / s["uncorrected"])
     # The printed table carries the same numbers (same seed).
     assert f"{s['static (st)']:.3f}" in res.output
+
+
+def test_cli_chain_tables_fit_verify(tmp_path):
+    run = CliRunner()
+    tables = tmp_path / "t.csv"
+    res = run.invoke(main, ["simulate", str(S500), "--tables", "--step", "3", "--seed", "1", "-o", str(tables)])
+    assert res.exit_code == 0, res.output
+    cal = tmp_path / "par.json"
+    res = run.invoke(main, ["fit", str(tables), "-o", str(cal)])
+    assert res.exit_code == 0, res.output
+    res = run.invoke(main, ["verify", "--points", str(TABLE1), "-c", str(cal), "--machine", str(S500),
+                            "--tool-vector", "0,0,-100", "--no-noise", "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    name = data["columns"][1]
+    assert name.startswith("parametric")
+    assert data["sum_mm"]["uncorrected"] > 2.5
+    # Noise-free tracker: what is left is the tables' noise and their 3 mm interpolation.
+    assert max(data["delta_mm"][name]) < 0.002
