@@ -227,3 +227,29 @@ def test_simulate_cli_needs_exactly_one_kind(tmp_path):
     assert res.exit_code == 2
     assert "exactly one" in res.output
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_warm_machine_effects_show_in_simulated_data(tmp_path):
+    from postproc.errors import MissingSetupError
+
+    m = load_machine(REPO / "calibrations" / "s500_warm.machine.json")
+    q = np.array([[100.0, 100.0, 100.0]])
+    plan = measurement_plan(q, approach="both", time_span_s=7200.0, load_values=[0, 500], repeats=2)
+    meas = simulate_plan(m, plan, noise=False)
+    geo = m.geometry.forward(meas.q, meas.r)
+    extra = meas.m - geo
+    t, load, dx = meas.context["t"], meas.context["load"], meas.direction[:, 0]
+    expect = np.column_stack([
+        0.004 * dx + 0.012 * (1 - np.exp(-t / 1800)),
+        0.003 * dx - 0.008 * (1 - np.exp(-t / 1800)),
+        0.020 * (1 - np.exp(-t / 1800)) - 2e-5 * load,
+    ])
+    assert_allclose(extra, expect, atol=1e-12)
+    with pytest.raises(MissingSetupError, match="'t'"):
+        simulate_points(m, q, None, {"dirx": 1, "diry": 1, "dirz": 1, "load": 0.0})
+    out = tmp_path / "w.csv"
+    res = CliRunner().invoke(main, ["simulate", str(REPO / "calibrations" / "s500_warm.machine.json"),
+                                    "--random", "5", "-o", str(out)])
+    assert res.exit_code == MissingSetupError.exit_code
+    assert "--context t=" in res.output
+    assert not out.exists()
