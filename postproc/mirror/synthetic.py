@@ -90,7 +90,7 @@ class Shell:
              - np.asarray(k_applied_mm) + self.rng.normal(0.0, self.noise_mm, b.shape))
         return ThicknessMap(self.b0(i) + b, self.z0_mm + z, t)
 
-    def sensor_sweep(self, b_step_deg: float = 0.05, z_rows=None) -> SensorData:
+    def sensor_sweep(self, b_step_deg: float = 0.1, z_rows=None) -> SensorData:
         """Pre-measurement of the back wall over the belt of pockets, rows of constant Z."""
         lo = self.first_b0_deg
         hi = self.b0(self.n_pockets - 1) + self.pocket_b_deg
@@ -166,3 +166,89 @@ def pocket_program(shell: Shell, y_bottom_mm: float = -5.0, feed: float = 600.0)
             out.append(f"G1 B{bv:.4f}")
     out += [f"G0 Y{y_bottom_mm - 20:.4f}", "M30", "%"]
     return "\n".join(out) + "\n"
+
+
+def zigzag_sensor_csv(shell: Shell, pocket: int = 0, step_deg: float = 0.02, rows: int = 4) -> str:
+    """The ideal back-wall signal along a zig-zag over one pocket, in path order (for deadband)."""
+    b0 = shell.b0(pocket)
+    up = np.arange(shell.grid_b_deg, shell.pocket_b_deg - shell.grid_b_deg + 1e-9, step_deg)
+    lines = ["# ideal back-wall signal along a zig-zag finish path (path order)", "# units: length=mm",
+             "t,B,Z,V"]
+    t = 0.0
+    for k in range(rows):
+        z = shell.z0_mm + shell.grid_z_mm * (k + 1)
+        for bl in (up if k % 2 == 0 else up[::-1]):
+            b = b0 + bl
+            lines.append(f"{t:.3f},{b:.4f},{z:.3f},{float(shell.wall_v(b, z)):.6f}")
+            t += 0.01
+    return "\n".join(lines) + "\n"
+
+
+def write_sample_set(directory, *, seed: int = 3, finished: int = 4) -> list:
+    """Write a campaign's files; the first ``finished`` pockets are already machined.
+
+    The machined pockets follow the self-tuning (with K_dist) exactly as
+    ``postproc mirror pockets`` decides it, so the plan is a consistent history.
+    """
+    from pathlib import Path
+
+    from postproc.calibration.calfile import atomic_write_text
+    from postproc.mirror.feedback import Band, pocket_corrections, read_plan, self_tune
+    from postproc.mirror.kdist import fit_kdist, kdist_comments
+    from postproc.mirror.maps import format_map
+
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    shell = Shell(seed=seed)
+    written = []
+
+    def put(name: str, text: str) -> None:
+        atomic_write_text(d / name, text)
+        written.append(d / name)
+
+    sensor = shell.sensor_sweep()
+    put("backwall_sensor.csv", sensor_csv(sensor))
+    res = fit_kdist(sensor, cutter_radius_mm=shell.cutter_radius_mm, diameter_mm=shell.diameter_mm,
+                    segment_deg=2.0)
+    put("kdist.csv", format_map(res.kmap, comments=kdist_comments(res, "backwall_sensor.csv")))
+    put("pocket.nc", pocket_program(shell))
+    put("shell_static.json", shell_calibration_text())
+    put("zigzag_sensor.csv", zigzag_sensor_csv(shell))
+    band = Band(shell.t_ref_mm, shell.t_ref_mm - 0.02, shell.t_ref_mm + 0.02)
+    b, z = shell.local_grid()
+    p = np.column_stack([np.zeros_like(b), np.full_like(b, -5.0), z])
+    rows = [("", "")] * shell.n_pockets
+    for _ in range(3 * shell.n_pockets):
+        put("plan.csv", plan_csv(shell, rows))
+        pockets = read_plan(d)
+        last = self_tune(pockets, band, shell.allowance_mm)[-1]
+        i = [pk.name for pk in pockets].index(last.pocket.name)
+        if not last.next or i >= finished:
+            break
+        semi, fin = pocket_corrections(last, {pk.name: pk for pk in pockets}, band=band,
+                                       allowance=shell.allowance_mm, apply_axis="Y", sign=1.0, kdist=res.kmap)
+        kind = "semi" if fin is None else "finish"
+        thk = shell.machine(i, b, z, (semi if fin is None else fin).delta(p, {"B": b})[:, 1])
+        name = f"{last.pocket.name}_{kind}.csv"
+        put(name, thickness_csv(thk, f"pocket {last.pocket.name} after the {kind} pass"))
+        rows[i] = (name, rows[i][1]) if fin is None else (rows[i][0], name)
+    return sorted(set(written))
+
+
+def shell_calibration_text() -> str:
+    """A small static calibration of the shell machine (X unused, Y spindle, Z vertical).
+
+    Y scale +20 um/m, Z leaning 30 urad towards +Y, 5 um offset in Y: enough to see
+    the geometric correction added to the mirror maps.
+    """
+    import json
+
+    from postproc.calibration.calfile import calibration_to_dict
+    from postproc.engine.static import StaticEngine
+
+    g = np.eye(3)
+    g[1, 1] += 20e-6
+    g[1, 2] = 30e-6
+    eng = StaticEngine(g, [0.0, 0.005, 0.0], [[-10.0, -60.0, -10.0], [10.0, 10.0, 400.0]])
+    data = calibration_to_dict(eng, name="shell-static", fit={"source": "synthetic shell machine"})
+    return json.dumps(data, indent=2) + "\n"
