@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from postproc.cli.options import parse_offset, parse_tool_length, parse_vector
+from postproc.errors import PostprocError
 
 
 def _direction(ctx, param, value):
@@ -229,9 +230,17 @@ def _setup(offsets, tool_lengths, tool_vector):
 def _correct_program(template, calibration, setup, corr, target: Path) -> str:
     """Correct the template with the calibration and ``corr`` added; write ``target``."""
     from postproc.calibration.calfile import atomic_write_text, load_calibration
+    from postproc.gcode.path import program_path
     from postproc.gcode.pipeline import correct_text
 
     cal = load_calibration(calibration)
+    # Evaluate the maps on the program's points first, so a point outside a map is
+    # refused naming its line in the template.
+    pp = program_path(template, setup)
+    try:
+        corr.delta(pp.points_mm, {**pp.context, "lineno": pp.lineno})
+    except PostprocError as exc:
+        raise exc.at(path=str(template)) from None
     text = Path(template).read_bytes().decode("utf-8", errors="surrogateescape")
     result = correct_text(text, cal, setup, path=str(template), added=[corr])
     atomic_write_text(target, result.text)

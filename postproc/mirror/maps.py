@@ -281,12 +281,14 @@ class _Interpolant:
         more = f" (and {count - 1} more point(s))" if count > 1 else ""
         lineno = int(linenos[i]) if linenos is not None else None
         shape = "" if self.grid is not None else " (or outside the hull of its scattered nodes)"
-        raise OutOfVolumeError(
+        err = OutOfVolumeError(
             f"program point {where} is outside the correction map {m.name} ({span}){shape}{more}",
             lineno=lineno,
             hint="measure the map over the whole program, or allow edge clamping "
             "('# outside: clamp' in the map file) if holding the edge value is acceptable",
         )
+        err.point_index = i  # which of the points given: lets a caller name the program line
+        raise err
 
 
 def _unique(a: np.ndarray) -> np.ndarray:
