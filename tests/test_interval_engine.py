@@ -18,13 +18,14 @@ def grid_data():
     return grid_measurements(MACHINE, step=15.0, sigma=0.002, seed=3)
 
 
-def two_cell_engine(shift_mm: float) -> IntervalEngine:
+def two_cell_engine(shift_mm: float, blend: float = 0.0) -> IntervalEngine:
     """Cells split at X = 100; the upper cell's origin is moved by ``shift_mm`` along x."""
     edges = [[0.0, 100.0, 200.0], [0.0, 100.0], [0.0, 100.0]]
     G = np.tile(np.eye(3), (2, 1, 1, 1, 1))
     origin = np.zeros((2, 1, 1, 3))
     origin[1, 0, 0, 0] = shift_mm
-    return IntervalEngine(edges, G, origin, np.eye(3), np.zeros(3), [[0, 0, 0], [200, 100, 100]])
+    return IntervalEngine(edges, G, origin, np.eye(3), np.zeros(3), [[0, 0, 0], [200, 100, 100]],
+                          border_blend_mm=blend)
 
 
 def test_parse_intervals():
@@ -62,17 +63,38 @@ def test_interval_beats_static_on_curved_machine(grid_data):
     assert_allclose(interval.volume_mm, [[0, 0, 0], [315, 315, 315]])
 
 
-def test_round_trip_with_border_rule(grid_data):
-    res_fit = fit([grid_data], intervals="X=4;Y=4;Z=4")
-    eng = res_fit.engine
+def test_round_trip_blended(grid_data):
+    eng = fit([grid_data], intervals="X=4;Y=4;Z=4").engine
+    assert eng.blend == 1.0
     rng = np.random.default_rng(9)
     p = rng.uniform(0, 315, (5000, 3))
+    # and targets crowded around a border, where the pairs are blended
+    near = rng.uniform(0, 315, (2000, 3))
+    near[:, 1] = 157.5 + rng.uniform(-0.6, 0.6, 2000)
+    p = np.vstack([p, near])
+    r = np.array([0.0, 0.0, -10.0])
+    res = eng.inverse(p + r, r)
+    assert_allclose(eng.forward(res.q, r), p + r, atol=1e-6)
+    assert res.residual_mm.max() < 1e-6
+    # away from the borders the model is the cell's own pair
+    q = np.array([[40.0, 120.0, 200.0]])
+    c = eng.cells_of(q)[0]
+    assert_allclose(eng.forward(q), eng.origin_mm[tuple(c)] + q @ eng.G[tuple(c)].T, atol=1e-12)
+
+
+def test_round_trip_pure_piecewise_with_border_rule(grid_data):
+    eng = fit([grid_data], intervals="X=4;Y=4;Z=4", border_blend_mm=0.0).engine
+    rng = np.random.default_rng(9)
+    p = rng.uniform(0, 315, (5000, 3))
+    near = rng.uniform(0, 315, (2000, 3))
+    near[:, 0] = 78.75 + rng.uniform(-0.03, 0.03, 2000)
+    p = np.vstack([p, near])
     res = eng.inverse(p)
     exact = res.residual_mm < 1e-6
     assert_allclose(eng.forward(res.q[exact]), p[exact], atol=1e-6)
-    # Exceptions are only targets in the gaps between neighbouring cells' images: the
+    assert exact[:5000].mean() > 0.998
+    # Any exceptions are targets in the gaps between neighbouring cells' images: the
     # answer lies just beyond a border and the residual is at most the border jump.
-    assert exact.mean() > 0.998
     jump = eng.border_jumps().max()
     assert np.all(res.residual_mm[~exact] <= jump)
     for n in np.flatnonzero(~exact):
@@ -92,6 +114,23 @@ def test_border_gap_and_overlap():
     assert_allclose(res.q, [[99.996, 50.0, 50.0]], atol=1e-12)
     assert res.residual_mm[0] < 1e-12
     assert eng.border_jumps()[0] == pytest.approx(0.010)
+
+
+def test_blend_makes_the_border_continuous():
+    eng = two_cell_engine(+0.010, blend=1.0)
+    x = np.linspace(99.0, 101.0, 2001)
+    q = np.column_stack([x, np.full_like(x, 50.0), np.full_like(x, 50.0)])
+    f = eng.forward(q)[:, 0]
+    assert np.all(np.diff(f) > 0)  # monotone, no gap
+    assert np.abs(np.diff(f)).max() < 0.001 * 1.02  # slope at most 1 + jump/width * 1.5
+    assert f[0] == pytest.approx(99.0)  # the lower pair ...
+    assert f[-1] == pytest.approx(101.010)  # ... and the upper pair outside the zone
+    res = eng.inverse([[100.004, 50.0, 50.0]])  # the former gap now has an answer
+    assert res.residual_mm[0] < 1e-6
+    assert 99.5 < res.q[0, 0] < 100.5
+    with pytest.raises(PostprocError, match="border blend"):
+        IntervalEngine([[0, 1.5, 3], [0, 1], [0, 1]], np.tile(np.eye(3), (2, 1, 1, 1, 1)),
+                       np.zeros((2, 1, 1, 3)), np.eye(3), np.zeros(3), [[0, 0, 0], [3, 1, 1]])
 
 
 def test_cell_with_too_few_points_is_refused():

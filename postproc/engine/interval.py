@@ -12,12 +12,24 @@ takes part in both neighbours' fits, which pulls their pairs together at the bor
 A cell whose points do not span three axes (fewer than 4, or all on a plane) is
 refused with an error naming the cell; give fewer intervals or measure more points.
 
+Cell borders. Piecewise-constant pairs make the model jump at every interior border
+(by a few to tens of micrometres: the neighbours' fits disagree there). A jump cannot
+be followed by a program move crossing the border (the path would need a step of zero
+length), so by default the two pairs are blended over a narrow zone of
+``border_blend_mm`` centred on the border, with a smooth weight (3t^2 - 2t^3): the
+model is then continuous, equal to the cell's own pair everywhere farther than half
+the zone from a border, and steep but finite across it. ``border_blend_mm = 0`` gives
+the seed's pure piecewise model.
+
 Inverse: the first cell is the one where the static inverse (one ``G``, ``r_O1`` fitted
-to all points) of the target lies; solve with that cell's pair, check that the answer
-lies in that cell, otherwise move to the answer's cell and solve again. The model is
-discontinuous at borders: where neighbouring images overlap the first consistent cell
-wins; where they leave a gap the answer is the solution nearest its own cell and the
-reported residual is the size of the gap there (see ``piecewise_inverse``).
+to all points) of the target lies; solve with that cell's pair (formula (1)), check
+that the answer lies in that cell, otherwise move to the answer's cell and solve
+again (see ``piecewise_inverse``). With a blend zone, answers that fall in it are then
+refined by Newton steps on the blended model until the residual is below the solver
+tolerance. Without it (pure model), where neighbouring images overlap the first
+consistent cell wins; where they leave a gap no commanded point reaches the target,
+the answer is the visited cell's solution nearest its own cell and the reported
+residual is the size of the gap there.
 
 Tool vector: carried unrotated, as in the static method.
 """
@@ -26,11 +38,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine._tangents import (
     AXES,
     LATTICE_TOL_MM,
     cell_index,
     distinct_positions,
+    format_node,
     parse_intervals,
     piecewise_inverse,
 )
@@ -42,12 +56,22 @@ from postproc.engine.base import (
     check_tool_vectors,
 )
 from postproc.engine.static import StaticEngine, fit_affine
-from postproc.errors import CalibrationError, MeasurementError
+from postproc.errors import CalibrationError, MeasurementError, SolverError
 
 # Intervals per axis when --intervals does not say (seed: "intervals of a preliminary
 # partition"; three per axis over a 315 mm cube gives 105 mm cells of ~500 points on a
 # 15 mm grid). Fewer when an axis has fewer distinct positions to fit.
 DEFAULT_INTERVALS = 3
+
+# Width of the zone centred on each interior border where the neighbouring pairs are
+# blended. 1 mm: far below a useful interval (tens of mm), so the model is the seed's
+# almost everywhere, and wide enough that a border jump of up to ~0.1 mm still leaves
+# the model monotone (jump / width << 1) and a program crossing the border is followed
+# with chords of a few tenths of a millimetre at a 1 um tolerance.
+BORDER_BLEND_MM = 1.0
+
+# Newton refinement in a blend zone stops a hundred times below the solver tolerance.
+NEWTON_TOL_MM = SOLVER_TOL_MM / 100
 
 # A cell fitted from fewer points than this has little noise averaging (12 parameters);
 # the fit report says so.
@@ -58,7 +82,8 @@ class IntervalEngine(Engine):
     method = "interval"
     affine = False
 
-    def __init__(self, edges, G, origin_mm, static_G, static_origin_mm, volume_mm) -> None:
+    def __init__(self, edges, G, origin_mm, static_G, static_origin_mm, volume_mm,
+                 border_blend_mm: float = BORDER_BLEND_MM) -> None:
         super().__init__(volume_mm)
         self.edges = [np.asarray(e, dtype=float) for e in edges]
         if len(self.edges) != 3 or any(e.ndim != 1 or len(e) < 2 or np.any(np.diff(e) <= 0) for e in self.edges):
@@ -81,6 +106,14 @@ class IntervalEngine(Engine):
         self.G_inv = np.linalg.inv(self.G)
         self.static = StaticEngine(static_G, static_origin_mm, volume_mm)
         self.shape = shape
+        self.blend = float(border_blend_mm)
+        shortest = min(np.diff(e).min() for e in self.edges)
+        if not np.isfinite(self.blend) or self.blend < 0 or (
+                self.blend > 0 and any(len(e) > 2 for e in self.edges) and shortest < 2 * self.blend):
+            raise CalibrationError(
+                f"interval model: border blend {self.blend:g} mm must be >= 0 and at most half "
+                f"the shortest interval ({shortest:g} mm)"
+            )
 
     def cell_name(self, c) -> str:
         return " ".join(
@@ -99,17 +132,92 @@ class IntervalEngine(Engine):
         i, j, k = cells.T
         return np.einsum("nab,nb->na", self.G_inv[i, j, k], target - self.origin_mm[i, j, k])
 
+    def _blend_weights(self, q: np.ndarray, cells: np.ndarray):
+        """Per axis: the neighbour cell, its weight and the weight's derivative (N, 3)."""
+        nb = cells.copy()
+        lam = np.zeros(q.shape)
+        dlam = np.zeros(q.shape)
+        if self.blend <= 0:
+            return nb, lam, dlam
+        w, half = self.blend, self.blend / 2
+        for j in range(3):
+            e = self.edges[j]
+            c = cells[:, j]
+            x = q[:, j]
+            up = (c < len(e) - 2) & (x > e[np.minimum(c + 1, len(e) - 1)] - half)
+            down = (c > 0) & (x < e[c] + half)
+            # t runs 0 -> 1 across the zone [border - w/2, border + w/2]
+            t = np.where(up, (x - (e[np.minimum(c + 1, len(e) - 1)] - half)) / w,
+                         np.where(down, (x - (e[c] - half)) / w, 0.0))
+            s = t * t * (3 - 2 * t)
+            ds = 6 * t * (1 - t) / w
+            nb[:, j] = np.where(up, c + 1, np.where(down, c - 1, c))
+            lam[:, j] = np.where(up, s, np.where(down, 1 - s, 0.0))
+            dlam[:, j] = np.where(up, ds, np.where(down, -ds, 0.0))
+        return nb, lam, dlam
+
+    def _blended(self, q: np.ndarray, jacobian: bool = False):
+        cells = cell_index(q, self.edges)
+        nb, lam, dlam = self._blend_weights(q, cells)
+        value = np.zeros(q.shape)
+        jac = np.zeros((len(q), 3, 3)) if jacobian else None
+        for a in np.ndindex(2, 2, 2):
+            sel = np.where(np.array(a, dtype=bool)[None, :], nb, cells)
+            wj = np.where(np.array(a, dtype=bool)[None, :], lam, 1 - lam)
+            weight = wj.prod(axis=1)
+            used = weight > 0
+            if not used.any():
+                continue
+            pv = self._apply(q[used], sel[used])
+            value[used] += weight[used, None] * pv
+            if jacobian:
+                i, j, k = sel[used].T
+                jac[used] += weight[used, None, None] * self.G[i, j, k]
+                dw = np.where(np.array(a, dtype=bool)[None, :], dlam, -dlam)[used]
+                for m in range(3):
+                    others = np.prod(np.delete(wj[used], m, axis=1), axis=1)
+                    jac[used, :, m] += (dw[:, m] * others)[:, None] * pv
+        return value, jac
+
+    def position(self, q) -> np.ndarray:
+        """Model position of the measured point (tool vector of the measurement removed)."""
+        q = check_points(q, "q")
+        if self.blend <= 0:
+            return self._apply(q, cell_index(q, self.edges))
+        return self._blended(q)[0]
+
     def forward(self, q, r=None, context=None) -> np.ndarray:
         q = check_points(q, "q")
-        return self._apply(q, cell_index(q, self.edges)) + check_tool_vectors(r, len(q))
+        return self.position(q) + check_tool_vectors(r, len(q))
 
     def inverse(self, p, r=None, context=None) -> InverseResult:
         p = check_points(p, "p")
         rr = check_tool_vectors(r, len(p))
-        first = cell_index(self.static.inverse(p, rr).q, self.edges)
-        q, iters = piecewise_inverse(p - rr, first, self._solve, self.edges)
+        target = p - rr
+        first = cell_index(self.static.inverse(target).q, self.edges)
+        q, iters = piecewise_inverse(target, first, self._solve, self.edges)
+        if self.blend > 0:
+            q, iters = self._newton(target, q, iters)
         resid = np.linalg.norm(self.forward(q, rr) - p, axis=1)
         return InverseResult(q, resid, iters)
+
+    def _newton(self, target: np.ndarray, q: np.ndarray, iters: np.ndarray):
+        """Refine answers that fall in a blend zone (elsewhere they are already exact)."""
+        active = np.arange(len(q))
+        for _ in range(SOLVER_MAX_ITER):
+            value, jac = self._blended(q[active], jacobian=True)
+            err = target[active] - value
+            done = np.linalg.norm(err, axis=1) < NEWTON_TOL_MM
+            active, err, jac = active[~done], err[~done], jac[~done]
+            if len(active) == 0:
+                return q, iters
+            q[active] += np.linalg.solve(jac, err[..., None])[..., 0]
+            iters[active] += 1
+        raise SolverError(
+            f"interval inverse did not converge for {len(active)} point(s), first target "
+            f"{format_node(target[active[0]])}",
+            hint="the interval calibration is probably corrupt (border jumps as wide as the blend zone); refit it",
+        )
 
     def border_jumps(self) -> np.ndarray:
         """Largest jump (mm) of the model across each axis' interior borders, per axis."""
@@ -146,12 +254,14 @@ class IntervalEngine(Engine):
             "G": self.G.tolist(),
             "r_O1_mm": self.origin_mm.tolist(),
             "static": {"G": self.static.G.tolist(), "r_O1_mm": self.static.origin_mm.tolist()},
+            "border_blend_mm": self.blend,
         }
 
     @classmethod
     def model_from_dict(cls, model: dict, volume_mm) -> IntervalEngine:
         return cls(model["edges_mm"], model["G"], model["r_O1_mm"], model["static"]["G"],
-                   model["static"]["r_O1_mm"], volume_mm)
+                   model["static"]["r_O1_mm"], volume_mm,
+                   border_blend_mm=model.get("border_blend_mm", BORDER_BLEND_MM))
 
 
 def partition_edges(q: np.ndarray, spec: list, path: str = "") -> list[np.ndarray]:
@@ -181,8 +291,12 @@ def partition_edges(q: np.ndarray, spec: list, path: str = "") -> list[np.ndarra
     return edges
 
 
-def fit(measurements, *, intervals=None, **options) -> FitResult:
-    """Fit ``G`` and ``r_O1`` per cell by least squares; options: ``intervals`` (spec string)."""
+def fit(measurements, *, intervals=None, border_blend_mm: float = BORDER_BLEND_MM, **options) -> FitResult:
+    """Fit ``G`` and ``r_O1`` per cell by least squares.
+
+    Options: ``intervals`` (spec string, see :func:`parse_intervals`),
+    ``border_blend_mm`` (0 for the seed's pure piecewise model).
+    """
     from postproc.calibration.measurements import Measurements
 
     items = list(measurements)
@@ -220,7 +334,7 @@ def fit(measurements, *, intervals=None, **options) -> FitResult:
         [max(edges[j][0], q[:, j].min()) for j in range(3)],
         [min(edges[j][-1], q[:, j].max()) for j in range(3)],
     ])
-    engine = IntervalEngine(edges, G, origin, static_G, static_origin, volume)
+    engine = IntervalEngine(edges, G, origin, static_G, static_origin, volume, border_blend_mm)
     resid = target - engine.forward(q)
     result = FitResult(engine=engine, residuals_mm=resid)
     jumps = engine.border_jumps()
@@ -228,8 +342,10 @@ def fit(measurements, *, intervals=None, **options) -> FitResult:
         f"interval fit: {shape[0]} x {shape[1]} x {shape[2]} cells on {len(meas)} points "
         f"({counts.min()}..{counts.max()} per cell, border points count in both neighbours)",
         *(f"  {AXES[j]} edges (mm): " + ", ".join(f"{v:g}" for v in edges[j]) for j in range(3)),
-        "largest jump of the model across interior borders (um): "
-        + "  ".join(f"{AXES[j]} {jumps[j] * 1000:.1f}" for j in range(3)),
+        "largest jump of the pairs across interior borders (um): "
+        + "  ".join(f"{AXES[j]} {jumps[j] * 1000:.1f}" for j in range(3))
+        + (f"; blended over {engine.blend:g} mm at each border" if engine.blend > 0 else
+           "; not blended (pure piecewise model)"),
     ]
     few = int((counts < FEW_POINTS_PER_CELL).sum())
     if few:
