@@ -1,0 +1,338 @@
+"""postproc predict: machined surfaces and feature errors from a serial-chain machine model."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import click
+import numpy as np
+
+from postproc.cli.options import parse_context, parse_vector
+
+
+def _save_figure(ax, path: str) -> None:
+    """Save the figure of ``ax`` atomically (temporary file beside it, then rename)."""
+    import matplotlib.pyplot as plt
+
+    fig = np.ravel(ax)[0].figure
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=target.parent if str(target.parent) else ".", prefix=f".{target.name}.",
+                               suffix=target.suffix or ".png")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
+
+
+def _echo_json(data) -> None:
+    click.echo(json.dumps(data, indent=2))
+
+
+def _fmt_um(mm: float) -> str:
+    return f"{mm * 1e3:8.3f} um"
+
+
+@click.group()
+def predict() -> None:
+    """Predict machined surfaces and feature errors from a machine chain.
+
+    A machine is a chain of modules from the workpiece to the tool (4x4 matrices:
+    constant geometry, axis motion, small-angle errors, frames from three points,
+    planes inside tolerance fields). An operation file names the machine and what
+    is cut. See docs/predict.md for both file formats.
+
+    Example:
+
+        postproc predict bore samples/predict/bore_50H7.operation.json
+    """
+
+
+@predict.command()
+@click.argument("operation", type=click.Path(exists=True, dir_okay=False))
+@click.option("--runout", "runout", type=float, default=None, metavar="RAD",
+              help="Spindle runout: angular amplitude A (rad). Default: the operation's value.")
+@click.option("--heights", type=int, default=None, help="Number of edge heights sampled (default: the operation's).")
+@click.option("--windows", type=int, default=40, show_default=True, help="Cutting windows (edge passes) sampled.")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
+              help="Write colour maps of the wall without and with runout to this PNG.")
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+def trace(operation, runout, heights, windows, plot, as_json):
+    """Trace of a flank-milling cutter and the wall it leaves (seed 002).
+
+    The edge trace r_s(t, p) = M(t) r_e(p) is sampled only in the cutting windows
+    (time scale of formula 4); the wall is the envelope of the passes. Prints the
+    cusp height along the feed (against R - sqrt(R^2 - (f/2)^2)) and the form of the
+    wall without and with spindle runout.
+
+    Example:
+
+        postproc predict trace samples/predict/flank_5mm.operation.json --plot wall.png
+    """
+    from postproc.errors import PostprocError
+    from postproc.predict.operation import load_operation
+    from postproc.predict.trace import flank_surface, plot_flank, with_runout
+
+    op = load_operation(operation)
+    if op.kind != "flank":
+        raise PostprocError(f"predict trace needs a flank operation, got {op.kind!r}", path=operation,
+                            hint="use predict bore or predict tolerance for this file")
+    prm = op.params
+    cutter = prm["cutter"]
+    amp = prm["runout_rad"] if runout is None else runout
+    n_h = heights or prm["heights"]
+    if n_h < 2 or windows < 5:
+        raise click.BadParameter("need at least 2 heights and 5 windows")
+    top = cutter.length_mm if cutter.kind != "ball" else cutter.d_mm / 2
+    p = np.linspace(0.0, top, n_h)
+    kw = {"rpm": prm["rpm"], "feed_mm_min": prm["feed_mm_min"], "heights_mm": p, "windows": windows,
+          "context": op.context}
+    cases = {"no runout": flank_surface(op.chain, cutter, **kw)}
+    if amp:
+        edge_rpm = prm["rpm"] * cutter.flutes
+        chain = with_runout(op.chain, amp, edge_rpm, cutter.flutes, prm["runout_phase_rad"])
+        cases[f"runout A = {amp:g} rad"] = flank_surface(chain, cutter, **kw)
+    fz = cases["no runout"].feed_per_edge_mm
+    r = cutter.d_mm / 2
+    expected = r - np.sqrt(r * r - (fz / 2) ** 2)
+    out = {
+        "operation": op.name,
+        "feed_per_edge_mm": fz,
+        "cutting_time_s": cases["no runout"].t_m_s,
+        "cusp_formula_mm": expected,
+        "cases": {
+            name: {
+                "cusp_median_mm": float(np.median(s.cusp_mm)),
+                "cusp_max_mm": float(np.max(s.cusp_mm)),
+                "form_mm": s.form_mm,
+                "deepest_mm": float(max(0.0, -np.min(s.excess_mm))),
+                "highest_mm": float(np.max(s.excess_mm)),
+            }
+            for name, s in cases.items()
+        },
+    }
+    if plot:
+        _save_figure(plot_flank(cases), plot)
+    if as_json:
+        _echo_json(out)
+        return
+    click.echo(f"{op.name or op.path}: {cutter.kind} cutter d = {cutter.d_mm:g} mm, {cutter.flutes} flute(s), "
+               f"{prm['rpm']:g} rpm, feed {prm['feed_mm_min']:g} mm/min")
+    click.echo(f"feed per edge {fz * 1e3:.4f} um, edge in the cut {out['cutting_time_s'] * 1e6:.4f} us per pass")
+    click.echo(f"cusp height R - sqrt(R^2 - (f/2)^2) = {expected * 1e6:.4f} nm")
+    for name, c in out["cases"].items():
+        click.echo(f"  {name}: cusp {c['cusp_median_mm'] * 1e6:.4f} nm (median over heights), "
+                   f"wall form {c['form_mm'] * 1e3:.4f} um, cut up to {c['deepest_mm'] * 1e3:.4f} um too deep")
+    if plot:
+        click.echo(f"wrote {plot}")
+
+
+def _load_bore(operation):
+    from postproc.errors import PostprocError
+    from postproc.predict.operation import load_operation
+
+    op = load_operation(operation)
+    if op.kind != "bore":
+        raise PostprocError(f"predict bore needs a bore operation, got {op.kind!r}", path=operation)
+    return op
+
+
+@predict.command()
+@click.argument("operation", type=click.Path(exists=True, dir_okay=False))
+@click.option("-n", "n", type=int, default=None, help="Monte-Carlo size (default: the operation's).")
+@click.option("--seed", type=int, default=None, help="Random seed (default: the operation's).")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
+              help="Write the section (errors magnified) and the centre scatter to this PNG.")
+@click.option("--magnify", type=float, default=100.0, show_default=True, help="Error magnification in the plot.")
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+def bore(operation, n, seed, plot, magnify, as_json):
+    """Position error of a bored hole's centre (seed 004 example).
+
+    The eight tool-tip positions of the seed's table 4 (and the axis point) go
+    through the chain; the section's least-squares circle gives the centre. Prints
+    the centre with every random variable mid-field, the worst case over the corners
+    of the tolerance fields and clearances, and the Monte-Carlo distribution with the
+    probability of meeting the +- tolerances.
+
+    Example:
+
+        postproc predict bore samples/predict/bore_50H7.operation.json -n 20000 --plot bore.png
+    """
+    from postproc.predict import bore as bore_mod
+    from postproc.predict import tolerance
+
+    op = _load_bore(operation)
+    mid = bore_mod.evaluate_section(op, tolerance.nominal(op.chain.random))
+    dist, worst = bore_mod.analyse(op, n=n, seed=seed)
+    tol = op.params["tolerance_mm"]
+    k = int(np.argmax(worst.max_abs_mm / tol))
+    worst_sec = bore_mod.evaluate_section(op, worst.corner[k])
+    out = {
+        "operation": op.name,
+        "nominal_centre_mm": op.params["nominal_centre_mm"].tolist(),
+        "mid_field": {"centre_mm": mid.centre_mm.tolist(), "error_mm": mid.error_mm.tolist(),
+                      "axis_point_mm": mid.axis_point_mm.tolist()},
+        "worst_case": worst.to_dict(),
+        "monte_carlo": dist.to_dict(),
+    }
+    if plot:
+        _save_figure(bore_mod.plot_bore(op, mid, worst_sec, dist, magnify), plot)
+    if as_json:
+        _echo_json(out)
+        return
+    names = dist.names
+    click.echo(f"{op.name or op.path}: d = {op.params['diameter_mm']:g} mm, overhang "
+               f"{op.params['overhang_mm']:g} mm, tolerance +-{tol[0]:g} ({names[0]}) +-{tol[1]:g} ({names[1]}) mm")
+    click.echo(f"variables mid-field: centre error {names[0]} {_fmt_um(mid.error_mm[0])}, "
+               f"{names[1]} {_fmt_um(mid.error_mm[1])}")
+    for i, name in enumerate(names):
+        click.echo(f"worst case {name}: |error| {_fmt_um(worst.max_abs_mm[i])}  "
+                   f"({'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm)")
+    lo, hi = dist.p_within_ci95
+    for i, name in enumerate(names):
+        click.echo(f"Monte Carlo {name}: mean {_fmt_um(dist.mean_mm[i])}, std {_fmt_um(dist.std_mm[i])}, "
+                   f"range {_fmt_um(dist.samples_mm[:, i].min())} .. {_fmt_um(dist.samples_mm[:, i].max())}")
+    click.echo(f"P(centre within tolerance) = {dist.p_within:.5f} (95 % {lo:.5f}..{hi:.5f}), "
+               f"n = {len(dist.samples_mm)}, seed {dist.seed}")
+    click.echo("the tolerance is " + ("met in the worst case" if worst.within else
+                                      "NOT met in the worst case"))
+    if plot:
+        click.echo(f"wrote {plot}")
+
+
+@predict.command("tolerance")
+@click.argument("operation", type=click.Path(exists=True, dir_okay=False))
+@click.option("-n", "n", type=int, default=None, help="Monte-Carlo size (default: the operation's).")
+@click.option("--seed", type=int, default=None, help="Random seed (default: the operation's).")
+@click.option("--worst-case", "worst_only", is_flag=True, help="Only the worst case over the field corners.")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
+              help="Write histograms of the error components to this PNG.")
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+def tolerance_cmd(operation, n, seed, worst_only, plot, as_json):
+    """Distribution of a feature's position error over the chain's random variables.
+
+    The random variables of the machine file (corner heights of planes inside
+    tolerance fields, positions inside joint clearances) are drawn n times
+    (reproducible for a seed); the feature is a bore centre or, for a "point"
+    operation, one tool point. Prints mean, std, range and P(within +- tolerance),
+    and the worst case over the corners of the variables' box.
+
+    Example:
+
+        postproc predict tolerance samples/predict/bore_50H7.operation.json -n 50000 --seed 2
+    """
+    from postproc.errors import PostprocError
+    from postproc.predict import bore as bore_mod
+    from postproc.predict import tolerance
+    from postproc.predict.operation import load_operation
+
+    op = load_operation(operation)
+    if op.kind == "bore":
+        names = bore_mod.component_names(op)
+
+        def fn(env):
+            return bore_mod.centre_errors(op, env)
+    elif op.kind == "point":
+        names = ["X", "Y", "Z"]
+        r = op.params["tool_point_mm"]
+
+        def fn(env):
+            full = {**op.context, **{k: np.asarray(v, dtype=float) for k, v in env.items()}}
+            return op.chain.transform(r, full) - op.params["nominal_mm"]
+    else:
+        raise PostprocError(f"predict tolerance needs a bore or point operation, got {op.kind!r}", path=operation)
+    if not op.chain.random:
+        raise PostprocError("the machine has no random variables", path=operation,
+                            hint='add a "random" section to the chain file (see docs/predict.md)')
+    tol = op.params["tolerance_mm"]
+    worst = tolerance.worst_case(fn, op.chain.random, tolerance_mm=tol, names=names)
+    out = {"operation": op.name, "worst_case": worst.to_dict()}
+    dist = None
+    if not worst_only:
+        dist = tolerance.monte_carlo(fn, op.chain.random, n=n or op.params["n"],
+                                     seed=op.params["seed"] if seed is None else seed, tolerance_mm=tol, names=names)
+        out["monte_carlo"] = dist.to_dict()
+    if plot:
+        if dist is None:
+            raise click.UsageError("--plot needs the Monte Carlo (drop --worst-case)")
+        _save_figure(tolerance.plot_histograms(dist, worst), plot)
+    if as_json:
+        _echo_json(out)
+        return
+    for i, name in enumerate(names):
+        line = f"{name}: worst |error| {_fmt_um(worst.max_abs_mm[i])} (tolerance +-{tol[i]:g} mm)"
+        if dist is not None:
+            line += f"; mean {_fmt_um(dist.mean_mm[i])}, std {_fmt_um(dist.std_mm[i])}"
+        click.echo(line)
+    if dist is not None:
+        lo, hi = dist.p_within_ci95
+        click.echo(f"P(within tolerance) = {dist.p_within:.5f} (95 % {lo:.5f}..{hi:.5f}), "
+                   f"n = {len(dist.samples_mm)}, seed {dist.seed}")
+    click.echo("worst case: " + ("within tolerance" if worst.within else "OUTSIDE tolerance"))
+    if plot:
+        click.echo(f"wrote {plot}")
+
+
+@predict.command()
+@click.argument("chain_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "values", multiple=True, metavar="NAME=VALUE",
+              help="A variable (axis position, t, rpm, random variable). Repeatable.")
+@click.option("--tool", "tool", default="0,0,0", show_default=True, metavar="X,Y,Z",
+              help="Point in the tool frame (mm).")
+def point(chain_file, values, tool):
+    """Tool point of a chain in the workpiece frame, and the chain matrix.
+
+    Random variables that are not set take their mid-field value.
+
+    Example:
+
+        postproc predict point samples/predict/mc12.machine.json --set X=0 --set S=90 --tool 100,25,0
+    """
+    from postproc.predict import tolerance
+    from postproc.predict.operation import load_chain
+
+    chain = load_chain(chain_file)
+    env = {**tolerance.nominal(chain.random), **dict(parse_context(v) for v in values)}
+    m = chain.matrix(env)
+    p = chain.transform(parse_vector(tool, "--tool"), env)
+    click.echo("point: " + " ".join(f"{v:.6f}" for v in np.ravel(p)))
+    click.echo("matrix:")
+    for row in np.asarray(m).reshape(4, 4):
+        click.echo("  " + " ".join(f"{v:12.8f}" for v in row))
+
+
+@predict.command("chain")
+@click.argument("tables", type=click.Path(exists=True, dir_okay=False))
+@click.option("--squareness", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Squareness file (default: TABLES_squareness.csv if present).")
+@click.option("--order", type=click.Choice(["exact", "small"]), default="exact", show_default=True,
+              help="Angular error matrix: finite rotation or seed 002's small-angle matrix.")
+@click.option("--angular", type=click.Choice(["summed", "per-axis"]), default="summed", show_default=True,
+              help="One matrix of the summed angles (the 21-parameter model) or one per axis.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Chain file to write.")
+def chain_cmd(tables, squareness, order, angular, output):
+    """Write axis error tables (formats.md) as a chain description file.
+
+    The chain reproduces the 21-parameter model: tool point = q + rho(q) + R r.
+
+    Example:
+
+        postproc predict chain tables.csv --squareness tables_squareness.csv -o machine.chain.json
+    """
+    from postproc.calibration.calfile import atomic_write_text
+    from postproc.engine.parametric_tables import read_squareness, read_tables, squareness_path_for
+    from postproc.predict.parametric_chain import chain_from_tables
+
+    tab = read_tables(tables)
+    sq_path = squareness or (squareness_path_for(tables) if squareness_path_for(tables).exists() else None)
+    sq = read_squareness(sq_path) if sq_path else None
+    chain = chain_from_tables(tab, sq, order=order, angular=angular)
+    atomic_write_text(output, json.dumps(chain.to_dict(), indent=1) + "\n")
+    click.echo(f"wrote {output}: {len(chain.modules)} modules, variables {', '.join(sorted(chain.variables()))}")
