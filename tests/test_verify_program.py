@@ -85,3 +85,47 @@ def test_machine_with_backlash_effect_depends_on_approach():
     assert_allclose(meas.m[0] - meas.m[1], [0.02, 0, 0], atol=1e-12)
     res = m.inverse(meas.m, None, {"dirx": np.array([1.0, -1.0])})
     assert_allclose(res.q, q, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def s500_parametric(tmp_path_factory):
+    """A parametric calibration fitted from simulated 2 mm interferometer tables."""
+    from postproc.calibration.calfile import save_calibration
+    from postproc.engine.parametric_tables import fit_tables
+    from postproc.simulate.s500 import s500_machine
+    from postproc.simulate.tables import simulate_tables
+    from postproc.simulate.tables_io import write_axis_errors
+
+    d = tmp_path_factory.mktemp("s500")
+    tabs, sq = simulate_tables(s500_machine(), 2.0, np.random.default_rng(11))
+    write_axis_errors(d / "t.csv", d / "t_squareness.csv", tabs, sq)
+    cal = d / "par.json"
+    save_calibration(cal, fit_tables([str(d / "t.csv")]).engine, name="s500_par")
+    return cal
+
+
+def test_corrected_pocket_stays_within_2um_on_s500(s500_parametric):
+    s500 = REPO / "calibrations" / "s500.machine.json"
+    res = CliRunner().invoke(main, ["verify", str(POCKET), "-c", str(s500_parametric), "--machine", str(s500),
+                                    "--json"])
+    assert res.exit_code == 0, res.output
+    before, after = json.loads(res.stdout)["runs"]
+    assert before["max_mm"] > 0.100
+    assert after["max_mm"] < 0.002
+    assert after["feed_samples"] >= before["feed_samples"]  # the corrected run covers the program too
+
+
+def test_corrected_pocket_with_a_tool_and_work_offset(s500_parametric):
+    from postproc.calibration.calfile import load_calibration
+    from postproc.simulate.s500 import s500_machine
+
+    # The same pocket moved by G54 and cut with a 100 mm tool: the gauge point runs 100 mm
+    # higher, where the machine's errors differ, and the angular errors act on the tool.
+    text = POCKET.read_text().replace("N10 G21 G90 G17 G94", "N10 G21 G90 G17 G94 G54 G43 H1")
+    prog = s500_parametric.parent / "pocket_g54.nc"
+    prog.write_text(text)
+    setup = {"offsets": {"G54": (40.0, 60.0, 20.0)}, "tool_lengths": {1: 100.0}}
+    rep = verify_program(prog, s500_machine(), [load_calibration(s500_parametric)], setup)
+    before, after = rep.runs
+    assert before.max_mm > 0.100
+    assert after.max_mm < 0.002

@@ -27,6 +27,8 @@ from postproc.cli.options import parse_context, parse_offset, parse_tool_length,
               help="Tool length of offset number H in mm (repeatable).")
 @click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
               help="Context value during the run (temp=21.5, load=300 ...; repeatable).")
+@click.option("--tolerance", type=float, default=None, metavar="MM",
+              help="Path tolerance of the in-process correction (default: the correct command's).")
 @click.option("--max-step", "max_step", type=float, default=0.5, show_default=True, metavar="MM",
               help="Sampling step along the program's moves.")
 @click.option("--shots", type=int, default=12, show_default=True,
@@ -37,7 +39,7 @@ from postproc.cli.options import parse_context, parse_offset, parse_tool_length,
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="PNG of the deviation along the program (needs matplotlib).")
 def verify(program, calibrations, machine_path, points, corrected, tool_vector, offsets, tool_lengths,
-           contexts, max_step, shots, seed, no_noise, as_json, plot):
+           contexts, tolerance, max_step, shots, seed, no_noise, as_json, plot):
     """Run a program, or control points, on a virtual machine and report the errors.
 
     PROGRAM mode: the original program and its corrected version (corrected here with
@@ -102,7 +104,13 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
                   "tool_lengths": dict(parse_tool_length(t) for t in tool_lengths),
                   "tool_vector": tool, "context": ctx}
     cals = [load_calibration(c) for c in calibrations]
-    report = verify_program(program, machine, cals, setup_args, corrected=corrected, max_step_mm=max_step)
+    options = None
+    if tolerance is not None:
+        from postproc.gcode.pipeline import CorrectOptions
+
+        options = CorrectOptions(tolerance_mm=tolerance)
+    report = verify_program(program, machine, cals, setup_args, corrected=corrected, max_step_mm=max_step,
+                            options=options)
     if plot:
         from postproc.simulate.verify import plot_deviation
 
@@ -113,8 +121,9 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
         return
     click.echo(f"{program} on machine {machine.name}: deviation of the tool point from the nominal path "
                "(feed moves)")
+    width = max(len(run.label) for run in report.runs)
     for run in report.runs:
-        click.echo(f"  {run.label:<28} max {run.max_mm * 1000:9.2f} um   RMS {run.rms_mm * 1000:9.2f} um   "
+        click.echo(f"  {run.label:<{width}}  max {run.max_mm * 1000:9.2f} um   RMS {run.rms_mm * 1000:9.2f} um   "
                    f"({int(np.count_nonzero(run.feed))} samples)")
     for run in report.runs:
         click.echo(f"  worst lines, {run.label}:")

@@ -26,16 +26,18 @@ def make_setup(setup_args: dict | None):
                  tool_vector=args.get("tool_vector"), context=dict(args.get("context") or {}))
 
 
-def correct_program_text(text: str, calibration, setup, path: str | None = None) -> str:
-    """The program corrected in-process with the correction pipeline (default options)."""
+def correct_program_text(text: str, calibration, setup, path: str | None = None, options=None) -> str:
+    """The program corrected in-process with the correction pipeline (``options``:
+    :class:`postproc.gcode.pipeline.CorrectOptions`, default the pipeline's)."""
     from postproc.gcode.pipeline import correct_text
 
-    result = correct_text(text, calibration, setup, path=path)
-    return result if isinstance(result, str) else result.text
+    fixed, _ = correct_text(text, calibration.engine, setup, options, path=path,
+                            calibration_name=calibration.name, calibration_sha256=calibration.sha256)
+    return fixed
 
 
 def verify_program(program, machine: Machine, calibrations: list, setup_args: dict | None = None, *,
-                   corrected=None, max_step_mm: float = RUN_STEP_MM) -> VerifyReport:
+                   corrected=None, max_step_mm: float = RUN_STEP_MM, options=None) -> VerifyReport:
     """Deviation from the nominal path of the original program and of each corrected one.
 
     ``calibrations``: loaded :class:`Calibration` objects, each used to correct
@@ -61,7 +63,7 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
         report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
         return report
     for cal in calibrations:
-        fixed = correct_program_text(text, cal, setup, path=program)
+        fixed = correct_program_text(text, cal, setup, path=program, options=options)
         path = program_path(fixed, setup, max_step_mm=max_step_mm)
         label = f"corrected, {cal.method}" + (f" ({cal.name})" if cal.name != cal.method else "")
         report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
