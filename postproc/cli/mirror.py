@@ -149,10 +149,12 @@ def kfb(semi, t_ref, allowance, origin, thinner, output):
 @click.option("--tool-length", "tool_lengths", multiple=True, metavar="H=L", help="Tool length (repeatable).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm), e.g. 0,150,0 for a spindle along +Y.")
+@click.option("--max-correction", "max_correction", type=float, default=1.0, show_default=True, metavar="MM",
+              help="Refuse a program whose total correction (geometric + maps + allowance) exceeds this.")
 @click.option("-o", "--output-dir", "outdir", required=True, type=click.Path(file_okay=False),
               help="Directory for the programs and maps of the next pocket.")
 def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, clamp, offsets,
-            tool_lengths, tool_vector, outdir):
+            tool_lengths, tool_vector, max_correction, outdir):
     """Pocket-to-pocket self-tuning: which correction each pocket gets (formulas 7-11).
 
     PLAN is a CSV '# postproc mirror plan v1' with columns pocket,B0,Z0,semi,finish
@@ -202,7 +204,7 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     out.mkdir(parents=True, exist_ok=True)
     setup = _setup(offsets, tool_lengths, tool_vector)
     target = out / f"{last.pocket.name}_{kind}.nc"
-    summary = _correct_program(template, calibration, setup, corr, target)
+    summary = _correct_program(template, calibration, setup, corr, target, max_correction)
     click.echo(f"next: pocket {last.pocket.name}: {last.next}")
     click.echo(f"wrote {target} ({summary})")
     if fin_corr is not None:
@@ -227,24 +229,25 @@ def _setup(offsets, tool_lengths, tool_vector):
                  tool_vector=parse_vector(tool_vector, "--tool-vector") if tool_vector else None)
 
 
-def _correct_program(template, calibration, setup, corr, target: Path) -> str:
-    """Correct the template with the calibration and ``corr`` added; write ``target``."""
-    from postproc.calibration.calfile import atomic_write_text, load_calibration
+def _correct_program(template, calibration, setup, corr, target: Path, max_correction: float) -> str:
+    """Correct the template with the calibration, ``corr`` added; write ``target`` atomically."""
+    from postproc.calibration.calfile import load_calibration
     from postproc.gcode.path import program_path
-    from postproc.gcode.pipeline import correct_text
+    from postproc.gcode.pipeline import CorrectOptions, correct_file
 
     cal = load_calibration(calibration)
-    # Evaluate the maps on the program's points first, so a point outside a map is
-    # refused naming its line in the template.
+    # Evaluate the maps on the program's points first, so that a point outside a map
+    # is refused naming its line in the template.
     pp = program_path(template, setup)
     try:
         corr.delta(pp.points_mm, {**pp.context, "lineno": pp.lineno})
     except PostprocError as exc:
         raise exc.at(path=str(template)) from None
-    text = Path(template).read_bytes().decode("utf-8", errors="surrogateescape")
-    result = correct_text(text, cal, setup, path=str(template), added=[corr])
-    atomic_write_text(target, result.text)
-    return getattr(result, "summary", "") or "corrected"
+    options = CorrectOptions(added=[corr], max_correction_mm=max_correction)
+    report = correct_file(template, target, cal.engine, setup, options, calibration_name=cal.name,
+                          calibration_sha256=cal.sha256)
+    return (f"{report.moves} moves, {report.words_changed} words changed, "
+            f"largest correction {report.max_correction_mm * 1e3:.1f} um")
 
 
 @mirror.command()

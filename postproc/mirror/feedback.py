@@ -81,7 +81,7 @@ class Band:
         if inside:
             return True, f"T {lo:.4f}..{hi:.4f} inside [{self.t_min:.4f}, {self.t_max:.4f}]"
         i = int(np.argmax(thk.t_mm)) if hi > self.t_max else int(np.argmin(thk.t_mm))
-        line = f" (line {int(thk.linenos[i])})" if thk.linenos is not None else ""
+        line = f" ({Path(thk.path).name}:{int(thk.linenos[i])})" if thk.linenos is not None else ""
         return False, (f"T {thk.t_mm[i]:.4f} at B={thk.b_deg[i]:.3f} Z={thk.z_mm[i]:.3f}{line} "
                        f"outside [{self.t_min:.4f}, {self.t_max:.4f}]")
 
