@@ -239,7 +239,7 @@ def piecewise_inverse(
     cells = first_cells.copy()
     best_q = np.full((n, 3), np.nan)
     best_d = np.full(n, np.inf)
-    visited: list[set[tuple[int, int, int]]] = [set() for _ in range(n)]
+    visited: dict[int, set[tuple[int, int, int]]] = {}
     active = np.arange(n)
     for _ in range(SOLVER_MAX_ITER):
         if len(active) == 0:
@@ -257,9 +257,10 @@ def piecewise_inverse(
         still = []
         for i_local in np.flatnonzero(~same):
             i = active[i_local]
-            visited[i].add(tuple(c[i_local]))
+            seen = visited.setdefault(int(i), set())
+            seen.add(tuple(c[i_local]))
             key = tuple(new[i_local])
-            if key in visited[i]:  # a cycle: the target lies in a gap between cells
+            if key in seen:  # a cycle: the target lies in a gap between cells
                 q[i] = best_q[i]
             else:
                 cells[i] = new[i_local]

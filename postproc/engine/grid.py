@@ -165,25 +165,34 @@ class GridEngine(Engine):
 
     def _trilinear(self, q: np.ndarray, jacobian: bool = False):
         cells, t = self._local(q)
-        i, j, k = cells.T
-        P = self.nodes
-        value = np.zeros((len(q), 3))
-        jac = np.zeros((len(q), 3, 3)) if jacobian else None
+        n2, n3 = int(self.shape[1]), int(self.shape[2])
+        base = (cells[:, 0] * n2 + cells[:, 1]) * n3 + cells[:, 2]
+        flat = self.nodes.reshape(-1, 3)
+        # Differences along z, then y, then x (the standard nested form of trilinear
+        # interpolation): 8 gathers, and the Jacobian from the same intermediate values.
+        tx, ty, tz = t[:, 0:1], t[:, 1:2], t[:, 2:3]
+        c = {}
         for a in (0, 1):
-            wa = t[:, 0] if a else 1 - t[:, 0]
             for b in (0, 1):
-                wb = t[:, 1] if b else 1 - t[:, 1]
-                for c in (0, 1):
-                    wc = t[:, 2] if c else 1 - t[:, 2]
-                    corner = P[i + a, j + b, k + c]
-                    value += (wa * wb * wc)[:, None] * corner
-                    if jacobian:
-                        sa, sb, sc = (1 if a else -1), (1 if b else -1), (1 if c else -1)
-                        jac[:, :, 0] += (sa * wb * wc)[:, None] * corner
-                        jac[:, :, 1] += (wa * sb * wc)[:, None] * corner
-                        jac[:, :, 2] += (wa * wb * sc)[:, None] * corner
-        if jacobian:
-            jac /= self.step[None, None, :]
+                lo = flat[base + (a * n2 + b) * n3]
+                hi = flat[base + (a * n2 + b) * n3 + 1]
+                c[a, b] = (lo, hi - lo)  # value at z-low, z-difference
+        # interpolate along z
+        zv = {ab: v + tz * d for ab, (v, d) in c.items()}
+        # along y
+        y0, y1 = zv[0, 0] + ty * (zv[0, 1] - zv[0, 0]), zv[1, 0] + ty * (zv[1, 1] - zv[1, 0])
+        value = y0 + tx * (y1 - y0)
+        if not jacobian:
+            return value, None
+        jac = np.empty((len(q), 3, 3))
+        jac[:, :, 0] = (y1 - y0) / self.step[0]
+        dy0 = zv[0, 1] - zv[0, 0]
+        dy1 = zv[1, 1] - zv[1, 0]
+        jac[:, :, 1] = (dy0 + tx * (dy1 - dy0)) / self.step[1]
+        dz = {ab: d for ab, (_, d) in c.items()}
+        dz0 = dz[0, 0] + ty * (dz[0, 1] - dz[0, 0])
+        dz1 = dz[1, 0] + ty * (dz[1, 1] - dz[1, 0])
+        jac[:, :, 2] = (dz0 + tx * (dz1 - dz0)) / self.step[2]
         return value, jac
 
     def _cell_affine(self, q: np.ndarray, cells: np.ndarray) -> np.ndarray:

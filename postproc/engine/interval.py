@@ -182,9 +182,14 @@ class IntervalEngine(Engine):
     def position(self, q) -> np.ndarray:
         """Model position of the measured point (tool vector of the measurement removed)."""
         q = check_points(q, "q")
-        if self.blend <= 0:
-            return self._apply(q, cell_index(q, self.edges))
-        return self._blended(q)[0]
+        cells = cell_index(q, self.edges)
+        out = self._apply(q, cells)
+        if self.blend > 0:
+            _, lam, _ = self._blend_weights(q, cells)
+            zone = np.any(lam > 0, axis=1)
+            if zone.any():
+                out[zone] = self._blended(q[zone])[0]
+        return out
 
     def forward(self, q, r=None, context=None) -> np.ndarray:
         q = check_points(q, "q")
@@ -194,7 +199,7 @@ class IntervalEngine(Engine):
         p = check_points(p, "p")
         rr = check_tool_vectors(r, len(p))
         target = p - rr
-        first = cell_index(self.static.inverse(target).q, self.edges)
+        first = cell_index((target - self.static.origin_mm) @ self.static.G_inv.T, self.edges)
         q, iters = piecewise_inverse(target, first, self._solve, self.edges)
         if self.blend > 0:
             q, iters = self._newton(target, q, iters)
@@ -203,7 +208,10 @@ class IntervalEngine(Engine):
 
     def _newton(self, target: np.ndarray, q: np.ndarray, iters: np.ndarray):
         """Refine answers that fall in a blend zone (elsewhere they are already exact)."""
-        active = np.arange(len(q))
+        cells = cell_index(q, self.edges)
+        _, lam, _ = self._blend_weights(q, cells)
+        off = np.linalg.norm(self._apply(q, cells) - target, axis=1) >= NEWTON_TOL_MM
+        active = np.flatnonzero(np.any(lam > 0, axis=1) | off)
         for _ in range(SOLVER_MAX_ITER):
             value, jac = self._blended(q[active], jacobian=True)
             err = target[active] - value
