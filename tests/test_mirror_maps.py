@@ -151,3 +151,30 @@ def test_parse_direction():
     assert parse_direction("-z") == ("Z", -1.0)
     with pytest.raises(ValueError, match="expected"):
         parse_direction("B")
+
+
+def test_map_through_the_pipeline_adds_to_the_geometric_inverse(tmp_path):
+    """Geometric inverse first, then the map value added along its axis, in commanded space."""
+    from postproc.engine.static import StaticEngine
+    from postproc.gcode.path import program_path
+    from postproc.gcode.pipeline import CorrectOptions, correct_text
+
+    xs, ys = np.array([0.0, 50.0, 100.0]), np.array([0.0, 40.0, 80.0])
+    rows = [(x, y, bilinear_xy(x, y)) for y in ys for x in xs]
+    m = load_map(write_map(tmp_path / "flat.csv", "X,Y,value", rows, ("units: length=mm", "apply: Z")))
+    g = np.eye(3) + np.array([[50e-6, 0, 0], [20e-6, -30e-6, 0], [0, 0, 10e-6]])
+    eng = StaticEngine(g, [0.01, -0.02, 0.005], [[-10, -10, -50], [200, 200, 50]])
+    prog = "G21 G90\nG0 X0 Y0 Z5\nG1 Z-1 F300\nG1 X100 Y0\nG1 X100 Y80\nG1 X10\nG1 Y35\nG0 Z5\nM30\n"
+    text, report = correct_text(prog, eng, None, CorrectOptions(added=[m]))
+    nominal = program_path(prog, max_step_mm=1e9)
+    got = program_path(text, max_step_mm=1e9)
+    ends = ~nominal.rapid
+    p = nominal.points_mm[ends]
+    expect = eng.inverse(p).q
+    expect[:, 2] += bilinear_xy(p[:, 0], p[:, 1])
+    assert_allclose(got.points_mm[ends], expect, atol=0.6e-4)  # 4 decimals written
+    assert report.max_correction_mm > 0.01
+
+
+def bilinear_xy(x, y):
+    return 1e-3 * (5 + 0.1 * x - 0.05 * y + 1e-3 * x * y)
