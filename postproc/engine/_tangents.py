@@ -137,6 +137,17 @@ def distinct_positions(values: np.ndarray, tol: float = LATTICE_TOL_MM) -> np.nd
     return np.array([g.mean() for g in np.split(v, breaks)])
 
 
+def tool_vector_note(r: np.ndarray, method: str) -> list[str]:
+    """Report line on the tool vectors of the measurement (the model carries them unrotated)."""
+    distinct = np.unique(np.round(np.asarray(r, dtype=float), 3), axis=0)
+    if len(distinct) == 1:
+        t = distinct[0]
+        return [f"tool vector of the measurement: {t[0]:g},{t[1]:g},{t[2]:g} mm; the {method} model "
+                "describes that point and carries any other tool vector unrotated"]
+    return [f"note: the points carry {len(distinct)} different tool vectors; the {method} model "
+            "removes each and averages, so angular errors acting on their difference are not modelled"]
+
+
 def format_node(q) -> str:
     return " ".join(f"{a}={v:.3f}" for a, v in zip(AXES, q, strict=True))
 

@@ -57,6 +57,7 @@ from postproc.engine._tangents import (
     parse_step,
     piecewise_inverse,
     step_warnings,
+    tool_vector_note,
 )
 from postproc.engine.base import (
     Engine,
@@ -413,6 +414,7 @@ def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", 
         )
     )
     report.append("the model passes through the node means: the fit residual is the scatter of repeated shots")
+    report += tool_vector_note(meas.r[on], "quasi-differential")
     check = _interpolation_check(origin, steps, nodes)
     if check:
         report.append(check)

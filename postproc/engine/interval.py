@@ -47,6 +47,7 @@ from postproc.engine._tangents import (
     format_node,
     parse_intervals,
     piecewise_inverse,
+    tool_vector_note,
 )
 from postproc.engine.base import (
     Engine,
@@ -355,6 +356,7 @@ def fit(measurements, *, intervals=None, border_blend_mm: float = BORDER_BLEND_M
         + (f"; blended over {engine.blend:g} mm at each border" if engine.blend > 0 else
            "; not blended (pure piecewise model)"),
     ]
+    report += tool_vector_note(meas.r, "interval")
     few = int((counts < FEW_POINTS_PER_CELL).sum())
     if few:
         report.append(f"warning: {few} cell(s) fitted from fewer than {FEW_POINTS_PER_CELL} points: "
