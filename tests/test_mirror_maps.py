@@ -178,3 +178,13 @@ def test_map_through_the_pipeline_adds_to_the_geometric_inverse(tmp_path):
 
 def bilinear_xy(x, y):
     return 1e-3 * (5 + 0.1 * x - 0.05 * y + 1e-3 * x * y)
+
+
+def test_grid_lines_shifted_by_round_off_are_still_one_grid():
+    b0 = 27.1
+    b = np.array([27.35, 27.6, 27.85]) - b0  # 0.25 +- 1e-15 from row to row
+    nodes = np.array([[bb + row * 1e-13, z] for row, z in enumerate((0.0, 5.0)) for bb in b])
+    vals = bilinear(nodes[:, 0], nodes[:, 1])
+    m = CorrectionMap("k", ("B", "Z"), nodes, vals)
+    assert m.regular
+    assert_allclose(m.values_at(nodes), vals, atol=1e-12)

@@ -202,10 +202,13 @@ class _Interpolant:
             return
         axes = [_unique(nodes[:, j]) for j in range(self.k)]
         if np.prod([len(a) for a in axes]) == len(values) and all(len(a) >= 2 for a in axes):
-            idx = [np.searchsorted(a, nodes[:, j]) for j, a in enumerate(axes)]
+            idx = [_nearest_index(a, nodes[:, j]) for j, a in enumerate(axes)]
             grid = np.full([len(a) for a in axes], np.nan)
             grid[tuple(idx)] = values
             if np.all(np.isfinite(grid)):
+                # grid lines at the mean of the merged coordinates they stand for
+                axes = [np.bincount(ix, weights=nodes[:, j]) / np.bincount(ix)
+                        for j, ix in enumerate(idx)]
                 for j in range(self.k):
                     axes, grid, self.closed[j] = self._close(j, axes, grid)
                 from scipy.interpolate import RegularGridInterpolator
@@ -289,6 +292,12 @@ class _Interpolant:
         )
         err.point_index = i  # which of the points given: lets a caller name the program line
         raise err
+
+
+def _nearest_index(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Index of the element of sorted ``a`` nearest to each ``v``."""
+    i = np.clip(np.searchsorted(a, v), 1, len(a) - 1)
+    return np.where(np.abs(v - a[i - 1]) <= np.abs(a[i] - v), i - 1, i)
 
 
 def _unique(a: np.ndarray) -> np.ndarray:
