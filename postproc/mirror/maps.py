@@ -214,7 +214,8 @@ class _Interpolant:
                 from scipy.interpolate import RegularGridInterpolator
 
                 self.axes = axes
-                self.grid = RegularGridInterpolator(tuple(axes), grid, method="linear")
+                self.grid = RegularGridInterpolator(tuple(axes), grid, method="linear", bounds_error=False,
+                                                    fill_value=None)
                 return
         from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
         from scipy.spatial import QhullError
