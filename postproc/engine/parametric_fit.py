@@ -42,10 +42,10 @@ from postproc.engine.parametric_tables import AXES, COLUMNS, AxisTables, Squaren
 from postproc.errors import MeasurementError
 
 # Relative singular value below which a direction of the (column-normalised) design
-# matrix is taken as undetermined. Exact confounding shows as ~1e-15; a real but weak
-# direction (two nearly equal tool vectors) as 1e-4..1e-6, which is kept and shows in
-# the condition number instead.
-RANK_RTOL = 1e-8
+# matrix is taken as undetermined. Exact confounding shows as ~1e-8 through the normal
+# equations (rounding of the squared values); a direction a million times weaker than
+# the strongest would amplify a 1 um noise to a metre, so it is not determined either.
+RANK_RTOL = 1e-6
 
 # A block whose share of the null space is above this fraction of its size is listed
 # as undetermined; between PARTLY_MIN and this, as partly undetermined.
@@ -259,12 +259,6 @@ def _by_block(names: list[str], theta: np.ndarray) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in out.items()}
 
 
-def _normalise(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norms = np.linalg.norm(A, axis=0)
-    scale = np.where(norms > 0, norms, 1.0)
-    return A / scale, scale
-
-
 def _block_shares(null: np.ndarray, names: list[str]) -> dict[str, tuple[float, int]]:
     """Per block: (share of the null space inside it, block size)."""
     out: dict[str, tuple[float, int]] = {}
@@ -274,52 +268,68 @@ def _block_shares(null: np.ndarray, names: list[str]) -> dict[str, tuple[float, 
     return out
 
 
+def _pinv_sym(G: np.ndarray, tol: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Eigen-decomposition of a symmetric PSD matrix: (values desc, vectors, pseudo-inverse, rank).
+
+    Eigenvalues below ``tol`` (default RANK_RTOL^2 times the largest) count as zero.
+    """
+    lam, V = np.linalg.eigh(G)
+    lam, V = lam[::-1], V[:, ::-1]
+    if tol is None:
+        tol = RANK_RTOL**2 * max(float(lam[0]), 0.0)
+    k = int(np.sum(lam > tol))
+    pinv = (V[:, :k] / lam[:k]) @ V[:, :k].T
+    return lam, V, pinv, k
+
+
 def _staged_solve(A_L, A_E, y, names_L, names_E):
-    """Least squares with the linear errors first, then the angular errors; min-norm gauge."""
-    An_L, s_L = _normalise(A_L)
-    U, sv, Vt = np.linalg.svd(An_L, full_matrices=False)
-    tol = RANK_RTOL * sv[0]
-    k_L = int(np.sum(sv > tol))
-    U_k = U[:, :k_L]
+    """Least squares with the linear errors first, then the angular errors; min-norm gauge.
+
+    Worked on the normal equations of the column-normalised design (p x p matrices, so
+    the cost is one product A^T A); the rank threshold RANK_RTOL on singular values is
+    RANK_RTOL^2 on these eigenvalues, far above their rounding (~1e-16).
+    """
+    A = np.hstack([A_L, A_E])
+    norms = np.sqrt(np.einsum("ij,ij->j", A, A))
+    seen = norms > 0
+    scale = np.where(seen, norms, 1.0)
+    An = A / scale
+    G = An.T @ An
+    b = An.T @ y
+    nL = A_L.shape[1]
+    L, E = slice(0, nL), slice(nL, None)
+    lam_L, V_L, G_LL_pinv, k_L = _pinv_sym(G[L, L])
+    tol = RANK_RTOL**2 * float(lam_L[0])  # relative to the largest singular value
     undetermined: dict[str, str] = {}
     partly: dict[str, str] = {}
-    for nm, (share, size) in _block_shares(Vt[k_L:].T, names_L).items():
+    for nm, (share, size) in _block_shares(V_L[:, k_L:], names_L).items():
         _classify(nm, share, size, "the measured points do not move it independently", undetermined, partly)
 
-    # Angular columns: what the linear errors cannot explain.
-    An_E, s_E = _normalise(A_E)
-    seen = np.linalg.norm(A_E, axis=0) > 0
-    P_E = An_E - U_k @ (U_k.T @ An_E)
-    if P_E.shape[1]:
-        Ue, se, Vte = np.linalg.svd(P_E, full_matrices=False)
-        k_E = int(np.sum(se > tol))
-        for nm, (share, size) in _block_shares(Vte[k_E:].T, names_E).items():
-            rows = [j for j, b in enumerate(names_E) if b == nm]
-            if not seen[rows].any():
-                why = "not seen at all: the rotation is about the tool vectors measured (or they are zero)"
-            else:
-                carriers = _carriers(An_E[:, rows], U_k, sv[:k_L], Vt[:k_L], names_L)
-                why = ("indistinguishable at these tool vectors from " + ", ".join(carriers)
-                       + " (measure with other tool vectors to separate them)")
-            _classify(nm, share, size, why, undetermined, partly)
-        # Minimum-norm angular solution in the normalised parameters.
-        proj_y = y - U_k @ (U_k.T @ y)
-        phi_E = Vte[:k_E].T @ ((Ue[:, :k_E].T @ proj_y) / se[:k_E])
-        full_sv = np.concatenate([sv[:k_L], se[:k_E]])
-    else:
-        phi_E, full_sv = np.zeros(0), sv[:k_L]
-    theta_E = phi_E / s_E
-    rest = y - A_E @ theta_E
-    phi_L = Vt[:k_L].T @ ((U_k.T @ rest) / sv[:k_L])
-    theta_L = phi_L / s_L
+    # Angular columns: what the linear errors cannot explain (Schur complement).
+    coef_LE = G_LL_pinv @ G[L, E]  # linear parameters reproducing each angular column
+    S = G[E, E] - G[E, L] @ coef_LE
+    S = (S + S.T) / 2
+    lam_E, V_E, S_pinv, k_E = _pinv_sym(S, tol)
+    seen_E = seen[E]
+    for nm, (share, size) in _block_shares(V_E[:, k_E:], names_E).items():
+        rows = [j for j, bname in enumerate(names_E) if bname == nm]
+        if not seen_E[rows].any():
+            why = "not seen at all: the rotation is about the tool vectors measured (or they are zero)"
+        else:
+            why = ("indistinguishable at these tool vectors from " + ", ".join(_carriers(coef_LE[:, rows], names_L))
+                   + " (measure with other tool vectors to separate them)")
+        _classify(nm, share, size, why, undetermined, partly)
+    phi_E = S_pinv @ (b[E] - G[E, L] @ (G_LL_pinv @ b[L]))
+    phi_L = G_LL_pinv @ (b[L] - G[L, E] @ phi_E)
+    kept = np.concatenate([lam_L[:k_L], lam_E[:k_E]])
     analysis = {
-        "n_params": A_L.shape[1] + A_E.shape[1],
-        "rank": int(len(full_sv)),
-        "condition": float(full_sv.max() / full_sv.min()),
+        "n_params": A.shape[1],
+        "rank": int(k_L + k_E),
+        "condition": float(np.sqrt(kept.max() / kept.min())),
         "undetermined": undetermined,
         "partly": partly,
     }
-    return theta_L, theta_E, analysis
+    return phi_L / scale[L], phi_E / scale[E], analysis
 
 
 def _classify(name, share, size, why, undetermined, partly) -> None:
@@ -330,9 +340,8 @@ def _classify(name, share, size, why, undetermined, partly) -> None:
             f"a combination worth {share:.2f} of {size} coefficients; {why}")
 
 
-def _carriers(cols, U_k, s_k, Vt_k, names_L) -> list[str]:
-    """The linear-error blocks that reproduce the given angular columns."""
-    coef = Vt_k.T @ ((U_k.T @ cols) / s_k[:, None])
+def _carriers(coef: np.ndarray, names_L: list[str]) -> list[str]:
+    """The linear-error blocks that carry the given angular columns (by coefficient energy)."""
     energy: dict[str, float] = {}
     for j, nm in enumerate(names_L):
         energy[nm] = energy.get(nm, 0.0) + float(np.sum(coef[j] ** 2))
