@@ -46,6 +46,11 @@ ROTARY = "ABC"
 PARAM_LETTERS = set("DFHIJKLNPQRST")
 # A degenerate arc (start, end and centre within this) is not an arc.
 MIN_ARC_RADIUS_MM = 1e-6
+# Input arcs whose end radius differs from the start radius by more than this are
+# refused. Looser than the check on emitted arcs: CAM posts round centres to 3-4
+# decimals and controllers accept it (LinuxCNC's centre-format tolerance is
+# 0.002 in); postproc then follows the spiral the controller draws.
+INPUT_ARC_RADIUS_ABS_MM = 0.0508
 
 
 @dataclass(slots=True)
@@ -86,7 +91,9 @@ class Move:
     rotary: dict[str, float]
     arc: Arc | None = None
     prefix_words: list[str] = field(default_factory=list)
-    stays: bool = False  # a tool-change line: must not be split
+    stays: bool = False  # a tool-change or G53 line: must not be split
+    motion_idx: int = -1  # word index of the block's G0/G1/G2/G3, or -1 (modal)
+    aux_idx: tuple[int, ...] = ()  # word indices of I/J/K/R/P (removed if an arc is linearised)
 
 
 def _gkey(text: str) -> int:
@@ -118,6 +125,8 @@ class Interpreter:
         self.implicit_g54 = False  # a move ran in G54 that the user did not give
         self.used_rotary: set[str] = set()
         self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
+        self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
+        self.ended = False  # an M2/M30 was read: later lines are not executed
 
     # -- helpers -----------------------------------------------------------------------
     def _err(self, cls, msg, lineno, col, hint=None):
@@ -155,6 +164,9 @@ class Interpreter:
     # -- the block ---------------------------------------------------------------------
     def feed_line(self, lineno: int, line: str) -> Move | None:
         """Interpret one line (with its ending); return the Move it makes, if any."""
+        self.motion_word = False
+        if self.ended:
+            return None  # after M2/M30 the controller reads no further
         words = lexer.scan_words(line)
         block_delete = False
         if words is None:
@@ -165,6 +177,10 @@ class Interpreter:
 
     def _slow_words(self, lineno: int, line: str):
         tokens = lexer.lex(line, self.path, lineno)
+        for tok in tokens:
+            if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
+                raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
+                                hint="expand subroutines and loops in the CAM system before correcting")
         words = []
         block_delete = False
         seen_content = False
@@ -188,7 +204,7 @@ class Interpreter:
                 seen_content = True
                 start = tok.col - 1 + tok.number_offset
                 num = tok.number_text
-                words.append((tok.letter, num, start, start + len(num)))
+                words.append((tok.letter, num, start, start + len(num), tok.col - 1))
             elif kind == lexer.LETTER:
                 if tok.letter == "O":
                     raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
@@ -212,7 +228,7 @@ class Interpreter:
         gcodes: list[tuple[int, int]] = []  # (key, word index)
         mcodes: list[tuple[int, int]] = []
         vals: dict[str, tuple[float, int]] = {}
-        for i, (letter, num, start, _end) in enumerate(words):
+        for i, (letter, num, _start, _end, _lpos) in enumerate(words):
             if letter == "G":
                 gcodes.append((_gkey(num), i))
             elif letter == "M":
@@ -220,17 +236,16 @@ class Interpreter:
             else:
                 if letter in vals:
                     raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
-                                    lineno, start)
+                                    lineno, _lpos + 1)
                 if letter == "O":
-                    raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, start,
+                    raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
                                     hint="expand subroutines and loops in the CAM system before correcting")
                 if letter in "UVWE":
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
-                                    lineno, start)
+                                    lineno, _lpos + 1)
                 vals[letter] = (float(num), i)
         def col_of(i: int) -> int:
-            # 0-based start of the number = 1-based column of its letter (when adjacent)
-            return max(words[i][2], 1)
+            return words[i][4] + 1  # 1-based column of the word's letter
 
         # M codes
         tool_change = False
@@ -248,6 +263,8 @@ class Interpreter:
                 before_m.append(f"M{words[i][1]}")
             if m == 6:
                 tool_change = True
+            if m in (2, 30):
+                self.ended = True
             if m == 61:
                 if "Q" not in vals:
                     raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, col_of(i))
@@ -259,6 +276,7 @@ class Interpreter:
             st.spindle_tool = st.tool
 
         motion_key = None
+        motion_idx = -1
         g53 = False
         g92 = None
         g10 = False
@@ -269,7 +287,8 @@ class Interpreter:
             if key in MOTION_CODES:
                 if motion_key is not None:
                     raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key = key
+                motion_key, motion_idx = key, i
+                self.motion_word = True
             elif key in CANNED_CYCLES:
                 raise self._err(UnsupportedGcodeError, f"canned cycle G{words[i][1]}", lineno, col_of(i),
                                 hint="postproc does not correct canned cycles; post the holes as G0/G1 moves")
@@ -404,6 +423,8 @@ class Interpreter:
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
             prefix_words=prefix + (["S" + words[vals["S"][1]][1]] if "S" in vals else []) + before_m,
             stays=tool_change or "T" in vals or g53,
+            motion_idx=motion_idx,
+            aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
         )
         return move
 
@@ -476,8 +497,8 @@ class Interpreter:
     def _arc(self, lineno, words, vals, q0, q1, shift, unit, gcodes) -> Arc:
         st = self.state
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
-        col = words[min(vals[a][1] for a in AXES if a in vals)][2]
-        if math.isnan(q0[a1]) or math.isnan(q0[a2]) or math.isnan(q0[an]):
+        col = words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
+        if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc")
         turns = 1
@@ -485,7 +506,7 @@ class Interpreter:
             turns = int(vals["P"][0])
             if turns < 1 or turns != vals["P"][0]:
                 raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno,
-                                words[vals["P"][1]][2])
+                                words[vals["P"][1]][4] + 1)
         clockwise = st.motion == ARC_CW
         s1, s2 = q0[a1], q0[a2]
         e1, e2 = q1[a1], q1[a2]
@@ -493,7 +514,7 @@ class Interpreter:
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
-                            words[vals[wrong[0]][1]][2])
+                            words[vals[wrong[0]][1]][4] + 1)
         del plane_letters
         if "R" in vals:
             if l1 in vals or l2 in vals:
@@ -507,7 +528,7 @@ class Interpreter:
             if abs(R) < half:
                 if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
                     raise self._err(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
-                                    lineno, words[vals["R"][1]][2])
+                                    lineno, words[vals["R"][1]][4] + 1)
                 h = 0.0
             else:
                 h = math.sqrt(R * R - half * half)
@@ -534,10 +555,11 @@ class Interpreter:
             re_ = math.hypot(e1 - c1, e2 - c2)
             if rs < MIN_ARC_RADIUS_MM:
                 raise self._err(GcodeSyntaxError, "arc of zero radius", lineno, col)
-            if abs(rs - re_) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * rs):
+            if abs(rs - re_) > max(INPUT_ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * rs):
                 raise self._err(GcodeSyntaxError,
                                 f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm",
-                                lineno, col, hint="a controller refuses this arc; fix it in the CAM system")
+                                lineno, col, hint="the end point is not on the arc's circle, so the path the controller takes "
+                                     "is uncertain; post the arc with more decimals")
             idx = (vals[l1][1] if l1 in vals else -1, vals[l2][1] if l2 in vals else -1)
             r_idx = -1
         center = [0.0, 0.0, 0.0]

@@ -128,23 +128,25 @@ def split_lines(text: str) -> list[str]:
 _FAST_LINE = re.compile(rf"[ \t]*(?:[A-Za-z][ \t]*{NUMBER_RE}[ \t]*)*(?:\r\n|\n|\r)?")
 
 
-def scan_words(line: str) -> list[tuple[str, str, int, int]] | None:
-    """Fast path: ``[(LETTER, number_text, start, end), ...]`` or None if not simple.
+def scan_words(line: str) -> list[tuple[str, str, int, int, int]] | None:
+    """Fast path: ``[(LETTER, number_text, start, end, letter_pos), ...]`` or None.
 
-    ``start:end`` is the span of the number text in ``line``; None means the line
-    has comments, symbols or anything else and must go through :func:`lex`.
+    ``start:end`` is the span of the number text in ``line`` and ``letter_pos`` the
+    index of its letter; None means the line has comments, symbols or anything else
+    and must go through :func:`lex`.
     """
     if _FAST_LINE.fullmatch(line) is None:
         return None
-    return [(m.group(1).upper(), m.group(2), m.start(2), m.end(2)) for m in _WORD_PARTS.finditer(line)]
+    return [(m.group(1).upper(), m.group(2), m.start(2), m.end(2), m.start(1))
+            for m in _WORD_PARTS.finditer(line)]
 
 
-def words_from_tokens(tokens: list[Token]) -> list[tuple[str, str, int, int]]:
-    """The same ``(LETTER, number_text, start, end)`` list, from :func:`lex` tokens of one line."""
+def words_from_tokens(tokens: list[Token]) -> list[tuple[str, str, int, int, int]]:
+    """The same list as :func:`scan_words`, from :func:`lex` tokens of one line."""
     out = []
     for t in tokens:
         if t.kind == WORD:
             start = t.col - 1 + t.number_offset
             num = t.number_text
-            out.append((t.letter, num, start, start + len(num)))
+            out.append((t.letter, num, start, start + len(num), t.col - 1))
     return out

@@ -35,7 +35,7 @@ P_SYSTEMS = {1: "G54", 2: "G55", 3: "G56", 4: "G57", 5: "G58", 6: "G59",
 
 # Codes accepted without effect on geometry (pass through): path control, spindle
 # speed modes, retract modes, dwell, cutter-comp cancel, stored positions, rotation cancel.
-NEUTRAL_G = {40, 610, 611, 640, 960, 970, 980, 990, 281, 301, 690, 800, 150, 500}
+NEUTRAL_G = {400, 610, 611, 640, 960, 970, 980, 990, 281, 301, 690, 800, 150, 500}
 
 # Codes refused with the construct's name: they change geometry in ways this
 # postprocessor does not model.

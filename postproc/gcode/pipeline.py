@@ -1,0 +1,608 @@
+"""The correction pipeline: G-code lines in, corrected G-code lines out, in chunks.
+
+For each chunk of lines (default 20,000) the interpreter yields the moves; all their
+targets go to the engine in one vectorised call (``Engine.correction``), then arcs
+and moves needing segmentation get their own batched calls; then the lines are
+emitted one by one, splicing new numbers into the original text.
+
+Order of corrections: the engine inverse first (``q = F^-1(p*, r)``), then each of
+``added`` in turn, ``q += added.delta(p*, context)``, every one evaluated at the
+nominal point ``p*``. The safety bound ``max_correction_mm`` applies to the total.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from postproc.constants import (
+    DEFAULT_MAX_CORRECTION_MM,
+    DEFAULT_TOLERANCE_MM,
+    MM_PER_INCH,
+    SOLVER_TOL_MM,
+)
+from postproc.errors import (
+    AlreadyCorrectedError,
+    CorrectionTooLargeError,
+    OutOfVolumeError,
+    PostprocError,
+    SolverError,
+)
+from postproc.gcode import emit
+from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
+from postproc.gcode.interp import Arc, Interpreter, Move
+from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
+from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, r_center, subdivide
+from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
+
+# A solver answer is accepted up to ten times its own stopping tolerance (float noise
+# in the residual itself); still a thousand times below the default path tolerance.
+SOLVER_ACCEPT_MM = 10 * SOLVER_TOL_MM
+DEFAULT_CHUNK_LINES = 20_000
+# Angular step of the samples that check a kept arc against the corrected path.
+ARC_CHECK_STEP_RAD = math.pi / 16
+ARC_CHECK_MIN_SAMPLES = 9
+MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
+
+
+@dataclass
+class CorrectOptions:
+    tolerance_mm: float = DEFAULT_TOLERANCE_MM
+    decimals: int | None = None  # default 4 in mm, 5 in inch
+    max_correction_mm: float = DEFAULT_MAX_CORRECTION_MM
+    extrapolate: str = "refuse"  # refuse | clamp | linear
+    force: bool = False
+    added: list = field(default_factory=list)
+    chunk_lines: int = DEFAULT_CHUNK_LINES
+
+
+@dataclass
+class CorrectReport:
+    lines_in: int = 0
+    lines_out: int = 0
+    moves: int = 0
+    words_changed: int = 0
+    lines_inserted: int = 0
+    arcs_kept: int = 0
+    arcs_linearised: int = 0
+    extrapolated_points: int = 0
+    max_correction_mm: float = 0.0
+    g54_assumed_zero: bool = False
+
+
+def _unit_decimals(options: CorrectOptions, unit: float) -> int:
+    if options.decimals is not None:
+        return options.decimals
+    return 5 if unit == MM_PER_INCH else 4
+
+
+class Corrector:
+    """State of one correction run; see the module docstring."""
+
+    def __init__(self, engine, setup: Setup, options: CorrectOptions, *, path: str | None = None,
+                 calibration_name: str = "", calibration_sha256: str = "") -> None:
+        self.engine = engine
+        self.setup = setup
+        self.opt = options
+        self.path = path
+        self.cal_name = calibration_name
+        self.cal_sha = calibration_sha256
+        self.interp = Interpreter(setup, path)
+        self.report = CorrectReport()
+        self.qe = [math.nan] * 3  # emitted gauge position (what the controller will hold)
+        self.prev_nominal = np.full(3, np.nan)
+        self.prev_target = np.full(3, np.nan)
+        self.dirs = np.zeros(3)
+        self.emitted_motion: int | None = None
+        self.linear_exact = bool(engine.affine) and not options.added
+        if options.extrapolate not in ("refuse", "clamp", "linear"):
+            raise PostprocError(f"--extrapolate must be refuse, clamp or linear, got {options.extrapolate!r}")
+
+    # -- safety-checked engine calls ----------------------------------------------------
+    def _context(self, dirs: np.ndarray, rotary: list[dict]) -> dict:
+        ctx: dict = {"dirx": dirs[:, 0], "diry": dirs[:, 1], "dirz": dirs[:, 2]}
+        for a in sorted(self.interp.used_rotary):
+            ctx[a] = np.array([d.get(a, 0.0) for d in rotary])
+        for k, v in (self.setup.context or {}).items():
+            ctx[k] = np.full(len(dirs), float(v))
+        return ctx
+
+    def corrected(self, q_nom: np.ndarray, r: np.ndarray, dirs: np.ndarray, rotary: list[dict],
+                  lineno: np.ndarray) -> np.ndarray:
+        """Corrected gauge positions for nominal gauge positions (all safety checks)."""
+        eng = self.engine
+        p = q_nom + r
+        ctx = self._context(dirs, rotary)
+        inside = eng.inside(q_nom)
+        p_eval = p
+        if not inside.all():
+            bad = np.flatnonzero(~inside)
+            if self.opt.extrapolate == "refuse":
+                lines = sorted(set(lineno[bad].tolist()))
+                first = q_nom[bad[0]]
+                raise OutOfVolumeError(
+                    f"target outside the calibrated volume at lines {', '.join(map(str, lines[:8]))}"
+                    f"{' ...' if len(lines) > 8 else ''}: commanded ({first[0]:.3f}, {first[1]:.3f}, "
+                    f"{first[2]:.3f}) mm, volume {eng.volume_mm[0].tolist()} .. {eng.volume_mm[1].tolist()} mm",
+                    path=self.path, lineno=int(lineno[bad[0]]),
+                    hint="check --offset/--tool-length, or allow it with --extrapolate clamp|linear")
+            self.report.extrapolated_points += len(bad)
+            if self.opt.extrapolate == "clamp":
+                q_eval = np.clip(q_nom, eng.volume_mm[0], eng.volume_mm[1])
+                p_eval = q_eval + r
+        res = eng.correction(p_eval, r, ctx)
+        delta = np.asarray(res.q, dtype=float)
+        resid = np.asarray(res.residual_mm, dtype=float)
+        bad = ~np.isfinite(delta).all(axis=1) | ~(resid <= SOLVER_ACCEPT_MM)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise SolverError(
+                f"the {eng.method} inverse did not converge (residual {resid[i]:.3g} mm)",
+                path=self.path, lineno=int(lineno[i]),
+                hint="the calibration may be unusable here; check it with 'postproc check'")
+        for add in self.opt.added:
+            d = np.asarray(add.delta(p, ctx), dtype=float)
+            if d.shape != delta.shape or not np.isfinite(d).all():
+                raise SolverError(f"correction map {add.name!r} gave no finite correction here",
+                                  path=self.path, lineno=int(lineno[0]))
+            delta = delta + d
+        size = np.linalg.norm(delta, axis=1)
+        if len(size):
+            i = int(np.argmax(size))
+            if size[i] > self.opt.max_correction_mm:
+                raise CorrectionTooLargeError(
+                    f"correction of {size[i]:.4f} mm exceeds --max-correction {self.opt.max_correction_mm:g} mm",
+                    path=self.path, lineno=int(lineno[i]),
+                    hint="a correction this large suggests wrong units or a wrong calibration; "
+                         "raise --max-correction only if it is real")
+            self.report.max_correction_mm = max(self.report.max_correction_mm, float(size[i]))
+        return q_nom + delta
+
+    # -- the run -----------------------------------------------------------------------
+    def run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
+        it = iter(lines)
+        head = [ln for ln in (next(it, None),) if ln is not None]
+        if head and head[0].strip() == "%":
+            head.extend(ln for ln in (next(it, None),) if ln is not None)
+        for k, line in enumerate(head):
+            if emit.is_header(line) and not self.opt.force:
+                raise AlreadyCorrectedError(
+                    "this program already carries a postproc header: it has been corrected before",
+                    path=self.path, lineno=k + 1, col=1,
+                    hint="correct the original program instead, or use --force to correct it again")
+        ending = (emit.line_ending(head[0]) if head else "") or "\n"
+        header = emit.header_line(self.cal_name, self.cal_sha, self.opt.tolerance_mm, self._setup_note(), ending)
+        entries: list = []
+        lineno = 1
+        if head and head[0].strip() == "%":
+            write(head[0] if emit.line_ending(head[0]) else head[0] + ending)
+            self.report.lines_out += 1
+            head = head[1:]
+            lineno = 2
+        write(header)
+        self.report.lines_out += 1
+
+        def feed(line: str) -> None:
+            nonlocal lineno
+            mv = self.interp.feed_line(lineno, line)
+            entries.append((line, mv, self.interp.motion_word, self.interp.state.motion))
+            lineno += 1
+
+        for line in head:
+            feed(line)
+        for line in it:
+            feed(line)
+            if len(entries) >= self.opt.chunk_lines and not any(math.isnan(v) for v in self.interp.state.pos):
+                self._chunk(entries, write)
+                entries.clear()
+                if progress is not None:
+                    progress(lineno - 1)
+        self._chunk(entries, write)
+        if progress is not None:
+            progress(lineno - 1)
+        self.report.lines_in = lineno - 1
+        self.report.g54_assumed_zero = self.interp.implicit_g54
+        return self.report
+
+    def _setup_note(self) -> str:
+        parts = []
+        offs = self.setup.offsets or {}
+        if "G54" not in offs:
+            parts.append("G54 taken as zero unless named")
+        for k in sorted(offs):
+            v = offs[k]
+            if isinstance(v, dict):
+                v = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+            parts.append(f"{k}={','.join(f'{x:g}' for x in v)}")
+        if self.setup.tool_lengths:
+            parts.append("tools " + ",".join(f"{k}={v:g}" for k, v in sorted(self.setup.tool_lengths.items())))
+        if self.setup.tool_vector is not None:
+            parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
+        for a in self.opt.added:
+            parts.append(f"map {a.name}")
+        return "; ".join(parts)
+
+    # -- one chunk ---------------------------------------------------------------------
+    def _chunk(self, entries: list, write) -> None:
+        moves: list[Move] = [e[1] for e in entries if e[1] is not None]
+        targets = np.zeros((0, 3))
+        plans: dict[int, object] = {}
+        if moves:
+            targets, plans = self._plan(moves)
+        k = 0
+        for line, mv, motion_word, prog_motion in entries:
+            if mv is None:
+                write(line)
+                self.report.lines_out += 1
+                if motion_word:
+                    self.emitted_motion = prog_motion
+                continue
+            self._emit_move(line, mv, targets[k], plans.get(k), write)
+            k += 1
+
+    def _plan(self, moves: list[Move]):
+        M = len(moves)
+        Q1 = np.array([m.q1 for m in moves], dtype=float)
+        linenos = np.array([m.lineno for m in moves])
+        Q1 = backfill_unknown(Q1, linenos, self.path)
+        Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
+        Q0 = np.where(np.isnan(Q0), Q1, Q0)
+        R = np.array([m.r for m in moves], dtype=float)
+        rot = [m.rotary for m in moves]
+        # approach directions: chord signs (end tangent for arcs), carried where zero
+        d = Q1 - Q0
+        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
+        arcs = [i for i, m in enumerate(moves) if m.arc is not None]
+        for i in arcs:
+            m = moves[i]
+            before = arc_points(m.arc, m.q0, m.q1, np.array([1.0 - 1e-6]))[0]
+            t = np.sign(np.where(np.abs(Q1[i] - before) > 1e-12, Q1[i] - before, 0.0))
+            sign[i] = t
+        D = np.empty_like(sign)
+        for ax in range(3):
+            col = sign[:, ax]
+            idx = np.where(col != 0, np.arange(M), -1)
+            np.maximum.accumulate(idx, out=idx)
+            D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
+        T = self.corrected(Q1, R, D, rot, linenos)
+        plans: dict[int, object] = {}
+        # starts: the corrected previous target (unrounded) for the pre-decision
+        S = np.vstack([self.prev_target[None, :], T[:-1]])
+        d_in = np.vstack([self.dirs[None, :], D[:-1]])
+        curves: list[Curve] = []
+        s_init: list[np.ndarray] = []
+        owner: list[int] = []
+        tol = self.opt.tolerance_mm
+        # arcs: sample the corrected ideal path and decide keep / linearise
+        if arcs:
+            samp_s, samp_c = [], []
+            curve_of: dict[int, Curve] = {}
+            for i in arcs:
+                m = moves[i]
+                c = Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary)
+                curve_of[i] = c
+                _, _, sweep, _, _ = arc_params(m.arc, m.q0, m.q1)
+                n = max(ARC_CHECK_MIN_SAMPLES, math.ceil(abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
+                s = np.linspace(0.0, 1.0, n)
+                samp_s.append(s)
+                samp_c.append(np.full(n, i))
+            allc = np.concatenate(samp_c)
+            nom = np.vstack([curve_of[i].nominal(s) for i, s in zip(arcs, samp_s, strict=True)])
+            dirs = np.vstack([curve_of[i].directions(s) for i, s in zip(arcs, samp_s, strict=True)])
+            corr = self.corrected(nom, R[allc], dirs, [rot[i] for i in allc], linenos[allc])
+            off = 0
+            for i, s in zip(arcs, samp_s, strict=True):
+                n = len(s)
+                m = moves[i]
+                qs, qn = corr[off:off + n], nom[off:off + n]
+                off += n
+                plan = {"s": s, "q": qs, "qn": qn, "curve": curve_of[i]}
+                plans[i] = plan
+                unit = m.unit
+                rerr = self._round_err(unit)
+                ok = False
+                if not np.isnan(S[i]).any():
+                    centre = centre_estimate(m.arc, s, qn, qs)
+                    cand = Arc(tuple(centre), m.arc.plane, m.arc.clockwise, m.arc.turns, m.arc.offset_idx, m.arc.r_idx)
+                    _, _, nsweep, _, _ = arc_params(m.arc, m.q0, m.q1)
+                    dev = arc_deviation(cand, tuple(S[i]), tuple(T[i]), s, qs, nsweep, _mismatch(m))
+                    ok = dev <= tol - 2 * rerr
+                if not ok:
+                    plan["linearise"] = True
+                    c = curve_of[i]
+                    n0 = arc_chord_steps(m.arc, m.q0, m.q1, (tol - rerr) * 0.5)
+                    curves.append(c)
+                    s_init.append(np.linspace(0.0, 1.0, n0 + 1))
+                    owner.append(i)
+        if not self.linear_exact:
+            for i, m in enumerate(moves):
+                if m.kind == LINE and not any(math.isnan(v) for v in m.q0):
+                    curves.append(Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary))
+                    s_init.append(np.array([0.0, 1.0]))
+                    owner.append(i)
+        if curves:
+            results = self._subdivide(curves, s_init, moves[0].unit)
+            for i, (s, q) in zip(owner, results, strict=True):
+                plan = plans.setdefault(i, {})
+                plan["split_s"] = s
+                plan["split_q"] = q
+        self.prev_nominal = Q1[-1].copy()
+        self.prev_target = T[-1].copy()
+        self.dirs = D[-1].copy()
+        return T, plans
+
+    def _round_err(self, unit: float) -> float:
+        d = _unit_decimals(self.opt, unit)
+        return 0.5 * 10.0 ** (-d) * unit * math.sqrt(3.0)
+
+    def _subdivide(self, curves: list[Curve], s_init: list[np.ndarray], unit: float):
+        rerr = self._round_err(unit)
+        line_ids = np.array([c.arc is None for c in curves])
+        Q0 = np.array([c.q0 for c in curves], dtype=float)
+        Q1 = np.array([c.q1 for c in curves], dtype=float)
+        Rr = np.array([c.r for c in curves], dtype=float)
+
+        def evaluate(cid: np.ndarray, s: np.ndarray) -> np.ndarray:
+            nom = np.empty((len(s), 3))
+            dirs = np.empty((len(s), 3))
+            is_line = line_ids[cid]
+            if is_line.any():
+                c = cid[is_line]
+                nom[is_line] = Q0[c] + (Q1[c] - Q0[c]) * s[is_line, None]
+                dd = np.sign(Q1[c] - Q0[c])
+                carried = np.array([curves[j].dirs for j in c]).reshape(-1, 3)
+                dirs[is_line] = np.where(dd == 0, carried, dd)
+            if (~is_line).any():
+                for j in np.unique(cid[~is_line]).tolist():
+                    sel = cid == j
+                    nom[sel] = curves[j].nominal(s[sel])
+                    dirs[sel] = curves[j].directions(s[sel])
+            rot = [curves[j].rotary for j in cid.tolist()]
+            ln = np.array([curves[j].lineno for j in cid.tolist()])
+            return self.corrected(nom, Rr[cid], dirs, rot, ln)
+
+        return subdivide(curves, s_init, evaluate, self.opt.tolerance_mm - rerr)
+
+    # -- emission ----------------------------------------------------------------------
+    def _axis_words(self, mv: Move, target, qe: list[float], d: int, present_only: bool = False):
+        """Edits for the axis words of ``mv``'s line and the words to add; updates qe."""
+        edits, added = [], []
+        unit, shift, inc = mv.unit, mv.shift, mv.incremental
+        half = 0.5 * 10.0 ** (-d)
+        for k in range(3):
+            t = float(target[k])
+            idx = mv.axis_idx[k]
+            if idx >= 0:
+                _letter, num, start, end, _lpos = mv.words[idx]
+                ov = float(num)
+                v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
+                dout = max(d, emit.decimals_of(num))
+                if abs(v - ov) < 0.5 * 10.0 ** (-dout):
+                    val = ov
+                else:
+                    text = emit.fmt(v, dout)
+                    edits.append((start, end, text))
+                    val = float(text)
+                qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
+            elif not present_only:
+                if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
+                    continue
+                v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
+                text = emit.fmt(v, d)
+                added.append("XYZ"[k] + text)
+                val = float(text)
+                qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
+        return edits, added
+
+    def _emit_move(self, line: str, mv: Move, target, plan, write) -> None:
+        self.report.moves += 1
+        d = _unit_decimals(self.opt, mv.unit)
+        linearise = bool(plan and plan.get("linearise"))
+        split_q = plan.get("split_q") if plan else None
+        split_s = plan.get("split_s") if plan else None
+        if mv.arc is not None and not linearise:
+            if self._emit_arc(line, mv, target, plan, d, write):
+                return
+            # the rounded arc failed its check: linearise it now
+            linearise = True
+            c = plan["curve"]
+            rerr = self._round_err(mv.unit)
+            n0 = arc_chord_steps(mv.arc, mv.q0, mv.q1, (self.opt.tolerance_mm - rerr) * 0.5)
+            (split_s, split_q), = self._subdivide([c], [np.linspace(0.0, 1.0, n0 + 1)], mv.unit)
+        inner = split_q[1:-1] if split_q is not None else np.zeros((0, 3))
+        if len(inner) and mv.stays:
+            raise PostprocError(
+                "this move must be split to stay within tolerance, but its line also changes the tool "
+                "or uses G53", path=self.path, lineno=mv.lineno,
+                hint="put the tool change or G53 on a line of its own")
+        sep, lower = emit.style_of(line)
+        ending = emit.line_ending(line) or "\n"
+        qe = self.qe
+        # inserted lines for intermediate points
+        fracs = np.diff(split_s) if split_s is not None else np.array([1.0])
+        for j, q in enumerate(inner):
+            words = []
+            if j == 0:
+                words.extend(mv.prefix_words)
+            words.append("G1")
+            _e, added = self._axis_words_free(mv, q, qe, d)
+            words.extend(added)
+            if mv.inverse_time:
+                words.append("F" + emit.fmt(mv.feed / max(fracs[j], 1e-12), 4))
+            elif j == 0 and mv.feed_idx >= 0:
+                words.append("F" + mv.words[mv.feed_idx][1])
+            text = sep.join(words)
+            write((text.lower() if lower else text) + ending)
+            self.report.lines_inserted += 1
+            self.report.lines_out += 1
+        edits, added = self._axis_words(mv, target, qe, d)
+        if linearise and mv.arc is not None:
+            self.report.arcs_linearised += 1
+            g1 = "g1" if lower else "G1"
+            if mv.motion_idx >= 0:
+                _l, num, start, end, _p = mv.words[mv.motion_idx]
+                edits.append((start, end, ("0" if num.startswith("0") else "") + "1"))
+            else:
+                edits.append(self._insert_motion(mv, g1 + sep))
+            spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
+            edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
+            self.emitted_motion = LINE
+        else:
+            if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+                text = "G" + MOTION_TEXT[mv.kind]
+                edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+            self.emitted_motion = mv.kind
+        if mv.inverse_time and len(inner) and mv.feed_idx >= 0:
+            _l, num, start, end, _p = mv.words[mv.feed_idx]
+            edits.append((start, end, emit.fmt(mv.feed / max(fracs[-1], 1e-12), max(4, emit.decimals_of(num)))))
+        if added:
+            pos = self._insert_pos(mv)
+            text = "".join(sep + w for w in added) if pos > 0 else "".join(w + sep for w in added)
+            edits.append((pos, pos, text.lower() if lower else text))
+        self._write_line(line, edits, write)
+
+    def _axis_words_free(self, mv: Move, q, qe, d):
+        """Words for an inserted line (no original words): every axis that moves."""
+        fake = Move(mv.lineno, LINE, mv.q0, mv.q1, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute,
+                    [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary)
+        return self._axis_words(fake, q, qe, d)
+
+    def _insert_pos(self, mv: Move) -> int:
+        idx = [i for i in mv.axis_idx if i >= 0]
+        if idx:
+            return mv.words[max(idx)][3]
+        if mv.motion_idx >= 0:
+            return mv.words[mv.motion_idx][3]
+        return mv.words[-1][3]
+
+    def _insert_motion(self, mv: Move, text: str) -> tuple[int, int, str]:
+        first = next((w for w in mv.words if w[0] != "N"), mv.words[0])
+        return (first[4], first[4], text)
+
+    def _write_line(self, line: str, edits, write) -> None:
+        self.report.words_changed += len(edits)
+        write(emit.edit_line(line, edits))
+        self.report.lines_out += 1
+
+    def _emit_arc(self, line: str, mv: Move, target, plan, d: int, write) -> bool:
+        """Emit a kept arc if the rounded arc passes its checks; False to linearise."""
+        S = list(self.qe)
+        qe = list(self.qe)
+        edits, added = self._axis_words(mv, target, qe, d)
+        E = list(qe)
+        arc = mv.arc
+        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        centre = centre_estimate(arc, plan["s"], plan["qn"], plan["q"])
+        unit = mv.unit
+        sep, lower = emit.style_of(line)
+        arc_edits, arc_added = [], []
+        if arc.r_idx >= 0:
+            _l, num, start, end, _p = mv.words[arc.r_idx]
+            orig = float(num)
+            rad = 0.5 * (math.hypot(S[a1] - centre[a1], S[a2] - centre[a2])
+                         + math.hypot(E[a1] - centre[a1], E[a2] - centre[a2]))
+            v = math.copysign(rad / unit, orig)
+            dout = max(d, emit.decimals_of(num))
+            if abs(v - orig) < 0.5 * 10.0 ** (-dout):
+                val = orig
+            else:
+                text = emit.fmt(v, dout)
+                arc_edits.append((start, end, text))
+                val = float(text)
+            c = r_center(S[a1], S[a2], E[a1], E[a2], val * unit, arc.clockwise)
+            if c is None:
+                return False
+            ctrl = [0.0, 0.0, 0.0]
+            ctrl[a1], ctrl[a2], ctrl[an] = c[0], c[1], S[an]
+        else:
+            ctrl = [0.0, 0.0, 0.0]
+            ctrl[an] = S[an]
+            for axis, letter, idx in ((a1, l1, arc.offset_idx[0]), (a2, l2, arc.offset_idx[1])):
+                base = mv.shift[axis] if mv.arc_absolute else S[axis]
+                v = (centre[axis] - base) / unit
+                if idx >= 0:
+                    _l, num, start, end, _p = mv.words[idx]
+                    orig = float(num)
+                    dout = max(d, emit.decimals_of(num))
+                    if abs(v - orig) < 0.5 * 10.0 ** (-dout):
+                        val = orig
+                    else:
+                        text = emit.fmt(v, dout)
+                        arc_edits.append((start, end, text))
+                        val = float(text)
+                else:
+                    text = emit.fmt(v, d)
+                    val = float(text)
+                    if val != 0.0 or mv.arc_absolute:
+                        arc_added.append(letter + text)
+                    else:
+                        val = 0.0
+                    if mv.arc_absolute and val == 0.0 and not arc_added:
+                        arc_added.append(letter + text)
+                ctrl[axis] = base + val * unit
+        cand = Arc(tuple(ctrl), arc.plane, arc.clockwise, arc.turns, arc.offset_idx, arc.r_idx)
+        _, _, nsweep, _, _ = arc_params(arc, mv.q0, mv.q1)
+        dev = arc_deviation(cand, tuple(S), tuple(E), plan["s"], plan["q"], nsweep, _mismatch(mv))
+        if not dev <= self.opt.tolerance_mm - self._round_err(unit):
+            return False
+        self.qe[:] = qe
+        self.report.arcs_kept += 1
+        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+            text = "G" + MOTION_TEXT[mv.kind]
+            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+        self.emitted_motion = mv.kind
+        words_added = added + arc_added
+        if words_added:
+            aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0]
+            pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
+            text = "".join(sep + w for w in words_added)
+            edits.append((pos, pos, text.lower() if lower else text))
+        self._write_line(line, edits + arc_edits, write)
+        return True
+
+
+def _mismatch(mv: Move) -> float:
+    """End radius minus start radius of the input arc (mm)."""
+    _, _, _, r0, r1 = arc_params(mv.arc, mv.q0, mv.q1)
+    return abs(r1 - r0)
+
+
+# -- entry points ---------------------------------------------------------------------
+def correct_text(text: str, engine, setup: Setup | None = None, options: CorrectOptions | None = None, *,
+                 path: str | None = None, calibration_name: str = "", calibration_sha256: str = ""):
+    """Correct G-code ``text``; returns ``(corrected_text, CorrectReport)``."""
+    from postproc.gcode.lexer import split_lines
+
+    out: list[str] = []
+    c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
+                  calibration_name=calibration_name, calibration_sha256=calibration_sha256)
+    report = c.run(split_lines(text), out.append)
+    return "".join(out), report
+
+
+def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, setup: Setup | None = None,
+                 options: CorrectOptions | None = None, *, calibration_name: str = "",
+                 calibration_sha256: str = "", progress=None) -> CorrectReport:
+    """Correct the program at ``source`` into ``output`` atomically (temp file, then rename).
+
+    On any error nothing is left at ``output`` (an existing file there is untouched).
+    """
+    path, lines = iter_source_lines(Path(source))
+    out = Path(output)
+    fd, tmp = tempfile.mkstemp(dir=out.parent if str(out.parent) else ".", prefix=f".{out.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
+            c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
+                          calibration_name=calibration_name, calibration_sha256=calibration_sha256)
+            report = c.run(lines, fh.write, progress=progress)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return report

@@ -1,0 +1,158 @@
+"""Corrected programs pushed through the forward model land on the nominal path."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
+from postproc.engine.static import StaticEngine
+from postproc.gcode.path import Setup, program_path
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+
+ROOT = Path(__file__).parents[1]
+SAMPLES = ROOT / "samples"
+TOL = 0.001
+VOLUME = [[0.0, 0.0, 0.0], [315.0, 315.0, 315.0]]
+# tests: a machine ten times worse than the demo calibration, so that a program that
+# was not corrected misses the path by far more than the tolerance
+G_BAD = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
+
+
+def static_engine() -> StaticEngine:
+    return StaticEngine(G_BAD, [0.035, -0.022, 0.018], VOLUME)
+
+
+class WavyEngine(Engine):
+    """Test-only non-affine machine: a smooth curved error field of 20 um amplitude."""
+
+    method = "wavy"
+    affine = False
+    AMP = 0.02
+
+    def _err(self, q):
+        return self.AMP * np.column_stack([np.sin(q[:, 1] / 7.0), np.sin(q[:, 0] / 9.0),
+                                           np.sin((q[:, 0] + q[:, 1]) / 11.0)])
+
+    def forward(self, q, r=None, context=None):
+        q = check_points(q)
+        return q + self._err(q) + check_tool_vectors(r, len(q))
+
+    def inverse(self, p, r=None, context=None):
+        p = check_points(p)
+        rr = check_tool_vectors(r, len(p))
+        q = p - rr
+        for _ in range(30):
+            q = p - rr - self._err(q)
+        resid = np.linalg.norm(self.forward(q, rr) - p, axis=1)
+        return InverseResult(q, resid, np.full(len(p), 30))
+
+    def model_to_dict(self):
+        return {}
+
+    @classmethod
+    def model_from_dict(cls, model, volume_mm):
+        return cls(volume_mm)
+
+
+def _polyline_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance from each point to the polyline through ``poly`` (exact for segments)."""
+    tree = cKDTree(poly)
+    _, idx = tree.query(points, k=min(6, len(poly)))
+    idx = np.atleast_2d(idx)
+    best = np.full(len(points), np.inf)
+    for col in range(idx.shape[1]):
+        for shift in (0, -1):
+            i0 = np.clip(idx[:, col] + shift, 0, len(poly) - 2)
+            a, b = poly[i0], poly[i0 + 1]
+            ab = b - a
+            denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30)
+            t = np.clip(np.einsum("ij,ij->i", points - a, ab) / denom, 0.0, 1.0)
+            d = np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
+            best = np.minimum(best, d)
+    return best
+
+
+def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
+    """Largest distance between the actual path of ``corrected`` and the nominal path
+    of ``original``, both ways (feed moves and rapid end points)."""
+    nominal = program_path(original, setup, max_step_mm=step).points_mm
+    pp = program_path(corrected, setup, max_step_mm=step)
+    actual = engine.forward(pp.points_mm - pp.tool_mm, pp.tool_mm, pp.context)
+    there = _polyline_distance(actual, nominal).max()
+    back = _polyline_distance(nominal, actual).max()
+    return float(max(there, back))
+
+
+CASES = [
+    ("pocket.nc", Setup()),
+    ("holes_g91.nc", Setup()),
+    ("inch.nc", Setup()),
+    ("planes.ngc", Setup()),
+    ("g54_g43.ngc", Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 100.0})),
+]
+
+
+@pytest.mark.parametrize(("name", "setup"), CASES, ids=[c[0] for c in CASES])
+def test_static_correction_lands_on_the_nominal_path(name, setup):
+    text = (SAMPLES / name).read_text()
+    eng = static_engine()
+    out, report = correct_text(text, eng, setup, CorrectOptions(tolerance_mm=TOL))
+    assert report.words_changed > 0
+    assert landing_error(text, out, eng, setup) <= TOL * 1.01
+    # the same program uncorrected misses by far more (the check can fail)
+    assert landing_error(text, text, eng, setup) > 20 * TOL
+
+
+@pytest.mark.parametrize("name", ["pocket.nc", "planes.ngc", "holes_g91.nc"])
+def test_non_affine_engine_splits_lines_and_linearises_arcs(name):
+    text = (SAMPLES / name).read_text()
+    eng = WavyEngine(VOLUME)
+    out, report = correct_text(text, eng, Setup(), CorrectOptions(tolerance_mm=TOL))
+    assert report.lines_inserted > 0
+    assert landing_error(text, out, eng, Setup(), step=0.02) <= TOL * 1.01
+    assert landing_error(text, text, eng, Setup()) > 10 * TOL
+
+
+def test_tolerance_controls_the_number_of_inserted_lines():
+    text = (SAMPLES / "pocket.nc").read_text()
+    eng = WavyEngine(VOLUME)
+    _, fine = correct_text(text, eng, Setup(), CorrectOptions(tolerance_mm=0.001))
+    out, coarse = correct_text(text, eng, Setup(), CorrectOptions(tolerance_mm=0.005))
+    assert coarse.lines_inserted < fine.lines_inserted
+    assert landing_error(text, out, eng, Setup(), step=0.02) <= 0.005 * 1.01
+
+
+def test_g91_increments_sum_to_the_corrected_points_without_drift():
+    # 2000 tiny incremental steps: rounding each increment independently would drift
+    body = "G21 G90 G0 X10 Y10 Z10\nG91\n" + "G1 X0.1 Y0.05 F100\n" * 2000 + "G90\n"
+    eng = static_engine()
+    out, _ = correct_text(body, eng, Setup(), CorrectOptions())
+    pp = program_path(out, Setup(), max_step_mm=1000)
+    actual = eng.forward(pp.points_mm - pp.tool_mm, pp.tool_mm)
+    nominal = program_path(body, Setup(), max_step_mm=1000).points_mm
+    assert np.abs(actual - nominal).max() < 2e-4
+    assert "G91" in out
+
+
+@pytest.mark.parametrize("name", ["pocket.nc", "planes.ngc", "inch.nc"])
+def test_arcs_are_kept_when_the_corrected_arc_is_still_an_arc(name):
+    # uniform scale plus a shift maps circles to circles: every arc must stay an arc
+    eng = StaticEngine(np.eye(3) * (1 + 80e-6), [0.03, -0.02, 0.01], VOLUME)
+    text = (SAMPLES / name).read_text()
+    out, report = correct_text(text, eng, Setup(), CorrectOptions())
+    assert report.arcs_linearised == 0
+    assert report.arcs_kept > 0
+    assert report.lines_inserted == 0
+    assert landing_error(text, out, eng, Setup()) <= TOL * 1.01
+
+
+def test_demo_calibration_keeps_small_arcs_and_lands():
+    from postproc.calibration.calfile import load_calibration
+
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    text = (SAMPLES / "pocket.nc").read_text()
+    out, report = correct_text(text, cal.engine, Setup(), CorrectOptions())
+    assert report.arcs_kept >= 8  # the 8 mm corner radii stay arcs
+    assert landing_error(text, out, cal.engine, Setup()) <= TOL * 1.01

@@ -1,0 +1,70 @@
+"""Identity calibration: every program comes out byte-identical apart from the header,
+or fails with a PostprocError naming its place (never a traceback)."""
+
+from pathlib import Path
+
+import pytest
+
+from postproc.engine.identity import IdentityEngine
+from postproc.errors import PostprocError
+from postproc.gcode import emit
+from postproc.gcode.path import Setup
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+
+ROOT = Path(__file__).parents[1]
+CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
+EXTS = {".nc", ".ngc", ".tap", ".gcode"}
+
+# every work offset and tool length a corpus program might name, so that the run
+# goes as far as the program's own constructs allow
+ALL_OFFSETS = {n: (0.0, 0.0, 0.0) for n in
+               ["G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3"]}
+ALL_TOOLS = {t: 50.0 + t for t in range(100)}
+BIG = [[-1e5] * 3, [1e5] * 3]
+
+
+def _files():
+    files = sorted(p for p in (ROOT / "samples").rglob("*") if p.suffix.lower() in EXTS)
+    if CORPUS.is_dir():
+        files += sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS)
+    return files
+
+
+def strip_header(text: str) -> str:
+    lines = text.splitlines(keepends=True)
+    return "".join(ln for ln in lines if not emit.is_header(ln))
+
+
+@pytest.mark.parametrize("path", _files(), ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_identity_roundtrip_is_byte_identical_or_a_clear_error(path):
+    text = path.read_bytes().decode("utf-8", errors="surrogateescape")
+    setup = Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS)
+    err = None
+    try:
+        out, report = correct_text(text, IdentityEngine(BIG), setup, CorrectOptions(),
+                                   path=str(path), calibration_name="identity", calibration_sha256="0" * 64)
+    except PostprocError as exc:
+        err = exc
+    if err is not None:
+        assert err.path == str(path)
+        assert err.lineno is not None
+        assert err.message
+        return
+    assert strip_header(out) == text
+    assert report.lines_inserted == 0
+    assert report.words_changed == 0
+
+
+def test_the_corpus_is_mostly_corrected_not_refused():
+    if not CORPUS.is_dir():
+        pytest.skip("no shared corpus")
+    ok, refused = [], []
+    for path in sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS):
+        text = path.read_bytes().decode("utf-8", errors="surrogateescape")
+        try:
+            correct_text(text, IdentityEngine(BIG), Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS))
+            ok.append(path.name)
+        except PostprocError as exc:
+            refused.append((path.name, exc.message))
+    # refusals are for macros, O-words, canned cycles, splines, cutter compensation
+    assert len(ok) >= 14, refused
