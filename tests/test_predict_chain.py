@@ -167,3 +167,9 @@ def test_orders_and_per_axis_matrices_differ_at_second_order(machine):
         d = np.linalg.norm(tool_points(chain_from_tables(tables, sq, **kwargs), q, R_TOOL) - exact, axis=1)
         assert np.all(d <= bound)
         assert d.max() > 1e-3 * bound.max()  # really a second-order difference, not zero
+
+
+def test_collinear_frame_points_are_reported_at_evaluation_with_their_place():
+    ch = chain([{"points": {"i": [0, 0, 0], "j": ["L", 0, 0], "k": [{"scale": 2, "of": "L"}, 0, 0]}}])
+    with pytest.raises(PostprocError, match=r"modules\[0\].*collinear"):
+        ch.matrix({"L": 100.0})

@@ -73,7 +73,17 @@ class Element:
             raise _fail(self.where, f"unknown element kind {self.kind!r}", hint=f"use one of {', '.join(KINDS)}")
         if not isinstance(self.body, Mapping):
             raise _fail(self.where, f"{self.kind} element needs an object, got {self.body!r}")
-        getattr(self, f"_check_{self.kind}")()
+        try:
+            getattr(self, f"_check_{self.kind}")()
+        except PostprocError as exc:
+            raise self._placed(exc) from None
+
+    def _placed(self, exc: PostprocError) -> PostprocError:
+        """Prefix an error raised by a helper with this element's place."""
+        if not exc.message.startswith(self.where):
+            exc.message = f"{self.where}: {exc.message}"
+            exc.args = (exc.message,)
+        return exc
 
     # -- validation ------------------------------------------------------------------
     def _check_fixed(self) -> None:
@@ -160,6 +170,12 @@ class Element:
     # -- evaluation ------------------------------------------------------------------
     def matrix(self, env: Mapping[str, Any]) -> np.ndarray:
         """The element's transform(s), shape ``S + (4, 4)`` with ``S`` from the variables."""
+        try:
+            return self._matrix(env)
+        except PostprocError as exc:
+            raise self._placed(exc) from None
+
+    def _matrix(self, env: Mapping[str, Any]) -> np.ndarray:
         b, w = self.body, self.where
         if self.kind == "fixed":
             return self._const
