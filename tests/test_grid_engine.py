@@ -189,3 +189,13 @@ def test_other_tool_vector_is_carried_unrotated(grid15):
     q = np.array([[100.0, 200.0, 50.0]])
     r1, r2 = np.zeros(3), np.array([10.0, 0.0, -120.0])
     assert_allclose(eng.forward(q, r2) - eng.forward(q, r1), r2[None], atol=1e-12)
+
+
+def test_report_names_the_tool_vectors():
+    one = fit([small_grid(tool=(0.0, 0.0, -80.0))])
+    assert any("tool vector of the measurement: 0,0,-80 mm" in line for line in one.report)
+    two = Measurements.concat([small_grid(tool=(0.0, 0.0, -80.0)), small_grid(tool=(0.0, 0.0, 0.0))])
+    res = fit([two])
+    assert any("2 different tool vectors" in line for line in res.report)
+    # both tool vectors are averaged into one node position per lattice node
+    assert res.engine.nodes.shape == (4, 4, 4, 3)
