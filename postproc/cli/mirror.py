@@ -176,6 +176,8 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     from postproc.mirror.maps import load_map
 
     axis, sign = thinner
+    if allowance < 0:
+        raise click.BadParameter("the allowance b must not be negative", param_hint="--allowance")
     t_min, t_max = _pair(band, "--band")
     bnd = Band(t_ref, t_min, t_max)
     plan_path = str(Path(plan) / "plan.csv") if Path(plan).is_dir() else str(plan)
