@@ -112,3 +112,30 @@ def test_finish_without_required_semi_is_refused(tmp_path):
     with pytest.raises(MeasurementError, match="no semi-finish") as exc:
         self_tune(read_plan(tmp_path), band, 0.3, str(tmp_path / "plan.csv"))
     assert exc.value.lineno == 4
+
+
+@pytest.mark.parametrize(
+    ("body", "match", "line"),
+    [
+        ("pocket,B0,Z0,semi,finish\nP01,0,0,missing.csv,\n", "not found", 4),
+        ("pocket,B0,Z0,semi,finish\nP01,0,0,,\nP01,6,0,,\n", "repeats", 5),
+        ("pocket,B0,Z0\nP01,x,0\n", "not a number", 4),
+    ],
+)
+def test_plan_errors_name_their_line(tmp_path, body, match, line):
+    from postproc.errors import MeasurementError
+
+    (tmp_path / "plan.csv").write_text("# postproc mirror plan v1\n# units: length=mm\n" + body)
+    with pytest.raises(MeasurementError, match=match) as exc:
+        read_plan(tmp_path / "plan.csv")
+    assert exc.value.lineno == line
+
+
+def test_plan_needs_its_magic_line_and_band_must_hold_t_ref(tmp_path):
+    from postproc.errors import MeasurementError, PostprocError
+
+    (tmp_path / "plan.csv").write_text("pocket,B0,Z0\nP01,0,0\n")
+    with pytest.raises(MeasurementError, match="not a mirror plan"):
+        read_plan(tmp_path)
+    with pytest.raises(PostprocError, match="must contain"):
+        Band(2.0, 2.01, 2.03)
