@@ -201,3 +201,14 @@ def test_cli_fit_bad_table_exits_with_input_error(tmp_path):
     assert result.exit_code == EXIT_INPUT
     assert f"{path}:6:" in result.output
     assert not out.exists()
+
+
+def test_cli_fit_tables_stores_order_and_solver(tmp_path):
+    path, _, _ = write_machine(tmp_path, seed=1)
+    out = tmp_path / "cal.json"
+    result = CliRunner().invoke(main, ["fit", str(path), "--order", "exact", "--solver", "astatic", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    engine = load_calibration(out).engine
+    assert (engine.order, engine.solver) == ("exact", "astatic")
+    assert engine.accept_residual_mm == 2.0
+    assert engine.with_options(solver="newton").accept_residual_mm == 1e-6

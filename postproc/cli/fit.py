@@ -24,13 +24,17 @@ from postproc.cli.options import parse_vector
               help="Declared lead-screw pitch (mm) of an axis, to warn about grid steps that alias it.")
 @click.option("--knot-spacing", "knot_spacing", type=float, default=None, metavar="MM",
               help="Parametric identification: B-spline knot spacing (default: from the data).")
+@click.option("--order", type=click.Choice(["first", "second", "exact"]), default=None,
+              help="Parametric: forward-model order stored in the calibration (default: first).")
+@click.option("--solver", type=click.Choice(["newton", "astatic"]), default=None,
+              help="Parametric: inverse solver stored in the calibration (default: newton).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
 @click.option("--effect", "effects", multiple=True, metavar="NAME",
               help="Add a physical effect to the model, named as 'postproc check' prints it "
                    "(e.g. backlash:X, periodic:Y, thermal:t, load:load). Repeatable.")
 def fit(files, method, output, name, squareness, intervals, step, screw_pitch, knot_spacing,
-        tool_vector, effects):
+        order, solver, tool_vector, effects):
     """Fit a calibration from point measurements or axis error tables.
 
     FILES are formats.md CSV files: point measurements (several files are fitted
@@ -54,6 +58,8 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         "step": step,
         "screw_pitch": list(screw_pitch) or None,
         "knot_spacing": knot_spacing,
+        "order": order,
+        "solver": solver,
     }
     options = {k: v for k, v in options.items() if v is not None}
     if "tables" in kinds:
@@ -67,6 +73,8 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         result = fit_tables(list(files), squareness=squareness, **options)
     else:
         method = method or "static"
+        if (order or solver) and method != "parametric":
+            raise click.UsageError("--order and --solver apply to the parametric method only")
         data = [read_measurements(f) for f in files]
         if tool_vector is not None:
             r = parse_vector(tool_vector, "--tool-vector")
