@@ -63,8 +63,10 @@ def predict() -> None:
 @click.option("--windows", type=int, default=40, show_default=True, help="Cutting windows (edge passes) sampled.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write colour maps of the wall without and with runout to this PNG.")
+@click.option("--plot-trace", "plot_trace", type=click.Path(dir_okay=False), default=None,
+              help="Write the trace of the edge tip near the wall (cutting windows and air) to this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def trace(operation, runout, heights, windows, plot, as_json):
+def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
     """Trace of a flank-milling cutter and the wall it leaves (seed 002).
 
     The edge trace r_s(t, p) = M(t) r_e(p) is sampled only in the cutting windows
@@ -74,11 +76,11 @@ def trace(operation, runout, heights, windows, plot, as_json):
 
     Example:
 
-        postproc predict trace samples/predict/flank_5mm.operation.json --plot wall.png
+        postproc predict trace samples/predict/flank_5mm.operation.json --plot wall.png --plot-trace arcs.png
     """
     from postproc.errors import PostprocError
     from postproc.predict.operation import load_operation
-    from postproc.predict.trace import flank_surface, plot_flank, with_runout
+    from postproc.predict.trace import flank_surface, plot_flank, plot_trace_near_wall, with_runout
 
     op = load_operation(operation)
     if op.kind != "flank":
@@ -120,6 +122,9 @@ def trace(operation, runout, heights, windows, plot, as_json):
     }
     if plot:
         _save_figure(plot_flank(cases), plot)
+    if plot_trace:
+        _save_figure(plot_trace_near_wall(op.chain, cutter, rpm=prm["rpm"], feed_mm_min=prm["feed_mm_min"],
+                                          context=op.context), plot_trace)
     if as_json:
         _echo_json(out)
         return
@@ -132,6 +137,8 @@ def trace(operation, runout, heights, windows, plot, as_json):
                    f"wall form {c['form_mm'] * 1e3:.4f} um, cut up to {c['deepest_mm'] * 1e3:.4f} um too deep")
     if plot:
         click.echo(f"wrote {plot}")
+    if plot_trace:
+        click.echo(f"wrote {plot_trace}")
 
 
 def _load_bore(operation):
@@ -193,7 +200,7 @@ def bore(operation, n, seed, plot, magnify, as_json):
     click.echo(f"variables mid-field: centre error {names[0]} {_fmt_um(mid.error_mm[0])}, "
                f"{names[1]} {_fmt_um(mid.error_mm[1])}")
     for i, name in enumerate(names):
-        click.echo(f"worst case {name}: |error| {_fmt_um(worst.max_abs_mm[i])}  "
+        click.echo(f"worst case {name}: {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])}  "
                    f"({'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm)")
     lo, hi = dist.p_within_ci95
     for i, name in enumerate(names):
@@ -267,7 +274,8 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, as_json):
         _echo_json(out)
         return
     for i, name in enumerate(names):
-        line = f"{name}: worst |error| {_fmt_um(worst.max_abs_mm[i])} (tolerance +-{tol[i]:g} mm)"
+        line = (f"{name}: worst case {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])} "
+                f"(tolerance +-{tol[i]:g} mm)")
         if dist is not None:
             line += f"; mean {_fmt_um(dist.mean_mm[i])}, std {_fmt_um(dist.std_mm[i])}"
         click.echo(line)

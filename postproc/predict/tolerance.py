@@ -148,6 +148,8 @@ class WorstCase:
     max_abs_mm: np.ndarray  # (d,)
     corner: list[dict[str, float]]  # per component, the variable values
     tolerance_mm: np.ndarray
+    min_mm: np.ndarray | None = None  # (d,) smallest and largest signed error over the corners
+    max_mm: np.ndarray | None = None
 
     @property
     def within(self) -> bool:
@@ -157,6 +159,8 @@ class WorstCase:
         return {
             "components": self.names,
             "max_abs_mm": self.max_abs_mm.tolist(),
+            "min_mm": None if self.min_mm is None else self.min_mm.tolist(),
+            "max_mm": None if self.max_mm is None else self.max_mm.tolist(),
             "tolerance_mm": self.tolerance_mm.tolist(),
             "within": self.within,
             "corner": self.corner,
@@ -195,6 +199,8 @@ def worst_case(error_fn: ErrorFn, random: Mapping[str, Mapping], *, tolerance_mm
         np.abs(err[idx, np.arange(err.shape[1])]),
         worst,
         np.broadcast_to(np.asarray(tolerance_mm, float), err.shape[1:]).copy(),
+        err.min(axis=0),
+        err.max(axis=0),
     )
 
 
@@ -214,12 +220,13 @@ def plot_histograms(dist: Distribution, worst: WorstCase | None = None, ax=None)
         a.hist(dist.samples_mm[:, i] * 1e3, bins=80, color="tab:blue", alpha=0.8)
         for s in (-1, 1):
             a.axvline(s * dist.tolerance_mm[i] * 1e3, color="k", ls="--", lw=1)
-            if worst is not None:
-                a.axvline(s * worst.max_abs_mm[i] * 1e3, color="tab:red", ls=":", lw=1)
+        if worst is not None and worst.min_mm is not None:
+            for v in (worst.min_mm[i], worst.max_mm[i]):
+                a.axvline(v * 1e3, color="tab:red", ls=":", lw=1.5)
         a.set_xlabel(f"error {dist.names[i]} (µm)")
         a.set_title(f"{dist.names[i]}: mean {dist.mean_mm[i] * 1e3:.1f} µm, std {dist.std_mm[i] * 1e3:.1f} µm")
     ax[0].set_ylabel("draws")
-    ax[0].figure.suptitle(f"P(within tolerance) = {dist.p_within:.4f}, n = {len(dist.samples_mm)}; "
-                          "dashed: tolerance, dotted: worst case")
+    ax[0].figure.suptitle(f"P(within tolerance) = {dist.p_within:.5f}, n = {len(dist.samples_mm)}; "
+                          "dashed: tolerance, dotted: worst-case range")
     ax[0].figure.tight_layout()
     return ax

@@ -261,3 +261,59 @@ def plot_flank(surfaces: Mapping[str, FlankSurface], ax=None):
         ax[2, col].legend(fontsize=8)
     ax[0, 0].figure.tight_layout()
     return ax
+
+
+def plot_trace_near_wall(
+    chain: Chain,
+    cutter,
+    *,
+    rpm: float,
+    feed_mm_min: float,
+    height_mm: float = 0.0,
+    revolutions: int = 6,
+    span: float = 6.0,
+    wall_direction_rad: float = -np.pi / 2,
+    context: Mapping[str, float] | None = None,
+    ax=None,
+):
+    """The trace of one edge point near the wall: each pass's arc, the part formula (4)
+    keeps (coloured) and the air it skips (grey), with the resulting wall -> axes."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 4.5))
+    edge_rpm = rpm * cutter.flutes
+    rev_per_s = edge_rpm / SECONDS_PER_MINUTE
+    fz = feed_mm_min / edge_rpm
+    t_m = cutting_time_s(fz, cutter.d_mm, rev_per_s)
+    p = np.array([float(height_mm)])
+    spin, phase = spindle_of(chain)
+    t_face = facing_times(cutter.helix_angle_rad(p), wall_direction_rad, edge_rpm, spin, phase)
+    wide = window_times(t_face, rev_per_s, span * t_m, revolutions, 801)  # (K, M, 1)
+    env = {"Y": 0.0, "Z": 0.0, **(context or {}), "rpm": edge_rpm}
+    env.update({"t": wide, "X": feed_mm_min / SECONDS_PER_MINUTE * wide})
+    pts = trace_points(chain, cutter.edge(p), env)[..., 0, :]  # (K, M, 3)
+    normal = np.array([np.cos(wall_direction_rad), np.sin(wall_direction_rad), 0.0])
+    radius = float(np.linalg.norm(cutter.edge(p)[0, :2]))
+    u_um = (pts[..., 0] - pts[0, :, 0].mean()) * 1e3
+    left_nm = (radius - pts @ normal) * 1e6
+    frac = (np.arange(801) + 0.5) / 801 - 0.5  # position inside the wide window
+    kept = np.abs(frac * span) <= 0.5
+    for k in range(revolutions):
+        ax.plot(u_um[k], left_nm[k], color="0.75", lw=1, label="air (skipped)" if k == 0 else None)
+        ax.plot(u_um[k, kept], left_nm[k, kept], color="tab:blue", lw=2,
+                label="cutting window t_m (formula 4)" if k == 0 else None)
+    uq = np.linspace(u_um[1].mean(), u_um[-2].mean(), 2000)
+    wall = -envelope(u_um, -left_nm, uq)
+    ax.plot(uq, wall, "k--", lw=1, label="wall left (envelope)")
+    ax.set_ylim(-0.02, 4 * max(float(np.max(wall)), 1e-6))
+    ax.set_xlabel("along the feed (µm)")
+    ax.set_ylabel("distance from the nominal wall (nm)")
+    ax.set_title(f"edge point p = {height_mm:g} mm near the wall: one arc per pass, "
+                 f"feed {fz * 1e3:.3g} µm, t_m = {t_m * 1e9:.1f} ns")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.figure.tight_layout()
+    return ax
