@@ -134,7 +134,7 @@ def kfb(semi, t_ref, allowance, origin, thinner, output):
 @mirror.command()
 @click.argument("plan", type=click.Path(exists=True))
 @click.option("-c", "--calibration", required=True, type=click.Path(exists=True, dir_okay=False),
-              help="Geometric calibration applied first (identity for none).")
+              help="Geometric calibration applied first (a calibration of method identity for none, e.g. samples/mirror/shell_identity.json).")
 @click.option("--program", "template", required=True, type=click.Path(exists=True, dir_okay=False),
               help="Pocket program in pocket-local coordinates (B as programmed = B - B0).")
 @click.option("--t-ref", "t_ref", type=float, required=True, metavar="MM", help="Nominal wall thickness T_ref.")

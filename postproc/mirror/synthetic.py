@@ -213,6 +213,7 @@ def write_sample_set(directory, *, seed: int = 3, finished: int = 4) -> list:
     put("kdist.csv", format_map(res.kmap, comments=kdist_comments(res, "backwall_sensor.csv")))
     put("pocket.nc", pocket_program(shell))
     put("shell_static.json", shell_calibration_text())
+    put("shell_identity.json", shell_calibration_text(identity=True))
     put("zigzag_sensor.csv", zigzag_sensor_csv(shell))
     band = Band(shell.t_ref_mm, shell.t_ref_mm - 0.02, shell.t_ref_mm + 0.02)
     b, z = shell.local_grid()
@@ -235,20 +236,27 @@ def write_sample_set(directory, *, seed: int = 3, finished: int = 4) -> list:
     return sorted(set(written))
 
 
-def shell_calibration_text() -> str:
+def shell_calibration_text(identity: bool = False) -> str:
     """A small static calibration of the shell machine (X unused, Y spindle, Z vertical).
 
     Y scale +20 um/m, Z leaning 30 urad towards +Y, 5 um offset in Y: enough to see
-    the geometric correction added to the mirror maps.
+    the geometric correction added to the mirror maps. ``identity``: no geometric
+    correction over the same volume (the maps alone).
     """
     import json
 
     from postproc.calibration.calfile import calibration_to_dict
+    from postproc.engine.identity import IdentityEngine
     from postproc.engine.static import StaticEngine
 
+    volume = [[-10.0, -60.0, -10.0], [10.0, 10.0, 400.0]]
+    if identity:
+        data = calibration_to_dict(IdentityEngine(volume), name="shell-identity",
+                                   fit={"source": "no geometric correction"})
+        return json.dumps(data, indent=2) + "\n"
     g = np.eye(3)
     g[1, 1] += 20e-6
     g[1, 2] = 30e-6
-    eng = StaticEngine(g, [0.0, 0.005, 0.0], [[-10.0, -60.0, -10.0], [10.0, 10.0, 400.0]])
+    eng = StaticEngine(g, [0.0, 0.005, 0.0], volume)
     data = calibration_to_dict(eng, name="shell-static", fit={"source": "synthetic shell machine"})
     return json.dumps(data, indent=2) + "\n"
