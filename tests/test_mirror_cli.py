@@ -83,3 +83,23 @@ def test_bad_sensor_file_names_its_place(tmp_path):
     assert res.exit_code == 3
     assert f"{bad}:3:" in res.output
     assert not (tmp_path / "k.csv").exists()
+
+
+def test_correct_with_a_kfb_map_moves_each_node_by_its_value(tmp_path):
+    from postproc.gcode.path import program_path
+
+    kfb = tmp_path / "kfb.csv"
+    assert run("kfb", SAMPLES / "P01_semi.csv", "--t-ref", 2.0, "--allowance", 0.3, "--origin", "3,100",
+               "-o", kfb).exit_code == 0
+    out = tmp_path / "P01_finish.nc"
+    res = CliRunner().invoke(main, ["correct", str(SAMPLES / "pocket.nc"), "-c", str(SAMPLES / "shell_identity.json"),
+                                    "--map", str(kfb), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    pp = program_path(out)
+    feed = ~pp.rapid
+    semi = read_thickness(SAMPLES / "P01_semi.csv")
+    b, z = semi.b_deg - 3.0, semi.z_mm - 100.0
+    for bb, zz, t in zip(b, z, semi.t_mm, strict=True):
+        hit = np.flatnonzero(feed & (np.abs(pp.context["B"] - bb) < 1e-6) & (np.abs(pp.points_mm[:, 2] - zz) < 1e-6))
+        # identity geometry: Y moves by K_fb = T - T_ref - b (4 decimals written)
+        assert abs(pp.points_mm[hit[-1], 1] - (-5.0 + t - 2.3)) <= 0.5e-4 + 1e-9
