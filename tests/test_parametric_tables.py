@@ -212,3 +212,13 @@ def test_cli_fit_tables_stores_order_and_solver(tmp_path):
     assert (engine.order, engine.solver) == ("exact", "astatic")
     assert engine.accept_residual_mm == 2.0
     assert engine.with_options(solver="newton").accept_residual_mm == 1e-6
+
+
+def test_cli_fit_takes_a_squareness_file_given_among_the_files(tmp_path):
+    path, tables, sq = write_machine(tmp_path, seed=5, name="axes.csv")
+    other = tmp_path / "sq_elsewhere.csv"
+    squareness_path_for(path).rename(other)
+    out = tmp_path / "cal.json"
+    result = CliRunner().invoke(main, ["fit", str(path), str(other), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert load_calibration(out).engine.squareness == sq

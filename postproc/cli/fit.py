@@ -62,6 +62,11 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         "solver": solver,
     }
     options = {k: v for k, v in options.items() if v is not None}
+    if "tables" in kinds and kinds.count("squareness") == 1 and squareness is None:
+        # A squareness file given among FILES is taken as --squareness.
+        squareness = files[kinds.index("squareness")]
+        files = tuple(f for f, k in zip(files, kinds, strict=True) if k != "squareness")
+        kinds = [k for k in kinds if k != "squareness"]
     if "tables" in kinds:
         if any(k != "tables" for k in kinds):
             raise MeasurementError("axis error tables cannot be fitted together with point files",
