@@ -139,3 +139,15 @@ def test_plan_needs_its_magic_line_and_band_must_hold_t_ref(tmp_path):
         read_plan(tmp_path)
     with pytest.raises(PostprocError, match="must contain"):
         Band(2.0, 2.01, 2.03)
+
+
+def test_measurements_after_an_unfinished_pocket_are_refused(tmp_path):
+    from postproc.errors import MeasurementError
+
+    shell = Shell(n_pockets=3)
+    b, z = shell.local_grid()
+    (tmp_path / "t.csv").write_text(thickness_csv(shell.machine(0, b, z, -0.3), "semi"))
+    (tmp_path / "plan.csv").write_text(plan_csv(shell, [("t.csv", ""), ("", ""), ("t.csv", "")]))
+    with pytest.raises(MeasurementError, match="P01 before it is not finished") as exc:
+        self_tune(read_plan(tmp_path), Band(2.0, 1.98, 2.02), 0.3, str(tmp_path / "plan.csv"))
+    assert exc.value.lineno == 6

@@ -191,6 +191,20 @@ def self_tune(pockets: list[Pocket], band: Band, allowance: float, plan_path: st
 
     Returns one decision per pocket up to and including the next one to machine.
     """
+    decisions = _replay(pockets, band, allowance, plan_path)
+    done = len(decisions)
+    later = next((pk for pk in pockets[done:] if pk.semi or pk.finish), None)
+    if later is not None and decisions[-1].next:
+        raise MeasurementError(
+            f"pocket {later.name} has measurements, "
+            f"but pocket {decisions[-1].pocket.name} before it is not finished",
+            path=plan_path, lineno=later.lineno,
+            hint="list the pockets in machining order and give every pass's thickness map",
+        )
+    return decisions
+
+
+def _replay(pockets: list[Pocket], band: Band, allowance: float, plan_path: str) -> list[Decision]:
     decisions: list[Decision] = []
     source: Pocket | None = None
     relearn_reason = "first pocket: learn K_fb"
