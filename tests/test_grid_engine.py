@@ -199,3 +199,29 @@ def test_report_names_the_tool_vectors():
     assert any("2 different tool vectors" in line for line in res.report)
     # both tool vectors are averaged into one node position per lattice node
     assert res.engine.nodes.shape == (4, 4, 4, 3)
+
+
+def test_fill_missing_nodes_from_neighbours():
+    meas = small_grid(sigma=0.0)
+    drop = (np.all(meas.q == [20.0, 40.0, 0.0], axis=1) | np.all(meas.q == [60.0, 0.0, 60.0], axis=1)
+            | np.all(meas.q == [20.0, 20.0, 20.0], axis=1))
+    cut = Measurements(q=meas.q[~drop], m=meas.m[~drop], r=meas.r[~drop])
+    res = fit([cut], fill_missing=True)
+    warn = [line for line in res.report if "filled from their neighbours" in line]
+    assert len(warn) == 1
+    assert warn[0].startswith("warning: 3 node(s)")
+    assert "X=60.000 Y=0.000 Z=60.000" in warn[0]
+    full = fit([meas]).engine
+    # interior node: midpoints of its neighbours on three axes; corner: extrapolated
+    i = (1, 1, 1)
+    expected = np.mean([(full.nodes[0, 1, 1] + full.nodes[2, 1, 1]) / 2,
+                        (full.nodes[1, 0, 1] + full.nodes[1, 2, 1]) / 2,
+                        (full.nodes[1, 1, 0] + full.nodes[1, 1, 2]) / 2], axis=0)
+    assert_allclose(res.engine.nodes[i], expected, atol=1e-12)
+    filled = np.array([[1, 2, 0], [3, 0, 3], [1, 1, 1]])
+    err = np.linalg.norm(res.engine.nodes[tuple(filled.T)] - full.nodes[tuple(filled.T)], axis=1)
+    assert err.max() < 0.01  # a smooth machine: neighbours predict a 20 mm node to ~um
+    assert res.info["n_filled_nodes"] == 3
+    two = np.all(meas.q == 0, axis=1) | np.all(meas.q == 60, axis=1)
+    with pytest.raises(MeasurementError, match="too few to fill"):
+        fit([Measurements(q=meas.q[two], m=meas.m[two], r=meas.r[two])], step="20", fill_missing=True)

@@ -327,10 +327,59 @@ def detect_lattice(q: np.ndarray, step: np.ndarray | None, path: str = "") -> tu
     return origin, steps, counts
 
 
-def node_means(q, p, origin, step, counts, path: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Average the points at each lattice node (repeated shots); returns (nodes, index, on_lattice).
+def _shifted(pad: np.ndarray, n: np.ndarray, axis: int, k: int) -> np.ndarray:
+    """The nodes ``k`` steps away along ``axis`` from a lattice padded by 2 NaN layers."""
+    sl = [slice(2, 2 + n[a]) for a in range(3)]
+    sl[axis] = slice(2 + k, 2 + k + n[axis])
+    return pad[tuple(sl)]
 
-    Raises MeasurementError naming missing nodes.
+
+def fill_missing_nodes(nodes: np.ndarray) -> np.ndarray:
+    """Fill NaN nodes from their lattice neighbours (a documented, opt-in fill).
+
+    Pass after pass, a missing node takes the mean over axes of the midpoint of its two
+    neighbours on that axis when both are known; failing that, the mean of the linear
+    extrapolations from two known nodes on one side. Nodes no pass can reach (a whole
+    empty region) get the affine (static) fit of all known nodes.
+    """
+    P = nodes.copy()
+    n = np.array(P.shape[:3])
+    while True:
+        missing = np.isnan(P[..., 0])
+        if not missing.any():
+            return P
+        pad = np.pad(P, [(2, 2)] * 3 + [(0, 0)], constant_values=np.nan)
+        two = np.zeros_like(P)
+        two_n = np.zeros(P.shape[:3])
+        one = np.zeros_like(P)
+        one_n = np.zeros(P.shape[:3])
+        for j in range(3):
+            near = {k: _shifted(pad, n, j, k) for k in (-2, -1, 1, 2)}
+            for est, acc, cnt in (((near[-1] + near[1]) / 2, two, two_n),
+                                  (2 * near[-1] - near[-2], one, one_n),
+                                  (2 * near[1] - near[2], one, one_n)):
+                ok = ~np.isnan(est[..., 0])
+                acc[ok] += est[ok]
+                cnt[ok] += 1
+        use_two = missing & (two_n > 0)
+        use_one = missing & ~use_two & (one_n > 0)
+        if not (use_two.any() or use_one.any()):
+            known = ~missing
+            qk = np.argwhere(known).astype(float)
+            A = np.column_stack([np.ones(len(qk)), qk])
+            coef, *_ = np.linalg.lstsq(A, P[known], rcond=None)
+            qm = np.argwhere(missing).astype(float)
+            P[missing] = np.column_stack([np.ones(len(qm)), qm]) @ coef
+            return P
+        P[use_two] = two[use_two] / two_n[use_two, None]
+        P[use_one] = one[use_one] / one_n[use_one, None]
+
+
+def node_means(q, p, origin, step, counts, path: str = "", fill: bool = False):
+    """Average the points at each lattice node (repeated shots).
+
+    Returns (nodes, index, on_lattice, missing node indices). Missing nodes raise a
+    MeasurementError naming them, unless ``fill`` (then :func:`fill_missing_nodes`).
     """
     s = (q - origin) / step
     idx = np.rint(s).astype(int)
@@ -341,7 +390,12 @@ def node_means(q, p, origin, step, counts, path: str = "") -> tuple[np.ndarray, 
     np.add.at(total, flat, p[on])
     np.add.at(n, flat, 1.0)
     missing = np.flatnonzero(n == 0)
-    if len(missing):
+    if fill and len(missing) > len(n) - 4:
+        raise MeasurementError(
+            f"only {len(n) - len(missing)} of {len(n)} lattice nodes are measured: too few to fill the rest",
+            path=path or None,
+        )
+    if len(missing) and not fill:
         names = [format_node(origin + np.array(np.unravel_index(m, counts)) * step) for m in missing[:MAX_NODES_NAMED]]
         more = f" and {len(missing) - MAX_NODES_NAMED} more" if len(missing) > MAX_NODES_NAMED else ""
         raise MeasurementError(
@@ -351,8 +405,11 @@ def node_means(q, p, origin, step, counts, path: str = "") -> tuple[np.ndarray, 
             path=path or None,
             hint="measure the missing nodes, or fit a coarser --step or a smaller region",
         )
-    nodes = (total / n[:, None]).reshape(*counts, 3)
-    return nodes, idx, on
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nodes = (total / n[:, None]).reshape(*counts, 3)
+    if len(missing):
+        nodes = fill_missing_nodes(nodes)
+    return nodes, idx, on, np.array(np.unravel_index(missing, counts)).T
 
 
 def _interpolation_check(origin, step, nodes) -> str | None:
@@ -374,12 +431,14 @@ def _interpolation_check(origin, step, nodes) -> str | None:
     )
 
 
-def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", **options) -> FitResult:
+def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", fill_missing: bool = False,
+        **options) -> FitResult:
     """Fit the quasi-differential model from tracker points on a regular lattice.
 
     Options: ``step`` ("15" or "15,15,10" mm; default: the lattice step of the data),
     ``screw_pitch`` (["X=5", ...] mm, for the aliasing warning), ``model``
-    ("trilinear" or "cell").
+    ("trilinear" or "cell"), ``fill_missing`` (fill nodes without measurements from
+    their neighbours instead of refusing; for cross-validation and partial grids).
     """
     from postproc.calibration.measurements import Measurements
 
@@ -392,7 +451,7 @@ def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", 
     pitches = parse_screw_pitch(screw_pitch)
     P_obs = meas.m - meas.r
     origin, steps, counts = detect_lattice(meas.q, steps, path)
-    nodes, idx, on = node_means(meas.q, P_obs, origin, steps, counts, path)
+    nodes, idx, on, filled = node_means(meas.q, P_obs, origin, steps, counts, path, fill=fill_missing)
     engine = GridEngine.from_nodes(origin, steps, nodes, model=model)
     resid = P_obs[on] - nodes[tuple(idx[on].T)]
     result = FitResult(engine=engine, residuals_mm=resid)
@@ -405,6 +464,10 @@ def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", 
             f"{AXES[j]} {origin[j]:.3f}..{origin[j] + span[j]:.3f}" for j in range(3)
         ),
     ]
+    if len(filled):
+        names = "; ".join(format_node(origin + f * steps) for f in filled[:MAX_NODES_NAMED])
+        more = f" and {len(filled) - MAX_NODES_NAMED} more" if len(filled) > MAX_NODES_NAMED else ""
+        report.append(f"warning: {len(filled)} node(s) without measurement filled from their neighbours: {names}{more}")
     if (~on).sum():
         report.append(f"left out {(~on).sum()} points that are not on the lattice")
     lengths = [np.linalg.norm(engine.Q1, axis=-1), np.linalg.norm(engine.Q2, axis=-1), np.linalg.norm(engine.Q3, axis=-1)]
@@ -424,7 +487,8 @@ def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", 
         report.append(f"note: option(s) {', '.join(unused)} do not apply to the grid method and were ignored")
     result.report = report
     result.info = {
-        "n_points": int(on.sum()), "n_nodes": int(np.prod(counts)), "step_mm": steps.tolist(),
+        "n_points": int(on.sum()), "n_nodes": int(np.prod(counts)), "n_filled_nodes": len(filled),
+        "step_mm": steps.tolist(),
         "rms_mm": result.rms_mm, "max_mm": result.max_mm, "sources": [m.path for m in items],
     }
     return result
