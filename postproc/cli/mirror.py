@@ -106,8 +106,10 @@ def kdist(sensor, radius, diameter, segment, z_bin, model, thinner, units, outpu
 @click.option("--origin", default="0,0", show_default=True, metavar="B0,Z0",
               help="Pocket origin: the map is written in pocket-local B-B0, Z-Z0.")
 @THINNER
+@click.option("--smooth", type=int, default=1, show_default=True, metavar="N",
+              help="Average each K_fb node with its neighbours along B (odd N nodes per row); 1 = none.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="K_fb map to write.")
-def kfb(semi, t_ref, allowance, origin, thinner, output):
+def kfb(semi, t_ref, allowance, origin, thinner, smooth, output):
     """Feedback correction K_fb = T - T_ref - b from one semi-finish thickness map (formula 7).
 
     SEMI is the ultrasonic thickness map B,Z,T measured after a semi-finish pass
@@ -124,7 +126,7 @@ def kfb(semi, t_ref, allowance, origin, thinner, output):
     axis, sign = thinner
     b0, z0 = _pair(origin, "--origin")
     thk = read_thickness(semi)
-    m = kfb_map(thk, t_ref=t_ref, allowance=allowance, b0=b0, z0=z0, apply_axis=axis, sign=sign)
+    m = kfb_map(thk, t_ref=t_ref, allowance=allowance, b0=b0, z0=z0, apply_axis=axis, sign=sign, smooth=smooth)
     save_map(output, m, comments=[f"kfb: T - T_ref - b, T_ref={t_ref:g} mm, b={allowance:g} mm, "
                                   f"origin B0={b0:g} Z0={z0:g}", f"source: {Path(semi).name}"])
     click.echo(f"K_fb {m.values_mm.min() * 1e3:+.2f}..{m.values_mm.max() * 1e3:+.2f} um at {len(m.values_mm)} "
@@ -143,6 +145,8 @@ def kfb(semi, t_ref, allowance, origin, thinner, output):
 @click.option("--kdist", "kdist_path", type=click.Path(exists=True, dir_okay=False), default=None,
               help="K_dist map (machine B, Z) added to every pass (formula 11).")
 @THINNER
+@click.option("--smooth", type=int, default=1, show_default=True, metavar="N",
+              help="Average each K_fb node with its neighbours along B (odd N nodes per row); 1 = none.")
 @click.option("--clamp", is_flag=True, help="Hold the edge value for program points outside a map "
                                             "(default: refuse).")
 @click.option("--offset", "offsets", multiple=True, metavar="G54=X..,Y..,Z..", help="Work offset (repeatable).")
@@ -153,7 +157,7 @@ def kfb(semi, t_ref, allowance, origin, thinner, output):
               help="Refuse a program whose total correction (geometric + maps + allowance) exceeds this.")
 @click.option("-o", "--output-dir", "outdir", required=True, type=click.Path(file_okay=False),
               help="Directory for the programs and maps of the next pocket.")
-def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, clamp, offsets,
+def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, smooth, clamp, offsets,
             tool_lengths, tool_vector, max_correction, outdir):
     """Pocket-to-pocket self-tuning: which correction each pocket gets (formulas 7-11).
 
@@ -199,7 +203,8 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
         click.echo("all pockets of the plan are finished")
         return
     semi_corr, fin_corr = pocket_corrections(last, {p.name: p for p in pks}, band=bnd, allowance=allowance,
-                                             apply_axis=axis, sign=sign, kdist=kd, outside=outside)
+                                             apply_axis=axis, sign=sign, kdist=kd, outside=outside,
+                                             smooth=smooth)
     corr = fin_corr if fin_corr is not None else semi_corr
     kind = "finish" if fin_corr is not None else "semi"
     out = Path(outdir)

@@ -37,6 +37,10 @@ from postproc.mirror.maps import ConstantCorrection, CorrectionMap, SumCorrectio
 
 PLAN_MAGIC = "postproc mirror plan v1"
 
+# Thickness nodes whose Z differs by less than this (mm) are one row for smoothing:
+# gauge positions are read to 1 um.
+ROW_Z_TOL_MM = 1e-3
+
 
 @dataclass
 class ThicknessMap:
@@ -93,16 +97,45 @@ def kfb_values(semi: ThicknessMap, t_ref: float, allowance: float) -> np.ndarray
 
 def kfb_map(semi: ThicknessMap, *, t_ref: float, allowance: float, b0: float, z0: float,
             apply_axis: str = "Y", sign: float = 1.0, name: str = "kfb",
-            outside: str = "refuse") -> CorrectionMap:
-    """K_fb as a correction map in pocket-local coordinates ``(B - B0, Z - Z0)``."""
+            outside: str = "refuse", smooth: int = 1) -> CorrectionMap:
+    """K_fb as a correction map in pocket-local coordinates ``(B - B0, Z - Z0)``.
+
+    ``smooth``: odd number of neighbouring nodes along B averaged in each Z row (the
+    seed's smoothing of the thickness signal before K_fb); 1 = none.
+    """
     nodes = np.column_stack([semi.b_deg - b0, semi.z_mm - z0])
     from postproc.mirror.maps import _check_duplicates
 
     linenos = semi.linenos if semi.linenos is not None else np.arange(1, len(nodes) + 1)
     _check_duplicates(nodes, linenos, semi.path)
-    return CorrectionMap(name, ("B", "Z"), nodes, kfb_values(semi, t_ref, allowance),
+    values = kfb_values(semi, t_ref, allowance)
+    if smooth != 1:
+        values = smooth_rows(nodes, values, smooth, semi.path)
+    return CorrectionMap(name, ("B", "Z"), nodes, values,
                          apply_axis=apply_axis, sign=sign, outside=outside, path=semi.path,
                          linenos=linenos)
+
+
+def smooth_rows(nodes: np.ndarray, values: np.ndarray, window: int, path: str = "") -> np.ndarray:
+    """Centred moving average of ``window`` nodes along B within each row of equal Z.
+
+    Near the row ends the window shrinks symmetrically (the end node keeps its own
+    value), so a linear trend along the row is left unchanged.
+    """
+    if window < 1 or window % 2 == 0:
+        raise MeasurementError(f"smoothing window {window} must be an odd number of nodes", path=path,
+                               hint="e.g. --smooth 3 (each node averaged with one neighbour each side)")
+    half = window // 2
+    out = values.copy()
+    rows = np.round(nodes[:, 1] / ROW_Z_TOL_MM).astype(np.int64)
+    for key in np.unique(rows):
+        idx = np.flatnonzero(rows == key)
+        idx = idx[np.argsort(nodes[idx, 0])]
+        v = values[idx]
+        for k in range(len(idx)):
+            h = min(half, k, len(idx) - 1 - k)
+            out[idx[k]] = v[k - h:k + h + 1].mean()
+    return out
 
 
 # -- the plan ------------------------------------------------------------------------
@@ -247,7 +280,7 @@ def _replay(pockets: list[Pocket], band: Band, allowance: float, plan_path: str)
 
 def pocket_corrections(dec: Decision, pockets: dict[str, Pocket], *, band: Band, allowance: float,
                        apply_axis: str, sign: float, kdist: CorrectionMap | None = None,
-                       outside: str = "refuse") -> tuple[SumCorrection | None, SumCorrection | None]:
+                       outside: str = "refuse", smooth: int = 1) -> tuple[SumCorrection | None, SumCorrection | None]:
     """(semi-finish correction, finish correction) for the pocket of ``dec``, local coordinates.
 
     The semi-finish correction is the allowance (``-b`` in the cut-deeper sense) plus the
@@ -273,5 +306,5 @@ def pocket_corrections(dec: Decision, pockets: dict[str, Pocket], *, band: Band,
         return semi, None
     src = pockets[dec.k_from]
     kfb = kfb_map(read_thickness(src.semi), t_ref=band.t_ref, allowance=allowance, b0=src.b0, z0=src.z0,
-                  apply_axis=apply_axis, sign=sign, name=f"kfb@{src.name}", outside=outside)
+                  apply_axis=apply_axis, sign=sign, name=f"kfb@{src.name}", outside=outside, smooth=smooth)
     return semi, SumCorrection(f"finish:{pk.name}", [kfb, *dist])
