@@ -9,14 +9,14 @@ from numpy.testing import assert_allclose
 from postproc.cli import main
 from postproc.simulate import AxisErrors, Machine, MachineGeometry, save_machine, simulate_points
 from postproc.simulate.program import verify_program
-from postproc.simulate.verify import NOMINAL_STEP_MM, Polyline, point_segment_distance
+from postproc.simulate.verify import NOMINAL_CHORD_MM, Polyline, point_segment_distance
 
 REPO = Path(__file__).parents[1]
 POCKET = REPO / "samples" / "pocket.nc"
 VOLUME = [[0, 0, 0], [315, 315, 315]]
-# The nominal path's arcs are chords of NOMINAL_STEP_MM: a point on the smallest arc of
-# the pocket (R = 5 mm) is up to h^2 / (8 R) = 10 nm from them.
-CHORD_MM = NOMINAL_STEP_MM**2 / (8 * 5.0)
+# The nominal path's arcs are chords within NOMINAL_CHORD_MM of them: a point on an arc
+# is at most that far from the nominal polyline.
+CHORD_MM = NOMINAL_CHORD_MM
 
 
 def offset_machine(offset):
@@ -36,6 +36,13 @@ def test_polyline_nearest_is_exact():
     brute = np.array([point_segment_distance(np.repeat(x[None], 799, 0), pts[:-1], pts[1:]) for x in p])
     assert_allclose(d, brute.min(axis=1), atol=1e-12)
     assert_allclose(d, brute[np.arange(300), seg], atol=1e-12)
+    # Long segments are indexed in pieces; the distances and segment numbers stay exact.
+    zig = np.array([[0, 0, 0], [100, 0, 0], [100, 3, 0], [0, 3, 0], [0, 6, 1.0]])
+    q = rng.uniform([-5, -2, -1], [105, 8, 2], (400, 3))
+    d, seg = Polyline(zig, piece_mm=0.7).nearest(q)
+    brute = np.array([point_segment_distance(np.repeat(x[None], 4, 0), zig[:-1], zig[1:]) for x in q])
+    assert_allclose(d, brute.min(axis=1), atol=1e-12)
+    assert_allclose(d, brute[np.arange(400), seg], atol=1e-12)
 
 
 def test_ideal_machine_runs_the_program_on_its_path():

@@ -7,10 +7,10 @@ from pathlib import Path
 from postproc.errors import PostprocError
 from postproc.simulate.machine import Machine
 from postproc.simulate.verify import (
-    NOMINAL_STEP_MM,
     RUN_STEP_MM,
     VerifyReport,
     evaluate_run,
+    nominal_path,
     nominal_polyline,
 )
 
@@ -49,7 +49,7 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
         raise PostprocError(f"sampling step must be positive, got {max_step_mm}")
     setup = make_setup(setup_args)
     program = str(program)
-    nominal = program_path(program, setup, max_step_mm=NOMINAL_STEP_MM)
+    nominal = nominal_path(program, setup)
     if len(nominal) < 2:
         raise PostprocError("the program has no moves to verify", path=program)
     poly = nominal_polyline(nominal)

@@ -1,9 +1,9 @@
 """Run NC programs through a virtual machine and measure how far the tool point
 strays from the nominal path.
 
-The nominal path is the original program's functional-point path, sampled finely
-(:data:`NOMINAL_STEP_MM`, so that the chords of arcs stay far below a micrometre from
-the arcs). A program (original or corrected) is sampled along every move, its
+The nominal path is the original program's functional-point path: the end points of
+straight moves, and arcs cut into chords that stay within :data:`NOMINAL_CHORD_MM` of
+them. A program (original or corrected) is sampled along every move, its
 commanded positions ``q = points - tool`` go through ``machine.forward`` and the
 deviation of each actual point is its distance from the nominal polyline, not from
 the sample of the same index: a corrected program is split and moved, so its samples
@@ -20,10 +20,18 @@ from scipy.spatial import cKDTree
 
 from postproc.simulate.machine import Machine
 
-#: Sampling step of the nominal path (mm). An arc of radius R sampled with chords of
-#: length h bulges from its chords by at most h^2 / (8 R): 10 nm for R = 5 mm, 50 nm for
-#: R = 1 mm, which is the most a deviation is overstated by (well below 1 um).
-NOMINAL_STEP_MM = 0.02
+#: Chord tolerance of the nominal path (mm): arcs are cut into chords that bulge from
+#: the arc by at most this much, the most a deviation can be overstated by; a hundred
+#: times below the micrometre that verify reports. Straight moves need no samples.
+NOMINAL_CHORD_MM = 1e-5
+
+#: Longest piece of the nominal path in the nearest-segment index (mm). Long moves are
+#: cut into such pieces so that the candidate search radius (distance + half a piece)
+#: stays small; it does not change any distance.
+INDEX_PIECE_MM = 2.0
+
+#: Points queried at once against the nominal path (bounds the candidate lists' memory).
+QUERY_CHUNK = 100_000
 
 #: Sampling step of the program runs (mm): the verify --max-step default.
 RUN_STEP_MM = 0.5
@@ -43,9 +51,13 @@ def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
 
 
 class Polyline:
-    """Segments between consecutive points, with a fast nearest-segment query."""
+    """Segments between consecutive points, with a fast nearest-segment query.
 
-    def __init__(self, points, keep=None) -> None:
+    ``keep`` (bool per segment) leaves segments out; segments longer than
+    ``piece_mm`` are indexed as several pieces (the answer still names the segment).
+    """
+
+    def __init__(self, points, keep=None, piece_mm: float = INDEX_PIECE_MM) -> None:
         pts = np.asarray(points, dtype=float)
         a, b = pts[:-1], pts[1:]
         idx = np.arange(len(a))
@@ -53,7 +65,15 @@ class Polyline:
             idx = idx[np.asarray(keep, dtype=bool)]
         if len(idx) == 0:
             raise ValueError("a path needs at least one segment")
-        self.a, self.b, self.index = a[idx], b[idx], idx
+        a, b = a[idx], b[idx]
+        n_pieces = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / piece_mm).astype(int))
+        owner = np.repeat(np.arange(len(a)), n_pieces)
+        k = np.arange(len(owner)) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces)
+        frac0 = (k / n_pieces[owner])[:, None]
+        frac1 = ((k + 1) / n_pieces[owner])[:, None]
+        d = b[owner] - a[owner]
+        self.a, self.b = a[owner] + frac0 * d, a[owner] + frac1 * d
+        self.index = idx[owner]
         self.half_len = 0.5 * float(np.max(np.linalg.norm(self.b - self.a, axis=1)))
         self.tree = cKDTree(0.5 * (self.a + self.b))
 
@@ -62,9 +82,12 @@ class Polyline:
 
         Exact: a segment within distance d of p has its midpoint within d + half its
         length, so the candidates are the midpoints within (distance to the nearest
-        midpoint) + half the longest segment.
+        midpoint) + half the longest piece.
         """
         p = np.asarray(p, dtype=float)
+        if len(p) > QUERY_CHUNK:
+            parts = [self.nearest(p[i:i + QUERY_CHUNK]) for i in range(0, len(p), QUERY_CHUNK)]
+            return np.concatenate([d for d, _ in parts]), np.concatenate([s for _, s in parts])
         d0, _ = self.tree.query(p)
         cand = self.tree.query_ball_point(p, d0 + self.half_len + 1e-12)
         counts = np.fromiter((len(c) for c in cand), dtype=int, count=len(p))
@@ -144,6 +167,57 @@ class VerifyReport:
                 w["text"] = self.line_text(w["line"])
             runs.append(d)
         return {"runs": runs, "notes": list(self.notes)}
+
+
+@dataclass
+class NominalPath:
+    """The functional-point path of a program: move end points, and arcs as fine chords."""
+
+    points_mm: np.ndarray
+    lineno: np.ndarray
+    rapid: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points_mm)
+
+
+def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPath:
+    """Nominal path of a program (path or text) for measuring deviations against.
+
+    Straight moves contribute their end points only (a straight segment is exact);
+    arcs are cut into chords bulging at most ``chord_mm`` from them. Same moves, units,
+    offsets and tool vectors as :func:`postproc.gcode.path.program_path`.
+    """
+    import math
+
+    from postproc.gcode.geometry import arc_chord_steps, arc_points
+    from postproc.gcode.interp import Interpreter
+    from postproc.gcode.path import backfill_unknown, iter_source_lines
+    from postproc.gcode.state import RAPID
+
+    path, lines = iter_source_lines(source)
+    interp = Interpreter(setup, path)
+    pts, lns, rapid = [], [], []
+    for lineno, line in enumerate(lines, start=1):
+        mv = interp.feed_line(lineno, line)
+        if mv is None:
+            continue
+        if mv.arc is not None and mv.kind != RAPID and not any(math.isnan(v) for v in mv.q0):
+            n = arc_chord_steps(mv.arc, mv.q0, mv.q1, chord_mm)
+            q = arc_points(mv.arc, mv.q0, mv.q1, np.arange(1, n + 1) / n)
+        else:
+            q = np.array([mv.q1], dtype=float)
+        pts.append(q + np.asarray(mv.r, dtype=float))
+        lns.append(np.full(len(q), lineno))
+        rapid.append(np.full(len(q), mv.kind == RAPID))
+    if not pts:
+        return NominalPath(np.zeros((0, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
+    lineno_arr = np.concatenate(lns)
+    points = np.vstack(pts)
+    # Backfill axes not yet positioned, as the sampled path does (on gauge = point - r
+    # the NaNs are the same).
+    points = backfill_unknown(points, lineno_arr, path)
+    return NominalPath(points, lineno_arr, np.concatenate(rapid))
 
 
 def machine_run(machine: Machine, path) -> np.ndarray:
