@@ -68,6 +68,7 @@ class CorrectReport:
     lines_out: int = 0
     moves: int = 0
     words_changed: int = 0
+    lines_changed: int = 0
     lines_inserted: int = 0
     arcs_kept: int = 0
     arcs_linearised: int = 0
@@ -487,6 +488,7 @@ class Corrector:
 
     def _write_line(self, line: str, edits, write) -> None:
         self.report.words_changed += len(edits)
+        self.report.lines_changed += bool(edits)
         write(emit.edit_line(line, edits))
         self.report.lines_out += 1
 
@@ -502,24 +504,41 @@ class Corrector:
         unit = mv.unit
         sep, lower = emit.style_of(line)
         arc_edits, arc_added = [], []
+        _, _, nsweep, _, _ = arc_params(arc, mv.q0, mv.q1)
+        mismatch = _mismatch(mv)
+        budget = self.opt.tolerance_mm - self._round_err(unit)
         if arc.r_idx >= 0:
+            # R arcs: the controller finds the centre from R, which is ill-conditioned
+            # near half circles; try the rounded neighbours and keep the best.
             _l, num, start, end, _p = mv.words[arc.r_idx]
             orig = float(num)
             rad = 0.5 * (math.hypot(S[a1] - centre[a1], S[a2] - centre[a2])
                          + math.hypot(E[a1] - centre[a1], E[a2] - centre[a2]))
             v = math.copysign(rad / unit, orig)
             dout = max(d, emit.decimals_of(num))
-            if abs(v - orig) < 0.5 * 10.0 ** (-dout):
-                val = orig
-            else:
-                text = emit.fmt(v, dout)
-                arc_edits.append((start, end, text))
-                val = float(text)
-            c = r_center(S[a1], S[a2], E[a1], E[a2], val * unit, arc.clockwise)
-            if c is None:
+            step = 10.0 ** (-dout)
+            half_chord = 0.5 * math.hypot(E[a1] - S[a1], E[a2] - S[a2]) / unit
+            cands = [orig] if abs(v - orig) < 0.5 * step else []
+            base_v = float(emit.fmt(v, dout))
+            cands += [base_v + k * step for k in (0, 1, -1, 2, -2)]
+            cands += [math.copysign(float(emit.fmt(half_chord, dout)) + k * step, orig) for k in (0, 1)]
+            best = None
+            for val in cands:
+                val = float(emit.fmt(val, dout)) if val != orig else orig
+                c = r_center(S[a1], S[a2], E[a1], E[a2], val * unit, arc.clockwise)
+                if c is None:
+                    continue
+                ctrl = [0.0, 0.0, 0.0]
+                ctrl[a1], ctrl[a2], ctrl[an] = c[0], c[1], S[an]
+                cand = Arc(tuple(ctrl), arc.plane, arc.clockwise, arc.turns, arc.offset_idx, arc.r_idx)
+                dev = arc_deviation(cand, tuple(S), tuple(E), plan["s"], plan["q"], nsweep, mismatch)
+                if best is None or dev < best[0]:
+                    best = (dev, val, ctrl)
+            if best is None or not best[0] <= budget:
                 return False
-            ctrl = [0.0, 0.0, 0.0]
-            ctrl[a1], ctrl[a2], ctrl[an] = c[0], c[1], S[an]
+            _dev, val, ctrl = best
+            if val != orig:
+                arc_edits.append((start, end, emit.fmt(val, dout)))
         else:
             ctrl = [0.0, 0.0, 0.0]
             ctrl[an] = S[an]
@@ -547,9 +566,8 @@ class Corrector:
                         arc_added.append(letter + text)
                 ctrl[axis] = base + val * unit
         cand = Arc(tuple(ctrl), arc.plane, arc.clockwise, arc.turns, arc.offset_idx, arc.r_idx)
-        _, _, nsweep, _, _ = arc_params(arc, mv.q0, mv.q1)
-        dev = arc_deviation(cand, tuple(S), tuple(E), plan["s"], plan["q"], nsweep, _mismatch(mv))
-        if not dev <= self.opt.tolerance_mm - self._round_err(unit):
+        dev = arc_deviation(cand, tuple(S), tuple(E), plan["s"], plan["q"], nsweep, mismatch)
+        if not dev <= budget:
             return False
         self.qe[:] = qe
         self.report.arcs_kept += 1

@@ -1,0 +1,251 @@
+"""postproc correct: correct NC programs with a calibration."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import click
+
+from postproc.cli.options import parse_context, parse_offset, parse_tool_length, parse_vector
+from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
+from postproc.errors import PostprocError
+
+# Files larger than this get a progress line on stderr (when stderr is a terminal).
+PROGRESS_MIN_BYTES = 2_000_000
+
+
+def read_tool_table(path: str) -> dict[int, float]:
+    """Tool lengths (mm) from a LinuxCNC tool table: lines like ``T1 P1 Z100.5 D6 ;comment``."""
+    lengths: dict[int, float] = {}
+    try:
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise PostprocError(f"cannot read tool table: {exc.strerror}", path=path) from None
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        body = raw.split(";", 1)[0].strip()
+        if not body:
+            continue
+        fields = {}
+        for item in body.split():
+            letter, value = item[:1].upper(), item[1:]
+            try:
+                fields[letter] = float(value)
+            except ValueError:
+                raise PostprocError(f"tool table field {item!r} is not a letter and a number",
+                                    path=path, lineno=lineno) from None
+        if "T" not in fields:
+            raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
+        lengths[int(fields["T"])] = fields.get("Z", 0.0)
+    return lengths
+
+
+def build_setup(offset, tool_length, tool_table, tool_vector, context):
+    from postproc.gcode.path import Setup
+
+    offsets = {}
+    for text in offset:
+        name, values = parse_offset(text)
+        missing = [a for a in "XYZ" if a not in values]
+        if missing:
+            raise click.BadParameter(f"{text!r}: give all of X, Y and Z (missing {', '.join(missing)})",
+                                     param_hint="--offset")
+        offsets[name] = (values["X"], values["Y"], values["Z"])
+    tools = read_tool_table(tool_table) if tool_table else {}
+    for text in tool_length:
+        h, length = parse_tool_length(text)
+        tools[h] = length
+    vec = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
+    ctx = dict(parse_context(c) for c in context)
+    return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx)
+
+
+def load_maps(paths) -> list:
+    if not paths:
+        return []
+    try:
+        from postproc.mirror.maps import load_map
+    except ImportError:
+        raise PostprocError("--map needs the measured-map reader (postproc.mirror.maps), which is not "
+                            "available in this installation") from None
+    return [load_map(p) for p in paths]
+
+
+def _summary(src: str, dst: str, rep) -> str:
+    lines = [
+        f"{src} -> {dst}: {rep.lines_in} lines, {rep.moves} moves, {rep.lines_changed} lines edited, "
+        f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
+        f"{rep.arcs_linearised}, largest correction {rep.max_correction_mm * 1000:.1f} um"
+    ]
+    if rep.g54_assumed_zero:
+        lines.append("  note: no --offset G54 given: the program's coordinates were taken as machine coordinates "
+                     "(G54 = 0); recorded in the header")
+    if rep.extrapolated_points:
+        lines.append(f"  note: {rep.extrapolated_points} points outside the calibrated volume were extrapolated")
+    return "\n".join(lines)
+
+
+def _run_one(job: dict) -> tuple[str, str | None, int]:
+    """Correct one file (runs in a worker process with -j); returns (summary, error, exit code)."""
+    from postproc.calibration.calfile import load_calibration
+    from postproc.gcode.pipeline import CorrectOptions, correct_file
+
+    try:
+        cal = load_calibration(job["calibration"])
+        opts = CorrectOptions(**job["options"], added=load_maps(job["maps"]))
+        rep = correct_file(job["src"], job["dst"], cal.engine, job["setup"], opts,
+                           calibration_name=cal.name, calibration_sha256=cal.sha256)
+        return _summary(job["src"], job["dst"], rep), None, 0
+    except PostprocError as exc:
+        return "", str(exc), exc.exit_code
+
+
+def _progress_printer(total_hint: str):
+    def show(n: int) -> None:
+        click.echo(f"\r{total_hint}: {n:,} lines", nl=False, err=True)
+    return show
+
+
+@click.command()
+@click.argument("inputs", nargs=-1, required=True, metavar="IN...")
+@click.option("-c", "--calibration", required=True, type=click.Path(dir_okay=False),
+              help="Calibration file (from 'postproc fit').")
+@click.option("-o", "--output", default=None, help="Output program ('-' for stdout). One input only.")
+@click.option("--output-dir", default=None, type=click.Path(file_okay=False),
+              help="Directory for the corrected programs (same names); for several inputs.")
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Correct this many files in parallel processes.")
+@click.option("--offset", multiple=True, metavar="G5x=X..,Y..,Z..",
+              help="Work offset value in machine mm (end with 'in' for inches), e.g. G54=X100,Y50,Z-300. Repeatable.")
+@click.option("--tool-length", "tool_length", multiple=True, metavar="H=L",
+              help="Tool length (mm) for G43 H<n>, e.g. 1=100.5. Repeatable.")
+@click.option("--tool-table", "tool_table", default=None, type=click.Path(dir_okay=False),
+              help="LinuxCNC tool table (.tbl) giving tool lengths (Z column, mm).")
+@click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
+              help="Tool vector r (mm) from gauge point to tool tip, overriding (0,0,-length).")
+@click.option("--context", multiple=True, metavar="NAME=VALUE",
+              help="Constant context value for the engine, e.g. temp=21.5. Repeatable.")
+@click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
+              help="Largest distance (mm) between the emitted and the corrected ideal path.")
+@click.option("--decimals", default=None, type=click.IntRange(1, 8),
+              help="Decimals of rewritten coordinates [default: 4 in mm, 5 in inch].")
+@click.option("--max-correction", "max_correction", default=DEFAULT_MAX_CORRECTION_MM, show_default=True,
+              type=click.FloatRange(min=0.0), help="Refuse any correction larger than this (mm).")
+@click.option("--extrapolate", type=click.Choice(["refuse", "clamp", "linear"]), default="refuse",
+              show_default=True, help="Targets outside the calibrated volume: refuse, or correct them with the "
+                                      "correction at the nearest point inside (clamp) or the model as is (linear).")
+@click.option("--force", is_flag=True, help="Correct a program that already carries a postproc header.")
+@click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
+              help="Measured correction map added after the calibration's correction. Repeatable.")
+def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, tool_table, tool_vector,
+            context, tolerance, decimals, max_correction, extrapolate, force, maps):
+    """Correct NC programs for the machine's measured errors.
+
+    Each move's target is sent through the calibration's inverse model and the
+    coordinate words that change are rewritten; every other byte is kept. Moves
+    along which the correction varies are split, and arcs that would leave the
+    tolerance are turned into lines. Nothing is written when a safety rule refuses
+    the job (correction too large, target outside the calibrated volume, work
+    offset or tool length not given, program already corrected).
+
+    A program that never names a work offset runs in G54; without --offset G54
+    its coordinates are taken as machine coordinates (noted in the header).
+
+    Example:
+
+        postproc correct samples/pocket.nc -c calibrations/s500_static.json -o pocket_corrected.nc
+
+        postproc correct samples/g54_g43.ngc -c calibrations/s500_static.json \\
+            --offset G54=X100,Y80,Z40 --tool-length 1=100 -o part_corrected.ngc
+    """
+    setup = build_setup(offset, tool_length, tool_table, tool_vector, context)
+    if len(inputs) > 1 and output is not None:
+        raise click.UsageError("-o takes one input; use --output-dir for several")
+    if output is not None and output_dir is not None:
+        raise click.UsageError("give -o or --output-dir, not both")
+    if "-" in inputs and len(inputs) > 1:
+        raise click.UsageError("'-' (stdin) can only be the only input")
+    options = {"tolerance_mm": tolerance, "decimals": decimals, "max_correction_mm": max_correction,
+               "extrapolate": extrapolate, "force": force}
+    if len(inputs) == 1 and (output is not None or output_dir is None):
+        _single(inputs[0], output or "-", calibration, setup, options, maps)
+        return
+    if output_dir is None:
+        raise click.UsageError("several inputs need --output-dir")
+    Path(output_dir).mkdir(parents=True, exist_ok=True)
+    jobs_list = []
+    for src in inputs:
+        dst = str(Path(output_dir) / Path(src).name)
+        _check_not_same(src, dst)
+        jobs_list.append({"src": src, "dst": dst, "calibration": calibration, "setup": setup,
+                          "options": options, "maps": list(maps)})
+    if jobs > 1 and len(jobs_list) > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            results = list(pool.map(_run_one, jobs_list))
+    else:
+        results = [_run_one(j) for j in jobs_list]
+    worst = 0
+    for summary, error, code in results:
+        if error:
+            click.echo(f"postproc: error: {error}", err=True)
+            worst = max(worst, code)
+        else:
+            click.echo(summary, err=True)
+    if worst:
+        sys.exit(worst)
+
+
+def _check_not_same(src: str, dst: str) -> None:
+    if src != "-" and dst != "-" and Path(dst).exists() and Path(src).resolve() == Path(dst).resolve():
+        raise click.UsageError(f"output {dst} is the input itself; write the corrected program elsewhere")
+
+
+def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) -> None:
+    from postproc.calibration.calfile import load_calibration
+    from postproc.gcode.pipeline import CorrectOptions, correct_file
+
+    _check_not_same(src, dst)
+    cal = load_calibration(calibration)
+    opts = CorrectOptions(**options, added=load_maps(maps))
+    progress = None
+    if src != "-" and sys.stderr.isatty() and os.path.getsize(src) > PROGRESS_MIN_BYTES:
+        progress = _progress_printer(src)
+    tmpdir = None
+    try:
+        if src == "-":
+            tmpdir = tempfile.mkdtemp(prefix="postproc-")
+            src_path = os.path.join(tmpdir, "stdin.nc")
+            with open(src_path, "wb") as fh:
+                shutil.copyfileobj(sys.stdin.buffer, fh)
+        else:
+            src_path = src
+        if dst == "-":
+            tmpdir = tmpdir or tempfile.mkdtemp(prefix="postproc-")
+            out_path = os.path.join(tmpdir, "out.nc")
+        else:
+            out_path = dst
+        rep = correct_file(src_path, out_path, cal.engine, setup, opts,
+                           calibration_name=cal.name, calibration_sha256=cal.sha256, progress=progress)
+        if progress is not None:
+            click.echo("", err=True)
+        if dst == "-":
+            with open(out_path, "rb") as fh:
+                out = sys.stdout.buffer if hasattr(sys.stdout, "buffer") else None
+                if out is None:
+                    sys.stdout.write(fh.read().decode("utf-8", errors="surrogateescape"))
+                else:
+                    shutil.copyfileobj(fh, out)
+                    out.flush()
+    except PostprocError as exc:
+        if src == "-":
+            exc.path = "<stdin>" if exc.path and exc.path.endswith("stdin.nc") else exc.path
+        raise
+    finally:
+        if tmpdir:
+            shutil.rmtree(tmpdir, ignore_errors=True)
+    click.echo(_summary("<stdin>" if src == "-" else src, "<stdout>" if dst == "-" else dst, rep), err=True)
+
