@@ -131,6 +131,15 @@ def test_astatic_error_is_measured_at_seed_parameters():
     assert np.all(res.iterations > 1)
 
 
+def test_astatic_error_shrinks_with_the_grid_step():
+    # Seed 000, chapter 4: a finer partition of the workspace makes KMTPP more accurate.
+    eng = machine(1, solver="astatic")
+    p = RNG.uniform(0, 315, (300, 3)) + TOOL
+    med = [np.median(eng.with_options(astatic={"grid_step_mm": u}).inverse(p, TOOL).residual_mm)
+           for u in (1.0, 5.0)]
+    assert med[0] < 0.5 * med[1]
+
+
 def test_astatic_is_exact_on_an_affine_machine():
     tables, _ = synthetic_tables(0)
     zero = AxisTables(tables.position_mm, {a: np.zeros_like(tables.errors[a]) for a in AXES})

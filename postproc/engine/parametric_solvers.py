@@ -96,18 +96,27 @@ def astatic_inverse(engine, p: np.ndarray, r: np.ndarray, settings) -> InverseRe
     iterations = np.zeros(n, dtype=int)
     G_last = np.empty((n, 3, 3))
     active = np.arange(n)
+
+    def node_of(q):
+        return origin + np.floor((q - origin) / u) * u
+
     for _ in range(settings.max_iter):
-        node = origin + np.floor((q_m[active] - origin) / u) * u
-        G = cell_matrix(engine, node, r[active], u)
-        G_last[active] = G
+        G_last[active] = cell_matrix(engine, node_of(q_m[active]), r[active], u)
         close = np.all(np.abs(R[active] - p[active]) <= u, axis=1)
         active = active[~close]
         if not len(active):
             break
-        G = G[~close]
         step = dt * (-K * (q_m[active] - q_d[active]))
-        R[active] += np.einsum("nij,nj->ni", G, step)
-        q_m[active] += step
+        # The actual position accumulates cell by cell along the step (sub-steps of at
+        # most one grid step on every axis), each with its own cell's G.
+        n_sub = np.maximum(1, np.ceil(np.max(np.abs(step), axis=1) / u)).astype(int)
+        sub = step / n_sub[:, None]
+        for j in range(int(n_sub.max())):
+            sel = n_sub > j
+            idx = active[sel]
+            G = cell_matrix(engine, node_of(q_m[idx]), r[idx], u)
+            R[idx] += np.einsum("nij,nj->ni", G, sub[sel])
+            q_m[idx] += sub[sel]
         iterations[active] += 1
     else:
         if len(active):
