@@ -44,6 +44,40 @@ def cv_residuals(model: BaseModel, ds: Dataset, effects: list[Effect], folds: li
     return out
 
 
+class FoldCache:
+    """Per fold, the current model (base + selected effects) fitted on the training part
+    once, so that candidates are scored on its residuals without refitting the base.
+
+    Used for methods refitted through their fitter (interval, grid, parametric):
+    a candidate is fitted to the training residual (the base held as fitted
+    without it) and tested on the held-out one. It underrates effects the base can
+    partly absorb, never overrates them.
+    """
+
+    def __init__(self, model: BaseModel, ds: Dataset, effects: list[Effect], folds: list[np.ndarray]):
+        self.ds = ds
+        self.items = []
+        for test in folds:
+            train, held = ds.subset(~test), ds.subset(test)
+            fitted = model.fit(train, model.prepare(train, effects))
+            self.items.append((test, train, held, train.m - fitted.predict(train), held.m - fitted.predict(held)))
+
+    def residuals(self) -> np.ndarray:
+        out = np.empty_like(self.ds.m)
+        for test, _, _, _, r_held in self.items:
+            out[test] = r_held
+        return out
+
+    def with_effect(self, effect: Effect) -> np.ndarray:
+        out = np.empty_like(self.ds.m)
+        for test, train, held, r_train, r_held in self.items:
+            e = effect.prepare(train.q, train.r, train.ctx, r_train)
+            B = e.basis(train.q, train.r, train.ctx)
+            coef, *_ = np.linalg.lstsq(B.reshape(-1, B.shape[2]), r_train.reshape(-1), rcond=None)
+            out[test] = r_held - e.basis(held.q, held.r, held.ctx) @ coef
+        return out
+
+
 def rms3(resid: np.ndarray) -> float:
     """3D RMS: sqrt(mean |e|^2) over points."""
     return float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))) if len(resid) else 0.0

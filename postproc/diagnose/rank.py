@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from postproc.diagnose.crossval import cv_residuals, rms3
+from postproc.diagnose.crossval import FoldCache, cv_residuals, rms3
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import BaseModel
+from postproc.diagnose.models import BaseModel, LinearStatic, stacked
 from postproc.effects import Effect, get_effect
 from postproc.errors import PostprocError
 
@@ -106,7 +106,9 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         else:
             testable.append(name)
 
-    e0 = cv_residuals(model, ds, selected_effects, folds)
+    joint = isinstance(model, LinearStatic)  # exact joint refits are cheap only there
+    cache = None if joint else FoldCache(model, ds, selected_effects, folds)
+    e0 = cv_residuals(model, ds, selected_effects, folds) if joint else cache.residuals()
     base_resid, base_sse = e0, float(np.sum(e0**2))
     rounds: list[list[Candidate]] = []
     selected: list[Candidate] = []
@@ -116,7 +118,10 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
             if any(c.name == name for c in selected):
                 continue
             try:
-                e1 = cv_residuals(model, ds, [*selected_effects, get_effect(name)], folds)
+                if joint:
+                    e1 = cv_residuals(model, ds, [*selected_effects, get_effect(name)], folds)
+                else:
+                    e1 = cache.with_effect(get_effect(name))
             except PostprocError as exc:
                 untestable.append(Candidate(name, "untestable", f"cannot be fitted: {exc.message}"))
                 testable.remove(name)
@@ -129,18 +134,41 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
                                      "" if np.isfinite(p) else "too few points for a test",
                                      explained, rms3(e1), p, rnd, resid=e1))
         results.sort(key=lambda c: -c.explained)
-        for c in results[:N_FITTED_REPORTED]:
-            c.effect = _fit_all(model, ds, [*selected_effects, get_effect(c.name)])[-1]
+        _fit_reported(model, ds, selected_effects, results[:N_FITTED_REPORTED], joint)
         rounds.append(results)
         if not results or results[0].status != "significant" or rnd == max_selected:
             break
         best = results[0]
         selected.append(best)
         selected_effects.append(get_effect(best.name))
-        e0 = best.resid
+        if joint:
+            e0 = best.resid
+        else:
+            # the selected effect refitted jointly with the base: report that model
+            cache = FoldCache(model, ds, selected_effects, folds)
+            sse_prev, e0 = float(np.sum(e0**2)), cache.residuals()
+            best.rms_after_mm = rms3(e0)
+            best.explained = (sse_prev - float(np.sum(e0**2))) / base_sse if base_sse > 0 else 0.0
     final = _fit_all(model, ds, selected_effects) if selected_effects else []
     return Ranking(model, len(folds), rms3(base_resid), base_resid, rounds, selected, untestable,
                    in_model, rms3(e0), final)
+
+
+def _fit_reported(model: BaseModel, ds: Dataset, selected: list[Effect], cands: list[Candidate],
+                  joint: bool) -> None:
+    """Parameters of the leading candidates, fitted on all data, for the report."""
+    if joint:
+        for c in cands:
+            c.effect = _fit_all(model, ds, [*selected, get_effect(c.name)])[-1]
+        return
+    if not cands:
+        return
+    fitted = model.fit(ds, model.prepare(ds, selected))
+    resid = ds.m - fitted.predict(ds)
+    for c in cands:
+        e = get_effect(c.name).prepare(ds.q, ds.r, ds.ctx, resid)
+        coef, *_ = np.linalg.lstsq(stacked(e.basis(ds.q, ds.r, ds.ctx)), resid.reshape(-1), rcond=None)
+        c.effect = e.copy(params=coef)
 
 
 def _fit_all(model: BaseModel, ds: Dataset, effects: list[Effect]) -> list[Effect]:

@@ -1,7 +1,7 @@
 """``postproc fit ... --effect NAME``: a calibration with physical effects added.
 
 The base method is fitted jointly with the effects where it is linear in its
-parameters (static) and by alternation otherwise (see :mod:`postproc.diagnose.models`).
+parameters (static) and through the fitter's linear response otherwise (see :mod:`postproc.diagnose.models`).
 The result's engine is the base engine composed with the fitted effects; the
 calibration file stores the base model and the effects (``FitResult.effects``).
 """
