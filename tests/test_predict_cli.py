@@ -132,3 +132,19 @@ def test_broken_machine_file_names_its_place(tmp_path):
     assert "mc12.machine.json" in res.output
     assert "modules[3]" in res.output
     assert "axis must be x, y or z" in res.output
+
+
+def test_flank_operation_with_straight_flutes_and_a_conical_cutter(tmp_path):
+    op = json.loads(Path(FLANK).read_text())
+    op["machine"] = str(SAMPLES / "mill3.machine.json")
+    op["cutter"] = {"kind": "conical", "d_mm": 4, "D_mm": 6, "length_mm": 4, "flutes": 2}  # no pitch: straight
+    op["rpm"], op["feed_mm_min"] = 2000, 200
+    path = tmp_path / "cone.operation.json"
+    path.write_text(json.dumps(op))
+    out = json.loads(run("trace", path, "--heights", 3, "--windows", 8, "--runout", 0, "--json").output)
+    fz = 200 / 4000
+    # heights 0, 2, 4 mm have radii 2, 2.5, 3: the largest cusp is at the tip. The
+    # trochoid's radius of curvature at the wall is R (1 - f / (2 pi R))^2, so its cusp
+    # exceeds the circles' by up to 2 f / (2 pi R) = 0.8 %
+    trochoid = 2 * fz / (2 * np.pi * 2.0)
+    assert out["cases"]["no runout"]["cusp_max_mm"] == pytest.approx(2 - np.sqrt(4 - (fz / 2) ** 2), rel=trochoid)

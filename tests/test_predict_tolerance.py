@@ -126,3 +126,12 @@ def test_distributions_and_their_bounds():
     assert sorted(zip(c["a"], c["b"], strict=True)) == [(0, -2), (0, 2), (1, -2), (1, 2)]
     with pytest.raises(PostprocError, match="2\\*\\*17"):
         tolerance.corners({f"v{i}": {"uniform": [0, 1]} for i in range(17)})
+
+
+def test_monte_carlo_in_blocks_gives_the_same_draws(op, monkeypatch):
+    fn = lambda env: bore.centre_errors(op, env)  # noqa: E731
+    kw = {"n": 50, "seed": 5, "tolerance_mm": [0.1, 0.1], "names": ["Y", "Z"]}
+    whole = tolerance.monte_carlo(fn, op.chain.random, **kw)
+    monkeypatch.setattr(tolerance, "DRAWS_PER_BLOCK", 7)
+    blocks = tolerance.monte_carlo(fn, op.chain.random, **kw)
+    assert_allclose(blocks.samples_mm, whole.samples_mm, rtol=0, atol=1e-15)

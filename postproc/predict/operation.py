@@ -125,7 +125,7 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
         params["cutter"] = Cutter(
             str(cut.get("kind", "cylindrical")),
             _number(cut, "d_mm", f"{where}: cutter"),
-            _number(cut, "pitch_mm", f"{where}: cutter", float("inf")),
+            _number(cut, "pitch_mm", f"{where}: cutter") if "pitch_mm" in cut else float("inf"),
             _number(cut, "length_mm", f"{where}: cutter", 1.0),
             _number(cut, "D_mm", f"{where}: cutter", cut.get("d_mm", 1.0)),
             int(_number(cut, "flutes", f"{where}: cutter", 1)),

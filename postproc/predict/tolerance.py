@@ -31,6 +31,10 @@ NORMAL_WORST_SIGMAS = 3.0
 # (2**16 = 65536 chain evaluations take well under a second, 2**24 would not).
 MAX_WORST_CASE_VARIABLES = 16
 
+# Draws evaluated at once: a chain of 4x4 matrices for 9 section points costs about
+# 1 kB per draw and matrix, so blocks of 10 000 stay near 100 MB whatever n is.
+DRAWS_PER_BLOCK = 10_000
+
 
 def check_distribution(dist: Any, where: str) -> None:
     """Raise PostprocError unless ``dist`` is ``{"uniform": [lo, hi]}`` or ``{"normal": [m, s]}``."""
@@ -182,8 +186,14 @@ def monte_carlo(
     """Draw ``n`` sets of the random variables and evaluate ``error_fn(env) -> (n, d)``."""
     if n < 2:
         raise PostprocError(f"Monte-Carlo size must be at least 2, got {n}")
+    if not random:
+        raise PostprocError("no random variables to draw", hint='add a "random" section to the chain file')
     draws = sample(random, n, np.random.default_rng(seed))
-    err = np.asarray(error_fn(draws), dtype=float).reshape(n, -1)
+    blocks = []
+    for start in range(0, n, DRAWS_PER_BLOCK):
+        part = {k: v[start:start + DRAWS_PER_BLOCK] for k, v in draws.items()}
+        blocks.append(np.asarray(error_fn(part), dtype=float).reshape(len(next(iter(part.values()))), -1))
+    err = np.concatenate(blocks)
     return Distribution(names, err, np.broadcast_to(np.asarray(tolerance_mm, float), err.shape[1:]).copy(), seed)
 
 

@@ -30,12 +30,17 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.predict import frames
 from postproc.predict.chain import Chain, Element, Module
+from postproc.predict.tools import ball_edge_parameter
 
 SECONDS_PER_MINUTE = 60.0
 
 # Edge heights traced at once: bounds the memory of the (windows, samples, heights, 4, 4)
 # chain matrices to some tens of megabytes.
 HEIGHTS_PER_BLOCK = 16
+
+# The wall is reported between the second and the last-but-one pass (the first and last
+# have a neighbour on one side only), so at least this many passes are traced.
+MIN_WINDOWS = 5
 
 
 def cutting_time_scale(t, t0, rev_per_s: float, t_m: float) -> np.ndarray:
@@ -191,6 +196,11 @@ def flank_surface(
     """
     if rpm <= 0 or feed_mm_min <= 0:
         raise PostprocError(f"spindle speed and feed must be positive, got {rpm} rpm, {feed_mm_min} mm/min")
+    if windows < MIN_WINDOWS or samples < 3 or margin < 1.0:
+        raise PostprocError(
+            f"need at least {MIN_WINDOWS} windows, 3 samples per window and margin >= 1, "
+            f"got {windows}, {samples}, {margin}"
+        )
     edge_rpm = rpm * cutter.flutes
     rev_per_s = edge_rpm / SECONDS_PER_MINUTE
     fz = feed_mm_min / edge_rpm
@@ -317,3 +327,41 @@ def plot_trace_near_wall(
     ax.legend(fontsize=8, loc="upper right")
     ax.figure.tight_layout()
     return ax
+
+
+def raster_section(
+    chain: Chain,
+    cutter,
+    *,
+    rpm: float,
+    stepover_mm: float,
+    passes: int,
+    samples: int = 2001,
+    context: Mapping[str, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Floor left by parallel ball-end passes ``stepover`` apart along y, in the section x = X.
+
+    The chain must take ``Y`` (the pass position), ``t`` (s) and ``rpm``; pass k runs at
+    ``Y = k * stepover``. In each pass the edge points cross the section when they face
+    +y or -y; those points (k, both sides, every p) are the section curves, and the floor
+    is their lowest envelope. Returns ``(y_mm, height_mm)`` between the first and the last
+    pass, the height measured from the tool tip's nominal level (z = 0 at Z = 0).
+    """
+    if cutter.kind != "ball":
+        raise PostprocError(f"a raster section needs a ball-end cutter, got {cutter.kind!r}")
+    if passes < 2 or stepover_mm <= 0 or samples < 3:
+        raise PostprocError(f"need at least 2 passes, a positive stepover and 3 samples, got "
+                            f"{passes}, {stepover_mm}, {samples}")
+    edge_rpm = rpm * cutter.flutes
+    p = cutter.d_mm / 2 * ball_edge_parameter(np.linspace(0.0, np.pi / 2, samples))
+    edge = cutter.edge(p)
+    spin, phase = spindle_of(chain)
+    ys = np.arange(passes) * stepover_mm
+    curves = []
+    for side in (np.pi / 2, -np.pi / 2):
+        t = facing_times(cutter.helix_angle_rad(p), side, edge_rpm, spin, phase)
+        env = {"X": 0.0, "Z": 0.0, **(context or {}), "rpm": edge_rpm, "Y": ys[:, None], "t": t[None, :]}
+        curves.append(trace_points(chain, edge, env))  # (passes, P, 3)
+    pts = np.concatenate(curves)
+    u = np.linspace(ys[0], ys[-1], max(400 * (passes - 1), 200) + 1)
+    return u, -envelope(pts[..., 1], -pts[..., 2], u)
