@@ -30,6 +30,10 @@ NOMINAL_CHORD_MM = 1e-5
 #: stays small; it does not change any distance.
 INDEX_PIECE_MM = 2.0
 
+#: Nearest piece midpoints measured first for each point; enough that the K-th is
+#: almost always far enough to rule out the rest (else a radius search settles it).
+NEAREST_K = 16
+
 #: Points queried at once against the nominal path (bounds the candidate lists' memory).
 QUERY_CHUNK = 100_000
 
@@ -80,24 +84,36 @@ class Polyline:
     def nearest(self, p) -> tuple[np.ndarray, np.ndarray]:
         """(distance (N,), segment index (N,)) of the nearest segment to each point.
 
-        Exact: a segment within distance d of p has its midpoint within d + half its
-        length, so the candidates are the midpoints within (distance to the nearest
-        midpoint) + half the longest piece.
+        Exact: a piece whose midpoint is at distance m from p is at least m - h from it
+        (h: half the longest piece). The pieces of the K nearest midpoints are measured;
+        where the K-th midpoint is not far enough to rule out all others, every
+        midpoint within (best distance) + h is measured instead.
         """
         p = np.asarray(p, dtype=float)
         if len(p) > QUERY_CHUNK:
             parts = [self.nearest(p[i:i + QUERY_CHUNK]) for i in range(0, len(p), QUERY_CHUNK)]
             return np.concatenate([d for d, _ in parts]), np.concatenate([s for _, s in parts])
-        d0, _ = self.tree.query(p)
-        cand = self.tree.query_ball_point(p, d0 + self.half_len + 1e-12)
-        counts = np.fromiter((len(c) for c in cand), dtype=int, count=len(p))
-        rows = np.repeat(np.arange(len(p)), counts)
-        segs = np.fromiter((s for c in cand for s in c), dtype=int, count=int(counts.sum()))
-        dist = point_segment_distance(p[rows], self.a[segs], self.b[segs])
-        order = np.lexsort((dist, rows))
-        first = np.r_[0, np.cumsum(counts)[:-1]]
-        best = order[first]
-        return dist[best], self.index[segs[best]]
+        k = min(NEAREST_K, len(self.a))
+        dk, ik = self.tree.query(p, k=k)
+        dk, ik = dk.reshape(len(p), k), ik.reshape(len(p), k)
+        dist = point_segment_distance(np.repeat(p, k, axis=0), self.a[ik.ravel()],
+                                      self.b[ik.ravel()]).reshape(len(p), k)
+        j = np.argmin(dist, axis=1)
+        rows = np.arange(len(p))
+        best, seg = dist[rows, j], ik[rows, j]
+        unsure = np.flatnonzero((dk[:, -1] - self.half_len < best) & (k < len(self.a)))
+        if len(unsure):
+            cand = self.tree.query_ball_point(p[unsure], best[unsure] + self.half_len + 1e-12)
+            counts = np.fromiter((len(c) for c in cand), dtype=int, count=len(unsure))
+            r = np.repeat(np.arange(len(unsure)), counts)
+            segs = np.fromiter((x for c in cand for x in c), dtype=int, count=int(counts.sum()))
+            d = point_segment_distance(p[unsure][r], self.a[segs], self.b[segs])
+            order = np.lexsort((d, r))
+            first = order[np.r_[0, np.cumsum(counts)[:-1]]]
+            better = d[first] < best[unsure]
+            best[unsure[better]] = d[first][better]
+            seg[unsure[better]] = segs[first][better]
+        return best, self.index[seg]
 
 
 @dataclass
