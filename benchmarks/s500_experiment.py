@@ -7,7 +7,12 @@ seed's control points uncorrected and corrected with each, measured by a simulat
 tracker (12 shots averaged). Prints both tables with the seed's own sums beside
 them, and how long each step took.
 
-    python benchmarks/s500_experiment.py [--out DIR] [--seed N]
+    python benchmarks/s500_experiment.py [--out DIR] [--seed N] [--machine FILE]
+
+With a machine that has time- or load-dependent effects (e.g.
+calibrations/s500_warm.machine.json) the campaign is timed: the six points in the
+first 10 minutes, the grid over the next 4 hours, the control points 6 hours after
+the start, all without load and approaching every point moving +.
 """
 
 from __future__ import annotations
@@ -39,17 +44,26 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="keep the simulated files and calibrations here")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--machine", default=str(MACHINE), help="machine definition (default: the S500-like one)")
     args = ap.parse_args()
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="s500_"))
     out.mkdir(parents=True, exist_ok=True)
-    machine = load_machine(MACHINE)
+    machine = load_machine(args.machine)
+    timed = {"t", "load"} & set(getattr(machine.model, "needs", []))
+
+    def plan(points, start_s: float, span_s: float):
+        if not timed:
+            return measurement_plan(points, repeats=12)
+        p = measurement_plan(points, repeats=12, time_span_s=span_s, context={"load": 0.0})
+        p.context["t"] = p.context["t"] + start_s
+        return p
     rng = np.random.default_rng(args.seed)
     clock = {}
 
     t0 = time.perf_counter()
-    six = simulate_plan(machine, measurement_plan(static_set(machine.volume_mm), repeats=12), rng)
-    grid = simulate_plan(machine, measurement_plan(grid_points(machine.volume_mm, 15.0), repeats=12), rng)
-    tables, squareness = simulate_tables(machine, 2.0, rng)
+    six = simulate_plan(machine, plan(static_set(machine.volume_mm), 0.0, 600.0), rng)
+    grid = simulate_plan(machine, plan(grid_points(machine.volume_mm, 15.0), 600.0, 4 * 3600.0), rng)
+    tables, squareness = simulate_tables(machine, 2.0, rng, context={"t": 0.0, "load": 0.0} if timed else None)
     write_axis_errors(out / "tables.csv", out / "tables_squareness.csv", tables, squareness)
     clock["simulate (6 pts, 15 mm grid x 12 shots, 2 mm tables)"] = time.perf_counter() - t0
 
@@ -75,9 +89,10 @@ def main() -> None:
     ):
         t0 = time.perf_counter()
         targets = read_control_points(path).targets
-        rep = control_experiment(machine, targets, [(n, cals[n]) for n in names], rng=rng, shots=12)
+        ctx = {"t": 6 * 3600.0, "load": 0.0} if timed else None
+        rep = control_experiment(machine, targets, [(n, cals[n]) for n in names], context=ctx, rng=rng, shots=12)
         clock[f"control points, {title}"] = time.perf_counter() - t0
-        print(f"\n{title} on the S500-like virtual machine (D in mm, tracker 12 shots averaged)")
+        print(f"\n{title} on machine {machine.name} (D in mm, tracker 12 shots averaged)")
         print(format_control_report(rep), end="")
         seed = ", ".join(f"{k} {v:.3f}" for k, v in seed_sums.items())
         print(f"seed 000 sums on the real S500: {seed}")
