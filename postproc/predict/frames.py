@@ -30,6 +30,11 @@ COLLINEAR_RATIO = 1e-9
 # machine errors.
 RODRIGUES_SERIES_RAD = 1e-4
 
+# A rotation block whose R R^T differs from I by less than this is treated as rigid and
+# inverted by transposition; the small-angle matrix of seed 002 (off by angle**2, 1e-8
+# for 1e-4 rad) is not, and goes through the general inverse.
+ORTHONORMAL_TOL = 1e-12
+
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
@@ -141,7 +146,7 @@ def invert(m) -> np.ndarray:
     """Inverse of rigid transforms (rotation part orthonormal); general inverse otherwise."""
     m = np.asarray(m, dtype=float)
     rot = m[..., :3, :3]
-    if np.allclose(rot @ np.swapaxes(rot, -1, -2), np.eye(3), atol=1e-12):
+    if np.allclose(rot @ np.swapaxes(rot, -1, -2), np.eye(3), atol=ORTHONORMAL_TOL):
         out = identity(m.shape[:-2])
         rt = np.swapaxes(rot, -1, -2)
         out[..., :3, :3] = rt

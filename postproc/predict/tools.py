@@ -24,6 +24,10 @@ import numpy as np
 
 from postproc.errors import PostprocError
 
+# Relative slack on the ball parameter's upper end d/2, so that d/2 computed as
+# d/2 * (1 - cos(pi/2)) (6e-17 off) is still accepted.
+BALL_PARAMETER_SLACK = 1e-12
+
 
 def _positive(value: float, name: str) -> float:
     if not np.isfinite(value) or value <= 0:
@@ -54,7 +58,7 @@ def ball_edge(p, d_mm: float, pitch_mm: float = np.inf) -> np.ndarray:
     """Edge of a ball-end mill of diameter d; ``p`` is the height above the tip, 0..d/2."""
     d = _positive(d_mm, "ball diameter")
     p = np.asarray(p, dtype=float)
-    if np.any(p < 0) or np.any(p > d / 2.0 + 1e-12 * d):
+    if np.any(p < 0) or np.any(p > d / 2.0 * (1.0 + BALL_PARAMETER_SLACK)):
         raise PostprocError(f"ball edge parameter must lie in 0..d/2 = {d / 2.0}")
     radius = np.sqrt(np.clip(p * (d - p), 0.0, None))
     return _helix(radius, p, pitch_mm)

@@ -42,6 +42,9 @@ HEIGHTS_PER_BLOCK = 16
 # have a neighbour on one side only), so at least this many passes are traced.
 MIN_WINDOWS = 5
 
+# Smallest vertical range (nm) of the trace-near-the-wall plot, for a wall with no cusps.
+MIN_PLOT_RANGE_NM = 1e-6
+
 
 def cutting_time_scale(t, t0, rev_per_s: float, t_m: float) -> np.ndarray:
     """Seed 002 formula (4) with the integer part: compressed time -> real time.
@@ -319,7 +322,7 @@ def plot_trace_near_wall(
     uq = np.linspace(u_um[1].mean(), u_um[-2].mean(), 2000)
     wall = -envelope(u_um, -left_nm, uq)
     ax.plot(uq, wall, "k--", lw=1, label="wall left (envelope)")
-    ax.set_ylim(-0.02, 4 * max(float(np.max(wall)), 1e-6))
+    ax.set_ylim(-0.02, 4 * max(float(np.max(wall)), MIN_PLOT_RANGE_NM))
     ax.set_xlabel("along the feed (µm)")
     ax.set_ylabel("distance from the nominal wall (nm)")
     ax.set_title(f"edge point p = {height_mm:g} mm near the wall: one arc per pass, "
