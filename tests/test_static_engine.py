@@ -110,3 +110,16 @@ def test_measurement_reader_units_and_errors(tmp_path):
     path.write_text(text.replace("length=um", "length=furlong"))
     with pytest.raises(MeasurementError, match="length unit"):
         read_measurements(path)
+
+
+def test_saved_files_have_ordinary_permissions(tmp_path):
+    import os
+
+    path = tmp_path / "cal.json"
+    save_calibration(path, known_engine())
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+    path.chmod(0o640)
+    save_calibration(path, known_engine())
+    assert path.stat().st_mode & 0o777 == 0o640

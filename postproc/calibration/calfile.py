@@ -77,6 +77,20 @@ def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) ->
     }
 
 
+def output_mode(path: Path) -> int:
+    """Permissions for a new output file: those of the file it replaces, else 0666 less umask.
+
+    ``mkstemp`` creates files readable by their owner only; a corrected program or a
+    calibration must be readable as any ordinary file the user writes would be.
+    """
+    try:
+        return path.stat().st_mode & 0o777
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to a temporary file beside ``path``, then rename it into place."""
     path = Path(path)
@@ -84,6 +98,7 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
+        os.chmod(tmp, output_mode(path))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
