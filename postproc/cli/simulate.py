@@ -72,7 +72,9 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
 
     Example:
 
+    \b
         postproc simulate calibrations/s500.machine.json --static-set --repeats 12 -o six.csv
+        postproc simulate calibrations/s500.machine.json --tables --step 2 -o tables.csv
     """
     import numpy as np
 

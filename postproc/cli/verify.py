@@ -53,7 +53,9 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
 
     Example:
 
+    \b
         postproc verify --points samples/s500_control_points.csv -c calibrations/s500_static.json --machine calibrations/s500.machine.json
+        postproc verify samples/pocket.nc -c calibrations/s500_static.json --machine calibrations/s500.machine.json --plot dev.png
     """
     import numpy as np
 
