@@ -135,3 +135,23 @@ def test_monte_carlo_in_blocks_gives_the_same_draws(op, monkeypatch):
     monkeypatch.setattr(tolerance, "DRAWS_PER_BLOCK", 7)
     blocks = tolerance.monte_carlo(fn, op.chain.random, **kw)
     assert_allclose(blocks.samples_mm, whole.samples_mm, rtol=0, atol=1e-15)
+
+
+def test_a_turning_deflection_changes_the_diameter_not_the_centre(tmp_path):
+    from postproc.predict.operation import operation_from_dict
+
+    chain = {"format": "postproc chain", "modules": [
+        {"name": "head", "elements": [{"fixed": {"translation": [0, 270, 560]}}]},
+        {"name": "spindle", "elements": [
+            {"rotary": {"axis": "x", "var": "S"}},
+            # 10 um of radial tool deflection turning with the spindle, 20 urad of axis tilt
+            {"error": {"v": 0.01, "gamma": 2e-5}}]},
+    ]}
+    op = operation_from_dict({"format": "postproc operation", "kind": "bore", "machine": chain,
+                              "diameter_mm": 50, "overhang_mm": 100, "nominal_centre_mm": [270, 560],
+                              "tolerance_mm": [0.1, 0.1]}, tmp_path)
+    sec = bore.evaluate_section(op, {})
+    # tip (100, 25, 0) in the turning frame -> radius 25 + 0.01 + 2e-5 * 100
+    assert sec.diameter_mm == pytest.approx(50 + 2 * (0.01 + 2e-5 * 100), abs=1e-9)
+    assert_allclose(sec.error_mm, [0, 0], atol=1e-9)
+    assert sec.roundness_mm == pytest.approx(0.0, abs=1e-9)

@@ -185,7 +185,10 @@ def bore(operation, n, seed, plot, magnify, as_json):
         "operation": op.name,
         "nominal_centre_mm": op.params["nominal_centre_mm"].tolist(),
         "mid_field": {"centre_mm": mid.centre_mm.tolist(), "error_mm": mid.error_mm.tolist(),
-                      "axis_point_mm": mid.axis_point_mm.tolist()},
+                      "axis_point_mm": mid.axis_point_mm.tolist(), "diameter_mm": mid.diameter_mm,
+                      "roundness_mm": mid.roundness_mm},
+        "worst_section": {"values": worst.corner[k], "error_mm": worst_sec.error_mm.tolist(),
+                          "diameter_mm": worst_sec.diameter_mm, "roundness_mm": worst_sec.roundness_mm},
         "worst_case": worst.to_dict(),
         "monte_carlo": dist.to_dict(),
     }
@@ -198,7 +201,8 @@ def bore(operation, n, seed, plot, magnify, as_json):
     click.echo(f"{op.name or op.path}: d = {op.params['diameter_mm']:g} mm, overhang "
                f"{op.params['overhang_mm']:g} mm, tolerance +-{tol[0]:g} ({names[0]}) +-{tol[1]:g} ({names[1]}) mm")
     click.echo(f"variables mid-field: centre error {names[0]} {_fmt_um(mid.error_mm[0])}, "
-               f"{names[1]} {_fmt_um(mid.error_mm[1])}")
+               f"{names[1]} {_fmt_um(mid.error_mm[1])}; section diameter {mid.diameter_mm:.4f} mm, "
+               f"roundness {mid.roundness_mm * 1e3:.3f} um")
     for i, name in enumerate(names):
         click.echo(f"worst case {name}: {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])}  "
                    f"({'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm)")

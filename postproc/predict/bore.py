@@ -44,10 +44,15 @@ def tool_points(op: Operation) -> np.ndarray:
 
 
 def section_points(op: Operation, env: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-    """Workpiece-frame points (..., 9, 3) of the section for variables ``env`` (arrays (n,))."""
+    """Workpiece-frame points (n, 9, 3) of the section for variables ``env`` (arrays (n,)).
+
+    With no variables in ``env`` the result is one section, (1, 9, 3).
+    """
     full = {**op.context, **{k: np.asarray(v, dtype=float)[..., None] for k, v in (env or {}).items()}}
     full[op.params["spindle_var"]] = TABLE4_ANGLES_DEG
-    return op.chain.transform(tool_points(op), full)
+    pts = op.chain.transform(tool_points(op), full)
+    # a chain without variables other than the spindle gives (9, 3): one section
+    return pts if pts.ndim == 3 or env else pts[None]
 
 
 def circle_centre(points) -> np.ndarray:
@@ -72,6 +77,8 @@ class Section:
     axis_point_mm: np.ndarray
     error_mm: np.ndarray
     names: list[str]
+    diameter_mm: float = float("nan")  # of the least-squares circle
+    roundness_mm: float = float("nan")  # max - min distance of the eight points from its centre
 
 
 def centre_errors(op: Operation, env: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -93,7 +100,9 @@ def evaluate_section(op: Operation, values: Mapping[str, float]) -> Section:
     env = {k: np.asarray([v]) for k, v in values.items()}
     pts = section_points(op, env)[0]
     centre = circle_centre(pts[:8, [a, b]])
-    return Section(pts, centre, pts[8], centre - op.params["nominal_centre_mm"], component_names(op))
+    radii = np.linalg.norm(pts[:8, [a, b]] - centre, axis=1)
+    return Section(pts, centre, pts[8], centre - op.params["nominal_centre_mm"], component_names(op),
+                   float(2 * radii.mean()), float(radii.max() - radii.min()))
 
 
 def analyse(op: Operation, n: int | None = None, seed: int | None = None):
