@@ -214,3 +214,11 @@ def test_bad_settings_are_refused():
         ParametricEngine(tables, sq, astatic={"gain": 30.0, "time_step": 0.1})
     with pytest.raises(CalibrationError, match="beyond the table ranges"):
         ParametricEngine(tables, sq, [[0, 0, 0], [400, 315, 315]])
+
+
+def test_newton_converges_with_linear_interpolation_too():
+    eng = machine(4, interpolation="linear")
+    p = RNG.uniform(0, 315, (3000, 3)) + TOOL
+    res = eng.inverse(p, TOOL)
+    assert res.residual_mm.max() <= SOLVER_TOL_MM
+    assert res.iterations.max() <= 4

@@ -222,3 +222,22 @@ def test_cli_fit_takes_a_squareness_file_given_among_the_files(tmp_path):
     result = CliRunner().invoke(main, ["fit", str(path), str(other), "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert load_calibration(out).engine.squareness == sq
+
+
+def test_fit_tables_reports_options_that_do_not_apply(tmp_path):
+    path, _, _ = write_machine(tmp_path, seed=6)
+    res = fit_tables([path], knot_spacing=20.0, order="second")
+    assert res.engine.order == "second"
+    assert res.info["ignored_options"] == ["knot_spacing"]
+    assert any("knot_spacing do not apply" in line for line in res.report)
+
+
+def test_cli_order_on_a_static_fit_is_a_usage_error(tmp_path):
+    from postproc.calibration.measurements import Measurements, format_measurements
+
+    q = RNG.uniform(0, 300, (20, 3))
+    src = tmp_path / "pts.csv"
+    src.write_text(format_measurements(Measurements(q=q, m=q.copy(), r=np.zeros((20, 3)))))
+    result = CliRunner().invoke(main, ["fit", str(src), "--order", "exact", "-o", str(tmp_path / "c.json")])
+    assert result.exit_code == 2
+    assert "parametric method only" in result.output
