@@ -148,3 +148,14 @@ def test_flank_operation_with_straight_flutes_and_a_conical_cutter(tmp_path):
     # exceeds the circles' by up to 2 f / (2 pi R) = 0.8 %
     trochoid = 2 * fz / (2 * np.pi * 2.0)
     assert out["cases"]["no runout"]["cusp_max_mm"] == pytest.approx(2 - np.sqrt(4 - (fz / 2) ** 2), rel=trochoid)
+
+
+def test_plot_files_are_readable_like_any_output(tmp_path):
+    import os
+    import stat
+
+    png = tmp_path / "bore.png"
+    assert run("bore", BORE, "-n", 50, "--plot", png).exit_code == 0
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(png.stat().st_mode) == 0o666 & ~umask

@@ -17,6 +17,8 @@ def _save_figure(ax, path: str) -> None:
     """Save the figure of ``ax`` atomically (temporary file beside it, then rename)."""
     import matplotlib.pyplot as plt
 
+    from postproc.calibration.calfile import output_mode
+
     fig = np.ravel(ax)[0].figure
     target = Path(path)
     fd, tmp = tempfile.mkstemp(dir=target.parent if str(target.parent) else ".", prefix=f".{target.name}.",
@@ -24,6 +26,7 @@ def _save_figure(ax, path: str) -> None:
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=110)
+        os.chmod(tmp, output_mode(target))
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
