@@ -151,7 +151,7 @@ def test_arcs_are_kept_when_the_corrected_arc_is_still_an_arc(name):
 def test_demo_calibration_keeps_small_arcs_and_lands():
     from postproc.calibration.calfile import load_calibration
 
-    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    cal = load_calibration(ROOT / "tests" / "cases" / "demo_static.json")
     text = (SAMPLES / "pocket.nc").read_text()
     out, report = correct_text(text, cal.engine, Setup(), CorrectOptions())
     assert report.arcs_kept >= 8  # the 8 mm corner radii stay arcs

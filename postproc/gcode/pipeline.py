@@ -147,8 +147,12 @@ class Corrector:
                 f"the {eng.method} inverse did not converge (residual {resid[i]:.3g} mm)",
                 path=self.path, lineno=int(lineno[i]),
                 hint="the calibration may be unusable here; check it with 'postproc check'")
+        ctx_added = dict(ctx, lineno=lineno) if self.opt.added else ctx
         for add in self.opt.added:
-            d = np.asarray(add.delta(p, ctx), dtype=float)
+            try:
+                d = np.asarray(add.delta(p, ctx_added), dtype=float)
+            except PostprocError as exc:
+                raise exc.at(path=self.path) from None
             if d.shape != delta.shape or not np.isfinite(d).all():
                 raise SolverError(f"correction map {add.name!r} gave no finite correction here",
                                   path=self.path, lineno=int(lineno[0]))
