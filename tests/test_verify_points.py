@@ -135,3 +135,20 @@ def test_cli_chain_tables_fit_verify(tmp_path):
     assert data["sum_mm"]["uncorrected"] > 2.5
     # Noise-free tracker: what is left is the tables' noise and their 3 mm interpolation.
     assert max(data["delta_mm"][name]) < 0.002
+
+
+def test_measurement_file_as_control_points_uses_its_tool_vectors(tmp_path):
+    m = s500_machine()
+    q = np.array([[100.0, 120, 140], [200, 60, 250]])
+    meas = simulate_points(m, q, [0, 0, -80.0], None, np.random.default_rng(8))
+    from postproc.calibration.measurements import format_measurements
+
+    path = tmp_path / "m.csv"
+    path.write_text(format_measurements(meas))
+    cps = read_control_points(path)
+    assert_allclose(cps.targets, q)
+    assert_allclose(cps.tool, [[0, 0, -80]] * 2)
+    rep = control_experiment(m, cps.targets, [("truth", m.model)], cps.tool, noise=False)
+    expect = np.linalg.norm(m.forward(q - cps.tool, cps.tool) - q, axis=1)
+    assert_allclose(rep.deltas["uncorrected"], expect)
+    assert rep.deltas["truth"].max() < 1e-5

@@ -264,13 +264,10 @@ def evaluate_run(label: str, machine: Machine, path, nominal, nominal_lines: np.
 
 def plot_deviation(report: VerifyReport, ax=None, *, title: str = ""):
     """Deviation (um) along the program, one curve per run; returns the axes."""
-    import matplotlib
-
     if ax is None:
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure  # no pyplot: no GUI backend, no global state
 
-        _, ax = plt.subplots(figsize=(10, 4))
+        ax = Figure(figsize=(10, 4)).subplots()
     for run in report.runs:
         d = np.where(run.feed, run.deviation_mm * 1000.0, np.nan)
         ax.plot(run.arclength_mm, d, lw=0.8,
