@@ -58,7 +58,7 @@ def test_single_tool_vector_reports_what_it_cannot_see(truth):
     undetermined = set(res.info["undetermined"])
     # Every angular function acts through r only: with one r it is either invisible
     # (rotation about r: the EC ones for a vertical tool) or confounded with a linear error.
-    assert {"EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "eps0"} <= undetermined
+    assert {"EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "eps0x", "eps0y", "eps0z"} <= undetermined
     assert not {"EXX", "EYY", "EZZ", "EC0Y", "EB0Z", "EA0Z"} & undetermined
     assert res.info["rank"] < res.info["n_params"]
     lines = {line.split()[0]: line for line in res.report if line.startswith("  ")}

@@ -150,7 +150,7 @@ def fit(measurements, knot_spacing: float | None = None, **options) -> FitResult
     lin.add("EZY trend", np.outer(q[:, 1] - lo[1], _UNIT[2]))
     turn = [np.cross(_UNIT[k], r) for k in range(3)]  # e_k x r, (N, 3)
     for k in range(3):
-        ang.add("eps0", turn[k])
+        ang.add(f"eps0{'xyz'[k]}", turn[k])
     coef_index: dict[tuple[int, int], tuple[str, range]] = {}
     for i, ax in enumerate(AXES):
         B = basis[i]
@@ -188,7 +188,7 @@ def fit(measurements, knot_spacing: float | None = None, **options) -> FitResult
             cols[:, c] = Bx @ coef
         positions[ax], errors[ax] = x, cols
     errors["X"][:, :3] += blocks_L["offset"]
-    errors["X"][:, 3:] += blocks_E["eps0"]
+    errors["X"][:, 3:] += np.concatenate([blocks_E[f"eps0{c}"] for c in "xyz"])
     errors["X"][:, 1] += L["EYX trend"] * (positions["X"] - lo[0])
     errors["X"][:, 2] += L["EZX trend"] * (positions["X"] - lo[0])
     errors["Y"][:, 2] += L["EZY trend"] * (positions["Y"] - lo[1])
@@ -243,8 +243,8 @@ def fit(measurements, knot_spacing: float | None = None, **options) -> FitResult
 
 
 def _describe(name: str) -> str:
-    if name == "eps0":
-        return "constant angular error (tool-side tilt)"
+    if name.startswith("eps0"):
+        return f"constant angle about {name[-1]} (tool-side tilt)"
     if name.endswith(" trend"):
         return "linear trend: alignment of the machine in the measurement frame"
     if len(name) == 3 and name[:2] in COLUMNS and name[2] in AXES:
