@@ -138,33 +138,7 @@ def fit(measurements, knot_spacing: float | None = None, **options) -> FitResult
     knots = [_knots(lo[i], hi[i], n_int[i]) for i in range(3)]
     basis = [BSpline.design_matrix(np.clip(q[:, i], lo[i], hi[i]), knots[i], 3).toarray() for i in range(3)]
 
-    lin, ang = _Design(n), _Design(n)
-    zeros = np.zeros((n, 3))
-    for k in range(3):
-        lin.add("offset", zeros + _UNIT[k])
-    lin.add("EC0Y", np.outer(-q[:, 1], _UNIT[0]))
-    lin.add("EB0Z", np.outer(q[:, 2], _UNIT[0]))
-    lin.add("EA0Z", np.outer(-q[:, 2], _UNIT[1]))
-    lin.add("EYX trend", np.outer(q[:, 0] - lo[0], _UNIT[1]))
-    lin.add("EZX trend", np.outer(q[:, 0] - lo[0], _UNIT[2]))
-    lin.add("EZY trend", np.outer(q[:, 1] - lo[1], _UNIT[2]))
-    turn = [np.cross(_UNIT[k], r) for k in range(3)]  # e_k x r, (N, 3)
-    for k in range(3):
-        ang.add(f"eps0{'xyz'[k]}", turn[k])
-    coef_index: dict[tuple[int, int], tuple[str, range]] = {}
-    for i, ax in enumerate(AXES):
-        B = basis[i]
-        nb = B.shape[1]
-        for c in range(6):
-            name = f"{COLUMNS[c]}{ax}"
-            design = lin if c < 3 else ang
-            # zero at the reference (first coefficient); straightness also at the far end.
-            js = range(1, nb - 1) if (c < 3 and c != i) else range(1, nb)
-            start = len(design.cols)
-            for j in js:
-                design.add(name, np.outer(B[:, j], _UNIT[c]) if c < 3 else B[:, j, None] * turn[c - 3])
-            coef_index[(i, c)] = ("lin" if c < 3 else "ang", range(start, start + len(js)))
-
+    lin, ang, coef_index = _build_design(q, r, lo, basis)
     A_L, A_E = lin.matrix(), ang.matrix()
     yv = y.reshape(-1)
     theta_L, theta_E, analysis = _staged_solve(A_L, A_E, yv, lin.block, ang.block)
@@ -240,6 +214,39 @@ def fit(measurements, knot_spacing: float | None = None, **options) -> FitResult
         "tool_vectors_mm": tools[:10].tolist(),
     }
     return FitResult(engine=engine, residuals_mm=resid, report=report, info=info)
+
+
+def _build_design(q, r, lo, basis):
+    """Design columns: (linear-error design, angular-error design, coefficient index per function)."""
+    n = len(q)
+    lin, ang = _Design(n), _Design(n)
+    zeros = np.zeros((n, 3))
+    for k in range(3):
+        lin.add("offset", zeros + _UNIT[k])
+    lin.add("EC0Y", np.outer(-q[:, 1], _UNIT[0]))
+    lin.add("EB0Z", np.outer(q[:, 2], _UNIT[0]))
+    lin.add("EA0Z", np.outer(-q[:, 2], _UNIT[1]))
+    lin.add("EYX trend", np.outer(q[:, 0] - lo[0], _UNIT[1]))
+    lin.add("EZX trend", np.outer(q[:, 0] - lo[0], _UNIT[2]))
+    lin.add("EZY trend", np.outer(q[:, 1] - lo[1], _UNIT[2]))
+    turn = [np.cross(_UNIT[k], r) for k in range(3)]  # e_k x r, (N, 3)
+    for k in range(3):
+        ang.add(f"eps0{'xyz'[k]}", turn[k])
+    coef_index: dict[tuple[int, int], tuple[str, range]] = {}
+    for i, ax in enumerate(AXES):
+        B = basis[i]
+        nb = B.shape[1]
+        for c in range(6):
+            name = f"{COLUMNS[c]}{ax}"
+            design = lin if c < 3 else ang
+            # zero at the reference (first coefficient); straightness also at the far end.
+            js = range(1, nb - 1) if (c < 3 and c != i) else range(1, nb)
+            start = len(design.cols)
+            for j in js:
+                design.add(name, np.outer(B[:, j], _UNIT[c]) if c < 3 else B[:, j, None] * turn[c - 3])
+            coef_index[(i, c)] = ("lin" if c < 3 else "ang", range(start, start + len(js)))
+
+    return lin, ang, coef_index
 
 
 def _describe(name: str) -> str:
