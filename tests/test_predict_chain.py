@@ -59,6 +59,7 @@ def test_values_tables_polynomials_sines_sums():
     sine = {"var": "t", "sine": {"amplitude": 2.0, "omega": 2 * np.pi, "phase": 0.0}}
     assert evaluate(sine, env) == pytest.approx(2.0)
     assert evaluate({"sum": [1.5, "-load", {"scale": 3, "of": "t"}]}, env) == pytest.approx(1.5 - 2 + 0.75)
+    assert evaluate({"product": ["load", sine, 0.5]}, env) == pytest.approx(2.0)
 
 
 def test_missing_variable_names_the_element():
@@ -101,10 +102,10 @@ def test_chain_file_round_trip(tmp_path):
     path = tmp_path / "c.json"
     path.write_text(json.dumps(ch.to_dict()))
     again = load_chain(path)
-    env = {name: 0.01 for name in ch.random} | {"X": 10.0, "S": 30.0}
+    env = {name: 0.01 for name in ch.random} | {"X": 10.0, "S": 30.0, "A1": 0.002, "A2": 0.0, "A3": 0.0, "A4": 0.0}
     assert_allclose(again.transform([100, 25, 0], env), ch.transform([100, 25, 0], env))
     assert again.random == ch.random
-    assert {"X", "S", "g1", "cz_front"} <= ch.variables()
+    assert {"X", "S", "g1", "cz_front", "A4"} <= ch.variables()
 
 
 def test_chain_file_syntax_error_names_line(tmp_path):
@@ -173,3 +174,14 @@ def test_collinear_frame_points_are_reported_at_evaluation_with_their_place():
     ch = chain([{"points": {"i": [0, 0, 0], "j": ["L", 0, 0], "k": [{"scale": 2, "of": "L"}, 0, 0]}}])
     with pytest.raises(PostprocError, match=r"modules\[0\].*collinear"):
         ch.matrix({"L": 100.0})
+
+
+def test_defaults_fill_variables_that_are_not_given():
+    data = {"format": "postproc chain", "defaults": {"X": 5.0},
+            "modules": [{"name": "x", "elements": [{"linear": {"axis": "x", "var": "X"}}]}]}
+    ch = chain_from_dict(data)
+    assert_allclose(ch.transform([0, 0, 0]), [5, 0, 0])
+    assert_allclose(ch.transform([0, 0, 0], {"X": 7.0}), [7, 0, 0])
+    assert chain_from_dict(ch.to_dict()).defaults == {"X": 5.0}
+    with pytest.raises(PostprocError, match="defaults"):
+        chain_from_dict({**data, "defaults": {"X": "five"}})

@@ -155,3 +155,15 @@ def test_a_turning_deflection_changes_the_diameter_not_the_centre(tmp_path):
     assert sec.diameter_mm == pytest.approx(50 + 2 * (0.01 + 2e-5 * 100), abs=1e-9)
     assert_allclose(sec.error_mm, [0, 0], atol=1e-9)
     assert sec.roundness_mm == pytest.approx(0.0, abs=1e-9)
+
+
+def test_turning_cutting_force_of_table3_shrinks_and_ovalises_the_hole():
+    # supports displaced by (A2 cos S, A1 sin S) at the rear and (-A4 cos S, -A3 sin S) at
+    # the front: the tip, at 1.5 front - 0.5 rear, moves (-(1.5 A4 + 0.5 A2) cos S,
+    # -(1.5 A3 + 0.5 A1) sin S): an ellipse with half-axes 25.00625 - 0.010 and - 0.006
+    op = load_operation(SAMPLES / "bore_50H7_rotating_load.operation.json")
+    sec = bore.evaluate_section(op, tolerance.nominal(op.chain.random))
+    assert sec.diameter_mm == pytest.approx(50.0125 - 0.010 - 0.006, abs=1e-6)
+    assert sec.roundness_mm == pytest.approx(0.004, abs=1e-6)
+    assert_allclose(sec.error_mm, [0.0, 0.025], atol=1e-6)  # the centre does not move
+    assert not (op.params["diameter_limits_mm"][0] <= sec.diameter_mm)

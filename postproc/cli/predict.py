@@ -195,6 +195,9 @@ def bore(operation, n, seed, plot, magnify, as_json):
         "worst_case": worst.to_dict(),
         "monte_carlo": dist.to_dict(),
     }
+    if "diameter_limits_mm" in op.params:
+        lo_d, hi_d = op.params["diameter_limits_mm"]
+        out["mid_field"]["diameter_within_limits"] = bool(lo_d <= mid.diameter_mm <= hi_d)
     if plot:
         _save_figure(bore_mod.plot_bore(op, mid, worst_sec, dist, magnify), plot)
     if as_json:
@@ -206,6 +209,11 @@ def bore(operation, n, seed, plot, magnify, as_json):
     click.echo(f"variables mid-field: centre error {names[0]} {_fmt_um(mid.error_mm[0])}, "
                f"{names[1]} {_fmt_um(mid.error_mm[1])}; section diameter {mid.diameter_mm:.4f} mm, "
                f"roundness {mid.roundness_mm * 1e3:.3f} um")
+    if "diameter_limits_mm" in op.params:
+        lo_d, hi_d = op.params["diameter_limits_mm"]
+        ok = lo_d <= mid.diameter_mm <= hi_d
+        click.echo(f"diameter {mid.diameter_mm:.4f} mm is {'within' if ok else 'OUTSIDE'} "
+                   f"{lo_d:.4f}..{hi_d:.4f} mm")
     for i, name in enumerate(names):
         click.echo(f"worst case {name}: {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])}  "
                    f"({'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm)")

@@ -249,10 +249,11 @@ class Chain:
     name: str = "chain"
     random: dict = field(default_factory=dict)
     description: str = ""
+    defaults: dict = field(default_factory=dict)  # variable values used when not given
 
     def matrix(self, env: Mapping[str, Any] | None = None) -> np.ndarray:
         """``M = M_1 ... M_m``: tool-frame -> workpiece-frame transforms, shape ``S + (4, 4)``."""
-        env = env or {}
+        env = {**self.defaults, **(env or {})}
         m = np.eye(4)
         for mod in self.modules:
             m = m @ mod.matrix(env)
@@ -272,6 +273,8 @@ class Chain:
         out = {"format": CHAIN_FORMAT, "version": 1, "name": self.name}
         if self.description:
             out["description"] = self.description
+        if self.defaults:
+            out["defaults"] = self.defaults
         if self.random:
             out["random"] = self.random
         out["modules"] = [m.to_dict() for m in self.modules]
@@ -312,4 +315,10 @@ def chain_from_dict(data: Any, where: str = "chain") -> Chain:
 
     for name, dist in random.items():
         check_distribution(dist, f"{where}: random.{name}")
-    return Chain(modules, str(data.get("name", "chain")), dict(random), str(data.get("description", "")))
+    defaults = data.get("defaults", {})
+    if not isinstance(defaults, Mapping) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in defaults.values()
+    ):
+        raise _fail(where, '"defaults" must map variable names to numbers')
+    return Chain(modules, str(data.get("name", "chain")), dict(random), str(data.get("description", "")),
+                 {str(k): float(v) for k, v in defaults.items()})

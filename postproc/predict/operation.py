@@ -3,8 +3,9 @@
 An operation file names the machine (a chain file, path relative to the operation
 file) and says what is machined:
 
-- ``"kind": "bore"``: a hole bored by a single-point tool (seed 004): diameter,
-  tool overhang, spindle axis, nominal centre and its +- tolerances;
+- ``"kind": "bore"``: a hole bored by a single-point tool (seed 004): diameter the
+  tool is set to, tool overhang, spindle axis, nominal centre and its +- tolerances,
+  optionally the diameter's limits;
 - ``"kind": "flank"``: a wall cut by the flank of an end mill (seed 002): cutter,
   spindle speed, feed, optional spindle runout;
 - ``"kind": "point"``: one tool point at given axis positions, with a nominal
@@ -114,6 +115,11 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
         params["nominal_centre_mm"] = _numbers(data, "nominal_centre_mm", where, 2)
         params["tolerance_mm"] = _numbers(data, "tolerance_mm", where, 2)
         params["spindle_var"] = str(data.get("spindle_var", "S"))
+        if "diameter_limits_mm" in data:
+            lim = _numbers(data, "diameter_limits_mm", where, 2)
+            if lim[0] > lim[1]:
+                raise PostprocError(f'{where}: "diameter_limits_mm" must be [smallest, largest]')
+            params["diameter_limits_mm"] = lim
     elif kind == "point":
         params["tool_point_mm"] = _numbers(data, "tool_point_mm", where, 3)
         params["nominal_mm"] = _numbers(data, "nominal_mm", where, 3)

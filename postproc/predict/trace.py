@@ -78,7 +78,7 @@ def runout_element(amplitude_rad: float, edge_rpm: float, flutes: int, phase_rad
 def with_runout(chain: Chain, amplitude_rad: float, edge_rpm: float, flutes: int, phase_rad: float = 0.0) -> Chain:
     """A copy of ``chain`` with the runout matrix appended after its last module."""
     module = Module("spindle runout", [runout_element(amplitude_rad, edge_rpm, flutes, phase_rad)])
-    return Chain([*chain.modules, module], chain.name, dict(chain.random), chain.description)
+    return Chain([*chain.modules, module], chain.name, dict(chain.random), chain.description, dict(chain.defaults))
 
 
 def facing_times(

@@ -11,7 +11,8 @@ A value in a chain file is one of
 - ``{"var": "t", "sine": {"amplitude": A, "omega": w, "phase": f}}``: ``A sin(w v + f)``
   (``w`` in rad per unit of the variable);
 - ``{"sum": [value, value, ...]}``: the sum of values (e.g. one error term from
-  several axes' tables);
+  several axes' tables); ``{"product": [value, ...]}``: their product (e.g. an
+  amplitude given as a variable times a sine);
 - ``{"scale": k, "of": value}``: ``k * value``.
 
 Values are evaluated against an environment mapping names to scalars or (N,) arrays.
@@ -48,12 +49,13 @@ def check_value(spec: Any, where: str) -> None:
         return
     if not isinstance(spec, Mapping):
         raise _fail(where, f"expected a number, a variable name or a function, got {spec!r}")
-    if "sum" in spec:
-        if not isinstance(spec["sum"], list):
-            raise _fail(where, '"sum" must be a list of values')
-        for i, item in enumerate(spec["sum"]):
-            check_value(item, f"{where}.sum[{i}]")
-        return
+    for key in ("sum", "product"):
+        if key in spec:
+            if not isinstance(spec[key], list) or not spec[key]:
+                raise _fail(where, f'"{key}" must be a non-empty list of values')
+            for i, item in enumerate(spec[key]):
+                check_value(item, f"{where}.{key}[{i}]")
+            return
     if "scale" in spec:
         if not isinstance(spec["scale"], int | float) or "of" not in spec:
             raise _fail(where, 'expected {"scale": number, "of": value}')
@@ -110,6 +112,11 @@ def evaluate(spec: Any, env: Mapping[str, Any], where: str = "value") -> np.ndar
             for i, item in enumerate(spec["sum"]):
                 total = total + evaluate(item, env, f"{where}.sum[{i}]")
             return total
+        if "product" in spec:
+            total = np.asarray(1.0)
+            for i, item in enumerate(spec["product"]):
+                total = total * evaluate(item, env, f"{where}.product[{i}]")
+            return total
         if "scale" in spec:
             return float(spec["scale"]) * evaluate(spec["of"], env, f"{where}.of")
         x = variable(env, spec["var"], where)
@@ -133,8 +140,9 @@ def names_in(spec: Any) -> set[str]:
     if isinstance(spec, str):
         return {spec[1:] if spec.startswith("-") else spec}
     if isinstance(spec, Mapping):
-        if "sum" in spec:
-            return set().union(*(names_in(s) for s in spec["sum"])) if spec["sum"] else set()
+        for key in ("sum", "product"):
+            if key in spec:
+                return set().union(*(names_in(s) for s in spec[key])) if spec[key] else set()
         if "scale" in spec:
             return names_in(spec["of"])
         return {spec["var"]} if isinstance(spec.get("var"), str) else set()
