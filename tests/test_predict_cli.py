@@ -159,3 +159,12 @@ def test_plot_files_are_readable_like_any_output(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE(png.stat().st_mode) == 0o666 & ~umask
+
+
+def test_bore_checks_the_diameter_against_its_limits():
+    op = SAMPLES / "bore_50H7_rotating_load.operation.json"
+    out = json.loads(run("bore", op, "-n", 100, "--json").output)
+    assert out["mid_field"]["diameter_mm"] == pytest.approx(49.9965, abs=1e-6)
+    assert out["mid_field"]["diameter_within_limits"] is False
+    assert "diameter_within_limits" not in json.loads(run("bore", BORE, "-n", 100, "--json").output)["mid_field"]
+    assert "OUTSIDE 50.0000..50.0250 mm" in run("bore", op, "-n", 100).output
