@@ -13,6 +13,13 @@ import numpy as np
 from postproc.cli.options import parse_context, parse_vector
 
 
+def _use_agg() -> None:
+    """Draw off-screen: the command writes files and never opens a window."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+
 def _save_figure(ax, path: str) -> None:
     """Save the figure of ``ax`` atomically (temporary file beside it, then rename)."""
     import matplotlib.pyplot as plt
@@ -123,6 +130,8 @@ def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
             for name, s in cases.items()
         },
     }
+    if plot or plot_trace:
+        _use_agg()
     if plot:
         _save_figure(plot_flank(cases), plot)
     if plot_trace:
@@ -199,6 +208,7 @@ def bore(operation, n, seed, plot, magnify, as_json):
         lo_d, hi_d = op.params["diameter_limits_mm"]
         out["mid_field"]["diameter_within_limits"] = bool(lo_d <= mid.diameter_mm <= hi_d)
     if plot:
+        _use_agg()
         _save_figure(bore_mod.plot_bore(op, mid, worst_sec, dist, magnify), plot)
     if as_json:
         _echo_json(out)
@@ -284,6 +294,7 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, as_json):
     if plot:
         if dist is None:
             raise click.UsageError("--plot needs the Monte Carlo (drop --worst-case)")
+        _use_agg()
         _save_figure(tolerance.plot_histograms(dist, worst), plot)
     if as_json:
         _echo_json(out)

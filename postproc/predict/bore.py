@@ -125,9 +125,6 @@ def analyse(op: Operation, n: int | None = None, seed: int | None = None):
 def plot_bore(op: Operation, nominal: Section, worst: Section, dist, magnify: float = 100.0, ax=None):
     """Seed 004 figure 12: nominal circle, machined section (errors magnified), tolerance
     square and the Monte-Carlo centres -> axes."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     if ax is None:

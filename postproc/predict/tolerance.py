@@ -216,9 +216,6 @@ def worst_case(error_fn: ErrorFn, random: Mapping[str, Mapping], *, tolerance_mm
 
 def plot_histograms(dist: Distribution, worst: WorstCase | None = None, ax=None):
     """Histogram of each error component with its tolerance limits -> axes."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     d = dist.samples_mm.shape[1]

@@ -242,9 +242,6 @@ def flank_surface(
 
 def plot_flank(surfaces: Mapping[str, FlankSurface], ax=None):
     """Colour maps of the material left on the wall, one panel per surface -> axes."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     names = list(surfaces)
@@ -291,9 +288,6 @@ def plot_trace_near_wall(
 ):
     """The trace of one edge point near the wall: each pass's arc, the part formula (4)
     keeps (coloured) and the air it skips (grey), with the resulting wall -> axes."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     if ax is None:
