@@ -61,6 +61,7 @@ def predict() -> None:
 
     Example:
 
+    \b
         postproc predict bore samples/predict/bore_50H7.operation.json
     """
 
@@ -86,6 +87,7 @@ def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
 
     Example:
 
+    \b
         postproc predict trace samples/predict/flank_5mm.operation.json --plot wall.png --plot-trace arcs.png
     """
     from postproc.errors import PostprocError
@@ -182,6 +184,7 @@ def bore(operation, n, seed, plot, magnify, as_json):
 
     Example:
 
+    \b
         postproc predict bore samples/predict/bore_50H7.operation.json -n 20000 --plot bore.png
     """
     from postproc.predict import bore as bore_mod
@@ -258,6 +261,7 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, as_json):
 
     Example:
 
+    \b
         postproc predict tolerance samples/predict/bore_50H7.operation.json -n 50000 --seed 2
     """
     from postproc.errors import PostprocError
@@ -327,6 +331,7 @@ def point(chain_file, values, tool):
 
     Example:
 
+    \b
         postproc predict point samples/predict/mc12.machine.json --set X=0 --set S=90 --tool 100,25,0
     """
     from postproc.predict import tolerance
@@ -358,6 +363,7 @@ def chain_cmd(tables, squareness, order, angular, output):
 
     Example:
 
+    \b
         postproc predict chain tables.csv --squareness tables_squareness.csv -o machine.chain.json
     """
     from postproc.calibration.calfile import atomic_write_text
