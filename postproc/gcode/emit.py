@@ -17,11 +17,11 @@ HEADER_MARK = " corrected "
 
 def fmt(value: float, decimals: int) -> str:
     """Fixed-point text of ``value`` with ``decimals`` digits; ``-0.000`` becomes ``0.000``."""
+    text = "%.*f" % (decimals, value)  # noqa: UP031  (the fastest fixed-point formatting)
+    if text[0] == "-" and not text.strip("-0."):
+        return text[1:]
     if not math.isfinite(value):
         raise ValueError(f"cannot write {value} into a program")
-    text = f"{value:.{decimals}f}"
-    if text.startswith("-") and not text.strip("-0."):
-        text = text[1:]
     return text
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import lexer
 from postproc.gcode.state import (
@@ -130,6 +130,7 @@ class Interpreter:
         self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
         self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
         self.ended = False  # an M2/M30 was read: later lines are not executed
+        self._fast_shift: tuple[float, float, float] | None = None
 
     # -- helpers -----------------------------------------------------------------------
     def _err(self, cls, msg, lineno, col, hint=None):
@@ -176,9 +177,80 @@ class Interpreter:
         block_delete = False
         if words is None:
             words, block_delete = self._slow_words(lineno, line)
+        elif words:
+            mv = self._fast_block(lineno, words)
+            if mv is not None:
+                return mv
         if not words:
             return None
+        self._fast_shift = None  # the slow path may change offsets, units or tool length
         return self._block(lineno, words, block_delete)
+
+    def _fast_block(self, lineno: int, words) -> Move | None:
+        """The common straight move (N, G0/G1, X/Y/Z, F words only), or None.
+
+        Gives the same Move as :meth:`_block` (tests check both agree); anything
+        else returns None and takes the full path.
+        """
+        st = self.state
+        if st.inverse_time:
+            return None
+        idx = [-1, -1, -1]
+        vals = [0.0, 0.0, 0.0]
+        feed_idx = -1
+        motion = st.motion
+        motion_idx = -1
+        seen = set()
+        for i, w in enumerate(words):
+            letter = w[0]
+            if letter in seen:
+                return None
+            seen.add(letter)
+            if letter == "X":
+                idx[0] = i
+                vals[0] = float(w[1])
+            elif letter == "Y":
+                idx[1] = i
+                vals[1] = float(w[1])
+            elif letter == "Z":
+                idx[2] = i
+                vals[2] = float(w[1])
+            elif letter == "F":
+                feed_idx = i
+            elif letter == "G":
+                key = _gkey(w[1])
+                if key not in (0, 10):
+                    return None
+                motion = MOTION_CODES[key]
+                motion_idx = i
+            elif letter != "N":
+                return None
+        if motion not in (RAPID, LINE) or idx == [-1, -1, -1]:
+            return None
+        shift = self._fast_shift
+        if shift is None:
+            col = words[min(i for i in idx if i >= 0)][4] + 1
+            shift = self._fast_shift = self.shift(False, lineno, col)
+        unit = MM_PER_INCH if st.inch else 1.0
+        q0 = tuple(st.pos)
+        q1 = list(q0)
+        inc = st.incremental
+        for k in range(3):
+            if idx[k] >= 0:
+                if inc:
+                    if math.isnan(q1[k]):
+                        return None  # the full path raises the error
+                    q1[k] = q1[k] + vals[k] * unit
+                else:
+                    q1[k] = vals[k] * unit + shift[k]
+        if feed_idx >= 0:
+            st.feed = float(words[feed_idx][1])
+        st.motion = motion
+        self.motion_word = motion_idx >= 0
+        st.pos = q1
+        return Move(lineno, motion, q0, tuple(q1), self.tool_r(), shift, unit, inc, st.arc_absolute, words,
+                    tuple(idx), feed_idx, False, st.feed, dict(st.rotary) if self.used_rotary else {},
+                    None, [], False, motion_idx, ())
 
     def _slow_words(self, lineno: int, line: str):
         tokens = lexer.lex(line, self.path, lineno)

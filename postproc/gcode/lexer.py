@@ -125,6 +125,7 @@ def split_lines(text: str) -> list[str]:
 
 
 # A line made only of words and blanks (the overwhelming majority of CAM output).
+_WORD_RUN = re.compile(rf"([ \t]*)([A-Za-z])([ \t]*)({NUMBER_RE})")
 _FAST_LINE = re.compile(rf"[ \t]*(?:[A-Za-z][ \t]*{NUMBER_RE}[ \t]*)*(?:\r\n|\n|\r)?")
 
 
@@ -137,8 +138,14 @@ def scan_words(line: str) -> list[tuple[str, str, int, int, int]] | None:
     """
     if _FAST_LINE.fullmatch(line) is None:
         return None
-    return [(m.group(1).upper(), m.group(2), m.start(2), m.end(2), m.start(1))
-            for m in _WORD_PARTS.finditer(line)]
+    out = []
+    pos = 0
+    for ws1, letter, ws2, num in _WORD_RUN.findall(line):
+        lpos = pos + len(ws1)
+        start = lpos + 1 + len(ws2)
+        pos = start + len(num)
+        out.append((letter.upper(), num, start, pos, lpos))
+    return out
 
 
 def words_from_tokens(tokens: list[Token]) -> list[tuple[str, str, int, int, int]]:

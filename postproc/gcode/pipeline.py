@@ -49,6 +49,8 @@ DEFAULT_CHUNK_LINES = 20_000
 ARC_CHECK_STEP_RAD = math.pi / 16
 ARC_CHECK_MIN_SAMPLES = 9
 MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
+# half of the last written digit, by number of decimals
+HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 16)}
 
 
 @dataclass
@@ -240,6 +242,7 @@ class Corrector:
         plans: dict[int, object] = {}
         if moves:
             targets, plans = self._plan(moves)
+        targets = targets.tolist()
         k = 0
         for line, mv, motion_word, prog_motion in entries:
             if mv is None:
@@ -379,19 +382,21 @@ class Corrector:
         """Edits for the axis words of ``mv``'s line and the words to add; updates qe."""
         edits, added = [], []
         unit, shift, inc = mv.unit, mv.shift, mv.incremental
-        half = 0.5 * 10.0 ** (-d)
+        half = HALF_UNIT[d]
+        fmt = emit.fmt
         for k in range(3):
-            t = float(target[k])
+            t = target[k]
             idx = mv.axis_idx[k]
             if idx >= 0:
                 _letter, num, start, end, _lpos = mv.words[idx]
                 ov = float(num)
                 v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
-                dout = max(d, emit.decimals_of(num))
-                if abs(v - ov) < 0.5 * 10.0 ** (-dout):
+                dot = num.find(".")
+                dout = d if dot < 0 or len(num) - dot - 1 <= d else len(num) - dot - 1
+                if abs(v - ov) < HALF_UNIT[dout]:
                     val = ov
                 else:
-                    text = emit.fmt(v, dout)
+                    text = fmt(v, dout)
                     edits.append((start, end, text))
                     val = float(text)
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
@@ -399,7 +404,7 @@ class Corrector:
                 if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
                     continue
                 v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
-                text = emit.fmt(v, d)
+                text = fmt(v, d)
                 added.append("XYZ"[k] + text)
                 val = float(text)
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
@@ -408,6 +413,21 @@ class Corrector:
     def _emit_move(self, line: str, mv: Move, target, plan, write) -> None:
         self.report.moves += 1
         d = _unit_decimals(self.opt, mv.unit)
+        if plan is None and mv.arc is None:
+            # the common case: a move that is not split; only its words change
+            edits, added = self._axis_words(mv, target, self.qe, d)
+            if added or (mv.motion_idx < 0 and self.emitted_motion != mv.kind):
+                sep, lower = emit.style_of(line)
+                if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+                    text = "G" + MOTION_TEXT[mv.kind]
+                    edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+                if added:
+                    pos = self._insert_pos(mv)
+                    text = "".join(sep + w for w in added)
+                    edits.append((pos, pos, text.lower() if lower else text))
+            self.emitted_motion = mv.kind
+            self._write_line(line, edits, write)
+            return
         linearise = bool(plan and plan.get("linearise"))
         split_q = plan.get("split_q") if plan else None
         split_s = plan.get("split_s") if plan else None
