@@ -16,9 +16,11 @@ import click
               help="Write PNG plots (residual vectors, residual vs each variable, periodograms, before/after).")
 @click.option("--folds", type=click.IntRange(2, 50), default=5, show_default=True,
               help="Cross-validation folds (repeated points stay together).")
+@click.option("--max-effects", "max_effects", type=click.IntRange(0, 10), default=4, show_default=True,
+              help="Most effects the greedy search adds (0: rank candidates, add none).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
-def check(files, cal_path, sigma, as_json, plot_dir, folds, tool_vector):
+def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, tool_vector):
     """Check a calibration against measurements: residuals, noise floor, where it
     fails and which physical effect is missing.
 
@@ -53,7 +55,7 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, tool_vector):
         for d in data:
             if not d.has_tool_columns:
                 d.r[:] = r
-    res = run_check(cal, data, list(files), sigma_mm=sigma, folds=folds)
+    res = run_check(cal, data, list(files), sigma_mm=sigma, folds=folds, max_selected=max_effects)
     if plot_dir:
         from postproc.diagnose.plots import write_plots
 

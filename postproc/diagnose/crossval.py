@@ -11,6 +11,7 @@ import numpy as np
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.models import BaseModel
 from postproc.effects import Effect
+from postproc.effects.linalg import solve_ls
 
 DEFAULT_FOLDS = 5
 # Fold assignment is random but reproducible: the same data always gives the same report.
@@ -73,7 +74,7 @@ class FoldCache:
         for test, train, held, r_train, r_held in self.items:
             e = effect.prepare(train.q, train.r, train.ctx, r_train)
             B = e.basis(train.q, train.r, train.ctx)
-            coef, *_ = np.linalg.lstsq(B.reshape(-1, B.shape[2]), r_train.reshape(-1), rcond=None)
+            coef = solve_ls(B.reshape(-1, B.shape[2]), r_train.reshape(-1))
             out[test] = r_held - e.basis(held.q, held.r, held.ctx) @ coef
         return out
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from postproc.diagnose.data import Dataset
 from postproc.effects import Effect
+from postproc.effects.linalg import solve_ls
 from postproc.effects.periodic import Periodic
 from postproc.effects.thermal import ThermalTime
 from postproc.engine.base import Engine
@@ -96,7 +97,7 @@ class BaseModel:
             return False
         ready = effect.prepare(ds.q, ds.r, ds.ctx, np.zeros_like(ds.m))  # any pitch or lag will do
         B = stacked(ready.basis(ds.q, ds.r, ds.ctx))
-        coef, *_ = np.linalg.lstsq(A, B, rcond=None)
+        coef = solve_ls(A, B)
         rest = np.linalg.norm(B - A @ coef, axis=0)
         return bool(np.all(rest <= REDUNDANT_FRACTION * np.maximum(np.linalg.norm(B, axis=0), 1e-300)))
 
@@ -137,7 +138,7 @@ class LinearStatic(BaseModel):
         else:
             fit_affine(ds.q, ds.m - ds.r)  # the same refusal of points that do not span 3 axes
             A = np.hstack([static_design(ds), stacked(effects_basis(effects, ds))])
-            coef, *_ = np.linalg.lstsq(A, (ds.m - ds.r).reshape(-1), rcond=None)
+            coef = solve_ls(A, (ds.m - ds.r).reshape(-1))
             block = coef[:12].reshape(3, 4)
             origin, G = block[:, 0], block[:, 1:]
             effects = split_params(effects, coef[12:])
@@ -161,7 +162,7 @@ def static_summary(G: np.ndarray, origin: np.ndarray) -> list[str]:
 def _lstsq_effects(effects: list[Effect], ds: Dataset, resid: np.ndarray) -> list[Effect]:
     if not effects:
         return []
-    coef, *_ = np.linalg.lstsq(stacked(effects_basis(effects, ds)), resid.reshape(-1), rcond=None)
+    coef = solve_ls(stacked(effects_basis(effects, ds)), resid.reshape(-1))
     return split_params(effects, coef)
 
 
@@ -193,7 +194,7 @@ class Refit(BaseModel):
             s = PROBE_RMS_MM / size
             _, rk = self._residual(ds, ds.m + s * bk)
             cols.append(((rk - r0) / s).reshape(-1))
-        coef, *_ = np.linalg.lstsq(np.column_stack(cols), r0.reshape(-1), rcond=None)
+        coef = solve_ls(np.column_stack(cols), r0.reshape(-1))
         effects = split_params(effects, coef)
         shift = sum((e.displacement(ds.q, ds.r, ds.ctx) for e in effects), np.zeros_like(ds.m))
         res, _ = self._residual(ds, ds.m - shift)

@@ -22,6 +22,7 @@ from postproc.diagnose.crossval import FoldCache, cv_residuals, rms3
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.models import BaseModel, LinearStatic, stacked
 from postproc.effects import Effect, get_effect
+from postproc.effects.linalg import solve_ls
 from postproc.errors import PostprocError
 
 # Significance threshold (one-sided p-value) for suggesting an effect. About 30
@@ -167,7 +168,7 @@ def _fit_reported(model: BaseModel, ds: Dataset, selected: list[Effect], cands: 
     resid = ds.m - fitted.predict(ds)
     for c in cands:
         e = get_effect(c.name).prepare(ds.q, ds.r, ds.ctx, resid)
-        coef, *_ = np.linalg.lstsq(stacked(e.basis(ds.q, ds.r, ds.ctx)), resid.reshape(-1), rcond=None)
+        coef = solve_ls(stacked(e.basis(ds.q, ds.r, ds.ctx)), resid.reshape(-1))
         c.effect = e.copy(params=coef)
 
 

@@ -87,6 +87,8 @@ SPECS = {
     "abbe:X": {"name": "abbe:X", "params": {"wy_rad_per_mm": 1.0, "wz_rad_per_mm": 0.5}},
     "straightness:X": {"name": "straightness:X", "config": {"center_mm": 150.0, "half_travel_mm": 150.0},
                        "params": {"bow_y_mm": 1.0, "s_z_mm": -0.7}},
+    "positioning:Y": {"name": "positioning:Y", "config": {"center_mm": 150.0, "half_travel_mm": 150.0},
+                      "params": {"bow_mm": 1.0, "s_mm": 0.6}},
     "lever:XZ": {"name": "lever:XZ", "params": {"EAX_rad_per_mm": 1.0, "EBX_rad_per_mm": -0.5}},
     "linear:humidity": {"name": "linear:humidity", "config": {"reference": 50.0},
                         "params": {"ay_mm_per_unit": 1.0}},

@@ -8,6 +8,10 @@ from postproc.diagnose.check import CheckResult
 from postproc.diagnose.rank import SIGNIFICANCE_P
 from postproc.effects.base import AXES
 
+# After the suggested effects, a cross-validated RMS above this many times the noise
+# floor means the model's form is wrong, not just incomplete.
+FAR_ABOVE_FLOOR = 2.0
+
 # A reversal between +1 and -1 approaches larger than this many standard errors is
 # marked as a finding (3 sigma: one false mark in ~700 clean axes).
 REVERSAL_FLAG_SIGMAS = 3.0
@@ -57,7 +61,7 @@ def _where(res: CheckResult) -> list[str]:
         q = p["q_mm"]
         out.append(f"    {p['place']}  X {q[0]:.3f} Y {q[1]:.3f} Z {q[2]:.3f}  "
                    f"residual {vec_um(p['residual_mm'])} um (|{um(p['norm_mm'])}| um)")
-    out.append("  by region (RMS um in quarters of the points along each axis):")
+    out.append("  by region (RMS um in quarters of each axis's travel):")
     for a, bins in w["by_region"].items():
         worst = max(bins, key=lambda b: b["rms_mm"])
         cells = " | ".join(f"{b['from']:.0f}..{b['to']:.0f}: {um(b['rms_mm'])}" for b in bins)
@@ -72,9 +76,9 @@ def _where(res: CheckResult) -> list[str]:
     else:
         out.append("  by approach direction: no dirx/diry/dirz columns")
     if w["along_time"]:
-        out.append("  along time t (mean residual um per quarter of the campaign):")
+        out.append("  along time t (mean residual um per quarter of the campaign, n points):")
         for b in w["along_time"]:
-            out.append(f"    t {b['from']:.0f}..{b['to']:.0f} s: {vec_um(b['mean_xyz_mm'])}")
+            out.append(f"    t {b['from']:.0f}..{b['to']:.0f} s: {vec_um(b['mean_xyz_mm'])}  (n {b['n']})")
     for name, c in w["context"].items():
         r = c["correlation_xyz"]
         flag = "  <- correlated" if c["flagged"] else ""
@@ -89,7 +93,12 @@ def _ranking(res: CheckResult) -> list[str]:
         return ["missing effects: not ranked (no cross-validation)"]
     out = [f"missing effects (each added to the model and cross-validated; significant at p < {SIGNIFICANCE_P:g}):"]
     sug = res.suggestions
-    if not sug:
+    last = rk.rounds[-1] if rk.rounds else []
+    if not sug and last and last[0].status == "significant":
+        out.append("  none added (--max-effects 0); significant candidates, best first:")
+        out += [f"    {c.name}: explains {c.explained * 100:.1f} % (p = {c.p_value:.2g})"
+                for c in last if c.status == "significant"]
+    elif not sug:
         out.append("  none: no candidate effect explains the residual significantly")
     for i, (c, sgg) in enumerate(zip(rk.selected, sug, strict=True), 1):
         out.append(f"  {i}. {c.name}: explains {c.explained * 100:.1f} % of the residual variance, "
@@ -98,16 +107,25 @@ def _ranking(res: CheckResult) -> list[str]:
         out.append(f"     {sgg['meaning']}; {sgg['compensable']}")
         out.append(f"     add it: {sgg['command']}" if sgg["command"] else
                    f"     the {res.method} method cannot be refitted from points: add it to a static fit")
-    last = rk.rounds[-1] if rk.rounds else []
     if last and sug:
         nxt = last[0]
-        out.append(f"  next best, not significant: {nxt.name} explains {nxt.explained * 100:.1f} % (p = {nxt.p_value:.2g})")
-    elif last:
+        if nxt.status == "significant":
+            out.append(f"  stopped at {len(sug)} effects (--max-effects); next: {nxt.name} explains "
+                       f"{nxt.explained * 100:.1f} % (p = {nxt.p_value:.2g})")
+        else:
+            out.append(f"  next best, not significant: {nxt.name} explains {nxt.explained * 100:.1f} % "
+                       f"(p = {nxt.p_value:.2g})")
+    elif last and last[0].status != "significant":
         out.append("  best tried: " + ", ".join(
             f"{c.name} {c.explained * 100:+.1f} % (p = {c.p_value:.2g})" for c in last[:3]))
     if sug and res.noise.rms_mm:
+        ratio = rk.final_cv_rms_mm / res.noise.rms_mm
         out.append(f"  with all suggestions: cross-validated RMS {um(rk.final_cv_rms_mm)} um = "
-                   f"{rk.final_cv_rms_mm / res.noise.rms_mm:.2f} x the noise floor")
+                   f"{ratio:.2f} x the noise floor")
+        if ratio > FAR_ABOVE_FLOOR:
+            out.append("  still far above the noise floor: the errors are not a few missing effects but "
+                       "the shape of the axes; fit a more flexible method (interval, grid, or parametric "
+                       "from axis error tables) and check it")
     if rk.untestable:
         out.append("untestable with this data:")
         out += [f"  {c.name}: {c.reason}" for c in rk.untestable]

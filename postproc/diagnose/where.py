@@ -13,8 +13,9 @@ from postproc.effects.base import AXES, DIR_COLUMNS
 
 # Worst points listed in the report.
 N_WORST = 5
-# Bins along each axis and along time: 4 bins of ~N/4 points each keep the bin means
-# within noise/sqrt(N/4) while still showing where along the travel the error sits.
+# Bins along each axis and along time: quarters of the range keep ~N/4 points per bin
+# (bin means within noise/sqrt(N/4)) while still showing where along the travel the
+# error sits.
 N_BINS = 4
 # A correlation between a residual component and a context column above this (in
 # absolute value) is flagged; for N = 100 points |r| > 0.33 has p < 0.001 by chance.
@@ -44,15 +45,19 @@ def worst_points(ds: Dataset, resid: np.ndarray, n: int = N_WORST) -> list[dict]
 
 
 def binned(values: np.ndarray, resid: np.ndarray, n_bins: int = N_BINS) -> list[dict]:
-    """Residual statistics in equal-count bins of ``values``."""
-    order = np.argsort(values, kind="stable")
+    """Residual statistics in ``n_bins`` equal-width bins over the range of ``values``
+    (empty bins are left out)."""
+    lo, hi = float(np.min(values)), float(np.max(values))
+    edges = np.linspace(lo, hi, n_bins + 1)
+    which = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, n_bins - 1)
     out = []
-    for chunk in np.array_split(order, min(n_bins, len(order))):
-        if len(chunk) == 0:
+    for b in range(n_bins):
+        sel = which == b
+        if not sel.any():
             continue
-        r = resid[chunk]
+        r = resid[sel]
         out.append({
-            "from": float(values[chunk].min()), "to": float(values[chunk].max()), "n": int(len(chunk)),
+            "from": float(edges[b]), "to": float(edges[b + 1]), "n": int(sel.sum()),
             "rms_mm": float(np.sqrt(np.mean(np.sum(r**2, axis=1)))),
             "mean_xyz_mm": [float(v) for v in r.mean(axis=0)],
         })

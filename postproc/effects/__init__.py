@@ -14,6 +14,7 @@ name                        physical meaning                                need
 ``squareness:XY|XZ|YZ``     out-of-squareness (if the model lacks it)       positions
 ``scale:X|Y|Z``             linear positioning error (if lacking)           positions
 ``straightness:X|Y|Z``      bow and S-shape of an axis's straightness       positions
+``positioning:X|Y|Z``       bow and S-shape of the positioning error        positions
 ``lever:AB``                angle of A growing with A, over B's travel      positions
 ``linear:<column>``         shift linear in any other context column        ``<column>``
 ==========================  ==============================================  ==============
@@ -35,7 +36,7 @@ from postproc.effects.load import Load
 from postproc.effects.periodic import Periodic
 from postproc.effects.scale import Scale
 from postproc.effects.squareness import PAIRS, Squareness
-from postproc.effects.straightness import Straightness
+from postproc.effects.straightness import Positioning, Straightness
 from postproc.effects.thermal import ThermalTemperature, ThermalTime
 from postproc.errors import CalibrationError
 
@@ -53,6 +54,7 @@ KINDS = {
     "squareness": (Squareness, tuple(PAIRS)),
     "scale": (Scale, tuple(AXES)),
     "straightness": (Straightness, tuple(AXES)),
+    "positioning": (Positioning, tuple(AXES)),
     "lever": (Lever, LEVER_PAIRS),
     "linear": (Linear, None),
 }
@@ -109,6 +111,7 @@ def candidate_names(context_columns: Iterable[str]) -> list[str]:
     names += [f"squareness:{p}" for p in PAIRS]
     names += [f"scale:{a}" for a in AXES]
     names += [f"straightness:{a}" for a in AXES]
+    names += [f"positioning:{a}" for a in AXES]
     names += [f"lever:{p}" for p in LEVER_PAIRS]
     names += [f"linear:{c}" for c in cols if c not in _OWN_COLUMNS and not c.startswith("temp")]
     return names

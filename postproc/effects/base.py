@@ -22,6 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from postproc.effects.linalg import solve_ls
 from postproc.engine.base import check_points, check_tool_vectors
 from postproc.errors import CalibrationError, MissingSetupError, PostprocError
 
@@ -119,7 +120,7 @@ class Effect:
     def compensable_reason(self) -> str:
         """How ``correct`` compensates it, or why it cannot."""
         if not self.needs:
-            return "compensated from the commanded position and tool vector"
+            return "compensated from the commanded position"
         return "compensated given " + ", ".join(self.needs)
 
     def describe(self, params: Mapping | None = None) -> str:
@@ -209,6 +210,6 @@ def lstsq_with_offset(B: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, flo
     for j in range(3):
         A[j::3, k + j] = 1.0
     y = resid.reshape(3 * n)
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    coef = solve_ls(A, y)
     sse = float(np.sum((y - A @ coef) ** 2))
     return coef[:k], sse

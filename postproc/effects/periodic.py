@@ -25,11 +25,16 @@ from postproc.effects.base import AXES, Effect, unit_basis
 # Shortest pitch searched: ball screws on machine tools have leads of 2 mm and more.
 PITCH_MIN_MM = 2.0
 # Longest pitch searched, as a fraction of the travel: a period longer than half the
-# travel is not periodic in the data, it is a straightness/scale shape.
+# travel is not periodic in the data, it is a straightness/scale shape ...
 PITCH_MAX_TRAVEL_FRACTION = 0.5
-# Frequency grid oversampling over the natural resolution 1/travel: fine enough that
-# the true peak is not missed between grid frequencies.
-PERIODOGRAM_OVERSAMPLING = 8
+# ... and never longer than this: machine-tool ball screws have leads up to ~40 mm;
+# longer waves are guideway or scale shapes, not a screw's turn.
+PITCH_MAX_MM = 50.0
+# Frequency grid oversampling over the natural resolution 1/travel: 3 points per
+# peak width so the peak is not missed between grid frequencies ...
+PERIODOGRAM_OVERSAMPLING = 3
+# ... then refined on this many frequencies across one coarse step either side.
+PEAK_REFINE_POINTS = 25
 # At least this many distinct positions are needed to see a period at all.
 MIN_DISTINCT_POSITIONS = 12
 # Positions closer than this are the same position (repeated points).
@@ -48,7 +53,7 @@ def search_frequencies(x: np.ndarray) -> np.ndarray:
         regular = np.std(steps) < 0.05 * step
         if regular:
             f_max = min(f_max, 0.5 / step)
-    f_min = 1.0 / (PITCH_MAX_TRAVEL_FRACTION * travel)
+    f_min = 1.0 / min(PITCH_MAX_TRAVEL_FRACTION * travel, PITCH_MAX_MM)
     if f_max <= f_min:
         return np.zeros(0)
     n = int(np.ceil((f_max - f_min) * travel * PERIODOGRAM_OVERSAMPLING)) + 1
@@ -112,5 +117,8 @@ class Periodic(Effect):
         x = np.asarray(q)[:, self.axis]
         freqs = search_frequencies(x)
         power = periodogram(x, np.asarray(resid)[:, self.axis], freqs)
-        f = float(freqs[int(np.argmax(power))])
+        i = int(np.argmax(power))
+        lo, hi = freqs[max(i - 1, 0)], freqs[min(i + 1, len(freqs) - 1)]
+        fine = np.linspace(lo, hi, PEAK_REFINE_POINTS)
+        f = float(fine[int(np.argmax(periodogram(x, np.asarray(resid)[:, self.axis], fine)))])
         return self.copy(config={"pitch_mm": 1.0 / f})

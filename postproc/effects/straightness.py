@@ -69,3 +69,40 @@ class Straightness(Effect):
         x = np.asarray(q)[:, self.axis]
         lo, hi = float(np.min(x)), float(np.max(x))
         return self.copy(config={"center_mm": 0.5 * (lo + hi), "half_travel_mm": max(0.5 * (hi - lo), 1e-3)})
+
+
+class Positioning(Effect):
+    """Non-linear positioning error of one axis (``positioning:X``): bow and S-shape of
+    the error along the axis itself (the linear part is the scale, held by affine
+    models). A screw or scale with a progressive pitch error, or a thermal gradient
+    along it::
+
+        d_axis = bow * u^2 + s * u^3      u = position scaled to [-1, 1] over the travel
+    """
+
+    kind = "positioning"
+    meaning = "non-linear positioning error along an axis (bow and S-shape)"
+
+    @property
+    def axis(self) -> int:
+        return AXES.index(self.target)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return ("bow_mm", "s_mm")
+
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        return (f"positioning error of {self.target} (at end of travel): bow {p['bow_mm'] * 1000:+.2f} um, "
+                f"S {p['s_mm'] * 1000:+.2f} um")
+
+    untestable_reason = Straightness.untestable_reason
+    prepare = Straightness.prepare
+
+    def basis(self, q, r, ctx) -> np.ndarray:
+        c = float(self.config.get("center_mm", 0.0))
+        h = float(self.config.get("half_travel_mm", 1.0))
+        u = (q[:, self.axis] - c) / h
+        B = np.zeros((len(q), 3, 2))
+        B[:, self.axis, 0], B[:, self.axis, 1] = u**2, u**3
+        return B
