@@ -116,3 +116,19 @@ def test_alternating_refit_for_a_non_linear_method():
     assert eff["params"]["b_mm"] == pytest.approx(truth.params["b_mm"], rel=0.1)
     plain = fit_with_effects("parametric", [meas], [])
     assert res.rms_mm < 0.7 * plain.rms_mm
+
+
+def test_interval_calibration_is_refitted_with_its_own_partition(walk):
+    res = run(["fit", SAMPLE.name, "--method", "interval", "--intervals", "X=2;Y=2;Z=2", "-o", "wi.json"], walk)
+    assert res.exit_code == 0, res.output
+    res = run(["check", SAMPLE.name, "-c", "wi.json", "--json", "--folds", "4", "--max-effects", "1"], walk)
+    data = json.loads(res.stdout)
+    assert data["cv_rms_mm"] is not None, data["cv_note"]
+    (sug,) = data["suggestions"]
+    assert sug["effect"] == "backlash:X"
+    args = shlex.split(sug["command"])
+    assert args[args.index("--method") + 1] == "interval"
+    assert "--intervals" in args
+    res = run(args[1:], walk)
+    assert res.exit_code == 0, res.output
+    assert load_calibration(args[args.index("-o") + 1]).effects[0]["name"] == "backlash:X"

@@ -41,6 +41,7 @@ class CheckResult:
     ranking: Ranking | None
     cv_note: str = ""
     existing: list[str] = field(default_factory=list)
+    fit_options: dict = field(default_factory=dict)
 
     @property
     def suggestions(self) -> list[dict]:
@@ -71,6 +72,8 @@ class CheckResult:
         added = [n for n in names if n not in self.existing]
         out = f"{stem}_{'_'.join(n.replace(':', '_') for n in added)}.json"
         args = ["postproc", "fit", *self.files, "--method", self.method]
+        for key, value in self.fit_options.items():
+            args += [f"--{key}", str(value)]
         for n in names:
             args += ["--effect", n]
         return shlex.join([*args, "-o", out])
@@ -128,6 +131,18 @@ def measured_residual(engine, ds: Dataset) -> np.ndarray:
         ) from None
 
 
+def refit_options(engine) -> dict:
+    """The fitter options that reproduce the calibration's own partition or grid step,
+    so that the cross-validation refits the same model, not the method's default."""
+    model = engine.model_to_dict()
+    if engine.method == "interval" and "edges_mm" in model:
+        return {"intervals": ";".join(f"{a}={','.join(f'{v:.3f}' for v in e)}"
+                                      for a, e in zip("XYZ", model["edges_mm"], strict=True))}
+    if engine.method == "grid" and "step_mm" in model:
+        return {"step": ",".join(f"{v:g}" for v in model["step_mm"])}
+    return {}
+
+
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED) -> CheckResult:
     """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``."""
@@ -139,8 +154,9 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     noise = noise_floor(ds, sigma_mm)
     where = where_it_fails(ds, resid)
     ranking, note = None, ""
+    options = refit_options(base_engine)
     try:
-        model = base_model(cal.method, {}, engine=base_engine)
+        model = base_model(cal.method, options, engine=base_engine)
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
@@ -149,4 +165,4 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     except PostprocError as exc:
         note = f"cross-validation not possible: {exc.message}"
     return CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
-                       ranking, note, [e.name for e in existing])
+                       ranking, note, [e.name for e in existing], options)
