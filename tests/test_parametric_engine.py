@@ -222,3 +222,21 @@ def test_newton_converges_with_linear_interpolation_too():
     res = eng.inverse(p, TOOL)
     assert res.residual_mm.max() <= SOLVER_TOL_MM
     assert res.iterations.max() <= 4
+
+
+def test_singular_tables_raise_a_solver_error_not_a_crash():
+    tables, sq = synthetic_tables(0)
+    errors = dict(tables.errors)
+    errors["X"] = np.zeros_like(errors["X"])
+    errors["X"][:, 0] = -tables.position_mm["X"]  # EX of X cancels the X motion: dF/dX = 0
+    eng = ParametricEngine(AxisTables(tables.position_mm, errors), sq, interpolation="linear")
+    p = np.array([[100.0, 100.0, 100.0]]) + TOOL
+    with pytest.raises(SolverError, match="singular at point #0"):
+        eng.inverse(p, TOOL)
+    with pytest.raises(SolverError, match="astatic iteration did not converge for point #0"):
+        eng.inverse(p, TOOL, solver="astatic")
+    # Nearly singular (the angular slopes keep dF/dX at ~1e-5): no convergence, reported.
+    errors["X"][:, 3:] = tables.errors["X"][:, 3:]
+    eng = ParametricEngine(AxisTables(tables.position_mm, errors), sq, interpolation="linear")
+    with pytest.raises(SolverError, match="point #0"):
+        eng.inverse(p, TOOL)

@@ -48,6 +48,28 @@ def _solver_error(what: str, idx: int, p: np.ndarray, resid: float, n: int) -> S
     return err
 
 
+# A Jacobian whose determinant is below this is singular: the model maps a direction
+# of motion to nothing (error slopes of -1 or worse), and no inverse exists there.
+MIN_JACOBIAN_DET = 1e-6
+
+
+def _solve(J: np.ndarray, f: np.ndarray, what: str, idx: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Solve J x = f per point; a singular J raises SolverError naming the point."""
+    det = np.linalg.det(J)
+    bad = np.flatnonzero(~(np.abs(det) >= MIN_JACOBIAN_DET))
+    if len(bad):
+        k = int(idx[bad[0]])
+        x, y, z = p[k]
+        err = SolverError(
+            f"{what}: the model's axis directions are singular at point #{k} "
+            f"(target {x:.4f}, {y:.4f}, {z:.4f} mm; det {det[bad[0]]:.3g})",
+            hint="the error tables have a slope of -1 or worse here (a jump of millimetres between rows?)",
+        )
+        err.point_index = k
+        raise err
+    return np.linalg.solve(J, f[:, :, None])[:, :, 0]
+
+
 def newton_inverse(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLVER_TOL_MM,
                    max_iter: int = SOLVER_MAX_ITER) -> InverseResult:
     """Newton iteration q <- q - J^-1 (F(q) - p*), per point, from q = p* - r."""
@@ -65,7 +87,7 @@ def newton_inverse(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLV
         if not len(active) or k == max_iter:
             break
         J = engine.jacobian(q[active], r[active])
-        q[active] -= np.linalg.solve(J, f[:, :, None])[:, :, 0]
+        q[active] -= _solve(J, f, "Newton inverse", active, p)
         iterations[active] += 1
     bad = np.flatnonzero(~(resid <= tol_mm))
     if len(bad):
@@ -124,6 +146,6 @@ def astatic_inverse(engine, p: np.ndarray, r: np.ndarray, settings) -> InverseRe
             worst = int(active[np.argmax(dist)])
             raise _solver_error("astatic iteration", worst, p, float(dist.max()), settings.max_iter)
     # Formula (2) with the last G: one linear step from the model point to the target.
-    q = q_m + np.linalg.solve(G_last, (p - R)[:, :, None])[:, :, 0]
+    q = q_m + _solve(G_last, p - R, "astatic iteration", np.arange(n), p)
     resid = np.linalg.norm(engine.forward(q, r) - p, axis=1)
     return InverseResult(q, resid, iterations + 1)
