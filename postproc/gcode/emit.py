@@ -37,7 +37,9 @@ def edit_line(line: str, edits: list[tuple[int, int, str]]) -> str:
         return line
     out = []
     pos = 0
-    for start, end, text in sorted(edits, key=lambda e: (e[0], e[1])):
+    if len(edits) > 1:
+        edits = sorted(edits)
+    for start, end, text in edits:
         out.append(line[pos:start])
         out.append(text)
         pos = end

@@ -96,8 +96,12 @@ class Move:
     aux_idx: tuple[int, ...] = ()  # word indices of I/J/K/R/P (removed if an arc is linearised)
 
 
+_GKEYS = {"0": 0, "00": 0, "1": 10, "01": 10, "2": 20, "02": 20, "3": 30, "03": 30}
+
+
 def _gkey(text: str) -> int:
-    return int(round(float(text) * 10))
+    key = _GKEYS.get(text)
+    return key if key is not None else int(round(float(text) * 10))
 
 
 def _symbol_construct(tok: lexer.Token, prev: lexer.Token | None) -> str:
@@ -131,6 +135,7 @@ class Interpreter:
         self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self._fast_shift: tuple[float, float, float] | None = None
+        self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
     def _err(self, cls, msg, lineno, col, hint=None):
@@ -200,12 +205,10 @@ class Interpreter:
         feed_idx = -1
         motion = st.motion
         motion_idx = -1
-        seen = set()
+        if len(words) > 1 and len({w[0] for w in words}) != len(words):
+            return None
         for i, w in enumerate(words):
             letter = w[0]
-            if letter in seen:
-                return None
-            seen.add(letter)
             if letter == "X":
                 idx[0] = i
                 vals[0] = float(w[1])
@@ -231,6 +234,7 @@ class Interpreter:
         if shift is None:
             col = words[min(i for i in idx if i >= 0)][4] + 1
             shift = self._fast_shift = self.shift(False, lineno, col)
+            self._fast_r = self.tool_r()
         unit = MM_PER_INCH if st.inch else 1.0
         q0 = tuple(st.pos)
         q1 = list(q0)
@@ -248,7 +252,7 @@ class Interpreter:
         st.motion = motion
         self.motion_word = motion_idx >= 0
         st.pos = q1
-        return Move(lineno, motion, q0, tuple(q1), self.tool_r(), shift, unit, inc, st.arc_absolute, words,
+        return Move(lineno, motion, q0, tuple(q1), self._fast_r, shift, unit, inc, st.arc_absolute, words,
                     tuple(idx), feed_idx, False, st.feed, dict(st.rotary) if self.used_rotary else {},
                     None, [], False, motion_idx, ())
 
