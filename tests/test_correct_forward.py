@@ -156,3 +156,13 @@ def test_demo_calibration_keeps_small_arcs_and_lands():
     out, report = correct_text(text, cal.engine, Setup(), CorrectOptions())
     assert report.arcs_kept >= 8  # the 8 mm corner radii stay arcs
     assert landing_error(text, out, cal.engine, Setup()) <= TOL * 1.01
+
+
+def test_modal_arc_after_a_linearised_arc_gets_its_motion_word_back():
+    text = "G21 G90 G17\nG0 X100 Y100 Z50\nG1 Z40 F300\nG2 X120 Y120 I20 J0\nX120.2 Y120.2 I0.1 J0.1\nG1 X130\n"
+    eng = static_engine()
+    out, rep = correct_text(text, eng, Setup(), CorrectOptions())
+    assert rep.arcs_linearised == 1
+    assert rep.arcs_kept == 1
+    assert out.splitlines()[-2].startswith("G2 X")
+    assert landing_error(text, out, eng, Setup()) <= TOL * 1.01
