@@ -130,3 +130,18 @@ def test_candidates_cover_context_columns():
     assert "linear:dirx" not in names
     for n in names:
         assert get_effect(n).name == n
+
+
+def test_untestable_reasons_name_what_is_missing():
+    q = RNG.uniform(0, 300, (40, 3))
+    r = np.zeros((40, 3))
+    bl = get_effect("backlash:X")
+    assert "no dirx column" in bl.untestable_reason(q, r, {})
+    assert "does not vary" in bl.untestable_reason(q, r, {"dirx": np.ones(40)})
+    one_sided = np.ones(40)
+    one_sided[:2] = -1
+    assert "2 from -" in bl.untestable_reason(q, r, {"dirx": one_sided})
+    assert bl.untestable_reason(q, r, {"dirx": np.where(np.arange(40) % 2, 1.0, -1.0)}) is None
+    assert "tool vectors vary by only" in get_effect("abbe:tilt").untestable_reason(q, r, {})
+    assert "distinct Y positions" in get_effect("periodic:Y").untestable_reason(
+        np.repeat(q[:5], 8, axis=0), r, {})

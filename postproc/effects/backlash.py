@@ -17,6 +17,10 @@ import numpy as np
 
 from postproc.effects.base import AXES, DIR_COLUMNS, Effect, context_column, unit_basis
 
+# Fewer rows than this approached from either side cannot show a reversal: the mean on
+# that side would rest on one or two noisy shots.
+MIN_ROWS_PER_SIDE = 3
+
 
 class Backlash(Effect):
     kind = "backlash"
@@ -41,6 +45,17 @@ class Backlash(Effect):
     def describe(self, params=None) -> str:
         p = self.params if params is None else params
         return f"reversal (backlash) of {self.target}: {p['b_mm'] * 1000:+.2f} um"
+
+    def untestable_reason(self, q, r, ctx) -> str | None:
+        why = super().untestable_reason(q, r, ctx)
+        if why:
+            return why
+        d = np.asarray(ctx[self.needs[0]], dtype=float)
+        plus, minus = int(np.sum(d > 0)), int(np.sum(d < 0))
+        if min(plus, minus) < MIN_ROWS_PER_SIDE:
+            return (f"{self.target} was approached {plus} times from + and {minus} from -: "
+                    f"a reversal needs {MIN_ROWS_PER_SIDE}+ each (approach the points from both sides)")
+        return None
 
     def basis(self, q, r, ctx) -> np.ndarray:
         d = context_column(ctx, self.needs[0], len(q), self.name)
