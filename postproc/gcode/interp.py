@@ -96,6 +96,8 @@ class Move:
     aux_idx: tuple[int, ...] = ()  # word indices of I/J/K/R/P (removed if an arc is linearised)
 
 
+# word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
+_FAST_SLOT = {"X": 0, "Y": 1, "Z": 2, "F": 3, "G": 4, "N": 5}
 _GKEYS = {"0": 0, "00": 0, "1": 10, "01": 10, "2": 20, "02": 20, "3": 30, "03": 30}
 
 
@@ -208,26 +210,20 @@ class Interpreter:
         if len(words) > 1 and len({w[0] for w in words}) != len(words):
             return None
         for i, w in enumerate(words):
-            letter = w[0]
-            if letter == "X":
-                idx[0] = i
-                vals[0] = float(w[1])
-            elif letter == "Y":
-                idx[1] = i
-                vals[1] = float(w[1])
-            elif letter == "Z":
-                idx[2] = i
-                vals[2] = float(w[1])
-            elif letter == "F":
+            slot = _FAST_SLOT.get(w[0])
+            if slot is None:
+                return None
+            if slot < 3:
+                idx[slot] = i
+                vals[slot] = float(w[1])
+            elif slot == 3:
                 feed_idx = i
-            elif letter == "G":
-                key = _gkey(w[1])
-                if key not in (0, 10):
+            elif slot == 4:
+                key = _GKEYS.get(w[1])
+                if key is None or key > 10:
                     return None
                 motion = MOTION_CODES[key]
                 motion_idx = i
-            elif letter != "N":
-                return None
         if motion not in (RAPID, LINE) or idx == [-1, -1, -1]:
             return None
         shift = self._fast_shift

@@ -105,6 +105,7 @@ class Corrector:
         self.dirs = np.zeros(3)
         self.emitted_motion: int | None = None
         self.linear_exact = bool(engine.affine) and not options.added
+        self._decimals: dict[float, int] = {}
         if options.extrapolate not in ("refuse", "clamp", "linear"):
             raise PostprocError(f"--extrapolate must be refuse, clamp or linear, got {options.extrapolate!r}")
 
@@ -410,7 +411,7 @@ class Corrector:
                 else:
                     text = fmt(v, dout)
                     edits.append((start, end, text))
-                    val = float(text)
+                    val = round(v, dout)  # == float(text): both correctly rounded
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
             elif not present_only:
                 if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
@@ -424,7 +425,9 @@ class Corrector:
 
     def _emit_move(self, line: str, mv: Move, target, plan, write) -> None:
         self.report.moves += 1
-        d = _unit_decimals(self.opt, mv.unit)
+        d = self._decimals.get(mv.unit)
+        if d is None:
+            d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
             edits, added = self._axis_words(mv, target, self.qe, d)
