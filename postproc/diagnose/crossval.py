@@ -45,6 +45,40 @@ def cv_residuals(model: BaseModel, ds: Dataset, effects: list[Effect], folds: li
     return out
 
 
+class JointCV:
+    """Cross-validation of "the selected effects + one candidate", refitting the base
+    jointly with all of them on every training fold (exact for the static method).
+
+    The selected effects' settings and the training residual they leave are the same
+    for every candidate, so they are computed once per fold; each candidate's own
+    search (pitch, time constant) runs on that residual, as ``model.prepare`` would.
+    """
+
+    def __init__(self, model: BaseModel, ds: Dataset, effects: list[Effect], folds: list[np.ndarray]):
+        self.model, self.ds = model, ds
+        self.items = []
+        for test in folds:
+            train, held = ds.subset(~test), ds.subset(test)
+            prepared = model.prepare(train, effects)
+            fitted = model.fit(train, prepared)
+            self.items.append((test, train, held, prepared, train.m - fitted.predict(train),
+                               held.m - fitted.predict(held)))
+
+    def residuals(self) -> np.ndarray:
+        out = np.empty_like(self.ds.m)
+        for test, *_, r_held in self.items:
+            out[test] = r_held
+        return out
+
+    def with_effect(self, effect: Effect) -> np.ndarray:
+        out = np.empty_like(self.ds.m)
+        for test, train, held, prepared, r_train, _ in self.items:
+            e = effect.prepare(train.q, train.r, train.ctx, r_train)
+            fitted = self.model.fit(train, [*prepared, e])
+            out[test] = held.m - fitted.predict(held)
+        return out
+
+
 class FoldCache:
     """Per fold, the current model (base + selected effects) fitted on the training part
     once, so that candidates are scored on its residuals without refitting the base.

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from postproc.diagnose.crossval import FoldCache, cv_residuals, rms3
+from postproc.diagnose.crossval import FoldCache, JointCV, rms3
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.models import BaseModel, LinearStatic, stacked
 from postproc.effects import Effect, get_effect
@@ -108,8 +108,9 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
             testable.append(name)
 
     joint = isinstance(model, LinearStatic)  # exact joint refits are cheap only there
-    cache = None if joint else FoldCache(model, ds, selected_effects, folds)
-    e0 = cv_residuals(model, ds, selected_effects, folds) if joint else cache.residuals()
+    scorer = JointCV if joint else FoldCache
+    cache = scorer(model, ds, selected_effects, folds)
+    e0 = cache.residuals()
     base_resid, base_sse = e0, float(np.sum(e0**2))
     rounds: list[list[Candidate]] = []
     selected: list[Candidate] = []
@@ -119,10 +120,7 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
             if any(c.name == name for c in selected):
                 continue
             try:
-                if joint:
-                    e1 = cv_residuals(model, ds, [*selected_effects, get_effect(name)], folds)
-                else:
-                    e1 = cache.with_effect(get_effect(name))
+                e1 = cache.with_effect(get_effect(name))
             except PostprocError as exc:
                 untestable.append(Candidate(name, "untestable", f"cannot be fitted: {exc.message}"))
                 testable.remove(name)
@@ -142,11 +140,11 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         best = results[0]
         selected.append(best)
         selected_effects.append(get_effect(best.name))
+        cache = scorer(model, ds, selected_effects, folds)
         if joint:
             e0 = best.resid
         else:
             # the selected effect refitted jointly with the base: report that model
-            cache = FoldCache(model, ds, selected_effects, folds)
             sse_prev, e0 = float(np.sum(e0**2)), cache.residuals()
             best.rms_after_mm = rms3(e0)
             best.explained = (sse_prev - float(np.sum(e0**2))) / base_sse if base_sse > 0 else 0.0
