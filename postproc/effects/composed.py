@@ -19,6 +19,10 @@ from postproc.effects.base import Effect, context_hint
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.errors import CalibrationError, MissingSetupError
 
+# The fixed point has stopped when a step moves q by less than this: a tenth of the
+# solver tolerance, so a residual left above the tolerance is the base inverse's own.
+STALL_STEP_MM = 0.1 * SOLVER_TOL_MM
+
 
 class ComposedEngine(Engine):
     """``base`` with ``effects``; serialises as the base model (effects go in "effects")."""
@@ -72,15 +76,21 @@ class ComposedEngine(Engine):
         q = res.q
         iters = np.zeros(len(p), dtype=int)
         resid = np.linalg.norm(self.forward(q, rr, context) - p, axis=1)
+        todo = resid >= SOLVER_TOL_MM
         for _ in range(SOLVER_MAX_ITER):
-            todo = resid >= SOLVER_TOL_MM
             if not todo.any():
                 break
             sub = _subset_context(context, todo, len(p))
             d = self.displacement(q[todo], rr[todo], sub)
-            q[todo] = self.base.inverse(p[todo] - d, rr[todo], sub).q
+            q_new = self.base.inverse(p[todo] - d, rr[todo], sub).q
+            step = np.linalg.norm(q_new - q[todo], axis=1)
+            q[todo] = q_new
             iters[todo] += 1
             resid[todo] = np.linalg.norm(self.forward(q[todo], rr[todo], sub) - p[todo], axis=1)
+            # done when on target, or when the fixed point stopped moving (what is left is
+            # the base inverse's own residual, reported as it is)
+            idx = np.flatnonzero(todo)
+            todo[idx[(resid[idx] < SOLVER_TOL_MM) | (step < STALL_STEP_MM)]] = False
         return InverseResult(q, resid, iters)
 
     def model_to_dict(self) -> dict:
