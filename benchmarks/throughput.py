@@ -52,8 +52,8 @@ elif case == "correct":
     if code:
         sys.exit(f"postproc correct failed with exit code {code}")
 dt = time.perf_counter() - t0
-peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-print(json.dumps({"seconds": dt, "peak_mb": peak_mb}))
+ru = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"seconds": dt, "cpu_seconds": ru.ru_utime + ru.ru_stime, "peak_mb": ru.ru_maxrss / 1024.0}))
 """
 
 
@@ -109,10 +109,11 @@ def main() -> None:
             runs = [run_case(case, src, Path(tmp) / f"out_{case}.nc", args.calibration)
                     for _ in range(args.repeats)]
             secs = statistics.median(r["seconds"] for r in runs)
+            cpu = statistics.median(r["cpu_seconds"] for r in runs)
             peak = max(r["peak_mb"] for r in runs)
             results[case] = n / secs
             print(f"{label:34s} {n / secs:12,.0f} lines/s   peak RSS {peak:7.1f} MB   "
-                  f"(median of {args.repeats}: {secs:.2f} s)")
+                  f"(median of {args.repeats}: {secs:.2f} s wall, {cpu:.2f} s CPU)")
         print(f"ratio (c)/(b)  = {results['correct'] / results['lex']:.2f}   (target >= 0.3)")
         print(f"ratio (c)/(b') = {results['correct'] / results['scan']:.2f}")
         print(f"ratio (c)/(a)  = {results['correct'] / results['copy']:.3f}")

@@ -157,8 +157,8 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
 
     Example:
 
+    \b
         postproc correct samples/pocket.nc -c calibrations/s500_static.json -o pocket_corrected.nc
-
         postproc correct samples/g54_g43.ngc -c calibrations/s500_static.json \\
             --offset G54=X100,Y80,Z40 --tool-length 1=100 -o part_corrected.ngc
     """

@@ -28,8 +28,8 @@ def diff(original, corrected, as_json, show_all, offset, tool_length):
 
     Example:
 
+    \b
         postproc diff samples/pocket.nc pocket_corrected.nc
-
         postproc diff samples/g54_g43.ngc part_corrected.ngc --offset G54=X100,Y80,Z40 --tool-length 1=100 --json
     """
     from postproc.cli.correct import build_setup

@@ -61,18 +61,27 @@ class ProgramPath:
 _LINE_RE = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)|[^\r\n]+$")
 
 
+PROGRAM_SUFFIXES = {".nc", ".ngc", ".tap", ".gcode", ".cnc", ".iso", ".mpf", ".txt", ".out"}
+
+
+def _looks_like_path(text: str) -> bool:
+    if any(c in text for c in "\r\n \t"):
+        return False
+    return os.sep in text or Path(text).suffix.lower() in PROGRAM_SUFFIXES or Path(text).is_file()
+
+
 def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
     """``(path_or_None, iterator of lines with endings)`` for a path or G-code text."""
-    if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source
-                                          and "\r" not in source and Path(source).is_file()):
+    if isinstance(source, os.PathLike) or (isinstance(source, str) and _looks_like_path(source)):
         path = str(source)
 
         def gen():
             try:
-                with open(path, encoding="utf-8", errors="surrogateescape", newline="") as fh:
-                    yield from fh
+                fh = open(path, encoding="utf-8", errors="surrogateescape", newline="")
             except OSError as exc:
                 raise PostprocError(f"cannot read program: {exc.strerror}", path=path) from None
+            with fh:
+                yield from fh
 
         return path, gen()
     return None, iter(_LINE_RE.findall(str(source)))

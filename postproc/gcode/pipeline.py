@@ -249,23 +249,30 @@ class Corrector:
         return "; ".join(parts)
 
     # -- one chunk ---------------------------------------------------------------------
-    def _chunk(self, entries: list, write) -> None:
+    def _chunk(self, entries: list, write_out) -> None:
         moves: list[Move] = [e[1] for e in entries if e[1] is not None]
         targets = np.zeros((0, 3))
         plans: dict[int, object] = {}
         if moves:
             targets, plans = self._plan(moves)
         targets = targets.tolist()
+        out: list[str] = []  # the chunk's text, written at once
+        write = out.append
+        emit_move = self._emit_move
+        get_plan = plans.get
         k = 0
+        passed = 0
         for line, mv, motion_word, prog_motion in entries:
             if mv is None:
                 write(line)
-                self.report.lines_out += 1
+                passed += 1
                 if motion_word:
                     self.emitted_motion = prog_motion
                 continue
-            self._emit_move(line, mv, targets[k], plans.get(k), write)
+            emit_move(line, mv, targets[k], get_plan(k), write)
             k += 1
+        self.report.lines_out += passed
+        write_out("".join(out))
 
     def _plan(self, moves: list[Move]):
         M = len(moves)
