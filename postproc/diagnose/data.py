@@ -12,6 +12,10 @@ from postproc.effects.base import DIR_COLUMNS
 # this many decimals (mm, or the context column's own unit): text files round-trip
 # numbers far finer than this, distinct points differ by far more.
 REPEAT_DECIMALS = 6
+# Rows at the same point whose times differ by at most this (seconds, between
+# consecutive shots) are repeats: warm-up drifts have time constants of tens of
+# minutes, so a minute moves the machine by a few percent of the drift at most.
+REPEAT_TIME_S = 60.0
 
 
 @dataclass
@@ -73,11 +77,26 @@ class Dataset:
                             path=",".join(self.paths))
 
     def repeat_groups(self) -> np.ndarray:
-        """(N,) group id: rows with the same commanded point, tool vector and context."""
-        cols = [self.q, self.r] + [v[:, None] for _, v in sorted(self.ctx.items())]
+        """(N,) group id: rows with the same commanded point, tool vector and context.
+
+        Time ``t`` is compared with a tolerance: shots at one point a few seconds
+        apart are repeats (REPEAT_TIME_S).
+        """
+        cols = [self.q, self.r] + [v[:, None] for k, v in sorted(self.ctx.items()) if k != "t"]
         key = np.round(np.hstack(cols), REPEAT_DECIMALS)
         _, inverse = np.unique(key, axis=0, return_inverse=True)
-        return inverse.ravel()
+        groups = inverse.ravel()
+        if "t" not in self.ctx or len(self) == 0:
+            return groups
+        t = self.ctx["t"]
+        order = np.lexsort((t, groups))
+        new = np.ones(len(order), dtype=bool)
+        same = groups[order][1:] == groups[order][:-1]
+        close = np.diff(t[order]) <= REPEAT_TIME_S
+        new[1:] = ~(same & close)
+        out = np.empty(len(self), dtype=int)
+        out[order] = np.cumsum(new) - 1
+        return out
 
     def place(self, i: int) -> str:
         src = "" if self.sources is None else str(self.sources[i])
