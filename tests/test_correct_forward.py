@@ -1,5 +1,6 @@
 """Corrected programs pushed through the forward model land on the nominal path."""
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +9,8 @@ from scipy.spatial import cKDTree
 
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine
+from postproc.gcode.interp import Interpreter
+from postproc.gcode.lexer import split_lines
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -74,12 +77,26 @@ def _polyline_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return best
 
 
+def _first_known_line(text: str, setup: Setup) -> int:
+    """First line after which every axis has been positioned (before it, the machine's
+    position is unknown and so is the path)."""
+    interp = Interpreter(setup)
+    for i, line in enumerate(split_lines(text), 1):
+        interp.feed_line(i, line)
+        if not any(math.isnan(v) for v in interp.state.pos):
+            return i
+    return 10**9
+
+
 def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
     """Largest distance between the actual path of ``corrected`` and the nominal path
-    of ``original``, both ways (feed moves and rapid end points)."""
-    nominal = program_path(original, setup, max_step_mm=step).points_mm
+    of ``original``, both ways (feed moves and rapid end points, from the first point
+    where the machine position is known)."""
+    nom = program_path(original, setup, max_step_mm=step)
+    nominal = nom.points_mm[nom.lineno >= _first_known_line(original, setup)]
     pp = program_path(corrected, setup, max_step_mm=step)
-    actual = engine.forward(pp.points_mm - pp.tool_mm, pp.tool_mm, pp.context)
+    keep = pp.lineno >= _first_known_line(corrected, setup)
+    actual = engine.forward(pp.points_mm - pp.tool_mm, pp.tool_mm, pp.context)[keep]
     there = _polyline_distance(actual, nominal).max()
     back = _polyline_distance(nominal, actual).max()
     return float(max(there, back))
@@ -166,3 +183,29 @@ def test_modal_arc_after_a_linearised_arc_gets_its_motion_word_back():
     assert rep.arcs_kept == 1
     assert out.splitlines()[-2].startswith("G2 X")
     assert landing_error(text, out, eng, Setup()) <= TOL * 1.01
+
+
+CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
+
+
+def _corpus_files():
+    if not CORPUS.is_dir():
+        return []
+    return sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in {".nc", ".ngc", ".tap", ".gcode"})
+
+
+@pytest.mark.parametrize("path", _corpus_files(), ids=lambda p: p.name)
+def test_corpus_programs_land_on_their_nominal_path(path):
+    from test_correct_roundtrip import ALL_OFFSETS, ALL_TOOLS
+
+    from postproc.errors import PostprocError
+
+    setup = Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS)
+    eng = StaticEngine(G_BAD, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+    text = path.read_bytes().decode("utf-8", errors="surrogateescape")
+    try:
+        out, _ = correct_text(text, eng, setup, CorrectOptions())
+    except PostprocError:
+        pytest.skip("refused (see the round-trip test for why)")
+    # fine sampling: the nominal polyline must follow 0.1 mm arcs to well under 1 um
+    assert landing_error(text, out, eng, setup, step=0.01) <= TOL * 1.01
