@@ -132,3 +132,22 @@ def test_interval_calibration_is_refitted_with_its_own_partition(walk):
     res = run(args[1:], walk)
     assert res.exit_code == 0, res.output
     assert load_calibration(args[args.index("-o") + 1]).effects[0]["name"] == "backlash:X"
+
+
+def test_fixed_ranks_effects_on_the_calibration_as_it_is(tmp_path, monkeypatch):
+    from postproc.calibration.calfile import save_calibration
+    from postproc.diagnose.synthetic import static_machine
+
+    monkeypatch.chdir(tmp_path)
+    # calibrated cold (the true geometry), measured while warming up
+    save_calibration("cold.json", static_machine())
+    meas, (truth,) = make_data([(SPECS["thermal:t"], 3.0)], seed=31)
+    Path("warm.csv").write_text(format_measurements(meas))
+    res = run(["check", "warm.csv", "-c", "cold.json", "--fixed", "--json", "--folds", "4"], tmp_path)
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert "held fixed" in data["cv_note"]
+    assert data["cv_rms_mm"] == pytest.approx(data["rms_mm"])  # nothing refitted
+    assert data["suggestions"][0]["effect"] == "thermal:t"
+    assert data["suggestions"][0]["config"]["tau_s"] == pytest.approx(truth.config["tau_s"], rel=0.3)
+    assert data["cv_rms_after_mm"] < 1.15 * data["noise_floor_mm"]

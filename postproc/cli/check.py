@@ -18,9 +18,12 @@ import click
               help="Cross-validation folds (repeated points stay together).")
 @click.option("--max-effects", "max_effects", type=click.IntRange(0, 10), default=4, show_default=True,
               help="Most effects the greedy search adds (0: rank candidates, add none).")
+@click.option("--fixed", is_flag=True,
+              help="Hold the calibration as it is (no refit of its method): rank effects on its own "
+                   "residual. For checking a calibration made from other data (e.g. axis error tables).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
-def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, tool_vector):
+def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, tool_vector):
     """Check a calibration against measurements: residuals, noise floor, where it
     fails and which physical effect is missing.
 
@@ -55,7 +58,8 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, tool_ve
         for d in data:
             if not d.has_tool_columns:
                 d.r[:] = r
-    res = run_check(cal, data, list(files), sigma_mm=sigma, folds=folds, max_selected=max_effects)
+    res = run_check(cal, data, list(files), sigma_mm=sigma, folds=folds, max_selected=max_effects,
+                    fixed=fixed)
     if plot_dir:
         from postproc.diagnose.plots import write_plots
 

@@ -16,9 +16,9 @@ import numpy as np
 
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import base_model
+from postproc.diagnose.models import Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
-from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Ranking, rank_effects
+from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Candidate, Ranking, rank_effects
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
@@ -144,8 +144,13 @@ def refit_options(engine) -> dict:
 
 
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
-              candidates: list[str] | None = None, max_selected: int = MAX_SELECTED) -> CheckResult:
-    """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``."""
+              candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
+              fixed: bool = False) -> CheckResult:
+    """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``.
+
+    ``fixed``: hold the calibration (with its effects) as it is and rank effects on its
+    residual, instead of refitting its method on the training folds.
+    """
     ds = Dataset.from_measurements(data)
     engine = cal.engine
     base_engine = engine.base if isinstance(engine, ComposedEngine) else engine
@@ -156,11 +161,20 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     ranking, note = None, ""
     options = refit_options(base_engine)
     try:
-        model = base_model(cal.method, options, engine=base_engine)
+        if fixed:
+            model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual")
+        else:
+            model = base_model(cal.method, options, engine=base_engine)
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
-        ranking = rank_effects(model, ds, existing, names, fold_masks, max_selected=max_selected)
+        if fixed:
+            held = {e.name for e in existing}
+            ranking = rank_effects(model, ds, [], [n for n in names if n not in held], fold_masks,
+                                   max_selected=max_selected)
+            ranking.in_model[:0] = [Candidate(e.name, "in model", "already in the calibration") for e in existing]
+        else:
+            ranking = rank_effects(model, ds, existing, names, fold_masks, max_selected=max_selected)
         note = f"{len(fold_masks)} folds; {model.description}"
     except PostprocError as exc:
         note = f"cross-validation not possible: {exc.message}"

@@ -209,6 +209,10 @@ class Fixed(BaseModel):
         self.engine = engine
         self.description = f"{engine.method} calibration held fixed ({why})"
 
+    def span(self, ds: Dataset) -> np.ndarray:
+        """Nothing is refitted: only an effect that is identically zero is redundant."""
+        return np.zeros((3 * len(ds), 0))
+
     def fit(self, ds: Dataset, effects: list[Effect]) -> Fitted:
         resid = ds.m - self.engine.forward(ds.q, ds.r, ds.ctx)
         return Fitted(self.engine, _lstsq_effects(effects, ds, resid), [])

@@ -129,8 +129,13 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
             explained = (sse0 - sse1) / base_sse if base_sse > 0 else 0.0
             p = paired_p_value(e0, e1, groups)
             ok = np.isfinite(p) and p < SIGNIFICANCE_P and explained >= MIN_EXPLAINED
-            results.append(Candidate(name, "significant" if ok else "not significant",
-                                     "" if np.isfinite(p) else "too few points for a test",
+            if not np.isfinite(p):
+                why = "too few points for a test"
+            elif p < SIGNIFICANCE_P and not ok:
+                why = f"explains less than {MIN_EXPLAINED:.0%}"
+            else:
+                why = ""
+            results.append(Candidate(name, "significant" if ok else "not significant", why,
                                      explained, rms3(e1), p, rnd, resid=e1))
         results.sort(key=lambda c: -c.explained)
         _fit_reported(model, ds, selected_effects, results[:N_FITTED_REPORTED], joint)

@@ -12,6 +12,10 @@ from postproc.effects.base import AXES
 # floor means the model's form is wrong, not just incomplete.
 FAR_ABOVE_FLOOR = 2.0
 
+# The calibration as it is fits the points this much worse than its method refitted
+# on held-out folds: it no longer describes the machine these points measured.
+WORSE_THAN_REFIT = 1.2
+
 # A reversal between +1 and -1 approaches larger than this many standard errors is
 # marked as a finding (3 sigma: one false mark in ~700 clean axes).
 REVERSAL_FLAG_SIGMAS = 3.0
@@ -47,6 +51,10 @@ def format_report(res: CheckResult) -> list[str]:
     if rk is not None:
         ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
         out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
+        if s["rms_mm"] > WORSE_THAN_REFIT * rk.base_cv_rms_mm:
+            out.append(f"  the calibration fits these points worse ({um(s['rms_mm'])} um) than its method refitted "
+                       "to them: the machine changed since it was calibrated, or the calibration came from "
+                       "other data; --fixed ranks the effects on the calibration as it is")
     else:
         out.append(res.cv_note)
     out += ["", "where it fails:"] + _where(res)
@@ -113,8 +121,9 @@ def _ranking(res: CheckResult) -> list[str]:
             out.append(f"  stopped at {len(sug)} effects (--max-effects); next: {nxt.name} explains "
                        f"{nxt.explained * 100:.1f} % (p = {nxt.p_value:.2g})")
         else:
-            out.append(f"  next best, not significant: {nxt.name} explains {nxt.explained * 100:.1f} % "
-                       f"(p = {nxt.p_value:.2g})")
+            why = f"; {nxt.reason}" if nxt.reason else ""
+            out.append(f"  next best, not suggested: {nxt.name} explains {nxt.explained * 100:.1f} % "
+                       f"(p = {nxt.p_value:.2g}{why})")
     elif last and last[0].status != "significant":
         out.append("  best tried: " + ", ".join(
             f"{c.name} {c.explained * 100:+.1f} % (p = {c.p_value:.2g})" for c in last[:3]))
