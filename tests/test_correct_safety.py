@@ -215,3 +215,18 @@ def test_calibration_saved_in_wrong_scale_is_refused_by_max_correction(tmp_path)
     assert r.exit_code == EXIT_SAFETY
     assert "exceeds --max-correction" in r.output
     assert not (tmp_path / "o.nc").exists()
+
+
+def test_output_gets_a_normal_file_mode_and_a_missing_directory_is_an_input_error(tmp_path):
+    import os
+    import stat
+
+    out = tmp_path / "o.nc"
+    correct_file(ROOT / "samples" / "pocket.nc", out, static(), Setup())
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~umask
+    r = run(["correct", str(ROOT / "samples" / "pocket.nc"), "-c", CAL, "-o", str(tmp_path / "no" / "o.nc")],
+            tmp_path)
+    assert r.exit_code == EXIT_INPUT
+    assert "cannot write the output" in r.output

@@ -659,12 +659,25 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
     """
     path, lines = iter_source_lines(Path(source))
     out = Path(output)
-    fd, tmp = tempfile.mkstemp(dir=out.parent if str(out.parent) else ".", prefix=f".{out.name}.", suffix=".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise PostprocError(f"cannot write the output here: {exc.strerror}", path=str(out),
+                            hint="check that the directory exists and is writable") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
             c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
                           calibration_name=calibration_name, calibration_sha256=calibration_sha256)
             report = c.run(lines, fh.write, progress=progress)
+        # mkstemp makes the file private (0600); give it the mode a new file would get
+        # (or keep the mode of the file it replaces)
+        try:
+            mode = out.stat().st_mode & 0o777
+        except OSError:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(tmp, mode)
         os.replace(tmp, out)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
