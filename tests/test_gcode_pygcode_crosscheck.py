@@ -25,7 +25,7 @@ def theirs(line: str):
     parsed = pygcode.Line(line.rstrip("\r\n"))
     if parsed.block is None:
         return []
-    words = list(parsed.block.words) + list(parsed.block.modal_params)
+    words = list(parsed.block.words)
     return sorted((w.letter.upper(), round(float(w.value), 9)) for w in words)
 
 
