@@ -11,6 +11,9 @@ import math
 
 from postproc import __version__
 
+# half of the last written digit, by number of decimals
+HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 16)}
+
 HEADER_TAG = "(postproc "
 HEADER_MARK = " corrected "
 

@@ -36,6 +36,7 @@ from postproc.errors import (
     SolverError,
 )
 from postproc.gcode import emit
+from postproc.gcode.fastlane import FastMove, emit_fast, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
@@ -50,8 +51,7 @@ DEFAULT_CHUNK_LINES = 20_000
 ARC_CHECK_STEP_RAD = math.pi / 16
 ARC_CHECK_MIN_SAMPLES = 9
 MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
-# half of the last written digit, by number of decimals
-HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 16)}
+HALF_UNIT = emit.HALF_UNIT
 
 
 @dataclass
@@ -63,6 +63,7 @@ class CorrectOptions:
     force: bool = False
     added: list = field(default_factory=list)
     chunk_lines: int = DEFAULT_CHUNK_LINES
+    fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
 
 
 @dataclass
@@ -208,11 +209,22 @@ class Corrector:
         write(header)
         self.report.lines_out += 1
 
+        interp = self.interp
+        use_fast = self.linear_exact and self.opt.fast_lane
+        allowed = False
+
         def feed(line: str) -> None:
-            nonlocal lineno
-            mv = self.interp.feed_line(lineno, line)
-            entries.append((line, mv, self.interp.motion_word, self.interp.state.motion))
+            nonlocal lineno, allowed
+            if allowed:
+                fm = read_fast(interp, lineno, line)
+                if fm is not None:
+                    entries.append((line, fm, interp.motion_word, interp.state.motion))
+                    lineno += 1
+                    return
+            mv = interp.feed_line(lineno, line)
+            entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
+            allowed = use_fast and state_allows(interp)
 
         for line in head:
             feed(line)
@@ -435,6 +447,10 @@ class Corrector:
         d = self._decimals.get(mv.unit)
         if d is None:
             d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
+        if type(mv) is FastMove:
+            if emit_fast(self, line, mv, target, write, d):
+                return
+            mv = mv.to_move(line)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
             edits, added = self._axis_words(mv, target, self.qe, d)

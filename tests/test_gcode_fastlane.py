@@ -1,0 +1,49 @@
+"""The fast lane gives byte for byte the output of the general path."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from postproc.engine.static import StaticEngine
+from postproc.errors import PostprocError
+from postproc.gcode.path import Setup
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+
+ROOT = Path(__file__).parents[1]
+CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
+G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
+OFFSETS = {n: (0.0, 0.0, 0.0) for n in ["G54", "G55", "G56", "G57", "G58", "G59"]}
+
+
+def _files():
+    files = sorted(p for p in (ROOT / "samples").glob("*") if p.suffix in {".nc", ".ngc"})
+    files += sorted((ROOT / "tests" / "cases").glob("*.nc"))
+    if CORPUS.is_dir():
+        files += sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in {".nc", ".ngc", ".tap"})
+    return files
+
+
+@pytest.mark.parametrize("path", _files(), ids=lambda p: p.name)
+def test_fast_lane_output_equals_general_path(path):
+    eng = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+    setup = Setup(offsets=OFFSETS | {"G54": (100.0, 80.0, 40.0)}, tool_lengths={t: 50.0 + t for t in range(100)})
+    text = path.read_bytes().decode("utf-8", errors="surrogateescape")
+    outs = []
+    for fast in (True, False):
+        try:
+            outs.append(correct_text(text, eng, setup, CorrectOptions(fast_lane=fast))[0])
+        except PostprocError as exc:
+            outs.append(str(exc))
+    assert outs[0] == outs[1]
+
+
+def test_fast_lane_handles_lower_case_spacing_and_added_words():
+    eng = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+    text = "g0 x10 y10 z10\ny20\nX 30 Y 5\ng1x40f100\nG2 X50 Y15 I5 J5\nG1 X60\nY20\n"
+    a = correct_text(text, eng, Setup(), CorrectOptions(fast_lane=True))[0]
+    b = correct_text(text, eng, Setup(), CorrectOptions(fast_lane=False))[0]
+    assert a == b
+    # Y moved, so X (squareness) gets a word too, in the line's own case and spacing
+    assert a.splitlines()[2].startswith("y20.0140x9.9")
+    assert a.splitlines()[-1].startswith("Y20.0140X")  # no blanks in the line: none added
