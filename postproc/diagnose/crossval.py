@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import BaseModel
+from postproc.diagnose.models import BaseModel, effects_basis, stacked
 from postproc.effects import Effect
 from postproc.effects.linalg import solve_ls
 
@@ -63,12 +63,18 @@ class JointCV:
             fitted = model.fit(train, prepared)
             self.items.append((test, train, held, prepared, train.m - fitted.predict(train),
                                held.m - fitted.predict(held)))
+        self.spans = [_held_span(model, it[2], it[3]) for it in self.items]
 
     def residuals(self) -> np.ndarray:
         out = np.empty_like(self.ds.m)
         for test, *_, r_held in self.items:
             out[test] = r_held
         return out
+
+    def project_out(self, delta: np.ndarray) -> np.ndarray | None:
+        """``delta`` (N, 3) with, in each held-out fold, its part along the fitted model's
+        own error directions removed (see rank.held_out_p_value); None if unknown."""
+        return _project_fold(self.items, self.spans, delta)
 
     def with_effect(self, effect: Effect) -> np.ndarray:
         out = np.empty_like(self.ds.m)
@@ -92,16 +98,23 @@ class FoldCache:
     def __init__(self, model: BaseModel, ds: Dataset, effects: list[Effect], folds: list[np.ndarray]):
         self.ds = ds
         self.items = []
+        spans = []
         for test in folds:
             train, held = ds.subset(~test), ds.subset(test)
-            fitted = model.fit(train, model.prepare(train, effects))
+            prepared = model.prepare(train, effects)
+            fitted = model.fit(train, prepared)
             self.items.append((test, train, held, train.m - fitted.predict(train), held.m - fitted.predict(held)))
+            spans.append(_held_span(model, held, prepared))
+        self.spans = spans
 
     def residuals(self) -> np.ndarray:
         out = np.empty_like(self.ds.m)
         for test, _, _, _, r_held in self.items:
             out[test] = r_held
         return out
+
+    def project_out(self, delta: np.ndarray) -> np.ndarray | None:
+        return _project_fold(self.items, self.spans, delta)
 
     def with_effect(self, effect: Effect) -> np.ndarray:
         out = np.empty_like(self.ds.m)
@@ -111,6 +124,34 @@ class FoldCache:
             coef = solve_ls(B.reshape(-1, B.shape[2]), r_train.reshape(-1))
             out[test] = r_held - e.basis(held.q, held.r, held.ctx) @ coef
         return out
+
+
+def _held_span(model: BaseModel, held: Dataset, prepared: list[Effect]) -> np.ndarray | None:
+    """Columns (3n, m) on the held-out rows along which the fitted model's own error
+    lies: the base's span and the selected effects. None when the base has no
+    explicit span (methods refitted through their fitter)."""
+    base = model.span(held)
+    if base is None:
+        return None
+    return np.hstack([base, stacked(effects_basis(prepared, held))])
+
+
+def _project_out(span: np.ndarray | None, delta: np.ndarray) -> np.ndarray | None:
+    if span is None:
+        return None
+    y = delta.reshape(-1)
+    if span.shape[1] == 0:
+        return delta.copy()
+    return (y - span @ solve_ls(span, y)).reshape(delta.shape)
+
+
+def _project_fold(items, spans, delta: np.ndarray) -> np.ndarray | None:
+    if any(sp is None for sp in spans):
+        return None
+    out = np.empty_like(delta)
+    for (test, *_), span in zip(items, spans, strict=True):
+        out[test] = _project_out(span, delta[test])
+    return out
 
 
 def rms3(resid: np.ndarray) -> float:

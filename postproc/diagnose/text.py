@@ -102,7 +102,7 @@ def _ranking(res: CheckResult) -> list[str]:
     out = [f"missing effects (each added to the model and cross-validated; significant at p < {SIGNIFICANCE_P:g}):"]
     sug = res.suggestions
     last = rk.rounds[-1] if rk.rounds else []
-    if not sug and last and last[0].status == "significant":
+    if not sug and any(c.status == "significant" for c in last):
         out.append("  none added (--max-effects 0); significant candidates, best first:")
         out += [f"    {c.name}: explains {c.explained * 100:.1f} % (p = {c.p_value:.2g})"
                 for c in last if c.status == "significant"]
@@ -116,7 +116,7 @@ def _ranking(res: CheckResult) -> list[str]:
         out.append(f"     add it: {sgg['command']}" if sgg["command"] else
                    f"     the {res.method} method cannot be refitted from points: add it to a static fit")
     if last and sug:
-        nxt = last[0]
+        nxt = next((c for c in last if c.status == "significant"), last[0])
         if nxt.status == "significant":
             out.append(f"  stopped at {len(sug)} effects (--max-effects); next: {nxt.name} explains "
                        f"{nxt.explained * 100:.1f} % (p = {nxt.p_value:.2g})")
@@ -124,7 +124,7 @@ def _ranking(res: CheckResult) -> list[str]:
             why = f"; {nxt.reason}" if nxt.reason else ""
             out.append(f"  next best, not suggested: {nxt.name} explains {nxt.explained * 100:.1f} % "
                        f"(p = {nxt.p_value:.2g}{why})")
-    elif last and last[0].status != "significant":
+    elif last:
         out.append("  best tried: " + ", ".join(
             f"{c.name} {c.explained * 100:+.1f} % (p = {c.p_value:.2g})" for c in last[:3]))
     if sug and res.noise.rms_mm:
