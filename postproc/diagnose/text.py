@@ -124,6 +124,8 @@ def _ranking(res: CheckResult) -> list[str]:
             why = f"; {nxt.reason}" if nxt.reason else ""
             out.append(f"  next best, not suggested: {nxt.name} explains {nxt.explained * 100:.1f} % "
                        f"(p = {nxt.p_value:.2g}{why})")
+            if nxt.effect is not None and nxt.reason:
+                out.append(f"     {nxt.effect.describe()}")
     elif last:
         out.append("  best tried: " + ", ".join(
             f"{c.name} {c.explained * 100:+.1f} % (p = {c.p_value:.2g})" for c in last[:3]))
