@@ -17,6 +17,8 @@ from postproc.gcode.interp import _GKEYS, Move
 from postproc.gcode.state import LINE, MOTION_CODES, RAPID
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2, "x": 0, "y": 1, "z": 2}
+# axes a line does not name, by the bit mask of those it names
+_MISSING = {m: tuple(k for k in range(3) if not m & (1 << k)) for m in range(8)}
 _LETTER = "XYZ"
 _FULLMATCH = lexer._FAST_LINE.fullmatch
 _FINDALL = lexer._WORD_RUN.findall
@@ -26,9 +28,9 @@ class FastMove:
     """What the planner and the emitter need of a plain straight move."""
 
     __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "spans", "motion_word", "rotary",
-                 "arc", "arc_absolute", "feed")
+                 "arc", "arc_absolute", "feed", "missing")
 
-    def __init__(self, lineno, kind, q0, q1, r, shift, unit, spans, motion_word, arc_absolute, feed):
+    def __init__(self, lineno, kind, q0, q1, r, shift, unit, spans, motion_word, arc_absolute, feed, missing):
         self.lineno = lineno
         self.kind = kind
         self.q0 = q0
@@ -42,6 +44,7 @@ class FastMove:
         self.arc = None
         self.arc_absolute = arc_absolute
         self.feed = feed
+        self.missing = missing  # axes the line does not name
 
     def to_move(self, line: str) -> Move:
         """The general Move of the same line (for the rare cases the fast emitter hands on)."""
@@ -114,7 +117,7 @@ def read_fast(interp, lineno: int, line: str) -> FastMove | None:
         st.feed = feed
     interp.motion_word = motion_word
     return FastMove(lineno, motion, q0, tuple(q1), interp._fast_r, shift, unit, spans, motion_word,
-                    st.arc_absolute, st.feed)
+                    st.arc_absolute, st.feed, _MISSING[seen & 7])
 
 
 def state_allows(interp) -> bool:
@@ -132,38 +135,35 @@ def emit_fast(corrector, line: str, fm: FastMove, target, write, decimals: int) 
     qe = corrector.qe
     shift, unit = fm.shift, fm.unit
     half = emit.HALF_UNIT
+    fmt = emit.fmt
     pieces = []
     last = 0
-    present = 0
     edits = 0
     for start, end, k, num, ov in fm.spans:
-        present |= 1 << k
         v = (target[k] - shift[k]) / unit
         dot = num.find(".")
         dout = decimals if dot < 0 or len(num) - dot - 1 <= decimals else len(num) - dot - 1
         if abs(v - ov) < half[dout]:
-            val = ov
+            qe[k] = ov * unit + shift[k]
         else:
             pieces.append(line[last:start])
-            pieces.append(emit.fmt(v, dout))
+            pieces.append(fmt(v, dout))
             last = end
-            val = round(v, dout)
+            qe[k] = round(v, dout) * unit + shift[k]
             edits += 1
-        qe[k] = val * unit + shift[k]
-    if present != 7:
+    if fm.missing:
         added = []
-        for k in range(3):
-            if present & (1 << k) or math.isnan(qe[k]):
-                continue
+        hd = half[decimals]
+        for k in fm.missing:
             t = target[k]
-            if abs(t - qe[k]) / unit < half[decimals]:
+            if abs(t - qe[k]) / unit < hd or math.isnan(qe[k]):
                 continue
             v = (t - shift[k]) / unit
-            added.append(_LETTER[k] + emit.fmt(v, decimals))
+            added.append(_LETTER[k] + fmt(v, decimals))
             qe[k] = round(v, decimals) * unit + shift[k]
         if added:
             sep = " " if (" " in line or "\t" in line) else ""
-            text = "".join(sep + w for w in added)
+            text = sep + sep.join(added)
             at = fm.spans[-1][1]
             pieces.append(line[last:at])
             pieces.append(text.lower() if line.islower() else text)
