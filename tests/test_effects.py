@@ -145,3 +145,13 @@ def test_untestable_reasons_name_what_is_missing():
     assert "tool vectors vary by only" in get_effect("abbe:tilt").untestable_reason(q, r, {})
     assert "distinct Y positions" in get_effect("periodic:Y").untestable_reason(
         np.repeat(q[:5], 8, axis=0), r, {})
+
+
+def test_too_little_variation_is_untestable():
+    q = RNG.uniform(0, 300, (30, 3))
+    load = np.zeros(30)
+    load[:2] = 500.0
+    why = get_effect("load:load").untestable_reason(q, None, {"load": load})
+    assert "varies in only 2 row(s)" in why
+    load[:5] = 500.0
+    assert get_effect("load:load").untestable_reason(q, None, {"load": load}) is None

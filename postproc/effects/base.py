@@ -34,6 +34,11 @@ DIR_COLUMNS = ("dirx", "diry", "dirz")
 MIN_RELATIVE_SPREAD = 1e-9
 
 
+# A context column must differ from its most common value in at least this many rows:
+# an effect fitted on one or two rows is those rows' noise.
+MIN_ROWS_VARIED = 3
+
+
 def axis_index(letter: str) -> int:
     return AXES.index(letter)
 
@@ -162,6 +167,11 @@ class Effect:
             v = np.asarray(ctx[c], dtype=float)
             if np.ptp(v) <= MIN_RELATIVE_SPREAD * max(1.0, float(np.max(np.abs(v)))):
                 return f"{c} does not vary in the data (always {v.flat[0]:g})"
+            values, counts = np.unique(v, return_counts=True)
+            off_mode = len(v) - int(counts.max())
+            if off_mode < MIN_ROWS_VARIED:
+                return (f"{c} varies in only {off_mode} row(s) (always {values[np.argmax(counts)]:g} "
+                        f"otherwise): too little variation to test")
         return None
 
     def prepare(self, q, r, ctx, resid) -> Effect:
