@@ -47,15 +47,14 @@ class Backlash(Effect):
         return f"reversal (backlash) of {self.target}: {p['b_mm'] * 1000:+.2f} um"
 
     def untestable_reason(self, q, r, ctx) -> str | None:
-        why = super().untestable_reason(q, r, ctx)
-        if why:
-            return why
+        if self.missing(ctx):
+            return super().untestable_reason(q, r, ctx)
         d = np.asarray(ctx[self.needs[0]], dtype=float)
         plus, minus = int(np.sum(d > 0)), int(np.sum(d < 0))
-        if min(plus, minus) < MIN_ROWS_PER_SIDE:
+        if 0 < min(plus, minus) < MIN_ROWS_PER_SIDE:
             return (f"{self.target} was approached {plus} times from + and {minus} from -: "
                     f"a reversal needs {MIN_ROWS_PER_SIDE}+ each (approach the points from both sides)")
-        return None
+        return super().untestable_reason(q, r, ctx)
 
     def basis(self, q, r, ctx) -> np.ndarray:
         d = context_column(ctx, self.needs[0], len(q), self.name)
