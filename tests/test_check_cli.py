@@ -151,3 +151,14 @@ def test_fixed_ranks_effects_on_the_calibration_as_it_is(tmp_path, monkeypatch):
     assert data["suggestions"][0]["effect"] == "thermal:t"
     assert data["suggestions"][0]["config"]["tau_s"] == pytest.approx(truth.config["tau_s"], rel=0.3)
     assert data["cv_rms_after_mm"] < 1.15 * data["noise_floor_mm"]
+
+
+def test_effect_with_axis_tables_is_a_usage_error(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    tables = Path(__file__).parents[1] / "calibrations" / "s500_tables.csv"
+    if not tables.exists():
+        pytest.skip("no S500 tables in calibrations/")
+    res = run(["fit", str(tables), "--effect", "thermal:t", "-o", "x.json"], tmp_path)
+    assert res.exit_code == 2
+    assert "--effect is fitted from point measurements" in res.output
+    assert not Path("x.json").exists()

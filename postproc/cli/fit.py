@@ -73,6 +73,10 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
                                    path=files[kinds.index("measurements")] if "measurements" in kinds else files[0])
         if method not in (None, "parametric"):
             raise click.UsageError("axis error tables make a parametric calibration; drop --method or use parametric")
+        if effects:
+            raise click.UsageError("--effect is fitted from point measurements, not axis error tables; "
+                                   "fit the tables alone, then 'postproc check POINTS -c CAL --fixed' tells "
+                                   "which effect the points show")
         from postproc.engine.parametric_tables import fit_tables
 
         result = fit_tables(list(files), squareness=squareness, **options)
