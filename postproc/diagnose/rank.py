@@ -186,6 +186,8 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         best = next((c for c in results if c.status == "significant"), None)
         if best is None or rnd == max_selected:
             break
+        if best.effect is None:
+            _fit_reported(model, ds, selected_effects, [best], joint)
         selected.append(best)
         selected_effects.append(get_effect(best.name))
         cache = scorer(model, ds, selected_effects, folds)
