@@ -39,7 +39,10 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, 
 
     Example:
 
-        postproc check samples/walkthrough_check.csv -c walkthrough_static.json
+    \b
+        postproc fit samples/walkthrough_points.csv --method static -o walkthrough_static.json
+        postproc check samples/walkthrough_points.csv -c walkthrough_static.json
+        postproc check warm_points.csv -c s500_param.json --fixed --plot plots
     """
     import json
 
