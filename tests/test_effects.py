@@ -23,6 +23,7 @@ ALL_EFFECTS = [
     get_effect("thermal:t", config={"tau_s": 1800.0}, params={"dx_mm": 0.004, "dz_mm": 0.01}),
     get_effect("thermal:temp", params={"kz_mm_per_C": 0.003}),
     get_effect("load:load", params={"cz_mm_per_unit": -2e-5}),
+    get_effect("expansion:temp", params={"ax_per_C": 11.5e-6, "az_per_C": 5e-6}),
     get_effect("abbe:tilt", params={"wx_rad": 2e-5, "wy_rad": -1e-5}),
     get_effect("abbe:Y", params={"wx_rad_per_mm": 5e-8}),
     get_effect("squareness:XY", params={"EC0Y_rad": 3e-5}),

@@ -82,6 +82,7 @@ SPECS = {
     "periodic:Y": {"name": "periodic:Y", "config": {"pitch_mm": 7.7}, "params": {"cos_mm": 0.8, "sin_mm": 0.6}},
     "thermal:t": {"name": "thermal:t", "config": {"tau_s": 2700.0}, "params": {"dx_mm": 0.4, "dz_mm": 1.0}},
     "thermal:temp": {"name": "thermal:temp", "params": {"kx_mm_per_C": 0.3, "kz_mm_per_C": 1.0}},
+    "expansion:temp": {"name": "expansion:temp", "params": {"ax_per_C": 1.0, "ay_per_C": 0.8, "az_per_C": 0.3}},
     "load:load": {"name": "load:load", "params": {"cy_mm_per_unit": 0.3, "cz_mm_per_unit": -1.0}},
     "abbe:tilt": {"name": "abbe:tilt", "params": {"wx_rad": 1.0, "wy_rad": -0.6}},
     "abbe:X": {"name": "abbe:X", "params": {"wy_rad_per_mm": 1.0, "wz_rad_per_mm": 0.5}},

@@ -9,6 +9,7 @@ name                        physical meaning                                need
 ``periodic:X|Y|Z``          lead-screw periodic error at a found pitch      positions
 ``thermal:t``               warm-up drift, first-order lag in time          ``t``
 ``thermal:temp...``         growth linear in temperature (about 20 °C)      ``temp...``
+``expansion:temp...``       axes expanding with temperature (ppm/°C)         ``temp...``
 ``load:load``               zero-point migration per unit table load        ``load``
 ``abbe:tilt|X|Y|Z``         angular error acting through the tool vector    varied ``r``
 ``squareness:XY|XZ|YZ``     out-of-squareness (if the model lacks it)       positions
@@ -37,7 +38,7 @@ from postproc.effects.periodic import Periodic
 from postproc.effects.scale import Scale
 from postproc.effects.squareness import PAIRS, Squareness
 from postproc.effects.straightness import Positioning, Straightness
-from postproc.effects.thermal import ThermalTemperature, ThermalTime
+from postproc.effects.thermal import ThermalExpansion, ThermalTemperature, ThermalTime
 from postproc.errors import CalibrationError
 
 __all__ = ["Effect", "get_effect", "effect_from_dict", "compose", "candidate_names", "KINDS"]
@@ -49,6 +50,7 @@ KINDS = {
     "backlash": (Backlash, tuple(AXES)),
     "periodic": (Periodic, tuple(AXES)),
     "thermal": (None, None),
+    "expansion": (ThermalExpansion, None),
     "load": (Load, None),
     "abbe": (Abbe, ("tilt", *AXES)),
     "squareness": (Squareness, tuple(PAIRS)),
@@ -106,6 +108,7 @@ def candidate_names(context_columns: Iterable[str]) -> list[str]:
     names += ["thermal:t"]
     temps = [c for c in cols if c.startswith("temp")]
     names += [f"thermal:{c}" for c in temps] or ["thermal:temp"]
+    names += [f"expansion:{c}" for c in temps] or ["expansion:temp"]
     names += ["load:load"]
     names += ["abbe:tilt"] + [f"abbe:{a}" for a in AXES]
     names += [f"squareness:{p}" for p in PAIRS]

@@ -111,3 +111,43 @@ class ThermalTemperature(Effect):
 
     def prepare(self, q, r, ctx, resid) -> ThermalTemperature:
         return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})
+
+
+class ThermalExpansion(Effect):
+    """Thermal expansion of the axes with temperature (``expansion:temp``): each axis's
+    positioning error grows with its position from the axis zero and with the
+    temperature's departure from 20 °C (ISO 230-3's nominal differential expansion
+    of scale and part)::
+
+        displacement_j = a_j * (T - 20) * q_j          a in mm/mm per °C (reported in ppm/°C)
+
+    Needs the temperature column; compensable at ``--context temp=°C``.
+    """
+
+    kind = "expansion"
+    meaning = "thermal expansion of the axes: positioning error growing with position and temperature"
+
+    @property
+    def needs(self) -> tuple[str, ...]:
+        return (self.target,)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return ("ax_per_C", "ay_per_C", "az_per_C")
+
+    @property
+    def compensable_reason(self) -> str:
+        return f"compensated at the temperature given as --context {self.target}=°C"
+
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        return (f"thermal expansion per °C of {self.target} "
+                + " ".join(f"{a} {p[k] * 1e6:+.2f} ppm/°C" for a, k in zip("XYZ", self.param_names, strict=True)))
+
+    def basis(self, q, r, ctx) -> np.ndarray:
+        T = context_column(ctx, self.target, len(q), self.name)
+        ref = float(self.config.get("reference_C", REFERENCE_TEMPERATURE_C))
+        return np.einsum("n,nj,jk->njk", T - ref, q, np.eye(3))
+
+    def prepare(self, q, r, ctx, resid) -> ThermalExpansion:
+        return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})
