@@ -47,3 +47,17 @@ def test_fast_lane_handles_lower_case_spacing_and_added_words():
     # Y moved, so X (squareness) gets a word too, in the line's own case and spacing
     assert a.splitlines()[2].startswith("y20.0140x9.9")
     assert a.splitlines()[-1].startswith("Y20.0140X")  # no blanks in the line: none added
+
+
+@pytest.mark.parametrize("line", ["X1(c)Y2\n", "X1\fY2\n", "X1.2.3\n", "X1 )\n", "X1 Y2 #3\n", "X1 Y2;c\n",
+                                  "/X1\n", "X1 Y2 Q3\n", "X1 X2\n", "G2 X1\n", "X1 Y2 M3\n", "G91 X1\n"])
+def test_fast_lane_refuses_anything_but_a_plain_straight_move(line):
+    from postproc.gcode.fastlane import read_fast, state_allows
+    from postproc.gcode.interp import Interpreter
+
+    it = Interpreter(Setup())
+    it.feed_line(1, "G0 X1 Y1 Z1\n")
+    it.feed_line(2, "G0 X2\n")
+    assert state_allows(it)
+    assert read_fast(it, 3, line) is None
+    assert read_fast(it, 3, "N10 G1 X 1 Y-.5 F100") is not None

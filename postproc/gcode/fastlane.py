@@ -20,7 +20,6 @@ _AXIS = {"X": 0, "Y": 1, "Z": 2, "x": 0, "y": 1, "z": 2}
 # axes a line does not name, by the bit mask of those it names
 _MISSING = {m: tuple(k for k in range(3) if not m & (1 << k)) for m in range(8)}
 _LETTER = "XYZ"
-_FULLMATCH = lexer._FAST_LINE.fullmatch
 _FINDALL = lexer._WORD_RUN.findall
 
 
@@ -69,8 +68,6 @@ def read_fast(interp, lineno: int, line: str) -> FastMove | None:
     The caller checks the state conditions (see :func:`state_allows`); nothing is
     changed unless a FastMove is returned.
     """
-    if _FULLMATCH(line) is None:
-        return None
     st = interp.state
     shift = interp._fast_shift
     unit = 25.4 if st.inch else 1.0
@@ -108,7 +105,9 @@ def read_fast(interp, lineno: int, line: str) -> FastMove | None:
                 return None
             motion = MOTION_CODES[key]
             motion_word = True
-    if not spans or motion not in (RAPID, LINE):
+    # findall skips what it cannot read; the positions above assume it skipped nothing,
+    # so anything skipped shows up as text left after the last word
+    if line[pos:].strip(" \t\r\n") or not spans or motion not in (RAPID, LINE):
         return None
     q0 = tuple(st.pos)
     st.pos = q1
