@@ -273,7 +273,9 @@ class Corrector:
         emit_move = self._emit_move
         get_plan = plans.get
         k = 0
-        passed = 0
+        passed = fast = 0
+        dec_mm = _unit_decimals(self.opt, 1.0)
+        dec_in = _unit_decimals(self.opt, MM_PER_INCH)
         for line, mv, motion_word, prog_motion in entries:
             if mv is None:
                 write(line)
@@ -281,9 +283,14 @@ class Corrector:
                 if motion_word:
                     self.emitted_motion = prog_motion
                 continue
-            emit_move(line, mv, targets[k], get_plan(k), write)
+            if type(mv) is FastMove and emit_fast(self, line, mv, targets[k], write,
+                                                  dec_mm if mv.unit == 1.0 else dec_in):
+                fast += 1
+            else:
+                emit_move(line, mv, targets[k], get_plan(k), write)
             k += 1
         self.report.lines_out += passed
+        self.report.moves += fast
         write_out("".join(out))
 
     def _plan(self, moves: list[Move]):
