@@ -176,6 +176,10 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
         return
     if output_dir is None:
         raise click.UsageError("several inputs need --output-dir")
+    names = [Path(src).name for src in inputs]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise click.UsageError(f"several inputs are named {', '.join(dupes)}: their outputs would collide in --output-dir")
     Path(output_dir).mkdir(parents=True, exist_ok=True)
     jobs_list = []
     for src in inputs:
