@@ -71,3 +71,17 @@ def test_the_corpus_is_mostly_corrected_not_refused():
              "never positioned", "is not G-code", "arc end radius", "arc without end point")
     assert all(any(k in msg for k in known) for _, msg in refused), refused
     assert len(ok) >= 10, refused
+
+
+def test_comments_in_any_encoding_are_copied_byte_for_byte(tmp_path):
+    from postproc.gcode.pipeline import correct_file
+
+    raw = ("%\r\n(Карман 60x40, фреза D8)\r\nG21 G90\r\nG0 X10 Y10 Z10 ; подвод\r\nG1 X20 F300\r\n%\r\n")
+    for encoding in ("cp1251", "utf-8"):
+        src = tmp_path / f"prog_{encoding}.nc"
+        src.write_bytes(raw.encode(encoding))
+        out = tmp_path / f"out_{encoding}.nc"
+        correct_file(src, out, IdentityEngine(BIG), Setup())
+        got = out.read_bytes().split(b"\r\n")
+        assert got[1].startswith(b"(postproc ")
+        assert b"\r\n".join(got[:1] + got[2:]) == raw.encode(encoding)
