@@ -77,3 +77,27 @@ def test_diff_of_unrelated_programs_is_an_error():
     b = (ROOT / "samples" / "holes_g91.nc").read_text()
     with pytest.raises(PostprocError):
         compare_programs(a, b)
+
+
+def test_diff_pairs_steps_shorter_than_the_correction():
+    from postproc.engine.static import StaticEngine
+
+    # 0.01 mm steps, 0.2 mm correction: the nearest corrected end point of a step is
+    # usually another step's; pairing must still find each step's own line
+    eng = StaticEngine(np.eye(3), [0.2, -0.1, 0.05], [[0, 0, 0], [315, 315, 315]])
+    text = "G21 G90 G0 X10 Y10 Z10\n" + "".join(f"G1 X{10 + 0.01 * i:.2f}\n" for i in range(1, 400)) + "M2\n"
+    out, rep = correct_text(text, eng, Setup())
+    d = compare_programs(text, out)
+    assert d.moves == rep.moves
+    np.testing.assert_allclose(np.array([m.delta_mm for m in d.moved]), [[-0.2, 0.1, -0.05]] * d.n_moved,
+                               atol=1e-9)
+    assert [m.lineno for m in d.moved] == [m.lineno_corrected - 1 for m in d.moved]
+
+
+def test_diff_of_a_twice_corrected_program_skips_both_headers():
+    cal = load_calibration(CASES / "demo_static.json")
+    text = (ROOT / "samples" / "pocket.nc").read_text()
+    once, _ = correct_text(text, cal.engine, Setup())
+    twice, _ = correct_text(once, cal.engine, Setup(), CorrectOptions(force=True))
+    d = compare_programs(text, twice)
+    assert d.moves == 26

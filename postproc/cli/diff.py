@@ -46,10 +46,10 @@ def diff(original, corrected, as_json, show_all, offset, tool_length):
         click.echo(f"  {rep.header}")
     click.echo(f"  lines: {rep.lines_original} original, {rep.lines_corrected} corrected "
                f"(+{rep.lines_inserted} inserted by segmentation), {rep.lines_unchanged} unchanged")
-    click.echo(f"  moves: {rep.moves}, {len(rep.moved)} moved, {rep.moves_unchanged} unchanged")
+    click.echo(f"  moves: {rep.moves}, {rep.n_moved} moved, {rep.moves_unchanged} unchanged")
     click.echo("  correction per axis (um):  " + "   ".join(
         f"{a} max {stats[a]['max_mm'] * 1000:.1f} mean {stats[a]['mean_mm'] * 1000:.1f}" for a in "XYZ"))
-    moved = rep.moved if show_all else sorted(rep.moved, key=lambda m: -m.size_mm)[:LIST_MOVED]
+    moved = rep.moved if show_all else rep.largest(LIST_MOVED)
     if moved:
         click.echo("  moved blocks" + ("" if show_all else f" (largest {len(moved)})") + ":")
         for m in moved:

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 import re
+from array import array
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,12 +58,38 @@ class DiffReport:
     lines_inserted: int = 0
     moves: int = 0
     moves_unchanged: int = 0
-    moved: list[MovedBlock] = field(default_factory=list)
+    # moved blocks, stored compactly: original line, corrected line, dX, dY, dZ
+    _lines: array = field(default_factory=lambda: array("q"))
+    _clines: array = field(default_factory=lambda: array("q"))
+    _deltas: array = field(default_factory=lambda: array("d"))
+
+    def add_moved(self, lineno: int, clineno: int, delta) -> None:
+        self._lines.append(lineno)
+        self._clines.append(clineno)
+        self._deltas.extend(delta)
+
+    @property
+    def n_moved(self) -> int:
+        return len(self._lines)
+
+    def _delta_array(self) -> np.ndarray:
+        return np.frombuffer(self._deltas, dtype=float).reshape(-1, 3) if self._lines else np.zeros((0, 3))
+
+    @property
+    def moved(self) -> list[MovedBlock]:
+        d = self._delta_array()
+        return [MovedBlock(int(a), int(b), (float(x), float(y), float(z)))
+                for a, b, (x, y, z) in zip(self._lines, self._clines, d.tolist(), strict=True)]
+
+    def largest(self, n: int) -> list[MovedBlock]:
+        d = self._delta_array()
+        order = np.argsort(-np.linalg.norm(d, axis=1), kind="stable")[:n]
+        return [MovedBlock(self._lines[i], self._clines[i], tuple(float(x) for x in d[i])) for i in order]
 
     def axis_stats(self) -> dict:
-        if not self.moved:
+        d = np.abs(self._delta_array())
+        if not len(d):
             return {a: {"max_mm": 0.0, "mean_mm": 0.0} for a in "XYZ"}
-        d = np.abs(np.array([m.delta_mm for m in self.moved]))
         return {a: {"max_mm": float(d[:, k].max()), "mean_mm": float(d[:, k].mean())} for k, a in enumerate("XYZ")}
 
     def to_dict(self) -> dict:
@@ -69,7 +97,7 @@ class DiffReport:
             "original": self.original, "corrected": self.corrected, "header": self.header,
             "lines_original": self.lines_original, "lines_corrected": self.lines_corrected,
             "lines_unchanged": self.lines_unchanged, "lines_inserted": self.lines_inserted,
-            "moves": self.moves, "moves_unchanged": self.moves_unchanged, "moves_moved": len(self.moved),
+            "moves": self.moves, "moves_unchanged": self.moves_unchanged, "moves_moved": self.n_moved,
             "per_axis": self.axis_stats(),
             "moved": [{"line": m.lineno, "line_corrected": m.lineno_corrected,
                        "delta_mm": [round(x, 7) for x in m.delta_mm], "size_mm": round(m.size_mm, 7)}
@@ -77,64 +105,81 @@ class DiffReport:
         }
 
 
-def _records(source, drop_header: bool, setup: Setup | None):
+def _records(source, setup: Setup | None, counter: list, drop_header: bool = False, header: list | None = None):
+    """Yield ``(lineno, line, end or None)`` lazily; counts lines in ``counter[0]``."""
     path, lines = iter_source_lines(source)
     interp = Interpreter(setup or Setup(), path, lenient_setup=True)
-    recs = []
-    header = ""
     for lineno, line in enumerate(lines, start=1):
-        if drop_header and not header and emit.is_header(line):
-            header = line.strip()
-            recs.append((lineno, line, None, True))
+        counter[0] += 1
+        if drop_header and header is not None and lineno <= 3 and emit.is_header(line):
+            header.append(line.strip())
+            counter[0] -= 1
             continue
         mv = interp.feed_line(lineno, line)
-        recs.append((lineno, line, None if mv is None else np.array(mv.q1, dtype=float), False))
-    return path, recs, header
+        yield lineno, line, (None if mv is None else mv.q1)
+
+
+def _distance(a, b) -> float:
+    return sum(abs(x - y) for x, y in zip(a, b, strict=True) if not (math.isnan(x) or math.isnan(y)))
 
 
 def compare_programs(original, corrected, setup: Setup | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
-    ``setup`` gives work offsets and tool lengths (those not given count as zero);
-    they matter only for G53 blocks, whose words are machine coordinates.
+    Streams both programs (memory does not grow with their length, apart from the
+    compact list of moved blocks). ``setup`` gives work offsets and tool lengths
+    (those not given count as zero); they matter only for G53 blocks, whose words
+    are machine coordinates.
     """
-    opath, orecs, _ = _records(original, drop_header=False, setup=setup)
-    cpath, crecs, header = _records(corrected, drop_header=True, setup=setup)
-    crecs = [r for r in crecs if not r[3]]
-    rep = DiffReport(str(opath or "<text>"), str(cpath or "<text>"), header=header,
-                     lines_original=len(orecs), lines_corrected=len(crecs))
-    j = 0
-    i = 0
-    while i < len(orecs):
-        # the next anchor (non-move line) in the original, and where it sits in the corrected
-        k = i
-        while k < len(orecs) and orecs[k][2] is not None:
-            k += 1
-        moves = orecs[i:k]
-        if k < len(orecs):
-            anchor = orecs[k][1]
-            jj = j
-            while jj < len(crecs) and not (crecs[jj][2] is None and crecs[jj][1] == anchor):
-                jj += 1
-            if jj == len(crecs):
-                raise PostprocError(f"line {orecs[k][0]} of the original is missing from the corrected program",
-                                    path=rep.corrected, hint="is this the corrected version of that program?")
-        else:
-            jj = len(crecs)
-        window = crecs[j:jj]
-        pos = 0
-        for m_idx, (o_lineno, o_line, o_end, _) in enumerate(moves):
-            sk = skeleton(o_line)
-            best = None
-            worse = 0
-            stop = len(window) - (len(moves) - 1 - m_idx)
-            for w in range(pos, stop):
-                c_lineno, c_line, c_end, _h = window[w]
-                if c_end is None or (skeleton(c_line) != sk and not _compatible(o_line, c_line)):
-                    continue
-                dist = float(np.nansum(np.abs(c_end - o_end)))
+    ocount, ccount, header = [0], [0], []
+    opath, _ = iter_source_lines(original)
+    cpath, _ = iter_source_lines(corrected)
+    orecs = _records(original, setup, ocount)
+    crecs = _records(corrected, setup, ccount, drop_header=True, header=header)
+    rep = DiffReport(str(opath or "<text>"), str(cpath or "<text>"))
+    buf: deque = deque()  # corrected records read ahead, not yet paired
+
+    def peek(i: int):
+        while len(buf) <= i:
+            nxt = next(crecs, None)
+            if nxt is None:
+                return None
+            buf.append(nxt)
+        return buf[i]
+
+    last_delta = (0.0, 0.0, 0.0)
+    for o_lineno, o_line, o_end in orecs:
+        if o_end is None:
+            # an anchor: every corrected move before it was inserted
+            while True:
+                rec = peek(0)
+                if rec is None:
+                    raise PostprocError(f"line {o_lineno} of the original is missing from the corrected program",
+                                        path=rep.corrected, hint="is this the corrected version of that program?")
+                buf.popleft()
+                if rec[2] is None:
+                    if rec[1] != o_line:
+                        raise PostprocError(
+                            f"line {rec[0]} of the corrected program differs from line {o_lineno} of the original",
+                            path=rep.corrected, lineno=rec[0],
+                            hint="lines that are not moves must be identical: is this its corrected version?")
+                    rep.lines_unchanged += 1
+                    break
+                rep.lines_inserted += 1
+            continue
+        sk = skeleton(o_line)
+        predicted = tuple(e + d for e, d in zip(o_end, last_delta, strict=True))
+        best = None
+        worse = 0
+        i = 0
+        while True:
+            rec = peek(i)
+            if rec is None or rec[2] is None:
+                break  # the end, or the next anchor: the pair lies before it
+            if skeleton(rec[1]) == sk or _compatible(o_line, rec[1]):
+                dist = _distance(rec[2], predicted)
                 if best is None or dist < best[0]:
-                    best = (dist, w)
+                    best = (dist, i)
                     worse = 0
                 else:
                     # past the nearest line the end points walk away again (the next
@@ -142,27 +187,34 @@ def compare_programs(original, corrected, setup: Setup | None = None) -> DiffRep
                     worse += 1
                     if worse >= STOP_AFTER_WORSE:
                         break
-            if best is None:
-                raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
-                                    path=rep.corrected)
-            w = best[1]
-            rep.lines_inserted += sum(1 for x in window[pos:w] if x[2] is not None)
-            c_lineno, c_line, c_end, _h = window[w]
-            rep.moves += 1
-            delta = np.nan_to_num(c_end - o_end)
-            if c_line == o_line:
-                rep.moves_unchanged += 1
-                rep.lines_unchanged += 1
-            else:
-                rep.moved.append(MovedBlock(o_lineno, c_lineno, tuple(float(x) for x in delta)))
-            pos = w + 1
-        rep.lines_inserted += sum(1 for x in window[pos:] if x[2] is not None)
-        if k < len(orecs):
+            i += 1
+        if best is None:
+            raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
+                                path=rep.corrected)
+        for _ in range(best[1]):
+            buf.popleft()
+            rep.lines_inserted += 1
+        c_lineno, c_line, c_end = buf.popleft()
+        rep.moves += 1
+        delta = tuple(0.0 if (math.isnan(c) or math.isnan(o)) else c - o for c, o in zip(c_end, o_end, strict=True))
+        last_delta = delta
+        if c_line == o_line:
+            rep.moves_unchanged += 1
             rep.lines_unchanged += 1
-            j = jj + 1
         else:
-            j = jj
-        i = k + 1
+            rep.add_moved(o_lineno, c_lineno, delta)
+    while True:
+        rec = peek(0)
+        if rec is None:
+            break
+        buf.popleft()
+        if rec[2] is None:
+            raise PostprocError(f"line {rec[0]} of the corrected program has no counterpart in the original",
+                                path=rep.corrected, lineno=rec[0])
+        rep.lines_inserted += 1
+    rep.header = header[-1] if header else ""
+    rep.lines_original = ocount[0]
+    rep.lines_corrected = ccount[0]
     return rep
 
 
