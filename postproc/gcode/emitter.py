@@ -190,7 +190,9 @@ class EmitterMixin:
         E = list(qe)
         arc = mv.arc
         (a1, a2, an), (l1, l2) = PLANES[arc.plane]
-        centre = centre_estimate(arc, plan["s"], plan["qn"], plan["q"])
+        centre = plan.get("centre")
+        if centre is None:
+            centre = centre_estimate(arc, plan["s"], plan["qn"], plan["q"])
         unit = mv.unit
         sep, lower = emit.style_of(line)
         arc_edits, arc_added = [], []

@@ -348,7 +348,7 @@ class Corrector(EmitterMixin):
                 rerr = self._round_err(unit)
                 ok = False
                 if not np.isnan(S[i]).any():
-                    centre = centre_estimate(m.arc, s, qn, qs)
+                    centre = plan["centre"] = centre_estimate(m.arc, s, qn, qs)
                     cand = Arc(tuple(centre), m.arc.plane, m.arc.clockwise, m.arc.turns, m.arc.offset_idx, m.arc.r_idx)
                     _, _, nsweep, _, _ = arc_params(m.arc, m.q0, m.q1)
                     dev = arc_deviation(cand, tuple(S[i]), tuple(T[i]), s, qs, nsweep, _mismatch(m))

@@ -136,10 +136,12 @@ def centre_estimate(arc: Arc, s_nom: np.ndarray, q_nom: np.ndarray, q_corr: np.n
     """Corrected centre: the correction fitted as affine in the plane, evaluated at the centre."""
     (a1, a2, _an), _ = _plane(arc)
     d = q_corr - q_nom
-    A = np.column_stack([np.ones(len(q_nom)), q_nom[:, a1], q_nom[:, a2]])
-    coef, *_ = np.linalg.lstsq(A, d, rcond=None)
     c = np.asarray(arc.center, dtype=float)
-    return c + coef[0] + coef[1] * c[a1] + coef[2] * c[a2]
+    # coordinates about the centre keep the 3x3 normal equations well conditioned;
+    # the fitted constant term is then the correction at the centre
+    A = np.column_stack([np.ones(len(q_nom)), q_nom[:, a1] - c[a1], q_nom[:, a2] - c[a2]])
+    coef = np.linalg.solve(A.T @ A, A.T @ d)
+    return c + coef[0]
 
 
 def _plane(arc: Arc):
