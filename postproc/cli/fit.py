@@ -98,10 +98,11 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
             result = fitter(method)(data, **options)
     for line in result.report:
         click.echo(line, err=True)
-    click.echo(
-        f"fit residual: RMS {result.rms_mm * 1000:.2f} um, max {result.max_mm * 1000:.2f} um "
-        f"over {len(result.residuals_mm)} points",
-        err=True,
-    )
+    if len(result.residuals_mm):  # tables are taken as measured: there is no fit residual
+        click.echo(
+            f"fit residual: RMS {result.rms_mm * 1000:.2f} um, max {result.max_mm * 1000:.2f} um "
+            f"over {len(result.residuals_mm)} points",
+            err=True,
+        )
     save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
     click.echo(f"wrote {output}", err=True)
