@@ -1,0 +1,89 @@
+"""The README and the commands stay in step: every command is listed with exactly its options."""
+
+import re
+from pathlib import Path
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from postproc.cli import main
+
+README = Path(__file__).parents[1] / "README.md"
+
+
+def leaf_commands():
+    ctx = click.Context(main)
+
+    def walk(cmd, prefix):
+        if isinstance(cmd, click.Group):
+            for name in cmd.list_commands(ctx):
+                yield from walk(cmd.get_command(ctx, name), prefix + [name])
+        else:
+            yield " ".join(prefix), cmd
+
+    return list(walk(main, ["postproc"]))
+
+
+def signature(cmd: click.Command) -> list[str]:
+    out = []
+    for p in cmd.params:
+        if isinstance(p, click.Option):
+            out.append(max(p.opts, key=len))
+        else:
+            out.append(p.name.upper())
+    return out
+
+
+def readme_table() -> dict[str, list[str]]:
+    text = README.read_text(encoding="utf-8")
+    section = text.split("\n## Commands\n", 1)[1].split("\n## ", 1)[0]
+    rows = {}
+    for m in re.finditer(r"^\| `(postproc [^`]+)` \| ([^|]+) \|$", section, re.MULTILINE):
+        rows[m.group(1)] = m.group(2).split()
+    return rows
+
+
+def test_every_command_is_in_the_readme_with_its_options():
+    documented = readme_table()
+    actual = {name: signature(cmd) for name, cmd in leaf_commands()}
+    assert sorted(documented) == sorted(actual), "README command table and CLI commands differ"
+    for name, opts in actual.items():
+        assert documented[name] == opts, f"{name}: README lists {documented[name]}, CLI has {opts}"
+
+
+@pytest.mark.parametrize(("name", "cmd"), leaf_commands(), ids=lambda v: v if isinstance(v, str) else "")
+def test_every_command_has_help_with_an_example(name, cmd):
+    args = name.split()[1:] + ["--help"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert "Example" in result.output, f"{name} --help has no example"
+    assert (cmd.help or "").strip(), f"{name} has no docstring"
+
+
+def test_readme_quick_start_commands():
+    text = README.read_text(encoding="utf-8")
+    ci = (Path(__file__).parents[1] / ".ci" / "run").read_text()
+    test_cmd = 'pip install -e ".[test]" && python3 -m pytest -q -p no:cacheprovider'
+    assert test_cmd in text
+    assert 'python3 -m pip install --quiet -e ".[test]" && python3 -m pytest -q -p no:cacheprovider' in ci
+    m = re.search(r"pip install -e \. && postproc correct (\S+) -c (\S+) -o (\S+)", text)
+    assert m, "README has no install-and-correct command"
+    for path in m.group(1, 2):
+        assert (README.parent / path).is_file(), path
+
+
+def test_readme_links_exist():
+    text = README.read_text(encoding="utf-8")
+    for target in re.findall(r"\]\(((?:docs|samples|calibrations)/[^)#]+)\)", text):
+        assert (README.parent / target).exists(), target
+
+
+def test_readme_main_job_runs(tmp_path, monkeypatch):
+    text = README.read_text(encoding="utf-8")
+    m = re.search(r"pip install -e \. && postproc correct (\S+) -c (\S+) -o (\S+)", text)
+    monkeypatch.chdir(README.parent)
+    out = tmp_path / m.group(3)
+    result = CliRunner().invoke(main, ["correct", m.group(1), "-c", m.group(2), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.read_text().count("\n") > 34
