@@ -21,8 +21,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +28,7 @@ from postproc import __version__
 from postproc.engine.base import Engine
 from postproc.engine.registry import engine_class
 from postproc.errors import CalibrationError
+from postproc.fileio import atomic_write_text, output_mode  # noqa: F401  (re-exported)
 
 FORMAT = "postproc calibration"
 VERSION = 1
@@ -75,34 +74,6 @@ def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) ->
         "fit": dict(fit or {}),
         "created_by": f"postproc {__version__}",
     }
-
-
-def output_mode(path: Path) -> int:
-    """Permissions for a new output file: those of the file it replaces, else 0666 less umask.
-
-    ``mkstemp`` creates files readable by their owner only; a corrected program or a
-    calibration must be readable as any ordinary file the user writes would be.
-    """
-    try:
-        return path.stat().st_mode & 0o777
-    except OSError:
-        umask = os.umask(0)
-        os.umask(umask)
-        return 0o666 & ~umask
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path``, then rename it into place."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.chmod(tmp, output_mode(path))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def save_calibration(path, engine: Engine, *, name: str | None = None, effects=None, fit=None) -> None:

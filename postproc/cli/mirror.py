@@ -332,11 +332,10 @@ def deadband(sensor, gap, tau, correction, learn, plot, output):
         import matplotlib
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from postproc.fileio import save_figure
 
         ax = plot_deadband(res, x=t, xlabel="t, s" if t is not None else "sample")
-        ax[0].figure.savefig(plot, dpi=120)
-        plt.close(ax[0].figure)
+        save_figure(ax[0].figure, plot, dpi=120)
         click.echo(f"wrote {plot}")
 
 

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
-from pathlib import Path
 
 import click
 import numpy as np
@@ -22,24 +19,9 @@ def _use_agg() -> None:
 
 def _save_figure(ax, path: str) -> None:
     """Save the figure of ``ax`` atomically (temporary file beside it, then rename)."""
-    import matplotlib.pyplot as plt
+    from postproc.fileio import save_figure
 
-    from postproc.calibration.calfile import output_mode
-
-    fig = np.ravel(ax)[0].figure
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=target.parent if str(target.parent) else ".", prefix=f".{target.name}.",
-                               suffix=target.suffix or ".png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.chmod(tmp, output_mode(target))
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    finally:
-        plt.close(fig)
+    save_figure(np.ravel(ax)[0].figure, path, dpi=110)
 
 
 def _echo_json(data) -> None:

@@ -114,10 +114,11 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
     report = verify_program(program, machine, cals, setup_args, corrected=corrected, max_step_mm=max_step,
                             options=options)
     if plot:
+        from postproc.fileio import save_figure
         from postproc.simulate.verify import plot_deviation
 
         ax = plot_deviation(report, title=f"{program} on {machine.name}")
-        ax.figure.savefig(plot, dpi=120, bbox_inches="tight")
+        save_figure(ax.figure, plot, dpi=120, bbox_inches="tight")
     if as_json:
         click.echo(json.dumps(report.to_dict(), indent=2))
         return

@@ -78,6 +78,8 @@ def plot_before_after(labels: list[str], rms_mm: list[float], floor_mm: float | 
 
 def write_plots(res, directory) -> list[Path]:
     """Write the check's plots as PNG files in ``directory``; returns their paths."""
+    from postproc.fileio import save_figure
+
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     ds, resid = res.ds, res.resid
@@ -85,7 +87,7 @@ def write_plots(res, directory) -> list[Path]:
 
     def save(ax, name):
         path = d / name
-        ax.figure.savefig(path, dpi=100)
+        save_figure(ax.figure, path, dpi=100)
         written.append(path)
 
     save(plot_residual_vectors(ds.q, resid), "residual_vectors.png")
