@@ -164,7 +164,10 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
         if fixed:
             model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual")
         else:
-            model = base_model(cal.method, options, engine=base_engine)
+            # A training fold of a grid calibration leaves lattice nodes without points; the
+            # fold's model fills them from neighbours (the held-out points then test that fill).
+            cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
+            model = base_model(cal.method, cv_options, engine=base_engine)
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
