@@ -75,7 +75,7 @@ def load_maps(paths) -> list:
     return [load_map(p) for p in paths]
 
 
-def _summary(src: str, dst: str, rep) -> str:
+def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
     lines = [
         f"{src} -> {dst}: {rep.lines_in} lines, {rep.moves} moves, {rep.lines_changed} lines edited, "
         f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
@@ -86,6 +86,12 @@ def _summary(src: str, dst: str, rep) -> str:
                      "(G54 = 0); recorded in the header")
     if rep.extrapolated_points:
         lines.append(f"  note: {rep.extrapolated_points} points outside the calibrated volume were extrapolated")
+    if rep.solver:
+        lines.append(f"  solver {rep.solver}: largest inverse residual {rep.max_residual_mm * 1000:.3g} um "
+                     f"(accepted up to {rep.accept_residual_mm * 1000:.3g} um)")
+        if rep.max_residual_mm > tolerance_mm:
+            lines.append(f"  note: the solver's residual exceeds --tolerance {tolerance_mm:g} mm: the corrected "
+                         "targets are only as close to the nominal as that residual")
     return "\n".join(lines)
 
 
@@ -99,7 +105,7 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
         opts = CorrectOptions(**job["options"], added=load_maps(job["maps"]))
         rep = correct_file(job["src"], job["dst"], cal.engine, job["setup"], opts,
                            calibration_name=cal.name, calibration_sha256=cal.sha256)
-        return _summary(job["src"], job["dst"], rep), None, 0
+        return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
     except PostprocError as exc:
         return "", str(exc), exc.exit_code
 
@@ -251,5 +257,6 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
     finally:
         if tmpdir:
             shutil.rmtree(tmpdir, ignore_errors=True)
-    click.echo(_summary("<stdin>" if src == "-" else src, "<stdout>" if dst == "-" else dst, rep), err=True)
+    click.echo(_summary("<stdin>" if src == "-" else src, "<stdout>" if dst == "-" else dst, rep, opts.tolerance_mm),
+               err=True)
 

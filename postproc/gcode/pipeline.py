@@ -46,7 +46,12 @@ from postproc.gcode.state import LINE
 
 # A solver answer is accepted up to ten times its own stopping tolerance (float noise
 # in the residual itself); still a thousand times below the default path tolerance.
+# An engine whose solver stands for larger residuals says so in ``accept_residual_mm``
+# (the parametric astatic solver: one grid step); the larger of the two applies.
 SOLVER_ACCEPT_MM = 10 * SOLVER_TOL_MM
+# Context columns the pipeline itself supplies: approach directions always, rotary
+# positions when the program moves them (checked when the first inverse is called).
+PIPELINE_CONTEXT = ("dirx", "diry", "dirz", "A", "B", "C")
 DEFAULT_CHUNK_LINES = 20_000
 # Angular step of the samples that check a kept arc against the corrected path.
 ARC_CHECK_STEP_RAD = math.pi / 16
@@ -78,6 +83,48 @@ class CorrectReport:
     extrapolated_points: int = 0
     max_correction_mm: float = 0.0
     g54_assumed_zero: bool = False
+    solver: str = ""  # the engine's inverse solver when it names one (parametric: newton | astatic)
+    accept_residual_mm: float = SOLVER_ACCEPT_MM  # largest inverse residual accepted
+    max_residual_mm: float = 0.0  # largest inverse residual met
+
+
+def _base_attr(engine, name: str):
+    """``engine.name``, or that of the base engine a composed engine wraps; None if neither."""
+    value = getattr(engine, name, None)
+    if value is None and getattr(engine, "base", None) is not None:
+        value = getattr(engine.base, name, None)
+    return value
+
+
+def accept_residual(engine) -> float:
+    """Largest inverse residual (mm) the pipeline accepts from ``engine``."""
+    own = _base_attr(engine, "accept_residual_mm")
+    return max(SOLVER_ACCEPT_MM, float(own)) if own is not None else SOLVER_ACCEPT_MM
+
+
+def prepare_engine(engine, extrapolate: str, context_names, path: str | None = None):
+    """The engine as a run uses it.
+
+    - ``extrapolate="linear"``: an engine with ``with_options`` (parametric) is switched
+      to linear extrapolation of its functions (by default it holds their end
+      values); a composed engine gets its base switched. Static, interval and grid
+      engines extrapolate with their model as it is (see docs/gcode.md).
+    - An engine with ``check_context`` (a base engine plus effects) is asked up front
+      whether the context values its effects need are given, so a missing
+      ``--context`` is refused before any line is processed.
+    """
+    if extrapolate == "linear":
+        if hasattr(engine, "with_options"):
+            engine = engine.with_options(extrapolate="linear")
+        elif hasattr(getattr(engine, "base", None), "with_options") and hasattr(engine, "effects"):
+            engine = type(engine)(engine.base.with_options(extrapolate="linear"), engine.effects)
+    check = getattr(engine, "check_context", None)
+    if check is not None:
+        try:
+            check(set(PIPELINE_CONTEXT) | set(context_names))
+        except PostprocError as exc:
+            raise exc.at(path=path) from None
+    return engine
 
 
 class Corrector(EmitterMixin):
@@ -85,6 +132,9 @@ class Corrector(EmitterMixin):
 
     def __init__(self, engine, setup: Setup, options: CorrectOptions, *, path: str | None = None,
                  calibration_name: str = "", calibration_sha256: str = "") -> None:
+        if options.extrapolate not in ("refuse", "clamp", "linear"):
+            raise PostprocError(f"--extrapolate must be refuse, clamp or linear, got {options.extrapolate!r}")
+        engine = prepare_engine(engine, options.extrapolate, (setup.context or {}).keys(), path)
         self.engine = engine
         self.setup = setup
         self.opt = options
@@ -100,8 +150,9 @@ class Corrector(EmitterMixin):
         self.emitted_motion: int | None = None
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
-        if options.extrapolate not in ("refuse", "clamp", "linear"):
-            raise PostprocError(f"--extrapolate must be refuse, clamp or linear, got {options.extrapolate!r}")
+        self.accept_residual_mm = accept_residual(engine)
+        self.report.accept_residual_mm = self.accept_residual_mm
+        self.report.solver = str(_base_attr(engine, "solver") or "")
 
     # -- safety-checked engine calls ----------------------------------------------------
     def _context(self, dirs: np.ndarray, rotary: list[dict]) -> dict:
@@ -135,22 +186,32 @@ class Corrector(EmitterMixin):
             if self.opt.extrapolate == "clamp":
                 q_eval = np.clip(q_nom, eng.volume_mm[0], eng.volume_mm[1])
                 p_eval = q_eval + r
-        res = eng.correction(p_eval, r, ctx)
+        try:
+            res = eng.correction(p_eval, r, ctx)
+        except PostprocError as exc:
+            raise exc.at(path=self.path, lineno=int(lineno[0]) if len(lineno) else None) from None
         delta = np.asarray(res.q, dtype=float)
         resid = np.asarray(res.residual_mm, dtype=float)
-        bad = ~np.isfinite(delta).all(axis=1) | ~(resid <= SOLVER_ACCEPT_MM)
+        bad = ~np.isfinite(delta).all(axis=1) | ~(resid <= self.accept_residual_mm)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
+            solver = f" {self.report.solver}" if self.report.solver else ""
             raise SolverError(
-                f"the {eng.method} inverse did not converge (residual {resid[i]:.3g} mm)",
+                f"the {eng.method}{solver} inverse did not converge (residual {resid[i]:.3g} mm, "
+                f"accepted up to {self.accept_residual_mm:.3g} mm)",
                 path=self.path, lineno=int(lineno[i]),
                 hint="the calibration may be unusable here; check it with 'postproc check'")
+        if len(resid):
+            self.report.max_residual_mm = max(self.report.max_residual_mm, float(resid.max()))
         ctx_added = dict(ctx, lineno=lineno) if self.opt.added else ctx
         for add in self.opt.added:
             try:
                 d = np.asarray(add.delta(p, ctx_added), dtype=float)
             except PostprocError as exc:
-                raise exc.at(path=self.path) from None
+                # a map names the point it refused (point_index); name its program line
+                i = getattr(exc, "point_index", None)
+                ln = int(lineno[i]) if i is not None and 0 <= i < len(lineno) else None
+                raise exc.at(path=self.path, lineno=ln) from None
             if d.shape != delta.shape or not np.isfinite(d).all():
                 raise SolverError(f"correction map {add.name!r} gave no finite correction here",
                                   path=self.path, lineno=int(lineno[0]))
@@ -251,6 +312,9 @@ class Corrector(EmitterMixin):
             parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
         for a in self.opt.added:
             parts.append(f"map {a.name}")
+        if self.accept_residual_mm > SOLVER_ACCEPT_MM:
+            parts.append(f"{self.engine.method} solver {self.report.solver or '?'} "
+                         f"accepting residuals up to {self.accept_residual_mm:g} mm")
         return "; ".join(parts)
 
     # -- one chunk ---------------------------------------------------------------------
@@ -407,7 +471,15 @@ class Corrector(EmitterMixin):
             ln = np.array([curves[j].lineno for j in cid.tolist()])
             return self.corrected(nom, Rr[cid], dirs, rot, ln)
 
-        return subdivide(curves, s_init, evaluate, self.opt.tolerance_mm - rerr)
+        try:
+            return subdivide(curves, s_init, evaluate, self.opt.tolerance_mm - rerr)
+        except SolverError as exc:
+            if self.accept_residual_mm > self.opt.tolerance_mm:
+                exc.hint = (f"the {self.report.solver or self.engine.method} solver's answers scatter by up to "
+                            f"its residual (largest so far {self.report.max_residual_mm * 1000:.3g} um), more than "
+                            f"--tolerance {self.opt.tolerance_mm:g} mm allows: raise --tolerance above that "
+                            "residual, or use a calibration with the newton solver")
+            raise exc.at(path=self.path) from None
 
     # -- emission ----------------------------------------------------------------------
 
