@@ -75,6 +75,12 @@ class CalibrationError(PostprocError):
     exit_code = EXIT_CALIBRATION
 
 
+class OutputError(PostprocError):
+    """An output file that cannot be written where it was asked for (nothing was written)."""
+
+    exit_code = EXIT_USAGE
+
+
 class SafetyError(PostprocError):
     """A safety rule refused the job; nothing was written."""
 

@@ -12,6 +12,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from postproc.errors import OutputError
+
 
 def output_mode(path: Path) -> int:
     """Permissions for a new output file: those of the file it replaces, else 0666 less umask.
@@ -31,15 +33,30 @@ def output_mode(path: Path) -> int:
 def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[str]:
     """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds."""
     target = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=suffix)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=suffix)
+    except OSError as exc:
+        raise _cannot_write(target, exc) from None
     os.close(fd)
     try:
         yield tmp
         os.chmod(tmp, output_mode(target))
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise _cannot_write(target, exc) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _cannot_write(target: Path, exc: OSError) -> OutputError:
+    """The error for an output that cannot be created where it was asked for."""
+    if not target.parent.is_dir():
+        return OutputError(f"cannot write the output: directory {str(target.parent)!r} does not exist",
+                           path=str(target), hint="create the directory first, or give another output path")
+    return OutputError(f"cannot write the output: {exc.strerror}", path=str(target),
+                       hint="check the output path and its permissions")
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
