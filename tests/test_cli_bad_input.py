@@ -3,13 +3,22 @@ a non-zero exit code, no traceback and no output file left behind."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from postproc.cli import main
-from postproc.errors import EXIT_INTERNAL, EXIT_USAGE, OutputError
+from postproc.effects import get_effect
+from postproc.errors import (
+    EXIT_CALIBRATION,
+    EXIT_INTERNAL,
+    EXIT_USAGE,
+    CalibrationError,
+    OutputError,
+)
 from postproc.fileio import atomic_write_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,3 +62,30 @@ def test_simulate_tables_into_a_missing_directory(tmp_path):
     result = run("simulate", MACHINE, "--tables", "--step", "100", "-o", out)
     assert_user_error(result, EXIT_USAGE, "cannot write the output")
     assert not out.parent.exists()
+
+
+def _static_calibration_with(tmp_path, effects) -> Path:
+    data = json.loads((ROOT / "calibrations" / "s500_static.json").read_text())
+    data["effects"] = effects
+    path = tmp_path / "cal.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(("effect", "fragment"), [
+    ({"name": "backlash:X", "params": {"b_mm": "x"}}, "params.b_mm is 'x', not a finite number"),
+    ({"name": "backlash:X", "params": {"b_mm": float("nan")}}, "params.b_mm is nan, not a finite number"),
+    ({"name": "backlash:X", "params": {"b_mm": [1, 2]}}, "params.b_mm is [1, 2], not a finite number"),
+    ({"name": "thermal:t", "config": {"tau_s": "x"}, "params": {"dx_mm": 0.01}},
+     "config.tau_s is 'x', not a finite number"),
+])
+def test_calibration_effect_values_must_be_finite_numbers(tmp_path, effect, fragment):
+    cal = _static_calibration_with(tmp_path, [effect])
+    result = run("check", WALKTHROUGH, "-c", cal)
+    assert_user_error(result, EXIT_CALIBRATION, f"{cal}: effect {effect['name']}: {fragment}")
+
+
+def test_straightness_needs_a_positive_half_travel():
+    effect = get_effect("straightness:X", config={"center_mm": 100.0, "half_travel_mm": 0.0})
+    with pytest.raises(CalibrationError, match="no half_travel_mm > 0"):
+        effect.basis(np.array([[10.0, 20.0, 30.0]]), None, None)

@@ -17,6 +17,8 @@ Serialised as ``{"name": "periodic:X", "config": {"pitch_mm": 10.0},
 from __future__ import annotations
 
 import copy
+import math
+import numbers
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -81,6 +83,16 @@ def context_column(ctx: Mapping[str, Any] | None, column: str, n: int, who: str)
     return v
 
 
+def _check_number(name: str, where: str, key: str, value: Any) -> None:
+    """Effect settings and parameters read from a file must be finite numbers."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise CalibrationError(
+            f"effect {name}: {where}.{key} is {value!r}, not a finite number",
+            hint="an effect's config and params hold numbers (lengths mm, angles rad, times s); "
+                 "refit with 'postproc fit --effect'",
+        )
+
+
 class Effect:
     """Base class of every effect. Subclasses set the class attributes and :meth:`basis`.
 
@@ -105,6 +117,9 @@ class Effect:
                 f"effect {self.name}: unknown parameter(s) {', '.join(sorted(unknown))}",
                 hint=f"its parameters are {', '.join(names)}",
             )
+        for where, values in (("config", self.config), ("params", params)):
+            for key, value in values.items():
+                _check_number(self.name, where, key, value)
         self.params = {k: float(params.get(k, 0.0)) for k in names}
 
     # -- description -------------------------------------------------------------

@@ -56,9 +56,7 @@ class Straightness(Effect):
         return None
 
     def basis(self, q, r, ctx) -> np.ndarray:
-        c = float(self.config.get("center_mm", 0.0))
-        h = float(self.config.get("half_travel_mm", 1.0))
-        u = (q[:, self.axis] - c) / h
+        u = _scaled_position(self, q)
         B = np.zeros((len(q), 3, 4))
         o1, o2 = self.others
         B[:, o1, 0], B[:, o1, 1] = u**2, u**3
@@ -100,9 +98,18 @@ class Positioning(Effect):
     prepare = Straightness.prepare
 
     def basis(self, q, r, ctx) -> np.ndarray:
-        c = float(self.config.get("center_mm", 0.0))
-        h = float(self.config.get("half_travel_mm", 1.0))
-        u = (q[:, self.axis] - c) / h
+        u = _scaled_position(self, q)
         B = np.zeros((len(q), 3, 2))
         B[:, self.axis, 0], B[:, self.axis, 1] = u**2, u**3
         return B
+
+
+def _scaled_position(effect: Effect, q: np.ndarray) -> np.ndarray:
+    """The axis position scaled to [-1, 1] over the travel in ``config``."""
+    c = float(effect.config.get("center_mm", 0.0))
+    h = float(effect.config.get("half_travel_mm", 1.0))
+    if h <= 0:
+        from postproc.errors import CalibrationError
+
+        raise CalibrationError(f"effect {effect.name} has no half_travel_mm > 0 in its config")
+    return (q[:, effect.axis] - c) / h
