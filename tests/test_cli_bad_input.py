@@ -89,3 +89,27 @@ def test_straightness_needs_a_positive_half_travel():
     effect = get_effect("straightness:X", config={"center_mm": 100.0, "half_travel_mm": 0.0})
     with pytest.raises(CalibrationError, match="no half_travel_mm > 0"):
         effect.basis(np.array([[10.0, 20.0, 30.0]]), None, None)
+
+
+MIRROR = ROOT / "samples" / "mirror"
+
+
+@pytest.mark.parametrize("args", [
+    ["mirror", "kfb", MIRROR / "P01_semi.csv", "--t-ref", "nan", "--allowance", "0.3", "--origin", "3,100"],
+    ["mirror", "kfb", MIRROR / "P01_semi.csv", "--t-ref", "2", "--allowance", "0.3", "--origin", "3,inf"],
+    ["mirror", "kdist", MIRROR / "backwall_sensor.csv", "--cutter-radius", "nan", "--diameter", "2000"],
+    ["mirror", "deadband", MIRROR / "zigzag_sensor.csv", "--gap", "nan"],
+    ["simulate", MACHINE, "--random", "2", "--tool-vector", "nan,0,0"],
+    ["simulate", MACHINE, "--random", "2", "--context", "t=inf"],
+    ["orders", "-c", ROOT / "calibrations" / "s500_parametric.json", "--point", "60,50,50", "-k", "inf"],
+    ["orders", "-c", ROOT / "calibrations" / "s500_parametric.json", "--point", "nan,50,50"],
+    ["verify", ROOT / "samples" / "pocket.nc", "-c", ROOT / "calibrations" / "s500_static.json",
+     "--machine", MACHINE, "--tool-length", "1=nan"],
+])
+def test_non_finite_option_values_are_usage_errors(tmp_path, args):
+    out = tmp_path / "out.csv"
+    result = run(*args, "-o", out) if args[0] in ("mirror", "simulate") and args[1] != "deadband" else run(*args)
+    assert result.exit_code == EXIT_USAGE, result.output
+    assert "Invalid value" in result.output
+    assert "internal error" not in result.output
+    assert not out.exists()

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import click
 
+from postproc.cli.options import FINITE_FLOAT
+
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
 @click.option("-c", "--calibration", "cal_path", required=True, type=click.Path(exists=True, dir_okay=False),
               help="Calibration file to check.")
-@click.option("--sigma", type=float, default=None, metavar="MM",
+@click.option("--sigma", type=FINITE_FLOAT, default=None, metavar="MM",
               help="Instrument noise, standard deviation per axis in mm (default: from repeated points).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",

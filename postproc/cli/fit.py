@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from postproc.cli.options import parse_vector
+from postproc.cli.options import FINITE_FLOAT, parse_vector
 
 
 @click.command()
@@ -22,7 +22,7 @@ from postproc.cli.options import parse_vector
               help="Grid method: grid step u1,u2,u3 in mm (default: the lattice step of the data).")
 @click.option("--screw-pitch", "screw_pitch", multiple=True, metavar="AXIS=P",
               help="Declared lead-screw pitch (mm) of an axis, to warn about grid steps that alias it.")
-@click.option("--knot-spacing", "knot_spacing", type=float, default=None, metavar="MM",
+@click.option("--knot-spacing", "knot_spacing", type=FINITE_FLOAT, default=None, metavar="MM",
               help="Parametric identification: B-spline knot spacing (default: from the data).")
 @click.option("--order", type=click.Choice(["first", "second", "exact"]), default=None,
               help="Parametric: forward-model order stored in the calibration (default: first).")

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
 
-from postproc.cli.options import parse_offset, parse_tool_length, parse_vector
+from postproc.cli.options import FINITE_FLOAT, parse_offset, parse_tool_length, parse_vector
 from postproc.errors import PostprocError
 
 
@@ -22,6 +23,8 @@ def _direction(ctx, param, value):
 def _pair(text: str, what: str) -> tuple[float, float]:
     try:
         a, b = (float(p) for p in text.split(","))
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise ValueError
     except ValueError:
         raise click.BadParameter(f"{what} must be two numbers A,B, got {text!r}") from None
     return a, b
@@ -49,11 +52,11 @@ def mirror() -> None:
 
 @mirror.command()
 @click.argument("sensor", type=click.Path(exists=True, dir_okay=False))
-@click.option("--cutter-radius", "radius", type=float, required=True, metavar="MM", help="Cutter radius R (mm).")
-@click.option("--diameter", type=float, required=True, metavar="MM", help="Blank (shell) diameter D (mm).")
-@click.option("--segment-deg", "segment", type=float, default=5.0, show_default=True, metavar="DEG",
+@click.option("--cutter-radius", "radius", type=FINITE_FLOAT, required=True, metavar="MM", help="Cutter radius R (mm).")
+@click.option("--diameter", type=FINITE_FLOAT, required=True, metavar="MM", help="Blank (shell) diameter D (mm).")
+@click.option("--segment-deg", "segment", type=FINITE_FLOAT, default=5.0, show_default=True, metavar="DEG",
               help="Length in B of each least-squares segment.")
-@click.option("--z-bin", "z_bin", type=float, default=None, metavar="MM",
+@click.option("--z-bin", "z_bin", type=FINITE_FLOAT, default=None, metavar="MM",
               help="Group sensor rows into Z bins of this height (for sweeps not at constant Z).")
 @click.option("--model", type=click.Choice(["signed", "overcut"]), default="signed", show_default=True,
               help="signed: E = R*360/(pi D)*tan(alpha) as in the seed; overcut: E = -R|slope| "
@@ -101,8 +104,8 @@ def kdist(sensor, radius, diameter, segment, z_bin, model, thinner, units, outpu
 
 @mirror.command()
 @click.argument("semi", type=click.Path(exists=True, dir_okay=False))
-@click.option("--t-ref", "t_ref", type=float, required=True, metavar="MM", help="Nominal wall thickness T_ref.")
-@click.option("--allowance", type=float, required=True, metavar="MM", help="Semi-finish allowance b.")
+@click.option("--t-ref", "t_ref", type=FINITE_FLOAT, required=True, metavar="MM", help="Nominal wall thickness T_ref.")
+@click.option("--allowance", type=FINITE_FLOAT, required=True, metavar="MM", help="Semi-finish allowance b.")
 @click.option("--origin", default="0,0", show_default=True, metavar="B0,Z0",
               help="Pocket origin: the map is written in pocket-local B-B0, Z-Z0.")
 @THINNER
@@ -139,9 +142,9 @@ def kfb(semi, t_ref, allowance, origin, thinner, smooth, output):
               help="Geometric calibration applied first (a calibration of method identity for none, e.g. samples/mirror/shell_identity.json).")
 @click.option("--program", "template", required=True, type=click.Path(exists=True, dir_okay=False),
               help="Pocket program in pocket-local coordinates (B as programmed = B - B0).")
-@click.option("--t-ref", "t_ref", type=float, required=True, metavar="MM", help="Nominal wall thickness T_ref.")
+@click.option("--t-ref", "t_ref", type=FINITE_FLOAT, required=True, metavar="MM", help="Nominal wall thickness T_ref.")
 @click.option("--band", required=True, metavar="TMIN,TMAX", help="Signal band [T_min, T_max] (mm).")
-@click.option("--allowance", type=float, required=True, metavar="MM", help="Semi-finish allowance b.")
+@click.option("--allowance", type=FINITE_FLOAT, required=True, metavar="MM", help="Semi-finish allowance b.")
 @click.option("--kdist", "kdist_path", type=click.Path(exists=True, dir_okay=False), default=None,
               help="K_dist map (machine B, Z) added to every pass (formula 11).")
 @THINNER
@@ -153,7 +156,7 @@ def kfb(semi, t_ref, allowance, origin, thinner, smooth, output):
 @click.option("--tool-length", "tool_lengths", multiple=True, metavar="H=L", help="Tool length (repeatable).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm), e.g. 0,150,0 for a spindle along +Y.")
-@click.option("--max-correction", "max_correction", type=float, default=1.0, show_default=True, metavar="MM",
+@click.option("--max-correction", "max_correction", type=FINITE_FLOAT, default=1.0, show_default=True, metavar="MM",
               help="Refuse a program whose total correction (geometric + maps + allowance) exceeds this.")
 @click.option("-o", "--output-dir", "outdir", required=True, type=click.Path(file_okay=False),
               help="Directory for the programs and maps of the next pocket.")
@@ -259,8 +262,8 @@ def _correct_program(template, calibration, setup, corr, target: Path, max_corre
 
 @mirror.command()
 @click.argument("sensor", type=click.Path(exists=True, dir_okay=False))
-@click.option("--gap", type=float, required=True, metavar="MM", help="Width of the elastic gap (dead band).")
-@click.option("--drive-tau", "tau", type=float, default=0.0, show_default=True, metavar="S",
+@click.option("--gap", type=FINITE_FLOAT, required=True, metavar="MM", help="Width of the elastic gap (dead band).")
+@click.option("--drive-tau", "tau", type=FINITE_FLOAT, default=0.0, show_default=True, metavar="S",
               help="Time constant of the tracking drive (needs a t column); 0: ideal drive.")
 @click.option("--correction", "correction", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Correction map (B,Z or B) to test: the residual E - K is reported.")

@@ -2,11 +2,28 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 import click
 
 _AXES = "XYZ"
+
+
+class FiniteFloat(click.types.FloatParamType):
+    """A float option that refuses nan and inf (click's float accepts them)."""
+
+    name = "float"
+
+    def convert(self, value, param, ctx):
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
+
+
+#: use as ``type=FINITE_FLOAT`` for every float option
+FINITE_FLOAT = FiniteFloat()
 
 
 def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
@@ -16,7 +33,7 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
         values = tuple(float(p) for p in parts)
     except ValueError:
         values = ()
-    if len(values) != 3:
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise click.BadParameter(f"{what} must be three numbers X,Y,Z, got {text!r}")
     return values  # type: ignore[return-value]
 
@@ -54,7 +71,10 @@ def parse_tool_length(text: str) -> tuple[int, float]:
     key, sep, value = text.partition("=")
     key = key.strip().upper().lstrip("HT")
     try:
-        return int(key), float(value)
+        length = float(value)
+        if not math.isfinite(length):
+            raise ValueError
+        return int(key), length
     except ValueError:
         raise click.BadParameter(f"{text!r}: expected H=L, e.g. 1=100.5 or H1=100.5 (mm)") from None
 
@@ -63,8 +83,9 @@ def parse_context(text: str) -> tuple[str, float]:
     """``"temp=21.5"`` -> ("temp", 21.5)."""
     key, sep, value = text.partition("=")
     try:
-        if not sep or not key.strip():
+        number = float(value)
+        if not sep or not key.strip() or not math.isfinite(number):
             raise ValueError
-        return key.strip(), float(value)
+        return key.strip(), number
     except ValueError:
         raise click.BadParameter(f"{text!r}: expected NAME=VALUE, e.g. temp=21.5") from None

@@ -6,7 +6,7 @@ import json
 
 import click
 
-from postproc.cli.options import parse_vector
+from postproc.cli.options import FINITE_FLOAT, parse_vector
 
 
 @click.command()
@@ -18,7 +18,7 @@ from postproc.cli.options import parse_vector
               help="A commanded point in mm (repeatable). Default: the six points of seed 000, Table 3.")
 @click.option("--tool-vector", "tool_vector", default="0,0,-100", show_default=True, metavar="X,Y,Z",
               help="Tool vector r (mm) from the gauge point to the functional point.")
-@click.option("-k", "k", type=float, default=1000.0, show_default=True,
+@click.option("-k", "k", type=FINITE_FLOAT, default=1000.0, show_default=True,
               help="Factor applied to every angular error for the second comparison (seed 000, Table 4).")
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
 def orders(calibration, points, point, tool_vector, k, as_json):

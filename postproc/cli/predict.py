@@ -7,7 +7,7 @@ import json
 import click
 import numpy as np
 
-from postproc.cli.options import parse_context, parse_vector
+from postproc.cli.options import FINITE_FLOAT, parse_context, parse_vector
 
 
 def _use_agg() -> None:
@@ -50,7 +50,7 @@ def predict() -> None:
 
 @predict.command()
 @click.argument("operation", type=click.Path(exists=True, dir_okay=False))
-@click.option("--runout", "runout", type=float, default=None, metavar="RAD",
+@click.option("--runout", "runout", type=FINITE_FLOAT, default=None, metavar="RAD",
               help="Spindle runout: angular amplitude A (rad). Default: the operation's value.")
 @click.option("--heights", type=int, default=None, help="Number of edge heights sampled (default: the operation's).")
 @click.option("--windows", type=int, default=40, show_default=True, help="Cutting windows (edge passes) sampled.")
@@ -153,7 +153,7 @@ def _load_bore(operation):
 @click.option("--seed", type=int, default=None, help="Random seed (default: the operation's).")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write the section (errors magnified) and the centre scatter to this PNG.")
-@click.option("--magnify", type=float, default=100.0, show_default=True, help="Error magnification in the plot.")
+@click.option("--magnify", type=FINITE_FLOAT, default=100.0, show_default=True, help="Error magnification in the plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
 def bore(operation, n, seed, plot, magnify, as_json):
     """Position error of a bored hole's centre (seed 004 example).

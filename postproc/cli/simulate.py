@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from postproc.cli.options import parse_context, parse_vector
+from postproc.cli.options import FINITE_FLOAT, parse_context, parse_vector
 
 
 def _parse_volume(text: str) -> list[list[float]]:
@@ -35,7 +35,7 @@ def _parse_floats(text: str, what: str) -> list[float]:
               help="The static method's six points: two per axis (low corner and each axis end).")
 @click.option("--tables", "tables", is_flag=True,
               help="Interferometer axis error tables; the squareness goes to OUTPUT_squareness.csv.")
-@click.option("--step", "step", type=float, default=5.0, show_default=True, metavar="MM",
+@click.option("--step", "step", type=FINITE_FLOAT, default=5.0, show_default=True, metavar="MM",
               help="Position step of the interferometer tables.")
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
               help="File to write (formats.md CSV), written atomically.")
@@ -50,7 +50,7 @@ def _parse_floats(text: str, what: str) -> list[float]:
               help="Approach each point moving + on every axis, or both + and -.")
 @click.option("--repeats", type=int, default=1, show_default=True,
               help="Shots per point (the seed averaged 12); each is its own row.")
-@click.option("--time-span", "time_span", type=float, default=None, metavar="S",
+@click.option("--time-span", "time_span", type=FINITE_FLOAT, default=None, metavar="S",
               help="Spread the rows evenly over S seconds and write a t column.")
 @click.option("--temp-profile", "temp_profile", default=None, metavar="T|T0:T1|T0:T1:TAU",
               help="Write a temp column: constant, linear ramp over the run, or warm-up from T0 "

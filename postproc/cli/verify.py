@@ -6,7 +6,13 @@ import json
 
 import click
 
-from postproc.cli.options import parse_context, parse_offset, parse_tool_length, parse_vector
+from postproc.cli.options import (
+    FINITE_FLOAT,
+    parse_context,
+    parse_offset,
+    parse_tool_length,
+    parse_vector,
+)
 
 
 @click.command()
@@ -27,9 +33,9 @@ from postproc.cli.options import parse_context, parse_offset, parse_tool_length,
               help="Tool length of offset number H in mm (repeatable).")
 @click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
               help="Context value during the run (temp=21.5, load=300 ...; repeatable).")
-@click.option("--tolerance", type=float, default=None, metavar="MM",
+@click.option("--tolerance", type=FINITE_FLOAT, default=None, metavar="MM",
               help="Path tolerance of the in-process correction (default: the correct command's).")
-@click.option("--max-step", "max_step", type=float, default=0.5, show_default=True, metavar="MM",
+@click.option("--max-step", "max_step", type=FINITE_FLOAT, default=0.5, show_default=True, metavar="MM",
               help="Sampling step along the program's moves.")
 @click.option("--shots", type=int, default=12, show_default=True,
               help="With --points: tracker shots averaged per point.")
