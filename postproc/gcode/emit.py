@@ -11,8 +11,9 @@ import math
 
 from postproc import __version__
 
-# half of the last written digit, by number of decimals
-HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 16)}
+# half of the last written digit, by number of decimals (a program's numbers may carry
+# any number of them; beyond 323 the half unit is below the smallest double, 0.0)
+HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 330)}
 
 HEADER_TAG = "(postproc "
 HEADER_MARK = " corrected "

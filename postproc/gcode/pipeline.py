@@ -18,6 +18,7 @@ import os
 import tempfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ from postproc.errors import (
     PostprocError,
     SolverError,
 )
-from postproc.gcode import emit
+from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import EmitterMixin, _mismatch, _unit_decimals
 from postproc.gcode.fastlane import FastMove, emit_fast, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
@@ -68,6 +69,7 @@ class CorrectOptions:
     added: list = field(default_factory=list)
     chunk_lines: int = DEFAULT_CHUNK_LINES
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
+    bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
 
 
 @dataclass
@@ -265,7 +267,11 @@ class Corrector(EmitterMixin):
 
         interp = self.interp
         use_fast = self.linear_exact and self.opt.fast_lane
+        use_bulk = use_fast and self.opt.bulk_lane
+        dec_mm = _unit_decimals(self.opt, 1.0)
+        dec_in = _unit_decimals(self.opt, MM_PER_INCH)
         allowed = False
+        pending = 0  # lines in entries
 
         def feed(line: str) -> None:
             nonlocal lineno, allowed
@@ -280,13 +286,39 @@ class Corrector(EmitterMixin):
             lineno += 1
             allowed = use_fast and state_allows(interp)
 
+        def feed_block(lines: list[str]) -> None:
+            nonlocal lineno
+            block = bulk.scan(lines) if use_bulk else None
+            if block is None:
+                for line in lines:
+                    feed(line)
+                return
+            edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
+            i, n = 0, len(lines)
+            for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
+                while i < a or (i < b and not allowed):
+                    feed(lines[i])
+                    i += 1
+                if i < b:
+                    dec = dec_in if interp.state.inch else dec_mm
+                    entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
+                    lineno += b - i
+                    i = b
+            while i < n:
+                feed(lines[i])
+                i += 1
+            bulk.finish_block(block)
+
         for line in head:
             feed(line)
-        for line in it:
-            feed(line)
-            if len(entries) >= self.opt.chunk_lines and not any(math.isnan(v) for v in self.interp.state.pos):
+            pending += 1
+        for block in iter(lambda: list(islice(it, self.opt.chunk_lines)), []):
+            feed_block(block)
+            pending += len(block)
+            if pending >= self.opt.chunk_lines and not any(math.isnan(v) for v in self.interp.state.pos):
                 self._chunk(entries, write)
                 entries.clear()
+                pending = 0
                 if progress is not None:
                     progress(lineno - 1)
         self._chunk(entries, write)
@@ -319,12 +351,47 @@ class Corrector(EmitterMixin):
 
     # -- one chunk ---------------------------------------------------------------------
     def _chunk(self, entries: list, write_out) -> None:
-        moves: list[Move] = [e[1] for e in entries if e[1] is not None]
-        targets = np.zeros((0, 3))
+        # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
+        q_parts: list[np.ndarray] = []
+        ln_parts: list[np.ndarray] = []
+        r_parts: list[np.ndarray] = []
+        rot: list[dict] = []
+        general: list[tuple[int, Move]] = []
+        rows: list = []
+        unit0 = None
+
+        def flush_rows() -> None:
+            if rows:
+                q_parts.append(np.array([m.q1 for m in rows], dtype=float))
+                ln_parts.append(np.array([m.lineno for m in rows]))
+                r_parts.append(np.array([m.r for m in rows], dtype=float))
+                rows.clear()
+
+        M = 0
+        for e in entries:
+            if type(e) is bulk.Run:
+                flush_rows()
+                m = len(e)
+                e.trow = M
+                q_parts.append(e.q1)
+                ln_parts.append(np.arange(e.lineno, e.lineno + m))
+                r_parts.append(np.broadcast_to(np.asarray(e.r, dtype=float), (m, 3)))
+                rot.extend([{}] * m)
+                unit0 = e.unit if unit0 is None else unit0
+                M += m
+            elif e[1] is not None:
+                mv = e[1]
+                rows.append(mv)
+                rot.append(mv.rotary)
+                general.append((M, mv))
+                unit0 = mv.unit if unit0 is None else unit0
+                M += 1
+        flush_rows()
+        T = np.zeros((0, 3))
         plans: dict[int, object] = {}
-        if moves:
-            targets, plans = self._plan(moves)
-        targets = targets.tolist()
+        if M:
+            T, plans = self._plan(np.vstack(q_parts), np.concatenate(ln_parts), np.vstack(r_parts), rot,
+                                  general, unit0)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
@@ -333,36 +400,54 @@ class Corrector(EmitterMixin):
         passed = fast = 0
         dec_mm = _unit_decimals(self.opt, 1.0)
         dec_in = _unit_decimals(self.opt, MM_PER_INCH)
-        for line, mv, motion_word, prog_motion in entries:
+        prepared: dict[int, object] = {}
+        blocks: list[bulk.Block] = []
+        for e in entries:
+            if type(e) is bulk.Run:
+                em = prepared.get(id(e.block))
+                if em is None:
+                    em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
+                    blocks.append(e.block)
+                bulk.emit_run(self, e, em, T, write)
+                k += len(e)
+                continue
+            line, mv, motion_word, prog_motion = e
             if mv is None:
                 write(line)
                 passed += 1
                 if motion_word:
                     self.emitted_motion = prog_motion
                 continue
-            if type(mv) is FastMove and emit_fast(self, line, mv, targets[k], write,
+            target = T[k].tolist()
+            if type(mv) is FastMove and emit_fast(self, line, mv, target, write,
                                                   dec_mm if mv.unit == 1.0 else dec_in):
                 fast += 1
             else:
-                emit_move(line, mv, targets[k], get_plan(k), write)
+                emit_move(line, mv, target, get_plan(k), write)
             k += 1
+        for blk in blocks:
+            blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += passed
         self.report.moves += fast
         write_out("".join(out))
 
-    def _plan(self, moves: list[Move]):
-        M = len(moves)
-        Q1 = np.array([m.q1 for m in moves], dtype=float)
-        linenos = np.array([m.lineno for m in moves])
+    def _plan(self, Q1: np.ndarray, linenos: np.ndarray, R: np.ndarray, rot: list[dict],
+              general: list[tuple[int, Move]], unit0: float):
+        """Corrected targets of a chunk's moves, and the plans of those that need one.
+
+        ``Q1``, ``linenos``, ``R``, ``rot``: every move's nominal target, line, tool
+        vector and rotary positions; ``general``: (index, Move) of the moves not read
+        in bulk (arcs among them; all moves when straight moves may be split).
+        """
+        M = len(Q1)
         Q1 = backfill_unknown(Q1, linenos, self.path)
         Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
         Q0 = np.where(np.isnan(Q0), Q1, Q0)
-        R = np.array([m.r for m in moves], dtype=float)
-        rot = [m.rotary for m in moves]
+        moves = dict(general)
         # approach directions: chord signs (end tangent for arcs), carried where zero
         d = Q1 - Q0
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
-        arcs = [i for i, m in enumerate(moves) if m.arc is not None]
+        arcs = [i for i, m in general if m.arc is not None]
         for i in arcs:
             m = moves[i]
             before = arc_points(m.arc, m.q0, m.q1, np.array([1.0 - 1e-6]))[0]
@@ -425,13 +510,13 @@ class Corrector(EmitterMixin):
                     s_init.append(np.linspace(0.0, 1.0, n0 + 1))
                     owner.append(i)
         if not self.linear_exact:
-            for i, m in enumerate(moves):
+            for i, m in general:
                 if m.kind == LINE and not any(math.isnan(v) for v in m.q0):
                     curves.append(Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary))
                     s_init.append(np.array([0.0, 1.0]))
                     owner.append(i)
         if curves:
-            results = self._subdivide(curves, s_init, moves[0].unit)
+            results = self._subdivide(curves, s_init, unit0)
             for i, (s, q) in zip(owner, results, strict=True):
                 plan = plans.setdefault(i, {})
                 plan["split_s"] = s

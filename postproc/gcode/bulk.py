@@ -1,0 +1,331 @@
+"""The bulk lane: runs of plain absolute straight moves read and rewritten per chunk.
+
+Most lines of CAM output are ``[N..] [G0|G1] [X..] [Y..] [Z..] [F..]`` in that order.
+A chunk of lines is matched by one regular expression (one ``findall`` over the
+chunk's text), which splits every such line into its pieces: the text before the
+first axis word, each axis word's letter (with the blanks before it) and number,
+and the rest (feed word, trailing blanks, ``\\r``). The numbers of the whole chunk
+are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
+state is simple (the conditions of the per-line fast lane,
+:func:`postproc.gcode.fastlane.state_allows`) form a :class:`Run`: reading one only
+advances the modal state to its last line; the nominal targets of all the chunk's
+runs are then made at once (positions carried forward where a line does not name
+an axis).
+
+After the chunk's targets are corrected, the comparisons of old and new values of
+every run line are vectorised and the new numbers formatted in one operation; each
+run is then written in program order by joining its lines' pieces. Only the words
+an axis does not name but whose corrected position moves (squareness) need a
+sequential pass, because whether one is written depends on the position the words
+before it reached. The result is byte for byte that of the per-line fast lane and
+of the general path (tests run all of them on the same programs); every line that
+is not plain, and every line of a chunk with lone ``\\r`` line endings, takes those.
+"""
+
+from __future__ import annotations
+
+import re
+from bisect import bisect_left
+from itertools import accumulate
+
+import numpy as np
+
+from postproc.gcode import emit
+from postproc.gcode.fastlane import FastMove
+from postproc.gcode.lexer import NUMBER_RE
+from postproc.gcode.state import LINE, RAPID
+
+_N = NUMBER_RE
+# Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks
+# before it, 4/6/8 their numbers, 9 the rest (F word, trailing blanks, \r), 10 the F
+# number, 11 any other line.
+_PLAIN = re.compile(
+    rf"^(?:([ \t]*(?:[Nn][ \t]*{_N})?(?:[ \t]*[Gg][ \t]*(0?[01]))?)"
+    rf"(?:([ \t]*[Xx][ \t]*)({_N}))?(?:([ \t]*[Yy][ \t]*)({_N}))?(?:([ \t]*[Zz][ \t]*)({_N}))?"
+    rf"((?:[ \t]*[Ff][ \t]*({_N}))?[ \t]*\r?)|(.*))$",
+    re.M,
+)
+_HEAD, _G, _REST, _F = 0, 1, 8, 9
+_LETTER = (2, 4, 6)  # tuple index of each axis letter (with the blanks before it)
+_NUM = (3, 5, 7)  # tuple index of each axis number
+_HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
+
+
+def _last_index(present: np.ndarray) -> np.ndarray:
+    """For each row, the index of the last present row at or before it (-1: none)."""
+    idx = np.where(present, np.arange(len(present)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return idx
+
+
+class Block:
+    """One chunk of lines split into pieces, with the plain lines' numbers parsed."""
+
+    def __init__(self, lines: list[str], found: list[tuple]) -> None:
+        n = len(lines)
+        self.lines = lines
+        cols = list(zip(*found, strict=True)) if n else [()] * 11
+        self.cols = cols
+        self.has, self.ov, self.ovl, self.frac, self.last = [], [], [], [], []
+        for k in range(3):
+            nums = cols[_NUM[k]]
+            arr = np.array(nums, dtype=str)
+            has = arr != ""
+            ov = np.zeros(n)
+            ov[has] = np.array([x for x in nums if x], dtype=float)
+            dot = np.strings.find(arr, ".")
+            self.has.append(has)
+            self.ov.append(ov)
+            self.ovl.append(ov.tolist())
+            self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
+            self.last.append(_last_index(has))
+        self.plain = self.has[0] | self.has[1] | self.has[2]
+        g = np.array(cols[_G], dtype=str)
+        self.gword = (g != "").tolist()
+        self.code = np.where((g == "1") | (g == "01"), LINE, RAPID).tolist()
+        self.last_g = _last_index(g != "").tolist()
+        self.last_f = _last_index(np.array(cols[_F], dtype=str) != "").tolist()
+        self.last_l = [a.tolist() for a in self.last]
+        self.runs: list[Run] = []
+
+
+def scan(lines: list[str]) -> Block | None:
+    """The chunk ``lines`` as a :class:`Block`, or None when it cannot be scanned as a
+    whole (a lone ``\\r`` line ending)."""
+    text = "".join(lines)
+    if "\r" in text and text.count("\r") != text.count("\r\n"):
+        return None
+    found = _PLAIN.findall(text)
+    n = len(lines)
+    # one match per line, plus an empty one after a final line ending
+    if len(found) not in (n, n + 1):
+        return None
+    return Block(lines, found[:n] if len(found) > n else found)
+
+
+class Run:
+    """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
+
+    __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
+                 "feed0", "q1", "trow")
+
+    def __len__(self) -> int:
+        return self.b - self.a
+
+
+def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run:
+    """Interpret the plain lines ``a:b`` of ``block``: advance the modal state to the
+    end of the run. The caller checks :func:`postproc.gcode.fastlane.state_allows`."""
+    st = interp.state
+    run = Run()
+    run.block, run.a, run.b, run.lineno = block, a, b, lineno
+    run.unit = unit = 25.4 if st.inch else 1.0
+    run.shift = shift = interp._fast_shift
+    run.r = interp._fast_r
+    run.arc_absolute = st.arc_absolute
+    run.decimals = decimals
+    run.q0 = tuple(st.pos)
+    run.motion0 = st.motion
+    run.feed0 = st.feed
+    pos = list(st.pos)
+    e = b - 1
+    for k in range(3):
+        i = block.last_l[k][e]
+        if i >= a:
+            pos[k] = block.ovl[k][i] * unit + shift[k]
+    st.pos = pos
+    i = block.last_g[e]
+    if i >= a:
+        st.motion = block.code[i]
+    i = block.last_f[e]
+    if i >= a:
+        st.feed = float(block.cols[_F][i])
+    interp.motion_word = block.gword[e]
+    block.runs.append(run)
+    return run
+
+
+def finish_block(block: Block) -> None:
+    """Nominal targets ``q1`` of every run of the block (after all were read)."""
+    runs = block.runs
+    if not runs:
+        return
+    lengths = [r.b - r.a for r in runs]
+    idx = np.concatenate([np.arange(r.a, r.b) for r in runs])
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    unit = np.repeat([r.unit for r in runs], lengths)
+    shift = np.repeat(np.array([r.shift for r in runs], dtype=float), lengths, axis=0)
+    q0 = np.array([r.q0 for r in runs], dtype=float)
+    q = np.empty((len(idx), 3))
+    for k in range(3):
+        has = block.has[k][idx]
+        val = block.ov[k][idx] * unit + shift[:, k]
+        # a run's first line that does not name the axis starts from the run's start
+        first_missing = ~has[starts]
+        val[starts[first_missing]] = q0[first_missing, k]
+        has[starts] = True
+        q[:, k] = val[_last_index(has)]
+    for r, s, n in zip(runs, starts.tolist(), lengths, strict=True):
+        r.q1 = q[s:s + n]
+
+
+class _Emission:
+    """What the emitter needs of a block's run lines once their targets are known."""
+
+    __slots__ = ("nums", "miss", "miss_t", "miss_q", "miss_text", "miss_last", "edits_cum", "changed_cum",
+                 "named_edits")
+
+
+def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
+    """Vectorised part of writing the block's runs (``run.trow``: first row in T).
+
+    Named words: the new number where it changes. Axes a line does not name: the
+    word that would be added (its text and the position it reaches), for the
+    sequential decision in :func:`emit_run`.
+    """
+    runs = block.runs
+    lengths = [r.b - r.a for r in runs]
+    idx = np.concatenate([np.arange(r.a, r.b) for r in runs])
+    trow = np.concatenate([np.arange(r.trow, r.trow + n) for r, n in zip(runs, lengths, strict=True)])
+    unit = np.repeat([r.unit for r in runs], lengths)
+    shift = np.repeat(np.array([r.shift for r in runs], dtype=float), lengths, axis=0)
+    dec = np.repeat([r.decimals for r in runs], lengths)
+    n = len(block.lines)
+    em = _Emission()
+    em.nums, em.miss, em.miss_t, em.miss_q, em.miss_text, em.miss_last = [], [], [], [], [], []
+    named = np.zeros(n, dtype=int)
+    for k in range(3):
+        has = block.has[k][idx]
+        tk = T[trow, k]
+        v = (tk - shift[:, k]) / unit
+        ov = block.ov[k][idx]
+        dout = np.maximum(block.frac[k][idx], dec)
+        changed = has & ~(np.abs(v - ov) < _HALF[dout])
+        sel = np.flatnonzero(changed)
+        nums = block.cols[_NUM[k]]
+        if len(sel):
+            col = np.array(nums, dtype=object)
+            col[idx[sel]] = _format(v[sel], dout[sel])
+            nums = col.tolist()
+            named[idx[sel]] += 1
+        em.nums.append(nums)
+        miss = np.flatnonzero(~has)
+        if len(miss):
+            letter = "XYZ"[k]
+            texts = _format(v[miss], dec[miss])
+            em.miss_text.append([letter + t for t in texts])
+            # round(v, decimals) == float(fmt(v, decimals)): both correctly rounded
+            em.miss_q.append((np.array(texts, dtype=float) * unit[miss] + shift[miss, k]).tolist())
+        else:
+            em.miss_text.append([])
+            em.miss_q.append([])
+        rows = idx[miss]
+        em.miss.append(rows.tolist())
+        em.miss_t.append(tk[miss].tolist())
+        em.miss_last.append(block.last[k][rows].tolist())
+    em.named_edits = named.tolist()
+    em.edits_cum = [0, *accumulate(em.named_edits)]
+    em.changed_cum = [0, *accumulate(int(x > 0) for x in em.named_edits)]
+    return em
+
+
+def _format(values: np.ndarray, dout: np.ndarray) -> list[str]:
+    """``emit.fmt(v, d)`` for every value, in bulk (grouped by number of decimals)."""
+    if not np.isfinite(values).all():
+        raise ValueError("cannot write a non-finite value into a program")
+    out: list[str] = [""] * len(values)
+    groups = [int(dout[0])] if (dout == dout[0]).all() else np.unique(dout).tolist()
+    for d in groups:
+        sel = np.flatnonzero(dout == d) if len(groups) > 1 else None
+        v = values if sel is None else values[sel]
+        texts = ((f"%.{d}f\n" * len(v)) % tuple(v.tolist())).split("\n")
+        texts.pop()
+        # "-0.000" is written "0.000" (emit.fmt)
+        for j in np.flatnonzero((v <= 0.0) & (v > -(10.0 ** -d))).tolist():
+            t = texts[j]
+            if t[0] == "-" and not t.strip("-0."):
+                texts[j] = t[1:]
+        if sel is None:
+            return texts
+        for i, t in zip(sel.tolist(), texts, strict=True):
+            out[i] = t
+    return out
+
+
+def _first_move(run: Run, lineno: int) -> FastMove:
+    """The first line of a run as a FastMove (for the general emitter)."""
+    blk, a = run.block, run.a
+    f = blk.cols[_F][a]
+    missing = tuple(k for k in range(3) if not blk.has[k][a])
+    kind = blk.code[a] if blk.gword[a] else run.motion0
+    return FastMove(lineno, kind, run.q0, tuple(run.q1[0].tolist()), run.r, run.shift, run.unit, [],
+                    blk.gword[a], run.arc_absolute, float(f) if f else run.feed0, missing)
+
+
+def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
+    """Write the corrected lines of ``run`` (targets prepared in ``em``)."""
+    blk = run.block
+    a, b = run.a, run.b
+    s = a
+    kind0 = blk.code[a] if blk.gword[a] else run.motion0
+    if not blk.gword[a] and corrector.emitted_motion != kind0:
+        # the controller's modal motion differs from the program's here (after a
+        # linearised arc): the general emitter adds the motion word
+        corrector._emit_move(blk.lines[a], _first_move(run, run.lineno), T[run.trow].tolist(), None, write)
+        s = a + 1
+        if s == b:
+            return
+    qe = corrector.qe
+    unit, shift = run.unit, run.shift
+    hd = emit.HALF_UNIT[run.decimals]
+    added: dict[int, list[str]] = {}
+    for k in range(3):
+        qk = qe[k]
+        miss = em.miss[k]
+        lo, hi = bisect_left(miss, s), bisect_left(miss, b)
+        nums = em.nums[k]
+        sk = shift[k]
+        if lo < hi:
+            ts, qs, texts, lasts = em.miss_t[k], em.miss_q[k], em.miss_text[k], em.miss_last[k]
+            prev = -1
+            for j in range(lo, hi):
+                p = lasts[j]
+                if p != prev and p >= s:
+                    # the position the line's own word reached (float(text) == the
+                    # value it was written from, correctly rounded)
+                    qk = float(nums[p]) * unit + sk
+                    prev = p
+                if abs(ts[j] - qk) / unit < hd or qk != qk:
+                    continue
+                i = miss[j]
+                words = added.get(i)
+                if words is None:
+                    added[i] = [texts[j]]
+                else:
+                    words.append(texts[j])
+                qk = qs[j]
+        if blk.has[k][b - 1]:
+            qk = float(nums[b - 1]) * unit + sk
+        qe[k] = qk
+    n = b - s
+    add_col = [""] * n
+    lines = blk.lines
+    named = em.named_edits
+    newly_changed = 0
+    for i, words in added.items():
+        line = lines[i]
+        sep = " " if (" " in line or "\t" in line) else ""
+        text = sep + sep.join(words)
+        add_col[i - s] = text.lower() if line.islower() else text
+        newly_changed += named[i] == 0
+    rep = corrector.report
+    rep.words_changed += em.edits_cum[b] - em.edits_cum[s] + len(added)
+    rep.lines_changed += em.changed_cum[b] - em.changed_cum[s] + newly_changed
+    rep.lines_out += n
+    rep.moves += n
+    i = blk.last_g[b - 1]
+    corrector.emitted_motion = blk.code[i] if i >= a else run.motion0
+    cols, nums = blk.cols, em.nums
+    text = "\n".join(map("".join, zip(cols[_HEAD][s:b], cols[2][s:b], nums[0][s:b], cols[4][s:b], nums[1][s:b],
+                                      cols[6][s:b], nums[2][s:b], add_col, cols[_REST][s:b], strict=True)))
+    write(text + "\n" if lines[b - 1].endswith("\n") else text)
