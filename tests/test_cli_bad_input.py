@@ -113,3 +113,31 @@ def test_non_finite_option_values_are_usage_errors(tmp_path, args):
     assert "Invalid value" in result.output
     assert "internal error" not in result.output
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("args", "option"), [
+    (["simulate", MACHINE, "--random", "5", "--seed", "-1"], "--seed"),
+    (["simulate", MACHINE, "--random", "5", "--time-span", "-1"], "--time-span"),
+    (["verify", "--points", ROOT / "samples" / "s500_control_points.csv", "-c",
+      ROOT / "calibrations" / "s500_static.json", "--machine", MACHINE, "--seed", "-1"], "--seed"),
+    (["verify", "--points", ROOT / "samples" / "s500_control_points.csv", "-c",
+      ROOT / "calibrations" / "s500_static.json", "--machine", MACHINE, "--shots", "0"], "--shots"),
+    (["verify", ROOT / "samples" / "pocket.nc", "-c", ROOT / "calibrations" / "s500_static.json",
+      "--machine", MACHINE, "--tolerance", "0"], "--tolerance"),
+    (["predict", "bore", ROOT / "samples" / "predict" / "bore_50H7.operation.json", "--seed", "-1"], "--seed"),
+    (["predict", "tolerance", ROOT / "samples" / "predict" / "bore_50H7.operation.json", "-n", "0"], "-n"),
+    (["mirror", "deadband", MIRROR / "zigzag_sensor.csv", "--gap", "0.02", "--drive-tau", "-1"], "--drive-tau"),
+])
+def test_out_of_range_options_are_usage_errors(tmp_path, args, option):
+    out = tmp_path / "out.csv"
+    result = run(*args, "-o", out) if args[0] == "simulate" else run(*args)
+    assert result.exit_code == EXIT_USAGE, result.output
+    assert f"Invalid value for '{option}'" in result.output
+    assert not out.exists()
+
+
+def test_mirror_synth_refuses_a_negative_seed(tmp_path):
+    result = run("mirror", "synth", tmp_path / "shell", "--seed", "-1")
+    assert result.exit_code == EXIT_USAGE, result.output
+    assert "Invalid value for '--seed'" in result.output
+    assert not (tmp_path / "shell").exists()

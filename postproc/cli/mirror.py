@@ -7,7 +7,13 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, parse_offset, parse_tool_length, parse_vector
+from postproc.cli.options import (
+    FINITE_FLOAT,
+    FiniteFloat,
+    parse_offset,
+    parse_tool_length,
+    parse_vector,
+)
 from postproc.errors import PostprocError
 
 
@@ -263,7 +269,7 @@ def _correct_program(template, calibration, setup, corr, target: Path, max_corre
 @mirror.command()
 @click.argument("sensor", type=click.Path(exists=True, dir_okay=False))
 @click.option("--gap", type=FINITE_FLOAT, required=True, metavar="MM", help="Width of the elastic gap (dead band).")
-@click.option("--drive-tau", "tau", type=FINITE_FLOAT, default=0.0, show_default=True, metavar="S",
+@click.option("--drive-tau", "tau", type=FiniteFloat(min=0), default=0.0, show_default=True, metavar="S",
               help="Time constant of the tracking drive (needs a t column); 0: ideal drive.")
 @click.option("--correction", "correction", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Correction map (B,Z or B) to test: the residual E - K is reported.")
@@ -344,7 +350,7 @@ def deadband(sensor, gap, tau, correction, learn, plot, output):
 
 @mirror.command()
 @click.argument("directory", type=click.Path(file_okay=False))
-@click.option("--seed", type=int, default=3, show_default=True, help="Seed of the synthetic noise.")
+@click.option("--seed", type=click.IntRange(min=0), default=3, show_default=True, help="Seed of the synthetic noise.")
 def synth(directory, seed):
     """Write a synthetic shell data set: sensor sweep, pocket program, plan, first maps.
 

@@ -10,10 +10,9 @@ import click
 _AXES = "XYZ"
 
 
-class FiniteFloat(click.types.FloatParamType):
-    """A float option that refuses nan and inf (click's float accepts them)."""
-
-    name = "float"
+class FiniteFloat(click.FloatRange):
+    """A float option that refuses nan and inf (click's float accepts them, and a
+    range check lets nan through); ``min``/``max`` as in :class:`click.FloatRange`."""
 
     def convert(self, value, param, ctx):
         number = super().convert(value, param, ctx)

@@ -149,8 +149,8 @@ def _load_bore(operation):
 
 @predict.command()
 @click.argument("operation", type=click.Path(exists=True, dir_okay=False))
-@click.option("-n", "n", type=int, default=None, help="Monte-Carlo size (default: the operation's).")
-@click.option("--seed", type=int, default=None, help="Random seed (default: the operation's).")
+@click.option("-n", "n", type=click.IntRange(min=2), default=None, help="Monte-Carlo size (default: the operation's).")
+@click.option("--seed", type=click.IntRange(min=0), default=None, help="Random seed (default: the operation's).")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write the section (errors magnified) and the centre scatter to this PNG.")
 @click.option("--magnify", type=FINITE_FLOAT, default=100.0, show_default=True, help="Error magnification in the plot.")
@@ -226,8 +226,8 @@ def bore(operation, n, seed, plot, magnify, as_json):
 
 @predict.command("tolerance")
 @click.argument("operation", type=click.Path(exists=True, dir_okay=False))
-@click.option("-n", "n", type=int, default=None, help="Monte-Carlo size (default: the operation's).")
-@click.option("--seed", type=int, default=None, help="Random seed (default: the operation's).")
+@click.option("-n", "n", type=click.IntRange(min=2), default=None, help="Monte-Carlo size (default: the operation's).")
+@click.option("--seed", type=click.IntRange(min=0), default=None, help="Random seed (default: the operation's).")
 @click.option("--worst-case", "worst_only", is_flag=True, help="Only the worst case over the field corners.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write histograms of the error components to this PNG.")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, parse_context, parse_vector
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, parse_context, parse_vector
 
 
 def _parse_volume(text: str) -> list[list[float]]:
@@ -39,7 +39,7 @@ def _parse_floats(text: str, what: str) -> list[float]:
               help="Position step of the interferometer tables.")
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
               help="File to write (formats.md CSV), written atomically.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the instrument noise.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of the instrument noise.")
 @click.option("--no-noise", "no_noise", is_flag=True, help="Exact values, no instrument noise.")
 @click.option("--volume", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
               help="Measure this part of the travel (mm); default: the machine's whole volume.")
@@ -50,7 +50,7 @@ def _parse_floats(text: str, what: str) -> list[float]:
               help="Approach each point moving + on every axis, or both + and -.")
 @click.option("--repeats", type=int, default=1, show_default=True,
               help="Shots per point (the seed averaged 12); each is its own row.")
-@click.option("--time-span", "time_span", type=FINITE_FLOAT, default=None, metavar="S",
+@click.option("--time-span", "time_span", type=FiniteFloat(min=0), default=None, metavar="S",
               help="Spread the rows evenly over S seconds and write a t column.")
 @click.option("--temp-profile", "temp_profile", default=None, metavar="T|T0:T1|T0:T1:TAU",
               help="Write a temp column: constant, linear ramp over the run, or warm-up from T0 "

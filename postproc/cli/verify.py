@@ -8,6 +8,7 @@ import click
 
 from postproc.cli.options import (
     FINITE_FLOAT,
+    FiniteFloat,
     parse_context,
     parse_offset,
     parse_tool_length,
@@ -33,13 +34,13 @@ from postproc.cli.options import (
               help="Tool length of offset number H in mm (repeatable).")
 @click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
               help="Context value during the run (temp=21.5, load=300 ...; repeatable).")
-@click.option("--tolerance", type=FINITE_FLOAT, default=None, metavar="MM",
+@click.option("--tolerance", type=FiniteFloat(min=0, min_open=True), default=None, metavar="MM",
               help="Path tolerance of the in-process correction (default: the correct command's).")
 @click.option("--max-step", "max_step", type=FINITE_FLOAT, default=0.5, show_default=True, metavar="MM",
               help="Sampling step along the program's moves.")
-@click.option("--shots", type=int, default=12, show_default=True,
+@click.option("--shots", type=click.IntRange(min=1), default=12, show_default=True,
               help="With --points: tracker shots averaged per point.")
-@click.option("--seed", type=int, default=0, show_default=True, help="With --points: seed of the tracker noise.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="With --points: seed of the tracker noise.")
 @click.option("--no-noise", "no_noise", is_flag=True, help="With --points: exact positions, no tracker noise.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
