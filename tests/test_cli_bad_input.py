@@ -141,3 +141,20 @@ def test_mirror_synth_refuses_a_negative_seed(tmp_path):
     assert result.exit_code == EXIT_USAGE, result.output
     assert "Invalid value for '--seed'" in result.output
     assert not (tmp_path / "shell").exists()
+
+
+def test_verify_refuses_a_corrected_program_without_feed_moves(tmp_path):
+    """An empty or rapid-only corrected program must not be reported as 0.00 um off the path."""
+    corrected = tmp_path / "corrected.nc"
+    for text in ("", "G0 X10 Y10 Z10\nG0 X20 Y20\n"):
+        corrected.write_text(text)
+        result = run("verify", ROOT / "samples" / "pocket.nc", "--corrected", corrected, "--machine", MACHINE)
+        assert_user_error(result, 3, f"{corrected}: the corrected program has no feed moves")
+        assert "0.00 um" not in result.output
+
+
+def test_verify_refuses_a_program_without_feed_moves(tmp_path):
+    program = tmp_path / "rapids.nc"
+    program.write_text("G0 X10 Y10 Z10\nG0 X20 Y20\n")
+    result = run("verify", program, "-c", ROOT / "calibrations" / "s500_static.json", "--machine", MACHINE)
+    assert_user_error(result, 3, f"{program}: the program has no feed moves to verify")

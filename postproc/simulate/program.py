@@ -57,10 +57,16 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     report = VerifyReport(source_lines=text.splitlines())
     original = program_path(program, setup, max_step_mm=max_step_mm)
     report.runs.append(evaluate_run("uncorrected", machine, original, poly, nominal.lineno))
+    if not report.runs[-1].feed.any():
+        raise PostprocError("the program has no feed moves to verify (the deviation is measured on feed moves)",
+                            path=program)
     if corrected is not None:
         label = f"corrected ({Path(corrected).name})"
         path = program_path(str(corrected), setup, max_step_mm=max_step_mm)
         report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
+        if not report.runs[-1].feed.any():
+            raise PostprocError("the corrected program has no feed moves: there is nothing to compare",
+                                path=str(corrected), hint="give the corrected version of PROGRAM")
         return report
     for cal in calibrations:
         fixed = correct_program_text(text, cal, setup, path=program, options=options)
