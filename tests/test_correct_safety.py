@@ -19,6 +19,7 @@ from postproc.errors import (
     CorrectionTooLargeError,
     MissingSetupError,
     OutOfVolumeError,
+    SafetyError,
     SolverError,
     UnsupportedGcodeError,
 )
@@ -230,3 +231,19 @@ def test_output_gets_a_normal_file_mode_and_a_missing_directory_is_an_input_erro
             tmp_path)
     assert r.exit_code == EXIT_INPUT
     assert "cannot write the output" in r.output
+
+
+def test_decimals_too_few_for_the_tolerance_are_refused():
+    # one decimal rounds a word by up to 0.05 mm per axis: the 0.001 mm tolerance cannot hold
+    text = "G21 G90\nG0 X10 Y10 Z10\nG1 X20 F100\nG2 X30 Y10 I5 J0\n"
+    with pytest.raises(SafetyError, match=r"words written with 1 decimals in mm are rounded by up to 0.0866 mm") as exc:
+        correct_text(text, static(), Setup(), CorrectOptions(decimals=1))
+    assert exc.value.lineno == 2
+    out, _ = correct_text(text, static(), Setup(), CorrectOptions(decimals=1, tolerance_mm=0.1))
+    assert "\nG1 X20 F100\n" in out  # 20 - 0.01 is 20.0 to one decimal: the word stays
+    # inch words with 4 decimals round by up to 0.0022 mm: refused at the first inch move only
+    inch = "G21 G90\nG0 X10 Y10 Z10\nG20\nG1 X1 F10\n"
+    with pytest.raises(SafetyError, match=r"in inch") as exc:
+        correct_text(inch, static(), Setup(), CorrectOptions(decimals=4))
+    assert exc.value.lineno == 4
+    correct_text(inch.replace("G20\nG1 X1", "G1 X11"), static(), Setup(), CorrectOptions(decimals=4))

@@ -34,6 +34,7 @@ from postproc.errors import (
     CorrectionTooLargeError,
     OutOfVolumeError,
     PostprocError,
+    SafetyError,
     SolverError,
 )
 from postproc.gcode import bulk, emit
@@ -152,6 +153,7 @@ class Corrector(EmitterMixin):
         self.emitted_motion: int | None = None
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
+        self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
         self.report.solver = str(_base_attr(engine, "solver") or "")
@@ -372,6 +374,8 @@ class Corrector(EmitterMixin):
             if type(e) is bulk.Run:
                 flush_rows()
                 m = len(e)
+                if e.unit not in self._units_checked:
+                    self._check_rounding(e.unit, e.lineno)
                 e.trow = M
                 q_parts.append(e.q1)
                 ln_parts.append(np.arange(e.lineno, e.lineno + m))
@@ -381,6 +385,8 @@ class Corrector(EmitterMixin):
                 M += m
             elif e[1] is not None:
                 mv = e[1]
+                if mv.unit not in self._units_checked:
+                    self._check_rounding(mv.unit, mv.lineno)
                 rows.append(mv)
                 rot.append(mv.rotary)
                 general.append((M, mv))
@@ -525,6 +531,18 @@ class Corrector(EmitterMixin):
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
         return T, plans
+
+    def _check_rounding(self, unit: float, lineno: int) -> None:
+        """Refuse when rounding the words to their decimals alone exceeds the tolerance."""
+        err = self._round_err(unit)
+        if err >= self.opt.tolerance_mm:
+            d = _unit_decimals(self.opt, unit)
+            raise SafetyError(
+                f"words written with {d} decimals in {'inch' if unit == MM_PER_INCH else 'mm'} are rounded by up "
+                f"to {err:.3g} mm, more than --tolerance {self.opt.tolerance_mm:g} mm",
+                path=self.path, lineno=lineno,
+                hint=f"give more --decimals or a --tolerance above {err:.3g} mm")
+        self._units_checked.add(unit)
 
     def _round_err(self, unit: float) -> float:
         d = _unit_decimals(self.opt, unit)
