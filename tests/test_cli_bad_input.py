@@ -158,3 +158,15 @@ def test_verify_refuses_a_program_without_feed_moves(tmp_path):
     program.write_text("G0 X10 Y10 Z10\nG0 X20 Y20\n")
     result = run("verify", program, "-c", ROOT / "calibrations" / "s500_static.json", "--machine", MACHINE)
     assert_user_error(result, 3, f"{program}: the program has no feed moves to verify")
+
+
+@pytest.mark.parametrize("command", ["verify", "orders"])
+def test_point_files_without_rows(tmp_path, command):
+    points = tmp_path / "points.csv"
+    points.write_text("# units: length=mm\nX,Y,Z\n")
+    if command == "verify":
+        result = run("verify", "--points", points, "-c", ROOT / "calibrations" / "s500_static.json",
+                     "--machine", MACHINE)
+    else:
+        result = run("orders", "-c", ROOT / "calibrations" / "s500_parametric.json", "--points", points)
+    assert_user_error(result, 3, f"{points}:2: no ")
