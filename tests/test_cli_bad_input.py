@@ -170,3 +170,21 @@ def test_point_files_without_rows(tmp_path, command):
     else:
         result = run("orders", "-c", ROOT / "calibrations" / "s500_parametric.json", "--points", points)
     assert_user_error(result, 3, f"{points}:2: no ")
+
+
+def test_kfb_from_a_thickness_file_without_rows(tmp_path):
+    semi = tmp_path / "semi.csv"
+    semi.write_text("# units: length=mm\nB,Z,T\n")
+    out = tmp_path / "kfb.csv"
+    result = run("mirror", "kfb", semi, "--t-ref", "2", "--allowance", "0.3", "--origin", "3,100", "-o", out)
+    assert_user_error(result, 3, f"{semi}:2: no thickness rows")
+    assert not out.exists()
+
+
+def test_pockets_leaves_no_output_directory_when_the_job_fails(tmp_path):
+    out = tmp_path / "next"
+    result = run("mirror", "pockets", MIRROR / "plan.csv", "-c", MIRROR / "shell_static.json",
+                 "--program", MIRROR / "pocket.nc", "--t-ref", "2.0", "--band", "1.98,2.02", "--allowance", "0.3",
+                 "--max-correction", "0.01", "-o", out)
+    assert_user_error(result, 5, "exceeds --max-correction 0.01 mm")
+    assert not out.exists()

@@ -217,10 +217,16 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     corr = fin_corr if fin_corr is not None else semi_corr
     kind = "finish" if fin_corr is not None else "semi"
     out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
     setup = _setup(offsets, tool_lengths, tool_vector)
     target = out / f"{last.pocket.name}_{kind}.nc"
-    summary = _correct_program(template, calibration, setup, corr, target, max_correction)
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        summary = _correct_program(template, calibration, setup, corr, target, max_correction)
+    except BaseException:
+        if created and not any(out.iterdir()):
+            out.rmdir()  # leave nothing behind: the directory was made for this job
+        raise
     click.echo(f"next: pocket {last.pocket.name}: {last.next}")
     click.echo(f"wrote {target} ({summary})")
     if fin_corr is not None:
