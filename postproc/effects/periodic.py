@@ -39,6 +39,12 @@ PEAK_REFINE_POINTS = 25
 MIN_DISTINCT_POSITIONS = 12
 # Positions closer than this are the same position (repeated points).
 SAME_POSITION_MM = 1e-6
+# Steps between positions whose spread is under this fraction of the median step form a
+# regular grid (which aliases above its Nyquist frequency).
+REGULAR_STEP_SPREAD = 0.05
+# Relative spread of frequency steps under which the frequency grid is evenly spaced
+# (np.linspace output differs from even by rounding only).
+EVEN_FREQUENCY_RTOL = 1e-9
 
 
 def search_frequencies(x: np.ndarray) -> np.ndarray:
@@ -50,7 +56,7 @@ def search_frequencies(x: np.ndarray) -> np.ndarray:
     if len(steps):
         # Regular grids alias above their Nyquist frequency; random positions do not.
         step = float(np.median(steps))
-        regular = np.std(steps) < 0.05 * step
+        regular = np.std(steps) < REGULAR_STEP_SPREAD * step
         if regular:
             f_max = min(f_max, 0.5 / step)
     f_min = 1.0 / min(PITCH_MAX_TRAVEL_FRACTION * travel, PITCH_MAX_MM)
@@ -73,7 +79,7 @@ def periodogram(x: np.ndarray, y: np.ndarray, freqs: np.ndarray) -> np.ndarray:
         return np.zeros(len(freqs))
     yc = np.asarray(y, dtype=float) - np.mean(y)
     steps = np.diff(freqs)
-    if len(freqs) > 2 and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0):
+    if len(freqs) > 2 and np.allclose(steps, steps[0], rtol=EVEN_FREQUENCY_RTOL, atol=0.0):
         w = yc * np.exp(-2j * np.pi * freqs[0] * x)
         advance = np.exp(-2j * np.pi * steps[0] * x)
         out = np.empty(len(freqs))

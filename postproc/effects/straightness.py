@@ -20,6 +20,9 @@ from postproc.effects.base import AXES, Effect
 # Fewer distinct positions along the axis than this cannot show a cubic shape beside
 # the affine terms of the model.
 MIN_DISTINCT_POSITIONS = 5
+# Floor of the half travel that scales positions to [-1, 1]: data at one position
+# would otherwise give a zero half travel (and a division by zero).
+MIN_HALF_TRAVEL_MM = 1e-3
 
 
 class Straightness(Effect):
@@ -66,7 +69,7 @@ class Straightness(Effect):
     def prepare(self, q, r, ctx, resid) -> Straightness:
         x = np.asarray(q)[:, self.axis]
         lo, hi = float(np.min(x)), float(np.max(x))
-        return self.copy(config={"center_mm": 0.5 * (lo + hi), "half_travel_mm": max(0.5 * (hi - lo), 1e-3)})
+        return self.copy(config={"center_mm": 0.5 * (lo + hi), "half_travel_mm": max(0.5 * (hi - lo), MIN_HALF_TRAVEL_MM)})
 
 
 class Positioning(Effect):

@@ -66,6 +66,9 @@ MAX_PARAMS_PER_OBSERVATION = 0.25
 # Sampling step of the fitted functions into tables (pchip between samples is then
 # within ~0.01 um of the spline for knot spacings of 10 mm and more).
 TABLE_STEP_MM = 2.5
+# Rounding guard when counting knot intervals: a travel of exactly n spacings gives n
+# intervals, not n + 1 from floating-point division.
+INTERVAL_COUNT_GUARD = 1e-9
 
 _UNIT = np.eye(3)
 
@@ -88,7 +91,7 @@ def _default_intervals(x: np.ndarray, n_obs: int, spacing: float | None) -> int:
         if not spacing > 0:
             raise MeasurementError(f"knot spacing {spacing} mm: must be positive",
                                    hint="give --knot-spacing in mm, e.g. 20")
-        return max(1, int(np.ceil((hi - lo) / spacing - 1e-9)))
+        return max(1, int(np.ceil((hi - lo) / spacing - INTERVAL_COUNT_GUARD)))
     distinct = len(np.unique(np.round(x, 3)))
     n = min(int((hi - lo) // MIN_DEFAULT_KNOT_MM), (distinct - 1) // POSITIONS_PER_INTERVAL)
     # 3 axes x 6 functions x (n + 3) coefficients within the parameter budget.

@@ -47,6 +47,9 @@ MIN_SEGMENT_POINTS = 3
 
 # A segment whose B values span less than this (degrees) cannot give a slope.
 MIN_SEGMENT_SPAN_DEG = 1e-6
+# Rounding guard when counting whole segments in a range: a range of exactly n segments
+# must not lose one to floating-point division.
+SEGMENT_COUNT_GUARD = 1e-9
 
 
 @dataclass
@@ -107,7 +110,7 @@ def line_fit(b: np.ndarray, v: np.ndarray) -> tuple[float, float]:
 
 def segment_edges(b_lo: float, b_hi: float, segment_deg: float) -> np.ndarray:
     """Edges from b_lo in steps of segment_deg; a short last piece joins its neighbour."""
-    n = max(1, int(np.floor((b_hi - b_lo) / segment_deg + 1e-9)))
+    n = max(1, int(np.floor((b_hi - b_lo) / segment_deg + SEGMENT_COUNT_GUARD)))
     edges = b_lo + segment_deg * np.arange(n + 1)
     edges[-1] = b_hi
     return edges

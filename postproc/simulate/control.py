@@ -27,6 +27,9 @@ from postproc.simulate.machine import Machine
 # A calibration whose inverse misses its own model's target by more than this gets a
 # note: the experiment then measures the solver (e.g. an approximate astatic law) too.
 INVERSE_RESIDUAL_NOTE_MM = 1e-4
+# Coordinates of control points within this of a whole mm are printed as whole mm
+# (the Table 1 labels "230/230/230"); others with three decimals.
+WHOLE_MM_LABEL_TOL = 5e-4
 
 
 @dataclass
@@ -129,7 +132,7 @@ def control_experiment(machine: Machine, targets, calibrations: list[tuple[str, 
 
 
 def _coord(v: float) -> str:
-    return f"{v:.0f}" if abs(v - round(v)) < 5e-4 else f"{v:.3f}"
+    return f"{v:.0f}" if abs(v - round(v)) < WHOLE_MM_LABEL_TOL else f"{v:.3f}"
 
 
 def format_control_report(report: ControlReport) -> str:

@@ -42,6 +42,8 @@ RUN_STEP_MM = 0.5
 
 #: How many of the worst program lines a report lists.
 WORST_LINES = 5
+# Widens the ball query by rounding only, so that a segment exactly at the bound is found.
+BALL_QUERY_GUARD_MM = 1e-12
 
 
 def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -103,7 +105,7 @@ class Polyline:
         best, seg = dist[rows, j], ik[rows, j]
         unsure = np.flatnonzero((dk[:, -1] - self.half_len < best) & (k < len(self.a)))
         if len(unsure):
-            cand = self.tree.query_ball_point(p[unsure], best[unsure] + self.half_len + 1e-12)
+            cand = self.tree.query_ball_point(p[unsure], best[unsure] + self.half_len + BALL_QUERY_GUARD_MM)
             counts = np.fromiter((len(c) for c in cand), dtype=int, count=len(unsure))
             r = np.repeat(np.arange(len(unsure)), counts)
             segs = np.fromiter((x for c in cand for x in c), dtype=int, count=int(counts.sum()))
