@@ -1,5 +1,6 @@
 """The README and the commands stay in step: every command is listed with exactly its options."""
 
+import json
 import re
 from pathlib import Path
 
@@ -87,3 +88,39 @@ def test_readme_main_job_runs(tmp_path, monkeypatch):
     result = CliRunner().invoke(main, ["correct", m.group(1), "-c", m.group(2), "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert out.read_text().count("\n") > 34
+
+
+def _readme_block_after(text: str, command_start: str) -> str:
+    """The first fenced block that follows the block holding ``command_start``."""
+    at = text.index(command_start)
+    rest = text[text.index("```\n", at) + 4:]
+    start = rest.index("```\n") + 4
+    return rest[start:rest.index("```", start)]
+
+
+def test_readme_quick_start_figures_are_what_correct_prints(tmp_path, monkeypatch):
+    text = README.read_text(encoding="utf-8")
+    m = re.search(r"pip install -e \. && postproc correct (\S+) -c (\S+) -o (\S+)", text)
+    printed = _readme_block_after(text, m.group(0)).splitlines()[0]
+    monkeypatch.chdir(README.parent)
+    out = tmp_path / m.group(3)
+    result = CliRunner().invoke(main, ["correct", m.group(1), "-c", m.group(2), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    figures = printed.split(": ", 1)[1]
+    assert f"{m.group(1)} -> {out}: {figures}" in result.output
+
+
+def test_readme_verify_table_is_what_verify_prints(monkeypatch):
+    text = README.read_text(encoding="utf-8")
+    m = re.search(r"^postproc verify (samples/pocket\.nc .+)$", text, re.MULTILINE)
+    rows = re.findall(r"^\| (uncorrected|corrected, \w+) .*?\| ([\d.]+) µm \| ([\d.]+) µm \|$", text, re.MULTILINE)
+    assert [r[0] for r in rows] == ["uncorrected", "corrected, parametric", "corrected, static"]
+    monkeypatch.chdir(README.parent)
+    result = CliRunner().invoke(main, ["verify", *m.group(1).split(), "--json"])
+    assert result.exit_code == 0, result.output
+    runs = json.loads(result.output)["runs"]
+    assert len(runs) == len(rows)
+    for run, (label, max_um, rms_um) in zip(runs, rows, strict=True):
+        assert run["label"].startswith(label)
+        assert f"{run['max_mm'] * 1000:.2f}" == max_um, label
+        assert f"{run['rms_mm'] * 1000:.2f}" == rms_um, label
