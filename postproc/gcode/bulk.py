@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import re
 from bisect import bisect_left
-from itertools import accumulate
 
 import numpy as np
 
@@ -38,11 +37,11 @@ from postproc.gcode.state import LINE, RAPID
 _N = NUMBER_RE
 # Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks
 # before it, 4/6/8 their numbers, 9 the rest (F word, trailing blanks, \r), 10 the F
-# number, 11 any other line.
+# number; any other line matches with every group empty.
 _PLAIN = re.compile(
     rf"^(?:([ \t]*(?:[Nn][ \t]*{_N})?(?:[ \t]*[Gg][ \t]*(0?[01]))?)"
     rf"(?:([ \t]*[Xx][ \t]*)({_N}))?(?:([ \t]*[Yy][ \t]*)({_N}))?(?:([ \t]*[Zz][ \t]*)({_N}))?"
-    rf"((?:[ \t]*[Ff][ \t]*({_N}))?[ \t]*\r?)|(.*))$",
+    rf"((?:[ \t]*[Ff][ \t]*({_N}))?[ \t]*\r?)|.*)$",
     re.M,
 )
 _HEAD, _G, _REST, _F = 0, 1, 8, 9
@@ -64,7 +63,7 @@ class Block:
     def __init__(self, lines: list[str], found: list[tuple]) -> None:
         n = len(lines)
         self.lines = lines
-        cols = list(zip(*found, strict=True)) if n else [()] * 11
+        cols = list(zip(*found, strict=True)) if n else [()] * 10
         self.cols = cols
         self.has, self.ov, self.ovl, self.frac, self.last = [], [], [], [], []
         for k in range(3):
@@ -80,13 +79,16 @@ class Block:
             self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
             self.last.append(_last_index(has))
         self.plain = self.has[0] | self.has[1] | self.has[2]
-        g = np.array(cols[_G], dtype=str)
-        self.gword = (g != "").tolist()
-        self.code = np.where((g == "1") | (g == "01"), LINE, RAPID).tolist()
-        self.last_g = _last_index(g != "").tolist()
-        self.last_f = _last_index(np.array(cols[_F], dtype=str) != "").tolist()
+        g = cols[_G]
+        self.gword = g
+        self.last_g = _last_index(np.fromiter(map(bool, g), dtype=bool, count=n)).tolist()
+        self.last_f = _last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
+
+    def code(self, i: int) -> int:
+        """Motion of line i's G word (G0, G00, G1 or G01)."""
+        return LINE if self.gword[i][-1] == "1" else RAPID
 
 
 def scan(lines: list[str]) -> Block | None:
@@ -136,11 +138,11 @@ def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -
     st.pos = pos
     i = block.last_g[e]
     if i >= a:
-        st.motion = block.code[i]
+        st.motion = block.code(i)
     i = block.last_f[e]
     if i >= a:
         st.feed = float(block.cols[_F][i])
-    interp.motion_word = block.gword[e]
+    interp.motion_word = bool(block.gword[e])
     block.runs.append(run)
     return run
 
@@ -172,8 +174,8 @@ def finish_block(block: Block) -> None:
 class _Emission:
     """What the emitter needs of a block's run lines once their targets are known."""
 
-    __slots__ = ("nums", "miss", "miss_t", "miss_q", "miss_text", "miss_last", "edits_cum", "changed_cum",
-                 "named_edits")
+    __slots__ = ("nums", "miss", "miss_t", "miss_q", "miss_text", "miss_last", "miss_seg", "edits_cum",
+                 "changed_cum", "named_edits")
 
 
 def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
@@ -192,7 +194,7 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
     dec = np.repeat([r.decimals for r in runs], lengths)
     n = len(block.lines)
     em = _Emission()
-    em.nums, em.miss, em.miss_t, em.miss_q, em.miss_text, em.miss_last = [], [], [], [], [], []
+    em.nums, em.miss, em.miss_t, em.miss_q, em.miss_text, em.miss_last, em.miss_seg = [], [], [], [], [], [], []
     named = np.zeros(n, dtype=int)
     for k in range(3):
         has = block.has[k][idx]
@@ -222,10 +224,12 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
         rows = idx[miss]
         em.miss.append(rows.tolist())
         em.miss_t.append(tk[miss].tolist())
-        em.miss_last.append(block.last[k][rows].tolist())
+        last = block.last[k][rows]
+        em.miss_last.append(last.tolist())
+        em.miss_seg.append((np.flatnonzero(np.diff(last) != 0) + 1).tolist())
     em.named_edits = named.tolist()
-    em.edits_cum = [0, *accumulate(em.named_edits)]
-    em.changed_cum = [0, *accumulate(int(x > 0) for x in em.named_edits)]
+    em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
+    em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
     return em
 
 
@@ -257,9 +261,9 @@ def _first_move(run: Run, lineno: int) -> FastMove:
     blk, a = run.block, run.a
     f = blk.cols[_F][a]
     missing = tuple(k for k in range(3) if not blk.has[k][a])
-    kind = blk.code[a] if blk.gword[a] else run.motion0
+    kind = blk.code(a) if blk.gword[a] else run.motion0
     return FastMove(lineno, kind, run.q0, tuple(run.q1[0].tolist()), run.r, run.shift, run.unit, [],
-                    blk.gword[a], run.arc_absolute, float(f) if f else run.feed0, missing)
+                    bool(blk.gword[a]), run.arc_absolute, float(f) if f else run.feed0, missing)
 
 
 def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
@@ -267,7 +271,7 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
     blk = run.block
     a, b = run.a, run.b
     s = a
-    kind0 = blk.code[a] if blk.gword[a] else run.motion0
+    kind0 = blk.code(a) if blk.gword[a] else run.motion0
     if not blk.gword[a] and corrector.emitted_motion != kind0:
         # the controller's modal motion differs from the program's here (after a
         # linearised arc): the general emitter adds the motion word
@@ -278,7 +282,11 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
     qe = corrector.qe
     unit, shift = run.unit, run.shift
     hd = emit.HALF_UNIT[run.decimals]
-    added: dict[int, list[str]] = {}
+    n = b - s
+    add_col = [""] * n
+    lines = blk.lines
+    named = em.named_edits
+    rows_added = newly_changed = 0
     for k in range(3):
         qk = qe[k]
         miss = em.miss[k]
@@ -286,45 +294,41 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
         nums = em.nums[k]
         sk = shift[k]
         if lo < hi:
-            ts, qs, texts, lasts = em.miss_t[k], em.miss_q[k], em.miss_text[k], em.miss_last[k]
-            prev = -1
-            for j in range(lo, hi):
-                p = lasts[j]
-                if p != prev and p >= s:
+            ts, qs, texts, segs, lasts = em.miss_t[k], em.miss_q[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
+            # stretches of missing rows after the same named row
+            g = bisect_left(segs, lo + 1)
+            bounds = [lo, *segs[g:bisect_left(segs, hi)], hi]
+            for x, y in zip(bounds, bounds[1:], strict=False):
+                p = lasts[x]
+                if p >= s:
                     # the position the line's own word reached (float(text) == the
                     # value it was written from, correctly rounded)
                     qk = float(nums[p]) * unit + sk
-                    prev = p
-                if abs(ts[j] - qk) / unit < hd or qk != qk:
-                    continue
-                i = miss[j]
-                words = added.get(i)
-                if words is None:
-                    added[i] = [texts[j]]
-                else:
-                    words.append(texts[j])
-                qk = qs[j]
+                if qk != qk:
+                    continue  # never positioned: nothing to compare with, no word
+                for j, t, q in zip(range(x, y), ts[x:y], qs[x:y], strict=True):
+                    if abs(t - qk) / unit < hd:
+                        continue
+                    qk = q
+                    i = miss[j]
+                    line = lines[i]
+                    sep = " " if (" " in line or "\t" in line) else ""
+                    word = texts[j].lower() if line.islower() else texts[j]
+                    c = i - s
+                    if not add_col[c]:
+                        rows_added += 1
+                        newly_changed += named[i] == 0
+                    add_col[c] += sep + word
         if blk.has[k][b - 1]:
             qk = float(nums[b - 1]) * unit + sk
         qe[k] = qk
-    n = b - s
-    add_col = [""] * n
-    lines = blk.lines
-    named = em.named_edits
-    newly_changed = 0
-    for i, words in added.items():
-        line = lines[i]
-        sep = " " if (" " in line or "\t" in line) else ""
-        text = sep + sep.join(words)
-        add_col[i - s] = text.lower() if line.islower() else text
-        newly_changed += named[i] == 0
     rep = corrector.report
-    rep.words_changed += em.edits_cum[b] - em.edits_cum[s] + len(added)
+    rep.words_changed += em.edits_cum[b] - em.edits_cum[s] + rows_added
     rep.lines_changed += em.changed_cum[b] - em.changed_cum[s] + newly_changed
     rep.lines_out += n
     rep.moves += n
     i = blk.last_g[b - 1]
-    corrector.emitted_motion = blk.code[i] if i >= a else run.motion0
+    corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
     cols, nums = blk.cols, em.nums
     text = "\n".join(map("".join, zip(cols[_HEAD][s:b], cols[2][s:b], nums[0][s:b], cols[4][s:b], nums[1][s:b],
                                       cols[6][s:b], nums[2][s:b], add_col, cols[_REST][s:b], strict=True)))

@@ -196,8 +196,11 @@ class EmitterMixin:
         unit = mv.unit
         sep, lower = emit.style_of(line)
         arc_edits, arc_added = [], []
-        _, _, nsweep, _, _ = arc_params(arc, mv.q0, mv.q1)
-        mismatch = _mismatch(mv)
+        if "nsweep" in plan:
+            nsweep, mismatch = plan["nsweep"], plan["mismatch"]
+        else:
+            _, _, nsweep, _, _ = arc_params(arc, mv.q0, mv.q1)
+            mismatch = _mismatch(mv)
         budget = self.opt.tolerance_mm - self._round_err(unit)
         if arc.r_idx >= 0:
             # R arcs: the controller finds the centre from R, which is ill-conditioned

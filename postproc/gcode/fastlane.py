@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer
 from postproc.gcode.interp import _GKEYS, Move
 from postproc.gcode.state import LINE, MOTION_CODES, RAPID
@@ -119,11 +120,25 @@ def read_fast(interp, lineno: int, line: str) -> FastMove | None:
                     st.arc_absolute, st.feed, _MISSING[seen & 7])
 
 
-def state_allows(interp) -> bool:
-    """Whether the modal state lets the fast lane read the next line."""
+def prime_shift(interp) -> bool:
+    """Compute the offsets of absolute words in the current state (as the interpreter's
+    own fast block does); False if they cannot be (the general path then reports why)."""
+    if interp._fast_shift is None:
+        try:
+            shift = interp.shift(False, None, None)
+        except PostprocError:
+            return False
+        interp._fast_shift = shift
+        interp._fast_r = interp.tool_r()
+    return True
+
+
+def state_allows(interp, motion_word: bool = False) -> bool:
+    """Whether the modal state lets the fast lane read the next line (``motion_word``:
+    that line names its own G0/G1, so the modal motion does not matter)."""
     st = interp.state
     return (not interp.ended and not st.incremental and not st.inverse_time and interp._fast_shift is not None
-            and not interp.used_rotary and st.motion in (RAPID, LINE)
+            and not interp.used_rotary and (motion_word or st.motion in (RAPID, LINE))
             and not (math.isnan(st.pos[0]) or math.isnan(st.pos[1]) or math.isnan(st.pos[2])))
 
 

@@ -38,9 +38,10 @@ def arc_params(arc: Arc, q0, q1) -> tuple[tuple[int, int, int], float, float, fl
     return (a1, a2, an), t0, sweep, r0, r1
 
 
-def arc_points(arc: Arc, q0, q1, s: np.ndarray) -> np.ndarray:
-    """Nominal points (k, 3) at parameters ``s`` along the arc."""
-    (a1, a2, an), t0, sweep, r0, r1 = arc_params(arc, q0, q1)
+def arc_points(arc: Arc, q0, q1, s: np.ndarray, params=None) -> np.ndarray:
+    """Nominal points (k, 3) at parameters ``s`` along the arc (``params``: its
+    :func:`arc_params`, when already known)."""
+    (a1, a2, an), t0, sweep, r0, r1 = params or arc_params(arc, q0, q1)
     s = np.asarray(s, dtype=float)
     th = t0 + s * sweep
     rad = r0 + (r1 - r0) * s

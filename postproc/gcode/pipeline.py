@@ -38,8 +38,8 @@ from postproc.errors import (
     SolverError,
 )
 from postproc.gcode import bulk, emit
-from postproc.gcode.emitter import EmitterMixin, _mismatch, _unit_decimals
-from postproc.gcode.fastlane import FastMove, emit_fast, read_fast, state_allows
+from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
@@ -289,7 +289,7 @@ class Corrector(EmitterMixin):
             allowed = use_fast and state_allows(interp)
 
         def feed_block(lines: list[str]) -> None:
-            nonlocal lineno
+            nonlocal lineno, allowed
             block = bulk.scan(lines) if use_bulk else None
             if block is None:
                 for line in lines:
@@ -297,8 +297,13 @@ class Corrector(EmitterMixin):
                 return
             edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
             i, n = 0, len(lines)
+            gword = block.gword
             for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
-                while i < a or (i < b and not allowed):
+                while i < a:
+                    feed(lines[i])
+                    i += 1
+                # a line naming its own G0/G1 may start a run whatever the modal motion
+                while i < b and not (allowed or (prime_shift(interp) and state_allows(interp, bool(gword[i])))):
                     feed(lines[i])
                     i += 1
                 if i < b:
@@ -306,6 +311,7 @@ class Corrector(EmitterMixin):
                     entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
                     lineno += b - i
                     i = b
+                    allowed = state_allows(interp)
             while i < n:
                 feed(lines[i])
                 i += 1
@@ -454,9 +460,10 @@ class Corrector(EmitterMixin):
         d = Q1 - Q0
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
         arcs = [i for i, m in general if m.arc is not None]
+        arc_prm = {i: arc_params(moves[i].arc, moves[i].q0, moves[i].q1) for i in arcs}
         for i in arcs:
             m = moves[i]
-            before = arc_points(m.arc, m.q0, m.q1, np.array([1.0 - 1e-6]))[0]
+            before = arc_points(m.arc, m.q0, m.q1, np.array([1.0 - 1e-6]), arc_prm[i])[0]
             t = np.sign(np.where(np.abs(Q1[i] - before) > 1e-12, Q1[i] - before, 0.0))
             sign[i] = t
         D = np.empty_like(sign)
@@ -480,16 +487,17 @@ class Corrector(EmitterMixin):
             curve_of: dict[int, Curve] = {}
             for i in arcs:
                 m = moves[i]
-                c = Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary)
+                c = Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])
                 curve_of[i] = c
-                _, _, sweep, _, _ = arc_params(m.arc, m.q0, m.q1)
+                sweep = arc_prm[i][2]
                 n = max(ARC_CHECK_MIN_SAMPLES, math.ceil(abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
                 s = np.linspace(0.0, 1.0, n)
                 samp_s.append(s)
                 samp_c.append(np.full(n, i))
             allc = np.concatenate(samp_c)
-            nom = np.vstack([curve_of[i].nominal(s) for i, s in zip(arcs, samp_s, strict=True)])
-            dirs = np.vstack([curve_of[i].directions(s) for i, s in zip(arcs, samp_s, strict=True)])
+            noms = [curve_of[i].nominal(s) for i, s in zip(arcs, samp_s, strict=True)]
+            nom = np.vstack(noms)
+            dirs = np.vstack([curve_of[i].directions(s, q) for i, s, q in zip(arcs, samp_s, noms, strict=True)])
             corr = self.corrected(nom, R[allc], dirs, [rot[i] for i in allc], linenos[allc])
             off = 0
             for i, s in zip(arcs, samp_s, strict=True):
@@ -497,7 +505,8 @@ class Corrector(EmitterMixin):
                 m = moves[i]
                 qs, qn = corr[off:off + n], nom[off:off + n]
                 off += n
-                plan = {"s": s, "q": qs, "qn": qn, "curve": curve_of[i]}
+                _, _, nsweep, r0, r1 = arc_prm[i]
+                plan = {"s": s, "q": qs, "qn": qn, "curve": curve_of[i], "nsweep": nsweep, "mismatch": abs(r1 - r0)}
                 plans[i] = plan
                 unit = m.unit
                 rerr = self._round_err(unit)
@@ -505,8 +514,7 @@ class Corrector(EmitterMixin):
                 if not np.isnan(S[i]).any():
                     centre = plan["centre"] = centre_estimate(m.arc, s, qn, qs)
                     cand = Arc(tuple(centre), m.arc.plane, m.arc.clockwise, m.arc.turns, m.arc.offset_idx, m.arc.r_idx)
-                    _, _, nsweep, _, _ = arc_params(m.arc, m.q0, m.q1)
-                    dev = arc_deviation(cand, tuple(S[i]), tuple(T[i]), s, qs, nsweep, _mismatch(m))
+                    dev = arc_deviation(cand, tuple(S[i]), tuple(T[i]), s, qs, nsweep, plan["mismatch"])
                     ok = dev <= tol - 2 * rerr
                 if not ok:
                     plan["linearise"] = True

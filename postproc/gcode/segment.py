@@ -43,20 +43,25 @@ class Curve:
     dirs: np.ndarray  # (3,) approach signs carried into the move
     lineno: int
     rotary: dict
+    params: tuple | None = None  # arc_params of an arc (computed once)
 
     def nominal(self, s: np.ndarray) -> np.ndarray:
         if self.arc is None:
             return line_points(self.q0, self.q1, s)
-        return arc_points(self.arc, self.q0, self.q1, s)
+        if self.params is None:
+            self.params = arc_params(self.arc, self.q0, self.q1)
+        return arc_points(self.arc, self.q0, self.q1, s, self.params)
 
-    def directions(self, s: np.ndarray) -> np.ndarray:
-        """Sign of each axis's motion at parameter s (the carried sign where it does not move)."""
+    def directions(self, s: np.ndarray, nominal: np.ndarray | None = None) -> np.ndarray:
+        """Sign of each axis's motion at parameter s (the carried sign where it does not
+        move); ``nominal``: ``self.nominal(s)`` when already computed."""
         if self.arc is None:
             d = np.sign(np.asarray(self.q1) - np.asarray(self.q0))
             d = np.where(d == 0, self.dirs, d)
             return np.broadcast_to(d, (len(s), 3))
         h = 1e-6
-        d = np.sign(self.nominal(s) - self.nominal(np.clip(s - h, 0.0, 1.0)))
+        here = self.nominal(s) if nominal is None else nominal
+        d = np.sign(here - self.nominal(np.clip(s - h, 0.0, 1.0)))
         return np.where(d == 0, self.dirs, d)
 
 
