@@ -188,3 +188,17 @@ def test_pockets_leaves_no_output_directory_when_the_job_fails(tmp_path):
                  "--max-correction", "0.01", "-o", out)
     assert_user_error(result, 5, "exceeds --max-correction 0.01 mm")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("units_line", "col", "message"), [
+    ("# units: length=inch", 10, "length unit 'inch' is not one of mm, um"),
+    ("# units: angle=rad length=inch", 20, "length unit 'inch' is not one of mm, um"),
+    ("# units: length mm", 10, "units entry 'length' is not key=value"),
+])
+def test_a_bad_units_line_is_named_by_line_and_column(tmp_path, units_line, col, message):
+    src = tmp_path / "m.csv"
+    src.write_text(f"# postproc measurements v1\n{units_line}\nX,Y,Z,mx,my,mz\n1,2,3,1,2,3\n")
+    out = tmp_path / "cal.json"
+    result = run("fit", src, "-o", out)
+    assert_user_error(result, 3, f"{src}:2:{col}: {message}")
+    assert not out.exists()

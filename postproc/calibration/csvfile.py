@@ -90,6 +90,7 @@ def _cell_starts(line: str, n: int) -> list[int]:
 def read_csv_text(text: str, path: str) -> CsvTable:
     lines = text.splitlines()
     meta: dict[str, str] = {}
+    meta_lines: dict[str, tuple[int, str]] = {}  # key -> (line number, line text)
     comments: list[str] = []
     i = 0
     while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
@@ -99,6 +100,7 @@ def read_csv_text(text: str, path: str) -> CsvTable:
             key, sep, value = body.partition(":")
             if sep and key.strip() and " " not in key.strip():
                 meta[key.strip()] = value.strip()
+                meta_lines[key.strip()] = (i + 1, lines[i])
         i += 1
     if i >= len(lines):
         raise MeasurementError("no header row", path=path, lineno=max(i, 1), col=1,
@@ -126,6 +128,7 @@ def read_csv_text(text: str, path: str) -> CsvTable:
         starts.append(_cell_starts(line, len(row)))
     table = CsvTable(path, meta, comments, header, rows, linenos, starts)
     table.header_lineno = header_lineno
+    table.meta_lines = meta_lines
     return table
 
 
@@ -142,6 +145,15 @@ def read_csv(path) -> CsvTable:
     return read_csv_text(text, path)
 
 
+def _units_place(table: CsvTable, text: str) -> dict:
+    """``lineno``/``col`` of ``text`` on the ``# units:`` line, for an error there."""
+    lineno, line = getattr(table, "meta_lines", {}).get("units", (None, ""))
+    if lineno is None:
+        return {}
+    col = line.find(text, line.find(":") + 1) if text else -1
+    return {"lineno": lineno, "col": col + 1 if col >= 0 else None}
+
+
 def parse_units(table: CsvTable) -> dict[str, str]:
     """``# units: length=mm angle=rad`` -> {"length": "mm", "angle": "rad"}."""
     spec = table.meta.get("units", "")
@@ -150,6 +162,7 @@ def parse_units(table: CsvTable) -> dict[str, str]:
         key, sep, value = item.partition("=")
         if not sep:
             raise MeasurementError(f"units entry {item!r} is not key=value", path=table.path,
+                                   **_units_place(table, item),
                                    hint="write e.g. '# units: length=mm angle=rad'")
         units[key.strip()] = value.strip()
     return units
@@ -159,6 +172,7 @@ def length_scale(table: CsvTable, default: str = "mm") -> float:
     unit = parse_units(table).get("length", default)
     if unit not in LENGTH_TO_MM:
         raise MeasurementError(f"length unit {unit!r} is not one of mm, um", path=table.path,
+                               **_units_place(table, f"length={unit}"),
                                hint="write '# units: length=mm' or 'length=um'")
     return LENGTH_TO_MM[unit]
 
@@ -167,6 +181,7 @@ def angle_scale(table: CsvTable, default: str = "rad") -> float:
     unit = parse_units(table).get("angle", default)
     if unit not in ANGLE_TO_RAD:
         raise MeasurementError(f"angle unit {unit!r} is not one of rad, urad, arcsec", path=table.path,
+                               **_units_place(table, f"angle={unit}"),
                                hint="write '# units: angle=rad', 'angle=urad' or 'angle=arcsec'")
     return ANGLE_TO_RAD[unit]
 
