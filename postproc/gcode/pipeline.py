@@ -303,7 +303,8 @@ class Corrector(EmitterMixin):
                     feed(lines[i])
                     i += 1
                 # a line naming its own G0/G1 may start a run whatever the modal motion
-                while i < b and not (allowed or (prime_shift(interp) and state_allows(interp, bool(gword[i])))):
+                while i < b and not (allowed or (use_fast and not interp.ended and prime_shift(interp)
+                                                 and state_allows(interp, bool(gword[i])))):
                     feed(lines[i])
                     i += 1
                 if i < b:

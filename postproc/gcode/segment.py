@@ -145,7 +145,12 @@ def centre_estimate(arc: Arc, s_nom: np.ndarray, q_nom: np.ndarray, q_corr: np.n
     # coordinates about the centre keep the 3x3 normal equations well conditioned;
     # the fitted constant term is then the correction at the centre
     A = np.column_stack([np.ones(len(q_nom)), q_nom[:, a1] - c[a1], q_nom[:, a2] - c[a2]])
-    coef = np.linalg.solve(A.T @ A, A.T @ d)
+    try:
+        coef = np.linalg.solve(A.T @ A, A.T @ d)
+    except np.linalg.LinAlgError:
+        # an arc so short that its samples do not span the plane: the correction
+        # does not vary along it; the centre gets the mean
+        return c + d.mean(axis=0)
     return c + coef[0]
 
 
