@@ -243,3 +243,19 @@ def test_map_refusal_by_point_index_is_placed_on_its_line():
     with pytest.raises(OutOfVolumeError) as exc:
         correct_text(text, eng, Setup(), CorrectOptions(added=[IndexOnlyMap()]), path="part.nc")
     assert (exc.value.path, exc.value.lineno) == ("part.nc", 6)
+
+
+def test_cli_extrapolate_linear_reaches_the_parametric_engine(tmp_path):
+    prog = tmp_path / "out.nc"
+    prog.write_text(OUTSIDE)
+    got = {}
+    for mode in ("clamp", "linear"):
+        out = tmp_path / f"{mode}.nc"
+        r = invoke(["correct", prog, "-c", PARAMETRIC, "--extrapolate", mode, "-o", out])
+        assert r.exit_code == 0, r.output
+        assert "1 points outside the calibrated volume were extrapolated" in r.output
+        got[mode] = ends(out.read_text())[1]
+    eng = load_calibration(PARAMETRIC).engine.with_options(extrapolate="linear")
+    target = np.array([[335.0, 10.0, 10.0]])
+    np.testing.assert_allclose(got["linear"], (target + eng.correction(target, np.zeros((1, 3))).q)[0], atol=6e-5)
+    assert np.abs(got["linear"] - got["clamp"]).max() > 0.005
