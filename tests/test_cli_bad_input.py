@@ -127,10 +127,14 @@ def test_non_finite_option_values_are_usage_errors(tmp_path, args):
     (["predict", "bore", ROOT / "samples" / "predict" / "bore_50H7.operation.json", "--seed", "-1"], "--seed"),
     (["predict", "tolerance", ROOT / "samples" / "predict" / "bore_50H7.operation.json", "-n", "0"], "-n"),
     (["mirror", "deadband", MIRROR / "zigzag_sensor.csv", "--gap", "0.02", "--drive-tau", "-1"], "--drive-tau"),
+    (["mirror", "kfb", MIRROR / "P01_semi.csv", "--t-ref", "2", "--allowance", "-0.3", "--origin", "3,100"],
+     "--allowance"),
+    (["mirror", "pockets", MIRROR / "plan.csv", "-c", MIRROR / "shell_static.json", "--program",
+      MIRROR / "pocket.nc", "--t-ref", "2", "--band", "1.98,2.02", "--allowance", "-0.3"], "--allowance"),
 ])
 def test_out_of_range_options_are_usage_errors(tmp_path, args, option):
     out = tmp_path / "out.csv"
-    result = run(*args, "-o", out) if args[0] == "simulate" else run(*args)
+    result = run(*args, "-o", out) if args[0] in ("simulate", "mirror") else run(*args)
     assert result.exit_code == EXIT_USAGE, result.output
     assert f"Invalid value for '{option}'" in result.output
     assert not out.exists()

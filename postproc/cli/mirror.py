@@ -111,7 +111,7 @@ def kdist(sensor, radius, diameter, segment, z_bin, model, thinner, units, outpu
 @mirror.command()
 @click.argument("semi", type=click.Path(exists=True, dir_okay=False))
 @click.option("--t-ref", "t_ref", type=FINITE_FLOAT, required=True, metavar="MM", help="Nominal wall thickness T_ref.")
-@click.option("--allowance", type=FINITE_FLOAT, required=True, metavar="MM", help="Semi-finish allowance b.")
+@click.option("--allowance", type=FiniteFloat(min=0), required=True, metavar="MM", help="Semi-finish allowance b.")
 @click.option("--origin", default="0,0", show_default=True, metavar="B0,Z0",
               help="Pocket origin: the map is written in pocket-local B-B0, Z-Z0.")
 @THINNER
@@ -150,7 +150,7 @@ def kfb(semi, t_ref, allowance, origin, thinner, smooth, output):
               help="Pocket program in pocket-local coordinates (B as programmed = B - B0).")
 @click.option("--t-ref", "t_ref", type=FINITE_FLOAT, required=True, metavar="MM", help="Nominal wall thickness T_ref.")
 @click.option("--band", required=True, metavar="TMIN,TMAX", help="Signal band [T_min, T_max] (mm).")
-@click.option("--allowance", type=FINITE_FLOAT, required=True, metavar="MM", help="Semi-finish allowance b.")
+@click.option("--allowance", type=FiniteFloat(min=0), required=True, metavar="MM", help="Semi-finish allowance b.")
 @click.option("--kdist", "kdist_path", type=click.Path(exists=True, dir_okay=False), default=None,
               help="K_dist map (machine B, Z) added to every pass (formula 11).")
 @THINNER
@@ -189,8 +189,6 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     from postproc.mirror.maps import load_map
 
     axis, sign = thinner
-    if allowance < 0:
-        raise click.BadParameter("the allowance b must not be negative", param_hint="--allowance")
     t_min, t_max = _pair(band, "--band")
     bnd = Band(t_ref, t_min, t_max)
     plan_path = str(Path(plan) / "plan.csv") if Path(plan).is_dir() else str(plan)
