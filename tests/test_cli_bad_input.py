@@ -206,3 +206,16 @@ def test_a_bad_units_line_is_named_by_line_and_column(tmp_path, units_line, col,
     result = run("fit", src, "-o", out)
     assert_user_error(result, 3, f"{src}:2:{col}: {message}")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("method", "message"), [
+    ("bogus", "unknown calibration method 'bogus'"),
+    (["static"], "calibration method ['static'] is not a name"),
+])
+def test_calibration_method_errors_name_the_file(tmp_path, method, message):
+    data = json.loads((ROOT / "calibrations" / "s500_static.json").read_text())
+    data["method"] = method
+    cal = tmp_path / "cal.json"
+    cal.write_text(json.dumps(data))
+    result = run("check", WALKTHROUGH, "-c", cal)
+    assert_user_error(result, EXIT_CALIBRATION, f"{cal}: {message}")

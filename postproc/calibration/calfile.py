@@ -105,7 +105,12 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
     _check_finite(data["model"], path or "", "model")
-    cls = engine_class(data["method"])
+    if not isinstance(data["method"], str):
+        raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
+    try:
+        cls = engine_class(data["method"])
+    except CalibrationError as exc:
+        raise exc.at(path=path) from None
     try:
         engine = cls.model_from_dict(data["model"], data["volume_mm"])
     except CalibrationError as exc:
