@@ -219,3 +219,15 @@ def test_calibration_method_errors_name_the_file(tmp_path, method, message):
     cal.write_text(json.dumps(data))
     result = run("check", WALKTHROUGH, "-c", cal)
     assert_user_error(result, EXIT_CALIBRATION, f"{cal}: {message}")
+
+
+@pytest.mark.parametrize("tables", [5, [1]])
+def test_machine_tables_of_the_wrong_type(tmp_path, tables):
+    data = json.loads(MACHINE.read_text())
+    data["tables"] = tables
+    machine = tmp_path / "m.machine.json"
+    machine.write_text(json.dumps(data))
+    out = tmp_path / "pts.csv"
+    result = run("simulate", machine, "--random", "3", "-o", out)
+    assert_user_error(result, EXIT_CALIBRATION, f"{machine}: malformed machine definition")
+    assert not out.exists()

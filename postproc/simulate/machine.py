@@ -315,7 +315,7 @@ def machine_from_dict(data, *, path: str | None = None) -> Machine:
         )
     except PostprocError as exc:
         raise exc.at(path=path) from None
-    except (TypeError, ValueError, KeyError) as exc:
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise MachineError(f"malformed machine definition: {type(exc).__name__}: {exc}", path=path) from None
 
 
