@@ -61,3 +61,17 @@ def test_fast_lane_refuses_anything_but_a_plain_straight_move(line):
     assert state_allows(it)
     assert read_fast(it, 3, line) is None
     assert read_fast(it, 3, "N10 G1 X 1 Y-.5 F100") is not None
+
+
+@pytest.mark.parametrize("path", _files(), ids=lambda p: p.name)
+def test_output_does_not_depend_on_the_chunk_size(path):
+    eng = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+    setup = Setup(offsets=OFFSETS | {"G54": (100.0, 80.0, 40.0)}, tool_lengths={t: 50.0 + t for t in range(100)})
+    text = path.read_bytes().decode("utf-8", errors="surrogateescape")
+    outs = []
+    for chunk in (20_000, 5):
+        try:
+            outs.append(correct_text(text, eng, setup, CorrectOptions(chunk_lines=chunk))[0])
+        except PostprocError as exc:
+            outs.append(str(exc))
+    assert outs[0] == outs[1]
