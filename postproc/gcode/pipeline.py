@@ -55,6 +55,9 @@ SOLVER_ACCEPT_MM = 10 * SOLVER_TOL_MM
 # positions when the program moves them (checked when the first inverse is called).
 PIPELINE_CONTEXT = ("dirx", "diry", "dirz", "A", "B", "C")
 DEFAULT_CHUNK_LINES = 20_000
+# With segmentation (non-affine engines, maps) every move's midpoints go through the
+# engine together: smaller chunks keep the peak memory low at the same speed.
+SEGMENTED_CHUNK_LINES = 2_000
 # Angular step of the samples that check a kept arc against the corrected path.
 ARC_CHECK_STEP_RAD = math.pi / 16
 ARC_CHECK_MIN_SAMPLES = 9
@@ -68,7 +71,7 @@ class CorrectOptions:
     extrapolate: str = "refuse"  # refuse | clamp | linear
     force: bool = False
     added: list = field(default_factory=list)
-    chunk_lines: int = DEFAULT_CHUNK_LINES
+    chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
 
@@ -321,10 +324,11 @@ class Corrector(EmitterMixin):
         for line in head:
             feed(line)
             pending += 1
-        for block in iter(lambda: list(islice(it, self.opt.chunk_lines)), []):
+        chunk = self.opt.chunk_lines or (DEFAULT_CHUNK_LINES if self.linear_exact else SEGMENTED_CHUNK_LINES)
+        for block in iter(lambda: list(islice(it, chunk)), []):
             feed_block(block)
             pending += len(block)
-            if pending >= self.opt.chunk_lines and not any(math.isnan(v) for v in self.interp.state.pos):
+            if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 self._chunk(entries, write)
                 entries.clear()
                 pending = 0
