@@ -259,3 +259,11 @@ def test_cli_extrapolate_linear_reaches_the_parametric_engine(tmp_path):
     target = np.array([[335.0, 10.0, 10.0]])
     np.testing.assert_allclose(got["linear"], (target + eng.correction(target, np.zeros((1, 3))).q)[0], atol=6e-5)
     assert np.abs(got["linear"] - got["clamp"]).max() > 0.005
+
+
+def test_segmented_output_does_not_depend_on_the_chunk_size():
+    eng = load_calibration(PARAMETRIC).engine
+    text = (ROOT / "samples" / "pocket.nc").read_text()
+    outs = [correct_text(text, eng, Setup(), CorrectOptions(chunk_lines=c))[0] for c in (None, 3)]
+    assert outs[0] == outs[1]
+    assert outs[0].count("\n") > text.count("\n") + 100  # moves were split
