@@ -231,3 +231,29 @@ def test_machine_tables_of_the_wrong_type(tmp_path, tables):
     result = run("simulate", machine, "--random", "3", "-o", out)
     assert_user_error(result, EXIT_CALIBRATION, f"{machine}: malformed machine definition")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("source", "key", "value", "fragment"), [
+    ("calibrations/s500_parametric.json", "astatic", 5, "astatic settings must be an object"),
+    ("calibrations/s500_parametric.json", "squareness_rad", [1, 2], "malformed parametric model"),
+    ("calibrations/s500_parametric.json", "tables", 5, "malformed parametric model"),
+])
+def test_malformed_model_fields_are_calibration_errors(tmp_path, source, key, value, fragment):
+    data = json.loads((ROOT / source).read_text())
+    data["model"][key] = value
+    cal = tmp_path / "cal.json"
+    cal.write_text(json.dumps(data))
+    result = run("check", WALKTHROUGH, "-c", cal)
+    assert_user_error(result, EXIT_CALIBRATION, f"{cal}: ", fragment)
+
+
+@pytest.mark.parametrize("r_o1", [5.0, [1.0]])
+def test_grid_model_needs_a_three_vector_origin(r_o1):
+    from postproc.engine.grid import GridEngine
+
+    nodes = np.stack(np.meshgrid([0.0, 10.0], [0.0, 10.0], [0.0, 10.0], indexing="ij"), axis=-1)
+    engine = GridEngine.from_nodes([0, 0, 0], [10, 10, 10], nodes)
+    model = engine.model_to_dict()
+    model["r_O1_mm"] = r_o1
+    with pytest.raises(CalibrationError, match=r"r_O1_mm \(3,\)"):
+        GridEngine.model_from_dict(model, engine.volume_mm.tolist())

@@ -115,7 +115,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         engine = cls.model_from_dict(data["model"], data["volume_mm"])
     except CalibrationError as exc:
         raise exc.at(path=path) from None
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         raise CalibrationError(
             f"malformed {data['method']} model: {type(exc).__name__}: {exc}", path=path
         ) from None

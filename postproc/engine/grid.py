@@ -135,6 +135,8 @@ class GridEngine(Engine):
         self.shape = np.array([n1, n2, n3])
         self.model = model
         self.r_O1 = np.asarray(r_O1, dtype=float)
+        if self.r_O1.shape != (3,):
+            raise CalibrationError(f"grid model needs r_O1_mm (3,), got shape {self.r_O1.shape}")
         self.Q1, self.Q2, self.Q3 = Q1, Q2, Q3
         self.nodes = nodes_from_tangents(self.r_O1, Q1, Q2, Q3, self.step)
         self.edges = [self.q0[j] + self.step[j] * np.arange(self.shape[j]) for j in range(3)]

@@ -169,6 +169,8 @@ class ParametricEngine(Engine):
         self.interpolation, self.extrapolate = interpolation, extrapolate
         if isinstance(astatic, dict):
             astatic = AstaticSettings(**astatic)
+        elif astatic is not None and not isinstance(astatic, AstaticSettings):
+            raise CalibrationError(f"astatic settings must be an object (grid_step_mm, gain, time_step), got {astatic!r}")
         self.astatic = astatic or AstaticSettings()
         self._functions = [AxisFunctions(tables.position_mm[a], tables.errors[a], interpolation, extrapolate)
                            for a in AXES]
