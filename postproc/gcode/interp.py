@@ -368,7 +368,9 @@ class Interpreter:
                 self.motion_word = True
             elif key in CANNED_CYCLES:
                 raise self._err(UnsupportedGcodeError, f"canned cycle G{words[i][1]}", lineno, col_of(i),
-                                hint="postproc does not correct canned cycles; post the holes as G0/G1 moves")
+                                hint="the controller drills a cycle along Z at one commanded X/Y, so the hole "
+                                     "could be placed right at one depth only (the axes' squareness moves it with "
+                                     "depth); post the holes as G0/G1 moves (expanded cycles) so every point is corrected")
             elif key in REFUSED_G:
                 raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i))
             elif key in PLANES:
