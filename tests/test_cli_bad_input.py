@@ -257,3 +257,21 @@ def test_grid_model_needs_a_three_vector_origin(r_o1):
     model["r_O1_mm"] = r_o1
     with pytest.raises(CalibrationError, match=r"r_O1_mm \(3,\)"):
         GridEngine.model_from_dict(model, engine.volume_mm.tolist())
+
+
+PREDICT = ROOT / "samples" / "predict"
+
+
+@pytest.mark.parametrize(("command", "source", "key"), [
+    ("trace", "flank_5mm.operation.json", "runout"),
+    ("bore", "bore_50H7.operation.json", "monte_carlo"),
+])
+def test_operation_sub_objects_of_the_wrong_type(tmp_path, command, source, key):
+    data = json.loads((PREDICT / source).read_text())
+    data[key] = "x"
+    for machine in PREDICT.glob("*.machine.json"):
+        (tmp_path / machine.name).write_text(machine.read_text())
+    op = tmp_path / source
+    op.write_text(json.dumps(data))
+    result = run("predict", command, op)
+    assert_user_error(result, 3, f'{op}: operation: "{key}" must be an object')

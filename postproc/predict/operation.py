@@ -84,6 +84,14 @@ class Operation:
     path: str | None = None
 
 
+def _object(data: Mapping, key: str, where: str) -> Mapping:
+    """The optional sub-object ``key`` of ``data`` (empty when absent)."""
+    value = data.get(key, {})
+    if not isinstance(value, Mapping):
+        raise PostprocError(f'{where}: "{key}" must be an object, got {value!r}')
+    return value
+
+
 def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> Operation:
     if not isinstance(data, Mapping) or data.get("format") != OPERATION_FORMAT:
         raise PostprocError(f'{where}: not an operation description: "format" must be "{OPERATION_FORMAT}"')
@@ -103,7 +111,7 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
     ):
         raise PostprocError(f'{where}: "context" must map variable names to numbers')
     params: dict[str, Any] = {}
-    mc = data.get("monte_carlo", {})
+    mc = _object(data, "monte_carlo", where)
     params["n"] = int(_number(mc, "n", f"{where}: monte_carlo", 10000))
     params["seed"] = int(_number(mc, "seed", f"{where}: monte_carlo", 0, positive=False))
     if kind == "bore":
@@ -139,7 +147,7 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
         params["rpm"] = _number(data, "rpm", where)
         params["feed_mm_min"] = _number(data, "feed_mm_min", where)
         params["heights"] = int(_number(data, "heights", where, 41))
-        run = data.get("runout", {})
+        run = _object(data, "runout", where)
         params["runout_rad"] = _number(run, "amplitude_rad", f"{where}: runout", 0.0, positive=False)
         params["runout_phase_rad"] = _number(run, "phase_rad", f"{where}: runout", 0.0, positive=False)
     return Operation(kind, chain, str(data.get("name", "")), dict(context), params)
