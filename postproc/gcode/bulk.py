@@ -175,7 +175,7 @@ def finish_block(block: Block) -> None:
 class _Emission:
     """What the emitter needs of a block's run lines once their targets are known."""
 
-    __slots__ = ("nums", "miss", "miss_t", "miss_q", "miss_text", "miss_last", "miss_seg", "edits_cum",
+    __slots__ = ("nums", "miss", "miss_t", "miss_v", "miss_text", "miss_last", "miss_seg", "edits_cum",
                  "changed_cum", "named_edits")
 
 
@@ -195,7 +195,7 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
     dec = np.repeat([r.decimals for r in runs], lengths)
     n = len(block.lines)
     em = _Emission()
-    em.nums, em.miss, em.miss_t, em.miss_q, em.miss_text, em.miss_last, em.miss_seg = [], [], [], [], [], [], []
+    em.nums, em.miss, em.miss_t, em.miss_v, em.miss_text, em.miss_last, em.miss_seg = [], [], [], [], [], [], []
     named = np.zeros(n, dtype=int)
     for k in range(3):
         has = block.has[k][idx]
@@ -213,15 +213,9 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
             named[idx[sel]] += 1
         em.nums.append(nums)
         miss = np.flatnonzero(~has)
-        if len(miss):
-            letter = "XYZ"[k]
-            texts = _format(v[miss], dec[miss])
-            em.miss_text.append([letter + t for t in texts])
-            # round(v, decimals) == float(fmt(v, decimals)): both correctly rounded
-            em.miss_q.append((np.array(texts, dtype=float) * unit[miss] + shift[miss, k]).tolist())
-        else:
-            em.miss_text.append([])
-            em.miss_q.append([])
+        vm = v[miss]
+        em.miss_text.append(_format(vm, dec[miss], "XYZ"[k]) if len(miss) else [])
+        em.miss_v.append(vm.tolist())
         rows = idx[miss]
         em.miss.append(rows.tolist())
         em.miss_t.append(tk[miss].tolist())
@@ -234,8 +228,8 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
     return em
 
 
-def _format(values: np.ndarray, dout: np.ndarray) -> list[str]:
-    """``emit.fmt(v, d)`` for every value, in bulk (grouped by number of decimals)."""
+def _format(values: np.ndarray, dout: np.ndarray, prefix: str = "") -> list[str]:
+    """``prefix + emit.fmt(v, d)`` for every value, in bulk (grouped by number of decimals)."""
     if not np.isfinite(values).all():
         raise ValueError("cannot write a non-finite value into a program")
     out: list[str] = [""] * len(values)
@@ -243,13 +237,14 @@ def _format(values: np.ndarray, dout: np.ndarray) -> list[str]:
     for d in groups:
         sel = np.flatnonzero(dout == d) if len(groups) > 1 else None
         v = values if sel is None else values[sel]
-        texts = ((f"%.{d}f\n" * len(v)) % tuple(v.tolist())).split("\n")
+        texts = ((f"{prefix}%.{d}f\n" * len(v)) % tuple(v.tolist())).split("\n")
         texts.pop()
         # "-0.000" is written "0.000" (emit.fmt)
+        cut = len(prefix)
         for j in np.flatnonzero((v <= 0.0) & (v > -(10.0 ** -d))).tolist():
-            t = texts[j]
+            t = texts[j][cut:]
             if t[0] == "-" and not t.strip("-0."):
-                texts[j] = t[1:]
+                texts[j] = prefix + t[1:]
         if sel is None:
             return texts
         for i, t in zip(sel.tolist(), texts, strict=True):
@@ -295,7 +290,8 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
         nums = em.nums[k]
         sk = shift[k]
         if lo < hi:
-            ts, qs, texts, segs, lasts = em.miss_t[k], em.miss_q[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
+            ts, vs, texts, segs, lasts = em.miss_t[k], em.miss_v[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
+            decimals = run.decimals
             # stretches of missing rows after the same named row
             g = bisect_left(segs, lo + 1)
             bounds = [lo, *segs[g:bisect_left(segs, hi)], hi]
@@ -307,10 +303,10 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
                     qk = float(nums[p]) * unit + sk
                 if qk != qk:
                     continue  # never positioned: nothing to compare with, no word
-                for j, t, q in zip(range(x, y), ts[x:y], qs[x:y], strict=True):
+                for j, t, v in zip(range(x, y), ts[x:y], vs[x:y], strict=True):
                     if abs(t - qk) / unit < hd:
                         continue
-                    qk = q
+                    qk = round(v, decimals) * unit + sk  # the position the added word reaches
                     i = miss[j]
                     line = lines[i]
                     sep = " " if (" " in line or "\t" in line) else ""
