@@ -156,3 +156,24 @@ def test_too_little_variation_is_untestable():
     assert "varies in only 2 row(s)" in why
     load[:5] = 500.0
     assert get_effect("load:load").untestable_reason(q, None, {"load": load}) is None
+
+
+def test_periodic_is_a_wave_of_its_pitch_along_its_axis():
+    """Against the formula, not against data made by the effect itself."""
+    e = get_effect("periodic:Y", config={"pitch_mm": 10.0}, params={"cos_mm": 0.003, "sin_mm": -0.002})
+    q = RNG.uniform(0, 300, (40, 3))
+    y = q[:, 1]
+    expect = np.zeros((40, 3))
+    expect[:, 1] = 0.003 * np.cos(2 * np.pi * y / 10.0) - 0.002 * np.sin(2 * np.pi * y / 10.0)
+    assert_allclose(e.displacement(q, None, {}), expect, atol=1e-15)
+
+
+def test_periodic_pitch_and_amplitude_from_an_independent_lead_screw_wave():
+    q = RNG.uniform(0, 300, (400, 3))
+    resid = np.zeros((400, 3))
+    resid[:, 0] = 0.0025 * np.sin(2 * np.pi * q[:, 0] / 10.0 + 0.4) + RNG.normal(0, 2e-4, 400)
+    e = get_effect("periodic:X").prepare(q, None, {}, resid)
+    assert e.config["pitch_mm"] == pytest.approx(10.0, rel=2e-3)
+    B = e.basis(q, None, {})[:, 0, :]
+    coef, *_ = np.linalg.lstsq(B, resid[:, 0], rcond=None)
+    assert np.hypot(*coef) == pytest.approx(0.0025, rel=0.05)
