@@ -27,7 +27,6 @@ from postproc.constants import (
     DEFAULT_MAX_CORRECTION_MM,
     DEFAULT_TOLERANCE_MM,
     MM_PER_INCH,
-    SOLVER_TOL_MM,
 )
 from postproc.errors import (
     AlreadyCorrectedError,
@@ -39,6 +38,7 @@ from postproc.errors import (
 )
 from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, engine_attr, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move
@@ -46,14 +46,6 @@ from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, subdivide
 from postproc.gcode.state import LINE
 
-# A solver answer is accepted up to ten times its own stopping tolerance (float noise
-# in the residual itself); still a thousand times below the default path tolerance.
-# An engine whose solver stands for larger residuals says so in ``accept_residual_mm``
-# (the parametric astatic solver: one grid step); the larger of the two applies.
-SOLVER_ACCEPT_MM = 10 * SOLVER_TOL_MM
-# Context columns the pipeline itself supplies: approach directions always, rotary
-# positions when the program moves them (checked when the first inverse is called).
-PIPELINE_CONTEXT = ("dirx", "diry", "dirz", "A", "B", "C")
 DEFAULT_CHUNK_LINES = 20_000
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
 # engine together: smaller chunks keep the peak memory low at the same speed.
@@ -94,45 +86,6 @@ class CorrectReport:
     max_residual_mm: float = 0.0  # largest inverse residual met
 
 
-def _base_attr(engine, name: str):
-    """``engine.name``, or that of the base engine a composed engine wraps; None if neither."""
-    value = getattr(engine, name, None)
-    if value is None and getattr(engine, "base", None) is not None:
-        value = getattr(engine.base, name, None)
-    return value
-
-
-def accept_residual(engine) -> float:
-    """Largest inverse residual (mm) the pipeline accepts from ``engine``."""
-    own = _base_attr(engine, "accept_residual_mm")
-    return max(SOLVER_ACCEPT_MM, float(own)) if own is not None else SOLVER_ACCEPT_MM
-
-
-def prepare_engine(engine, extrapolate: str, context_names, path: str | None = None):
-    """The engine as a run uses it.
-
-    - ``extrapolate="linear"``: an engine with ``with_options`` (parametric) is switched
-      to linear extrapolation of its functions (by default it holds their end
-      values); a composed engine gets its base switched. Static, interval and grid
-      engines extrapolate with their model as it is (see docs/gcode.md).
-    - An engine with ``check_context`` (a base engine plus effects) is asked up front
-      whether the context values its effects need are given, so a missing
-      ``--context`` is refused before any line is processed.
-    """
-    if extrapolate == "linear":
-        if hasattr(engine, "with_options"):
-            engine = engine.with_options(extrapolate="linear")
-        elif hasattr(getattr(engine, "base", None), "with_options") and hasattr(engine, "effects"):
-            engine = type(engine)(engine.base.with_options(extrapolate="linear"), engine.effects)
-    check = getattr(engine, "check_context", None)
-    if check is not None:
-        try:
-            check(set(PIPELINE_CONTEXT) | set(context_names))
-        except PostprocError as exc:
-            raise exc.at(path=path) from None
-    return engine
-
-
 class Corrector(EmitterMixin):
     """State of one correction run; see the module docstring."""
 
@@ -159,7 +112,7 @@ class Corrector(EmitterMixin):
         self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
-        self.report.solver = str(_base_attr(engine, "solver") or "")
+        self.report.solver = str(engine_attr(engine, "solver") or "")
 
     # -- safety-checked engine calls ----------------------------------------------------
     def _context(self, dirs: np.ndarray, rotary: list[dict]) -> dict:
