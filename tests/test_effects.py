@@ -177,3 +177,46 @@ def test_periodic_pitch_and_amplitude_from_an_independent_lead_screw_wave():
     B = e.basis(q, None, {})[:, 0, :]
     coef, *_ = np.linalg.lstsq(B, resid[:, 0], rcond=None)
     assert np.hypot(*coef) == pytest.approx(0.0025, rel=0.05)
+
+
+def test_geometric_effects_follow_their_documented_formulas():
+    """Each against the formula in docs/diagnostics.md, written out independently."""
+    q = RNG.uniform(0, 300, (30, 3))
+    r = RNG.uniform(-100, 100, (30, 3))
+    x, y, z = q.T
+    w = np.array([2e-5, -1e-5, 3e-5])
+
+    scale = get_effect("scale:X", params={"scale": 2e-5}).displacement(q, r, {})
+    assert_allclose(scale, np.column_stack([2e-5 * x, 0 * x, 0 * x]), atol=1e-15)
+
+    tilt = get_effect("abbe:tilt", params={"wx_rad": w[0], "wy_rad": w[1], "wz_rad": w[2]})
+    assert_allclose(tilt.displacement(q, r, {}), np.cross(w, r), atol=1e-15)
+    abbe_y = get_effect("abbe:Y", params={"wx_rad_per_mm": w[0], "wy_rad_per_mm": w[1], "wz_rad_per_mm": w[2]})
+    assert_allclose(abbe_y.displacement(q, r, {}), np.cross(y[:, None] * w, r), atol=1e-15)
+
+    lever = get_effect("lever:XZ", params={"EAX_rad_per_mm": 1e-7, "EBX_rad_per_mm": -5e-8})
+    omega = x[:, None] * np.array([1e-7, -5e-8, 0.0])
+    assert_allclose(lever.displacement(q, r, {}), np.cross(omega, z[:, None] * [0.0, 0.0, 1.0]), atol=1e-15)
+
+    st = get_effect("straightness:X", config={"center_mm": 150.0, "half_travel_mm": 150.0},
+                    params={"bow_y_mm": 0.004, "s_y_mm": -0.002, "bow_z_mm": 0.001, "s_z_mm": 0.003})
+    u = (x - 150.0) / 150.0
+    expect = np.column_stack([0 * x, 0.004 * u**2 - 0.002 * u**3, 0.001 * u**2 + 0.003 * u**3])
+    assert_allclose(st.displacement(q, r, {}), expect, atol=1e-15)
+
+
+def test_squareness_effects_use_the_parametric_model_signs():
+    """squareness:XY/XZ/YZ add what the 21-parameter model's EC0Y/EB0Z/EA0Z add."""
+    from postproc.engine.parametric import ParametricEngine
+    from postproc.engine.parametric_tables import AxisTables, Squareness
+
+    positions = {a: np.array([0.0, 300.0]) for a in "XYZ"}
+    zeros = {a: np.zeros((2, 6)) for a in "XYZ"}
+    sq = Squareness(EC0Y=3e-5, EB0Z=-2e-5, EA0Z=4e-5)
+    q = RNG.uniform(0, 300, (20, 3))
+    flat = ParametricEngine(AxisTables(positions, zeros), Squareness(), VOLUME)
+    square = ParametricEngine(AxisTables(positions, zeros), sq, VOLUME)
+    expect = square.forward(q) - flat.forward(q)
+    got = sum(get_effect(f"squareness:{pair}", params={name: getattr(sq, name[:4])}).displacement(q, None, {})
+              for pair, name in (("XY", "EC0Y_rad"), ("XZ", "EB0Z_rad"), ("YZ", "EA0Z_rad")))
+    assert_allclose(got, expect, atol=1e-12)
