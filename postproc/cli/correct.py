@@ -88,7 +88,7 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
         lines.append(f"  note: {rep.extrapolated_points} points outside the calibrated volume were extrapolated")
     if rep.solver:
         lines.append(f"  solver {rep.solver}: largest inverse residual {rep.max_residual_mm * 1000:.3g} um "
-                     f"(accepted up to {rep.accept_residual_mm * 1000:.3g} um)")
+                     f"(accepted up to {rep.accept_residual_mm * 1000:.4g} um)")
         if rep.max_residual_mm > tolerance_mm:
             lines.append(f"  note: the solver's residual exceeds --tolerance {tolerance_mm:g} mm: the corrected "
                          "targets are only as close to the nominal as that residual")
