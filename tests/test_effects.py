@@ -220,3 +220,32 @@ def test_squareness_effects_use_the_parametric_model_signs():
     got = sum(get_effect(f"squareness:{pair}", params={name: getattr(sq, name[:4])}).displacement(q, None, {})
               for pair, name in (("XY", "EC0Y_rad"), ("XZ", "EB0Z_rad"), ("YZ", "EA0Z_rad")))
     assert_allclose(got, expect, atol=1e-12)
+
+
+def test_context_and_positioning_effects_follow_their_documented_formulas():
+    q = RNG.uniform(0, 300, (30, 3))
+    x, y, z = q.T
+    temp, load, hum = RNG.uniform(18, 24, 30), RNG.uniform(0, 500, 30), RNG.uniform(30, 70, 30)
+    ones = np.ones((30, 3))
+
+    d = get_effect("thermal:temp", params={"kx_mm_per_C": 0.002, "ky_mm_per_C": -0.001, "kz_mm_per_C": 0.003})
+    assert_allclose(d.displacement(q, None, {"temp": temp}),
+                    (temp - 20.0)[:, None] * np.array([0.002, -0.001, 0.003]) * ones, atol=1e-15)
+
+    d = get_effect("expansion:temp", params={"ax_per_C": 11.5e-6, "ay_per_C": 0.0, "az_per_C": 5e-6})
+    assert_allclose(d.displacement(q, None, {"temp": temp}),
+                    (temp - 20.0)[:, None] * np.column_stack([11.5e-6 * x, 0 * y, 5e-6 * z]), atol=1e-15)
+
+    d = get_effect("load:load", params={"cz_mm_per_unit": -2e-5})
+    assert_allclose(d.displacement(q, None, {"load": load}), np.column_stack([0 * x, 0 * x, -2e-5 * load]),
+                    atol=1e-15)
+
+    d = get_effect("linear:humidity", config={"reference": 50.0}, params={"ax_mm_per_unit": 1e-4})
+    assert_allclose(d.displacement(q, None, {"humidity": hum}),
+                    np.column_stack([1e-4 * (hum - 50.0), 0 * x, 0 * x]), atol=1e-15)
+
+    d = get_effect("positioning:Y", config={"center_mm": 150.0, "half_travel_mm": 150.0},
+                   params={"bow_mm": 0.004, "s_mm": -0.002})
+    u = (y - 150.0) / 150.0
+    assert_allclose(d.displacement(q, None, {}), np.column_stack([0 * x, 0.004 * u**2 - 0.002 * u**3, 0 * x]),
+                    atol=1e-15)
