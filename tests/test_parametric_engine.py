@@ -240,3 +240,23 @@ def test_singular_tables_raise_a_solver_error_not_a_crash():
     eng = ParametricEngine(AxisTables(tables.position_mm, errors), sq, interpolation="linear")
     with pytest.raises(SolverError, match="point #0"):
         eng.inverse(p, TOOL)
+
+
+def test_astatic_iteration_count_follows_the_control_law():
+    """On an error-free machine the law q_m <- q_m - dt K (q_m - q_d) shrinks the distance
+    from the origin by (1 - K dt) per step; it stops once within u on every axis, then
+    takes the final formula (2) step."""
+    import math
+
+    from postproc.engine.parametric_tables import AxisTables
+
+    positions = {a: np.array([0.0, 315.0]) for a in "XYZ"}
+    zeros = {a: np.zeros((2, 6)) for a in "XYZ"}
+    eng = ParametricEngine(AxisTables(positions, zeros), Squareness(), [[0, 0, 0], [315, 315, 315]],
+                           solver="astatic")
+    u, K, dt = eng.astatic.grid_step_mm, eng.astatic.gain, eng.astatic.time_step
+    p = np.array([[200.0, 100.0, 50.0], [20.0, 30.0, 300.0], [150.0, 250.0, 10.0]])
+    res = eng.inverse(p, np.zeros((3, 3)))
+    expect = [math.ceil(math.log(u / d) / math.log(1.0 - K * dt)) + 1 for d in p.max(axis=1)]
+    assert res.iterations.tolist() == expect
+    assert_allclose(res.q, p, atol=1e-9)
