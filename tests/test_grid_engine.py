@@ -225,3 +225,17 @@ def test_fill_missing_nodes_from_neighbours():
     two = np.all(meas.q == 0, axis=1) | np.all(meas.q == 60, axis=1)
     with pytest.raises(MeasurementError, match="too few to fill"):
         fit([Measurements(q=meas.q[two], m=meas.m[two], r=meas.r[two])], step="20", fill_missing=True)
+
+
+def test_unequal_steps_per_axis_reproduce_the_nodes():
+    """Steps of 10, 15 and 20 mm: each axis's tangents are scaled by its own step."""
+    steps = np.array([10.0, 15.0, 20.0])
+    axes = [np.arange(4) * steps[j] for j in range(3)]
+    q = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    x, y, z = q[..., 0], q[..., 1], q[..., 2]
+    nodes = q + np.stack([1e-3 * np.sin(y / 20) + 2e-4 * z, 3e-4 * x + 1e-3 * np.cos(z / 30),
+                          -2e-4 * y + 1e-3 * np.sin(x / 25)], axis=-1)
+    eng = GridEngine.from_nodes([0, 0, 0], steps, nodes)
+    assert_allclose(eng.nodes, nodes, atol=1e-12)
+    flat_q, flat_nodes = q.reshape(-1, 3), nodes.reshape(-1, 3)
+    assert_allclose(eng.forward(flat_q), flat_nodes, atol=1e-9)
