@@ -155,3 +155,11 @@ def test_calibration_round_trip(tmp_path, grid_data):
     q = np.random.default_rng(2).uniform(0, 315, (300, 3))
     assert_allclose(cal.engine.forward(q), eng.forward(q), atol=1e-12)
     assert_allclose(cal.engine.inverse(q).q, eng.inverse(q).q, atol=1e-12)
+
+
+def test_cells_are_half_open_except_the_last():
+    from postproc.engine._tangents import cell_index
+
+    edges = [np.array([0.0, 100.0, 200.0]), np.array([0.0, 50.0]), np.array([0.0, 10.0, 20.0, 30.0])]
+    q = np.array([[100.0, 0.0, 10.0], [99.999, 50.0, 30.0], [200.0, 25.0, 20.0], [-5.0, 60.0, 35.0]])
+    assert cell_index(q, edges).tolist() == [[1, 0, 1], [0, 0, 2], [1, 0, 2], [0, 0, 2]]
