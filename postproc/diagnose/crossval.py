@@ -29,22 +29,6 @@ def make_folds(groups: np.ndarray, k: int, seed: int = FOLD_SEED) -> list[np.nda
     return [f == i for i in range(k)]
 
 
-def cv_residuals(model: BaseModel, ds: Dataset, effects: list[Effect], folds: list[np.ndarray]) -> np.ndarray:
-    """(N, 3) held-out residuals measured - prediction, each from a fit without its fold.
-
-    The effects' non-linear settings (pitch, time constant) are searched on the
-    training folds only.
-    """
-    out = np.empty_like(ds.m)
-    for test in folds:
-        train = ds.subset(~test)
-        prepared = model.prepare(train, effects)
-        fitted = model.fit(train, prepared)
-        held = ds.subset(test)
-        out[test] = held.m - fitted.predict(held)
-    return out
-
-
 class JointCV:
     """Cross-validation of "the selected effects + one candidate", refitting the base
     jointly with all of them on every training fold (exact for the static method).
