@@ -152,3 +152,26 @@ def test_measurement_file_as_control_points_uses_its_tool_vectors(tmp_path):
     expect = np.linalg.norm(m.forward(q - cps.tool, cps.tool) - q, axis=1)
     assert_allclose(rep.deltas["uncorrected"], expect)
     assert rep.deltas["truth"].max() < 1e-5
+
+
+def test_control_result_does_not_depend_on_the_other_calibrations():
+    """Each calibration's Delta is the same alone, first or last (shared tracker noise)."""
+    import numpy as np
+
+    from postproc.engine.identity import IdentityEngine
+    from postproc.engine.static import StaticEngine
+    from postproc.simulate.control import control_experiment
+    from postproc.simulate.s500 import s500_machine
+
+    machine = s500_machine()
+    targets = np.array([[50.0, 60, 70], [200, 150, 100], [120, 250, 200]])
+    vol = [[0, 0, 0], [315, 315, 315]]
+    a = ("a", StaticEngine(np.eye(3) * (1 + 1e-4), [0.01, 0, 0], vol))
+    b = ("b", IdentityEngine(vol))
+    alone = control_experiment(machine, targets, [a], rng=np.random.default_rng(5))
+    first = control_experiment(machine, targets, [a, b], rng=np.random.default_rng(5))
+    last = control_experiment(machine, targets, [b, a], rng=np.random.default_rng(5))
+    np.testing.assert_array_equal(alone.deltas["a"], first.deltas["a"])
+    np.testing.assert_array_equal(alone.deltas["a"], last.deltas["a"])
+    # The identity engine commands the nominal point: its column is the uncorrected one.
+    np.testing.assert_allclose(last.deltas["b"], last.deltas[last.UNCORRECTED], atol=1e-12)

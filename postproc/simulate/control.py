@@ -106,8 +106,12 @@ def control_experiment(machine: Machine, targets, calibrations: list[tuple[str, 
     ctx = {"dirx": 1.0, "diry": 1.0, "dirz": 1.0, **(context or {})}
     ctx = {k: np.broadcast_to(np.asarray(v, dtype=float), (len(p),)).copy() for k, v in ctx.items()}
     rng = rng if rng is not None else np.random.default_rng(0)
+    # The tracker's averaged noise at each control point is drawn once and shared by every
+    # column (common random numbers): a calibration's Delta then depends neither on which
+    # other calibrations are compared nor on their order, only on the machine and itself.
+    tracker = measure_averaged(machine, p - rr, rr, ctx, rng, shots, noise) - machine.forward(p - rr, rr, ctx)
     deltas = {}
-    measured = measure_averaged(machine, p - rr, rr, ctx, rng, shots, noise)
+    measured = machine.forward(p - rr, rr, ctx) + tracker
     deltas[ControlReport.UNCORRECTED] = np.linalg.norm(measured - p, axis=1)
     names, notes = [], []
     for name, engine in calibrations:
@@ -121,7 +125,7 @@ def control_experiment(machine: Machine, targets, calibrations: list[tuple[str, 
         outside = int(np.count_nonzero(~engine.inside(res.q)))
         if outside:
             notes.append(f"{name}: {outside} point(s) outside its calibrated volume")
-        measured = measure_averaged(machine, res.q, rr, ctx, rng, shots, noise)
+        measured = machine.forward(res.q, rr, ctx) + tracker
         key = name
         while key in deltas:
             key += "'"
