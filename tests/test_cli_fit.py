@@ -49,3 +49,23 @@ def test_fit_unknown_file_kind(tmp_path):
     result = CliRunner().invoke(main, ["fit", str(src), "-o", str(tmp_path / "c.json")])
     assert result.exit_code == EXIT_INPUT
     assert "cannot tell what this file holds" in result.output
+
+
+def test_fit_tool_vector_fills_files_without_tool_columns(tmp_path):
+    rng = np.random.default_rng(9)
+    q = rng.uniform(0, 300, (20, 3))
+    origin = np.array([0.01, -0.02, 0.03])
+    m = origin + q + np.array([0, 0, -100.0])
+    text = format_measurements(Measurements(q=q, m=m, r=np.zeros_like(q)))
+    lines = text.splitlines()
+    header = lines[2].split(",")
+    keep = [i for i, h in enumerate(header) if h not in ("tx", "ty", "tz")]
+    src = tmp_path / "no_tool.csv"
+    src.write_text("\n".join(lines[:2] + [",".join(row.split(",")[i] for i in keep) for row in lines[2:]]) + "\n")
+    out = tmp_path / "c.json"
+    result = CliRunner().invoke(main, ["fit", str(src), "--tool-vector", "0,0,-100", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    np.testing.assert_allclose(json.loads(out.read_text())["model"]["r_O1_mm"], origin, atol=1e-6)
+    # Without --tool-vector the 100 mm tool ends up in the origin.
+    result = CliRunner().invoke(main, ["fit", str(src), "-o", str(out)])
+    np.testing.assert_allclose(json.loads(out.read_text())["model"]["r_O1_mm"][2], origin[2] - 100, atol=1e-6)

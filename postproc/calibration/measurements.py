@@ -109,6 +109,16 @@ def read_measurements(path) -> Measurements:
     return measurements_from_table(read_csv(path))
 
 
+def read_measurement_files(paths, tool_vector=None) -> list[Measurements]:
+    """Read several files; ``tool_vector`` (3,) fills in files that have no tx,ty,tz columns."""
+    data = [read_measurements(p) for p in paths]
+    if tool_vector is not None:
+        for d in data:
+            if not d.has_tool_columns:
+                d.r[:] = np.asarray(tool_vector, dtype=float)
+    return data
+
+
 def format_measurements(meas: Measurements, *, comments: list[str] | None = None, decimals: int = 6) -> str:
     """Render in the formats.md form (lengths in mm)."""
     header = ["X", "Y", "Z", "mx", "my", "mz", "tx", "ty", "tz"]

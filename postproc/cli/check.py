@@ -49,7 +49,7 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, 
     import json
 
     from postproc.calibration.calfile import load_calibration
-    from postproc.calibration.measurements import read_measurements
+    from postproc.calibration.measurements import read_measurement_files
     from postproc.cli.options import parse_vector
     from postproc.diagnose.check import json_safe, run_check
     from postproc.diagnose.text import format_report
@@ -57,12 +57,8 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, 
     if sigma is not None and not sigma > 0:
         raise click.BadParameter("must be a positive length in mm", param_hint="--sigma")
     cal = load_calibration(cal_path)
-    data = [read_measurements(f) for f in files]
-    if tool_vector is not None:
-        r = parse_vector(tool_vector, "--tool-vector")
-        for d in data:
-            if not d.has_tool_columns:
-                d.r[:] = r
+    r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
+    data = read_measurement_files(files, r)
     res = run_check(cal, data, list(files), sigma_mm=sigma, folds=folds, max_selected=max_effects,
                     fixed=fixed)
     if plot_dir:

@@ -47,7 +47,7 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         postproc fit samples/tracker_6points.csv --method static -o my_static.json
     """
     from postproc.calibration.calfile import save_calibration
-    from postproc.calibration.measurements import read_measurements
+    from postproc.calibration.measurements import read_measurement_files
     from postproc.calibration.sniff import sniff
     from postproc.engine.registry import fitter
     from postproc.errors import MeasurementError
@@ -84,12 +84,8 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         method = method or "static"
         if (order or solver) and method != "parametric":
             raise click.UsageError("--order and --solver apply to the parametric method only")
-        data = [read_measurements(f) for f in files]
-        if tool_vector is not None:
-            r = parse_vector(tool_vector, "--tool-vector")
-            for d in data:
-                if not d.has_tool_columns:
-                    d.r[:] = r
+        r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
+        data = read_measurement_files(files, r)
         if effects:
             from postproc.diagnose.refit import fit_with_effects
 

@@ -46,13 +46,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine._tangents import (
     AXES,
     LATTICE_TOL_MM,
     cell_index,
     distinct_positions,
     format_node,
+    newton_refine,
     parse_screw_pitch,
     parse_step,
     piecewise_inverse,
@@ -69,10 +69,6 @@ from postproc.engine.base import (
 from postproc.errors import CalibrationError, MeasurementError, PostprocError, SolverError
 
 MODELS = ("trilinear", "cell")
-
-# Newton on the interpolated field stops a hundred times below the solver tolerance:
-# the extra iteration costs microseconds and keeps the answer far from the limit.
-NEWTON_TOL_MM = SOLVER_TOL_MM / 100
 
 # A step detected from the data must repeat within this relative difference to count as
 # a regular lattice (commanded positions are exact to 1 nm, steps >= 1 mm).
@@ -239,16 +235,10 @@ class GridEngine(Engine):
     def _newton(self, target: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Formula (2) repeated with the tangent matrix at the current point."""
         iters = np.ones(len(q), dtype=int)  # the first step was formula (2) itself
-        active = np.arange(len(q))
-        for _ in range(SOLVER_MAX_ITER):
-            value, jac = self._trilinear(q[active], jacobian=True)
-            err = target[active] - value
-            done = np.linalg.norm(err, axis=1) < NEWTON_TOL_MM
-            active, err, jac = active[~done], err[~done], jac[~done]
-            if len(active) == 0:
-                return q, iters
-            q[active] += np.linalg.solve(jac, err[..., None])[..., 0]
-            iters[active] += 1
+        active = newton_refine(lambda x: self._trilinear(x, jacobian=True), target, q, iters,
+                               np.arange(len(q)))
+        if len(active) == 0:
+            return q, iters
         raise SolverError(
             f"quasi-differential inverse did not converge for {len(active)} point(s), "
             f"first target {format_node(target[active[0]])}",

@@ -38,13 +38,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine._tangents import (
     AXES,
     LATTICE_TOL_MM,
+    NEWTON_TOL_MM,
     cell_index,
     distinct_positions,
     format_node,
+    newton_refine,
     parse_intervals,
     piecewise_inverse,
     tool_vector_note,
@@ -70,9 +71,6 @@ DEFAULT_INTERVALS = 3
 # the model monotone (jump / width << 1) and a program crossing the border is followed
 # with chords of a few tenths of a millimetre at a 1 um tolerance.
 BORDER_BLEND_MM = 1.0
-
-# Newton refinement in a blend zone stops a hundred times below the solver tolerance.
-NEWTON_TOL_MM = SOLVER_TOL_MM / 100
 
 # A cell fitted from fewer points than this has little noise averaging (12 parameters);
 # the fit report says so.
@@ -213,15 +211,9 @@ class IntervalEngine(Engine):
         _, lam, _ = self._blend_weights(q, cells)
         off = np.linalg.norm(self._apply(q, cells) - target, axis=1) >= NEWTON_TOL_MM
         active = np.flatnonzero(np.any(lam > 0, axis=1) | off)
-        for _ in range(SOLVER_MAX_ITER):
-            value, jac = self._blended(q[active], jacobian=True)
-            err = target[active] - value
-            done = np.linalg.norm(err, axis=1) < NEWTON_TOL_MM
-            active, err, jac = active[~done], err[~done], jac[~done]
-            if len(active) == 0:
-                return q, iters
-            q[active] += np.linalg.solve(jac, err[..., None])[..., 0]
-            iters[active] += 1
+        active = newton_refine(lambda x: self._blended(x, jacobian=True), target, q, iters, active)
+        if len(active) == 0:
+            return q, iters
         raise SolverError(
             f"interval inverse did not converge for {len(active)} point(s), first target "
             f"{format_node(target[active[0]])}",
