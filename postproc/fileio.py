@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import tempfile
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 from postproc.errors import OutputError
@@ -63,6 +63,17 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8, line endings as given) atomically to ``path``."""
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as fh:
         fh.write(text)
+
+
+def atomic_write_texts(files: dict) -> None:
+    """Write several files together: every temporary file is written first, then all are
+    renamed, so a failure while writing leaves none of them (a set such as axis tables
+    and their squareness file is never half new, half old)."""
+    with ExitStack() as stack:
+        for path, text in files.items():
+            tmp = stack.enter_context(atomic_path(path))
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
+                fh.write(text)
 
 
 def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> None:

@@ -78,8 +78,8 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
     """
     import numpy as np
 
-    from postproc.calibration.calfile import atomic_write_text
     from postproc.calibration.measurements import format_measurements
+    from postproc.fileio import atomic_write_text, atomic_write_texts
     from postproc.simulate import load_machine
     from postproc.simulate.points import (
         grid_points,
@@ -109,8 +109,7 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
         tabs, sq = simulate_tables(mach, step, rng, noise=not no_noise, context=ctx)
         sq_path = suffix_squareness(output)
         text, sq_text = axis_errors_text(tabs, sq, comments=comments + [f"step: {step:g} mm"])
-        atomic_write_text(sq_path, sq_text)
-        atomic_write_text(output, text)
+        atomic_write_texts({sq_path: sq_text, output: text})
         click.echo(f"wrote {output} ({sum(len(t.position) for t in tabs.values())} rows) and {sq_path}",
                    err=True)
         return

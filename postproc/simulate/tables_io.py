@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from postproc.calibration.calfile import atomic_write_text
 from postproc.engine.parametric_tables import (
     AXES,
     AxisTables,
@@ -17,6 +16,7 @@ from postproc.engine.parametric_tables import (
     read_squareness,
     read_tables,
 )
+from postproc.fileio import atomic_write_texts
 from postproc.simulate.machine import AxisErrors
 
 
@@ -44,8 +44,7 @@ def axis_errors_text(tables: dict[str, AxisErrors], squareness: dict[str, float]
 def write_axis_errors(tables_path, squareness_path, tables: dict[str, AxisErrors],
                       squareness: dict[str, float], comments: list[str] | None = None) -> None:
     text, sq_text = axis_errors_text(tables, squareness, comments)
-    atomic_write_text(squareness_path, sq_text)
-    atomic_write_text(tables_path, text)
+    atomic_write_texts({squareness_path: sq_text, tables_path: text})
 
 
 def read_axis_errors(path: Path, where: str = "") -> dict[str, AxisErrors]:
