@@ -21,6 +21,14 @@ ALL_OFFSETS = {n: (0.0, 0.0, 0.0) for n in
                ["G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3"]}
 ALL_TOOLS = {t: 50.0 + t for t in range(100)}
 BIG = [[-1e5] * 3, [1e5] * 3]
+# 2-D programs that never name Z: corrected with the machine's Z given by --start
+# (docs/gcode.md, "Start position"); without it they are refused
+CORPUS_START = {"Star_Trek.tap": {"Z": 150.0}, "plug6a.tap": {"Z": 150.0}}
+
+
+def corpus_setup(path: Path) -> Setup:
+    """The setup a corpus program is corrected with (every offset and tool, its start)."""
+    return Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS, start=CORPUS_START.get(path.name, {}))
 
 
 def _files():
@@ -38,7 +46,7 @@ def strip_header(text: str) -> str:
 @pytest.mark.parametrize("path", _files(), ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_identity_roundtrip_is_byte_identical_or_a_clear_error(path):
     text = path.read_bytes().decode("utf-8", errors="surrogateescape")
-    setup = Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS)
+    setup = corpus_setup(path)
     err = None
     try:
         out, report = correct_text(text, IdentityEngine(BIG), setup, CorrectOptions(),
@@ -62,7 +70,7 @@ def test_the_corpus_is_mostly_corrected_not_refused():
     for path in sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS):
         text = path.read_bytes().decode("utf-8", errors="surrogateescape")
         try:
-            correct_text(text, IdentityEngine(BIG), Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS))
+            correct_text(text, IdentityEngine(BIG), corpus_setup(path))
             ok.append(path.name)
         except PostprocError as exc:
             refused.append((path.name, exc.message))
@@ -71,6 +79,14 @@ def test_the_corpus_is_mostly_corrected_not_refused():
              "never positioned", "is not G-code", "arc end radius", "arc without end point")
     assert all(any(k in msg for k in known) for _, msg in refused), refused
     assert len(ok) >= 10, refused
+    # the programs that need a start position are corrected once it is given
+    assert set(CORPUS_START) <= set(ok)
+    for name in CORPUS_START:
+        path = next(CORPUS.rglob(name))
+        text = path.read_bytes().decode("utf-8", errors="surrogateescape")
+        with pytest.raises(PostprocError, match="never positioned") as err:
+            correct_text(text, IdentityEngine(BIG), Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS))
+        assert "--start" in err.value.hint
 
 
 def test_comments_in_any_encoding_are_copied_byte_for_byte(tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -12,7 +13,7 @@ from pathlib import Path
 import click
 
 from postproc.cli.options import parse_context, parse_offset, parse_tool_length, parse_vector
-from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
+from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM, MM_PER_INCH
 from postproc.errors import PostprocError
 
 # Files larger than this get a progress line on stderr (when stderr is a terminal).
@@ -44,7 +45,27 @@ def read_tool_table(path: str) -> dict[int, float]:
     return lengths
 
 
-def build_setup(offset, tool_length, tool_table, tool_vector, context):
+def parse_start(text: str) -> dict[str, float]:
+    """``"X10,Y20,Z150"`` (any of X, Y, Z; end with ``in`` for inches) -> machine mm by axis."""
+    body = text.strip()
+    scale = 1.0
+    if body.lower().endswith("in"):
+        scale, body = MM_PER_INCH, body[:-2]
+    values: dict[str, float] = {}
+    for item in filter(None, (p.strip() for p in body.split(","))):
+        m = re.fullmatch(r"([XYZxyz])\s*([-+]?(?:\d+\.?\d*|\.\d+))", item)
+        if not m:
+            raise click.BadParameter(f"{text!r}: {item!r} is not X, Y or Z and a number", param_hint="--start")
+        axis = m.group(1).upper()
+        if axis in values:
+            raise click.BadParameter(f"{text!r}: {axis} is given twice", param_hint="--start")
+        values[axis] = float(m.group(2)) * scale
+    if not values:
+        raise click.BadParameter(f"{text!r}: expected X..,Y..,Z.. (any of them)", param_hint="--start")
+    return values
+
+
+def build_setup(offset, tool_length, tool_table, tool_vector, context, start=None):
     from postproc.gcode.path import Setup
 
     offsets = {}
@@ -61,7 +82,8 @@ def build_setup(offset, tool_length, tool_table, tool_vector, context):
         tools[h] = length
     vec = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
     ctx = dict(parse_context(c) for c in context)
-    return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx)
+    return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
+                 start=parse_start(start) if start is not None else {})
 
 
 def load_maps(paths) -> list:
@@ -133,6 +155,9 @@ def _progress_printer(total_hint: str):
               help="LinuxCNC tool table (.tbl) giving tool lengths (Z column, mm).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector r (mm) from gauge point to tool tip, overriding (0,0,-length).")
+@click.option("--start", default=None, metavar="X..,Y..,Z..",
+              help="Machine axis positions (mm, as G53; end with 'in' for inches) at program start, for the "
+                   "axes the program has not positioned yet, e.g. Z150. Needs --offset for G54.")
 @click.option("--context", multiple=True, metavar="NAME=VALUE",
               help="Constant context value for the engine, e.g. temp=21.5. Repeatable.")
 @click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
@@ -148,7 +173,7 @@ def _progress_printer(total_hint: str):
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
 def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, tool_table, tool_vector,
-            context, tolerance, decimals, max_correction, extrapolate, force, maps):
+            start, context, tolerance, decimals, max_correction, extrapolate, force, maps):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -161,14 +186,21 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     A program that never names a work offset runs in G54; without --offset G54
     its coordinates are taken as machine coordinates (noted in the header).
 
+    An axis the program never positions (Z in 2-D engraving files) stays where
+    the machine is: give that machine position with --start (and the work
+    offset with --offset G54=...); the corrected program then names that axis
+    wherever the correction moves it.
+
     Example:
 
     \b
         postproc correct samples/pocket.nc -c calibrations/s500_static.json -o pocket_corrected.nc
         postproc correct samples/g54_g43.ngc -c calibrations/s500_static.json \\
             --offset G54=X100,Y80,Z40 --tool-length 1=100 -o part_corrected.ngc
+        postproc correct engraving.tap -c calibrations/s500_static.json \\
+            --offset G54=X100,Y100,Z0 --start Z150 -o engraving_corrected.tap
     """
-    setup = build_setup(offset, tool_length, tool_table, tool_vector, context)
+    setup = build_setup(offset, tool_length, tool_table, tool_vector, context, start)
     if len(inputs) > 1 and output is not None:
         raise click.UsageError("-o takes one input; use --output-dir for several")
     if output is not None and output_dir is not None:

@@ -129,6 +129,11 @@ class Interpreter:
         self.lenient_setup = lenient_setup
         self.path = path
         self.state = ModalState()
+        # axes the program has not positioned yet start where the machine is (Setup.start)
+        self.state.pos = start_position(getattr(setup, "start", None))
+        # set by the corrector when a start is given: words it adds on an axis known only
+        # from the start are written in the work frame, so G54 must not be taken as zero
+        self.require_g54 = False
         self.offsets = {k: _offset_tuple(v) for k, v in (setup.offsets or {}).items()}
         self.program_offsets: dict[str, list[float]] = {}  # set by G10 L2/L20
         self.implicit_g54 = False  # a move ran in G54 that the user did not give
@@ -153,6 +158,12 @@ class Interpreter:
         if self.lenient_setup:
             return [0.0, 0.0, 0.0]
         if name == "G54" and not st.work_explicit:
+            if self.require_g54:
+                raise self._err(
+                    MissingSetupError, "--start gives machine positions, so the value of the work offset G54 "
+                    "the program runs in must be given too", lineno, col,
+                    hint="give --offset G54=X..,Y..,Z.. (G54=X0,Y0,Z0 if the program's coordinates are "
+                         "machine coordinates)")
             # Documented default: a program that never names a work offset runs in
             # G54 taken as zero (program coordinates = machine coordinates); flagged.
             self.implicit_g54 = True
@@ -475,7 +486,8 @@ class Interpreter:
                             MissingSetupError,
                             f"incremental move on {a} from an unknown position (no absolute move on {a} before)",
                             lineno, col_of(i),
-                            hint="position every axis with a G90 move before the first G91 move")
+                            hint="position every axis with a G90 move before the first G91 move, or give its "
+                                 "machine position at program start with --start")
                     q1[k] = q1[k] + v * unit
                 else:
                     q1[k] = v * unit + shift[k]
@@ -540,7 +552,8 @@ class Interpreter:
             if a in vals:
                 if math.isnan(st.pos[k]):
                     raise self._err(MissingSetupError, f"G92 on {a} at an unknown position", lineno,
-                                    col, hint="position the axis with a G90 move before G92")
+                                    col, hint="position the axis with a G90 move before G92, or give its machine "
+                                 "position at program start with --start")
                 st.g92[k] = 0.0
                 w = self._work_offset(lineno, col)
                 st.g92[k] = st.pos[k] - (w[k] + (st.tlo if k == 2 else 0.0)) - vals[a][0] * unit
@@ -582,7 +595,8 @@ class Interpreter:
         col = words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
         if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
-                            hint="position all axes with a G90 move before the first arc")
+                            hint="position all axes with a G90 move before the first arc, or give their "
+                                 "machine positions at program start with --start")
         turns = 1
         if "P" in vals:
             turns = int(vals["P"][0])
@@ -655,4 +669,21 @@ def _offset_tuple(v) -> tuple[float, float, float]:
     t = tuple(float(x) for x in v)
     if len(t) != 3:
         raise ValueError(f"work offset needs 3 values, got {v!r}")
+    return t
+
+
+def start_position(start) -> list[float]:
+    """Machine gauge position at program start: ``{"X":.., "Z":..}`` (any subset) or
+    (x, y, z); NaN for an axis not given."""
+    if not start:
+        return [NAN, NAN, NAN]
+    if isinstance(start, dict):
+        bad = [k for k in start if str(k).upper() not in AXES]
+        if bad:
+            raise ValueError(f"start position names unknown axes {bad!r} (X, Y, Z only)")
+        up = {str(k).upper(): float(v) for k, v in start.items()}
+        return [up.get(a, NAN) for a in AXES]
+    t = [float(x) for x in start]
+    if len(t) != 3:
+        raise ValueError(f"start position needs 3 values, got {start!r}")
     return t

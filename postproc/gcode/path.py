@@ -6,7 +6,8 @@ positions ``p = q + r`` (after units, work offsets, G92 and tool length); ``tool
 is the tool vector ``r``, so ``q = points_mm - tool_mm`` is what the controller
 commands and ``machine.forward(q, tool_mm, context)`` is where the tool really goes.
 
-Axes not yet positioned when a program starts take the value of their next known
+Axes not yet positioned when a program starts are where the machine is, when
+``Setup.start`` gives that position; otherwise they take the value of their next known
 position (the first move of most programs is a retract on one axis).
 """
 
@@ -23,7 +24,7 @@ import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
 from postproc.gcode.geometry import arc_length, arc_points, line_points
-from postproc.gcode.interp import Interpreter
+from postproc.gcode.interp import Interpreter, start_position
 from postproc.gcode.state import RAPID
 
 DEFAULT_MAX_STEP_MM = 0.5
@@ -37,13 +38,17 @@ class Setup:
     (x, y, z) mm in the machine frame (or a dict ``{"X":.., "Y":.., "Z":..}``);
     ``tool_lengths``: tool number -> length (mm) for G43; ``tool_vector``: the tool
     vector r (mm) overriding ``(0, 0, -length)``; ``context``: constant context
-    values passed to the engine (e.g. ``{"temp": 21.5}``).
+    values passed to the engine (e.g. ``{"temp": 21.5}``); ``start``: machine axis
+    positions (mm, the gauge point as in G53, like ``offsets``) at program start, by
+    axis letter (``{"Z": 150.0}``, any subset), used for the axes the program has not
+    positioned yet; the functional point there is ``start + r``.
     """
 
     offsets: dict = field(default_factory=dict)
     tool_lengths: dict = field(default_factory=dict)
     tool_vector: tuple | None = None
     context: dict = field(default_factory=dict)
+    start: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -100,7 +105,8 @@ def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.
             raise MissingSetupError(
                 f"axis {'XYZ'[k]} is never positioned by the program, so the correction cannot be evaluated",
                 path=path, lineno=int(lineno[0]) if len(lineno) else None,
-                hint=f"add an absolute move on {'XYZ'[k]} (e.g. G0 {'XYZ'[k]}..) near the start")
+                hint=f"give the machine position of {'XYZ'[k]} at program start with --start {'XYZ'[k]}.. "
+                     f"(mm, machine coordinates), or add an absolute move on {'XYZ'[k]} near the start")
         idx = np.searchsorted(good, np.flatnonzero(bad))
         if np.any(idx >= len(good)):
             raise MissingSetupError(f"axis {'XYZ'[k]} is not positioned before the end of the program",
@@ -109,9 +115,12 @@ def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.
     return q
 
 
-def motion_signs(q: np.ndarray, initial=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Sign of each axis's motion into each point; the previous sign where it does not move."""
-    d = np.diff(np.vstack([q[:1], q]), axis=0)
+def motion_signs(q: np.ndarray, initial=(0.0, 0.0, 0.0), start=None) -> np.ndarray:
+    """Sign of each axis's motion into each point; the previous sign where it does not move.
+
+    ``start``: the position before the first point (NaN or None: no motion into it)."""
+    first = q[:1] if start is None else np.where(np.isnan(start), q[:1], np.asarray(start, dtype=float))
+    d = np.diff(np.vstack([first, q]), axis=0)
     sign = np.sign(np.where(np.abs(d) > MOTION_EPS_MM, d, 0.0))
     out = np.empty_like(sign)
     for k in range(3):
@@ -163,7 +172,7 @@ def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEF
     lineno_arr = np.concatenate(lns)
     q = backfill_unknown(q, lineno_arr, path)
     r = np.vstack(rs)
-    signs = motion_signs(q)
+    signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
     context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
     for a in sorted(interp.used_rotary):
         context[a] = np.concatenate([np.full(n, d.get(a, 0.0)) for n, d in rot])

@@ -41,7 +41,7 @@ from postproc.gcode.emitter import EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, engine_attr, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
-from postproc.gcode.interp import Arc, Interpreter, Move
+from postproc.gcode.interp import Arc, Interpreter, Move, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, subdivide
 from postproc.gcode.state import LINE
@@ -101,10 +101,14 @@ class Corrector(EmitterMixin):
         self.cal_name = calibration_name
         self.cal_sha = calibration_sha256
         self.interp = Interpreter(setup, path)
+        self.interp.require_g54 = bool(setup.start)
         self.report = CorrectReport()
-        self.qe = [math.nan] * 3  # emitted gauge position (what the controller will hold)
-        self.prev_nominal = np.full(3, np.nan)
-        self.prev_target = np.full(3, np.nan)
+        # where the machine is before the first move: the start position (NaN: unknown);
+        # the machine is there uncorrected, so it is also the emitted and the previous target
+        start = start_position(setup.start)
+        self.qe = list(start)  # emitted gauge position (what the controller will hold)
+        self.prev_nominal = np.array(start, dtype=float)
+        self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
         self.emitted_motion: int | None = None
         self.linear_exact = bool(engine.affine) and not options.added
@@ -306,6 +310,9 @@ class Corrector(EmitterMixin):
             parts.append(f"{k}={','.join(f'{x:g}' for x in v)}")
         if self.setup.tool_lengths:
             parts.append("tools " + ",".join(f"{k}={v:g}" for k, v in sorted(self.setup.tool_lengths.items())))
+        start = start_position(self.setup.start)
+        if self.setup.start:
+            parts.append("start " + ",".join(f"{a}{v:g}" for a, v in zip("XYZ", start, strict=True) if v == v))
         if self.setup.tool_vector is not None:
             parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
         for a in self.opt.added:
