@@ -57,7 +57,7 @@ def test_a_lift_of_the_tool_shows_as_its_height_and_names_lines():
     rep = verify_program(POCKET, offset_machine([0, 0, 0.010]), [], corrected=POCKET)
     run = rep.runs[0]
     assert run.max_mm == pytest.approx(0.010, abs=CHORD_MM)
-    plunges = {6, 18, 27}  # file lines of N60, N150, N240 (G1 Z.. plunges)
+    plunges = {9, 18, 27}  # file lines of N60, N150, N240 (G1 Z.. plunges)
     lines = {ln for ln, _ in run.worst_lines()}
     assert not lines & plunges
     # A shift along X leaves the X-direction moves on their line and moves the others.
@@ -79,6 +79,13 @@ def test_verify_program_cli_json_and_plot(tmp_path):
     assert [r["label"] for r in data["runs"]] == ["uncorrected", "corrected (pocket.nc)"]
     assert data["runs"][0]["max_mm"] == pytest.approx(0.004, abs=CHORD_MM)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for side in ("actual_to_nominal", "nominal_to_actual"):
+        assert data["runs"][0][side]["max_mm"] == pytest.approx(0.004, abs=CHORD_MM)
+    res = CliRunner().invoke(main, ["verify", str(POCKET), "--corrected", str(POCKET), "--machine", str(mpath)])
+    assert res.exit_code == 0, res.output
+    assert "max = two-sided, the larger of (a) and (b)" in res.stdout
+    row = next(ln for ln in res.stdout.splitlines() if ln.strip().startswith("uncorrected")).split()
+    assert [float(row[i]) for i in (1, 2, 4)] == pytest.approx([4.0, 4.0, 4.0], abs=0.01)  # the maxima
     res = CliRunner().invoke(main, ["verify", str(POCKET), "--machine", str(mpath)])
     assert res.exit_code == 2
     assert "-c CALIBRATION" in res.output
@@ -136,3 +143,75 @@ def test_corrected_pocket_with_a_tool_and_work_offset(s500_parametric):
     before, after = rep.runs
     assert before.max_mm > 0.100
     assert after.max_mm < 0.002
+
+
+def test_a_skipped_stretch_shows_in_the_nominal_to_actual_direction(tmp_path):
+    # The second pass (N150..N230, at Z46) left out: every point the program reaches lies
+    # on the nominal path, but the Z46 contour is 2 mm from anything it cuts.
+    lines = POCKET.read_text().splitlines(keepends=True)
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("N150"))
+    last = next(i for i, ln in enumerate(lines) if ln.startswith("N230"))
+    skipped = tmp_path / "skipped.nc"
+    skipped.write_text("".join(lines[:first] + lines[last + 1:]))
+    run = verify_program(POCKET, offset_machine([0, 0, 0]), [], corrected=skipped).runs[1]
+    assert run.actual_to_nominal_max_mm <= CHORD_MM + 1e-12
+    assert run.nominal_to_actual_max_mm == pytest.approx(2.0, abs=CHORD_MM)
+    assert run.max_mm == run.nominal_to_actual_max_mm
+    assert {ln for ln, _ in run.worst_lines()} <= set(range(first + 1, last + 2))
+    # The nominal samples of the skipped lines are the ones far from the run.
+    far = run.nominal_to_actual_mm > 0.5
+    assert set(run.nominal_sample_line[far]) <= set(range(first + 1, last + 2))
+
+
+def test_a_corrected_program_that_stops_early_scores_badly(s500_parametric, tmp_path):
+    from postproc.calibration.calfile import load_calibration
+    from postproc.simulate.program import correct_program_text, make_setup
+    from postproc.simulate.s500 import s500_machine
+
+    fixed = correct_program_text(POCKET.read_text(), load_calibration(s500_parametric), make_setup(None),
+                                 path=str(POCKET)).splitlines(keepends=True)
+    # Leave out the helix (N270 and the lines it was split into), the last feed move.
+    start = next(i for i, ln in enumerate(fixed) if ln.startswith("N260")) + 1
+    end = next(i for i, ln in enumerate(fixed) if ln.startswith("N270"))
+    assert end - start > 10
+    short = tmp_path / "short.nc"
+    short.write_text("".join(fixed[:start] + fixed[end + 1:]))
+    rep = verify_program(POCKET, s500_machine(), [], corrected=short)
+    before, after = rep.runs
+    # One-sided, the truncated program still looks corrected ...
+    assert after.actual_to_nominal_max_mm < 0.002
+    # ... two-sided, the 5 mm helix it never cuts is millimetres from its path.
+    assert after.nominal_to_actual_max_mm > 5.0
+    assert after.max_mm > 5.0
+    assert after.worst_lines()[0][0] == 30  # file line of N270
+    assert before.max_mm < 0.400
+    data = rep.to_dict()["runs"][1]
+    assert data["max_mm"] == after.max_mm
+    assert data["actual_to_nominal"]["max_mm"] < 0.002
+    assert data["nominal_to_actual"]["max_mm"] == after.nominal_to_actual_max_mm
+    assert data["nominal_to_actual"]["samples"] == np.count_nonzero(~before.rapid)
+
+
+def test_actual_path_samples_match_program_path_but_follow_arcs_closely():
+    from postproc.gcode.path import Setup, program_path
+    from postproc.simulate.verify import actual_path_samples
+
+    ref = program_path(str(POCKET), Setup(), max_step_mm=0.5)
+    # With a chord tolerance that asks for no more points, the samples are program_path's.
+    same = actual_path_samples(str(POCKET), Setup(), 0.5, chord_mm=1e9)
+    assert_allclose(same.points_mm, ref.points_mm, atol=0)
+    assert_allclose(same.tool_mm, ref.tool_mm, atol=0)
+    assert (same.lineno == ref.lineno).all()
+    assert (same.rapid == ref.rapid).all()
+    assert same.context.keys() == ref.context.keys()
+    for k in ref.context:
+        assert_allclose(same.context[k], ref.context[k], atol=0)
+    # With the default, arc chords stay within NOMINAL_CHORD_MM of the arcs: every
+    # chord midpoint of the 8 mm corner arc N80 (centre 172,118) is that close to it.
+    fine = actual_path_samples(str(POCKET), Setup(), 0.5)
+    on = np.flatnonzero(fine.lineno == 11)
+    pts = fine.points_mm[np.r_[on[0] - 1, on]]
+    mid = 0.5 * (pts[1:] + pts[:-1])
+    sag = 8.0 - np.hypot(mid[:, 0] - 172.0, mid[:, 1] - 118.0)
+    assert sag.max() <= CHORD_MM
+    assert sag.max() > CHORD_MM / 4  # no more points than the tolerance needs

@@ -51,8 +51,11 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
 
     PROGRAM mode: the original program and its corrected version (corrected here with
     each -c calibration, or --corrected FILE) are sampled along every move and run
-    through the machine; the deviation of the actual tool point from the nominal
-    path is reported (max and RMS over feed moves, the worst lines), before and after.
+    through the machine. The deviation is measured both ways over feed moves: (a)
+    each actual tool point's distance from the nominal path, and (b) each nominal
+    point's distance from the actual path, which shows a program that stops early or
+    skips a stretch. Reported before and after: the two-sided max (the larger of (a)
+    and (b)), max and RMS of each direction, and the worst lines.
 
     --points mode: for each control point, Delta = |actual - target| uncorrected and
     with each calibration, their sums and the improvement in percent, in the layout
@@ -129,12 +132,17 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
     if as_json:
         click.echo(json.dumps(report.to_dict(), indent=2))
         return
-    click.echo(f"{program} on machine {machine.name}: deviation of the tool point from the nominal path "
-               "(feed moves)")
+    click.echo(f"{program} on machine {machine.name}: deviation from the nominal path (feed moves), um")
+    click.echo("  (a) actual tool point -> nominal path; (b) nominal point -> actual path; "
+               "max = two-sided, the larger of (a) and (b)")
     width = max(len(run.label) for run in report.runs)
+    click.echo(f"  {'':<{width}}  {'max':>9}  {'(a) max':>9}  {'(a) RMS':>9}  {'(b) max':>9}  {'(b) RMS':>9}  "
+               "samples (a)/(b)")
     for run in report.runs:
-        click.echo(f"  {run.label:<{width}}  max {run.max_mm * 1000:9.2f} um   RMS {run.rms_mm * 1000:9.2f} um   "
-                   f"({int(np.count_nonzero(run.feed))} samples)")
+        click.echo(f"  {run.label:<{width}}  {run.max_mm * 1000:9.2f}  {run.actual_to_nominal_max_mm * 1000:9.2f}  "
+                   f"{run.rms_mm * 1000:9.2f}  {run.nominal_to_actual_max_mm * 1000:9.2f}  "
+                   f"{run.nominal_to_actual_rms_mm * 1000:9.2f}  "
+                   f"{int(np.count_nonzero(run.feed))}/{len(run.nominal_to_actual_mm)}")
     for run in report.runs:
         click.echo(f"  worst lines, {run.label}:")
         for ln, d in run.worst_lines():

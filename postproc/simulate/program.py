@@ -9,6 +9,7 @@ from postproc.simulate.machine import Machine
 from postproc.simulate.verify import (
     RUN_STEP_MM,
     VerifyReport,
+    actual_path_samples,
     evaluate_run,
     nominal_path,
     nominal_polyline,
@@ -42,6 +43,9 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
 
     ``calibrations``: loaded :class:`Calibration` objects, each used to correct
     ``program`` in-process, unless ``corrected`` (a path) gives the corrected program.
+    Each run is measured both ways: its actual points against the nominal path, and
+    the original program's samples against its actual path (see
+    :mod:`postproc.simulate.verify`).
     """
     from postproc.gcode.path import program_path
 
@@ -56,21 +60,22 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     text = Path(program).read_text(encoding="utf-8", errors="surrogateescape")
     report = VerifyReport(source_lines=text.splitlines())
     original = program_path(program, setup, max_step_mm=max_step_mm)
-    report.runs.append(evaluate_run("uncorrected", machine, original, poly, nominal.lineno))
-    if not report.runs[-1].feed.any():
+
+    def run(label: str, source):
+        path = original if source is program else program_path(source, setup, max_step_mm=max_step_mm)
+        fine = actual_path_samples(source, setup, max_step_mm)
+        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno, original, fine))
+        return report.runs[-1]
+
+    if not run("uncorrected", program).feed.any():
         raise PostprocError("the program has no feed moves to verify (the deviation is measured on feed moves)",
                             path=program)
     if corrected is not None:
-        label = f"corrected ({Path(corrected).name})"
-        path = program_path(str(corrected), setup, max_step_mm=max_step_mm)
-        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
-        if not report.runs[-1].feed.any():
+        if not run(f"corrected ({Path(corrected).name})", str(corrected)).feed.any():
             raise PostprocError("the corrected program has no feed moves: there is nothing to compare",
                                 path=str(corrected), hint="give the corrected version of PROGRAM")
         return report
     for cal in calibrations:
         fixed = correct_program_text(text, cal, setup, path=program, options=options)
-        path = program_path(fixed, setup, max_step_mm=max_step_mm)
-        label = f"corrected, {cal.method}" + (f" ({cal.name})" if cal.name != cal.method else "")
-        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno))
+        run(f"corrected, {cal.method}" + (f" ({cal.name})" if cal.name != cal.method else ""), fixed)
     return report

@@ -9,16 +9,27 @@ deviation of each actual point is its distance from the nominal polyline, not fr
 the sample of the same index: a corrected program is split and moved, so its samples
 are not the original's. Statistics are over feed moves (G1, G2, G3); rapids are
 left out, their path between end points being the controller's choice.
+
+That distance is one-sided: a program that stops early or skips a stretch leaves
+every point it does reach on the path. So the other direction is measured too: the
+distance of each nominal sample (the original program sampled like the run) from
+the *actual* path, the polyline of the run's actual points, sampled along straight
+moves at the run step and along arcs in chords within :data:`NOMINAL_CHORD_MM`. The
+headline maximum is the larger of the two (a Hausdorff-type distance).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from postproc.simulate.machine import Machine
+
+if TYPE_CHECKING:
+    from postproc.gcode.path import ProgramPath
 
 #: Chord tolerance of the nominal path (mm): arcs are cut into chords that bulge from
 #: the arc by at most this much, the most a deviation can be overstated by; a hundred
@@ -118,9 +129,30 @@ class Polyline:
         return best, self.index[seg]
 
 
+def _max(d: np.ndarray) -> float:
+    return float(d.max()) if len(d) else 0.0
+
+
+def _rms(d: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(d**2))) if len(d) else 0.0
+
+
+def _empty_floats() -> np.ndarray:
+    return np.zeros(0)
+
+
+def _empty_ints() -> np.ndarray:
+    return np.zeros(0, dtype=int)
+
+
 @dataclass
 class Run:
-    """One program run on the machine: where the point went and how far from nominal."""
+    """One program run on the machine: where the point went and how far from nominal.
+
+    ``deviation_mm``: each actual point's distance from the nominal path (all run
+    samples; statistics over feed ones). ``nominal_to_actual_mm``: each nominal feed
+    sample's distance from the actual path (empty when not measured).
+    """
 
     label: str
     actual_mm: np.ndarray
@@ -128,24 +160,42 @@ class Run:
     nominal_line: np.ndarray  # original-program line of the nearest nominal segment
     rapid: np.ndarray
     arclength_mm: np.ndarray
+    nominal_to_actual_mm: np.ndarray = field(default_factory=_empty_floats)
+    nominal_sample_line: np.ndarray = field(default_factory=_empty_ints)  # line of each nominal sample
+    nominal_arclength_mm: np.ndarray = field(default_factory=_empty_floats)
 
     @property
     def feed(self) -> np.ndarray:
         return ~self.rapid
 
     @property
+    def actual_to_nominal_max_mm(self) -> float:
+        """Largest distance of an actual feed point from the nominal path."""
+        return _max(self.deviation_mm[self.feed])
+
+    @property
+    def nominal_to_actual_max_mm(self) -> float:
+        """Largest distance of a nominal feed sample from the actual path."""
+        return _max(self.nominal_to_actual_mm)
+
+    @property
+    def nominal_to_actual_rms_mm(self) -> float:
+        return _rms(self.nominal_to_actual_mm)
+
+    @property
     def max_mm(self) -> float:
-        d = self.deviation_mm[self.feed]
-        return float(d.max()) if len(d) else 0.0
+        """Two-sided maximum: the larger of the two directions."""
+        return max(self.actual_to_nominal_max_mm, self.nominal_to_actual_max_mm)
 
     @property
     def rms_mm(self) -> float:
-        d = self.deviation_mm[self.feed]
-        return float(np.sqrt(np.mean(d**2))) if len(d) else 0.0
+        """RMS distance of the actual feed points from the nominal path."""
+        return _rms(self.deviation_mm[self.feed])
 
     def worst_lines(self, n: int = WORST_LINES) -> list[tuple[int, float]]:
-        """The ``n`` original program lines with the largest feed deviation."""
-        d, lines = self.deviation_mm[self.feed], self.nominal_line[self.feed]
+        """The ``n`` original program lines with the largest feed deviation, either direction."""
+        d = np.concatenate([self.deviation_mm[self.feed], self.nominal_to_actual_mm])
+        lines = np.concatenate([self.nominal_line[self.feed], self.nominal_sample_line])
         if not len(d):
             return []
         order = np.argsort(-d, kind="stable")
@@ -162,6 +212,11 @@ class Run:
         return {"label": self.label, "samples": int(len(self.deviation_mm)),
                 "feed_samples": int(np.count_nonzero(self.feed)),
                 "max_mm": self.max_mm, "rms_mm": self.rms_mm,
+                "actual_to_nominal": {"max_mm": self.actual_to_nominal_max_mm, "rms_mm": self.rms_mm,
+                                      "samples": int(np.count_nonzero(self.feed))},
+                "nominal_to_actual": {"max_mm": self.nominal_to_actual_max_mm,
+                                      "rms_mm": self.nominal_to_actual_rms_mm,
+                                      "samples": int(len(self.nominal_to_actual_mm))},
                 "worst_lines": [{"line": ln, "deviation_mm": d} for ln, d in self.worst_lines()]}
 
 
@@ -238,6 +293,60 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
     return NominalPath(points, lineno_arr, np.concatenate(rapid))
 
 
+def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
+                        chord_mm: float = NOMINAL_CHORD_MM) -> ProgramPath:
+    """A program (path or text) sampled to draw its actual path as a polyline.
+
+    Like :func:`postproc.gcode.path.program_path` (straight moves every
+    ``max_step_mm``, the same context), but arcs are cut into chords within
+    ``chord_mm`` of them, so that the polyline of the actual points does not cut
+    the corners of arcs by the sagitta of a ``max_step_mm`` chord.
+    """
+    import math
+
+    from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points, line_points
+    from postproc.gcode.interp import Interpreter
+    from postproc.gcode.path import ProgramPath, backfill_unknown, iter_source_lines, motion_signs
+    from postproc.gcode.state import RAPID
+
+    path, lines = iter_source_lines(source)
+    interp = Interpreter(setup, path)
+    qs, rs, lns, rapid, rot = [], [], [], [], []
+    for lineno, line in enumerate(lines, start=1):
+        mv = interp.feed_line(lineno, line)
+        if mv is None:
+            continue
+        q0, q1 = mv.q0, mv.q1
+        if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
+            pts = np.array([q1], dtype=float)
+        elif mv.arc is not None:
+            n = max(math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm),
+                    arc_chord_steps(mv.arc, q0, q1, chord_mm))
+            pts = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+        else:
+            n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
+            pts = line_points(q0, q1, np.arange(1, n + 1) / n)
+        qs.append(pts)
+        rs.append(np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape))
+        lns.append(np.full(len(pts), lineno))
+        rapid.append(np.full(len(pts), mv.kind == RAPID))
+        rot.append((len(pts), mv.rotary))
+    if not qs:
+        empty = np.zeros((0, 3))
+        return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
+                           {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
+    lineno_arr = np.concatenate(lns)
+    q = backfill_unknown(np.vstack(qs), lineno_arr, path)
+    r = np.vstack(rs)
+    signs = motion_signs(q)
+    context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
+    for a in sorted(interp.used_rotary):
+        context[a] = np.concatenate([np.full(n, d.get(a, 0.0)) for n, d in rot])
+    for k, v in (setup.context or {}).items():
+        context[k] = np.full(len(q), float(v))
+    return ProgramPath(q + r, r, lineno_arr, np.concatenate(rapid), context)
+
+
 def machine_run(machine: Machine, path) -> np.ndarray:
     """Actual functional-point positions of a sampled program path on the machine."""
     q = np.asarray(path.points_mm) - np.asarray(path.tool_mm)
@@ -254,14 +363,48 @@ def nominal_polyline(path) -> Polyline:
     return Polyline(path.points_mm, keep)
 
 
-def evaluate_run(label: str, machine: Machine, path, nominal, nominal_lines: np.ndarray) -> Run:
-    """Run ``path`` on ``machine`` and measure it against the ``nominal`` path."""
+def _arclength(points) -> np.ndarray:
+    pts = np.asarray(points, dtype=float)
+    if not len(pts):
+        return np.zeros(0)
+    return np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+
+
+def actual_polyline(machine: Machine, fine_path) -> Polyline:
+    """The actual path of a run (``fine_path``: :func:`actual_path_samples`) as feed segments.
+
+    A segment belongs to the move it ends in; a run without feed moves keeps all its
+    segments, and a single point is a segment of zero length.
+    """
+    actual = machine_run(machine, fine_path)
+    if len(actual) == 0:
+        raise ValueError("a run without samples has no actual path")
+    if len(actual) == 1:
+        return Polyline(np.vstack([actual, actual]))
+    keep = ~np.asarray(fine_path.rapid, dtype=bool)[1:]
+    return Polyline(actual, keep if keep.any() else None)
+
+
+def evaluate_run(label: str, machine: Machine, path, nominal, nominal_lines: np.ndarray,
+                 reference=None, fine_path=None) -> Run:
+    """Run ``path`` on ``machine`` and measure it against the ``nominal`` path.
+
+    With ``reference`` (the original program sampled, a ``ProgramPath``) and
+    ``fine_path`` (the run program by :func:`actual_path_samples`), the other
+    direction is measured too: each nominal feed sample of ``reference`` against
+    the actual path.
+    """
     actual = machine_run(machine, path)
     dist, seg = nominal.nearest(actual)
-    pts = np.asarray(path.points_mm)
-    arclen = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
-    return Run(label, actual, dist, np.asarray(nominal_lines)[seg + 1],
-               np.asarray(path.rapid, dtype=bool), arclen)
+    run = Run(label, actual, dist, np.asarray(nominal_lines)[seg + 1],
+              np.asarray(path.rapid, dtype=bool), _arclength(path.points_mm))
+    if reference is not None and fine_path is not None and len(fine_path):
+        ref_feed = ~np.asarray(reference.rapid, dtype=bool)
+        ref_pts = np.asarray(reference.points_mm)
+        run.nominal_to_actual_mm, _ = actual_polyline(machine, fine_path).nearest(ref_pts[ref_feed])
+        run.nominal_sample_line = np.asarray(reference.lineno)[ref_feed]
+        run.nominal_arclength_mm = _arclength(ref_pts)[ref_feed]
+    return run
 
 
 def plot_deviation(report: VerifyReport, ax=None, *, title: str = ""):
@@ -272,8 +415,12 @@ def plot_deviation(report: VerifyReport, ax=None, *, title: str = ""):
         ax = Figure(figsize=(10, 4)).subplots()
     for run in report.runs:
         d = np.where(run.feed, run.deviation_mm * 1000.0, np.nan)
-        ax.plot(run.arclength_mm, d, lw=0.8,
-                label=f"{run.label}: max {run.max_mm * 1000:.1f} um, RMS {run.rms_mm * 1000:.1f} um")
+        (line,) = ax.plot(run.arclength_mm, d, lw=0.8,
+                          label=f"{run.label}: max {run.max_mm * 1000:.1f} um (two-sided), "
+                                f"RMS {run.rms_mm * 1000:.1f} um")
+        if len(run.nominal_to_actual_mm):
+            ax.plot(run.nominal_arclength_mm, run.nominal_to_actual_mm * 1000.0, lw=0.8, ls=":",
+                    color=line.get_color(), label=f"{run.label}: nominal -> actual path")
     ax.set_xlabel("path length along the program (mm)")
     ax.set_ylabel("deviation from nominal path (um)")
     ax.set_yscale("symlog", linthresh=1.0)
