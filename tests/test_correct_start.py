@@ -138,9 +138,27 @@ def test_cli_start_option(tmp_path):
     res = runner.invoke(main, ["correct", str(src), "-c", str(cal), "-o", str(tmp_path / "c.nc"),
                                "--offset", "G54=X100,Y80,Z0", "--start", "z5.90551in"])
     assert res.exit_code == 0, res.output
-    assert "start Z150" in (tmp_path / "c.nc").read_text().splitlines()[0]
+    assert f"start Z{5.90551 * 25.4:.10g}" in (tmp_path / "c.nc").read_text().splitlines()[0]
     for bad in ("A10", "Z1,Z2", "", "Z", "X1;Y2"):
         res = runner.invoke(main, ["correct", str(src), "-c", str(cal), "--offset", "G54=X0,Y0,Z0",
                                    "--start", bad])
         assert res.exit_code == 2, (bad, res.output)
         assert "--start" in res.output
+
+
+def test_diff_takes_the_start_from_the_header():
+    from postproc.gcode.compare import compare_programs
+
+    lines = "G21 G90\nG0 X10 Y10\nG1 X60 F800\nG1 Y50\nG1 X10\nG0 X0 Y0\nM30\n"
+    out, rep = correct_text(lines, ENGINE, SETUP)
+    assert rep.lines_inserted == 0  # every move pairs with its own line
+    stats = compare_programs(lines, out).axis_stats()
+    explicit = compare_programs(lines, out, Setup(start={"Z": 150.0})).axis_stats()
+    assert stats == explicit
+    # Z moves by the Z-X/Y squareness over X 110..160 mm (0.7 mrad): about 0.1 mm
+    assert stats["Z"]["max_mm"] > 0.05
+    pp = program_path(out, SETUP, max_step_mm=1e9)
+    assert stats["Z"]["max_mm"] == pytest.approx(np.abs((pp.points_mm - pp.tool_mm)[:, 2] - 150.0).max())
+    # without the start the Z change of a program that never names Z is not seen
+    blind = compare_programs(lines, out.replace("; start Z150", "")).axis_stats()
+    assert blind["Z"]["max_mm"] == 0.0

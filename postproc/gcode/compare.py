@@ -11,11 +11,13 @@ blocks whose words are machine coordinates: give them for programs using G53).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from array import array
 from collections import deque
 from dataclasses import dataclass, field
+from itertools import islice
 
 import numpy as np
 
@@ -119,6 +121,25 @@ def _records(source, setup: Setup | None, counter: list, drop_header: bool = Fal
         yield lineno, line, (None if mv is None else mv.q1)
 
 
+_HEADER_START = re.compile(r"; start ((?:[XYZ][-+0-9.eE]+,?)+)")
+
+
+def header_start(source) -> dict[str, float]:
+    """The ``--start`` a corrected program's header records (``{}`` when none)."""
+    _path, lines = iter_source_lines(source)
+    try:
+        for line in islice(lines, 3):
+            m = _HEADER_START.search(line) if emit.is_header(line) else None
+            if m:
+                items = (item for item in m.group(1).split(",") if item)
+                return {item[0]: float(item[1:]) for item in items}
+    finally:
+        close = getattr(lines, "close", None)
+        if close is not None:
+            close()
+    return {}
+
+
 def _distance(a, b) -> float:
     return sum(abs(x - y) for x, y in zip(a, b, strict=True) if not (math.isnan(x) or math.isnan(y)))
 
@@ -131,6 +152,11 @@ def compare_programs(original, corrected, setup: Setup | None = None) -> DiffRep
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates.
     """
+    if not (setup and setup.start):
+        # the start the program was corrected with: axes it never names start there
+        start = header_start(corrected)
+        if start:
+            setup = dataclasses.replace(setup or Setup(), start=start)
     ocount, ccount, header = [0], [0], []
     opath, _ = iter_source_lines(original)
     cpath, _ = iter_source_lines(corrected)

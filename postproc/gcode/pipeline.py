@@ -312,7 +312,7 @@ class Corrector(EmitterMixin):
             parts.append("tools " + ",".join(f"{k}={v:g}" for k, v in sorted(self.setup.tool_lengths.items())))
         start = start_position(self.setup.start)
         if self.setup.start:
-            parts.append("start " + ",".join(f"{a}{v:g}" for a, v in zip("XYZ", start, strict=True) if v == v))
+            parts.append("start " + ",".join(f"{a}{v:.10g}" for a, v in zip("XYZ", start, strict=True) if v == v))
         if self.setup.tool_vector is not None:
             parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
         for a in self.opt.added:
