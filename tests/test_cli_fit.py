@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import numpy as np
 from click.testing import CliRunner
@@ -69,3 +70,78 @@ def test_fit_tool_vector_fills_files_without_tool_columns(tmp_path):
     # Without --tool-vector the 100 mm tool ends up in the origin.
     result = CliRunner().invoke(main, ["fit", str(src), "-o", str(out)])
     np.testing.assert_allclose(json.loads(out.read_text())["model"]["r_O1_mm"][2], origin[2] - 100, atol=1e-6)
+
+
+def write_lattice(path, step=50.0, n=5, drop=None):
+    """Points on an n x n x n lattice (no noise) of a machine with smooth, curved errors."""
+    g = np.arange(n) * step
+    q = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T
+    if drop is not None:
+        q = q[~np.all(q == drop, axis=1)]
+    m = q + 1e-3 * np.column_stack([np.sin(q[:, 0] / 40), q[:, 0] * q[:, 1] / 4e4, np.cos(q[:, 2] / 60)])
+    path.write_text(format_measurements(Measurements(q=q, m=m, r=np.zeros_like(q))))
+
+
+def test_fit_border_blend_reaches_the_interval_model(tmp_path):
+    src = tmp_path / "lattice.csv"
+    write_lattice(src)
+    outs = {}
+    for blend in (None, "0", "3.5"):
+        out = tmp_path / f"interval_{blend}.json"
+        args = ["fit", str(src), "-m", "interval", "--intervals", "X=2;Y=2;Z=2", "-o", str(out)]
+        result = CliRunner().invoke(main, args + (["--border-blend", blend] if blend else []))
+        assert result.exit_code == 0, result.output
+        outs[blend] = json.loads(out.read_text())["model"]["border_blend_mm"]
+    assert outs == {None: 1.0, "0": 0.0, "3.5": 3.5}
+    # A blend wider than half an interval (100 mm here) is a usage error, and nothing is written.
+    out = tmp_path / "wide.json"
+    result = CliRunner().invoke(main, ["fit", str(src), "-m", "interval", "--intervals", "X=2;Y=2;Z=2",
+                                       "--border-blend", "150", "-o", str(out)])
+    assert result.exit_code == 2
+    assert "--border-blend 150: interval model: border blend 150 mm must be >= 0 and at most half" in result.output
+    assert not out.exists()
+    result = CliRunner().invoke(main, ["fit", str(src), "-m", "interval", "--border-blend", "-1", "-o", str(out)])
+    assert result.exit_code == 2
+
+
+def test_fit_grid_model_and_fill_missing(tmp_path):
+    src = tmp_path / "lattice.csv"
+    write_lattice(src)
+    out = tmp_path / "grid.json"
+    for model in ("trilinear", "cell"):
+        result = CliRunner().invoke(main, ["fit", str(src), "-m", "grid", "--grid-model", model, "-o", str(out)])
+        assert result.exit_code == 0, result.output
+        assert f"quasi-differential ({model}) fit" in result.output
+        assert json.loads(out.read_text())["model"]["interpolation"] == model
+    holed = tmp_path / "holed.csv"
+    write_lattice(holed, drop=[100.0, 150.0, 50.0])
+    out = tmp_path / "holed.json"
+    result = CliRunner().invoke(main, ["fit", str(holed), "-m", "grid", "-o", str(out)])
+    assert result.exit_code == EXIT_INPUT
+    assert not out.exists()
+    result = CliRunner().invoke(main, ["fit", str(holed), "-m", "grid", "--fill-missing", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "warning: 1 node(s) without measurement filled from their neighbours" in result.output
+    assert json.loads(out.read_text())["model"]["shape"] == [5, 5, 5]
+
+
+def test_fit_tangential_options_of_another_method_are_usage_errors(tmp_path):
+    src = tmp_path / "lattice.csv"
+    write_lattice(src, n=3)
+    out = tmp_path / "c.json"
+    cases = [
+        (["-m", "grid", "--border-blend", "0"], "--border-blend applies to the interval method only"),
+        (["--border-blend", "0"], "--border-blend applies to the interval method only (this fit is static)"),
+        (["-m", "interval", "--grid-model", "cell"], "--grid-model applies to the grid method only"),
+        (["-m", "interval", "--fill-missing"], "--fill-missing applies to the grid method only"),
+        (["-m", "parametric", "--fill-missing"], "--fill-missing applies to the grid method only"),
+    ]
+    for extra, message in cases:
+        result = CliRunner().invoke(main, ["fit", str(src), *extra, "-o", str(out)])
+        assert result.exit_code == 2, (extra, result.output)
+        assert message in result.output, extra
+        assert not out.exists()
+    tables = Path(__file__).parents[1] / "calibrations" / "s500_tables.csv"
+    result = CliRunner().invoke(main, ["fit", str(tables), "--grid-model", "cell", "-o", str(out)])
+    assert result.exit_code == 2
+    assert "--grid-model applies to the grid method only (this fit is parametric)" in result.output

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, parse_vector
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, parse_vector
+
+#: Options of one tangential method: option name -> the method it belongs to.
+METHOD_OPTIONS = {"--border-blend": "interval", "--grid-model": "grid", "--fill-missing": "grid"}
 
 
 @click.command()
@@ -18,10 +21,19 @@ from postproc.cli.options import FINITE_FLOAT, parse_vector
               help="Squareness file for axis error tables (default: TABLES_squareness.csv if present).")
 @click.option("--intervals", default=None, metavar="SPEC",
               help="Interval method: partition, e.g. 'X=0,100,200,315;Y=3;Z=2' (edges, or a count per axis).")
+@click.option("--border-blend", "border_blend", type=FiniteFloat(min=0), default=None, metavar="MM",
+              help="Interval method: width of the zone blending neighbouring cells at each border "
+                   "(default 1 mm; 0: the seed's pure piecewise model).")
 @click.option("--step", default=None, metavar="MM",
               help="Grid method: grid step u1,u2,u3 in mm (default: the lattice step of the data).")
 @click.option("--screw-pitch", "screw_pitch", multiple=True, metavar="AXIS=P",
               help="Declared lead-screw pitch (mm) of an axis, to warn about grid steps that alias it.")
+@click.option("--grid-model", "grid_model", type=click.Choice(["trilinear", "cell"]), default=None,
+              help="Grid method: trilinear tangent field (default, continuous) or the seed's "
+                   "piecewise-affine cells.")
+@click.option("--fill-missing", "fill_missing", is_flag=True, default=None,
+              help="Grid method: fill lattice nodes without measurements from their neighbours "
+                   "(listed as a warning) instead of refusing the grid.")
 @click.option("--knot-spacing", "knot_spacing", type=FINITE_FLOAT, default=None, metavar="MM",
               help="Parametric identification: B-spline knot spacing (default: from the data).")
 @click.option("--order", type=click.Choice(["first", "second", "exact"]), default=None,
@@ -33,8 +45,8 @@ from postproc.cli.options import FINITE_FLOAT, parse_vector
 @click.option("--effect", "effects", multiple=True, metavar="NAME",
               help="Add a physical effect to the model, named as 'postproc check' prints it "
                    "(e.g. backlash:X, periodic:Y, thermal:t, load:load). Repeatable.")
-def fit(files, method, output, name, squareness, intervals, step, screw_pitch, knot_spacing,
-        order, solver, tool_vector, effects):
+def fit(files, method, output, name, squareness, intervals, border_blend, step, screw_pitch, grid_model,
+        fill_missing, knot_spacing, order, solver, tool_vector, effects):
     """Fit a calibration from point measurements or axis error tables.
 
     FILES are formats.md CSV files: point measurements (several files are fitted
@@ -44,24 +56,31 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
 
     Example:
 
+    \b
         postproc fit samples/tracker_6points.csv --method static -o my_static.json
+        postproc fit grid15.csv -m interval --intervals 'X=3;Y=3;Z=2' --border-blend 0 -o interval.json
+        postproc fit grid15.csv -m grid --grid-model cell --fill-missing -o grid.json
     """
     from postproc.calibration.calfile import save_calibration
     from postproc.calibration.measurements import read_measurement_files
     from postproc.calibration.sniff import sniff
     from postproc.engine.registry import fitter
-    from postproc.errors import MeasurementError
+    from postproc.errors import CalibrationError, MeasurementError
 
     kinds = [sniff(f) for f in files]
     options = {
         "intervals": intervals,
+        "border_blend_mm": border_blend,
         "step": step,
         "screw_pitch": list(screw_pitch) or None,
+        "model": grid_model,
+        "fill_missing": fill_missing,
         "knot_spacing": knot_spacing,
         "order": order,
         "solver": solver,
     }
     options = {k: v for k, v in options.items() if v is not None}
+    given = {"--border-blend": border_blend, "--grid-model": grid_model, "--fill-missing": fill_missing}
     if "tables" in kinds and kinds.count("squareness") == 1 and squareness is None:
         # A squareness file given among FILES is taken as --squareness.
         squareness = files[kinds.index("squareness")]
@@ -73,6 +92,7 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
                                    path=files[kinds.index("measurements")] if "measurements" in kinds else files[0])
         if method not in (None, "parametric"):
             raise click.UsageError("axis error tables make a parametric calibration; drop --method or use parametric")
+        _check_method_options("parametric", given)
         if effects:
             raise click.UsageError("--effect is fitted from point measurements, not axis error tables; "
                                    "fit the tables alone, then 'postproc check POINTS -c CAL --fixed' tells "
@@ -84,14 +104,21 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         method = method or "static"
         if (order or solver) and method != "parametric":
             raise click.UsageError("--order and --solver apply to the parametric method only")
+        _check_method_options(method, given)
         r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
         data = read_measurement_files(files, r)
-        if effects:
-            from postproc.diagnose.refit import fit_with_effects
+        try:
+            if effects:
+                from postproc.diagnose.refit import fit_with_effects
 
-            result = fit_with_effects(method, data, list(effects), **options)
-        else:
-            result = fitter(method)(data, **options)
+                result = fit_with_effects(method, data, list(effects), **options)
+            else:
+                result = fitter(method)(data, **options)
+        except CalibrationError as exc:
+            if border_blend is not None and "border blend" in exc.message:
+                # The blend is checked against the partition, known only once fitted.
+                raise click.UsageError(f"--border-blend {border_blend:g}: {exc.message}") from None
+            raise
     for line in result.report:
         click.echo(line, err=True)
     if len(result.residuals_mm):  # tables are taken as measured: there is no fit residual
@@ -102,3 +129,11 @@ def fit(files, method, output, name, squareness, intervals, step, screw_pitch, k
         )
     save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
     click.echo(f"wrote {output}", err=True)
+
+
+def _check_method_options(method: str, given: dict) -> None:
+    """A usage error for an option of another method (``given``: option name -> value or None)."""
+    for opt, value in given.items():
+        if value is not None and METHOD_OPTIONS[opt] != method:
+            raise click.UsageError(f"{opt} applies to the {METHOD_OPTIONS[opt]} method only "
+                                   f"(this fit is {method}); add --method {METHOD_OPTIONS[opt]} or drop {opt}")
