@@ -28,6 +28,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 
+import numpy as np
+
 from postproc.effects.abbe import Abbe
 from postproc.effects.backlash import Backlash
 from postproc.effects.base import AXES, DIR_COLUMNS, Effect
@@ -41,7 +43,7 @@ from postproc.effects.straightness import Positioning, Straightness
 from postproc.effects.thermal import ThermalExpansion, ThermalTemperature, ThermalTime
 from postproc.errors import CalibrationError
 
-__all__ = ["Effect", "get_effect", "effect_from_dict", "compose", "candidate_names", "KINDS"]
+__all__ = ["Effect", "get_effect", "effect_from_dict", "check_config", "compose", "candidate_names", "KINDS"]
 
 LEVER_PAIRS = tuple(a + b for a in AXES for b in AXES if a != b)
 
@@ -120,11 +122,51 @@ def candidate_names(context_columns: Iterable[str]) -> list[str]:
     return names
 
 
+#: Value of every context column the effect needs when its config is checked (a valid
+#: approach direction, time, temperature and load alike): only the config is under test.
+CHECK_CONTEXT_VALUE = 1.0
+
+_CONFIG_HINT = ("an effect's config holds the settings its fit found (pitch_mm, tau_s, center_mm, "
+                "half_travel_mm, reference...); refit with 'postproc fit --effect NAME' or correct the file")
+
+
+def check_config(effect: Effect, volume_mm=None) -> None:
+    """Evaluate ``effect`` once, at the corners and centre of ``volume_mm``, so that a
+    config it cannot work with (a ``periodic`` without ``pitch_mm``, ``tau_s <= 0`` ...)
+    is refused when a calibration or machine is loaded, not when it is first used.
+
+    Raises CalibrationError naming the effect (the caller adds the file).
+    """
+    vol = np.asarray(volume_mm if volume_mm is not None else np.zeros((2, 3)), dtype=float)
+    if vol.shape != (2, 3) or not np.all(np.isfinite(vol)):
+        vol = np.zeros((2, 3))
+    q = np.vstack([vol, vol.mean(axis=0)])
+    ctx = {c: np.full(len(q), CHECK_CONTEXT_VALUE) for c in effect.needs}
+    try:
+        B = np.asarray(effect.basis(q, np.zeros_like(q), ctx), dtype=float)
+    except CalibrationError as exc:
+        name = effect.name
+        msg = exc.message if name in exc.message else f"effect {name}: {exc.message}"
+        raise CalibrationError(msg, hint=exc.hint or _CONFIG_HINT) from None
+    except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as exc:
+        raise CalibrationError(f"effect {effect.name}: config {effect.config} cannot be used "
+                               f"({type(exc).__name__}: {exc})", hint=_CONFIG_HINT) from None
+    if B.shape != (len(q), 3, len(effect.param_names)) or not np.all(np.isfinite(B)):
+        raise CalibrationError(f"effect {effect.name}: config {effect.config} does not give a finite "
+                               "displacement in the calibrated volume", hint=_CONFIG_HINT)
+
+
 def compose(engine, effects_dicts):
-    """Wrap ``engine`` so that forward adds the effects' displacements (see composed.py)."""
+    """Wrap ``engine`` so that forward adds the effects' displacements (see composed.py).
+
+    Each effect is built and its config checked (:func:`check_config`) here, so a wrong
+    one is reported on loading.
+    """
     from postproc.effects.composed import ComposedEngine
 
     effects = [e if isinstance(e, Effect) else effect_from_dict(e) for e in (effects_dicts or [])]
     if not effects:
         return engine
+    for e in effects:
+        check_config(e, getattr(engine, "volume_mm", None))
     return ComposedEngine(engine, effects)
