@@ -196,16 +196,22 @@ def test_actual_path_samples_match_program_path_but_follow_arcs_closely():
     from postproc.gcode.path import Setup, program_path
     from postproc.simulate.verify import actual_path_samples
 
-    ref = program_path(str(POCKET), Setup(), max_step_mm=0.5)
-    # With a chord tolerance that asks for no more points, the samples are program_path's.
-    same = actual_path_samples(str(POCKET), Setup(), 0.5, chord_mm=1e9)
-    assert_allclose(same.points_mm, ref.points_mm, atol=0)
-    assert_allclose(same.tool_mm, ref.tool_mm, atol=0)
-    assert (same.lineno == ref.lineno).all()
-    assert (same.rapid == ref.rapid).all()
-    assert same.context.keys() == ref.context.keys()
-    for k in ref.context:
-        assert_allclose(same.context[k], ref.context[k], atol=0)
+    # With a chord tolerance that asks for no more points, the samples are program_path's:
+    # offsets, tool length, G91, rotary axes and context included.
+    cases = [(POCKET, Setup()), (REPO / "samples" / "holes_g91.nc", Setup()),
+             (REPO / "samples" / "g54_g43.ngc", Setup(offsets={"G54": (100.0, 80.0, 40.0)},
+                                                     tool_lengths={1: 100.0}, context={"temp": 21.5})),
+             (REPO / "samples" / "mirror" / "pocket.nc", Setup())]
+    for prog, setup in cases:
+        ref = program_path(str(prog), setup, max_step_mm=0.5)
+        same = actual_path_samples(str(prog), setup, 0.5, chord_mm=1e9)
+        np.testing.assert_array_equal(same.points_mm, ref.points_mm)
+        np.testing.assert_array_equal(same.tool_mm, ref.tool_mm)
+        np.testing.assert_array_equal(same.lineno, ref.lineno)
+        np.testing.assert_array_equal(same.rapid, ref.rapid)
+        assert same.context.keys() == ref.context.keys()
+        for k in ref.context:
+            np.testing.assert_array_equal(same.context[k], ref.context[k])
     # With the default, arc chords stay within NOMINAL_CHORD_MM of the arcs: every
     # chord midpoint of the 8 mm corner arc N80 (centre 172,118) is that close to it.
     fine = actual_path_samples(str(POCKET), Setup(), 0.5)

@@ -45,6 +45,9 @@ INDEX_PIECE_MM = 2.0
 #: almost always far enough to rule out the rest (else a radius search settles it).
 NEAREST_K = 16
 
+#: Threads of the k-nearest query (-1: every core); the answer does not depend on it.
+QUERY_WORKERS = -1
+
 #: Points queried at once against the nominal path (bounds the candidate lists' memory).
 QUERY_CHUNK = 100_000
 
@@ -107,7 +110,7 @@ class Polyline:
             parts = [self.nearest(p[i:i + QUERY_CHUNK]) for i in range(0, len(p), QUERY_CHUNK)]
             return np.concatenate([d for d, _ in parts]), np.concatenate([s for _, s in parts])
         k = min(NEAREST_K, len(self.a))
-        dk, ik = self.tree.query(p, k=k)
+        dk, ik = self.tree.query(p, k=k, workers=QUERY_WORKERS)
         dk, ik = dk.reshape(len(p), k), ik.reshape(len(p), k)
         dist = point_segment_distance(np.repeat(p, k, axis=0), self.a[ik.ravel()],
                                       self.b[ik.ravel()]).reshape(len(p), k)
@@ -304,47 +307,59 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     """
     import math
 
-    from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points, line_points
+    from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
     from postproc.gcode.interp import Interpreter
     from postproc.gcode.path import ProgramPath, backfill_unknown, iter_source_lines, motion_signs
     from postproc.gcode.state import RAPID
 
     path, lines = iter_source_lines(source)
     interp = Interpreter(setup, path)
-    qs, rs, lns, rapid, rot = [], [], [], [], []
+    # Per move: its end and start, sample count, tool vector, line, kind, rotary
+    # positions; arcs' samples are computed at once per arc, straight moves' all at
+    # once at the end (one move of a long program is a few microseconds of Python).
+    q1s, q0s, counts, rs, lns, rapid, rot, arcs = [], [], [], [], [], [], [], {}
     for lineno, line in enumerate(lines, start=1):
         mv = interp.feed_line(lineno, line)
         if mv is None:
             continue
         q0, q1 = mv.q0, mv.q1
         if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-            pts = np.array([q1], dtype=float)
+            n = 1
+            q0 = q1
         elif mv.arc is not None:
             n = max(math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm),
                     arc_chord_steps(mv.arc, q0, q1, chord_mm))
-            pts = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+            arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
         else:
             n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
-            pts = line_points(q0, q1, np.arange(1, n + 1) / n)
-        qs.append(pts)
-        rs.append(np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape))
-        lns.append(np.full(len(pts), lineno))
-        rapid.append(np.full(len(pts), mv.kind == RAPID))
-        rot.append((len(pts), mv.rotary))
-    if not qs:
+        q0s.append(q0)
+        q1s.append(q1)
+        counts.append(n)
+        rs.append(mv.r)
+        lns.append(lineno)
+        rapid.append(mv.kind == RAPID)
+        rot.append(mv.rotary)
+    if not counts:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
                            {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
-    lineno_arr = np.concatenate(lns)
-    q = backfill_unknown(np.vstack(qs), lineno_arr, path)
-    r = np.vstack(rs)
+    n = np.asarray(counts)
+    move = np.repeat(np.arange(len(n)), n)
+    step = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
+    a, b = np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float)
+    q = a[move] + (b[move] - a[move]) * (step / n[move])[:, None]  # as line_points does
+    for k, pts in arcs.items():
+        q[move == k] = pts
+    lineno_arr = np.asarray(lns)[move]
+    q = backfill_unknown(q, lineno_arr, path)
+    r = np.asarray(rs, dtype=float)[move]
     signs = motion_signs(q)
     context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
-    for a in sorted(interp.used_rotary):
-        context[a] = np.concatenate([np.full(n, d.get(a, 0.0)) for n, d in rot])
+    for ax in sorted(interp.used_rotary):
+        context[ax] = np.asarray([d.get(ax, 0.0) for d in rot], dtype=float)[move]
     for k, v in (setup.context or {}).items():
         context[k] = np.full(len(q), float(v))
-    return ProgramPath(q + r, r, lineno_arr, np.concatenate(rapid), context)
+    return ProgramPath(q + r, r, lineno_arr, np.asarray(rapid)[move], context)
 
 
 def machine_run(machine: Machine, path) -> np.ndarray:
