@@ -33,6 +33,11 @@ class CsvTable:
     def has(self, name: str) -> bool:
         return name in self.header
 
+    def require_rows(self, what: str, hint: str | None = None) -> None:
+        """Refuse a file whose header is followed by no rows, naming the header line."""
+        if not self.rows:
+            raise MeasurementError(f"no {what}", path=self.path, lineno=self.header_lineno, hint=hint)
+
     def text(self, name: str) -> list[str]:
         j = self.header.index(name)
         return [row[j] for row in self.rows]

@@ -66,6 +66,7 @@ class Measurements:
 
 
 def measurements_from_table(table: CsvTable) -> Measurements:
+    table.require_rows("measurement rows", "give one measured point per row after the header")
     scale = length_scale(table)
     cols = {c: table.numeric(c) * scale for c in ("X", "Y", "Z", "mx", "my", "mz")}
     tool = {c: table.numeric(c, default=0.0) * scale for c in ("tx", "ty", "tz")}
@@ -90,8 +91,6 @@ def measurements_from_table(table: CsvTable) -> Measurements:
             context[name] = table.numeric(name)
         except MeasurementError:
             continue  # a text column is kept out of the numeric context
-    if len(table.rows) == 0:
-        raise MeasurementError("no measurement rows", path=table.path, lineno=table.header_lineno)
     return Measurements(
         q=np.column_stack([cols["X"], cols["Y"], cols["Z"]]),
         m=np.column_stack([cols["mx"], cols["my"], cols["mz"]]),

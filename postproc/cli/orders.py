@@ -55,14 +55,9 @@ def orders(calibration, points, point, tool_vector, k, as_json):
     if points is not None and point:
         raise click.UsageError("give --points or --point, not both")
     if points is not None:
-        from postproc.calibration.csvfile import length_scale, read_csv
-        from postproc.errors import MeasurementError
+        from postproc.simulate.control import read_control_points
 
-        table = read_csv(points)
-        if not table.rows:
-            raise MeasurementError("no points", path=table.path, lineno=table.header_lineno,
-                                   hint="give one X,Y,Z point per row after the header")
-        q = np.column_stack([table.numeric(c) for c in ("X", "Y", "Z")]) * length_scale(table)
+        q = read_control_points(points).targets
     elif point:
         q = np.array([parse_vector(p, "--point") for p in point])
     else:

@@ -60,9 +60,7 @@ class ThicknessMap:
 def read_thickness(path) -> ThicknessMap:
     """Read ``B,Z,T`` (``# units: length=mm|um`` for Z and T)."""
     table = read_csv(path)
-    if not table.rows:
-        raise MeasurementError("no thickness rows", path=table.path, lineno=table.header_lineno,
-                               hint="give one B,Z,T measurement per row after the header")
+    table.require_rows("thickness rows", "give one B,Z,T measurement per row after the header")
     scale = length_scale(table)
     return ThicknessMap(table.numeric("B"), table.numeric("Z") * scale, table.numeric("T") * scale,
                         str(path), np.asarray(table.linenos))

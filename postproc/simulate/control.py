@@ -21,7 +21,7 @@ import numpy as np
 
 from postproc.calibration.csvfile import length_scale, read_csv
 from postproc.engine.base import Engine, check_points, check_tool_vectors
-from postproc.errors import MeasurementError, SolverError
+from postproc.errors import SolverError
 from postproc.simulate.machine import Machine
 
 # A calibration whose inverse misses its own model's target by more than this gets a
@@ -42,9 +42,7 @@ class ControlPoints:
 def read_control_points(path) -> ControlPoints:
     """Targets (N, 3) and optional per-point tool vectors from a control-points CSV."""
     table = read_csv(path)
-    if not table.rows:
-        raise MeasurementError("no control points", path=table.path, lineno=table.header_lineno,
-                               hint="give one X,Y,Z target per row after the header")
+    table.require_rows("control points", "give one X,Y,Z target per row after the header")
     scale = length_scale(table)
     targets = np.column_stack([table.numeric(c) for c in ("X", "Y", "Z")]) * scale
     tool = None
