@@ -41,7 +41,9 @@ class Setup:
     values passed to the engine (e.g. ``{"temp": 21.5}``); ``start``: machine axis
     positions (mm, the gauge point as in G53, like ``offsets``) at program start, by
     axis letter (``{"Z": 150.0}``, any subset), used for the axes the program has not
-    positioned yet; the functional point there is ``start + r``.
+    positioned yet; the functional point there is ``start + r``; ``home``: the stored
+    positions G28 and G30 go to (``{"G28": {"X":.., "Y":.., "Z":..}}``, machine mm as
+    ``offsets``, any subset of axes; an axis not given is unknown after the move).
     """
 
     offsets: dict = field(default_factory=dict)
@@ -49,6 +51,7 @@ class Setup:
     tool_vector: tuple | None = None
     context: dict = field(default_factory=dict)
     start: dict = field(default_factory=dict)
+    home: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -244,7 +244,15 @@ class Corrector(EmitterMixin):
                     lineno += 1
                     return
             mv = interp.feed_line(lineno, line)
-            entries.append((line, mv, interp.motion_word, interp.state.motion))
+            if mv is not None and mv.fixed:
+                # the line only sends the machine to a stored position: written as it is
+                entries.append((line, None, False, interp.state.motion))
+                entries.append((None, mv, False, interp.state.motion))
+            elif mv is not None and mv.then is not None:
+                entries.append((line, mv, False, interp.state.motion))
+                entries.append((None, mv.then, False, interp.state.motion))
+            else:
+                entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
             allowed = use_fast and state_allows(interp)
 
@@ -395,6 +403,14 @@ class Corrector(EmitterMixin):
                 if motion_word:
                     self.emitted_motion = prog_motion
                 continue
+            if mv.fixed:  # the machine is at a stored position, uncorrected
+                self.qe = list(mv.q1)
+                k += 1
+                continue
+            if mv.then is not None:  # G28/G30: only the intermediate point's own words change
+                self._emit_words_only(line, mv, T[k].tolist(), write)
+                k += 1
+                continue
             target = T[k].tolist()
             if type(mv) is FastMove and emit_fast(self, line, mv, target, write,
                                                   dec_mm if mv.unit == 1.0 else dec_in):
@@ -417,6 +433,13 @@ class Corrector(EmitterMixin):
         in bulk (arcs among them; all moves when straight moves may be split).
         """
         M = len(Q1)
+        fixed_rows = [i for i, m in general if m.fixed]
+        fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
+        if fixed_rows:
+            # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it
+            for i in fixed_rows:  # unknown axes: taken as not moving (no approach direction)
+                before = Q1[i - 1] if i > 0 else self.prev_nominal
+                Q1[i] = np.where(np.isnan(Q1[i]), before, Q1[i])
         Q1 = backfill_unknown(Q1, linenos, self.path)
         Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
         Q0 = np.where(np.isnan(Q0), Q1, Q0)
@@ -437,7 +460,16 @@ class Corrector(EmitterMixin):
             idx = np.where(col != 0, np.arange(M), -1)
             np.maximum.accumulate(idx, out=idx)
             D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
-        T = self.corrected(Q1, R, D, rot, linenos)
+        if fixed_rows:
+            live = np.ones(M, dtype=bool)
+            live[fixed_rows] = False
+            T = np.empty_like(Q1)
+            T[live] = self.corrected(Q1[live], R[live], D[live], [rot[i] for i in np.flatnonzero(live)],
+                                     linenos[live])
+            T[fixed_rows] = fixed_q
+            Q1[fixed_rows] = fixed_q
+        else:
+            T = self.corrected(Q1, R, D, rot, linenos)
         plans: dict[int, object] = {}
         # starts: the corrected previous target (unrounded) for the pre-decision
         S = np.vstack([self.prev_target[None, :], T[:-1]])
@@ -558,6 +590,13 @@ class Corrector(EmitterMixin):
             raise exc.at(path=self.path) from None
 
     # -- emission ----------------------------------------------------------------------
+    def _emit_words_only(self, line: str, mv: Move, target, write) -> None:
+        """Rewrite the axis words a line names, adding none and keeping the modal motion
+        (G28/G30 intermediate points)."""
+        self.report.moves += 1
+        d = _unit_decimals(self.opt, mv.unit)
+        edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
+        self._write_line(line, edits, write)
 
 
 # -- entry points ---------------------------------------------------------------------
