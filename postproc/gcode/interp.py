@@ -28,6 +28,7 @@ from postproc.gcode.state import (
     ARC_CW,
     BEFORE_MOTION_M,
     CANNED_CYCLES,
+    DWELL,
     HOME_CODES,
     HOME_STORE,
     IO_M,
@@ -72,6 +73,22 @@ class Arc:
 
 
 @dataclass(slots=True)
+class Cycle:
+    """A canned-cycle block: its holes and the controller's moves (machine mm)."""
+
+    code: int  # 730, 810, ..., 890
+    holes: list  # [((x, y, z_bottom), (x, y, z_r)), ...] one per repeat
+    clear_z: float  # level after the block (R for G99, max(start, R) for G98)
+    steps: list  # [(RAPID | LINE | DWELL, (x, y, z) or (seconds, 0, 0)), ...]
+    r_idx: int  # word index of R on the line, or -1
+    r_mm: float  # machine Z of the R plane
+    z_mm: float  # machine Z of the hole bottom
+    repeats: int
+    retract_r: bool  # G99
+    dwell: float | None
+
+
+@dataclass(slots=True)
 class Move:
     """A motion block: where the gauge point goes and how to rewrite the line.
 
@@ -106,6 +123,10 @@ class Move:
     # the target is where the machine goes uncorrected (a stored position reached by
     # G28/G30): not corrected, no words written for it; NaN axes are unknown
     fixed: bool = False
+    cycle: Cycle | None = None  # a canned-cycle block (kind is its code)
+    # corrected but not written: 1 = the R point of the cycle block before it, 2 = a hole
+    # of a cycle block kept as it is, whose correction must round to nothing
+    probe: int = 0
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -447,6 +468,7 @@ class Interpreter:
         g92 = None
         g10 = False
         home_code = None
+        cancel_cycle = False
         g52 = False
         lookahead = None
         work_name = None
@@ -459,10 +481,15 @@ class Interpreter:
                 motion_key, motion_idx = key, i
                 self.motion_word = True
             elif key in CANNED_CYCLES:
-                raise self._err(UnsupportedGcodeError, f"canned cycle G{words[i][1]}", lineno, col_of(i),
-                                hint="the controller drills a cycle along Z at one commanded X/Y, so the hole "
-                                     "could be placed right at one depth only (the axes' squareness moves it with "
-                                     "depth); post the holes as G0/G1 moves (expanded cycles) so every point is corrected")
+                if motion_key is not None:
+                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
+                motion_key, motion_idx = key, i
+                self.motion_word = True
+            elif key in (980, 990):
+                st.retract_r = key == 990
+            elif key == 800:
+                cancel_cycle = True
+                self.motion_word = True
             elif key in LOOKAHEAD_G and self._is_lookahead(key, vals):
                 lookahead = key
             elif key in REFUSED_G:
@@ -552,6 +579,21 @@ class Interpreter:
                 rotary_changed = True
 
         has_axes = any(a in vals for a in AXES)
+        if cancel_cycle:
+            if st.motion in CANNED_CYCLES:
+                st.motion = None if self.dialect == "linuxcnc" else st.before_cycle
+            elif self.dialect == "linuxcnc":
+                st.motion = None
+            st.cycle_r = st.cycle_z = st.cycle_q = st.cycle_p = None
+        if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
+            if motion_key is not None and st.motion not in CANNED_CYCLES:
+                st.before_cycle = st.motion
+            if motion_key is not None and motion_key != st.motion:
+                st.cycle_r = st.cycle_z = None  # given again when the motion mode changes (LinuxCNC)
+            if motion_key is not None:
+                st.motion = motion_key
+            return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
+                               tool_change or "T" in vals)
         if motion_key is not None:
             st.motion = MOTION_CODES[motion_key]
         full_circle = False
@@ -695,6 +737,118 @@ class Interpreter:
         self._check_known(inter, lineno, col)
         return Move(lineno, RAPID, q0, tuple(inter), r, shift, unit, st.incremental, st.arc_absolute, words,
                     tuple(axis_idx), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
+
+    def _cycle(self, lineno, words, vals, motion_idx, gcodes, prefix, stays) -> Move:  # noqa: C901
+        """A canned-cycle block: the holes it drills and the moves the controller makes.
+
+        Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
+        R when Z is below it; per hole a rapid in X/Y at the current level, a rapid to
+        R, the cycle's own moves, and a retract to R (G99) or to the higher of R and the
+        level at the block's start (G98). In G91, R is relative to the current Z and Z
+        to R; X/Y move by their increments for each of the L repeats. Pecks: G83 rapid
+        back to R and down to 0.254 mm (0.010 in) above the last depth, G73 retract 0.254 mm.
+        """
+        st = self.state
+        key = st.motion
+        col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
+        name = f"G{key / 10:g}"
+        if st.plane != 170:
+            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
+        if st.inverse_time:
+            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in G93 inverse-time mode", lineno, col)
+        if any(a in vals for a in ROTARY) or any(k in vals for k in "IJ"):
+            raise self._err(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
+                            lineno, col)
+        unit = st.unit_mm
+        if "R" in vals:
+            st.cycle_r = vals["R"][0]
+        if st.cycle_r is None:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
+        if "Z" in vals:
+            st.cycle_z = vals["Z"][0]
+        if st.cycle_z is None:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
+        if key in (730, 830):
+            if "Q" in vals:
+                st.cycle_q = vals["Q"][0]
+            if st.cycle_q is None or st.cycle_q <= 0:
+                raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
+                                lineno, col)
+        if "P" in vals:
+            st.cycle_p = vals["P"][0]
+        if "F" in vals:
+            st.feed = vals["F"][0]
+        repeat_letter = "K" if self.dialect in ("fanuc", "haas") and "K" in vals else "L"
+        repeats = 1
+        if repeat_letter in vals:
+            repeats = vals[repeat_letter][0]
+            if repeats != int(repeats) or repeats < 0:
+                raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
+                                lineno, words[vals[repeat_letter][1]][4] + 1)
+            repeats = int(repeats)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
+                            hint="position every axis with a G90 move before the cycle, or give --start")
+        if self.unknown_after:
+            self._check_known([NAN, NAN, NAN], lineno, col)
+        shift = self.shift(False, lineno, col)
+        x0, y0, z0 = st.pos
+        if st.incremental:
+            r_m = z0 + st.cycle_r * unit
+            z_m = r_m + st.cycle_z * unit
+            dx = vals["X"][0] * unit if "X" in vals else 0.0
+            dy = vals["Y"][0] * unit if "Y" in vals else 0.0
+        else:
+            r_m = st.cycle_r * unit + shift[2]
+            z_m = st.cycle_z * unit + shift[2]
+            xs = vals["X"][0] * unit + shift[0] if "X" in vals else x0
+            ys = vals["Y"][0] * unit + shift[1] if "Y" in vals else y0
+        if z_m > r_m:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
+                            lineno, col)
+        clear = r_m if st.retract_r else max(z0, r_m)
+        delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
+        steps: list[tuple[int, tuple]] = []
+        cur = [x0, y0, z0]
+
+        def go(kind: int, x: float, y: float, z: float) -> None:
+            if (x, y, z) != tuple(cur):
+                steps.append((kind, (x, y, z)))
+                cur[:] = (x, y, z)
+
+        holes = []
+        if z0 < r_m:
+            go(RAPID, x0, y0, r_m)
+        for _ in range(repeats):
+            x, y = (cur[0] + dx, cur[1] + dy) if st.incremental else (xs, ys)
+            go(RAPID, x, y, cur[2])
+            go(RAPID, x, y, r_m)
+            if key in (730, 830):
+                q = st.cycle_q * unit
+                depth = r_m - q
+                while depth > z_m:
+                    go(LINE, x, y, depth)
+                    if key == 830:
+                        go(RAPID, x, y, r_m)
+                    go(RAPID, x, y, depth + delta)
+                    depth -= q
+            go(LINE, x, y, z_m)
+            if key in (820, 890) and st.cycle_p:
+                steps.append((DWELL, (st.cycle_p, 0.0, 0.0)))
+            if key in (840, 850, 890):
+                go(LINE, x, y, r_m)
+            go(RAPID, x, y, clear)
+            holes.append(((x, y, z_m), (x, y, r_m)))
+        axis_idx = tuple(vals[a][1] if a in vals else -1 for a in AXES)
+        q0 = tuple(st.pos)
+        st.pos = list(cur)
+        return Move(
+            lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
+            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+            axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
+            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
+            motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
+                                               r_m, z_m, repeats, st.retract_r, st.cycle_p))
 
     def _check_known(self, q1, lineno: int, col: int) -> None:
         """Refuse a move that needs an axis left at a stored position that was not given."""
@@ -895,6 +1049,24 @@ class Interpreter:
         center = [0.0, 0.0, 0.0]
         center[a1], center[a2], center[an] = c1, c2, q0[an]
         return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
+
+
+def plain_moves(mv: Move):
+    """The straight and arc moves a Move stands for, in order: a cycle block's rapids
+    and feeds, a G28/G30 line's two legs, or the move itself."""
+    if mv.cycle is not None:
+        q0 = mv.q0
+        for kind, q in mv.cycle.steps:
+            if kind == DWELL:
+                continue
+            yield Move(mv.lineno, kind, q0, q, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute, [],
+                       (-1, -1, -1), -1, False, mv.feed, mv.rotary)
+            q0 = q
+        return
+    while mv is not None:
+        if not (mv.fixed and any(math.isnan(v) for v in mv.q1)):  # an unknown stored position
+            yield mv
+        mv = mv.then
 
 
 def col_of_word(words, i: int) -> int:

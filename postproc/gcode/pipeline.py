@@ -17,7 +17,7 @@ import math
 import os
 import tempfile
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import islice
 from pathlib import Path
 
@@ -44,7 +44,7 @@ from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, subdivide
-from postproc.gcode.state import LINE
+from postproc.gcode.state import DWELL, LINE, RAPID
 
 DEFAULT_CHUNK_LINES = 20_000
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
@@ -64,6 +64,7 @@ class CorrectOptions:
     force: bool = False
     added: list = field(default_factory=list)
     chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
+    cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
 
@@ -84,6 +85,8 @@ class CorrectReport:
     solver: str = ""  # the engine's inverse solver when it names one (parametric: newton | astatic)
     accept_residual_mm: float = SOLVER_ACCEPT_MM  # largest inverse residual accepted
     max_residual_mm: float = 0.0  # largest inverse residual met
+    cycles_kept: int = 0
+    cycles_expanded: int = 0
 
 
 class Corrector(EmitterMixin):
@@ -111,6 +114,8 @@ class Corrector(EmitterMixin):
         self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
         self.emitted_motion: int | None = None
+        self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
+        self._cycle_rz: float | None = None
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
         self._units_checked: set[float] = set()
@@ -244,7 +249,9 @@ class Corrector(EmitterMixin):
                     lineno += 1
                     return
             mv = interp.feed_line(lineno, line)
-            if mv is not None and mv.fixed:
+            if mv is not None and mv.cycle is not None:
+                self._feed_cycle(entries, line, mv, interp.state.motion)
+            elif mv is not None and mv.fixed:
                 # the line only sends the machine to a stored position: written as it is
                 entries.append((line, None, False, interp.state.motion))
                 entries.append((None, mv, False, interp.state.motion))
@@ -402,6 +409,15 @@ class Corrector(EmitterMixin):
                 passed += 1
                 if motion_word:
                     self.emitted_motion = prog_motion
+                continue
+            if mv.probe:  # used by the cycle block before it, or checked here
+                if mv.probe == 2:
+                    self._check_unmoved(mv, T[k])
+                k += 1
+                continue
+            if mv.cycle is not None:
+                self._emit_cycle(line, mv, T[k].tolist(), T[k + 1].tolist(), write)
+                k += 1
                 continue
             if mv.fixed:  # the machine is at a stored position, uncorrected
                 self.qe = list(mv.q1)
@@ -588,6 +604,120 @@ class Corrector(EmitterMixin):
                             f"--tolerance {self.opt.tolerance_mm:g} mm allows: raise --tolerance above that "
                             "residual, or use a calibration with the newton solver")
             raise exc.at(path=self.path) from None
+
+    # -- canned cycles -------------------------------------------------------------------
+    def _feed_cycle(self, entries: list, line: str, mv: Move, motion) -> None:
+        """Queue a cycle block: kept (its bottom and R point corrected) or expanded into
+        the controller's own G0/G1 moves, each corrected like any other move."""
+        c = mv.cycle
+        if self.opt.cycles != "expand":
+            if c.repeats == 1 and not mv.incremental:
+                entries.append((line, mv, True, motion))
+                bottom, rpoint = c.holes[0]
+                entries.append((None, replace(mv, q1=rpoint, cycle=None, probe=1), False, motion))
+                return
+            # several holes from one line, or increments: one word cannot carry each hole's
+            # correction; kept only where nothing is corrected
+            for bottom, rpoint in c.holes:
+                for q in (bottom, rpoint):
+                    entries.append((None, replace(mv, q1=q, cycle=None, probe=2), False, motion))
+            entries.append((line, None, True, None))
+            end = c.steps[-1][1] if c.steps else mv.q0
+            entries.append((None, replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
+                                          axis_idx=(-1, -1, -1)), False, None))
+            return
+        ending = emit.line_ending(line) or "\n"
+        sep, lower = emit.style_of(line)
+        sep = sep or " "
+        unit = mv.unit
+        d = _unit_decimals(self.opt, unit)
+        prefix = [w for w in mv.prefix_words if not w.upper().startswith(("G98", "G99"))]
+        if prefix:
+            text = sep.join(prefix)
+            entries.append(((text.lower() if lower else text) + ending, None, False, None))
+        prev = mv.q0
+        feed_done = False
+        from postproc.gcode.lexer import scan_words
+        for kind, q in c.steps:
+            if kind == DWELL:
+                text = f"G4{sep}P{emit.fmt(q[0], 4).rstrip('0').rstrip('.') or '0'}"
+                entries.append(((text.lower() if lower else text) + ending, None, False, None))
+                continue
+            vals = [(qv - pv) / unit if mv.incremental else (qv - sv) / unit
+                    for qv, pv, sv in zip(q, prev, mv.shift, strict=True)]
+            words = ["G0" if kind == RAPID else "G1"]
+            words += [a + emit.fmt(v, d) for a, v, qv, pv in zip("XYZ", vals, q, prev, strict=True) if qv != pv]
+            if kind != RAPID and not feed_done and mv.feed_idx >= 0:
+                words.append("F" + mv.words[mv.feed_idx][1])
+                feed_done = True
+            text = sep.join(words) + ending
+            ws = scan_words(text)
+            idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+            step = Move(mv.lineno, kind, tuple(prev), tuple(q), mv.r, mv.shift, unit, mv.incremental,
+                        mv.arc_absolute, ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1),
+                        False, mv.feed, mv.rotary, motion_idx=0)
+            entries.append(((text.lower() if lower else text), step, True, kind))
+            prev = q
+        self.report.cycles_expanded += 1
+
+    def _check_unmoved(self, mv: Move, target) -> None:
+        """A cycle block that stays as it is, with several holes or increments: refuse it
+        when a hole's correction does not round to nothing."""
+        d = _unit_decimals(self.opt, mv.unit)
+        moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
+        if moved >= emit.HALF_UNIT[d]:
+            how = "with L/K repeats" if mv.cycle is None and mv.incremental is False else "in G91 (incremental)"
+            raise SafetyError(
+                f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
+                f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
+                path=self.path, lineno=mv.lineno,
+                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
+
+    def _emit_cycle(self, line: str, mv: Move, t_bottom, t_r, write) -> None:
+        """Write a kept cycle block: X/Y at the corrected bottom, Z and R along the tool axis."""
+        c = mv.cycle
+        unit, shift = mv.unit, mv.shift
+        d = _unit_decimals(self.opt, unit)
+        rerr = self._round_err(unit)
+        drift = math.hypot(t_r[0] - t_bottom[0], t_r[1] - t_bottom[1])
+        if drift > self.opt.tolerance_mm - rerr:
+            raise SafetyError(
+                f"canned cycle G{c.code / 10:g}: the correction moves the hole's axis by {drift * 1000:.3g} um "
+                f"between its R plane and its bottom, more than --tolerance {self.opt.tolerance_mm:g} mm",
+                path=self.path, lineno=mv.lineno,
+                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
+        self.report.moves += 1
+        self.report.cycles_kept += 1
+        qe = self.qe
+        z_before = qe[2]
+        flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
+        edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
+        sep, lower = emit.style_of(line)
+        for letter, idx, t, attr in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z"), ("R", c.r_idx, t_r[2], "_cycle_rz")):
+            v = (t - shift[2]) / unit
+            if idx >= 0:
+                _l, num, start, end, _p = mv.words[idx]
+                dout = max(d, emit.decimals_of(num))
+                val = float(num)
+                if abs(v - val) >= emit.HALF_UNIT[dout]:
+                    text = emit.fmt(v, dout)
+                    edits.append((start, end, text))
+                    val = float(text)
+            else:
+                val = getattr(self, attr)
+                if val is None or abs(v - val) >= emit.HALF_UNIT[d]:
+                    text = emit.fmt(v, d)
+                    added.append(letter + text)
+                    val = float(text)
+            setattr(self, attr, val)
+        if added:
+            pos = self._insert_pos(mv)
+            text = "".join(sep + w for w in added)
+            edits.append((pos, pos, text.lower() if lower else text))
+        r_machine = self._cycle_rz * unit + shift[2]
+        qe[2] = r_machine if c.retract_r else max(z_before, r_machine)
+        self.emitted_motion = c.code
+        self._write_line(line, edits, write)
 
     # -- emission ----------------------------------------------------------------------
     def _emit_words_only(self, line: str, mv: Move, target, write) -> None:

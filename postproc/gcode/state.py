@@ -16,7 +16,9 @@ NAN = math.nan
 # Motion modes (group 1)
 RAPID, LINE, ARC_CW, ARC_CCW = 0, 10, 20, 30
 MOTION_CODES = {0: RAPID, 10: LINE, 20: ARC_CW, 30: ARC_CCW}
-CANNED_CYCLES = {730, 760, 810, 820, 830, 840, 850, 860, 870, 880, 890}
+CANNED_CYCLES = {730, 810, 820, 830, 840, 850, 860, 870, 880, 890}
+# a pause in an expanded cycle (G4 P..), as a step kind
+DWELL = -1
 
 # Planes: (first axis, second axis, normal axis) as right-handed triples, the
 # offset letters of the first and second axis. G2 is clockwise seen from +normal.
@@ -35,7 +37,7 @@ P_SYSTEMS = {1: "G54", 2: "G55", 3: "G56", 4: "G57", 5: "G58", 6: "G59",
 
 # Codes accepted without effect on geometry (pass through): path control, spindle
 # speed modes, retract modes, dwell, cutter-comp cancel, stored positions, rotation cancel.
-NEUTRAL_G = {400, 610, 611, 640, 960, 970, 980, 990, 690, 800, 150, 500}
+NEUTRAL_G = {400, 610, 611, 640, 960, 970, 690, 150, 500}
 # Fanuc/Haas look-ahead and smoothing modes (no geometry): G5.1 Q1/Q0 (AI contour
 # control), G5 P10000/P0 (high-speed machining), G187 (Haas smoothness), G103 (Haas
 # block look-ahead). Accepted only without axis or spline words (G5/G5.1 are splines
@@ -112,6 +114,13 @@ class ModalState:
     pos: list[float] = field(default_factory=lambda: [NAN, NAN, NAN])
     rotary: dict[str, float] = field(default_factory=dict)
     dirs: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # canned cycles: retract to R (G99) or to the initial level (G98); modal R, Z, Q, P
+    retract_r: bool = False
+    cycle_r: float | None = None
+    cycle_z: float | None = None
+    cycle_q: float | None = None
+    cycle_p: float | None = None
+    before_cycle: int | None = None  # the motion mode before the cycle (restored by G80 outside LinuxCNC)
 
     @property
     def unit_mm(self) -> float:
