@@ -15,6 +15,7 @@ from __future__ import annotations
 import gc
 import math
 import os
+import re
 import tempfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
@@ -47,6 +48,7 @@ from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, subdiv
 from postproc.gcode.state import DWELL, LINE, RAPID
 
 DEFAULT_CHUNK_LINES = 20_000
+_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
 # engine together: smaller chunks keep the peak memory low at the same speed.
 SEGMENTED_CHUNK_LINES = 2_000
@@ -211,9 +213,14 @@ class Corrector(EmitterMixin):
 
     def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
         it = iter(lines)
-        head = [ln for ln in (next(it, None),) if ln is not None]
-        if head and head[0].strip() == "%":
-            head.extend(ln for ln in (next(it, None),) if ln is not None)
+        # the lines that stay before the header: a '%' tape mark and the program number
+        # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
+        head = [ln for ln in islice(it, 3)]
+        keep = 0
+        if head and head[0].lstrip("\ufeff").strip().startswith("%"):
+            keep = 1
+        if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
+            keep += 1
         for k, line in enumerate(head):
             if emit.is_header(line) and not self.opt.force:
                 raise AlreadyCorrectedError(
@@ -224,11 +231,15 @@ class Corrector(EmitterMixin):
         header = emit.header_line(self.cal_name, self.cal_sha, self.opt.tolerance_mm, self._setup_note(), ending)
         entries: list = []
         lineno = 1
-        if head and head[0].strip() == "%":
-            write(head[0] if emit.line_ending(head[0]) else head[0] + ending)
+        for line in head[:keep]:
+            self.interp.feed_line(lineno, line)
+            write(line if emit.line_ending(line) else line + ending)
             self.report.lines_out += 1
-            head = head[1:]
-            lineno = 2
+            lineno += 1
+        if head and not keep and head[0].startswith("\ufeff"):
+            write("\ufeff")  # the byte-order mark stays the file's first bytes
+            head[0] = head[0][1:]
+        head = head[keep:]
         write(header)
         self.report.lines_out += 1
 
@@ -328,6 +339,9 @@ class Corrector(EmitterMixin):
         start = start_position(self.setup.start)
         if self.setup.start:
             parts.append("start " + ",".join(f"{a}{v:.10g}" for a, v in zip("XYZ", start, strict=True) if v == v))
+        for name, v in sorted((getattr(self.setup, "home", None) or {}).items()):
+            v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
+            parts.append(f"{name}=" + ",".join(f"{a}{float(x):g}" for a, x in sorted(v.items())))
         if self.setup.tool_vector is not None:
             parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
         for a in self.opt.added:
