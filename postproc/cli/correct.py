@@ -109,6 +109,8 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
         f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
         f"{rep.arcs_linearised}, largest correction {rep.max_correction_mm * 1000:.1f} um"
     ]
+    if rep.cycles_kept or rep.cycles_expanded:
+        lines.append(f"  canned cycles: {rep.cycles_kept} kept, {rep.cycles_expanded} expanded")
     if rep.g54_assumed_zero:
         lines.append("  note: no --offset G54 given: the program's coordinates were taken as machine coordinates "
                      "(G54 = 0); recorded in the header")
