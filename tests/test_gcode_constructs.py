@@ -65,8 +65,9 @@ def test_utf8_bom_is_not_a_word_and_stays_in_place():
     # a scale of the coordinates: words rewritten at the right places
     eng = scale_engine()
     out, _ = correct_text(text, eng, ZERO, CorrectOptions(), path="p.nc")
-    body = [ln for ln in out.splitlines(keepends=True) if not emit.is_header(ln)]
-    assert body[0].startswith("\ufeffG21 G90 G0 X")
+    assert out.startswith("\ufeff(postproc ")  # the mark stays the file's first bytes
+    body = out.splitlines(keepends=True)[1:]
+    assert body[0].startswith("G21 G90 G0 X")
 
 
 def test_g28_goes_through_the_intermediate_point_to_the_stored_position():
@@ -192,3 +193,60 @@ def test_refused_codes_say_why(line, what):
         run("G21 G90\nG0 X1 Y2 Z3\n" + line + "M30\n")
     assert what in err.value.message
     assert err.value.hint
+
+
+SPLINES = "G21 G90 G17\nG0 X0 Y0 Z1\nG5 X10 Y0 I2 J5 P-2 Q5 F100\nG5 X20 Y0 P-3 Q-4\nG5.1 X30 Y5 I5 J5\nG0 Z10\nM30\n"
+
+
+def _bezier(ctrl, s):
+    # de Casteljau, independent of the closed form used by the interpreter
+    pts = [np.array(c, dtype=float) for c in ctrl]
+    while len(pts) > 1:
+        pts = [(1 - s) * a + s * b for a, b in zip(pts[:-1], pts[1:], strict=True)]
+    return pts[0]
+
+
+def test_splines_follow_linuxcncs_control_points():
+    _, moves = run(SPLINES)
+    g5a, g5b, g51 = moves[1], moves[2], moves[3]
+    assert g5a.spline == [(0.0, 0.0), (2.0, 5.0), (8.0, 5.0), (10.0, 0.0)]
+    # the second G5 without I/J starts in the direction the first ended: I/J = -(P/Q)
+    assert g5b.spline == [(10.0, 0.0), (12.0, -5.0), (17.0, -4.0), (20.0, 0.0)]
+    assert g51.spline == [(20.0, 0.0), (25.0, 5.0), (30.0, 5.0)]
+
+
+def test_identity_keeps_splines_and_a_scale_linearises_them_within_tolerance():
+    out, rep = identity(SPLINES)
+    assert out == SPLINES
+    eng = scale_engine(1.0001)
+    out, rep = correct_text(SPLINES, eng, ZERO, CorrectOptions(), path="p.nc")
+    assert rep.splines_linearised == 3
+    assert not any(ln.startswith("G5") for ln in out.splitlines())
+    # every emitted vertex, run through the machine (x 1.0001), lies on the nominal splines
+    # within the tolerance, and the chords between them stay within it too
+    _, moves = run(SPLINES)
+    curve = np.vstack([np.array([_bezier(m.spline, s) for s in np.linspace(0, 1, 4001)]) for m in moves[1:4]])
+    c0, c1 = curve[:-1], curve[1:]
+    seg = c1 - c0
+    seg2 = np.maximum((seg * seg).sum(axis=1), 1e-30)
+
+    def distance(p):  # from p to the dense polyline of the splines
+        t = np.clip(((p - c0) * seg).sum(axis=1) / seg2, 0.0, 1.0)
+        return np.min(np.linalg.norm(c0 + t[:, None] * seg - p, axis=1))
+
+    verts = []
+    for ln in out.splitlines():
+        if ln.startswith("G1"):
+            w = dict((t[0], float(t[1:])) for t in ln.split()[1:] if t[0] in "XY")
+            verts.append((w["X"] * 1.0001, w["Y"] * 1.0001))
+    verts = np.array(verts)
+    for a, b in zip(verts[:-1], verts[1:], strict=True):
+        for s in np.linspace(0, 1, 5):
+            p = a + s * (b - a)
+            assert distance(p) < 0.001
+    assert len(verts) < 400
+
+
+def test_g5_without_ij_first_is_refused_as_linuxcnc_does():
+    with pytest.raises(PostprocError, match="needs I and J"):
+        run("G21 G90 G17\nG0 X0 Y0 Z1\nG5 X10 Y0 P-2 Q5 F100\nM30\n")

@@ -12,7 +12,13 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import parse_context, parse_home, parse_offset, parse_tool_length, parse_vector
+from postproc.cli.options import (
+    parse_context,
+    parse_home,
+    parse_offset,
+    parse_tool_length,
+    parse_vector,
+)
 from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM, MM_PER_INCH
 from postproc.errors import PostprocError
 

@@ -20,6 +20,8 @@ import math
 import re
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import lexer
@@ -43,6 +45,7 @@ from postproc.gcode.state import (
     REFUSED_G,
     REFUSED_HINT,
     REFUSED_M,
+    SPLINES,
     WORK_SYSTEMS,
     ModalState,
 )
@@ -127,6 +130,10 @@ class Move:
     # corrected but not written: 1 = the R point of the cycle block before it, 2 = a hole
     # of a cycle block kept as it is, whose correction must round to nothing
     probe: int = 0
+    # a G5/G5.1 spline: its control points in the XY plane (machine mm), Z constant
+    spline: list | None = None
+    # already cut within tolerance (a spline's chords): not split again by the planner
+    planned: bool = False
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -214,6 +221,7 @@ class Interpreter:
                      ((getattr(setup, "home", None) or {}).items())}
         # axes sent to a stored position that was not given: unknown until positioned again
         self.unknown_after: dict[int, str] = {}
+        self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
         self._fast_shift: tuple[float, float, float] | None = None
         self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
@@ -492,6 +500,11 @@ class Interpreter:
                 self.motion_word = True
             elif key in LOOKAHEAD_G and self._is_lookahead(key, vals):
                 lookahead = key
+            elif key in SPLINES:
+                if motion_key is not None:
+                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
+                motion_key, motion_idx = key, i
+                self.motion_word = True
             elif key in REFUSED_G:
                 raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i),
                                 hint=REFUSED_HINT.get(key))
@@ -594,6 +607,10 @@ class Interpreter:
                 st.motion = motion_key
             return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
                                tool_change or "T" in vals)
+        if motion_key in SPLINES or (motion_key is None and st.motion in SPLINES and has_axes):
+            if motion_key is not None:
+                st.motion = motion_key
+            return self._spline(lineno, words, vals, motion_idx, prefix + before_m)
         if motion_key is not None:
             st.motion = MOTION_CODES[motion_key]
         full_circle = False
@@ -737,6 +754,64 @@ class Interpreter:
         self._check_known(inter, lineno, col)
         return Move(lineno, RAPID, q0, tuple(inter), r, shift, unit, st.incremental, st.arc_absolute, words,
                     tuple(axis_idx), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
+
+    def _spline(self, lineno, words, vals, motion_idx, prefix) -> Move:
+        """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
+        offset the first control point from the start (the previous P/Q mirrored when
+        left out), P/Q the second from the end; G5.1's I/J offset its control point."""
+        st = self.state
+        key = st.motion
+        name = "G5" if key == 50 else "G5.1"
+        col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[0][4] + 1
+        if st.plane != 170:
+            raise self._err(GcodeSyntaxError, f"{name} spline outside the G17 plane", lineno, col)
+        other = [a for a in "ZABCKR" if a in vals]
+        if other:
+            raise self._err(GcodeSyntaxError, f"{name} spline with a {other[0]} word (X and Y only)", lineno,
+                            words[vals[other[0]][1]][4] + 1)
+        if st.inverse_time:
+            raise self._err(UnsupportedGcodeError, f"{name} spline in G93 inverse-time mode", lineno, col)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"{name} spline from an unknown position", lineno, col,
+                            hint="position every axis with a G90 move before the spline, or give --start")
+        if ("I" in vals) != ("J" in vals):
+            raise self._err(GcodeSyntaxError, f"{name} needs both I and J, or neither", lineno, col)
+        unit = st.unit_mm
+        if "F" in vals:
+            st.feed = vals["F"][0]
+        shift = self.shift(False, lineno, col)
+        q0 = tuple(st.pos)
+        q1 = list(q0)
+        axis_idx = [-1, -1, -1]
+        for k, a in enumerate("XY"):
+            if a in vals:
+                v, i = vals[a]
+                axis_idx[k] = i
+                q1[k] = q1[k] + v * unit if st.incremental else v * unit + shift[k]
+        p0 = (q0[0], q0[1])
+        p3 = (q1[0], q1[1])
+        if key == 50:
+            if "P" not in vals or "Q" not in vals:
+                raise self._err(GcodeSyntaxError, "G5 needs both P and Q", lineno, col)
+            if "I" in vals:
+                ij = (vals["I"][0] * unit, vals["J"][0] * unit)
+            elif self._last_pq is not None:
+                ij = (-self._last_pq[0], -self._last_pq[1])
+            else:
+                raise self._err(GcodeSyntaxError, "the first G5 of a series needs I and J", lineno, col)
+            pq = (vals["P"][0] * unit, vals["Q"][0] * unit)
+            self._last_pq = pq
+            ctrl = [p0, (p0[0] + ij[0], p0[1] + ij[1]), (p3[0] + pq[0], p3[1] + pq[1]), p3]
+        else:
+            if "I" not in vals or (vals["I"][0] == 0 and vals["J"][0] == 0):
+                raise self._err(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
+            ctrl = [p0, (p0[0] + vals["I"][0] * unit, p0[1] + vals["J"][0] * unit), p3]
+        st.pos = q1
+        return Move(lineno=lineno, kind=LINE, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift, unit=unit,
+                    incremental=st.incremental, arc_absolute=st.arc_absolute, words=words, axis_idx=tuple(axis_idx),
+                    feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
+                    rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
+                    motion_idx=motion_idx, spline=ctrl)
 
     def _cycle(self, lineno, words, vals, motion_idx, gcodes, prefix, stays) -> Move:  # noqa: C901
         """A canned-cycle block: the holes it drills and the moves the controller makes.
@@ -1051,6 +1126,31 @@ class Interpreter:
         return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
 
 
+def spline_points(ctrl, s) -> np.ndarray:
+    """Points (k, 2) of a Bezier curve with control points ``ctrl`` at parameters ``s``."""
+    s = np.asarray(s, dtype=float)[:, None]
+    c = np.asarray(ctrl, dtype=float)
+    if len(c) == 3:
+        return (1 - s) ** 2 * c[0] + 2 * (1 - s) * s * c[1] + s ** 2 * c[2]
+    return (1 - s) ** 3 * c[0] + 3 * (1 - s) ** 2 * s * c[1] + 3 * (1 - s) * s ** 2 * c[2] + s ** 3 * c[3]
+
+
+def spline_samples(ctrl, chord_mm: float) -> np.ndarray:
+    """Parameters along a spline whose chords stay within ``chord_mm`` of it (from the
+    bound on the second derivative: error <= max|B''| h^2 / 8)."""
+    c = np.asarray(ctrl, dtype=float)
+    if len(c) == 3:
+        bound = 2.0 * np.linalg.norm(c[0] - 2 * c[1] + c[2])
+    else:
+        bound = 6.0 * max(np.linalg.norm(c[0] - 2 * c[1] + c[2]), np.linalg.norm(c[1] - 2 * c[2] + c[3]))
+    n = max(1, math.ceil(math.sqrt(bound / (8.0 * chord_mm)))) if bound > 0 else 1
+    return np.linspace(0.0, 1.0, n + 1)
+
+
+# chord error of the polyline the samplers use for a spline
+SPLINE_SAMPLE_MM = 1e-4
+
+
 def plain_moves(mv: Move):
     """The straight and arc moves a Move stands for, in order: a cycle block's rapids
     and feeds, a G28/G30 line's two legs, or the move itself."""
@@ -1060,6 +1160,16 @@ def plain_moves(mv: Move):
             if kind == DWELL:
                 continue
             yield Move(mv.lineno, kind, q0, q, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute, [],
+                       (-1, -1, -1), -1, False, mv.feed, mv.rotary)
+            q0 = q
+        return
+    if mv.spline is not None:
+        s = spline_samples(mv.spline, SPLINE_SAMPLE_MM)[1:]
+        xy = spline_points(mv.spline, s)
+        q0 = mv.q0
+        for x, y in xy.tolist():
+            q = (x, y, mv.q1[2])
+            yield Move(mv.lineno, LINE, q0, q, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute, [],
                        (-1, -1, -1), -1, False, mv.feed, mv.rotary)
             q0 = q
         return

@@ -88,6 +88,7 @@ class CorrectReport:
     accept_residual_mm: float = SOLVER_ACCEPT_MM  # largest inverse residual accepted
     max_residual_mm: float = 0.0  # largest inverse residual met
     cycles_kept: int = 0
+    splines_linearised: int = 0
     cycles_expanded: int = 0
 
 
@@ -118,6 +119,7 @@ class Corrector(EmitterMixin):
         self.emitted_motion: int | None = None
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
+        self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
         self._units_checked: set[float] = set()
@@ -262,6 +264,8 @@ class Corrector(EmitterMixin):
             mv = interp.feed_line(lineno, line)
             if mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
+            elif mv is not None and mv.spline is not None:
+                self._feed_spline(entries, line, mv)
             elif mv is not None and mv.fixed:
                 # the line only sends the machine to a stored position: written as it is
                 entries.append((line, None, False, interp.state.motion))
@@ -552,7 +556,7 @@ class Corrector(EmitterMixin):
                     owner.append(i)
         if not self.linear_exact:
             for i, m in general:
-                if m.kind == LINE and not any(math.isnan(v) for v in m.q0):
+                if m.kind == LINE and not m.planned and not any(math.isnan(v) for v in m.q0):
                     curves.append(Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary))
                     s_init.append(np.array([0.0, 1.0]))
                     owner.append(i)
@@ -618,6 +622,80 @@ class Corrector(EmitterMixin):
                             f"--tolerance {self.opt.tolerance_mm:g} mm allows: raise --tolerance above that "
                             "residual, or use a calibration with the newton solver")
             raise exc.at(path=self.path) from None
+
+    # -- splines -------------------------------------------------------------------------
+    def _feed_spline(self, entries: list, line: str, mv: Move) -> None:
+        """Queue a G5/G5.1 spline as the fewest G1 chords whose corrected path stays within
+        --tolerance of the corrected spline (checked at samples 1/10 of the tolerance apart
+        in chord error)."""
+        from postproc.gcode.interp import spline_points, spline_samples
+        from postproc.gcode.lexer import scan_words
+
+        tol = self.opt.tolerance_mm - self._round_err(mv.unit)
+        has_ij = any(w[0] == "I" for w in mv.words)
+        kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv)
+        self._spline_kept = kept
+        if kept:
+            # an affine correction maps the spline onto itself: the line stays as it is
+            entries.append((line, None, True, LINE))
+            entries.append((None, replace(mv, q0=mv.q1, fixed=True, spline=None, words=[],
+                                          axis_idx=(-1, -1, -1)), False, None))
+            return
+        s = spline_samples(mv.spline, tol / 10.0)
+        xy = spline_points(mv.spline, s)
+        nom = np.column_stack([xy, np.full(len(s), mv.q1[2])])
+        d = np.diff(np.vstack([np.asarray(mv.q0)[None, :], nom]), axis=0)
+        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
+        for k in range(1, len(sign)):
+            sign[k] = np.where(sign[k] == 0, sign[k - 1], sign[k])
+        sign = np.where(sign == 0, self.dirs, sign)
+        lineno = np.full(len(s), mv.lineno)
+        corr = self.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
+                              [mv.rotary] * len(s), lineno)
+        keep = [0]
+        i = 0
+        budget = 0.9 * tol
+        while i < len(s) - 1:
+            j = i + 1
+            while j + 1 < len(s) and _chord_fits(corr[i:j + 2], budget):
+                j += 1
+            keep.append(j)
+            i = j
+        ending = emit.line_ending(line) or "\n"
+        sep, lower = emit.style_of(line)
+        sep = sep or " "
+        unit = mv.unit
+        dec = _unit_decimals(self.opt, unit)
+        if mv.prefix_words:
+            text = sep.join(mv.prefix_words)
+            entries.append(((text.lower() if lower else text) + ending, None, False, None))
+        prev = mv.q0
+        for n, k in enumerate(keep[1:]):
+            q = tuple(nom[k].tolist()) if k < len(s) - 1 else mv.q1
+            vals = [(qv - pv) / unit if mv.incremental else (qv - sv) / unit
+                    for qv, pv, sv in zip(q, prev, mv.shift, strict=True)]
+            words = ["G1"] + [a + emit.fmt(v, dec) for a, v in zip("XY", vals[:2], strict=True)]
+            if n == 0 and mv.feed_idx >= 0:
+                words.append("F" + mv.words[mv.feed_idx][1])
+            text = sep.join(words) + ending
+            ws = scan_words(text)
+            idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+            step = Move(mv.lineno, LINE, tuple(prev), q, mv.r, mv.shift, unit, mv.incremental, mv.arc_absolute,
+                        ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False, mv.feed,
+                        mv.rotary, motion_idx=0, planned=True)
+            entries.append(((text.lower() if lower else text), step, True, LINE))
+            prev = q
+        self.report.splines_linearised += 1
+
+    def _spline_unmoved(self, mv: Move) -> bool:
+        """Whether the correction at the spline's control points rounds to nothing (for an
+        affine correction the corrected spline is then the spline itself)."""
+        pts = np.array([(x, y, mv.q1[2]) for x, y in mv.spline], dtype=float)
+        n = len(pts)
+        t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
+                           np.broadcast_to(self.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
+        d = _unit_decimals(self.opt, mv.unit)
+        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
     # -- canned cycles -------------------------------------------------------------------
     def _feed_cycle(self, entries: list, line: str, mv: Move, motion) -> None:
@@ -741,6 +819,17 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, mv.unit)
         edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
         self._write_line(line, edits, write)
+
+
+def _chord_fits(points: np.ndarray, budget: float) -> bool:
+    """Whether every point lies within ``budget`` of the chord from the first to the last."""
+    a, b = points[0], points[-1]
+    ab = b - a
+    L2 = float(ab @ ab)
+    if L2 == 0.0:
+        return bool(np.all(np.linalg.norm(points - a, axis=1) <= budget))
+    t = np.clip((points - a) @ ab / L2, 0.0, 1.0)
+    return bool(np.all(np.linalg.norm(points - (a + t[:, None] * ab), axis=1) <= budget))
 
 
 # -- entry points ---------------------------------------------------------------------

@@ -50,8 +50,11 @@ HOME_STORE = {281: "G28", 301: "G30"}
 
 # Codes refused with the construct's name: they change geometry in ways this
 # postprocessor does not model.
+# G5 cubic and G5.1 quadratic splines (LinuxCNC): motion modes, linearised when corrected
+SPLINES = {50, 51}
+
 REFUSED_G = {
-    50: "G5 cubic spline", 51: "G5.1 quadratic spline", 52: "G5.2 NURBS",
+    52: "G5.2 NURBS block (not supported yet)", 53: "G5.3 end of NURBS block (not supported yet)",
     70: "G7 lathe diameter mode", 80: "G8 lathe radius mode",
     330: "G33 spindle-synchronised motion", 331: "G33.1 rigid tapping",
     382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing", 385: "G38.5 probing",
