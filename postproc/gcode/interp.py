@@ -177,6 +177,29 @@ def classify_construct(line: str) -> tuple[str, str]:
     return "", ""
 
 
+# controllers that read "(a (b) c)" as one comment (LinuxCNC and Grbl reject it)
+NESTING_COMMENTS = {"fanuc", "haas", "mach3"}
+
+
+def blank_nested_comments(line: str) -> str:
+    """The line with the inside of each outermost balanced ( ... ) blanked, so that a
+    nested comment lexes as one comment at the same columns."""
+    out = list(line)
+    depth = 0
+    for i, ch in enumerate(line):
+        if ch == ";" and depth == 0:
+            break
+        if ch == "(":
+            if depth > 0:
+                out[i] = " "
+            depth += 1
+        elif ch == ")" and depth > 0:
+            depth -= 1
+            if depth > 0:
+                out[i] = " "
+    return "".join(out)
+
+
 def _is_program_number(tokens) -> bool:
     """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
     content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
@@ -352,6 +375,8 @@ class Interpreter:
                     None, [], False, motion_idx, ())
 
     def _slow_words(self, lineno: int, line: str):
+        if self.dialect in NESTING_COMMENTS and line.count("(") > 1:
+            line = blank_nested_comments(line)
         try:
             tokens = lexer.lex(line, self.path, lineno)
         except GcodeSyntaxError:
@@ -434,7 +459,7 @@ class Interpreter:
                                     hint="expand subroutines and loops in the CAM system before correcting")
                 if letter in "UVW" or (letter == "E" and not any(
                         (w[0] == "M" and _gkey(w[1]) // 10 in IO_M and _gkey(w[1]) % 10 == 0)
-                        or (w[0] == "G" and _gkey(w[1]) == 1870) for w in words)):
+                        or (w[0] == "G" and _gkey(w[1]) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 vals[letter] = (float(num), i)
@@ -601,8 +626,11 @@ class Interpreter:
         if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
             if motion_key is not None and st.motion not in CANNED_CYCLES:
                 st.before_cycle = st.motion
-            if motion_key is not None and motion_key != st.motion:
-                st.cycle_r = st.cycle_z = None  # given again when the motion mode changes (LinuxCNC)
+            if motion_key is not None and motion_key != st.motion and (
+                    self.dialect not in ("fanuc", "haas") or st.motion not in CANNED_CYCLES):
+                # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
+                # keep them from one cycle to the next (until G80 or another motion)
+                st.cycle_r = st.cycle_z = None
             if motion_key is not None:
                 st.motion = motion_key
             return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
@@ -635,9 +663,13 @@ class Interpreter:
                             lineno, first_axis_col)
         if g53 and st.motion not in (RAPID, LINE):
             raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
-        if g53 and st.incremental:
-            raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
-                            first_axis_col)
+        incremental = st.incremental
+        if g53 and incremental:
+            if self.dialect not in ("fanuc", "haas"):
+                raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
+                                first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
+                                                     "machine positions in G91 too (--dialect fanuc|haas)")
+            incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
 
         shift = self.shift(g53, lineno, first_axis_col)
         q0 = tuple(st.pos)
@@ -647,7 +679,7 @@ class Interpreter:
             if a in vals:
                 v, i = vals[a]
                 axis_idx[k] = i
-                if st.incremental:
+                if incremental:
                     if math.isnan(q1[k]):
                         raise self._err(
                             MissingSetupError,
@@ -678,7 +710,7 @@ class Interpreter:
         st.pos = q1
         move = Move(
             lineno=lineno, kind=st.motion, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift,
-            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+            unit=unit, incremental=incremental, arc_absolute=st.arc_absolute, words=words,
             axis_idx=tuple(axis_idx), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
@@ -837,6 +869,12 @@ class Interpreter:
         unit = st.unit_mm
         if "R" in vals:
             st.cycle_r = vals["R"][0]
+        if st.cycle_r is None and self.dialect in ("fanuc", "haas") and not math.isnan(st.pos[2]):
+            # Fanuc and Haas: R is optional; without it the R plane is the initial level
+            if st.incremental:
+                st.cycle_r = 0.0
+            else:
+                st.cycle_r = (st.pos[2] - self.shift(False, lineno, col)[2]) / unit
         if st.cycle_r is None:
             raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
         if "Z" in vals:
@@ -1069,6 +1107,8 @@ class Interpreter:
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
         if wrong and self.dialect in ("fanuc", "haas", "mach3"):
             wrong = []  # these controllers ignore an offset word off the arc's plane
+        elif wrong and self.dialect == "generic" and all(vals[k][0] == 0 for k in wrong):
+            wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
                             words[vals[wrong[0]][1]][4] + 1,

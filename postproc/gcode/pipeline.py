@@ -66,6 +66,7 @@ class CorrectOptions:
     force: bool = False
     added: list = field(default_factory=list)
     chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
+    dialect: str = "generic"  # the controller the program is for: how it is read and written
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
@@ -106,7 +107,7 @@ class Corrector(EmitterMixin):
         self.path = path
         self.cal_name = calibration_name
         self.cal_sha = calibration_sha256
-        self.interp = Interpreter(setup, path)
+        self.interp = Interpreter(setup, path, dialect=options.dialect)
         self.interp.require_g54 = bool(setup.start)
         self.report = CorrectReport()
         # where the machine is before the first move: the start position (NaN: unknown);
@@ -119,6 +120,7 @@ class Corrector(EmitterMixin):
         self.emitted_motion: int | None = None
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
+        self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
@@ -785,8 +787,15 @@ class Corrector(EmitterMixin):
         flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
         edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
         sep, lower = emit.style_of(line)
-        for letter, idx, t, attr in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z"), ("R", c.r_idx, t_r[2], "_cycle_rz")):
+        same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
+        self._cycle_nominal = (c.z_mm, c.r_mm)
+        for letter, idx, t, attr, nominal in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z", c.z_mm),
+                                              ("R", c.r_idx, t_r[2], "_cycle_rz", c.r_mm)):
             v = (t - shift[2]) / unit
+            if idx < 0 and not same_group:
+                # the controller holds the program's own value (given earlier, or R taken as
+                # the initial level)
+                setattr(self, attr, (nominal - shift[2]) / unit)
             if idx >= 0:
                 _l, num, start, end, _p = mv.words[idx]
                 dout = max(d, emit.decimals_of(num))

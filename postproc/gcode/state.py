@@ -65,6 +65,8 @@ REFUSED_G = {
     680: "G68 coordinate rotation", 923: "G92.3 restore offsets",
     171: "G17.1 plane", 181: "G18.1 plane", 191: "G19.1 plane", 600: "G60 directional positioning",
     760: "G76 threading cycle",
+    470: "G47 text engraving (Haas)", 120: "G12 circular pocket (Haas)", 130: "G13 circular pocket (Haas)",
+    1500: "G150 general pocket milling (Haas)",
 }
 
 # Why some refused codes cannot be corrected (the hint shown with the refusal).
