@@ -495,94 +495,15 @@ class Interpreter:
         if tool_change:
             st.spindle_tool = st.tool
 
-        motion_key = None
-        motion_idx = -1
-        g53 = False
-        g92 = None
-        g10 = False
-        home_code = None
-        cancel_cycle = False
-        g52 = False
-        lookahead = None
-        work_name = None
-        prefix: list[str] = []
+        blk = _Block(lineno, words, vals)
         for key, i in gcodes:
-            gtext = f"G{words[i][1]}"
-            if key in MOTION_CODES:
-                if motion_key is not None:
-                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key, motion_idx = key, i
-                self.motion_word = True
-            elif key in CANNED_CYCLES:
-                if motion_key is not None:
-                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key, motion_idx = key, i
-                self.motion_word = True
-            elif key in (980, 990):
-                st.retract_r = key == 990
-            elif key == 800:
-                cancel_cycle = True
-                self.motion_word = True
-            elif key in LOOKAHEAD_G and self._is_lookahead(key, vals):
-                lookahead = key
-            elif key in SPLINES:
-                if motion_key is not None:
-                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key, motion_idx = key, i
-                self.motion_word = True
-            elif key in REFUSED_G:
-                raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i),
-                                hint=REFUSED_HINT.get(key))
-            elif key in HOME_CODES:
-                home_code = (key, i)
-            elif key in HOME_STORE:
-                if any(a in vals for a in AXES):
-                    raise self._err(UnsupportedGcodeError, f"G{words[i][1]} with axis words", lineno, col_of(i))
-                self.home[HOME_STORE[key]] = list(st.pos)
-            elif key == 520:
-                g52 = True
-            elif key in PLANES:
-                st.plane = key
-                prefix.append(gtext)
-            elif key in (200, 210):
-                st.inch = key == 200
-                prefix.append(gtext)
-            elif key in (900, 910):
-                st.incremental = key == 910
-                prefix.append(gtext)
-            elif key in (901, 911):
-                st.arc_absolute = key == 901
-                prefix.append(gtext)
-            elif key in (930, 940, 950):
-                st.inverse_time = key == 930
-                prefix.append(gtext)
-            elif key in WORK_SYSTEMS:
-                work_name = WORK_SYSTEMS[key]
-                prefix.append(gtext)
-            elif key == 541:
-                if "P" not in vals:
-                    raise self._err(GcodeSyntaxError, "G54.1 needs a P word", lineno, col_of(i))
-                work_name = f"G54.1P{int(vals['P'][0])}"
-                prefix.append(f"{gtext} P{words[vals['P'][1]][1]}")
-            elif key == 430:
-                prefix.append(gtext + (f" H{words[vals['H'][1]][1]}" if "H" in vals else ""))
-                self._g43(vals, lineno, col_of(i))
-            elif key == 490:
-                st.tlo, st.tlo_active = 0.0, False
-                prefix.append(gtext)
-            elif key == 530:
-                g53 = True
-                prefix.append(gtext)
-            elif key in (920, 921, 922):
-                g92 = key
-            elif key == 100:
-                g10 = True
-            elif key == 40:
-                pass  # dwell: P is seconds, no geometry
-            elif key in NEUTRAL_G:
-                pass
-            else:
+            handler = _G_HANDLERS.get(key)
+            if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i][1]} (unknown G code)", lineno, col_of(i))
+            handler(self, blk, key, i)
+        motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
+        home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
+        lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
 
         if work_name is not None:
             st.work = work_name
@@ -1164,6 +1085,164 @@ class Interpreter:
         center = [0.0, 0.0, 0.0]
         center[a1], center[a2], center[an] = c1, c2, q0[an]
         return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
+
+
+@dataclass(slots=True)
+class _Block:
+    """What the G codes of one block set, read by the rest of :meth:`Interpreter._block`."""
+
+    lineno: int
+    words: list
+    vals: dict
+    motion_key: int | None = None
+    motion_idx: int = -1
+    g53: bool = False
+    g92: int | None = None
+    g10: bool = False
+    home_code: tuple[int, int] | None = None
+    cancel_cycle: bool = False
+    g52: bool = False
+    lookahead: int | None = None
+    work_name: str | None = None
+    prefix: list = field(default_factory=list)
+
+    def col(self, i: int) -> int:
+        return self.words[i][4] + 1
+
+    def gtext(self, i: int) -> str:
+        return f"G{self.words[i][1]}"
+
+
+def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G0-G3, canned cycles, splines: the block's motion code (one per block)."""
+    if b.motion_key is not None:
+        raise it._err(GcodeSyntaxError, "two motion codes in one block", b.lineno, b.col(i))
+    b.motion_key, b.motion_idx = key, i
+    it.motion_word = True
+
+
+def _g_retract(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.retract_r = key == 990
+
+
+def _g_cancel_cycle(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.cancel_cycle = True
+    it.motion_word = True
+
+
+def _g_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    raise it._err(UnsupportedGcodeError, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
+
+
+def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G5, G5.1, G8: Fanuc/Haas look-ahead codes with their P/Q alone, else splines (G5,
+    G5.1) or refused (G8 lathe radius mode)."""
+    if it._is_lookahead(key, b.vals):
+        b.lookahead = key
+    elif key in SPLINES:
+        _g_motion(it, b, key, i)
+    else:
+        _g_refused(it, b, key, i)
+
+
+def _g_lookahead(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.lookahead = key
+
+
+def _g_home(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.home_code = (key, i)
+
+
+def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    if any(a in b.vals for a in AXES):
+        raise it._err(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
+    it.home[HOME_STORE[key]] = list(it.state.pos)
+
+
+def _g_local_offset(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g52 = True
+
+
+def _g_plane(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.plane = key
+    b.prefix.append(b.gtext(i))
+
+
+def _g_units(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.inch = key == 200
+    b.prefix.append(b.gtext(i))
+
+
+def _g_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.incremental = key == 910
+    b.prefix.append(b.gtext(i))
+
+
+def _g_arc_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.arc_absolute = key == 901
+    b.prefix.append(b.gtext(i))
+
+
+def _g_feed_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.inverse_time = key == 930
+    b.prefix.append(b.gtext(i))
+
+
+def _g_work(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.work_name = WORK_SYSTEMS[key]
+    b.prefix.append(b.gtext(i))
+
+
+def _g_work_extended(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    vals = b.vals
+    if "P" not in vals:
+        raise it._err(GcodeSyntaxError, "G54.1 needs a P word", b.lineno, b.col(i))
+    b.work_name = f"G54.1P{int(vals['P'][0])}"
+    b.prefix.append(f"{b.gtext(i)} P{b.words[vals['P'][1]][1]}")
+
+
+def _g_tool_length(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    vals = b.vals
+    b.prefix.append(b.gtext(i) + (f" H{b.words[vals['H'][1]][1]}" if "H" in vals else ""))
+    it._g43(vals, b.lineno, b.col(i))
+
+
+def _g_tool_length_cancel(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.tlo, it.state.tlo_active = 0.0, False
+    b.prefix.append(b.gtext(i))
+
+
+def _g_machine(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g53 = True
+    b.prefix.append(b.gtext(i))
+
+
+def _g_g92(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g92 = key
+
+
+def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g10 = True
+
+
+def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
+
+
+#: G code key (10 x number) -> handler(interpreter, block, key, word index)
+_G_HANDLERS: dict = {}
+for _keys, _handler in (
+    (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused),
+    (MOTION_CODES, _g_motion), (CANNED_CYCLES, _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
+    (LOOKAHEAD_G, _g_lookahead), ({50, 51, 80}, _g_lookahead_spline_or_refused),
+    (HOME_CODES, _g_home), (HOME_STORE, _g_home_store), ({520}, _g_local_offset),
+    (PLANES, _g_plane), ({200, 210}, _g_units), ({900, 910}, _g_distance), ({901, 911}, _g_arc_distance),
+    ({930, 940, 950}, _g_feed_mode), (WORK_SYSTEMS, _g_work), ({541}, _g_work_extended),
+    ({430}, _g_tool_length), ({490}, _g_tool_length_cancel), ({530}, _g_machine), ({920, 921, 922}, _g_g92),
+    ({100}, _g_g10),
+):
+    for _key in _keys:
+        _G_HANDLERS[_key] = _handler
 
 
 def spline_points(ctrl, s) -> np.ndarray:
