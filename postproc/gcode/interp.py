@@ -109,7 +109,7 @@ class Move:
     unit: float
     incremental: bool
     arc_absolute: bool
-    words: list[tuple[str, str, int, int]]
+    words: list[lexer.Word]  # (LETTER, number text, start, end, letter position) per word
     axis_idx: tuple[int, int, int]
     feed_idx: int
     inverse_time: bool
