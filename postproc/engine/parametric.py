@@ -190,7 +190,10 @@ class ParametricEngine(Engine):
             opts["astatic"] = replace(self.astatic, **opts["astatic"])
         return ParametricEngine(self.tables, self.squareness, self.volume_mm, **opts)
 
-    @property
+    def with_extrapolation(self, mode: str) -> ParametricEngine:
+        return self.with_options(extrapolate=mode)
+
+    @property  # type: ignore[override]
     def accept_residual_mm(self) -> float:
         """Largest inverse residual this engine's solver stands for.
 

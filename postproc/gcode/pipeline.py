@@ -39,7 +39,7 @@ from postproc.errors import (
 )
 from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import EmitterMixin, _unit_decimals
-from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, engine_attr, prepare_engine
+from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move, start_position
@@ -127,7 +127,7 @@ class Corrector(EmitterMixin):
         self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
-        self.report.solver = str(engine_attr(engine, "solver") or "")
+        self.report.solver = engine.solver
 
     # -- safety-checked engine calls ----------------------------------------------------
     def _context(self, dirs: np.ndarray, rotary: list[dict]) -> dict:
