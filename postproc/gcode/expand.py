@@ -213,9 +213,11 @@ def parse_block(line: str, *, fanuc: bool, path: str | None, lineno: int,
             word, i = _read_word(p, i)
             block.items.append(word)
         elif c in "@^":
-            raise UnsupportedGcodeError(
-                f"polar coordinate word '{c}' is not supported", path=path, lineno=lineno,
-                col=packed.col(i), hint="write the point in X/Y coordinates")
+            raise _polar(packed, i, path, lineno)
+        elif c in "+-*/" and block.items and isinstance(block.items[-1], Assign) and not fanuc:
+            raise p.error(i, f"unexpected {c!r} after a parameter setting",
+                          hint="LinuxCNC takes one value after '=': write the expression in [ ], "
+                          "e.g. #1 = [2 + 3]")
         else:
             raise p.error(i, f"unexpected character {c!r}",
                           hint="a G-code line holds words (letter + value), parameter settings and comments")
@@ -252,6 +254,12 @@ def _read_assign(p: ExprParser, i: int, fanuc: bool) -> Assign:
     return Assign(target, node, (a, b), p.p.col(start))
 
 
+def _polar(packed: Packed, i: int, path: str | None, lineno: int) -> UnsupportedGcodeError:
+    return UnsupportedGcodeError(
+        f"polar coordinate word '{packed.text[i]}' (LinuxCNC @ distance, ^ angle) is not supported",
+        path=path, lineno=lineno, col=packed.col(i), hint="write the point in X/Y coordinates")
+
+
 def _read_word(p: ExprParser, i: int) -> tuple[Word, int]:
     s = p.s
     letter = s[i].upper()
@@ -259,6 +267,8 @@ def _read_word(p: ExprParser, i: int) -> tuple[Word, int]:
     j = i + 1
     if j >= len(s):
         raise p.error(i, f"letter {letter} has no value")
+    if s[j] in "@^":
+        raise _polar(p.p, j, p.path, p.lineno)
     node, k = p.value(j)
     a, b = p.p.span(j, k)
     if node[0] == "num":
@@ -749,11 +759,16 @@ class _Expander(Env):
         if self.skipping_to_sub is not None or self.skipping_o is not None:
             name = self.skipping_to_sub or self.skipping_o
             unit, idx = self.skip_from or (self.unit, self.idx)
+            if self.skipping_to_sub is not None:
+                raise GcodeSyntaxError(
+                    f"subroutine o{_oname(name)} not found: neither in the file nor as {name}.ngc on "
+                    "the subroutine path", path=unit.path, lineno=idx + 1, col=1,
+                    hint=f"define 'o{_oname(name)} sub' in the file or put {name}.ngc on --subroutine-path")
+            kw = unit.block(idx).oword.kw if unit.block(idx).oword is not None else ""
             raise GcodeSyntaxError(
-                f"o-word o<{name}> not found: the file ended while looking for it",
+                f"'o{_oname(name)} {kw}': the file ended before the o{_oname(name)} line that closes it",
                 path=unit.path, lineno=idx + 1, col=1,
-                hint=f"define 'o{_oname(name)} sub' in the file or put {name}.ngc on the subroutine path"
-                if self.skipping_to_sub else "close the block with its matching o-word line")
+                hint="close the block with its matching o-word line (endif, endwhile, endrepeat, while)")
         if len(self.frames) > 1:
             fr = self.frames[-1]
             raise GcodeSyntaxError(
