@@ -97,7 +97,8 @@ def test_expansion_moves_like_linuxcnc(name):
     # flat: no parameter, expression or control left (comments aside)
     for sl in lines:
         code = re.sub(r"\([^)]*\)|;.*", "", sl.text)
-        assert "#" not in code and "[" not in code, sl
+        assert "#" not in code, sl
+        assert "[" not in code, sl
         assert not re.match(r"\s*/?\s*(N\d+\s*)?[oO]\s*(\d|<)", code) or sl.original, sl
         if sl.original:
             assert sl.text == split_lines(text)[sl.lineno - 1]
@@ -261,7 +262,8 @@ def test_nested_comment_is_an_error_in_linuxcnc_dialect_only():
 
 def test_block_delete_with_a_setting_is_refused():
     err = _raises(HEAD + "/#1 = 3\nM2\n", ExpansionError)
-    assert err.lineno == 2 and "block-delete" in str(err)
+    assert err.lineno == 2
+    assert "block-delete" in str(err)
 
 
 def test_recursion_is_stopped():
