@@ -207,6 +207,10 @@ def parse_block(line: str, *, fanuc: bool, path: str | None, lineno: int,
                 _expect_end(p, i, "a macro assignment must be alone in its block")
         elif c == "o" and not fanuc:
             block.oword, i = _read_oword(p, i)
+        elif fanuc and c == "o" and i + 1 < n and (s[i + 1] == "<" or s[i + 1].isdigit()) and (
+                _read_oword(p, i)[0].kw or s[i + 1] == "<"):
+            raise p.error(i, "o-word control (o100 sub/call/if/while, o<name>) is LinuxCNC syntax",
+                          hint="choose --dialect linuxcnc (or generic) for this program")
         elif fanuc and _macro_start(s, i):
             block.macro, i = _read_macro(p, i)
         elif c.isalpha():
@@ -926,6 +930,10 @@ class _Expander(Env):
             elif w.letter == "N":
                 continue
             elif w.letter in FANUC_ARGUMENTS_I:
+                if w.node is None and "." not in w.raw and v != 0.0:
+                    raise self.refuse(w.col, f"G65 argument {w.letter}{w.raw} has no decimal point: the "
+                                      "control scales it by its least input increment, which is "
+                                      "machine configuration", hint=f"write {w.letter}{w.raw}. (with a point)")
                 if w.letter in args:
                     raise self.refuse(w.col, f"argument {w.letter} given twice (argument specification II "
                                       "is not supported)")
