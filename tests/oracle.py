@@ -15,6 +15,7 @@ plane's normal axis. :class:`Motion` stores both the raw fields and X/Y/Z.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import shutil
@@ -34,6 +35,7 @@ RS274_RESOLUTION = 1e-4
 # Tool table used when a test gives none: tools 1..99, zero length and diameter, so that
 # T/M6/G43 in real programs are accepted and change nothing.
 DEFAULT_TOOLS = "".join(f"T{n} P{n} Z0 D0\n" for n in range(1, 100))
+_LOCK_PATH = Path(tempfile.gettempdir()) / "postproc-rs274.lock"
 # Wall-clock cap for one rs274 run (s): programs in the tests run in milliseconds.
 RS274_TIMEOUT_S = 60
 
@@ -147,13 +149,31 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
         ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\nPARAMETER_FILE = {var}\n")
         cmd += ["-i", str(ini), "-g", str(prog), str(out)]
         env = dict(os.environ, LC_ALL="C")
-        proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                              timeout=RS274_TIMEOUT_S, env=env)
+        # rs274 instances running at the same time can die of SIGBUS (they share memory):
+        # one at a time across processes (pytest-xdist workers too), and retry a killed run
+        with open(_LOCK_PATH, "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                for _attempt in range(3):
+                    out.unlink(missing_ok=True)
+                    proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True,
+                                          text=True, timeout=RS274_TIMEOUT_S, env=env)
+                    if proc.returncode >= 0:
+                        break
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
         canon = out.read_text() if out.exists() else ""
     motions, calls = parse_canon(canon)
     err_lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip() and ln.strip() != "executing"]
     ok = proc.returncode == 0
+    if proc.returncode < 0:
+        err_lines.append(f"rs274 was killed by signal {-proc.returncode}")
     return Rs274Result(ok, "" if ok else "\n".join(err_lines), motions, calls)
+
+
+def run_rs274_many(texts: list[str], **kw) -> list[Rs274Result]:
+    """:func:`run_rs274` on several programs (same options), one after the other."""
+    return [run_rs274(t, **kw) for t in texts]
 
 
 def same_motions(a: list[Motion], b: list[Motion], tol: float = RS274_RESOLUTION * 1.5) -> str:

@@ -15,7 +15,7 @@ from postproc.errors import GcodeSyntaxError, PostprocError
 from postproc.gcode.expand import ExpansionError, SourceLine, expand, needs_expansion
 from postproc.gcode.expr import format_number
 from postproc.gcode.lexer import split_lines
-from tests.oracle import requires_rs274, run_rs274, same_motions
+from tests.oracle import requires_rs274, run_rs274, run_rs274_many, same_motions
 
 HEAD = "G21 G17 G90 G94 F100\n"
 
@@ -86,12 +86,11 @@ PROGRAMS = {
 @pytest.mark.parametrize("name", sorted(PROGRAMS))
 def test_expansion_moves_like_linuxcnc(name):
     text = PROGRAMS[name]
-    ref = run_rs274(text)
-    assert ref.ok, ref.error
-    assert ref.motions, "the program must move"
     lines = flat(text)
     out = "".join(sl.text for sl in lines)
-    got = run_rs274(out)
+    ref, got = run_rs274_many([text, out])
+    assert ref.ok, ref.error
+    assert ref.motions, "the program must move"
     assert got.ok, got.error + "\n" + out
     assert same_motions(ref.motions, got.motions) == "", out
     # flat: no parameter, expression or control left (comments aside)

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import math
 import re
+from bisect import bisect_right
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from itertools import accumulate
 from pathlib import Path
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
@@ -40,6 +42,7 @@ from postproc.gcode.expr import (
     pack,
     to_index,
 )
+from postproc.gcode.lexer import scan_words, split_lines
 
 DIALECTS = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
 FANUC_DIALECTS = ("fanuc", "haas")
@@ -83,6 +86,8 @@ _LINUXCNC_MACHINE_RANGES = (
     (5599, 5601, "controller flag"),
 )
 
+_M_SPECIAL = (2.0, 30.0, 98.0, 99.0)
+_G_SPECIAL = (65.0, 66.0)
 _LINE_END = re.compile(r"(\r\n|\n|\r)$")
 _O_LINE = re.compile(r"[ \t]*/?[ \t]*(?:[nN][ \t]*\d+[ \t]*)?[oO:]")
 _N_LINE = re.compile(r"[ \t]*/?[ \t]*[nN][ \t]*(\d+)")
@@ -415,14 +420,24 @@ class Unit:
         return self._programs
 
 
-def _is_fanuc(lines: Sequence[str], dialect: str) -> bool:
+def _candidate_lines(lines: Sequence[str]) -> list[int]:
+    """Indices of the lines that may hold a construct (one regex pass over the text)."""
+    text = "".join(lines)
+    hits = [m.start() for m in _CANDIDATE.finditer(text)]
+    if not hits:
+        return []
+    ends = list(accumulate(map(len, lines)))
+    return sorted({bisect_right(ends, h) for h in hits})
+
+
+def _is_fanuc(lines: Sequence[str], dialect: str, candidates: list[int] | None = None) -> bool:
     if dialect in FANUC_DIALECTS:
         return True
     if dialect != "generic":
         return False
     fanuc = False
-    for line in lines:
-        code = _strip_comments(line)
+    for k in _candidate_lines(lines) if candidates is None else candidates:
+        code = _strip_comments(lines[k])
         if _LINUXCNC_MARK.search(code):
             return False
         if not fanuc and _FANUC_MARK.search(code):
@@ -442,17 +457,19 @@ def needs_expansion(lines: Sequence[str], dialect: str = "generic") -> bool:
     A program-number line (``O1234``, ``:1234``) or ``%`` alone does not count:
     :func:`expand` would yield such a program unchanged up to its M2/M30.
     """
-    fanuc = _is_fanuc(lines, dialect)
-    for k, line in enumerate(lines):
-        if not _CANDIDATE.search(line):
-            continue
+    candidates = _candidate_lines(lines)
+    fanuc = _is_fanuc(lines, dialect, candidates)
+    for k in candidates:
+        line = lines[k]
         code = _strip_comments(line)
         if not _CANDIDATE.search(code):
             continue
         try:
             b = parse_block(line, fanuc=fanuc, path=None, lineno=k + 1, nested_comments=dialect != "linuxcnc")
         except PostprocError:
-            return True  # let expand() report it with its place
+            if "#" in code or "[" in code:
+                return True  # a broken expression: let expand() report it with its place
+            continue  # not G-code an expansion would touch (e.g. text after the program end)
         if b.oword is not None:
             if b.oword.kw == "" and not any(True for _ in b.items) and _first_code_line(lines) == k:
                 continue
@@ -659,8 +676,6 @@ class _Expander(Env):
             text = raw.decode("utf-8", errors="strict") if raw else ""
             if text.startswith("\ufeff"):
                 text = text[1:]
-            from postproc.gcode.lexer import split_lines
-
             unit = Unit(split_lines(text), key, self.fanuc, self.nested)
             self.files[key] = unit
         return unit
@@ -713,6 +728,15 @@ class _Expander(Env):
                         target = self.skipping_to_sub or self.skipping_o
                         if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
                             yield from self._oword(b)
+                continue
+            words = scan_words(line)
+            if words is not None and not any(
+                    letter == "O" or (letter == "M" and float(num) in _M_SPECIAL)
+                    or (letter == "G" and float(num) in _G_SPECIAL) for letter, num, *_ in words):
+                # fast path: a line of plain words (most CAM output) is yielded as it is
+                if words:
+                    first_code = False
+                yield SourceLine(idx + 1, unit.path, line, True)
                 continue
             stripped = line.strip()
             if stripped.startswith("%"):
