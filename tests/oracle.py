@@ -141,13 +141,15 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
         var = d / "params.var"
         _write_var_file(var, params or {})
         cmd += ["-v", str(var)]
-        subs = d / "subs"
-        subs.mkdir()
-        for name, body in (files or {}).items():
-            (subs / name).write_text(body)
-        ini = d / "rs274.ini"
-        ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\nPARAMETER_FILE = {var}\n")
-        cmd += ["-i", str(ini), "-g", str(prog), str(out)]
+        if files:  # the INI file costs startup time: only when subroutines are needed
+            subs = d / "subs"
+            subs.mkdir()
+            for name, body in files.items():
+                (subs / name).write_text(body)
+            ini = d / "rs274.ini"
+            ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\nPARAMETER_FILE = {var}\n")
+            cmd += ["-i", str(ini)]
+        cmd += ["-g", str(prog), str(out)]
         env = dict(os.environ, LC_ALL="C")
         # rs274 instances running at the same time can die of SIGBUS (they share memory):
         # one at a time across processes (pytest-xdist workers too), and retry a killed run

@@ -196,3 +196,8 @@ def test_m98_program_file_on_subroutine_path(tmp_path):
     text = "O1\nM98 P5001 L2 (TWICE)\nM30\n%\n"
     body = "(W)\nG91 G01 X1. F100.\nG90\n"
     assert flat(text, subroutine_path=[tmp_path]) == "O1\n" + body * 2 + "M30\n%\n"
+
+
+def test_haas_m97_local_subprogram():
+    text = "O9\nM97 P100 L2\nG0 X9.\nM30\nN100 G91 G0 X1.\nG90\nM99\n"
+    assert flat(text, dialect="haas") == "O9\n" + "N100 G91 G0 X1.\nG90\n" * 2 + "G0 X9.\nM30\n"

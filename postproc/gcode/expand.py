@@ -86,7 +86,7 @@ _LINUXCNC_MACHINE_RANGES = (
     (5599, 5601, "controller flag"),
 )
 
-_M_SPECIAL = (2.0, 30.0, 98.0, 99.0)
+_M_SPECIAL = (2.0, 30.0, 97.0, 98.0, 99.0)
 _G_SPECIAL = (65.0, 66.0)
 _LINE_END = re.compile(r"(\r\n|\n|\r)$")
 _O_LINE = re.compile(r"[ \t]*/?[ \t]*(?:[nN][ \t]*\d+[ \t]*)?[oO:]")
@@ -478,15 +478,19 @@ def needs_expansion(lines: Sequence[str], dialect: str = "generic") -> bool:
             return True
         for w in b.words:
             v = _plain_value(w)
-            if (w.letter == "M" and v in (98.0, 99.0)) or (w.letter == "G" and v in (65.0, 66.0)):
+            if (w.letter == "M" and v in ((97.0, 98.0, 99.0) if fanuc else (98.0, 99.0))) or (
+                    w.letter == "G" and v in (65.0, 66.0)):
                 return True
     return False
 
 
 def _first_code_line(lines: Sequence[str]) -> int:
     for k, line in enumerate(lines):
-        code = _strip_comments(line).strip()
-        if code and code != "%":
+        try:
+            code = pack(line, path=None, lineno=k + 1).text
+        except PostprocError:
+            return k
+        if code and not code.startswith("%"):
             return k
     return -1
 
@@ -542,6 +546,8 @@ class _Expander(Env):
         self.fanuc = _is_fanuc(lines, dialect)
         self.linuxcnc_strict = dialect == "linuxcnc"
         self.nested = dialect != "linuxcnc"
+        # M97 (Haas local subprogram: call to a sequence number) in the Fanuc-family dialects
+        self.call_m_codes = (97.0, 98.0, 99.0) if self.fanuc else (98.0, 99.0)
         self.main = Unit(lines, path, self.fanuc, self.nested)
         self.subroutine_path = [Path(p) for p in subroutine_path]
         self.max_lines = max_lines
@@ -810,7 +816,8 @@ class _Expander(Env):
         if b.plain:
             m_codes = [float(w.raw) for w in b.items if w.letter == "M"]
             g_codes = [float(w.raw) for w in b.items if w.letter == "G"]
-            if not any(m in (98.0, 99.0) for m in m_codes) and 65.0 not in g_codes and 66.0 not in g_codes:
+            if not any(m in self.call_m_codes for m in m_codes) and 65.0 not in g_codes and (
+                    66.0 not in g_codes):
                 yield SourceLine(idx + 1, unit.path, line, True)
                 if any(m in (2.0, 30.0) for m in m_codes):
                     raise _Stop
@@ -846,7 +853,7 @@ class _Expander(Env):
         g_codes = by_letter.get("G", [])
         call = None
         drop: set[int] = set()
-        if 98.0 in m_codes or 99.0 in m_codes or 65.0 in g_codes:
+        if any(m in self.call_m_codes for m in m_codes) or 65.0 in g_codes:
             call, drop = self._call_words(words, m_codes, g_codes)
         if 66.0 in g_codes:
             w = next(w for w, v in words if w.letter == "G" and v == 66.0)
@@ -921,6 +928,19 @@ class _Expander(Env):
                 drop.add(k)
                 target = (int(round(v)), w.col)
             return (lambda: self._m99(target)), drop
+        if 97.0 in m_codes and self.fanuc:
+            mw = next(w for k, w, v in letters["M"] if v == 97.0)
+            for k, _w, v in letters.get("M", []):
+                if v == 97.0:
+                    drop.add(k)
+            p = letters.get("P")
+            if not p:
+                raise self.error(mw.col, "M97 needs P (the sequence number of the local subprogram)")
+            for k, _, _ in p + letters.get("L", []):
+                drop.add(k)
+            number = int(round(p[0][2]))
+            count = int(round(letters["L"][0][2])) if "L" in letters else 1
+            return (lambda: self._m97(number, count, p[0][1].col)), drop
         if 98.0 in m_codes:
             mw = next(w for k, w, v in letters["M"] if v == 98.0)
             for k, _w, v in letters.get("M", []):
@@ -998,6 +1018,12 @@ class _Expander(Env):
             return
         unit, start, _ = target
         self._enter("m98", f"O{number}", unit, start + 1, repeat - 1)
+
+    def _m97(self, number: int, count: int, col: int) -> None:
+        if count <= 0:
+            return
+        start = self._sequence(self.main, number, 0, col)
+        self._enter("m98", f"N{number}", self.main, start, count - 1)
 
     def _g65(self, number: int, count: int, args: dict, col: int) -> None:
         target = self._program_target(number, col)
