@@ -192,9 +192,9 @@ def test_o_word_control_in_fanuc_dialect_is_named():
 
 
 def test_m98_program_file_on_subroutine_path(tmp_path):
-    (tmp_path / "5001.NC").write_text("(W)\nG91 G01 X1. F100.\nG90\nM99\n")
+    (tmp_path / "5001.NC").write_text("%\nO5001 (W)\nG91 G01 X1. F100.\nG90\nM99\n%\n")
     text = "O1\nM98 P5001 L2 (TWICE)\nM30\n%\n"
-    body = "(W)\nG91 G01 X1. F100.\nG90\n"
+    body = "G91 G01 X1. F100.\nG90\n"
     assert flat(text, subroutine_path=[tmp_path]) == "O1\n" + body * 2 + "M30\n%\n"
 
 

@@ -746,6 +746,8 @@ class _Expander(Env):
                 continue
             stripped = line.strip()
             if stripped.startswith("%"):
+                if unit is not self.main:
+                    continue  # a subprogram file's own tape marks stay out of the flat program
                 yield SourceLine(idx + 1, unit.path, line, True)
                 if unit is self.main:
                     if percent_open:
