@@ -72,6 +72,10 @@ PROGRAMS = {
     "    o1 break\n  o2 endif\no1 endwhile\no3 do\n  G1 Y#1\n  #1 = [#1 - 1]\no3 while [#1 GT 0]\nG1 Z1\nM2\n",
     "continue_in_do": HEAD + "#1 = 0\no5 do\n  #1 = [#1 + 1]\n  G1 X#1\n  o6 if [#1 EQ 2]\n    o5 continue\n"
     "  o6 endif\n  G1 Z#1\no5 while [#1 LT 4]\nM2\n",
+    "recursion": HEAD + "#<_n> = 0\no20 sub\n  #<_n> = [#<_n> + 1]\n  o21 if [#<_n> LT 4]\n    G1 X#<_n>\n"
+    "    o20 call\n    G1 Y#<_n>\n  o21 endif\no20 endsub\no20 call\nM2\n",
+    "nested_repeat_globals": HEAD + "o10 repeat [2]\n  o11 repeat [3]\n    G91 G1 X1\n  o11 endrepeat\n"
+    "  G90 G1 Y[#31 + 1]\n  #31 = [#31 + 1]\no10 endrepeat\nG90\nM2\n",
     "m98_linuxcnc": HEAD + "M98 P300 L2\nM98 P300\nG1 Y#1\nM2\nO300\n#1 = [#1 + 1]\nG91 G1 X1\nG90\nM99\n",
     "comments_kept": HEAD + "#1 = 2 (width)\nG1 X#1 (move to #1) ; trailing\n(plain comment)\nG1 Y1 ; no change\nM2\n",
     "block_delete_word": HEAD + "#1 = 4\n/G1 X#1\nG1 Y2\nM2\n",
@@ -243,6 +247,8 @@ def test_a_parameter_set_by_the_program_may_be_read():
         (HEAD + "o1 endwhile\nM2\n", 2, 1, ["o1 endwhile"]),
         (HEAD + "o3 while [1]\no3 endwhile\n", 3, 1, ["more than 1000 lines", "endless"]),
         (HEAD + "G1 X@1\n", 2, 5, ["polar"]),
+        # rs274ngc evaluates an elseif condition even after a branch was taken
+        (HEAD + "o3 if [1]\nG1 X1\no3 elseif [1/0]\no3 endif\nM2\n", 4, 13, ["division by zero"]),
     ],
 )
 def test_errors_name_path_line_col(text, lineno, col, words):

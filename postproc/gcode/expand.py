@@ -1186,6 +1186,9 @@ class _Expander(Env):
         if self.fanuc:
             raise self.error(ow.col, "o-word control is LinuxCNC syntax",
                              hint="choose --dialect linuxcnc for this program")
+        if self.defining_sub is not None and self.skipping_o == self.defining_sub and not (
+                name == self.defining_sub and kw == "endsub"):
+            return  # inside a definition met in sequence: only its endsub counts
         if kw in ("sub", ""):
             if self.skipping_o is not None:
                 if self.offsets.get(name) is None:
@@ -1280,11 +1283,12 @@ class _Expander(Env):
             return
         if kw == "elseif":
             self._need(ow, ("if",), "'if'")
+            test = self._num(ow.args[0], ow.col)  # rs274ngc reads (evaluates) it in any case
             if self.executed_if:
                 self.skipping_o = name
                 self.skip_from = (self.unit_cur, self.cur_idx)
                 return
-            if self._num(ow.args[0], ow.col) != 0.0:
+            if test != 0.0:
                 self.skipping_o = None
                 self.executed_if = True
             return
