@@ -240,7 +240,8 @@ def test_a_parameter_set_by_the_program_may_be_read():
         (HEAD + "G1 X[SQRT[-1]]\n", 2, 6, ["SQRT"]),
         (HEAD + "G1 X[1 + ]\n", 2, 10, ["expected a number"]),
         (HEAD + "G1 X[1 + 2\n", 2, 11, ["']'"]),
-        (HEAD + "#1 = 2 + 3\n", 2, 8, ["unexpected", "[ ]"]),
+        # a named parameter marks the program as LinuxCNC, which takes one value after '='
+        (HEAD + "#<x> = 1\n#1 = 2 + 3\n", 3, 8, ["unexpected", "[ ]"]),
         (HEAD + "o<missing> call\nM2\n", 2, 1, ["o<missing>", "not found", "missing.ngc"]),
         (HEAD + "o1 if [0]\nG1 X1\nM2\n", 2, 1, ["'o1 if'", "file ended"]),
         (HEAD + "o1 sub\nG1 X1\nM2\n", 2, 1, ["o1 sub", "endsub"]),

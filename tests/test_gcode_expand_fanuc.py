@@ -151,8 +151,10 @@ def test_fanuc_functions_differ_from_linuxcnc():
 
 
 def test_generic_dialect_recognises_macro_b():
-    text = "O8\n#1 = 2\nIF [#1 GT 1] GOTO 5\nG0 X9.\nN5 G0 X#1\nM30\n"
+    text = "O8\n#1 = 2\nN3IF[#1GT1]GOTO5\nG0 X9.\nN5 G0 X#1\nM30\n"
     assert flat(text, dialect="generic") == "O8\nN5 G0 X2.0\nM30\n"
+    # arithmetic outside brackets is macro B (LinuxCNC wants #1 = [#2 + 3])
+    assert flat("#2 = 1.5\n#1 = #2 + 3 * 2\nG0 X#1 Y#7\nM30\n", dialect="generic") == "G0 X7.5\nM30\n"
 
 
 @pytest.mark.parametrize(
