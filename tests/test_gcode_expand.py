@@ -275,3 +275,9 @@ def test_block_delete_with_a_setting_is_refused():
 def test_recursion_is_stopped():
     err = _raises(HEAD + "o1 sub\n  o1 call\no1 endsub\no1 call\nM2\n", ExpansionError)
     assert "nested deeper" in str(err)
+
+
+def test_byte_order_mark_on_the_first_line():
+    lines = flat("\ufeff#1 = 2\nG1 X#1 F1\nM2\n")
+    assert [sl.text for sl in lines] == ["G1 X2.0 F1\n", "M2\n"]
+    assert flat("\ufeffG21\nM2\n")[0].text == "\ufeffG21\n"

@@ -92,7 +92,7 @@ def pack(line: str, *, path: str | None, lineno: int, nested_comments: bool = Tr
     text: list[str] = []
     cols: list[int] = []
     comments: list[tuple[int, int]] = []
-    i = 0
+    i = 1 if line.startswith("\ufeff") else 0  # a UTF-8 byte order mark before the first line
     while i < end:
         c = line[i]
         if c == "(":
