@@ -21,6 +21,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,6 +36,8 @@ RS274_RESOLUTION = 1e-4
 # Tool table used when a test gives none: tools 1..99, zero length and diameter, so that
 # T/M6/G43 in real programs are accepted and change nothing.
 DEFAULT_TOOLS = "".join(f"T{n} P{n} Z0 D0\n" for n in range(1, 100))
+# Runs killed by a signal (another rs274 outside the lock) are tried again this many times.
+RS274_ATTEMPTS = 5
 _LOCK_PATH = Path(tempfile.gettempdir()) / "postproc-rs274.lock"
 # Wall-clock cap for one rs274 run (s): programs in the tests run in milliseconds.
 RS274_TIMEOUT_S = 60
@@ -156,12 +159,13 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
         with open(_LOCK_PATH, "a") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
             try:
-                for _attempt in range(3):
+                for attempt in range(RS274_ATTEMPTS):
                     out.unlink(missing_ok=True)
                     proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True,
                                           text=True, timeout=RS274_TIMEOUT_S, env=env)
                     if proc.returncode >= 0:
                         break
+                    time.sleep(0.2 * (attempt + 1))  # another rs274 (not under this lock) is running
             finally:
                 fcntl.flock(lock, fcntl.LOCK_UN)
         canon = out.read_text() if out.exists() else ""

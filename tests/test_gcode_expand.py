@@ -10,12 +10,12 @@ from __future__ import annotations
 import re
 
 import pytest
+from oracle import requires_rs274, run_rs274, run_rs274_many, same_motions
 
 from postproc.errors import GcodeSyntaxError, PostprocError
 from postproc.gcode.expand import ExpansionError, SourceLine, expand, needs_expansion
 from postproc.gcode.expr import format_number
 from postproc.gcode.lexer import split_lines
-from tests.oracle import requires_rs274, run_rs274, run_rs274_many, same_motions
 
 HEAD = "G21 G17 G90 G94 F100\n"
 

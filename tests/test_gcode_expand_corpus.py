@@ -19,11 +19,11 @@ import re
 from pathlib import Path
 
 import pytest
+from oracle import requires_rs274, run_rs274, same_motions
 
 from postproc.errors import PostprocError
 from postproc.gcode.expand import expand, needs_expansion
 from postproc.gcode.lexer import split_lines
-from tests.oracle import requires_rs274, run_rs274, same_motions
 
 CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
 # rs274 and the expansion take ~5 s on the largest corpus programs; beyond this size

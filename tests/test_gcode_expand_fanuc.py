@@ -10,11 +10,11 @@ against rs274.
 from __future__ import annotations
 
 import pytest
+from oracle import requires_rs274, run_rs274, same_motions
 
 from postproc.errors import GcodeSyntaxError, PostprocError
 from postproc.gcode.expand import ExpansionError, expand
 from postproc.gcode.lexer import split_lines
-from tests.oracle import requires_rs274, run_rs274, same_motions
 
 
 def flat(text: str, dialect: str = "fanuc", **kw) -> str:

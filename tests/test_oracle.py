@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-
-from tests.oracle import parse_canon, requires_rs274, run_rs274, same_motions
+from oracle import parse_canon, requires_rs274, run_rs274, same_motions
 
 CANON = """\
     1 N..... USE_LENGTH_UNITS(CANON_UNITS_MM)
