@@ -135,7 +135,7 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
     with tempfile.TemporaryDirectory(prefix="rs274-") as tmp:
         d = Path(tmp)
         prog = d / "prog.ngc"
-        prog.write_text(text)
+        prog.write_bytes(text.encode("utf-8", errors="surrogateescape"))
         out = d / "out.txt"
         cmd = [RS274]
         tbl = d / "tools.tbl"
@@ -148,7 +148,7 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
             subs = d / "subs"
             subs.mkdir()
             for name, body in files.items():
-                (subs / name).write_text(body)
+                (subs / name).write_bytes(body.encode("utf-8", errors="surrogateescape"))
             ini = d / "rs274.ini"
             ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\nPARAMETER_FILE = {var}\n")
             cmd += ["-i", str(ini)]
