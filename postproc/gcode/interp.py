@@ -50,6 +50,16 @@ from postproc.gcode.state import (
     ModalState,
 )
 
+
+class NeedsExpansion(UnsupportedGcodeError):
+    """A construct the expansion stage flattens (parameters, expressions, O-words,
+    subprograms, macros): the corrector starts over on the expanded program."""
+
+
+# constructs the expansion stage (postproc.gcode.expand) flattens
+EXPANDABLE_M = {97, 98, 99}
+EXPANDABLE_G = {650, 660, 661}
+
 AXES = "XYZ"
 ROTARY = "ABC"
 # Letters accepted as plain parameters of other words (checked where used).
@@ -239,6 +249,7 @@ class Interpreter:
         self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
+        self.may_expand = False  # set by the corrector when it can start over on the expanded program
         # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
         self.home = {name: list(_offset_tuple(v, partial=True)) for name, v in
                      ((getattr(setup, "home", None) or {}).items())}
@@ -249,6 +260,13 @@ class Interpreter:
         self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
+    def _construct_error(self, what: str):
+        """The error class for a refused construct: NeedsExpansion when expanding is allowed
+        and the construct is one the expansion stage flattens."""
+        if self.may_expand and not what.startswith("polar"):
+            return NeedsExpansion
+        return UnsupportedGcodeError
+
     def _err(self, cls, msg, lineno, col, hint=None):
         return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
 
@@ -382,7 +400,7 @@ class Interpreter:
         except GcodeSyntaxError:
             what, hint = classify_construct(line)
             if what:
-                raise self._err(UnsupportedGcodeError, what, lineno, 1, hint=hint) from None
+                raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
             raise
         first = next((t for t in tokens if t.kind != lexer.SPACE), None)
         if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
@@ -396,9 +414,10 @@ class Interpreter:
             if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
                 what, hint = classify_construct(line)
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
+                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
             if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
-                raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
+                raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
+                                tok.col,
                                 hint="O words other than a program number are expanded only when their "
                                      "subroutine is in the program or on --subroutine-path")
         words = []
@@ -427,14 +446,14 @@ class Interpreter:
             elif kind == lexer.LETTER:
                 what, hint = classify_construct(line)
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
+                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
                 raise self._err(UnsupportedGcodeError,
                                 f"word {tok.letter} without a plain number (macro, expression or parameter)",
                                 lineno, tok.col, hint="expand macros and expressions before correcting")
             elif kind == lexer.SYMBOL:
                 what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
+                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
                 raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
             elif kind == lexer.NUMBER:
                 raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
@@ -474,7 +493,8 @@ class Interpreter:
                 raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
             m = key // 10
             if m in REFUSED_M:
-                raise self._err(UnsupportedGcodeError, REFUSED_M[m], lineno, col_of(i),
+                raise self._err(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
+                                REFUSED_M[m], lineno, col_of(i),
                                 hint="postproc expands M98/M99 subprograms defined in the same program; "
                                      "put the subprogram in the file")
             if m > 199:
@@ -1131,7 +1151,8 @@ def _g_cancel_cycle(it: Interpreter, b: _Block, key: int, i: int) -> None:
 
 
 def _g_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
-    raise it._err(UnsupportedGcodeError, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
+    cls = NeedsExpansion if (key in EXPANDABLE_G and it.may_expand) else UnsupportedGcodeError
+    raise it._err(cls, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
 
 
 def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:

@@ -17,6 +17,7 @@ import math
 import os
 import re
 import tempfile
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from itertools import islice
@@ -67,6 +68,8 @@ class CorrectOptions:
     added: list = field(default_factory=list)
     chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
     dialect: str = "generic"  # the controller the program is for: how it is read and written
+    expand: bool = True  # flatten parameters, O-words, subprograms and macros (False: refuse them)
+    subroutine_path: tuple = ()  # folders searched for o<name> call and M98 subprogram files
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
@@ -90,6 +93,7 @@ class CorrectReport:
     max_residual_mm: float = 0.0  # largest inverse residual met
     cycles_kept: int = 0
     splines_linearised: int = 0
+    expanded: bool = False  # the program was expanded (subprograms, loops, parameters)
     cycles_expanded: int = 0
 
 
@@ -118,6 +122,7 @@ class Corrector(EmitterMixin):
         self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
         self.emitted_motion: int | None = None
+        self.expanded = False  # correcting the expanded program (recorded in the header)
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
@@ -204,19 +209,34 @@ class Corrector(EmitterMixin):
         return q_nom + delta
 
     # -- the run -----------------------------------------------------------------------
-    def run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
+    def run(self, lines: Iterable[str], write: Callable[[str], None], progress=None,
+            source: deque | None = None) -> CorrectReport:
         # Millions of small short-lived objects, none of them cyclic: the cyclic
         # garbage collector only costs time here (the chunks bound the memory).
         was_enabled = gc.isenabled()
         gc.disable()
         try:
-            return self._run(lines, write, progress)
+            return self._run(lines, write, progress, source)
         finally:
             if was_enabled:
                 gc.enable()
 
-    def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
+    def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None,
+             source: deque | None = None) -> CorrectReport:
+        """``source``: for an expanded program, the (line, file) each of ``lines`` comes
+        from, in order (the lines are then read one by one, never in bulk)."""
         it = iter(lines)
+        interp = self.interp
+        interp.may_expand = source is None and self.opt.expand
+
+        def where(seq: int) -> int:
+            """The line number the interpreter reports for the ``seq``-th line read."""
+            if source is None:
+                return seq
+            ln, p = source.popleft()
+            interp.path = p or self.path
+            return ln
+
         # the lines that stay before the header: a '%' tape mark and the program number
         # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
         head = [ln for ln in islice(it, 3)]
@@ -236,7 +256,7 @@ class Corrector(EmitterMixin):
         entries: list = []
         lineno = 1
         for line in head[:keep]:
-            self.interp.feed_line(lineno, line)
+            self.interp.feed_line(where(lineno), line)
             write(line if emit.line_ending(line) else line + ending)
             self.report.lines_out += 1
             lineno += 1
@@ -247,8 +267,7 @@ class Corrector(EmitterMixin):
         write(header)
         self.report.lines_out += 1
 
-        interp = self.interp
-        use_fast = self.linear_exact and self.opt.fast_lane
+        use_fast = self.linear_exact and self.opt.fast_lane and source is None
         use_bulk = use_fast and self.opt.bulk_lane
         dec_mm = _unit_decimals(self.opt, 1.0)
         dec_in = _unit_decimals(self.opt, MM_PER_INCH)
@@ -263,7 +282,7 @@ class Corrector(EmitterMixin):
                     entries.append((line, fm, interp.motion_word, interp.state.motion))
                     lineno += 1
                     return
-            mv = interp.feed_line(lineno, line)
+            mv = interp.feed_line(where(lineno), line)
             if mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
             elif mv is not None and mv.spline is not None:
@@ -332,6 +351,8 @@ class Corrector(EmitterMixin):
 
     def _setup_note(self) -> str:
         parts = []
+        if self.expanded:
+            parts.append("expanded: subprograms, loops and parameters written out")
         offs = self.setup.offsets or {}
         if "G54" not in offs:
             parts.append("G54 taken as zero unless named")
@@ -848,10 +869,47 @@ def correct_text(text: str, engine, setup: Setup | None = None, options: Correct
     from postproc.gcode.lexer import split_lines
 
     out: list[str] = []
-    c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
-                  calibration_name=calibration_name, calibration_sha256=calibration_sha256)
-    report = c.run(split_lines(text), out.append)
+    lines = split_lines(text)
+    report = _correct_lines(lambda: lines, out.append, out.clear, engine, setup, options, path,
+                            calibration_name, calibration_sha256)
     return "".join(out), report
+
+
+def _correct_lines(get_lines, write, restart, engine, setup, options, path, calibration_name, calibration_sha256,
+                   progress=None) -> CorrectReport:
+    """Correct the lines ``get_lines()`` gives; when the program turns out to need
+    expansion, ``restart()`` drops what was written and the expanded program is corrected."""
+    from postproc.gcode.interp import NeedsExpansion
+
+    setup = setup or Setup()
+    options = options or CorrectOptions()
+
+    def corrector() -> Corrector:
+        return Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
+                         calibration_sha256=calibration_sha256)
+
+    try:
+        return corrector().run(get_lines(), write, progress=progress)
+    except NeedsExpansion:
+        if not options.expand:
+            raise
+    from postproc.gcode.expand import expand
+
+    restart()
+    lines = list(get_lines())
+    source: deque = deque()
+
+    def texts():
+        for sl in expand(lines, path=path, dialect=options.dialect,
+                         subroutine_path=[Path(p) for p in options.subroutine_path]):
+            source.append((sl.lineno, sl.path))
+            yield sl.text
+
+    c = corrector()
+    c.expanded = True
+    report = c.run(texts(), write, progress=progress, source=source)
+    report.expanded = True
+    return report
 
 
 def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, setup: Setup | None = None,
@@ -861,7 +919,7 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
 
     On any error nothing is left at ``output`` (an existing file there is untouched).
     """
-    path, lines = iter_source_lines(Path(source))
+    path, _lines = iter_source_lines(Path(source))
     out = Path(output)
     try:
         fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
@@ -870,9 +928,12 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
                             hint="check that the directory exists and is writable") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
-            c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
-                          calibration_name=calibration_name, calibration_sha256=calibration_sha256)
-            report = c.run(lines, fh.write, progress=progress)
+            def restart() -> None:
+                fh.seek(0)
+                fh.truncate()
+
+            report = _correct_lines(lambda: iter_source_lines(Path(source))[1], fh.write, restart, engine, setup,
+                                    options, path, calibration_name, calibration_sha256, progress)
         # mkstemp makes the file private (0600); give it the mode a new file would get
         # (or keep the mode of the file it replaces)
         try:
