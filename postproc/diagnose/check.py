@@ -16,6 +16,7 @@ import numpy as np
 
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
+from postproc.diagnose.frame import FrameFit
 from postproc.diagnose.models import Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
 from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Candidate, Ranking, rank_effects
@@ -42,6 +43,11 @@ class CheckResult:
     cv_note: str = ""
     existing: list[str] = field(default_factory=list)
     fit_options: dict = field(default_factory=dict)
+    fixed: bool = False
+    register: bool = False
+    frame: FrameFit | None = None
+    volume_mm: np.ndarray | None = None
+    resid_registered: np.ndarray | None = None  # measured - model after the registration alone
 
     @property
     def suggestions(self) -> list[dict]:
@@ -57,6 +63,7 @@ class CheckResult:
                 "rms_after_mm": c.rms_after_mm,
                 "p_value": c.p_value,
                 "parameters": dict(eff.params) if eff else {},
+                "parameters_u_k2": dict(getattr(eff, "uncertainty", {}) or {}) if eff else {},
                 "config": dict(eff.config) if eff else {},
                 "description": eff.describe() if eff else "",
                 "meaning": c.meaning,
@@ -65,12 +72,25 @@ class CheckResult:
             })
         return out
 
+    @property
+    def extends(self) -> bool:
+        """Suggestions keep the calibration and add effects to it (``fit --base``): the
+        calibration is held as it is (--fixed) or its method cannot be refitted from points."""
+        return self.fixed or self.method not in FIT_METHODS
+
     def fit_command(self, names: list[str]) -> str | None:
-        if self.method not in FIT_METHODS:
-            return None
         stem = Path(self.cal_path).stem if self.cal_path else "calibration"
         added = [n for n in names if n not in self.existing]
         out = f"{stem}_{'_'.join(n.replace(':', '_') for n in added)}.json"
+        if self.extends:
+            if not self.cal_path:
+                return None
+            args = ["postproc", "fit", "--base", self.cal_path, *self.files]
+            if not self.register:
+                args.append("--no-register")
+            for n in added:
+                args += ["--effect", n]
+            return shlex.join([*args, "-o", out])
         args = ["postproc", "fit", *self.files, "--method", self.method]
         for key, value in self.fit_options.items():
             args += [f"--{key}", str(value)]
@@ -95,6 +115,9 @@ class CheckResult:
             "cv_rms_mm": rk.base_cv_rms_mm if rk else None,
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
             "cv_note": self.cv_note,
+            "registration": (None if self.frame is None else
+                             {"absorbed_by_model": True} if self.frame.absorbed else
+                             self.frame.to_json(self.volume_mm)),
             "significance_p": SIGNIFICANCE_P,
             "suggestions": self.suggestions,
             "candidates": [
@@ -145,12 +168,15 @@ def refit_options(engine) -> dict:
 
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
-              fixed: bool = False) -> CheckResult:
+              fixed: bool = False, register: bool | None = None) -> CheckResult:
     """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``.
 
     ``fixed``: hold the calibration (with its effects) as it is and rank effects on its
     residual, instead of refitting its method on the training folds.
+    ``register``: fit a 6-DOF registration of the measurement frame as a nuisance
+    (default: on with ``fixed``, off otherwise).
     """
+    register = fixed if register is None else bool(register)
     ds = Dataset.from_measurements(data)
     engine = cal.engine
     base_engine = engine.base if isinstance(engine, ComposedEngine) else engine
@@ -159,15 +185,16 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     noise = noise_floor(ds, sigma_mm)
     where = where_it_fails(ds, resid)
     ranking, note = None, ""
+    frame, resid_registered = None, None
     options = refit_options(base_engine)
     try:
         if fixed:
-            model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual")
+            model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual", register)
         else:
             # A training fold of a grid calibration leaves lattice nodes without points; the
             # fold's model fills them from neighbours (the held-out points then test that fill).
             cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
-            model = base_model(cal.method, cv_options, engine=base_engine)
+            model = base_model(cal.method, cv_options, engine=base_engine, register=register)
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
@@ -179,7 +206,13 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
         else:
             ranking = rank_effects(model, ds, existing, names, fold_masks, max_selected=max_selected)
         note = f"{len(fold_masks)} folds; {model.description}"
+        if register:
+            frame = model.fit(ds, model.prepare(ds, existing) if not fixed else []).frame
+            if fixed and frame is not None and not frame.absorbed:
+                resid_registered = resid - frame.displacement(ds.q, ds.r)
+                where = where_it_fails(ds, resid_registered)
     except PostprocError as exc:
         note = f"cross-validation not possible: {exc.message}"
     return CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
-                       ranking, note, [e.name for e in existing], options)
+                       ranking, note, [e.name for e in existing], options, fixed, register, frame,
+                       np.asarray(engine.volume_mm, dtype=float), resid_registered)

@@ -36,7 +36,7 @@ import numpy as np
 
 from postproc.diagnose.crossval import FoldCache, JointCV, rms3
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import BaseModel, LinearStatic, stacked
+from postproc.diagnose.models import BaseModel, Fixed, LinearStatic, stacked
 from postproc.effects import Effect, get_effect
 from postproc.effects.linalg import solve_ls
 from postproc.errors import PostprocError
@@ -149,7 +149,7 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         else:
             testable.append(name)
 
-    joint = isinstance(model, LinearStatic)  # exact joint refits are cheap only there
+    joint = isinstance(model, LinearStatic | Fixed)  # exact joint refits are cheap only there
     scorer = JointCV if joint else FoldCache
     cache = scorer(model, ds, selected_effects, folds)
     e0 = cache.residuals()

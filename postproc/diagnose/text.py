@@ -21,6 +21,10 @@ WORSE_THAN_REFIT = 1.2
 REVERSAL_FLAG_SIGMAS = 3.0
 
 
+def rms_of(resid) -> float:
+    return float(np.sqrt(np.mean(np.sum(np.asarray(resid) ** 2, axis=1)))) if len(resid) else 0.0
+
+
 def um(v: float) -> str:
     return f"{v * 1000:.2f}"
 
@@ -48,6 +52,14 @@ def format_report(res: CheckResult) -> list[str]:
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")
     else:
         out.append("noise floor: unknown (no repeated points; give --sigma MM, the instrument's sigma per axis)")
+    if res.frame is not None:
+        if res.frame.absorbed:
+            out.append("measurement frame: its registration is held by the model itself (origin and axes)")
+        else:
+            out.append(f"measurement frame registered (a nuisance of the measurement, not a machine error): "
+                       f"{res.frame.describe(res.volume_mm)}")
+            if res.resid_registered is not None:
+                out.append(f"  residual after the registration: RMS {um(rms_of(res.resid_registered))} um")
     if rk is not None:
         ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
         out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
@@ -113,7 +125,13 @@ def _ranking(res: CheckResult) -> list[str]:
                    f"RMS after {um(c.rms_after_mm)} um (p = {c.p_value:.1g})")
         out.append(f"     {sgg['description']}")
         out.append(f"     {sgg['meaning']}; {sgg['compensable']}")
-        out.append(f"     add it: {sgg['command']}" if sgg["command"] else
+        if sgg["parameters_u_k2"]:
+            out.append("     k=2 uncertainty: " + ", ".join(
+                (f"{k} undetermined" if not np.isfinite(v) else
+                 f"{k} +- {v * 1000:.2f} um" if k.endswith("_mm") else f"{k} +- {v:.3g}")
+                for k, v in sgg["parameters_u_k2"].items()))
+        keeps = " (keeps the calibration, adds the effect)" if res.extends else ""
+        out.append(f"     add it{keeps}: {sgg['command']}" if sgg["command"] else
                    f"     the {res.method} method cannot be refitted from points: add it to a static fit")
     if last and sug:
         nxt = next((c for c in last if c.status == "significant"), last[0])
