@@ -25,6 +25,10 @@ from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
 
+#: A cross-validated RMS within this many times the noise floor is consistent with noise
+#: (the verdict "consistent"; after the suggestions, "missing-effect").
+CONSISTENT_RATIO = 1.15
+
 #: methods ``postproc fit`` can refit from points (its --method choices)
 FIT_METHODS = ("static", "interval", "grid", "parametric")
 
@@ -73,6 +77,19 @@ class CheckResult:
         return out
 
     @property
+    def verdict(self) -> str | None:
+        """"consistent" (the cross-validated RMS is within CONSISTENT_RATIO x the noise floor
+        and nothing is suggested), "missing-effect" (the suggestions bring it there) or
+        "unexplained" (above the floor and the catalogue does not explain it); None without
+        a noise floor or a cross-validation."""
+        rk, floor = self.ranking, self.noise.rms_mm
+        if rk is None or not floor:
+            return None
+        if not rk.selected:
+            return "consistent" if rk.base_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
+        return "missing-effect" if rk.final_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
+
+    @property
     def extends(self) -> bool:
         """Suggestions keep the calibration and add effects to it (``fit --base``): the
         calibration is held as it is (--fixed) or its method cannot be refitted from points."""
@@ -115,6 +132,8 @@ class CheckResult:
             "cv_rms_mm": rk.base_cv_rms_mm if rk else None,
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
             "cv_note": self.cv_note,
+            "verdict": self.verdict,
+            "cv_ratio_to_floor": (rk.final_cv_rms_mm / self.noise.rms_mm) if rk and self.noise.rms_mm else None,
             "registration": (None if self.frame is None else
                              {"absorbed_by_model": True} if self.frame.absorbed else
                              self.frame.to_json(self.volume_mm)),

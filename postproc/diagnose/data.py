@@ -16,6 +16,9 @@ REPEAT_DECIMALS = 6
 # consecutive shots) are repeats: warm-up drifts have time constants of tens of
 # minutes, so a minute moves the machine by a few percent of the drift at most.
 REPEAT_TIME_S = 60.0
+# ... or within this many of the campaign's median time steps between rows (shots of one
+# point taken one after the other, in a campaign slower than a shot a minute).
+REPEAT_TIME_STEPS = 3.0
 
 
 @dataclass
@@ -92,7 +95,11 @@ class Dataset:
         order = np.lexsort((t, groups))
         new = np.ones(len(order), dtype=bool)
         same = groups[order][1:] == groups[order][:-1]
-        close = np.diff(t[order]) <= REPEAT_TIME_S
+        # a slow campaign's consecutive shots are farther apart: a few of its row steps still count
+        steps = np.diff(np.sort(t))
+        steps = steps[steps > 0]
+        window = max(REPEAT_TIME_S, REPEAT_TIME_STEPS * float(np.median(steps))) if len(steps) else REPEAT_TIME_S
+        close = np.diff(t[order]) <= window
         new[1:] = ~(same & close)
         out = np.empty(len(self), dtype=int)
         out[order] = np.cumsum(new) - 1

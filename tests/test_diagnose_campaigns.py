@@ -1,0 +1,187 @@
+"""`check` and `fit` on campaigns measured as they really are, made with the virtual machine
+(postproc.simulate): a re-set-up tracker frame, rasters with dir=0 rows, a calibration
+extended by an effect, a degenerate joint fit."""
+
+import json
+import shlex
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from postproc.calibration.calfile import load_calibration
+from postproc.calibration.measurements import Measurements, format_measurements
+from postproc.cli import main
+from postproc.simulate import Machine, load_machine, measurement_plan, random_points, simulate_plan
+
+ROOT = Path(__file__).parents[1]
+MACHINE = ROOT / "calibrations" / "s500.machine.json"
+TABLES_CAL = ROOT / "calibrations" / "s500_parametric.json"  # fitted from the S500's interferometer tables
+
+
+def run(args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def rotation_matrix(axis, angle):
+    """Exact rotation (Rodrigues), independent of the first-order registration model."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def write(meas: Measurements, path: Path) -> Path:
+    path.write_text(format_measurements(meas))
+    return path
+
+
+def tracker_campaign(rng, n=70, machine=None):
+    mach = machine or load_machine(MACHINE)
+    plan = measurement_plan(random_points(mach.volume_mm, n, rng), tool_vectors=[(0, 0, -100)],
+                            approach="both", repeats=2, time_span_s=4 * 3600)
+    return simulate_plan(mach, plan, rng)
+
+
+def test_frame_offset_and_rotation_are_registered_not_named(tmp_path):
+    rng = np.random.default_rng(7)
+    meas = tracker_campaign(rng)
+    # the tracker set up 5 um off and turned 20 urad about z: m' = R m + t
+    R, t = rotation_matrix([0, 0, 1], 20e-6), np.array([0.005, 0.0, 0.0])
+    meas.m = meas.m @ R.T + t
+    pts = write(meas, tmp_path / "frame.csv")
+    plain = json.loads(run(["check", pts, "-c", TABLES_CAL, "--fixed", "--no-register", "--json",
+                            "--max-effects", "0"]).stdout)
+    # without registration the frame is taken for a machine effect
+    assert any(c["status"] == "significant" for c in plain["candidates"])
+    res = run(["check", pts, "-c", TABLES_CAL, "--fixed", "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["suggestions"] == []
+    assert data["verdict"] == "consistent"
+    reg = data["registration"]
+    # rotation about the frame origin: t stays the offset, w the 20 urad
+    assert np.allclose(reg["translation_mm"], t, atol=1.5 * max(reg["translation_u_k2_mm"]))
+    assert np.allclose(reg["rotation_rad"], [0, 0, 20e-6], atol=1.5 * max(reg["rotation_u_k2_rad"]))
+    assert 0.004 < reg["size_mm"] < 0.012
+    text = run(["check", pts, "-c", TABLES_CAL, "--fixed"]).stdout
+    assert "measurement frame registered" in text
+    assert "thermal" not in text.split("missing effects")[1].split("untestable")[0]
+
+
+def raster_with_dir0(machine, rng, step=35.0, repeats=2):
+    """A raster campaign as a tracker records it: X serpentine along each row, Y rising in
+    even Z layers and falling in odd ones. The machine moves with the approach state of
+    every axis carried from its last move (as a controller's backlash state is); the file
+    records 1/-1 only for axes that moved on the way to a point, 0 for the others."""
+    axis = np.arange(0.0, 315.0 + 1e-9, step)
+    rows = []
+    for k, z in enumerate([0.0, 157.5, 315.0]):
+        ys = axis if k % 2 == 0 else axis[::-1]
+        for i, y in enumerate(ys):
+            xs = axis if i % 2 == 0 else axis[::-1]
+            rows += [(x, y, z) for x in xs]
+    q = np.array(rows)
+    moves = np.diff(np.vstack([q[:1] - 1.0, q]), axis=0)  # from home, below the first point
+    recorded = np.sign(moves)
+    state = recorded.copy()
+    for j in range(1, len(state)):
+        state[j] = np.where(recorded[j] != 0, recorded[j], state[j - 1])
+    q, recorded, state = (np.repeat(a, repeats, axis=0) for a in (q, recorded, state))
+    recorded[1::repeats] = 0  # a repeat shot: nothing moved
+    t = np.linspace(0, 3 * 3600, len(q))
+    r = np.tile([0.0, 0.0, -100.0], (len(q), 1))
+    truth = machine.forward(q, r, {"dirx": state[:, 0], "diry": state[:, 1], "dirz": state[:, 2], "t": t})
+    m = truth + rng.normal(0, machine.noise.tracker_mm, q.shape)
+    return Measurements(q=q, m=m, r=r, direction=recorded, context={"t": t}), state
+
+
+def machine_with(effects):
+    base = load_machine(MACHINE)
+    return Machine(base.geometry, effects=effects, noise=base.noise)
+
+
+def test_dir0_raster_backlash_is_named_backlash(tmp_path):
+    rng = np.random.default_rng(11)
+    mach = machine_with([{"name": "backlash:Y", "params": {"b_mm": 0.015}}])
+    meas, state = raster_with_dir0(mach, rng)
+    assert np.mean(meas.direction[:, 1] == 0) > 0.8  # Y moves only between rows
+    np.testing.assert_array_equal(meas.context_full()["diry"], state[:, 1])
+    pts = write(meas, tmp_path / "raster.csv")
+    res = run(["check", pts, "-c", TABLES_CAL, "--fixed", "--json", "--max-effects", "2"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    first = data["suggestions"][0]
+    assert first["effect"] == "backlash:Y"
+    assert first["parameters"]["b_mm"] == pytest.approx(0.015, abs=first["parameters_u_k2"]["b_mm"] * 1.5)
+    assert data["cv_rms_after_mm"] < 1.15 * data["noise_floor_mm"]
+
+
+def test_fit_base_adds_the_effect_and_delivers_the_promised_figure(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rng = np.random.default_rng(12)
+    mach = machine_with([{"name": "backlash:X", "params": {"b_mm": 0.012}}])
+    write(tracker_campaign(rng, n=60, machine=mach), tmp_path / "pts.csv")
+    cal = tmp_path / "tables.json"
+    cal.write_text(TABLES_CAL.read_text())
+    res = run(["check", "pts.csv", "-c", "tables.json", "--fixed", "--json", "--max-effects", "1"])
+    data = json.loads(res.stdout)
+    (sug,) = data["suggestions"]
+    assert sug["effect"] == "backlash:X"
+    args = shlex.split(sug["command"])
+    assert args[:4] == ["postproc", "fit", "--base", "tables.json"]
+    assert "--method" not in args
+    res = run(args[1:])
+    assert res.exit_code == 0, res.output
+    out = args[args.index("-o") + 1]
+    new, old = load_calibration(out), load_calibration("tables.json")
+    assert new.method == "parametric"
+    assert json.loads(Path(out).read_text())["model"] == json.loads(cal.read_text())["model"]  # base kept
+    assert [e["name"] for e in new.effects] == ["backlash:X"]
+    assert new.effects[0]["params"]["b_mm"] == pytest.approx(0.012, abs=0.002)
+    after = json.loads(run(["check", "pts.csv", "-c", out, "--fixed", "--json"]).stdout)
+    # the figure check promised is the one the extended calibration delivers
+    assert after["cv_rms_mm"] == pytest.approx(sug["rms_after_mm"], rel=0.05)
+    assert after["suggestions"] == []
+    assert after["cv_rms_mm"] < 1.15 * after["noise_floor_mm"]
+    assert old.effects == []
+    # a static calibration is extended the same way
+    assert run(["fit", "pts.csv", "--method", "static", "-o", "st.json"]).exit_code == 0
+    res = run(["fit", "--base", "st.json", "pts.csv", "--effect", "backlash:X", "-o", "st_b.json"])
+    assert res.exit_code == 0, res.output
+    assert "measurement frame registered" in res.output
+    st = json.loads(Path("st_b.json").read_text())
+    assert st["model"] == json.loads(Path("st.json").read_text())["model"]
+    assert st["effects"][0]["params"]["b_mm"] == pytest.approx(0.012, abs=0.002)
+
+
+def test_degenerate_joint_fit_is_regularised_and_named(tmp_path, monkeypatch):
+    """straightness:X + straightness:Y beside a parametric model that holds both shapes
+    already: once a bow of metres balanced by an alignment of radians."""
+    monkeypatch.chdir(tmp_path)
+    rng = np.random.default_rng(3)
+    write(tracker_campaign(rng, n=60), tmp_path / "r60.csv")
+    mach = load_machine(MACHINE)
+    q = random_points(mach.volume_mm, 300, rng)
+    r = np.tile([0.0, 0.0, -100.0], (len(q), 1))
+    truth = mach.forward(q, r)
+    res = run(["fit", "r60.csv", "-m", "parametric", "--effect", "straightness:Y", "--effect", "straightness:X",
+               "-o", "deg.json"])
+    assert res.exit_code == 0, res.output
+    assert "condition number" in res.output
+    assert "not determined by these data" in res.output
+    assert "straightness:X.bow_y_mm" in res.output
+    info = json.loads(Path("deg.json").read_text())["fit"]["conditioning"]
+    assert "straightness:Y.bow_x_mm" in info["undetermined"]
+    assert run(["fit", "r60.csv", "-m", "parametric", "-o", "plain.json"]).exit_code == 0
+    err = {}
+    for name in ("deg", "plain"):
+        pred = load_calibration(f"{name}.json").engine.forward(q, r, {})
+        err[name] = float(np.sqrt(np.mean(np.sum((pred - truth) ** 2, axis=1))))
+    assert err["deg"] < 1.1 * err["plain"]
+    assert err["deg"] < 0.02
+    # the last guard: no calibration that corrects by more than --max-correction is written
+    res = run(["fit", "r60.csv", "-m", "parametric", "--max-correction", "0.001", "-o", "tight.json"])
+    assert res.exit_code != 0
+    assert "--max-correction" in res.output
+    assert not Path("tight.json").exists()
