@@ -39,7 +39,7 @@ def write(meas: Measurements, path: Path) -> Path:
 def tracker_campaign(rng, n=70, machine=None):
     mach = machine or load_machine(MACHINE)
     plan = measurement_plan(random_points(mach.volume_mm, n, rng), tool_vectors=[(0, 0, -100)],
-                            approach="both", repeats=2, time_span_s=4 * 3600)
+                            approach="both", repeats=2, time_span_s=3 * 3600)
     return simulate_plan(mach, plan, rng)
 
 

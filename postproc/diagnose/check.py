@@ -14,12 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from postproc.diagnose.campaign import campaign_warnings
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.frame import FrameFit
 from postproc.diagnose.models import Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
 from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Candidate, Ranking, rank_effects
+from postproc.diagnose.robust import Screening, screen
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
@@ -28,6 +30,9 @@ from postproc.errors import MeasurementError, MissingSetupError, PostprocError
 #: A cross-validated RMS within this many times the noise floor is consistent with noise
 #: (the verdict "consistent"; after the suggestions, "missing-effect").
 CONSISTENT_RATIO = 1.15
+
+# Points beyond the calibrated volume by more than this (mm) are outside it.
+OUTSIDE_TOLERANCE_MM = 1e-3
 
 #: methods ``postproc fit`` can refit from points (its --method choices)
 FIT_METHODS = ("static", "interval", "grid", "parametric")
@@ -52,6 +57,10 @@ class CheckResult:
     frame: FrameFit | None = None
     volume_mm: np.ndarray | None = None
     resid_registered: np.ndarray | None = None  # measured - model after the registration alone
+    screening: Screening | None = None  # duplicates and outliers excluded
+    outside: list[str] = field(default_factory=list)  # rows outside the calibrated volume
+    outside_excluded: bool = False
+    warnings: list[dict] = field(default_factory=list)  # campaign diagnostics
 
     @property
     def suggestions(self) -> list[dict]:
@@ -146,6 +155,9 @@ class CheckResult:
                 for c in ((rk.rounds[-1] if rk.rounds else []) + rk.untestable + rk.in_model)
             ] if rk else [],
             "where": self.where,
+            "screening": self.screening.to_json() if self.screening else None,
+            "outside_volume": {"rows": list(self.outside), "excluded": self.outside_excluded},
+            "warnings": list(self.warnings),
         }
 
 
@@ -185,6 +197,13 @@ def refit_options(engine) -> dict:
     return {}
 
 
+def outside_volume(engine, ds: Dataset) -> np.ndarray:
+    """(N,) True for rows whose commanded point lies outside the calibrated volume (beyond
+    OUTSIDE_TOLERANCE_MM): there the calibration extrapolates."""
+    vol = np.asarray(engine.volume_mm, dtype=float)
+    return np.any((ds.q < vol[0] - OUTSIDE_TOLERANCE_MM) | (ds.q > vol[1] + OUTSIDE_TOLERANCE_MM), axis=1)
+
+
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
               fixed: bool = False, register: bool | None = None) -> CheckResult:
@@ -194,26 +213,46 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     residual, instead of refitting its method on the training folds.
     ``register``: fit a 6-DOF registration of the measurement frame as a nuisance
     (default: on with ``fixed``, off otherwise).
+
+    Duplicated rows and outliers (:mod:`postproc.diagnose.robust`) are excluded first,
+    and, with ``fixed``, points outside the calibrated volume (the calibration would be
+    extrapolated there); all are listed in the result.
     """
     register = fixed if register is None else bool(register)
-    ds = Dataset.from_measurements(data)
+    ds_all = Dataset.from_measurements(data)
     engine = cal.engine
     base_engine = engine.base if isinstance(engine, ComposedEngine) else engine
     existing = [effect_from_dict(d) for d in (cal.effects or [])]
-    resid = measured_residual(engine, ds)
+    resid_all = measured_residual(engine, ds_all)
+    if fixed:
+        model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual", register)
+    else:
+        # A training fold of a grid calibration leaves lattice nodes without points; the
+        # fold's model fills them from neighbours (the held-out points then test that fill).
+        options = refit_options(base_engine)
+        cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
+        model = base_model(cal.method, cv_options, engine=base_engine, register=register)
+    options = refit_options(base_engine)
+    keep = np.ones(len(ds_all), dtype=bool)
+    outside = outside_volume(engine, ds_all)
+    if fixed and outside.any() and not outside.all():
+        keep &= ~outside
+    screening_resid = resid_all
+    if fixed and register and keep.sum() >= 6:
+        try:
+            sub = ds_all.subset(keep)
+            fr = Fixed(engine, "registration", True).fit(sub, []).frame
+            screening_resid = resid_all - fr.displacement(ds_all.q, ds_all.r)
+        except PostprocError:
+            pass
+    screening = screen(ds_all.subset(keep), screening_resid[keep])
+    idx = np.nonzero(keep)[0][screening.keep]
+    ds, resid = ds_all.subset(idx), resid_all[idx]
     noise = noise_floor(ds, sigma_mm)
     where = where_it_fails(ds, resid)
     ranking, note = None, ""
     frame, resid_registered = None, None
-    options = refit_options(base_engine)
     try:
-        if fixed:
-            model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual", register)
-        else:
-            # A training fold of a grid calibration leaves lattice nodes without points; the
-            # fold's model fills them from neighbours (the held-out points then test that fill).
-            cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
-            model = base_model(cal.method, cv_options, engine=base_engine, register=register)
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
@@ -232,6 +271,11 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
                 where = where_it_fails(ds, resid_registered)
     except PostprocError as exc:
         note = f"cross-validation not possible: {exc.message}"
-    return CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
-                       ranking, note, [e.name for e in existing], options, fixed, register, frame,
-                       np.asarray(engine.volume_mm, dtype=float), resid_registered)
+    res = CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
+                      ranking, note, [e.name for e in existing], options, fixed, register, frame,
+                      np.asarray(engine.volume_mm, dtype=float), resid_registered)
+    res.screening = screening
+    res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
+    res.outside_excluded = bool(fixed and outside.any() and not outside.all())
+    res.warnings = campaign_warnings(ds, cal, data, res)
+    return res

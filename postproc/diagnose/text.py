@@ -69,9 +69,49 @@ def format_report(res: CheckResult) -> list[str]:
                        "other data; --fixed ranks the effects on the calibration as it is")
     else:
         out.append(res.cv_note)
+    out += _screening(res)
+    if res.warnings:
+        out += ["", "what this campaign cannot show:"] + [f"  {w['message']}" for w in res.warnings]
     out += ["", "where it fails:"] + _where(res)
     out += [""] + _ranking(res)
+    out += ["", _verdict(res)]
     return out
+
+
+def _screening(res: CheckResult) -> list[str]:
+    sc = res.screening
+    if sc is None or (not sc.duplicates and not sc.outliers):
+        return []
+    out = []
+    if sc.duplicates:
+        out.append(f"duplicated rows (one shot written twice; kept once): {len(sc.duplicates)}: "
+                   + ", ".join(d["place"] for d in sc.duplicates[:8]) + (" ..." if len(sc.duplicates) > 8 else ""))
+    if sc.outliers:
+        out.append(f"outliers excluded from the analysis: {len(sc.outliers)}")
+        for o in sc.outliers[:10]:
+            out.append(f"  {o['place']}  residual {vec_um(o['residual_mm'])} um: {o['reason']}")
+        if len(sc.outliers) > 10:
+            out.append(f"  ... and {len(sc.outliers) - 10} more (see --json)")
+    return out
+
+
+def _verdict(res: CheckResult) -> str:
+    v, rk, floor = res.verdict, res.ranking, res.noise.rms_mm
+    if v is None:
+        return ("verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
+                if rk is not None else "verdict: none (no cross-validation)")
+    if v == "consistent":
+        return (f"verdict: consistent: the calibration explains these points down to the noise "
+                f"(cross-validated {rk.base_cv_rms_mm / floor:.2f} x the floor)")
+    if v == "missing-effect":
+        names = ", ".join(c.name for c in rk.selected)
+        return (f"verdict: missing effect: {names} explain(s) the residual down to the noise "
+                f"({rk.final_cv_rms_mm / floor:.2f} x the floor with them)")
+    part = (f"; the suggestions explain part of it ({rk.final_cv_rms_mm / floor:.2f} x the floor with them)"
+            if rk.selected else "")
+    return (f"verdict: unexplained: the residual stays {rk.base_cv_rms_mm / floor:.2f} x the noise floor and "
+            f"no effect in the catalogue explains it{part}; the physics is not known to the model "
+            "(see where it fails; an empirical correction is the last resort)")
 
 
 def _where(res: CheckResult) -> list[str]:
