@@ -54,9 +54,11 @@ def test_frame_offset_and_rotation_are_registered_not_named(tmp_path):
                             "--max-effects", "0"]).stdout)
     # without registration the frame is taken for a machine effect
     assert any(c["status"] == "significant" for c in plain["candidates"])
-    res = run(["check", pts, "-c", TABLES_CAL, "--fixed", "--json"])
-    assert res.exit_code == 0, res.output
-    data = json.loads(res.stdout)
+    from postproc.diagnose.check import json_safe, run_check
+    from postproc.diagnose.text import format_report
+
+    res = run_check(load_calibration(TABLES_CAL), [meas], [str(pts)], fixed=True)  # registered by default
+    data = json.loads(json.dumps(json_safe(res.to_json())))
     assert data["suggestions"] == []
     assert data["verdict"] == "consistent"
     reg = data["registration"]
@@ -64,7 +66,7 @@ def test_frame_offset_and_rotation_are_registered_not_named(tmp_path):
     assert np.allclose(reg["translation_mm"], t, atol=1.5 * max(reg["translation_u_k2_mm"]))
     assert np.allclose(reg["rotation_rad"], [0, 0, 20e-6], atol=1.5 * max(reg["rotation_u_k2_rad"]))
     assert 0.004 < reg["size_mm"] < 0.012
-    text = run(["check", pts, "-c", TABLES_CAL, "--fixed"]).stdout
+    text = "\n".join(format_report(res))
     assert "measurement frame registered" in text
     assert "thermal" not in text.split("missing effects")[1].split("untestable")[0]
 
@@ -160,7 +162,7 @@ def test_degenerate_joint_fit_is_regularised_and_named(tmp_path, monkeypatch):
     already: once a bow of metres balanced by an alignment of radians."""
     monkeypatch.chdir(tmp_path)
     rng = np.random.default_rng(3)
-    write(tracker_campaign(rng, n=60), tmp_path / "r60.csv")
+    write(tracker_campaign(rng, n=45), tmp_path / "r60.csv")
     mach = load_machine(MACHINE)
     q = random_points(mach.volume_mm, 300, rng)
     r = np.tile([0.0, 0.0, -100.0], (len(q), 1))
@@ -185,3 +187,130 @@ def test_degenerate_joint_fit_is_regularised_and_named(tmp_path, monkeypatch):
     assert res.exit_code != 0
     assert "--max-correction" in res.output
     assert not Path("tight.json").exists()
+
+
+def test_glitch_duplicates_and_per_shot_temperature_are_handled():
+    from postproc.diagnose.check import run_check
+
+    rng = np.random.default_rng(5)
+    meas = tracker_campaign(rng, n=60)
+    n = len(meas.q)
+    # temperature logged with every shot (0.01 degC sensor noise on a slow rise)
+    meas.context["temp"] = 20.0 + 2.0 * meas.context["t"] / meas.context["t"].max() + rng.normal(0, 0.01, n)
+    meas.m[17] += [0.2, -0.05, 0.1]  # one 200 um tracker glitch inside a repeat group
+    dup = [30, 31, 32]
+    for name in ("q", "m", "r", "direction"):
+        setattr(meas, name, np.vstack([getattr(meas, name), getattr(meas, name)[dup]]))
+    meas.context = {k: np.concatenate([v, v[dup]]) for k, v in meas.context.items()}
+    meas.path, meas.linenos = "g.csv", np.arange(len(meas.q)) + 4
+    res = run_check(load_calibration(TABLES_CAL), [meas], ["g.csv"], fixed=True, candidates=["backlash:X"])
+    sc = res.screening
+    assert [o["place"] for o in sc.outliers] == ["g.csv:21"]
+    assert [d["place"] for d in sc.duplicates] == [f"g.csv:{n + 4 + i}" for i in range(3)]
+    assert len(res.ds) == n - 1
+    # the floor is the tracker's (5 um per axis), neither inflated by the glitch nor
+    # shrunk by the duplicates, and the per-shot temperature does not break the repeat groups
+    assert res.noise.source == "repeats"
+    assert res.noise.dof >= n // 2 - 2
+    assert res.noise.rms_mm == pytest.approx(0.005 * np.sqrt(3), rel=0.12)
+    data = res.to_json()
+    assert data["screening"]["n_excluded"] == 4
+
+
+def test_single_shot_glitch_is_excluded_and_clean_rows_are_not():
+    from postproc.diagnose.check import run_check
+
+    rng = np.random.default_rng(6)
+    mach = load_machine(MACHINE)
+    plan = measurement_plan(random_points(mach.volume_mm, 120, rng), tool_vectors=[(0, 0, -100)])
+    meas = simulate_plan(mach, plan, rng)
+    meas.m[40] += [0.0, 0.2, 0.0]
+    meas.path, meas.linenos = "s.csv", np.arange(len(meas.q)) + 4
+    res = run_check(load_calibration(TABLES_CAL), [meas], ["s.csv"], fixed=True, candidates=["squareness:XY"],
+                    sigma_mm=0.005)
+    assert [o["row"] for o in res.screening.outliers] == [40]
+    assert res.suggestions == []
+
+
+def test_unexplained_verdict_offers_an_empirical_correction(tmp_path, monkeypatch):
+    """A coupling of the axes that no effect of the catalogue has (z error growing with
+    x*y*z, x error over the Y-Z plane): said in words, and the empirical field offered."""
+    from postproc.diagnose.check import json_safe, run_check
+    from postproc.diagnose.text import format_report
+
+    monkeypatch.chdir(tmp_path)
+    rng = np.random.default_rng(32)
+    meas = tracker_campaign(rng, n=80)
+    u = meas.q / 315.0
+    meas.m[:, 2] += 0.24 * np.prod(u - 0.5, axis=1)
+    meas.m[:, 0] += 0.030 * np.sin(np.pi * u[:, 1]) * np.sin(np.pi * u[:, 2])
+    write(meas, tmp_path / "c.csv")
+    cal = tmp_path / "tables.json"
+    cal.write_text(TABLES_CAL.read_text())
+    res = run_check(load_calibration("tables.json"), [meas], ["c.csv"], fixed=True)
+    data = json.loads(json.dumps(json_safe(res.to_json())))
+    assert data["verdict"] == "unexplained"
+    assert data["cv_ratio_to_floor"] > 1.15
+    emp = data["empirical"]
+    assert emp["effect"].startswith("empirical:")
+    assert emp["cv_rms_after_mm"] < 1.15 * data["noise_floor_mm"]
+    assert all(not s["effect"].startswith("empirical") for s in data["suggestions"])
+    where = data["where"]
+    assert set(where["maps_2d"]) == {"XY", "XZ", "YZ"}
+    assert len(where["by_approach"]) >= 2
+    assert all("stderr_xyz_mm" in b for b in where["binned_means"]["X"])
+    text = "\n".join(format_report(res))
+    assert "verdict: unexplained" in text
+    assert "empirical correction" in text
+    # the user can still add it, and watch the error fall
+    args = shlex.split(emp["command"])
+    assert run(args[1:]).exit_code == 0
+    out = args[args.index("-o") + 1]
+    after = json.loads(run(["check", "c.csv", "-c", out, "--fixed", "--json", "--max-effects", "0"]).stdout)
+    assert after["cv_rms_mm"] < 1.2 * data["noise_floor_mm"]
+    assert after["effects_in_calibration"][-1] == emp["effect"]
+
+
+def test_two_pitches_on_one_axis_are_found():
+    from postproc.diagnose.check import run_check
+
+    mach = machine_with([
+        {"name": "periodic:Y", "config": {"pitch_mm": 16.0}, "params": {"cos_mm": 0.006, "sin_mm": 0.0}},
+        {"name": "periodic:Y", "config": {"pitch_mm": 5.3}, "params": {"cos_mm": 0.0, "sin_mm": 0.005}},
+    ])
+    rng = np.random.default_rng(41)
+    meas = simulate_plan(mach, measurement_plan(random_points(mach.volume_mm, 150, rng),
+                                                tool_vectors=[(0, 0, -100)], repeats=2), rng)
+    res = run_check(load_calibration(TABLES_CAL), [meas], ["p.csv"], fixed=True,
+                    candidates=["periodic:X", "periodic:Y", "straightness:Y", "positioning:Y"])
+    sug = res.suggestions
+    assert [s["effect"] for s in sug] == ["periodic:Y", "periodic:Y"]
+    assert sorted(s["config"]["pitch_mm"] for s in sug) == pytest.approx([5.3, 16.0], rel=0.01)
+    assert res.verdict == "missing-effect"
+    assert sug[-1]["command"].count("--effect periodic:Y") == 2
+
+
+def test_campaign_warnings(tmp_path):
+    from postproc.diagnose.check import run_check
+
+    rng = np.random.default_rng(13)
+    warm = machine_with([{"name": "thermal:t", "config": {"tau_s": 2400.0},
+                          "params": {"dx_mm": 0.012, "dy_mm": -0.006, "dz_mm": 0.02}}])
+    meas, _ = raster_with_dir0(warm, rng, step=35.0)
+    # two points beyond the calibrated travel of X
+    extra = Measurements(q=np.array([[330.0, 10.0, 0.0], [340.0, 10.0, 0.0]]), m=np.array([[330.0, 10, 0], [340, 10, 0]]),
+                         r=np.tile([0.0, 0.0, -100.0], (2, 1)), direction=np.zeros((2, 3)),
+                         context={"t": np.full(2, meas.context["t"].max() + 60.0)})
+    for name in ("q", "m", "r", "direction"):
+        setattr(meas, name, np.vstack([getattr(meas, name), getattr(extra, name)]))
+    meas.context = {"t": np.concatenate([meas.context["t"], extra.context["t"]])}
+    meas.path, meas.linenos = "raster.csv", np.arange(len(meas.q)) + 4
+    res = run_check(load_calibration(TABLES_CAL), [meas], ["raster.csv"], fixed=True, candidates=[])
+    kinds = {w["kind"]: w for w in res.warnings}
+    assert kinds["time-position confounding"]["r2"] > 0.9
+    aliasing = {w["axis"]: w["shortest_pitch_mm"] for w in res.warnings if w["kind"] == "aliasing"}
+    assert aliasing == pytest.approx({"X": 70.0, "Y": 70.0, "Z": 315.0})
+    out = kinds["outside volume"]
+    assert out["rows"] == [f"raster.csv:{len(meas.q) + 2}", f"raster.csv:{len(meas.q) + 3}"]
+    assert len(res.ds) == len(meas.q) - 2
+    assert "unknown approach" not in kinds  # the raster records its first move

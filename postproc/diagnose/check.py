@@ -20,7 +20,14 @@ from postproc.diagnose.data import Dataset
 from postproc.diagnose.frame import FrameFit
 from postproc.diagnose.models import Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
-from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Candidate, Ranking, rank_effects
+from postproc.diagnose.rank import (
+    MAX_SELECTED,
+    SIGNIFICANCE_P,
+    Candidate,
+    Ranking,
+    empirical_offer,
+    rank_effects,
+)
 from postproc.diagnose.robust import Screening, screen
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
@@ -61,6 +68,7 @@ class CheckResult:
     outside: list[str] = field(default_factory=list)  # rows outside the calibrated volume
     outside_excluded: bool = False
     warnings: list[dict] = field(default_factory=list)  # campaign diagnostics
+    empirical: dict | None = None  # the last-resort empirical field, when the verdict is unexplained
 
     @property
     def suggestions(self) -> list[dict]:
@@ -158,6 +166,7 @@ class CheckResult:
             "screening": self.screening.to_json() if self.screening else None,
             "outside_volume": {"rows": list(self.outside), "excluded": self.outside_excluded},
             "warnings": list(self.warnings),
+            "empirical": self.empirical,
         }
 
 
@@ -278,4 +287,13 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
     res.outside_excluded = bool(fixed and outside.any() and not outside.all())
     res.warnings = campaign_warnings(ds, cal, data, res)
+    if ranking is not None and res.verdict == "unexplained":
+        try:
+            offer = empirical_offer(model, ds, ranking, [] if fixed else existing, fold_masks)
+        except PostprocError:
+            offer = None
+        if offer is not None:
+            offer["command"] = res.fit_command([*res.existing, *(c.name for c in ranking.selected),
+                                                offer["effect"]])
+            res.empirical = offer
     return res

@@ -17,6 +17,9 @@ DISCRETE_VALUES = 5
 # ... a continuous one (temperature, humidity) may differ within a group by up to this
 # fraction of its range over the campaign (the sensor's noise, logged per shot).
 CONTEXT_SPLIT_FRACTION = 0.02
+# ... or by up to this many times its row-to-row scatter in file order (robust sigma of
+# consecutive differences), whichever is larger.
+CONTEXT_NOISE_FACTOR = 5.0
 # Rows at the same point whose times differ by at most this (seconds, between
 # consecutive shots) are repeats: warm-up drifts have time constants of tens of
 # minutes, so a minute moves the machine by a few percent of the drift at most.
@@ -119,7 +122,9 @@ class Dataset:
         _, inverse = np.unique(key, axis=0, return_inverse=True)
         groups = inverse.ravel()
         for v in loose:
-            groups = _split_by_gaps(groups, v, CONTEXT_SPLIT_FRACTION * float(np.ptp(v)))
+            # the column's own row-to-row scatter (a sensor's noise) never splits a group
+            jitter = CONTEXT_NOISE_FACTOR * 1.4826 * float(np.median(np.abs(np.diff(v)))) if len(v) > 1 else 0.0
+            groups = _split_by_gaps(groups, v, max(CONTEXT_SPLIT_FRACTION * float(np.ptp(v)), jitter))
         if "t" in self.ctx:
             groups = _split_by_gaps(groups, self.ctx["t"], REPEAT_TIME_S)
         return groups

@@ -26,6 +26,16 @@ MAX_CORRECTION_MM = 1.0
 CORRECTION_LATTICE = 7
 
 
+def effect_list(effect_names) -> list[str]:
+    """A repeated --effect counts once, except ``periodic:AXIS``: a second one is a second
+    pitch on the same axis (found on the residual of the first)."""
+    out: list[str] = []
+    for n in effect_names:
+        if n not in out or n.startswith("periodic:"):
+            out.append(n)
+    return out
+
+
 def check_effects_testable(ds: Dataset, effects) -> None:
     """Refuse effects the data cannot determine, naming the column or variation missing."""
     for e in effects:
@@ -75,7 +85,7 @@ def fit_with_effects(method: str, data, effect_names, register: bool = False, **
     """Fit ``method`` on the measurements ``data`` together with the named effects
     (and a registration of the measurement frame when ``register``)."""
     ds = Dataset.from_measurements(data)
-    names = list(dict.fromkeys(effect_names))  # a repeated --effect counts once
+    names = effect_list(effect_names)
     effects = [get_effect(n) for n in names]
     check_effects_testable(ds, effects)
     model = base_model(method, options, register=register)
@@ -102,8 +112,8 @@ def extend_calibration(cal, data, effect_names, register: bool = True) -> FitRes
     ds = Dataset.from_measurements(data)
     existing = [effect_from_dict(d) for d in (cal.effects or [])]
     held = {e.name for e in existing}
-    names = [n for n in dict.fromkeys(effect_names)]
-    again = [n for n in names if n in held]
+    names = effect_list(effect_names)
+    again = [n for n in names if n in held and not n.startswith("periodic:")]
     if again:
         raise CalibrationError(f"{cal.path}: effect(s) {', '.join(again)} already in the calibration",
                                hint="name only effects to add; refit the calibration to change existing ones")

@@ -63,7 +63,7 @@ def format_report(res: CheckResult) -> list[str]:
     if rk is not None:
         ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
         out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
-        if s["rms_mm"] > WORSE_THAN_REFIT * rk.base_cv_rms_mm:
+        if not res.fixed and s["rms_mm"] > WORSE_THAN_REFIT * rk.base_cv_rms_mm:
             out.append(f"  the calibration fits these points worse ({um(s['rms_mm'])} um) than its method refitted "
                        "to them: the machine changed since it was calibrated, or the calibration came from "
                        "other data; --fixed ranks the effects on the calibration as it is")
@@ -75,6 +75,14 @@ def format_report(res: CheckResult) -> list[str]:
     out += ["", "where it fails:"] + _where(res)
     out += [""] + _ranking(res)
     out += ["", _verdict(res)]
+    if res.empirical:
+        e, floor = res.empirical, res.noise.rms_mm
+        ratio = f" = {e['cv_rms_after_mm'] / floor:.2f} x the floor" if floor else ""
+        out.append(f"  last resort, an empirical correction ({e['effect']}: {e['description']}): "
+                   f"cross-validated RMS {um(e['cv_rms_before_mm'])} -> {um(e['cv_rms_after_mm'])} um{ratio}; "
+                   "it names no cause and holds only inside that extent")
+        if e.get("command"):
+            out.append(f"  add it: {e['command']}")
     return out
 
 
