@@ -314,3 +314,26 @@ def test_campaign_warnings(tmp_path):
     assert out["rows"] == [f"raster.csv:{len(meas.q) + 2}", f"raster.csv:{len(meas.q) + 3}"]
     assert len(res.ds) == len(meas.q) - 2
     assert "unknown approach" not in kinds  # the raster records its first move
+
+
+def test_suggested_size_is_the_joint_one_fit_delivers():
+    """A backlash held out of a parametric calibration refitted from points: the
+    suggestion's size is sized jointly with the base, exactly as 'fit --effect' sizes it."""
+    from postproc.calibration.calfile import calibration_from_dict, calibration_to_dict
+    from postproc.diagnose.check import run_check
+    from postproc.diagnose.refit import fit_with_effects
+
+    rng = np.random.default_rng(17)
+    mach = machine_with([{"name": "backlash:Y", "params": {"b_mm": 0.012}}])
+    meas = tracker_campaign(rng, n=50, machine=mach)
+    plain = fit_with_effects("parametric", [meas], [])
+    cal = calibration_from_dict(calibration_to_dict(plain.engine, name="p", fit={}), path="p.json")
+    res = run_check(cal, [meas], ["w.csv"], folds=4, max_selected=1, candidates=["backlash:Y", "backlash:X"],
+                    offer_empirical=False)
+    (sug,) = res.suggestions
+    assert sug["effect"] == "backlash:Y"
+    b, u = sug["parameters"]["b_mm"], sug["parameters_u_k2"]["b_mm"]
+    assert 0 < u < 0.004
+    assert b == pytest.approx(0.012, abs=1.5 * u)
+    (eff,) = fit_with_effects("parametric", [meas], ["backlash:Y"]).effects
+    assert eff["params"]["b_mm"] == pytest.approx(b, rel=1e-6)

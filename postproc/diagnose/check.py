@@ -215,13 +215,14 @@ def outside_volume(engine, ds: Dataset) -> np.ndarray:
 
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
-              fixed: bool = False, register: bool | None = None) -> CheckResult:
+              fixed: bool = False, register: bool | None = None, offer_empirical: bool = True) -> CheckResult:
     """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``.
 
     ``fixed``: hold the calibration (with its effects) as it is and rank effects on its
     residual, instead of refitting its method on the training folds.
     ``register``: fit a 6-DOF registration of the measurement frame as a nuisance
-    (default: on with ``fixed``, off otherwise).
+    (default: on with ``fixed``, off otherwise). ``offer_empirical``: when the verdict is
+    "unexplained", size the empirical field (one more cross-validation).
 
     Duplicated rows and outliers (:mod:`postproc.diagnose.robust`) are excluded first,
     and, with ``fixed``, points outside the calibrated volume (the calibration would be
@@ -287,7 +288,7 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
     res.outside_excluded = bool(fixed and outside.any() and not outside.all())
     res.warnings = campaign_warnings(ds, cal, data, res)
-    if ranking is not None and res.verdict == "unexplained":
+    if offer_empirical and ranking is not None and res.verdict == "unexplained":
         try:
             offer = empirical_offer(model, ds, ranking, [] if fixed else existing, fold_masks)
         except PostprocError:

@@ -89,6 +89,7 @@ class Ranking:
     in_model: list[Candidate]
     final_cv_rms_mm: float
     final_effects: list[Effect]  # all effects of the final model, fitted on all data
+    final_cv_resid: np.ndarray | None = field(default=None, repr=False)  # held-out residual after them
 
 
 def slope_p_value(y: np.ndarray, delta: np.ndarray, groups: np.ndarray) -> float:
@@ -210,7 +211,7 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         if offset + i < len(final) and final[offset + i].name == c.name:
             c.effect = final[offset + i]
     return Ranking(model, len(folds), rms3(base_resid), base_resid, rounds, selected, untestable,
-                   in_model, rms3(e0), final)
+                   in_model, rms3(e0), final, e0)
 
 
 def empirical_offer(model: BaseModel, ds: Dataset, ranking: Ranking, existing: list[Effect],
@@ -234,7 +235,8 @@ def empirical_offer(model: BaseModel, ds: Dataset, ranking: Ranking, existing: l
             rms = rms3(cache.with_effect(eff))
         except PostprocError:
             continue
-        if rms < base and (best is None or rms < best[1]):
+        # worth a term only if it removes a useful part of the held-out variance
+        if rms**2 < (1 - MIN_EXPLAINED) * base**2 and (best is None or rms < best[1]):
             best = (name, rms)
     if best is None:
         return None
