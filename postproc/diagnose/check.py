@@ -69,6 +69,7 @@ class CheckResult:
     outside_excluded: bool = False
     warnings: list[dict] = field(default_factory=list)  # campaign diagnostics
     empirical: dict | None = None  # the last-resort empirical field, when the verdict is unexplained
+    from_other_data: bool = False  # the calibration was not fitted on these files
 
     @property
     def suggestions(self) -> list[dict]:
@@ -150,6 +151,8 @@ class CheckResult:
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
             "cv_note": self.cv_note,
             "verdict": self.verdict,
+            "conditioning": rk.final_guard.to_json() if rk and rk.final_guard is not None else None,
+            "calibration_from_other_data": self.from_other_data,
             "cv_ratio_to_floor": (rk.final_cv_rms_mm / self.noise.rms_mm) if rk and self.noise.rms_mm else None,
             "registration": (None if self.frame is None else
                              {"absorbed_by_model": True} if self.frame.absorbed else
@@ -285,6 +288,9 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
                       ranking, note, [e.name for e in existing], options, fixed, register, frame,
                       np.asarray(engine.volume_mm, dtype=float), resid_registered)
     res.screening = screening
+    sources = [Path(p).name for p in (cal.fit or {}).get("sources", [])]
+    res.from_other_data = bool(cal.fit and (cal.fit.get("kind") == "axis error tables"
+                                            or (sources and sorted(sources) != sorted(Path(f).name for f in files))))
     res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
     res.outside_excluded = bool(fixed and outside.any() and not outside.all())
     res.warnings = campaign_warnings(ds, cal, data, res)

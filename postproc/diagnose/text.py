@@ -63,6 +63,12 @@ def format_report(res: CheckResult) -> list[str]:
     if rk is not None:
         ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
         out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
+        if not res.fixed and res.from_other_data:
+            out.append("  this calibration came from other data: its method is refitted here on these points; "
+                       "'postproc check ... --fixed' keeps it as it is and suggests 'postproc fit --base' "
+                       "to add effects to it")
+        if rk.final_guard is not None and rk.final_guard.undetermined:
+            out.append("  " + rk.final_guard.lines()[1])
         if not res.fixed and s["rms_mm"] > WORSE_THAN_REFIT * rk.base_cv_rms_mm:
             out.append(f"  the calibration fits these points worse ({um(s['rms_mm'])} um) than its method refitted "
                        "to them: the machine changed since it was calibrated, or the calibration came from "
