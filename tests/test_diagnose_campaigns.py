@@ -337,3 +337,23 @@ def test_suggested_size_is_the_joint_one_fit_delivers():
     assert b == pytest.approx(0.012, abs=1.5 * u)
     (eff,) = fit_with_effects("parametric", [meas], ["backlash:Y"]).effects
     assert eff["params"]["b_mm"] == pytest.approx(b, rel=1e-6)
+
+
+def test_coarse_raster_warns_about_knots():
+    from types import SimpleNamespace
+
+    from postproc.diagnose.campaign import campaign_warnings
+    from postproc.diagnose.data import Dataset
+    from postproc.simulate import grid_points
+
+    rng = np.random.default_rng(19)
+    mach = load_machine(MACHINE)
+    q = grid_points(mach.volume_mm, [63.0, 105.0, 105.0])  # a 6 x 4 x 4 raster
+    meas = simulate_plan(mach, measurement_plan(q, tool_vectors=[(0, 0, -100)]), rng)
+    ds = Dataset.from_measurements([meas])
+    res = SimpleNamespace(fixed=False, outside=[], outside_excluded=False)
+    warn = campaign_warnings(ds, SimpleNamespace(method="parametric"), [meas], res)
+    coarse = {w["axis"]: w["distinct_positions"] for w in warn if w["kind"] == "coarse knots"}
+    assert coarse == {"X": 6, "Y": 4, "Z": 4}
+    held = campaign_warnings(ds, SimpleNamespace(method="parametric"), [meas], SimpleNamespace(**{**vars(res), "fixed": True}))
+    assert not any(w["kind"] == "coarse knots" for w in held)  # a calibration held as it is is not refitted
