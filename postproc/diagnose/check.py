@@ -282,6 +282,8 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
             if fixed and frame is not None and not frame.absorbed:
                 resid_registered = resid - frame.displacement(ds.q, ds.r)
                 where = where_it_fails(ds, resid_registered)
+            if ranking.selected and ranking.final_frame is not None:
+                frame = ranking.final_frame  # reported as fitted beside the suggested effects
     except PostprocError as exc:
         note = f"cross-validation not possible: {exc.message}"
     res = CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,

@@ -91,6 +91,7 @@ class Ranking:
     final_effects: list[Effect]  # all effects of the final model, fitted on all data
     final_cv_resid: np.ndarray | None = field(default=None, repr=False)  # held-out residual after them
     final_guard: object = None  # conditioning of the final joint fit (postproc.diagnose.guard.Guard)
+    final_frame: object = None  # the frame registration fitted with the final effects (FrameFit)
 
 
 def slope_p_value(y: np.ndarray, delta: np.ndarray, groups: np.ndarray) -> float:
@@ -204,10 +205,10 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
             sse_prev, e0 = float(np.sum(e0**2)), cache.residuals()
             best.rms_after_mm = rms3(e0)
             best.explained = (sse_prev - float(np.sum(e0**2))) / base_sse if base_sse > 0 else 0.0
-    final, final_guard = [], None
+    final, final_guard, final_frame = [], None, None
     if selected_effects:
         fitted = model.fit(ds, model.prepare(ds, selected_effects))
-        final, final_guard = fitted.effects, fitted.guard
+        final, final_guard, final_frame = fitted.effects, fitted.guard, fitted.frame
     # Suggestions are sized jointly with the base and each other, as 'fit --effect' sizes them
     # (the per-round fit on the base's residual underrates what a flexible base partly absorbs).
     offset = len(existing)
@@ -215,7 +216,7 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         if offset + i < len(final) and final[offset + i].name == c.name:
             c.effect = final[offset + i]
     return Ranking(model, len(folds), rms3(base_resid), base_resid, rounds, selected, untestable,
-                   in_model, rms3(e0), final, e0, final_guard)
+                   in_model, rms3(e0), final, e0, final_guard, final_frame)
 
 
 def empirical_offer(model: BaseModel, ds: Dataset, ranking: Ranking, existing: list[Effect],

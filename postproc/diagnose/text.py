@@ -56,10 +56,11 @@ def format_report(res: CheckResult) -> list[str]:
         if res.frame.absorbed:
             out.append("measurement frame: its registration is held by the model itself (origin and axes)")
         else:
-            out.append(f"measurement frame registered (a nuisance of the measurement, not a machine error): "
+            beside = " (fitted beside the suggested effects)" if res.ranking and res.ranking.selected else ""
+            out.append(f"measurement frame registered (a nuisance of the measurement, not a machine error){beside}: "
                        f"{res.frame.describe(res.volume_mm)}")
             if res.resid_registered is not None:
-                out.append(f"  residual after the registration: RMS {um(rms_of(res.resid_registered))} um")
+                out.append(f"  residual after the registration alone: RMS {um(rms_of(res.resid_registered))} um")
     if rk is not None:
         ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
         out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
