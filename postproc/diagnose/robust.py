@@ -32,6 +32,9 @@ FAMILY_ALPHA = 1e-3
 MAD_TO_SIGMA = 1.4826
 # Fewer rows than this give no robust spread.
 MIN_ROWS = 8
+# Spreads below this (mm, a nanometre: below any instrument) are rounding, not noise:
+# noise-free simulated data must not make outliers of rounding differences.
+MIN_SIGMA_MM = 1e-6
 
 
 @dataclass
@@ -52,7 +55,7 @@ def threshold(n: int) -> float:
 
 def _robust_sigma(dev: np.ndarray) -> np.ndarray:
     s = MAD_TO_SIGMA * np.median(np.abs(dev - np.median(dev, axis=0)), axis=0)
-    return np.where(s > 0, s, np.inf)
+    return np.maximum(s, MIN_SIGMA_MM)
 
 
 def duplicate_rows(ds: Dataset) -> np.ndarray:
