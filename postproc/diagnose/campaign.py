@@ -1,5 +1,7 @@
 """What a measurement campaign cannot show, said as warnings before any effect is named.
 
+- **Time/tool confounding**: tool vectors measured one after the other make a drift in
+  time and an error of one tool (its length) the same columns of the data.
 - **Time/position confounding**: when the measurement order follows the position (a
   raster), a drift in time and an error along the axes are the same columns of the data:
   a warm-up is absorbed into scale and squareness and never seen as drift.
@@ -62,6 +64,17 @@ def campaign_warnings(ds: Dataset, cal, data, res) -> list[dict]:
                                    "told apart from errors along the axes (a warm-up is taken for scale "
                                    "and squareness); measure in a random order, or come back to a "
                                    "reference point through the campaign"})
+    tools, inv = np.unique(np.round(ds.r, 3), axis=0, return_inverse=True)
+    if "t" in ds.ctx and np.ptp(ds.ctx["t"]) > 0 and len(tools) > 1:
+        t = ds.ctx["t"]
+        inv = inv.ravel()
+        means = np.bincount(inv, weights=t) / np.bincount(inv)
+        r2 = float(np.sum((means[inv] - t.mean()) ** 2) / np.sum((t - t.mean()) ** 2))
+        if r2 > CONFOUNDED_R2:
+            out.append({"kind": "time-tool confounding", "r2": r2,
+                        "message": f"the tool vectors were measured one after the other ({r2:.0%} of the time "
+                                   "is predicted by the tool vector): a drift in time cannot be told apart "
+                                   "from an error of one tool (its length, say); alternate the tools"})
     for j, a in enumerate(AXES):
         step = regular_step(ds.q[:, j])
         if step is not None and 2 * step > PITCH_MIN_MM:

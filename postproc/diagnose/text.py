@@ -150,6 +150,12 @@ def _where(res: CheckResult) -> list[str]:
                        f"difference {um(d['reversal_mm'])} +- {um(d['stderr_mm'])} um{flag}")
     else:
         out.append("  by approach direction: no dirx/diry/dirz columns")
+    if w.get("by_tool"):
+        out.append("  by tool vector (mean residual um, RMS um, n points):")
+        for b in w["by_tool"]:
+            t = b["tool_mm"]
+            out.append(f"    tool {t[0]:g},{t[1]:g},{t[2]:g} mm: {vec_um(b['mean_xyz_mm'])}; RMS {um(b['rms_mm'])}  "
+                       f"(n {b['n']})")
     if w["along_time"]:
         out.append("  along time t (mean residual um per quarter of the campaign, n points):")
         for b in w["along_time"]:
