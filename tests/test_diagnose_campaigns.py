@@ -357,3 +357,25 @@ def test_coarse_raster_warns_about_knots():
     assert coarse == {"X": 6, "Y": 4, "Z": 4}
     held = campaign_warnings(ds, SimpleNamespace(method="parametric"), [meas], SimpleNamespace(**{**vars(res), "fixed": True}))
     assert not any(w["kind"] == "coarse knots" for w in held)  # a calibration held as it is is not refitted
+
+
+def test_tools_measured_one_after_the_other_warn():
+    from types import SimpleNamespace
+
+    from postproc.diagnose.campaign import campaign_warnings
+    from postproc.diagnose.data import Dataset
+
+    rng = np.random.default_rng(23)
+    mach = load_machine(MACHINE)
+    res = SimpleNamespace(fixed=True, outside=[], outside_excluded=False)
+    cal = SimpleNamespace(method="parametric")
+    plan = measurement_plan(random_points(mach.volume_mm, 40, rng), tool_vectors=[(0, 0, -100), (0, 0, -200)],
+                            time_span_s=3600)
+    meas = simulate_plan(mach, plan, rng)
+    kinds = {w["kind"] for w in campaign_warnings(Dataset.from_measurements([meas]), cal, [meas], res)}
+    assert "time-tool confounding" in kinds
+    # the same rows in a shuffled order: no confounding
+    order = rng.permutation(len(meas.q))
+    meas.q, meas.m, meas.r, meas.direction = meas.q[order], meas.m[order], meas.r[order], meas.direction[order]
+    kinds = {w["kind"] for w in campaign_warnings(Dataset.from_measurements([meas]), cal, [meas], res)}
+    assert "time-tool confounding" not in kinds
