@@ -112,7 +112,8 @@ def _guarded_effects(effects: list[Effect], P: np.ndarray, y: np.ndarray, raw: n
         absorbed = all(n in guard.undetermined for n in FRAME_PARAMS)
         frame = FrameFit(coef[k:], guard.u_k2[k:], absorbed=absorbed)
         guard.undetermined = [n for n in guard.undetermined if n not in FRAME_PARAMS]
-    return fitted, frame, guard
+    # the conditioning reported is that of the effects; a frame alone has its own line
+    return fitted, frame, (guard if effects else None)
 
 
 class BaseModel:
