@@ -112,6 +112,9 @@ def _guarded_effects(effects: list[Effect], P: np.ndarray, y: np.ndarray, raw: n
         absorbed = all(n in guard.undetermined for n in FRAME_PARAMS)
         frame = FrameFit(coef[k:], guard.u_k2[k:], absorbed=absorbed)
         guard.undetermined = [n for n in guard.undetermined if n not in FRAME_PARAMS]
+        if effects:  # conditioning of the effects themselves (a frame the base holds is not theirs)
+            own = guarded_solve(P[:, :k], y, raw[:k], names[:k], dof)[1]
+            guard.condition, guard.min_visible = own.condition, own.min_visible
     # the conditioning reported is that of the effects; a frame alone has its own line
     return fitted, frame, (guard if effects else None)
 
