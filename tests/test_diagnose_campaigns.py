@@ -379,3 +379,14 @@ def test_tools_measured_one_after_the_other_warn():
     meas.q, meas.m, meas.r, meas.direction = meas.q[order], meas.m[order], meas.r[order], meas.direction[order]
     kinds = {w["kind"] for w in campaign_warnings(Dataset.from_measurements([meas]), cal, [meas], res)}
     assert "time-tool confounding" not in kinds
+
+
+def test_dir0_carries_the_last_move_and_leading_zeros_are_unknown():
+    from postproc.calibration.measurements import carried_directions
+
+    d = np.array([[0, 0, 1], [1, 0, 0], [0, -1, 0], [-1, 0, 0], [0, 0, -1]], dtype=float)
+    expected = np.array([[0, 0, 1], [1, 0, 1], [1, -1, 1], [-1, -1, 1], [-1, -1, -1]], dtype=float)
+    np.testing.assert_array_equal(carried_directions(d), expected)
+    meas = Measurements(q=np.zeros((5, 3)), m=np.zeros((5, 3)), r=np.zeros((5, 3)), direction=d)
+    np.testing.assert_array_equal(meas.unknown_direction_rows(), [True, True, False, False, False])
+    np.testing.assert_array_equal(meas.context_full()["diry"], expected[:, 1])
