@@ -8,12 +8,11 @@ Programs run with every work offset zero, tool lengths zero and the stored G28/G
 positions at the origin, so that program and machine coordinates coincide."""
 
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from oracle import RS274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
 
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
@@ -23,12 +22,10 @@ from postproc.gcode.pipeline import CorrectOptions, correct_text
 ROOT = Path(__file__).parents[1]
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 EXTS = {".nc", ".ngc", ".tap", ".gcode"}
-RS274 = shutil.which("rs274")
 K = 1.0002
 MAX_LINES = 10_000  # longer corpus programs: benchmarks/corpus_survey.py --oracle
 _CANON = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED|ARC_FEED|SET_G5X_OFFSET|SET_G92_OFFSET|"
                     r"USE_TOOL_LENGTH_OFFSET)\(([^)]*)\)")
-_ERROR_HINTS = ("error", "Error", "too long", "Bad character", "unknown", "missing", "Unable", "not found")
 
 pytestmark = pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 is not installed")
 
@@ -45,47 +42,38 @@ def _programs():
     return out
 
 
+TOOLS = "".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100))
+
+
 def rs274(text: str, tmp: Path):
-    """(accepted, canonical motions) of ``text`` run through rs274."""
-    tools = tmp / "tools.tbl"
-    if not tools.exists():
-        tools.write_text("".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100)))
-    src = tmp / "prog.ngc"
-    src.write_bytes(text.encode("utf-8", errors="surrogateescape"))
-    out = tmp / "canon.txt"
-    out.unlink(missing_ok=True)
-    proc = subprocess.run([RS274, "-t", str(tools), "-g", str(src), str(out)], capture_output=True, text=True,
-                          timeout=120, stdin=subprocess.DEVNULL)
-    log = proc.stdout + proc.stderr
-    canon = out.read_text(errors="replace") if out.exists() else ""
+    """(accepted, motions in machine coordinates, error) of ``text`` run through rs274."""
+    res = run_rs274(text, tools=TOOLS)
     # canonical positions are in the program's frame; machine = canonical + G5x + G92 +
     # tool length offset, tracked as rs274 announces them
     motions = []
     g5x = np.zeros(3)
     g92 = np.zeros(3)
     tlo = np.zeros(3)
-    for m in _CANON.finditer(canon):
+    for call in res.calls:
+        m = _CANON.match(call)
+        if m is None:
+            continue
         name = m.group(1)
         v = [float(x) for x in re.split(r"[,\s]+", m.group(2).strip()) if x]
         if name == "SET_G5X_OFFSET":
             g5x = np.array(v[1:4])
-            continue
-        if name == "SET_G92_OFFSET":
+        elif name == "SET_G92_OFFSET":
             g92 = np.array(v[:3])
-            continue
-        if name == "USE_TOOL_LENGTH_OFFSET":
+        elif name == "USE_TOOL_LENGTH_OFFSET":
             tlo = np.array(v[:3])
-            continue
-        off = g5x + g92 + tlo
-        if name == "ARC_FEED":
+        elif name == "ARC_FEED":
             # first_end, second_end, first_axis, second_axis, rotation, axis_end, a, b, c (G17)
+            off = g5x + g92 + tlo
             motions.append(("ARC", tuple(np.array([v[0], v[1], v[5]]) + off), tuple(np.array(v[2:4]) + off[:2]),
                             int(v[4])))
         else:
-            motions.append((name, tuple(np.array(v[:3]) + off), None, 0))
-    accepted = proc.returncode == 0 and "PROGRAM_END" in canon and not any(
-        h in line for line in log.splitlines()[-3:] for h in _ERROR_HINTS if "executing" not in line)
-    return accepted, motions, log
+            motions.append((name, tuple(np.array(v[:3]) + g5x + g92 + tlo), None, 0))
+    return res.ok, motions, res.error
 
 
 def _setup():
