@@ -182,6 +182,23 @@ def length_scale(table: CsvTable, default: str = "mm") -> float:
     return LENGTH_TO_MM[unit]
 
 
+def error_scale(table: CsvTable, default: str = "mm") -> float:
+    """Scale of the error columns: ``error=mm|um`` when given, else the ``length`` unit.
+
+    formats.md section 2: ``length`` applies to positions and errors alike unless
+    ``error`` is given for the error columns (``# units: length=mm error=um``).
+    """
+    units = parse_units(table)
+    if "error" not in units:
+        return length_scale(table, default)
+    unit = units["error"]
+    if unit not in LENGTH_TO_MM:
+        raise MeasurementError(f"error unit {unit!r} is not one of mm, um", path=table.path,
+                               **_units_place(table, f"error={unit}"),
+                               hint="write '# units: length=mm error=um' (positions in mm, errors in um)")
+    return LENGTH_TO_MM[unit]
+
+
 def angle_scale(table: CsvTable, default: str = "rad") -> float:
     unit = parse_units(table).get("angle", default)
     if unit not in ANGLE_TO_RAD:
