@@ -10,11 +10,12 @@ KINDS = {
     "postproc measurements v1": "measurements",
     "postproc axis error tables v1": "tables",
     "postproc squareness v1": "squareness",
+    "postproc iso230 runs v1": "runs",
 }
 
 
 def sniff(path) -> str:
-    """Return "measurements", "tables" or "squareness"."""
+    """Return "measurements", "tables", "squareness" or "runs" (ISO 230-2 interferometer runs)."""
     path = str(path)
     try:
         with open(path, encoding="utf-8-sig") as fh:
@@ -34,13 +35,16 @@ def sniff(path) -> str:
         cols = {c.strip() for c in line.split(",")}
         if {"X", "Y", "Z", "mx", "my", "mz"} <= cols:
             return "measurements"
+        if {"axis", "target", "run", "direction", "deviation"} <= cols:
+            return "runs"
         if {"axis", "position"} <= cols:
             return "tables"
         if {"name", "value"} <= cols:
             return "squareness"
         break
     raise MeasurementError(
-        "cannot tell what this file holds: not point measurements, axis error tables or squareness",
+        "cannot tell what this file holds: not point measurements, axis error tables, squareness or "
+        "interferometer runs",
         path=path,
         lineno=1,
         col=1,
