@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from postproc.errors import MeasurementError
@@ -15,7 +16,8 @@ KINDS = {
 
 
 def sniff(path) -> str:
-    """Return "measurements", "tables", "squareness" or "runs" (ISO 230-2 interferometer runs)."""
+    """Return "measurements", "tables", "squareness", "runs" (ISO 230-2 interferometer runs)
+    or "isg" (Beckhoff TF5280 component errors in the ISG CSV format, read as tables)."""
     path = str(path)
     try:
         with open(path, encoding="utf-8-sig") as fh:
@@ -30,8 +32,11 @@ def sniff(path) -> str:
             if body in KINDS:
                 return KINDS[body]
             continue
-        if not line.strip():
+        if not line.strip() or line.startswith("//"):  # '//': a comment of the TF5280 ISG CSV format
             continue
+        words = line.split()
+        if words and any(re.fullmatch(r"E[XYZABC][XYZ]", w) for w in words) and "," not in line:
+            return "isg"
         cols = {c.strip() for c in line.split(",")}
         if {"X", "Y", "Z", "mx", "my", "mz"} <= cols:
             return "measurements"

@@ -27,6 +27,7 @@ COMMANDS = {
     "mirror": "postproc.cli.mirror:mirror",
     "predict": "postproc.cli.predict:predict",
     "iso230": "postproc.cli.iso230:iso230",
+    "export": "postproc.cli.export:export",
 }
 
 

@@ -71,7 +71,7 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     from postproc.engine.registry import fitter
     from postproc.errors import CalibrationError, MeasurementError
 
-    kinds = [sniff(f) for f in files]
+    kinds = ["tables" if k == "isg" else k for k in (sniff(f) for f in files)]
     options = {
         "intervals": intervals,
         "border_blend_mm": border_blend,

@@ -394,7 +394,7 @@ def fit_tables(paths, squareness=None, runs=None, **options):
         paths = [paths]
     paths = [str(p) for p in paths]
     runs = [str(p) for p in (runs or [])]
-    parts = [_partial_parts(read_csv(p)) for p in paths]
+    parts = [_table_parts(p) for p in paths]
     report = [f"parametric model from axis error tables: {', '.join(paths)}"] if paths else []
     effects: list[dict] = []
     for p in runs:
@@ -444,7 +444,7 @@ UNMEASURED_HALF_RANGE_MM = 10_000.0
 
 
 @dataclass
-class _Part:
+class TablePart:
     """The columns one source gives for one axis: positions, values (n, 6), which columns."""
 
     x: np.ndarray
@@ -453,12 +453,23 @@ class _Part:
     source: str
 
 
-def _partial_parts(table: CsvTable) -> dict[str, _Part]:
+def _table_parts(path: str) -> dict[str, TablePart]:
+    """The parts of one tables file: formats.md section 2, or a TF5280 ISG CSV file."""
+    from postproc.calibration.sniff import sniff
+
+    if sniff(path) == "isg":
+        from postproc.metrology.controllers.beckhoff import read_isg_parts
+
+        return read_isg_parts(path)
+    return _partial_parts(read_csv(path))
+
+
+def _partial_parts(table: CsvTable) -> dict[str, TablePart]:
     measured = np.array([c in table.header for c in COLUMNS])
-    return {ax: _Part(x, e, measured, table.path) for ax, (x, e, _) in _axis_rows(table, partial=True).items()}
+    return {ax: TablePart(x, e, measured, table.path) for ax, (x, e, _) in _axis_rows(table, partial=True).items()}
 
 
-def _parts_from_runs(path: str) -> tuple[dict[str, _Part], list[dict], list[str]]:
+def _parts_from_runs(path: str) -> tuple[dict[str, TablePart], list[dict], list[str]]:
     """ISO 230-2 runs -> the positioning column (bidirectional mean deviation) of each
     axis and a backlash effect with the reversal values B_i along the axis."""
     from postproc.effects import get_effect
@@ -482,7 +493,7 @@ def _parts_from_runs(path: str) -> tuple[dict[str, _Part], list[dict], list[str]
         values[:, k] = res.mean
         measured = np.zeros(6, bool)
         measured[k] = True
-        parts[ax] = _Part(res.target_mm, values, measured, path)
+        parts[ax] = TablePart(res.target_mm, values, measured, path)
         b = res.reversal
         ref = float(b[np.argmax(np.abs(b))])
         f = res.figures
@@ -500,7 +511,7 @@ def _parts_from_runs(path: str) -> tuple[dict[str, _Part], list[dict], list[str]
     return parts, effects, report
 
 
-def _merge_parts(parts: list[dict[str, _Part]]) -> tuple[AxisTables, list[str]]:
+def _merge_parts(parts: list[dict[str, TablePart]]) -> tuple[AxisTables, list[str]]:
     """One AxisTables from partial sources: each column of each axis from at most one
     source, on the union of the sources' positions (a column is interpolated linearly
     between its own positions and held at its end values beyond them); columns nobody
@@ -514,7 +525,7 @@ def _merge_parts(parts: list[dict[str, _Part]]) -> tuple[AxisTables, list[str]]:
             report.append(f"{ax}: not measured: all six components taken as zero "
                           f"(table over +-{UNMEASURED_HALF_RANGE_MM:g} mm so it does not limit the volume)")
             continue
-        owner: dict[int, _Part] = {}
+        owner: dict[int, TablePart] = {}
         for part in mine:
             for j in np.flatnonzero(part.measured):
                 if j in owner:
