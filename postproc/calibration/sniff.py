@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from postproc.calibration.csvfile import sniff_separator
 from postproc.errors import MeasurementError
 
 KINDS = {
@@ -35,9 +36,9 @@ def sniff(path) -> str:
         if not line.strip() or line.startswith("//"):  # '//': a comment of the TF5280 ISG CSV format
             continue
         words = line.split()
-        if words and any(re.fullmatch(r"E[XYZABC][XYZ]", w) for w in words) and "," not in line:
+        if words and any(re.fullmatch(r"E[XYZABC][XYZ]", w) for w in words) and not re.search("[,;\t]", line):
             return "isg"
-        cols = {c.strip() for c in line.split(",")}
+        cols = {c.strip() for c in line.split(sniff_separator(line))}
         if {"X", "Y", "Z", "mx", "my", "mz"} <= cols:
             return "measurements"
         if {"axis", "target", "run", "direction", "deviation"} <= cols:

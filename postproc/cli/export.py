@@ -125,7 +125,7 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
     if others:
         click.echo(f"not in the table (position-independent or volumetric): {', '.join(others)}", err=True)
     if remainder:
-        data = json.loads(Path(cal_path).read_text(encoding="utf-8"))
+        data = json.loads(Path(cal_path).read_text(encoding="utf-8-sig"))
         rest = remainder_dict(data, result)
         calibration_from_dict(rest, path=remainder)  # the remainder must load as any calibration
         atomic_write_text(remainder, json.dumps(rest, indent=2) + "\n")

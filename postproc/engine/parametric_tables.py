@@ -20,6 +20,7 @@ import numpy as np
 from postproc.calibration.csvfile import (
     CsvTable,
     angle_scale,
+    check_position_span,
     error_scale,
     format_csv,
     length_scale,
@@ -210,6 +211,7 @@ def _axis_rows(table: CsvTable, partial: bool = False) -> dict[str, tuple[np.nda
                 hint="give each axis at least the two ends of its travel",
             )
         x = position[idx]
+        check_position_span(table, x, f"axis {ax}: positions")
         bad = np.flatnonzero(np.diff(x) <= 0)
         if len(bad):
             k = idx[bad[0] + 1]

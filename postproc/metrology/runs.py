@@ -13,7 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from postproc.calibration.csvfile import CsvTable, error_scale, format_csv, length_scale, read_csv
+from postproc.calibration.csvfile import (
+    CsvTable,
+    check_position_span,
+    error_scale,
+    format_csv,
+    length_scale,
+    read_csv,
+)
 from postproc.errors import MeasurementError
 
 MAGIC = "postproc iso230 runs v1"
@@ -87,6 +94,8 @@ def runs_from_table(table: CsvTable) -> Runs:
             raise MeasurementError("empty axis name", col=table.col_starts[i][jaxis], **place)
         axes.append(a)
         dirs.append(DIRECTIONS[d])
+    for a in dict.fromkeys(axes):
+        check_position_span(table, target[np.array(axes) == a], f"axis {a}: targets")
     order = table.numeric("t") if table.has("t") else np.arange(len(table.rows), dtype=float)
     runs = Runs(np.array(axes), target, run_f.astype(int), np.array(dirs), deviation, order,
                 np.asarray(table.linenos), table.path)
