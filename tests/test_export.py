@@ -172,3 +172,22 @@ def test_remainder_drops_backlash_and_positioning(tmp_path):
     # with positioning and backlash in the controller, nothing is left along X
     q = np.column_stack([TARGETS, np.full(len(TARGETS), 5.0), np.zeros(len(TARGETS))])
     assert_allclose(load_calibration(rest).engine.forward(q), q, atol=1e-12)
+
+
+def test_fanuc_magnification_and_detection_unit(tmp_path):
+    # 0.01 um detection units: the increments over 25 mm (up to ~7 um) exceed 127 units,
+    # so a magnification above 1 is chosen; the tape still sums back to the errors
+    cal, up, down = runs_calibration(tmp_path, 25)
+    out = tmp_path / "pitch.txt"
+    res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25", "--detection-unit", "0.01",
+                                    "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    params, data = read_fanuc(out.read_text())
+    assert params[3623]["1"] > 1
+    assert max(abs(v) for v in data.values()) <= 127
+    x, c_up, c_down = fanuc_compensation(params, data, "1", detection_unit_mm=0.00001)
+    unit = 0.00001 * params[3623]["1"]
+    assert_allclose(c_up, -(up - up[0]), atol=0.5 * unit + 1e-9)
+    res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25.00005", "-o", str(out)])
+    assert res.exit_code == 4
+    assert "not a whole number of detection units" in res.stderr

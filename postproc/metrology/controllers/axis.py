@@ -23,6 +23,9 @@ from postproc.errors import CalibrationError
 
 #: Points per table interval at which an exported table is compared with the model.
 CHECK_POINTS_PER_INTERVAL = 16
+#: A range that is a whole number of steps up to float rounding (in steps) is taken
+#: as whole: 300 mm in 25 mm steps is 12 intervals, not 13.
+WHOLE_STEPS_SLACK = 1e-9
 
 
 class AxisErrors:
@@ -100,7 +103,7 @@ def equidistant(lo: float, hi: float, step: float) -> tuple[np.ndarray, float]:
     """Positions lo, lo + s, ..., hi with s <= step chosen so that the last one is hi."""
     if not step > 0:
         raise CalibrationError(f"table step {step:g} mm: must be positive")
-    n = max(1, int(np.ceil((hi - lo) / step - 1e-9)))
+    n = max(1, int(np.ceil((hi - lo) / step - WHOLE_STEPS_SLACK)))
     s = (hi - lo) / n
     return lo + s * np.arange(n + 1), s
 

@@ -27,7 +27,7 @@ import re
 import numpy as np
 
 from postproc.errors import CalibrationError, MeasurementError
-from postproc.metrology.controllers.axis import AxisErrors
+from postproc.metrology.controllers.axis import WHOLE_STEPS_SLACK, AxisErrors
 from postproc.metrology.controllers.base import Export
 
 #: Pitch error data numbers on the parameter tape start here (N10000 = point 0).
@@ -44,8 +44,8 @@ DEFAULT_AXIS_NUMBERS = {"X": "1", "Y": "2", "Z": "3"}
 
 def _grid(e: AxisErrors, reference: float, interval: float) -> np.ndarray:
     """Section ends reference + k * interval covering the axis range: k from kmin to kmax."""
-    kmin = math.floor((e.lo - reference) / interval + 1e-9)
-    kmax = math.ceil((e.hi - reference) / interval - 1e-9)
+    kmin = math.floor((e.lo - reference) / interval + WHOLE_STEPS_SLACK)
+    kmax = math.ceil((e.hi - reference) / interval - WHOLE_STEPS_SLACK)
     return np.arange(min(kmin, 0), max(kmax, 0) + 1)
 
 
@@ -54,7 +54,7 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
                  axis_numbers: dict[str, str] | None = None, first_point: int = 0) -> Export:
     numbers = {**DEFAULT_AXIS_NUMBERS, **(axis_numbers or {})}
     interval_du = round(interval_mm / detection_unit_mm)
-    if interval_du <= 0 or abs(interval_du * detection_unit_mm - interval_mm) > 1e-9:
+    if interval_du <= 0 or abs(interval_du - interval_mm / detection_unit_mm) > WHOLE_STEPS_SLACK * max(1, interval_du):
         raise CalibrationError(f"interval {interval_mm:g} mm is not a whole number of detection units "
                                f"({detection_unit_mm * 1000:g} um)", hint="give --step as a multiple of the detection unit")
     params: dict[int, list[tuple[str, int]]] = {}
