@@ -114,3 +114,14 @@ def test_backlash_profile_is_validated_on_load(tmp_path):
     res = CliRunner().invoke(main, ["correct", "samples/pocket.nc", "-c", str(out), "-o", str(tmp_path / "o.nc")])
     assert res.exit_code == 4
     assert "reversal profile needs position_mm" in res.stderr
+
+
+def test_runs_with_a_squareness_file_among_files(tmp_path):
+    rng = np.random.default_rng(11)
+    runs, _ = make_runs(tmp_path / "runs.csv", rng)
+    sq = tmp_path / "sq.csv"
+    sq.write_text("# postproc squareness v1\n# units: angle=urad\nname,value\nEC0Y,20\nEB0Z,0\nEA0Z,0\n")
+    out = tmp_path / "cal.json"
+    res = CliRunner().invoke(main, ["fit", str(runs), str(sq), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert load_calibration(out).engine.base.squareness.EC0Y == pytest.approx(20e-6)

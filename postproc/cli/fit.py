@@ -85,7 +85,7 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     }
     options = {k: v for k, v in options.items() if v is not None}
     given = {"--border-blend": border_blend, "--grid-model": grid_model, "--fill-missing": fill_missing}
-    if "tables" in kinds and kinds.count("squareness") == 1 and squareness is None:
+    if ("tables" in kinds or "runs" in kinds) and kinds.count("squareness") == 1 and squareness is None:
         # A squareness file given among FILES is taken as --squareness.
         squareness = files[kinds.index("squareness")]
         files = tuple(f for f, k in zip(files, kinds, strict=True) if k != "squareness")
