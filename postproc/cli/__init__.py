@@ -26,6 +26,8 @@ COMMANDS = {
     "check": "postproc.cli.check:check",
     "mirror": "postproc.cli.mirror:mirror",
     "predict": "postproc.cli.predict:predict",
+    "iso230": "postproc.cli.iso230:iso230",
+    "export": "postproc.cli.export:export",
 }
 
 
