@@ -9,8 +9,6 @@ from scipy.spatial import cKDTree
 
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine
-from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import split_lines
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -79,13 +77,17 @@ def _polyline_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
 
 def _first_known_line(text: str, setup: Setup) -> int:
     """First line after which every axis has been positioned (before it, the machine's
-    position is unknown and so is the path)."""
-    interp = Interpreter(setup)
-    for i, line in enumerate(split_lines(text), 1):
-        interp.feed_line(i, line)
-        if not any(math.isnan(v) for v in interp.state.pos):
-            return i
-    return 10**9
+    position is unknown and so is the path); programs needing expansion read expanded."""
+    from postproc.gcode.path import for_each_block
+
+    found: list[int] = []
+
+    def visit(lineno, _line, _block, state) -> None:
+        if not found and not any(math.isnan(v) for v in state.pos):
+            found.append(lineno)
+
+    for_each_block(text, setup, visit, found.clear)
+    return found[0] if found else 10**9
 
 
 def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
