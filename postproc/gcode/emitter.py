@@ -41,6 +41,11 @@ def _unit_decimals(options, unit: float) -> int:
     return 5 if unit == MM_PER_INCH else 4
 
 
+def _nominal_offset(Q, nom, a: int, b: int) -> np.ndarray:
+    """The mean correction over samples a..b (broadcast): corrected minus nominal."""
+    return (Q[a:b + 1] - nom[a:b + 1]).mean(axis=0)
+
+
 class EmitterMixin:
     """Line emission for the corrector (see the module docstring)."""
 
@@ -146,9 +151,9 @@ class EmitterMixin:
                     segs.append({"kind": "line", "qe": qn, "added": added, "ds": 0.0, "takeup": True})
                     qe = qn
                 continue
-            _tag, s, Q, nom = st
+            _tag, s, Q, nom, bulge = st
             final = k == len(seq) - 1
-            segs.extend(self._fit_piece(mv, plan, s, Q, nom, qe, final, d, budget))
+            segs.extend(self._fit_piece(mv, plan, s, Q, nom, bulge, qe, final, d, budget))
             qe = segs[-1]["qe"]
         last = segs[-1]
         inserted = segs[:-1]
@@ -225,7 +230,7 @@ class EmitterMixin:
         self.qe[:] = last["qe"]
         self._write_line(line, edits, write)
 
-    def _fit_piece(self, mv: Move, plan, s, Q, nom, qe, final: bool, d: int, budget: float) -> list[dict]:
+    def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
         exact arc (or, failing that, one chord) reaches within the budget."""
         n = len(Q)
@@ -233,11 +238,11 @@ class EmitterMixin:
         cur = list(qe)
         out: list[dict] = []
         while a < n - 1:
-            seg = self._try_segment(mv, plan, s, Q, nom, a, n - 1, cur, final, d, budget)
+            seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, n - 1, cur, final, d, budget)
             if seg is not None:
                 out.append(seg)
                 break
-            lo_seg = self._try_segment(mv, plan, s, Q, nom, a, a + 1, cur, final, d, budget)
+            lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
             if lo_seg is None:
                 # the samples are too sparse here: follow the curve by subdivision
                 segs = self._refine(mv, plan, s[a], s[a + 1], Q[a + 1], cur, final and a + 1 == n - 1, d)
@@ -248,7 +253,7 @@ class EmitterMixin:
             lo, hi = a + 1, n - 1
             step = 2
             while a + step < hi:
-                sg = self._try_segment(mv, plan, s, Q, nom, a, a + step, cur, final, d, budget)
+                sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + step, cur, final, d, budget)
                 if sg is None:
                     hi = a + step
                     break
@@ -256,7 +261,7 @@ class EmitterMixin:
                 step *= 2
             while hi - lo > 1:
                 mid = (lo + hi) // 2
-                sg = self._try_segment(mv, plan, s, Q, nom, a, mid, cur, final, d, budget)
+                sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
                 if sg is None:
                     hi = mid
                 else:
@@ -266,7 +271,7 @@ class EmitterMixin:
             a = lo
         return out
 
-    def _try_segment(self, mv: Move, plan, s, Q, nom, a: int, b: int, cur, final: bool, d: int,
+    def _try_segment(self, mv: Move, plan, s, Q, nom, bulge, a: int, b: int, cur, final: bool, d: int,
                      budget: float) -> dict | None:
         last = final and b == len(Q) - 1
         qn = list(cur)
@@ -276,14 +281,22 @@ class EmitterMixin:
             edits, added = self._axis_words_free(mv, Q[b], qn, d)
         ds = float(s[b] - s[a])
         seg = {"qe": qn, "edits": edits, "added": added, "ds": ds}
+        # the samples and the middles of their intervals (the chord's middle moved by the
+        # nominal path's bulge there)
+        Qs = np.empty((2 * (b - a) + 1, 3))
+        Qs[0::2] = Q[a:b + 1]
+        Qs[1::2] = 0.5 * (Q[a:b] + Q[a + 1:b + 1]) + bulge[a:b]
+        ss = np.empty(len(Qs))
+        ss[0::2] = s[a:b + 1]
+        ss[1::2] = 0.5 * (s[a:b] + s[a + 1:b + 1])
         if mv.arc is not None:
-            spec = self._exact_arc(mv, plan, cur, qn, Q[a:b + 1], nom[a:b + 1], s[a:b + 1], last and not edits,
-                                   d, budget)
+            spec = self._exact_arc(mv, plan, cur, qn, Qs, Qs - _nominal_offset(Q, nom, a, b), ss,
+                                   last and not edits, d, budget)
             if spec is not None:
                 seg["kind"] = "arc"
                 seg["spec"] = spec
                 return seg
-        if chord_deviation(cur, qn, Q[a:b + 1]) <= budget:
+        if chord_deviation(cur, qn, Qs) <= budget:
             seg["kind"] = "line"
             return seg
         return None

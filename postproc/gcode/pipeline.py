@@ -511,6 +511,7 @@ class Corrector(EmitterMixin):
         dirs_all = np.repeat(np.array([dr for _i, pcs in layout for _s, _n, dr in pcs]), counts, axis=0)
         corr = self.corrected(nom_all, R[owner], dirs_all, [rot[i] for i in owner.tolist()], linenos[owner])
         off = 0
+        m_of = dict(planned)
         for i, pieces in layout:
             seq: list = []
             prev_end = S[i]
@@ -519,15 +520,22 @@ class Corrector(EmitterMixin):
                 n = len(s)
                 Q = corr[off:off + n].copy()
                 off += n
+                # how the nominal path bulges from its chord between samples: the fits
+                # check the middle of every sample interval too
+                if m_of[i].arc is not None:
+                    mid = arc_points(m_of[i].arc, m_of[i].q0, m_of[i].q1, 0.5 * (s[:-1] + s[1:]), arc_prm[i])
+                    bulge = mid - 0.5 * (nom[:-1] + nom[1:])
+                else:
+                    bulge = np.zeros((n - 1, 3))
                 if (dr != prev_dirs).any() and np.abs(Q[0] - prev_end).max() > TAKEUP_MIN_MM:
                     seq.append(("takeup", Q[0].copy()))
                 else:
                     Q[0] = prev_end
                     if seq and seq[-1][0] == "piece":
-                        _t, s0, Qa, na = seq.pop()
-                        s, Q, nom = (np.concatenate([s0, s[1:]]), np.vstack([Qa, Q[1:]]),
-                                     np.vstack([na, nom[1:]]))
-                seq.append(("piece", s, Q, nom))
+                        _t, s0, Qa, na, ba = seq.pop()
+                        s, Q, nom, bulge = (np.concatenate([s0, s[1:]]), np.vstack([Qa, Q[1:]]),
+                                            np.vstack([na, nom[1:]]), np.vstack([ba, bulge]))
+                seq.append(("piece", s, Q, nom, bulge))
                 prev_end = Q[-1]
                 prev_dirs = dr
             seq[-1][2][-1] = T[i]
