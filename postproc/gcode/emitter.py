@@ -184,6 +184,7 @@ class EmitterMixin:
             self.report.lines_out += 1
             if sg.get("takeup"):
                 self.report.takeups += 1
+            self.emitted_motion = mv.kind if sg["kind"] == "arc" else LINE
         if arc is not None:
             kinds = [sg["kind"] for sg in segs if not sg.get("takeup")]
             if all(kd == "arc" for kd in kinds):
@@ -205,7 +206,7 @@ class EmitterMixin:
             edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
             self.emitted_motion = LINE
         else:
-            if mv.motion_idx < 0 and (self.emitted_motion != mv.kind or inserted):
+            if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
                 text = "G" + MOTION_TEXT[mv.kind]
                 edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
             self.emitted_motion = mv.kind
