@@ -38,12 +38,12 @@ SAMPLE_CASES = [
     ("inch.nc", Setup()),
     ("g54_g43.ngc", Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 100.0})),
 ]
-# corpus programs with arcs (all planes, R and IJ, G91.1, inch), placed in the volume
+# corpus programs with arcs (R and IJ, G91.1, inch, tool lengths), placed in the volume
+TOOLS = {t: 20.0 for t in range(100)}
 CORPUS_CASES = [
-    ("linuxcnc/tort.ngc", Setup(offsets={"G54": (150.0, 150.0, 150.0)})),
-    ("pygcode-linuxcnc/Circular_Pocket.tap", Setup(offsets={"G54": (150.0, 150.0, 150.0)})),
-    ("pygcode-linuxcnc/Smiley001.nc", Setup(offsets={"G54": (100.0, 100.0, 150.0)})),
-    ("pygcode-linuxcnc/Clamp.nc", Setup(offsets={"G54": (100.0, 100.0, 150.0)})),
+    ("pygcode-linuxcnc/Circular_Pocket.tap", Setup(offsets={"G54": (150.0, 150.0, 150.0)}, tool_lengths=TOOLS)),
+    ("pygcode-linuxcnc/Smiley001.nc", Setup(offsets={"G54": (100.0, 100.0, 150.0)}, tool_lengths=TOOLS)),
+    ("pygcode-linuxcnc/Clamp.nc", Setup(offsets={"G54": (100.0, 100.0, 150.0)}, tool_lengths=TOOLS)),
 ]
 
 
