@@ -243,3 +243,23 @@ def test_walkthrough_backlash_calibration_corrects_the_pocket(tmp_path, monkeypa
     assert "G1 X" in out  # take-ups
     for unit, r0, r1, lineno in emitted_arcs(out, Setup()):
         assert abs(r1 - r0) <= 0.5e-4 * unit + 1e-9, out.splitlines()[lineno - 1]
+
+
+def test_periodic_lead_screw_error_is_followed_along_moves_and_arcs():
+    from postproc.effects import compose
+    from postproc.engine.static import StaticEngine
+
+    base = StaticEngine(np.eye(3), [0, 0, 0], [[0] * 3, [315] * 3])
+    eng = compose(base, [{"name": "periodic:X", "config": {"pitch_mm": 5.0},
+                          "params": {"cos_mm": 0.004, "sin_mm": -0.003}}])
+    text = ("G21 G90 G17\nG0 X100 Y100 Z50\nG1 Z40 F300\nG1 X160 Y110 F800\n"
+            "G2 X160 Y90 I0 J-10\nG3 X140 Y70 R20\nG1 X100 Y100\nG0 Z60\nM2\n")
+    out, rep = correct_text(text, eng, Setup(), CorrectOptions())
+    # the 5 um screw wave is followed within the tolerance, by far fewer lines than halving gave
+    assert ideal_vs_emitted(text, out, eng, Setup()) <= TOL
+    uncorrected = program_path(text, Setup(), max_step_mm=STEP)
+    assert rep.lines_out < 200
+    assert np.abs(np.asarray(eng.correction(uncorrected.points_mm, uncorrected.tool_mm,
+                                            uncorrected.context).q)).max() > 0.004
+    for unit, r0, r1, lineno in emitted_arcs(out, Setup()):
+        assert abs(r1 - r0) <= 0.5e-4 * unit + 1e-9, out.splitlines()[lineno - 1]
