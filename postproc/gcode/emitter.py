@@ -300,7 +300,7 @@ class EmitterMixin:
         ss[0::2] = s[a:b + 1]
         ss[1::2] = 0.5 * (s[a:b] + s[a + 1:b + 1])
         if mv.arc is not None:
-            spec = self._exact_arc(mv, plan, cur, qn, Qs, Qs - _nominal_offset(Q, nom, a, b), ss,
+            spec = self._exact_arc(mv, plan, cur, qn, Qs, _nominal_offset(Q, nom, a, b), ss,
                                    last and not edits, d, budget)
             if spec is not None:
                 seg["kind"] = "arc"
@@ -326,9 +326,10 @@ class EmitterMixin:
             cur = qn
         return out
 
-    def _exact_arc(self, mv: Move, plan, S, E, Qp, nomp, sp, may_keep: bool, d: int, budget: float):
+    def _exact_arc(self, mv: Move, plan, S, E, Qp, offset, sp, may_keep: bool, d: int, budget: float):
         """The arc from S to E (both as written) that stays within ``budget`` of the
-        corrected samples ``Qp``: its centre on the bisector of S and E, the written centre
+        corrected samples ``Qp`` (``offset``: their mean correction, which moves the nominal
+        centre to the first guess): its centre on the bisector of S and E, the written centre
         (I/J/K, or R where the input used R) chosen among rounded candidates so that the
         start and end radii agree to half the output resolution. None if none passes.
 
@@ -336,7 +337,7 @@ class EmitterMixin:
         input's own centre words are kept when their arc still passes (identity keeps
         every input arc as it is)."""
         arc = mv.arc
-        axes = (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
         unit = mv.unit
         S = np.asarray(S, dtype=float)
         E = np.asarray(E, dtype=float)
@@ -345,7 +346,6 @@ class EmitterMixin:
             return None
         nsw = span * plan["nsweep"]
         frac = (sp - sp[0]) / span
-        (a1, a2, an), (l1, l2) = axes
         if may_keep and span >= 1.0 and plan.get("whole"):
             ctrl = self._input_centre(mv, S, E)
             if ctrl is not None:
@@ -356,7 +356,7 @@ class EmitterMixin:
                     return {"form": "keep", "turns": int(turns[0])}
         S2, E2 = S[[a1, a2]], E[[a1, a2]]
         P2 = Qp[:, [a1, a2]]
-        c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + (Qp - nomp).mean(axis=0)[[a1, a2]]
+        c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
         if math.hypot(*(E2 - S2)) > 0.0:
             centre = bisector_centre(S2, E2, P2, c0)
         else:

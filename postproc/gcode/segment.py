@@ -1,13 +1,16 @@
-"""Segmentation: keep the emitted path within tolerance of the corrected ideal path.
+"""Segmentation and exact arcs: keep the emitted path within tolerance of the corrected ideal path.
 
-- :func:`subdivide` splits curves (straight moves under a non-affine correction,
-  linearised arcs) adaptively: a chord is accepted when the corrected point at the
-  middle of its parameter interval lies within the threshold of the chord's middle.
-  All midpoints of one level, over all curves of a chunk, go to the engine in one
-  vectorised call.
-- :func:`check_arc` decides whether a corrected arc can stay an arc: the arc that
-  the controller will draw from the emitted words must pass the controller's radius
-  check and lie within tolerance of the corrected ideal path at every sample.
+- :func:`bisector_centre`, :func:`arc_candidates`: an emitted arc is one exact circle
+  (or helix) through its end points as written; its centre lies on their bisector and
+  each rounded candidate centre is judged by how far the arc every controller draws from
+  it (LinuxCNC's spiral, or one radius and a jump at the end) strays from the corrected
+  samples. The emitter (:mod:`postproc.gcode.emitter`) fits the fewest such arcs, or
+  chords (:func:`chord_deviation`), through each move's samples.
+- :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
+- :func:`subdivide` splits curves adaptively where the samples are too sparse: a chord
+  is accepted when the corrected point at the middle of its parameter interval lies
+  within the threshold of the chord's middle. All midpoints of one level go to the
+  engine in one vectorised call.
 """
 
 from __future__ import annotations
