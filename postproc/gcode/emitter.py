@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from postproc.constants import MM_PER_INCH
-from postproc.errors import PostprocError, SolverError
+from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.fastlane import FastMove, emit_fast
 from postproc.gcode.geometry import TWO_PI
@@ -267,15 +267,15 @@ class EmitterMixin:
                     hi = mid
                 else:
                     lo, lo_seg = mid, sg
-            if lo == a + 1 and self.accept_residual_mm > self.opt.tolerance_mm:
-                # consecutive samples only: the path follows the solver's scatter
-                raise SolverError(
-                    f"the correction varies too fast along this move to follow within "
-                    f"{self.opt.tolerance_mm:g} mm", path=self.path, lineno=mv.lineno,
-                    hint=f"the {self.report.solver or self.engine.method} solver's answers scatter by up to "
-                         f"its residual (largest so far {self.report.max_residual_mm * 1000:.3g} um), more than "
-                         f"--tolerance {self.opt.tolerance_mm:g} mm allows: raise --tolerance above that "
-                         "residual, or use a calibration with the newton solver")
+            if lo == a + 1:
+                # only the next sample is reached: check the path between them with the
+                # engine itself (a jump or a solver's scatter there is refused)
+                segs = self._refine(mv, plan, s[a], s[a + 1], Q[a + 1], cur, final and a + 1 == n - 1, d)
+                if len(segs) > 1 or lo_seg["kind"] == "line":
+                    out.extend(segs)
+                    cur = segs[-1]["qe"]
+                    a += 1
+                    continue
             out.append(lo_seg)
             cur = lo_seg["qe"]
             a = lo
