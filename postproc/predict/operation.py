@@ -47,9 +47,11 @@ def load_chain(path) -> Chain:
     """Chain description file -> :class:`Chain` (errors name the file and the element)."""
     data = read_json(path)
     try:
-        return chain_from_dict(data, where="chain")
+        chain = chain_from_dict(data, where="chain", base_dir=Path(path).parent)
     except PostprocError as exc:
         raise exc.at(str(path)) from None
+    chain.path = str(path)
+    return chain
 
 
 def _number(data: Mapping, key: str, where: str, default: float | None = None, positive: bool = True) -> float:
@@ -102,14 +104,14 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
     if isinstance(machine, str):
         chain = load_chain(base_dir / machine)
     elif isinstance(machine, Mapping):
-        chain = chain_from_dict(machine, where=f"{where}: machine")
+        chain = chain_from_dict(machine, where=f"{where}: machine", base_dir=base_dir)
     else:
         raise PostprocError(f'{where}: "machine" must be a chain file name or an embedded chain')
     context = data.get("context", {})
     if not isinstance(context, Mapping) or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in context.values()
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in context.values()
     ):
-        raise PostprocError(f'{where}: "context" must map variable names to numbers')
+        raise PostprocError(f'{where}: "context" must map variable names to finite numbers')
     params: dict[str, Any] = {}
     mc = _object(data, "monte_carlo", where)
     params["n"] = int(_number(mc, "n", f"{where}: monte_carlo", 10000))
@@ -162,4 +164,6 @@ def load_operation(path) -> Operation:
     except PostprocError as exc:
         raise exc.at(str(p)) from None
     op.path = str(p)
+    if op.chain.path is None:  # embedded in the operation file
+        op.chain.path = op.path
     return op
