@@ -137,11 +137,16 @@ def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
         click.echo(f"wrote {plot_trace}")
 
 
-def _load_bore(operation):
+MACHINE_OPTION = click.option(
+    "--machine", "machine", type=click.Path(exists=True, dir_okay=False), default=None, metavar="CHAIN",
+    help="Chain file of the machine to use instead of the operation's \"machine\" (e.g. one from predict init).")
+
+
+def _load_bore(operation, machine=None):
     from postproc.errors import PostprocError
     from postproc.predict.operation import load_operation
 
-    op = load_operation(operation)
+    op = load_operation(operation, machine)
     if op.kind != "bore":
         raise PostprocError(f"predict bore needs a bore operation, got {op.kind!r}", path=operation)
     return op
@@ -166,9 +171,10 @@ def _finish_check(check: bool, verdict: dict) -> None:
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write the section (errors magnified) and the centre scatter to this PNG.")
 @click.option("--magnify", type=FINITE_FLOAT, default=100.0, show_default=True, help="Error magnification in the plot.")
+@MACHINE_OPTION
 @click.option("--check", "check", is_flag=True, help=CHECK_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def bore(operation, n, seed, plot, magnify, check, as_json):
+def bore(operation, n, seed, plot, magnify, machine, check, as_json):
     """Position error of a bored hole's centre (seed 004 example).
 
     The eight tool-tip positions of the seed's table 4 (and the axis point) go
@@ -189,7 +195,7 @@ def bore(operation, n, seed, plot, magnify, check, as_json):
     from postproc.predict import bore as bore_mod
     from postproc.predict import tolerance
 
-    op = _load_bore(operation)
+    op = _load_bore(operation, machine)
     mid = bore_mod.evaluate_section(op, tolerance.nominal(op.chain.random))
     dist, worst = bore_mod.analyse(op, n=n, seed=seed)
     tol = op.params["tolerance_mm"]
@@ -261,9 +267,10 @@ def bore(operation, n, seed, plot, magnify, check, as_json):
 @click.option("--worst-case", "worst_only", is_flag=True, help="Only the worst case over the field corners.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write histograms of the error components to this PNG.")
+@MACHINE_OPTION
 @click.option("--check", "check", is_flag=True, help=CHECK_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def tolerance_cmd(operation, n, seed, worst_only, plot, check, as_json):
+def tolerance_cmd(operation, n, seed, worst_only, plot, machine, check, as_json):
     """Distribution of a feature's position error over the chain's random variables.
 
     The random variables of the machine file (corner heights of planes inside
@@ -284,7 +291,7 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, check, as_json):
     from postproc.predict import tolerance
     from postproc.predict.operation import load_operation
 
-    op = load_operation(operation)
+    op = load_operation(operation, machine)
     if op.kind == "bore":
         names = bore_mod.component_names(op)
 
@@ -415,3 +422,44 @@ def chain_cmd(tables, squareness, order, angular, output):
     chain = chain_from_tables(tab, sq, order=order, angular=angular)
     atomic_write_text(output, json.dumps(chain.to_dict(), indent=1) + "\n")
     click.echo(f"wrote {output}: {len(chain.modules)} modules, variables {', '.join(sorted(chain.variables()))}")
+
+
+@predict.command("init")
+@click.option("--layout", required=True, type=click.Choice(["vertical-mill", "horizontal-boring"]),
+              help="Machine layout: 3-axis vertical mill, or horizontal boring machine (seed 004).")
+@click.option("-c", "--calibration", "calibration", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Calibration made by fit: the chain takes its measured error instead of zero axis errors.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Chain file to write.")
+def init(layout, calibration, output):
+    """Write a starting chain file with the common modules of a machine layout.
+
+    Every module and element carries a "comment" (JSON has no comments; the chain
+    format keeps "comment" and "_comment" keys as text) saying what it stands for and
+    what to fill in. With --calibration the axes' error elements give way to the
+    calibration's measured error at the commanded X, Y, Z (the path is written
+    relative to the chain file; X, Y, Z default to the middle of its volume).
+
+    Example:
+
+    \b
+        postproc predict init --layout vertical-mill -c calibrations/s500_parametric.json -o s500.chain.json
+    """
+    import os
+    from pathlib import Path
+
+    from postproc.calibration.calfile import load_calibration
+    from postproc.fileio import atomic_write_text
+    from postproc.predict.chain import chain_from_dict
+    from postproc.predict.layouts import layout_chain
+
+    centre = (0.0, 0.0, 0.0)
+    rel = None
+    if calibration is not None:
+        centre = tuple(load_calibration(calibration).engine.volume_mm.mean(axis=0))
+        out_dir = Path(output).resolve().parent
+        rel = Path(os.path.relpath(Path(calibration).resolve(), out_dir)).as_posix()
+    data = layout_chain(layout, rel, centre)
+    chain = chain_from_dict(data, base_dir=Path(output).resolve().parent)  # what predict will read
+    atomic_write_text(output, json.dumps(data, indent=2) + "\n")
+    click.echo(f"wrote {output}: {layout}, {len(chain.modules)} modules, variables "
+               f"{', '.join(sorted(chain.variables()))}")
