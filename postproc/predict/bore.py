@@ -33,11 +33,17 @@ from postproc.predict.operation import Operation
 #: Spindle angles of the seed's table 4 points 1-8 (deg), then the axis point 9.
 TABLE4_ANGLES_DEG = np.array([0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0, 0.0])
 
-#: The eight section points must spread over a circle: their smaller principal spread
-#: (singular value of the centred points, about 2 r for a circle of radius r) below
-#: this fraction of 2 r means they coincide or lie on a line, i.e. the tool does not
-#: turn about the bore axis. A real section, even a strongly elliptic one, is of order 1.
-SECTION_FLAT_RATIO = 1e-6
+#: The eight section points must spread over a circle. Their principal spreads (the
+#: singular values of the centred points) are both 2 r for a circle of radius r. A
+#: larger one below this fraction of the diameter means the points coincide: nothing
+#: turns the tool (rounding leaves some 1e-15 of it).
+SECTION_COINCIDENT_RATIO = 1e-9
+
+#: The smaller spread below this fraction of the larger means the points lie on a line
+#: or a flat ellipse: the tool turns about an axis more than 60 degrees (cos 60 = 0.5)
+#: off the bore axis, and no circle describes the section. Machine errors tilt it by
+#: milliradians, the seed's turning loads make it elliptic by parts per thousand.
+SECTION_FLAT_RATIO = 0.5
 
 
 def section_axes(axis: str) -> tuple[int, int]:
@@ -81,19 +87,21 @@ def check_section(op: Operation, plane_points: np.ndarray) -> None:
     """Refuse sections (..., 8, 2) whose points do not spread over a circle."""
     x = plane_points - plane_points.mean(axis=-2, keepdims=True)
     spread = np.linalg.svd(x, compute_uv=False).reshape(-1, 2)
-    circle = 2.0 * op.params["diameter_mm"] / 2.0  # both singular values of 8 points on a circle of radius r
-    flat = spread[:, 1] <= SECTION_FLAT_RATIO * circle
-    if not flat.any():
+    coincident = spread[:, 0] <= SECTION_COINCIDENT_RATIO * op.params["diameter_mm"]
+    flat = spread[:, 1] <= SECTION_FLAT_RATIO * spread[:, 0]
+    if not (coincident | flat).any():
         return
     axis, var = op.params["axis"], op.params["spindle_var"]
     plane = "-".join(component_names(op))
     hint = (f'turn the tool about the bore axis {axis}: a {{"spindle": {{"axis": "{axis}", "rpm": 0}}}} element, '
             f'or {{"rotary": {{"axis": "{axis}", "var": "{var}"}}}}, after the modules that carry it')
-    if np.any(spread[flat, 0] <= SECTION_FLAT_RATIO * circle):
+    if coincident.any():
         raise PostprocError(f"the eight section points coincide: nothing in the chain turns the tool with the "
                             f"spindle angle '{var}'", path=op.path, hint=hint)
-    raise PostprocError(f"the eight section points lie on a line in the {plane} plane, not on a circle: the tool "
-                        f"turns with '{var}' about an axis other than the bore axis {axis}", path=op.path, hint=hint)
+    ratio = float(np.min(spread[flat, 1] / spread[flat, 0]))
+    raise PostprocError(f"the eight section points lie on a line or a flat ellipse in the {plane} plane (axes "
+                        f"ratio {ratio:.3g}), not on a circle: the tool turns with '{var}' about an axis more than "
+                        f"60 degrees off the bore axis {axis}", path=op.path, hint=hint)
 
 
 def circle_centre(points) -> np.ndarray:
