@@ -193,31 +193,13 @@ def bore(operation, n, seed, plot, magnify, machine, check, as_json):
         postproc predict bore samples/predict/bore_50H7.operation.json -n 20000 --plot bore.png
     """
     from postproc.predict import bore as bore_mod
-    from postproc.predict import tolerance
+    from postproc.predict.analysis import predict_bore
 
     op = _load_bore(operation, machine)
-    mid = bore_mod.evaluate_section(op, tolerance.nominal(op.chain.random))
-    dist, worst = bore_mod.analyse(op, n=n, seed=seed)
+    report = predict_bore(op, n=n, seed=seed)
+    mid, worst, worst_sec, dist, verdict = report.mid, report.worst, report.worst_section, report.dist, report.verdict
     tol = op.params["tolerance_mm"]
-    k = int(np.argmax(worst.max_abs_mm / tol))
-    worst_sec = bore_mod.evaluate_section(op, worst.corner[k])
-    verdict = bore_mod.verdict(op, worst, bore_mod.diameter_range(op))
-    out = {
-        "operation": op.name,
-        "deterministic": dist is None,
-        "nominal_centre_mm": op.params["nominal_centre_mm"].tolist(),
-        "mid_field": {"centre_mm": mid.centre_mm.tolist(), "error_mm": mid.error_mm.tolist(),
-                      "axis_point_mm": mid.axis_point_mm.tolist(), "diameter_mm": mid.diameter_mm,
-                      "roundness_mm": mid.roundness_mm},
-        "worst_section": {"values": worst.corner[k], "error_mm": worst_sec.error_mm.tolist(),
-                          "diameter_mm": worst_sec.diameter_mm, "roundness_mm": worst_sec.roundness_mm},
-        "worst_case": worst.to_dict(),
-        "monte_carlo": None if dist is None else dist.to_dict(),
-        "verdict": verdict,
-    }
-    if "diameter_limits_mm" in op.params:
-        lo_d, hi_d = op.params["diameter_limits_mm"]
-        out["mid_field"]["diameter_within_limits"] = bool(lo_d <= mid.diameter_mm <= hi_d)
+    out = report.to_dict()
     if plot:
         _use_agg()
         _save_figure(bore_mod.plot_bore(op, mid, worst_sec, dist, magnify), plot)
@@ -286,45 +268,15 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, machine, check, as_json)
     \b
         postproc predict tolerance samples/predict/bore_50H7.operation.json -n 50000 --seed 2
     """
-    from postproc.errors import PostprocError
-    from postproc.predict import bore as bore_mod
     from postproc.predict import tolerance
+    from postproc.predict.analysis import analyse_feature
     from postproc.predict.operation import load_operation
 
     op = load_operation(operation, machine)
-    if op.kind == "bore":
-        names = bore_mod.component_names(op)
-
-        def fn(env):
-            return bore_mod.centre_errors(op, env)
-    elif op.kind == "point":
-        names = ["X", "Y", "Z"]
-        r = op.params["tool_point_mm"]
-
-        def fn(env):
-            full = {**op.context, **{k: np.asarray(v, dtype=float) for k, v in env.items()}}
-            return op.chain.transform(r, full) - op.params["nominal_mm"]
-    else:
-        raise PostprocError(f"predict tolerance needs a bore or point operation, got {op.kind!r}", path=operation)
-    tol = op.params["tolerance_mm"]
-    random = op.chain.random
-    deterministic = not tolerance.varying(random, op.chain.variables())
-    if deterministic:
-        worst = tolerance.single(fn, tolerance.nominal(random), tolerance_mm=tol, names=names)
-    else:
-        worst = tolerance.worst_case(fn, random, tolerance_mm=tol, names=names)
-    if op.kind == "bore":
-        verdict = bore_mod.verdict(op, worst, bore_mod.diameter_range(op))
-    else:
-        verdict = {"held": worst.within, "basis": "single prediction" if deterministic else "worst case",
-                   "within": worst.within}
-    out = {"operation": op.name, "deterministic": deterministic, "worst_case": worst.to_dict()}
-    dist = None
-    if not worst_only and not deterministic:
-        dist = tolerance.monte_carlo(fn, random, n=n or op.params["n"],
-                                     seed=op.params["seed"] if seed is None else seed, tolerance_mm=tol, names=names)
-        out["monte_carlo"] = dist.to_dict()
-    out["verdict"] = verdict
+    report = analyse_feature(op, n=n, seed=seed, monte_carlo=not worst_only)
+    worst, dist, verdict, deterministic = report.worst, report.dist, report.verdict, report.deterministic
+    names, tol = worst.names, op.params["tolerance_mm"]
+    out = report.to_dict()
     if plot:
         if dist is None:
             raise click.UsageError("--plot needs the Monte Carlo (drop --worst-case; a chain without random "
