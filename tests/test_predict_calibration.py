@@ -185,3 +185,23 @@ def test_verify_program_on_a_calibration_as_the_machine():
     corrected = next(v for k, v in runs.items() if k.startswith("corrected"))
     assert corrected["max_mm"] < 0.001
     assert runs["uncorrected"]["max_mm"] > 0.3
+
+
+def test_the_corrected_program_bores_the_hole_where_it_belongs(tmp_path):
+    # correct puts the bottom of the plunge (gauge point X200 Y250 Z180, tool 100 mm
+    # down) where the calibration's inverse says; predicting the bore there through
+    # the chain's calibration element brings the centre back to the nominal, to the
+    # 0.05 um the corrected program's 4 decimals allow.
+    out = tmp_path / "bore_corrected.nc"
+    res = run("correct", ROOT / "samples" / "predict" / "s500_bore.nc", "-c", PARAMETRIC, "--tool-vector", "0,0,-100",
+              "-o", out)
+    assert res.exit_code == 0, res.output
+    bottom = min((line for line in out.read_text().splitlines() if line.startswith("G1") and " Z" in line),
+                 key=lambda line: float(line.split(" Z")[1].split()[0]))
+    words = {w[0]: w[1:] for w in bottom.split()[1:] if w[0] in "XYZ"}
+    sample = ROOT / "samples" / "predict" / "s500_bore.operation.json"
+    before = json.loads(run("predict", "bore", sample, "--json").output)
+    assert np.max(np.abs(before["mid_field"]["error_mm"])) > 0.2
+    res = run("predict", "bore", sample, *[f"--set={k}={v}" for k, v in words.items()], "--check", "--json")
+    assert res.exit_code == 0, res.output
+    assert_allclose(json.loads(res.output)["mid_field"]["error_mm"], [0, 0], atol=1e-4)

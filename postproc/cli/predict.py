@@ -142,11 +142,24 @@ MACHINE_OPTION = click.option(
     help="Chain file of the machine to use instead of the operation's \"machine\" (e.g. one from predict init).")
 
 
-def _load_bore(operation, machine=None):
-    from postproc.errors import PostprocError
+SET_OPTION = click.option(
+    "--set", "values", multiple=True, metavar="NAME=VALUE",
+    help="A context variable (axis position X, Y, Z, t, a load ...) in place of the operation's. Repeatable.")
+
+
+def _load(operation, machine=None, values=()):
+    """The operation (with --machine's chain), its context updated by --set."""
     from postproc.predict.operation import load_operation
 
     op = load_operation(operation, machine)
+    op.context.update(dict(parse_context(v) for v in values))
+    return op
+
+
+def _load_bore(operation, machine=None, values=()):
+    from postproc.errors import PostprocError
+
+    op = _load(operation, machine, values)
     if op.kind != "bore":
         raise PostprocError(f"predict bore needs a bore operation, got {op.kind!r}", path=operation)
     return op
@@ -172,9 +185,10 @@ def _finish_check(check: bool, verdict: dict) -> None:
               help="Write the section (errors magnified) and the centre scatter to this PNG.")
 @click.option("--magnify", type=FINITE_FLOAT, default=100.0, show_default=True, help="Error magnification in the plot.")
 @MACHINE_OPTION
+@SET_OPTION
 @click.option("--check", "check", is_flag=True, help=CHECK_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def bore(operation, n, seed, plot, magnify, machine, check, as_json):
+def bore(operation, n, seed, plot, magnify, machine, values, check, as_json):
     """Position error of a bored hole's centre (seed 004 example).
 
     The eight tool-tip positions of the seed's table 4 (and the axis point) go
@@ -195,7 +209,7 @@ def bore(operation, n, seed, plot, magnify, machine, check, as_json):
     from postproc.predict import bore as bore_mod
     from postproc.predict.analysis import predict_bore
 
-    op = _load_bore(operation, machine)
+    op = _load_bore(operation, machine, values)
     report = predict_bore(op, n=n, seed=seed)
     mid, worst, worst_sec, dist, verdict = report.mid, report.worst, report.worst_section, report.dist, report.verdict
     tol = op.params["tolerance_mm"]
@@ -250,9 +264,10 @@ def bore(operation, n, seed, plot, magnify, machine, check, as_json):
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write histograms of the error components to this PNG.")
 @MACHINE_OPTION
+@SET_OPTION
 @click.option("--check", "check", is_flag=True, help=CHECK_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def tolerance_cmd(operation, n, seed, worst_only, plot, machine, check, as_json):
+def tolerance_cmd(operation, n, seed, worst_only, plot, machine, values, check, as_json):
     """Distribution of a feature's position error over the chain's random variables.
 
     The random variables of the machine file (corner heights of planes inside
@@ -270,9 +285,8 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, machine, check, as_json)
     """
     from postproc.predict import tolerance
     from postproc.predict.analysis import analyse_feature
-    from postproc.predict.operation import load_operation
 
-    op = load_operation(operation, machine)
+    op = _load(operation, machine, values)
     report = analyse_feature(op, n=n, seed=seed, monte_carlo=not worst_only)
     worst, dist, verdict, deterministic = report.worst, report.dist, report.verdict, report.deterministic
     names, tol = worst.names, op.params["tolerance_mm"]
