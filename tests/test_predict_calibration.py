@@ -205,3 +205,29 @@ def test_the_corrected_program_bores_the_hole_where_it_belongs(tmp_path):
     res = run("predict", "bore", sample, *[f"--set={k}={v}" for k, v in words.items()], "--check", "--json")
     assert res.exit_code == 0, res.output
     assert_allclose(json.loads(res.output)["mid_field"]["error_mm"], [0, 0], atol=1e-4)
+
+
+def test_readme_walkthrough_from_a_calibration_to_a_predicted_bore(tmp_path, monkeypatch):
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("### From a calibration to a predicted bore", 1)[1].split("\n## ", 1)[0]
+    blocks = section.split("```\n")[1::2]
+    commands = [line.split("postproc ", 1)[1].split() for line in blocks[0].splitlines()]
+    printed = blocks[1].splitlines()
+    monkeypatch.chdir(ROOT)
+    for args in commands:  # fit, init, bore: outputs go to tmp_path
+        args = [str(tmp_path / a) if a.endswith((".chain.json", "s500_tables.json")) else a for a in args]
+        res = run(*args)
+    assert res.exit_code == EXIT_NOT_HELD, res.output
+    assert printed[0] in res.output
+    assert printed[-1] in res.output
+    second = blocks[2].replace("\\\n", " ").splitlines()
+    correct = second[0].split("postproc ", 1)[1].split()
+    correct = [str(tmp_path / a) if a.endswith((".nc", ".json")) and not a.startswith("samples") else a
+               for a in correct]
+    assert run(*correct).exit_code == 0
+    expected_line = second[1].split("# ", 1)[1]
+    assert expected_line in (tmp_path / "bore_corrected.nc").read_text().splitlines()
+    bore = [str(tmp_path / a) if a.endswith(".chain.json") else a for a in second[2].split("postproc ", 1)[1].split()]
+    res = run(*bore)
+    assert res.exit_code == 0, res.output
+    assert "centre error X    0.013 um, Y    0.018 um" in res.output
