@@ -213,6 +213,20 @@ def analyse(op: Operation, n: int | None = None, seed: int | None = None):
     return dist, worst
 
 
+def _nominal_angles(offsets: np.ndarray) -> np.ndarray:
+    """Angles (rad) of the eight tips on an error-free machine: ``sense * S + phase``, the
+    sense (the spindle may turn either way) and phase that best fit where they are."""
+    s = np.radians(TABLE4_ANGLES_DEG[:8])
+    seen = np.arctan2(offsets[:, 1], offsets[:, 0])
+    best = None
+    for sense in (1.0, -1.0):
+        phase = np.angle(np.mean(np.exp(1j * (seen - sense * s))))
+        miss = np.sum(1.0 - np.cos(seen - sense * s - phase))
+        if best is None or miss < best[0]:
+            best = (miss, sense * s + phase)
+    return best[1]
+
+
 def plot_bore(op: Operation, nominal: Section, worst: Section, dist, magnify: float = 100.0, ax=None):
     """Seed 004 figure 12: nominal circle, machined section (errors magnified), tolerance
     square and the Monte-Carlo centres -> axes."""
@@ -229,10 +243,9 @@ def plot_bore(op: Operation, nominal: Section, worst: Section, dist, magnify: fl
     left.plot(*c0, "k+", ms=12)
     order = [0, 4, 1, 5, 2, 6, 3, 7, 0]
     for sec, style, label in ((nominal, "b.-", "all variables mid-field"), (worst, "r.-", "worst corner")):
-        ideal = (np.array([np.cos(np.radians(d)) for d in (0, 90, 180, 270, 45, 135, 225, 315)]),
-                 np.array([np.sin(np.radians(d)) for d in (0, 90, 180, 270, 45, 135, 225, 315)]))
-        nom = np.stack([c0[0] + r * ideal[0], c0[1] + r * ideal[1]], axis=1)
         act = sec.points_mm[:8][:, [a, b]]
+        phi = _nominal_angles(act - sec.centre_mm)
+        nom = np.stack([c0[0] + r * np.cos(phi), c0[1] + r * np.sin(phi)], axis=1)
         shown = nom + magnify * (act - nom)
         left.plot(shown[order, 0], shown[order, 1], style, lw=1, label=f"{label} (errors x{magnify:g})")
         left.quiver(nom[:, 0], nom[:, 1], shown[:, 0] - nom[:, 0], shown[:, 1] - nom[:, 1],
