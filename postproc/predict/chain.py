@@ -194,9 +194,6 @@ class Element:
 
     def _check_error(self) -> None:
         b = self.body
-        unknown = set(b) - set(ERROR_PARAMS) - {"order", "comment"}
-        if unknown:
-            raise _fail(self.where, f"unknown error parameters {sorted(unknown)}", hint=f"use {', '.join(ERROR_PARAMS)}")
         for key in ERROR_PARAMS:
             check_value(b.get(key, 0.0), f"{self.where}.{key}")
         if b.get("order", "small") not in ("small", "exact"):
