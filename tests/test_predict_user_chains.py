@@ -148,7 +148,7 @@ def test_a_tool_turned_about_another_axis_is_refused_with_the_reason(tmp_path):
     path = write_bore(tmp_path, user_chain(spindle={"axis": "z", "rpm": 0}))
     res = run("bore", path)
     assert res.exit_code == EXIT_INPUT
-    assert "lie on a line or a flat ellipse in the Y-Z plane" in res.output
+    assert "lie on no circle of the tool's diameter 50 mm" in res.output
     assert str(path) in res.output
 
 
@@ -213,3 +213,22 @@ def test_tolerance_of_a_point_on_a_deterministic_chain(tmp_path):
     assert out["deterministic"] is True
     assert "monte_carlo" not in out
     assert out["verdict"]["held"] is True
+
+
+def test_a_tool_turned_exactly_across_the_bore_axis_is_refused_as_a_line(tmp_path):
+    # No error element: turning about z, the tips (100 cos S - 25 sin S, ...) keep Z.
+    chain = user_chain(error={"beta": 0}, spindle={"axis": "z", "rpm": 0})
+    res = run("bore", write_bore(tmp_path, chain))
+    assert res.exit_code == EXIT_INPUT
+    assert "lie on a line in the Y-Z plane" in res.output
+
+
+def test_tips_spaced_unevenly_on_the_circle_still_give_its_centre(tmp_path):
+    # A phase of S rad on top of the S deg turning puts the eight tips at uneven
+    # angles (-S deg + S rad), all on the same circle: its centre is still Y +30, Z -40 um.
+    path = write_bore(tmp_path, user_chain(spindle={"axis": "x", "rpm": 0, "phase": "S"}))
+    res = run("bore", path, "--json")
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert_allclose(out["mid_field"]["error_mm"], [0.03, -0.04], atol=1e-9)
+    assert_allclose(out["mid_field"]["diameter_mm"], 50.0, atol=1e-9)

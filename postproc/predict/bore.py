@@ -33,17 +33,23 @@ from postproc.predict.operation import Operation
 #: Spindle angles of the seed's table 4 points 1-8 (deg), then the axis point 9.
 TABLE4_ANGLES_DEG = np.array([0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0, 0.0])
 
-#: The eight section points must spread over a circle. Their principal spreads (the
-#: singular values of the centred points) are both 2 r for a circle of radius r. A
-#: larger one below this fraction of the diameter means the points coincide: nothing
-#: turns the tool (rounding leaves some 1e-15 of it).
+#: The eight section points must spread over a circle. Their larger principal spread
+#: (singular value of the centred points, 2 r for eight points on a circle of radius r)
+#: below this fraction of the diameter means they coincide: nothing turns the tool
+#: (rounding leaves some 1e-15 of it).
 SECTION_COINCIDENT_RATIO = 1e-9
 
-#: The smaller spread below this fraction of the larger means the points lie on a line
-#: or a flat ellipse: the tool turns about an axis more than 60 degrees (cos 60 = 0.5)
-#: off the bore axis, and no circle describes the section. Machine errors tilt it by
-#: milliradians, the seed's turning loads make it elliptic by parts per thousand.
-SECTION_FLAT_RATIO = 0.5
+#: The smaller spread below this fraction of the larger means the points lie on a line:
+#: no circle passes through them (the least-squares circle is singular).
+SECTION_LINE_RATIO = 1e-9
+
+#: A section is a hole the tool bored when its points lie on a circle of about the
+#: tool's size: the spread of their distances from the centre (roundness) and the
+#: difference of its diameter from the tool's both below this fraction of the tool's
+#: radius. A tool turning about an axis tilted by theta from the bore axis leaves an
+#: ellipse of roundness r (1 - cos theta): at 60 degrees half the radius. Machine
+#: errors and the seed's turning loads leave micrometres on tens of millimetres.
+SECTION_ROUND_RATIO = 0.5
 
 
 def section_axes(axis: str) -> tuple[int, int]:
@@ -83,25 +89,38 @@ def section_points(op: Operation, env: Mapping[str, np.ndarray] | None = None) -
     return np.broadcast_to(pts, (n, 9, 3))
 
 
-def check_section(op: Operation, plane_points: np.ndarray) -> None:
-    """Refuse sections (..., 8, 2) whose points do not spread over a circle."""
-    x = plane_points - plane_points.mean(axis=-2, keepdims=True)
-    spread = np.linalg.svd(x, compute_uv=False).reshape(-1, 2)
-    coincident = spread[:, 0] <= SECTION_COINCIDENT_RATIO * op.params["diameter_mm"]
-    flat = spread[:, 1] <= SECTION_FLAT_RATIO * spread[:, 0]
-    if not (coincident | flat).any():
-        return
+def _refuse(op: Operation, message: str) -> PostprocError:
     axis, var = op.params["axis"], op.params["spindle_var"]
-    plane = "-".join(component_names(op))
     hint = (f'turn the tool about the bore axis {axis}: a {{"spindle": {{"axis": "{axis}", "rpm": 0}}}} element, '
             f'or {{"rotary": {{"axis": "{axis}", "var": "{var}"}}}}, after the modules that carry it')
-    if coincident.any():
-        raise PostprocError(f"the eight section points coincide: nothing in the chain turns the tool with the "
-                            f"spindle angle '{var}'", path=op.path, hint=hint)
-    ratio = float(np.min(spread[flat, 1] / spread[flat, 0]))
-    raise PostprocError(f"the eight section points lie on a line or a flat ellipse in the {plane} plane (axes "
-                        f"ratio {ratio:.3g}), not on a circle: the tool turns with '{var}' about an axis more than "
-                        f"60 degrees off the bore axis {axis}", path=op.path, hint=hint)
+    return PostprocError(message, path=op.path, hint=hint)
+
+
+def check_section(op: Operation, plane_points: np.ndarray) -> None:
+    """Refuse sections (..., 8, 2) whose points coincide or lie on a line: no circle fits."""
+    x = plane_points - plane_points.mean(axis=-2, keepdims=True)
+    spread = np.linalg.svd(x, compute_uv=False).reshape(-1, 2)
+    var = op.params["spindle_var"]
+    if np.any(spread[:, 0] <= SECTION_COINCIDENT_RATIO * op.params["diameter_mm"]):
+        raise _refuse(op, f"the eight section points coincide: nothing in the chain turns the tool with the "
+                          f"spindle angle '{var}'")
+    if np.any(spread[:, 1] <= SECTION_LINE_RATIO * spread[:, 0]):
+        raise _refuse(op, f"the eight section points lie on a line in the {'-'.join(component_names(op))} plane: "
+                          f"the tool turns with '{var}' about an axis normal to the bore axis {op.params['axis']}")
+
+
+def check_round(op: Operation, diameter_mm: np.ndarray, roundness_mm: np.ndarray) -> None:
+    """Refuse sections that are no circle of about the tool's diameter (see SECTION_ROUND_RATIO)."""
+    d = op.params["diameter_mm"]
+    off = np.maximum(roundness_mm, np.abs(diameter_mm - d))
+    bad = off > SECTION_ROUND_RATIO * d / 2.0
+    if np.any(bad):
+        k = int(np.argmax(off))
+        raise _refuse(op, f"the eight section points lie on no circle of the tool's diameter {d:g} mm (their "
+                          f"circle {float(np.ravel(diameter_mm)[k]):.4g} mm, out of round by "
+                          f"{float(np.ravel(roundness_mm)[k]):.4g} mm): the tool turns with "
+                          f"'{op.params['spindle_var']}' about an axis more than 60 degrees off the bore axis "
+                          f"{op.params['axis']}, or a variable moves it along the section")
 
 
 def circle_centre(points) -> np.ndarray:
@@ -137,8 +156,9 @@ def fit_sections(op: Operation, env: Mapping[str, np.ndarray]) -> tuple[np.ndarr
     check_section(op, plane)
     centre = circle_centre(plane)
     radii = np.linalg.norm(plane - centre[..., None, :], axis=-1)
-    return (centre - op.params["nominal_centre_mm"], 2.0 * radii.mean(axis=-1),
-            radii.max(axis=-1) - radii.min(axis=-1))
+    diameter, roundness = 2.0 * radii.mean(axis=-1), radii.max(axis=-1) - radii.min(axis=-1)
+    check_round(op, diameter, roundness)
+    return centre - op.params["nominal_centre_mm"], diameter, roundness
 
 
 def centre_errors(op: Operation, env: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -159,6 +179,7 @@ def evaluate_section(op: Operation, values: Mapping[str, float]) -> Section:
     check_section(op, pts[:8, [a, b]])
     centre = circle_centre(pts[:8, [a, b]])
     radii = np.linalg.norm(pts[:8, [a, b]] - centre, axis=1)
+    check_round(op, 2 * radii.mean(), radii.max() - radii.min())
     return Section(pts, centre, pts[8], centre - op.params["nominal_centre_mm"], component_names(op),
                    float(2 * radii.mean()), float(radii.max() - radii.min()))
 
