@@ -14,6 +14,7 @@ EXIT_USAGE = 2  # bad command-line usage (click's own code)
 EXIT_INPUT = 3  # a G-code, measurement or table file cannot be read as given
 EXIT_CALIBRATION = 4  # a calibration file is malformed, in the wrong units or unfit
 EXIT_SAFETY = 5  # a safety rule refused the job (bound, volume, missing offset, twice)
+EXIT_NOT_HELD = 6  # predict --check: the predicted part does not hold its tolerance
 
 
 class PostprocError(Exception):

@@ -137,14 +137,44 @@ def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
         click.echo(f"wrote {plot_trace}")
 
 
-def _load_bore(operation):
-    from postproc.errors import PostprocError
+MACHINE_OPTION = click.option(
+    "--machine", "machine", type=click.Path(exists=True, dir_okay=False), default=None, metavar="CHAIN",
+    help="Chain file of the machine to use instead of the operation's \"machine\" (e.g. one from predict init).")
+
+
+SET_OPTION = click.option(
+    "--set", "values", multiple=True, metavar="NAME=VALUE",
+    help="A context variable (axis position X, Y, Z, t, a load ...) in place of the operation's. Repeatable.")
+
+
+def _load(operation, machine=None, values=()):
+    """The operation (with --machine's chain), its context updated by --set."""
     from postproc.predict.operation import load_operation
 
-    op = load_operation(operation)
+    op = load_operation(operation, machine)
+    op.context.update(dict(parse_context(v) for v in values))
+    return op
+
+
+def _load_bore(operation, machine=None, values=()):
+    from postproc.errors import PostprocError
+
+    op = _load(operation, machine, values)
     if op.kind != "bore":
         raise PostprocError(f"predict bore needs a bore operation, got {op.kind!r}", path=operation)
     return op
+
+
+CHECK_HELP = ("Exit with status 6 when the tolerance (and the diameter limits) are not held: in the worst "
+              "case over the fields, or by the single prediction of a chain without random variables.")
+
+
+def _finish_check(check: bool, verdict: dict) -> None:
+    """With --check, a tolerance that is not held is exit status 6 (after the report)."""
+    if check and not verdict["held"]:
+        from postproc.errors import EXIT_NOT_HELD
+
+        click.get_current_context().exit(EXIT_NOT_HELD)
 
 
 @predict.command()
@@ -154,15 +184,22 @@ def _load_bore(operation):
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write the section (errors magnified) and the centre scatter to this PNG.")
 @click.option("--magnify", type=FINITE_FLOAT, default=100.0, show_default=True, help="Error magnification in the plot.")
+@MACHINE_OPTION
+@SET_OPTION
+@click.option("--check", "check", is_flag=True, help=CHECK_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def bore(operation, n, seed, plot, magnify, as_json):
+def bore(operation, n, seed, plot, magnify, machine, values, check, as_json):
     """Position error of a bored hole's centre (seed 004 example).
 
     The eight tool-tip positions of the seed's table 4 (and the axis point) go
     through the chain; the section's least-squares circle gives the centre. Prints
     the centre with every random variable mid-field, the worst case over the corners
     of the tolerance fields and clearances, and the Monte-Carlo distribution with the
-    probability of meeting the +- tolerances.
+    probability of meeting the +- tolerances. A chain without random variables gives
+    its single prediction (the worst case is that prediction, no Monte Carlo).
+
+    With --check the exit status is the verdict: 0 when the centre (and the diameter,
+    if the operation gives limits) is within tolerance, 6 when not.
 
     Example:
 
@@ -170,38 +207,25 @@ def bore(operation, n, seed, plot, magnify, as_json):
         postproc predict bore samples/predict/bore_50H7.operation.json -n 20000 --plot bore.png
     """
     from postproc.predict import bore as bore_mod
-    from postproc.predict import tolerance
+    from postproc.predict.analysis import predict_bore
 
-    op = _load_bore(operation)
-    mid = bore_mod.evaluate_section(op, tolerance.nominal(op.chain.random))
-    dist, worst = bore_mod.analyse(op, n=n, seed=seed)
+    op = _load_bore(operation, machine, values)
+    report = predict_bore(op, n=n, seed=seed)
+    mid, worst, worst_sec, dist, verdict = report.mid, report.worst, report.worst_section, report.dist, report.verdict
     tol = op.params["tolerance_mm"]
-    k = int(np.argmax(worst.max_abs_mm / tol))
-    worst_sec = bore_mod.evaluate_section(op, worst.corner[k])
-    out = {
-        "operation": op.name,
-        "nominal_centre_mm": op.params["nominal_centre_mm"].tolist(),
-        "mid_field": {"centre_mm": mid.centre_mm.tolist(), "error_mm": mid.error_mm.tolist(),
-                      "axis_point_mm": mid.axis_point_mm.tolist(), "diameter_mm": mid.diameter_mm,
-                      "roundness_mm": mid.roundness_mm},
-        "worst_section": {"values": worst.corner[k], "error_mm": worst_sec.error_mm.tolist(),
-                          "diameter_mm": worst_sec.diameter_mm, "roundness_mm": worst_sec.roundness_mm},
-        "worst_case": worst.to_dict(),
-        "monte_carlo": dist.to_dict(),
-    }
-    if "diameter_limits_mm" in op.params:
-        lo_d, hi_d = op.params["diameter_limits_mm"]
-        out["mid_field"]["diameter_within_limits"] = bool(lo_d <= mid.diameter_mm <= hi_d)
+    out = report.to_dict()
     if plot:
         _use_agg()
         _save_figure(bore_mod.plot_bore(op, mid, worst_sec, dist, magnify), plot)
     if as_json:
         _echo_json(out)
+        _finish_check(check, verdict)
         return
-    names = dist.names
+    names = list(worst.names)
     click.echo(f"{op.name or op.path}: d = {op.params['diameter_mm']:g} mm, overhang "
                f"{op.params['overhang_mm']:g} mm, tolerance +-{tol[0]:g} ({names[0]}) +-{tol[1]:g} ({names[1]}) mm")
-    click.echo(f"variables mid-field: centre error {names[0]} {_fmt_um(mid.error_mm[0])}, "
+    what = "single prediction (no random variable varies)" if dist is None else "variables mid-field"
+    click.echo(f"{what}: centre error {names[0]} {_fmt_um(mid.error_mm[0])}, "
                f"{names[1]} {_fmt_um(mid.error_mm[1])}; section diameter {mid.diameter_mm:.4f} mm, "
                f"roundness {mid.roundness_mm * 1e3:.3f} um")
     if "diameter_limits_mm" in op.params:
@@ -209,19 +233,27 @@ def bore(operation, n, seed, plot, magnify, as_json):
         ok = lo_d <= mid.diameter_mm <= hi_d
         click.echo(f"diameter {mid.diameter_mm:.4f} mm is {'within' if ok else 'OUTSIDE'} "
                    f"{lo_d:.4f}..{hi_d:.4f} mm")
-    for i, name in enumerate(names):
-        click.echo(f"worst case {name}: {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])}  "
-                   f"({'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm)")
-    lo, hi = dist.p_within_ci95
-    for i, name in enumerate(names):
-        click.echo(f"Monte Carlo {name}: mean {_fmt_um(dist.mean_mm[i])}, std {_fmt_um(dist.std_mm[i])}, "
-                   f"range {_fmt_um(dist.samples_mm[:, i].min())} .. {_fmt_um(dist.samples_mm[:, i].max())}")
-    click.echo(f"P(centre within tolerance) = {dist.p_within:.5f} (95 % {lo:.5f}..{hi:.5f}), "
-               f"n = {len(dist.samples_mm)}, seed {dist.seed}")
-    click.echo("the tolerance is " + ("met in the worst case" if worst.within else
-                                      "NOT met in the worst case"))
+    if dist is None:
+        for i, name in enumerate(names):
+            click.echo(f"{name}: {'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm")
+        click.echo("the tolerance is " + ("met" if worst.within else "NOT met") + " (deterministic chain)")
+    else:
+        for i, name in enumerate(names):
+            click.echo(f"worst case {name}: {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])}  "
+                       f"({'within' if worst.max_abs_mm[i] <= tol[i] else 'OUTSIDE'} +-{tol[i]:g} mm)")
+        lo, hi = dist.p_within_ci95
+        for i, name in enumerate(names):
+            click.echo(f"Monte Carlo {name}: mean {_fmt_um(dist.mean_mm[i])}, std {_fmt_um(dist.std_mm[i])}, "
+                       f"range {_fmt_um(dist.samples_mm[:, i].min())} .. {_fmt_um(dist.samples_mm[:, i].max())}")
+        click.echo(f"P(centre within tolerance) = {dist.p_within:.5f} (95 % {lo:.5f}..{hi:.5f}), "
+                   f"n = {len(dist.samples_mm)}, seed {dist.seed}")
+        click.echo("the tolerance is " + ("met in the worst case" if worst.within else
+                                          "NOT met in the worst case"))
+    if check:
+        click.echo(f"check: {'held' if verdict['held'] else 'NOT held'} ({verdict['basis']})")
     if plot:
         click.echo(f"wrote {plot}")
+    _finish_check(check, verdict)
 
 
 @predict.command("tolerance")
@@ -231,63 +263,50 @@ def bore(operation, n, seed, plot, magnify, as_json):
 @click.option("--worst-case", "worst_only", is_flag=True, help="Only the worst case over the field corners.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write histograms of the error components to this PNG.")
+@MACHINE_OPTION
+@SET_OPTION
+@click.option("--check", "check", is_flag=True, help=CHECK_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-def tolerance_cmd(operation, n, seed, worst_only, plot, as_json):
+def tolerance_cmd(operation, n, seed, worst_only, plot, machine, values, check, as_json):
     """Distribution of a feature's position error over the chain's random variables.
 
     The random variables of the machine file (corner heights of planes inside
     tolerance fields, positions inside joint clearances) are drawn n times
     (reproducible for a seed); the feature is a bore centre or, for a "point"
     operation, one tool point. Prints mean, std, range and P(within +- tolerance),
-    and the worst case over the corners of the variables' box.
+    and the worst case over the corners of the variables' box. A chain without
+    random variables gives its single prediction. --check: exit status 6 when the
+    tolerance is not held.
 
     Example:
 
     \b
         postproc predict tolerance samples/predict/bore_50H7.operation.json -n 50000 --seed 2
     """
-    from postproc.errors import PostprocError
-    from postproc.predict import bore as bore_mod
     from postproc.predict import tolerance
-    from postproc.predict.operation import load_operation
+    from postproc.predict.analysis import analyse_feature
 
-    op = load_operation(operation)
-    if op.kind == "bore":
-        names = bore_mod.component_names(op)
-
-        def fn(env):
-            return bore_mod.centre_errors(op, env)
-    elif op.kind == "point":
-        names = ["X", "Y", "Z"]
-        r = op.params["tool_point_mm"]
-
-        def fn(env):
-            full = {**op.context, **{k: np.asarray(v, dtype=float) for k, v in env.items()}}
-            return op.chain.transform(r, full) - op.params["nominal_mm"]
-    else:
-        raise PostprocError(f"predict tolerance needs a bore or point operation, got {op.kind!r}", path=operation)
-    if not op.chain.random:
-        raise PostprocError("the machine has no random variables", path=operation,
-                            hint='add a "random" section to the chain file (see docs/predict.md)')
-    tol = op.params["tolerance_mm"]
-    worst = tolerance.worst_case(fn, op.chain.random, tolerance_mm=tol, names=names)
-    out = {"operation": op.name, "worst_case": worst.to_dict()}
-    dist = None
-    if not worst_only:
-        dist = tolerance.monte_carlo(fn, op.chain.random, n=n or op.params["n"],
-                                     seed=op.params["seed"] if seed is None else seed, tolerance_mm=tol, names=names)
-        out["monte_carlo"] = dist.to_dict()
+    op = _load(operation, machine, values)
+    report = analyse_feature(op, n=n, seed=seed, monte_carlo=not worst_only)
+    worst, dist, verdict, deterministic = report.worst, report.dist, report.verdict, report.deterministic
+    names, tol = worst.names, op.params["tolerance_mm"]
+    out = report.to_dict()
     if plot:
         if dist is None:
-            raise click.UsageError("--plot needs the Monte Carlo (drop --worst-case)")
+            raise click.UsageError("--plot needs the Monte Carlo (drop --worst-case; a chain without random "
+                                   "variables has none)")
         _use_agg()
         _save_figure(tolerance.plot_histograms(dist, worst), plot)
     if as_json:
         _echo_json(out)
+        _finish_check(check, verdict)
         return
     for i, name in enumerate(names):
-        line = (f"{name}: worst case {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])} "
-                f"(tolerance +-{tol[i]:g} mm)")
+        if deterministic:
+            line = f"{name}: error {_fmt_um(worst.max_mm[i])} (tolerance +-{tol[i]:g} mm)"
+        else:
+            line = (f"{name}: worst case {_fmt_um(worst.min_mm[i])} .. {_fmt_um(worst.max_mm[i])} "
+                    f"(tolerance +-{tol[i]:g} mm)")
         if dist is not None:
             line += f"; mean {_fmt_um(dist.mean_mm[i])}, std {_fmt_um(dist.std_mm[i])}"
         click.echo(line)
@@ -295,9 +314,20 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, as_json):
         lo, hi = dist.p_within_ci95
         click.echo(f"P(within tolerance) = {dist.p_within:.5f} (95 % {lo:.5f}..{hi:.5f}), "
                    f"n = {len(dist.samples_mm)}, seed {dist.seed}")
-    click.echo("worst case: " + ("within tolerance" if worst.within else "OUTSIDE tolerance"))
+    if deterministic:
+        click.echo("single prediction (no random variable varies): " + ("within tolerance" if worst.within
+                                                                  else "OUTSIDE tolerance"))
+    else:
+        click.echo("worst case: " + ("within tolerance" if worst.within else "OUTSIDE tolerance"))
+    if op.kind == "bore" and verdict["diameter_within"] is not None:
+        lo_d, hi_d = verdict["diameter_range_mm"]
+        click.echo(f"diameter {lo_d:.4f}..{hi_d:.4f} mm: {'within' if verdict['diameter_within'] else 'OUTSIDE'} "
+                   "its limits")
+    if check:
+        click.echo(f"check: {'held' if verdict['held'] else 'NOT held'} ({verdict['basis']})")
     if plot:
         click.echo(f"wrote {plot}")
+    _finish_check(check, verdict)
 
 
 @predict.command()
@@ -358,3 +388,44 @@ def chain_cmd(tables, squareness, order, angular, output):
     chain = chain_from_tables(tab, sq, order=order, angular=angular)
     atomic_write_text(output, json.dumps(chain.to_dict(), indent=1) + "\n")
     click.echo(f"wrote {output}: {len(chain.modules)} modules, variables {', '.join(sorted(chain.variables()))}")
+
+
+@predict.command("init")
+@click.option("--layout", required=True, type=click.Choice(["vertical-mill", "horizontal-boring"]),
+              help="Machine layout: 3-axis vertical mill, or horizontal boring machine (seed 004).")
+@click.option("-c", "--calibration", "calibration", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Calibration made by fit: the chain takes its measured error instead of zero axis errors.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Chain file to write.")
+def init(layout, calibration, output):
+    """Write a starting chain file with the common modules of a machine layout.
+
+    Every module and element carries a "comment" (JSON has no comments; the chain
+    format keeps "comment" and "_comment" keys as text) saying what it stands for and
+    what to fill in. With --calibration the axes' error elements give way to the
+    calibration's measured error at the commanded X, Y, Z (the path is written
+    relative to the chain file; X, Y, Z default to the middle of its volume).
+
+    Example:
+
+    \b
+        postproc predict init --layout vertical-mill -c calibrations/s500_parametric.json -o s500.chain.json
+    """
+    import os
+    from pathlib import Path
+
+    from postproc.calibration.calfile import load_calibration
+    from postproc.fileio import atomic_write_text
+    from postproc.predict.chain import chain_from_dict
+    from postproc.predict.layouts import layout_chain
+
+    centre = (0.0, 0.0, 0.0)
+    rel = None
+    if calibration is not None:
+        centre = tuple(load_calibration(calibration).engine.volume_mm.mean(axis=0))
+        out_dir = Path(output).resolve().parent
+        rel = Path(os.path.relpath(Path(calibration).resolve(), out_dir)).as_posix()
+    data = layout_chain(layout, rel, centre)
+    chain = chain_from_dict(data, base_dir=Path(output).resolve().parent)  # what predict will read
+    atomic_write_text(output, json.dumps(data, indent=2) + "\n")
+    click.echo(f"wrote {output}: {layout}, {len(chain.modules)} modules, variables "
+               f"{', '.join(sorted(chain.variables()))}")

@@ -21,6 +21,9 @@ shaping motion, elastic displacement in the joint). Both are element lists:
 ``plane``   least-squares plane through ``nodes`` [[x, y], ...] at heights ``z``
             (values), and the frame on it above the first three nodes (formulas
             18-22; table 1)
+``calibration``  a calibration file made by ``postproc fit``: the machine's
+            volumetric error at the commanded position ``at`` (values, default
+            X, Y, Z), from the calibration's forward model with its effects
 ==========  ===================================================================
 
 A module matrix maps the next module's coordinates into this one's; the chain gives
@@ -33,7 +36,8 @@ whole Monte-Carlo sample.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -43,21 +47,58 @@ from postproc.predict import frames
 from postproc.predict.values import check_value, evaluate, names_in
 
 ERROR_PARAMS = ("u", "v", "w", "alpha", "beta", "gamma")
-KINDS = ("fixed", "linear", "rotary", "spindle", "error", "points", "plane")
+KINDS = ("fixed", "linear", "rotary", "spindle", "error", "points", "plane", "calibration")
+
+#: The fields each element kind reads ("comment" is allowed everywhere); any other key
+#: is refused, so that a misspelt field is not silently ignored.
+FIELDS = {
+    "fixed": ("translation", "rotation", "matrix", "small_angle", "inverse"),
+    "linear": ("axis", "direction", "var", "scale"),
+    "rotary": ("axis", "var", "unit", "scale"),
+    "spindle": ("axis", "rpm", "var", "phase", "direction"),
+    "error": (*ERROR_PARAMS, "order"),
+    "points": ("i", "j", "k"),
+    "plane": ("nodes", "z", "frame"),
+    "calibration": ("file", "at", "context"),
+}
+
+#: The calibration element differences the calibration's forward model over tool
+#: vectors this long (mm) to get its rotation part; the models are affine in the tool
+#: vector, so any length gives the same matrix, and a machine-sized one keeps the
+#: rounding of positions of some 100 mm out of the difference.
+CALIBRATION_LEVER_MM = 100.0
 
 
 def _fail(where: str, message: str, hint: str | None = None) -> PostprocError:
     return PostprocError(f"{where}: {message}", hint=hint)
 
 
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and bool(np.isfinite(x))
+
+
+def _array(value: Any, shape: tuple, what: str, where: str) -> np.ndarray:
+    """``value`` as a float array of ``shape`` holding finite JSON numbers, or raise."""
+    def numbers(v, dims):
+        if not dims:
+            return _is_number(v)
+        return isinstance(v, list) and len(v) == dims[0] and all(numbers(x, dims[1:]) for x in v)
+
+    if not numbers(value, shape):
+        size = f"a list of {shape[0]}" if len(shape) == 1 else f"a {' x '.join(map(str, shape))} list of"
+        raise _fail(where, f"{what} must be {size} finite numbers, got {value!r}")
+    return np.asarray(value, dtype=float)
+
+
 def _vector(body: Mapping, key: str, where: str, n: int = 3) -> np.ndarray:
-    try:
-        arr = np.asarray(body[key], dtype=float)
-    except (KeyError, TypeError, ValueError):
-        raise _fail(where, f'"{key}" must be a list of {n} numbers') from None
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise _fail(where, f'"{key}" must be a list of {n} finite numbers, got {body[key]!r}')
-    return arr
+    return _array(body.get(key), (n,), f'"{key}"', where)
+
+
+def _scale(body: Mapping, where: str) -> float:
+    scale = body.get("scale", 1.0)
+    if not _is_number(scale):
+        raise _fail(where, f'"scale" must be a finite number, got {scale!r}')
+    return float(scale)
 
 
 @dataclass
@@ -65,14 +106,23 @@ class Element:
     """One factor of a module matrix; ``body`` is its JSON description."""
 
     kind: str
-    body: dict
+    body: Any
     where: str = "element"
+    base_dir: Path | None = None  # calibration files are found relative to it
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise _fail(self.where, f"unknown element kind {self.kind!r}", hint=f"use one of {', '.join(KINDS)}")
+        if self.kind == "calibration" and isinstance(self.body, str):
+            self.body = {"file": self.body}
+            self._short = True  # written back as {"calibration": "file.json"}
         if not isinstance(self.body, Mapping):
             raise _fail(self.where, f"{self.kind} element needs an object, got {self.body!r}")
+        unknown = sorted(set(self.body) - set(FIELDS[self.kind]) - {"comment"})
+        if unknown:
+            what = "error parameters" if self.kind == "error" else f"{self.kind} field(s)"
+            raise _fail(self.where, f"unknown {what} {unknown}",
+                        hint=f"a {self.kind} element takes {', '.join(FIELDS[self.kind])}")
         try:
             getattr(self, f"_check_{self.kind}")()
         except PostprocError as exc:
@@ -95,28 +145,35 @@ class Element:
 
     def _fixed_matrix(self, key: str) -> np.ndarray:
         b, w = self.body, self.where
+        if "inverse" in b and (key != "small_angle" or not isinstance(b["inverse"], bool)):
+            raise _fail(w, '"inverse" is true or false, and only with "small_angle"')
         if key == "translation":
             return frames.translation(*_vector(b, "translation", w))
         if key == "rotation":
             rot = b["rotation"]
-            if not isinstance(rot, Mapping) or not isinstance(rot.get("angle"), int | float):
-                raise _fail(w, 'rotation must be {"axis": "x|y|z", "angle": radians}')
+            if not isinstance(rot, Mapping) or not _is_number(rot.get("angle")) or set(rot) - {"axis", "angle"}:
+                raise _fail(w, f'rotation must be {{"axis": "x|y|z", "angle": radians}}, got {rot!r}')
             return frames.rotation(rot.get("axis", "z"), float(rot["angle"]))
         if key == "matrix":
-            m = np.asarray(b["matrix"], dtype=float)
-            if m.shape != (4, 4) or not np.all(np.isfinite(m)) or not np.allclose(m[3], [0, 0, 0, 1]):
+            m = _array(b["matrix"], (4, 4), "matrix", w)
+            if not np.array_equal(m[3], [0, 0, 0, 1]):
                 raise _fail(w, "matrix must be 4x4 with last row 0 0 0 1")
+            if abs(np.linalg.det(m[:3, :3])) < frames.COLLINEAR_RATIO:
+                raise _fail(w, "matrix is singular: its 3x3 part maps the next frame onto a plane or line")
             return m
         m = frames.small_angle_matrix(*_vector(b, "small_angle", w, 6))
         return np.linalg.inv(m) if b.get("inverse") else m
 
     def _check_linear(self) -> None:
         b = self.body
+        if "direction" in b and "axis" in b:
+            raise _fail(self.where, 'a linear element takes "axis" or "direction", not both')
         if "direction" in b:
             self._dir = _vector(b, "direction", self.where)
         else:
             self._dir = np.eye(3)[frames.axis_index(b.get("axis", "x"))]
         check_value(b.get("var"), f"{self.where}.var")
+        self._scale = _scale(b, self.where)
 
     def _check_rotary(self) -> None:
         b = self.body
@@ -124,6 +181,7 @@ class Element:
         check_value(b.get("var"), f"{self.where}.var")
         if b.get("unit", "deg") not in ("deg", "rad"):
             raise _fail(self.where, 'rotary "unit" must be "deg" or "rad"')
+        self._scale = _scale(b, self.where)
 
     def _check_spindle(self) -> None:
         b = self.body
@@ -136,9 +194,6 @@ class Element:
 
     def _check_error(self) -> None:
         b = self.body
-        unknown = set(b) - set(ERROR_PARAMS) - {"order", "comment"}
-        if unknown:
-            raise _fail(self.where, f"unknown error parameters {sorted(unknown)}", hint=f"use {', '.join(ERROR_PARAMS)}")
         for key in ERROR_PARAMS:
             check_value(b.get(key, 0.0), f"{self.where}.{key}")
         if b.get("order", "small") not in ("small", "exact"):
@@ -153,19 +208,55 @@ class Element:
                 check_value(v, f"{self.where}.{key}[{n}]")
 
     def _check_plane(self) -> None:
-        b = self.body
-        nodes = np.asarray(b.get("nodes", []), dtype=float)
+        b, w = self.body, self.where
+        raw = b.get("nodes")
+        if not isinstance(raw, list) or len(raw) < 3:
+            raise _fail(w, 'plane "nodes" must be a list of at least 3 [x, y] pairs')
+        nodes = _array(raw, (len(raw), 2), 'plane "nodes"', w)
         z = b.get("z")
-        if nodes.ndim != 2 or nodes.shape[1] != 2 or len(nodes) < 3:
-            raise _fail(self.where, 'plane "nodes" must be a list of at least 3 [x, y] pairs')
         if not isinstance(z, list) or len(z) != len(nodes):
-            raise _fail(self.where, f'plane "z" must be a list of {len(nodes)} values, one per node')
+            raise _fail(w, f'plane "z" must be a list of {len(nodes)} values, one per node')
         for n, v in enumerate(z):
-            check_value(v, f"{self.where}.z[{n}]")
-        frame = np.asarray(b.get("frame", nodes[:3].tolist()), dtype=float)
-        if frame.shape != (3, 2):
-            raise _fail(self.where, 'plane "frame" must be three [x, y] nodes')
+            check_value(v, f"{w}.z[{n}]")
+        frame = _array(b.get("frame", nodes[:3].tolist()), (3, 2), 'plane "frame"', w)
+        if not _spans_plane(nodes):
+            raise _fail(w, "plane nodes lie on a line: they do not define a plane",
+                        hint="give corner points of a rectangle")
+        if not _spans_plane(frame):
+            raise _fail(w, "the plane's frame nodes lie on a line: they do not define a frame",
+                        hint='give three corners of a triangle as "frame" (default: the first three nodes)')
         self._nodes, self._frame = nodes, frame
+
+    def _check_calibration(self) -> None:
+        from postproc.calibration.calfile import load_calibration
+
+        b, w = self.body, self.where
+        name = b.get("file")
+        if not isinstance(name, str) or not name.strip():
+            raise _fail(w, f'calibration needs a file name, got {name!r}',
+                        hint='{"calibration": "my_machine.json"}, the path relative to the chain file')
+        at = b.get("at", ["X", "Y", "Z"])
+        if not isinstance(at, list) or len(at) != 3:
+            raise _fail(w, f'calibration "at" must be three values (the commanded X, Y, Z), got {at!r}')
+        for n, v in enumerate(at):
+            check_value(v, f"{w}.at[{n}]")
+        ctx = b.get("context", {})
+        if not isinstance(ctx, Mapping):
+            raise _fail(w, f'calibration "context" must map context names to values, got {ctx!r}')
+        for key, v in ctx.items():
+            check_value(v, f"{w}.context.{key}")
+        path = Path(name) if self.base_dir is None else Path(self.base_dir) / name
+        try:
+            self._cal = load_calibration(path)
+        except PostprocError as exc:
+            place = f"{exc.place}: " if exc.place else ""
+            raise type(exc)(f"{w}: calibration {place}{exc.message}", hint=exc.hint) from None
+        missing = [c for c in getattr(self._cal.engine, "needs", []) if c not in ctx]
+        if missing:
+            raise _fail(w, f"the effects of calibration {name} need the context value(s) {missing}",
+                        hint='map each to a value: "context": {' + ", ".join(f'"{c}": "{c}"' for c in missing)
+                             + "}, and give the variables in the operation's \"context\"")
+        self._at, self._ctx = list(at), dict(ctx)
 
     # -- evaluation ------------------------------------------------------------------
     def matrix(self, env: Mapping[str, Any]) -> np.ndarray:
@@ -179,11 +270,13 @@ class Element:
         b, w = self.body, self.where
         if self.kind == "fixed":
             return self._const
+        if self.kind == "calibration":
+            return self._calibration_matrix(env)
         if self.kind == "linear":
-            s = evaluate(b["var"], env, f"{w}.var") * float(b.get("scale", 1.0))
+            s = evaluate(b["var"], env, f"{w}.var") * self._scale
             return frames.translation_along(self._dir, s)
         if self.kind == "rotary":
-            a = evaluate(b["var"], env, f"{w}.var") * float(b.get("scale", 1.0))
+            a = evaluate(b["var"], env, f"{w}.var") * self._scale
             return frames.rotation(b.get("axis", "z"), np.radians(a) if b.get("unit", "deg") == "deg" else a)
         if self.kind == "spindle":
             t = evaluate(b.get("var", "t"), env, f"{w}.var")
@@ -206,10 +299,37 @@ class Element:
         coef = frames.fit_plane(self._nodes, np.stack(z, axis=-1))
         return frames.pose_on_plane(coef, self._frame)
 
+    def _calibration_matrix(self, env: Mapping[str, Any]) -> np.ndarray:
+        """``[[A, t], [0, 1]]`` with ``F(q, r) = q + t + A r``, F the calibration's forward model."""
+        w = self.where
+        at = [evaluate(v, env, f"{w}.at[{n}]") for n, v in enumerate(self._at)]
+        ctx = {k: evaluate(v, env, f"{w}.context.{k}") for k, v in self._ctx.items()}
+        shape = np.broadcast_shapes(*(np.shape(a) for a in (*at, *ctx.values())))
+        q = np.stack([np.broadcast_to(a, shape).ravel() for a in at], axis=1)
+        context = {k: np.broadcast_to(v, shape).ravel() for k, v in ctx.items()} or None
+        engine = self._cal.engine
+        outside = ~engine.inside(q)
+        if outside.any():
+            lo, hi = engine.volume_mm
+            raise _fail(w, f"commanded position {q[outside][0].round(4).tolist()} lies outside the calibrated "
+                           f"volume {lo.tolist()}..{hi.tolist()} of {self.body['file']}",
+                        hint="predict inside the volume the calibration was measured in")
+        p0 = engine.forward(q, np.zeros_like(q), context)
+        m = frames.identity(shape)
+        m[..., :3, 3] = (p0 - q).reshape(shape + (3,))
+        for i in range(3):
+            lever = np.zeros_like(q)
+            lever[:, i] = CALIBRATION_LEVER_MM
+            col = (engine.forward(q, lever, context) - p0) / CALIBRATION_LEVER_MM
+            m[..., :3, i] = col.reshape(shape + (3,))
+        return m
+
     def variables(self) -> set[str]:
         b = self.body
         if self.kind == "fixed":
             return set()
+        if self.kind == "calibration":
+            return set().union(*(names_in(v) for v in (*self._at, *self._ctx.values())))
         if self.kind in ("linear", "rotary"):
             return names_in(b["var"])
         if self.kind == "spindle":
@@ -221,7 +341,26 @@ class Element:
         return set().union(*(names_in(v) for v in b["z"]))
 
     def to_dict(self) -> dict:
+        if getattr(self, "_short", False) and set(self.body) == {"file"}:
+            return {self.kind: self.body["file"]}
         return {self.kind: self.body}
+
+    def turned_by(self, var: str) -> Element:
+        """A spindle element as the rotation by the angle ``var`` (deg) in place of ``rpm`` and
+        time: ``sign * var + phase``, the same direction and phase."""
+        if self.kind != "spindle":
+            return self
+        sign = -1.0 if self.body.get("direction", "cw") == "cw" else 1.0
+        angle = {"sum": [{"scale": sign * np.pi / 180.0, "of": var}, self.body.get("phase", 0.0)]}
+        return Element("rotary", {"axis": self.body.get("axis", "z"), "var": angle, "unit": "rad"},
+                       f"{self.where} (turned by {var})")
+
+
+def _spans_plane(xy: np.ndarray) -> bool:
+    """Whether 2-D points span a plane (are not all on one line), scale-free."""
+    d = xy - xy.mean(axis=0)
+    s = np.linalg.svd(d, compute_uv=False)
+    return bool(s[0] > 0 and s[-1] > frames.COLLINEAR_RATIO * s[0])
 
 
 @dataclass
@@ -234,7 +373,11 @@ class Module:
     def matrix(self, env: Mapping[str, Any]) -> np.ndarray:
         m = np.eye(4)
         for el in self.elements:
-            m = m @ el.matrix(env)
+            e = el.matrix(env)
+            if not np.all(np.isfinite(e)):
+                raise _fail(el.where, "gives a matrix that is not finite (a value overflows for these variables)",
+                            hint="check the element's values and the range of its variables")
+            m = m @ e
         return m
 
     def to_dict(self) -> dict:
@@ -250,14 +393,27 @@ class Chain:
     random: dict = field(default_factory=dict)
     description: str = ""
     defaults: dict = field(default_factory=dict)  # variable values used when not given
+    path: str | None = None  # the file it was read from, named in evaluation errors
 
     def matrix(self, env: Mapping[str, Any] | None = None) -> np.ndarray:
         """``M = M_1 ... M_m``: tool-frame -> workpiece-frame transforms, shape ``S + (4, 4)``."""
         env = {**self.defaults, **(env or {})}
         m = np.eye(4)
-        for mod in self.modules:
-            m = m @ mod.matrix(env)
+        try:
+            for mod in self.modules:
+                m = m @ mod.matrix(env)
+        except PostprocError as exc:
+            raise exc.at(self.path) from None
         return m
+
+    def spindle_turned_by(self, var: str) -> Chain:
+        """This chain with every ``spindle`` element turned by the angle ``var`` (deg)
+        instead of ``rpm`` and time: a bore section samples the tool at spindle angles."""
+        mods = [Module(m.name, [e.turned_by(var) for e in m.elements]) for m in self.modules]
+        return replace(self, modules=mods)
+
+    def has_spindle(self) -> bool:
+        return any(e.kind == "spindle" for m in self.modules for e in m.elements)
 
     def transform(self, points, env: Mapping[str, Any] | None = None) -> np.ndarray:
         """Tool-frame points (..., 3) in the workpiece frame; shapes broadcast with ``S``."""
@@ -284,29 +440,48 @@ class Chain:
 CHAIN_FORMAT = "postproc chain"
 
 
-def element_from_dict(data: Any, where: str) -> Element:
+#: Keys a chain file and a module may hold besides their content; "comment" and
+#: "_comment" are free text (JSON has no comments).
+COMMENT_KEYS = ("comment", "_comment")
+CHAIN_KEYS = ("format", "version", "name", "description", "defaults", "random", "modules", *COMMENT_KEYS)
+MODULE_KEYS = ("name", "elements", *COMMENT_KEYS)
+
+
+def element_from_dict(data: Any, where: str, base_dir: Path | None = None) -> Element:
     if not isinstance(data, Mapping):
         raise _fail(where, f"an element must be an object like {{\"linear\": {{...}}}}, got {data!r}")
-    keys = [k for k in data if k != "comment"]
+    keys = [k for k in data if k not in COMMENT_KEYS]
     if len(keys) != 1:
         raise _fail(where, f"an element has exactly one kind key, got {sorted(keys)}", hint=f"one of {', '.join(KINDS)}")
-    return Element(keys[0], data[keys[0]], where)
+    return Element(keys[0], data[keys[0]], where, base_dir)
 
 
-def chain_from_dict(data: Any, where: str = "chain") -> Chain:
-    """Build a :class:`Chain` from its JSON description (see ``docs/predict.md``)."""
+def chain_from_dict(data: Any, where: str = "chain", base_dir: Path | str | None = None) -> Chain:
+    """Build a :class:`Chain` from its JSON description (see ``docs/predict.md``).
+
+    ``base_dir``: where the files a chain names (calibrations) are found.
+    """
     if not isinstance(data, Mapping) or data.get("format") != CHAIN_FORMAT:
         raise _fail(where, f'not a chain description: "format" must be "{CHAIN_FORMAT}"')
+    if data.get("version", 1) != 1:
+        raise _fail(where, f"chain version {data.get('version')!r} is not supported (this reads 1)")
+    unknown = sorted(set(data) - set(CHAIN_KEYS))
+    if unknown:
+        raise _fail(where, f"unknown key(s) {unknown}", hint=f"a chain holds {', '.join(CHAIN_KEYS)}")
     mods = data.get("modules")
     if not isinstance(mods, list) or not mods:
         raise _fail(where, '"modules" must be a non-empty list')
+    base = None if base_dir is None else Path(base_dir)
     modules = []
     for i, mod in enumerate(mods):
         w = f"{where}: modules[{i}]"
         if not isinstance(mod, Mapping) or not isinstance(mod.get("elements"), list):
             raise _fail(w, 'a module needs "name" and a list "elements"')
+        unknown = sorted(set(mod) - set(MODULE_KEYS))
+        if unknown:
+            raise _fail(w, f"unknown key(s) {unknown}", hint=f"a module holds {', '.join(MODULE_KEYS)}")
         name = str(mod.get("name", f"module{i + 1}"))
-        els = [element_from_dict(e, f"{w} ({name}).elements[{j}]") for j, e in enumerate(mod["elements"])]
+        els = [element_from_dict(e, f"{w} ({name}).elements[{j}]", base) for j, e in enumerate(mod["elements"])]
         modules.append(Module(name, els))
     random = data.get("random", {})
     if not isinstance(random, Mapping):
@@ -316,9 +491,7 @@ def chain_from_dict(data: Any, where: str = "chain") -> Chain:
     for name, dist in random.items():
         check_distribution(dist, f"{where}: random.{name}")
     defaults = data.get("defaults", {})
-    if not isinstance(defaults, Mapping) or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in defaults.values()
-    ):
-        raise _fail(where, '"defaults" must map variable names to numbers')
+    if not isinstance(defaults, Mapping) or not all(_is_number(v) for v in defaults.values()):
+        raise _fail(where, '"defaults" must map variable names to finite numbers')
     return Chain(modules, str(data.get("name", "chain")), dict(random), str(data.get("description", "")),
                  {str(k): float(v) for k, v in defaults.items()})

@@ -176,7 +176,7 @@ def pose_from_points(pi, pj, pk) -> np.ndarray:
     ``(j - i) x (k - i)`` (formulas 13-15); y = z x x (formula 16). Points are given
     in the parent frame, shape (..., 3). The columns of the result are x, y, z and i.
     """
-    pi, pj, pk = (np.asarray(p, dtype=float) for p in (pi, pj, pk))
+    pi, pj, pk = np.broadcast_arrays(*(np.asarray(p, dtype=float) for p in (pi, pj, pk)))
     vij = pj - pi
     vik = pk - pi
     normal = np.cross(vij, vik)

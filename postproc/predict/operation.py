@@ -47,9 +47,11 @@ def load_chain(path) -> Chain:
     """Chain description file -> :class:`Chain` (errors name the file and the element)."""
     data = read_json(path)
     try:
-        return chain_from_dict(data, where="chain")
+        chain = chain_from_dict(data, where="chain", base_dir=Path(path).parent)
     except PostprocError as exc:
         raise exc.at(str(path)) from None
+    chain.path = str(path)
+    return chain
 
 
 def _number(data: Mapping, key: str, where: str, default: float | None = None, positive: bool = True) -> float:
@@ -61,15 +63,15 @@ def _number(data: Mapping, key: str, where: str, default: float | None = None, p
     return float(value)
 
 
-def _numbers(data: Mapping, key: str, where: str, n: int, default=None) -> np.ndarray:
+def _numbers(data: Mapping, key: str, where: str, n: int, default=None, positive: bool = False) -> np.ndarray:
     value = data.get(key, default)
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        arr = np.zeros(0)
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise PostprocError(f"{where}: \"{key}\" must be a list of {n} numbers, got {value!r}")
-    return arr
+    ok = isinstance(value, list) and len(value) == n and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) and (v > 0 or not positive)
+        for v in value)
+    if not ok:
+        what = "positive numbers" if positive else "numbers"
+        raise PostprocError(f"{where}: \"{key}\" must be a list of {n} {what}, got {value!r}")
+    return np.asarray(value, dtype=float)
 
 
 @dataclass
@@ -92,36 +94,41 @@ def _object(data: Mapping, key: str, where: str) -> Mapping:
     return value
 
 
-def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> Operation:
+def operation_from_dict(data: Any, base_dir: Path, where: str = "operation", chain: Chain | None = None) -> Operation:
+    """An operation from its JSON data; ``chain``, when given, is the machine instead of its "machine"."""
     if not isinstance(data, Mapping) or data.get("format") != OPERATION_FORMAT:
         raise PostprocError(f'{where}: not an operation description: "format" must be "{OPERATION_FORMAT}"')
     kind = data.get("kind")
     if kind not in KINDS:
         raise PostprocError(f"{where}: \"kind\" must be one of {', '.join(KINDS)}, got {kind!r}")
     machine = data.get("machine")
-    if isinstance(machine, str):
+    if chain is not None:
+        pass
+    elif isinstance(machine, str):
         chain = load_chain(base_dir / machine)
     elif isinstance(machine, Mapping):
-        chain = chain_from_dict(machine, where=f"{where}: machine")
+        chain = chain_from_dict(machine, where=f"{where}: machine", base_dir=base_dir)
     else:
         raise PostprocError(f'{where}: "machine" must be a chain file name or an embedded chain')
     context = data.get("context", {})
     if not isinstance(context, Mapping) or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in context.values()
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in context.values()
     ):
-        raise PostprocError(f'{where}: "context" must map variable names to numbers')
+        raise PostprocError(f'{where}: "context" must map variable names to finite numbers')
     params: dict[str, Any] = {}
     mc = _object(data, "monte_carlo", where)
     params["n"] = int(_number(mc, "n", f"{where}: monte_carlo", 10000))
     params["seed"] = int(_number(mc, "seed", f"{where}: monte_carlo", 0, positive=False))
     if kind == "bore":
         params["diameter_mm"] = _number(data, "diameter_mm", where)
-        params["overhang_mm"] = _number(data, "overhang_mm", where)
+        # the tip's distance from the spindle frame's origin along +axis; negative for a
+        # tool pointing along -axis (a vertical mill's tool hanging down)
+        params["overhang_mm"] = _number(data, "overhang_mm", where, positive=False)
         params["axis"] = str(data.get("axis", "x")).lower()
         if params["axis"] not in ("x", "y", "z"):
             raise PostprocError(f'{where}: "axis" must be x, y or z')
         params["nominal_centre_mm"] = _numbers(data, "nominal_centre_mm", where, 2)
-        params["tolerance_mm"] = _numbers(data, "tolerance_mm", where, 2)
+        params["tolerance_mm"] = _numbers(data, "tolerance_mm", where, 2, positive=True)
         params["spindle_var"] = str(data.get("spindle_var", "S"))
         if "diameter_limits_mm" in data:
             lim = _numbers(data, "diameter_limits_mm", where, 2)
@@ -131,7 +138,7 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
     elif kind == "point":
         params["tool_point_mm"] = _numbers(data, "tool_point_mm", where, 3)
         params["nominal_mm"] = _numbers(data, "nominal_mm", where, 3)
-        params["tolerance_mm"] = _numbers(data, "tolerance_mm", where, 3)
+        params["tolerance_mm"] = _numbers(data, "tolerance_mm", where, 3, positive=True)
     else:
         cut = data.get("cutter")
         if not isinstance(cut, Mapping):
@@ -153,13 +160,17 @@ def operation_from_dict(data: Any, base_dir: Path, where: str = "operation") -> 
     return Operation(kind, chain, str(data.get("name", "")), dict(context), params)
 
 
-def load_operation(path) -> Operation:
-    """Operation file -> :class:`Operation`, with its machine chain loaded."""
+def load_operation(path, machine=None) -> Operation:
+    """Operation file -> :class:`Operation`, with its machine chain loaded (``machine``:
+    a chain file to use instead of the operation's own)."""
     p = Path(path)
     data = read_json(p)
+    chain = None if machine is None else load_chain(machine)
     try:
-        op = operation_from_dict(data, p.parent)
+        op = operation_from_dict(data, p.parent, chain=chain)
     except PostprocError as exc:
         raise exc.at(str(p)) from None
     op.path = str(p)
+    if op.chain.path is None:  # embedded in the operation file
+        op.chain.path = op.path
     return op

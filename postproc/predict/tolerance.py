@@ -62,6 +62,16 @@ def bounds(dist: Mapping) -> tuple[float, float]:
     return float(a - NORMAL_WORST_SIGMAS * b), float(a + NORMAL_WORST_SIGMAS * b)
 
 
+def varying(random: Mapping[str, Mapping], used) -> list[str]:
+    """The random variables among ``used`` whose field has a width (the others are constants)."""
+    out = []
+    for name, dist in random.items():
+        lo, hi = bounds(dist)
+        if name in used and hi > lo:
+            out.append(name)
+    return out
+
+
 def nominal(random: Mapping[str, Mapping]) -> dict[str, float]:
     """Centre of every variable (mid-field, or the mean)."""
     return {name: 0.5 * sum(bounds(d)) for name, d in random.items()}
@@ -174,6 +184,22 @@ class WorstCase:
 ErrorFn = Callable[[Mapping[str, np.ndarray]], np.ndarray]
 
 
+def _rows(err, n: int) -> np.ndarray:
+    """An error function's result as (n, d): a result that does not depend on the draws
+    (a chain that ignores the variables) is the same row n times."""
+    err = np.asarray(err, dtype=float)
+    if err.ndim <= 1:
+        return np.broadcast_to(err.reshape(1, -1), (n, err.size))
+    return np.broadcast_to(err.reshape(-1, err.shape[-1]), (n, err.shape[-1]))
+
+
+def single(error_fn: ErrorFn, values: Mapping[str, float], *, tolerance_mm, names: list[str]) -> WorstCase:
+    """The one prediction of a deterministic chain, as its own worst case."""
+    err = _rows(error_fn({k: np.asarray([v], dtype=float) for k, v in values.items()}), 1)[0]
+    return WorstCase(names, np.abs(err), [dict(values) for _ in err],
+                     np.broadcast_to(np.asarray(tolerance_mm, float), err.shape).copy(), err.copy(), err.copy())
+
+
 def monte_carlo(
     error_fn: ErrorFn,
     random: Mapping[str, Mapping],
@@ -192,7 +218,7 @@ def monte_carlo(
     blocks = []
     for start in range(0, n, DRAWS_PER_BLOCK):
         part = {k: v[start:start + DRAWS_PER_BLOCK] for k, v in draws.items()}
-        blocks.append(np.asarray(error_fn(part), dtype=float).reshape(len(next(iter(part.values()))), -1))
+        blocks.append(_rows(error_fn(part), len(next(iter(part.values())))))
     err = np.concatenate(blocks)
     return Distribution(names, err, np.broadcast_to(np.asarray(tolerance_mm, float), err.shape[1:]).copy(), seed)
 
@@ -200,8 +226,7 @@ def monte_carlo(
 def worst_case(error_fn: ErrorFn, random: Mapping[str, Mapping], *, tolerance_mm, names: list[str]) -> WorstCase:
     """Evaluate ``error_fn`` at every corner of the variables' box."""
     env = corners(random)
-    err = np.asarray(error_fn(env), dtype=float)
-    err = err.reshape(len(next(iter(env.values()))) if env else 1, -1)
+    err = _rows(error_fn(env), len(next(iter(env.values()))) if env else 1)
     idx = np.argmax(np.abs(err), axis=0)
     worst = [{k: float(v[i]) for k, v in env.items()} for i in idx]
     return WorstCase(

@@ -34,6 +34,19 @@ def _fail(where: str, message: str, hint: str | None = None) -> PostprocError:
     return PostprocError(f"{where}: {message}", hint=hint)
 
 
+def _is_number(x: Any) -> bool:
+    """A finite JSON number (``true``/``false`` are not numbers here)."""
+    return isinstance(x, int | float) and not isinstance(x, bool) and bool(np.isfinite(x))
+
+
+def _numbers(data: Any, key: str, where: str) -> np.ndarray:
+    """``data[key]`` as a 1-D array of finite numbers, or raise naming ``key``."""
+    items = data.get(key) if isinstance(data, Mapping) else None
+    if not isinstance(items, list) or not items or not all(_is_number(v) for v in items):
+        raise _fail(where, f'table "{key}" must be a non-empty list of finite numbers, got {items!r}')
+    return np.asarray(items, dtype=float)
+
+
 def check_value(spec: Any, where: str) -> None:
     """Raise PostprocError if ``spec`` is not a valid value description."""
     if isinstance(spec, bool):
@@ -57,33 +70,35 @@ def check_value(spec: Any, where: str) -> None:
                 check_value(item, f"{where}.{key}[{i}]")
             return
     if "scale" in spec:
-        if not isinstance(spec["scale"], int | float) or "of" not in spec:
-            raise _fail(where, 'expected {"scale": number, "of": value}')
+        if not _is_number(spec["scale"]) or "of" not in spec:
+            raise _fail(where, 'expected {"scale": finite number, "of": value}')
         check_value(spec["of"], f"{where}.of")
         return
     kinds = [k for k in FUNCTIONS if k in spec]
-    if len(kinds) != 1 or not isinstance(spec.get("var"), str):
+    name = spec.get("var")
+    if len(kinds) != 1 or not isinstance(name, str) or not name.strip():
         raise _fail(
             where,
-            f"a function value needs \"var\" and one of {', '.join(FUNCTIONS)}, got keys {sorted(spec)}",
+            f"a function value needs \"var\" (a variable name) and one of {', '.join(FUNCTIONS)}, "
+            f"got keys {sorted(spec)}",
             hint='e.g. {"var": "X", "table": {"positions": [0, 100], "values": [0, 0.002]}}',
         )
     body = spec[kinds[0]]
     if kinds[0] == "table":
-        pos = np.asarray(body.get("positions", []) if isinstance(body, Mapping) else [], dtype=float)
-        val = np.asarray(body.get("values", []) if isinstance(body, Mapping) else [], dtype=float)
-        if pos.ndim != 1 or pos.shape != val.shape or len(pos) < 1:
-            raise _fail(where, "table needs equal-length lists \"positions\" and \"values\"")
+        pos = _numbers(body, "positions", where)
+        val = _numbers(body, "values", where)
+        if pos.shape != val.shape:
+            raise _fail(where, f'table needs as many "values" as "positions", got {len(val)} and {len(pos)}')
         if np.any(np.diff(pos) <= 0):
             raise _fail(where, "table positions must increase strictly")
     elif kinds[0] == "poly":
-        if not isinstance(body, list) or not body or not all(isinstance(c, int | float) for c in body):
-            raise _fail(where, "poly must be a non-empty list of coefficients [c0, c1, ...]")
+        if not isinstance(body, list) or not body or not all(_is_number(c) for c in body):
+            raise _fail(where, "poly must be a non-empty list of finite coefficients [c0, c1, ...]")
     else:
         if not isinstance(body, Mapping) or not all(
-            isinstance(body.get(k, 0.0), int | float) for k in ("amplitude", "omega", "phase")
+            _is_number(body.get(k, 0.0)) for k in ("amplitude", "omega", "phase")
         ):
-            raise _fail(where, 'sine needs numbers "amplitude", "omega" and optionally "phase"')
+            raise _fail(where, 'sine needs finite numbers "amplitude", "omega" and optionally "phase"')
 
 
 def variable(env: Mapping[str, Any], name: str, where: str) -> np.ndarray:
