@@ -15,7 +15,6 @@ from __future__ import annotations
 import gc
 import math
 import os
-import tempfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from itertools import islice
@@ -66,6 +65,7 @@ class CorrectOptions:
     chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
+    dialect: str = "generic"  # controller the output is for (postproc.gcode.dialect.DIALECTS)
 
 
 @dataclass
@@ -216,7 +216,9 @@ class Corrector(EmitterMixin):
                     path=self.path, lineno=k + 1, col=1,
                     hint="correct the original program instead, or use --force to correct it again")
         ending = (emit.line_ending(head[0]) if head else "") or "\n"
-        header = emit.header_line(self.cal_name, self.cal_sha, self.opt.tolerance_mm, self._setup_note(), ending)
+        header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
+                                        self._setup_note(), ending, expanded=False, setup=self.setup)
+        header = "".join(header_rows)
         entries: list = []
         lineno = 1
         if head and head[0].strip() == "%":
@@ -225,7 +227,7 @@ class Corrector(EmitterMixin):
             head = head[1:]
             lineno = 2
         write(header)
-        self.report.lines_out += 1
+        self.report.lines_out += len(header_rows)
 
         interp = self.interp
         use_fast = self.linear_exact and self.opt.fast_lane
@@ -576,33 +578,26 @@ def correct_text(text: str, engine, setup: Setup | None = None, options: Correct
 def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, setup: Setup | None = None,
                  options: CorrectOptions | None = None, *, calibration_name: str = "",
                  calibration_sha256: str = "", progress=None) -> CorrectReport:
-    """Correct the program at ``source`` into ``output`` atomically (temp file, then rename).
+    """Correct the program at ``source`` into ``output`` safely (``postproc.fileio.output_path``).
 
-    On any error nothing is left at ``output`` (an existing file there is untouched).
+    On any error nothing is left at ``output`` (an existing file there is untouched); a
+    symbolic link is written through, a device or pipe written directly.
     """
+    from postproc.fileio import output_path
+
+    # an empty program (no bytes, or blanks and line ends only) is refused: nothing to
+    # correct, and most often a file that was not written completely
+    try:
+        with open(source, "rb") as fh:
+            empty = not fh.read(65536).strip() and not fh.read(1)
+    except OSError:
+        empty = False  # the reader names the problem
+    if empty:
+        raise PostprocError("the program is empty: nothing to correct", path=str(source),
+                            hint="check that this is the program you meant (was it written completely?)")
     path, lines = iter_source_lines(Path(source))
-    out = Path(output)
-    try:
-        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise PostprocError(f"cannot write the output here: {exc.strerror}", path=str(out),
-                            hint="check that the directory exists and is writable") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
-            c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
-                          calibration_name=calibration_name, calibration_sha256=calibration_sha256)
-            report = c.run(lines, fh.write, progress=progress)
-        # mkstemp makes the file private (0600); give it the mode a new file would get
-        # (or keep the mode of the file it replaces)
-        try:
-            mode = out.stat().st_mode & 0o777
-        except OSError:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(tmp, mode)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with output_path(output) as tmp, open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
+        c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
+                      calibration_name=calibration_name, calibration_sha256=calibration_sha256)
+        report = c.run(lines, fh.write, progress=progress)
     return report
