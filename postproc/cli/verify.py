@@ -72,6 +72,10 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
     from postproc.calibration.calfile import load_calibration
     from postproc.simulate import load_machine
 
+    if plot:
+        from postproc.fileio import require_matplotlib
+
+        require_matplotlib("--plot")
     machine = load_machine(machine_path)
     ctx = dict(parse_context(c) for c in contexts)
     tool = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
