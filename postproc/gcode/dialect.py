@@ -287,11 +287,11 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
             if not (" " <= c <= "~" or c == "\t"):
                 raise PostprocError(f"character {c!r} is not in the ISO code {d.title} reads", col=k + 1,
                                     hint="use ASCII letters, digits and punctuation only", **where)
-    words = []
+    words = []  # (start, end) of the text outside comments
     pos = 0
     for start, text, kind in _comments(body):
         if kind in ("(", "unclosed", ";"):
-            words.append(body[pos:start])
+            words.append((pos, start))
         if kind == "unclosed":
             raise PostprocError(f"comment opened here is not closed on its line, which {d.title} refuses",
                                 col=start + 1, hint="close the comment with ')'", **where)
@@ -310,14 +310,15 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
                                 hint="remove it from the comment", **where)
         pos = start + len(text) + 2
     else:
-        words.append(body[pos:])
+        words.append((pos, len(body)))
     if d.uppercase_only:
         for k, c in enumerate(body):
             if c.isalpha() and c.islower():
                 raise PostprocError(f"lower-case {c!r}: {d.title} reads upper-case letters only", col=k + 1,
                                     hint="write the program in upper case", **where)
     if d.max_word_chars is not None:
-        n = sum(1 for part in words for c in part if c > " ")
-        if n > d.max_word_chars:
-            raise PostprocError(f"{n} characters of words on one line, more than {d.title} holds "
-                                f"({d.max_word_chars})", hint="split the block", **where)
+        cols = [k for a, b in words for k in range(a, b) if body[k] > " "]
+        if len(cols) > d.max_word_chars:
+            raise PostprocError(f"{len(cols)} characters of words on one line, more than {d.title} holds "
+                                f"({d.max_word_chars})", col=cols[d.max_word_chars] + 1, hint="split the block",
+                                **where)

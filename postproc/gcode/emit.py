@@ -119,9 +119,15 @@ def _safe(text: str) -> str:
 
 
 def _num(v: float) -> str:
-    text = f"{float(v):.10g}"
+    """The shortest text that reads back as the same float, without an exponent."""
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"cannot write {v} into a header")
+    text = repr(v)
     if "e" in text or "E" in text:
-        text = f"{float(v):.10f}".rstrip("0").rstrip(".")
+        text = f"{v:.17f}".rstrip("0").rstrip(".")
+    if text.endswith(".0"):
+        text = text[:-2]
     return "0" if text in ("-0", "") else text
 
 
@@ -170,28 +176,41 @@ def _setup_parts(setup_note: str, setup) -> list[str]:
     return parts
 
 
+_KEYWORDS = {"TOOL LENGTHS": 2, "TOOL VECTOR": 2, "OFFSET": 2, "START": 1, "CALIBRATION": 1, "SHA256": 1,
+             "MAP": 1}
+
+
 def _wrap(words: str, width: int) -> list[str]:
     """Split header words into lines of at most ``width`` characters, comment marks included.
-    A continued line starts with the first word of the part (its keyword) and ``+``."""
-    room = width - len(HEADER_PREFIX) - 1
+    A continued line repeats the part's keyword (``TOOL LENGTHS``, ``OFFSET G54``, ...), so
+    each line reads on its own."""
     items = words.split()
     if not items:
         return []
-    lines, cur = [], ""
-    for w in items:
-        while len(w) > room:  # a word longer than a line (a long name): cut it
+    keep = next((n for k, n in _KEYWORDS.items() if words.startswith(k + " ")), 0)
+    lead = " ".join(items[:keep])
+    room = width - len(HEADER_PREFIX) - 1
+    lines: list[str] = []
+    cur = ""
+    body = items[keep:] if keep else items
+    if words.startswith("TOOL LENGTHS "):  # "H1 100.5": a pair stays on one line
+        body = [" ".join(body[i:i + 2]) for i in range(0, len(body), 2)]
+    for w in body:
+        base = lead if keep else ""
+        while len(w) > room - len(base) - 1:  # a word longer than a line (a long name): cut it
+            cut = max(1, room - len(base) - 1)
             if cur:
                 lines.append(cur)
                 cur = ""
-            lines.append(w[:room])
-            w = w[room:]
+            lines.append(f"{base} {w[:cut]}".strip())
+            w = w[cut:]
         if not cur:
-            cur = w
+            cur = f"{base} {w}".strip()
         elif len(cur) + 1 + len(w) <= room:
             cur += " " + w
         else:
             lines.append(cur)
-            cur = w
+            cur = f"{base} {w}".strip()
     if cur:
         lines.append(cur)
     return [f"{HEADER_PREFIX}{t})" for t in lines]
@@ -205,7 +224,7 @@ def header_lines(dialect, cal_name: str, cal_sha: str, tolerance_mm: float, setu
     characters; checked line by line). They carry the version, the calibration's name and
     sha256, the tolerance, the setup (``setup_note`` as the pipeline writes it; when
     ``setup`` is given, offsets, tool lengths, start and tool vector are written from it
-    with 10 significant digits) and EXPANDED when subprograms or macros were expanded.
+    exactly) and EXPANDED when subprograms or macros were expanded.
     Each line ends with ``ending``.
     """
     from postproc.gcode import dialect as dialects
