@@ -282,11 +282,20 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
             f"line of {count} characters is longer than {d.title} reads ({d.max_line_chars})", col=d.max_line_chars + 1,
             hint="shorten the comment on this line" if "(" in body or ";" in body else
             f"this line cannot be written for --dialect {d.name}", **where)
-    if d.ascii_only:
+    if d.ascii_only and not (body.isascii() and body.replace("\t", " ").isprintable()):
         for k, c in enumerate(body):
             if not (" " <= c <= "~" or c == "\t"):
                 raise PostprocError(f"character {c!r} is not in the ISO code {d.title} reads", col=k + 1,
                                     hint="use ASCII letters, digits and punctuation only", **where)
+    if d.uppercase_only and body.upper() != body:
+        for k, c in enumerate(body):
+            if c.isalpha() and c.islower():
+                raise PostprocError(f"lower-case {c!r}: {d.title} reads upper-case letters only", col=k + 1,
+                                    hint="write the program in upper case", **where)
+    if "(" not in body and ";" not in body and ")" not in body:  # no comment: the common line
+        if d.max_word_chars is not None and len(body) > d.max_word_chars:
+            _check_words(d, body, [(0, len(body))], where)
+        return
     words = []  # (start, end) of the text outside comments
     pos = 0
     for start, text, kind in _comments(body):
@@ -311,14 +320,14 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
         pos = start + len(text) + 2
     else:
         words.append((pos, len(body)))
-    if d.uppercase_only:
-        for k, c in enumerate(body):
-            if c.isalpha() and c.islower():
-                raise PostprocError(f"lower-case {c!r}: {d.title} reads upper-case letters only", col=k + 1,
-                                    hint="write the program in upper case", **where)
     if d.max_word_chars is not None:
-        cols = [k for a, b in words for k in range(a, b) if body[k] > " "]
-        if len(cols) > d.max_word_chars:
-            raise PostprocError(f"{len(cols)} characters of words on one line, more than {d.title} holds "
-                                f"({d.max_word_chars})", col=cols[d.max_word_chars] + 1, hint="split the block",
-                                **where)
+        _check_words(d, body, words, where)
+
+
+def _check_words(d: Dialect, body: str, words: list[tuple[int, int]], where: dict) -> None:
+    """Grbl keeps a line's words without blanks and comments in a buffer of its own."""
+    cols = [k for a, b in words for k in range(a, b) if body[k] > " "]
+    if len(cols) > d.max_word_chars:
+        raise PostprocError(f"{len(cols)} characters of words on one line, more than {d.title} holds "
+                            f"({d.max_word_chars})", col=cols[d.max_word_chars] + 1, hint="split the block",
+                            **where)
