@@ -395,7 +395,7 @@ def test_batch_folder_with_tally(tmp_path):
     assert r.exit_code == EXIT_SAFETY, r.output  # the worst refusal: already corrected
     assert "4 files: 2 corrected, 2 refused" in r.output
     assert r.output.count("/4]") == 4  # one progress line per file
-    assert "refused " + str(folder / "empty.ngc") in r.output
+    assert f"refused (exit {EXIT_INPUT}) {folder / 'empty.ngc'}: the program is empty" in r.output
     assert "program is empty" in r.output
     assert "already carries a postproc header" in r.output
     assert sorted(p.name for p in outdir.iterdir()) == ["O1001", "a.nc"]

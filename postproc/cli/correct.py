@@ -229,7 +229,7 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     wherever the correction moves it.
 
     The corrected program opens with a few short (POSTPROC ...) comment lines
-    (after a first % line and O number line) that the --dialect's controller
+    (after a first % line) that the --dialect's controller
     reads: version, calibration and its sha256, tolerance and the setup. An
     empty program is refused.
 
@@ -292,11 +292,15 @@ def _batch(jobs_list: list[dict], jobs: int) -> None:
     results: list = [None] * total
     width = len(str(total))
 
+    def placed(src: str, error: str) -> str:
+        """The error with its file named once (most errors begin with the file's place)."""
+        return error if error.startswith(f"{src}:") else f"{src}: {error}"
+
     def report(k: int, done: int, res) -> None:
         summary, error, _code = res
         src = jobs_list[k]["src"]
         if error:
-            click.echo(f"[{done:>{width}}/{total}] refused   {src}: {error.splitlines()[0]}", err=True)
+            click.echo(f"[{done:>{width}}/{total}] refused   {placed(src, error).splitlines()[0]}", err=True)
         else:
             click.echo(f"[{done:>{width}}/{total}] corrected {summary}", err=True)
 
@@ -317,7 +321,8 @@ def _batch(jobs_list: list[dict], jobs: int) -> None:
     click.echo(f"{total} file{'s' if total != 1 else ''}: {total - len(refused)} corrected, "
                f"{len(refused)} refused", err=True)
     for src, (_summary, error, code) in refused:
-        click.echo(f"  refused {src} (exit {code}): {error}", err=True)
+        first, *rest = placed(src, error).splitlines()
+        click.echo("\n".join([f"  refused (exit {code}) {first}", *(f"  {r}" for r in rest)]), err=True)
     if refused:
         sys.exit(max(code for _src, (_s, _e, code) in refused))
 
