@@ -185,6 +185,12 @@ def test_header_lines_fit_every_dialect():
         assert SHA.upper() in text
 
 
+def test_header_lines_end_lines_for_every_reader():
+    rows = emit.header_lines("generic", "cal", SHA, 0.001, "", "\r")
+    assert all(r.endswith("\r\n") for r in rows)  # "\r" alone ends no line for LinuxCNC or Grbl
+    assert all(r.endswith("\n") and not r.endswith("\r\n") for r in emit.header_lines("generic", "c", SHA, 1, "", ""))
+
+
 def test_header_carries_the_setup_exactly():
     setup = Setup(offsets={"G54": (100.123456789, 80.0, -40.5), "G55": {"X": 1.0, "Y": 2.0, "Z": 3.0}},
                   tool_lengths={1: 100.0, 12: 87.65432101}, start={"Z": 150.25}, tool_vector=(0.5, 0.0, -100.0))

@@ -225,13 +225,15 @@ def header_lines(dialect, cal_name: str, cal_sha: str, tolerance_mm: float, setu
     sha256, the tolerance, the setup (``setup_note`` as the pipeline writes it; when
     ``setup`` is given, offsets, tool lengths, start and tool vector are written from it
     exactly) and EXPANDED when subprograms or macros were expanded.
-    Each line ends with ``ending``.
+    Each line ends with ``ending`` (``"\r\n"`` for a lone ``"\r"``).
     """
     from postproc.gcode import dialect as dialects
 
     d = dialects.get(dialect)
     width = min(HEADER_LINE_CHARS, d.max_line_chars)
-    end = ending or "\n"
+    # a lone carriage return ends no line for LinuxCNC or Grbl (they read up to "\n"): the
+    # header would join the next line. "\r\n" ends a line for every reader.
+    end = "\r\n" if ending == "\r" else (ending or "\n")
     body = [f"{HEADER_PREFIX}{_safe(__version__)} CORRECTED)"]
     body += _wrap("CALIBRATION " + (_safe(cal_name) or "UNNAMED"), width)
     body += _wrap("SHA256 " + _safe(cal_sha), width)
