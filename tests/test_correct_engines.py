@@ -224,7 +224,8 @@ def test_map_refusal_names_the_program_file_and_line(tmp_path):
     outdir = tmp_path / "outdir"
     r = invoke(["correct", prog, ROOT / "samples" / "pocket.nc", "-c", ROOT / "tests" / "cases" / "demo_static.json",
                 "--map", small, "--output-dir", outdir, "-j", "1"])
-    assert f"error: {prog}:4: program point X=" in r.output
+    assert f"refused   {prog}:4: program point X=" in r.output
+    assert f"refused (exit {EXIT_SAFETY}) {prog}:4: program point X=" in r.output
 
 
 class IndexOnlyMap:
