@@ -111,14 +111,14 @@ def test_solver_that_does_not_converge_is_refused():
 
 
 @pytest.mark.parametrize(("program", "construct"), [
-    ("G0 X1 Y1 Z1\n#1=5\n", "macro variable"),
+    ("G0 X1 Y1 Z1\n#1=5\n", "parameter assignment"),
     ("G0 X1 Y1 Z1\nG1 X[1+2]\n", "expression"),
     ("O100 sub\n", "O-word"),
     ("G0 X1 Y1 Z1\nM98 P100\n", "M98"),
     ("G0 X1 Y1 Z1\nG41 D1\n", "cutter radius compensation"),
     ("G0 X1 Y1 Z1\nG68 X0 Y0 R30\n", "G68"),
     ("G0 X1 Y1 Z1\nG51 X0 Y0 P2\n", "G51"),
-    ("G0 X1 Y1 Z1\nG81 X5 Y5 Z-1 R1\n", "canned cycle"),
+    ("G0 X1 Y1 Z1\nG76 P0.05 Z-1 I-0.075 J0.008 K0.045\n", "G76 threading cycle"),
     ("G0 X1 Y1 Z1\nG12.3 X1\n", "unknown G code"),
     ("G0 X1 Y1 Z1\nG1 U5\n", "U axis"),
 ])
@@ -165,7 +165,7 @@ def test_cli_missing_offset_macro_and_bad_calibration(tmp_path):
     src = _write(tmp_path, "macro.nc", "G0 X1 Y1 Z1\nG0 X#1\n")
     r = run(["correct", src, "-c", CAL, "-o", str(out)], tmp_path)
     assert r.exit_code == EXIT_INPUT
-    assert "macro.nc:2:4:" in r.output
+    assert "macro.nc:2:5: parameter reference" in r.output  # the '#' of X#1
     assert not out.exists()
     bad = tmp_path / "bad.json"
     data = json.loads(Path(CAL).read_text())

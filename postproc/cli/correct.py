@@ -12,7 +12,13 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import parse_context, parse_offset, parse_tool_length, parse_vector
+from postproc.cli.options import (
+    parse_context,
+    parse_home,
+    parse_offset,
+    parse_tool_length,
+    parse_vector,
+)
 from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM, MM_PER_INCH
 from postproc.errors import PostprocError
 
@@ -65,7 +71,7 @@ def parse_start(text: str) -> dict[str, float]:
     return values
 
 
-def build_setup(offset, tool_length, tool_table, tool_vector, context, start=None):
+def build_setup(offset, tool_length, tool_table, tool_vector, context, start=None, home=()):
     from postproc.gcode.path import Setup
 
     offsets = {}
@@ -82,8 +88,14 @@ def build_setup(offset, tool_length, tool_table, tool_vector, context, start=Non
         tools[h] = length
     vec = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
     ctx = dict(parse_context(c) for c in context)
+    homes: dict = {}
+    for text in home:
+        name, values = parse_home(text)
+        if name in homes:
+            raise click.BadParameter(f"{name} is given twice", param_hint="--home")
+        homes[name] = values
     return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
-                 start=parse_start(start) if start is not None else {})
+                 start=parse_start(start) if start is not None else {}, home=homes)
 
 
 def load_maps(paths) -> list:
@@ -103,6 +115,8 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
         f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
         f"{rep.arcs_linearised}, largest correction {rep.max_correction_mm * 1000:.1f} um"
     ]
+    if rep.cycles_kept or rep.cycles_expanded:
+        lines.append(f"  canned cycles: {rep.cycles_kept} kept, {rep.cycles_expanded} expanded")
     if rep.g54_assumed_zero:
         lines.append("  note: no --offset G54 given: the program's coordinates were taken as machine coordinates "
                      "(G54 = 0); recorded in the header")
@@ -195,6 +209,12 @@ def _progress_printer(total_hint: str):
 @click.option("--start", default=None, metavar="X..,Y..,Z..",
               help="Machine axis positions (mm, as G53; end with 'in' for inches) at program start, for the "
                    "axes the program has not positioned yet, e.g. Z150. Needs --offset for G54.")
+@click.option("--home", multiple=True, metavar="G28=X..,Y..,Z..",
+              help="Stored position G28 or G30 goes to, in machine mm (end with 'in' for inches), any of X, Y, Z. "
+                   "Without it an axis sent there is unknown until the program positions it again. Repeatable.")
+@click.option("--cycles", type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
+              help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
+                   "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")
 @click.option("--context", multiple=True, metavar="NAME=VALUE",
               help="Constant context value for the engine, e.g. temp=21.5. Repeatable.")
 @click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
@@ -210,7 +230,7 @@ def _progress_printer(total_hint: str):
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
 def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, tool_table, tool_vector,
-            start, context, tolerance, decimals, max_correction, extrapolate, force, maps, dialect):
+            start, home, cycles, context, tolerance, decimals, max_correction, extrapolate, force, maps, dialect):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -229,7 +249,7 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     wherever the correction moves it.
 
     The corrected program opens with a few short (POSTPROC ...) comment lines
-    (after a first % line) that the --dialect's controller
+    (after a % line and an O number line) that the --dialect's controller
     reads: version, calibration and its sha256, tolerance and the setup. An
     empty program is refused.
 
@@ -247,8 +267,10 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
             --offset G54=X100,Y80,Z40 --tool-length 1=100 -o part_corrected.ngc
         postproc correct engraving.tap -c calibrations/s500_static.json \\
             --offset G54=X100,Y100,Z0 --start Z150 -o engraving_corrected.tap
+        postproc correct samples/fanuc_drill.nc -c calibrations/s500_static.json \\
+            --offset G54=X100,Y100,Z-200 --tool-length 1=100 --home G28=X0,Y0,Z0 -o drill_corrected.nc
     """
-    setup = build_setup(offset, tool_length, tool_table, tool_vector, context, start)
+    setup = build_setup(offset, tool_length, tool_table, tool_vector, context, start, home)
     inputs, folder = _expand_inputs(inputs)
     if folder and output is not None:
         raise click.UsageError("a folder as input needs --output-dir, not -o")
@@ -261,7 +283,7 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     if "-" in inputs and len(inputs) > 1:
         raise click.UsageError("'-' (stdin) can only be the only input")
     options = {"tolerance_mm": tolerance, "decimals": decimals, "max_correction_mm": max_correction,
-               "extrapolate": extrapolate, "force": force, "dialect": dialect.lower()}
+               "extrapolate": extrapolate, "force": force, "cycles": cycles, "dialect": dialect.lower()}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         _single(inputs[0], output or "-", calibration, setup, options, maps)
         return

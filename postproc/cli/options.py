@@ -88,3 +88,31 @@ def parse_context(text: str) -> tuple[str, float]:
         return key.strip(), number
     except ValueError:
         raise click.BadParameter(f"{text!r}: expected NAME=VALUE, e.g. temp=21.5") from None
+
+
+_HOME_NAME = re.compile(r"^G(28|30)$", re.IGNORECASE)
+
+
+def parse_home(text: str) -> tuple[str, dict[str, float]]:
+    """``"G28=X0,Y0,Z0"`` -> ("G28", {"X": 0, "Y": 0, "Z": 0}): the stored position G28
+    or G30 goes to, machine mm (end with ``in`` for inches); any subset of X, Y, Z."""
+    name, sep, rest = text.partition("=")
+    name = name.strip().upper()
+    if not sep or not _HOME_NAME.match(name):
+        raise click.BadParameter(f"{text!r}: expected G28=X..,Y..,Z.. or G30=X..,Y..,Z.. (machine mm)",
+                                 param_hint="--home")
+    scale = 1.0
+    rest = rest.strip()
+    if rest.lower().endswith("in"):
+        scale, rest = 25.4, rest[:-2]
+    values: dict[str, float] = {}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        m = re.fullmatch(r"([XYZxyz])\s*([-+]?(?:\d+\.?\d*|\.\d+))", item)
+        if not m:
+            raise click.BadParameter(f"{text!r}: {item!r} is not X, Y or Z and a number", param_hint="--home")
+        if m.group(1).upper() in values:
+            raise click.BadParameter(f"{text!r}: {m.group(1).upper()} is given twice", param_hint="--home")
+        values[m.group(1).upper()] = float(m.group(2)) * scale
+    if not values:
+        raise click.BadParameter(f"{text!r}: give at least one of X, Y, Z", param_hint="--home")
+    return name, values

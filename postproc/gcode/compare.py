@@ -108,7 +108,7 @@ class DiffReport:
         }
 
 
-_PROGRAM_START = re.compile(r"\s*(%|[Oo]\s*\d)")
+_PROGRAM_START = emit._PROGRAM_START
 
 
 def _records(source, setup: Setup | None, counter: list, drop_header: bool = False, header: list | None = None):

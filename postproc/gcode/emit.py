@@ -110,6 +110,7 @@ HEADER_PREFIX = "(POSTPROC "
 HEADER_LINE_CHARS = 96  # inside every dialect's line (generic: 127); the sha256 line needs 82
 _HEADER_OPEN = re.compile(r"\s*\(POSTPROC \S+ CORRECTED\)\s*$", re.IGNORECASE)
 _HEADER_ANY = re.compile(r"\s*\(POSTPROC [A-Z0-9 .+\-]*\)\s*$", re.IGNORECASE)
+_PROGRAM_START = re.compile(r"\ufeff?\s*(%|[Oo]\s*\d|:\s*\d)")  # tape mark, program number
 _HEADER_SAFE = re.compile(r"[^A-Z0-9 .+\-]")
 
 
@@ -269,8 +270,7 @@ def split_header(text: str) -> tuple[list[str], str]:
     head: list[str] = []
     rest: list[str] = []
     i = 0
-    while i < len(lines) and i < 2 and not is_header(lines[i]) and (
-            lines[i].strip() == "%" or re.match(r"\s*[Oo]\s*\d", lines[i]) or lines[i].strip().startswith("%")):
+    while i < len(lines) and i < 2 and not is_header(lines[i]) and _PROGRAM_START.match(lines[i]):
         rest.append(lines[i])
         i += 1
     while i < len(lines) and is_header(lines[i]):

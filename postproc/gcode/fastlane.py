@@ -29,6 +29,10 @@ class FastMove:
 
     __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "spans", "motion_word", "rotary",
                  "arc", "arc_absolute", "feed", "missing")
+    fixed = False  # never a stored-position move
+    then = None
+    cycle = None
+    probe = 0
 
     def __init__(self, lineno, kind, q0, q1, r, shift, unit, spans, motion_word, arc_absolute, feed, missing):
         self.lineno = lineno

@@ -17,7 +17,10 @@ UnsupportedGcodeError naming line, column and construct.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
@@ -27,7 +30,12 @@ from postproc.gcode.state import (
     ARC_CW,
     BEFORE_MOTION_M,
     CANNED_CYCLES,
+    DWELL,
+    HOME_CODES,
+    HOME_STORE,
+    IO_M,
     LINE,
+    LOOKAHEAD_G,
     MOTION_CODES,
     NAN,
     NEUTRAL_G,
@@ -35,7 +43,9 @@ from postproc.gcode.state import (
     PLANES,
     RAPID,
     REFUSED_G,
+    REFUSED_HINT,
     REFUSED_M,
+    SPLINES,
     WORK_SYSTEMS,
     ModalState,
 )
@@ -63,6 +73,22 @@ class Arc:
     turns: int
     offset_idx: tuple[int, int]  # word indices of the two centre offsets, or -1
     r_idx: int  # word index of R, or -1
+
+
+@dataclass(slots=True)
+class Cycle:
+    """A canned-cycle block: its holes and the controller's moves (machine mm)."""
+
+    code: int  # 730, 810, ..., 890
+    holes: list  # [((x, y, z_bottom), (x, y, z_r)), ...] one per repeat
+    clear_z: float  # level after the block (R for G99, max(start, R) for G98)
+    steps: list  # [(RAPID | LINE | DWELL, (x, y, z) or (seconds, 0, 0)), ...]
+    r_idx: int  # word index of R on the line, or -1
+    r_mm: float  # machine Z of the R plane
+    z_mm: float  # machine Z of the hole bottom
+    repeats: int
+    retract_r: bool  # G99
+    dwell: float | None
 
 
 @dataclass(slots=True)
@@ -94,6 +120,20 @@ class Move:
     stays: bool = False  # a tool-change or G53 line: must not be split
     motion_idx: int = -1  # word index of the block's G0/G1/G2/G3, or -1 (modal)
     aux_idx: tuple[int, ...] = ()  # word indices of I/J/K/R/P (removed if an arc is linearised)
+    # a second move made by the same line (G28/G30: from the intermediate point to the
+    # stored position), or None
+    then: Move | None = None
+    # the target is where the machine goes uncorrected (a stored position reached by
+    # G28/G30): not corrected, no words written for it; NaN axes are unknown
+    fixed: bool = False
+    cycle: Cycle | None = None  # a canned-cycle block (kind is its code)
+    # corrected but not written: 1 = the R point of the cycle block before it, 2 = a hole
+    # of a cycle block kept as it is, whose correction must round to nothing
+    probe: int = 0
+    # a G5/G5.1 spline: its control points in the XY plane (machine mm), Z constant
+    spline: list | None = None
+    # already cut within tolerance (a spline's chords): not split again by the planner
+    planned: bool = False
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -106,23 +146,55 @@ def _gkey(text: str) -> int:
     return key if key is not None else int(round(float(text) * 10))
 
 
-def _symbol_construct(tok: lexer.Token, prev: lexer.Token | None) -> str:
-    t = tok.text
-    if t == "#":
-        return "macro variable '#'"
-    if t in "[]":
-        return "expression '[ ]'"
-    if t in "@^":
-        return "polar coordinate word '@'/'^'"
-    if t == "<":
-        return "named O-word or parameter '< >'"
-    return ""
+_COMMENTS = re.compile(r"\([^)]*\)?|;.*")
+_OWORD = re.compile(r"^\s*/?\s*(?:N\s*\d+\s*)?O\s*(?:\d+|<[^>]*>)\s*([A-Z]+)?")
+_MACRO_KEYWORDS = re.compile(r"\b(IF|WHILE|GOTO|END|DO)\s*[\[\d]|\bGOTO")
+_ASSIGN = re.compile(r"#\s*(?:\d+|<[^>]*>|\[)[^=]*=")
+
+
+def classify_construct(line: str) -> tuple[str, str]:
+    """What an unsupported line really is: ``(construct, hint)`` for the refusal."""
+    text = _COMMENTS.sub(" ", line).upper()
+    expand_hint = ("postproc expands subprograms, loops, parameters and expressions when they are defined "
+                   "in the program (or on --subroutine-path); this one could not be expanded")
+    m = _OWORD.match(text)
+    if m and m.group(1):
+        return f"LinuxCNC O-word '{m.group(1).lower()}' (subroutine or flow control)", expand_hint
+    m = _MACRO_KEYWORDS.search(text)
+    if m:
+        kw = m.group(1) or "GOTO"
+        return f"Fanuc custom macro {kw} statement", expand_hint
+    if _ASSIGN.search(text):
+        return "parameter assignment '#...='", expand_hint
+    if "#" in text:
+        return "parameter reference '#'", expand_hint
+    if "[" in text or "]" in text:
+        return "expression '[ ]'", expand_hint
+    if "@" in text or "^" in text:
+        return "polar coordinate word '@'/'^'", "post the program in Cartesian coordinates"
+    if "<" in text:
+        return "named O-word or parameter '< >'", expand_hint
+    return "", ""
+
+
+def _is_program_number(tokens) -> bool:
+    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
+    content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
+                                                       lexer.NEWLINE)]
+    if len(content) == 1:
+        t = content[0]
+        return t.kind == lexer.WORD and t.letter == "O" and "." not in t.text and "-" not in t.text
+    if len(content) == 2:
+        a, b = content
+        return a.kind == lexer.SYMBOL and a.text == ":" and b.kind == lexer.NUMBER and b.text.isdigit()
+    return False
 
 
 class Interpreter:
     """Advance a :class:`ModalState` line by line; see the module docstring."""
 
-    def __init__(self, setup, path: str | None = None, *, lenient_setup: bool = False) -> None:
+    def __init__(self, setup, path: str | None = None, *, lenient_setup: bool = False,
+                 dialect: str = "generic") -> None:
         self.setup = setup
         # lenient: every work offset and tool length is taken as zero (for comparing
         # two versions of one program, where they cancel out)
@@ -135,12 +207,21 @@ class Interpreter:
         # from the start are written in the work frame, so G54 must not be taken as zero
         self.require_g54 = False
         self.offsets = {k: _offset_tuple(v) for k, v in (setup.offsets or {}).items()}
+        self.tool_lengths = dict(setup.tool_lengths or {})  # G10 L1/L10/L11 write here
+        self.rotary_g92: dict[str, float] = {}
         self.program_offsets: dict[str, list[float]] = {}  # set by G10 L2/L20
         self.implicit_g54 = False  # a move ran in G54 that the user did not give
         self.used_rotary: set[str] = set()
         self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
         self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
         self.ended = False  # an M2/M30 was read: later lines are not executed
+        self.dialect = dialect
+        # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
+        self.home = {name: list(_offset_tuple(v, partial=True)) for name, v in
+                     ((getattr(setup, "home", None) or {}).items())}
+        # axes sent to a stored position that was not given: unknown until positioned again
+        self.unknown_after: dict[int, str] = {}
+        self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
         self._fast_shift: tuple[float, float, float] | None = None
         self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
@@ -191,10 +272,17 @@ class Interpreter:
         self.motion_word = False
         if self.ended:
             return None  # after M2/M30 the controller reads no further
+        bom = line.startswith("\ufeff")
+        if bom:  # a UTF-8 byte-order mark before the first line: not part of the block
+            line = line[1:]
         words = lexer.scan_words(line)
         block_delete = False
         if words is None:
             words, block_delete = self._slow_words(lineno, line)
+        elif words and words[0][0] == "O" and len(words) == 1 and words[0][1].isdigit():
+            return None  # O1234: a program number (or label): no geometry
+        if bom:
+            words = [(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
         elif words:
             mv = self._fast_block(lineno, words)
             if mv is not None:
@@ -211,7 +299,7 @@ class Interpreter:
         else returns None and takes the full path.
         """
         st = self.state
-        if st.inverse_time:
+        if st.inverse_time or self.unknown_after:
             return None
         idx = [-1, -1, -1]
         vals = [0.0, 0.0, 0.0]
@@ -264,15 +352,33 @@ class Interpreter:
                     None, [], False, motion_idx, ())
 
     def _slow_words(self, lineno: int, line: str):
-        tokens = lexer.lex(line, self.path, lineno)
+        try:
+            tokens = lexer.lex(line, self.path, lineno)
+        except GcodeSyntaxError:
+            what, hint = classify_construct(line)
+            if what:
+                raise self._err(UnsupportedGcodeError, what, lineno, 1, hint=hint) from None
+            raise
+        first = next((t for t in tokens if t.kind != lexer.SPACE), None)
+        if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
+            if self.dialect != "linuxcnc":
+                return [], False  # '%' tape mark: the controller ignores the rest of the line
+            raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
+                            hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
+        if _is_program_number(tokens):
+            return [], False
         for tok in tokens:
+            if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
+                what, hint = classify_construct(line)
+                if what:
+                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
             if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
                 raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
-                                hint="expand subroutines and loops in the CAM system before correcting")
+                                hint="O words other than a program number are expanded only when their "
+                                     "subroutine is in the program or on --subroutine-path")
         words = []
         block_delete = False
         seen_content = False
-        prev = None
         for tok in tokens:
             kind = tok.kind
             if kind in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE):
@@ -294,21 +400,19 @@ class Interpreter:
                 num = tok.number_text
                 words.append((tok.letter, num, start, start + len(num), tok.col - 1))
             elif kind == lexer.LETTER:
-                if tok.letter == "O":
-                    raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
-                                    hint="expand subroutines and loops in the CAM system before correcting")
+                what, hint = classify_construct(line)
+                if what:
+                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
                 raise self._err(UnsupportedGcodeError,
                                 f"word {tok.letter} without a plain number (macro, expression or parameter)",
                                 lineno, tok.col, hint="expand macros and expressions before correcting")
             elif kind == lexer.SYMBOL:
-                what = _symbol_construct(tok, prev)
+                what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col,
-                                    hint="expand macros, parameters and expressions before correcting")
+                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
                 raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
             elif kind == lexer.NUMBER:
                 raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
-            prev = tok
         return words, block_delete
 
     def _block(self, lineno: int, words, block_delete: bool) -> Move | None:  # noqa: C901
@@ -328,7 +432,9 @@ class Interpreter:
                 if letter == "O":
                     raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
                                     hint="expand subroutines and loops in the CAM system before correcting")
-                if letter in "UVWE":
+                if letter in "UVW" or (letter == "E" and not any(
+                        (w[0] == "M" and _gkey(w[1]) // 10 in IO_M and _gkey(w[1]) % 10 == 0)
+                        or (w[0] == "G" and _gkey(w[1]) == 1870) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 vals[letter] = (float(num), i)
@@ -344,7 +450,8 @@ class Interpreter:
             m = key // 10
             if m in REFUSED_M:
                 raise self._err(UnsupportedGcodeError, REFUSED_M[m], lineno, col_of(i),
-                                hint="expand subprograms in the CAM system before correcting")
+                                hint="postproc expands M98/M99 subprograms defined in the same program; "
+                                     "put the subprogram in the file")
             if m > 199:
                 raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
             if m in BEFORE_MOTION_M:
@@ -368,6 +475,10 @@ class Interpreter:
         g53 = False
         g92 = None
         g10 = False
+        home_code = None
+        cancel_cycle = False
+        g52 = False
+        lookahead = None
         work_name = None
         prefix: list[str] = []
         for key, i in gcodes:
@@ -378,12 +489,33 @@ class Interpreter:
                 motion_key, motion_idx = key, i
                 self.motion_word = True
             elif key in CANNED_CYCLES:
-                raise self._err(UnsupportedGcodeError, f"canned cycle G{words[i][1]}", lineno, col_of(i),
-                                hint="the controller drills a cycle along Z at one commanded X/Y, so the hole "
-                                     "could be placed right at one depth only (the axes' squareness moves it with "
-                                     "depth); post the holes as G0/G1 moves (expanded cycles) so every point is corrected")
+                if motion_key is not None:
+                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
+                motion_key, motion_idx = key, i
+                self.motion_word = True
+            elif key in (980, 990):
+                st.retract_r = key == 990
+            elif key == 800:
+                cancel_cycle = True
+                self.motion_word = True
+            elif key in LOOKAHEAD_G and self._is_lookahead(key, vals):
+                lookahead = key
+            elif key in SPLINES:
+                if motion_key is not None:
+                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
+                motion_key, motion_idx = key, i
+                self.motion_word = True
             elif key in REFUSED_G:
-                raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i))
+                raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i),
+                                hint=REFUSED_HINT.get(key))
+            elif key in HOME_CODES:
+                home_code = (key, i)
+            elif key in HOME_STORE:
+                if any(a in vals for a in AXES):
+                    raise self._err(UnsupportedGcodeError, f"G{words[i][1]} with axis words", lineno, col_of(i))
+                self.home[HOME_STORE[key]] = list(st.pos)
+            elif key == 520:
+                g52 = True
             elif key in PLANES:
                 st.plane = key
                 prefix.append(gtext)
@@ -430,14 +562,21 @@ class Interpreter:
         if work_name is not None:
             st.work = work_name
             st.work_explicit = True
+        if lookahead is not None:
+            return None
         if g10:
             self._g10(vals, lineno, col_of(next(i for k, i in gcodes if k == 100)))
+            return None
+        if g52:
+            self._g52(vals, lineno, col_of(next(i for k, i in gcodes if k == 520)))
             return None
         if g92 is not None:
             self._g92(g92, vals, lineno, col_of(next(i for k, i in gcodes if k in (920, 921, 922))))
             return None
         if "F" in vals:
             st.feed = vals["F"][0]
+        if home_code is not None:
+            return self._home(home_code, words, vals, lineno, col_of(home_code[1]))
 
         unit = st.unit_mm
         # Rotary axes: passed through, tracked for the engine's context.
@@ -449,20 +588,48 @@ class Interpreter:
                 if st.incremental:
                     st.rotary[a] = st.rotary.get(a, 0.0) + v
                 else:
-                    st.rotary[a] = v
+                    st.rotary[a] = v + self.rotary_g92.get(a, 0.0)
                 rotary_changed = True
 
         has_axes = any(a in vals for a in AXES)
+        if cancel_cycle:
+            if st.motion in CANNED_CYCLES:
+                st.motion = None if self.dialect == "linuxcnc" else st.before_cycle
+            elif self.dialect == "linuxcnc":
+                st.motion = None
+            st.cycle_r = st.cycle_z = st.cycle_q = st.cycle_p = None
+        if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
+            if motion_key is not None and st.motion not in CANNED_CYCLES:
+                st.before_cycle = st.motion
+            if motion_key is not None and motion_key != st.motion:
+                st.cycle_r = st.cycle_z = None  # given again when the motion mode changes (LinuxCNC)
+            if motion_key is not None:
+                st.motion = motion_key
+            return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
+                               tool_change or "T" in vals)
+        if motion_key in SPLINES or (motion_key is None and st.motion in SPLINES and has_axes):
+            if motion_key is not None:
+                st.motion = motion_key
+            return self._spline(lineno, words, vals, motion_idx, prefix + before_m)
         if motion_key is not None:
             st.motion = MOTION_CODES[motion_key]
+        full_circle = False
         if not has_axes:
             arc_words = [vals[k][1] for k in "IJKR" if k in vals]
             if motion_key in (ARC_CW, ARC_CCW) or (arc_words and st.motion in (ARC_CW, ARC_CCW)):
                 i = arc_words[0] if arc_words else next(i for k, i in gcodes if k == motion_key)
-                raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i))
-            if not rotary_changed:
+                _, (l1, l2) = PLANES[st.plane]
+                if self.dialect == "grbl" or "R" in vals or not (l1 in vals or l2 in vals):
+                    raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i),
+                                    hint="a full circle needs its centre offsets (I/J/K)"
+                                    + (" and Grbl needs an end point" if self.dialect == "grbl" else ""))
+                full_circle = True  # a full circle back to the start (LinuxCNC, Fanuc)
+            elif not rotary_changed:
                 return None
-        first_axis_col = col_of(min(vals[a][1] for a in AXES + ROTARY if a in vals))
+        if full_circle:
+            first_axis_col = col_of(min(vals[k][1] for k in "IJK" if k in vals))
+        else:
+            first_axis_col = col_of(min(vals[a][1] for a in AXES + ROTARY if a in vals))
         if st.motion is None:
             raise self._err(GcodeSyntaxError, "axis words with no motion mode (G0/G1/G2/G3) active",
                             lineno, first_axis_col)
@@ -491,6 +658,9 @@ class Interpreter:
                     q1[k] = q1[k] + v * unit
                 else:
                     q1[k] = v * unit + shift[k]
+                    self.unknown_after.pop(k, None)
+        if self.unknown_after:
+            self._check_known(q1, lineno, first_axis_col)
         if block_delete and st.incremental:
             raise self._err(UnsupportedGcodeError, "block-delete '/' on an incremental move", lineno, 1,
                             hint="the result would depend on the block-delete switch")
@@ -519,6 +689,261 @@ class Interpreter:
         )
         return move
 
+    @staticmethod
+    def _is_lookahead(key: int, vals) -> bool:
+        """Fanuc/Haas look-ahead and smoothing codes (G5 P.., G5.1 Q.., G8 P.., G187, G103)."""
+        if key in (1870, 1030):
+            return True
+        if any(a in vals for a in "XYZIJKR"):
+            return False
+        if key == 50:
+            return "P" in vals and "Q" not in vals
+        if key == 51:
+            return "Q" in vals
+        if key == 80:
+            return "P" in vals
+        return False
+
+    def _home(self, home_code, words, vals, lineno: int, col: int) -> Move | None:
+        """G28/G30: through the intermediate point (the axis words) to the stored position."""
+        key, gi = home_code
+        name = HOME_CODES[key]
+        st = self.state
+        if any(a in vals for a in ROTARY):
+            raise self._err(UnsupportedGcodeError, f"{name} with rotary axis words", lineno, col,
+                            hint="the stored rotary positions are not known to postproc; home the rotary "
+                                 "axes on a line of their own before or after correcting")
+        if any(k in vals for k in "IJKR"):
+            raise self._err(GcodeSyntaxError, f"{name} with arc words", lineno, col)
+        unit = st.unit_mm
+        named = [k for k, a in enumerate(AXES) if a in vals]
+        q0 = tuple(st.pos)
+        inter = list(q0)
+        axis_idx = [-1, -1, -1]
+        shift = self.shift(False, lineno, col) if named and not st.incremental else (0.0, 0.0, 0.0)
+        for k in named:
+            v, i = vals[AXES[k]]
+            axis_idx[k] = i
+            if st.incremental:
+                if v != 0.0 and math.isnan(inter[k]):
+                    raise self._err(MissingSetupError, f"incremental {name} on {AXES[k]} from an unknown position",
+                                    lineno, col_of_word(words, i),
+                                    hint=f"give the machine position at program start with --start {AXES[k]}..")
+                if v != 0.0:
+                    inter[k] = inter[k] + v * unit
+            else:
+                inter[k] = v * unit + shift[k]
+                self.unknown_after.pop(k, None)
+        stored = self.home.get(name, [NAN, NAN, NAN])
+        after = list(inter)
+        for k in named or range(3):
+            after[k] = stored[k]
+            if math.isnan(stored[k]):
+                self.unknown_after[k] = name
+            else:
+                self.unknown_after.pop(k, None)
+        r = self.tool_r()
+        rot = dict(st.rotary) if self.used_rotary else {}
+        jump = Move(lineno, RAPID, tuple(inter), tuple(after), r, (0.0, 0.0, 0.0), unit, st.incremental,
+                    st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot, stays=True, motion_idx=gi,
+                    fixed=True)
+        st.pos = after
+        moved = [k for k in named if inter[k] != q0[k] and not (math.isnan(inter[k]) and math.isnan(q0[k]))]
+        if not moved:
+            return jump
+        self._check_known(inter, lineno, col)
+        return Move(lineno, RAPID, q0, tuple(inter), r, shift, unit, st.incremental, st.arc_absolute, words,
+                    tuple(axis_idx), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
+
+    def _spline(self, lineno, words, vals, motion_idx, prefix) -> Move:
+        """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
+        offset the first control point from the start (the previous P/Q mirrored when
+        left out), P/Q the second from the end; G5.1's I/J offset its control point."""
+        st = self.state
+        key = st.motion
+        name = "G5" if key == 50 else "G5.1"
+        col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[0][4] + 1
+        if st.plane != 170:
+            raise self._err(GcodeSyntaxError, f"{name} spline outside the G17 plane", lineno, col)
+        other = [a for a in "ZABCKR" if a in vals]
+        if other:
+            raise self._err(GcodeSyntaxError, f"{name} spline with a {other[0]} word (X and Y only)", lineno,
+                            words[vals[other[0]][1]][4] + 1)
+        if st.inverse_time:
+            raise self._err(UnsupportedGcodeError, f"{name} spline in G93 inverse-time mode", lineno, col)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"{name} spline from an unknown position", lineno, col,
+                            hint="position every axis with a G90 move before the spline, or give --start")
+        if ("I" in vals) != ("J" in vals):
+            raise self._err(GcodeSyntaxError, f"{name} needs both I and J, or neither", lineno, col)
+        unit = st.unit_mm
+        if "F" in vals:
+            st.feed = vals["F"][0]
+        shift = self.shift(False, lineno, col)
+        q0 = tuple(st.pos)
+        q1 = list(q0)
+        axis_idx = [-1, -1, -1]
+        for k, a in enumerate("XY"):
+            if a in vals:
+                v, i = vals[a]
+                axis_idx[k] = i
+                q1[k] = q1[k] + v * unit if st.incremental else v * unit + shift[k]
+        p0 = (q0[0], q0[1])
+        p3 = (q1[0], q1[1])
+        if key == 50:
+            if "P" not in vals or "Q" not in vals:
+                raise self._err(GcodeSyntaxError, "G5 needs both P and Q", lineno, col)
+            if "I" in vals:
+                ij = (vals["I"][0] * unit, vals["J"][0] * unit)
+            elif self._last_pq is not None:
+                ij = (-self._last_pq[0], -self._last_pq[1])
+            else:
+                raise self._err(GcodeSyntaxError, "the first G5 of a series needs I and J", lineno, col)
+            pq = (vals["P"][0] * unit, vals["Q"][0] * unit)
+            self._last_pq = pq
+            ctrl = [p0, (p0[0] + ij[0], p0[1] + ij[1]), (p3[0] + pq[0], p3[1] + pq[1]), p3]
+        else:
+            if "I" not in vals or (vals["I"][0] == 0 and vals["J"][0] == 0):
+                raise self._err(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
+            ctrl = [p0, (p0[0] + vals["I"][0] * unit, p0[1] + vals["J"][0] * unit), p3]
+        st.pos = q1
+        return Move(lineno=lineno, kind=LINE, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift, unit=unit,
+                    incremental=st.incremental, arc_absolute=st.arc_absolute, words=words, axis_idx=tuple(axis_idx),
+                    feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
+                    rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
+                    motion_idx=motion_idx, spline=ctrl)
+
+    def _cycle(self, lineno, words, vals, motion_idx, gcodes, prefix, stays) -> Move:  # noqa: C901
+        """A canned-cycle block: the holes it drills and the moves the controller makes.
+
+        Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
+        R when Z is below it; per hole a rapid in X/Y at the current level, a rapid to
+        R, the cycle's own moves, and a retract to R (G99) or to the higher of R and the
+        level at the block's start (G98). In G91, R is relative to the current Z and Z
+        to R; X/Y move by their increments for each of the L repeats. Pecks: G83 rapid
+        back to R and down to 0.254 mm (0.010 in) above the last depth, G73 retract 0.254 mm.
+        """
+        st = self.state
+        key = st.motion
+        col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
+        name = f"G{key / 10:g}"
+        if st.plane != 170:
+            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
+        if st.inverse_time:
+            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in G93 inverse-time mode", lineno, col)
+        if any(a in vals for a in ROTARY) or any(k in vals for k in "IJ"):
+            raise self._err(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
+                            lineno, col)
+        unit = st.unit_mm
+        if "R" in vals:
+            st.cycle_r = vals["R"][0]
+        if st.cycle_r is None:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
+        if "Z" in vals:
+            st.cycle_z = vals["Z"][0]
+        if st.cycle_z is None:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
+        if key in (730, 830):
+            if "Q" in vals:
+                st.cycle_q = vals["Q"][0]
+            if st.cycle_q is None or st.cycle_q <= 0:
+                raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
+                                lineno, col)
+        if "P" in vals:
+            st.cycle_p = vals["P"][0]
+        if "F" in vals:
+            st.feed = vals["F"][0]
+        repeat_letter = "K" if self.dialect in ("fanuc", "haas") and "K" in vals else "L"
+        repeats = 1
+        if repeat_letter in vals:
+            repeats = vals[repeat_letter][0]
+            if repeats != int(repeats) or repeats < 0:
+                raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
+                                lineno, words[vals[repeat_letter][1]][4] + 1)
+            repeats = int(repeats)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
+                            hint="position every axis with a G90 move before the cycle, or give --start")
+        if self.unknown_after:
+            self._check_known([NAN, NAN, NAN], lineno, col)
+        shift = self.shift(False, lineno, col)
+        x0, y0, z0 = st.pos
+        if st.incremental:
+            r_m = z0 + st.cycle_r * unit
+            z_m = r_m + st.cycle_z * unit
+            dx = vals["X"][0] * unit if "X" in vals else 0.0
+            dy = vals["Y"][0] * unit if "Y" in vals else 0.0
+        else:
+            r_m = st.cycle_r * unit + shift[2]
+            z_m = st.cycle_z * unit + shift[2]
+            xs = vals["X"][0] * unit + shift[0] if "X" in vals else x0
+            ys = vals["Y"][0] * unit + shift[1] if "Y" in vals else y0
+        if z_m > r_m:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
+                            lineno, col)
+        clear = r_m if st.retract_r else max(z0, r_m)
+        delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
+        steps: list[tuple[int, tuple]] = []
+        cur = [x0, y0, z0]
+
+        def go(kind: int, x: float, y: float, z: float) -> None:
+            if (x, y, z) != tuple(cur):
+                steps.append((kind, (x, y, z)))
+                cur[:] = (x, y, z)
+
+        holes = []
+        if z0 < r_m:
+            go(RAPID, x0, y0, r_m)
+        for _ in range(repeats):
+            x, y = (cur[0] + dx, cur[1] + dy) if st.incremental else (xs, ys)
+            go(RAPID, x, y, cur[2])
+            go(RAPID, x, y, r_m)
+            if key in (730, 830):
+                q = st.cycle_q * unit
+                depth = r_m - q
+                while depth > z_m:
+                    go(LINE, x, y, depth)
+                    if key == 830:
+                        go(RAPID, x, y, r_m)
+                    go(RAPID, x, y, depth + delta)
+                    depth -= q
+            go(LINE, x, y, z_m)
+            if key in (820, 890) and st.cycle_p:
+                steps.append((DWELL, (st.cycle_p, 0.0, 0.0)))
+            if key in (840, 850, 890):
+                go(LINE, x, y, r_m)
+            go(RAPID, x, y, clear)
+            holes.append(((x, y, z_m), (x, y, r_m)))
+        axis_idx = tuple(vals[a][1] if a in vals else -1 for a in AXES)
+        q0 = tuple(st.pos)
+        st.pos = list(cur)
+        return Move(
+            lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
+            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+            axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
+            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
+            motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
+                                               r_m, z_m, repeats, st.retract_r, st.cycle_p))
+
+    def _check_known(self, q1, lineno: int, col: int) -> None:
+        """Refuse a move that needs an axis left at a stored position that was not given."""
+        for k, name in self.unknown_after.items():
+            if math.isnan(q1[k]):
+                raise self._err(
+                    MissingSetupError, f"axis {AXES[k]} is at the {name} stored position, which was not given, "
+                    "and this move needs it", lineno, col,
+                    hint=f"give it with --home {name}=X..,Y..,Z.. (machine mm), or position {AXES[k]} with an "
+                         "absolute move first")
+
+    def _g52(self, vals, lineno, col) -> None:
+        """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""
+        st = self.state
+        if any(a in vals for a in ROTARY):
+            raise self._err(UnsupportedGcodeError, "G52 on a rotary axis", lineno, col)
+        for k, a in enumerate(AXES):
+            if a in vals:
+                st.g92[k] = vals[a][0] * st.unit_mm
+
     def _g43(self, vals, lineno, col) -> None:
         st = self.state
         if "H" in vals:
@@ -531,7 +956,7 @@ class Interpreter:
         if h == 0:
             st.tlo, st.tlo_active = 0.0, True
             return
-        lengths = self.setup.tool_lengths or {}
+        lengths = self.tool_lengths
         if self.lenient_setup and h not in lengths:
             st.tlo, st.tlo_active = 0.0, True
             return
@@ -544,8 +969,14 @@ class Interpreter:
         st = self.state
         if key in (921, 922):
             st.g92 = [0.0, 0.0, 0.0]
+            self.rotary_g92.clear()
             return
+        for a in ROTARY:
+            if a in vals:
+                self.rotary_g92[a] = st.rotary.get(a, 0.0) - vals[a][0]
         if not any(a in vals for a in AXES):
+            if any(a in vals for a in ROTARY):
+                return
             raise self._err(GcodeSyntaxError, "G92 needs at least one axis word", lineno, col)
         unit = st.unit_mm
         for k, a in enumerate(AXES):
@@ -561,6 +992,9 @@ class Interpreter:
     def _g10(self, vals, lineno, col) -> None:
         st = self.state
         L = int(vals["L"][0]) if "L" in vals else None
+        if L in (1, 10, 11):
+            self._g10_tool(L, vals, lineno, col)
+            return
         if L not in (2, 20) or "R" in vals:
             raise self._err(UnsupportedGcodeError, "G10 other than L2/L20 work offset setting (or with R rotation)",
                             lineno, col)
@@ -589,10 +1023,35 @@ class Interpreter:
                             lineno, col, hint=f"give --offset {name}=X..,Y..,Z..")
         self.program_offsets[name] = new
 
+    def _g10_tool(self, L: int, vals, lineno, col) -> None:
+        """G10 L1/L10/L11 P<tool> Z..: write a tool length (used by later G43)."""
+        st = self.state
+        if "P" not in vals:
+            raise self._err(GcodeSyntaxError, f"G10 L{L} needs a P word (tool number)", lineno, col)
+        tool = int(vals["P"][0])
+        if "Z" not in vals:
+            return  # X (lathe), R (radius), Q (orientation): no tool length written
+        z = vals["Z"][0] * st.unit_mm
+        if L == 1:
+            self.tool_lengths[tool] = z
+            return
+        if math.isnan(st.pos[2]):
+            raise self._err(MissingSetupError, f"G10 L{L} at an unknown Z position", lineno, col,
+                            hint="position Z with an absolute move first, or give --start Z..")
+        if L == 10:
+            w = self._work_offset(lineno, col)
+            self.tool_lengths[tool] = st.pos[2] - w[2] - st.g92[2] - z
+        else:
+            w = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
+            if w is None:
+                raise self._err(MissingSetupError, "G10 L11 uses the work offset G59.3, whose value was not given",
+                                lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
+            self.tool_lengths[tool] = st.pos[2] - w[2] - z
+
     def _arc(self, lineno, words, vals, q0, q1, shift, unit, gcodes) -> Arc:
         st = self.state
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
-        col = words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
+        col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
         if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc, or give their "
@@ -608,9 +1067,13 @@ class Interpreter:
         e1, e2 = q1[a1], q1[a2]
         plane_letters = {"I": 0, "J": 1, "K": 2}
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
+        if wrong and self.dialect in ("fanuc", "haas", "mach3"):
+            wrong = []  # these controllers ignore an offset word off the arc's plane
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
-                            words[vals[wrong[0]][1]][4] + 1)
+                            words[vals[wrong[0]][1]][4] + 1,
+                            hint="LinuxCNC and Grbl reject it (Fanuc, Haas and Mach3 ignore it: "
+                                 "choose that --dialect if the program is for one of them)")
         del plane_letters
         if "R" in vals:
             if l1 in vals or l2 in vals:
@@ -663,9 +1126,68 @@ class Interpreter:
         return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
 
 
-def _offset_tuple(v) -> tuple[float, float, float]:
+def spline_points(ctrl, s) -> np.ndarray:
+    """Points (k, 2) of a Bezier curve with control points ``ctrl`` at parameters ``s``."""
+    s = np.asarray(s, dtype=float)[:, None]
+    c = np.asarray(ctrl, dtype=float)
+    if len(c) == 3:
+        return (1 - s) ** 2 * c[0] + 2 * (1 - s) * s * c[1] + s ** 2 * c[2]
+    return (1 - s) ** 3 * c[0] + 3 * (1 - s) ** 2 * s * c[1] + 3 * (1 - s) * s ** 2 * c[2] + s ** 3 * c[3]
+
+
+def spline_samples(ctrl, chord_mm: float) -> np.ndarray:
+    """Parameters along a spline whose chords stay within ``chord_mm`` of it (from the
+    bound on the second derivative: error <= max|B''| h^2 / 8)."""
+    c = np.asarray(ctrl, dtype=float)
+    if len(c) == 3:
+        bound = 2.0 * np.linalg.norm(c[0] - 2 * c[1] + c[2])
+    else:
+        bound = 6.0 * max(np.linalg.norm(c[0] - 2 * c[1] + c[2]), np.linalg.norm(c[1] - 2 * c[2] + c[3]))
+    n = max(1, math.ceil(math.sqrt(bound / (8.0 * chord_mm)))) if bound > 0 else 1
+    return np.linspace(0.0, 1.0, n + 1)
+
+
+# chord error of the polyline the samplers use for a spline
+SPLINE_SAMPLE_MM = 1e-4
+
+
+def plain_moves(mv: Move):
+    """The straight and arc moves a Move stands for, in order: a cycle block's rapids
+    and feeds, a G28/G30 line's two legs, or the move itself."""
+    if mv.cycle is not None:
+        q0 = mv.q0
+        for kind, q in mv.cycle.steps:
+            if kind == DWELL:
+                continue
+            yield Move(mv.lineno, kind, q0, q, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute, [],
+                       (-1, -1, -1), -1, False, mv.feed, mv.rotary)
+            q0 = q
+        return
+    if mv.spline is not None:
+        s = spline_samples(mv.spline, SPLINE_SAMPLE_MM)[1:]
+        xy = spline_points(mv.spline, s)
+        q0 = mv.q0
+        for x, y in xy.tolist():
+            q = (x, y, mv.q1[2])
+            yield Move(mv.lineno, LINE, q0, q, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute, [],
+                       (-1, -1, -1), -1, False, mv.feed, mv.rotary)
+            q0 = q
+        return
+    while mv is not None:
+        if not (mv.fixed and any(math.isnan(v) for v in mv.q1)):  # an unknown stored position
+            yield mv
+        mv = mv.then
+
+
+def col_of_word(words, i: int) -> int:
+    return words[i][4] + 1
+
+
+def _offset_tuple(v, partial: bool = False) -> tuple[float, float, float]:
     if isinstance(v, dict):
-        return (float(v.get("X", 0.0)), float(v.get("Y", 0.0)), float(v.get("Z", 0.0)))
+        d = NAN if partial else 0.0
+        up = {str(k).upper(): x for k, x in v.items()}
+        return (float(up.get("X", d)), float(up.get("Y", d)), float(up.get("Z", d)))
     t = tuple(float(x) for x in v)
     if len(t) != 3:
         raise ValueError(f"work offset needs 3 values, got {v!r}")

@@ -24,7 +24,7 @@ import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
 from postproc.gcode.geometry import arc_length, arc_points, line_points
-from postproc.gcode.interp import Interpreter, start_position
+from postproc.gcode.interp import Interpreter, plain_moves, start_position
 from postproc.gcode.state import RAPID
 
 DEFAULT_MAX_STEP_MM = 0.5
@@ -41,7 +41,9 @@ class Setup:
     values passed to the engine (e.g. ``{"temp": 21.5}``); ``start``: machine axis
     positions (mm, the gauge point as in G53, like ``offsets``) at program start, by
     axis letter (``{"Z": 150.0}``, any subset), used for the axes the program has not
-    positioned yet; the functional point there is ``start + r``.
+    positioned yet; the functional point there is ``start + r``; ``home``: the stored
+    positions G28 and G30 go to (``{"G28": {"X":.., "Y":.., "Z":..}}``, machine mm as
+    ``offsets``, any subset of axes; an axis not given is unknown after the move).
     """
 
     offsets: dict = field(default_factory=dict)
@@ -49,6 +51,7 @@ class Setup:
     tool_vector: tuple | None = None
     context: dict = field(default_factory=dict)
     start: dict = field(default_factory=dict)
+    home: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -147,23 +150,24 @@ def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEF
     rapid: list[np.ndarray] = []
     rot: list[dict] = []
     for lineno, line in enumerate(lines, start=1):
-        mv = interp.feed_line(lineno, line)
-        if mv is None:
+        block = interp.feed_line(lineno, line)
+        if block is None:
             continue
-        q0, q1 = mv.q0, mv.q1
-        if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-            pts = np.array([q1], dtype=float)
-        elif mv.arc is not None:
-            n = max(1, math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm))
-            pts = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
-        else:
-            n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
-            pts = line_points(q0, q1, np.arange(1, n + 1) / n)
-        qs.append(pts)
-        rs.append(np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape))
-        lns.append(np.full(len(pts), lineno))
-        rapid.append(np.full(len(pts), mv.kind == RAPID))
-        rot.append((len(pts), mv.rotary))
+        for mv in plain_moves(block):
+            q0, q1 = mv.q0, mv.q1
+            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
+                pts = np.array([q1], dtype=float)
+            elif mv.arc is not None:
+                n = max(1, math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm))
+                pts = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+            else:
+                n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
+                pts = line_points(q0, q1, np.arange(1, n + 1) / n)
+            qs.append(pts)
+            rs.append(np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape))
+            lns.append(np.full(len(pts), lineno))
+            rapid.append(np.full(len(pts), mv.kind == RAPID))
+            rot.append((len(pts), mv.rotary))
     if not qs:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),

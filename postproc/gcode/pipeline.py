@@ -15,8 +15,9 @@ from __future__ import annotations
 import gc
 import math
 import os
+import re
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import islice
 from pathlib import Path
 
@@ -43,9 +44,10 @@ from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, subdivide
-from postproc.gcode.state import LINE
+from postproc.gcode.state import DWELL, LINE, RAPID
 
 DEFAULT_CHUNK_LINES = 20_000
+_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
 # engine together: smaller chunks keep the peak memory low at the same speed.
 SEGMENTED_CHUNK_LINES = 2_000
@@ -63,6 +65,7 @@ class CorrectOptions:
     force: bool = False
     added: list = field(default_factory=list)
     chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
+    cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     dialect: str = "generic"  # controller the output is for (postproc.gcode.dialect.DIALECTS)
@@ -84,6 +87,9 @@ class CorrectReport:
     solver: str = ""  # the engine's inverse solver when it names one (parametric: newton | astatic)
     accept_residual_mm: float = SOLVER_ACCEPT_MM  # largest inverse residual accepted
     max_residual_mm: float = 0.0  # largest inverse residual met
+    cycles_kept: int = 0
+    splines_linearised: int = 0
+    cycles_expanded: int = 0
 
 
 class Corrector(EmitterMixin):
@@ -111,6 +117,9 @@ class Corrector(EmitterMixin):
         self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
         self.emitted_motion: int | None = None
+        self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
+        self._cycle_rz: float | None = None
+        self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
         self._units_checked: set[float] = set()
@@ -206,9 +215,14 @@ class Corrector(EmitterMixin):
 
     def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
         it = iter(lines)
-        head = [ln for ln in (next(it, None),) if ln is not None]
-        if head and head[0].strip() == "%":
-            head.extend(ln for ln in (next(it, None),) if ln is not None)
+        # the lines that stay before the header: a '%' tape mark and the program number
+        # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
+        head = [ln for ln in islice(it, 3)]
+        keep = 0
+        if head and head[0].lstrip("\ufeff").strip().startswith("%"):
+            keep = 1
+        if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
+            keep += 1
         for k, line in enumerate(head):
             if emit.is_header(line) and not self.opt.force:
                 raise AlreadyCorrectedError(
@@ -221,11 +235,15 @@ class Corrector(EmitterMixin):
         header = "".join(header_rows)
         entries: list = []
         lineno = 1
-        if head and head[0].strip() == "%":
-            write(head[0] if emit.line_ending(head[0]) else head[0] + ending)
+        for line in head[:keep]:
+            self.interp.feed_line(lineno, line)
+            write(line if emit.line_ending(line) else line + ending)
             self.report.lines_out += 1
-            head = head[1:]
-            lineno = 2
+            lineno += 1
+        if head and not keep and head[0].startswith("\ufeff"):
+            write("\ufeff")  # the byte-order mark stays the file's first bytes
+            head[0] = head[0][1:]
+        head = head[keep:]
         write(header)
         self.report.lines_out += len(header_rows)
 
@@ -246,7 +264,19 @@ class Corrector(EmitterMixin):
                     lineno += 1
                     return
             mv = interp.feed_line(lineno, line)
-            entries.append((line, mv, interp.motion_word, interp.state.motion))
+            if mv is not None and mv.cycle is not None:
+                self._feed_cycle(entries, line, mv, interp.state.motion)
+            elif mv is not None and mv.spline is not None:
+                self._feed_spline(entries, line, mv)
+            elif mv is not None and mv.fixed:
+                # the line only sends the machine to a stored position: written as it is
+                entries.append((line, None, False, interp.state.motion))
+                entries.append((None, mv, False, interp.state.motion))
+            elif mv is not None and mv.then is not None:
+                entries.append((line, mv, False, interp.state.motion))
+                entries.append((None, mv.then, False, interp.state.motion))
+            else:
+                entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
             allowed = use_fast and state_allows(interp)
 
@@ -315,6 +345,9 @@ class Corrector(EmitterMixin):
         start = start_position(self.setup.start)
         if self.setup.start:
             parts.append("start " + ",".join(f"{a}{v:.10g}" for a, v in zip("XYZ", start, strict=True) if v == v))
+        for name, v in sorted((getattr(self.setup, "home", None) or {}).items()):
+            v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
+            parts.append(f"{name}=" + ",".join(f"{a}{float(x):g}" for a, x in sorted(v.items())))
         if self.setup.tool_vector is not None:
             parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
         for a in self.opt.added:
@@ -397,6 +430,23 @@ class Corrector(EmitterMixin):
                 if motion_word:
                     self.emitted_motion = prog_motion
                 continue
+            if mv.probe:  # used by the cycle block before it, or checked here
+                if mv.probe == 2:
+                    self._check_unmoved(mv, T[k])
+                k += 1
+                continue
+            if mv.cycle is not None:
+                self._emit_cycle(line, mv, T[k].tolist(), T[k + 1].tolist(), write)
+                k += 1
+                continue
+            if mv.fixed:  # the machine is at a stored position, uncorrected
+                self.qe = list(mv.q1)
+                k += 1
+                continue
+            if mv.then is not None:  # G28/G30: only the intermediate point's own words change
+                self._emit_words_only(line, mv, T[k].tolist(), write)
+                k += 1
+                continue
             target = T[k].tolist()
             if type(mv) is FastMove and emit_fast(self, line, mv, target, write,
                                                   dec_mm if mv.unit == 1.0 else dec_in):
@@ -419,6 +469,13 @@ class Corrector(EmitterMixin):
         in bulk (arcs among them; all moves when straight moves may be split).
         """
         M = len(Q1)
+        fixed_rows = [i for i, m in general if m.fixed]
+        fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
+        if fixed_rows:
+            # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it
+            for i in fixed_rows:  # unknown axes: taken as not moving (no approach direction)
+                before = Q1[i - 1] if i > 0 else self.prev_nominal
+                Q1[i] = np.where(np.isnan(Q1[i]), before, Q1[i])
         Q1 = backfill_unknown(Q1, linenos, self.path)
         Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
         Q0 = np.where(np.isnan(Q0), Q1, Q0)
@@ -439,7 +496,16 @@ class Corrector(EmitterMixin):
             idx = np.where(col != 0, np.arange(M), -1)
             np.maximum.accumulate(idx, out=idx)
             D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
-        T = self.corrected(Q1, R, D, rot, linenos)
+        if fixed_rows:
+            live = np.ones(M, dtype=bool)
+            live[fixed_rows] = False
+            T = np.empty_like(Q1)
+            T[live] = self.corrected(Q1[live], R[live], D[live], [rot[i] for i in np.flatnonzero(live)],
+                                     linenos[live])
+            T[fixed_rows] = fixed_q
+            Q1[fixed_rows] = fixed_q
+        else:
+            T = self.corrected(Q1, R, D, rot, linenos)
         plans: dict[int, object] = {}
         # starts: the corrected previous target (unrounded) for the pre-decision
         S = np.vstack([self.prev_target[None, :], T[:-1]])
@@ -492,7 +558,7 @@ class Corrector(EmitterMixin):
                     owner.append(i)
         if not self.linear_exact:
             for i, m in general:
-                if m.kind == LINE and not any(math.isnan(v) for v in m.q0):
+                if m.kind == LINE and not m.planned and not any(math.isnan(v) for v in m.q0):
                     curves.append(Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary))
                     s_init.append(np.array([0.0, 1.0]))
                     owner.append(i)
@@ -559,7 +625,213 @@ class Corrector(EmitterMixin):
                             "residual, or use a calibration with the newton solver")
             raise exc.at(path=self.path) from None
 
+    # -- splines -------------------------------------------------------------------------
+    def _feed_spline(self, entries: list, line: str, mv: Move) -> None:
+        """Queue a G5/G5.1 spline as the fewest G1 chords whose corrected path stays within
+        --tolerance of the corrected spline (checked at samples 1/10 of the tolerance apart
+        in chord error)."""
+        from postproc.gcode.interp import spline_points, spline_samples
+        from postproc.gcode.lexer import scan_words
+
+        tol = self.opt.tolerance_mm - self._round_err(mv.unit)
+        has_ij = any(w[0] == "I" for w in mv.words)
+        kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv)
+        self._spline_kept = kept
+        if kept:
+            # an affine correction maps the spline onto itself: the line stays as it is
+            entries.append((line, None, True, LINE))
+            entries.append((None, replace(mv, q0=mv.q1, fixed=True, spline=None, words=[],
+                                          axis_idx=(-1, -1, -1)), False, None))
+            return
+        s = spline_samples(mv.spline, tol / 10.0)
+        xy = spline_points(mv.spline, s)
+        nom = np.column_stack([xy, np.full(len(s), mv.q1[2])])
+        d = np.diff(np.vstack([np.asarray(mv.q0)[None, :], nom]), axis=0)
+        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
+        for k in range(1, len(sign)):
+            sign[k] = np.where(sign[k] == 0, sign[k - 1], sign[k])
+        sign = np.where(sign == 0, self.dirs, sign)
+        lineno = np.full(len(s), mv.lineno)
+        corr = self.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
+                              [mv.rotary] * len(s), lineno)
+        keep = [0]
+        i = 0
+        budget = 0.9 * tol
+        while i < len(s) - 1:
+            j = i + 1
+            while j + 1 < len(s) and _chord_fits(corr[i:j + 2], budget):
+                j += 1
+            keep.append(j)
+            i = j
+        ending = emit.line_ending(line) or "\n"
+        sep, lower = emit.style_of(line)
+        sep = sep or " "
+        unit = mv.unit
+        dec = _unit_decimals(self.opt, unit)
+        if mv.prefix_words:
+            text = sep.join(mv.prefix_words)
+            entries.append(((text.lower() if lower else text) + ending, None, False, None))
+        prev = mv.q0
+        for n, k in enumerate(keep[1:]):
+            q = tuple(nom[k].tolist()) if k < len(s) - 1 else mv.q1
+            vals = [(qv - pv) / unit if mv.incremental else (qv - sv) / unit
+                    for qv, pv, sv in zip(q, prev, mv.shift, strict=True)]
+            words = ["G1"] + [a + emit.fmt(v, dec) for a, v in zip("XY", vals[:2], strict=True)]
+            if n == 0 and mv.feed_idx >= 0:
+                words.append("F" + mv.words[mv.feed_idx][1])
+            text = sep.join(words) + ending
+            ws = scan_words(text)
+            idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+            step = Move(mv.lineno, LINE, tuple(prev), q, mv.r, mv.shift, unit, mv.incremental, mv.arc_absolute,
+                        ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False, mv.feed,
+                        mv.rotary, motion_idx=0, planned=True)
+            entries.append(((text.lower() if lower else text), step, True, LINE))
+            prev = q
+        self.report.splines_linearised += 1
+
+    def _spline_unmoved(self, mv: Move) -> bool:
+        """Whether the correction at the spline's control points rounds to nothing (for an
+        affine correction the corrected spline is then the spline itself)."""
+        pts = np.array([(x, y, mv.q1[2]) for x, y in mv.spline], dtype=float)
+        n = len(pts)
+        t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
+                           np.broadcast_to(self.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
+        d = _unit_decimals(self.opt, mv.unit)
+        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
+
+    # -- canned cycles -------------------------------------------------------------------
+    def _feed_cycle(self, entries: list, line: str, mv: Move, motion) -> None:
+        """Queue a cycle block: kept (its bottom and R point corrected) or expanded into
+        the controller's own G0/G1 moves, each corrected like any other move."""
+        c = mv.cycle
+        if self.opt.cycles != "expand":
+            if c.repeats == 1 and not mv.incremental:
+                entries.append((line, mv, True, motion))
+                bottom, rpoint = c.holes[0]
+                entries.append((None, replace(mv, q1=rpoint, cycle=None, probe=1), False, motion))
+                return
+            # several holes from one line, or increments: one word cannot carry each hole's
+            # correction; kept only where nothing is corrected
+            for bottom, rpoint in c.holes:
+                for q in (bottom, rpoint):
+                    entries.append((None, replace(mv, q1=q, cycle=None, probe=2), False, motion))
+            entries.append((line, None, True, None))
+            end = c.steps[-1][1] if c.steps else mv.q0
+            entries.append((None, replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
+                                          axis_idx=(-1, -1, -1)), False, None))
+            return
+        ending = emit.line_ending(line) or "\n"
+        sep, lower = emit.style_of(line)
+        sep = sep or " "
+        unit = mv.unit
+        d = _unit_decimals(self.opt, unit)
+        prefix = [w for w in mv.prefix_words if not w.upper().startswith(("G98", "G99"))]
+        if prefix:
+            text = sep.join(prefix)
+            entries.append(((text.lower() if lower else text) + ending, None, False, None))
+        prev = mv.q0
+        feed_done = False
+        from postproc.gcode.lexer import scan_words
+        for kind, q in c.steps:
+            if kind == DWELL:
+                text = f"G4{sep}P{emit.fmt(q[0], 4).rstrip('0').rstrip('.') or '0'}"
+                entries.append(((text.lower() if lower else text) + ending, None, False, None))
+                continue
+            vals = [(qv - pv) / unit if mv.incremental else (qv - sv) / unit
+                    for qv, pv, sv in zip(q, prev, mv.shift, strict=True)]
+            words = ["G0" if kind == RAPID else "G1"]
+            words += [a + emit.fmt(v, d) for a, v, qv, pv in zip("XYZ", vals, q, prev, strict=True) if qv != pv]
+            if kind != RAPID and not feed_done and mv.feed_idx >= 0:
+                words.append("F" + mv.words[mv.feed_idx][1])
+                feed_done = True
+            text = sep.join(words) + ending
+            ws = scan_words(text)
+            idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+            step = Move(mv.lineno, kind, tuple(prev), tuple(q), mv.r, mv.shift, unit, mv.incremental,
+                        mv.arc_absolute, ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1),
+                        False, mv.feed, mv.rotary, motion_idx=0)
+            entries.append(((text.lower() if lower else text), step, True, kind))
+            prev = q
+        self.report.cycles_expanded += 1
+
+    def _check_unmoved(self, mv: Move, target) -> None:
+        """A cycle block that stays as it is, with several holes or increments: refuse it
+        when a hole's correction does not round to nothing."""
+        d = _unit_decimals(self.opt, mv.unit)
+        moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
+        if moved >= emit.HALF_UNIT[d]:
+            how = "with L/K repeats" if mv.cycle is None and mv.incremental is False else "in G91 (incremental)"
+            raise SafetyError(
+                f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
+                f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
+                path=self.path, lineno=mv.lineno,
+                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
+
+    def _emit_cycle(self, line: str, mv: Move, t_bottom, t_r, write) -> None:
+        """Write a kept cycle block: X/Y at the corrected bottom, Z and R along the tool axis."""
+        c = mv.cycle
+        unit, shift = mv.unit, mv.shift
+        d = _unit_decimals(self.opt, unit)
+        rerr = self._round_err(unit)
+        drift = math.hypot(t_r[0] - t_bottom[0], t_r[1] - t_bottom[1])
+        if drift > self.opt.tolerance_mm - rerr:
+            raise SafetyError(
+                f"canned cycle G{c.code / 10:g}: the correction moves the hole's axis by {drift * 1000:.3g} um "
+                f"between its R plane and its bottom, more than --tolerance {self.opt.tolerance_mm:g} mm",
+                path=self.path, lineno=mv.lineno,
+                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
+        self.report.moves += 1
+        self.report.cycles_kept += 1
+        qe = self.qe
+        z_before = qe[2]
+        flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
+        edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
+        sep, lower = emit.style_of(line)
+        for letter, idx, t, attr in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z"), ("R", c.r_idx, t_r[2], "_cycle_rz")):
+            v = (t - shift[2]) / unit
+            if idx >= 0:
+                _l, num, start, end, _p = mv.words[idx]
+                dout = max(d, emit.decimals_of(num))
+                val = float(num)
+                if abs(v - val) >= emit.HALF_UNIT[dout]:
+                    text = emit.fmt(v, dout)
+                    edits.append((start, end, text))
+                    val = float(text)
+            else:
+                val = getattr(self, attr)
+                if val is None or abs(v - val) >= emit.HALF_UNIT[d]:
+                    text = emit.fmt(v, d)
+                    added.append(letter + text)
+                    val = float(text)
+            setattr(self, attr, val)
+        if added:
+            pos = self._insert_pos(mv)
+            text = "".join(sep + w for w in added)
+            edits.append((pos, pos, text.lower() if lower else text))
+        r_machine = self._cycle_rz * unit + shift[2]
+        qe[2] = r_machine if c.retract_r else max(z_before, r_machine)
+        self.emitted_motion = c.code
+        self._write_line(line, edits, write)
+
     # -- emission ----------------------------------------------------------------------
+    def _emit_words_only(self, line: str, mv: Move, target, write) -> None:
+        """Rewrite the axis words a line names, adding none and keeping the modal motion
+        (G28/G30 intermediate points)."""
+        self.report.moves += 1
+        d = _unit_decimals(self.opt, mv.unit)
+        edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
+        self._write_line(line, edits, write)
+
+
+def _chord_fits(points: np.ndarray, budget: float) -> bool:
+    """Whether every point lies within ``budget`` of the chord from the first to the last."""
+    a, b = points[0], points[-1]
+    ab = b - a
+    L2 = float(ab @ ab)
+    if L2 == 0.0:
+        return bool(np.all(np.linalg.norm(points - a, axis=1) <= budget))
+    t = np.clip((points - a) @ ab / L2, 0.0, 1.0)
+    return bool(np.all(np.linalg.norm(points - (a + t[:, None] * ab), axis=1) <= budget))
 
 
 # -- entry points ---------------------------------------------------------------------

@@ -16,7 +16,9 @@ NAN = math.nan
 # Motion modes (group 1)
 RAPID, LINE, ARC_CW, ARC_CCW = 0, 10, 20, 30
 MOTION_CODES = {0: RAPID, 10: LINE, 20: ARC_CW, 30: ARC_CCW}
-CANNED_CYCLES = {730, 760, 810, 820, 830, 840, 850, 860, 870, 880, 890}
+CANNED_CYCLES = {730, 810, 820, 830, 840, 850, 860, 870, 880, 890}
+# a pause in an expanded cycle (G4 P..), as a step kind
+DWELL = -1
 
 # Planes: (first axis, second axis, normal axis) as right-handed triples, the
 # offset letters of the first and second axis. G2 is clockwise seen from +normal.
@@ -35,33 +37,59 @@ P_SYSTEMS = {1: "G54", 2: "G55", 3: "G56", 4: "G57", 5: "G58", 6: "G59",
 
 # Codes accepted without effect on geometry (pass through): path control, spindle
 # speed modes, retract modes, dwell, cutter-comp cancel, stored positions, rotation cancel.
-NEUTRAL_G = {400, 610, 611, 640, 960, 970, 980, 990, 281, 301, 690, 800, 150, 500}
+NEUTRAL_G = {400, 610, 611, 640, 960, 970, 690, 150, 500}
+# Fanuc/Haas look-ahead and smoothing modes (no geometry): G5.1 Q1/Q0 (AI contour
+# control), G5 P10000/P0 (high-speed machining), G187 (Haas smoothness), G103 (Haas
+# block look-ahead). Accepted only without axis or spline words (G5/G5.1 are splines
+# in LinuxCNC).
+LOOKAHEAD_G = {50, 51, 80, 1870, 1030}
+# Stored positions: G28/G30 move through an intermediate point to the position held
+# in parameters #5161-#5166 / #5181-#5186; G28.1/G30.1 store the current position.
+HOME_CODES = {280: "G28", 300: "G30"}
+HOME_STORE = {281: "G28", 301: "G30"}
 
 # Codes refused with the construct's name: they change geometry in ways this
 # postprocessor does not model.
+# G5 cubic and G5.1 quadratic splines (LinuxCNC): motion modes, linearised when corrected
+SPLINES = {50, 51}
+
 REFUSED_G = {
-    50: "G5 cubic spline", 51: "G5.1 quadratic spline", 52: "G5.2 NURBS",
+    52: "G5.2 NURBS block (not supported yet)", 53: "G5.3 end of NURBS block (not supported yet)",
     70: "G7 lathe diameter mode", 80: "G8 lathe radius mode",
-    280: "G28 return to home", 300: "G30 return to stored position",
     330: "G33 spindle-synchronised motion", 331: "G33.1 rigid tapping",
     382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing", 385: "G38.5 probing",
     410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
     411: "G41.1 dynamic cutter compensation", 421: "G42.1 dynamic cutter compensation",
     431: "G43.1 dynamic tool length offset", 432: "G43.2 additional tool length offset",
     160: "G16 polar coordinates", 511: "G51 scaling", 510: "G51 scaling",
-    520: "G52 local offset", 680: "G68 coordinate rotation", 923: "G92.3 restore offsets",
+    680: "G68 coordinate rotation", 923: "G92.3 restore offsets",
     171: "G17.1 plane", 181: "G18.1 plane", 191: "G19.1 plane", 600: "G60 directional positioning",
     760: "G76 threading cycle",
 }
 
+# Why some refused codes cannot be corrected (the hint shown with the refusal).
+REFUSED_HINT = {
+    410: "the offset path depends on the cutter radius held at the control, which the program does not "
+         "know; post the program with the tool-centre path (cutter compensation done in CAM)",
+    420: "the offset path depends on the cutter radius held at the control, which the program does not "
+         "know; post the program with the tool-centre path (cutter compensation done in CAM)",
+    382: "a probing move stops where the probe trips, so the positions after it are not known in advance",
+    383: "a probing move stops where the probe trips, so the positions after it are not known in advance",
+    384: "a probing move stops where the probe trips, so the positions after it are not known in advance",
+    385: "a probing move stops where the probe trips, so the positions after it are not known in advance",
+}
+
 # M codes refused: subprograms and modal-state restore change what follows.
-REFUSED_M = {98: "M98 subprogram call", 99: "M99 subprogram return",
+REFUSED_M = {98: "M98 subprogram call (expanded only with the subprogram in the same file)",
+             99: "M99 subprogram return",
              71: "M71 modal state restore", 72: "M72 modal state restore",
              73: "M73 modal state save/autorestore"}
 
 # M codes acting before the motion of their block: copied to the first line inserted
 # before a split move so the whole move runs with them (spindle, coolant, synced outputs).
 BEFORE_MOTION_M = {3, 4, 7, 8, 62, 63, 64, 65}
+# Digital/analog I/O and input waits: their E, L, P, Q words are parameters, not axes.
+IO_M = {62, 63, 64, 65, 66, 67, 68}
 
 
 @dataclass
@@ -89,6 +117,13 @@ class ModalState:
     pos: list[float] = field(default_factory=lambda: [NAN, NAN, NAN])
     rotary: dict[str, float] = field(default_factory=dict)
     dirs: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # canned cycles: retract to R (G99) or to the initial level (G98); modal R, Z, Q, P
+    retract_r: bool = False
+    cycle_r: float | None = None
+    cycle_z: float | None = None
+    cycle_q: float | None = None
+    cycle_p: float | None = None
+    before_cycle: int | None = None  # the motion mode before the cycle (restored by G80 outside LinuxCNC)
 
     @property
     def unit_mm(self) -> float:

@@ -267,7 +267,7 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
     import math
 
     from postproc.gcode.geometry import arc_chord_steps, arc_points
-    from postproc.gcode.interp import Interpreter
+    from postproc.gcode.interp import Interpreter, plain_moves
     from postproc.gcode.path import backfill_unknown, iter_source_lines
     from postproc.gcode.state import RAPID
 
@@ -275,17 +275,18 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
     interp = Interpreter(setup, path)
     pts, lns, rapid = [], [], []
     for lineno, line in enumerate(lines, start=1):
-        mv = interp.feed_line(lineno, line)
-        if mv is None:
+        block = interp.feed_line(lineno, line)
+        if block is None:
             continue
-        if mv.arc is not None and mv.kind != RAPID and not any(math.isnan(v) for v in mv.q0):
-            n = arc_chord_steps(mv.arc, mv.q0, mv.q1, chord_mm)
-            q = arc_points(mv.arc, mv.q0, mv.q1, np.arange(1, n + 1) / n)
-        else:
-            q = np.array([mv.q1], dtype=float)
-        pts.append(q + np.asarray(mv.r, dtype=float))
-        lns.append(np.full(len(q), lineno))
-        rapid.append(np.full(len(q), mv.kind == RAPID))
+        for mv in plain_moves(block):
+            if mv.arc is not None and mv.kind != RAPID and not any(math.isnan(v) for v in mv.q0):
+                n = arc_chord_steps(mv.arc, mv.q0, mv.q1, chord_mm)
+                q = arc_points(mv.arc, mv.q0, mv.q1, np.arange(1, n + 1) / n)
+            else:
+                q = np.array([mv.q1], dtype=float)
+            pts.append(q + np.asarray(mv.r, dtype=float))
+            lns.append(np.full(len(q), lineno))
+            rapid.append(np.full(len(q), mv.kind == RAPID))
     if not pts:
         return NominalPath(np.zeros((0, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
     lineno_arr = np.concatenate(lns)
@@ -308,7 +309,7 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     import math
 
     from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
-    from postproc.gcode.interp import Interpreter
+    from postproc.gcode.interp import Interpreter, plain_moves
     from postproc.gcode.path import ProgramPath, backfill_unknown, iter_source_lines, motion_signs
     from postproc.gcode.state import RAPID
 
@@ -319,26 +320,27 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     # once at the end (one move of a long program is a few microseconds of Python).
     q1s, q0s, counts, rs, lns, rapid, rot, arcs = [], [], [], [], [], [], [], {}
     for lineno, line in enumerate(lines, start=1):
-        mv = interp.feed_line(lineno, line)
-        if mv is None:
+        block = interp.feed_line(lineno, line)
+        if block is None:
             continue
-        q0, q1 = mv.q0, mv.q1
-        if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-            n = 1
-            q0 = q1
-        elif mv.arc is not None:
-            n = max(math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm),
-                    arc_chord_steps(mv.arc, q0, q1, chord_mm))
-            arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
-        else:
-            n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
-        q0s.append(q0)
-        q1s.append(q1)
-        counts.append(n)
-        rs.append(mv.r)
-        lns.append(lineno)
-        rapid.append(mv.kind == RAPID)
-        rot.append(mv.rotary)
+        for mv in plain_moves(block):
+            q0, q1 = mv.q0, mv.q1
+            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
+                n = 1
+                q0 = q1
+            elif mv.arc is not None:
+                n = max(math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm),
+                        arc_chord_steps(mv.arc, q0, q1, chord_mm))
+                arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+            else:
+                n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
+            q0s.append(q0)
+            q1s.append(q1)
+            counts.append(n)
+            rs.append(mv.r)
+            lns.append(lineno)
+            rapid.append(mv.kind == RAPID)
+            rot.append(mv.rotary)
     if not counts:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),

@@ -1,0 +1,155 @@
+"""Canned cycles: the moves the controller makes (LinuxCNC's rs274 as the oracle), kept
+cycles corrected at the hole (X/Y at the bottom, R and Z along the tool axis), and
+--cycles expand writing them as G0/G1 moves."""
+
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from postproc.engine.identity import IdentityEngine
+from postproc.engine.static import StaticEngine
+from postproc.errors import SafetyError
+from postproc.gcode.interp import Interpreter, plain_moves
+from postproc.gcode.path import Setup
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+
+BIG = [[-1e5] * 3, [1e5] * 3]
+ZERO = Setup(offsets={"G54": (0.0, 0.0, 0.0)})
+RS274 = shutil.which("rs274")
+needs_rs274 = pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 is not installed")
+_MOTION = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED)\(([^)]*)\)")
+
+PROGRAMS = {
+    "g81_g98": "G21 G90 G17\nG0 X0 Y0 Z10\nG98 G81 X5 Y6 Z-3 R2 F100\nX7\nY9\nG80\nM2\n",
+    "g83_peck": "G21 G90 G17\nG0 X0 Y0 Z10\nG98 G83 X5 Y6 Z-3 R2 Q1.2 F100\nX7\nG80\nM2\n",
+    "g73_g99": "G21 G90 G17\nG0 X0 Y0 Z10\nG99 G73 X5 Y6 Z-3 R2 Q1.2 F100\nX8 Y1\nG80\nM2\n",
+    "g82_dwell": "G21 G90 G17\nG0 X0 Y0 Z1\nG98 G82 X5 Y6 Z-3 R2 P0.5 F100\nG80\nM2\n",
+    "g85_g89": "G21 G90 G17\nG0 X0 Y0 Z10\nG99 G85 X5 Y6 Z-3 R2 F100\nG89 X9 Z-2 R2 P0.2\nG80\nM2\n",
+    "g91_repeats": "G21 G90 G17\nG0 X0 Y0 Z10\nG91 G99 G81 X1 Y0.5 Z-4 R-1 L3 F100\nG90 G80\nM2\n",
+    "inch": "G20 G90 G17\nG0 X0 Y0 Z1\nG98 G83 X0.5 Y0.25 Z-0.3 R0.1 Q0.12 F10\nG80\nM2\n",
+}
+
+
+def rs274_motions(text, tmp_path):
+    src = tmp_path / "p.ngc"
+    src.write_text(text)
+    (tmp_path / "tools.tbl").write_text("T1 P1 Z0 ;\n")
+    out = tmp_path / "out.txt"
+    proc = subprocess.run([RS274, "-t", str(tmp_path / "tools.tbl"), "-g", str(src), str(out)],
+                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    text_out = out.read_text() if out.exists() else ""
+    moves = []
+    for m in _MOTION.finditer(text_out):
+        p = tuple(float(v) for v in m.group(2).split(",")[:3])
+        if not moves or moves[-1][1] != p:  # rs274 also prints moves of zero length
+            moves.append((m.group(1), p))
+    return moves, proc.stdout + proc.stderr
+
+
+def our_motions(text, setup=ZERO):
+    it = Interpreter(setup, "p.ngc", dialect="linuxcnc")
+    unit = 1.0
+    out = []
+    for n, line in enumerate(text.splitlines(keepends=True), start=1):
+        unit = 25.4 if "G20" in line else unit
+        mv = it.feed_line(n, line)
+        if mv is None:
+            continue
+        for m in plain_moves(mv):
+            kind = "STRAIGHT_TRAVERSE" if m.kind == 0 else "STRAIGHT_FEED"
+            out.append((kind, tuple(v / unit for v in m.q1)))
+    return out
+
+
+def same_motions(a, b, tol=1e-4):
+    assert [k for k, _ in a] == [k for k, _ in b]
+    for (_, p), (_, q) in zip(a, b, strict=True):
+        assert np.allclose(p, q, atol=tol), (p, q)
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", sorted(PROGRAMS))
+def test_cycle_moves_are_the_controllers(name, tmp_path):
+    ref, log = rs274_motions(PROGRAMS[name], tmp_path)
+    assert ref, log
+    same_motions(our_motions(PROGRAMS[name]), ref)
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", sorted(PROGRAMS))
+def test_expanded_cycles_make_the_same_moves(name, tmp_path):
+    out, rep = correct_text(PROGRAMS[name], IdentityEngine(BIG), ZERO, CorrectOptions(cycles="expand"))
+    assert rep.cycles_expanded >= 1
+    assert "G8" not in out.replace("G80", "")  # no cycle left
+    assert "G73" not in out
+    ref, _ = rs274_motions(PROGRAMS[name], tmp_path)
+    got, log = rs274_motions(out, tmp_path)
+    same_motions(got, ref)
+
+
+def scale_engine(k):
+    return StaticEngine(k * np.eye(3), np.zeros(3), BIG)
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", ["g81_g98", "g83_peck", "g73_g99", "g82_dwell", "g85_g89", "inch"])
+def test_kept_cycles_under_a_scale_land_every_hole_on_its_nominal(name, tmp_path):
+    # a machine that moves k times what it is told: every commanded point of the
+    # corrected program must be the original's divided by k (within the rounding)
+    k = 1.0002
+    out, rep = correct_text(PROGRAMS[name], scale_engine(k), ZERO, CorrectOptions())
+    assert rep.cycles_kept >= 1
+    ref, _ = rs274_motions(PROGRAMS[name], tmp_path)
+    got, log = rs274_motions(out, tmp_path)
+    assert got, log
+    # peck levels derive from R and Q (Q is a length, not moved), so compare the holes:
+    # every feed end at the bottom, and every point in X/Y
+    tol = 0.6e-4  # rs274 prints 4 decimals
+    ref_xy = [p[:2] for _, p in ref]
+    got_xy = [p[:2] for _, p in got]
+    assert len(ref_xy) == len(got_xy)
+    for p, q in zip(ref_xy, got_xy, strict=True):
+        assert np.allclose(np.array(p) / k, q, atol=tol)
+    bottoms_ref = [p[2] for kind, p in ref if kind == "STRAIGHT_FEED"]
+    bottoms_got = [p[2] for kind, p in got if kind == "STRAIGHT_FEED"]
+    assert min(bottoms_got) == pytest.approx(min(bottoms_ref) / k, abs=tol)
+
+
+def test_kept_cycle_rewrites_only_its_words_and_adds_z_r_only_when_they_change():
+    k = 1.0002
+    out, _ = correct_text(PROGRAMS["g81_g98"], scale_engine(k), ZERO, CorrectOptions())
+    lines = out.splitlines()[1:]
+    assert lines[2] == "G98 G81 X4.9990 Y5.9988 Z-2.9994 R1.9996 F100"
+    assert lines[3] == "X6.9986"  # same Z and R: nothing added
+    assert lines[4] == "Y8.9982"
+
+
+def test_a_hole_whose_axis_the_correction_tilts_is_refused_naming_expand():
+    # squareness: X grows with Z, so the hole's X at R and at the bottom differ by 1 mrad x 5 mm
+    G = np.eye(3)
+    G[0, 2] = 1e-3
+    eng = StaticEngine(G, np.zeros(3), BIG)
+    with pytest.raises(SafetyError) as err:
+        correct_text(PROGRAMS["g81_g98"], eng, ZERO, CorrectOptions(), path="p.ngc")
+    assert err.value.lineno == 3
+    assert "--cycles expand" in err.value.hint
+    out, rep = correct_text(PROGRAMS["g81_g98"], eng, ZERO, CorrectOptions(cycles="expand"))
+    assert rep.cycles_expanded == 3
+
+
+def test_a_new_cycle_code_needs_its_r_again_as_in_linuxcnc():
+    # rs274: "R clearance plane unspecified in cycle"
+    with pytest.raises(Exception, match="without its R plane"):
+        our_motions("G21 G90 G17\nG0 X0 Y0 Z10\nG99 G85 X5 Y6 Z-3 R2 F100\nG89 X9 P0.2\nM2\n")
+
+
+def test_repeats_and_increments_stay_only_when_nothing_is_corrected():
+    text = PROGRAMS["g91_repeats"]
+    out, rep = correct_text(text, IdentityEngine(BIG), ZERO, CorrectOptions())
+    assert out.splitlines()[1:] == text.splitlines()
+    with pytest.raises(SafetyError, match="G81") as err:
+        correct_text(text, scale_engine(1.001), ZERO, CorrectOptions(), path="p.ngc")
+    assert "--cycles expand" in err.value.hint
