@@ -65,8 +65,8 @@ def test_utf8_bom_is_not_a_word_and_stays_in_place():
     # a scale of the coordinates: words rewritten at the right places
     eng = scale_engine()
     out, _ = correct_text(text, eng, ZERO, CorrectOptions(), path="p.nc")
-    assert out.startswith("\ufeff(postproc ")  # the mark stays the file's first bytes
-    body = out.splitlines(keepends=True)[1:]
+    assert out.startswith("\ufeff(POSTPROC ")  # the mark stays the file's first bytes
+    body = emit.split_header(out)[1].splitlines(keepends=True)
     assert body[0].startswith("G21 G90 G0 X")
 
 

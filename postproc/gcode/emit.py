@@ -251,16 +251,16 @@ def header_lines(dialect, cal_name: str, cal_sha: str, tolerance_mm: float, setu
 def is_header(line: str) -> bool:
     """Is ``line`` a postproc header line? The old one-line header, or any line of the new
     one (``(POSTPROC ...)``, in any case)."""
-    s = line.lstrip()
+    s = line.lstrip("\ufeff \t")
     if s.startswith(HEADER_TAG) and HEADER_MARK in s:
         return True
-    return s[:10].upper() == HEADER_PREFIX and bool(_HEADER_ANY.match(line))
+    return s[:10].upper() == HEADER_PREFIX and bool(_HEADER_ANY.match(s))
 
 
 def is_header_start(line: str) -> bool:
     """The line that opens a header: the old one-line header or ``(POSTPROC <version> CORRECTED)``."""
-    s = line.lstrip()
-    return (s.startswith(HEADER_TAG) and HEADER_MARK in s) or bool(_HEADER_OPEN.match(line))
+    s = line.lstrip("\ufeff \t")
+    return (s.startswith(HEADER_TAG) and HEADER_MARK in s) or bool(_HEADER_OPEN.match(s))
 
 
 def split_header(text: str) -> tuple[list[str], str]:
