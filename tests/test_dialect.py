@@ -200,6 +200,11 @@ def test_header_carries_the_setup_exactly():
     assert hs.tool_lengths == {1: 100.0, 12: 87.65432101}
     assert hs.start == {"Z": 150.25}
     assert hs.tool_vector == (0.5, 0.0, -100.0)
+    # G28/G30 stored positions (--home), exactly
+    setup = Setup(home={"G28": {"X": 0.0, "Y": 0.0, "Z": 312.123456789}, "G30": (10.0, 20.0, 30.0)})
+    rows = emit.header_lines("fanuc", "cal", SHA, 0.002, "G28=X0,Y0,Z312.123; G30=X10,Y20,Z30", "\n", setup=setup)
+    hs = header_setup("".join(rows))
+    assert hs.home == {"G28": {"X": 0.0, "Y": 0.0, "Z": 312.123456789}, "G30": {"X": 10.0, "Y": 20.0, "Z": 30.0}}
     # from the note alone (no Setup): what the note says
     rows = emit.header_lines("fanuc", "cal", SHA, 0.002, LONG_NOTE, "\n")
     hs = header_setup("%\nO1234 (PART)\n" + "".join(rows) + "G0 X1\n")

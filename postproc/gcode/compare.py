@@ -146,6 +146,7 @@ class HeaderSetup:
     tool_lengths: dict = field(default_factory=dict)  # H -> mm
     start: dict = field(default_factory=dict)  # axis -> machine mm
     tool_vector: tuple | None = None
+    home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
 
 
 def _header_rows(source, limit: int = 200) -> list[str]:
@@ -184,6 +185,8 @@ def header_setup(source) -> HeaderSetup:
                         hs.tool_lengths[int(float(h))] = float(v)
                 elif part.startswith("tool vector "):
                     hs.tool_vector = tuple(float(v) for v in part[12:].split(","))
+                elif re.match(r"G(28|30)=", part):
+                    hs.home[part[:3]] = _axis_values(part[4:])
             m = _OLD_START.search(row)
             if m:
                 hs.start.update({item[0]: float(item[1:]) for item in m.group(1).split(",") if item})
@@ -198,6 +201,8 @@ def header_setup(source) -> HeaderSetup:
                 hs.tool_lengths[int(h)] = float(v)
         elif words.startswith("START "):
             hs.start.update(_axis_values(words[6:]))
+        elif re.match(r"G(28|30) ", words):
+            hs.home[words[:3]] = _axis_values(words[4:])
         elif words.startswith("TOOL VECTOR "):
             v = _axis_values(words[12:])
             hs.tool_vector = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
@@ -210,7 +215,8 @@ def header_start(source) -> dict[str, float]:
 
 
 def setup_from_header(corrected, setup: Setup | None) -> Setup:
-    """``setup`` with what it leaves out (offsets, tool lengths, start, tool vector) taken
+    """``setup`` with what it leaves out (offsets, tool lengths, start, tool vector, G28/G30
+    stored positions) taken
     from the corrected program's header: the setup the program was corrected with."""
     hs = header_setup(corrected)
     setup = setup or Setup()
@@ -223,6 +229,8 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
         changes["start"] = dict(hs.start)
     if setup.tool_vector is None and hs.tool_vector is not None:
         changes["tool_vector"] = hs.tool_vector
+    if hs.home and hasattr(setup, "home") and not setup.home:
+        changes["home"] = {k: dict(v) for k, v in hs.home.items()}
     return dataclasses.replace(setup, **changes) if changes else setup
 
 

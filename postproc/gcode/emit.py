@@ -152,6 +152,8 @@ def _setup_parts(setup_note: str, setup) -> list[str]:
             if not exact:
                 parts.append("START " + " ".join(item for item in raw[6:].split(",") if item))
             continue
+        if re.match(r"G(28|30)=", raw) and exact and getattr(setup, "home", None):
+            continue  # written from the setup below, exactly
         if raw.startswith("tool vector "):
             if not exact:
                 vals = raw[12:].split(",")
@@ -172,6 +174,9 @@ def _setup_parts(setup_note: str, setup) -> list[str]:
 
             pos = start_position(setup.start)
             parts.append("START " + " ".join(f"{a}{_num(v)}" for a, v in zip("XYZ", pos, strict=True) if v == v))
+        for name, v in sorted((getattr(setup, "home", None) or {}).items()):
+            v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
+            parts.append(f"{_safe(name)} " + " ".join(f"{a}{_num(x)}" for a, x in sorted(v.items())))
         if setup.tool_vector is not None:
             parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", setup.tool_vector, strict=True)))
     return parts
