@@ -13,6 +13,7 @@ postproc goes through :func:`output_path`:
 from __future__ import annotations
 
 import os
+import shutil
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -37,12 +38,14 @@ def output_mode(path: Path) -> int:
 
 
 @contextmanager
-def output_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[str]:
+def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bool = False) -> Iterator[str]:
     """Yield the path to write ``path``'s new content to; it becomes ``path``'s content if the block succeeds.
 
     A regular file (or a new name): a temporary file beside it, renamed over it at the end
     (removed on error). Through a symbolic link: the same, beside the file it points to,
-    so the link stays a link. A device, pipe or socket: ``path`` itself, written directly.
+    so the link stays a link. A device, pipe or socket: ``path`` itself, written directly;
+    with ``stage_special``, a temporary file whose content is copied into it at the end
+    (for writers that may start over: nothing reaches the device before the block ends).
     """
     target = Path(path)
     real = Path(os.path.realpath(target))
@@ -56,7 +59,20 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[str]:
         raise OutputError("cannot write the output: it is a directory", path=str(target),
                           hint="give a file name")
     if st is not None and not stat.S_ISREG(st.st_mode):
-        yield str(target)  # a device, pipe or socket: never replaced by a file
+        if not stage_special:
+            yield str(target)  # a device, pipe or socket: never replaced by a file
+            return
+        fd, tmp = tempfile.mkstemp(prefix="postproc-", suffix=suffix)
+        os.close(fd)
+        try:
+            yield tmp
+            try:
+                with open(tmp, "rb") as src, open(target, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
+            except OSError as exc:
+                raise _cannot_write(target, exc) from None
+        finally:
+            Path(tmp).unlink(missing_ok=True)
         return
     try:
         fd, tmp = tempfile.mkstemp(dir=real.parent, prefix=f".{real.name}.", suffix=suffix)

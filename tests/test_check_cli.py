@@ -85,7 +85,8 @@ def test_plots_and_declared_sigma(walk):
     assert data["noise_floor_mm"] == pytest.approx(0.002 * np.sqrt(3))
     names = {p.name for p in (walk / "plots").iterdir()}
     assert {"residual_vectors.png", "before_after.png", "periodogram_X.png", "residual_vs_t.png",
-            "residual_vs_temp.png"} <= names
+            "residual_vs_temp.png", "residual_map_XY.png", "residual_map_YZ.png",
+            "after_suggestions_vs_X.png"} <= names
     assert all((walk / "plots" / n).stat().st_size > 1000 for n in names)
 
 
@@ -143,13 +144,22 @@ def test_fixed_ranks_effects_on_the_calibration_as_it_is(tmp_path, monkeypatch):
     save_calibration("cold.json", static_machine())
     meas, (truth,) = make_data([(SPECS["thermal:t"], 3.0)], seed=31)
     Path("warm.csv").write_text(format_measurements(meas))
-    res = run(["check", "warm.csv", "-c", "cold.json", "--fixed", "--json", "--folds", "4"], tmp_path)
+    res = run(["check", "warm.csv", "-c", "cold.json", "--fixed", "--no-register", "--json", "--folds", "4"],
+              tmp_path)
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     assert "held fixed" in data["cv_note"]
+    assert data["registration"] is None
     assert data["cv_rms_mm"] == pytest.approx(data["rms_mm"])  # nothing refitted
     assert data["suggestions"][0]["effect"] == "thermal:t"
     assert data["suggestions"][0]["config"]["tau_s"] == pytest.approx(truth.config["tau_s"], rel=0.3)
+    assert data["cv_rms_after_mm"] < 1.15 * data["noise_floor_mm"]
+    # registered (the default with --fixed): the drift's settled part is a frame offset, its
+    # transient is still the warm-up
+    res = run(["check", "warm.csv", "-c", "cold.json", "--fixed", "--json", "--folds", "4"], tmp_path)
+    data = json.loads(res.stdout)
+    assert data["registration"] is not None
+    assert data["suggestions"][0]["effect"] == "thermal:t"
     assert data["cv_rms_after_mm"] < 1.15 * data["noise_floor_mm"]
 
 

@@ -67,8 +67,15 @@ def test_fit_tool_vector_fills_files_without_tool_columns(tmp_path):
     result = CliRunner().invoke(main, ["fit", str(src), "--tool-vector", "0,0,-100", "-o", str(out)])
     assert result.exit_code == 0, result.output
     np.testing.assert_allclose(json.loads(out.read_text())["model"]["r_O1_mm"], origin, atol=1e-6)
-    # Without --tool-vector the 100 mm tool ends up in the origin.
+    # Without --tool-vector the 100 mm tool ends up in the origin: a 100 mm correction,
+    # refused unless --max-correction allows it.
+    out.unlink()
     result = CliRunner().invoke(main, ["fit", str(src), "-o", str(out)])
+    assert result.exit_code != 0
+    assert "--max-correction" in result.output
+    assert not out.exists()
+    result = CliRunner().invoke(main, ["fit", str(src), "-o", str(out), "--max-correction", "200"])
+    assert result.exit_code == 0, result.output
     np.testing.assert_allclose(json.loads(out.read_text())["model"]["r_O1_mm"][2], origin[2] - 100, atol=1e-6)
 
 

@@ -124,3 +124,23 @@ def test_readme_verify_table_is_what_verify_prints(monkeypatch):
         assert run["label"].startswith(label)
         assert f"{run['max_mm'] * 1000:.2f}" == max_um, label
         assert f"{run['rms_mm'] * 1000:.2f}" == rms_um, label
+
+
+def test_the_command_list_needs_no_command_module_and_says_what_each_docstring_says():
+    import re
+    import subprocess
+    import sys
+
+    from postproc.cli import COMMANDS, SHORT_HELP, main
+
+    for name in COMMANDS:
+        cmd = main.get_command(None, name)
+        para = " ".join((cmd.help or "").strip().split("\n\n")[0].split())
+        m = re.match(r"(.*?\.)(\s|$)", para)
+        assert SHORT_HELP.get(name) == (m.group(1) if m else para), name
+    # `postproc --help` imports no command module (so neither numpy nor scipy)
+    code = ("import sys\nfrom postproc.cli import main\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('numpy', 'scipy', 'postproc.cli.'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"

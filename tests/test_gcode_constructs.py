@@ -250,3 +250,43 @@ def test_identity_keeps_splines_and_a_scale_linearises_them_within_tolerance():
 def test_g5_without_ij_first_is_refused_as_linuxcnc_does():
     with pytest.raises(PostprocError, match="needs I and J"):
         run("G21 G90 G17\nG0 X0 Y0 Z1\nG5 X10 Y0 P-2 Q5 F100\nM30\n")
+
+
+def test_programs_needing_expansion_are_corrected_flat_with_source_line_numbers(tmp_path):
+    text = ("G21 G90\nG0 X0 Y0 Z5\n#1 = 10\no100 sub\n  G1 X[#1 + #2] F100\no100 endsub\n"
+            "o100 call [0] [1]\no100 call [0] [5]\nG1 Y7\nM2\n")
+    out, rep = correct_text(text, scale_engine(1.0001), ZERO, CorrectOptions(), path="p.ngc")
+    assert rep.expanded
+    body = out.splitlines()[1:]
+    assert "expanded" in out.splitlines()[0]
+    assert body[:2] == ["G21 G90", "G0 X0 Y0 Z4.9995"]
+    # the call's arguments are #1 and #2 inside the subroutine (LinuxCNC): X = 0 + 1, 0 + 5
+    xs = [float(ln.split()[1][1:]) for ln in body if ln.strip().startswith("G1 X")]
+    assert xs == pytest.approx([1 / 1.0001, 5 / 1.0001], abs=6e-5)
+    assert body[-2].startswith("G1 Y6.9993")  # an untouched-by-expansion line keeps its own bytes but Y moves
+    # errors inside a subroutine name the subroutine's own line
+    bad = "G21 G90\nG0 X0 Y0 Z5\no100 sub\n  G1 X[#1 + #<_x>] F100\no100 endsub\no100 call [1]\nM2\n"
+    with pytest.raises(PostprocError) as err:
+        correct_text(bad, scale_engine(1.0001), ZERO, CorrectOptions(), path="p.ngc")
+    assert err.value.lineno == 4
+    # --no-expand refuses, naming the construct
+    with pytest.raises(UnsupportedGcodeError, match="parameter assignment"):
+        correct_text(text, scale_engine(1.0001), ZERO, CorrectOptions(expand=False), path="p.ngc")
+
+
+def test_fanuc_sample_expands_its_subprogram_and_corrects_cycles_and_g28():
+    from pathlib import Path
+    text = (Path(__file__).parents[1] / "samples" / "fanuc_drill.nc").read_text()
+    setup = Setup(offsets={"G54": (100.0, 100.0, 100.0)}, tool_lengths={1: 100.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 300.0}})
+    out, rep = correct_text(text, scale_engine(1.0001), setup, CorrectOptions(dialect="fanuc", cycles="expand"),
+                            path="fanuc_drill.nc")
+    lines = out.splitlines()
+    assert lines[0] == "%"
+    assert lines[1] == "O1001 (FANUC DRILL SAMPLE)"
+    assert lines[2].startswith("(postproc ")
+    assert rep.expanded
+    assert rep.cycles_expanded == 5  # three G81 holes, two G83 holes from the M98 subprogram
+    assert "M98" not in out
+    assert "M99" not in out
+    assert "G91 G28 Z0." in lines

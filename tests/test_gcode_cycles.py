@@ -2,12 +2,9 @@
 cycles corrected at the hole (X/Y at the bottom, R and Z along the tool axis), and
 --cycles expand writing them as G0/G1 moves."""
 
-import re
-import shutil
-import subprocess
-
 import numpy as np
 import pytest
+from oracle import requires_rs274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
 
 from postproc.engine.identity import IdentityEngine
 from postproc.engine.static import StaticEngine
@@ -19,9 +16,7 @@ from postproc.gcode.pipeline import CorrectOptions, correct_text
 
 BIG = [[-1e5] * 3, [1e5] * 3]
 ZERO = Setup(offsets={"G54": (0.0, 0.0, 0.0)})
-RS274 = shutil.which("rs274")
-needs_rs274 = pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 is not installed")
-_MOTION = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED)\(([^)]*)\)")
+needs_rs274 = requires_rs274
 
 PROGRAMS = {
     "g81_g98": "G21 G90 G17\nG0 X0 Y0 Z10\nG98 G81 X5 Y6 Z-3 R2 F100\nX7\nY9\nG80\nM2\n",
@@ -35,19 +30,14 @@ PROGRAMS = {
 
 
 def rs274_motions(text, tmp_path):
-    src = tmp_path / "p.ngc"
-    src.write_text(text)
-    (tmp_path / "tools.tbl").write_text("T1 P1 Z0 ;\n")
-    out = tmp_path / "out.txt"
-    proc = subprocess.run([RS274, "-t", str(tmp_path / "tools.tbl"), "-g", str(src), str(out)],
-                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
-    text_out = out.read_text() if out.exists() else ""
+    res = run_rs274(text)
     moves = []
-    for m in _MOTION.finditer(text_out):
-        p = tuple(float(v) for v in m.group(2).split(",")[:3])
+    for m in res.motions:
+        kind = m.kind
+        p = tuple(m.end[:3])
         if not moves or moves[-1][1] != p:  # rs274 also prints moves of zero length
-            moves.append((m.group(1), p))
-    return moves, proc.stdout + proc.stderr
+            moves.append((kind, p))
+    return moves, res.error
 
 
 def our_motions(text, setup=ZERO):

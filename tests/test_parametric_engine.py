@@ -260,3 +260,21 @@ def test_astatic_iteration_count_follows_the_control_law():
     expect = [math.ceil(math.log(u / d) / math.log(1.0 - K * dt)) + 1 for d in p.max(axis=1)]
     assert res.iterations.tolist() == expect
     assert_allclose(res.q, p, atol=1e-9)
+
+
+@pytest.mark.parametrize("n", [2, 3, 5, 40])
+def test_numpy_pchip_is_scipys_interpolant(n):
+    from scipy.interpolate import PchipInterpolator
+
+    from postproc.engine.pchip import Pchip
+
+    rng = np.random.default_rng(n)
+    x = np.unique(rng.uniform(0.0, 300.0, n))
+    y = rng.normal(size=(len(x), 6))
+    y[:, 0] = np.cumsum(np.abs(y[:, 0]))  # monotone
+    y[: min(3, len(x)), 2] = 0.0  # a flat stretch
+    ref = PchipInterpolator(x, y, axis=0, extrapolate=True)
+    t = np.linspace(x[0] - 20.0, x[-1] + 20.0, 1001)
+    ours = Pchip(x, y)
+    np.testing.assert_allclose(ours(t), ref(t), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(ours.derivative(t), ref.derivative()(t), rtol=1e-12, atol=1e-12)

@@ -37,12 +37,24 @@ class Measurements:
         return len(self.q)
 
     def context_full(self) -> dict[str, np.ndarray]:
-        """Context including the approach directions as ``dirx``, ``diry``, ``dirz``."""
+        """Context including the approach directions as ``dirx``, ``diry``, ``dirz``.
+
+        A ``0`` (the axis did not move on the way to this point) is replaced by the
+        axis's last approach direction in file order, as formats.md defines it
+        (:func:`carried_directions`); rows before an axis's first move stay 0 (unknown).
+        """
         ctx = dict(self.context)
         if self.direction is not None:
+            carried = carried_directions(self.direction)
             for j, name in enumerate(("dirx", "diry", "dirz")):
-                ctx[name] = self.direction[:, j]
+                ctx[name] = carried[:, j]
         return ctx
+
+    def unknown_direction_rows(self) -> np.ndarray:
+        """(N,) True where some axis has no approach state yet (0 before its first move)."""
+        if self.direction is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.any(carried_directions(self.direction) == 0, axis=1)
 
     @staticmethod
     def concat(items: list[Measurements]) -> Measurements:
@@ -63,6 +75,21 @@ class Measurements:
             meta={},
             linenos=None,
         )
+
+
+def carried_directions(direction: np.ndarray) -> np.ndarray:
+    """Approach directions (N, 3) with each ``0`` replaced by the last non-zero value
+    above it in the same column: the axis did not move, so its backlash state is that of
+    its last move (formats.md section 1). Leading zeros stay 0: the state is unknown."""
+    d = np.asarray(direction, dtype=float)
+    if d.size == 0:
+        return d.copy()
+    n = len(d)
+    rows = np.arange(n)[:, None]
+    last = np.where(d != 0, rows, -1)
+    last = np.maximum.accumulate(last, axis=0)
+    out = np.where(last >= 0, d[np.maximum(last, 0), np.arange(d.shape[1])], 0.0)
+    return out
 
 
 def measurements_from_table(table: CsvTable) -> Measurements:

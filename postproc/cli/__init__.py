@@ -29,7 +29,40 @@ COMMANDS = {
 }
 
 
+#: command name -> its one-line help, shown by ``postproc --help`` without importing the
+#: command (numpy, scipy); tests/test_docs.py checks it against each command's docstring
+SHORT_HELP = {
+    "check": "Check a calibration against measurements: residuals, noise floor, where it fails and which "
+             "physical effect is missing.",
+    "correct": "Correct NC programs for the machine's measured errors.",
+    "diff": "Compare a program with its corrected version.",
+    "fit": "Fit a calibration from point measurements or axis error tables.",
+    "mirror": "Mirror milling of waffle shells: K_dist, feedback self-tuning, dead-band model.",
+    "orders": "Compare the first- and second-order volumetric error at chosen points.",
+    "predict": "Predict machined surfaces and feature errors from a machine chain.",
+    "simulate": "Measure a virtual machine: tracker points or interferometer tables.",
+    "verify": "Run a program, or control points, on a virtual machine and report the errors.",
+}
+
+
 class LazyGroup(click.Group):
+    def format_commands(self, ctx, formatter):
+        """The command list from :data:`SHORT_HELP` (no command module is imported)."""
+        rows = []
+        names = self.list_commands(ctx)
+        width = formatter.width - 6 - max((len(n) for n in names), default=0)
+        for name in names:
+            text = SHORT_HELP.get(name)
+            if text is None:
+                cmd = self.get_command(ctx, name)
+                text = cmd.get_short_help_str(width) if cmd is not None else ""
+            elif len(text) > width:
+                text = text[: max(width - 3, 1)].rstrip() + "..."
+            rows.append((name, text))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
     def list_commands(self, ctx):
         return sorted(name for name in COMMANDS if self._spec_exists(name))
 

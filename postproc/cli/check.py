@@ -25,7 +25,10 @@ from postproc.cli.options import FINITE_FLOAT
                    "residual. For checking a calibration made from other data (e.g. axis error tables).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
-def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, tool_vector):
+@click.option("--register/--no-register", "register", default=None,
+              help="Fit a 6-DOF registration of the measurement frame (translation and rotation) as a "
+                   "nuisance, reported with its size, never as an effect. Default: on with --fixed.")
+def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, tool_vector, register):
     """Check a calibration against measurements: residuals, noise floor, where it
     fails and which physical effect is missing.
 
@@ -69,7 +72,7 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, 
     r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
     data = read_measurement_files(files, r)
     res = run_check(cal, data, list(files), sigma_mm=sigma, folds=folds, max_selected=max_effects,
-                    fixed=fixed)
+                    fixed=fixed, register=register)
     if plot_dir:
         from postproc.diagnose.plots import write_plots
 

@@ -115,6 +115,9 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
         f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
         f"{rep.arcs_linearised}, largest correction {rep.max_correction_mm * 1000:.1f} um"
     ]
+    if rep.expanded:
+        lines.append("  note: subprograms, loops, parameters and expressions were expanded: the corrected "
+                     "program is flat (recorded in the header)")
     if rep.cycles_kept or rep.cycles_expanded:
         lines.append(f"  canned cycles: {rep.cycles_kept} kept, {rep.cycles_expanded} expanded")
     if rep.g54_assumed_zero:
@@ -215,6 +218,11 @@ def _progress_printer(total_hint: str):
 @click.option("--cycles", type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
               help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
                    "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")
+@click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
+              help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "
+                   "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")
+@click.option("--no-expand", "no_expand", is_flag=True,
+              help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")
 @click.option("--context", multiple=True, metavar="NAME=VALUE",
               help="Constant context value for the engine, e.g. temp=21.5. Repeatable.")
 @click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
@@ -230,7 +238,8 @@ def _progress_printer(total_hint: str):
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
 def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, tool_table, tool_vector,
-            start, home, cycles, context, tolerance, decimals, max_correction, extrapolate, force, maps, dialect):
+            start, home, cycles, subroutine_path, no_expand, context, tolerance, decimals, max_correction, extrapolate,
+            force, maps, dialect):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -283,7 +292,8 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     if "-" in inputs and len(inputs) > 1:
         raise click.UsageError("'-' (stdin) can only be the only input")
     options = {"tolerance_mm": tolerance, "decimals": decimals, "max_correction_mm": max_correction,
-               "extrapolate": extrapolate, "force": force, "cycles": cycles, "dialect": dialect.lower()}
+               "extrapolate": extrapolate, "force": force, "cycles": cycles,
+               "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         _single(inputs[0], output or "-", calibration, setup, options, maps)
         return

@@ -45,8 +45,17 @@ METHOD_OPTIONS = {"--border-blend": "interval", "--grid-model": "grid", "--fill-
 @click.option("--effect", "effects", multiple=True, metavar="NAME",
               help="Add a physical effect to the model, named as 'postproc check' prints it "
                    "(e.g. backlash:X, periodic:Y, thermal:t, load:load). Repeatable.")
+@click.option("--base", "base_path", type=click.Path(exists=True, dir_okay=False), default=None, metavar="CAL",
+              help="Keep this calibration (tables, grid, static ...) as it is and add the --effect terms, "
+                   "fitted to its residual on the point FILES (what 'postproc check --fixed' suggests).")
+@click.option("--register/--no-register", "register", default=None,
+              help="Fit a 6-DOF registration of the measurement frame as a nuisance (reported, not "
+                   "stored). Default: on with --base, off otherwise.")
+@click.option("--max-correction", "max_correction", type=FiniteFloat(min=0), default=1.0, show_default=True,
+              metavar="MM", help="Refuse to write a calibration whose correction anywhere in its volume "
+                                 "exceeds this (an undetermined fit).")
 def fit(files, method, output, name, squareness, intervals, border_blend, step, screw_pitch, grid_model,
-        fill_missing, knot_spacing, order, solver, tool_vector, effects):
+        fill_missing, knot_spacing, order, solver, tool_vector, effects, base_path, register, max_correction):
     """Fit a calibration from point measurements or axis error tables.
 
     FILES are formats.md CSV files: point measurements (several files are fitted
@@ -60,6 +69,7 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
         postproc fit samples/tracker_6points.csv --method static -o my_static.json
         postproc fit grid15.csv -m interval --intervals 'X=3;Y=3;Z=2' --border-blend 0 -o interval.json
         postproc fit grid15.csv -m grid --grid-model cell --fill-missing -o grid.json
+        postproc fit --base tables_cal.json tracker.csv --effect backlash:Y -o tables_backlash.json
     """
     from postproc.calibration.calfile import save_calibration
     from postproc.calibration.measurements import read_measurement_files
@@ -68,6 +78,9 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     from postproc.errors import CalibrationError, MeasurementError
 
     kinds = [sniff(f) for f in files]
+    if base_path is not None:
+        _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction)
+        return
     options = {
         "intervals": intervals,
         "border_blend_mm": border_blend,
@@ -108,10 +121,10 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
         r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
         data = read_measurement_files(files, r)
         try:
-            if effects:
+            if effects or register:
                 from postproc.diagnose.refit import fit_with_effects
 
-                result = fit_with_effects(method, data, list(effects), **options)
+                result = fit_with_effects(method, data, list(effects), register=bool(register), **options)
             else:
                 result = fitter(method)(data, **options)
         except CalibrationError as exc:
@@ -127,6 +140,39 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
             f"over {len(result.residuals_mm)} points",
             err=True,
         )
+    if len(result.residuals_mm):
+        from postproc.diagnose.refit import refuse_large_correction
+
+        refuse_large_correction(result.engine, data, max_correction, output)
+    save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
+    click.echo(f"wrote {output}", err=True)
+
+
+def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction):
+    """``fit --base CAL POINTS... --effect NAME``: effects added to a calibration kept as it is."""
+    from postproc.calibration.calfile import load_calibration, save_calibration
+    from postproc.calibration.measurements import read_measurement_files
+    from postproc.diagnose.refit import extend_calibration, refuse_large_correction
+    from postproc.errors import MeasurementError
+
+    if method is not None:
+        raise click.UsageError("--base keeps the calibration's own method; drop --method")
+    if not effects:
+        raise click.UsageError("--base adds effects: name at least one --effect (as 'postproc check --fixed' "
+                               "suggests)")
+    bad = [f for f, k in zip(files, kinds, strict=True) if k != "measurements"]
+    if bad:
+        raise MeasurementError("--base fits effects from point measurements; this is not a point file",
+                               path=bad[0])
+    cal = load_calibration(base_path)
+    r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
+    data = read_measurement_files(files, r)
+    result = extend_calibration(cal, data, list(effects), register=True if register is None else register)
+    for line in result.report:
+        click.echo(line, err=True)
+    click.echo(f"fit residual: RMS {result.rms_mm * 1000:.2f} um, max {result.max_mm * 1000:.2f} um "
+               f"over {len(result.residuals_mm)} points", err=True)
+    refuse_large_correction(result.engine, data, max_correction, output)
     save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
     click.echo(f"wrote {output}", err=True)
 

@@ -14,15 +14,32 @@ from pathlib import Path
 
 import numpy as np
 
+from postproc.diagnose.campaign import campaign_warnings
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
+from postproc.diagnose.frame import FrameFit
 from postproc.diagnose.models import Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
-from postproc.diagnose.rank import MAX_SELECTED, SIGNIFICANCE_P, Candidate, Ranking, rank_effects
+from postproc.diagnose.rank import (
+    MAX_SELECTED,
+    SIGNIFICANCE_P,
+    Candidate,
+    Ranking,
+    empirical_offer,
+    rank_effects,
+)
+from postproc.diagnose.robust import Screening, screen
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
+
+#: A cross-validated RMS within this many times the noise floor is consistent with noise
+#: (the verdict "consistent"; after the suggestions, "missing-effect").
+CONSISTENT_RATIO = 1.15
+
+# Points beyond the calibrated volume by more than this (mm) are outside it.
+OUTSIDE_TOLERANCE_MM = 1e-3
 
 #: methods ``postproc fit`` can refit from points (its --method choices)
 FIT_METHODS = ("static", "interval", "grid", "parametric")
@@ -42,6 +59,17 @@ class CheckResult:
     cv_note: str = ""
     existing: list[str] = field(default_factory=list)
     fit_options: dict = field(default_factory=dict)
+    fixed: bool = False
+    register: bool = False
+    frame: FrameFit | None = None
+    volume_mm: np.ndarray | None = None
+    resid_registered: np.ndarray | None = None  # measured - model after the registration alone
+    screening: Screening | None = None  # duplicates and outliers excluded
+    outside: list[str] = field(default_factory=list)  # rows outside the calibrated volume
+    outside_excluded: bool = False
+    warnings: list[dict] = field(default_factory=list)  # campaign diagnostics
+    empirical: dict | None = None  # the last-resort empirical field, when the verdict is unexplained
+    from_other_data: bool = False  # the calibration was not fitted on these files
 
     @property
     def suggestions(self) -> list[dict]:
@@ -57,6 +85,7 @@ class CheckResult:
                 "rms_after_mm": c.rms_after_mm,
                 "p_value": c.p_value,
                 "parameters": dict(eff.params) if eff else {},
+                "parameters_u_k2": dict(getattr(eff, "uncertainty", {}) or {}) if eff else {},
                 "config": dict(eff.config) if eff else {},
                 "description": eff.describe() if eff else "",
                 "meaning": c.meaning,
@@ -65,12 +94,38 @@ class CheckResult:
             })
         return out
 
-    def fit_command(self, names: list[str]) -> str | None:
-        if self.method not in FIT_METHODS:
+    @property
+    def verdict(self) -> str | None:
+        """"consistent" (the cross-validated RMS is within CONSISTENT_RATIO x the noise floor
+        and nothing is suggested), "missing-effect" (the suggestions bring it there) or
+        "unexplained" (above the floor and the catalogue does not explain it); None without
+        a noise floor or a cross-validation."""
+        rk, floor = self.ranking, self.noise.rms_mm
+        if rk is None or not floor:
             return None
+        if not rk.selected:
+            return "consistent" if rk.base_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
+        return "missing-effect" if rk.final_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
+
+    @property
+    def extends(self) -> bool:
+        """Suggestions keep the calibration and add effects to it (``fit --base``): the
+        calibration is held as it is (--fixed) or its method cannot be refitted from points."""
+        return self.fixed or self.method not in FIT_METHODS
+
+    def fit_command(self, names: list[str]) -> str | None:
         stem = Path(self.cal_path).stem if self.cal_path else "calibration"
         added = [n for n in names if n not in self.existing]
         out = f"{stem}_{'_'.join(n.replace(':', '_') for n in added)}.json"
+        if self.extends:
+            if not self.cal_path:
+                return None
+            args = ["postproc", "fit", "--base", self.cal_path, *self.files]
+            if not self.register:
+                args.append("--no-register")
+            for n in added:
+                args += ["--effect", n]
+            return shlex.join([*args, "-o", out])
         args = ["postproc", "fit", *self.files, "--method", self.method]
         for key, value in self.fit_options.items():
             args += [f"--{key}", str(value)]
@@ -95,6 +150,13 @@ class CheckResult:
             "cv_rms_mm": rk.base_cv_rms_mm if rk else None,
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
             "cv_note": self.cv_note,
+            "verdict": self.verdict,
+            "conditioning": rk.final_guard.to_json() if rk and rk.final_guard is not None else None,
+            "calibration_from_other_data": self.from_other_data,
+            "cv_ratio_to_floor": (rk.final_cv_rms_mm / self.noise.rms_mm) if rk and self.noise.rms_mm else None,
+            "registration": (None if self.frame is None else
+                             {"absorbed_by_model": True} if self.frame.absorbed else
+                             self.frame.to_json(self.volume_mm)),
             "significance_p": SIGNIFICANCE_P,
             "suggestions": self.suggestions,
             "candidates": [
@@ -104,6 +166,10 @@ class CheckResult:
                 for c in ((rk.rounds[-1] if rk.rounds else []) + rk.untestable + rk.in_model)
             ] if rk else [],
             "where": self.where,
+            "screening": self.screening.to_json() if self.screening else None,
+            "outside_volume": {"rows": list(self.outside), "excluded": self.outside_excluded},
+            "warnings": list(self.warnings),
+            "empirical": self.empirical,
         }
 
 
@@ -143,31 +209,63 @@ def refit_options(engine) -> dict:
     return {}
 
 
+def outside_volume(engine, ds: Dataset) -> np.ndarray:
+    """(N,) True for rows whose commanded point lies outside the calibrated volume (beyond
+    OUTSIDE_TOLERANCE_MM): there the calibration extrapolates."""
+    vol = np.asarray(engine.volume_mm, dtype=float)
+    return np.any((ds.q < vol[0] - OUTSIDE_TOLERANCE_MM) | (ds.q > vol[1] + OUTSIDE_TOLERANCE_MM), axis=1)
+
+
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
-              fixed: bool = False) -> CheckResult:
+              fixed: bool = False, register: bool | None = None, offer_empirical: bool = True) -> CheckResult:
     """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``.
 
     ``fixed``: hold the calibration (with its effects) as it is and rank effects on its
     residual, instead of refitting its method on the training folds.
+    ``register``: fit a 6-DOF registration of the measurement frame as a nuisance
+    (default: on with ``fixed``, off otherwise). ``offer_empirical``: when the verdict is
+    "unexplained", size the empirical field (one more cross-validation).
+
+    Duplicated rows and outliers (:mod:`postproc.diagnose.robust`) are excluded first,
+    and, with ``fixed``, points outside the calibrated volume (the calibration would be
+    extrapolated there); all are listed in the result.
     """
-    ds = Dataset.from_measurements(data)
+    register = fixed if register is None else bool(register)
+    ds_all = Dataset.from_measurements(data)
     engine = cal.engine
     base_engine = engine.base if isinstance(engine, ComposedEngine) else engine
     existing = [effect_from_dict(d) for d in (cal.effects or [])]
-    resid = measured_residual(engine, ds)
+    resid_all = measured_residual(engine, ds_all)
+    if fixed:
+        model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual", register)
+    else:
+        # A training fold of a grid calibration leaves lattice nodes without points; the
+        # fold's model fills them from neighbours (the held-out points then test that fill).
+        options = refit_options(base_engine)
+        cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
+        model = base_model(cal.method, cv_options, engine=base_engine, register=register)
+    options = refit_options(base_engine)
+    keep = np.ones(len(ds_all), dtype=bool)
+    outside = outside_volume(engine, ds_all)
+    if fixed and outside.any() and not outside.all():
+        keep &= ~outside
+    screening_resid = resid_all
+    if fixed and register and keep.sum() >= 6:
+        try:
+            sub = ds_all.subset(keep)
+            fr = Fixed(engine, "registration", True).fit(sub, []).frame
+            screening_resid = resid_all - fr.displacement(ds_all.q, ds_all.r)
+        except PostprocError:
+            pass
+    screening = screen(ds_all.subset(keep), screening_resid[keep])
+    idx = np.nonzero(keep)[0][screening.keep]
+    ds, resid = ds_all.subset(idx), resid_all[idx]
     noise = noise_floor(ds, sigma_mm)
     where = where_it_fails(ds, resid)
     ranking, note = None, ""
-    options = refit_options(base_engine)
+    frame, resid_registered = None, None
     try:
-        if fixed:
-            model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual")
-        else:
-            # A training fold of a grid calibration leaves lattice nodes without points; the
-            # fold's model fills them from neighbours (the held-out points then test that fill).
-            cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
-            model = base_model(cal.method, cv_options, engine=base_engine)
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
@@ -179,7 +277,32 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
         else:
             ranking = rank_effects(model, ds, existing, names, fold_masks, max_selected=max_selected)
         note = f"{len(fold_masks)} folds; {model.description}"
+        if register:
+            frame = model.fit(ds, model.prepare(ds, existing) if not fixed else []).frame
+            if fixed and frame is not None and not frame.absorbed:
+                resid_registered = resid - frame.displacement(ds.q, ds.r)
+                where = where_it_fails(ds, resid_registered)
+            if ranking.selected and ranking.final_frame is not None:
+                frame = ranking.final_frame  # reported as fitted beside the suggested effects
     except PostprocError as exc:
         note = f"cross-validation not possible: {exc.message}"
-    return CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
-                       ranking, note, [e.name for e in existing], options)
+    res = CheckResult(cal.path or "", cal.method, list(files), ds, resid, components(resid), noise, where,
+                      ranking, note, [e.name for e in existing], options, fixed, register, frame,
+                      np.asarray(engine.volume_mm, dtype=float), resid_registered)
+    res.screening = screening
+    sources = [Path(p).name for p in (cal.fit or {}).get("sources", [])]
+    res.from_other_data = bool(cal.fit and (cal.fit.get("kind") == "axis error tables"
+                                            or (sources and sorted(sources) != sorted(Path(f).name for f in files))))
+    res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
+    res.outside_excluded = bool(fixed and outside.any() and not outside.all())
+    res.warnings = campaign_warnings(ds, cal, data, res)
+    if offer_empirical and ranking is not None and res.verdict == "unexplained":
+        try:
+            offer = empirical_offer(model, ds, ranking, [] if fixed else existing, fold_masks)
+        except PostprocError:
+            offer = None
+        if offer is not None:
+            offer["command"] = res.fit_command([*res.existing, *(c.name for c in ranking.selected),
+                                                offer["effect"]])
+            res.empirical = offer
+    return res

@@ -8,14 +8,34 @@ import numpy as np
 
 from postproc.effects.base import DIR_COLUMNS
 
-# Repeated points are rows whose commanded point, tool vector and context agree to
-# this many decimals (mm, or the context column's own unit): text files round-trip
-# numbers far finer than this, distinct points differ by far more.
-REPEAT_DECIMALS = 6
+# Repeated points are rows whose commanded point and tool vector agree within this (mm):
+# a tracker resolves about a micrometre; distinct points of a campaign differ by far more.
+REPEAT_POSITION_MM = 1e-3
+# A context column with at most this many distinct values is discrete (load steps, a
+# spindle on/off flag): repeats must agree on it exactly ...
+DISCRETE_VALUES = 5
+# ... a continuous one (temperature, humidity) may differ within a group by up to this
+# fraction of its range over the campaign (the sensor's noise, logged per shot).
+CONTEXT_SPLIT_FRACTION = 0.02
+# ... or by up to this many times its row-to-row scatter in file order (robust sigma of
+# consecutive differences), whichever is larger.
+CONTEXT_NOISE_FACTOR = 5.0
 # Rows at the same point whose times differ by at most this (seconds, between
 # consecutive shots) are repeats: warm-up drifts have time constants of tens of
 # minutes, so a minute moves the machine by a few percent of the drift at most.
 REPEAT_TIME_S = 60.0
+
+
+def _split_by_gaps(groups: np.ndarray, values: np.ndarray, gap: float) -> np.ndarray:
+    """Groups split where, sorted by ``values``, consecutive members differ by more than ``gap``."""
+    order = np.lexsort((values, groups))
+    new = np.ones(len(order), dtype=bool)
+    same = groups[order][1:] == groups[order][:-1]
+    close = np.diff(values[order]) <= gap
+    new[1:] = ~(same & close)
+    out = np.empty(len(groups), dtype=int)
+    out[order] = np.cumsum(new) - 1
+    return out
 
 
 @dataclass
@@ -77,26 +97,37 @@ class Dataset:
                             path=",".join(self.paths))
 
     def repeat_groups(self) -> np.ndarray:
-        """(N,) group id: rows with the same commanded point, tool vector and context.
+        """(N,) group id: repeated shots of one point.
 
+        Rows are repeats when their commanded point and tool vector agree within
+        REPEAT_POSITION_MM, their approach directions and every discrete context column
+        (a few values, e.g. load steps) are equal, and every continuous context column
+        differs by no more than CONTEXT_SPLIT_FRACTION of its range over the campaign
+        (temperature logged per shot with its sensor noise does not split a group).
         Time ``t`` is compared with a tolerance: shots at one point a few seconds
         apart are repeats (REPEAT_TIME_S).
         """
-        cols = [self.q, self.r] + [v[:, None] for k, v in sorted(self.ctx.items()) if k != "t"]
-        key = np.round(np.hstack(cols), REPEAT_DECIMALS)
+        if len(self) == 0:
+            return np.zeros(0, dtype=int)
+        pos = np.round(np.hstack([self.q, self.r]) / REPEAT_POSITION_MM)
+        exact, loose = [], []
+        for k, v in sorted(self.ctx.items()):
+            if k == "t":
+                continue
+            if k in DIR_COLUMNS or len(np.unique(v)) <= DISCRETE_VALUES:
+                exact.append(v[:, None])
+            else:
+                loose.append(v)
+        key = np.hstack([pos, *exact]) if exact else pos
         _, inverse = np.unique(key, axis=0, return_inverse=True)
         groups = inverse.ravel()
-        if "t" not in self.ctx or len(self) == 0:
-            return groups
-        t = self.ctx["t"]
-        order = np.lexsort((t, groups))
-        new = np.ones(len(order), dtype=bool)
-        same = groups[order][1:] == groups[order][:-1]
-        close = np.diff(t[order]) <= REPEAT_TIME_S
-        new[1:] = ~(same & close)
-        out = np.empty(len(self), dtype=int)
-        out[order] = np.cumsum(new) - 1
-        return out
+        for v in loose:
+            # the column's own row-to-row scatter (a sensor's noise) never splits a group
+            jitter = CONTEXT_NOISE_FACTOR * 1.4826 * float(np.median(np.abs(np.diff(v)))) if len(v) > 1 else 0.0
+            groups = _split_by_gaps(groups, v, max(CONTEXT_SPLIT_FRACTION * float(np.ptp(v)), jitter))
+        if "t" in self.ctx:
+            groups = _split_by_gaps(groups, self.ctx["t"], REPEAT_TIME_S)
+        return groups
 
     def place(self, i: int) -> str:
         src = "" if self.sources is None else str(self.sources[i])

@@ -37,26 +37,47 @@ def plot_residual_vectors(q: np.ndarray, resid: np.ndarray, ax=None):
     return ax
 
 
-def plot_residual_vs(values: np.ndarray, resid: np.ndarray, name: str, ax=None):
-    """Residual components (um) against one variable."""
+def plot_residual_vs(values: np.ndarray, resid: np.ndarray, name: str, ax=None, title: str | None = None):
+    """Residual components (um) against one variable, with binned means and their error
+    bars (2 standard errors)."""
+    from postproc.diagnose.where import binned_means
+
     ax = _axes(ax)
+    bins = binned_means(values, resid)
     for j, a in enumerate(AXES):
-        ax.plot(values, resid[:, j] * 1000, ".", ms=3, label=f"{a.lower()} residual")
+        line = ax.plot(values, resid[:, j] * 1000, ".", ms=3, alpha=0.5, label=f"{a.lower()} residual")[0]
+        if bins:
+            mid = [0.5 * (b["from"] + b["to"]) for b in bins]
+            mean = [b["mean_xyz_mm"][j] * 1000 for b in bins]
+            err = [2 * b["stderr_xyz_mm"][j] * 1000 if np.isfinite(b["stderr_xyz_mm"][j]) else 0.0 for b in bins]
+            ax.errorbar(mid, mean, yerr=err, fmt="o-", color=line.get_color(), ms=4, capsize=3, lw=1.2)
     ax.axhline(0, color="k", lw=0.5)
     ax.set_xlabel(name)
     ax.set_ylabel("residual um")
     ax.legend(loc="best", fontsize="small")
-    ax.set_title(f"residual vs {name}")
+    ax.set_title(title or f"residual vs {name} (binned means +- 2 standard errors)")
     return ax
 
 
-def plot_periodogram(x: np.ndarray, y: np.ndarray, axis: str, ax=None):
-    """Periodogram of the residual along an axis against that axis's position, by pitch."""
+# Family-wise level of the periodogram's significance line (over all pitches searched).
+PERIODOGRAM_ALPHA = 1e-3
+
+
+def plot_periodogram(x: np.ndarray, y: np.ndarray, axis: str, ax=None, sigma_mm: float | None = None):
+    """Periodogram of the residual along an axis against that axis's position, by pitch,
+    with the level white noise of ``sigma_mm`` exceeds at PERIODOGRAM_ALPHA over all pitches
+    (the power at one frequency is sigma^2 * Exp(1); about travel * frequency span
+    independent frequencies)."""
     ax = _axes(ax)
     freqs = search_frequencies(x)
     if len(freqs):
         ax.plot(1.0 / freqs, periodogram(x, y, freqs) * 1e6)
         ax.set_xscale("log")
+        s2 = sigma_mm**2 if sigma_mm else float(np.var(y))
+        m = max(1.0, float(np.ptp(x)) * float(freqs[-1] - freqs[0]))
+        level = s2 * np.log(m / PERIODOGRAM_ALPHA) * 1e6
+        ax.axhline(level, color="r", ls="--", lw=0.8, label=f"p = {PERIODOGRAM_ALPHA:g} over all pitches")
+        ax.legend(loc="best", fontsize="small")
     ax.set_xlabel(f"pitch (mm of {axis} travel)")
     ax.set_ylabel("power um^2")
     ax.set_title(f"periodogram of the {axis} residual along {axis}")
@@ -76,13 +97,32 @@ def plot_before_after(labels: list[str], rms_mm: list[float], floor_mm: float | 
     return ax
 
 
+def plot_map(ds_q: np.ndarray, resid: np.ndarray, pair: str, cells: dict, figure=None):
+    """2-D residual map: the mean of each component over cells of two axes (um)."""
+    from matplotlib.figure import Figure
+
+    fig = figure or Figure(figsize=(12, 4), layout="constrained")
+    axes = fig.subplots(1, 3)
+    ea, eb = (np.asarray(e) for e in cells["edges_mm"])
+    for c, ax in zip("xyz", axes, strict=True):
+        grid = np.array([[np.nan if v is None else v * 1000 for v in row] for row in cells["mean_mm"][c]])
+        lim = float(np.nanmax(np.abs(grid))) if np.isfinite(grid).any() else 1.0
+        im = ax.pcolormesh(ea, eb, grid.T, cmap="coolwarm", vmin=-lim, vmax=lim)
+        fig.colorbar(im, ax=ax, label="um")
+        ax.set_xlabel(f"{pair[0]} mm")
+        ax.set_ylabel(f"{pair[1]} mm")
+        ax.set_title(f"mean {c} residual over {pair}")
+    return axes[0]
+
+
 def write_plots(res, directory) -> list[Path]:
     """Write the check's plots as PNG files in ``directory``; returns their paths."""
     from postproc.fileio import save_figure
 
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
-    ds, resid = res.ds, res.resid
+    ds = res.ds
+    resid = res.resid_registered if getattr(res, "resid_registered", None) is not None else res.resid
     written = []
 
     def save(ax, name):
@@ -93,11 +133,19 @@ def write_plots(res, directory) -> list[Path]:
     save(plot_residual_vectors(ds.q, resid), "residual_vectors.png")
     for j, a in enumerate(AXES):
         save(plot_residual_vs(ds.q[:, j], resid, f"{a} mm"), f"residual_vs_{a}.png")
-        save(plot_periodogram(ds.q[:, j], resid[:, j], a), f"periodogram_{a}.png")
+        sigma = res.noise.sigma_mm[j] if res.noise.sigma_mm else None
+        save(plot_periodogram(ds.q[:, j], resid[:, j], a, sigma_mm=sigma), f"periodogram_{a}.png")
     for name, v in sorted(ds.ctx.items()):
         if np.ptp(v) > 0:
             save(plot_residual_vs(v, resid, name), f"residual_vs_{name}.png")
+    for pair, cells in res.where.get("maps_2d", {}).items():
+        save(plot_map(ds.q, resid, pair, cells), f"residual_map_{pair}.png")
     rk = res.ranking
+    if rk is not None and rk.selected and rk.final_cv_resid is not None:
+        names = ", ".join(c.name for c in rk.selected)
+        for j, a in enumerate(AXES):
+            save(plot_residual_vs(ds.q[:, j], rk.final_cv_resid, f"{a} mm",
+                                  title=f"held-out residual after {names} vs {a}"), f"after_suggestions_vs_{a}.png")
     if rk is not None:
         labels = ["calibration"] + [f"+ {c.name}" for c in rk.selected]
         values = [rk.base_cv_rms_mm] + [c.rms_after_mm for c in rk.selected]

@@ -36,7 +36,7 @@ import numpy as np
 
 from postproc.diagnose.crossval import FoldCache, JointCV, rms3
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import BaseModel, LinearStatic, stacked
+from postproc.diagnose.models import BaseModel, Fixed, LinearStatic, stacked
 from postproc.effects import Effect, get_effect
 from postproc.effects.linalg import solve_ls
 from postproc.errors import PostprocError
@@ -55,6 +55,9 @@ MAX_SELECTED = 4
 MIN_GROUPS_FOR_TEST = 8
 # Candidates per round whose parameters are fitted on all data for the report.
 N_FITTED_REPORTED = 5
+# Periodic terms per axis the greedy search may add (two pitches on one screw: the lead
+# and a harmonic, or a screw and a scale): each further one at the pitch the residual shows.
+MAX_PERIODIC_PER_AXIS = 2
 
 
 @dataclass
@@ -86,6 +89,9 @@ class Ranking:
     in_model: list[Candidate]
     final_cv_rms_mm: float
     final_effects: list[Effect]  # all effects of the final model, fitted on all data
+    final_cv_resid: np.ndarray | None = field(default=None, repr=False)  # held-out residual after them
+    final_guard: object = None  # conditioning of the final joint fit (postproc.diagnose.guard.Guard)
+    final_frame: object = None  # the frame registration fitted with the final effects (FrameFit)
 
 
 def slope_p_value(y: np.ndarray, delta: np.ndarray, groups: np.ndarray) -> float:
@@ -149,7 +155,7 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         else:
             testable.append(name)
 
-    joint = isinstance(model, LinearStatic)  # exact joint refits are cheap only there
+    joint = isinstance(model, LinearStatic | Fixed)  # exact joint refits are cheap only there
     scorer = JointCV if joint else FoldCache
     cache = scorer(model, ds, selected_effects, folds)
     e0 = cache.residuals()
@@ -159,7 +165,8 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
     for rnd in range(max_selected + 1):
         results = []
         for name in list(testable):
-            if any(c.name == name for c in selected):
+            taken = sum(c.name == name for c in selected)
+            if taken and not (name.startswith("periodic:") and taken < MAX_PERIODIC_PER_AXIS):
                 continue
             try:
                 e1 = cache.with_effect(get_effect(name))
@@ -198,9 +205,50 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
             sse_prev, e0 = float(np.sum(e0**2)), cache.residuals()
             best.rms_after_mm = rms3(e0)
             best.explained = (sse_prev - float(np.sum(e0**2))) / base_sse if base_sse > 0 else 0.0
-    final = _fit_all(model, ds, selected_effects) if selected_effects else []
+    final, final_guard, final_frame = [], None, None
+    if selected_effects:
+        fitted = model.fit(ds, model.prepare(ds, selected_effects))
+        final, final_guard, final_frame = fitted.effects, fitted.guard, fitted.frame
+    # Suggestions are sized jointly with the base and each other, as 'fit --effect' sizes them
+    # (the per-round fit on the base's residual underrates what a flexible base partly absorbs).
+    offset = len(existing)
+    for i, c in enumerate(selected):
+        if offset + i < len(final) and final[offset + i].name == c.name:
+            c.effect = final[offset + i]
     return Ranking(model, len(folds), rms3(base_resid), base_resid, rounds, selected, untestable,
-                   in_model, rms3(e0), final)
+                   in_model, rms3(e0), final, e0, final_guard, final_frame)
+
+
+def empirical_offer(model: BaseModel, ds: Dataset, ranking: Ranking, existing: list[Effect],
+                    folds: list[np.ndarray]) -> dict | None:
+    """The empirical field (:mod:`postproc.effects.empirical`) added to the final model,
+    its degree chosen by the same cross-validation; None when no degree lowers the
+    held-out error."""
+    from postproc.effects.empirical import DEGREES
+
+    effects = [get_effect(e.name) for e in existing] + [get_effect(c.name) for c in ranking.selected]
+    joint = isinstance(model, LinearStatic | Fixed)
+    cache = (JointCV if joint else FoldCache)(model, ds, effects, folds)
+    base = rms3(cache.residuals())
+    best = None
+    for target in DEGREES:
+        name = f"empirical:{target}"
+        eff = get_effect(name)
+        if len(eff.param_names) * 3 > len(ds):  # 3 observations per parameter at least
+            continue
+        try:
+            rms = rms3(cache.with_effect(eff))
+        except PostprocError:
+            continue
+        # worth a term only if it removes a useful part of the held-out variance
+        if rms**2 < (1 - MIN_EXPLAINED) * base**2 and (best is None or rms < best[1]):
+            best = (name, rms)
+    if best is None:
+        return None
+    fitted = _fit_all(model, ds, [*effects, get_effect(best[0])])[-1]
+    return {"effect": best[0], "cv_rms_before_mm": base, "cv_rms_after_mm": best[1],
+            "extent_mm": fitted.extent().tolist(), "description": fitted.describe(),
+            "meaning": fitted.meaning}
 
 
 def _fit_reported(model: BaseModel, ds: Dataset, selected: list[Effect], cands: list[Candidate],

@@ -11,11 +11,29 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import base_model
-from postproc.effects import get_effect
+from postproc.diagnose.models import Fitted, Fixed, base_model
+from postproc.effects import effect_from_dict, get_effect
 from postproc.effects.composed import ComposedEngine
 from postproc.engine.base import FitResult
-from postproc.errors import MeasurementError
+from postproc.errors import CalibrationError, MeasurementError
+
+#: Default of ``fit --max-correction`` (mm): machine-tool geometric errors are tens of
+#: micrometres; a correction of a millimetre somewhere in the volume is a fit gone wrong
+#: (an undetermined parameter), not a machine.
+MAX_CORRECTION_MM = 1.0
+# Points per axis of the lattice over the calibrated volume where the correction is
+# evaluated (besides the measured points themselves).
+CORRECTION_LATTICE = 7
+
+
+def effect_list(effect_names) -> list[str]:
+    """A repeated --effect counts once, except ``periodic:AXIS``: a second one is a second
+    pitch on the same axis (found on the residual of the first)."""
+    out: list[str] = []
+    for n in effect_names:
+        if n not in out or n.startswith("periodic:"):
+            out.append(n)
+    return out
 
 
 def check_effects_testable(ds: Dataset, effects) -> None:
@@ -30,27 +48,123 @@ def check_effects_testable(ds: Dataset, effects) -> None:
                                    path=",".join(ds.paths), hint=hint)
 
 
-def fit_with_effects(method: str, data, effect_names, **options) -> FitResult:
-    """Fit ``method`` on the measurements ``data`` together with the named effects."""
+def _effect_lines(fitted: Fitted) -> list[str]:
+    out = []
+    if fitted.guard is not None:
+        out += fitted.guard.lines()
+    for e in fitted.effects:
+        out.append(f"effect {e.name}: {e.describe()}")
+        u = getattr(e, "uncertainty", None)
+        if u:
+            out.append("  k=2 uncertainty: " + ", ".join(
+                (f"{k} undetermined" if not np.isfinite(v) else
+                 f"{k} +- {v * 1000:.2f} um" if k.endswith("_mm") else f"{k} +- {v:.3g}") for k, v in u.items()))
+        out.append(f"  {e.meaning}; {e.compensable_reason}")
+    if fitted.frame is not None:
+        if fitted.frame.absorbed:
+            out.append("measurement frame: held by the base model itself (no separate registration)")
+        else:
+            out.append(f"measurement frame registered (not stored): {fitted.frame.describe(fitted.engine.volume_mm)}")
+    return out
+
+
+def _info(ds: Dataset, resid: np.ndarray, fitted: Fitted) -> dict:
+    info = {
+        "n_points": len(ds), "rms_mm": float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))),
+        "max_mm": float(np.max(np.linalg.norm(resid, axis=1))),
+        "sources": list(ds.paths), "effects": [e.name for e in fitted.effects],
+    }
+    if fitted.guard is not None:
+        info["conditioning"] = fitted.guard.to_json()
+    if fitted.frame is not None and not fitted.frame.absorbed:
+        info["registration"] = fitted.frame.to_json(fitted.engine.volume_mm)
+    return info
+
+
+def fit_with_effects(method: str, data, effect_names, register: bool = False, **options) -> FitResult:
+    """Fit ``method`` on the measurements ``data`` together with the named effects
+    (and a registration of the measurement frame when ``register``)."""
     ds = Dataset.from_measurements(data)
-    names = list(dict.fromkeys(effect_names))  # a repeated --effect counts once
+    names = effect_list(effect_names)
     effects = [get_effect(n) for n in names]
     check_effects_testable(ds, effects)
-    model = base_model(method, options)
+    model = base_model(method, options, register=register)
     prepared = model.prepare(ds, effects)
     fitted = model.fit(ds, prepared)
     resid = ds.m - fitted.predict(ds)
     engine = ComposedEngine(fitted.engine, fitted.effects)
     result = FitResult(engine=engine, residuals_mm=resid)
-    rms = float(np.sqrt(np.mean(np.sum(resid**2, axis=1))))
     result.report = [f"{method} fit with {len(effects)} effect(s) on {len(ds)} points ({model.description})"]
     result.report += fitted.report
-    for e in fitted.effects:
-        result.report.append(f"effect {e.name}: {e.describe()}")
-        result.report.append(f"  {e.meaning}; {e.compensable_reason}")
-    result.info = {
-        "n_points": len(ds), "rms_mm": rms, "max_mm": float(np.max(np.linalg.norm(resid, axis=1))),
-        "sources": list(ds.paths), "effects": [e.name for e in fitted.effects],
-    }
+    result.report += _effect_lines(fitted)
+    result.info = _info(ds, resid, fitted)
     result.effects = [e.to_dict() for e in fitted.effects]
     return result
+
+
+def extend_calibration(cal, data, effect_names, register: bool = True) -> FitResult:
+    """``fit --base CAL``: the calibration ``cal`` held as it is (its base and its effects),
+    the named effects fitted to its residual on ``data`` (with a registration of the
+    measurement frame when ``register``); the result is the same base with the effects added.
+
+    This is exactly the model ``check --fixed`` ranks, so the figure it promises is the
+    one this fit delivers."""
+    ds = Dataset.from_measurements(data)
+    existing = [effect_from_dict(d) for d in (cal.effects or [])]
+    held = {e.name for e in existing}
+    names = effect_list(effect_names)
+    again = [n for n in names if n in held and not n.startswith("periodic:")]
+    if again:
+        raise CalibrationError(f"{cal.path}: effect(s) {', '.join(again)} already in the calibration",
+                               hint="name only effects to add; refit the calibration to change existing ones")
+    effects = [get_effect(n) for n in names]
+    check_effects_testable(ds, effects)
+    base_engine = cal.engine.base if isinstance(cal.engine, ComposedEngine) else cal.engine
+    model = Fixed(cal.engine, "fit --base: the calibration as it is", register)
+    prepared = model.prepare(ds, effects)
+    fitted = model.fit(ds, prepared)
+    resid = ds.m - fitted.predict(ds)
+    all_effects = [*existing, *fitted.effects]
+    engine = ComposedEngine(base_engine, all_effects) if all_effects else base_engine
+    result = FitResult(engine=engine, residuals_mm=resid)
+    result.report = [f"{cal.method} calibration {cal.path} kept as it is; {len(effects)} effect(s) added, "
+                     f"fitted on {len(ds)} points ({model.description})"]
+    result.report += _effect_lines(fitted)
+    result.info = _info(ds, resid, fitted)
+    result.info["effects"] = [e.name for e in all_effects]
+    result.info["base"] = {"path": cal.path, "method": cal.method, "fit": dict(cal.fit or {})}
+    result.effects = [e.to_dict() for e in all_effects]
+    return result
+
+
+def max_correction(engine, data=None) -> tuple[float, np.ndarray]:
+    """Largest |correction| (mm) of ``engine`` (forward(q, r) - q - r) over a lattice of its
+    volume and the measured points, with the measurements' tool vectors and context
+    (cycled over the lattice). Returns (size, where: the commanded point)."""
+    vol = np.asarray(engine.volume_mm, dtype=float)
+    axes = [np.linspace(vol[0, j], vol[1, j], CORRECTION_LATTICE) for j in range(3)]
+    lattice = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    qs, rs, ctx = [lattice], [np.zeros_like(lattice)], {}
+    if data:
+        ds = Dataset.from_measurements(data)
+        idx = np.arange(len(lattice)) % len(ds)
+        qs.append(ds.q)
+        rs = [ds.r[idx], ds.r]
+        ctx = {k: np.concatenate([v[idx], v]) for k, v in ds.ctx.items()}
+    q, r = np.vstack(qs), np.vstack(rs)
+    dev = np.linalg.norm(engine.forward(q, r, ctx) - q - r, axis=1)
+    i = int(np.argmax(dev))
+    return float(dev[i]), q[i]
+
+
+def refuse_large_correction(engine, data, limit_mm: float, output: str) -> None:
+    """The guard of ``fit --max-correction``: a calibration that corrects by more than
+    ``limit_mm`` anywhere in its volume is not written."""
+    size, where = max_correction(engine, data)
+    if size > limit_mm:
+        raise CalibrationError(
+            f"the fitted calibration corrects by {size:.4f} mm at X {where[0]:.1f} Y {where[1]:.1f} "
+            f"Z {where[2]:.1f}, more than --max-correction {limit_mm:g} mm; {output} was not written",
+            hint="an undetermined parameter usually makes this (see the conditioning lines above): "
+                 "drop an effect, measure more points, or raise --max-correction if the machine "
+                 "really is that far off")

@@ -21,6 +21,10 @@ WORSE_THAN_REFIT = 1.2
 REVERSAL_FLAG_SIGMAS = 3.0
 
 
+def rms_of(resid) -> float:
+    return float(np.sqrt(np.mean(np.sum(np.asarray(resid) ** 2, axis=1)))) if len(resid) else 0.0
+
+
 def um(v: float) -> str:
     return f"{v * 1000:.2f}"
 
@@ -48,18 +52,81 @@ def format_report(res: CheckResult) -> list[str]:
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")
     else:
         out.append("noise floor: unknown (no repeated points; give --sigma MM, the instrument's sigma per axis)")
+    if res.frame is not None:
+        if res.frame.absorbed:
+            out.append("measurement frame: its registration is held by the model itself (origin and axes)")
+        else:
+            beside = " (fitted beside the suggested effects)" if res.ranking and res.ranking.selected else ""
+            out.append(f"measurement frame registered (a nuisance of the measurement, not a machine error){beside}: "
+                       f"{res.frame.describe(res.volume_mm)}")
+            if res.resid_registered is not None:
+                out.append(f"  residual after the registration alone: RMS {um(rms_of(res.resid_registered))} um")
     if rk is not None:
         ratio = f" = {rk.base_cv_rms_mm / nf.rms_mm:.2f} x the noise floor" if nf.rms_mm else ""
         out.append(f"cross-validated RMS: {um(rk.base_cv_rms_mm)} um{ratio} ({res.cv_note})")
-        if s["rms_mm"] > WORSE_THAN_REFIT * rk.base_cv_rms_mm:
+        if not res.fixed and res.from_other_data:
+            out.append("  this calibration came from other data: its method is refitted here on these points; "
+                       "'postproc check ... --fixed' keeps it as it is and suggests 'postproc fit --base' "
+                       "to add effects to it")
+        if rk.final_guard is not None and rk.final_guard.undetermined:
+            out.append("  " + rk.final_guard.lines()[1])
+        if not res.fixed and s["rms_mm"] > WORSE_THAN_REFIT * rk.base_cv_rms_mm:
             out.append(f"  the calibration fits these points worse ({um(s['rms_mm'])} um) than its method refitted "
                        "to them: the machine changed since it was calibrated, or the calibration came from "
                        "other data; --fixed ranks the effects on the calibration as it is")
     else:
         out.append(res.cv_note)
+    out += _screening(res)
+    if res.warnings:
+        out += ["", "what this campaign cannot show:"] + [f"  {w['message']}" for w in res.warnings]
     out += ["", "where it fails:"] + _where(res)
     out += [""] + _ranking(res)
+    out += ["", _verdict(res)]
+    if res.empirical:
+        e, floor = res.empirical, res.noise.rms_mm
+        ratio = f" = {e['cv_rms_after_mm'] / floor:.2f} x the floor" if floor else ""
+        out.append(f"  last resort, an empirical correction ({e['effect']}: {e['description']}): "
+                   f"cross-validated RMS {um(e['cv_rms_before_mm'])} -> {um(e['cv_rms_after_mm'])} um{ratio}; "
+                   "it names no cause and holds only inside that extent")
+        if e.get("command"):
+            out.append(f"  add it: {e['command']}")
     return out
+
+
+def _screening(res: CheckResult) -> list[str]:
+    sc = res.screening
+    if sc is None or (not sc.duplicates and not sc.outliers):
+        return []
+    out = []
+    if sc.duplicates:
+        out.append(f"duplicated rows (one shot written twice; kept once): {len(sc.duplicates)}: "
+                   + ", ".join(d["place"] for d in sc.duplicates[:8]) + (" ..." if len(sc.duplicates) > 8 else ""))
+    if sc.outliers:
+        out.append(f"outliers excluded from the analysis: {len(sc.outliers)}")
+        for o in sc.outliers[:10]:
+            out.append(f"  {o['place']}  residual {vec_um(o['residual_mm'])} um: {o['reason']}")
+        if len(sc.outliers) > 10:
+            out.append(f"  ... and {len(sc.outliers) - 10} more (see --json)")
+    return out
+
+
+def _verdict(res: CheckResult) -> str:
+    v, rk, floor = res.verdict, res.ranking, res.noise.rms_mm
+    if v is None:
+        return ("verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
+                if rk is not None else "verdict: none (no cross-validation)")
+    if v == "consistent":
+        return (f"verdict: consistent: the calibration explains these points down to the noise "
+                f"(cross-validated {rk.base_cv_rms_mm / floor:.2f} x the floor)")
+    if v == "missing-effect":
+        names = ", ".join(c.name for c in rk.selected)
+        return (f"verdict: missing effect: {names} explain(s) the residual down to the noise "
+                f"({rk.final_cv_rms_mm / floor:.2f} x the floor with them)")
+    part = (f"; the suggestions explain part of it ({rk.final_cv_rms_mm / floor:.2f} x the floor with them)"
+            if rk.selected else "")
+    return (f"verdict: unexplained: the residual stays {rk.base_cv_rms_mm / floor:.2f} x the noise floor and "
+            f"no effect in the catalogue explains it{part}; the physics is not known to the model "
+            "(see where it fails; an empirical correction is the last resort)")
 
 
 def _where(res: CheckResult) -> list[str]:
@@ -83,6 +150,12 @@ def _where(res: CheckResult) -> list[str]:
                        f"difference {um(d['reversal_mm'])} +- {um(d['stderr_mm'])} um{flag}")
     else:
         out.append("  by approach direction: no dirx/diry/dirz columns")
+    if w.get("by_tool"):
+        out.append("  by tool vector (mean residual um, RMS um, n points):")
+        for b in w["by_tool"]:
+            t = b["tool_mm"]
+            out.append(f"    tool {t[0]:g},{t[1]:g},{t[2]:g} mm: {vec_um(b['mean_xyz_mm'])}; RMS {um(b['rms_mm'])}  "
+                       f"(n {b['n']})")
     if w["along_time"]:
         out.append("  along time t (mean residual um per quarter of the campaign, n points):")
         for b in w["along_time"]:
@@ -113,7 +186,13 @@ def _ranking(res: CheckResult) -> list[str]:
                    f"RMS after {um(c.rms_after_mm)} um (p = {c.p_value:.1g})")
         out.append(f"     {sgg['description']}")
         out.append(f"     {sgg['meaning']}; {sgg['compensable']}")
-        out.append(f"     add it: {sgg['command']}" if sgg["command"] else
+        if sgg["parameters_u_k2"]:
+            out.append("     k=2 uncertainty: " + ", ".join(
+                (f"{k} undetermined" if not np.isfinite(v) else
+                 f"{k} +- {v * 1000:.2f} um" if k.endswith("_mm") else f"{k} +- {v:.3g}")
+                for k, v in sgg["parameters_u_k2"].items()))
+        keeps = " (keeps the calibration, adds the effect)" if res.extends else ""
+        out.append(f"     add it{keeps}: {sgg['command']}" if sgg["command"] else
                    f"     the {res.method} method cannot be refitted from points: add it to a static fit")
     if last and sug:
         nxt = next((c for c in last if c.status == "significant"), last[0])

@@ -18,7 +18,11 @@ name                        physical meaning                                need
 ``positioning:X|Y|Z``       bow and S-shape of the positioning error        positions
 ``lever:AB``                angle of A growing with A, over B's travel      positions
 ``linear:<column>``         shift linear in any other context column        ``<column>``
+``empirical:poly2|3|4``     smooth residual field, no physics (last resort)  positions
 ==========================  ==============================================  ==============
+
+``empirical`` is never a candidate: ``check`` offers it only when no effect explains
+the residual.
 
 ``get_effect(name)`` builds one; ``compose(engine, effects_dicts)`` adds them to a
 base engine (:mod:`postproc.effects.composed`).
@@ -33,6 +37,8 @@ import numpy as np
 from postproc.effects.abbe import Abbe
 from postproc.effects.backlash import Backlash
 from postproc.effects.base import AXES, DIR_COLUMNS, Effect
+from postproc.effects.empirical import DEGREES as EMPIRICAL_DEGREES
+from postproc.effects.empirical import Empirical
 from postproc.effects.lever import Lever
 from postproc.effects.linear import Linear
 from postproc.effects.load import Load
@@ -61,6 +67,7 @@ KINDS = {
     "positioning": (Positioning, tuple(AXES)),
     "lever": (Lever, LEVER_PAIRS),
     "linear": (Linear, None),
+    "empirical": (Empirical, tuple(EMPIRICAL_DEGREES)),
 }
 
 # Context columns with an effect of their own, never offered as linear:<column>.

@@ -45,6 +45,17 @@ class ComposedEngine(Engine):
     def effects_dicts(self) -> list[dict]:
         return [e.to_dict() for e in self.effects]
 
+    @property  # type: ignore[override]
+    def solver(self) -> str:
+        return self.base.solver
+
+    @property  # type: ignore[override]
+    def accept_residual_mm(self) -> float:
+        return self.base.accept_residual_mm
+
+    def with_extrapolation(self, mode: str) -> Engine:
+        return type(self)(self.base.with_extrapolation(mode), self.effects)
+
     def check_context(self, names) -> None:
         """Refuse early, before a program is processed, when a needed value is missing."""
         names = set(names or ())

@@ -85,6 +85,24 @@ class Engine(ABC):
             )
         self.volume_mm = vol
 
+    # -- what the correction pipeline asks of every engine (defaults here) ---------------
+    #: name of the inverse solver when the engine has a choice (parametric: newton | astatic)
+    solver: str = ""
+    #: largest inverse residual (mm) the engine's solver stands for; 0: the pipeline's own
+    #: acceptance (ten times the solver tolerance) applies
+    accept_residual_mm: float = 0.0
+
+    def with_extrapolation(self, mode: str) -> Engine:
+        """The engine extrapolating outside its tables by ``mode`` ("clamp": hold the end
+        values, "linear": continue the end slopes). Engines whose model already covers
+        all space (static, interval, grid) return themselves."""
+        return self
+
+    def check_context(self, names) -> None:
+        """Refuse (PostprocError) when a context value the engine needs is not among
+        ``names``; engines without effects need none."""
+        return None
+
     # -- the model -------------------------------------------------------------------
     @abstractmethod
     def forward(self, q, r=None, context: Context | None = None) -> np.ndarray:

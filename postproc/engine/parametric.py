@@ -33,11 +33,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.parametric_tables import AXES, AxisTables, Squareness
+from postproc.engine.pchip import Pchip
 from postproc.errors import CalibrationError
 
 ORDERS = ("first", "second", "exact")
@@ -81,8 +81,8 @@ class AxisFunctions:
         self.interpolation = interpolation
         self.extrapolate = extrapolate
         if interpolation == "pchip":
-            self._f = PchipInterpolator(self.x, self.values, axis=0, extrapolate=True)
-            self._df = self._f.derivative()
+            self._f = Pchip(self.x, self.values)
+            self._df = self._f.derivative
         else:
             self._slopes = np.diff(self.values, axis=0) / np.diff(self.x)[:, None]
 
@@ -190,7 +190,10 @@ class ParametricEngine(Engine):
             opts["astatic"] = replace(self.astatic, **opts["astatic"])
         return ParametricEngine(self.tables, self.squareness, self.volume_mm, **opts)
 
-    @property
+    def with_extrapolation(self, mode: str) -> ParametricEngine:
+        return self.with_options(extrapolate=mode)
+
+    @property  # type: ignore[override]
     def accept_residual_mm(self) -> float:
         """Largest inverse residual this engine's solver stands for.
 

@@ -154,6 +154,8 @@ def _setup_parts(setup_note: str, setup) -> list[str]:
             continue
         if re.match(r"G(28|30)=", raw) and exact and getattr(setup, "home", None):
             continue  # written from the setup below, exactly
+        if raw.lower().startswith("expanded"):
+            continue  # the EXPANDED line of header_lines says it
         if raw.startswith("tool vector "):
             if not exact:
                 vals = raw[12:].split(",")
@@ -244,6 +246,7 @@ def header_lines(dialect, cal_name: str, cal_sha: str, tolerance_mm: float, setu
     body += _wrap("CALIBRATION " + (_safe(cal_name) or "UNNAMED"), width)
     body += _wrap("SHA256 " + _safe(cal_sha), width)
     body += _wrap(f"TOLERANCE {_num(tolerance_mm)} MM", width)
+    expanded = expanded or any(p.strip().lower().startswith("expanded") for p in (setup_note or "").split(";"))
     for part in _setup_parts(setup_note, setup):
         body += _wrap(part, width)
     if expanded:

@@ -16,40 +16,20 @@ SOLVER_ACCEPT_MM = 10 * SOLVER_TOL_MM
 PIPELINE_CONTEXT = ("dirx", "diry", "dirz", "A", "B", "C")
 
 
-def engine_attr(engine, name: str):
-    """``engine.name``, or that of the base engine a composed engine wraps; None if neither."""
-    value = getattr(engine, name, None)
-    if value is None and getattr(engine, "base", None) is not None:
-        value = getattr(engine.base, name, None)
-    return value
-
-
 def accept_residual(engine) -> float:
     """Largest inverse residual (mm) the pipeline accepts from ``engine``."""
-    own = engine_attr(engine, "accept_residual_mm")
-    return max(SOLVER_ACCEPT_MM, float(own)) if own is not None else SOLVER_ACCEPT_MM
+    return max(SOLVER_ACCEPT_MM, float(engine.accept_residual_mm))
 
 
 def prepare_engine(engine, extrapolate: str, context_names, path: str | None = None):
-    """The engine as a run uses it.
-
-    - ``extrapolate="linear"``: an engine with ``with_options`` (parametric) is switched
-      to linear extrapolation of its functions (by default it holds their end
-      values); a composed engine gets its base switched. Static, interval and grid
-      engines extrapolate with their model as it is (see docs/gcode.md).
-    - An engine with ``check_context`` (a base engine plus effects) is asked up front
-      whether the context values its effects need are given, so a missing
-      ``--context`` is refused before any line is processed.
-    """
+    """The engine as a run uses it: switched to ``extrapolate`` ("linear" continues the
+    end slopes of table-based models; see :meth:`Engine.with_extrapolation`), and asked up
+    front whether the context values its effects need are given, so a missing
+    ``--context`` is refused before any line is processed."""
     if extrapolate == "linear":
-        if hasattr(engine, "with_options"):
-            engine = engine.with_options(extrapolate="linear")
-        elif hasattr(getattr(engine, "base", None), "with_options") and hasattr(engine, "effects"):
-            engine = type(engine)(engine.base.with_options(extrapolate="linear"), engine.effects)
-    check = getattr(engine, "check_context", None)
-    if check is not None:
-        try:
-            check(set(PIPELINE_CONTEXT) | set(context_names))
-        except PostprocError as exc:
-            raise exc.at(path=path) from None
+        engine = engine.with_extrapolation("linear")
+    try:
+        engine.check_context(set(PIPELINE_CONTEXT) | set(context_names))
+    except PostprocError as exc:
+        raise exc.at(path=path) from None
     return engine

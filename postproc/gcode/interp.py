@@ -50,6 +50,16 @@ from postproc.gcode.state import (
     ModalState,
 )
 
+
+class NeedsExpansion(UnsupportedGcodeError):
+    """A construct the expansion stage flattens (parameters, expressions, O-words,
+    subprograms, macros): the corrector starts over on the expanded program."""
+
+
+# constructs the expansion stage (postproc.gcode.expand) flattens
+EXPANDABLE_M = {97, 98, 99}
+EXPANDABLE_G = {650, 660, 661}
+
 AXES = "XYZ"
 ROTARY = "ABC"
 # Letters accepted as plain parameters of other words (checked where used).
@@ -109,7 +119,7 @@ class Move:
     unit: float
     incremental: bool
     arc_absolute: bool
-    words: list[tuple[str, str, int, int]]
+    words: list[lexer.Word]  # (LETTER, number text, start, end, letter position) per word
     axis_idx: tuple[int, int, int]
     feed_idx: int
     inverse_time: bool
@@ -177,6 +187,29 @@ def classify_construct(line: str) -> tuple[str, str]:
     return "", ""
 
 
+# controllers that read "(a (b) c)" as one comment (LinuxCNC and Grbl reject it)
+NESTING_COMMENTS = {"fanuc", "haas", "mach3"}
+
+
+def blank_nested_comments(line: str) -> str:
+    """The line with the inside of each outermost balanced ( ... ) blanked, so that a
+    nested comment lexes as one comment at the same columns."""
+    out = list(line)
+    depth = 0
+    for i, ch in enumerate(line):
+        if ch == ";" and depth == 0:
+            break
+        if ch == "(":
+            if depth > 0:
+                out[i] = " "
+            depth += 1
+        elif ch == ")" and depth > 0:
+            depth -= 1
+            if depth > 0:
+                out[i] = " "
+    return "".join(out)
+
+
 def _is_program_number(tokens) -> bool:
     """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
     content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
@@ -216,6 +249,7 @@ class Interpreter:
         self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
+        self.may_expand = False  # set by the corrector when it can start over on the expanded program
         # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
         self.home = {name: list(_offset_tuple(v, partial=True)) for name, v in
                      ((getattr(setup, "home", None) or {}).items())}
@@ -226,6 +260,13 @@ class Interpreter:
         self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
+    def _construct_error(self, what: str):
+        """The error class for a refused construct: NeedsExpansion when expanding is allowed
+        and the construct is one the expansion stage flattens."""
+        if self.may_expand and not what.startswith("polar"):
+            return NeedsExpansion
+        return UnsupportedGcodeError
+
     def _err(self, cls, msg, lineno, col, hint=None):
         return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
 
@@ -352,12 +393,14 @@ class Interpreter:
                     None, [], False, motion_idx, ())
 
     def _slow_words(self, lineno: int, line: str):
+        if self.dialect in NESTING_COMMENTS and line.count("(") > 1:
+            line = blank_nested_comments(line)
         try:
             tokens = lexer.lex(line, self.path, lineno)
         except GcodeSyntaxError:
             what, hint = classify_construct(line)
             if what:
-                raise self._err(UnsupportedGcodeError, what, lineno, 1, hint=hint) from None
+                raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
             raise
         first = next((t for t in tokens if t.kind != lexer.SPACE), None)
         if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
@@ -371,9 +414,10 @@ class Interpreter:
             if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
                 what, hint = classify_construct(line)
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
+                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
             if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
-                raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, tok.col,
+                raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
+                                tok.col,
                                 hint="O words other than a program number are expanded only when their "
                                      "subroutine is in the program or on --subroutine-path")
         words = []
@@ -402,14 +446,14 @@ class Interpreter:
             elif kind == lexer.LETTER:
                 what, hint = classify_construct(line)
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
+                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
                 raise self._err(UnsupportedGcodeError,
                                 f"word {tok.letter} without a plain number (macro, expression or parameter)",
                                 lineno, tok.col, hint="expand macros and expressions before correcting")
             elif kind == lexer.SYMBOL:
                 what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
                 if what:
-                    raise self._err(UnsupportedGcodeError, what, lineno, tok.col, hint=hint)
+                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
                 raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
             elif kind == lexer.NUMBER:
                 raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
@@ -434,7 +478,7 @@ class Interpreter:
                                     hint="expand subroutines and loops in the CAM system before correcting")
                 if letter in "UVW" or (letter == "E" and not any(
                         (w[0] == "M" and _gkey(w[1]) // 10 in IO_M and _gkey(w[1]) % 10 == 0)
-                        or (w[0] == "G" and _gkey(w[1]) == 1870) for w in words)):
+                        or (w[0] == "G" and _gkey(w[1]) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 vals[letter] = (float(num), i)
@@ -449,7 +493,8 @@ class Interpreter:
                 raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
             m = key // 10
             if m in REFUSED_M:
-                raise self._err(UnsupportedGcodeError, REFUSED_M[m], lineno, col_of(i),
+                raise self._err(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
+                                REFUSED_M[m], lineno, col_of(i),
                                 hint="postproc expands M98/M99 subprograms defined in the same program; "
                                      "put the subprogram in the file")
             if m > 199:
@@ -470,94 +515,15 @@ class Interpreter:
         if tool_change:
             st.spindle_tool = st.tool
 
-        motion_key = None
-        motion_idx = -1
-        g53 = False
-        g92 = None
-        g10 = False
-        home_code = None
-        cancel_cycle = False
-        g52 = False
-        lookahead = None
-        work_name = None
-        prefix: list[str] = []
+        blk = _Block(lineno, words, vals)
         for key, i in gcodes:
-            gtext = f"G{words[i][1]}"
-            if key in MOTION_CODES:
-                if motion_key is not None:
-                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key, motion_idx = key, i
-                self.motion_word = True
-            elif key in CANNED_CYCLES:
-                if motion_key is not None:
-                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key, motion_idx = key, i
-                self.motion_word = True
-            elif key in (980, 990):
-                st.retract_r = key == 990
-            elif key == 800:
-                cancel_cycle = True
-                self.motion_word = True
-            elif key in LOOKAHEAD_G and self._is_lookahead(key, vals):
-                lookahead = key
-            elif key in SPLINES:
-                if motion_key is not None:
-                    raise self._err(GcodeSyntaxError, "two motion codes in one block", lineno, col_of(i))
-                motion_key, motion_idx = key, i
-                self.motion_word = True
-            elif key in REFUSED_G:
-                raise self._err(UnsupportedGcodeError, REFUSED_G[key], lineno, col_of(i),
-                                hint=REFUSED_HINT.get(key))
-            elif key in HOME_CODES:
-                home_code = (key, i)
-            elif key in HOME_STORE:
-                if any(a in vals for a in AXES):
-                    raise self._err(UnsupportedGcodeError, f"G{words[i][1]} with axis words", lineno, col_of(i))
-                self.home[HOME_STORE[key]] = list(st.pos)
-            elif key == 520:
-                g52 = True
-            elif key in PLANES:
-                st.plane = key
-                prefix.append(gtext)
-            elif key in (200, 210):
-                st.inch = key == 200
-                prefix.append(gtext)
-            elif key in (900, 910):
-                st.incremental = key == 910
-                prefix.append(gtext)
-            elif key in (901, 911):
-                st.arc_absolute = key == 901
-                prefix.append(gtext)
-            elif key in (930, 940, 950):
-                st.inverse_time = key == 930
-                prefix.append(gtext)
-            elif key in WORK_SYSTEMS:
-                work_name = WORK_SYSTEMS[key]
-                prefix.append(gtext)
-            elif key == 541:
-                if "P" not in vals:
-                    raise self._err(GcodeSyntaxError, "G54.1 needs a P word", lineno, col_of(i))
-                work_name = f"G54.1P{int(vals['P'][0])}"
-                prefix.append(f"{gtext} P{words[vals['P'][1]][1]}")
-            elif key == 430:
-                prefix.append(gtext + (f" H{words[vals['H'][1]][1]}" if "H" in vals else ""))
-                self._g43(vals, lineno, col_of(i))
-            elif key == 490:
-                st.tlo, st.tlo_active = 0.0, False
-                prefix.append(gtext)
-            elif key == 530:
-                g53 = True
-                prefix.append(gtext)
-            elif key in (920, 921, 922):
-                g92 = key
-            elif key == 100:
-                g10 = True
-            elif key == 40:
-                pass  # dwell: P is seconds, no geometry
-            elif key in NEUTRAL_G:
-                pass
-            else:
+            handler = _G_HANDLERS.get(key)
+            if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i][1]} (unknown G code)", lineno, col_of(i))
+            handler(self, blk, key, i)
+        motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
+        home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
+        lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
 
         if work_name is not None:
             st.work = work_name
@@ -601,8 +567,11 @@ class Interpreter:
         if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
             if motion_key is not None and st.motion not in CANNED_CYCLES:
                 st.before_cycle = st.motion
-            if motion_key is not None and motion_key != st.motion:
-                st.cycle_r = st.cycle_z = None  # given again when the motion mode changes (LinuxCNC)
+            if motion_key is not None and motion_key != st.motion and (
+                    self.dialect not in ("fanuc", "haas") or st.motion not in CANNED_CYCLES):
+                # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
+                # keep them from one cycle to the next (until G80 or another motion)
+                st.cycle_r = st.cycle_z = None
             if motion_key is not None:
                 st.motion = motion_key
             return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
@@ -635,9 +604,13 @@ class Interpreter:
                             lineno, first_axis_col)
         if g53 and st.motion not in (RAPID, LINE):
             raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
-        if g53 and st.incremental:
-            raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
-                            first_axis_col)
+        incremental = st.incremental
+        if g53 and incremental:
+            if self.dialect not in ("fanuc", "haas"):
+                raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
+                                first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
+                                                     "machine positions in G91 too (--dialect fanuc|haas)")
+            incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
 
         shift = self.shift(g53, lineno, first_axis_col)
         q0 = tuple(st.pos)
@@ -647,7 +620,7 @@ class Interpreter:
             if a in vals:
                 v, i = vals[a]
                 axis_idx[k] = i
-                if st.incremental:
+                if incremental:
                     if math.isnan(q1[k]):
                         raise self._err(
                             MissingSetupError,
@@ -678,7 +651,7 @@ class Interpreter:
         st.pos = q1
         move = Move(
             lineno=lineno, kind=st.motion, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift,
-            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+            unit=unit, incremental=incremental, arc_absolute=st.arc_absolute, words=words,
             axis_idx=tuple(axis_idx), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
@@ -837,6 +810,12 @@ class Interpreter:
         unit = st.unit_mm
         if "R" in vals:
             st.cycle_r = vals["R"][0]
+        if st.cycle_r is None and self.dialect in ("fanuc", "haas") and not math.isnan(st.pos[2]):
+            # Fanuc and Haas: R is optional; without it the R plane is the initial level
+            if st.incremental:
+                st.cycle_r = 0.0
+            else:
+                st.cycle_r = (st.pos[2] - self.shift(False, lineno, col)[2]) / unit
         if st.cycle_r is None:
             raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
         if "Z" in vals:
@@ -1069,6 +1048,8 @@ class Interpreter:
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
         if wrong and self.dialect in ("fanuc", "haas", "mach3"):
             wrong = []  # these controllers ignore an offset word off the arc's plane
+        elif wrong and self.dialect == "generic" and all(vals[k][0] == 0 for k in wrong):
+            wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
                             words[vals[wrong[0]][1]][4] + 1,
@@ -1124,6 +1105,165 @@ class Interpreter:
         center = [0.0, 0.0, 0.0]
         center[a1], center[a2], center[an] = c1, c2, q0[an]
         return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
+
+
+@dataclass(slots=True)
+class _Block:
+    """What the G codes of one block set, read by the rest of :meth:`Interpreter._block`."""
+
+    lineno: int
+    words: list
+    vals: dict
+    motion_key: int | None = None
+    motion_idx: int = -1
+    g53: bool = False
+    g92: int | None = None
+    g10: bool = False
+    home_code: tuple[int, int] | None = None
+    cancel_cycle: bool = False
+    g52: bool = False
+    lookahead: int | None = None
+    work_name: str | None = None
+    prefix: list = field(default_factory=list)
+
+    def col(self, i: int) -> int:
+        return self.words[i][4] + 1
+
+    def gtext(self, i: int) -> str:
+        return f"G{self.words[i][1]}"
+
+
+def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G0-G3, canned cycles, splines: the block's motion code (one per block)."""
+    if b.motion_key is not None:
+        raise it._err(GcodeSyntaxError, "two motion codes in one block", b.lineno, b.col(i))
+    b.motion_key, b.motion_idx = key, i
+    it.motion_word = True
+
+
+def _g_retract(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.retract_r = key == 990
+
+
+def _g_cancel_cycle(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.cancel_cycle = True
+    it.motion_word = True
+
+
+def _g_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    cls = NeedsExpansion if (key in EXPANDABLE_G and it.may_expand) else UnsupportedGcodeError
+    raise it._err(cls, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
+
+
+def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G5, G5.1, G8: Fanuc/Haas look-ahead codes with their P/Q alone, else splines (G5,
+    G5.1) or refused (G8 lathe radius mode)."""
+    if it._is_lookahead(key, b.vals):
+        b.lookahead = key
+    elif key in SPLINES:
+        _g_motion(it, b, key, i)
+    else:
+        _g_refused(it, b, key, i)
+
+
+def _g_lookahead(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.lookahead = key
+
+
+def _g_home(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.home_code = (key, i)
+
+
+def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    if any(a in b.vals for a in AXES):
+        raise it._err(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
+    it.home[HOME_STORE[key]] = list(it.state.pos)
+
+
+def _g_local_offset(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g52 = True
+
+
+def _g_plane(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.plane = key
+    b.prefix.append(b.gtext(i))
+
+
+def _g_units(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.inch = key == 200
+    b.prefix.append(b.gtext(i))
+
+
+def _g_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.incremental = key == 910
+    b.prefix.append(b.gtext(i))
+
+
+def _g_arc_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.arc_absolute = key == 901
+    b.prefix.append(b.gtext(i))
+
+
+def _g_feed_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.inverse_time = key == 930
+    b.prefix.append(b.gtext(i))
+
+
+def _g_work(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.work_name = WORK_SYSTEMS[key]
+    b.prefix.append(b.gtext(i))
+
+
+def _g_work_extended(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    vals = b.vals
+    if "P" not in vals:
+        raise it._err(GcodeSyntaxError, "G54.1 needs a P word", b.lineno, b.col(i))
+    b.work_name = f"G54.1P{int(vals['P'][0])}"
+    b.prefix.append(f"{b.gtext(i)} P{b.words[vals['P'][1]][1]}")
+
+
+def _g_tool_length(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    vals = b.vals
+    b.prefix.append(b.gtext(i) + (f" H{b.words[vals['H'][1]][1]}" if "H" in vals else ""))
+    it._g43(vals, b.lineno, b.col(i))
+
+
+def _g_tool_length_cancel(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    it.state.tlo, it.state.tlo_active = 0.0, False
+    b.prefix.append(b.gtext(i))
+
+
+def _g_machine(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g53 = True
+    b.prefix.append(b.gtext(i))
+
+
+def _g_g92(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g92 = key
+
+
+def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    b.g10 = True
+
+
+def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
+
+
+#: G code key (10 x number) -> handler(interpreter, block, key, word index)
+_G_HANDLERS: dict = {}
+for _keys, _handler in (
+    (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused),
+    (MOTION_CODES, _g_motion), (CANNED_CYCLES, _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
+    (LOOKAHEAD_G, _g_lookahead), ({50, 51, 80}, _g_lookahead_spline_or_refused),
+    (HOME_CODES, _g_home), (HOME_STORE, _g_home_store), ({520}, _g_local_offset),
+    (PLANES, _g_plane), ({200, 210}, _g_units), ({900, 910}, _g_distance), ({901, 911}, _g_arc_distance),
+    ({930, 940, 950}, _g_feed_mode), (WORK_SYSTEMS, _g_work), ({541}, _g_work_extended),
+    ({430}, _g_tool_length), ({490}, _g_tool_length_cancel), ({530}, _g_machine), ({920, 921, 922}, _g_g92),
+    ({100}, _g_g10),
+):
+    for _key in _keys:
+        _G_HANDLERS[_key] = _handler
 
 
 def spline_points(ctrl, s) -> np.ndarray:

@@ -124,12 +124,18 @@ def split_lines(text: str) -> list[str]:
     return _LINE_SPLIT.findall(text)
 
 
+#: a word of a block: (upper-case letter, raw number text, start and end of the number text
+#: in the line, index of the letter). Plain tuples: a NamedTuple costs 7x more to build
+#: (0.59 against 0.09 us each, measured), and a program has millions of words.
+Word = tuple[str, str, int, int, int]
+WORD_LETTER, WORD_NUMBER, WORD_START, WORD_END, WORD_LETTER_POS = range(5)
+
 # A line made only of words and blanks (the overwhelming majority of CAM output).
 _WORD_RUN = re.compile(rf"([ \t]*)([A-Za-z])([ \t]*)({NUMBER_RE})")
 _FAST_LINE = re.compile(rf"[ \t]*(?:[A-Za-z][ \t]*{NUMBER_RE}[ \t]*)*(?:\r\n|\n|\r)?")
 
 
-def scan_words(line: str) -> list[tuple[str, str, int, int, int]] | None:
+def scan_words(line: str) -> list[Word] | None:
     """Fast path: ``[(LETTER, number_text, start, end, letter_pos), ...]`` or None.
 
     ``start:end`` is the span of the number text in ``line`` and ``letter_pos`` the
@@ -148,7 +154,7 @@ def scan_words(line: str) -> list[tuple[str, str, int, int, int]] | None:
     return out
 
 
-def words_from_tokens(tokens: list[Token]) -> list[tuple[str, str, int, int, int]]:
+def words_from_tokens(tokens: list[Token]) -> list[Word]:
     """The same list as :func:`scan_words`, from :func:`lex` tokens of one line."""
     out = []
     for t in tokens:

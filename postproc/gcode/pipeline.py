@@ -16,6 +16,7 @@ import gc
 import math
 import os
 import re
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from itertools import islice
@@ -38,7 +39,7 @@ from postproc.errors import (
 )
 from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import EmitterMixin, _unit_decimals
-from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, engine_attr, prepare_engine
+from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
 from postproc.gcode.interp import Arc, Interpreter, Move, start_position
@@ -65,10 +66,12 @@ class CorrectOptions:
     force: bool = False
     added: list = field(default_factory=list)
     chunk_lines: int | None = None  # default: DEFAULT_CHUNK_LINES, or SEGMENTED_CHUNK_LINES with segmentation
+    dialect: str = "generic"  # the controller the program is for: how it is read and written
+    expand: bool = True  # flatten parameters, O-words, subprograms and macros (False: refuse them)
+    subroutine_path: tuple = ()  # folders searched for o<name> call and M98 subprogram files
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
-    dialect: str = "generic"  # controller the output is for (postproc.gcode.dialect.DIALECTS)
 
 
 @dataclass
@@ -89,6 +92,7 @@ class CorrectReport:
     max_residual_mm: float = 0.0  # largest inverse residual met
     cycles_kept: int = 0
     splines_linearised: int = 0
+    expanded: bool = False  # the program was expanded (subprograms, loops, parameters)
     cycles_expanded: int = 0
 
 
@@ -106,7 +110,7 @@ class Corrector(EmitterMixin):
         self.path = path
         self.cal_name = calibration_name
         self.cal_sha = calibration_sha256
-        self.interp = Interpreter(setup, path)
+        self.interp = Interpreter(setup, path, dialect=options.dialect)
         self.interp.require_g54 = bool(setup.start)
         self.report = CorrectReport()
         # where the machine is before the first move: the start position (NaN: unknown);
@@ -117,15 +121,17 @@ class Corrector(EmitterMixin):
         self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
         self.emitted_motion: int | None = None
+        self.expanded = False  # correcting the expanded program (recorded in the header)
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
+        self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
         self._decimals: dict[float, int] = {}
         self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
-        self.report.solver = str(engine_attr(engine, "solver") or "")
+        self.report.solver = engine.solver
 
     # -- safety-checked engine calls ----------------------------------------------------
     def _context(self, dirs: np.ndarray, rotary: list[dict]) -> dict:
@@ -202,19 +208,34 @@ class Corrector(EmitterMixin):
         return q_nom + delta
 
     # -- the run -----------------------------------------------------------------------
-    def run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
+    def run(self, lines: Iterable[str], write: Callable[[str], None], progress=None,
+            source: deque | None = None) -> CorrectReport:
         # Millions of small short-lived objects, none of them cyclic: the cyclic
         # garbage collector only costs time here (the chunks bound the memory).
         was_enabled = gc.isenabled()
         gc.disable()
         try:
-            return self._run(lines, write, progress)
+            return self._run(lines, write, progress, source)
         finally:
             if was_enabled:
                 gc.enable()
 
-    def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None) -> CorrectReport:
+    def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None,
+             source: deque | None = None) -> CorrectReport:
+        """``source``: for an expanded program, the (line, file) each of ``lines`` comes
+        from, in order (the lines are then read one by one, never in bulk)."""
         it = iter(lines)
+        interp = self.interp
+        interp.may_expand = source is None and self.opt.expand
+
+        def where(seq: int) -> int:
+            """The line number the interpreter reports for the ``seq``-th line read."""
+            if source is None:
+                return seq
+            ln, p = source.popleft()
+            interp.path = p or self.path
+            return ln
+
         # the lines that stay before the header: a '%' tape mark and the program number
         # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
         head = [ln for ln in islice(it, 3)]
@@ -231,12 +252,12 @@ class Corrector(EmitterMixin):
                     hint="correct the original program instead, or use --force to correct it again")
         ending = (emit.line_ending(head[0]) if head else "") or "\n"
         header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
-                                        self._setup_note(), ending, expanded=False, setup=self.setup)
+                                        self._setup_note(), ending, expanded=self.expanded, setup=self.setup)
         header = "".join(header_rows)
         entries: list = []
         lineno = 1
         for line in head[:keep]:
-            self.interp.feed_line(lineno, line)
+            self.interp.feed_line(where(lineno), line)
             write(line if emit.line_ending(line) else line + ending)
             self.report.lines_out += 1
             lineno += 1
@@ -247,8 +268,7 @@ class Corrector(EmitterMixin):
         write(header)
         self.report.lines_out += len(header_rows)
 
-        interp = self.interp
-        use_fast = self.linear_exact and self.opt.fast_lane
+        use_fast = self.linear_exact and self.opt.fast_lane and source is None
         use_bulk = use_fast and self.opt.bulk_lane
         dec_mm = _unit_decimals(self.opt, 1.0)
         dec_in = _unit_decimals(self.opt, MM_PER_INCH)
@@ -263,7 +283,7 @@ class Corrector(EmitterMixin):
                     entries.append((line, fm, interp.motion_word, interp.state.motion))
                     lineno += 1
                     return
-            mv = interp.feed_line(lineno, line)
+            mv = interp.feed_line(where(lineno), line)
             if mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
             elif mv is not None and mv.spline is not None:
@@ -332,6 +352,8 @@ class Corrector(EmitterMixin):
 
     def _setup_note(self) -> str:
         parts = []
+        if self.expanded:
+            parts.append("expanded: subprograms, loops and parameters written out")
         offs = self.setup.offsets or {}
         if "G54" not in offs:
             parts.append("G54 taken as zero unless named")
@@ -787,8 +809,15 @@ class Corrector(EmitterMixin):
         flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
         edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
         sep, lower = emit.style_of(line)
-        for letter, idx, t, attr in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z"), ("R", c.r_idx, t_r[2], "_cycle_rz")):
+        same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
+        self._cycle_nominal = (c.z_mm, c.r_mm)
+        for letter, idx, t, attr, nominal in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z", c.z_mm),
+                                              ("R", c.r_idx, t_r[2], "_cycle_rz", c.r_mm)):
             v = (t - shift[2]) / unit
+            if idx < 0 and not same_group:
+                # the controller holds the program's own value (given earlier, or R taken as
+                # the initial level)
+                setattr(self, attr, (nominal - shift[2]) / unit)
             if idx >= 0:
                 _l, num, start, end, _p = mv.words[idx]
                 dout = max(d, emit.decimals_of(num))
@@ -841,10 +870,47 @@ def correct_text(text: str, engine, setup: Setup | None = None, options: Correct
     from postproc.gcode.lexer import split_lines
 
     out: list[str] = []
-    c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
-                  calibration_name=calibration_name, calibration_sha256=calibration_sha256)
-    report = c.run(split_lines(text), out.append)
+    lines = split_lines(text)
+    report = _correct_lines(lambda: lines, out.append, out.clear, engine, setup, options, path,
+                            calibration_name, calibration_sha256)
     return "".join(out), report
+
+
+def _correct_lines(get_lines, write, restart, engine, setup, options, path, calibration_name, calibration_sha256,
+                   progress=None) -> CorrectReport:
+    """Correct the lines ``get_lines()`` gives; when the program turns out to need
+    expansion, ``restart()`` drops what was written and the expanded program is corrected."""
+    from postproc.gcode.interp import NeedsExpansion
+
+    setup = setup or Setup()
+    options = options or CorrectOptions()
+
+    def corrector() -> Corrector:
+        return Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
+                         calibration_sha256=calibration_sha256)
+
+    try:
+        return corrector().run(get_lines(), write, progress=progress)
+    except NeedsExpansion:
+        if not options.expand:
+            raise
+    from postproc.gcode.expand import expand
+
+    restart()
+    lines = list(get_lines())
+    source: deque = deque()
+
+    def texts():
+        for sl in expand(lines, path=path, dialect=options.dialect,
+                         subroutine_path=[Path(p) for p in options.subroutine_path]):
+            source.append((sl.lineno, sl.path))
+            yield sl.text
+
+    c = corrector()
+    c.expanded = True
+    report = c.run(texts(), write, progress=progress, source=source)
+    report.expanded = True
+    return report
 
 
 def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, setup: Setup | None = None,
@@ -867,9 +933,14 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
     if empty:
         raise PostprocError("the program is empty: nothing to correct", path=str(source),
                             hint="check that this is the program you meant (was it written completely?)")
-    path, lines = iter_source_lines(Path(source))
-    with output_path(output) as tmp, open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
-        c = Corrector(engine, setup or Setup(), options or CorrectOptions(), path=path,
-                      calibration_name=calibration_name, calibration_sha256=calibration_sha256)
-        report = c.run(lines, fh.write, progress=progress)
+    path, _lines = iter_source_lines(Path(source))
+    # staged: a device or pipe gets the whole program at the end (the run may start over)
+    with output_path(output, stage_special=True) as tmp, \
+            open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
+        def restart() -> None:
+            fh.seek(0)
+            fh.truncate()
+
+        report = _correct_lines(lambda: iter_source_lines(Path(source))[1], fh.write, restart, engine, setup,
+                                options, path, calibration_name, calibration_sha256, progress)
     return report

@@ -65,6 +65,9 @@ REFUSED_G = {
     680: "G68 coordinate rotation", 923: "G92.3 restore offsets",
     171: "G17.1 plane", 181: "G18.1 plane", 191: "G19.1 plane", 600: "G60 directional positioning",
     760: "G76 threading cycle",
+    650: "G65 macro call", 660: "G66 modal macro call", 661: "G66.1 modal macro call",
+    470: "G47 text engraving (Haas)", 120: "G12 circular pocket (Haas)", 130: "G13 circular pocket (Haas)",
+    1500: "G150 general pocket milling (Haas)",
 }
 
 # Why some refused codes cannot be corrected (the hint shown with the refusal).
@@ -80,7 +83,8 @@ REFUSED_HINT = {
 }
 
 # M codes refused: subprograms and modal-state restore change what follows.
-REFUSED_M = {98: "M98 subprogram call (expanded only with the subprogram in the same file)",
+REFUSED_M = {97: "M97 local subprogram call (Haas)",
+             98: "M98 subprogram call (expanded only with the subprogram in the same file)",
              99: "M99 subprogram return",
              71: "M71 modal state restore", 72: "M72 modal state restore",
              73: "M73 modal state save/autorestore"}

@@ -1,0 +1,119 @@
+"""Duplicates and outliers in a measurement campaign, found before anything is fitted.
+
+- **Duplicates**: rows equal in every column (commanded point, measured point, tool
+  vector, context) are one shot written twice (a copy-paste, an exporter repeating a
+  row). Kept once: as repeats they would pull the noise floor toward zero.
+- **Outliers in repeat groups**: a shot that departs from the other shots of its
+  group (same point, approach and context) by far more than the pooled within-group
+  scatter. The scatter is estimated robustly (median absolute deviation), so one glitch
+  cannot inflate the yardstick it is measured with. In a pair the two shots depart
+  from each other alike: the one farther from the model is taken.
+- **Outliers among single shots**: a residual (against the calibration) far outside its
+  robust spread. The spread (median absolute deviation per component) includes any
+  systematic error the model misses, so an unmodelled effect does not become outliers;
+  a tracker glitch of tens of sigma does.
+
+Both tests flag a row when its standardised squared deviation exceeds the chi-square
+(3 degrees of freedom) quantile at ``FAMILY_ALPHA / N``: on clean data the chance of one
+false flag in the whole campaign is about FAMILY_ALPHA.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from postproc.diagnose.data import Dataset
+
+# Chance of flagging one clean row anywhere in the campaign (Bonferroni over rows).
+FAMILY_ALPHA = 1e-3
+# Consistency factor of the median absolute deviation for a Gaussian (MAD * 1.4826 = sigma).
+MAD_TO_SIGMA = 1.4826
+# Fewer rows than this give no robust spread.
+MIN_ROWS = 8
+# Spreads below this (mm, a nanometre: below any instrument) are rounding, not noise:
+# noise-free simulated data must not make outliers of rounding differences.
+MIN_SIGMA_MM = 1e-6
+
+
+@dataclass
+class Screening:
+    keep: np.ndarray  # (N,) bool: rows used by the analysis
+    duplicates: list[dict] = field(default_factory=list)
+    outliers: list[dict] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return {"duplicates": self.duplicates, "outliers": self.outliers, "n_excluded": int(np.sum(~self.keep))}
+
+
+def threshold(n: int) -> float:
+    from scipy.stats import chi2
+
+    return float(chi2.isf(FAMILY_ALPHA / max(n, 1), 3))
+
+
+def _robust_sigma(dev: np.ndarray) -> np.ndarray:
+    s = MAD_TO_SIGMA * np.median(np.abs(dev - np.median(dev, axis=0)), axis=0)
+    return np.maximum(s, MIN_SIGMA_MM)
+
+
+def duplicate_rows(ds: Dataset) -> np.ndarray:
+    """(N,) True for a row equal in every column to an earlier row."""
+    cols = [ds.q, ds.m, ds.r] + [v[:, None] for _, v in sorted(ds.ctx.items())]
+    _, first = np.unique(np.hstack(cols), axis=0, return_index=True)
+    dup = np.ones(len(ds), dtype=bool)
+    dup[first] = False
+    return dup
+
+
+def screen(ds: Dataset, resid: np.ndarray) -> Screening:
+    """Duplicates and outliers of ``ds`` given its residual ``resid`` (N, 3) against the model."""
+    n = len(ds)
+    dup = duplicate_rows(ds)
+    out = Screening(~dup)
+    for i in np.nonzero(dup)[0]:
+        out.duplicates.append({"place": ds.place(int(i)), "row": int(i)})
+    if n - dup.sum() < MIN_ROWS:
+        return out
+    live = np.nonzero(~dup)[0]
+    sub = ds.subset(live)
+    groups = sub.repeat_groups()
+    counts = np.bincount(groups)
+    limit = threshold(len(live))
+    flagged = np.zeros(len(live), dtype=bool)
+    reason: dict[int, str] = {}
+    # repeat groups: each shot against the mean of the others in its group
+    multi = counts[groups] >= 2
+    if np.count_nonzero(multi) >= MIN_ROWS:
+        sums = np.zeros((len(counts), 3))
+        np.add.at(sums, groups, sub.m)
+        k = counts[groups][:, None].astype(float)
+        loo = (sums[groups] - sub.m) / np.maximum(k - 1, 1)
+        d = sub.m - loo  # variance sigma^2 * k / (k - 1)
+        dstd = d * np.sqrt((k - 1) / k)
+        sigma = _robust_sigma(dstd[multi])
+        z2 = np.sum((dstd / sigma) ** 2, axis=1)
+        rnorm = np.linalg.norm(resid[live], axis=1)
+        for g in np.unique(groups[multi & (z2 > limit)]):
+            rows = np.nonzero(groups == g)[0]
+            bad = rows[z2[rows] > limit]
+            if counts[g] == 2:
+                bad = bad[np.argsort(-rnorm[bad])][:1]  # a pair: the shot farther from the model
+            for i in bad:
+                flagged[i] = True
+                reason[int(i)] = (f"departs from the other shots at this point by {np.sqrt(z2[i]):.1f} "
+                                  f"within-group sigma")
+    # single shots (and the rest): the residual against its robust spread
+    sigma = _robust_sigma(resid[live][~flagged])
+    z2 = np.sum(((resid[live] - np.median(resid[live][~flagged], axis=0)) / sigma) ** 2, axis=1)
+    single = (counts[groups] == 1) & (z2 > limit) & ~flagged
+    for i in np.nonzero(single)[0]:
+        flagged[i] = True
+        reason[int(i)] = f"residual {np.sqrt(z2[i]):.1f} robust sigma from the others"
+    for i in np.nonzero(flagged)[0]:
+        row = int(live[i])
+        out.keep[row] = False
+        out.outliers.append({"place": ds.place(row), "row": row, "q_mm": [float(v) for v in ds.q[row]],
+                             "residual_mm": [float(v) for v in resid[row]], "reason": reason[int(i)]})
+    return out

@@ -1,0 +1,1059 @@
+"""Expansion of parameters, expressions, O-word control, subprograms and macros.
+
+A streaming preprocessor that runs before the modal interpreter and turns a program
+that uses LinuxCNC parameters/O-words or Fanuc M98/M99 and custom macro B into a
+*flat* program: every executed line once per execution, expressions evaluated to
+numbers, control lines consumed. A line holding no expression, parameter or control
+is yielded with its original bytes (``SourceLine.original``).
+
+LinuxCNC control flow is executed the way ``interp_o_word.cc`` does it: one global
+"skipping to o-word NAME" state, a table of o-word positions filled as they are met,
+``executed_if`` / ``doing_break`` / ``doing_continue`` flags, subroutines found in the
+file (forward search) or as ``<name>.ngc`` on the subroutine path. Fanuc/Haas
+programs (``dialect="fanuc"``/``"haas"``, or ``"generic"`` when the program uses
+macro B statements) are executed with Fanuc's rules: subprograms ``O1000 ... M99``
+found by number anywhere in the file, ``M98`` sharing local variables, ``G65``
+opening a new local level with the arguments of Argument specification I, ``GOTO``
+searching forward then from the start of the program, vacant variables.
+
+Values that only the running machine knows (probe results, current position and
+tool, HAL pins, Fanuc system variables, retained #500-#999, coordinate-system
+parameters not set by the program) are refused with ``path:line:col``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.gcode.expand_syntax import (
+    CANDIDATE,
+    Assign,
+    Block,
+    Macro,
+    OWord,
+    Unit,
+    Word,
+    candidate_lines,
+    first_code_line,
+    is_fanuc,
+    parse_block,
+    plain_value,
+    strip_comments,
+)
+from postproc.gcode.expr import (
+    NULL,
+    Env,
+    evaluate,
+    format_number,
+    to_index,
+)
+from postproc.gcode.lexer import scan_words, split_lines
+
+DIALECTS = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
+
+# rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
+LINUXCNC_SUB_PARAMS = 30
+# rs274ngc RS274NGC_MAX_PARAMETERS: numbered parameters are #1..#5601.
+LINUXCNC_MAX_PARAMETER = 5601
+# rs274ngc INTERP_SUB_ROUTINE_LEVELS: call depth limit.
+MAX_CALL_DEPTH = 10
+# Fanuc local variables #1..#33 (one set per G65 macro level).
+FANUC_LOCALS = 33
+
+# Fanuc argument specification I (G65): address -> local variable number.
+FANUC_ARGUMENTS_I = {
+    "A": 1, "B": 2, "C": 3, "I": 4, "J": 5, "K": 6, "D": 7, "E": 8, "F": 9,
+    "H": 11, "M": 13, "Q": 17, "R": 18, "S": 19, "T": 20, "U": 21, "V": 22,
+    "W": 23, "X": 24, "Y": 25, "Z": 26,
+}
+
+# LinuxCNC read-only named parameters that hold machine or modal state.
+_LINUXCNC_PREDEFINED = frozenset(
+    """vmajor vminor line motion_mode plane ccomp metric imperial absolute incremental
+    inverse_time units_per_minute units_per_rev coord_system tool_offset retract_r_plane
+    retract_old_z spindle_rpm_mode spindle_css_mode ijk_absolute_mode lathe_diameter_mode
+    lathe_radius_mode spindle_on spindle_cw mist flood speed_override feed_override
+    adaptive_feed feed_hold feed rpm x y z a b c u v w abs_x abs_y abs_z abs_a abs_b abs_c
+    abs_u abs_v abs_w current_tool current_pocket selected_tool selected_pocket task
+    call_level remap_level task""".split()
+)
+
+# LinuxCNC numbered parameters whose value lives in the controller.
+_LINUXCNC_MACHINE_RANGES = (
+    (5061, 5070, "probe result (G38)"),
+    (5161, 5390, "stored position or coordinate-system offset kept by the controller"),
+    (5399, 5399, "M66 input result"),
+    (5400, 5413, "current tool and its offsets"),
+    (5420, 5428, "current position"),
+    (5599, 5601, "controller flag"),
+)
+
+
+
+_M_SPECIAL = (2.0, 30.0, 97.0, 98.0, 99.0)
+_G_SPECIAL = (65.0, 66.0)
+_LINE_END = re.compile(r"(\r\n|\n|\r)$")
+
+# ---------------------------------------------------------------------------
+# Public types
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class SourceLine:
+    """One executed line of the flat program."""
+
+    lineno: int  # 1-based line in ``path``
+    path: str | None  # file the line comes from (a subroutine file for o<name> call)
+    text: str  # the line as executed, with its line ending
+    original: bool  # text is byte-identical to the source line
+
+
+class ExpansionError(UnsupportedGcodeError):
+    """A program whose expansion is refused (machine state, runaway loop, ...)."""
+
+
+def needs_expansion(lines: Sequence[str], dialect: str = "generic") -> bool:
+    """True when a line uses parameters, expressions, O-word control or subprograms.
+
+    A program-number line (``O1234``, ``:1234``) or ``%`` alone does not count:
+    :func:`expand` would yield such a program unchanged up to its M2/M30.
+    """
+    candidates = candidate_lines(lines)
+    fanuc = is_fanuc(lines, dialect, candidates)
+    for k in candidates:
+        line = lines[k]
+        code = strip_comments(line)
+        if not CANDIDATE.search(code):
+            continue
+        try:
+            b = parse_block(line, fanuc=fanuc, path=None, lineno=k + 1, nested_comments=dialect != "linuxcnc")
+        except PostprocError:
+            if "#" in code or "[" in code:
+                return True  # a broken expression: let expand() report it with its place
+            continue  # not G-code an expansion would touch (e.g. text after the program end)
+        if b.oword is not None:
+            if b.oword.kw == "" and not any(True for _ in b.items) and first_code_line(lines) == k:
+                continue
+            return True
+        if b.macro is not None or not b.plain:
+            return True
+        for w in b.words:
+            v = plain_value(w)
+            if (w.letter == "M" and v in ((97.0, 98.0, 99.0) if fanuc else (98.0, 99.0))) or (
+                    w.letter == "G" and v in (65.0, 66.0)):
+                return True
+    return False
+
+
+# ---------------------------------------------------------------------------
+# Execution
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class _Offset:
+    unit: Unit
+    idx: int  # line index of the o-word
+    kind: str
+    repeat_count: int = -1
+
+
+@dataclass
+class _Frame:
+    named: dict[str, float] = field(default_factory=dict)
+    call_type: str = ""  # "", "oword", "m98", "g65"
+    ret_unit: Unit | None = None
+    ret_idx: int = 0
+    saved: list | None = None  # numbered locals of the caller (o-word call / G65)
+    repeats_left: int = 0  # M98/G65 L count still to run after this pass
+    start_unit: Unit | None = None
+    start_idx: int = 0
+    sub_name: str | None = None
+    call_lineno: int = 0
+    call_path: str | None = None
+    m98_loop_counter: int = -1  # LinuxCNC M98 L loop bookkeeping (on the caller's frame)
+
+
+class _Stop(Exception):
+    pass
+
+
+class _Expander(Env):
+    def __init__(self, lines: list[str], path: str | None, dialect: str,
+                 subroutine_path: Sequence[Path], max_lines: int):
+        if dialect not in DIALECTS:
+            raise ValueError(f"unknown dialect {dialect!r}")
+        self.dialect = dialect
+        self.fanuc = is_fanuc(lines, dialect)
+        self.linuxcnc_strict = dialect == "linuxcnc"
+        self.nested = dialect != "linuxcnc"
+        # M97 (Haas local subprogram: call to a sequence number) in the Fanuc-family dialects
+        self.call_m_codes = (97.0, 98.0, 99.0) if self.fanuc else (98.0, 99.0)
+        self.main = Unit(lines, path, self.fanuc, self.nested)
+        self.subroutine_path = [Path(p) for p in subroutine_path]
+        self.max_lines = max_lines
+        self.files: dict[str, Unit] = {}
+        # numbered parameters: LinuxCNC: index -> value (unset reads 0);
+        # Fanuc: common/retained variables (locals live in the frames)
+        self.params: dict[int, float] = {}
+        self.globals: dict[str, float] = {"_value": 0.0, "_value_returned": 0.0}
+        self.frames = [_Frame()]
+        if self.fanuc:
+            self.frames[0].saved = [NULL] * (FANUC_LOCALS + 1)
+        # LinuxCNC o-word state (interp_o_word.cc)
+        self.offsets: dict[str, _Offset] = {}
+        self.skipping_o: str | None = None
+        self.skipping_to_sub: str | None = None
+        self.skip_from: tuple[Unit, int] | None = None
+        self.executed_if = False
+        self.doing_break = False
+        self.doing_continue = False
+        self.defining_sub: str | None = None
+        self.pending: list[tuple[tuple, float]] = []
+        self.pending_names: set[str] = set()
+        # where we are
+        self.unit = self.main
+        self.idx = 0
+        self.unit_cur = self.main
+        self.cur_idx = 0
+        self.cur_col = 0
+        self.executed = 0
+
+    # -- places and errors ------------------------------------------------
+    @property
+    def lineno(self) -> int:
+        return self.cur_idx + 1
+
+    def error(self, col: int, message: str, hint: str | None = None):
+        return GcodeSyntaxError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
+
+    def refuse(self, col: int, message: str, hint: str | None = None):
+        return ExpansionError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
+
+    # -- parameters ---------------------------------------------------------
+    def _fanuc_locals(self) -> list:
+        for fr in reversed(self.frames):
+            if fr.call_type in ("", "g65"):
+                return fr.saved  # type: ignore[return-value]
+        raise AssertionError  # pragma: no cover
+
+    def read_numbered(self, index: int, col: int):
+        if self.fanuc:
+            if index == 0:
+                return NULL
+            if 1 <= index <= FANUC_LOCALS:
+                return self._fanuc_locals()[index]
+            if 100 <= index <= 499:
+                return self.params.get(index, NULL)
+            if 500 <= index <= 999:
+                if index in self.params:
+                    return self.params[index]
+                raise self.refuse(col, f"#{index} is a retained common variable: its value is kept by the "
+                                  "controller and unknown before the program runs",
+                                  hint=f"set #{index} in the program before reading it")
+            if index >= 1000:
+                raise self.refuse(col, f"#{index} is a system variable (machine state, positions, offsets or "
+                                  "signals): its value is unknown before the program runs",
+                                  hint="replace it with the value it holds on your machine")
+            raise self.error(col, f"#{index} is not a macro variable number")
+        if not 1 <= index <= LINUXCNC_MAX_PARAMETER:
+            raise self.error(col, f"parameter number #{index} is out of range (1..{LINUXCNC_MAX_PARAMETER})")
+        if index in self.params:
+            return self.params[index]
+        for lo, hi, what in _LINUXCNC_MACHINE_RANGES:
+            if lo <= index <= hi:
+                raise self.refuse(col, f"#{index} reads a {what}: its value is unknown before the program runs",
+                                  hint="replace it with the value it holds on your machine")
+        return 0.0
+
+    def write_numbered(self, index: int, value, col: int) -> None:
+        if self.fanuc:
+            if 1 <= index <= FANUC_LOCALS:
+                self._fanuc_locals()[index] = value
+                return
+            if 100 <= index <= 999:
+                self.params[index] = value
+                return
+            if index >= 1000:
+                raise self.refuse(col, f"setting system variable #{index} changes controller state "
+                                  "(alarm, offsets, signals) that a corrected program cannot follow",
+                                  hint="remove the setting or set the value on the controller")
+            raise self.error(col, f"#{index} cannot be set")
+        if not 1 <= index <= LINUXCNC_MAX_PARAMETER:
+            raise self.error(col, f"parameter number #{index} is out of range (1..{LINUXCNC_MAX_PARAMETER})")
+        if 5161 <= index <= 5390:
+            raise self.refuse(col, f"setting #{index} changes a stored position or coordinate-system offset "
+                              "kept by the controller", hint="use G10 L2/L20 or set it on the controller")
+        self.params[index] = value
+
+    def read_named(self, name: str, col: int):
+        scope = self.globals if name.startswith("_") else self.frames[-1].named
+        if name in scope:
+            return scope[name]
+        if name in self.pending_names:
+            return 0.0
+        if name.startswith("_"):
+            bare = name[1:]
+            if bare in _LINUXCNC_PREDEFINED or bare.startswith(("hal[", "ini[")):
+                raise self.refuse(col, f"#<{name}> reads the controller's live state: its value is unknown "
+                                  "before the program runs", hint="replace it with the value it holds")
+        raise self.error(col, f"named parameter #<{name}> is not defined",
+                         hint=f"set it first: #<{name}> = value")
+
+    def exists_named(self, name: str) -> bool:
+        scope = self.globals if name.startswith("_") else self.frames[-1].named
+        return name in scope or name in self.pending_names or (
+            name.startswith("_") and name[1:] in _LINUXCNC_PREDEFINED)
+
+    def _value(self, node: tuple):
+        return evaluate(node, self)
+
+    def _num(self, node: tuple, col: int) -> float:
+        v = evaluate(node, self)
+        if v is NULL:
+            return 0.0
+        return v
+
+    # -- units --------------------------------------------------------------
+    def load_file(self, file: Path) -> Unit:
+        key = str(file)
+        unit = self.files.get(key)
+        if unit is None:
+            raw = file.read_bytes()
+            text = raw.decode("utf-8", errors="strict") if raw else ""
+            if text.startswith("\ufeff"):
+                text = text[1:]
+            unit = Unit(split_lines(text), key, self.fanuc, self.nested)
+            self.files[key] = unit
+        return unit
+
+    def find_sub_file(self, name: str) -> Path | None:
+        for d in self.subroutine_path:
+            cand = d / f"{name}.ngc"
+            if cand.is_file():
+                return cand
+        return None
+
+    def find_program_file(self, number: int) -> Path | None:
+        stems = [f"O{number:04d}", f"O{number}", f"{number:04d}", f"{number}"]
+        for d in self.subroutine_path:
+            try:
+                entries = {p.name.lower(): p for p in d.iterdir() if p.is_file()}
+            except OSError:
+                continue
+            for stem in stems:
+                for ext in ("", ".nc", ".ngc", ".txt", ".tap", ".cnc"):
+                    hit = entries.get((stem + ext).lower())
+                    if hit is not None:
+                        return hit
+        return None
+
+    # -- main loop ----------------------------------------------------------
+    def run(self) -> Iterator[SourceLine]:
+        stopped_at_end = False
+        percent_open = False
+        first_code = True
+        while True:
+            unit = self.unit
+            if self.idx >= len(unit.lines):
+                self._end_of_file()
+                break
+            idx = self.idx
+            self.idx += 1
+            self.cur_idx = idx
+            self.unit_cur = unit
+            self.executed += 1
+            if self.executed > self.max_lines:
+                raise self.refuse(1, f"the program runs more than {self.max_lines} lines: an endless loop or "
+                                  "recursion", hint="check the loop conditions and subprogram returns")
+            line = unit.lines[idx]
+            # LinuxCNC skipping states: only o-word lines can stop them
+            if self.skipping_o is not None or self.skipping_to_sub is not None:
+                if not self.fanuc and unit.maybe_oword(idx):
+                    b = unit.block(idx)
+                    if b.oword is not None:
+                        target = self.skipping_to_sub or self.skipping_o
+                        if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
+                            yield from self._oword(b)
+                continue
+            words = scan_words(line)
+            if words is not None and not any(
+                    letter == "O" or (letter == "M" and float(num) in _M_SPECIAL)
+                    or (letter == "G" and float(num) in _G_SPECIAL) for letter, num, *_ in words):
+                # fast path: a line of plain words (most CAM output) is yielded as it is
+                if words:
+                    first_code = False
+                yield SourceLine(idx + 1, unit.path, line, True)
+                continue
+            stripped = line.strip()
+            if stripped.startswith("%"):
+                if unit is not self.main:
+                    continue  # a subprogram file's own tape marks stay out of the flat program
+                yield SourceLine(idx + 1, unit.path, line, True)
+                if unit is self.main:
+                    if percent_open:
+                        return
+                    percent_open = True
+                continue
+            b = unit.block(idx)
+            if b.program_number is not None:
+                if unit is self.main and first_code:
+                    first_code = False
+                    yield SourceLine(idx + 1, unit.path, line, True)
+                    continue
+                if len(self.frames) == 1:
+                    break  # the main program ran into the next program in the file
+                continue
+            if b.oword is not None and b.oword.kw == "" and unit is self.main and first_code:
+                first_code = False
+                yield SourceLine(idx + 1, unit.path, line, True)
+                continue
+            if b.items or b.oword or b.macro:
+                first_code = False
+            try:
+                if b.oword is not None:
+                    yield from self._oword(b)
+                elif b.macro is not None:
+                    self._macro(b)
+                else:
+                    yield from self._block(b, line)
+            except _Stop:
+                stopped_at_end = True
+                break
+        if stopped_at_end:
+            last = _last_code_line(self.main.lines)
+            if last is not None and self.main.lines[last].strip().startswith("%") and last > self.cur_idx:
+                yield SourceLine(last + 1, self.main.path, self.main.lines[last], True)
+
+    def _end_of_file(self) -> None:
+        if self.defining_sub is not None and self.skipping_o == self.defining_sub:
+            unit, idx = self.skip_from or (self.unit, self.idx)
+            name = self.defining_sub
+            raise GcodeSyntaxError(
+                f"'o{_oname(name)} sub' has no matching 'o{_oname(name)} endsub'",
+                path=unit.path, lineno=idx + 1, col=1,
+                hint=f"end the subroutine with 'o{_oname(name)} endsub'")
+        if self.skipping_to_sub is not None or self.skipping_o is not None:
+            name = self.skipping_to_sub or self.skipping_o
+            unit, idx = self.skip_from or (self.unit, self.idx)
+            if self.skipping_to_sub is not None:
+                raise GcodeSyntaxError(
+                    f"subroutine o{_oname(name)} not found: neither in the file nor as {name}.ngc on "
+                    "the subroutine path", path=unit.path, lineno=idx + 1, col=1,
+                    hint=f"define 'o{_oname(name)} sub' in the file or put {name}.ngc on --subroutine-path")
+            kw = unit.block(idx).oword.kw if unit.block(idx).oword is not None else ""
+            raise GcodeSyntaxError(
+                f"'o{_oname(name)} {kw}': the file ended before the o{_oname(name)} line that closes it",
+                path=unit.path, lineno=idx + 1, col=1,
+                hint="close the block with its matching o-word line (endif, endwhile, endrepeat, while)")
+        if len(self.frames) > 1:
+            fr = self.frames[-1]
+            raise GcodeSyntaxError(
+                f"subprogram {fr.sub_name} ended without its return (endsub/M99)",
+                path=fr.call_path, lineno=fr.call_lineno, col=1,
+                hint="end the subprogram with 'o<name> endsub' or M99")
+
+    # -- ordinary blocks ------------------------------------------------------
+    def _block(self, b: Block, line: str) -> Iterator[SourceLine]:
+        unit, idx = self.unit_cur, self.cur_idx
+        if b.plain:
+            m_codes = [float(w.raw) for w in b.items if w.letter == "M"]
+            g_codes = [float(w.raw) for w in b.items if w.letter == "G"]
+            if not any(m in self.call_m_codes for m in m_codes) and 65.0 not in g_codes and (
+                    66.0 not in g_codes):
+                yield SourceLine(idx + 1, unit.path, line, True)
+                if any(m in (2.0, 30.0) for m in m_codes):
+                    raise _Stop
+                return
+        if b.slash and b.assigns:
+            raise self.refuse(1, "a parameter setting on a block-delete ('/') line: whether it runs depends on "
+                              "the operator's block-delete switch", hint="remove the '/' or the setting")
+        # evaluate every value in source order (rs274ngc: settings apply after the line)
+        values: list = []
+        self.pending = []
+        self.pending_names = set()
+        for it in b.items:
+            if isinstance(it, Word):
+                if it.node is None:
+                    values.append(float(it.raw))
+                else:
+                    values.append(self._value(it.node))
+            else:
+                v = self._value(it.node)
+                if v is not NULL and not self.fanuc:
+                    v = float(v)
+                self._queue_setting(it, v)
+                values.append(None)
+                if self.fanuc:
+                    self._apply_pending()
+        self._apply_pending()
+        words = [(w, v) for w, v in zip(b.items, values, strict=True) if isinstance(w, Word)]
+        by_letter: dict[str, list[float]] = {}
+        for w, v in words:
+            if v is not NULL:
+                by_letter.setdefault(w.letter, []).append(v)
+        m_codes = by_letter.get("M", [])
+        g_codes = by_letter.get("G", [])
+        call = None
+        drop: set[int] = set()
+        if any(m in self.call_m_codes for m in m_codes) or 65.0 in g_codes:
+            call, drop = self._call_words(words, m_codes, g_codes)
+        if 66.0 in g_codes:
+            w = next(w for w, v in words if w.letter == "G" and v == 66.0)
+            raise self.refuse(w.col, "G66 modal macro call is not supported",
+                              hint="call the macro with G65 at each position")
+        # rewrite
+        edits: list[tuple[int, int, str]] = []
+        kept = 0
+        for k, (w, v) in enumerate(words):
+            if k in drop or v is NULL:
+                edits.append((w.letter_at, w.span[1], ""))
+                continue
+            if w.letter != "N":
+                kept += 1
+            if w.node is not None:
+                if not math.isfinite(v):
+                    raise self.error(w.col, f"value of {w.letter} is not a finite number")
+                edits.append((w.span[0], w.span[1], format_number(v, w.letter)))
+        for a in b.assigns:
+            edits.append((a.span[0], a.span[1], ""))
+        if kept or (not b.assigns and call is None):
+            if edits:
+                text = _apply_edits(line, edits)
+                yield SourceLine(idx + 1, unit.path, text, False)
+            else:
+                yield SourceLine(idx + 1, unit.path, line, True)
+        if any(m in (2.0, 30.0) for m in m_codes):
+            raise _Stop
+        if call is not None:
+            call()
+
+    def _queue_setting(self, a: Assign, v) -> None:
+        t = a.target
+        if t[0] == "name":
+            self.pending_names.add(t[1])
+            self.pending.append((("name", t[1]), v))
+        else:
+            index = to_index(self, self._value(t[1]), t[2])
+            if v is NULL and not self.fanuc:
+                v = 0.0
+            self.pending.append((("par", index, t[2]), v))
+
+    def _apply_pending(self) -> None:
+        for target, v in self.pending:
+            if target[0] == "name":
+                name = target[1]
+                if name.startswith("_"):
+                    bare = name[1:]
+                    if bare in _LINUXCNC_PREDEFINED or bare in ("value", "value_returned"):
+                        raise self.error(1, f"#<{name}> is a read-only parameter")
+                    self.globals[name] = v
+                else:
+                    self.frames[-1].named[name] = v
+            else:
+                self.write_numbered(target[1], v, target[2])
+        self.pending = []
+        self.pending_names = set()
+
+    # -- subprogram calls (M98 / M99 / G65) ----------------------------------
+    def _call_words(self, words, m_codes, g_codes):
+        """The call a block makes and the indices of the words it uses."""
+        drop: set[int] = set()
+        letters = {}
+        for k, (w, v) in enumerate(words):
+            letters.setdefault(w.letter, []).append((k, w, v))
+        if 99.0 in m_codes:
+            for k, _w, v in letters.get("M", []):
+                if v == 99.0:
+                    drop.add(k)
+            target = None
+            for k, w, v in letters.get("P", []):
+                drop.add(k)
+                target = (int(round(v)), w.col)
+            return (lambda: self._m99(target)), drop
+        if 97.0 in m_codes and self.fanuc:
+            mw = next(w for k, w, v in letters["M"] if v == 97.0)
+            for k, _w, v in letters.get("M", []):
+                if v == 97.0:
+                    drop.add(k)
+            p = letters.get("P")
+            if not p:
+                raise self.error(mw.col, "M97 needs P (the sequence number of the local subprogram)")
+            for k, _, _ in p + letters.get("L", []):
+                drop.add(k)
+            number = int(round(p[0][2]))
+            count = int(round(letters["L"][0][2])) if "L" in letters else 1
+            return (lambda: self._m97(number, count, p[0][1].col)), drop
+        if 98.0 in m_codes:
+            mw = next(w for k, w, v in letters["M"] if v == 98.0)
+            for k, _w, v in letters.get("M", []):
+                if v == 98.0:
+                    drop.add(k)
+            p = letters.get("P")
+            if not p:
+                raise self.error(mw.col, "M98 needs P (the subprogram number)")
+            for k, _, _ in p + letters.get("L", []):
+                drop.add(k)
+            number = int(round(p[0][2]))
+            count = int(round(letters["L"][0][2])) if "L" in letters else None
+            return (lambda: self._m98(number, count, p[0][1].col)), drop
+        # G65 P.. L.. args
+        gw = next(w for k, w, v in letters["G"] if v == 65.0)
+        if not self.fanuc:
+            raise self.refuse(gw.col, "G65 macro call is Fanuc/Haas syntax",
+                              hint="choose --dialect fanuc or haas for this program")
+        args = {}
+        number = None
+        count = 1
+        for k, (w, v) in enumerate(words):
+            drop.add(k)
+            if w.letter == "G":
+                if v != 65.0:
+                    raise self.refuse(w.col, "G65 must be alone in its block with its arguments")
+            elif w.letter == "P":
+                number = int(round(v))
+            elif w.letter == "L":
+                count = int(round(v))
+            elif w.letter == "N":
+                continue
+            elif w.letter in FANUC_ARGUMENTS_I:
+                if w.node is None and "." not in w.raw and v != 0.0:
+                    raise self.refuse(w.col, f"G65 argument {w.letter}{w.raw} has no decimal point: the "
+                                      "control scales it by its least input increment, which is "
+                                      "machine configuration", hint=f"write {w.letter}{w.raw}. (with a point)")
+                if w.letter in args:
+                    raise self.refuse(w.col, f"argument {w.letter} given twice (argument specification II "
+                                      "is not supported)")
+                args[w.letter] = v
+            else:
+                raise self.error(w.col, f"address {w.letter} cannot be a G65 argument")
+        if number is None:
+            raise self.error(gw.col, "G65 needs P (the macro program number)")
+        return (lambda: self._g65(number, count, args, gw.col)), drop
+
+    def _program_target(self, number: int, col: int) -> tuple[Unit, int, int] | None:
+        progs = self.main.programs()
+        if number in progs:
+            return self.main, progs[number], number
+        if self.unit_cur is not self.main and number in self.unit_cur.programs():
+            return self.unit_cur, self.unit_cur.programs()[number], number
+        f = self.find_program_file(number)
+        if f is not None:
+            u = self.load_file(f)
+            start = u.programs().get(number)
+            return u, (start if start is not None else -1), number
+        return None
+
+    def _m98(self, number: int, count: int | None, col: int) -> None:
+        target = self._program_target(number, col)
+        repeat = 1 if count is None else count
+        if target is None and count is None and number >= 10000 and (
+                self.fanuc or self.dialect == "generic"):
+            # Fanuc: P(count)(4-digit program number)
+            target = self._program_target(number % 10000, col)
+            repeat = number // 10000
+            number = number % 10000
+        if target is None:
+            raise self.error(col, f"subprogram O{number} not found in the file or on the subroutine path",
+                             hint=f"add 'O{number}' ... M99 after the main program's M30, or put O{number}.nc "
+                             "on --subroutine-path")
+        if repeat <= 0:
+            return
+        unit, start, _ = target
+        self._enter("m98", f"O{number}", unit, start + 1, repeat - 1)
+
+    def _m97(self, number: int, count: int, col: int) -> None:
+        if count <= 0:
+            return
+        start = self._sequence(self.main, number, 0, col)
+        self._enter("m98", f"N{number}", self.main, start, count - 1)
+
+    def _g65(self, number: int, count: int, args: dict, col: int) -> None:
+        target = self._program_target(number, col)
+        if target is None:
+            raise self.error(col, f"macro program O{number} not found in the file or on the subroutine path")
+        if count <= 0:
+            return
+        unit, start, _ = target
+        local = [NULL] * (FANUC_LOCALS + 1)
+        for letter, v in args.items():
+            local[FANUC_ARGUMENTS_I[letter]] = v
+        self._enter("g65", f"O{number}", unit, start + 1, count - 1, saved=local)
+
+    def _enter(self, call_type, name, unit, start, repeats, saved=None) -> None:
+        if len(self.frames) > MAX_CALL_DEPTH:
+            raise self.refuse(1, f"subprogram calls nested deeper than {MAX_CALL_DEPTH} levels",
+                              hint="check for a subprogram that calls itself")
+        fr = _Frame(call_type=call_type, ret_unit=self.unit_cur, ret_idx=self.cur_idx + 1,
+                    saved=saved, repeats_left=repeats, start_unit=unit, start_idx=start, sub_name=name,
+                    call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
+        self.frames.append(fr)
+        self.unit, self.idx = unit, start
+
+    def _m99(self, target: tuple[int, int] | None) -> None:
+        if len(self.frames) == 1:
+            raise self.refuse(1, "M99 in the main program repeats it forever",
+                              hint="end the main program with M30")
+        fr = self.frames[-1]
+        if fr.call_type not in ("m98", "g65"):
+            raise self.error(1, "M99 inside an o-word subroutine", hint="end it with 'o<name> endsub'")
+        if fr.repeats_left > 0:
+            fr.repeats_left -= 1
+            if fr.call_type == "g65":
+                pass  # locals persist across G65 L repeats
+            self.unit, self.idx = fr.start_unit, fr.start_idx
+            return
+        self.frames.pop()
+        self.unit, self.idx = fr.ret_unit, fr.ret_idx
+        if target is not None:
+            number, col = target
+            self.idx = self._sequence(fr.ret_unit, number, fr.ret_idx, col)
+
+    def _sequence(self, unit: Unit, number: int, start: int, col: int) -> int:
+        """Fanuc sequence-number search: forward from ``start``, then from the program start."""
+        hits = unit.sequence_numbers().get(number, [])
+        lo = self._program_start(unit, start)
+        for k in hits:
+            if k >= start and self._program_start(unit, k) == lo:
+                return k
+        for k in hits:
+            if lo <= k < start:
+                return k
+        raise self.error(col, f"sequence number N{number} not found in this program",
+                         hint="GOTO/M99 P jump to a block that starts with that N number")
+
+    def _program_start(self, unit: Unit, idx: int) -> int:
+        starts = sorted(unit.programs().values())
+        lo = 0
+        for s in starts:
+            if s <= idx:
+                lo = s
+        return lo
+
+    # -- Fanuc macro statements -------------------------------------------------
+    def _macro(self, b: Block) -> None:
+        m = b.macro
+        if b.slash:
+            raise self.refuse(1, "a macro statement on a block-delete ('/') line")
+        if m.kind == "goto":
+            self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
+        elif m.kind == "if_goto":
+            if self._cond(m.cond):
+                self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
+        elif m.kind == "if_then":
+            if self._cond(m.cond):
+                v = self._value(m.assign.node)
+                self.pending = []
+                self._queue_setting(m.assign, v)
+                self._apply_pending()
+        elif m.kind == "while":
+            if not self._cond(m.cond):
+                self.idx = self._find_end(m.loop, m.col) + 1
+        elif m.kind == "do":
+            pass
+        elif m.kind == "end":
+            self.idx = self._find_do(m.loop, m.col)
+
+    def _cond(self, node: tuple) -> bool:
+        v = self._value(node)
+        return v is not NULL and v != 0.0
+
+    def _target(self, m: Macro) -> int:
+        v = self._value(m.target)
+        if v is NULL:
+            raise self.error(m.col, "GOTO to a vacant variable")
+        return to_index(self, v, m.col)
+
+    def _find_end(self, loop: int, col: int) -> int:
+        unit = self.unit_cur
+        for k in range(self.cur_idx + 1, len(unit.lines)):
+            if "end" in unit.lines[k].lower() or "END" in unit.lines[k]:
+                b = unit.block(k)
+                if b.macro is not None and b.macro.kind == "end" and b.macro.loop == loop:
+                    return k
+        raise self.error(col, f"DO {loop} has no END {loop} after it")
+
+    def _find_do(self, loop: int, col: int) -> int:
+        unit = self.unit_cur
+        for k in range(self.cur_idx - 1, -1, -1):
+            if "do" in unit.lines[k].lower():
+                b = unit.block(k)
+                if b.macro is not None and b.macro.kind in ("while", "do") and b.macro.loop == loop:
+                    return k
+        raise self.error(col, f"END {loop} has no DO {loop} before it")
+
+    # -- LinuxCNC o-words (interp_o_word.cc) ------------------------------------
+    def _save_offset(self, ow: OWord) -> None:
+        have = self.offsets.get(ow.name)
+        if have is not None:
+            raise self.error(ow.col, f"o-word o{_oname(ow.name)} is already defined at "
+                             f"{have.unit.path or '<input>'}:{have.idx + 1}",
+                             hint="give each sub, loop and if its own o-number")
+        self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+
+    def _check_label(self, ow: OWord, allow_do: bool = False) -> _Offset | None:
+        op = self.offsets.get(ow.name)
+        if op is not None:
+            if allow_do and op.kind == "do":
+                return op
+            if not (op.unit is self.unit_cur and op.idx == self.cur_idx):
+                raise self.error(ow.col, f"duplicate o-word label o{_oname(ow.name)}: already used at line "
+                                 f"{op.idx + 1}", hint="give each sub, loop and if its own o-number")
+        return op
+
+    def _need(self, ow: OWord, kinds: tuple[str, ...], what: str) -> _Offset:
+        op = self.offsets.get(ow.name)
+        if op is None:
+            raise self.error(ow.col, f"'o{_oname(ow.name)} {ow.kw}' without its {what}")
+        if op.kind not in kinds:
+            raise self.error(ow.col, f"'o{_oname(ow.name)} {ow.kw}' does not match 'o{_oname(ow.name)} "
+                             f"{op.kind}' at line {op.idx + 1}")
+        return op
+
+    def _back_to(self, name: str) -> None:
+        op = self.offsets[name]
+        self.unit, self.idx = op.unit, op.idx
+
+    def _oword(self, b: Block) -> Iterator[SourceLine]:
+        ow = b.oword
+        if b.slash:
+            raise self.refuse(ow.col, "an o-word on a block-delete ('/') line")
+        if b.items:
+            w = b.items[0]
+            if not (isinstance(w, Word) and w.letter == "N" and len(b.items) == 1):
+                raise self.error(ow.col, "an o-word line holds nothing but the o-word (and a line number)")
+        kw = ow.kw
+        name = ow.name
+        if self.fanuc:
+            raise self.error(ow.col, "o-word control is LinuxCNC syntax",
+                             hint="choose --dialect linuxcnc for this program")
+        if self.defining_sub is not None and self.skipping_o == self.defining_sub and not (
+                name == self.defining_sub and kw == "endsub"):
+            return  # inside a definition met in sequence: only its endsub counts
+        if kw in ("sub", ""):
+            if self.skipping_o is not None:
+                if self.offsets.get(name) is None:
+                    self.offsets[name] = _Offset(self.unit_cur, self.cur_idx, kw)
+                self.skipping_o = None
+            self.skipping_to_sub = None
+            if kw == "":
+                return  # Fanuc-style O number: execution continues into it
+            if len(self.frames) > 1 and self.frames[-1].call_type == "oword" and (
+                    self.frames[-1].sub_name == name):
+                return  # the called subroutine starts here
+            if self.defining_sub is not None:
+                raise self.error(ow.col, "a subroutine defined inside another subroutine definition")
+            self._save_offset(ow)
+            self.skipping_o = name
+            self.skip_from = (self.unit_cur, self.cur_idx)
+            self.defining_sub = name
+            return
+        if kw in ("endsub", "return"):
+            if self.defining_sub == name:
+                if kw == "endsub":  # end of a definition met in sequence
+                    self.skipping_o = None
+                    self.defining_sub = None
+                return
+            if len(self.frames) == 1:
+                raise self.error(ow.col, f"'o{_oname(name)} {kw}' outside a subroutine")
+            fr = self.frames[-1]
+            if fr.call_type != "oword":
+                raise self.error(ow.col, f"'o{_oname(name)} {kw}' in a subprogram called with M98",
+                                 hint="end an M98 subprogram with M99")
+            if kw == "endsub" and self.skipping_o is not None:
+                self.skipping_o = None
+            if ow.args:
+                self.globals["_value"] = self._num(ow.args[0], ow.col)
+                self.globals["_value_returned"] = 1.0
+            for k, v in enumerate(fr.saved or []):
+                self.params[k + 1] = v
+            self.frames.pop()
+            self.unit, self.idx = fr.ret_unit, fr.ret_idx
+            return
+        if kw == "call":
+            yield from ()
+            self._ocall(ow)
+            return
+        if kw == "do":
+            self.skipping_o = None
+            if name not in self.offsets:
+                self._save_offset(ow)
+            return
+        if kw == "repeat":
+            op = self._check_label(ow)
+            if op is None:
+                self._save_offset(ow)
+                op = self.offsets[name]
+            self.skipping_o = None
+            if op.repeat_count == -1:
+                op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
+            if op.repeat_count > 0:
+                op.repeat_count -= 1
+            else:
+                self.skipping_o = name
+                self.skip_from = (self.unit_cur, self.cur_idx)
+                op.repeat_count = -1
+            return
+        if kw == "while":
+            op = self._check_label(ow, allow_do=True)
+            if op is None:
+                self._save_offset(ow)
+                op = self.offsets[name]
+            self.skipping_o = None
+            test = self._num(ow.args[0], ow.col)
+            if op.kind == "while":
+                if test == 0.0:
+                    self.skipping_o = name
+                    self.skip_from = (self.unit_cur, self.cur_idx)
+            else:  # end of a do loop
+                if test != 0.0 and not self.doing_break:
+                    self._back_to(name)
+                else:
+                    self.doing_break = False
+            return
+        if kw == "if":
+            if self._check_label(ow) is None:
+                self._save_offset(ow)
+            if self._num(ow.args[0], ow.col) != 0.0:
+                self.skipping_o = None
+                self.executed_if = True
+            else:
+                self.skipping_o = name
+                self.skip_from = (self.unit_cur, self.cur_idx)
+                self.executed_if = False
+            return
+        if kw == "elseif":
+            self._need(ow, ("if",), "'if'")
+            test = self._num(ow.args[0], ow.col)  # rs274ngc reads (evaluates) it in any case
+            if self.executed_if:
+                self.skipping_o = name
+                self.skip_from = (self.unit_cur, self.cur_idx)
+                return
+            if test != 0.0:
+                self.skipping_o = None
+                self.executed_if = True
+            return
+        if kw == "else":
+            self._need(ow, ("if",), "'if'")
+            if self.executed_if:
+                self.skipping_o = name
+                self.skip_from = (self.unit_cur, self.cur_idx)
+                return
+            if self.skipping_o == name:
+                self.executed_if = True
+                self.skipping_o = None
+            return
+        if kw == "endif":
+            self._need(ow, ("if",), "'if'")
+            self.skipping_o = None
+            self.executed_if = True
+            return
+        if kw == "break":
+            self._need(ow, ("while", "do"), "loop")
+            self.skipping_o = name
+            self.skip_from = (self.unit_cur, self.cur_idx)
+            self.doing_break = True
+            return
+        if kw == "continue":
+            self._need(ow, ("while", "do"), "loop")
+            if self.skipping_o == name:
+                return
+            self.skipping_o = name
+            self.skip_from = (self.unit_cur, self.cur_idx)
+            self.doing_continue = True
+            return
+        if kw in ("endwhile", "endrepeat"):
+            self._need(ow, ("repeat",) if kw == "endrepeat" else ("while",), "loop start")
+            if self.skipping_o == name:
+                self.skipping_o = None
+                if self.doing_continue:
+                    self.doing_continue = False
+                    self._back_to(name)
+                return
+            self._back_to(name)
+            return
+        raise AssertionError(kw)  # pragma: no cover
+
+    def _ocall(self, ow: OWord) -> None:
+        args = [self._num(a, ow.col) for a in ow.args]
+        if len(args) > LINUXCNC_SUB_PARAMS:
+            raise self.error(ow.col, f"more than {LINUXCNC_SUB_PARAMS} call arguments")
+        if len(self.frames) > MAX_CALL_DEPTH:
+            raise self.refuse(ow.col, f"o-word calls nested deeper than {MAX_CALL_DEPTH} levels",
+                              hint="check for a subroutine that calls itself without end")
+        saved = [self.params.get(k, 0.0) for k in range(1, LINUXCNC_SUB_PARAMS + 1)]
+        for k in range(1, LINUXCNC_SUB_PARAMS + 1):
+            self.params[k] = args[k - 1] if k <= len(args) else 0.0
+        self.globals["_value"] = 0.0
+        self.globals["_value_returned"] = 0.0
+        fr = _Frame(call_type="oword", ret_unit=self.unit_cur, ret_idx=self.cur_idx + 1, saved=saved,
+                    sub_name=ow.name, call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
+        self.frames.append(fr)
+        op = self.offsets.get(ow.name)
+        if op is not None:
+            if op.kind != "sub":
+                raise self.error(ow.col, f"o{_oname(ow.name)} is a '{op.kind}', not a subroutine")
+            self.unit, self.idx = op.unit, op.idx + 1
+            return
+        f = self.find_sub_file(ow.name)
+        if f is not None:
+            self.unit, self.idx = self.load_file(f), 0
+        self.skipping_to_sub = ow.name
+        self.skipping_o = ow.name
+        self.skip_from = (self.unit_cur, self.cur_idx)
+
+
+def _round_to_int(v: float) -> int:
+    return int(math.floor(v + 0.5))
+
+
+def _oname(name: str) -> str:
+    return name if name.isdigit() else f"<{name}>"
+
+
+def _apply_edits(line: str, edits: list[tuple[int, int, str]]) -> str:
+    out = []
+    pos = 0
+    for a, b, rep in sorted(edits):
+        if rep == "":
+            while a > pos and line[a - 1] in " \t":  # take the blanks before a removed item
+                a -= 1
+        out.append(line[pos:a])
+        out.append(rep)
+        pos = b
+    out.append(line[pos:])
+    text = "".join(out)
+    m = _LINE_END.search(text)
+    ending = m.group(1) if m else ""
+    body = text[: len(text) - len(ending)]
+    if line[:1] not in " \t":
+        body = body.lstrip(" \t")
+    if not body.strip():
+        body = ""
+    return body + ending
+
+
+def _last_code_line(lines: list[str]) -> int | None:
+    for k in range(len(lines) - 1, -1, -1):
+        if lines[k].strip():
+            return k
+    return None
+
+
+def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "generic",
+           subroutine_path: Sequence[Path] = (), max_lines: int = 50_000_000) -> Iterator[SourceLine]:
+    """Execute the program's control flow and yield the flat program line by line.
+
+    ``lines`` are the source lines with their endings (e.g. from
+    :func:`postproc.gcode.lexer.split_lines`). Raises :class:`GcodeSyntaxError` for
+    malformed constructs and :class:`ExpansionError` for refused ones, both with
+    ``path:line:col``.
+    """
+    ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
+    return ex.run()

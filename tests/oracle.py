@@ -1,0 +1,192 @@
+"""LinuxCNC's own interpreter as a test oracle.
+
+``rs274`` (Debian package ``linuxcnc-uspace``) is LinuxCNC's standalone interpreter:
+``rs274 -t TOOLS.tbl -g IN.ngc OUT.txt`` writes the canonical machining calls
+(``STRAIGHT_TRAVERSE``, ``STRAIGHT_FEED``, ``ARC_FEED``, ...) that the program
+produces. It exits non-zero and prints the error and the offending line on stderr
+when it refuses a program. Tests use it through :func:`run_rs274` and skip when it
+is absent (:data:`requires_rs274`).
+
+Canonical positions are printed with 4 decimals; ``ARC_FEED`` prints its end point
+and centre in the plane's own axis order (XY: X Y; XZ: Z X; YZ: Y Z), then the
+turn count (sign = direction, ``1`` counter-clockwise), then the end point on the
+plane's normal axis. :class:`Motion` stores both the raw fields and X/Y/Z.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+RS274 = shutil.which("rs274")
+requires_rs274 = pytest.mark.skipif(
+    RS274 is None, reason="LinuxCNC's rs274 is not installed (apt-get install linuxcnc-uspace)"
+)
+# rs274 writes positions with 4 decimals: a difference below this is the same position.
+RS274_RESOLUTION = 1e-4
+# Tool table used when a test gives none: tools 1..99, zero length and diameter, so that
+# T/M6/G43 in real programs are accepted and change nothing.
+DEFAULT_TOOLS = "".join(f"T{n} P{n} Z0 D0\n" for n in range(1, 100))
+# Runs killed by a signal (another rs274 outside the lock) are tried again this many times.
+RS274_ATTEMPTS = 5
+_LOCK_PATH = Path(tempfile.gettempdir()) / "postproc-rs274.lock"
+# Wall-clock cap for one rs274 run (s): programs in the tests run in milliseconds.
+RS274_TIMEOUT_S = 60
+
+_CALL = re.compile(r"^\s*\d+\s+N\S*\s+([A-Z_0-9]+)\((.*)\)\s*$")
+_PLANE_AXES = {
+    # plane: (first, second, normal) axis indices into (x, y, z)
+    "CANON_PLANE_XY": (0, 1, 2),
+    "CANON_PLANE_XZ": (2, 0, 1),
+    "CANON_PLANE_YZ": (1, 2, 0),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Motion:
+    """One canonical motion."""
+
+    kind: str  # STRAIGHT_TRAVERSE, STRAIGHT_FEED, ARC_FEED
+    end: tuple[float, ...]  # x, y, z, then the rotary/extra axes rs274 prints
+    centre: tuple[float, float, float] | None = None  # ARC_FEED: centre (normal axis: end's)
+    turn: int = 0  # ARC_FEED: signed turn count (positive = counter-clockwise)
+    plane: str = ""  # ARC_FEED: XY, XZ or YZ
+
+    def close_to(self, other: Motion, tol: float = RS274_RESOLUTION * 1.5) -> bool:
+        if self.kind != other.kind or self.turn != other.turn or self.plane != other.plane:
+            return False
+        if len(self.end) != len(other.end):
+            return False
+        if any(abs(a - b) > tol for a, b in zip(self.end, other.end, strict=True)):
+            return False
+        if (self.centre is None) != (other.centre is None):
+            return False
+        if self.centre is not None:
+            return all(abs(a - b) <= tol for a, b in zip(self.centre, other.centre, strict=True))
+        return True
+
+
+@dataclass(slots=True)
+class Rs274Result:
+    ok: bool  # rs274 ran the program to its end without an error
+    error: str  # rs274's error text (stderr without its progress line), "" when ok
+    motions: list[Motion] = field(default_factory=list)
+    calls: list[str] = field(default_factory=list)  # every canonical call, "NAME(args)"
+
+
+def parse_canon(text: str) -> tuple[list[Motion], list[str]]:
+    """Motions and calls from rs274's canonical output."""
+    motions: list[Motion] = []
+    calls: list[str] = []
+    plane = "CANON_PLANE_XY"
+    for line in text.splitlines():
+        m = _CALL.match(line)
+        if not m:
+            continue
+        name, args = m.group(1), m.group(2)
+        calls.append(f"{name}({args})")
+        if name == "SELECT_PLANE":
+            plane = args.strip()
+            continue
+        if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            vals = tuple(float(a) for a in args.split(","))
+            motions.append(Motion(name, vals))
+        elif name == "ARC_FEED":
+            parts = [a.strip() for a in args.split(",")]
+            first_end, second_end, first_c, second_c = (float(p) for p in parts[:4])
+            turn = int(parts[4])
+            axis_end = float(parts[5])
+            rest = tuple(float(p) for p in parts[6:])
+            i1, i2, inorm = _PLANE_AXES[plane]
+            end = [0.0, 0.0, 0.0]
+            end[i1], end[i2], end[inorm] = first_end, second_end, axis_end
+            centre = [0.0, 0.0, 0.0]
+            centre[i1], centre[i2], centre[inorm] = first_c, second_c, axis_end
+            motions.append(Motion(name, tuple(end) + rest, tuple(centre), turn,
+                                  plane.removeprefix("CANON_PLANE_")))
+    return motions, calls
+
+
+def _write_var_file(path: Path, params: dict[int, float]) -> None:
+    lines = [f"{k}\t{v:.6f}\n" for k, v in sorted(params.items())]
+    path.write_text("".join(lines))
+
+
+def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | None = None,
+              *, files: dict[str, str] | None = None) -> Rs274Result:
+    """Run ``text`` through rs274 and parse what it did.
+
+    ``tools`` is the text of a LinuxCNC tool table (``T1 P1 D6 Z10``; default
+    :data:`DEFAULT_TOOLS`), ``params`` the
+    numbered parameters to start with (a .var file), ``files`` extra files (name ->
+    text) put in a directory that is the interpreter's SUBROUTINE_PATH.
+    """
+    if RS274 is None:
+        pytest.skip("LinuxCNC's rs274 is not installed")
+    with tempfile.TemporaryDirectory(prefix="rs274-") as tmp:
+        d = Path(tmp)
+        prog = d / "prog.ngc"
+        prog.write_bytes(text.encode("utf-8", errors="surrogateescape"))
+        out = d / "out.txt"
+        cmd = [RS274]
+        tbl = d / "tools.tbl"
+        tbl.write_text(DEFAULT_TOOLS if tools is None else tools)
+        cmd += ["-t", str(tbl)]
+        var = d / "params.var"
+        _write_var_file(var, params or {})
+        cmd += ["-v", str(var)]
+        if files:  # the INI file costs startup time: only when subroutines are needed
+            subs = d / "subs"
+            subs.mkdir()
+            for name, body in files.items():
+                (subs / name).write_bytes(body.encode("utf-8", errors="surrogateescape"))
+            ini = d / "rs274.ini"
+            ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\nPARAMETER_FILE = {var}\n")
+            cmd += ["-i", str(ini)]
+        cmd += ["-g", str(prog), str(out)]
+        env = dict(os.environ, LC_ALL="C")
+        # rs274 instances running at the same time can die of SIGBUS (they share memory):
+        # one at a time across processes (pytest-xdist workers too), and retry a killed run
+        with open(_LOCK_PATH, "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                for attempt in range(RS274_ATTEMPTS):
+                    out.unlink(missing_ok=True)
+                    proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True,
+                                          text=True, timeout=RS274_TIMEOUT_S, env=env)
+                    if proc.returncode >= 0:
+                        break
+                    time.sleep(0.2 * (attempt + 1))  # another rs274 (not under this lock) is running
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+        canon = out.read_text() if out.exists() else ""
+    motions, calls = parse_canon(canon)
+    err_lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip() and ln.strip() != "executing"]
+    ok = proc.returncode == 0
+    if proc.returncode < 0:
+        err_lines.append(f"rs274 was killed by signal {-proc.returncode}")
+    return Rs274Result(ok, "" if ok else "\n".join(err_lines), motions, calls)
+
+
+def run_rs274_many(texts: list[str], **kw) -> list[Rs274Result]:
+    """:func:`run_rs274` on several programs (same options), one after the other."""
+    return [run_rs274(t, **kw) for t in texts]
+
+
+def same_motions(a: list[Motion], b: list[Motion], tol: float = RS274_RESOLUTION * 1.5) -> str:
+    """"" when the two lists match motion by motion, else where they first differ."""
+    for k, (ma, mb) in enumerate(zip(a, b, strict=False)):
+        if not ma.close_to(mb, tol):
+            return f"motion {k}: {ma} != {mb}"
+    if len(a) != len(b):
+        return f"{len(a)} motions != {len(b)} motions"
+    return ""
