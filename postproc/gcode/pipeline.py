@@ -921,6 +921,7 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
     On any error nothing is left at ``output`` (an existing file there is untouched); a
     symbolic link is written through, a device or pipe written directly.
     """
+    from postproc.errors import OutputError
     from postproc.fileio import output_path
 
     # an empty program (no bytes, or blanks and line ends only) is refused: nothing to
@@ -935,12 +936,15 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
                             hint="check that this is the program you meant (was it written completely?)")
     path, _lines = iter_source_lines(Path(source))
     # staged: a device or pipe gets the whole program at the end (the run may start over)
-    with output_path(output, stage_special=True) as tmp, \
-            open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
-        def restart() -> None:
-            fh.seek(0)
-            fh.truncate()
+    try:
+        with output_path(output, stage_special=True) as tmp, \
+                open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
+            def restart() -> None:
+                fh.seek(0)
+                fh.truncate()
 
-        report = _correct_lines(lambda: iter_source_lines(Path(source))[1], fh.write, restart, engine, setup,
-                                options, path, calibration_name, calibration_sha256, progress)
+            report = _correct_lines(lambda: iter_source_lines(Path(source))[1], fh.write, restart, engine, setup,
+                                    options, path, calibration_name, calibration_sha256, progress)
+    except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
+        raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None
     return report
