@@ -40,12 +40,11 @@ def invoke(args):
     return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
 
 
-def rs274(tmp_path, text: str, tools: str = "T1 P1 Z100 D6\n") -> subprocess.CompletedProcess:
-    prog = tmp_path / "in.ngc"
-    prog.write_text(text)
-    (tmp_path / "tools.tbl").write_text(tools)
-    return subprocess.run([RS274, "-t", str(tmp_path / "tools.tbl"), "-g", str(prog), str(tmp_path / "out.txt")],
-                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+def rs274(_tmp_path, text: str, tools: str = "T1 P1 Z100 D6\n"):
+    """LinuxCNC's rs274 on ``text`` through the tests' shared oracle (one run at a time)."""
+    from oracle import run_rs274
+
+    return run_rs274(text, tools=tools)
 
 
 # -- the arc rules -------------------------------------------------------------------------
@@ -99,8 +98,8 @@ def test_linuxcnc_arc_rule_matches_rs274(tmp_path):
             r_u, err_u = (r, err) if units == "mm" else (r / 25.4, err / 25.4)
             text = f"{g} G17 G90\nG0 X0 Y0\nG2 X{2 * r_u + err_u:.6f} Y0 I{r_u:.6f} J0 F100\nM2\n"
             res = rs274(tmp_path, text)
-            accepted = res.returncode == 0 and "differs" not in res.stdout + res.stderr
-            assert accepted == d.arc_end_radius_ok(r, r + err, units), (units, r, err, res.stdout[-300:])
+            accepted = res.ok and "differs" not in res.error
+            assert accepted == d.arc_end_radius_ok(r, r + err, units), (units, r, err, res.error[-300:])
 
 
 # -- output lines ---------------------------------------------------------------------------
@@ -117,7 +116,7 @@ def test_linuxcnc_line_length():
 def test_linuxcnc_line_length_matches_rs274(tmp_path):
     for n, ok in ((252, True), (253, False)):
         res = rs274(tmp_path, "G21\n(" + "A" * (n - 2) + ")\nG0 X1\nM2\n")
-        assert (res.returncode == 0) == ok, n
+        assert res.ok == ok, (n, res.error)
         try:
             D.check_output_line("linuxcnc", "(" + "A" * (n - 2) + ")\n")
             assert ok
@@ -249,14 +248,14 @@ def test_rs274_reads_a_corrected_program_with_a_long_setup(tmp_path):
     out, _ = correct_text(text, eng, setup, CorrectOptions(dialect="linuxcnc"), calibration_name="s500 static",
                           calibration_sha256=SHA)
     res = rs274(tmp_path, out)
-    assert res.returncode == 0, res.stdout[-500:] + res.stderr[-500:]
+    assert res.ok, res.error[-500:]
     head, _ = emit.split_header(out)
     note = "; ".join(f"{k}={','.join(f'{x:g}' for x in v)}" for k, v in sorted(offs.items()))
     note += "; tools " + ",".join(f"{k}={v:g}" for k, v in sorted(tools.items()))
     old = emit.header_line("s500 static", SHA, 0.001, note, "\n")
     res_old = rs274(tmp_path, out.replace("".join(head), old))
-    assert res_old.returncode != 0
-    assert "too long" in res_old.stdout + res_old.stderr
+    assert not res_old.ok
+    assert "too long" in res_old.error
 
 
 # -- diff reads the setup from the header ----------------------------------------------------
