@@ -272,4 +272,4 @@ def test_segmented_output_does_not_depend_on_the_chunk_size():
     text = (ROOT / "samples" / "pocket.nc").read_text()
     outs = [correct_text(text, eng, Setup(), CorrectOptions(chunk_lines=c))[0] for c in (None, 3)]
     assert outs[0] == outs[1]
-    assert outs[0].count("\n") > text.count("\n") + 100  # moves were split
+    assert outs[0].count("\n") > text.count("\n") + 10  # moves were split (into few exact arcs and chords)

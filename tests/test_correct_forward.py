@@ -9,8 +9,6 @@ from scipy.spatial import cKDTree
 
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine
-from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import split_lines
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -79,13 +77,17 @@ def _polyline_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
 
 def _first_known_line(text: str, setup: Setup) -> int:
     """First line after which every axis has been positioned (before it, the machine's
-    position is unknown and so is the path)."""
-    interp = Interpreter(setup)
-    for i, line in enumerate(split_lines(text), 1):
-        interp.feed_line(i, line)
-        if not any(math.isnan(v) for v in interp.state.pos):
-            return i
-    return 10**9
+    position is unknown and so is the path); programs needing expansion read expanded."""
+    from postproc.gcode.path import for_each_block
+
+    found: list[int] = []
+
+    def visit(lineno, _line, _block, state) -> None:
+        if not found and not any(math.isnan(v) for v in state.pos):
+            found.append(lineno)
+
+    for_each_block(text, setup, visit, found.clear)
+    return found[0] if found else 10**9
 
 
 def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
@@ -175,14 +177,18 @@ def test_demo_calibration_keeps_small_arcs_and_lands():
     assert landing_error(text, out, cal.engine, Setup()) <= TOL * 1.01
 
 
-def test_modal_arc_after_a_linearised_arc_gets_its_motion_word_back():
+def test_modal_arc_after_a_split_arc_keeps_its_motion():
+    # the strong squareness makes both circles ellipses: each is followed by two exact arcs
     text = "G21 G90 G17\nG0 X100 Y100 Z50\nG1 Z40 F300\nG2 X120 Y120 I20 J0\nX120.2 Y120.2 I0.1 J0.1\nG1 X130\n"
     eng = static_engine()
     out, rep = correct_text(text, eng, Setup(), CorrectOptions())
-    assert rep.arcs_linearised == 1
-    assert rep.arcs_kept == 1
-    assert out.splitlines()[-2].startswith("G2 X")
-    assert landing_error(text, out, eng, Setup()) <= TOL * 1.01
+    assert rep.arcs_linearised == 0
+    assert rep.arcs_split == 2
+    lines = out.splitlines()
+    assert all(ln.startswith("G2 X") for ln in lines[4:7])
+    assert lines[7].startswith("X")  # the modal arc line stays modal: the controller is in G2
+    # fine sampling: the polylines must follow a 0.14 mm radius to well under 1 um
+    assert landing_error(text, out, eng, Setup(), step=0.002) <= TOL * 1.01
 
 
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"

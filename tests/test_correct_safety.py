@@ -124,8 +124,10 @@ def test_solver_that_does_not_converge_is_refused():
     ("G0 X1 Y1 Z1\nG1 U5\n", "U axis"),
 ])
 def test_unsupported_constructs_are_refused_with_line_and_column(program, construct):
+    # macros, expressions, O-words and subprograms are expanded by default: --no-expand
+    # refuses them, naming what they are
     with pytest.raises(UnsupportedGcodeError) as e:
-        correct_text(program, static(), Setup(), path="p.nc")
+        correct_text(program, static(), Setup(), CorrectOptions(expand=False), path="p.nc")
     assert construct in str(e.value)
     assert e.value.lineno is not None
     assert e.value.col is not None
@@ -164,7 +166,7 @@ def test_cli_missing_offset_macro_and_bad_calibration(tmp_path):
     assert r.exit_code == 0, r.output
     out.unlink()
     src = _write(tmp_path, "macro.nc", "G0 X1 Y1 Z1\nG0 X#1\n")
-    r = run(["correct", src, "-c", CAL, "-o", str(out)], tmp_path)
+    r = run(["correct", src, "-c", CAL, "-o", str(out), "--no-expand"], tmp_path)
     assert r.exit_code == EXIT_INPUT
     assert "macro.nc:2:5: parameter reference" in r.output  # the '#' of X#1
     assert not out.exists()

@@ -26,8 +26,11 @@ def test_backlash_is_compensated_from_move_directions():
     eng = compose(IdentityEngine(VOLUME), [get_effect("backlash:X", params={"b_mm": B_MM}).to_dict()])
     out, _ = correct_text(PROGRAM, eng, Setup(offsets={"G54": (0, 0, 0)}))
     x = xs(out)
-    # the machine falls short by b/2 against its approach direction: command beyond it
-    assert x == pytest.approx([200 - B_MM / 2, 100 + B_MM / 2, 150 - B_MM / 2], abs=1e-4)
+    # each target is commanded b/2 against its approach direction, and each reversal (the
+    # first feed move from the unknown direction too) is taken up where it happens, before
+    # the move, as a controller's backlash compensation does
+    assert x == pytest.approx([-B_MM / 2, 200 - B_MM / 2, 200 + B_MM / 2, 100 + B_MM / 2,
+                               100 - B_MM / 2, 150 - B_MM / 2], abs=1e-4)
 
 
 def test_thermal_needs_context_at_correction_time():

@@ -51,11 +51,12 @@ def test_every_unit_combination_gives_the_same_model(tmp_path, length_unit, angl
 
 def test_unit_text_is_converted(tmp_path):
     path = tmp_path / "t.csv"
-    rows = "".join(f"{ax},{x},1,2,3,1,2,3\n" for ax in AXES for x in (0, 100))
+    # positions 0 and 100000 um: a 100 mm axis (a 0.1 mm one would be refused as implausible)
+    rows = "".join(f"{ax},{x},1,2,3,1,2,3\n" for ax in AXES for x in (0, 100000))
     path.write_text("# postproc axis error tables v1\n# units: length=um angle=arcsec\n"
                     "axis,position,EX,EY,EZ,EA,EB,EC\n" + rows)
     t = read_tables(path)
-    assert_allclose(t.position_mm["Y"], [0, 0.1])
+    assert_allclose(t.position_mm["Y"], [0, 100])
     assert_allclose(t.errors["Z"][0], [1e-3, 2e-3, 3e-3, *(np.array([1, 2, 3]) * np.pi / 648000)])
 
 

@@ -145,9 +145,29 @@ def load_calibration(path) -> Calibration:
         raise CalibrationError(f"cannot read calibration: {exc.strerror}", path=path) from None
     sha = hashlib.sha256(raw).hexdigest()
     try:
-        data = json.loads(raw.decode("utf-8"))
+        data = json.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise CalibrationError(f"calibration is not UTF-8 text ({exc.reason})", path=path) from None
     except json.JSONDecodeError as exc:
+        kind = _csv_kind(path)
+        if kind:
+            raise CalibrationError(
+                f"this is a CSV file of {kind}, not a calibration",
+                path=path,
+                hint=f"make a calibration from it first: postproc fit {path} -o CAL.json, then give -c CAL.json",
+            ) from None
         raise CalibrationError(f"calibration is not valid JSON: {exc.msg}", path=path, lineno=exc.lineno, col=exc.colno) from None
     return calibration_from_dict(data, path=path, sha256=sha)
+
+
+def _csv_kind(path: str) -> str | None:
+    """What formats.md file ``path`` holds (for a calibration given a CSV), else None."""
+    from postproc.calibration.sniff import sniff
+    from postproc.errors import MeasurementError
+
+    names = {"measurements": "point measurements", "tables": "axis error tables", "squareness": "squareness",
+             "runs": "ISO 230-2 interferometer runs", "isg": "TF5280 component errors"}
+    try:
+        return names[sniff(path)]
+    except MeasurementError:
+        return None

@@ -6,7 +6,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from postproc.calibration.csvfile import CsvTable, format_csv, length_scale, read_csv
+from postproc.calibration.csvfile import (
+    CsvTable,
+    check_position_span,
+    format_csv,
+    length_scale,
+    read_csv,
+)
 from postproc.errors import MeasurementError
 
 MAGIC = "postproc measurements v1"
@@ -96,6 +102,9 @@ def measurements_from_table(table: CsvTable) -> Measurements:
     table.require_rows("measurement rows", "give one measured point per row after the header")
     scale = length_scale(table)
     cols = {c: table.numeric(c) * scale for c in ("X", "Y", "Z", "mx", "my", "mz")}
+    q = np.column_stack([cols["X"], cols["Y"], cols["Z"]])
+    widest = int(np.argmax(np.ptp(q, axis=0)))
+    check_position_span(table, q[:, widest], f"the commanded positions ({'XYZ'[widest]}, the widest axis)")
     tool = {c: table.numeric(c, default=0.0) * scale for c in ("tx", "ty", "tz")}
     direction = None
     if any(table.has(c) for c in ("dirx", "diry", "dirz")):

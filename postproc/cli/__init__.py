@@ -26,6 +26,8 @@ COMMANDS = {
     "check": "postproc.cli.check:check",
     "mirror": "postproc.cli.mirror:mirror",
     "predict": "postproc.cli.predict:predict",
+    "iso230": "postproc.cli.iso230:iso230",
+    "export": "postproc.cli.export:export",
 }
 
 
@@ -36,7 +38,9 @@ SHORT_HELP = {
              "physical effect is missing.",
     "correct": "Correct NC programs for the machine's measured errors.",
     "diff": "Compare a program with its corrected version.",
+    "export": "Write a controller's compensation table from a parametric calibration.",
     "fit": "Fit a calibration from point measurements or axis error tables.",
+    "iso230": "Evaluate bidirectional positioning runs as ISO 230-2:2014 does.",
     "mirror": "Mirror milling of waffle shells: K_dist, feedback self-tuning, dead-band model.",
     "orders": "Compare the first- and second-order volumetric error at chosen points.",
     "predict": "Predict machined surfaces and feature errors from a machine chain.",

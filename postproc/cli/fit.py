@@ -59,9 +59,12 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     """Fit a calibration from point measurements or axis error tables.
 
     FILES are formats.md CSV files: point measurements (several files are fitted
-    together), or axis error tables with their squareness file. The calibration is
-    written to OUTPUT atomically; a summary of the fit (residual, rank,
-    undetermined parameters) is printed.
+    together), or axis error tables with their squareness file, and/or ISO 230-2
+    interferometer runs. A tables file may give only the components measured
+    (missing ones are zero, and reported). Runs give each axis's positioning error
+    (the mean bidirectional deviation) and a backlash effect with the reversal
+    values B_i along the axis. The calibration is written to OUTPUT atomically; a
+    summary of the fit (residual, rank, undetermined parameters) is printed.
 
     Example:
 
@@ -70,6 +73,7 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
         postproc fit grid15.csv -m interval --intervals 'X=3;Y=3;Z=2' --border-blend 0 -o interval.json
         postproc fit grid15.csv -m grid --grid-model cell --fill-missing -o grid.json
         postproc fit --base tables_cal.json tracker.csv --effect backlash:Y -o tables_backlash.json
+        postproc fit samples/iso230_runs_x.csv -o x_runs.json
     """
     from postproc.calibration.calfile import save_calibration
     from postproc.calibration.measurements import read_measurement_files
@@ -77,7 +81,7 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     from postproc.engine.registry import fitter
     from postproc.errors import CalibrationError, MeasurementError
 
-    kinds = [sniff(f) for f in files]
+    kinds = ["tables" if k == "isg" else k for k in (sniff(f) for f in files)]
     if base_path is not None:
         _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction)
         return
@@ -94,15 +98,19 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     }
     options = {k: v for k, v in options.items() if v is not None}
     given = {"--border-blend": border_blend, "--grid-model": grid_model, "--fill-missing": fill_missing}
-    if "tables" in kinds and kinds.count("squareness") == 1 and squareness is None:
+    if ("tables" in kinds or "runs" in kinds) and kinds.count("squareness") == 1 and squareness is None:
         # A squareness file given among FILES is taken as --squareness.
         squareness = files[kinds.index("squareness")]
         files = tuple(f for f, k in zip(files, kinds, strict=True) if k != "squareness")
         kinds = [k for k in kinds if k != "squareness"]
-    if "tables" in kinds:
-        if any(k != "tables" for k in kinds):
-            raise MeasurementError("axis error tables cannot be fitted together with point files",
-                                   path=files[kinds.index("measurements")] if "measurements" in kinds else files[0])
+    if "tables" in kinds or "runs" in kinds:
+        if "measurements" in kinds:
+            what = "axis error tables" if "tables" in kinds else "interferometer runs"
+            raise MeasurementError(f"{what} cannot be fitted together with point files",
+                                   path=files[kinds.index("measurements")])
+        if "squareness" in kinds:
+            raise MeasurementError("more than one squareness file", path=files[kinds.index("squareness")],
+                                   hint="give one squareness file (among FILES or with --squareness)")
         if method not in (None, "parametric"):
             raise click.UsageError("axis error tables make a parametric calibration; drop --method or use parametric")
         _check_method_options("parametric", given)
@@ -112,7 +120,8 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
                                    "which effect the points show")
         from postproc.engine.parametric_tables import fit_tables
 
-        result = fit_tables(list(files), squareness=squareness, **options)
+        result = fit_tables([f for f, k in zip(files, kinds, strict=True) if k == "tables"], squareness=squareness,
+                            runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], **options)
     else:
         method = method or "static"
         if (order or solver) and method != "parametric":

@@ -9,6 +9,13 @@ direction the axis approached the point (+1 / -1, 0 when it did not move)::
 ``b`` (``b_mm``) is the reversal error that a bidirectional ISO 230-2 test reads.
 Needs ``dirx`` / ``diry`` / ``dirz``. Compensable: the correction pipeline knows the
 direction of every move of the program.
+
+A reversal that varies along the axis (the B_i of an ISO 230-2 evaluation, one per
+target) is a profile in ``config``: ``position_mm`` (increasing) and ``shape``
+(B_i / b at each position, linear in between, held at the ends). ``b`` then scales
+the profile, so the effect stays linear in its parameter::
+
+    displacement along the axis = b / 2 * shape(q_axis) * dir
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.effects.base import AXES, DIR_COLUMNS, Effect, context_column, unit_basis
+from postproc.errors import CalibrationError
 
 # Fewer rows than this approached from either side cannot show a reversal: the mean on
 # that side would rest on one or two noisy shots.
@@ -42,10 +50,6 @@ class Backlash(Effect):
     def compensable_reason(self) -> str:
         return f"compensated from the direction of each {self.target} move in the program"
 
-    def describe(self, params=None) -> str:
-        p = self.params if params is None else params
-        return f"reversal (backlash) of {self.target}: {p['b_mm'] * 1000:+.2f} um"
-
     def untestable_reason(self, q, r, ctx) -> str | None:
         if self.missing(ctx):
             return super().untestable_reason(q, r, ctx)
@@ -56,6 +60,28 @@ class Backlash(Effect):
                     f"a reversal needs {MIN_ROWS_PER_SIDE}+ each (approach the points from both sides)")
         return super().untestable_reason(q, r, ctx)
 
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        text = f"reversal (backlash) of {self.target}: {p['b_mm'] * 1000:+.2f} um"
+        if "position_mm" in self.config:
+            shape = np.asarray(self.config["shape"], dtype=float) * p["b_mm"] * 1000
+            text += (f" at most, varying along {self.target} from {shape.min():+.2f} to {shape.max():+.2f} um "
+                     f"over {len(shape)} positions")
+        return text
+
+    def profile(self, t) -> np.ndarray:
+        """The reversal profile shape(t) at axis positions t (1 without a profile)."""
+        t = np.asarray(t, dtype=float)
+        if "position_mm" not in self.config and "shape" not in self.config:
+            return np.ones_like(t)
+        x = np.asarray(self.config.get("position_mm", ()), dtype=float)
+        shape = np.asarray(self.config.get("shape", ()), dtype=float)
+        if x.ndim != 1 or len(x) < 2 or shape.shape != x.shape or np.any(np.diff(x) <= 0):
+            raise CalibrationError(
+                f"effect {self.name}: a reversal profile needs position_mm (2 or more, increasing) "
+                f"and shape of the same length; got {len(x)} positions and {shape.size} shape values")
+        return np.interp(t, x, shape)
+
     def basis(self, q, r, ctx) -> np.ndarray:
         d = context_column(ctx, self.needs[0], len(q), self.name)
-        return unit_basis(0.5 * d, self.axis)[:, :, None]
+        return unit_basis(0.5 * d * self.profile(q[:, self.axis]), self.axis)[:, :, None]

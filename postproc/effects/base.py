@@ -119,6 +119,11 @@ class Effect:
             )
         for where, values in (("config", self.config), ("params", params)):
             for key, value in values.items():
+                if where == "config" and isinstance(value, list | tuple):
+                    # a profile along an axis (e.g. a reversal value per table position)
+                    for v in value:
+                        _check_number(self.name, where, key, v)
+                    continue
                 _check_number(self.name, where, key, value)
         self.params = {k: float(params.get(k, 0.0)) for k in names}
 
@@ -200,7 +205,7 @@ class Effect:
     # -- serialisation -----------------------------------------------------------
     def copy(self, *, config: Mapping | None = None, params=None) -> Effect:
         new = copy.copy(self)
-        new.config = dict(self.config if config is None else config)
+        new.config = copy.deepcopy(dict(self.config if config is None else config))
         if params is None:
             new.params = dict(self.params)
         elif isinstance(params, Mapping):
@@ -210,7 +215,7 @@ class Effect:
         return new
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "config": dict(self.config), "params": dict(self.params)}
+        return {"name": self.name, "config": copy.deepcopy(self.config), "params": dict(self.params)}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> Effect:

@@ -212,6 +212,12 @@ class ParametricEngine(Engine):
             total += f.evaluate(q[:, i])
         return total[:, :3] + q @ self._S.T, total[:, 3:]
 
+    def axis_errors(self, axis: str, t) -> np.ndarray:
+        """The six error functions (N, 6) of one axis at its positions t (N,): EX, EY,
+        EZ in mm and EA, EB, EC in rad, interpolated as the model does (squareness not
+        included)."""
+        return self._functions[AXES.index(axis)].evaluate(np.asarray(t, dtype=float).reshape(-1))
+
     def error_derivatives(self, q) -> tuple[np.ndarray, np.ndarray]:
         """d rho / dq and d eps / dq as (N, 3, 3) arrays (column i: derivative along axis i)."""
         q = check_points(q, "q")

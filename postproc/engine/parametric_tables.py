@@ -20,6 +20,8 @@ import numpy as np
 from postproc.calibration.csvfile import (
     CsvTable,
     angle_scale,
+    check_position_span,
+    error_scale,
     format_csv,
     length_scale,
     read_csv,
@@ -156,14 +158,24 @@ def tables_from_csv(*tables: CsvTable) -> AxisTables:
     return _merge_tables([_axis_rows(t) for t in tables], list(tables))
 
 
-def _axis_rows(table: CsvTable) -> dict[str, tuple[np.ndarray, np.ndarray, CsvTable]]:
-    """The rows of each axis present in one tables file, checked, in mm / rad."""
+def _axis_rows(table: CsvTable, partial: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray, CsvTable]]:
+    """The rows of each axis present in one tables file, checked, in mm / rad.
+
+    ``partial``: error columns may be missing (the components that were not
+    measured); they are read as zero. At least one error column is still required.
+    """
     path = table.path
     try:
-        lscale, ascale = length_scale(table), angle_scale(table)
+        lscale, escale, ascale = length_scale(table), error_scale(table), angle_scale(table)
     except MeasurementError as exc:
         raise exc.at(lineno=_meta_lineno(table, "units")) from None
-    for name in ("axis", "position", *COLUMNS):
+    required = ("axis", "position") if partial else ("axis", "position", *COLUMNS)
+    if partial and not any(c in table.header for c in COLUMNS):
+        raise MeasurementError(
+            f"no error column (header: {','.join(table.header)})", path=path, lineno=table.header_lineno, col=1,
+            hint="axis error tables need axis,position and at least one of EX,EY,EZ,EA,EB,EC",
+        )
+    for name in required:
         if name not in table.header:
             raise MeasurementError(
                 f"required column {name!r} is missing (header: {','.join(table.header)})",
@@ -182,8 +194,9 @@ def _axis_rows(table: CsvTable) -> dict[str, tuple[np.ndarray, np.ndarray, CsvTa
             )
         axes.append(name)
     position = table.numeric("position") * lscale
-    values = np.column_stack([table.numeric(c) for c in COLUMNS]) if table.rows else np.zeros((0, 6))
-    values[:, :3] *= lscale
+    values = (np.column_stack([table.numeric(c, default=0.0) for c in COLUMNS]) if table.rows
+              else np.zeros((0, 6)))
+    values[:, :3] *= escale
     values[:, 3:] *= ascale
     axes_arr = np.array(axes)
     out = {}
@@ -198,6 +211,7 @@ def _axis_rows(table: CsvTable) -> dict[str, tuple[np.ndarray, np.ndarray, CsvTa
                 hint="give each axis at least the two ends of its travel",
             )
         x = position[idx]
+        check_position_span(table, x, f"axis {ax}: positions")
         bad = np.flatnonzero(np.diff(x) <= 0)
         if len(bad):
             k = idx[bad[0] + 1]
@@ -360,10 +374,15 @@ def synthetic_tables(seed: int = 0, *, travel_mm: float = 315.0, step_mm: float 
 ENGINE_OPTIONS = ("order", "solver", "interpolation", "extrapolate", "astatic")
 
 
-def fit_tables(paths, squareness=None, **options):
+def fit_tables(paths, squareness=None, runs=None, **options):
     """Calibration from axis error tables (+ squareness): a ParametricEngine FitResult.
 
-    ``paths``: one tables file or several (each axis in exactly one). ``squareness``:
+    ``paths``: one tables file or several; a file may give only the components that
+    were measured (missing columns are zero and reported), and each component of
+    each axis comes from one file. ``runs``: ISO 230-2 runs files (formats.md
+    section 3): each gives its axes' positioning column (the mean bidirectional
+    deviation) and a backlash effect with the reversal values B_i along the axis.
+    An axis that no file gives has zero errors. ``squareness``:
     the squareness file; by default ``<first tables file>_squareness.csv`` when it
     exists, otherwise squareness is taken as zero and the report says so. Options
     ``order``, ``solver``, ``interpolation``, ``extrapolate``, ``astatic`` go to the
@@ -376,17 +395,26 @@ def fit_tables(paths, squareness=None, **options):
     if isinstance(paths, str | Path):
         paths = [paths]
     paths = [str(p) for p in paths]
-    tables = tables_from_csv(*(read_csv(p) for p in paths))
-    report = [f"parametric model from axis error tables: {', '.join(paths)}"]
-    if squareness is None and squareness_path_for(paths[0]).exists():
+    runs = [str(p) for p in (runs or [])]
+    parts = [_table_parts(p) for p in paths]
+    report = [f"parametric model from axis error tables: {', '.join(paths)}"] if paths else []
+    effects: list[dict] = []
+    for p in runs:
+        part, effect_dicts, lines = _parts_from_runs(p)
+        parts.append(part)
+        effects += effect_dicts
+        report += lines
+    tables, merge_report = _merge_parts(parts)
+    report += merge_report
+    if squareness is None and paths and squareness_path_for(paths[0]).exists():
         squareness = squareness_path_for(paths[0])
     if squareness is not None:
         sq = read_squareness(squareness)
         sq_source = str(squareness)
     else:
         sq, sq_source = Squareness(), None
-        report.append(f"no squareness file (looked for {squareness_path_for(paths[0])}): "
-                      "squareness taken as zero; give it with --squareness")
+        looked = f" (looked for {squareness_path_for(paths[0])})" if paths else ""
+        report.append(f"no squareness file{looked}: squareness taken as zero; give it with --squareness")
     engine_opts = {k: v for k, v in options.items() if k in ENGINE_OPTIONS and v is not None}
     ignored = sorted(k for k, v in options.items() if k not in ENGINE_OPTIONS and v is not None)
     if ignored:
@@ -405,4 +433,118 @@ def fit_tables(paths, squareness=None, **options):
                   f"outside the tables: {engine.extrapolate}")
     info = {"kind": "axis error tables", "sources": paths, "squareness_source": sq_source,
             "ignored_options": ignored}
-    return FitResult(engine=engine, residuals_mm=np.zeros((0, 3)), report=report, info=info)
+    if runs:
+        info["runs_sources"] = runs
+    return FitResult(engine=engine, residuals_mm=np.zeros((0, 3)), report=report, info=info, effects=effects)
+
+
+# -- tables that give only some components, and ISO 230-2 runs ------------------------
+
+#: An axis that no file measured gets zero errors over -this..+this mm, so that its
+#: table (which says nothing about that axis) does not limit the calibrated volume.
+UNMEASURED_HALF_RANGE_MM = 10_000.0
+
+
+@dataclass
+class TablePart:
+    """The columns one source gives for one axis: positions, values (n, 6), which columns."""
+
+    x: np.ndarray
+    values: np.ndarray
+    measured: np.ndarray  # (6,) bool
+    source: str
+
+
+def _table_parts(path: str) -> dict[str, TablePart]:
+    """The parts of one tables file: formats.md section 2, or a TF5280 ISG CSV file."""
+    from postproc.calibration.sniff import sniff
+
+    if sniff(path) == "isg":
+        from postproc.metrology.controllers.beckhoff import read_isg_parts
+
+        return read_isg_parts(path)
+    return _partial_parts(read_csv(path))
+
+
+def _partial_parts(table: CsvTable) -> dict[str, TablePart]:
+    measured = np.array([c in table.header for c in COLUMNS])
+    return {ax: TablePart(x, e, measured, table.path) for ax, (x, e, _) in _axis_rows(table, partial=True).items()}
+
+
+def _parts_from_runs(path: str) -> tuple[dict[str, TablePart], list[dict], list[str]]:
+    """ISO 230-2 runs -> the positioning column (bidirectional mean deviation) of each
+    axis and a backlash effect with the reversal values B_i along the axis."""
+    from postproc.effects import get_effect
+    from postproc.metrology.iso230 import evaluate
+    from postproc.metrology.runs import read_runs
+
+    runs = read_runs(path)
+    results = evaluate(runs)
+    parts, effects, report = {}, [], []
+    for ax, res in results.items():
+        if ax not in AXES:
+            line = int(runs.linenos[runs.axis == ax][0])
+            raise MeasurementError(f"axis {ax!r}: runs of this axis cannot enter a calibration of X, Y, Z",
+                                   path=path, lineno=line, col=1,
+                                   hint="evaluate it with 'postproc iso230'; fit takes runs of X, Y and Z")
+        if len(res.target_mm) < 2:
+            raise MeasurementError(f"axis {ax}: runs at one target cannot give an error table",
+                                   path=path, lineno=int(runs.linenos[runs.axis == ax][0]), col=1)
+        k = AXES.index(ax)
+        values = np.zeros((len(res.target_mm), 6))
+        values[:, k] = res.mean
+        measured = np.zeros(6, bool)
+        measured[k] = True
+        parts[ax] = TablePart(res.target_mm, values, measured, path)
+        b = res.reversal
+        ref = float(b[np.argmax(np.abs(b))])
+        f = res.figures
+        report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}..{res.target_mm[-1]:.3f} mm; "
+                      f"E{COLUMNS[k][1]} (positioning) = mean bidirectional deviation, M {f['M'] * 1000:.2f} um")
+        if ref == 0.0:
+            report.append(f"{ax}: no reversal in the runs (every B_i is 0): no backlash effect")
+        else:
+            effect = get_effect(f"backlash:{ax}", config={"position_mm": res.target_mm.tolist(),
+                                                          "shape": (b / ref).tolist()}, params={"b_mm": ref})
+            effects.append(effect.to_dict())
+            report.append(f"{ax}: backlash:{ax} from the reversal values B_i: {effect.describe()}; "
+                          f"mean reversal {f['B_mean'] * 1000:+.2f} um")
+        report += [f"warning: {w}" for w in res.warnings]
+    return parts, effects, report
+
+
+def _merge_parts(parts: list[dict[str, TablePart]]) -> tuple[AxisTables, list[str]]:
+    """One AxisTables from partial sources: each column of each axis from at most one
+    source, on the union of the sources' positions (a column is interpolated linearly
+    between its own positions and held at its end values beyond them); columns nobody
+    measured are zero and reported, an axis nobody measured is zero over a wide range."""
+    report, pos, err = [], {}, {}
+    for ax in AXES:
+        mine = [p[ax] for p in parts if ax in p]
+        if not mine:
+            pos[ax] = np.array([-UNMEASURED_HALF_RANGE_MM, UNMEASURED_HALF_RANGE_MM])
+            err[ax] = np.zeros((2, 6))
+            report.append(f"{ax}: not measured: all six components taken as zero "
+                          f"(table over +-{UNMEASURED_HALF_RANGE_MM:g} mm so it does not limit the volume)")
+            continue
+        owner: dict[int, TablePart] = {}
+        for part in mine:
+            for j in np.flatnonzero(part.measured):
+                if j in owner:
+                    raise MeasurementError(
+                        f"axis {ax} is given in two sources for {COLUMNS[j]} ({owner[j].source} and {part.source})",
+                        path=part.source, hint=f"give each component of {ax} once (drop {COLUMNS[j]} from one file)",
+                    )
+                owner[j] = part
+        x = np.unique(np.concatenate([p.x for p in mine]))
+        values = np.zeros((len(x), 6))
+        for j, part in owner.items():
+            values[:, j] = np.interp(x, part.x, part.values[:, j])
+            if len(mine) > 1 and (part.x[0] > x[0] or part.x[-1] < x[-1]):
+                report.append(f"{ax}: {COLUMNS[j]} ({part.source}) covers {part.x[0]:.3f}..{part.x[-1]:.3f} mm: "
+                              f"held at its end values out to {x[0]:.3f}..{x[-1]:.3f} mm")
+        missing = [COLUMNS[j] for j in range(6) if j not in owner]
+        if missing:
+            report.append(f"{ax}: {', '.join(missing)} not measured: taken as zero")
+        pos[ax], err[ax] = x, values
+    return AxisTables(pos, err), report

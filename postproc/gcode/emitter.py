@@ -14,25 +14,36 @@ from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.fastlane import FastMove, emit_fast
-from postproc.gcode.geometry import arc_chord_steps, arc_params
+from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
-from postproc.gcode.segment import arc_deviation, centre_estimate, r_center
+from postproc.gcode.segment import (
+    CENTRE_LATTICE,
+    arc_candidates,
+    bisector_centre,
+    chord_deviation,
+    circle_fit,
+    r_center,
+)
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 
 MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
 HALF_UNIT = emit.HALF_UNIT
-
-
-def _mismatch(mv: Move) -> float:
-    """End radius minus start radius of the input arc (mm)."""
-    _, _, _, r0, r1 = arc_params(mv.arc, mv.q0, mv.q1)
-    return abs(r1 - r0)
+# Share of --tolerance that a fitted arc or chord may use at the samples of the corrected
+# ideal path; the rest covers the path between samples.
+FIT_BUDGET = 0.95
+# Smallest share of a move's time given to an inserted line in inverse-time mode (G93).
+MIN_FEED_FRACTION = 1e-3
 
 
 def _unit_decimals(options, unit: float) -> int:
     if options.decimals is not None:
         return options.decimals
     return 5 if unit == MM_PER_INCH else 4
+
+
+def _nominal_offset(Q, nom, a: int, b: int) -> np.ndarray:
+    """The mean correction over samples a..b (broadcast): corrected minus nominal."""
+    return (Q[a:b + 1] - nom[a:b + 1]).mean(axis=0)
 
 
 class EmitterMixin:
@@ -94,69 +105,10 @@ class EmitterMixin:
             self.emitted_motion = mv.kind
             self._write_line(line, edits, write)
             return
-        linearise = bool(plan and plan.get("linearise"))
-        split_q = plan.get("split_q") if plan else None
-        split_s = plan.get("split_s") if plan else None
-        if mv.arc is not None and not linearise:
-            if self._emit_arc(line, mv, target, plan, d, write):
-                return
-            # the rounded arc failed its check: linearise it now
-            linearise = True
-            c = plan["curve"]
-            rerr = self._round_err(mv.unit)
-            n0 = arc_chord_steps(mv.arc, mv.q0, mv.q1, (self.opt.tolerance_mm - rerr) * 0.5)
-            (split_s, split_q), = self._subdivide([c], [np.linspace(0.0, 1.0, n0 + 1)], mv.unit)
-        inner = split_q[1:-1] if split_q is not None else np.zeros((0, 3))
-        if len(inner) and mv.stays:
-            raise PostprocError(
-                "this move must be split to stay within tolerance, but its line also changes the tool "
-                "or uses G53", path=self.path, lineno=mv.lineno,
-                hint="put the tool change or G53 on a line of its own")
-        sep, lower = emit.style_of(line)
-        ending = emit.line_ending(line) or "\n"
-        qe = self.qe
-        # inserted lines for intermediate points
-        fracs = np.diff(split_s) if split_s is not None else np.array([1.0])
-        for j, q in enumerate(inner):
-            words = []
-            if j == 0:
-                words.extend(mv.prefix_words)
-            words.append("G1")
-            _e, added = self._axis_words_free(mv, q, qe, d)
-            words.extend(added)
-            if mv.inverse_time:
-                words.append("F" + emit.fmt(mv.feed / max(fracs[j], 1e-12), 4))
-            elif j == 0 and mv.feed_idx >= 0:
-                words.append("F" + mv.words[mv.feed_idx][1])
-            text = sep.join(words)
-            write((text.lower() if lower else text) + ending)
-            self.report.lines_inserted += 1
-            self.report.lines_out += 1
-        edits, added = self._axis_words(mv, target, qe, d)
-        if linearise and mv.arc is not None:
-            self.report.arcs_linearised += 1
-            g1 = "g1" if lower else "G1"
-            if mv.motion_idx >= 0:
-                _l, num, start, end, _p = mv.words[mv.motion_idx]
-                edits.append((start, end, ("0" if num.startswith("0") else "") + "1"))
-            else:
-                edits.append(self._insert_motion(mv, g1 + sep))
-            spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
-            edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
-            self.emitted_motion = LINE
-        else:
-            if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
-                text = "G" + MOTION_TEXT[mv.kind]
-                edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
-            self.emitted_motion = mv.kind
-        if mv.inverse_time and len(inner) and mv.feed_idx >= 0:
-            _l, num, start, end, _p = mv.words[mv.feed_idx]
-            edits.append((start, end, emit.fmt(mv.feed / max(fracs[-1], 1e-12), max(4, emit.decimals_of(num)))))
-        if added:
-            pos = self._insert_pos(mv)
-            text = "".join(sep + w for w in added) if pos > 0 else "".join(w + sep for w in added)
-            edits.append((pos, pos, text.lower() if lower else text))
-        self._write_line(line, edits, write)
+        if plan is None or "seq" not in plan:
+            self._emit_unplanned_arc(line, mv, target, d, write)
+            return
+        self._emit_planned(line, mv, target, plan, d, write)
 
     def _axis_words_free(self, mv: Move, q, qe, d):
         """Words for an inserted line (no original words): every axis that moves."""
@@ -182,99 +134,352 @@ class EmitterMixin:
         write(emit.edit_line(line, edits))
         self.report.lines_out += 1
 
-    def _emit_arc(self, line: str, mv: Move, target, plan, d: int, write) -> bool:
-        """Emit a kept arc if the rounded arc passes its checks; False to linearise."""
-        S = list(self.qe)
+    # -- planned moves: pieces of corrected samples fitted by exact arcs and lines ----------
+    def _emit_planned(self, line: str, mv: Move, target, plan, d: int, write) -> None:
+        """Emit a move from its plan: take-ups and pieces of corrected samples, each piece
+        fitted by the fewest exact arcs (arc moves) or chords that stay within the budget;
+        the last segment is written on the move's own line."""
+        budget = self.opt.tolerance_mm * FIT_BUDGET
         qe = list(self.qe)
-        edits, added = self._axis_words(mv, target, qe, d)
-        E = list(qe)
+        segs: list[dict] = []
+        seq = plan["seq"]
+        for k, st in enumerate(seq):
+            if st[0] == "takeup":
+                qn = list(qe)
+                _e, added = self._axis_words_free(mv, st[1], qn, d)
+                if added:
+                    segs.append({"kind": "line", "qe": qn, "added": added, "ds": 0.0, "takeup": True})
+                    qe = qn
+                continue
+            _tag, s, Q, nom, bulge = st
+            final = k == len(seq) - 1
+            segs.extend(self._fit_piece(mv, plan, s, Q, nom, bulge, qe, final, d, budget))
+            qe = segs[-1]["qe"]
+        last = segs[-1]
+        inserted = segs[:-1]
+        if inserted and mv.stays:
+            raise PostprocError(
+                "this move must be split to stay within tolerance, but its line also changes the tool "
+                "or uses G53", path=self.path, lineno=mv.lineno,
+                hint="put the tool change or G53 on a line of its own")
+        sep, lower = emit.style_of(line)
+        ending = emit.line_ending(line) or "\n"
+        arc = mv.arc
+        for j, sg in enumerate(inserted):
+            words = list(mv.prefix_words) if j == 0 else []
+            if sg["kind"] == "arc":
+                words.append("G2" if arc.clockwise else "G3")
+                words.extend(sg["added"])
+                words.extend(self._arc_words(sg["spec"], arc, final=False))
+            else:
+                words.append("G1")
+                words.extend(sg["added"])
+            if mv.inverse_time:
+                words.append("F" + emit.fmt(mv.feed / max(sg["ds"], MIN_FEED_FRACTION), 4))
+            elif j == 0 and mv.feed_idx >= 0:
+                words.append("F" + mv.words[mv.feed_idx][1])
+            text = sep.join(words)
+            write((text.lower() if lower else text) + ending)
+            self.report.lines_inserted += 1
+            self.report.lines_out += 1
+            if sg.get("takeup"):
+                self.report.takeups += 1
+            self.emitted_motion = mv.kind if sg["kind"] == "arc" else LINE
+        if arc is not None:
+            kinds = [sg["kind"] for sg in segs if not sg.get("takeup")]
+            if all(kd == "arc" for kd in kinds):
+                if len(kinds) == 1:
+                    self.report.arcs_kept += 1
+                else:
+                    self.report.arcs_split += 1
+            else:
+                self.report.arcs_linearised += 1
+        edits, added = last["edits"], last["added"]
+        if last["kind"] == "line" and arc is not None:
+            g1 = "g1" if lower else "G1"
+            if mv.motion_idx >= 0:
+                _l, num, start, end, _p = mv.words[mv.motion_idx]
+                edits.append((start, end, ("0" if num.startswith("0") else "") + "1"))
+            else:
+                edits.append(self._insert_motion(mv, g1 + sep))
+            spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
+            edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
+            self.emitted_motion = LINE
+        else:
+            if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+                text = "G" + MOTION_TEXT[mv.kind]
+                edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+            self.emitted_motion = mv.kind
+        arc_added: list[str] = []
+        if last["kind"] == "arc":
+            arc_edits, arc_added = self._arc_edits(line, mv, last["spec"])
+            edits = edits + arc_edits
+        if mv.inverse_time and inserted and mv.feed_idx >= 0:
+            _l, num, start, end, _p = mv.words[mv.feed_idx]
+            edits.append((start, end, emit.fmt(mv.feed / max(last["ds"], MIN_FEED_FRACTION),
+                                               max(4, emit.decimals_of(num)))))
+        if added or arc_added:
+            if arc_added:
+                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not last["spec"].get("replace")]
+                pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
+                words_added = added + arc_added
+            else:
+                pos = self._insert_pos(mv)
+                words_added = added
+            text = "".join(sep + w for w in words_added) if pos > 0 else "".join(w + sep for w in words_added)
+            edits.append((pos, pos, text.lower() if lower else text))
+        self.qe[:] = last["qe"]
+        self._write_line(line, edits, write)
+
+    def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
+        """Greedy fit of one piece's samples: from each start, the farthest sample that one
+        exact arc (or, failing that, one chord) reaches within the budget."""
+        n = len(Q)
+        a = 0
+        cur = list(qe)
+        out: list[dict] = []
+        while a < n - 1:
+            seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, n - 1, cur, final, d, budget)
+            if seg is not None:
+                out.append(seg)
+                break
+            lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
+            if lo_seg is None:
+                # the samples are too sparse here: follow the curve by subdivision
+                segs = self._refine(mv, plan, s[a], s[a + 1], Q[a + 1], cur, final and a + 1 == n - 1, d)
+                out.extend(segs)
+                cur = segs[-1]["qe"]
+                a += 1
+                continue
+            lo, hi = a + 1, n - 1
+            step = 2
+            while a + step < hi:
+                sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + step, cur, final, d, budget)
+                if sg is None:
+                    hi = a + step
+                    break
+                lo, lo_seg = a + step, sg
+                step *= 2
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
+                if sg is None:
+                    hi = mid
+                else:
+                    lo, lo_seg = mid, sg
+            if lo == a + 1:
+                # only the next sample is reached: check the path between them with the
+                # engine itself (a jump or a solver's scatter there is refused)
+                segs = self._refine(mv, plan, s[a], s[a + 1], Q[a + 1], cur, final and a + 1 == n - 1, d)
+                if len(segs) > 1 or lo_seg["kind"] == "line":
+                    out.extend(segs)
+                    cur = segs[-1]["qe"]
+                    a += 1
+                    continue
+            out.append(lo_seg)
+            cur = lo_seg["qe"]
+            a = lo
+        return out
+
+    def _try_segment(self, mv: Move, plan, s, Q, nom, bulge, a: int, b: int, cur, final: bool, d: int,
+                     budget: float) -> dict | None:
+        last = final and b == len(Q) - 1
+        qn = list(cur)
+        if last:
+            edits, added = self._axis_words(mv, Q[b], qn, d)
+        else:
+            edits, added = self._axis_words_free(mv, Q[b], qn, d)
+        ds = float(s[b] - s[a])
+        seg = {"qe": qn, "edits": edits, "added": added, "ds": ds}
+        # the samples and the middles of their intervals (the chord's middle moved by the
+        # nominal path's bulge there)
+        Qs = np.empty((2 * (b - a) + 1, 3))
+        Qs[0::2] = Q[a:b + 1]
+        Qs[1::2] = 0.5 * (Q[a:b] + Q[a + 1:b + 1]) + bulge[a:b]
+        ss = np.empty(len(Qs))
+        ss[0::2] = s[a:b + 1]
+        ss[1::2] = 0.5 * (s[a:b] + s[a + 1:b + 1])
+        if mv.arc is not None:
+            spec = self._exact_arc(mv, plan, cur, qn, Qs, _nominal_offset(Q, nom, a, b), ss,
+                                   last and not edits, d, budget)
+            if spec is not None:
+                seg["kind"] = "arc"
+                seg["spec"] = spec
+                return seg
+        if chord_deviation(cur, qn, Qs) <= budget:
+            seg["kind"] = "line"
+            return seg
+        return None
+
+    def _refine(self, mv: Move, plan, sa: float, sb: float, qb, cur, last: bool, d: int) -> list[dict]:
+        (ss, qq), = self._subdivide([plan["curve"]], [np.array([sa, sb])], mv.unit)
+        qq = np.array(qq, dtype=float)
+        qq[-1] = qb
+        out = []
+        for j in range(1, len(ss)):
+            qn = list(cur)
+            if last and j == len(ss) - 1:
+                edits, added = self._axis_words(mv, qq[j], qn, d)
+            else:
+                edits, added = self._axis_words_free(mv, qq[j], qn, d)
+            out.append({"kind": "line", "qe": qn, "edits": edits, "added": added, "ds": float(ss[j] - ss[j - 1])})
+            cur = qn
+        return out
+
+    def _exact_arc(self, mv: Move, plan, S, E, Qp, offset, sp, may_keep: bool, d: int, budget: float):
+        """The arc from S to E (both as written) that stays within ``budget`` of the
+        corrected samples ``Qp`` (``offset``: their mean correction, which moves the nominal
+        centre to the first guess): its centre on the bisector of S and E, the written centre
+        (I/J/K, or R where the input used R) chosen among rounded candidates so that the
+        start and end radii agree to half the output resolution. None if none passes.
+
+        ``may_keep``: the piece is the whole move and its end words are unchanged: the
+        input's own centre words are kept when their arc still passes (identity keeps
+        every input arc as it is)."""
         arc = mv.arc
         (a1, a2, an), (l1, l2) = PLANES[arc.plane]
-        centre = plan.get("centre")
-        if centre is None:
-            centre = centre_estimate(arc, plan["s"], plan["qn"], plan["q"])
         unit = mv.unit
-        sep, lower = emit.style_of(line)
-        arc_edits, arc_added = [], []
-        if "nsweep" in plan:
-            nsweep, mismatch = plan["nsweep"], plan["mismatch"]
+        S = np.asarray(S, dtype=float)
+        E = np.asarray(E, dtype=float)
+        span = float(sp[-1] - sp[0])
+        if span <= 0.0:
+            return None
+        nsw = span * plan["nsweep"]
+        frac = (sp - sp[0]) / span
+        if may_keep and span >= 1.0 and plan.get("whole"):
+            ctrl = self._input_centre(mv, S, E)
+            if ctrl is not None:
+                worst, mism, turns = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+                # the input's own reading: the spiral its controller draws (no penalty for
+                # the input's own radius mismatch)
+                if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
+                    return {"form": "keep", "turns": int(turns[0])}
+        S2, E2 = S[[a1, a2]], E[[a1, a2]]
+        P2 = Qp[:, [a1, a2]]
+        c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
+        if math.hypot(*(E2 - S2)) > 0.0:
+            centre = bisector_centre(S2, E2, P2, c0)
         else:
-            _, _, nsweep, _, _ = arc_params(arc, mv.q0, mv.q1)
-            mismatch = _mismatch(mv)
-        budget = self.opt.tolerance_mm - self._round_err(unit)
+            centre = circle_fit(P2)
+            centre = c0 if centre is None or not np.isfinite(centre).all() else centre
+        step = 10.0 ** (-d)
+        agree = 0.5 * step * unit
+        if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
+            spec = self._r_candidates(S, E, centre, (a1, a2, an), arc.clockwise, nsw, Qp, frac, d, unit, budget)
+            if spec is not None:
+                return spec
+        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S2
+        v0 = np.round((centre - base) / unit, d)
+        ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * step
+        grid = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
+        V = np.round(v0[None, :] + grid, d)
+        C = base[None, :] + V * unit
+        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+        ok = (mism <= agree) & (worst <= budget)
+        if not ok.any():
+            return None
+        order = np.argsort(np.where(ok, worst, np.inf))
+        for j in order[:3].tolist():
+            texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
+            ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
+            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+            if m[0] <= agree and w[0] <= budget:
+                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
+                        "dev": float(w[0]), "mismatch": float(m[0])}
+        return None
+
+    def _r_candidates(self, S, E, centre, axes, clockwise, nsw, Qp, frac, d, unit, budget):
+        a1, a2, an = axes
+        step = 10.0 ** (-d)
+        half = 0.5 * math.hypot(E[a1] - S[a1], E[a2] - S[a2])
+        if half == 0.0:
+            return None
+        rho = 0.5 * (math.hypot(S[a1] - centre[0], S[a2] - centre[1])
+                     + math.hypot(E[a1] - centre[0], E[a2] - centre[1]))
+        sign = -1.0 if abs(nsw) > math.pi else 1.0
+        r0 = round(rho / unit, d)
+        vals = {round(r0 + k * step, d) for k in range(-CENTRE_LATTICE, CENTRE_LATTICE + 1)}
+        vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
+        best = None
+        for val in sorted(vals):
+            text = emit.fmt(sign * val, d)
+            R = float(text) * unit
+            if abs(R) <= half:
+                continue  # every controller must find a centre without its own tolerance
+            c = r_center(S[a1], S[a2], E[a1], E[a2], R, clockwise)
+            if c is None:
+                continue
+            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac)
+            if t[0] != 1:
+                continue
+            if best is None or w[0] < best[0]:
+                best = (float(w[0]), text, float(m[0]))
+        if best is None or not best[0] <= budget:
+            return None
+        return {"form": "r", "vals": (("R", best[1]),), "turns": 1, "dev": best[0], "mismatch": best[2]}
+
+    def _input_centre(self, mv: Move, S, E) -> np.ndarray | None:
+        """Centre (2,) a controller finds from the input line's own arc words, with the
+        emitted start and end."""
+        arc = mv.arc
+        (a1, a2, _an), _ = PLANES[arc.plane]
+        unit = mv.unit
         if arc.r_idx >= 0:
-            # R arcs: the controller finds the centre from R, which is ill-conditioned
-            # near half circles; try the rounded neighbours and keep the best.
-            _l, num, start, end, _p = mv.words[arc.r_idx]
-            orig = float(num)
-            rad = 0.5 * (math.hypot(S[a1] - centre[a1], S[a2] - centre[a2])
-                         + math.hypot(E[a1] - centre[a1], E[a2] - centre[a2]))
-            v = math.copysign(rad / unit, orig)
-            dout = max(d, emit.decimals_of(num))
-            step = 10.0 ** (-dout)
-            half_chord = 0.5 * math.hypot(E[a1] - S[a1], E[a2] - S[a2]) / unit
-            cands = [orig] if abs(v - orig) < 0.5 * step else []
-            base_v = float(emit.fmt(v, dout))
-            cands += [base_v + k * step for k in (0, 1, -1, 2, -2)]
-            cands += [math.copysign(float(emit.fmt(half_chord, dout)) + k * step, orig) for k in (0, 1)]
-            best = None
-            for val in cands:
-                val = float(emit.fmt(val, dout)) if val != orig else orig
-                c = r_center(S[a1], S[a2], E[a1], E[a2], val * unit, arc.clockwise)
-                if c is None:
-                    continue
-                ctrl = [0.0, 0.0, 0.0]
-                ctrl[a1], ctrl[a2], ctrl[an] = c[0], c[1], S[an]
-                cand = Arc(tuple(ctrl), arc.plane, arc.clockwise, arc.turns, arc.offset_idx, arc.r_idx)
-                dev = arc_deviation(cand, tuple(S), tuple(E), plan["s"], plan["q"], nsweep, mismatch)
-                if best is None or dev < best[0]:
-                    best = (dev, val, ctrl)
-            if best is None or not best[0] <= budget:
-                return False
-            _dev, val, ctrl = best
-            if val != orig:
-                arc_edits.append((start, end, emit.fmt(val, dout)))
+            c = r_center(S[a1], S[a2], E[a1], E[a2], float(mv.words[arc.r_idx][1]) * unit, arc.clockwise)
+            return None if c is None else np.array(c)
+        out = []
+        for axis, idx in ((a1, arc.offset_idx[0]), (a2, arc.offset_idx[1])):
+            base = mv.shift[axis] if mv.arc_absolute else S[axis]
+            val = float(mv.words[idx][1]) if idx >= 0 else 0.0
+            out.append(base + val * unit)
+        return np.array(out)
+
+    def _arc_words(self, spec, arc: Arc, final: bool) -> list[str]:
+        words = [letter + text for letter, text in spec["vals"]]
+        if spec["turns"] > 1:
+            words.append(f"P{spec['turns']}")
+        return words
+
+    def _arc_edits(self, line: str, mv: Move, spec) -> tuple[list, list[str]]:
+        """Edits of the move's own arc words for the arc ``spec`` and the words to add."""
+        arc = mv.arc
+        if spec["form"] == "keep":
+            return [], []
+        p_idx = [i for i in mv.aux_idx if mv.words[i][0] == "P"]
+        same_form = (spec["form"] == "r") == (arc.r_idx >= 0)
+        if not same_form or spec["turns"] != arc.turns:
+            # a different form or number of turns: the old words go, the new ones are added
+            spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
+            spec["replace"] = True
+            edits = [(a, b, "") for a, b in emit.removal_spans(line, spans)]
+            return edits, self._arc_words(spec, arc, final=True)
+        edits, added = [], []
+        if spec["form"] == "r":
+            idxs = (arc.r_idx,)
         else:
-            ctrl = [0.0, 0.0, 0.0]
-            ctrl[an] = S[an]
-            for axis, letter, idx in ((a1, l1, arc.offset_idx[0]), (a2, l2, arc.offset_idx[1])):
-                base = mv.shift[axis] if mv.arc_absolute else S[axis]
-                v = (centre[axis] - base) / unit
-                if idx >= 0:
-                    _l, num, start, end, _p = mv.words[idx]
-                    orig = float(num)
-                    dout = max(d, emit.decimals_of(num))
-                    if abs(v - orig) < 0.5 * 10.0 ** (-dout):
-                        val = orig
-                    else:
-                        text = emit.fmt(v, dout)
-                        arc_edits.append((start, end, text))
-                        val = float(text)
-                else:
-                    text = emit.fmt(v, d)
-                    val = float(text)
-                    if val != 0.0 or mv.arc_absolute:
-                        arc_added.append(letter + text)
-                    else:
-                        val = 0.0
-                    if mv.arc_absolute and val == 0.0 and not arc_added:
-                        arc_added.append(letter + text)
-                ctrl[axis] = base + val * unit
-        cand = Arc(tuple(ctrl), arc.plane, arc.clockwise, arc.turns, arc.offset_idx, arc.r_idx)
-        dev = arc_deviation(cand, tuple(S), tuple(E), plan["s"], plan["q"], nsweep, mismatch)
-        if not dev <= budget:
-            return False
-        self.qe[:] = qe
-        self.report.arcs_kept += 1
+            idxs = arc.offset_idx
+        for (letter, text), idx in zip(spec["vals"], idxs, strict=True):
+            if idx >= 0:
+                _l, num, start, end, _p = mv.words[idx]
+                if float(num) != float(text):
+                    edits.append((start, end, text))
+            elif float(text) != 0.0 or mv.arc_absolute:
+                added.append(letter + text)
+        del p_idx
+        return edits, added
+
+    def _emit_unplanned_arc(self, line: str, mv: Move, target, d: int, write) -> None:
+        """An arc whose start is not known (the program's first move): its end words follow
+        the target and its centre words keep their offset from the start."""
+        edits, added = self._axis_words(mv, target, self.qe, d)
+        sep, lower = emit.style_of(line)
         if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
             text = "G" + MOTION_TEXT[mv.kind]
             edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
         self.emitted_motion = mv.kind
-        words_added = added + arc_added
-        if words_added:
-            aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0]
-            pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
-            text = "".join(sep + w for w in words_added)
+        if added:
+            pos = self._insert_pos(mv)
+            text = "".join(sep + w for w in added)
             edits.append((pos, pos, text.lower() if lower else text))
-        self._write_line(line, edits + arc_edits, write)
-        return True
+        self.report.arcs_kept += 1
+        self._write_line(line, edits, write)

@@ -529,7 +529,7 @@ class _Expander(Env):
                 yield SourceLine(idx + 1, unit.path, text, False)
             else:
                 yield SourceLine(idx + 1, unit.path, line, True)
-        if any(m in (2.0, 30.0) for m in m_codes):
+        if any(m in (2.0, 30.0) for m in m_codes) or (99.0 in m_codes and call is None and len(self.frames) == 1):
             raise _Stop
         if call is not None:
             call()
@@ -568,6 +568,12 @@ class _Expander(Env):
         letters = {}
         for k, (w, v) in enumerate(words):
             letters.setdefault(w.letter, []).append((k, w, v))
+        if 99.0 in m_codes and len(self.frames) == 1 and "P" not in letters:
+            # M99 ending the main program: the end of one pass (a subprogram file
+            # corrected on its own, or a program the controller repeats: each pass is
+            # corrected alike; the interpreter refuses it in G91, where each pass would
+            # start elsewhere). The line stays as it is and expansion stops there.
+            return None, set()
         if 99.0 in m_codes:
             for k, _w, v in letters.get("M", []):
                 if v == 99.0:
@@ -698,7 +704,7 @@ class _Expander(Env):
 
     def _m99(self, target: tuple[int, int] | None) -> None:
         if len(self.frames) == 1:
-            raise self.refuse(1, "M99 in the main program repeats it forever",
+            raise self.refuse(1, "M99 P.. in the main program jumps back into it forever",
                               hint="end the main program with M30")
         fr = self.frames[-1]
         if fr.call_type not in ("m98", "g65"):

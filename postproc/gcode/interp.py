@@ -250,6 +250,7 @@ class Interpreter:
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
+        self.repeats = False  # the program ended with M99 (repeated by the controller)
         # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
         self.home = {name: list(_offset_tuple(v, partial=True)) for name, v in
                      ((getattr(setup, "home", None) or {}).items())}
@@ -492,6 +493,17 @@ class Interpreter:
             if key % 10:
                 raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
             m = key // 10
+            if m == 99 and "P" not in vals:
+                # M99 reached in the main program (a call would have started the expansion,
+                # which consumes the subprograms' own M99): the end of a pass, as the
+                # expansion stage reads it too
+                if st.incremental:
+                    raise self._err(UnsupportedGcodeError, "M99 repeats the program from where it ended, in G91 "
+                                    "(incremental): each pass starts elsewhere", lineno, col_of(i),
+                                    hint="end the program with G90 before M99, or with M30")
+                self.ended = True
+                self.repeats = True
+                continue
             if m in REFUSED_M:
                 raise self._err(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
                                 REFUSED_M[m], lineno, col_of(i),

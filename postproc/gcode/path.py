@@ -95,6 +95,37 @@ def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
     return None, iter(_LINE_RE.findall(str(source)))
 
 
+def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", subroutine_path=(),
+                   lenient_setup: bool = False) -> Interpreter:
+    """Interpret a program (path or text) line by line, calling ``visit(lineno, line,
+    block, state)`` for each line that makes a move (``state``: the modal state after it); the same reading as ``correct``: when the
+    program needs expanding (parameters, O-words, subprograms, macros), ``reset()`` is
+    called and the expanded program is read instead. Returns the interpreter."""
+    from postproc.gcode.interp import NeedsExpansion
+
+    path, lines = iter_source_lines(source)
+    interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
+    interp.may_expand = True
+    try:
+        for lineno, line in enumerate(lines, start=1):
+            block = interp.feed_line(lineno, line)
+            if block is not None:
+                visit(lineno, line, block, interp.state)
+        return interp
+    except NeedsExpansion:
+        reset()
+    from postproc.gcode.expand import expand
+
+    _path, lines = iter_source_lines(source)
+    interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
+    for sl in expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path]):
+        interp.path = sl.path or path
+        block = interp.feed_line(sl.lineno, sl.text)
+        if block is not None:
+            visit(sl.lineno, sl.text, block, interp.state)
+    return interp
+
+
 def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.ndarray:
     """Replace NaN (not yet positioned) by the next known value of the same axis."""
     q = q.copy()
@@ -139,20 +170,18 @@ def motion_signs(q: np.ndarray, initial=(0.0, 0.0, 0.0), start=None) -> np.ndarr
 MOTION_EPS_MM = 1e-9
 
 
-def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEFAULT_MAX_STEP_MM) -> ProgramPath:
+def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEFAULT_MAX_STEP_MM,
+                 dialect: str = "generic", subroutine_path=()) -> ProgramPath:
     """Sample the nominal path of a program (path or text); see the module docstring."""
     setup = setup or Setup()
-    path, lines = iter_source_lines(source)
-    interp = Interpreter(setup, path)
+    path, _lines = iter_source_lines(source)
     qs: list[np.ndarray] = []
     rs: list[np.ndarray] = []
     lns: list[np.ndarray] = []
     rapid: list[np.ndarray] = []
-    rot: list[dict] = []
-    for lineno, line in enumerate(lines, start=1):
-        block = interp.feed_line(lineno, line)
-        if block is None:
-            continue
+    rot: list[tuple] = []
+
+    def visit(lineno: int, _line: str, block, _state) -> None:
         for mv in plain_moves(block):
             q0, q1 = mv.q0, mv.q1
             if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
@@ -168,6 +197,12 @@ def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEF
             lns.append(np.full(len(pts), lineno))
             rapid.append(np.full(len(pts), mv.kind == RAPID))
             rot.append((len(pts), mv.rotary))
+
+    def reset() -> None:
+        for acc in (qs, rs, lns, rapid, rot):
+            acc.clear()
+
+    interp = for_each_block(source, setup, visit, reset, dialect=dialect, subroutine_path=subroutine_path)
     if not qs:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),

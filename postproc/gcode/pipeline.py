@@ -41,10 +41,10 @@ from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
-from postproc.gcode.geometry import arc_chord_steps, arc_params, arc_points
-from postproc.gcode.interp import Arc, Interpreter, Move, start_position
+from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
+from postproc.gcode.interp import Interpreter, Move, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
-from postproc.gcode.segment import Curve, arc_deviation, centre_estimate, subdivide
+from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
 from postproc.gcode.state import DWELL, LINE, RAPID
 
 DEFAULT_CHUNK_LINES = 20_000
@@ -52,9 +52,16 @@ _PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
 # engine together: smaller chunks keep the peak memory low at the same speed.
 SEGMENTED_CHUNK_LINES = 2_000
-# Angular step of the samples that check a kept arc against the corrected path.
-ARC_CHECK_STEP_RAD = math.pi / 16
-ARC_CHECK_MIN_SAMPLES = 9
+# Samples of the corrected ideal path that every emitted arc and chord is fitted to and
+# checked against: at most this far apart along a move (half verify's run step) ...
+SAMPLE_STEP_MM = 0.25
+# ... and this far apart in angle along an arc, with at least this many on each piece.
+ARC_CHECK_STEP_RAD = math.pi / 32
+ARC_CHECK_MIN_SAMPLES = 5
+# A reversal whose corrections on either side differ by more than this gets a take-up move.
+TAKEUP_MIN_MM = 1e-7
+# Output growth (lines out / lines in) above which the summary warns.
+GROWTH_WARN = 5.0
 
 
 @dataclass
@@ -94,6 +101,13 @@ class CorrectReport:
     splines_linearised: int = 0
     expanded: bool = False  # the program was expanded (subprograms, loops, parameters)
     cycles_expanded: int = 0
+    arcs_split: int = 0  # arcs emitted as several exact arcs
+    takeups: int = 0  # lines inserted to take up a reversal (backlash)
+
+    @property
+    def growth(self) -> float:
+        """Lines out / lines in."""
+        return self.lines_out / self.lines_in if self.lines_in else 1.0
 
 
 class Corrector(EmitterMixin):
@@ -507,11 +521,16 @@ class Corrector(EmitterMixin):
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
         arcs = [i for i, m in general if m.arc is not None]
         arc_prm = {i: arc_params(moves[i].arc, moves[i].q0, moves[i].q1) for i in arcs}
+        breaks: dict[int, np.ndarray] = {}
         for i in arcs:
             m = moves[i]
-            before = arc_points(m.arc, m.q0, m.q1, np.array([1.0 - 1e-6]), arc_prm[i])[0]
-            t = np.sign(np.where(np.abs(Q1[i] - before) > 1e-12, Q1[i] - before, 0.0))
-            sign[i] = t
+            prm = arc_prm[i]
+            br = breaks[i] = quadrant_breaks(prm[1], prm[2])
+            # the approach direction at the end: the motion over the arc's last piece
+            # (between quadrant points every axis moves one way)
+            ends = arc_points(m.arc, m.q0, m.q1, np.array([float(br[-1]) if len(br) else 0.0, 1.0]), prm)
+            dd = ends[1] - ends[0]
+            sign[i] = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
         D = np.empty_like(sign)
         for ax in range(3):
             col = sign[:, ax]
@@ -529,71 +548,97 @@ class Corrector(EmitterMixin):
         else:
             T = self.corrected(Q1, R, D, rot, linenos)
         plans: dict[int, object] = {}
-        # starts: the corrected previous target (unrounded) for the pre-decision
+        # starts: the corrected previous target (unrounded)
         S = np.vstack([self.prev_target[None, :], T[:-1]])
         d_in = np.vstack([self.dirs[None, :], D[:-1]])
-        curves: list[Curve] = []
-        s_init: list[np.ndarray] = []
-        owner: list[int] = []
-        tol = self.opt.tolerance_mm
-        # arcs: sample the corrected ideal path and decide keep / linearise
-        if arcs:
-            samp_s, samp_c = [], []
-            curve_of: dict[int, Curve] = {}
-            for i in arcs:
-                m = moves[i]
-                c = Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])
-                curve_of[i] = c
-                sweep = arc_prm[i][2]
-                n = max(ARC_CHECK_MIN_SAMPLES, math.ceil(abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
-                s = np.linspace(0.0, 1.0, n)
-                samp_s.append(s)
-                samp_c.append(np.full(n, i))
-            allc = np.concatenate(samp_c)
-            noms = [curve_of[i].nominal(s) for i, s in zip(arcs, samp_s, strict=True)]
-            nom = np.vstack(noms)
-            dirs = np.vstack([curve_of[i].directions(s, q) for i, s, q in zip(arcs, samp_s, noms, strict=True)])
-            corr = self.corrected(nom, R[allc], dirs, [rot[i] for i in allc], linenos[allc])
-            off = 0
-            for i, s in zip(arcs, samp_s, strict=True):
-                n = len(s)
-                m = moves[i]
-                qs, qn = corr[off:off + n], nom[off:off + n]
-                off += n
-                _, _, nsweep, r0, r1 = arc_prm[i]
-                plan = {"s": s, "q": qs, "qn": qn, "curve": curve_of[i], "nsweep": nsweep, "mismatch": abs(r1 - r0)}
-                plans[i] = plan
-                unit = m.unit
-                rerr = self._round_err(unit)
-                ok = False
-                if not np.isnan(S[i]).any():
-                    centre = plan["centre"] = centre_estimate(m.arc, s, qn, qs)
-                    cand = Arc(tuple(centre), m.arc.plane, m.arc.clockwise, m.arc.turns, m.arc.offset_idx, m.arc.r_idx)
-                    dev = arc_deviation(cand, tuple(S[i]), tuple(T[i]), s, qs, nsweep, plan["mismatch"])
-                    ok = dev <= tol - 2 * rerr
-                if not ok:
-                    plan["linearise"] = True
-                    c = curve_of[i]
-                    n0 = arc_chord_steps(m.arc, m.q0, m.q1, (tol - rerr) * 0.5)
-                    curves.append(c)
-                    s_init.append(np.linspace(0.0, 1.0, n0 + 1))
-                    owner.append(i)
-        if not self.linear_exact:
-            for i, m in general:
-                if m.kind == LINE and not m.planned and not any(math.isnan(v) for v in m.q0):
-                    curves.append(Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary))
-                    s_init.append(np.array([0.0, 1.0]))
-                    owner.append(i)
-        if curves:
-            results = self._subdivide(curves, s_init, unit0)
-            for i, (s, q) in zip(owner, results, strict=True):
-                plan = plans.setdefault(i, {})
-                plan["split_s"] = s
-                plan["split_q"] = q
+        planned = [(i, m) for i, m in general
+                   if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
+                   and not np.isnan(S[i]).any() and not any(math.isnan(v) for v in m.q0)]
+        if planned:
+            self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
         self.prev_nominal = Q1[-1].copy()
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
         return T, plans
+
+    def _plan_moves(self, planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans) -> None:
+        """Sample the corrected ideal path of every planned move in one engine call.
+
+        A move is cut into pieces along which every axis moves one way (arcs at their
+        quadrant points); each piece is evaluated with its own approach directions. Where
+        the correction differs across a reversal (backlash), the plan takes up the
+        difference there, as a controller's backlash compensation does; elsewhere the
+        pieces are joined again."""
+        layout = []  # (i, [(s, nominal, dirs), ...])
+        for i, m in planned:
+            pieces = []
+            if m.arc is not None:
+                prm = arc_prm[i]
+                _axes, _t0, sweep, r0, r1 = prm
+                length = arc_length(m.arc, m.q0, m.q1)
+                cuts = [0.0, *breaks[i].tolist(), 1.0]
+                carried = d_in[i]
+                for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
+                    n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
+                            math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
+                    s = np.linspace(sa, sb, n)
+                    nom = arc_points(m.arc, m.q0, m.q1, s, prm)
+                    dd = nom[-1] - nom[0]
+                    dr = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
+                    dr = np.where(dr == 0, carried, dr)
+                    carried = dr
+                    pieces.append((s, nom, dr))
+            else:
+                length = float(np.linalg.norm(Q1[i] - Q0[i]))
+                n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
+                s = np.linspace(0.0, 1.0, n)
+                pieces.append((s, line_points(Q0[i], Q1[i], s), D[i]))
+            layout.append((i, pieces))
+        noms = [nom for _i, pcs in layout for _s, nom, _d in pcs]
+        counts = [len(nom) for nom in noms]
+        owner = np.repeat(np.array([i for i, pcs in layout for _p in pcs]), counts)
+        nom_all = np.vstack(noms)
+        dirs_all = np.repeat(np.array([dr for _i, pcs in layout for _s, _n, dr in pcs]), counts, axis=0)
+        corr = self.corrected(nom_all, R[owner], dirs_all, [rot[i] for i in owner.tolist()], linenos[owner])
+        off = 0
+        m_of = dict(planned)
+        for i, pieces in layout:
+            seq: list = []
+            prev_end = S[i]
+            prev_dirs = d_in[i]
+            for s, nom, dr in pieces:
+                n = len(s)
+                Q = corr[off:off + n].copy()
+                off += n
+                # how the nominal path bulges from its chord between samples: the fits
+                # check the middle of every sample interval too
+                if m_of[i].arc is not None:
+                    mid = arc_points(m_of[i].arc, m_of[i].q0, m_of[i].q1, 0.5 * (s[:-1] + s[1:]), arc_prm[i])
+                    bulge = mid - 0.5 * (nom[:-1] + nom[1:])
+                else:
+                    bulge = np.zeros((n - 1, 3))
+                if (dr != prev_dirs).any() and np.abs(Q[0] - prev_end).max() > TAKEUP_MIN_MM:
+                    seq.append(("takeup", Q[0].copy()))
+                else:
+                    Q[0] = prev_end
+                    if seq and seq[-1][0] == "piece":
+                        _t, s0, Qa, na, ba = seq.pop()
+                        s, Q, nom, bulge = (np.concatenate([s0, s[1:]]), np.vstack([Qa, Q[1:]]),
+                                            np.vstack([na, nom[1:]]), np.vstack([ba, bulge]))
+                seq.append(("piece", s, Q, nom, bulge))
+                prev_end = Q[-1]
+                prev_dirs = dr
+            seq[-1][2][-1] = T[i]
+            plans[i] = {"seq": seq, "whole": len(seq) == 1}
+        for i, m in planned:
+            plan = plans[i]
+            if m.arc is not None:
+                _axes, _t0, sweep, r0, r1 = arc_prm[i]
+                plan["nsweep"] = sweep
+                plan["mismatch"] = abs(r1 - r0)
+                plan["curve"] = Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])
+            else:
+                plan["curve"] = Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary)
 
     def _check_rounding(self, unit: float, lineno: int) -> None:
         """Refuse when rounding the words to their decimals alone exceeds the tolerance."""

@@ -1,13 +1,16 @@
-"""Segmentation: keep the emitted path within tolerance of the corrected ideal path.
+"""Segmentation and exact arcs: keep the emitted path within tolerance of the corrected ideal path.
 
-- :func:`subdivide` splits curves (straight moves under a non-affine correction,
-  linearised arcs) adaptively: a chord is accepted when the corrected point at the
-  middle of its parameter interval lies within the threshold of the chord's middle.
-  All midpoints of one level, over all curves of a chunk, go to the engine in one
-  vectorised call.
-- :func:`check_arc` decides whether a corrected arc can stay an arc: the arc that
-  the controller will draw from the emitted words must pass the controller's radius
-  check and lie within tolerance of the corrected ideal path at every sample.
+- :func:`bisector_centre`, :func:`arc_candidates`: an emitted arc is one exact circle
+  (or helix) through its end points as written; its centre lies on their bisector and
+  each rounded candidate centre is judged by how far the arc every controller draws from
+  it (LinuxCNC's spiral, or one radius and a jump at the end) strays from the corrected
+  samples. The emitter (:mod:`postproc.gcode.emitter`) fits the fewest such arcs, or
+  chords (:func:`chord_deviation`), through each move's samples.
+- :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
+- :func:`subdivide` splits curves adaptively where the samples are too sparse: a chord
+  is accepted when the corrected point at the middle of its parameter interval lies
+  within the threshold of the chord's middle. All midpoints of one level go to the
+  engine in one vectorised call.
 """
 
 from __future__ import annotations
@@ -184,3 +187,130 @@ def arc_deviation(arc: Arc, S, E, s_samples: np.ndarray, q_samples: np.ndarray, 
     nrm = S[an] + (E[an] - S[an]) * frac
     dev = np.hypot(np.hypot(v1, v2) - rad, q_samples[:, an] - nrm)
     return float(dev.max())
+
+
+# -- exact circles --------------------------------------------------------------------
+# Rounded centre candidates tried on each side of the ideal centre (per axis).
+CENTRE_LATTICE = 3
+
+
+def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarray) -> np.ndarray:
+    """Centre (2,) on the perpendicular bisector of S2-E2 whose circle through both fits
+    the points P2 (k, 2) best (least squares on the radial distance); ``c0``: first guess.
+
+    Gauss-Newton on the one free parameter, the signed distance ``t`` of the centre
+    from the chord's midpoint along the bisector."""
+    M = 0.5 * (S2 + E2)
+    D = E2 - S2
+    L = math.hypot(D[0], D[1])
+    if L == 0.0:
+        return np.asarray(c0, dtype=float)
+    n = np.array([-D[1], D[0]]) / L
+    h = 0.5 * L
+    t = float((np.asarray(c0, dtype=float) - M) @ n)
+    for _ in range(12):
+        c = M + t * n
+        v = P2 - c
+        dist = np.hypot(v[:, 0], v[:, 1])
+        dist = np.where(dist > 0, dist, 1e-300)
+        rho = math.hypot(h, t)
+        res = dist - rho
+        J = -(v @ n) / dist - t / rho
+        den = float(J @ J)
+        if den <= 0.0:
+            break
+        dt = -float(J @ res) / den
+        # a step across the chord would flip the arc to the other side: halve it
+        if (t + dt) * t < 0 and abs(t) > 0:
+            dt = -0.5 * t
+        t += dt
+        if abs(dt) <= 1e-13 * (1.0 + abs(t)):
+            break
+    return M + t * n
+
+
+def circle_fit(P2: np.ndarray) -> np.ndarray | None:
+    """Least-squares (Kasa) centre (2,) of points P2 (k, 2), or None when they are collinear."""
+    m = P2.mean(axis=0)
+    x, y = P2[:, 0] - m[0], P2[:, 1] - m[1]
+    A = np.column_stack([x, y, np.ones(len(x))])
+    b = x * x + y * y
+    try:
+        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.isfinite(sol).all():
+        return None
+    return m + 0.5 * sol[:2]
+
+
+def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: float, Q: np.ndarray,
+                   frac_nominal: np.ndarray):
+    """Deviation of the corrected samples ``Q`` (k, 3) from the arcs that controllers draw
+    from S to E around each candidate centre ``C`` (m, 2, plane coordinates).
+
+    Returns ``(worst (m,), mismatch (m,), turns (m,))``: ``worst`` is the largest
+    distance of a sample from the spiral (LinuxCNC's reading: radius from the start
+    radius to the end radius) plus the radius mismatch (the most any controller that
+    draws on one radius and jumps at the end, Grbl or Fanuc, adds to it); inf where the
+    arc would turn the wrong way or the wrong number of turns. ``frac_nominal`` (k,):
+    where each sample lies along the piece (0 at S, 1 at E), which resolves the
+    angle's turn for multi-turn arcs."""
+    a1, a2, an = axes
+    c1, c2 = C[:, 0], C[:, 1]
+    s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
+    t0 = np.arctan2(s2 - c2, s1 - c1)
+    t1 = np.arctan2(e2 - c2, e1 - c1)
+    r0 = np.hypot(s1 - c1, s2 - c2)
+    r1 = np.hypot(e1 - c1, e2 - c2)
+    if clockwise:
+        base = -np.mod(t0 - t1, TWO_PI)
+    else:
+        base = np.mod(t1 - t0, TWO_PI)
+    chord = math.hypot(e1 - s1, e2 - s2)
+    from postproc.gcode.geometry import FULL_CIRCLE_MM
+
+    full = (np.abs(base) < 1e-12) | (chord < FULL_CIRCLE_MM)
+    base = np.where(full, -TWO_PI if clockwise else TWO_PI, base)
+    turns = np.maximum(1, np.round((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
+    sweep = base + np.sign(base) * (turns - 1) * TWO_PI
+    bad = np.abs(sweep - nominal_sweep) > math.pi / 2
+    v1 = Q[None, :, a1] - c1[:, None]
+    v2 = Q[None, :, a2] - c2[:, None]
+    phi = np.arctan2(v2, v1)
+    sgn = -1.0 if clockwise else 1.0
+    asw = np.abs(sweep)[:, None]
+    alpha = np.mod((phi - t0[:, None]) * sgn, TWO_PI)
+    target = frac_nominal[None, :] * asw
+    alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
+    frac = alpha / asw
+    rad = r0[:, None] + (r1 - r0)[:, None] * frac
+    nrm = S[an] + (E[an] - S[an]) * frac
+    dev = np.hypot(np.hypot(v1, v2) - rad, Q[None, :, an] - nrm).max(axis=1)
+    mismatch = np.abs(r1 - r0)
+    worst = np.where(bad, np.inf, dev + mismatch)
+    return worst, mismatch, turns
+
+
+def chord_deviation(S, E, Q: np.ndarray) -> float:
+    """Largest distance of the points Q (k, 3) from the segment S-E."""
+    a = np.asarray(S, dtype=float)
+    ab = np.asarray(E, dtype=float) - a
+    den = float(ab @ ab)
+    if den == 0.0:
+        return float(np.linalg.norm(Q - a, axis=1).max())
+    t = np.clip(((Q - a) @ ab) / den, 0.0, 1.0)
+    return float(np.linalg.norm(Q - (a + t[:, None] * ab), axis=1).max())
+
+
+def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:
+    """Parameters s in (0, 1) where an arc from angle t0 sweeping ``sweep`` passes a
+    quadrant point (an in-plane axis reverses there)."""
+    if sweep == 0.0:
+        return np.zeros(0)
+    lo, hi = sorted((t0, t0 + sweep))
+    k0, k1 = math.ceil(lo / (math.pi / 2)), math.floor(hi / (math.pi / 2))
+    ang = np.arange(k0, k1 + 1) * (math.pi / 2)
+    s = (ang - t0) / sweep
+    s = np.sort(s[(s > 1e-9) & (s < 1.0 - 1e-9)])
+    return s

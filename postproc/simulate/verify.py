@@ -267,17 +267,14 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
     import math
 
     from postproc.gcode.geometry import arc_chord_steps, arc_points
-    from postproc.gcode.interp import Interpreter, plain_moves
-    from postproc.gcode.path import backfill_unknown, iter_source_lines
+    from postproc.gcode.interp import plain_moves
+    from postproc.gcode.path import backfill_unknown, for_each_block, iter_source_lines
     from postproc.gcode.state import RAPID
 
-    path, lines = iter_source_lines(source)
-    interp = Interpreter(setup, path)
+    path, _lines = iter_source_lines(source)
     pts, lns, rapid = [], [], []
-    for lineno, line in enumerate(lines, start=1):
-        block = interp.feed_line(lineno, line)
-        if block is None:
-            continue
+
+    def visit(lineno: int, _line: str, block, _state) -> None:
         for mv in plain_moves(block):
             if mv.arc is not None and mv.kind != RAPID and not any(math.isnan(v) for v in mv.q0):
                 n = arc_chord_steps(mv.arc, mv.q0, mv.q1, chord_mm)
@@ -287,6 +284,12 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
             pts.append(q + np.asarray(mv.r, dtype=float))
             lns.append(np.full(len(q), lineno))
             rapid.append(np.full(len(q), mv.kind == RAPID))
+
+    def reset() -> None:
+        for acc in (pts, lns, rapid):
+            acc.clear()
+
+    for_each_block(source, setup, visit, reset)
     if not pts:
         return NominalPath(np.zeros((0, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
     lineno_arr = np.concatenate(lns)
@@ -309,20 +312,23 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     import math
 
     from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
-    from postproc.gcode.interp import Interpreter, plain_moves
-    from postproc.gcode.path import ProgramPath, backfill_unknown, iter_source_lines, motion_signs
+    from postproc.gcode.interp import plain_moves
+    from postproc.gcode.path import (
+        ProgramPath,
+        backfill_unknown,
+        for_each_block,
+        iter_source_lines,
+        motion_signs,
+    )
     from postproc.gcode.state import RAPID
 
-    path, lines = iter_source_lines(source)
-    interp = Interpreter(setup, path)
+    path, _lines = iter_source_lines(source)
     # Per move: its end and start, sample count, tool vector, line, kind, rotary
     # positions; arcs' samples are computed at once per arc, straight moves' all at
     # once at the end (one move of a long program is a few microseconds of Python).
     q1s, q0s, counts, rs, lns, rapid, rot, arcs = [], [], [], [], [], [], [], {}
-    for lineno, line in enumerate(lines, start=1):
-        block = interp.feed_line(lineno, line)
-        if block is None:
-            continue
+
+    def visit(lineno: int, _line: str, block, _state) -> None:
         for mv in plain_moves(block):
             q0, q1 = mv.q0, mv.q1
             if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
@@ -341,6 +347,13 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
             lns.append(lineno)
             rapid.append(mv.kind == RAPID)
             rot.append(mv.rotary)
+
+    def reset() -> None:
+        for acc in (q1s, q0s, counts, rs, lns, rapid, rot):
+            acc.clear()
+        arcs.clear()
+
+    interp = for_each_block(source, setup, visit, reset)
     if not counts:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),

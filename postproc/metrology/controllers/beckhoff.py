@@ -1,0 +1,135 @@
+"""Beckhoff TwinCAT 3 CNC TF5280 volumetric compensation: component errors in the ISG
+CSV format (infosys, TF5280 "ISG CSV format" and "Units of measure").
+
+A header line names the columns: the argument (the axis position ``X``, ``Y`` or
+``Z``, mm) and the component errors in ISO 230-1 names, ``E<direction><axis>``
+(``EXX`` positioning of X, ``EYX`` and ``EZX`` its straightness, ``EAX``, ``EBX``,
+``ECX`` its roll, pitch and yaw); one record per row below it, values separated by
+blanks; ``//`` starts a comment line; ``#`` alone is a file break after which a new
+header follows. Lengths are in mm, angles in rad. The compensation list
+(``volcomp*.lis``) names the file with ``file[j]`` / ``file_format[j] ISG_CSV``.
+
+This is the same information as formats.md's axis error tables, so the volumetric
+part can go to the control as a whole. What the file does not carry here: the
+squareness (TF5280 holds it as position errors, which this export leaves to the
+program correction) and the backlash effects (the axis backlash parameters of the
+CNC, or the program correction). The component errors are postproc's effective
+ones (tool point relative to the workpiece, all axes counted on the tool side):
+set the kinematic chain and ``workpiece_axes`` of the compensation list to match.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from postproc.engine.parametric_tables import AXES, COLUMNS, TablePart
+from postproc.errors import CalibrationError, MeasurementError
+from postproc.metrology.controllers.axis import AxisErrors
+from postproc.metrology.controllers.base import Export
+
+_COMPONENT = re.compile(r"^E([XYZABC])([XYZ])$")
+
+
+def _num(v: float) -> str:
+    s = f"{v:.9g}"
+    return "0" if float(s) == 0 else s
+
+
+def export_beckhoff(axis_errors: list[AxisErrors], *, name: str = "calibration") -> Export:
+    exp = Export({})
+    lines = [f"// postproc calibration {name}: TF5280 component errors (ISO 230-1 names), mm and rad",
+             "// effective errors of the tool point relative to the workpiece, all axes on the tool side"]
+    blocks = []
+    for e in axis_errors:
+        x = e.nodes()
+        values = e.base.axis_errors(e.axis, x)
+        header = [e.axis] + [f"{c}{e.axis}" for c in COLUMNS]
+        block = [" ".join(header)] + [" ".join(_num(v) for v in (xi, *row)) for xi, row in zip(x, values, strict=True)]
+        blocks.append("\n".join(block))
+        exp.columns |= {(e.axis, c) for c in COLUMNS}
+        exp.notes.append(f"{e.axis}: {len(x)} records over {x[0]:.3f}..{x[-1]:.3f} mm, all six component errors")
+        if e.backlash:
+            exp.notes.append(f"{e.axis}: backlash:{e.axis} is not a component error: it stays in the program "
+                             "correction (leave the CNC's backlash compensation of this axis off)")
+    sq = axis_errors[0].base.squareness.as_dict() if axis_errors else {}
+    lines.append("// squareness (rad, formats.md names), not written as TF5280 position errors: "
+                 + " ".join(f"{k}={v:.6g}" for k, v in sq.items()))
+    exp.files["volcomp.csv"] = "\n".join(lines) + "\n" + "\n#\n".join(blocks) + "\n"
+    exp.notes.append("compensation list: file[0] volcomp.csv, file_format[0] ISG_CSV; "
+                     "the squareness stays in the program correction")
+    return exp
+
+
+def read_isg_parts(path) -> dict[str, TablePart]:
+    """Component errors of X, Y, Z from an ISG CSV file, as table parts (mm, rad)."""
+    path = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MeasurementError(f"cannot read file: {exc}", path=path) from None
+    blocks: list[list[tuple[int, str]]] = [[]]
+    for lineno, line in enumerate(text.splitlines(), 1):
+        body = line.strip()
+        if not body or body.startswith("//"):
+            continue
+        if body == "#":
+            blocks.append([])
+            continue
+        blocks[-1].append((lineno, body))
+    parts: dict[str, TablePart] = {}
+    for block in blocks:
+        if not block:
+            continue
+        head_line, head = block[0]
+        names = head.split()
+        args = [n for n in names if n in AXES]
+        comps = [n for n in names if n not in AXES]
+        if not args and comps:
+            raise MeasurementError(f"position errors ({', '.join(comps)}) are not read: give squareness in a "
+                                   "formats.md squareness file", path=path, lineno=head_line, col=1)
+        if len(args) != 1:
+            raise MeasurementError(f"header {head!r}: one argument column (X, Y or Z) expected",
+                                   path=path, lineno=head_line, col=1,
+                                   hint="component errors depending on two axes are not read")
+        axis = args[0]
+        measured = np.zeros(6, bool)
+        cols = {}
+        for j, n in enumerate(names):
+            if n == axis:
+                continue
+            m = _COMPONENT.match(n)
+            if not m or m.group(2) != axis:
+                raise MeasurementError(f"column {n!r} is not a component error of {axis} (E<X|Y|Z|A|B|C>{axis})",
+                                       path=path, lineno=head_line, col=head.find(n) + 1)
+            k = COLUMNS.index(f"E{m.group(1)}")
+            measured[k] = True
+            cols[j] = k
+        rows = []
+        for lineno, body in block[1:]:
+            cells = body.split()
+            if len(cells) != len(names):
+                raise MeasurementError(f"row has {len(cells)} values, the header has {len(names)}",
+                                       path=path, lineno=lineno, col=1)
+            try:
+                rows.append([float(c) for c in cells])
+            except ValueError:
+                raise MeasurementError(f"{body!r} holds a value that is not a number", path=path,
+                                       lineno=lineno, col=1) from None
+        if len(rows) < 2:
+            raise MeasurementError(f"axis {axis}: fewer than 2 records", path=path, lineno=head_line, col=1)
+        a = np.array(rows)
+        order = np.argsort(a[:, names.index(axis)], kind="stable")
+        a = a[order]
+        x = a[:, names.index(axis)]
+        if np.any(np.diff(x) <= 0):
+            raise MeasurementError(f"axis {axis}: a position is repeated", path=path, lineno=head_line, col=1)
+        values = np.zeros((len(x), 6))
+        for j, k in cols.items():
+            values[:, k] = a[:, j]
+        if axis in parts:
+            raise CalibrationError(f"axis {axis} is given in two blocks", path=path)
+        parts[axis] = TablePart(x, values, measured, path)
+    return parts

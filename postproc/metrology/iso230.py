@@ -1,0 +1,262 @@
+"""ISO 230-2:2014 evaluation of bidirectional positioning runs of one numerically
+controlled axis.
+
+For target P_i (i = 1..m), run j (1..n) and approach direction up (moving in +) or
+down (moving in -), x_ij is the positional deviation (measured - target). Clause 2 of
+the standard defines, per target::
+
+    mean unidirectional positional deviation   xm_up_i = (1/n) sum_j x_ij_up      (likewise down)
+    reversal value                             B_i = xm_up_i - xm_down_i
+    estimator of the unidirectional
+    axis repeatability                          s_up_i = sqrt(sum_j (x_ij_up - xm_up_i)^2 / (n - 1))
+    unidirectional repeatability                R_up_i = 4 s_up_i                  (likewise down)
+    bidirectional repeatability                 R_i = max(2 s_up_i + 2 s_down_i + |B_i|, R_up_i, R_down_i)
+    mean bidirectional positional deviation     xm_i = (xm_up_i + xm_down_i) / 2
+
+and per axis::
+
+    B = max_i |B_i|,  B_mean = (1/m) sum_i B_i
+    R_up = max_i R_up_i,  R_down = max_i R_down_i,  R = max_i R_i
+    E_up = max_i xm_up_i - min_i xm_up_i           (unidirectional systematic deviation; likewise E_down)
+    E = max(xm_up, xm_down) - min(xm_up, xm_down)  (bidirectional systematic deviation)
+    M = max_i xm_i - min_i xm_i                    (range of the mean bidirectional deviation)
+    A_up = max_i(xm_up_i + 2 s_up_i) - min_i(xm_up_i - 2 s_up_i)   (likewise A_down)
+    A = max(xm_up + 2 s_up, xm_down + 2 s_down) - min(xm_up - 2 s_up, xm_down - 2 s_down)
+
+All lengths are in mm.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from postproc.errors import MeasurementError
+from postproc.metrology.runs import Runs
+
+#: ISO 230-2:2014, 3.2: five runs in each direction (axes up to 2000 mm).
+ISO_RUNS = 5
+#: ISO 230-2:2014, 3.3: at least five target positions per metre, and at least five in all.
+ISO_TARGETS_PER_M = 5
+ISO_MIN_TARGETS = 5
+#: Target intervals that differ by less than this are taken as equal (a 0.1 um
+#: resolution is finer than any interferometer's target setting).
+EQUAL_SPACING_MM = 1e-4
+#: The estimator s needs two runs in a direction.
+MIN_RUNS = 2
+
+AXIS_KEYS = ("A", "A_up", "A_down", "E", "E_up", "E_down", "M", "R", "R_up", "R_down", "B", "B_mean")
+
+
+@dataclass
+class AxisResult:
+    """The ISO 230-2 figures of one axis; per-target arrays over the sorted targets."""
+
+    axis: str
+    target_mm: np.ndarray
+    n_up: np.ndarray
+    n_down: np.ndarray
+    mean_up: np.ndarray
+    mean_down: np.ndarray
+    s_up: np.ndarray
+    s_down: np.ndarray
+    figures: dict[str, float]
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def reversal(self) -> np.ndarray:
+        """B_i = xm_up_i - xm_down_i."""
+        return self.mean_up - self.mean_down
+
+    @property
+    def mean(self) -> np.ndarray:
+        """Mean bidirectional positional deviation xm_i."""
+        return 0.5 * (self.mean_up + self.mean_down)
+
+    @property
+    def R_up(self) -> np.ndarray:
+        return 4.0 * self.s_up
+
+    @property
+    def R_down(self) -> np.ndarray:
+        return 4.0 * self.s_down
+
+    @property
+    def R_bi(self) -> np.ndarray:
+        return np.maximum.reduce([2 * self.s_up + 2 * self.s_down + np.abs(self.reversal),
+                                  self.R_up, self.R_down])
+
+    def targets_json(self) -> list[dict]:
+        out = []
+        for i, p in enumerate(self.target_mm):
+            out.append({"target": float(p), "n_up": int(self.n_up[i]), "n_down": int(self.n_down[i]),
+                        "mean_up": float(self.mean_up[i]), "mean_down": float(self.mean_down[i]),
+                        "mean": float(self.mean[i]), "B": float(self.reversal[i]),
+                        "s_up": float(self.s_up[i]), "s_down": float(self.s_down[i]),
+                        "R_up": float(self.R_up[i]), "R_down": float(self.R_down[i]),
+                        "R": float(self.R_bi[i])})
+        return out
+
+    def to_json(self) -> dict:
+        return {**{k: self.figures[k] for k in AXIS_KEYS}, "warnings": list(self.warnings),
+                "targets": self.targets_json()}
+
+
+def axis_figures(mean_up, mean_down, s_up, s_down) -> dict[str, float]:
+    """The axis figures of ISO 230-2:2014 from the per-target means and estimators."""
+    mu, md, su, sd = (np.asarray(v, dtype=float) for v in (mean_up, mean_down, s_up, s_down))
+    b = mu - md
+    xm = 0.5 * (mu + md)
+    r_bi = np.maximum.reduce([2 * su + 2 * sd + np.abs(b), 4 * su, 4 * sd])
+    both_hi = np.concatenate([mu + 2 * su, md + 2 * sd])
+    both_lo = np.concatenate([mu - 2 * su, md - 2 * sd])
+    means = np.concatenate([mu, md])
+    return {
+        "A": float(both_hi.max() - both_lo.min()),
+        "A_up": float((mu + 2 * su).max() - (mu - 2 * su).min()),
+        "A_down": float((md + 2 * sd).max() - (md - 2 * sd).min()),
+        "E": float(means.max() - means.min()),
+        "E_up": float(mu.max() - mu.min()),
+        "E_down": float(md.max() - md.min()),
+        "M": float(xm.max() - xm.min()),
+        "R": float(r_bi.max()),
+        "R_up": float(4 * su.max()),
+        "R_down": float(4 * sd.max()),
+        "B": float(np.abs(b).max()),
+        "B_mean": float(b.mean()),
+    }
+
+
+def evaluate_axis(runs: Runs, axis: str) -> AxisResult:
+    """ISO 230-2 evaluation of ``axis`` (the rows of that axis in ``runs``)."""
+    sub = runs.select(axis)
+    targets = np.unique(sub.target_mm)
+    m = len(targets)
+    n = {+1: np.zeros(m, int), -1: np.zeros(m, int)}
+    mean = {+1: np.zeros(m), -1: np.zeros(m)}
+    s = {+1: np.zeros(m), -1: np.zeros(m)}
+    for i, p in enumerate(targets):
+        at = sub.target_mm == p
+        for d in (+1, -1):
+            x = sub.deviation_mm[at & (sub.direction == d)]
+            n[d][i] = len(x)
+            if len(x) < MIN_RUNS:
+                line = int(sub.linenos[at][0])
+                side = "+" if d > 0 else "-"
+                raise MeasurementError(
+                    f"axis {axis}, target {p:g} mm: {len(x)} run(s) approached it in the {side} direction; "
+                    f"the evaluation needs at least {MIN_RUNS} in each direction (ISO 230-2 asks for {ISO_RUNS})",
+                    path=runs.path, lineno=line, col=1,
+                    hint="measure every target in both directions, in every run",
+                )
+            mean[d][i] = x.mean()
+            s[d][i] = x.std(ddof=1)
+    figures = axis_figures(mean[+1], mean[-1], s[+1], s[-1])
+    result = AxisResult(axis, targets, n[+1], n[-1], mean[+1], mean[-1], s[+1], s[-1], figures)
+    result.warnings = standard_warnings(sub, result)
+    return result
+
+
+def standard_warnings(sub: Runs, res: AxisResult) -> list[str]:
+    """Where the runs fall short of ISO 230-2:2014 (run count, targets, spacing, order)."""
+    ax = res.axis
+    out = []
+    fewest = int(min(res.n_up.min(), res.n_down.min()))
+    if fewest < ISO_RUNS:
+        out.append(f"{ax}: {fewest} run(s) at some target and direction; ISO 230-2 asks for {ISO_RUNS} "
+                   "in each direction: the repeatability figures (s, R, A) are uncertain")
+    if len(set(res.n_up.tolist() + res.n_down.tolist())) > 1:
+        out.append(f"{ax}: the run count differs between targets or directions "
+                   f"({int(min(res.n_up.min(), res.n_down.min()))} to {int(max(res.n_up.max(), res.n_down.max()))})")
+    travel = float(res.target_mm[-1] - res.target_mm[0])
+    needed = max(ISO_MIN_TARGETS, math.ceil(ISO_TARGETS_PER_M * travel / 1000.0))
+    if len(res.target_mm) < needed:
+        out.append(f"{ax}: {len(res.target_mm)} targets over {travel:g} mm; ISO 230-2 asks for at least "
+                   f"{needed} (five per metre and at least five)")
+    steps = np.diff(res.target_mm)
+    if len(steps) >= 2 and np.ptp(steps) < EQUAL_SPACING_MM:
+        out.append(f"{ax}: the targets are evenly spaced ({steps[0]:g} mm); ISO 230-2 spaces them unevenly "
+                   "so that periodic errors (lead-screw pitch, scale period) are not sampled at one phase")
+    for run in np.unique(sub.run):
+        for d in (+1, -1):
+            k = np.flatnonzero((sub.run == run) & (sub.direction == d))
+            if len(k) < 2:
+                continue
+            visited = sub.target_mm[k[np.argsort(sub.order[k], kind="stable")]]
+            if np.any(d * np.diff(visited) <= 0):
+                side, way = ("+", "increasing") if d > 0 else ("-", "decreasing")
+                out.append(f"{ax}: run {run} ({side}) does not visit its targets in {way} order "
+                           f"(line {int(sub.linenos[k[0]])}); ISO 230-2's linear cycle approaches "
+                           f"each target moving in the run's direction")
+                break
+    return out
+
+
+def evaluate(runs: Runs) -> dict[str, AxisResult]:
+    """Every axis of the file, in the order of first appearance."""
+    return {a: evaluate_axis(runs, a) for a in runs.axes}
+
+
+def results_json(results: dict[str, AxisResult]) -> dict:
+    return {"units": "mm", "axes": {a: r.to_json() for a, r in results.items()}}
+
+
+def format_results(results: dict[str, AxisResult]) -> list[str]:
+    """Text report in micrometres, one block per axis."""
+    lines = []
+    for a, r in results.items():
+        lines.append(f"axis {a}: {len(r.target_mm)} targets, runs per direction "
+                     f"{int(min(r.n_up.min(), r.n_down.min()))}..{int(max(r.n_up.max(), r.n_down.max()))} "
+                     "(ISO 230-2:2014; values in um)")
+        lines.append(f"  {'target mm':>10} {'mean+':>8} {'mean-':>8} {'mean':>8} {'B_i':>8} "
+                     f"{'s+':>7} {'s-':>7} {'R+':>7} {'R-':>7} {'R_i':>7}")
+        for t in r.targets_json():
+            lines.append(f"  {t['target']:10.3f} " + " ".join(
+                f"{t[k] * 1000:8.2f}" for k in ("mean_up", "mean_down", "mean", "B")) + " " + " ".join(
+                f"{t[k] * 1000:7.2f}" for k in ("s_up", "s_down", "R_up", "R_down", "R")))
+        f = {k: v * 1000 for k, v in r.figures.items()}
+        lines.append(f"  A {f['A']:.2f} (A+ {f['A_up']:.2f}, A- {f['A_down']:.2f})   "
+                     f"E {f['E']:.2f} (E+ {f['E_up']:.2f}, E- {f['E_down']:.2f})   M {f['M']:.2f}")
+        lines.append(f"  R {f['R']:.2f} (R+ {f['R_up']:.2f}, R- {f['R_down']:.2f})   "
+                     f"B {f['B']:.2f}   mean reversal {f['B_mean']:+.2f}")
+        for w in r.warnings:
+            lines.append(f"  warning: {w}")
+    return lines
+
+
+def plot_axis(res: AxisResult, ax=None):
+    """Mean deviation +- 2s per direction against position (um), A/E/R/B in the legend."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 4.5))
+    p = res.target_mm
+    f = {k: v * 1000 for k, v in res.figures.items()}
+    for mean, s, style, label in ((res.mean_up, res.s_up, "-o", "mean +"), (res.mean_down, res.s_down, "-s", "mean -")):
+        line, = ax.plot(p, mean * 1000, style, ms=4, label=label)
+        ax.plot(p, (mean + 2 * s) * 1000, "--", color=line.get_color(), lw=0.8, label=f"{label} ± 2s")
+        ax.plot(p, (mean - 2 * s) * 1000, "--", color=line.get_color(), lw=0.8)
+    ax.plot(p, res.mean * 1000, ":", color="k", lw=1, label="mean bidirectional")
+    ax.plot([], [], " ", label=f"A = {f['A']:.2f} µm, E = {f['E']:.2f} µm")
+    ax.plot([], [], " ", label=f"R = {f['R']:.2f} µm, B = {f['B']:.2f} µm")
+    ax.set_xlabel(f"target position {res.axis} (mm)")
+    ax.set_ylabel("positional deviation (µm)")
+    ax.set_title(f"ISO 230-2 bidirectional positioning, axis {res.axis}")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return ax
+
+
+def plot_results(results: dict[str, AxisResult], path) -> None:
+    """One panel per axis, written atomically to ``path``."""
+    import matplotlib.pyplot as plt
+
+    from postproc.fileio import save_figure
+
+    fig, axes = plt.subplots(len(results), 1, figsize=(8, 4.5 * len(results)), squeeze=False)
+    for ax, res in zip(axes[:, 0], results.values(), strict=True):
+        plot_axis(res, ax)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=120)

@@ -1,0 +1,202 @@
+"""ISO 230-2:2014 evaluation: a hand-computed run set, a generated set with known
+errors, the runs reader's errors and the iso230 command."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from numpy.testing import assert_allclose
+
+from postproc.cli import main
+from postproc.errors import MeasurementError
+from postproc.metrology.iso230 import evaluate
+from postproc.metrology.runs import Runs, format_runs, read_runs
+
+# Three targets (0, 50, 120 mm: uneven), three runs each way, deviations in um.
+#   target 0:   up  1, 2, 3   mean  2, s = sqrt((1 + 0 + 1) / 2) = 1
+#               down -1,-2,-3 mean -2, s = 1
+#   target 50:  up  4, 4, 7   mean  5, s = sqrt((1 + 1 + 4) / 2) = sqrt(3)
+#               down 1, 2, 3  mean  2, s = 1
+#   target 120: up  0, 2, 4   mean  2, s = sqrt((4 + 0 + 4) / 2) = 2
+#               down -6,-4,-2 mean -4, s = 2
+HAND = {0.0: ([1, 2, 3], [-1, -2, -3]), 50.0: ([4, 4, 7], [1, 2, 3]), 120.0: ([0, 2, 4], [-6, -4, -2])}
+S3 = np.sqrt(3.0)
+# Per target (um):
+#   B_i = mean_up - mean_down:            4, 3, 6
+#   R_up_i = 4 s_up:                       4, 4 sqrt(3), 8
+#   R_down_i = 4 s_down:                   4, 4, 8
+#   R_i = max(2 s_up + 2 s_down + |B_i|, R_up_i, R_down_i):
+#         max(2+2+4, 4, 4) = 8;  max(2 sqrt(3)+2+3, 4 sqrt(3), 4) = 5 + 2 sqrt(3);  max(4+4+6, 8, 8) = 14
+#   mean bidirectional (up + down) / 2:   0, 3.5, -1
+HAND_TARGETS = {
+    "B": [4, 3, 6], "R_up": [4, 4 * S3, 8], "R_down": [4, 4, 8], "R": [8, 5 + 2 * S3, 14],
+    "mean": [0, 3.5, -1], "s_up": [1, S3, 2], "s_down": [1, 1, 2],
+}
+# Per axis (um):
+#   B = max |B_i| = 6;  B_mean = (4 + 3 + 6) / 3 = 13/3
+#   R_up = 8, R_down = 8, R = 14
+#   E_up = 5 - 2 = 3;  E_down = 2 - (-4) = 6;  E = max(all means) - min(all means) = 5 - (-4) = 9
+#   M = 3.5 - (-1) = 4.5
+#   A_up = max(mean_up + 2 s_up) - min(mean_up - 2 s_up) = (5 + 2 sqrt(3)) - (2 - 4) = 7 + 2 sqrt(3)
+#   A_down = max(0, 4, 0) - min(-4, 0, -8) = 12
+#   A = max(5 + 2 sqrt(3), 4) - min(-2, -8) = 13 + 2 sqrt(3)
+HAND_AXIS = {
+    "B": 6, "B_mean": 13 / 3, "R_up": 8, "R_down": 8, "R": 14, "E_up": 3, "E_down": 6, "E": 9,
+    "M": 4.5, "A_up": 7 + 2 * S3, "A_down": 12, "A": 13 + 2 * S3,
+}
+
+
+def hand_lines(axis="X", targets=HAND, header="# units: length=mm error=um"):
+    """The runs in ISO 230-2's linear cycle: each run up through the targets, then down."""
+    lines = ["# postproc iso230 runs v1", header, "axis,target,run,direction,deviation"]
+    ps = sorted(targets)
+    for j in range(3):
+        lines += [f"{axis},{p:.3f},{j + 1},+,{targets[p][0][j]}" for p in ps]
+        lines += [f"{axis},{p:.3f},{j + 1},-,{targets[p][1][j]}" for p in reversed(ps)]
+    return lines
+
+
+def write(tmp_path, lines, name="runs.csv"):
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def test_hand_computed_figures(tmp_path):
+    res = evaluate(read_runs(write(tmp_path, hand_lines())))["X"]
+    for key, value in HAND_AXIS.items():
+        assert res.figures[key] == pytest.approx(value * 1e-3, abs=1e-12), key
+    assert_allclose(res.reversal, np.array(HAND_TARGETS["B"]) * 1e-3, atol=1e-12)
+    assert_allclose(res.R_up, np.array(HAND_TARGETS["R_up"]) * 1e-3, atol=1e-12)
+    assert_allclose(res.R_down, np.array(HAND_TARGETS["R_down"]) * 1e-3, atol=1e-12)
+    assert_allclose(res.R_bi, np.array(HAND_TARGETS["R"]) * 1e-3, atol=1e-12)
+    assert_allclose(res.mean, np.array(HAND_TARGETS["mean"]) * 1e-3, atol=1e-12)
+    assert_allclose(res.s_up, np.array(HAND_TARGETS["s_up"]) * 1e-3, atol=1e-12)
+    assert_allclose(res.s_down, np.array(HAND_TARGETS["s_down"]) * 1e-3, atol=1e-12)
+    # 3 runs and 3 targets fall short of the standard; the uneven spacing does not.
+    text = "\n".join(res.warnings)
+    assert "3 run(s)" in text
+    assert "asks for 5" in text
+    assert "3 targets over 120 mm" in text
+    assert "evenly spaced" not in text
+    assert "order" not in text
+
+
+def test_units_scale_positions_and_errors_separately(tmp_path):
+    # length=um with no error unit: both columns are micrometres.
+    um = {p * 1000: v for p, v in HAND.items()}
+    res = evaluate(read_runs(write(tmp_path, hand_lines(targets=um, header="# units: length=um"))))["X"]
+    assert_allclose(res.target_mm, [0, 50, 120])
+    assert res.figures["A"] == pytest.approx((13 + 2 * S3) * 1e-3)
+    # length=mm error=mm: deviations read as mm.
+    res = evaluate(read_runs(write(tmp_path, hand_lines(header="# units: length=mm error=mm"))))["X"]
+    assert res.figures["E"] == pytest.approx(9.0)
+
+
+def test_generated_runs_recover_known_errors():
+    """Known systematic error e(P), reversal b(P) and repeatability sigma, many runs."""
+    rng = np.random.default_rng(11)
+    targets = np.array([0.0, 27.0, 61.5, 88.0, 119.2, 150.0, 176.3, 211.0, 240.7, 270.0, 300.0])
+    e = 1.5e-5 * targets + 0.002 * np.sin(targets / 40.0)  # mm
+    b = 0.004 + 1e-5 * targets  # mm, B_i
+    sigma, n = 0.0005, 400
+    axis, tgt, run, direction, dev = [], [], [], [], []
+    for j in range(n):
+        for d, seq in ((1, range(len(targets))), (-1, reversed(range(len(targets))))):
+            for i in seq:
+                axis.append("X")
+                tgt.append(targets[i])
+                run.append(j + 1)
+                direction.append(d)
+                dev.append(e[i] + d * b[i] / 2 + rng.normal(0.0, sigma))
+    k = len(tgt)
+    runs = Runs(np.array(axis), np.array(tgt), np.array(run), np.array(direction), np.array(dev),
+                np.arange(k, dtype=float), np.arange(k) + 4, "generated")
+    res = evaluate(runs)["X"]
+    se = sigma / np.sqrt(n)  # standard error of a mean
+    assert_allclose(res.mean_up, e + b / 2, atol=5 * se)
+    assert_allclose(res.mean_down, e - b / 2, atol=5 * se)
+    assert_allclose(res.reversal, b, atol=7 * se)
+    assert_allclose(res.s_up, sigma, rtol=0.12)
+    assert_allclose(res.s_down, sigma, rtol=0.12)
+    # Axis figures from the true values (no noise in the means, s = sigma):
+    up, down = e + b / 2, e - b / 2
+    assert res.figures["B"] == pytest.approx(b.max(), abs=7 * se)
+    assert res.figures["B_mean"] == pytest.approx(b.mean(), abs=3 * se)
+    assert res.figures["E"] == pytest.approx(max(up.max(), down.max()) - min(up.min(), down.min()), abs=10 * se)
+    assert res.figures["M"] == pytest.approx(np.ptp(e), abs=10 * se)
+    true_a = max(up.max(), down.max()) - min(up.min(), down.min()) + 4 * sigma
+    assert res.figures["A"] == pytest.approx(true_a, abs=0.0003)
+    assert res.figures["R"] == pytest.approx(4 * sigma + b.max(), abs=0.0003)
+    assert res.figures["R_up"] == pytest.approx(4 * sigma, rel=0.15)
+    assert res.warnings == []
+
+
+def test_warnings_for_even_spacing_and_order(tmp_path):
+    lines = hand_lines(targets={0.0: HAND[0.0], 60.0: HAND[50.0], 120.0: HAND[120.0]})
+    # run 2's up stroke visits 120 before 60
+    i = lines.index("X,60.000,2,+,4")
+    lines[i], lines[i + 1] = lines[i + 1], lines[i]
+    res = evaluate(read_runs(write(tmp_path, lines)))["X"]
+    text = "\n".join(res.warnings)
+    assert "evenly spaced (60 mm)" in text
+    assert "run 2 (+) does not visit its targets in increasing order" in text
+
+
+@pytest.mark.parametrize(("old", "new", "line", "col", "words"), [
+    ("X,50.000,1,+,4", "X,50.000,1,up,4", 5, 12, "direction 'up' is not"),
+    ("X,50.000,1,+,4", "X,50.000,1.5,+,4", 5, 10, "not a run number"),
+    ("X,50.000,1,+,4", "X,50.000,1,+,4um", 5, 14, "not a number"),
+    ("X,50.000,1,+,4", "X,0.000,1,+,4", 5, 1, "given twice (first on line 4)"),
+])
+def test_bad_rows_name_their_place(tmp_path, old, new, line, col, words):
+    lines = hand_lines()
+    lines[lines.index(old)] = new
+    path = write(tmp_path, lines)
+    with pytest.raises(MeasurementError) as info:
+        read_runs(path)
+    assert (info.value.lineno, info.value.col) == (line, col)
+    assert words in info.value.message
+
+
+def test_a_target_without_its_second_direction_is_refused(tmp_path):
+    lines = [ln for ln in hand_lines() if not (ln.startswith("X,50.000") and ",-," in ln)]
+    with pytest.raises(MeasurementError, match="target 50 mm: 0 run") as info:
+        evaluate(read_runs(write(tmp_path, lines)))
+    assert info.value.lineno == 5
+
+
+def test_cli_json_text_and_plot(tmp_path):
+    path = write(tmp_path, hand_lines() + [ln.replace("X,", "Y,", 1) for ln in hand_lines()[3:]])
+    res = CliRunner().invoke(main, ["iso230", str(path), "--json", "--plot", str(tmp_path / "p.png")])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert sorted(data["axes"]) == ["X", "Y"]
+    for key, value in HAND_AXIS.items():
+        assert data["axes"]["Y"][key] == pytest.approx(value * 1e-3)
+    assert len(data["axes"]["X"]["targets"]) == 3
+    assert data["axes"]["X"]["targets"][2]["R"] == pytest.approx(0.014)
+    assert "warning: X: 3 run(s)" in res.stderr
+    assert (tmp_path / "p.png").stat().st_size > 1000
+    res = CliRunner().invoke(main, ["iso230", str(path)])
+    assert res.exit_code == 0
+    assert "A 16.46 (A+ 10.46, A- 12.00)   E 9.00 (E+ 3.00, E- 6.00)   M 4.50" in res.stdout
+    assert "R 14.00 (R+ 8.00, R- 8.00)   B 6.00   mean reversal +4.33" in res.stdout
+
+
+def test_cli_bad_file_exits_3(tmp_path):
+    lines = hand_lines()
+    lines[2] = "axis,target,run,dir,deviation"
+    res = CliRunner().invoke(main, ["iso230", str(write(tmp_path, lines))])
+    assert res.exit_code == 3
+    assert "runs.csv:3:1: required column 'direction' is missing" in res.stderr
+
+
+def test_format_runs_reads_back(tmp_path):
+    runs = read_runs(write(tmp_path, hand_lines()))
+    path = tmp_path / "again.csv"
+    path.write_text(format_runs(runs))
+    again = read_runs(path)
+    assert_allclose(again.deviation_mm, runs.deviation_mm, atol=1e-9)
+    assert_allclose(again.target_mm, runs.target_mm)
