@@ -1,18 +1,26 @@
 """Writing output files safely: a temporary file beside the target, renamed at the end.
 
 Nothing half-written is ever left under the target's name: on any error the temporary
-file is removed and an existing file of that name stays as it was.
+file is removed and an existing file of that name stays as it was. Every writer of
+postproc goes through :func:`output_path`:
+
+- a symbolic link is written through: the file it points to is replaced, the link stays;
+- a device, pipe or socket (``/dev/null``, ``/dev/stdout``, a FIFO) is written directly,
+  never replaced by a regular file;
+- only a regular file (or a new name) is written by rename.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from postproc.errors import OutputError
+from postproc.errors import EXIT_USAGE, OutputError, PostprocError
 
 
 def output_mode(path: Path) -> int:
@@ -30,24 +38,61 @@ def output_mode(path: Path) -> int:
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[str]:
-    """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds."""
+def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bool = False) -> Iterator[str]:
+    """Yield the path to write ``path``'s new content to; it becomes ``path``'s content if the block succeeds.
+
+    A regular file (or a new name): a temporary file beside it, renamed over it at the end
+    (removed on error). Through a symbolic link: the same, beside the file it points to,
+    so the link stays a link. A device, pipe or socket: ``path`` itself, written directly;
+    with ``stage_special``, a temporary file whose content is copied into it at the end
+    (for writers that may start over: nothing reaches the device before the block ends).
+    """
     target = Path(path)
+    real = Path(os.path.realpath(target))
     try:
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=suffix)
+        st = os.stat(real)
+    except FileNotFoundError:
+        st = None
     except OSError as exc:
         raise _cannot_write(target, exc) from None
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise OutputError("cannot write the output: it is a directory", path=str(target),
+                          hint="give a file name")
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        if not stage_special:
+            yield str(target)  # a device, pipe or socket: never replaced by a file
+            return
+        fd, tmp = tempfile.mkstemp(prefix="postproc-", suffix=suffix)
+        os.close(fd)
+        try:
+            yield tmp
+            try:
+                with open(tmp, "rb") as src, open(target, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
+            except OSError as exc:
+                raise _cannot_write(target, exc) from None
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+        return
+    try:
+        fd, tmp = tempfile.mkstemp(dir=real.parent, prefix=f".{real.name}.", suffix=suffix)
+    except OSError as exc:
+        raise _cannot_write(real, exc) from None
     os.close(fd)
     try:
         yield tmp
-        os.chmod(tmp, output_mode(target))
+        os.chmod(tmp, output_mode(real))
         try:
-            os.replace(tmp, target)
+            os.replace(tmp, real)
         except OSError as exc:
-            raise _cannot_write(target, exc) from None
+            raise _cannot_write(real, exc) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+#: the earlier name of :func:`output_path`
+atomic_path = output_path
 
 
 def _cannot_write(target: Path, exc: OSError) -> OutputError:
@@ -86,3 +131,19 @@ def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> None:
             fig.savefig(tmp, **savefig_kwargs)
     finally:
         plt.close(fig)
+
+
+class MissingDependencyError(PostprocError):
+    """An optional package that the asked-for output needs is not installed."""
+
+    exit_code = EXIT_USAGE
+
+
+def require_matplotlib(option: str = "--plot") -> None:
+    """Refuse ``option`` up front (exit 2, with the install command) when matplotlib is missing."""
+    import importlib.util
+
+    if importlib.util.find_spec("matplotlib") is None:
+        raise MissingDependencyError(f"{option} needs matplotlib, which is not installed",
+                                     hint="install it with: python -m pip install matplotlib "
+                                          "(or leave out " + option + ")")

@@ -16,6 +16,7 @@ from postproc.engine.identity import IdentityEngine
 from postproc.engine.parametric_tables import fit_tables
 from postproc.engine.static import StaticEngine
 from postproc.errors import EXIT_SAFETY, MissingSetupError, OutOfVolumeError, SolverError
+from postproc.gcode import emit
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import SOLVER_ACCEPT_MM, CorrectOptions, Corrector, correct_text
 
@@ -25,6 +26,10 @@ PARAMETRIC = ROOT / "calibrations" / "s500_parametric.json"
 VOLUME = [[0.0, 0.0, 0.0], [315.0, 315.0, 315.0]]
 # Rapid moves only: their end points are corrected, never split.
 RAPIDS = "G21 G90\nG0 X10 Y10 Z10\nG0 X200 Y150 Z80\nG0 X300 Y20 Z200\nG0 X40 Y290 Z30\nM30\n"
+
+
+def header_text(text: str) -> str:
+    return "".join(emit.split_header(text)[0])
 
 
 def invoke(args):
@@ -74,7 +79,7 @@ def test_residual_bound_comes_from_the_engine():
     out, rep = correct_text(RAPIDS, NoisySolver(0.005, accept=0.01), Setup())
     assert rep.max_residual_mm == pytest.approx(0.005)
     assert rep.accept_residual_mm == pytest.approx(0.01)
-    assert "accepting residuals up to 0.01 mm" in out.splitlines()[0]
+    assert "(POSTPROC NOISY SOLVER ACCEPTING RESIDUALS UP TO 0.01 MM)" in header_text(out)
     # the engine's bound never lowers the pipeline's float-noise allowance
     _, rep = correct_text(RAPIDS, NoisySolver(0.5 * SOLVER_ACCEPT_MM, accept=0.0), Setup())
     assert rep.accept_residual_mm == SOLVER_ACCEPT_MM
@@ -96,8 +101,8 @@ def test_astatic_calibration_corrects_a_program(astatic_cal, tmp_path):
     out = tmp_path / "out.nc"
     r = invoke(["correct", prog, "-c", astatic_cal, "-o", out])
     assert r.exit_code == 0, r.output
-    header = out.read_text().splitlines()[0]
-    assert "parametric solver astatic accepting residuals up to 2 mm" in header
+    header = header_text(out.read_text())
+    assert "(POSTPROC PARAMETRIC SOLVER ASTATIC ACCEPTING RESIDUALS UP TO 2 MM)" in header
     m = re.search(r"solver astatic: largest inverse residual ([\d.e+-]+) um", r.output)
     assert m, r.output
     resid_mm = float(m.group(1)) / 1000
@@ -219,7 +224,8 @@ def test_map_refusal_names_the_program_file_and_line(tmp_path):
     outdir = tmp_path / "outdir"
     r = invoke(["correct", prog, ROOT / "samples" / "pocket.nc", "-c", ROOT / "tests" / "cases" / "demo_static.json",
                 "--map", small, "--output-dir", outdir, "-j", "1"])
-    assert f"error: {prog}:4: program point X=" in r.output
+    assert f"refused   {prog}:4: program point X=" in r.output
+    assert f"refused (exit {EXIT_SAFETY}) {prog}:4: program point X=" in r.output
 
 
 class IndexOnlyMap:

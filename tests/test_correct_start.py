@@ -15,6 +15,7 @@ from postproc.cli import main
 from postproc.engine.identity import IdentityEngine
 from postproc.engine.static import StaticEngine
 from postproc.errors import MissingSetupError
+from postproc.gcode import emit
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -72,7 +73,7 @@ def test_start_allows_incremental_moves_arcs_and_g92_from_the_start():
 
 def test_the_corrected_2d_program_gains_z_words_and_lands_on_the_nominal_path():
     out, rep = correct_text(FLAT, ENGINE, SETUP, CorrectOptions(tolerance_mm=TOL))
-    assert "; start Z150" in out.splitlines()[0]
+    assert "(POSTPROC START Z150)" in "".join(emit.split_header(out)[0])
     assert not re.search("[Zz]", FLAT)
     assert len(re.findall(r"Z1[45]\d\.\d{4}", out)) >= 4  # the correction moves Z as X/Y go
     assert landing_error(FLAT, out, ENGINE, SETUP) <= TOL * 1.01
@@ -81,7 +82,7 @@ def test_the_corrected_2d_program_gains_z_words_and_lands_on_the_nominal_path():
     # an engine whose Z does not depend on X/Y needs no Z word after the first one
     flat_z = StaticEngine(np.diag([1 + 300e-6, 1 - 200e-6, 1.0]), [0.03, -0.02, 0.0], [[-1e4] * 3, [1e4] * 3])
     out2, _ = correct_text(FLAT, flat_z, SETUP, CorrectOptions(tolerance_mm=TOL))
-    assert not re.search("[Zz]", out2.split("\n", 1)[1])
+    assert not re.search("[Zz]", emit.split_header(out2)[1])
 
 
 def test_start_needs_the_work_offset_of_the_program():
@@ -97,7 +98,7 @@ def test_start_needs_the_work_offset_of_the_program():
 
 def test_identity_with_start_changes_nothing_but_the_header():
     out, rep = correct_text(FLAT, IdentityEngine([[-1e4] * 3, [1e4] * 3]), SETUP)
-    assert out.split("\n", 1)[1] == FLAT
+    assert emit.split_header(out)[1] == FLAT
     assert rep.words_changed == 0
 
 
@@ -134,11 +135,11 @@ def test_cli_start_option(tmp_path):
                                "--offset", "G54=X100,Y80,Z0", "--start", "Z150"])
     assert res.exit_code == 0, res.output
     want, _ = correct_text(FLAT, ENGINE, SETUP)
-    assert (tmp_path / "b.nc").read_text().split("\n", 1)[1] == want.split("\n", 1)[1]
+    assert emit.split_header((tmp_path / "b.nc").read_text())[1] == emit.split_header(want)[1]
     res = runner.invoke(main, ["correct", str(src), "-c", str(cal), "-o", str(tmp_path / "c.nc"),
                                "--offset", "G54=X100,Y80,Z0", "--start", "z5.90551in"])
     assert res.exit_code == 0, res.output
-    assert f"start Z{5.90551 * 25.4:.10g}" in (tmp_path / "c.nc").read_text().splitlines()[0]
+    assert f"(POSTPROC START Z{5.90551 * 25.4!r})" in "".join(emit.split_header((tmp_path / "c.nc").read_text())[0])
     for bad in ("A10", "Z1,Z2", "", "Z", "X1;Y2"):
         res = runner.invoke(main, ["correct", str(src), "-c", str(cal), "--offset", "G54=X0,Y0,Z0",
                                    "--start", bad])
@@ -160,5 +161,5 @@ def test_diff_takes_the_start_from_the_header():
     pp = program_path(out, SETUP, max_step_mm=1e9)
     assert stats["Z"]["max_mm"] == pytest.approx(np.abs((pp.points_mm - pp.tool_mm)[:, 2] - 150.0).max())
     # without the start the Z change of a program that never names Z is not seen
-    blind = compare_programs(lines, out.replace("; start Z150", "")).axis_stats()
+    blind = compare_programs(lines, out.replace("(POSTPROC START Z150)\n", "")).axis_stats()
     assert blind["Z"]["max_mm"] == 0.0

@@ -11,6 +11,7 @@ from postproc.calibration.calfile import load_calibration
 from postproc.cli import main
 from postproc.engine.identity import IdentityEngine
 from postproc.errors import PostprocError
+from postproc.gcode import emit
 from postproc.gcode.compare import compare_programs
 from postproc.gcode.path import Setup
 from postproc.gcode.pipeline import CorrectOptions, correct_text
@@ -91,7 +92,8 @@ def test_diff_pairs_steps_shorter_than_the_correction():
     assert d.moves == rep.moves
     np.testing.assert_allclose(np.array([m.delta_mm for m in d.moved]), [[-0.2, 0.1, -0.05]] * d.n_moved,
                                atol=1e-9)
-    assert [m.lineno for m in d.moved] == [m.lineno_corrected - 1 for m in d.moved]
+    n_header = len(emit.split_header(out)[0])
+    assert [m.lineno for m in d.moved] == [m.lineno_corrected - n_header for m in d.moved]
 
 
 def test_diff_of_a_twice_corrected_program_skips_both_headers():

@@ -65,8 +65,8 @@ def test_utf8_bom_is_not_a_word_and_stays_in_place():
     # a scale of the coordinates: words rewritten at the right places
     eng = scale_engine()
     out, _ = correct_text(text, eng, ZERO, CorrectOptions(), path="p.nc")
-    assert out.startswith("\ufeff(postproc ")  # the mark stays the file's first bytes
-    body = out.splitlines(keepends=True)[1:]
+    assert out.startswith("\ufeff(POSTPROC ")  # the mark stays the file's first bytes
+    body = emit.split_header(out)[1].splitlines(keepends=True)
     assert body[0].startswith("G21 G90 G0 X")
 
 
@@ -257,8 +257,9 @@ def test_programs_needing_expansion_are_corrected_flat_with_source_line_numbers(
             "o100 call [0] [1]\no100 call [0] [5]\nG1 Y7\nM2\n")
     out, rep = correct_text(text, scale_engine(1.0001), ZERO, CorrectOptions(), path="p.ngc")
     assert rep.expanded
-    body = out.splitlines()[1:]
-    assert "expanded" in out.splitlines()[0]
+    head, rest = emit.split_header(out)
+    body = rest.splitlines()
+    assert "(POSTPROC EXPANDED SUBPROGRAMS LOOPS AND MACROS)\n" in head
     assert body[:2] == ["G21 G90", "G0 X0 Y0 Z4.9995"]
     # the call's arguments are #1 and #2 inside the subroutine (LinuxCNC): X = 0 + 1, 0 + 5
     xs = [float(ln.split()[1][1:]) for ln in body if ln.strip().startswith("G1 X")]
@@ -284,7 +285,8 @@ def test_fanuc_sample_expands_its_subprogram_and_corrects_cycles_and_g28():
     lines = out.splitlines()
     assert lines[0] == "%"
     assert lines[1] == "O1001 (FANUC DRILL SAMPLE)"
-    assert lines[2].startswith("(postproc ")
+    assert emit.is_header_start(lines[2])
+    assert "(POSTPROC EXPANDED SUBPROGRAMS LOOPS AND MACROS)" in lines
     assert rep.expanded
     assert rep.cycles_expanded == 5  # three G81 holes, two G83 holes from the M98 subprogram
     assert "M98" not in out

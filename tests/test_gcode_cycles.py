@@ -9,6 +9,7 @@ from oracle import requires_rs274, run_rs274  # noqa: I001  (the tests' own help
 from postproc.engine.identity import IdentityEngine
 from postproc.engine.static import StaticEngine
 from postproc.errors import SafetyError
+from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter, plain_moves
 from postproc.gcode.path import Setup
 from postproc.gcode.pipeline import CorrectOptions, correct_text
@@ -111,7 +112,7 @@ def test_kept_cycles_under_a_scale_land_every_hole_on_its_nominal(name, tmp_path
 def test_kept_cycle_rewrites_only_its_words_and_adds_z_r_only_when_they_change():
     k = 1.0002
     out, _ = correct_text(PROGRAMS["g81_g98"], scale_engine(k), ZERO, CorrectOptions())
-    lines = out.splitlines()[1:]
+    lines = emit.split_header(out)[1].splitlines()
     assert lines[2] == "G98 G81 X4.9990 Y5.9988 Z-2.9994 R1.9996 F100"
     assert lines[3] == "X6.9986"  # same Z and R: nothing added
     assert lines[4] == "Y8.9982"
@@ -139,7 +140,7 @@ def test_a_new_cycle_code_needs_its_r_again_as_in_linuxcnc():
 def test_repeats_and_increments_stay_only_when_nothing_is_corrected():
     text = PROGRAMS["g91_repeats"]
     out, rep = correct_text(text, IdentityEngine(BIG), ZERO, CorrectOptions())
-    assert out.splitlines()[1:] == text.splitlines()
+    assert emit.split_header(out)[1].splitlines() == text.splitlines()
     with pytest.raises(SafetyError, match="G81") as err:
         correct_text(text, scale_engine(1.001), ZERO, CorrectOptions(), path="p.ngc")
     assert "--cycles expand" in err.value.hint

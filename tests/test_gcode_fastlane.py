@@ -7,6 +7,7 @@ import pytest
 
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
+from postproc.gcode import emit
 from postproc.gcode.path import Setup
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -45,7 +46,7 @@ def test_fast_lane_handles_lower_case_spacing_and_added_words():
     b = correct_text(text, eng, Setup(), CorrectOptions(fast_lane=False))[0]
     assert a == b
     # Y moved, so X (squareness) gets a word too, in the line's own case and spacing
-    assert a.splitlines()[2].startswith("y20.0140x9.9")
+    assert emit.split_header(a)[1].splitlines()[1].startswith("y20.0140x9.9")
     assert a.splitlines()[-1].startswith("Y20.0140X")  # no blanks in the line: none added
 
 

@@ -59,6 +59,15 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, 
 
     if sigma is not None and not sigma > 0:
         raise click.BadParameter("must be a positive length in mm", param_hint="--sigma")
+    if plot_dir:
+        from pathlib import Path
+
+        from postproc.fileio import require_matplotlib
+
+        if Path(plot_dir).suffix.lower() in (".png", ".svg", ".pdf", ".jpg", ".jpeg") and not Path(plot_dir).is_dir():
+            raise click.BadParameter(f"{plot_dir!r} looks like a file name: check writes several plots, "
+                                     "give the directory to write them in (it is created)", param_hint="--plot")
+        require_matplotlib("--plot")
     cal = load_calibration(cal_path)
     r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
     data = read_measurement_files(files, r)

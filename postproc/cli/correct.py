@@ -150,6 +150,36 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
         return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
     except PostprocError as exc:
         return "", str(exc), exc.exit_code
+    except Exception as exc:  # a bug: name it for this file and go on with the others
+        from postproc.errors import EXIT_INTERNAL
+
+        return "", f"internal error: {type(exc).__name__}: {exc} (a bug in postproc: please report it)", EXIT_INTERNAL
+
+
+# Files taken from a folder given as input: G-code suffixes, and no suffix (Fanuc and Haas
+# programs are often named O1234).
+PROGRAM_SUFFIXES = {"", ".nc", ".ngc", ".gcode", ".gc", ".g", ".tap", ".cnc", ".eia", ".mpf", ".min", ".ptp",
+                    ".txt", ".iso", ".ncc", ".dnc", ".fnc", ".nci"}
+
+
+def _expand_inputs(inputs) -> tuple[list[str], bool]:
+    """Inputs with each folder replaced by its programs (files directly in it with a
+    G-code suffix or none, hidden files left out, sorted); and whether a folder was given."""
+    out: list[str] = []
+    folder = False
+    for src in inputs:
+        p = Path(src)
+        if src != "-" and p.is_dir():
+            folder = True
+            files = sorted(str(f) for f in p.iterdir()
+                           if f.is_file() and not f.name.startswith(".") and f.suffix.lower() in PROGRAM_SUFFIXES)
+            if not files:
+                raise click.UsageError(f"folder {src} holds no program (files ending in .nc, .ngc, .tap, "
+                                       "... or without an extension)")
+            out.extend(files)
+        else:
+            out.append(src)
+    return out, folder
 
 
 def _progress_printer(total_hint: str):
@@ -162,11 +192,18 @@ def _progress_printer(total_hint: str):
 @click.argument("inputs", nargs=-1, required=True, metavar="IN...")
 @click.option("-c", "--calibration", required=True, type=click.Path(dir_okay=False),
               help="Calibration file (from 'postproc fit').")
-@click.option("-o", "--output", default=None, help="Output program ('-' for stdout). One input only.")
+@click.option("-o", "--output", default=None,
+              help="Output program ('-' for stdout). One input only. A symbolic link is written through; "
+                   "a device such as /dev/null is written, never replaced.")
 @click.option("--output-dir", default=None, type=click.Path(file_okay=False),
-              help="Directory for the corrected programs (same names); for several inputs.")
+              help="Directory for the corrected programs (same names); for several inputs or a folder.")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
-              help="Correct this many files in parallel processes.")
+              help="Correct this many files in parallel processes (several inputs or a folder); "
+                   "ends with a tally of corrected and refused files.")
+@click.option("--dialect", default="generic", show_default=True,
+              type=click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False),
+              help="Controller the output is for: its line length, comments, case and arc rule. "
+                   "generic is what all of them accept.")
 @click.option("--offset", multiple=True, metavar="G5x=X..,Y..,Z..",
               help="Work offset value in machine mm (end with 'in' for inches), e.g. G54=X100,Y50,Z-300. Repeatable.")
 @click.option("--tool-length", "tool_length", multiple=True, metavar="H=L",
@@ -204,7 +241,8 @@ def _progress_printer(total_hint: str):
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
 def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, tool_table, tool_vector,
-            start, home, cycles, subroutine_path, no_expand, context, tolerance, decimals, max_correction, extrapolate, force, maps):
+            start, home, cycles, subroutine_path, no_expand, context, tolerance, decimals, max_correction, extrapolate,
+            force, maps, dialect):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -222,10 +260,21 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     offset with --offset G54=...); the corrected program then names that axis
     wherever the correction moves it.
 
+    The corrected program opens with a few short (POSTPROC ...) comment lines
+    (after a % line and an O number line) that the --dialect's controller
+    reads: version, calibration and its sha256, tolerance and the setup. An
+    empty program is refused.
+
+    A folder as input corrects every program in it (files ending in .nc, .ngc,
+    .tap, ... or without an extension) into --output-dir, -j at a time, with a
+    line per file and a tally at the end; the exit code is non-zero when any
+    file was refused.
+
     Example:
 
     \b
         postproc correct samples/pocket.nc -c calibrations/s500_static.json -o pocket_corrected.nc
+        postproc correct programs/ -c calibrations/s500_static.json --output-dir corrected/ -j 4
         postproc correct samples/g54_g43.ngc -c calibrations/s500_static.json \\
             --offset G54=X100,Y80,Z40 --tool-length 1=100 -o part_corrected.ngc
         postproc correct engraving.tap -c calibrations/s500_static.json \\
@@ -234,6 +283,11 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
             --offset G54=X100,Y100,Z-200 --tool-length 1=100 --home G28=X0,Y0,Z0 -o drill_corrected.nc
     """
     setup = build_setup(offset, tool_length, tool_table, tool_vector, context, start, home)
+    inputs, folder = _expand_inputs(inputs)
+    if folder and output is not None:
+        raise click.UsageError("a folder as input needs --output-dir, not -o")
+    if folder and output_dir is None:
+        raise click.UsageError("a folder as input needs --output-dir for the corrected programs")
     if len(inputs) > 1 and output is not None:
         raise click.UsageError("-o takes one input; use --output-dir for several")
     if output is not None and output_dir is not None:
@@ -242,8 +296,8 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
         raise click.UsageError("'-' (stdin) can only be the only input")
     options = {"tolerance_mm": tolerance, "decimals": decimals, "max_correction_mm": max_correction,
                "extrapolate": extrapolate, "force": force, "cycles": cycles,
-               "expand": not no_expand, "subroutine_path": tuple(subroutine_path)}
-    if len(inputs) == 1 and (output is not None or output_dir is None):
+               "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
+    if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         _single(inputs[0], output or "-", calibration, setup, options, maps)
         return
     if output_dir is None:
@@ -252,27 +306,60 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
         raise click.UsageError(f"several inputs are named {', '.join(dupes)}: their outputs would collide in --output-dir")
-    Path(output_dir).mkdir(parents=True, exist_ok=True)
+    out_dir = Path(output_dir)
+    if out_dir.is_dir() and any(Path(src).parent.resolve() == out_dir.resolve() for src in inputs if src != "-"):
+        raise click.UsageError(f"--output-dir {output_dir} is the folder of the inputs: the corrected programs "
+                               "would replace them; give another folder")
+    out_dir.mkdir(parents=True, exist_ok=True)
     jobs_list = []
     for src in inputs:
-        dst = str(Path(output_dir) / Path(src).name)
+        dst = str(out_dir / Path(src).name)
         _check_not_same(src, dst)
         jobs_list.append({"src": src, "dst": dst, "calibration": calibration, "setup": setup,
                           "options": options, "maps": list(maps)})
-    if jobs > 1 and len(jobs_list) > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            results = list(pool.map(_run_one, jobs_list))
-    else:
-        results = [_run_one(j) for j in jobs_list]
-    worst = 0
-    for summary, error, code in results:
+    _batch(jobs_list, jobs)
+
+
+def _batch(jobs_list: list[dict], jobs: int) -> None:
+    """Correct every job, one stderr line per file as it ends, then the tally; exit with
+    the worst refusal's code when any file was refused."""
+    total = len(jobs_list)
+    results: list = [None] * total
+    width = len(str(total))
+
+    def placed(src: str, error: str) -> str:
+        """The error with its file named once (most errors begin with the file's place)."""
+        return error if error.startswith(f"{src}:") else f"{src}: {error}"
+
+    def report(k: int, done: int, res) -> None:
+        summary, error, _code = res
+        src = jobs_list[k]["src"]
         if error:
-            click.echo(f"postproc: error: {error}", err=True)
-            worst = max(worst, code)
+            click.echo(f"[{done:>{width}}/{total}] refused   {placed(src, error).splitlines()[0]}", err=True)
         else:
-            click.echo(summary, err=True)
-    if worst:
-        sys.exit(worst)
+            click.echo(f"[{done:>{width}}/{total}] corrected {summary}", err=True)
+
+    if jobs > 1 and total > 1:
+        from concurrent.futures import as_completed
+
+        with ProcessPoolExecutor(max_workers=min(jobs, total)) as pool:
+            futures = {pool.submit(_run_one, j): k for k, j in enumerate(jobs_list)}
+            for done, fut in enumerate(as_completed(futures), start=1):
+                k = futures[fut]
+                results[k] = fut.result()
+                report(k, done, results[k])
+    else:
+        for k, j in enumerate(jobs_list):
+            results[k] = _run_one(j)
+            report(k, k + 1, results[k])
+    refused = [(jobs_list[k]["src"], r) for k, r in enumerate(results) if r[1]]
+    click.echo(f"{total} file{'s' if total != 1 else ''}: {total - len(refused)} corrected, "
+               f"{len(refused)} refused", err=True)
+    for src, (_summary, error, code) in refused:
+        first, *rest = placed(src, error).splitlines()
+        click.echo("\n".join([f"  refused (exit {code}) {first}", *(f"  {r}" for r in rest)]), err=True)
+    if refused:
+        sys.exit(max(code for _src, (_s, _e, code) in refused))
 
 
 def _check_not_same(src: str, dst: str) -> None:

@@ -16,21 +16,25 @@ LIST_MOVED = 15
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
 @click.option("--all", "show_all", is_flag=True, help="List every moved block, not only the largest.")
 @click.option("--offset", multiple=True, metavar="G5x=X..,Y..,Z..",
-              help="Work offset as given to 'correct' (needed only for programs using G53). Repeatable.")
+              help="Work offset as given to 'correct' [default: the ones the corrected program's header "
+                   "records]. Matters only for programs using G53. Repeatable.")
 @click.option("--tool-length", "tool_length", multiple=True, metavar="H=L",
-              help="Tool length as given to 'correct' (needed only for programs using G53). Repeatable.")
+              help="Tool length as given to 'correct' [default: the ones the header records]. Matters only "
+                   "for programs using G53. Repeatable.")
 def diff(original, corrected, as_json, show_all, offset, tool_length):
     """Compare a program with its corrected version.
 
     Reports which blocks moved and by how much (end points, mm, machine axes), the
     largest and mean correction per axis, the lines inserted by segmentation and
     the lines left unchanged. Lines that are not moves must be identical in both.
+    The work offsets, tool lengths and start the program was corrected with are
+    read from its header (give --offset/--tool-length only to override them).
 
     Example:
 
     \b
         postproc diff samples/pocket.nc pocket_corrected.nc
-        postproc diff samples/g54_g43.ngc part_corrected.ngc --offset G54=X100,Y80,Z40 --tool-length 1=100 --json
+        postproc diff samples/g54_g43.ngc part_corrected.ngc --json
     """
     from postproc.cli.correct import build_setup
     from postproc.gcode.compare import compare_programs
@@ -42,8 +46,8 @@ def diff(original, corrected, as_json, show_all, offset, tool_length):
         return
     stats = rep.axis_stats()
     click.echo(f"{rep.original} -> {rep.corrected}")
-    if rep.header:
-        click.echo(f"  {rep.header}")
+    for row in rep.header.splitlines():
+        click.echo(f"  {row}")
     click.echo(f"  lines: {rep.lines_original} original, {rep.lines_corrected} corrected "
                f"(+{rep.lines_inserted} inserted by segmentation), {rep.lines_unchanged} unchanged")
     click.echo(f"  moves: {rep.moves}, {rep.n_moved} moved, {rep.moves_unchanged} unchanged")

@@ -297,6 +297,10 @@ def deadband(sensor, gap, tau, correction, learn, plot, output):
     """
     import numpy as np
 
+    if plot:
+        from postproc.fileio import require_matplotlib
+
+        require_matplotlib("--plot")
     from postproc.calibration.csvfile import read_csv
     from postproc.mirror.deadband import plot_deadband, simulate
     from postproc.mirror.kdist import read_sensor

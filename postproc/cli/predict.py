@@ -24,6 +24,12 @@ def _save_figure(ax, path: str) -> None:
     save_figure(np.ravel(ax)[0].figure, path, dpi=110)
 
 
+def _require_plotting(option: str = "--plot") -> None:
+    from postproc.fileio import require_matplotlib
+
+    require_matplotlib(option)
+
+
 def _echo_json(data) -> None:
     click.echo(json.dumps(data, indent=2))
 
@@ -76,6 +82,8 @@ def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
     from postproc.predict.operation import load_operation
     from postproc.predict.trace import flank_surface, plot_flank, plot_trace_near_wall, with_runout
 
+    if plot or plot_trace:
+        _require_plotting("--plot" if plot else "--plot-trace")
     op = load_operation(operation)
     if op.kind != "flank":
         raise PostprocError(f"predict trace needs a flank operation, got {op.kind!r}", path=operation,
@@ -209,6 +217,8 @@ def bore(operation, n, seed, plot, magnify, machine, values, check, as_json):
     from postproc.predict import bore as bore_mod
     from postproc.predict.analysis import predict_bore
 
+    if plot:
+        _require_plotting()
     op = _load_bore(operation, machine, values)
     report = predict_bore(op, n=n, seed=seed)
     mid, worst, worst_sec, dist, verdict = report.mid, report.worst, report.worst_section, report.dist, report.verdict
@@ -283,6 +293,8 @@ def tolerance_cmd(operation, n, seed, worst_only, plot, machine, values, check, 
     \b
         postproc predict tolerance samples/predict/bore_50H7.operation.json -n 50000 --seed 2
     """
+    if plot:
+        _require_plotting()
     from postproc.predict import tolerance
     from postproc.predict.analysis import analyse_feature
 

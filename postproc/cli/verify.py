@@ -76,6 +76,10 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
 
     from postproc.calibration.calfile import load_calibration
 
+    if plot:
+        from postproc.fileio import require_matplotlib
+
+        require_matplotlib("--plot")
     machine = _load_machine(machine_path)
     ctx = dict(parse_context(c) for c in contexts)
     tool = parse_vector(tool_vector, "--tool-vector") if tool_vector else None

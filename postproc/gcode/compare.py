@@ -4,9 +4,10 @@ Lines that are not moves must be byte-identical in both (they are the anchors).
 Between two anchors, each original move is paired with the corrected line of the
 same skeleton (the line without its numbers, motion and arc words, N words kept)
 whose end point is nearest; the corrected lines left over are the lines inserted by
-segmentation. Positions are compared in the machine frame; work offsets and tool lengths not
-given count as zero (both versions use the same ones, so they cancel, except in G53
-blocks whose words are machine coordinates: give them for programs using G53).
+segmentation. Positions are compared in the machine frame, with the work offsets, tool lengths,
+start and tool vector the corrected program's header records (those given by the
+caller take their place); they matter for G53 blocks, whose words are machine
+coordinates. Offsets and tool lengths neither given nor recorded count as zero.
 """
 
 from __future__ import annotations
@@ -107,37 +108,130 @@ class DiffReport:
         }
 
 
+_PROGRAM_START = emit._PROGRAM_START
+
+
 def _records(source, setup: Setup | None, counter: list, drop_header: bool = False, header: list | None = None):
-    """Yield ``(lineno, line, end or None)`` lazily; counts lines in ``counter[0]``."""
+    """Yield ``(lineno, line, end or None)`` lazily; counts lines in ``counter[0]``.
+
+    With ``drop_header`` the header lines at the start (after a ``%`` line and an ``O``
+    number line; several headers in a row for a program corrected more than once) are
+    left out and collected in ``header``."""
     path, lines = iter_source_lines(source)
     interp = Interpreter(setup or Setup(), path, lenient_setup=True)
+    head_open = drop_header
     for lineno, line in enumerate(lines, start=1):
         counter[0] += 1
-        if drop_header and header is not None and lineno <= 3 and emit.is_header(line):
-            header.append(line.strip())
-            counter[0] -= 1
-            continue
+        if head_open:
+            if emit.is_header(line):
+                if header is not None:
+                    header.append(line.strip())
+                counter[0] -= 1
+                continue
+            if not _PROGRAM_START.match(line) or lineno > 2:
+                head_open = False
         mv = interp.feed_line(lineno, line)
         yield lineno, line, (None if mv is None else mv.q1)
 
 
-_HEADER_START = re.compile(r"; start ((?:[XYZ][-+0-9.eE]+,?)+)")
+_OLD_START = re.compile(r"; start ((?:[XYZ][-+0-9.eE]+,?)+)")
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
 
-def header_start(source) -> dict[str, float]:
-    """The ``--start`` a corrected program's header records (``{}`` when none)."""
+@dataclass
+class HeaderSetup:
+    """The setup a corrected program's header records (empty where it records none)."""
+
+    offsets: dict = field(default_factory=dict)  # "G54" -> (x, y, z) machine mm
+    tool_lengths: dict = field(default_factory=dict)  # H -> mm
+    start: dict = field(default_factory=dict)  # axis -> machine mm
+    tool_vector: tuple | None = None
+    home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
+
+
+def _header_rows(source, limit: int = 200) -> list[str]:
+    """The header lines at the start of a program (old one-line form or the new lines)."""
     _path, lines = iter_source_lines(source)
+    rows: list[str] = []
     try:
-        for line in islice(lines, 3):
-            m = _HEADER_START.search(line) if emit.is_header(line) else None
-            if m:
-                items = (item for item in m.group(1).split(",") if item)
-                return {item[0]: float(item[1:]) for item in items}
+        for k, line in enumerate(islice(lines, limit), start=1):
+            if emit.is_header(line):
+                rows.append(line.strip())
+            elif rows or not (_PROGRAM_START.match(line) and k <= 2):
+                break
     finally:
         close = getattr(lines, "close", None)
         if close is not None:
             close()
-    return {}
+    return rows
+
+
+def _axis_values(text: str) -> dict[str, float]:
+    return {m.group(1).upper(): float(m.group(2)) for m in re.finditer(rf"([XYZxyz])({_NUMBER})", text)}
+
+
+def header_setup(source) -> HeaderSetup:
+    """Offsets, tool lengths, start and tool vector recorded in a corrected program's header."""
+    hs = HeaderSetup()
+    for row in _header_rows(source):
+        if row.startswith(emit.HEADER_TAG):  # the one-line header of earlier versions
+            for part in (p.strip() for p in row.rstrip(")").split(";")[1:]):
+                m = re.fullmatch(rf"(G5\S*?)=({_NUMBER}),({_NUMBER}),({_NUMBER})", part)
+                if m:
+                    hs.offsets[m.group(1).upper()] = tuple(float(m.group(i)) for i in (2, 3, 4))
+                elif part.startswith("tools "):
+                    for item in part[6:].split(","):
+                        h, _, v = item.partition("=")
+                        hs.tool_lengths[int(float(h))] = float(v)
+                elif part.startswith("tool vector "):
+                    hs.tool_vector = tuple(float(v) for v in part[12:].split(","))
+                elif re.match(r"G(28|30)=", part):
+                    hs.home[part[:3]] = _axis_values(part[4:])
+            m = _OLD_START.search(row)
+            if m:
+                hs.start.update({item[0]: float(item[1:]) for item in m.group(1).split(",") if item})
+            continue
+        words = row[len(emit.HEADER_PREFIX):].rstrip(")").strip().upper()
+        m = re.fullmatch(r"OFFSET (G5\S+) (.*)", words)
+        if m:
+            v = _axis_values(m.group(2))
+            hs.offsets[m.group(1)] = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+        elif words.startswith("TOOL LENGTHS "):
+            for h, v in re.findall(rf"H(\d+) ({_NUMBER})", words):
+                hs.tool_lengths[int(h)] = float(v)
+        elif words.startswith("START "):
+            hs.start.update(_axis_values(words[6:]))
+        elif re.match(r"G(28|30) ", words):
+            hs.home[words[:3]] = _axis_values(words[4:])
+        elif words.startswith("TOOL VECTOR "):
+            v = _axis_values(words[12:])
+            hs.tool_vector = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+    return hs
+
+
+def header_start(source) -> dict[str, float]:
+    """The ``--start`` a corrected program's header records (``{}`` when none)."""
+    return header_setup(source).start
+
+
+def setup_from_header(corrected, setup: Setup | None) -> Setup:
+    """``setup`` with what it leaves out (offsets, tool lengths, start, tool vector, G28/G30
+    stored positions) taken
+    from the corrected program's header: the setup the program was corrected with."""
+    hs = header_setup(corrected)
+    setup = setup or Setup()
+    changes = {}
+    if not setup.offsets and hs.offsets:
+        changes["offsets"] = dict(hs.offsets)
+    if not setup.tool_lengths and hs.tool_lengths:
+        changes["tool_lengths"] = dict(hs.tool_lengths)
+    if not setup.start and hs.start:
+        changes["start"] = dict(hs.start)
+    if setup.tool_vector is None and hs.tool_vector is not None:
+        changes["tool_vector"] = hs.tool_vector
+    if hs.home and hasattr(setup, "home") and not setup.home:
+        changes["home"] = {k: dict(v) for k, v in hs.home.items()}
+    return dataclasses.replace(setup, **changes) if changes else setup
 
 
 def _distance(a, b) -> float:
@@ -152,11 +246,9 @@ def compare_programs(original, corrected, setup: Setup | None = None) -> DiffRep
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates.
     """
-    if not (setup and setup.start):
-        # the start the program was corrected with: axes it never names start there
-        start = header_start(corrected)
-        if start:
-            setup = dataclasses.replace(setup or Setup(), start=start)
+    # what the program was corrected with, where the caller gives nothing: the start (axes
+    # it never names start there), and the offsets and tool lengths that G53 blocks need
+    setup = setup_from_header(corrected, setup)
     ocount, ccount, header = [0], [0], []
     opath, _ = iter_source_lines(original)
     cpath, _ = iter_source_lines(corrected)
@@ -238,7 +330,7 @@ def compare_programs(original, corrected, setup: Setup | None = None) -> DiffRep
             raise PostprocError(f"line {rec[0]} of the corrected program has no counterpart in the original",
                                 path=rep.corrected, lineno=rec[0])
         rep.lines_inserted += 1
-    rep.header = header[-1] if header else ""
+    rep.header = "\n".join(header)
     rep.lines_original = ocount[0]
     rep.lines_corrected = ccount[0]
     return rep

@@ -8,6 +8,7 @@ byte (spacing, comments, N numbers, line ending) is copied as it was.
 from __future__ import annotations
 
 import math
+import re
 
 from postproc import __version__
 
@@ -93,13 +94,194 @@ def style_of(line: str) -> tuple[str, bool]:
 
 
 def header_line(name: str, sha256: str, tolerance_mm: float, setup_note: str, ending: str) -> str:
-    """The comment that opens every corrected program (and marks it as corrected)."""
+    """The one-line header of earlier versions (still read by :func:`is_header` and ``diff``)."""
     clean = "".join("[" if c == "(" else "]" if c == ")" else c for c in name if c.isprintable())[:60]
     text = (f"{HEADER_TAG}{__version__}{HEADER_MARK}with calibration {clean} sha256 {sha256} "
             f"tolerance {tolerance_mm:g} mm{'; ' + setup_note if setup_note else ''})")
     return text + (ending or "\n")
 
 
+# -- the header of several short lines ---------------------------------------------------
+# Every line is "(POSTPROC <WORDS>)": upper case, letters, digits, blanks and ". - +" only,
+# so that every dialect reads it (no ";" or "," that a Fanuc link alarms on, no lower case,
+# none longer than the shortest line any controller reads). The first line carries the
+# version and CORRECTED: it marks the program as corrected.
+HEADER_PREFIX = "(POSTPROC "
+HEADER_LINE_CHARS = 96  # inside every dialect's line (generic: 127); the sha256 line needs 82
+_HEADER_OPEN = re.compile(r"\s*\(POSTPROC \S+ CORRECTED\)\s*$", re.IGNORECASE)
+_HEADER_ANY = re.compile(r"\s*\(POSTPROC [A-Z0-9 .+\-]*\)\s*$", re.IGNORECASE)
+_PROGRAM_START = re.compile(r"\ufeff?\s*(%|[Oo]\s*\d|:\s*\d)")  # tape mark, program number
+_HEADER_SAFE = re.compile(r"[^A-Z0-9 .+\-]")
+
+
+def _safe(text: str) -> str:
+    """Upper case, only letters, digits, blanks and ``. - +`` (others become blanks), blanks squeezed."""
+    return " ".join(_HEADER_SAFE.sub(" ", text.upper()).split())
+
+
+def _num(v: float) -> str:
+    """The shortest text that reads back as the same float, without an exponent."""
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"cannot write {v} into a header")
+    text = repr(v)
+    if "e" in text or "E" in text:
+        text = f"{v:.17f}".rstrip("0").rstrip(".")
+    if text.endswith(".0"):
+        text = text[:-2]
+    return "0" if text in ("-0", "") else text
+
+
+def _setup_parts(setup_note: str, setup) -> list[str]:
+    """The setup note as header words, one entry per part (offsets, tools, start, ...)."""
+    parts: list[str] = []
+    exact = setup is not None
+    for raw in (p.strip() for p in setup_note.split(";") if p.strip()) if setup_note else ():
+        m = re.fullmatch(r"(G5[0-9.]+)=([-+0-9.eE]+),([-+0-9.eE]+),([-+0-9.eE]+)", raw)
+        if m:
+            if not exact:
+                parts.append(f"OFFSET {m.group(1)} X{_num(float(m.group(2)))} Y{_num(float(m.group(3)))} "
+                             f"Z{_num(float(m.group(4)))}")
+            continue
+        if raw.startswith("tools "):
+            if not exact:
+                pairs = [item.split("=") for item in raw[6:].split(",") if "=" in item]
+                parts.append("TOOL LENGTHS " + " ".join(f"H{int(float(h))} {_num(float(v))}" for h, v in pairs))
+            continue
+        if raw.startswith("start "):
+            if not exact:
+                parts.append("START " + " ".join(item for item in raw[6:].split(",") if item))
+            continue
+        if re.match(r"G(28|30)=", raw) and exact and getattr(setup, "home", None):
+            continue  # written from the setup below, exactly
+        if raw.lower().startswith("expanded"):
+            continue  # the EXPANDED line of header_lines says it
+        if raw.startswith("tool vector "):
+            if not exact:
+                vals = raw[12:].split(",")
+                parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(float(v))}" for a, v in zip("XYZ", vals, strict=False)))
+            continue
+        parts.append(_safe(raw))
+    if exact:
+        offs = setup.offsets or {}
+        for k in sorted(offs):
+            v = offs[k]
+            if isinstance(v, dict):
+                v = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+            parts.append(f"OFFSET {_safe(k)} " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", v, strict=True)))
+        if setup.tool_lengths:
+            parts.append("TOOL LENGTHS " + " ".join(f"H{int(h)} {_num(v)}" for h, v in sorted(setup.tool_lengths.items())))
+        if setup.start:
+            from postproc.gcode.interp import start_position
+
+            pos = start_position(setup.start)
+            parts.append("START " + " ".join(f"{a}{_num(v)}" for a, v in zip("XYZ", pos, strict=True) if v == v))
+        for name, v in sorted((getattr(setup, "home", None) or {}).items()):
+            v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
+            parts.append(f"{_safe(name)} " + " ".join(f"{a}{_num(x)}" for a, x in sorted(v.items())))
+        if setup.tool_vector is not None:
+            parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", setup.tool_vector, strict=True)))
+    return parts
+
+
+_KEYWORDS = {"TOOL LENGTHS": 2, "TOOL VECTOR": 2, "OFFSET": 2, "START": 1, "CALIBRATION": 1, "SHA256": 1,
+             "MAP": 1}
+
+
+def _wrap(words: str, width: int) -> list[str]:
+    """Split header words into lines of at most ``width`` characters, comment marks included.
+    A continued line repeats the part's keyword (``TOOL LENGTHS``, ``OFFSET G54``, ...), so
+    each line reads on its own."""
+    items = words.split()
+    if not items:
+        return []
+    keep = next((n for k, n in _KEYWORDS.items() if words.startswith(k + " ")), 0)
+    lead = " ".join(items[:keep])
+    room = width - len(HEADER_PREFIX) - 1
+    lines: list[str] = []
+    cur = ""
+    body = items[keep:] if keep else items
+    if words.startswith("TOOL LENGTHS "):  # "H1 100.5": a pair stays on one line
+        body = [" ".join(body[i:i + 2]) for i in range(0, len(body), 2)]
+    for w in body:
+        base = lead if keep else ""
+        while len(w) > room - len(base) - 1:  # a word longer than a line (a long name): cut it
+            cut = max(1, room - len(base) - 1)
+            if cur:
+                lines.append(cur)
+                cur = ""
+            lines.append(f"{base} {w[:cut]}".strip())
+            w = w[cut:]
+        if not cur:
+            cur = f"{base} {w}".strip()
+        elif len(cur) + 1 + len(w) <= room:
+            cur += " " + w
+        else:
+            lines.append(cur)
+            cur = f"{base} {w}".strip()
+    if cur:
+        lines.append(cur)
+    return [f"{HEADER_PREFIX}{t})" for t in lines]
+
+
+def header_lines(dialect, cal_name: str, cal_sha: str, tolerance_mm: float, setup_note: str, ending: str,
+                 expanded: bool = False, setup=None) -> list[str]:
+    """The comment lines that open every corrected program (and mark it as corrected).
+
+    Each is a short ``(POSTPROC ...)`` comment that ``dialect`` accepts (length, case,
+    characters; checked line by line). They carry the version, the calibration's name and
+    sha256, the tolerance, the setup (``setup_note`` as the pipeline writes it; when
+    ``setup`` is given, offsets, tool lengths, start and tool vector are written from it
+    exactly) and EXPANDED when subprograms or macros were expanded.
+    Each line ends with ``ending`` (``"\r\n"`` for a lone ``"\r"``).
+    """
+    from postproc.gcode import dialect as dialects
+
+    d = dialects.get(dialect)
+    width = min(HEADER_LINE_CHARS, d.max_line_chars)
+    # a lone carriage return ends no line for LinuxCNC or Grbl (they read up to "\n"): the
+    # header would join the next line. "\r\n" ends a line for every reader.
+    end = "\r\n" if ending == "\r" else (ending or "\n")
+    body = [f"{HEADER_PREFIX}{_safe(__version__)} CORRECTED)"]
+    body += _wrap("CALIBRATION " + (_safe(cal_name) or "UNNAMED"), width)
+    body += _wrap("SHA256 " + _safe(cal_sha), width)
+    body += _wrap(f"TOLERANCE {_num(tolerance_mm)} MM", width)
+    expanded = expanded or any(p.strip().lower().startswith("expanded") for p in (setup_note or "").split(";"))
+    for part in _setup_parts(setup_note, setup):
+        body += _wrap(part, width)
+    if expanded:
+        body += _wrap("EXPANDED SUBPROGRAMS LOOPS AND MACROS", width)
+    for k, line in enumerate(body, start=1):
+        dialects.check_output_line(d, line, path="<header>", lineno=k)
+    return [line + end for line in body]
+
+
 def is_header(line: str) -> bool:
-    s = line.lstrip()
-    return s.startswith(HEADER_TAG) and HEADER_MARK in s
+    """Is ``line`` a postproc header line? The old one-line header, or any line of the new
+    one (``(POSTPROC ...)``, in any case)."""
+    s = line.lstrip("\ufeff \t")
+    if s.startswith(HEADER_TAG) and HEADER_MARK in s:
+        return True
+    return s[:10].upper() == HEADER_PREFIX and bool(_HEADER_ANY.match(s))
+
+
+def is_header_start(line: str) -> bool:
+    """The line that opens a header: the old one-line header or ``(POSTPROC <version> CORRECTED)``."""
+    s = line.lstrip("\ufeff \t")
+    return (s.startswith(HEADER_TAG) and HEADER_MARK in s) or bool(_HEADER_OPEN.match(s))
+
+
+def split_header(text: str) -> tuple[list[str], str]:
+    """``(header lines, the rest)`` of a corrected program's text: the header lines are the
+    run of header lines after an opening ``%`` and ``O`` number line (those stay in the rest)."""
+    lines = text.splitlines(keepends=True)
+    head: list[str] = []
+    rest: list[str] = []
+    i = 0
+    while i < len(lines) and i < 2 and not is_header(lines[i]) and _PROGRAM_START.match(lines[i]):
+        rest.append(lines[i])
+        i += 1
+    while i < len(lines) and is_header(lines[i]):
+        head.append(lines[i])
+        i += 1
+    return head, "".join(rest + lines[i:])

@@ -16,7 +16,6 @@ import gc
 import math
 import os
 import re
-import tempfile
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
@@ -266,7 +265,9 @@ class Corrector(EmitterMixin):
                     path=self.path, lineno=k + 1, col=1,
                     hint="correct the original program instead, or use --force to correct it again")
         ending = (emit.line_ending(head[0]) if head else "") or "\n"
-        header = emit.header_line(self.cal_name, self.cal_sha, self.opt.tolerance_mm, self._setup_note(), ending)
+        header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
+                                        self._setup_note(), ending, expanded=self.expanded, setup=self.setup)
+        header = "".join(header_rows)
         entries: list = []
         lineno = 1
         for line in head[:keep]:
@@ -279,7 +280,7 @@ class Corrector(EmitterMixin):
             head[0] = head[0][1:]
         head = head[keep:]
         write(header)
-        self.report.lines_out += 1
+        self.report.lines_out += len(header_rows)
 
         use_fast = self.linear_exact and self.opt.fast_lane and source is None
         use_bulk = use_fast and self.opt.bulk_lane
@@ -960,36 +961,35 @@ def _correct_lines(get_lines, write, restart, engine, setup, options, path, cali
 def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, setup: Setup | None = None,
                  options: CorrectOptions | None = None, *, calibration_name: str = "",
                  calibration_sha256: str = "", progress=None) -> CorrectReport:
-    """Correct the program at ``source`` into ``output`` atomically (temp file, then rename).
+    """Correct the program at ``source`` into ``output`` safely (``postproc.fileio.output_path``).
 
-    On any error nothing is left at ``output`` (an existing file there is untouched).
+    On any error nothing is left at ``output`` (an existing file there is untouched); a
+    symbolic link is written through, a device or pipe written directly.
     """
+    from postproc.errors import OutputError
+    from postproc.fileio import output_path
+
+    # an empty program (no bytes, or blanks and line ends only) is refused: nothing to
+    # correct, and most often a file that was not written completely
+    try:
+        with open(source, "rb") as fh:
+            empty = not fh.read(65536).strip() and not fh.read(1)
+    except OSError:
+        empty = False  # the reader names the problem
+    if empty:
+        raise PostprocError("the program is empty: nothing to correct", path=str(source),
+                            hint="check that this is the program you meant (was it written completely?)")
     path, _lines = iter_source_lines(Path(source))
-    out = Path(output)
+    # staged: a device or pipe gets the whole program at the end (the run may start over)
     try:
-        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise PostprocError(f"cannot write the output here: {exc.strerror}", path=str(out),
-                            hint="check that the directory exists and is writable") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
+        with output_path(output, stage_special=True) as tmp, \
+                open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
             def restart() -> None:
                 fh.seek(0)
                 fh.truncate()
 
             report = _correct_lines(lambda: iter_source_lines(Path(source))[1], fh.write, restart, engine, setup,
                                     options, path, calibration_name, calibration_sha256, progress)
-        # mkstemp makes the file private (0600); give it the mode a new file would get
-        # (or keep the mode of the file it replaces)
-        try:
-            mode = out.stat().st_mode & 0o777
-        except OSError:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(tmp, mode)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
+        raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None
     return report

@@ -1,0 +1,333 @@
+"""What each controller accepts: line length, comments, case, decimals, and its arc rule.
+
+A corrected program must load on the controller it is for. ``DIALECTS`` holds one
+``Dialect`` per controller that ``--dialect`` names; ``generic`` is the subset every
+one of them accepts (the shortest line, upper case, parenthesis comments holding no
+``;``, ``,`` or ``(``, ASCII only).
+
+Where a value comes from the controller's source, the file and the constant are named
+beside it. LinuxCNC's values were also checked against its own interpreter (``rs274``
+of Debian's linuxcnc-uspace 2.9.0~pre1): a 252-character line loads, a 253-character
+line is "Command too long"; the arc rule below accepts and refuses the same arcs.
+Values from the Fanuc and Haas manuals are machine parameters: the defaults here are
+the usual settings, and are said to be so.
+
+The input-arc rule: a centre-format arc (I/J/K) whose end point is not at the start
+radius from the centre. ``Dialect.arc_end_radius_tolerance(r_start_mm, units)`` is how
+far the end radius may differ from the start radius before that controller refuses the
+block; ``arc_mismatch`` says what it does with a difference inside that tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from postproc.constants import MM_PER_INCH
+from postproc.errors import PostprocError
+
+# --- LinuxCNC ------------------------------------------------------------------------
+# src/emc/linuxcnc.h: LINELEN 255. src/emc/rs274ngc/interp_read.cc (read_text) reads with
+# fgets(line, LINELEN, fp) and fails with NCE_COMMAND_TOO_LONG when strlen(line) ==
+# LINELEN - 1: the stored text includes the line feed, so 253 characters (254 with "\n")
+# is refused and 252 is the longest line that loads (251 with "\r\n").
+LINUXCNC_LINELEN = 255
+# src/emc/rs274ngc/interp_internal.hh:
+#   CENTER_ARC_RADIUS_TOLERANCE_INCH (2 * 0.001 * M_SQRT2)   absolute, program units (inch)
+#   CENTER_ARC_RADIUS_TOLERANCE_MM   (2 * 0.01 * M_SQRT2)    absolute, program units (mm)
+#   SPIRAL_RELATIVE_TOLERANCE 0.001                          relative to max(r_start, r_end)
+# src/emc/rs274ngc/interp_arc.cc (arc_data_ijk): error when
+#   abs_err > spiral_abs_tolerance * 100.0  ||  (rel_err > spiral_rel_tolerance && abs_err > spiral_abs_tolerance)
+# so the absolute tolerance alone passes small arcs, the relative one large arcs, and
+# 100 times the absolute tolerance is the cap. (rs274 2.9.0: 0.05 mm on r = 100 loads,
+# 0.05 mm on r = 10 is refused, 2.85 mm on r = 10000 is refused.)
+LINUXCNC_ARC_ABS_MM = 2 * 0.01 * math.sqrt(2.0)
+LINUXCNC_ARC_ABS_INCH = 2 * 0.001 * math.sqrt(2.0)
+LINUXCNC_ARC_REL = 0.001
+LINUXCNC_ARC_CAP_FACTOR = 100.0
+
+# --- Grbl (1.1) --------------------------------------------------------------------
+# grbl/gcode.c, centre-format arcs (IJK already converted to mm):
+#   if (delta_r > 0.005) { if (delta_r > 0.5) FAIL(STATUS_GCODE_INVALID_TARGET);
+#                          if (delta_r > (0.001*gc_block.values.r)) FAIL(STATUS_GCODE_INVALID_TARGET); }
+# with gc_block.values.r the start radius. Always millimetres, whatever G20/G21.
+GRBL_ARC_ABS_MM = 0.005
+GRBL_ARC_CAP_MM = 0.5
+GRBL_ARC_REL = 0.001
+# grbl/protocol.c keeps a line's words, without blanks and comments, in
+# line[LINE_BUFFER_SIZE] (LINE_BUFFER_SIZE 80, protocol.h) and reports an overflow
+# once char_counter >= LINE_BUFFER_SIZE-1: at most 79 characters of words.
+GRBL_LINE_BUFFER_SIZE = 80
+# grbl/serial.h RX_BUFFER_SIZE 128: senders that stream by character counting send
+# the whole line, comments included, and it must fit the receive buffer with its "\n".
+GRBL_RX_BUFFER_SIZE = 128
+
+# --- NIST RS274NGC 3 (the interpreter Mach3 is built on) ------------------------------
+# rs274ngc.hh: RS274NGC_TEXT_SIZE 256, TOLERANCE_INCH 0.0002, TOLERANCE_MM 0.002; arc_data_ijk
+# refuses fabs(radius - radius2) > tolerance. The line is read like LinuxCNC's (fgets into
+# RS274NGC_TEXT_SIZE, too long at TEXT_SIZE - 1): 253 characters load; 252 is kept here
+# as LinuxCNC's, one below, because Mach3's own reader is not published.
+NIST_ARC_ABS_MM = 0.002
+NIST_ARC_ABS_INCH = 0.0002
+
+# --- Fanuc / Haas (manuals) ----------------------------------------------------------
+# Fanuc parameter 3410 "tolerance of arc radius" (input unit): a centre-format arc whose
+# end radius differs from its start radius by more than it raises alarm PS0020 (OVER
+# TOLERANCE OF RADIUS); inside it the arc is cut as a spiral. The value is the machine
+# builder's: 0.020 mm (0.0008 in) is assumed here, a common setting; give programs for a
+# machine set tighter arcs that agree within its value.
+FANUC_ARC_ABS_MM = 0.020
+FANUC_ARC_ABS_INCH = 0.0008
+# Haas mills alarm "Invalid I, J, K, or R in G02 or G03" for an end point off the start
+# radius; the same tolerance is assumed (not documented as a number in the operator's manual).
+HAAS_ARC_ABS_MM = 0.020
+HAAS_ARC_ABS_INCH = 0.0008
+# Fanuc and Haas program memory: no block limit is given in the operator's manuals for
+# milling programs; DNC links and older memory formats break long blocks. 128 characters
+# is kept as the limit here (the header and every edited line stay far below it).
+FANUC_MAX_LINE = 128
+
+
+@dataclass(frozen=True)
+class Dialect:
+    name: str
+    title: str
+    max_line_chars: int  # characters of a line, line feed not counted (a carriage return is)
+    max_word_chars: int | None  # characters of words left after blanks and comments go (Grbl)
+    uppercase_only: bool  # letters must be upper case, comments included (Fanuc/Haas)
+    paren_comments: bool  # "( ... )"
+    semicolon_comments: bool  # "; ..." to the end of the line
+    comment_forbidden: str  # characters that must not appear inside a comment
+    nested_comments: str  # what the controller does with "(" inside a comment
+    ascii_only: bool  # only printable ASCII (ISO code) in the program
+    decimals_mm: int  # default decimals of written coordinates
+    decimals_inch: int
+    arc_rule: str  # linuxcnc | grbl | absolute | strictest
+    arc_abs_mm: float  # absolute tolerance in a G21 program (mm)
+    arc_abs_inch: float  # absolute tolerance in a G20 program (inch)
+    arc_rel: float  # relative tolerance (0: none)
+    arc_cap_mm: float  # largest tolerance whatever the radius, mm (G21); inf: none
+    arc_mismatch: str  # what the controller does with an arc inside the tolerance, and beyond it
+    source: str  # where the values come from
+
+    def arc_end_radius_tolerance(self, r_start_mm: float, units="mm") -> float:
+        """Largest |r_end - r_start| (mm) this controller accepts on a centre-format arc.
+
+        ``units``: the program's units, ``"mm"`` or ``"inch"`` (or the factor 1.0 or 25.4),
+        because LinuxCNC's and Fanuc's tolerances are set in program units. LinuxCNC's
+        relative test divides by the larger radius: taking the start radius gives the
+        exact limit when the end radius is the smaller, and one that is smaller by 0.1 %
+        of itself otherwise (the safe side); :meth:`arc_end_radius_ok` is exact.
+        """
+        inch = _is_inch(units)
+        r = abs(float(r_start_mm))
+        if self.arc_rule == "strictest":
+            return min(DIALECTS[n].arc_end_radius_tolerance(r, units) for n in _ALL_BUT_GENERIC)
+        if self.arc_rule == "grbl":
+            return min(GRBL_ARC_CAP_MM, max(GRBL_ARC_ABS_MM, GRBL_ARC_REL * r))
+        a = self.arc_abs_inch * MM_PER_INCH if inch else self.arc_abs_mm
+        if self.arc_rule == "linuxcnc":
+            return min(LINUXCNC_ARC_CAP_FACTOR * a, max(a, self.arc_rel * r))
+        return a
+
+    def arc_end_radius_ok(self, r_start_mm: float, r_end_mm: float, units="mm") -> bool:
+        """Would this controller accept a centre-format arc with these start and end radii?"""
+        if self.arc_rule == "strictest":
+            return all(DIALECTS[n].arc_end_radius_ok(r_start_mm, r_end_mm, units) for n in _ALL_BUT_GENERIC)
+        r0, r1 = abs(float(r_start_mm)), abs(float(r_end_mm))
+        err = abs(r1 - r0)
+        if self.arc_rule == "linuxcnc":
+            a = self.arc_abs_inch * MM_PER_INCH if _is_inch(units) else self.arc_abs_mm
+            rel = err / max(r0, r1) if max(r0, r1) > 0 else 0.0
+            return not (err > LINUXCNC_ARC_CAP_FACTOR * a or (rel > self.arc_rel and err > a))
+        return err <= self.arc_end_radius_tolerance(r0, units)
+
+    def decimals(self, units="mm") -> int:
+        return self.decimals_inch if _is_inch(units) else self.decimals_mm
+
+
+def _is_inch(units) -> bool:
+    if isinstance(units, str):
+        u = units.strip().lower()
+        if u in ("mm", "g21"):
+            return False
+        if u in ("in", "inch", "g20"):
+            return True
+        raise ValueError(f"units must be 'mm' or 'inch', got {units!r}")
+    return abs(float(units) - MM_PER_INCH) < 1e-9
+
+
+DIALECTS: dict[str, Dialect] = {
+    "linuxcnc": Dialect(
+        name="linuxcnc", title="LinuxCNC 2.9",
+        max_line_chars=LINUXCNC_LINELEN - 3, max_word_chars=None,
+        uppercase_only=False, paren_comments=True, semicolon_comments=True,
+        comment_forbidden="(", nested_comments="error (NCE_NESTED_COMMENT_FOUND)", ascii_only=False,
+        decimals_mm=4, decimals_inch=5,
+        arc_rule="linuxcnc", arc_abs_mm=LINUXCNC_ARC_ABS_MM, arc_abs_inch=LINUXCNC_ARC_ABS_INCH,
+        arc_rel=LINUXCNC_ARC_REL, arc_cap_mm=LINUXCNC_ARC_CAP_FACTOR * LINUXCNC_ARC_ABS_MM,
+        arc_mismatch="cut as a spiral from the start radius to the end radius; beyond the tolerance the "
+                     "block is an error ('Radius to end of arc differs from radius to start')",
+        source="linuxcnc.h LINELEN; interp_read.cc read_text; interp_internal.hh CENTER_ARC_RADIUS_TOLERANCE_*, "
+               "SPIRAL_RELATIVE_TOLERANCE; interp_arc.cc arc_data_ijk"),
+    "grbl": Dialect(
+        name="grbl", title="Grbl 1.1",
+        max_line_chars=GRBL_RX_BUFFER_SIZE - 1, max_word_chars=GRBL_LINE_BUFFER_SIZE - 1,
+        uppercase_only=False, paren_comments=True, semicolon_comments=True,
+        comment_forbidden="(", nested_comments="the first ')' closes the comment; the rest is read as words",
+        ascii_only=True, decimals_mm=3, decimals_inch=4,
+        arc_rule="grbl", arc_abs_mm=GRBL_ARC_ABS_MM, arc_abs_inch=GRBL_ARC_ABS_MM / MM_PER_INCH,
+        arc_rel=GRBL_ARC_REL, arc_cap_mm=GRBL_ARC_CAP_MM,
+        arc_mismatch="cut on the start radius (mc_arc), the last segment going straight to the end point; "
+                     "beyond the tolerance error 33 (STATUS_GCODE_INVALID_TARGET)",
+        source="gcode.c (arc radius check), protocol.c/protocol.h LINE_BUFFER_SIZE, serial.h RX_BUFFER_SIZE; "
+               "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals"),
+    "fanuc": Dialect(
+        name="fanuc", title="Fanuc 0i/30i (ISO code)",
+        max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
+        uppercase_only=True, paren_comments=True, semicolon_comments=False,
+        comment_forbidden="(;,", nested_comments="alarm", ascii_only=True,
+        decimals_mm=3, decimals_inch=4,
+        arc_rule="absolute", arc_abs_mm=FANUC_ARC_ABS_MM, arc_abs_inch=FANUC_ARC_ABS_INCH, arc_rel=0.0,
+        arc_cap_mm=FANUC_ARC_ABS_MM,
+        arc_mismatch="cut as a spiral (radius changing linearly); beyond parameter 3410 alarm PS0020 "
+                     "OVER TOLERANCE OF RADIUS",
+        source="Fanuc operator's manual (control-out/control-in comments, ';' is the end of block in ISO "
+               "code); parameter manual No. 3410"),
+    "haas": Dialect(
+        name="haas", title="Haas NGC",
+        max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
+        uppercase_only=True, paren_comments=True, semicolon_comments=False,
+        comment_forbidden="(;,", nested_comments="alarm", ascii_only=True,
+        decimals_mm=3, decimals_inch=4,
+        arc_rule="absolute", arc_abs_mm=HAAS_ARC_ABS_MM, arc_abs_inch=HAAS_ARC_ABS_INCH, arc_rel=0.0,
+        arc_cap_mm=HAAS_ARC_ABS_MM,
+        arc_mismatch="alarm 'Invalid I, J, K, or R in G02 or G03' beyond the tolerance",
+        source="Haas mill operator's manual (comments, program format); tolerance assumed as Fanuc's"),
+    "mach3": Dialect(
+        name="mach3", title="Mach3",
+        max_line_chars=LINUXCNC_LINELEN - 3, max_word_chars=None,
+        uppercase_only=False, paren_comments=True, semicolon_comments=False,
+        comment_forbidden="(", nested_comments="error", ascii_only=True,
+        decimals_mm=4, decimals_inch=5,
+        arc_rule="absolute", arc_abs_mm=NIST_ARC_ABS_MM, arc_abs_inch=NIST_ARC_ABS_INCH, arc_rel=0.0,
+        arc_cap_mm=NIST_ARC_ABS_MM,
+        arc_mismatch="beyond the tolerance the block is an error (NIST RS274NGC arc_data_ijk)",
+        source="NIST RS274NGC 3 rs274ngc.hh TOLERANCE_MM/TOLERANCE_INCH, RS274NGC_TEXT_SIZE"),
+}
+_ALL_BUT_GENERIC = tuple(DIALECTS)
+
+DIALECTS["generic"] = Dialect(
+    name="generic", title="every dialect above",
+    max_line_chars=min(d.max_line_chars for d in DIALECTS.values()),
+    max_word_chars=min(d.max_word_chars for d in DIALECTS.values() if d.max_word_chars),
+    uppercase_only=True, paren_comments=True, semicolon_comments=False,
+    comment_forbidden="".join(sorted(set("".join(d.comment_forbidden for d in DIALECTS.values())))),
+    nested_comments="refused", ascii_only=True,
+    decimals_mm=4, decimals_inch=5,
+    arc_rule="strictest", arc_abs_mm=min(d.arc_abs_mm for d in DIALECTS.values()),
+    arc_abs_inch=min(d.arc_abs_inch for d in DIALECTS.values()), arc_rel=0.0,
+    arc_cap_mm=min(d.arc_cap_mm for d in DIALECTS.values()),
+    arc_mismatch="the strictest of the dialects: an arc is accepted only where every controller accepts it",
+    source="the intersection of the others")
+
+DIALECT_NAMES = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
+
+
+def get(name: str | Dialect) -> Dialect:
+    """The dialect called ``name`` (case-insensitive); a Dialect is returned as is."""
+    if isinstance(name, Dialect):
+        return name
+    d = DIALECTS.get(str(name).strip().lower())
+    if d is None:
+        raise PostprocError(f"unknown dialect {name!r}", hint=f"use one of {', '.join(DIALECT_NAMES)}")
+    return d
+
+
+def _comments(body: str):
+    """Yield ``(start, text, kind)`` for each comment of a line without its ending; kind is
+    ``"("``, ``";"``, ``"nested"`` (a "(" inside a comment) or ``"unclosed"``."""
+    i, n = 0, len(body)
+    while i < n:
+        c = body[i]
+        if c == "(":
+            j = body.find(")", i + 1)
+            if j < 0:
+                yield i, body[i + 1:], "unclosed"
+                return
+            inner = body[i + 1:j]
+            if "(" in inner:
+                yield i + 1 + inner.index("("), inner, "nested"
+            yield i, inner, "("
+            i = j + 1
+            continue
+        if c == ";":
+            yield i, body[i + 1:], ";"
+            return
+        i += 1
+
+
+def check_output_line(d: str | Dialect, line: str, path: str | None = None, lineno: int | None = None) -> None:
+    """Raise a PostprocError when controller ``d`` would refuse ``line`` (with or without its ending)."""
+    d = get(d)
+    body = line.rstrip("\n")
+    if body.endswith("\r"):
+        count = len(body.encode("utf-8", errors="surrogateescape"))
+        body = body[:-1]
+    else:
+        count = len(body.encode("utf-8", errors="surrogateescape"))
+    where = {"path": path, "lineno": lineno}
+    if count > d.max_line_chars:
+        raise PostprocError(
+            f"line of {count} characters is longer than {d.title} reads ({d.max_line_chars})", col=d.max_line_chars + 1,
+            hint="shorten the comment on this line" if "(" in body or ";" in body else
+            f"this line cannot be written for --dialect {d.name}", **where)
+    if d.ascii_only and not (body.isascii() and body.replace("\t", " ").isprintable()):
+        for k, c in enumerate(body):
+            if not (" " <= c <= "~" or c == "\t"):
+                raise PostprocError(f"character {c!r} is not in the ISO code {d.title} reads", col=k + 1,
+                                    hint="use ASCII letters, digits and punctuation only", **where)
+    if d.uppercase_only and body.upper() != body:
+        for k, c in enumerate(body):
+            if c.isalpha() and c.islower():
+                raise PostprocError(f"lower-case {c!r}: {d.title} reads upper-case letters only", col=k + 1,
+                                    hint="write the program in upper case", **where)
+    if "(" not in body and ";" not in body and ")" not in body:  # no comment: the common line
+        if d.max_word_chars is not None and len(body) > d.max_word_chars:
+            _check_words(d, body, [(0, len(body))], where)
+        return
+    words = []  # (start, end) of the text outside comments
+    pos = 0
+    for start, text, kind in _comments(body):
+        if kind in ("(", "unclosed", ";"):
+            words.append((pos, start))
+        if kind == "unclosed":
+            raise PostprocError(f"comment opened here is not closed on its line, which {d.title} refuses",
+                                col=start + 1, hint="close the comment with ')'", **where)
+        if kind == "nested":
+            raise PostprocError(f"'(' inside a comment: {d.title} reads nested comments as {d.nested_comments}",
+                                col=start + 1, hint="remove the inner parenthesis", **where)
+        if kind == ";":
+            if not d.semicolon_comments:
+                raise PostprocError(f"';' comment: {d.title} does not read ';' as a comment", col=start + 1,
+                                    hint="write the comment in parentheses", **where)
+            break
+        bad = [c for c in text if c in d.comment_forbidden]
+        if bad:
+            k = start + 1 + text.index(bad[0])
+            raise PostprocError(f"{bad[0]!r} inside a comment, which {d.title} refuses", col=k + 1,
+                                hint="remove it from the comment", **where)
+        pos = start + len(text) + 2
+    else:
+        words.append((pos, len(body)))
+    if d.max_word_chars is not None:
+        _check_words(d, body, words, where)
+
+
+def _check_words(d: Dialect, body: str, words: list[tuple[int, int]], where: dict) -> None:
+    """Grbl keeps a line's words without blanks and comments in a buffer of its own."""
+    cols = [k for a, b in words for k in range(a, b) if body[k] > " "]
+    if len(cols) > d.max_word_chars:
+        raise PostprocError(f"{len(cols)} characters of words on one line, more than {d.title} holds "
+                            f"({d.max_word_chars})", col=cols[d.max_word_chars] + 1, hint="split the block",
+                            **where)
