@@ -66,11 +66,6 @@ ROTARY = "ABC"
 PARAM_LETTERS = set("DFHIJKLNPQRST")
 # A degenerate arc (start, end and centre within this) is not an arc.
 MIN_ARC_RADIUS_MM = 1e-6
-# Input arcs whose end radius differs from the start radius by more than this are
-# refused. Looser than the check on emitted arcs: CAM posts round centres to 3-4
-# decimals and controllers accept it (LinuxCNC's centre-format tolerance is
-# 0.002 in); postproc then follows the spiral the controller draws.
-INPUT_ARC_RADIUS_ABS_MM = 0.0508
 
 
 @dataclass(slots=True)
@@ -261,6 +256,13 @@ class Interpreter:
         self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
+    def _arc_rule(self):
+        """The controller whose input-arc rule applies: the dialect's own (generic reads
+        arcs as LinuxCNC, the reference interpreter, does)."""
+        from postproc.gcode import dialect
+
+        return dialect.get("linuxcnc" if self.dialect == "generic" else self.dialect)
+
     def _construct_error(self, what: str):
         """The error class for a refused construct: NeedsExpansion when expanding is allowed
         and the construct is one the expansion stage flattens."""
@@ -1107,11 +1109,14 @@ class Interpreter:
             re_ = math.hypot(e1 - c1, e2 - c2)
             if rs < MIN_ARC_RADIUS_MM:
                 raise self._err(GcodeSyntaxError, "arc of zero radius", lineno, col)
-            if abs(rs - re_) > max(INPUT_ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * rs):
+            ctrl = self._arc_rule()
+            if not ctrl.arc_end_radius_ok(rs, re_, unit):
                 raise self._err(GcodeSyntaxError,
-                                f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm",
-                                lineno, col, hint="the end point is not on the arc's circle, so the path the controller takes "
-                                     "is uncertain; post the arc with more decimals")
+                                f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm, more than "
+                                f"{ctrl.title} accepts", lineno, col,
+                                hint="the end point is not on the arc's circle, so the controller refuses the arc; "
+                                     "post the arc with more decimals (or choose the --dialect of the controller "
+                                     "the program is for)")
             idx = (vals[l1][1] if l1 in vals else -1, vals[l2][1] if l2 in vals else -1)
             r_idx = -1
         center = [0.0, 0.0, 0.0]
