@@ -42,7 +42,7 @@ from postproc.gcode.emitter import EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
-from postproc.gcode.interp import Interpreter, Move, start_position
+from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
 from postproc.gcode.state import DWELL, LINE, RAPID
@@ -252,12 +252,14 @@ class Corrector(EmitterMixin):
 
         # the lines that stay before the header: a '%' tape mark and the program number
         # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
-        head = [ln for ln in islice(it, 3)]
+        head = [ln for ln in islice(it, 1)]
         keep = 0
         if head and head[0].lstrip("\ufeff").strip().startswith("%"):
             keep = 1
+            head.extend(islice(it, 1))
         if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
             keep += 1
+            head.extend(islice(it, 1))
         for k, line in enumerate(head):
             if emit.is_header(line) and not self.opt.force:
                 raise AlreadyCorrectedError(
@@ -321,35 +323,47 @@ class Corrector(EmitterMixin):
                 for line in lines:
                     feed(line)
                 return
-            edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
-            i, n = 0, len(lines)
-            gword = block.gword
-            for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
-                while i < a:
+            try:
+                edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
+                i, n = 0, len(lines)
+                gword = block.gword
+                for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
+                    while i < a:
+                        feed(lines[i])
+                        i += 1
+                    # a line naming its own G0/G1 may start a run whatever the modal motion
+                    while i < b and not (allowed or (use_fast and not interp.ended and prime_shift(interp)
+                                                     and state_allows(interp, bool(gword[i])))):
+                        feed(lines[i])
+                        i += 1
+                    if i < b:
+                        dec = dec_in if interp.state.inch else dec_mm
+                        entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
+                        lineno += b - i
+                        i = b
+                        allowed = state_allows(interp)
+                while i < n:
                     feed(lines[i])
                     i += 1
-                # a line naming its own G0/G1 may start a run whatever the modal motion
-                while i < b and not (allowed or (use_fast and not interp.ended and prime_shift(interp)
-                                                 and state_allows(interp, bool(gword[i])))):
-                    feed(lines[i])
-                    i += 1
-                if i < b:
-                    dec = dec_in if interp.state.inch else dec_mm
-                    entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
-                    lineno += b - i
-                    i = b
-                    allowed = state_allows(interp)
-            while i < n:
-                feed(lines[i])
-                i += 1
-            bulk.finish_block(block)
+            finally:
+                bulk.finish_block(block)  # the runs read so far stay usable after an error
 
         for line in head:
             feed(line)
             pending += 1
         chunk = self.opt.chunk_lines or (DEFAULT_CHUNK_LINES if self.linear_exact else SEGMENTED_CHUNK_LINES)
         for block in iter(lambda: list(islice(it, chunk)), []):
-            feed_block(block)
+            try:
+                feed_block(block)
+            except NeedsExpansion:
+                raise
+            except PostprocError as exc:
+                # the lines read before this one are corrected first, so that an error of
+                # an earlier line (found when correcting) is the one reported, whatever
+                # the chunk size
+                if not any(math.isnan(v) for v in self.interp.state.pos):
+                    self._chunk(entries, lambda _text: None)
+                raise exc from None
             pending += len(block)
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 self._chunk(entries, write)
