@@ -80,7 +80,12 @@ def test_the_corpus_is_mostly_corrected_not_refused():
             refused.append((path.name, exc.message))
     # refusals name a construct postproc does not correct, or a defect of the file
     known = ("macro", "O-word", "parameter", "expression", "canned cycle", "cutter radius compensation", "polar",
-             "never positioned", "is not G-code", "arc end radius", "arc without end point")
+             "never positioned", "is not G-code", "arc end radius", "arc without end point", "arc without centre",
+             # subroutine files the corpus does not hold, and a sub without its endsub
+             "subroutine o<", "has no matching",
+             # read in the generic dialect: nested comments (Fanuc style) and G53 in G91 are
+             # LinuxCNC errors; positions a program never sets
+             "unexpected character ')'", "G53 is not allowed in G91", "unknown position", "unknown start position")
     assert all(any(k in msg for k in known) for _, msg in refused), refused
     assert len(ok) >= 10, refused
     # the programs that need a start position are corrected once it is given

@@ -164,7 +164,7 @@ def test_generic_dialect_recognises_macro_b():
         ("O1\n#1 = #4001\n", 2, 6, ["#4001", "system variable"]),
         ("O1\n#3000 = 1 (ALARM)\n", 2, 1, ["#3000", "controller state"]),
         ("O1\nG0 X#500\n", 2, 5, ["#500", "retained"]),
-        ("O1\nG0 X1.\nM99\n", 3, 1, ["M99", "main program"]),
+        ("O1\nG0 X1.\nM99 P1\n", 3, 1, ["M99", "main program"]),
         ("O1\nWHILE [1 EQ 1] DO 1\nEND 1\n", 3, 1, ["more than 100 lines"]),
         ("O1\nGOTO 50\nM30\n", 2, 1, ["N50", "not found"]),
         ("O1\nM98 P1234\nM30\n", 2, 5, ["O1234", "not found"]),
@@ -203,3 +203,11 @@ def test_m98_program_file_on_subroutine_path(tmp_path):
 def test_haas_m97_local_subprogram():
     text = "O9\nM97 P100 L2\nG0 X9.\nM30\nN100 G91 G0 X1.\nG90\nM99\n"
     assert flat(text, dialect="haas") == "O9\n" + "N100 G91 G0 X1.\nG90\n" * 2 + "G0 X9.\nM30\n"
+
+
+def test_m99_ending_the_main_program_ends_the_pass():
+    from postproc.gcode.expand import expand
+
+    text = "O1\nG0 X1.\nM99\nG0 X2.\n"
+    out = [sl.text for sl in expand(text.splitlines(keepends=True), dialect="fanuc")]
+    assert out == ["O1\n", "G0 X1.\n", "M99\n"]

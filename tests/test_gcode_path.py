@@ -47,5 +47,7 @@ def test_missing_offset_and_unsupported_are_refused_with_place():
     assert e.value.lineno == 2
     assert "G55" in str(e.value)
     with pytest.raises(UnsupportedGcodeError) as e:
-        program_path("G0 X1 Y1 Z1\nG0 X#1\n")
-    assert (e.value.lineno, e.value.col) == (2, 4)
+        program_path("G0 X1 Y1 Z1\nG0 X@1\n")  # polar words: not expanded
+    assert e.value.lineno == 2
+    # parameters are expanded, as correct expands them (unset #1 reads 0, as in LinuxCNC)
+    assert program_path("G0 X1 Y1 Z1\nG0 X#1\n").points_mm[-1].tolist() == [0.0, 1.0, 1.0]
