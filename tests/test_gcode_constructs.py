@@ -292,3 +292,11 @@ def test_fanuc_sample_expands_its_subprogram_and_corrects_cycles_and_g28():
     assert "M98" not in out
     assert "M99" not in out
     assert "G91 G28 Z0." in lines
+
+
+def test_blank_lines_before_the_tape_mark_stay_before_it_and_the_header_follows_the_program_number():
+    text = "\n%\nO78240\nG21 G90\nG0 X1 Y2 Z3\nM30\n%\n"
+    out, _ = correct_text(text, scale_engine(), ZERO, CorrectOptions(), path="p.nc")
+    lines = out.splitlines()
+    assert lines[:3] == ["", "%", "O78240"]
+    assert lines[3].startswith("(POSTPROC ")

@@ -36,8 +36,6 @@ KNOWN_DEFECTS = {
     "Alien.tap": "a tiny input arc is emitted with a centre that rounds onto its end points "
                  "(LinuxCNC: zero-radius arc)",
     "test_files__enclosure.nc": "a tiny input arc is emitted with a 0.7 um radius (LinuxCNC: zero-radius arc)",
-    "CNC_MILL__Ckiely_-_o78234.nc": "the corrected program's closing '%' is rejected by LinuxCNC",
-    "CNC_MILL__O78240.nc": "the corrected program's closing '%' is rejected by LinuxCNC",
     "test_files__communicator.nc": "a stretch of the original path is 100 um from the corrected path",
 }
 

@@ -254,9 +254,15 @@ class Corrector(EmitterMixin):
         # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
         head = [ln for ln in islice(it, 1)]
         keep = 0
-        if head and head[0].lstrip("\ufeff").strip().startswith("%"):
-            keep = 1
+        # blank lines before the '%' stay before it (LinuxCNC wants '%' first of the non-blank lines)
+        while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
+            keep += 1
             head.extend(islice(it, 1))
+        if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
+            keep += 1
+            head.extend(islice(it, 1))
+        elif keep:
+            keep = 0  # blank lines without a '%' after them: the header goes first as before
         if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
             keep += 1
             head.extend(islice(it, 1))
