@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import re
 import shutil
 import sys
 import tempfile
@@ -13,13 +12,14 @@ from pathlib import Path
 import click
 
 from postproc.cli.options import (
+    axis_values,
     parse_context,
     parse_home,
     parse_offset,
     parse_tool_length,
     parse_vector,
 )
-from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM, MM_PER_INCH
+from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
 from postproc.errors import PostprocError
 
 # Files larger than this get a progress line on stderr (when stderr is a terminal).
@@ -53,19 +53,7 @@ def read_tool_table(path: str) -> dict[int, float]:
 
 def parse_start(text: str) -> dict[str, float]:
     """``"X10,Y20,Z150"`` (any of X, Y, Z; end with ``in`` for inches) -> machine mm by axis."""
-    body = text.strip()
-    scale = 1.0
-    if body.lower().endswith("in"):
-        scale, body = MM_PER_INCH, body[:-2]
-    values: dict[str, float] = {}
-    for item in filter(None, (p.strip() for p in body.split(","))):
-        m = re.fullmatch(r"([XYZxyz])\s*([-+]?(?:\d+\.?\d*|\.\d+))", item)
-        if not m:
-            raise click.BadParameter(f"{text!r}: {item!r} is not X, Y or Z and a number", param_hint="--start")
-        axis = m.group(1).upper()
-        if axis in values:
-            raise click.BadParameter(f"{text!r}: {axis} is given twice", param_hint="--start")
-        values[axis] = float(m.group(2)) * scale
+    values = axis_values(text, text, "XYZ", param_hint="--start", once=True)
     if not values:
         raise click.BadParameter(f"{text!r}: expected X..,Y..,Z.. (any of them)", param_hint="--start")
     return values

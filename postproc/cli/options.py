@@ -40,6 +40,28 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
 _OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+)$", re.IGNORECASE)
 
 
+def axis_values(text: str, rest: str, letters: str, *, param_hint: str | None = None,
+                 once: bool = False) -> dict[str, float]:
+    """``"X100,Y50,Z-300"`` (``rest``; ending in ``in`` for inches) -> mm by upper-case axis
+    letter, for the letters in ``letters``; ``once``: an axis given twice is refused."""
+    scale = 1.0
+    rest = rest.strip()
+    if rest.lower().endswith("in"):
+        scale, rest = 25.4, rest[:-2]
+    values: dict[str, float] = {}
+    pattern = re.compile(rf"([{letters}{letters.lower()}])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
+    what = "an axis letter" if len(letters) > 3 else "X, Y or Z"
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        m = pattern.fullmatch(item)
+        if not m:
+            raise click.BadParameter(f"{text!r}: {item!r} is not {what} and a number", param_hint=param_hint)
+        axis = m.group(1).upper()
+        if once and axis in values:
+            raise click.BadParameter(f"{text!r}: {axis} is given twice", param_hint=param_hint)
+        values[axis] = float(m.group(2)) * scale
+    return values
+
+
 def parse_offset(text: str) -> tuple[str, dict[str, float]]:
     """``"G54=X100,Y50,Z-300"`` -> ("G54", {"X": 100, "Y": 50, "Z": -300}).
 
@@ -52,16 +74,7 @@ def parse_offset(text: str) -> tuple[str, dict[str, float]]:
         raise click.BadParameter(
             f"{text!r}: expected NAME=X..,Y..,Z.. with NAME one of G54..G59, G59.1..G59.3, G54.1P<n>"
         )
-    scale = 1.0
-    rest = rest.strip()
-    if rest.lower().endswith("in"):
-        scale, rest = 25.4, rest[:-2]
-    values: dict[str, float] = {}
-    for item in filter(None, (p.strip() for p in rest.split(","))):
-        m = re.fullmatch(r"([XYZABCxyzabc])\s*([-+]?(?:\d+\.?\d*|\.\d+))", item)
-        if not m:
-            raise click.BadParameter(f"{text!r}: {item!r} is not an axis letter and a number")
-        values[m.group(1).upper()] = float(m.group(2)) * scale
+    values = axis_values(text, rest, "XYZABC")
     return name, values
 
 
@@ -101,18 +114,7 @@ def parse_home(text: str) -> tuple[str, dict[str, float]]:
     if not sep or not _HOME_NAME.match(name):
         raise click.BadParameter(f"{text!r}: expected G28=X..,Y..,Z.. or G30=X..,Y..,Z.. (machine mm)",
                                  param_hint="--home")
-    scale = 1.0
-    rest = rest.strip()
-    if rest.lower().endswith("in"):
-        scale, rest = 25.4, rest[:-2]
-    values: dict[str, float] = {}
-    for item in filter(None, (p.strip() for p in rest.split(","))):
-        m = re.fullmatch(r"([XYZxyz])\s*([-+]?(?:\d+\.?\d*|\.\d+))", item)
-        if not m:
-            raise click.BadParameter(f"{text!r}: {item!r} is not X, Y or Z and a number", param_hint="--home")
-        if m.group(1).upper() in values:
-            raise click.BadParameter(f"{text!r}: {m.group(1).upper()} is given twice", param_hint="--home")
-        values[m.group(1).upper()] = float(m.group(2)) * scale
+    values = axis_values(text, rest, "XYZ", param_hint="--home", once=True)
     if not values:
         raise click.BadParameter(f"{text!r}: give at least one of X, Y, Z", param_hint="--home")
     return name, values

@@ -712,13 +712,36 @@ class Corrector(EmitterMixin):
                             "residual, or use a calibration with the newton solver")
             raise exc.at(path=self.path) from None
 
+    # -- moves written out for a cycle or a spline -------------------------------------
+    @staticmethod
+    def _generated_move(mv: Move, kind: int, prev, q, axes, with_feed: bool, decimals: int, sep: str,
+                        lower: bool, ending: str, planned: bool = False) -> tuple:
+        """The entry of a G0/G1 line written in place of ``mv`` (a cycle step, a spline
+        chord): its nominal words on ``axes`` in the program's distance mode, the F word
+        of ``mv`` when ``with_feed``, and the Move the corrector rewrites."""
+        from postproc.gcode.lexer import scan_words
+
+        unit = mv.unit
+        words = ["G0" if kind == RAPID else "G1"]
+        for k in axes:
+            v = (q[k] - prev[k]) / unit if mv.incremental else (q[k] - mv.shift[k]) / unit
+            words.append("XYZ"[k] + emit.fmt(v, decimals))
+        if with_feed and mv.feed_idx >= 0:
+            words.append("F" + mv.words[mv.feed_idx][1])
+        text = sep.join(words) + ending
+        ws = scan_words(text)
+        idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+        step = Move(mv.lineno, kind, tuple(prev), tuple(q), mv.r, mv.shift, unit, mv.incremental,
+                    mv.arc_absolute, ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False,
+                    mv.feed, mv.rotary, motion_idx=0, planned=planned)
+        return (text.lower() if lower else text), step, True, kind
+
     # -- splines -------------------------------------------------------------------------
     def _feed_spline(self, entries: list, line: str, mv: Move) -> None:
         """Queue a G5/G5.1 spline as the fewest G1 chords whose corrected path stays within
         --tolerance of the corrected spline (checked at samples 1/10 of the tolerance apart
         in chord error)."""
         from postproc.gcode.interp import spline_points, spline_samples
-        from postproc.gcode.lexer import scan_words
 
         tol = self.opt.tolerance_mm - self._round_err(mv.unit)
         has_ij = any(w[0] == "I" for w in mv.words)
@@ -761,18 +784,8 @@ class Corrector(EmitterMixin):
         prev = mv.q0
         for n, k in enumerate(keep[1:]):
             q = tuple(nom[k].tolist()) if k < len(s) - 1 else mv.q1
-            vals = [(qv - pv) / unit if mv.incremental else (qv - sv) / unit
-                    for qv, pv, sv in zip(q, prev, mv.shift, strict=True)]
-            words = ["G1"] + [a + emit.fmt(v, dec) for a, v in zip("XY", vals[:2], strict=True)]
-            if n == 0 and mv.feed_idx >= 0:
-                words.append("F" + mv.words[mv.feed_idx][1])
-            text = sep.join(words) + ending
-            ws = scan_words(text)
-            idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
-            step = Move(mv.lineno, LINE, tuple(prev), q, mv.r, mv.shift, unit, mv.incremental, mv.arc_absolute,
-                        ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False, mv.feed,
-                        mv.rotary, motion_idx=0, planned=True)
-            entries.append(((text.lower() if lower else text), step, True, LINE))
+            entries.append(self._generated_move(mv, LINE, prev, q, (0, 1), n == 0, dec, sep, lower, ending,
+                                                planned=True))
             prev = q
         self.report.splines_linearised += 1
 
@@ -818,26 +831,15 @@ class Corrector(EmitterMixin):
             entries.append(((text.lower() if lower else text) + ending, None, False, None))
         prev = mv.q0
         feed_done = False
-        from postproc.gcode.lexer import scan_words
         for kind, q in c.steps:
             if kind == DWELL:
                 text = f"G4{sep}P{emit.fmt(q[0], 4).rstrip('0').rstrip('.') or '0'}"
                 entries.append(((text.lower() if lower else text) + ending, None, False, None))
                 continue
-            vals = [(qv - pv) / unit if mv.incremental else (qv - sv) / unit
-                    for qv, pv, sv in zip(q, prev, mv.shift, strict=True)]
-            words = ["G0" if kind == RAPID else "G1"]
-            words += [a + emit.fmt(v, d) for a, v, qv, pv in zip("XYZ", vals, q, prev, strict=True) if qv != pv]
-            if kind != RAPID and not feed_done and mv.feed_idx >= 0:
-                words.append("F" + mv.words[mv.feed_idx][1])
-                feed_done = True
-            text = sep.join(words) + ending
-            ws = scan_words(text)
-            idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
-            step = Move(mv.lineno, kind, tuple(prev), tuple(q), mv.r, mv.shift, unit, mv.incremental,
-                        mv.arc_absolute, ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1),
-                        False, mv.feed, mv.rotary, motion_idx=0)
-            entries.append(((text.lower() if lower else text), step, True, kind))
+            first_feed = kind != RAPID and not feed_done
+            feed_done = feed_done or first_feed
+            moved = tuple(k for k in range(3) if q[k] != prev[k])
+            entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
             prev = q
         self.report.cycles_expanded += 1
 
@@ -847,7 +849,7 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, mv.unit)
         moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
         if moved >= emit.HALF_UNIT[d]:
-            how = "with L/K repeats" if mv.cycle is None and mv.incremental is False else "in G91 (incremental)"
+            how = "in G91 (incremental)" if mv.incremental else "with L/K repeats"
             raise SafetyError(
                 f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
                 f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
