@@ -98,6 +98,15 @@ class Engine(ABC):
         all space (static, interval, grid) return themselves."""
         return self
 
+    #: context values the engine reads (effects' ``dirx``, ``t``, ...); none by default
+    needs: tuple[str, ...] = ()
+
+    @property
+    def direction_dependent(self) -> bool:
+        """True when the correction depends on the approach direction of the axes
+        (backlash): the planner then cuts moves at reversals and takes them up."""
+        return any(c in ("dirx", "diry", "dirz") for c in self.needs)
+
     def check_context(self, names) -> None:
         """Refuse (PostprocError) when a context value the engine needs is not among
         ``names``; engines without effects need none."""

@@ -210,17 +210,25 @@ class EmitterMixin:
                 text = "G" + MOTION_TEXT[mv.kind]
                 edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
             self.emitted_motion = mv.kind
-        arc_added: list[str] = []
-        if last["kind"] == "arc":
-            arc_edits, arc_added = self._arc_edits(line, mv, last["spec"])
-            edits = edits + arc_edits
         if mv.inverse_time and inserted and mv.feed_idx >= 0:
             _l, num, start, end, _p = mv.words[mv.feed_idx]
             edits.append((start, end, emit.fmt(mv.feed / max(last["ds"], MIN_FEED_FRACTION),
                                                max(4, emit.decimals_of(num)))))
+        self._finish_line(line, mv, edits, added, last["spec"] if last["kind"] == "arc" else None, sep, lower,
+                          last["qe"], write)
+
+    def _finish_line(self, line: str, mv: Move, edits: list, added: list[str], spec, sep: str, lower: bool,
+                     qe, write) -> None:
+        """Write the move's own line: its word edits, the arc words of ``spec`` (None:
+        not an arc) and the added words; the controller is then at ``qe``."""
+        arc_added: list[str] = []
+        if spec is not None:
+            arc_edits, arc_added = self._arc_edits(line, mv, spec)
+            edits = edits + arc_edits
         if added or arc_added:
             if arc_added:
-                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not last["spec"].get("replace")]
+                arc = mv.arc
+                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not spec.get("replace")]
                 pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
                 words_added = added + arc_added
             else:
@@ -228,8 +236,31 @@ class EmitterMixin:
                 words_added = added
             text = "".join(sep + w for w in words_added) if pos > 0 else "".join(w + sep for w in words_added)
             edits.append((pos, pos, text.lower() if lower else text))
-        self.qe[:] = last["qe"]
+        self.qe[:] = qe
         self._write_line(line, edits, write)
+
+    def _emit_hinted_arc(self, line: str, mv: Move, target, hint, write) -> None:
+        """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
+        as one exact arc when the hint's rounded centre passes for the end points as
+        written, else planned and fitted as any other arc."""
+        d = self._decimals.get(mv.unit)
+        if d is None:
+            d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
+        qn = list(self.qe)
+        edits, added = self._axis_words(mv, target, qn, d)
+        # unchanged end words: the input's own arc words may stay (the general path decides)
+        spec = hint.spec(mv, self.qe, qn, d, self.opt.tolerance_mm * FIT_BUDGET) if edits else None
+        if spec is None:
+            self._emit_move(line, mv, target, hint.lazy(), write)
+            return
+        self.report.moves += 1
+        sep, lower = emit.style_of(line)
+        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+            text = "G" + MOTION_TEXT[mv.kind]
+            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+        self.emitted_motion = mv.kind
+        self.report.arcs_kept += 1
+        self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
 
     def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one

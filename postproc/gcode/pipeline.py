@@ -37,8 +37,8 @@ from postproc.errors import (
     SafetyError,
     SolverError,
 )
-from postproc.gcode import bulk, emit
-from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode import bulk, emit, vplan
+from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
@@ -79,6 +79,7 @@ class CorrectOptions:
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
+    bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
 
 
 @dataclass
@@ -141,6 +142,9 @@ class Corrector(EmitterMixin):
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
+        # moves settled in bulk (vplan) unless the correction depends on the approach
+        # direction (take-ups at reversals) or on maps the planner cannot sample in bulk
+        self.bulk_plan = options.bulk_plan and not options.added and not engine.direction_dependent
         self._decimals: dict[float, int] = {}
         self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
@@ -508,7 +512,11 @@ class Corrector(EmitterMixin):
                                                   dec_mm if mv.unit == 1.0 else dec_in):
                 fast += 1
             else:
-                emit_move(line, mv, target, get_plan(k), write)
+                plan = get_plan(k)
+                if type(plan) is vplan.ArcHint:
+                    self._emit_hinted_arc(line, mv, target, plan, write)
+                else:
+                    emit_move(line, mv, target, plan, write)
             k += 1
         for blk in blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
@@ -574,12 +582,33 @@ class Corrector(EmitterMixin):
         planned = [(i, m) for i, m in general
                    if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
                    and not np.isnan(S[i]).any() and not any(math.isnan(v) for v in m.q0)]
+        if planned and self.bulk_plan:
+            def corr(rows, nom):
+                return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
+
+            ok_lines, hints, planned = vplan.plan_chunk(
+                planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
+                min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
+                rounding=max(self._round_err(m.unit) for _i, m in general))
+            for i, hint in hints.items():
+                hint.lazy = self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
+                plans[i] = hint
         if planned:
             self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
         self.prev_nominal = Q1[-1].copy()
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
         return T, plans
+
+    def _lazy_plan(self, i: int, mv: Move, *arrays):
+        """The general plan of move ``i``, made when asked for."""
+
+        def plan():
+            out: dict[int, object] = {}
+            self._plan_moves([(i, mv)], *arrays, out)
+            return out[i]
+
+        return plan
 
     def _plan_moves(self, planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans) -> None:
         """Sample the corrected ideal path of every planned move in one engine call.
