@@ -110,7 +110,10 @@ class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
-                 "feed0", "q1", "trow")
+                 "feed0", "q1", "trow", "cut")
+
+    def __init__(self) -> None:
+        self.cut: list[int] = []  # lines (within the run) the planner wants split: written one by one
 
     def __len__(self) -> int:
         return self.b - self.a
@@ -330,3 +333,50 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
     text = "\n".join(map("".join, zip(cols[_HEAD][s:b], cols[2][s:b], nums[0][s:b], cols[4][s:b], nums[1][s:b],
                                       cols[6][s:b], nums[2][s:b], add_col, cols[_REST][s:b], strict=True)))
     write(text + "\n" if lines[b - 1].endswith("\n") else text)
+
+
+def _modal_at(run: Run, x: int) -> tuple[int, float]:
+    """Modal motion and feed after block line ``x - 1`` of ``run`` (its start state for x == a)."""
+    blk = run.block
+    if x <= run.a:
+        return run.motion0, run.feed0
+    g, f = blk.last_g[x - 1], blk.last_f[x - 1]
+    return (blk.code(g) if g >= run.a else run.motion0,
+            float(blk.cols[_F][f]) if f >= run.a else run.feed0)
+
+
+def kinds(run: Run) -> np.ndarray:
+    """Motion (RAPID or LINE) of every line of the run."""
+    blk = run.block
+    g = np.array(blk.last_g[run.a:run.b])
+    code = np.array([blk.code(i) if i >= run.a else run.motion0 for i in g.tolist()])
+    return code
+
+
+def split_run(run: Run, rows: list[int]):
+    """The run cut at its lines ``rows`` (indices within the run, increasing): yields
+    sub-runs (:class:`Run`) and, for each cut line, ``(index within the run, FastMove)``."""
+    x = run.a
+    for j in [*rows, len(run)]:
+        y = run.a + j
+        if y > x:
+            sub = Run()
+            sub.block, sub.a, sub.b = run.block, x, y
+            sub.lineno = run.lineno + (x - run.a)
+            sub.unit, sub.shift, sub.r, sub.arc_absolute, sub.decimals = (run.unit, run.shift, run.r,
+                                                                          run.arc_absolute, run.decimals)
+            sub.q0 = run.q0 if x == run.a else tuple(run.q1[x - run.a - 1].tolist())
+            sub.motion0, sub.feed0 = _modal_at(run, x)
+            sub.q1 = run.q1[x - run.a:j]
+            sub.trow = run.trow + (x - run.a)
+            yield sub
+        if j == len(run):
+            break
+        blk = run.block
+        motion, feed = _modal_at(run, y)
+        f = blk.cols[_F][y]
+        q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
+        yield j, FastMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
+                          run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
+                          float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
+        x = y + 1

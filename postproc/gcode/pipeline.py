@@ -295,14 +295,17 @@ class Corrector(EmitterMixin):
         self.report.lines_out += len(header_rows)
 
         use_fast = self.linear_exact and self.opt.fast_lane and source is None
-        use_bulk = use_fast and self.opt.bulk_lane
+        # runs of plain lines: for every engine whose moves the planner settles in bulk
+        use_bulk = ((self.linear_exact or self.bulk_plan) and self.opt.fast_lane and self.opt.bulk_lane
+                    and source is None)
+        run_ok = False  # the modal state lets a run of plain lines start here
         dec_mm = _unit_decimals(self.opt, 1.0)
         dec_in = _unit_decimals(self.opt, MM_PER_INCH)
         allowed = False
         pending = 0  # lines in entries
 
         def feed(line: str) -> None:
-            nonlocal lineno, allowed
+            nonlocal lineno, allowed, run_ok
             if allowed:
                 fm = read_fast(interp, lineno, line)
                 if fm is not None:
@@ -324,10 +327,11 @@ class Corrector(EmitterMixin):
             else:
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
-            allowed = use_fast and state_allows(interp)
+            run_ok = use_bulk and state_allows(interp)
+            allowed = use_fast and (run_ok or state_allows(interp))
 
         def feed_block(lines: list[str]) -> None:
-            nonlocal lineno, allowed
+            nonlocal lineno, allowed, run_ok
             block = bulk.scan(lines) if use_bulk else None
             if block is None:
                 for line in lines:
@@ -342,8 +346,8 @@ class Corrector(EmitterMixin):
                         feed(lines[i])
                         i += 1
                     # a line naming its own G0/G1 may start a run whatever the modal motion
-                    while i < b and not (allowed or (use_fast and not interp.ended and prime_shift(interp)
-                                                     and state_allows(interp, bool(gword[i])))):
+                    while i < b and not (run_ok or (not interp.ended and prime_shift(interp)
+                                                    and state_allows(interp, bool(gword[i])))):
                         feed(lines[i])
                         i += 1
                     if i < b:
@@ -351,7 +355,8 @@ class Corrector(EmitterMixin):
                         entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
                         lineno += b - i
                         i = b
-                        allowed = state_allows(interp)
+                        run_ok = state_allows(interp)
+                        allowed = use_fast and run_ok
                 while i < n:
                     feed(lines[i])
                     i += 1
@@ -436,8 +441,10 @@ class Corrector(EmitterMixin):
                 rows.clear()
 
         M = 0
+        runs: list[bulk.Run] = []
         for e in entries:
             if type(e) is bulk.Run:
+                runs.append(e)
                 flush_rows()
                 m = len(e)
                 if e.unit not in self._units_checked:
@@ -463,7 +470,7 @@ class Corrector(EmitterMixin):
         plans: dict[int, object] = {}
         if M:
             T, plans = self._plan(np.vstack(q_parts), np.concatenate(ln_parts), np.vstack(r_parts), rot,
-                                  general, unit0)
+                                  general, unit0, runs)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
@@ -480,7 +487,17 @@ class Corrector(EmitterMixin):
                 if em is None:
                     em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
                     blocks.append(e.block)
-                bulk.emit_run(self, e, em, T, write)
+                cut = e.cut
+                if not cut:
+                    bulk.emit_run(self, e, em, T, write)
+                else:  # lines that must be split: written by the general emitter
+                    for part in bulk.split_run(e, cut):
+                        if type(part) is bulk.Run:
+                            bulk.emit_run(self, part, em, T, write)
+                            continue
+                        j, fm = part
+                        line = e.block.lines[e.a + j]
+                        emit_move(line, fm.to_move(line), T[k + j].tolist(), plans[k + j], write)
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
@@ -525,7 +542,7 @@ class Corrector(EmitterMixin):
         write_out("".join(out))
 
     def _plan(self, Q1: np.ndarray, linenos: np.ndarray, R: np.ndarray, rot: list[dict],
-              general: list[tuple[int, Move]], unit0: float):
+              general: list[tuple[int, Move]], unit0: float, runs: list = ()):
         """Corrected targets of a chunk's moves, and the plans of those that need one.
 
         ``Q1``, ``linenos``, ``R``, ``rot``: every move's nominal target, line, tool
@@ -582,9 +599,25 @@ class Corrector(EmitterMixin):
         planned = [(i, m) for i, m in general
                    if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
                    and not np.isnan(S[i]).any() and not any(math.isnan(v) for v in m.q0)]
+        def corr(rows, nom):
+            return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
+
+        if runs and not self.linear_exact:
+            # straight moves of the runs of plain lines: those that must be split are
+            # planned when they are written (their Move is made then)
+            per_run = [np.arange(r.trow, r.trow + len(r))[bulk.kinds(r) == LINE] for r in runs]
+            rows = np.concatenate(per_run)
+            ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
+                                    limit=self.opt.tolerance_mm * FIT_BUDGET
+                                    - max(self._round_err(r.unit) for r in runs))
+            owner = np.repeat(np.arange(len(runs)), [len(p) for p in per_run])
+            run_lines = []
+            for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
+                runs[o].cut.append(i - runs[o].trow)
+                run_lines.append((i, _RunLine(int(linenos[i]))))
+            if run_lines:
+                self._plan_moves(run_lines, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
         if planned and self.bulk_plan:
-            def corr(rows, nom):
-                return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
 
             ok_lines, hints, planned = vplan.plan_chunk(
                 planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
@@ -946,6 +979,17 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, mv.unit)
         edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
         self._write_line(line, edits, write)
+
+
+class _RunLine:
+    """What the planner needs of a straight move read in a run of plain lines."""
+
+    __slots__ = ("lineno",)
+    arc = None
+    rotary: dict = {}
+
+    def __init__(self, lineno: int) -> None:
+        self.lineno = lineno
 
 
 def _chord_fits(points: np.ndarray, budget: float) -> bool:

@@ -135,6 +135,37 @@ def _group_max(values: np.ndarray, starts: np.ndarray, n: np.ndarray) -> np.ndar
     return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(n))
 
 
+def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float):
+    """Interior samples of the straight moves ``rows`` (every ``step_mm``, at least one):
+    ``(owner rows, nominal points, check)``; ``check(corrected points, limit)`` tells for
+    each move whether every corrected sample lies within ``limit`` of the chord S-T (a
+    move whose start is unknown passes: it is written as it is read)."""
+    n = np.maximum(3, np.ceil(np.linalg.norm(Q1[rows] - Q0[rows], axis=1) / step_mm).astype(int) + 1) \
+        if len(rows) else np.zeros(0, dtype=int)
+    own, pos, start = _ragged(n - 2)
+    s = (pos + 1) / (n[own] - 1)
+    r = rows[own]
+    nom = Q0[r] + (Q1[r] - Q0[r]) * s[:, None]
+
+    def check(P: np.ndarray, limit: float) -> np.ndarray:
+        A, B = S[r], T[r]
+        ab = B - A
+        den = np.einsum("ij,ij->i", ab, ab)
+        tt = np.clip(np.einsum("ij,ij->i", P - A, ab) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+        dist = np.linalg.norm(P - A - tt[:, None] * ab, axis=1)
+        worst = _group_max(dist, start, n - 2)
+        return (worst <= limit) | ~np.isfinite(S[rows]).all(axis=1)
+
+    return r, nom, check
+
+
+def lines_within(rows: np.ndarray, Q0, Q1, S, T, corrected, *, step_mm: float, limit: float) -> np.ndarray:
+    """Which straight moves ``rows`` stay within ``limit`` of their corrected chord (see
+    :func:`_line_samples`; ``corrected`` as in :func:`plan_chunk`)."""
+    r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm)
+    return check(corrected(r, nom) if len(r) else np.zeros((0, 3)), limit)
+
+
 def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, step_rad: float,
                min_arc_samples: int, budget: float, rounding: float):
     """Settle in bulk the planned moves of a chunk that stay one line or one exact arc.
@@ -156,9 +187,6 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
         else:
             rest.append((i, m))
     li = np.array(lines_i, dtype=int)
-    # -- samples: straight moves every step_mm, arcs every step_mm and step_rad ------------
-    nl = np.maximum(3, np.ceil(np.linalg.norm(Q1[li] - Q0[li], axis=1) / step_mm).astype(int) + 1) \
-        if len(li) else np.zeros(0, dtype=int)
     ai = np.array([i for i, _m in arcs_i], dtype=int)
     prm = [arc_prm[i] for i in ai.tolist()]
     sweep = np.array([p[2] for p in prm])
@@ -171,9 +199,6 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
     na = np.maximum.reduce([np.full(len(ai), min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
                             np.ceil(np.abs(sweep) / step_rad).astype(int) + 1]) if len(ai) else np.zeros(0, int)
     # interior samples only: the ends are S and T
-    lo, lp, lstart = _ragged(nl - 2)
-    s_l = (lp + 1) / (nl[lo] - 1)
-    nom_l = Q0[li][lo] + (Q1[li][lo] - Q0[li][lo]) * s_l[:, None]
     ao, ap, astart = _ragged(na - 2)
     s_a = (ap + 1) / (na[ao] - 1)
     # and the middles of the sample intervals (all of them), for the nominal bulge
@@ -194,19 +219,14 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
         return out
 
     nom_a = arc_nominal(ao, s_a)
-    rows_all = np.concatenate([li[lo], ai[ao]])
+    lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm)
+    rows_all = np.concatenate([lrows, ai[ao]])
     corr = corrected(rows_all, np.vstack([nom_l, nom_a])) if len(rows_all) else np.zeros((0, 3))
     P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
     # -- straight moves: every sample within budget - rounding of the chord ---------------
     ok_lines: list[int] = []
     if len(li):
-        A, B = S[li][lo], T[li][lo]
-        ab = B - A
-        den = np.einsum("ij,ij->i", ab, ab)
-        tt = np.clip(np.einsum("ij,ij->i", P_l - A, ab) / np.where(den > 0, den, 1.0), 0.0, 1.0)
-        dist = np.linalg.norm(P_l - A - tt[:, None] * ab, axis=1)
-        worst = _group_max(dist, lstart, nl - 2)
-        good = (worst <= budget - rounding) & np.isfinite(S[li]).all(axis=1)
+        good = lcheck(P_l, budget - rounding)
         ok_lines = li[good].tolist()
         bad = set(li[~good].tolist())
         rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
