@@ -13,7 +13,6 @@ import numpy as np
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
-from postproc.gcode.fastlane import FastMove, emit_fast
 from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
@@ -86,10 +85,6 @@ class EmitterMixin:
         d = self._decimals.get(mv.unit)
         if d is None:
             d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
-        if type(mv) is FastMove:
-            if emit_fast(self, line, mv, target, write, d):
-                return
-            mv = mv.to_move(line)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
             edits, added = self._axis_words(mv, target, self.qe, d)

@@ -40,7 +40,6 @@ from postproc.errors import (
 from postproc.gcode import bulk, emit, vplan
 from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
-from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
@@ -77,7 +76,6 @@ class CorrectOptions:
     expand: bool = True  # flatten parameters, O-words, subprograms and macros (False: refuse them)
     subroutine_path: tuple = ()  # folders searched for o<name> call and M98 subprogram files
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
-    fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
 
@@ -294,24 +292,15 @@ class Corrector(EmitterMixin):
         write(header)
         self.report.lines_out += len(header_rows)
 
-        use_fast = self.linear_exact and self.opt.fast_lane and source is None
         # runs of plain lines: for every engine whose moves the planner settles in bulk
-        use_bulk = ((self.linear_exact or self.bulk_plan) and self.opt.fast_lane and self.opt.bulk_lane
-                    and source is None)
+        use_bulk = (self.linear_exact or self.bulk_plan) and self.opt.bulk_lane and source is None
         run_ok = False  # the modal state lets a run of plain lines start here
         dec_mm = _unit_decimals(self.opt, 1.0)
         dec_in = _unit_decimals(self.opt, MM_PER_INCH)
-        allowed = False
         pending = 0  # lines in entries
 
         def feed(line: str) -> None:
-            nonlocal lineno, allowed, run_ok
-            if allowed:
-                fm = read_fast(interp, lineno, line)
-                if fm is not None:
-                    entries.append((line, fm, interp.motion_word, interp.state.motion))
-                    lineno += 1
-                    return
+            nonlocal lineno, run_ok
             mv = interp.feed_line(where(lineno), line)
             if mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
@@ -327,11 +316,10 @@ class Corrector(EmitterMixin):
             else:
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
-            run_ok = use_bulk and state_allows(interp)
-            allowed = use_fast and (run_ok or state_allows(interp))
+            run_ok = use_bulk and bulk.state_allows(interp)
 
         def feed_block(lines: list[str]) -> None:
-            nonlocal lineno, allowed, run_ok
+            nonlocal lineno, run_ok
             block = bulk.scan(lines) if use_bulk else None
             if block is None:
                 for line in lines:
@@ -346,8 +334,8 @@ class Corrector(EmitterMixin):
                         feed(lines[i])
                         i += 1
                     # a line naming its own G0/G1 may start a run whatever the modal motion
-                    while i < b and not (run_ok or (not interp.ended and prime_shift(interp)
-                                                    and state_allows(interp, bool(gword[i])))):
+                    while i < b and not (run_ok or (not interp.ended and bulk.prime_shift(interp)
+                                                    and bulk.state_allows(interp, bool(gword[i])))):
                         feed(lines[i])
                         i += 1
                     if i < b:
@@ -355,8 +343,7 @@ class Corrector(EmitterMixin):
                         entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
                         lineno += b - i
                         i = b
-                        run_ok = state_allows(interp)
-                        allowed = use_fast and run_ok
+                        run_ok = bulk.state_allows(interp)
                 while i < n:
                     feed(lines[i])
                     i += 1
@@ -476,9 +463,7 @@ class Corrector(EmitterMixin):
         emit_move = self._emit_move
         get_plan = plans.get
         k = 0
-        passed = fast = 0
-        dec_mm = _unit_decimals(self.opt, 1.0)
-        dec_in = _unit_decimals(self.opt, MM_PER_INCH)
+        passed = 0
         prepared: dict[int, object] = {}
         blocks: list[bulk.Block] = []
         for e in entries:
@@ -525,20 +510,15 @@ class Corrector(EmitterMixin):
                 k += 1
                 continue
             target = T[k].tolist()
-            if type(mv) is FastMove and emit_fast(self, line, mv, target, write,
-                                                  dec_mm if mv.unit == 1.0 else dec_in):
-                fast += 1
+            plan = get_plan(k)
+            if type(plan) is vplan.ArcHint:
+                self._emit_hinted_arc(line, mv, target, plan, write)
             else:
-                plan = get_plan(k)
-                if type(plan) is vplan.ArcHint:
-                    self._emit_hinted_arc(line, mv, target, plan, write)
-                else:
-                    emit_move(line, mv, target, plan, write)
+                emit_move(line, mv, target, plan, write)
             k += 1
         for blk in blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += passed
-        self.report.moves += fast
         write_out("".join(out))
 
     def _plan(self, Q1: np.ndarray, linenos: np.ndarray, R: np.ndarray, rot: list[dict],
