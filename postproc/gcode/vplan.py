@@ -77,20 +77,16 @@ class ArcHint:
         agree = 0.5 * step * unit
         v1 = round((p1 - b1) / unit, d)
         v2 = round((p2 - b2) / unit, d)
-        best = None
-        fmt = emit.fmt
         hyp = math.hypot
-        for k1 in _ORDER:
-            for k2 in _ORDER:
-                t1, t2 = fmt(v1 + k1 * step, d), fmt(v2 + k2 * step, d)
-                C1, C2 = b1 + float(t1) * unit, b2 + float(t2) * unit
-                mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
-                if mism <= agree:
-                    moved = hyp(C1 - self.c1, C2 - self.c2)
-                    if best is None or moved < best[0]:
-                        best = (moved, t1, t2, C1, C2, mism)
-            if best is not None and k1 == 0:
-                break  # a candidate in the rounded column: take the nearest of those
+        best = None
+        for k1, k2 in _ORDER:
+            # float(emit.fmt(v, d)) == round(v, d): both are the correctly rounded decimal
+            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+            C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+            mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
+            if mism <= agree:
+                best = (hyp(C1 - self.c1, C2 - self.c2), emit.fmt(w1, d), emit.fmt(w2, d), C1, C2, mism)
+                break
         if best is None:
             return None
         moved, t1, t2, C1, C2, mism = best
@@ -117,8 +113,9 @@ class ArcHint:
         return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound, "mismatch": mism}
 
 
-# lattice offsets, nearest first
-_ORDER = (0, *(k for j in range(1, LATTICE + 1) for k in (-j, j)))
+# lattice offsets (per axis, in units of the last decimal), nearest first
+_ORDER = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in range(-LATTICE, LATTICE + 1)),
+                      key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
 
 
 def _ragged(n: np.ndarray):
