@@ -32,6 +32,9 @@ HALF_UNIT = emit.HALF_UNIT
 FIT_BUDGET = 0.95
 # Smallest share of a move's time given to an inserted line in inverse-time mode (G93).
 MIN_FEED_FRACTION = 1e-3
+# A piece that one segment cannot follow is first tried in 2 .. EQUAL_SHARES equal shares
+# (each one try), before the search for the farthest sample one segment reaches.
+EQUAL_SHARES = 4
 
 
 def _unit_decimals(options, unit: float) -> int:
@@ -269,6 +272,20 @@ class EmitterMixin:
             if seg is not None:
                 out.append(seg)
                 break
+            # equal shares of what is left (a move cut in two or three is the common case):
+            # the longest share one segment reaches; the rest is fitted again from there
+            for k in range(2, EQUAL_SHARES + 1):
+                b = a + math.ceil((n - 1 - a) / k)
+                if b <= a + 1:
+                    break
+                seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, b, cur, final, d, budget)
+                if seg is not None:
+                    break
+            if seg is not None:
+                out.append(seg)
+                cur = seg["qe"]
+                a = b
+                continue
             lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
             if lo_seg is None:
                 # the samples are too sparse here: follow the curve by subdivision
