@@ -228,7 +228,8 @@ SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
              "Without it an axis sent there is unknown until the program positions it again. Repeatable.")),
     "--context": ("context", dict(
         multiple=True, metavar="NAME=VALUE",
-        help="Constant context value for the engine, e.g. temp=21.5. Repeatable.")),
+        help="Constant context value during the run, read by the calibration's model, e.g. temp=21.5. "
+             "Repeatable.")),
 }
 
 
