@@ -423,6 +423,12 @@ def _interpolation_check(origin, step, nodes) -> str | None:
     )
 
 
+def refit_options(engine) -> dict:
+    """The :func:`fit` options that fit ``engine``'s lattice again (its step)."""
+    model = engine.model_to_dict()
+    return {"step": ",".join(f"{v:g}" for v in model["step_mm"])} if "step_mm" in model else {}
+
+
 def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", fill_missing: bool = False,
         **options) -> FitResult:
     """Fit the quasi-differential model from tracker points on a regular lattice.

@@ -292,6 +292,15 @@ def partition_edges(q: np.ndarray, spec: list, path: str = "") -> list[np.ndarra
     return edges
 
 
+def refit_options(engine) -> dict:
+    """The :func:`fit` options that fit ``engine``'s partition again (its edges)."""
+    model = engine.model_to_dict()
+    if "edges_mm" not in model:
+        return {}
+    return {"intervals": ";".join(f"{a}={','.join(f'{v:.3f}' for v in e)}"
+                                  for a, e in zip("XYZ", model["edges_mm"], strict=True))}
+
+
 def fit(measurements, *, intervals=None, border_blend_mm: float = BORDER_BLEND_MM, **options) -> FitResult:
     """Fit ``G`` and ``r_O1`` per cell by least squares.
 
