@@ -33,7 +33,8 @@ FIT_BUDGET = 0.95
 # Smallest share of a move's time given to an inserted line in inverse-time mode (G93).
 MIN_FEED_FRACTION = 1e-3
 # A piece that one segment cannot follow is first tried in 2 .. EQUAL_SHARES equal shares
-# (each one try), before the search for the farthest sample one segment reaches.
+# (each one try) to bracket the farthest sample one segment reaches, before the search
+# from the next sample outwards.
 EQUAL_SHARES = 4
 
 
@@ -273,7 +274,9 @@ class EmitterMixin:
                 out.append(seg)
                 break
             # equal shares of what is left (a move cut in two or three is the common case):
-            # the longest share one segment reaches; the rest is fitted again from there
+            # the longest share one segment reaches brackets the farthest sample it
+            # reaches, which a bisection between that share and the next longer finds
+            hi = n - 1
             for k in range(2, EQUAL_SHARES + 1):
                 b = a + math.ceil((n - 1 - a) / k)
                 if b <= a + 1:
@@ -281,10 +284,19 @@ class EmitterMixin:
                 seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, b, cur, final, d, budget)
                 if seg is not None:
                     break
+                hi = b
             if seg is not None:
+                lo = b
+                while hi - lo > 1:
+                    mid = (lo + hi) // 2
+                    sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
+                    if sg is None:
+                        hi = mid
+                    else:
+                        lo, seg = mid, sg
                 out.append(seg)
                 cur = seg["qe"]
-                a = b
+                a = lo
                 continue
             lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
             if lo_seg is None:
