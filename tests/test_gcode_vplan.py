@@ -101,3 +101,44 @@ def test_direction_dependent_calibration_takes_the_general_path():
     b = correct_text(text, eng, Setup(), CorrectOptions(bulk_plan=False, bulk_lane=False))
     assert a[0] == b[0]
     assert a[1].takeups > 0
+
+
+def test_line_curvature_bound_holds_along_random_moves(parametric):
+    """The engine's bound on the correction's second derivative along a move holds for
+    the finite-difference second derivative of its inverse, and so the bound on the
+    chord deviation holds for the densely sampled corrected move."""
+    rng = np.random.default_rng(11)
+    n = 300
+    q0 = rng.uniform(20, 295, (n, 3))
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    length = rng.choice([0.5, 2.0, 8.0], n)
+    q1 = np.clip(q0 + u * length[:, None], 5, 310)
+    r = np.zeros((n, 3))
+    r[:, 2] = rng.choice([0.0, -100.0], n)
+    K = parametric.line_curvature_bound(q0, q1, np.linalg.norm(r, axis=1), 1.0)
+    assert np.isfinite(K).all()
+    s = np.linspace(0, 1, 41)
+    pts = q0[:, None, :] + (q1 - q0)[:, None, :] * s[None, :, None]
+    rr = np.repeat(r, len(s), axis=0)
+    delta = np.asarray(parametric.correction(pts.reshape(-1, 3) + rr, rr).q).reshape(n, len(s), 3)
+    L = np.linalg.norm(q1 - q0, axis=1)
+    h = L / (len(s) - 1)
+    second = np.linalg.norm(delta[:, 2:] - 2 * delta[:, 1:-1] + delta[:, :-2], axis=2) / (h[:, None] ** 2)
+    assert (second.max(axis=1) <= K).all()
+    # the chord deviation of the corrected move stays within K L^2 / 8
+    chord = delta[:, :1] + (delta[:, -1:] - delta[:, :1]) * s[None, :, None]
+    dev = np.linalg.norm(delta - chord, axis=2).max(axis=1)
+    assert (dev <= K * L * L / 8 + 1e-12).all()
+    # and the bound is not vacuous: within a factor 30 of the largest seen
+    assert np.median(K / np.maximum(second.max(axis=1), 1e-12)) < 30
+
+
+def test_no_bound_outside_the_tables_or_for_effects(parametric):
+    q = np.array([[100.0, 100.0, 100.0]])
+    assert np.isinf(parametric.line_curvature_bound(q, q + [0, 0, 300.0], np.zeros(1), 1.0)).all()
+    base = StaticEngine(np.eye(3), [0, 0, 0], [[0] * 3, [315] * 3])
+    assert (base.line_curvature_bound(q, q + 1, np.zeros(1)) == 0).all()
+    eng = compose(base, [{"name": "periodic:X", "config": {"pitch_mm": 5.0},
+                          "params": {"cos_mm": 0.004, "sin_mm": -0.003}}])
+    assert np.isinf(eng.line_curvature_bound(q, q + 1, np.zeros(1))).all()

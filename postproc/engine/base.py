@@ -107,6 +107,16 @@ class Engine(ABC):
         (backlash): the planner then cuts moves at reversals and takes them up."""
         return any(c in ("dirx", "diry", "dirz") for c in self.needs)
 
+    def line_curvature_bound(self, q0, q1, r_norm_mm, margin_mm: float = 0.0) -> np.ndarray:
+        """An upper bound (1/mm) on the second derivative, along each straight move from
+        ``q0`` to ``q1`` (N, 3) with a tool vector of length ``r_norm_mm`` (N,), of the
+        correction as a function of arc length (inf: no bound known). The commands the
+        inverse finds lie within ``margin_mm`` of the moves. A move of length L then
+        departs from the chord of its corrected ends by at most ``bound L^2 / 8``, which
+        spares the planner sampling it. Affine engines: 0."""
+        n = len(np.asarray(q0))
+        return np.zeros(n) if self.affine else np.full(n, np.inf)
+
     def check_context(self, names) -> None:
         """Refuse (PostprocError) when a context value the engine needs is not among
         ``names``; engines without effects need none."""

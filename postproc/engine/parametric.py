@@ -30,6 +30,7 @@ the table ranges; the correction pipeline refuses points outside it unless asked
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -177,6 +178,7 @@ class ParametricEngine(Engine):
         sq = self.squareness
         # Squareness as a constant matrix: rho += S q.
         self._S = np.array([[0.0, -sq.EC0Y, sq.EB0Z], [0.0, 0.0, -sq.EA0Z], [0.0, 0.0, 0.0]])
+        self._bounds: tuple | None = None  # of the error functions, for line_curvature_bound
 
     def with_options(self, **changes) -> ParametricEngine:
         """A copy with other order / solver / interpolation / extrapolate / astatic settings."""
@@ -228,6 +230,51 @@ class ParametricEngine(Engine):
             drho[:, :, i] = d[:, :3]
             deps[:, :, i] = d[:, 3:]
         return drho + self._S, deps
+
+    def line_curvature_bound(self, q0, q1, r_norm_mm, margin_mm: float = 0.0) -> np.ndarray:
+        """See :meth:`Engine.line_curvature_bound`. Each error is a sum of functions of one
+        axis each, so along a unit direction u the second derivative of the linear errors
+        is ``sum_i u_i^2 f_i''`` (squareness adds none): at most the largest ``|f_i''|``;
+        the angles' term adds ``|eps''| |r|``, the second-order terms ``2 |r| (|eps|
+        |eps''| + |eps'|^2)``. The inverse's second derivative is that bound over
+        ``(1 - e)^3``, with e the largest norm of the error Jacobian. Within the tables'
+        span only (PCHIP is twice differentiable there, piecewise); inf elsewhere, and
+        for linear interpolation (its kinks have no bounded second derivative)."""
+        q0 = np.asarray(q0, dtype=float)
+        q1 = np.asarray(q1, dtype=float)
+        r = np.asarray(r_norm_mm, dtype=float)
+        if self.interpolation != "pchip":
+            return np.full(len(q0), np.inf)
+        if self._bounds is None:
+            k_eps = s_rho = s_eps = v_eps = 0.0
+            local = []
+            for f in self._functions:
+                value, slope, _curv = f._f.bounds()
+                c = f._f.interval_curvature()
+                local.append((f.x, np.linalg.norm(c[:, :3], axis=1), np.linalg.norm(c[:, 3:], axis=1)))
+                k_eps = max(k_eps, float(np.linalg.norm(_curv[3:])))
+                s_rho = max(s_rho, float(np.linalg.norm(slope[:3])))
+                s_eps = max(s_eps, float(np.linalg.norm(slope[3:])))
+                v_eps += float(np.linalg.norm(value[3:]))
+            self._bounds = (local, k_eps, s_rho, s_eps, v_eps, float(np.linalg.norm(self._S)))
+        local, k_eps, s_rho, s_eps, v_eps, s_norm = self._bounds
+        # the largest second derivative on the knot intervals each move's axis range meets
+        k_rho = np.zeros(len(q0))
+        k_ang = np.zeros(len(q0))
+        inside = np.ones(len(q0), dtype=bool)
+        for i, (x, c_rho, c_eps) in enumerate(local):
+            a = np.minimum(q0[:, i], q1[:, i]) - margin_mm
+            b = np.maximum(q0[:, i], q1[:, i]) + margin_mm
+            inside &= (a >= x[0]) & (b <= x[-1])
+            j0 = np.clip(np.searchsorted(x, a, side="right") - 1, 0, len(x) - 2)
+            j1 = np.clip(np.searchsorted(x, b, side="left") - 1, 0, len(x) - 2)
+            near = j1 - j0 <= 1  # one or two intervals: their own values; more: the largest anywhere
+            k_rho = np.maximum(k_rho, np.where(near, np.maximum(c_rho[j0], c_rho[j1]), c_rho.max()))
+            k_ang = np.maximum(k_ang, np.where(near, np.maximum(c_eps[j0], c_eps[j1]), c_eps.max()))
+        jac = s_norm + math.sqrt(3.0) * (s_rho + r * s_eps)
+        k = k_rho + r * k_ang + 2.0 * r * (v_eps * k_eps + 3.0 * s_eps * s_eps)
+        bound = np.where(jac < 0.5, k / np.maximum(1.0 - jac, 0.5) ** 3, np.inf)
+        return np.where(inside, bound, np.inf)
 
     # -- the model -----------------------------------------------------------------------
     def forward(self, q, r=None, context=None) -> np.ndarray:

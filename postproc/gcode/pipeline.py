@@ -582,6 +582,11 @@ class Corrector(EmitterMixin):
         def corr(rows, nom):
             return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
 
+        def curvature(rows):
+            # the commands the inverse finds lie within the largest allowed correction
+            return self.engine.line_curvature_bound(Q0[rows], Q1[rows], np.linalg.norm(R[rows], axis=1),
+                                                    self.opt.max_correction_mm)
+
         if runs and not self.linear_exact:
             # straight moves of the runs of plain lines: those that must be split are
             # planned when they are written (their Move is made then)
@@ -589,7 +594,7 @@ class Corrector(EmitterMixin):
             rows = np.concatenate(per_run)
             ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
                                     limit=self.opt.tolerance_mm * FIT_BUDGET
-                                    - max(self._round_err(r.unit) for r in runs))
+                                    - max(self._round_err(r.unit) for r in runs), curvature=curvature)
             owner = np.repeat(np.arange(len(runs)), [len(p) for p in per_run])
             run_lines = []
             for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
@@ -602,7 +607,7 @@ class Corrector(EmitterMixin):
             ok_lines, hints, planned = vplan.plan_chunk(
                 planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
                 min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
-                rounding=max(self._round_err(m.unit) for _i, m in general))
+                rounding=max(self._round_err(m.unit) for _i, m in general), curvature=curvature)
             for i, hint in hints.items():
                 hint.lazy = self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
                 plans[i] = hint

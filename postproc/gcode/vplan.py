@@ -132,13 +132,21 @@ def _group_max(values: np.ndarray, starts: np.ndarray, n: np.ndarray) -> np.ndar
     return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(n))
 
 
-def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float):
+def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None, limit: float = 0.0):
     """Interior samples of the straight moves ``rows`` (every ``step_mm``, at least one):
     ``(owner rows, nominal points, check)``; ``check(corrected points, limit)`` tells for
     each move whether every corrected sample lies within ``limit`` of the chord S-T (a
-    move whose start is unknown passes: it is written as it is read)."""
-    n = np.maximum(3, np.ceil(np.linalg.norm(Q1[rows] - Q0[rows], axis=1) / step_mm).astype(int) + 1) \
-        if len(rows) else np.zeros(0, dtype=int)
+    move whose start is unknown passes: it is written as it is read).
+
+    ``curvature(rows)``: the engine's bound on the correction's second derivative along
+    each move (:meth:`postproc.engine.base.Engine.line_curvature_bound`); a move whose
+    chord the bound holds within ``limit`` (bound L^2 / 8) passes unsampled."""
+    length = np.linalg.norm(Q1[rows] - Q0[rows], axis=1) if len(rows) else np.zeros(0)
+    n = np.maximum(3, np.ceil(length / step_mm).astype(int) + 1) if len(rows) else np.zeros(0, dtype=int)
+    settled = np.zeros(len(rows), dtype=bool)
+    if curvature is not None and len(rows):
+        settled = curvature(rows) * length * length / 8.0 <= limit
+        n = np.where(settled, 2, n)  # no interior sample
     own, pos, start = _ragged(n - 2)
     s = (pos + 1) / (n[own] - 1)
     r = rows[own]
@@ -150,21 +158,25 @@ def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float):
         den = np.einsum("ij,ij->i", ab, ab)
         tt = np.clip(np.einsum("ij,ij->i", P - A, ab) / np.where(den > 0, den, 1.0), 0.0, 1.0)
         dist = np.linalg.norm(P - A - tt[:, None] * ab, axis=1)
-        worst = _group_max(dist, start, n - 2)
-        return (worst <= limit) | ~np.isfinite(S[rows]).all(axis=1)
+        worst = np.zeros(len(rows))
+        some = n > 2
+        if some.any():
+            worst[some] = _group_max(dist, start[some], (n - 2)[some])
+        return settled | (worst <= limit) | ~np.isfinite(S[rows]).all(axis=1)
 
     return r, nom, check
 
 
-def lines_within(rows: np.ndarray, Q0, Q1, S, T, corrected, *, step_mm: float, limit: float) -> np.ndarray:
+def lines_within(rows: np.ndarray, Q0, Q1, S, T, corrected, *, step_mm: float, limit: float,
+                 curvature=None) -> np.ndarray:
     """Which straight moves ``rows`` stay within ``limit`` of their corrected chord (see
     :func:`_line_samples`; ``corrected`` as in :func:`plan_chunk`)."""
-    r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm)
+    r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm, curvature, limit)
     return check(corrected(r, nom) if len(r) else np.zeros((0, 3)), limit)
 
 
 def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, step_rad: float,
-               min_arc_samples: int, budget: float, rounding: float):
+               min_arc_samples: int, budget: float, rounding: float, curvature=None):
     """Settle in bulk the planned moves of a chunk that stay one line or one exact arc.
 
     ``planned``: (row, Move) pairs; ``arc_prm``: row -> arc_params of the arcs;
@@ -216,7 +228,7 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
         return out
 
     nom_a = arc_nominal(ao, s_a)
-    lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm)
+    lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm, curvature, budget - rounding)
     rows_all = np.concatenate([lrows, ai[ao]])
     corr = corrected(rows_all, np.vstack([nom_l, nom_a])) if len(rows_all) else np.zeros((0, 3))
     P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
