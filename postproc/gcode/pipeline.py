@@ -546,8 +546,9 @@ class Corrector(EmitterMixin):
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
         arcs = [i for i, m in general if m.arc is not None]
         arc_prm = {i: arc_params(moves[i].arc, moves[i].q0, moves[i].q1) for i in arcs}
-        breaks: dict[int, np.ndarray] = {}
-        for i in arcs:
+        breaks: dict[int, np.ndarray] = {}  # of the arcs the general planner cuts (made when needed)
+        # the approach directions at arc ends matter only to a correction that reads them
+        for i in arcs if self.engine.direction_dependent or self.opt.added else ():
             m = moves[i]
             prm = arc_prm[i]
             br = breaks[i] = quadrant_breaks(prm[1], prm[2])
@@ -643,7 +644,10 @@ class Corrector(EmitterMixin):
                 prm = arc_prm[i]
                 _axes, _t0, sweep, r0, r1 = prm
                 length = arc_length(m.arc, m.q0, m.q1)
-                cuts = [0.0, *breaks[i].tolist(), 1.0]
+                br = breaks.get(i)
+                if br is None:
+                    br = breaks[i] = quadrant_breaks(_t0, sweep)
+                cuts = [0.0, *br.tolist(), 1.0]
                 carried = d_in[i]
                 for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
                     n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
