@@ -118,7 +118,7 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
             raise click.UsageError("--effect is fitted from point measurements, not axis error tables; "
                                    "fit the tables alone, then 'postproc check POINTS -c CAL --fixed' tells "
                                    "which effect the points show")
-        from postproc.engine.parametric_tables import fit_tables
+        from postproc.metrology.tables_fit import fit_tables
 
         result = fit_tables([f for f, k in zip(files, kinds, strict=True) if k == "tables"], squareness=squareness,
                             runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], **options)

@@ -54,6 +54,7 @@ from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
+    Measurements,
     check_points,
     check_tool_vectors,
 )
@@ -298,8 +299,6 @@ def fit(measurements, *, intervals=None, border_blend_mm: float = BORDER_BLEND_M
     Options: ``intervals`` (spec string, see :func:`parse_intervals`),
     ``border_blend_mm`` (0 for the seed's pure piecewise model).
     """
-    from postproc.calibration.measurements import Measurements
-
     items = list(measurements)
     meas = Measurements.concat(items)
     path = meas.path

@@ -31,14 +31,17 @@ the table ranges; the correction pipeline refuses points outside it unless asked
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
+from postproc.engine import parametric_solvers
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
-from postproc.engine.parametric_tables import AXES, AxisTables, Squareness
 from postproc.engine.pchip import Pchip
+from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError
+from postproc.rotation import cross, rotate
 
 ORDERS = ("first", "second", "exact")
 SOLVERS = ("newton", "astatic")
@@ -108,26 +111,6 @@ class AxisFunctions:
         return (v, dv) if derivative else v
 
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (N, 3) arrays (faster than np.cross for 3-vectors)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-
-
-def rotate(eps: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """R(eps) r for rotation vectors eps (N, 3), via Rodrigues-Hamilton parameters.
-
-    lambda0 = cos(theta/2), lambda = sin(theta/2) eps/theta; R r = r + 2 lambda0 (lambda x r)
-    + 2 lambda x (lambda x r). Written with sinc so it is exact and stable at theta -> 0.
-    """
-    theta = np.linalg.norm(eps, axis=1)
-    lam0 = np.cos(theta / 2)
-    lam = 0.5 * np.sinc(theta / (2 * np.pi))[:, None] * eps  # sin(theta/2)/theta * eps
-    lr = cross(lam, r)
-    return r + 2 * lam0[:, None] * lr + 2 * cross(lam, lr)
-
-
 def second_order_displacement(eps: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Formula (4) angular part: s (v + 0.5 eps x v), v = eps x r."""
     v = cross(eps, r)
@@ -148,6 +131,7 @@ class ParametricEngine(Engine):
     def __init__(self, tables: AxisTables, squareness: Squareness | None = None, volume_mm=None, *,
                  order: str = "first", solver: str = "newton", interpolation: str = "pchip",
                  extrapolate: str = "clamp", astatic: AstaticSettings | dict | None = None) -> None:
+        tables.require_all()
         table_volume = tables.volume_mm
         super().__init__(table_volume if volume_mm is None else volume_mm)
         if np.any(self.volume_mm[0] < table_volume[0] - VOLUME_EDGE_SLACK_MM) or np.any(
@@ -280,8 +264,6 @@ class ParametricEngine(Engine):
         return J
 
     def inverse(self, p, r=None, context=None, *, solver: str | None = None) -> InverseResult:
-        from postproc.engine import parametric_solvers
-
         p = check_points(p, "p")
         r = check_tool_vectors(r, len(p))
         solver = solver or self.solver
@@ -306,7 +288,8 @@ class ParametricEngine(Engine):
     @classmethod
     def model_from_dict(cls, model: dict, volume_mm) -> ParametricEngine:
         tables = AxisTables.from_dict(model["tables"])
-        sq = Squareness(**{k: float(v) for k, v in model.get("squareness_rad", {}).items()})
+        values: dict[str, Any] = {k: float(v) for k, v in model.get("squareness_rad", {}).items()}
+        sq = Squareness(**values)
         return cls(tables, sq, volume_mm, order=model.get("order", "first"),
                    solver=model.get("solver", "newton"), interpolation=model.get("interpolation", "pchip"),
                    extrapolate=model.get("extrapolate", "clamp"), astatic=model.get("astatic"))

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.engine.parametric_tables import AXES, COLUMNS, UNMEASURED_HALF_RANGE_MM
+from postproc.calibration.tables import UNMEASURED_HALF_RANGE_MM
+from postproc.engine.tables import AXES, COLUMNS
 from postproc.errors import CalibrationError
 
 #: Points per table interval at which an exported table is compared with the model.
