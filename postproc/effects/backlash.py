@@ -32,6 +32,7 @@ MIN_ROWS_PER_SIDE = 3
 
 class Backlash(Effect):
     kind = "backlash"
+    targets = tuple(AXES)
     meaning = "lost motion at reversal: the axis lags by b/2 against its approach direction"
 
     @property

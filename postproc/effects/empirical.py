@@ -37,6 +37,8 @@ def exponents(degree: int) -> list[tuple[int, int, int]]:
 
 class Empirical(Effect):
     kind = "empirical"
+    targets = tuple(DEGREES)
+    candidate = False
     meaning = "empirical smooth residual field (no physical model): corrects what no known effect explains"
 
     @property

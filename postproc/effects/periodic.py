@@ -93,6 +93,7 @@ def periodogram(x: np.ndarray, y: np.ndarray, freqs: np.ndarray) -> np.ndarray:
 
 class Periodic(Effect):
     kind = "periodic"
+    targets = tuple(AXES)
     meaning = "periodic positioning error repeating with the lead-screw pitch"
 
     @property

@@ -18,6 +18,7 @@ from postproc.effects.base import AXES, Effect, unit_basis
 
 class Scale(Effect):
     kind = "scale"
+    targets = tuple(AXES)
     meaning = "linear positioning (scale) error of an axis"
 
     @property

@@ -27,6 +27,7 @@ MIN_HALF_TRAVEL_MM = 1e-3
 
 class Straightness(Effect):
     kind = "straightness"
+    targets = tuple(AXES)
     meaning = "bow and S-shape of an axis's straightness"
 
     @property
@@ -82,6 +83,7 @@ class Positioning(Effect):
     """
 
     kind = "positioning"
+    targets = tuple(AXES)
     meaning = "non-linear positioning error along an axis (bow and S-shape)"
 
     @property
