@@ -272,7 +272,7 @@ def merge_parts(parts: list[dict[str, TablePart]]) -> tuple[AxisTables, list[str
             continue
         owner: dict[int, TablePart] = {}
         for part in mine:
-            for j in np.flatnonzero(part.measured):
+            for j in map(int, np.flatnonzero(part.measured)):
                 if j in owner:
                     raise MeasurementError(
                         f"axis {ax} is given in two sources for {COLUMNS[j]} ({owner[j].source} and {part.source})",

@@ -20,7 +20,7 @@ import copy
 import math
 import numbers
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -220,7 +220,7 @@ class Effect:
                         f"otherwise): too little variation to test")
         return None
 
-    def prepare(self, q, r, ctx, resid) -> Effect:
+    def prepare(self, q, r, ctx, resid) -> Self:
         """A copy whose ``config`` is set from training data and the current residual.
 
         Default: no non-linear settings. Periodic errors search the pitch, thermal
@@ -229,7 +229,7 @@ class Effect:
         return self.copy()
 
     # -- serialisation -----------------------------------------------------------
-    def copy(self, *, config: Mapping | None = None, params=None) -> Effect:
+    def copy(self, *, config: Mapping | None = None, params=None) -> Self:
         new = copy.copy(self)
         new.config = copy.deepcopy(dict(self.config if config is None else config))
         if params is None:
@@ -263,6 +263,16 @@ def lstsq_with_offset(B: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, flo
     coef = solve_ls(A, y)
     sse = float(np.sum((y - A @ coef) ** 2))
     return coef[:k], sse
+
+
+class AxisEffect(Effect):
+    """An effect of one axis: the target is X, Y or Z."""
+
+    targets = tuple(AXES)
+
+    @property
+    def axis(self) -> int:
+        return AXES.index(self.target)
 
 
 class ContextLinear(Effect):

@@ -35,6 +35,9 @@ class ComposedEngine(Engine):
         self.base = base
         self.effects = list(effects)
         self.method = base.method  # the calibration file's method is the base's
+        # the base's solver stands for the inverse: the fixed point only adds the effects
+        self.solver = base.solver
+        self.accept_residual_mm = base.accept_residual_mm
 
     @property
     def needs(self) -> list[str]:
@@ -45,14 +48,6 @@ class ComposedEngine(Engine):
 
     def effects_dicts(self) -> list[dict]:
         return [e.to_dict() for e in self.effects]
-
-    @property  # type: ignore[override]
-    def solver(self) -> str:
-        return self.base.solver
-
-    @property  # type: ignore[override]
-    def accept_residual_mm(self) -> float:
-        return self.base.accept_residual_mm
 
     def with_extrapolation(self, mode: str) -> Engine:
         return type(self)(self.base.with_extrapolation(mode), self.effects)

@@ -32,7 +32,7 @@ def _legendre(u: np.ndarray, n: int) -> np.ndarray:
 
 
 def exponents(degree: int) -> list[tuple[int, int, int]]:
-    return [e for e in product(range(degree + 1), repeat=3) if 2 <= sum(e) <= degree]
+    return [(i, j, k) for i, j, k in product(range(degree + 1), repeat=3) if 2 <= i + j + k <= degree]
 
 
 class Empirical(Effect):

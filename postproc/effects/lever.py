@@ -38,7 +38,8 @@ class Lever(Effect):
 
     @property
     def rotations(self) -> tuple[int, int]:
-        return tuple(k for k in range(3) if k != self.b)  # type: ignore[return-value]
+        k1, k2 = (k for k in range(3) if k != self.b)
+        return k1, k2
 
     @property
     def param_names(self) -> tuple[str, ...]:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import AXES, Effect, unit_basis
+from postproc.effects.base import AxisEffect, unit_basis
 
 # Shortest pitch searched: ball screws on machine tools have leads of 2 mm and more.
 PITCH_MIN_MM = 2.0
@@ -91,14 +91,9 @@ def periodogram(x: np.ndarray, y: np.ndarray, freqs: np.ndarray) -> np.ndarray:
     return ((np.cos(phase) @ yc) ** 2 + (np.sin(phase) @ yc) ** 2) / len(x)
 
 
-class Periodic(Effect):
+class Periodic(AxisEffect):
     kind = "periodic"
-    targets = tuple(AXES)
     meaning = "periodic positioning error repeating with the lead-screw pitch"
-
-    @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
 
     @property
     def param_names(self) -> tuple[str, ...]:

@@ -73,7 +73,7 @@ class Engine(ABC):
     coordinates ``q``: a (2, 3) array of lower and upper bounds.
     """
 
-    method: ClassVar[str] = ""
+    method: str = ""
     #: True when F is affine in q for fixed r (lines map to lines, no splitting needed).
     affine: ClassVar[bool] = False
 
@@ -222,9 +222,8 @@ class Measurements:
         if len(items) == 1:
             return items[0]
         common = set.intersection(*(set(m.context) for m in items))
-        direction = None
-        if all(m.direction is not None for m in items):
-            direction = np.vstack([m.direction for m in items])
+        directions = [m.direction for m in items if m.direction is not None]
+        direction = np.vstack(directions) if len(directions) == len(items) else None
         return Measurements(
             q=np.vstack([m.q for m in items]),
             m=np.vstack([m.m for m in items]),

@@ -170,7 +170,7 @@ class IntervalEngine(Engine):
                 continue
             pv = self._apply(q[used], sel[used])
             value[used] += weight[used, None] * pv
-            if jacobian:
+            if jac is not None:
                 i, j, k = sel[used].T
                 jac[used] += weight[used, None, None] * self.G[i, j, k]
                 dw = np.where(np.array(a, dtype=bool)[None, :], dlam, -dlam)[used]

@@ -104,6 +104,8 @@ class AxisFunctions:
         else:
             v, dv = self._linear(tc)
         outside = t != tc
+        if dv is None:  # pchip without derivative, clamped: the values are all that is asked
+            return v
         if self.extrapolate == "linear":
             v = v + (t - tc)[:, None] * dv
         elif derivative and outside.any():
@@ -156,6 +158,11 @@ class ParametricEngine(Engine):
         elif astatic is not None and not isinstance(astatic, AstaticSettings):
             raise CalibrationError(f"astatic settings must be an object (grid_step_mm, gain, time_step), got {astatic!r}")
         self.astatic = astatic or AstaticSettings()
+        # Largest inverse residual the solver stands for. Newton: SOLVER_TOL_MM (it
+        # converges or raises). Astatic: one grid step u, the method's own criterion; its
+        # measured errors are tens of micrometres (see benchmarks/solvers.py), reported
+        # per point in InverseResult.residual_mm.
+        self.accept_residual_mm = SOLVER_TOL_MM if solver == "newton" else float(self.astatic.grid_step_mm)
         self._functions = [AxisFunctions(tables.position_mm[a], tables.errors[a], interpolation, extrapolate)
                            for a in AXES]
         sq = self.squareness
@@ -164,7 +171,7 @@ class ParametricEngine(Engine):
 
     def with_options(self, **changes) -> ParametricEngine:
         """A copy with other order / solver / interpolation / extrapolate / astatic settings."""
-        opts = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
+        opts: dict[str, Any] = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
                 "extrapolate": self.extrapolate, "astatic": self.astatic}
         unknown = set(changes) - set(opts)
         if unknown:
@@ -176,16 +183,6 @@ class ParametricEngine(Engine):
 
     def with_extrapolation(self, mode: str) -> ParametricEngine:
         return self.with_options(extrapolate=mode)
-
-    @property  # type: ignore[override]
-    def accept_residual_mm(self) -> float:
-        """Largest inverse residual this engine's solver stands for.
-
-        Newton: SOLVER_TOL_MM (it converges or raises). Astatic: one grid step u, the
-        method's own criterion; its measured errors are tens of micrometres (see
-        benchmarks/solvers.py), reported per point in ``InverseResult.residual_mm``.
-        """
-        return SOLVER_TOL_MM if self.solver == "newton" else float(self.astatic.grid_step_mm)
 
     # -- the error functions -----------------------------------------------------------
     def errors_at(self, q) -> tuple[np.ndarray, np.ndarray]:

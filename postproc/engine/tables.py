@@ -134,7 +134,8 @@ class Squareness:
         return {n: float(getattr(self, n)) for n in SQUARENESS_NAMES}
 
     def scaled(self, factor: float) -> Squareness:
-        return Squareness(*(getattr(self, n) * factor for n in SQUARENESS_NAMES), path=self.path)
+        return Squareness(EC0Y=self.EC0Y * factor, EB0Z=self.EB0Z * factor, EA0Z=self.EA0Z * factor,
+                          path=self.path)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, float], path: str | None = None) -> Squareness:
@@ -145,4 +146,5 @@ class Squareness:
             raise CalibrationError(
                 f"unknown squareness name(s) {unknown}: use {', '.join(SQUARENESS_NAMES)}", path=path
             )
-        return cls(**{k: float(v) for k, v in values.items()}, path=path)
+        return cls(EC0Y=float(values.get("EC0Y", 0.0)), EB0Z=float(values.get("EB0Z", 0.0)),
+                   EA0Z=float(values.get("EA0Z", 0.0)), path=path)

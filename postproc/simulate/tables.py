@@ -61,4 +61,4 @@ def simulate_tables(machine: Machine, step_mm: float, rng: np.random.Generator |
     if noise:
         for k in squareness:
             squareness[k] += float(rng.normal(0.0, machine.noise.squareness_rad))
-    return AxisTables(pos, err), Squareness(**squareness)
+    return AxisTables(pos, err), Squareness.from_mapping(squareness)
