@@ -329,6 +329,10 @@ class ContextLinear(Effect):
     def reference(self) -> float:
         return float(self.config.get(self.reference_key, self.reference_default)) if self.reference_key else 0.0
 
+    def prepare(self, q, r, ctx, resid) -> Self:
+        """The reference set to its default (a subclass may take it from the data)."""
+        return self.copy(config={self.reference_key: self.reference_default}) if self.reference_key else self.copy()
+
     def value(self, v: np.ndarray, q: np.ndarray) -> np.ndarray:
         """The factor of each parameter: (N,) for all three axes alike, or (N, 3)."""
         return v - self.reference if self.reference_key else v

@@ -21,6 +21,7 @@ from itertools import product
 import numpy as np
 
 from postproc.effects.base import AXES, Effect
+from postproc.errors import CalibrationError
 
 DEGREES = {"poly2": 2, "poly3": 3, "poly4": 4}
 # Half extents below this (mm) are floored: one position along an axis gives no shape.
@@ -68,8 +69,6 @@ class Empirical(Effect):
     def basis(self, q, r, ctx) -> np.ndarray:
         ext = self.extent()
         if ext is None:
-            from postproc.errors import CalibrationError
-
             raise CalibrationError(f"effect {self.name} has no extent (center_x_mm ... half_z_mm) in its config")
         c, h = ext.mean(axis=0), np.maximum(0.5 * (ext[1] - ext[0]), MIN_HALF_MM)
         u = np.clip((np.asarray(q, dtype=float) - c) / h, -1.0, 1.0)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.effects.base import AxisEffect, unit_basis
+from postproc.errors import CalibrationError
 
 # Shortest pitch searched: ball screws on machine tools have leads of 2 mm and more.
 PITCH_MIN_MM = 2.0
@@ -121,8 +122,6 @@ class Periodic(AxisEffect):
     def basis(self, q, r, ctx) -> np.ndarray:
         pitch = self.config.get("pitch_mm")
         if not pitch or pitch <= 0:
-            from postproc.errors import CalibrationError
-
             raise CalibrationError(f"effect {self.name} has no pitch_mm > 0 in its config")
         phase = 2 * np.pi * q[:, self.axis] / pitch
         return np.stack([unit_basis(np.cos(phase), self.axis), unit_basis(np.sin(phase), self.axis)], axis=2)

@@ -82,9 +82,6 @@ class ThermalTemperature(ContextLinear):
     given_as = ("the temperature", "°C")
     describe_head, describe_unit, describe_format = "thermal growth per °C of", "um/°C", "+.2f"
 
-    def prepare(self, q, r, ctx, resid) -> ThermalTemperature:
-        return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})
-
 
 class ThermalExpansion(ContextLinear):
     """Thermal expansion of the axes with temperature (``expansion:temp``): each axis's
@@ -111,6 +108,3 @@ class ThermalExpansion(ContextLinear):
 
     def value(self, v: np.ndarray, q: np.ndarray) -> np.ndarray:
         return (v - self.reference)[:, None] * q
-
-    def prepare(self, q, r, ctx, resid) -> ThermalExpansion:
-        return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.calibration.tables import UNMEASURED_HALF_RANGE_MM
+from postproc.effects.composed import ComposedEngine
 from postproc.engine.tables import AXES, COLUMNS
 from postproc.errors import CalibrationError
 
@@ -33,8 +34,6 @@ class AxisErrors:
     """Positioning error of one axis of a parametric calibration, per direction (mm)."""
 
     def __init__(self, cal, axis: str) -> None:
-        from postproc.effects.composed import ComposedEngine
-
         engine = cal.engine
         base = engine.base if isinstance(engine, ComposedEngine) else engine
         if base.method != "parametric":
