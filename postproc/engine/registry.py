@@ -234,7 +234,7 @@ register(Method(
 
 register(Method(
     "parametric", "postproc.engine.parametric:ParametricEngine", "postproc.engine.parametric_fit:fit",
-    tables_fitter="postproc.engine.parametric_tables:fit_tables",
+    tables_fitter="postproc.metrology.tables_fit:fit_tables",
     options=(
         FitOption("knot_spacing", "--knot-spacing", "float", metavar="MM",
                   help="Parametric identification: B-spline knot spacing (default: from the data)."),
