@@ -40,11 +40,11 @@ class ComposedEngine(Engine):
         self.accept_residual_mm = base.accept_residual_mm
 
     @property
-    def needs(self) -> list[str]:
+    def needs(self) -> tuple[str, ...]:
         out: list[str] = []
         for e in self.effects:
             out += [c for c in e.needs if c not in out]
-        return out
+        return tuple(out)
 
     def effects_dicts(self) -> list[dict]:
         return [e.to_dict() for e in self.effects]

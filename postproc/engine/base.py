@@ -98,8 +98,10 @@ class Engine(ABC):
         all space (static, interval, grid) return themselves."""
         return self
 
-    #: context values the engine reads (effects' ``dirx``, ``t``, ...); none by default
-    needs: tuple[str, ...] = ()
+    @property
+    def needs(self) -> tuple[str, ...]:
+        """Context values the engine reads (effects' ``dirx``, ``t``, ...); none by default."""
+        return ()
 
     @property
     def direction_dependent(self) -> bool:

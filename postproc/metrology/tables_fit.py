@@ -27,13 +27,26 @@ from postproc.effects import get_effect
 from postproc.engine.base import FitResult
 from postproc.engine.parametric import ParametricEngine
 from postproc.engine.tables import AXES, COLUMNS, Squareness
-from postproc.errors import MeasurementError
+from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.beckhoff import read_isg_parts
 from postproc.metrology.iso230 import evaluate
 from postproc.metrology.runs import read_runs
 
 #: options of ``fit_tables`` that go to the engine
 ENGINE_OPTIONS = ("order", "solver", "interpolation", "extrapolate", "astatic")
+
+
+def tables_fitter(method: str):
+    """The function making a ``method`` calibration from axis error tables, called as
+    ``fit(tables_paths, squareness=..., runs=..., **options)`` (the methods
+    :func:`postproc.engine.registry.tables_methods` names)."""
+    fitters = {"parametric": fit_tables}
+    if method not in fitters:
+        from postproc.engine.registry import tables_methods
+
+        raise CalibrationError(f"method {method!r} is not made from axis error tables",
+                               hint=f"choose one of: {', '.join(tables_methods())}")
+    return fitters[method]
 
 
 def fit_tables(paths, squareness=None, runs=None, **options) -> FitResult:
