@@ -19,6 +19,7 @@ from postproc.cli import main
 from postproc.engine import registry
 from postproc.engine.base import Engine, FitResult, InverseResult, check_points, check_tool_vectors
 from postproc.engine.registry import FitOption, Method
+from postproc.metrology.tables_fit import tables_fitter
 
 
 # -- a throwaway method: the machine is off by one constant translation t -------------
@@ -167,7 +168,7 @@ def test_each_option_default_and_choices_are_the_fitters_own():
             default = where[opt.keyword].default
             assert opt.default == (None if default is inspect.Parameter.empty else default), (name, opt.keyword)
             if opt.tables:
-                assert "options" in inspect.signature(registry.tables_fitter(name)).parameters
+                assert "options" in inspect.signature(tables_fitter(name)).parameters
     opts = {opt.keyword: opt for opt, _ in registry.fit_options().values()}
     assert opts["model"].choices == grid.MODELS
     assert opts["order"].choices == parametric.ORDERS

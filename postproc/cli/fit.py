@@ -134,7 +134,9 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
             raise click.UsageError("--effect is fitted from point measurements, not axis error tables; "
                                    "fit the tables alone, then 'postproc check POINTS -c CAL --fixed' tells "
                                    "which effect the points show")
-        result = registry.tables_fitter(method)(
+        from postproc.metrology.tables_fit import tables_fitter
+
+        result = tables_fitter(method)(
             [f for f, k in zip(files, kinds, strict=True) if k == "tables"], squareness=squareness,
             runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], **options)
     else:

@@ -78,7 +78,7 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
     import numpy as np
 
     from postproc.calibration.measurements import format_measurements
-    from postproc.fileio import atomic_write_text, atomic_write_texts
+    from postproc.fileio import atomic_write_text
     from postproc.simulate import load_machine
     from postproc.simulate.points import (
         grid_points,
@@ -100,15 +100,13 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
                 f"seed: {seed}", f"noise: {'off' if no_noise else 'on'}"]
 
     if tables:
-        from postproc.calibration.sniff import suffix_squareness
+        from postproc.calibration.tables import squareness_path_for, write_tables
         from postproc.simulate.tables import simulate_tables
-        from postproc.simulate.tables_io import axis_errors_text
 
         tabs, sq = simulate_tables(mach, step, rng, noise=not no_noise, context=context)
-        sq_path = suffix_squareness(output)
-        text, sq_text = axis_errors_text(tabs, sq, comments=comments + [f"step: {step:g} mm"])
-        atomic_write_texts({sq_path: sq_text, output: text})
-        click.echo(f"wrote {output} ({sum(len(t.position) for t in tabs.values())} rows) and {sq_path}",
+        sq_path = squareness_path_for(output)
+        write_tables(output, sq_path, tabs, sq, comments=comments + [f"step: {step:g} mm"])
+        click.echo(f"wrote {output} ({sum(len(x) for x in tabs.position_mm.values())} rows) and {sq_path}",
                    err=True)
         return
 

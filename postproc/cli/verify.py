@@ -69,39 +69,10 @@ def verify(program, calibrations, machine_path, points, corrected, setup, tolera
 
         require_matplotlib("--plot")
     machine = _load_machine(machine_path)
-    ctx, tool = setup.context, setup.tool_vector
     if points is not None:
         if program is not None or corrected is not None:
             raise click.UsageError("give either PROGRAM or --points, not both")
-        unused = [flag for flag, value in (("--offset", setup.offsets), ("--tool-length/--tool-table", setup.tool_lengths),
-                                           ("--start", setup.start), ("--home", setup.home)) if value]
-        if unused:
-            raise click.UsageError(f"--points takes machine targets: {', '.join(unused)} would not be used; "
-                                   "drop it (of the setup options, --tool-vector and --context apply)")
-        from postproc.simulate.control import (
-            control_experiment,
-            format_control_report,
-            read_control_points,
-        )
-
-        cps = read_control_points(points)
-        cals = [load_calibration(c) for c in calibrations]
-        r = cps.tool if cps.tool is not None else (np.asarray(tool) if tool is not None else None)
-        report = control_experiment(machine, cps.targets, [(_label(c), c.engine) for c in cals], r, ctx,
-                                    np.random.default_rng(seed), shots=shots, noise=not no_noise)
-        if as_json:
-            click.echo(json.dumps(report.to_dict(), indent=2))
-            return
-        shot_text = (f"tracker {report.shots} shots averaged per point (sigma {report.sigma_mm * 1000:g} um "
-                     f"per shot), seed {seed}" if report.shots else "no tracker noise")
-        tool_text = ("per-point tool vectors" if cps.tool is not None
-                     else f"tool vector {','.join(f'{v:g}' for v in (tool or (0, 0, 0)))}")
-        click.echo(f"machine {machine.name}: {len(cps.targets)} control points from {points}; {tool_text}; "
-                   f"{shot_text}")
-        click.echo("D = |actual - target| in mm")
-        click.echo(format_control_report(report), nl=False)
-        for note in report.notes:
-            click.echo(f"note: {note}", err=True)
+        _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json)
         return
 
     if program is None:
@@ -175,3 +146,41 @@ def _load_machine(path: str):
 
 def _label(cal) -> str:
     return f"{cal.method} ({cal.name})" if cal.name and cal.name != cal.method else cal.method
+
+
+def _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json) -> None:
+    """--points mode of :func:`verify`."""
+    import numpy as np
+
+    from postproc.calibration.calfile import load_calibration
+
+    ctx, tool = setup.context, setup.tool_vector
+    unused = [flag for flag, value in (("--offset", setup.offsets), ("--tool-length/--tool-table", setup.tool_lengths),
+                                       ("--start", setup.start), ("--home", setup.home)) if value]
+    if unused:
+        raise click.UsageError(f"--points takes machine targets: {', '.join(unused)} would not be used; "
+                               "drop it (of the setup options, --tool-vector and --context apply)")
+    from postproc.simulate.control import (
+        control_experiment,
+        format_control_report,
+        read_control_points,
+    )
+
+    cps = read_control_points(points)
+    cals = [load_calibration(c) for c in calibrations]
+    r = cps.tool if cps.tool is not None else (np.asarray(tool) if tool is not None else None)
+    report = control_experiment(machine, cps.targets, [(_label(c), c.engine) for c in cals], r, ctx,
+                                np.random.default_rng(seed), shots=shots, noise=not no_noise)
+    if as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2))
+        return
+    shot_text = (f"tracker {report.shots} shots averaged per point (sigma {report.sigma_mm * 1000:g} um "
+                 f"per shot), seed {seed}" if report.shots else "no tracker noise")
+    tool_text = ("per-point tool vectors" if cps.tool is not None
+                 else f"tool vector {','.join(f'{v:g}' for v in (tool or (0, 0, 0)))}")
+    click.echo(f"machine {machine.name}: {len(cps.targets)} control points from {points}; {tool_text}; "
+               f"{shot_text}")
+    click.echo("D = |actual - target| in mm")
+    click.echo(format_control_report(report), nl=False)
+    for note in report.notes:
+        click.echo(f"note: {note}", err=True)

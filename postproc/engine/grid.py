@@ -63,6 +63,7 @@ from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
+    Measurements,
     check_points,
     check_tool_vectors,
 )
@@ -438,8 +439,6 @@ def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", 
     ("trilinear" or "cell"), ``fill_missing`` (fill nodes without measurements from
     their neighbours instead of refusing; for cross-validation and partial grids).
     """
-    from postproc.calibration.measurements import Measurements
-
     if model not in MODELS:
         raise PostprocError(f"grid model {model!r} is not one of {', '.join(MODELS)}")
     items = list(measurements)

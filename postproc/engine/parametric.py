@@ -32,14 +32,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
+from postproc.engine import parametric_solvers
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
-from postproc.engine.parametric_tables import AXES, AxisTables, Squareness
 from postproc.engine.pchip import Pchip
+from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError
+from postproc.rotation import cross, rotate
 
 ORDERS = ("first", "second", "exact")
 SOLVERS = ("newton", "astatic")
@@ -102,31 +105,13 @@ class AxisFunctions:
         else:
             v, dv = self._linear(tc)
         outside = t != tc
+        if dv is None:  # pchip without derivative, clamped: the values are all that is asked
+            return v
         if self.extrapolate == "linear":
             v = v + (t - tc)[:, None] * dv
         elif derivative and outside.any():
             dv = np.where(outside[:, None], 0.0, dv)
         return (v, dv) if derivative else v
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (N, 3) arrays (faster than np.cross for 3-vectors)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-
-
-def rotate(eps: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """R(eps) r for rotation vectors eps (N, 3), via Rodrigues-Hamilton parameters.
-
-    lambda0 = cos(theta/2), lambda = sin(theta/2) eps/theta; R r = r + 2 lambda0 (lambda x r)
-    + 2 lambda x (lambda x r). Written with sinc so it is exact and stable at theta -> 0.
-    """
-    theta = np.linalg.norm(eps, axis=1)
-    lam0 = np.cos(theta / 2)
-    lam = 0.5 * np.sinc(theta / (2 * np.pi))[:, None] * eps  # sin(theta/2)/theta * eps
-    lr = cross(lam, r)
-    return r + 2 * lam0[:, None] * lr + 2 * cross(lam, lr)
 
 
 def second_order_displacement(eps: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -149,6 +134,7 @@ class ParametricEngine(Engine):
     def __init__(self, tables: AxisTables, squareness: Squareness | None = None, volume_mm=None, *,
                  order: str = "first", solver: str = "newton", interpolation: str = "pchip",
                  extrapolate: str = "clamp", astatic: AstaticSettings | dict | None = None) -> None:
+        tables.require_all()
         table_volume = tables.volume_mm
         super().__init__(table_volume if volume_mm is None else volume_mm)
         if np.any(self.volume_mm[0] < table_volume[0] - VOLUME_EDGE_SLACK_MM) or np.any(
@@ -173,6 +159,11 @@ class ParametricEngine(Engine):
         elif astatic is not None and not isinstance(astatic, AstaticSettings):
             raise CalibrationError(f"astatic settings must be an object (grid_step_mm, gain, time_step), got {astatic!r}")
         self.astatic = astatic or AstaticSettings()
+        # Largest inverse residual the solver stands for. Newton: SOLVER_TOL_MM (it
+        # converges or raises). Astatic: one grid step u, the method's own criterion; its
+        # measured errors are tens of micrometres (see benchmarks/solvers.py), reported
+        # per point in InverseResult.residual_mm.
+        self.accept_residual_mm = SOLVER_TOL_MM if solver == "newton" else float(self.astatic.grid_step_mm)
         self._functions = [AxisFunctions(tables.position_mm[a], tables.errors[a], interpolation, extrapolate)
                            for a in AXES]
         sq = self.squareness
@@ -182,7 +173,7 @@ class ParametricEngine(Engine):
 
     def with_options(self, **changes) -> ParametricEngine:
         """A copy with other order / solver / interpolation / extrapolate / astatic settings."""
-        opts = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
+        opts: dict[str, Any] = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
                 "extrapolate": self.extrapolate, "astatic": self.astatic}
         unknown = set(changes) - set(opts)
         if unknown:
@@ -194,16 +185,6 @@ class ParametricEngine(Engine):
 
     def with_extrapolation(self, mode: str) -> ParametricEngine:
         return self.with_options(extrapolate=mode)
-
-    @property  # type: ignore[override]
-    def accept_residual_mm(self) -> float:
-        """Largest inverse residual this engine's solver stands for.
-
-        Newton: SOLVER_TOL_MM (it converges or raises). Astatic: one grid step u, the
-        method's own criterion; its measured errors are tens of micrometres (see
-        benchmarks/solvers.py), reported per point in ``InverseResult.residual_mm``.
-        """
-        return SOLVER_TOL_MM if self.solver == "newton" else float(self.astatic.grid_step_mm)
 
     # -- the error functions -----------------------------------------------------------
     def errors_at(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -327,8 +308,6 @@ class ParametricEngine(Engine):
         return J
 
     def inverse(self, p, r=None, context=None, *, solver: str | None = None) -> InverseResult:
-        from postproc.engine import parametric_solvers
-
         p = check_points(p, "p")
         r = check_tool_vectors(r, len(p))
         solver = solver or self.solver
@@ -353,7 +332,8 @@ class ParametricEngine(Engine):
     @classmethod
     def model_from_dict(cls, model: dict, volume_mm) -> ParametricEngine:
         tables = AxisTables.from_dict(model["tables"])
-        sq = Squareness(**{k: float(v) for k, v in model.get("squareness_rad", {}).items()})
+        values: dict[str, Any] = {k: float(v) for k, v in model.get("squareness_rad", {}).items()}
+        sq = Squareness(**values)
         return cls(tables, sq, volume_mm, order=model.get("order", "first"),
                    solver=model.get("solver", "newton"), interpolation=model.get("interpolation", "pchip"),
                    extrapolate=model.get("extrapolate", "clamp"), astatic=model.get("astatic"))

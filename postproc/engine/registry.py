@@ -63,8 +63,9 @@ class Method:
 
     ``engine``: "module:Class" of its engine; ``fitter``: "module:function" fitting it
     from point measurements, called as ``fit(measurements, **options)`` and returning a
-    FitResult; ``tables_fitter``: the same from axis error tables, called as
-    ``fit(tables_paths, squareness=..., runs=..., **options)``; ``options``: what the
+    FitResult; ``from_tables``: the method is also made from axis error tables (by
+    :func:`postproc.metrology.tables_fit.tables_fitter`, which reads the files: a
+    reader of measurement files sits above the engines); ``options``: what the
     fitters take; ``refit``: "module:function" giving, for an engine of this method, the
     fitter options that fit the same model again (its partition, its grid step), so that
     ``postproc check`` cross-validates that model; ``fold_options``: options added when
@@ -74,7 +75,7 @@ class Method:
     name: str
     engine: str
     fitter: str | None = None
-    tables_fitter: str | None = None
+    from_tables: bool = False
     options: tuple[FitOption, ...] = ()
     refit: str | None = None
     fold_options: Mapping[str, Any] = field(default_factory=dict)
@@ -129,7 +130,7 @@ def fit_methods() -> list[str]:
 
 def tables_methods() -> list[str]:
     """Methods that can be made from axis error tables."""
-    return [name for name, m in METHODS.items() if m.tables_fitter]
+    return [name for name, m in METHODS.items() if m.from_tables]
 
 
 def fit_options() -> dict[str, tuple[FitOption, list[str]]]:
@@ -174,14 +175,6 @@ def fitter(method: str):
             f"no fitter for method {method!r}", hint=f"choose one of: {', '.join(sorted(FITTERS))}"
         ) from None
     return _load(spec)
-
-
-def tables_fitter(method: str):
-    m = METHODS.get(method)
-    if m is None or not m.tables_fitter:
-        raise CalibrationError(f"method {method!r} is not made from axis error tables",
-                               hint=f"choose one of: {', '.join(tables_methods())}")
-    return _load(m.tables_fitter)
 
 
 def refit_options(engine) -> dict:
@@ -234,7 +227,7 @@ register(Method(
 
 register(Method(
     "parametric", "postproc.engine.parametric:ParametricEngine", "postproc.engine.parametric_fit:fit",
-    tables_fitter="postproc.engine.parametric_tables:fit_tables",
+    from_tables=True,
     options=(
         FitOption("knot_spacing", "--knot-spacing", "float", metavar="MM",
                   help="Parametric identification: B-spline knot spacing (default: from the data)."),
