@@ -67,47 +67,63 @@ def direction_axes(engine) -> tuple[int, ...]:
     return tuple(k for k, c in enumerate(DIR_COLUMNS) if c in needs)
 
 
-def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, given=None,
-              assumed=None) -> tuple[np.ndarray, np.ndarray]:
+def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, given=None, assumed=None,
+              move_first=None) -> tuple[np.ndarray, np.ndarray]:
     """Targets as commanded and the direction of each axis into each of them.
 
-    ``T`` (M, 3): corrected targets in order; ``start`` (3,): the target before the
+    ``T`` (M, 3): corrected points in order; ``start`` (3,): the point before the
     first (NaN: unknown, no motion into the first); ``dirs0`` (3,): directions before
-    it; ``hold_mm``: one output unit (at least :data:`MACHINE_STEP_MM`); ``axes``: the direction-dependent axes (the
-    others' columns of ``D`` are 0); ``free`` (M,) bool: targets that
-    may be held (False: a stored position the machine goes to as it is); ``given``
-    (M, 3) bool: directions that are the motion's own, taken from ``assumed`` (M, 3)
-    (the in-plane axes of an arc: the motion into its end is that of its last quarter,
-    not of its chord).
+    it; ``hold_mm``: one output unit (at least :data:`MACHINE_STEP_MM`); ``axes``: the
+    direction-dependent axes (the others' columns of ``D`` are 0); ``free`` (M,) bool:
+    points that may be held (False: a stored position the machine goes to as it is);
+    ``given`` (M, 3) bool: directions that are the motion's own, taken from ``assumed``
+    (M, 3) (an arc's in-plane axes: the direction of their quarter); ``move_first``
+    (M,) int: the first point of each point's move (the samples of one move).
+
+    Where an axis reverses after points of the same move that held it, the reversal is
+    put at the first of them: the axis did not move before it in this move, and the
+    take-up goes where the motion starts, as a controller takes it up at the start of
+    the block that reverses (``D`` of those points is the new direction; corrected with
+    it they move, and the next round confirms it).
 
     Returns ``(E, D)``: ``E`` is ``T`` with the held values, ``D`` (M, 3) the sign of
-    each axis's commanded motion into each target, carried where it does not move.
+    each axis's commanded motion into each point, carried where it does not move.
     """
     E = np.array(T, dtype=float, copy=True)
     D = np.zeros_like(E)
     M = len(E)
     may_hold = [True] * M if free is None else np.asarray(free, dtype=bool).tolist()
+    firsts = list(range(M)) if move_first is None else np.asarray(move_first, dtype=int).tolist()
     for k in axes:
         t = E[:, k].tolist()
         fixed = {} if given is None else {int(i): float(assumed[i, k]) for i in np.flatnonzero(given[:, k])}
         e = float(start[k])
         d = float(dirs0[k])
+        moved = -1  # the last point the axis moved into (or was reversed at)
         out_d = [0.0] * M
         for i, v in enumerate(t):
             if fixed and i in fixed:
                 e = v
                 d = fixed[i]
-            elif e != e or v != v:  # unknown position: no motion known into this target
+                moved = i
+            elif e != e or v != v:  # unknown position: no motion known into this point
                 e = v
+                moved = i
             else:
                 delta = v - e
-                if delta == 0.0 or (d != 0.0 and (delta > 0.0) == (d > 0.0)):
+                if delta == 0.0:
+                    pass
+                elif d != 0.0 and (delta > 0.0) == (d > 0.0):
                     e = v
+                    moved = i
                 elif may_hold[i] and abs(delta) <= hold_mm:
                     t[i] = e  # held: the word stays, the axis does not move
                 else:
                     e = v
                     d = 1.0 if delta > 0.0 else -1.0
+                    for j in range(max(moved + 1, firsts[i]), i):
+                        out_d[j] = d  # reversed at the start of the held stretch
+                    moved = i
             out_d[i] = d
         E[:, k] = t
         D[:, k] = out_d
@@ -115,13 +131,13 @@ def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, give
 
 
 def settle(T: np.ndarray, D: np.ndarray, start, dirs0, hold_mm: float, axes, solve, lineno,
-           free=None, given=None, *, path: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+           free=None, given=None, move_first=None, *, path: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The fixed point of corrected targets and commanded directions (see the module).
 
     ``T``: targets corrected with the assumed directions ``D`` (both (M, 3));
     ``solve(rows, D_rows)``: the targets of ``rows`` corrected with directions
-    ``D_rows``; ``lineno`` (M,): program lines, for the refusal; ``free``, ``given``:
-    as :func:`commanded`. Returns ``(E, D)``,
+    ``D_rows``; ``lineno`` (M,): program lines, for the refusal; ``free``, ``given``,
+    ``move_first``: as :func:`commanded`. Returns ``(E, D)``,
     the targets as commanded (holds applied) and their directions.
     """
     axes = tuple(axes)
@@ -132,7 +148,7 @@ def settle(T: np.ndarray, D: np.ndarray, start, dirs0, hold_mm: float, axes, sol
     free_mask = np.ones(len(T), dtype=bool) if free is None else np.asarray(free, dtype=bool)
     cols = list(axes)
     for _round in range(MAX_ITERATIONS):
-        E, Dm = commanded(T, start, dirs0, hold_mm, axes, free_mask, given, D)
+        E, Dm = commanded(T, start, dirs0, hold_mm, axes, free_mask, given, D, move_first)
         diff = Dm[:, cols] != D[:, cols]
         changed = np.flatnonzero(diff.any(axis=1))
         if not len(changed):

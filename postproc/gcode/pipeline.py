@@ -647,7 +647,7 @@ class Corrector(EmitterMixin):
         if len(inner):
             Tx[inner] = solve(inner, Dx[inner])
         Ex, Dx = settle(Tx, Dx, self.prev_target, self.dirs, hold, axes, solve, linenos[owner], free, given,
-                        path=self.path)
+                        first[owner], path=self.path)
         T, D = Ex[last], Dx[last]
         if not planned:
             return T, D
