@@ -12,6 +12,7 @@ import pytest
 from postproc.effects import compose, get_effect
 from postproc.engine.identity import IdentityEngine
 from postproc.engine.static import StaticEngine
+from postproc.errors import SafetyError
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 from postproc.simulate.program import verify_program
@@ -95,6 +96,20 @@ def test_a_plunge_moving_x_on_keeps_the_direction():
     # q_x = 150 - 0.0003 * 40 + 0.006 = 149.994 (from 149.991 at Z50)
     assert "X149.9940" in plunge
     assert rep.takeups == 1
+
+
+def test_an_axis_that_runs_ahead_cannot_follow_a_small_reversal_and_is_refused():
+    # b > 0: X runs ahead. The plunge's correction moves X back by 3 um: commanded as an
+    # X- move it jumps back by b and becomes an X+ move, and the other way round; the
+    # line is named
+    G = np.eye(3)
+    G[0, 2] = -300e-6
+    eng = compose(StaticEngine(G, [0.0, 0.0, 0.0], VOLUME),
+                  [get_effect("backlash:X", params={"b_mm": -B_MM}).to_dict()])
+    with pytest.raises(SafetyError, match="approach direction of X does not settle") as exc:
+        correct_text(PLUNGE, eng, Setup(), CorrectOptions())
+    assert exc.value.lineno == 3
+    assert "b < 0" in exc.value.hint
 
 
 def test_the_virtual_machine_reverses_on_commanded_motion_it_resolves(tmp_path):

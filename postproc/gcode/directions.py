@@ -164,8 +164,9 @@ def settle(T: np.ndarray, D: np.ndarray, start, dirs0, hold_mm: float, axes, sol
         f"moves {ax} the other way, and the other way back (a reversal value that makes {ax} run ahead, "
         f"backlash b > 0, cannot be taken up by a small move)",
         path=path, lineno=int(lineno[i]),
-        hint=f"check the calibration's backlash:{ax} (a lost motion has b < 0; b > 0 is an over-compensated "
-             "backlash: lower the controller's own compensation), or raise --tolerance")
+        hint=f"check the calibration's backlash:{ax}: lost motion has b < 0 (ISO 230-2 B = x_up - x_down); "
+             "b > 0 is an axis that runs ahead, as one does whose controller compensates more backlash than there "
+             "is: lower that compensation and measure again")
 
 
 def reversals(D: np.ndarray, dirs0, axes, rows: np.ndarray) -> np.ndarray:

@@ -601,6 +601,7 @@ class Corrector(EmitterMixin):
         axes = direction_axes(self.engine)
         counts = np.ones(M, dtype=int)
         samples: dict[int, tuple] = {}  # i -> (s (n,), nominal (n, 3), dirs (n, 3), given axes)
+        planned = [(i, m) for i, m in planned if not m.fixed]  # a stored position is one point
         for i, m in planned:
             if m.arc is None:
                 length = float(np.linalg.norm(Q1[i] - Q0[i]))
