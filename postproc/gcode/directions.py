@@ -28,8 +28,8 @@ Rounding is monotone, so targets that move along their direction or stand still 
 written as words that do too: the directions the correction assumed are the ones the
 controller executes.
 
-For a lagging axis (lost motion, ``b < 0``) the fixed point always exists: a reversal
-moves the corrected target by the lost motion in the new direction. For an axis that
+For a lagging axis (lost motion, ``b < 0``) the directions settle: a reversal moves
+the corrected target further in the new direction, by the lost motion. For an axis that
 runs ahead (``b > 0``, an over-compensated backlash) a small correction against the
 direction has no consistent answer (reversing moves the target back by ``b``); the
 correction refuses it after :data:`MAX_ITERATIONS` rounds, naming the line.
@@ -39,7 +39,12 @@ the fits follow), with an arc's quadrant points among them, and the target of an
 other move. Where a direction-dependent axis reverses inside such a move, the plan
 takes the reversal up there (:func:`reversals`, :func:`plan_pieces`), as a
 controller's backlash compensation does: between take-ups every direction-dependent
-axis of the emitted path moves one way.
+axis of the emitted path moves one way. A reversal after points of the same move that
+held the axis is taken up where they start (at the start of the block, for a line).
+
+Not covered: a word the input writes with more decimals than the output keeps them,
+and rounds on a finer grid than its neighbours; the points a fit adds between samples
+(adaptive subdivision) take the directions of their move, not their own.
 """
 
 from __future__ import annotations
