@@ -331,7 +331,8 @@ class EmitterMixin:
         corrected samples ``Qp`` (``offset``: their mean correction, which moves the nominal
         centre to the first guess): its centre on the bisector of S and E, the written centre
         (I/J/K, or R where the input used R) chosen among rounded candidates so that the
-        start and end radii agree to half the output resolution. None if none passes.
+        start and end radii agree to half the output resolution. None if none passes, or
+        if the samples lie within one output step of the line S-E (the line is written).
 
         ``may_keep``: the piece is the whole move and its end words are unchanged: the
         input's own centre words are kept when their arc still passes (identity keeps
@@ -354,6 +355,14 @@ class EmitterMixin:
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
+        step = 10.0 ** (-d)
+        agree = 0.5 * step * unit
+        if chord_deviation(S, E, Qp) <= min(step * unit, budget):
+            # the path bows from the line S-E by less than the output resolution: a
+            # circle through S and E would be set by the rounding of S and E, not by the
+            # path (a centre far off, or a tiny circle, where the chord is a few output
+            # steps long); the line (the caller's next try) draws the path as well
+            return None
         S2, E2 = S[[a1, a2]], E[[a1, a2]]
         P2 = Qp[:, [a1, a2]]
         c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
@@ -362,8 +371,6 @@ class EmitterMixin:
         else:
             centre = circle_fit(P2)
             centre = c0 if centre is None or not np.isfinite(centre).all() else centre
-        step = 10.0 ** (-d)
-        agree = 0.5 * step * unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
             spec = self._r_candidates(S, E, centre, (a1, a2, an), arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
@@ -374,7 +381,7 @@ class EmitterMixin:
         grid = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
         V = np.round(v0[None, :] + grid, d)
         C = base[None, :] + V * unit
-        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac, controller_limits=True)
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
@@ -382,7 +389,8 @@ class EmitterMixin:
         for j in order[:3].tolist():
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
-            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac,
+                                     controller_limits=True)
             if m[0] <= agree and w[0] <= budget:
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
                         "dev": float(w[0]), "mismatch": float(m[0])}
@@ -409,7 +417,7 @@ class EmitterMixin:
             c = r_center(S[a1], S[a2], E[a1], E[a2], R, clockwise)
             if c is None:
                 continue
-            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac)
+            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac, controller_limits=True)
             if t[0] != 1:
                 continue
             if best is None or w[0] < best[0]:
