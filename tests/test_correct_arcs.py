@@ -267,9 +267,10 @@ def test_periodic_lead_screw_error_is_followed_along_moves_and_arcs():
         assert abs(r1 - r0) <= 0.5e-4 * unit + 1e-9, out.splitlines()[lineno - 1]
 
 
-# Arcs a controller refuses or misreads when written with a fitted centre: chords of a few
-# output steps (a 0.9 mm arc 0.6 um long, from a real program; 0.0005 in corner arcs 1e-5 in
-# long) and a 2730 mm arc 0.28 mm long that bows 3.6 nm from its chord.
+# Arcs whose fitted centre a controller refused or misread: chords of a few output steps (a
+# 0.9 mm arc 0.6 um long, from a real program; 0.0005 in corner arcs 1e-5 in long, which
+# became circles of 0.7 um and of 6 km) and a 2730 mm arc 0.28 mm long that bows 3.6 nm
+# from its chord.
 TINY_MM = ("G21 G90 G17\nG0 X20.0923 Y27.7201 Z5\nG1 Z-0.3 F300\nG3 X20.0929 Y27.7202 I-0.1031 J0.8941\n"
            "G1 X10.4066 Y39.7626\nG2 X10.2729 Y40.0111 I2404.193 J1293.8208\nG2 X20.2729 I5 J0\nM2\n")
 TINY_INCH = ("G20 G90 G17\nG0 X-1.839332 Y1.06599 Z0.1\nG1 Z-0.05 F15\nG3 X-1.839333 Y1.066 I-0.000497 J-0.000058\n"
@@ -288,16 +289,16 @@ def _scaled(text: str):
     return eng, out, rep
 
 
-@pytest.mark.parametrize(("text", "kept", "lines"), [(TINY_MM, 1, 2), (TINY_INCH, 2, 2)], ids=["mm", "inch"])
-def test_tiny_and_flat_arcs_become_lines_and_every_arc_is_one_controllers_draw(text, kept, lines):
+@pytest.mark.parametrize(("text", "n_arcs"), [(TINY_MM, 3), (TINY_INCH, 4)], ids=["mm", "inch"])
+def test_tiny_and_flat_arcs_under_a_scale_stay_arcs_that_controllers_draw(text, n_arcs):
     eng, out, rep = _scaled(text)
     interp = Interpreter(Setup(), None)
-    n_arcs = 0
+    seen = 0
     for lineno, line in enumerate(out.splitlines(keepends=True), start=1):
         mv = interp.feed_line(lineno, line)
         if mv is None or mv.arc is None:
             continue
-        n_arcs += 1
+        seen += 1
         c = mv.arc.center
         r0 = math.hypot(mv.q0[0] - c[0], mv.q0[1] - c[1])
         r1 = math.hypot(mv.q1[0] - c[0], mv.q1[1] - c[1])
@@ -307,10 +308,9 @@ def test_tiny_and_flat_arcs_become_lines_and_every_arc_is_one_controllers_draw(t
         assert min(r0, r1) >= LINUXCNC_MIN_RADIUS_MM, line
         assert sweep >= 1e-5, line
         assert abs(r1 - r0) <= 0.5 * 10.0 ** (-(5 if mv.unit != 1.0 else 4)) * mv.unit + 1e-9, line
-    # each tiny or flat arc is one line (no growth); the others stay one arc each
-    assert (rep.arcs_kept, rep.arcs_linearised, rep.arcs_split) == (kept, lines, 0)
-    assert n_arcs == kept
-    assert rep.lines_inserted == 0
+    # a uniform scale keeps circles circles: every arc stays one arc
+    assert seen == n_arcs
+    assert (rep.arcs_kept, rep.arcs_linearised, rep.arcs_split, rep.lines_inserted) == (n_arcs, 0, 0, 0)
     assert ideal_vs_emitted(text, out, eng, Setup()) <= TOL
 
 

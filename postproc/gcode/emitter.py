@@ -20,6 +20,7 @@ from postproc.gcode.segment import (
     CENTRE_LATTICE,
     arc_candidates,
     bisector_centre,
+    bisector_point,
     chord_deviation,
     circle_fit,
     r_center,
@@ -331,8 +332,7 @@ class EmitterMixin:
         corrected samples ``Qp`` (``offset``: their mean correction, which moves the nominal
         centre to the first guess): its centre on the bisector of S and E, the written centre
         (I/J/K, or R where the input used R) chosen among rounded candidates so that the
-        start and end radii agree to half the output resolution. None if none passes, or
-        if the samples lie within one output step of the line S-E (the line is written).
+        start and end radii agree to half the output resolution. None if none passes.
 
         ``may_keep``: the piece is the whole move and its end words are unchanged: the
         input's own centre words are kept when their arc still passes (identity keeps
@@ -356,26 +356,41 @@ class EmitterMixin:
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
         step = 10.0 ** (-d)
-        agree = 0.5 * step * unit
-        if chord_deviation(S, E, Qp) <= min(step * unit, budget):
-            # the path bows from the line S-E by less than the output resolution: a
-            # circle through S and E would be set by the rounding of S and E, not by the
-            # path (a centre far off, or a tiny circle, where the chord is a few output
-            # steps long); the line (the caller's next try) draws the path as well
-            return None
         S2, E2 = S[[a1, a2]], E[[a1, a2]]
         P2 = Qp[:, [a1, a2]]
         c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
+        centres = []
         if math.hypot(*(E2 - S2)) > 0.0:
-            centre = bisector_centre(S2, E2, P2, c0)
+            if chord_deviation(S, E, Qp) <= step * unit:
+                # the path bows from the line S-E by less than one output step: a circle
+                # fitted to it is set by the rounding of S and E, not by the path (a centre
+                # kilometres off, or a circle a few steps wide, where the chord is a few
+                # steps long). The nominal circle, moved with the correction and its centre
+                # brought onto the bisector, is tried first.
+                centres.append(bisector_point(S2, E2, c0))
+            centres.append(bisector_centre(S2, E2, P2, c0))
         else:
             centre = circle_fit(P2)
-            centre = c0 if centre is None or not np.isfinite(centre).all() else centre
+            centres.append(c0 if centre is None or not np.isfinite(centre).all() else centre)
+        for centre in centres:
+            spec = self._arc_about(mv, S, E, centre, nsw, Qp, frac, d, budget)
+            if spec is not None:
+                return spec
+        return None
+
+    def _arc_about(self, mv: Move, S, E, centre, nsw: float, Qp, frac, d: int, budget: float):
+        """The written arc from S to E whose centre is the rounded candidate nearest
+        ``centre`` (2,) that passes (see :meth:`_exact_arc`), or None."""
+        arc = mv.arc
+        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        unit = mv.unit
+        step = 10.0 ** (-d)
+        agree = 0.5 * step * unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
             spec = self._r_candidates(S, E, centre, (a1, a2, an), arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
                 return spec
-        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S2
+        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
         v0 = np.round((centre - base) / unit, d)
         ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * step
         grid = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)

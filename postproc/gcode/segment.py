@@ -5,7 +5,11 @@
   each rounded candidate centre is judged by how far the arc every controller draws from
   it (LinuxCNC's spiral, or one radius and a jump at the end) strays from the corrected
   samples. The emitter (:mod:`postproc.gcode.emitter`) fits the fewest such arcs, or
-  chords (:func:`chord_deviation`), through each move's samples.
+  chords (:func:`chord_deviation`), through each move's samples. Where the path bows
+  from its chord by less than one output step the fitted centre means nothing and the
+  nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
+  arc is written that a controller refuses or reads as a full circle
+  (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`).
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
 - :func:`subdivide` splits curves adaptively where the samples are too sparse: a chord
   is accepted when the corrected point at the middle of its parameter interval lies
@@ -244,6 +248,14 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
         if abs(dt) <= 1e-13 * (1.0 + abs(t)):
             break
     return M + t * n
+
+
+def bisector_point(S2: np.ndarray, E2: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The point (2,) of the perpendicular bisector of S2-E2 nearest ``c`` (S2 != E2)."""
+    M = 0.5 * (S2 + E2)
+    D = E2 - S2
+    n = np.array([-D[1], D[0]]) / math.hypot(D[0], D[1])
+    return M + float((np.asarray(c, dtype=float) - M) @ n) * n
 
 
 def circle_fit(P2: np.ndarray) -> np.ndarray | None:
