@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import AXES, DIR_COLUMNS, Effect, context_column, unit_basis
+from postproc.effects.base import DIR_COLUMNS, AxisEffect, context_column, unit_basis
 from postproc.errors import CalibrationError
 
 # Fewer rows than this approached from either side cannot show a reversal: the mean on
@@ -30,13 +30,9 @@ from postproc.errors import CalibrationError
 MIN_ROWS_PER_SIDE = 3
 
 
-class Backlash(Effect):
+class Backlash(AxisEffect):
     kind = "backlash"
     meaning = "lost motion at reversal: the axis lags by b/2 against its approach direction"
-
-    @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
 
     @property
     def needs(self) -> tuple[str, ...]:

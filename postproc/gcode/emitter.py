@@ -13,7 +13,6 @@ import numpy as np
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
-from postproc.gcode.fastlane import FastMove, emit_fast
 from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
@@ -34,6 +33,10 @@ HALF_UNIT = emit.HALF_UNIT
 FIT_BUDGET = 0.95
 # Smallest share of a move's time given to an inserted line in inverse-time mode (G93).
 MIN_FEED_FRACTION = 1e-3
+# A piece that one segment cannot follow is first tried in 2 .. EQUAL_SHARES equal shares
+# (each one try) to bracket the farthest sample one segment reaches, before the search
+# from the next sample outwards.
+EQUAL_SHARES = 4
 
 
 def _unit_decimals(options, unit: float) -> int:
@@ -87,10 +90,6 @@ class EmitterMixin:
         d = self._decimals.get(mv.unit)
         if d is None:
             d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
-        if type(mv) is FastMove:
-            if emit_fast(self, line, mv, target, write, d):
-                return
-            mv = mv.to_move(line)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
             edits, added = self._axis_words(mv, target, self.qe, d)
@@ -211,17 +210,25 @@ class EmitterMixin:
                 text = "G" + MOTION_TEXT[mv.kind]
                 edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
             self.emitted_motion = mv.kind
-        arc_added: list[str] = []
-        if last["kind"] == "arc":
-            arc_edits, arc_added = self._arc_edits(line, mv, last["spec"])
-            edits = edits + arc_edits
         if mv.inverse_time and inserted and mv.feed_idx >= 0:
             _l, num, start, end, _p = mv.words[mv.feed_idx]
             edits.append((start, end, emit.fmt(mv.feed / max(last["ds"], MIN_FEED_FRACTION),
                                                max(4, emit.decimals_of(num)))))
+        self._finish_line(line, mv, edits, added, last["spec"] if last["kind"] == "arc" else None, sep, lower,
+                          last["qe"], write)
+
+    def _finish_line(self, line: str, mv: Move, edits: list, added: list[str], spec, sep: str, lower: bool,
+                     qe, write) -> None:
+        """Write the move's own line: its word edits, the arc words of ``spec`` (None:
+        not an arc) and the added words; the controller is then at ``qe``."""
+        arc_added: list[str] = []
+        if spec is not None:
+            arc_edits, arc_added = self._arc_edits(line, mv, spec)
+            edits = edits + arc_edits
         if added or arc_added:
             if arc_added:
-                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not last["spec"].get("replace")]
+                arc = mv.arc
+                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not spec.get("replace")]
                 pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
                 words_added = added + arc_added
             else:
@@ -229,8 +236,31 @@ class EmitterMixin:
                 words_added = added
             text = "".join(sep + w for w in words_added) if pos > 0 else "".join(w + sep for w in words_added)
             edits.append((pos, pos, text.lower() if lower else text))
-        self.qe[:] = last["qe"]
+        self.qe[:] = qe
         self._write_line(line, edits, write)
+
+    def _emit_hinted_arc(self, line: str, mv: Move, target, hint, write) -> None:
+        """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
+        as one exact arc when the hint's rounded centre passes for the end points as
+        written, else planned and fitted as any other arc."""
+        d = self._decimals.get(mv.unit)
+        if d is None:
+            d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
+        qn = list(self.qe)
+        edits, added = self._axis_words(mv, target, qn, d)
+        # unchanged end words: the input's own arc words may stay (the general path decides)
+        spec = hint.spec(mv, self.qe, qn, d, self.opt.tolerance_mm * FIT_BUDGET) if edits else None
+        if spec is None:
+            self._emit_move(line, mv, target, hint.lazy(), write)
+            return
+        self.report.moves += 1
+        sep, lower = emit.style_of(line)
+        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+            text = "G" + MOTION_TEXT[mv.kind]
+            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+        self.emitted_motion = mv.kind
+        self.report.arcs_kept += 1
+        self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
 
     def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
@@ -244,6 +274,31 @@ class EmitterMixin:
             if seg is not None:
                 out.append(seg)
                 break
+            # equal shares of what is left (a move cut in two or three is the common case):
+            # the longest share one segment reaches brackets the farthest sample it
+            # reaches, which a bisection between that share and the next longer finds
+            hi = n - 1
+            for k in range(2, EQUAL_SHARES + 1):
+                b = a + math.ceil((n - 1 - a) / k)
+                if b <= a + 1:
+                    break
+                seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, b, cur, final, d, budget)
+                if seg is not None:
+                    break
+                hi = b
+            if seg is not None:
+                lo = b
+                while hi - lo > 1:
+                    mid = (lo + hi) // 2
+                    sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
+                    if sg is None:
+                        hi = mid
+                    else:
+                        lo, seg = mid, sg
+                out.append(seg)
+                cur = seg["qe"]
+                a = lo
+                continue
             lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
             if lo_seg is None:
                 # the samples are too sparse here: follow the curve by subdivision
