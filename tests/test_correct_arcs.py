@@ -20,7 +20,7 @@ from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
-from postproc.gcode.segment import arc_candidates
+from postproc.gcode.segment import arc_candidates, within_controller_limits
 from postproc.gcode.state import PLANES
 from postproc.simulate.machine import load_machine
 from postproc.simulate.program import verify_program
@@ -339,3 +339,29 @@ def test_arc_candidates_with_controller_limits_refuse_zero_radius_and_flat_arcs(
     assert np.isfinite(loose).all()
     assert np.isinf(strict[[0, 2]]).all()
     assert strict[1] == loose[1]
+
+
+def test_a_bulk_planned_arc_is_held_to_the_controller_limits():
+    from postproc.gcode.vplan import ArcHint
+
+    # a chord of 0.3 um: the bulk planner's circle through the ends, fitted to rounding
+    # noise 6 km away on the bisector, passes its own deviation bound, but the sweep
+    # (5e-11 rad) is one LinuxCNC and Grbl cut as a whole circle
+    interp = Interpreter(Setup(), None)
+    interp.feed_line(1, "G21 G90 G17 G0 X10 Y10 Z0\n")
+    mv = interp.feed_line(2, "G3 X10.0003 Y10 I0.00015 J0.0005\n")
+    S, E = [10.0, 10.0, 0.0], [10.0003, 10.0, 0.0]
+    far = ArcHint(10.00015, 10.0 + 6e6, 6e6, 0.0, 5e-11, (10.0, 10.0, 0.0, 10.0003, 10.0, 0.0), None)
+    spec = far.spec(mv, S, E, 4, 0.00095)
+    assert spec is not None
+    centre = (S[0] + float(spec["vals"][0][1]), S[1] + float(spec["vals"][1][1]))
+    assert not within_controller_limits(S, E, centre, (0, 1, 2), False)
+    # limits by hand: radius 0.0013 mm passes, 0.0012 mm does not; a sweep of 2e-5 rad
+    # passes, 5e-6 rad does not; a full circle (S == E) passes
+    for r, ok in ((0.0013, True), (0.0012, False)):
+        assert within_controller_limits([r, 0, 0], [0, r, 0], (0.0, 0.0), (0, 1, 2), False) is ok
+    for sweep, ok in ((2e-5, True), (5e-6, False)):
+        end = [100 * math.cos(sweep), 100 * math.sin(sweep), 0]
+        assert within_controller_limits([100, 0, 0], end, (0.0, 0.0), (0, 1, 2), False) is ok
+        assert within_controller_limits(end, [100, 0, 0], (0.0, 0.0), (0, 1, 2), True) is ok
+    assert within_controller_limits([5, 0, 0], [5, 0, -1], (0.0, 0.0), (0, 1, 2), True)

@@ -23,6 +23,7 @@ from postproc.gcode.segment import (
     chord_deviation,
     circle_fit,
     r_center,
+    within_controller_limits,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 
@@ -250,6 +251,8 @@ class EmitterMixin:
         edits, added = self._axis_words(mv, target, qn, d)
         # unchanged end words: the input's own arc words may stay (the general path decides)
         spec = hint.spec(mv, self.qe, qn, d, self.opt.tolerance_mm * FIT_BUDGET) if edits else None
+        if spec is not None and not self._hint_is_sound(mv, spec, qn):
+            spec = None
         if spec is None:
             self._emit_move(line, mv, target, hint.lazy(), write)
             return
@@ -261,6 +264,18 @@ class EmitterMixin:
         self.emitted_motion = mv.kind
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
+
+    def _hint_is_sound(self, mv: Move, spec, E) -> bool:
+        """Whether controllers cut the bulk planner's arc ``spec`` (from the emitted
+        position to E, as written) as meant: radius and sweep within the controller
+        limits (:func:`postproc.gcode.segment.within_controller_limits`)."""
+        arc = mv.arc
+        (a1, a2, an), _ = PLANES[arc.plane]
+        S = self.qe
+        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+        (_l1, t1), (_l2, t2) = spec["vals"]
+        centre = (base[0] + float(t1) * mv.unit, base[1] + float(t2) * mv.unit)
+        return within_controller_limits(S, E, centre, (a1, a2, an), arc.clockwise)
 
     def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
