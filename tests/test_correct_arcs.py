@@ -281,17 +281,18 @@ TINY_INCH = ("G20 G90 G17\nG0 X-1.839332 Y1.06599 Z0.1\nG1 Z-0.05 F15\nG3 X-1.83
 LINUXCNC_MIN_RADIUS_MM = 0.00005 * 25.4
 
 
-def _scaled(text: str):
+def _scaled(text: str, bulk_plan: bool = True):
     from postproc.engine.static import StaticEngine
 
     eng = StaticEngine(np.eye(3) * 1.0002, [0, 0, 0], [[-1e6] * 3, [1e6] * 3])
-    out, rep = correct_text(text, eng, Setup(), CorrectOptions())
+    out, rep = correct_text(text, eng, Setup(), CorrectOptions(bulk_plan=bulk_plan))
     return eng, out, rep
 
 
+@pytest.mark.parametrize("bulk_plan", [True, False], ids=["bulk", "sampled"])
 @pytest.mark.parametrize(("text", "n_arcs"), [(TINY_MM, 3), (TINY_INCH, 4)], ids=["mm", "inch"])
-def test_tiny_and_flat_arcs_under_a_scale_stay_arcs_that_controllers_draw(text, n_arcs):
-    eng, out, rep = _scaled(text)
+def test_tiny_and_flat_arcs_under_a_scale_stay_arcs_that_controllers_draw(text, n_arcs, bulk_plan):
+    eng, out, rep = _scaled(text, bulk_plan)
     interp = Interpreter(Setup(), None)
     seen = 0
     for lineno, line in enumerate(out.splitlines(keepends=True), start=1):
@@ -315,10 +316,11 @@ def test_tiny_and_flat_arcs_under_a_scale_stay_arcs_that_controllers_draw(text, 
 
 
 @requires_rs274
+@pytest.mark.parametrize("bulk_plan", [True, False], ids=["bulk", "sampled"])
 @pytest.mark.parametrize("text", [TINY_MM, TINY_INCH], ids=["mm", "inch"])
-def test_linuxcnc_runs_the_corrected_tiny_arcs(text):
+def test_linuxcnc_runs_the_corrected_tiny_arcs(text, bulk_plan):
     assert run_rs274(text).ok  # the input itself loads
-    _eng, out, rep = _scaled(text)
+    _eng, out, rep = _scaled(text, bulk_plan)
     res = run_rs274(out)
     assert res.ok, res.error
     assert sum(m.kind == "ARC_FEED" for m in res.motions) == rep.arcs_kept
