@@ -5,7 +5,7 @@ Names are ``kind:target`` exactly as ``postproc check`` prints them:
 ==========================  ==============================================  ==============
 name                        physical meaning                                needs
 ==========================  ==============================================  ==============
-``backlash:X|Y|Z``          reversal error, b/2 against approach direction  ``dirx|diry|dirz``
+``backlash:X|Y|Z``          reversal value b, b/2 along approach direction  ``dirx|diry|dirz``
 ``periodic:X|Y|Z``          lead-screw periodic error at a found pitch      positions
 ``thermal:t``               warm-up drift, first-order lag in time          ``t``
 ``thermal:temp...``         growth linear in temperature (about 20 °C)      ``temp...``

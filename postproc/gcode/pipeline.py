@@ -38,6 +38,13 @@ from postproc.errors import (
     SolverError,
 )
 from postproc.gcode import bulk, emit, vplan
+from postproc.gcode.directions import (
+    MACHINE_STEP_MM,
+    direction_axes,
+    plan_pieces,
+    reversals,
+    settle,
+)
 from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
@@ -580,40 +587,42 @@ class Corrector(EmitterMixin):
         planned = [(i, m) for i, m in general
                    if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
                    and not np.isnan(S[i]).any() and not any(math.isnan(v) for v in m.q0)]
-        def corr(rows, nom):
-            return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
+        if direction_axes(self.engine):  # the directions the corrected commands take
+            T, D = self._plan_directions(planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans)
+        else:
+            def corr(rows, nom):
+                return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
 
-        def curvature(rows):
-            # the commands the inverse finds lie within the largest allowed correction
-            return self.engine.line_curvature_bound(Q0[rows], Q1[rows], np.linalg.norm(R[rows], axis=1),
-                                                    self.opt.max_correction_mm)
+            def curvature(rows):
+                # the commands the inverse finds lie within the largest allowed correction
+                return self.engine.line_curvature_bound(Q0[rows], Q1[rows], np.linalg.norm(R[rows], axis=1),
+                                                        self.opt.max_correction_mm)
 
-        if runs and not self.linear_exact:
-            # straight moves of the runs of plain lines: those that must be split are
-            # planned when they are written (their Move is made then)
-            per_run = [np.arange(r.trow, r.trow + len(r))[bulk.kinds(r) == LINE] for r in runs]
-            rows = np.concatenate(per_run)
-            ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
-                                    limit=self.opt.tolerance_mm * FIT_BUDGET
-                                    - max(self._round_err(r.unit) for r in runs), curvature=curvature)
-            owner = np.repeat(np.arange(len(runs)), [len(p) for p in per_run])
-            run_lines = []
-            for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
-                runs[o].cut.append(i - runs[o].trow)
-                run_lines.append((i, _RunLine(int(linenos[i]))))
-            if run_lines:
-                self._plan_moves(run_lines, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
-        if planned and self.bulk_plan:
-
-            ok_lines, hints, planned = vplan.plan_chunk(
-                planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
-                min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
-                rounding=max(self._round_err(m.unit) for _i, m in general), curvature=curvature)
-            for i, hint in hints.items():
-                hint.lazy = self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
-                plans[i] = hint
-        if planned:
-            self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
+            if runs and not self.linear_exact:
+                # straight moves of the runs of plain lines: those that must be split are
+                # planned when they are written (their Move is made then)
+                per_run = [np.arange(r.trow, r.trow + len(r))[bulk.kinds(r) == LINE] for r in runs]
+                rows = np.concatenate(per_run)
+                ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
+                                        limit=self.opt.tolerance_mm * FIT_BUDGET
+                                        - max(self._round_err(r.unit) for r in runs), curvature=curvature)
+                owner = np.repeat(np.arange(len(runs)), [len(p) for p in per_run])
+                run_lines = []
+                for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
+                    runs[o].cut.append(i - runs[o].trow)
+                    run_lines.append((i, _RunLine(int(linenos[i]))))
+                if run_lines:
+                    self._plan_moves(run_lines, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
+            if planned and self.bulk_plan:
+                ok_lines, hints, planned = vplan.plan_chunk(
+                    planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
+                    min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
+                    rounding=max(self._round_err(m.unit) for _i, m in general), curvature=curvature)
+                for i, hint in hints.items():
+                    hint.lazy = self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
+                    plans[i] = hint
+            if planned:
+                self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
         self.prev_nominal = Q1[-1].copy()
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
@@ -628,6 +637,103 @@ class Corrector(EmitterMixin):
             return out[i]
 
         return plan
+
+    def _plan_directions(self, planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans):
+        """Targets, directions and plans of a chunk for a direction-dependent correction
+        (backlash), settled on the directions the corrected commands take
+        (:mod:`postproc.gcode.directions`): the commanded points are every sample of a
+        planned move (sampled as :meth:`_plan_moves` does) and the target of any other
+        move; a point less than one output unit against its axis's direction is held.
+        Fills ``plans``; returns the targets and their directions."""
+        M = len(T)
+        axes = direction_axes(self.engine)
+        counts = np.ones(M, dtype=int)
+        samples: dict[int, tuple] = {}  # i -> (s (n,), nominal (n, 3), dirs (n, 3), given axes)
+        planned = [(i, m) for i, m in planned if not m.fixed]  # a stored position is one point
+        for i, m in planned:
+            if m.arc is None:
+                length = float(np.linalg.norm(Q1[i] - Q0[i]))
+                s = np.linspace(0.0, 1.0, max(3, math.ceil(length / SAMPLE_STEP_MM) + 1))[1:]
+                samples[i] = (s, line_points(Q0[i], Q1[i], s), D[i], [])
+            else:
+                prm = arc_prm[i]
+                (a1, a2, _an), _t0, sweep, _r0, _r1 = prm
+                length = arc_length(m.arc, m.q0, m.q1)
+                cuts = [0.0, *breaks[i].tolist(), 1.0]
+                ss = []
+                for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
+                    n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
+                            math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
+                    ss.append(np.linspace(sa, sb, n)[1:])
+                ends = arc_points(m.arc, m.q0, m.q1, np.array(cuts), prm)
+                dd = np.diff(ends, axis=0)
+                dr = np.where(np.abs(dd) > 1e-12, np.sign(dd), D[i])  # each quarter's own direction
+                s = np.concatenate(ss)
+                dirs = np.repeat(dr, [len(x) for x in ss], axis=0)
+                samples[i] = (s, arc_points(m.arc, m.q0, m.q1, s, prm), dirs, [a1, a2])
+            counts[i] = len(samples[i][0])
+        owner = np.repeat(np.arange(M), counts)
+        last = np.cumsum(counts) - 1
+        first = last - counts + 1
+        nominal, Tx, Dx = Q1[owner], T[owner], D[owner]
+        sx = np.ones(len(owner))
+        given = np.zeros(nominal.shape, dtype=bool)  # an arc's in-plane axes: the direction of its quarter
+        for i, (s, nom, dirs, plane) in samples.items():
+            rows = slice(first[i], last[i] + 1)
+            sx[rows], nominal[rows], Dx[rows] = s, nom, dirs
+            given[rows, plane] = True
+        free = np.ones(M, dtype=bool)
+        free[fixed_rows] = False
+        free = free[owner]
+        hold = max(MACHINE_STEP_MM, *(10.0 ** -_unit_decimals(self.opt, u) * u for u in self._units_checked))
+
+        def solve(rows: np.ndarray, dirs: np.ndarray, at=None) -> np.ndarray:
+            own = owner[rows]
+            return self.corrected(nominal[rows] if at is None else at, R[own], dirs,
+                                  [rot[j] for j in own.tolist()], linenos[own])
+
+        inner = np.flatnonzero(counts[owner] > 1)
+        if len(inner):
+            Tx[inner] = solve(inner, Dx[inner])
+        Ex, Dx = settle(Tx, Dx, self.prev_target, self.dirs, hold, axes, solve, linenos[owner], free, given,
+                        first[owner], path=self.path)
+        T, D = Ex[last], Dx[last]
+        if not planned:
+            return T, D
+        # take-ups: before a point a direction-dependent axis reverses into, the point
+        # before it corrected with the new directions
+        rows = np.concatenate([np.arange(first[i], last[i] + 1) for i, _m in planned])
+        rows = rows[reversals(Dx, self.dirs, axes, rows)]
+        takeups: dict[int, np.ndarray] = {}
+        if len(rows):
+            at = np.array([nominal[j - 1] if j != first[owner[j]] else Q0[owner[j]] for j in rows.tolist()])
+            takeups = dict(zip(rows.tolist(), solve(rows, Dx[rows], at), strict=True))
+        for i, m in planned:
+            j0 = int(first[i])
+            start = Ex[j0 - 1] if j0 > 0 else self.prev_target
+            start_dirs = Dx[j0 - 1] if j0 > 0 else self.dirs
+            if m.arc is not None:
+                prm = arc_prm[i]
+
+                def bulge(s, nom, m=m, prm=prm):
+                    mid = arc_points(m.arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), prm)
+                    return mid - 0.5 * (nom[:-1] + nom[1:])
+            else:
+                def bulge(s, nom):
+                    return np.zeros((len(s) - 1, 3))
+            seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
+                              TAKEUP_MIN_MM, bulge)
+            plan = plans[i] = {"seq": seq, "whole": len(seq) == 1}
+            if m.arc is not None:
+                (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
+                plan["nsweep"] = sweep
+                plan["mismatch"] = abs(r1 - r0)
+                carried = np.array(start_dirs, dtype=float)
+                carried[an] = D[i][an]
+                plan["curve"] = Curve(m.q0, m.q1, m.arc, R[i], carried, m.lineno, m.rotary, arc_prm[i])
+            else:  # a line's standing axes: the direction its corrected command takes
+                plan["curve"] = Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary)
+        return T, D
 
     def _plan_moves(self, planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans) -> None:
         """Sample the corrected ideal path of every planned move in one engine call.
