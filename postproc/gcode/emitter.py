@@ -19,9 +19,11 @@ from postproc.gcode.segment import (
     CENTRE_LATTICE,
     arc_candidates,
     bisector_centre,
+    bisector_point,
     chord_deviation,
     circle_fit,
     r_center,
+    within_controller_limits,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 
@@ -249,6 +251,8 @@ class EmitterMixin:
         edits, added = self._axis_words(mv, target, qn, d)
         # unchanged end words: the input's own arc words may stay (the general path decides)
         spec = hint.spec(mv, self.qe, qn, d, self.opt.tolerance_mm * FIT_BUDGET) if edits else None
+        if spec is not None and not self._hint_is_sound(mv, spec, qn):
+            spec = None
         if spec is None:
             self._emit_move(line, mv, target, hint.lazy(), write)
             return
@@ -260,6 +264,18 @@ class EmitterMixin:
         self.emitted_motion = mv.kind
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
+
+    def _hint_is_sound(self, mv: Move, spec, E) -> bool:
+        """Whether controllers cut the bulk planner's arc ``spec`` (from the emitted
+        position to E, as written) as meant: radius and sweep within the controller
+        limits (:func:`postproc.gcode.segment.within_controller_limits`)."""
+        arc = mv.arc
+        (a1, a2, an), _ = PLANES[arc.plane]
+        S = self.qe
+        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+        (_l1, t1), (_l2, t2) = spec["vals"]
+        centre = (base[0] + float(t1) * mv.unit, base[1] + float(t2) * mv.unit)
+        return within_controller_limits(S, E, centre, (a1, a2, an), arc.clockwise)
 
     def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
@@ -409,27 +425,48 @@ class EmitterMixin:
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
+        step = 10.0 ** (-d)
         S2, E2 = S[[a1, a2]], E[[a1, a2]]
         P2 = Qp[:, [a1, a2]]
         c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
+        centres = []
         if math.hypot(*(E2 - S2)) > 0.0:
-            centre = bisector_centre(S2, E2, P2, c0)
+            if chord_deviation(S, E, Qp) <= step * unit:
+                # the path bows from the line S-E by less than one output step: a circle
+                # fitted to it is set by the rounding of S and E, not by the path (a centre
+                # kilometres off, or a circle a few steps wide, where the chord is a few
+                # steps long). The nominal circle, moved with the correction and its centre
+                # brought onto the bisector, is tried first.
+                centres.append(bisector_point(S2, E2, c0))
+            centres.append(bisector_centre(S2, E2, P2, c0))
         else:
             centre = circle_fit(P2)
-            centre = c0 if centre is None or not np.isfinite(centre).all() else centre
+            centres.append(c0 if centre is None or not np.isfinite(centre).all() else centre)
+        for centre in centres:
+            spec = self._arc_about(mv, S, E, centre, nsw, Qp, frac, d, budget)
+            if spec is not None:
+                return spec
+        return None
+
+    def _arc_about(self, mv: Move, S, E, centre, nsw: float, Qp, frac, d: int, budget: float):
+        """The written arc from S to E whose centre is the rounded candidate nearest
+        ``centre`` (2,) that passes (see :meth:`_exact_arc`), or None."""
+        arc = mv.arc
+        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        unit = mv.unit
         step = 10.0 ** (-d)
         agree = 0.5 * step * unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
             spec = self._r_candidates(S, E, centre, (a1, a2, an), arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
                 return spec
-        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S2
+        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
         v0 = np.round((centre - base) / unit, d)
         ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * step
         grid = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
         V = np.round(v0[None, :] + grid, d)
         C = base[None, :] + V * unit
-        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac, controller_limits=True)
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
@@ -437,7 +474,8 @@ class EmitterMixin:
         for j in order[:3].tolist():
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
-            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac,
+                                     controller_limits=True)
             if m[0] <= agree and w[0] <= budget:
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
                         "dev": float(w[0]), "mismatch": float(m[0])}
@@ -464,7 +502,7 @@ class EmitterMixin:
             c = r_center(S[a1], S[a2], E[a1], E[a2], R, clockwise)
             if c is None:
                 continue
-            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac)
+            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac, controller_limits=True)
             if t[0] != 1:
                 continue
             if best is None or w[0] < best[0]:
