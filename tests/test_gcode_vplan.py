@@ -142,3 +142,18 @@ def test_no_bound_outside_the_tables_or_for_effects(parametric):
     eng = compose(base, [{"name": "periodic:X", "config": {"pitch_mm": 5.0},
                           "params": {"cos_mm": 0.004, "sin_mm": -0.003}}])
     assert np.isinf(eng.line_curvature_bound(q, q + 1, np.zeros(1))).all()
+
+
+@pytest.mark.parametrize("seed", [3, 6])
+def test_arcs_whose_words_do_not_change_keep_their_own_centre_words(seed):
+    """Under a correction too small to change an end word the input arc stays as written,
+    as the general planner keeps it (its own radius mismatch included)."""
+    from postproc.engine.identity import IdentityEngine
+
+    text = _arcs_program(seed)
+    eng = IdentityEngine([[-1e4] * 3, [1e4] * 3])
+    bulk, rep = correct_text(text, eng, Setup(), CorrectOptions())
+    general, _ = correct_text(text, eng, Setup(), CorrectOptions(bulk_plan=False))
+    assert emit.split_header(bulk)[1] == text
+    assert bulk == general
+    assert rep.arcs_kept == text.count("\nG2 ") + text.count("\nG3 ")

@@ -249,10 +249,14 @@ class EmitterMixin:
             d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
         qn = list(self.qe)
         edits, added = self._axis_words(mv, target, qn, d)
-        # unchanged end words: the input's own arc words may stay (the general path decides)
-        spec = hint.spec(mv, self.qe, qn, d, self.opt.tolerance_mm * FIT_BUDGET) if edits else None
-        if spec is not None and not self._hint_is_sound(mv, spec, qn):
-            spec = None
+        budget = self.opt.tolerance_mm * FIT_BUDGET
+        if edits:
+            spec = hint.spec(mv, self.qe, qn, d, budget)
+            if spec is not None and not self._hint_is_sound(mv, spec, qn):
+                spec = None
+        else:  # unchanged end words: the input's own arc words stay if they still pass
+            centre = self._input_centre(mv, self.qe, qn)
+            spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, hint.mismatch, budget)
         if spec is None:
             self._emit_move(line, mv, target, hint.lazy(), write)
             return

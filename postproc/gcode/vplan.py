@@ -37,6 +37,9 @@ TWO_PI = 2.0 * math.pi
 # Gauss-Newton steps of the bisector centre fit (it converges in 3-5 on real arcs; the
 # fit only seeds the rounded centre, whose deviation is bounded separately).
 CENTRE_ITERATIONS = 8
+# The input's own arc words are kept when their radius mismatch is at most the input's
+# own (which its controller accepts) plus this (float noise of the two readings).
+KEEP_MISMATCH_SLACK_MM = 1e-9
 # Rounded centre candidates tried on each side of the centre moved onto the bisector of
 # the written end points (per axis), as the general path does.
 LATTICE = 3
@@ -45,10 +48,12 @@ LATTICE = 3
 class ArcHint:
     """What the bulk planner found for one arc (see the module docstring)."""
 
-    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "lazy")
+    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy")
 
-    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends, lazy) -> None:
+    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends, lazy,
+                 mismatch: float = 0.0) -> None:
         self.c1, self.c2, self.rho, self.worst, self.nsweep = c1, c2, rho, worst, nsweep
+        self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
         self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
 
@@ -90,27 +95,53 @@ class ArcHint:
         if best is None:
             return None
         moved, t1, t2, C1, C2, mism = best
+        bound = self._bound(arc, S, E, C1, C2, (a1, a2, an))
+        if bound is None or not bound + mism <= budget:
+            return None
+        return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound + mism, "mismatch": mism}
+
+    def keep(self, mv, S, E, centre, nominal_mismatch: float, budget: float) -> dict | None:
+        """``{"form": "keep", "turns": 1}`` when the input's own arc words, around
+        ``centre`` from S to E (as written), still pass: their radius mismatch no larger
+        than the input's own (``nominal_mismatch``, which its controller accepts) and
+        the arc within ``budget`` of the samples; else None."""
+        arc = mv.arc
+        (a1, a2, an), _ = PLANES[arc.plane]
+        C1, C2 = float(centre[0]), float(centre[1])
+        mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
+        if not mism <= nominal_mismatch + KEEP_MISMATCH_SLACK_MM:
+            return None
+        bound = self._bound(arc, S, E, C1, C2, (a1, a2, an))
+        if bound is None or not bound <= budget:
+            return None
+        return {"form": "keep", "turns": 1}
+
+    def _bound(self, arc, S, E, C1: float, C2: float, axes) -> float | None:
+        """How far the arc a controller draws from S to E around (C1, C2) (radius from
+        the start to the end radius, the normal axis linear) can lie from the corrected
+        samples: the ideal circle's deviation plus how far the drawn arc lies from that
+        circle anywhere. None when it does not turn as the nominal arc does (one turn)."""
+        a1, a2, an = axes
+        hyp = math.hypot
+        s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
         rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
-        # the arc from S to E around C turns as the nominal arc does (one turn)
         th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
         sweep = -((th0 - th1) % TWO_PI) if arc.clockwise else (th1 - th0) % TWO_PI
         if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
             return None
+        moved = hyp(C1 - self.c1, C2 - self.c2)
         u1, u2, un, w1, w2, wn = self.ends
         shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - w1, e2 - w2))
         # in the plane: the samples' distance from the ideal circle, plus how far the
         # written circle (centre C, radius from rs to re) lies from it anywhere
-        bound = self.worst + moved + max(abs(rs - self.rho), abs(re - self.rho)) + mism
+        bound = self.worst + moved + max(abs(rs - self.rho), abs(re - self.rho))
         # along the normal axis: the written ends, and the shift of each sample's angle
         # (centre and ends moved) along the helix
         r_min = min(rs, re, self.rho)
         if not r_min > 0.0:
             return None
         dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
-        bound += max(abs(S[an] - un), abs(E[an] - wn)) + abs(E[an] - S[an]) * dfrac
-        if not bound <= budget:
-            return None
-        return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound, "mismatch": mism}
+        return bound + max(abs(S[an] - un), abs(E[an] - wn)) + abs(E[an] - S[an]) * dfrac
 
 
 # lattice offsets (per axis, in units of the last decimal), nearest first
@@ -324,7 +355,7 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
         if usable[jj]:
             hints[i] = ArcHint(float(c1[jj]), float(c2[jj]), float(rho[jj]), float(worst[jj]), float(sweep[jj]),
                                (float(S1[jj]), float(S2[jj]), float(Sn[jj]), float(E1[jj]), float(E2[jj]),
-                                float(En[jj])), None)
+                                float(En[jj])), None, float(abs(r1[jj] - r0[jj])))
         else:
             rest.append((i, m))
     return ok_lines, hints, rest
