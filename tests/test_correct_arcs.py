@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PARAMETRIC, STEP, TOL, emitted_arcs, ideal_vs_emitted
 from oracle import requires_rs274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
 
 from postproc.calibration.calfile import load_calibration
@@ -21,19 +22,14 @@ from postproc.gcode.interp import Interpreter
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 from postproc.gcode.segment import arc_candidates, within_controller_limits
-from postproc.gcode.state import PLANES
 from postproc.simulate.machine import load_machine
 from postproc.simulate.program import verify_program
-from postproc.simulate.verify import Polyline
 
 ROOT = Path(__file__).parents[1]
 SAMPLES = ROOT / "samples"
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 GENCAM = Path(__file__).parents[2] / "shared" / "bench" / "gencam.py"
-PARAMETRIC = ROOT / "calibrations" / "s500_parametric.json"
 MACHINE = ROOT / "calibrations" / "s500.machine.json"
-TOL = 0.001
-STEP = 0.02  # sampling of both paths (mm): the polyline error of a 0.5 mm arc is 0.1 nm
 
 SAMPLE_CASES = [
     ("pocket.nc", Setup()),
@@ -55,36 +51,6 @@ def _cases():
         out.append(pytest.param(CORPUS / n, s, id=n, marks=pytest.mark.skipif(
             not (CORPUS / n).is_file(), reason="no shared corpus")))
     return out
-
-
-def emitted_arcs(text: str, setup: Setup):
-    """(unit, start radius, end radius) of every arc in ``text``, read by the interpreter."""
-    interp = Interpreter(setup, None)
-    out = []
-    for lineno, line in enumerate(text.splitlines(keepends=True), start=1):
-        mv = interp.feed_line(lineno, line)
-        if mv is None or mv.arc is None:
-            continue
-        (a1, a2, _an), _ = PLANES[mv.arc.plane]
-        c = mv.arc.center
-        r0 = math.hypot(mv.q0[a1] - c[a1], mv.q0[a2] - c[a2])
-        r1 = math.hypot(mv.q1[a1] - c[a1], mv.q1[a2] - c[a2])
-        out.append((mv.unit, r0, r1, lineno))
-    return out
-
-
-def ideal_vs_emitted(original: str, corrected: str, engine, setup: Setup) -> float:
-    """Largest distance, both ways over feed moves, between the corrected ideal path (the
-    engine's correction of the original's dense samples) and the emitted path."""
-    nom = program_path(original, setup, max_step_mm=STEP)
-    q = nom.points_mm - nom.tool_mm
-    ideal = q + np.asarray(engine.correction(nom.points_mm, nom.tool_mm, nom.context).q)
-    out = program_path(corrected, setup, max_step_mm=STEP)
-    emitted = out.points_mm - out.tool_mm
-    feed_i, feed_o = ~nom.rapid, ~out.rapid
-    there, _ = Polyline(ideal, feed_i[1:]).nearest(emitted[feed_o])
-    back, _ = Polyline(emitted, feed_o[1:]).nearest(ideal[feed_i])
-    return float(max(there.max(), back.max()))
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from test_correct_forward import landing_error
+from conftest import landing_error
 
 from postproc.calibration.calfile import load_calibration
 from postproc.cli import main

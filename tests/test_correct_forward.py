@@ -1,11 +1,10 @@
 """Corrected programs pushed through the forward model land on the nominal path."""
 
-import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
+from conftest import landing_error, polyline_distance
 
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine
@@ -58,46 +57,6 @@ class WavyEngine(Engine):
         return cls(volume_mm)
 
 
-def _polyline_distance(points: np.ndarray, poly: np.ndarray, step: float = 0.05) -> np.ndarray:
-    """Distance from each point to the polyline through ``poly`` (exact).
-
-    Segments longer than ``step`` are split, so the nearest point of the polyline lies
-    within half a piece of a vertex: every piece that can hold it has a vertex within
-    (best distance found so far + half a piece) of the point. The nearest vertices are
-    searched until the farthest of them is beyond that bound."""
-    points = np.asarray(points, dtype=float)
-    poly = np.asarray(poly, dtype=float)
-    if len(poly) == 1:
-        return np.linalg.norm(points - poly[0], axis=1)
-    seg = np.diff(poly, axis=0)
-    length = np.linalg.norm(seg, axis=1)
-    pieces = np.maximum(1, np.ceil(length / step)).astype(int)
-    owner = np.repeat(np.arange(len(seg)), pieces)
-    j = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-    dense = np.vstack([poly[owner] + seg[owner] * (j / pieces[owner])[:, None], poly[-1:]])
-    half_piece = 0.5 * float((length / pieces).max())
-    tree = cKDTree(dense)
-    best = np.full(len(points), np.inf)
-    todo = np.arange(len(points))
-    k = 8
-    while len(todo):
-        k = min(k, len(dense))
-        dist, idx = tree.query(points[todo], k=k)
-        dist, idx = dist.reshape(len(todo), k), idx.reshape(len(todo), k)
-        p = points[todo]
-        for col in range(k):
-            for shift in (0, -1):
-                i0 = np.clip(idx[:, col] + shift, 0, len(dense) - 2)
-                a, ab = dense[i0], dense[i0 + 1] - dense[i0]
-                denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30)
-                t = np.clip(np.einsum("ij,ij->i", p - a, ab) / denom, 0.0, 1.0)
-                best[todo] = np.minimum(best[todo], np.linalg.norm(p - (a + t[:, None] * ab), axis=1))
-        done = (dist[:, -1] > best[todo] + half_piece) | (k == len(dense))
-        todo = todo[~done]
-        k *= 4
-    return best
-
-
 def test_polyline_distance_is_exact():
     rng = np.random.default_rng(12)
 
@@ -115,42 +74,13 @@ def test_polyline_distance_is_exact():
     below = above * [1, 1, -1]
     poly = np.vstack([above, [[0.0, 0.0, 0.0], [0.28, 0.0, 0.0]], below])
     mid = np.array([[0.14, 0.0, 0.0], [0.07, 0.0002, 0.0]])
-    assert np.allclose(_polyline_distance(mid, poly), [0.0, 0.0002], atol=1e-15)
+    assert np.allclose(polyline_distance(mid, poly), [0.0, 0.0002], atol=1e-15)
     for _ in range(100):
         n = int(rng.integers(2, 60))
         poly = np.cumsum(rng.normal(size=(n, 3)) * rng.choice([1e-3, 0.05, 1.0, 5.0], size=(n, 1)), axis=0)
         pts = poly[rng.integers(0, n, 40)] + rng.normal(size=(40, 3)) * rng.choice([1e-3, 0.1, 3.0])
-        assert np.allclose(_polyline_distance(pts, poly, step=float(rng.choice([0.01, 0.05, 1.0]))),
+        assert np.allclose(polyline_distance(pts, poly, step=float(rng.choice([0.01, 0.05, 1.0]))),
                            brute(pts, poly), rtol=0.0, atol=1e-12)
-
-
-def _first_known_line(text: str, setup: Setup) -> int:
-    """First line after which every axis has been positioned (before it, the machine's
-    position is unknown and so is the path); programs needing expansion read expanded."""
-    from postproc.gcode.path import for_each_block
-
-    found: list[int] = []
-
-    def visit(lineno, _line, _block, state) -> None:
-        if not found and not any(math.isnan(v) for v in state.pos):
-            found.append(lineno)
-
-    for_each_block(text, setup, visit, found.clear)
-    return found[0] if found else 10**9
-
-
-def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
-    """Largest distance between the actual path of ``corrected`` and the nominal path
-    of ``original``, both ways (feed moves and rapid end points, from the first point
-    where the machine position is known)."""
-    nom = program_path(original, setup, max_step_mm=step)
-    nominal = nom.points_mm[nom.lineno >= _first_known_line(original, setup)]
-    pp = program_path(corrected, setup, max_step_mm=step)
-    keep = pp.lineno >= _first_known_line(corrected, setup)
-    actual = engine.forward(pp.points_mm - pp.tool_mm, pp.tool_mm, pp.context)[keep]
-    there = _polyline_distance(actual, nominal).max()
-    back = _polyline_distance(nominal, actual).max()
-    return float(max(there, back))
 
 
 CASES = [
@@ -259,7 +189,7 @@ def _corpus_files():
 
 @pytest.mark.parametrize("path", _corpus_files(), ids=lambda p: p.name)
 def test_corpus_programs_land_on_their_nominal_path(path):
-    from test_correct_roundtrip import CORPUS_START, corpus_setup
+    from conftest import CORPUS_START, corpus_setup
 
     from postproc.errors import PostprocError
 

@@ -4,6 +4,7 @@ or fails with a PostprocError naming its place (never a traceback)."""
 from pathlib import Path
 
 import pytest
+from conftest import ALL_OFFSETS, ALL_TOOLS, BIG, CORPUS_START, corpus_setup
 
 from postproc.engine.identity import IdentityEngine
 from postproc.errors import PostprocError
@@ -14,21 +15,6 @@ from postproc.gcode.pipeline import CorrectOptions, correct_text
 ROOT = Path(__file__).parents[1]
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 EXTS = {".nc", ".ngc", ".tap", ".gcode"}
-
-# every work offset and tool length a corpus program might name, so that the run
-# goes as far as the program's own constructs allow
-ALL_OFFSETS = {n: (0.0, 0.0, 0.0) for n in
-               ["G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3"]}
-ALL_TOOLS = {t: 50.0 + t for t in range(100)}
-BIG = [[-1e5] * 3, [1e5] * 3]
-# 2-D programs that never name Z: corrected with the machine's Z given by --start
-# (docs/gcode.md, "Start position"); without it they are refused
-CORPUS_START = {"Star_Trek.tap": {"Z": 150.0}, "plug6a.tap": {"Z": 150.0}}
-
-
-def corpus_setup(path: Path) -> Setup:
-    """The setup a corpus program is corrected with (every offset and tool, its start)."""
-    return Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS, start=CORPUS_START.get(path.name, {}))
 
 
 def _files():

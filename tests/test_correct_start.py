@@ -6,10 +6,9 @@ import re
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import assert_same, landing_error, other_line, plain_line, run_all
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_correct_forward import landing_error
-from test_gcode_bulk import assert_same, other_line, plain_line, run_all
 
 from postproc.cli import main
 from postproc.engine.identity import IdentityEngine

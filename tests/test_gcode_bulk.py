@@ -4,88 +4,15 @@ programs and at every chunk boundary."""
 import dataclasses
 
 import numpy as np
+from conftest import ENGINE, assert_same, other_line, plain_line, run_all
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from postproc.engine.static import StaticEngine
-from postproc.errors import PostprocError
 from postproc.gcode import bulk, emit
 from postproc.gcode.path import Setup
-from postproc.gcode.pipeline import CorrectOptions, Corrector, correct_text
+from postproc.gcode.pipeline import CorrectOptions, Corrector
 from postproc.gcode.state import ARC_CW
-
-# squareness and scale: a move on one axis moves the others, so words get added
-G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
-ENGINE = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
-SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 50.0})
-MODES = {
-    "bulk": {},
-    "general": {"bulk_lane": False},
-}
-
-
-def run_all(text, *, chunk_lines=20_000, setup=SETUP, engine=ENGINE, **options):
-    outs = {}
-    for name, mode in MODES.items():
-        opts = CorrectOptions(chunk_lines=chunk_lines, **options, **mode)
-        try:
-            out, rep = correct_text(text, engine, setup, opts)
-            outs[name] = (out, dataclasses.asdict(rep))
-        except PostprocError as exc:
-            outs[name] = (str(exc), None)
-    return outs
-
-
-def assert_same(outs):
-    ref = outs["general"]
-    assert outs["bulk"][0] == ref[0]
-    assert outs["bulk"][1] == ref[1]
-
-
-# -- generated programs ------------------------------------------------------------------
-def number(draw, lo=-200.0, hi=200.0):
-    v = draw(st.floats(lo, hi, allow_nan=False))
-    d = draw(st.sampled_from([0, 1, 2, 3, 4, 4, 4, 5, 6, 8]))
-    text = f"{v:.{d}f}"
-    style = draw(st.sampled_from(["plain", "plain", "plus", "trail", "lead"]))
-    if style == "plus" and not text.startswith("-"):
-        text = "+" + text
-    elif style == "trail" and "." in text:
-        text = text.rstrip("0")
-    elif style == "lead" and text.startswith("0."):
-        text = text[1:]
-    elif style == "lead" and text.startswith("-0."):
-        text = "-" + text[2:]
-    return text
-
-
-@st.composite
-def plain_line(draw):
-    sp = draw(st.sampled_from([" ", " ", "", "\t", "  "]))
-    words = []
-    if draw(st.booleans()):
-        words.append(f"N{draw(st.integers(0, 99999))}")
-    if draw(st.integers(0, 2)):
-        words.append("G" + draw(st.sampled_from(["0", "1", "00", "01", "1", "1"])))
-    axes = draw(st.lists(st.sampled_from("XYZ"), min_size=1, max_size=3, unique=True))
-    for a in "XYZ":
-        if a in axes:
-            words.append(a + draw(st.sampled_from(["", "", " "])) + number(draw))
-    if draw(st.integers(0, 4)) == 0:
-        words.append(f"F{draw(st.sampled_from(['500', '1200.5', '80']))}")
-    if draw(st.integers(0, 9)) == 0 and len(words) > 1:  # a non-canonical order
-        words[-1], words[-2] = words[-2], words[-1]
-    line = draw(st.sampled_from(["", " ", "\t"])) + sp.join(words) + draw(st.sampled_from(["", "", " "]))
-    return line.lower() if draw(st.integers(0, 9)) == 0 else line
-
-
-@st.composite
-def other_line(draw):
-    return draw(st.sampled_from([
-        "G2 X{a} Y{b} I5 J0", "G3 X{a} Y{b} R40", "(comment X1 Y2)", "", "G91", "G90", "G20", "G21",
-        "G1 X{a} (tail comment)", "G0 Z{b} ; note", "G54", "G43 H1", "G49", "M3 S1000", "/G1 X{a}",
-        "G92 X{a}", "G92.1", "G17", "G18 G2 X{a} Z{b} I3 K3", "G1 F300", "N5", "%", "M30",
-    ])).format(a=draw(st.integers(-150, 150)), b=draw(st.integers(-150, 150)))
 
 
 @st.composite

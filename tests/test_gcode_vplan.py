@@ -4,7 +4,7 @@ the corrected ideal path, with the centre moved by no more than the bound allows
 
 import numpy as np
 import pytest
-from test_correct_arcs import PARAMETRIC, TOL, emitted_arcs, ideal_vs_emitted
+from conftest import PARAMETRIC, TOL, emitted_arcs, ideal_vs_emitted
 
 from postproc.calibration.calfile import load_calibration
 from postproc.effects import compose

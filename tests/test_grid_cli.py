@@ -2,7 +2,7 @@ import json
 
 import numpy as np
 from click.testing import CliRunner
-from test_grid_machine import TangentTestMachine, grid_measurements
+from conftest import TangentTestMachine, grid_measurements
 
 from postproc.calibration.calfile import load_calibration
 from postproc.calibration.measurements import format_measurements

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_grid_machine import TangentTestMachine, grid_measurements
+from conftest import TangentTestMachine, grid_measurements
 
 from postproc.engine import grid, interval
 from postproc.errors import PostprocError

@@ -2,12 +2,12 @@ import json
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
-from test_grid_machine import (
+from conftest import (
     TABLE1_POINTS,
     TangentTestMachine,
     grid_measurements,
 )
+from numpy.testing import assert_allclose
 
 from postproc.calibration.calfile import load_calibration, save_calibration
 from postproc.calibration.measurements import Measurements

@@ -1,7 +1,7 @@
 """The tangential engines against a parametric (21-error) machine with a tool vector."""
 
 import numpy as np
-from test_grid_machine import TABLE1_POINTS
+from conftest import TABLE1_POINTS
 
 from postproc.calibration.measurements import Measurements
 from postproc.engine import grid, interval

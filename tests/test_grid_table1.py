@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_grid_machine import (
+from conftest import (
     TABLE1_POINTS,
     TangentTestMachine,
     grid_measurements,

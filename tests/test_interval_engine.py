@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
+from conftest import TABLE1_POINTS, TangentTestMachine, grid_measurements
 from numpy.testing import assert_allclose
-from test_grid_machine import TABLE1_POINTS, TangentTestMachine, grid_measurements
 
 from postproc.calibration.calfile import load_calibration, save_calibration
 from postproc.calibration.measurements import Measurements

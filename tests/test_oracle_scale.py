@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import polyline_distance
 from oracle import RS274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
-from test_correct_forward import _polyline_distance
 
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
@@ -145,6 +145,6 @@ def test_scaled_program_lands_every_canonical_point_on_the_original_over_k(path,
     # each other, both ways. rs274 prints 4 decimals: 0.09 um of rounding on each side.
     tol = CorrectOptions().tolerance_mm + 2e-4
     target = ref_path / K
-    assert _polyline_distance(ref_ends / K, got_path).max() <= tol
-    assert _polyline_distance(got_path, target).max() <= tol
-    assert _polyline_distance(target, got_path).max() <= tol
+    assert polyline_distance(ref_ends / K, got_path).max() <= tol
+    assert polyline_distance(got_path, target).max() <= tol
+    assert polyline_distance(target, got_path).max() <= tol

@@ -1,0 +1,302 @@
+"""Helpers shared by the test modules: paths, setups, engines, program generators and
+the distances the path checks use."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+from hypothesis import strategies as st
+from scipy.spatial import cKDTree
+
+from postproc.calibration.measurements import Measurements
+from postproc.engine.static import StaticEngine
+from postproc.errors import PostprocError
+from postproc.gcode.interp import Interpreter
+from postproc.gcode.path import Setup, program_path
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+from postproc.gcode.state import PLANES
+from postproc.simulate.verify import Polyline
+
+ROOT = Path(__file__).parents[1]
+SAMPLES = ROOT / "samples"
+SHARED = ROOT.parent / "shared"  # corpus and benchmark generator; tests that need them skip without
+CORPUS = SHARED / "corpus"
+
+# -- the smooth test machine of the tangential engines and its measurements --------
+SIDE_MM = 315.0
+
+
+#: Seed 000, Table 1 control points.
+TABLE1_POINTS = np.array([
+    [230, 230, 230], [110, 170, 185], [170, 125, 200], [198, 196, 140], [130, 140, 106],
+    [50, 50, 50], [133, 198, 176], [80, 112, 118], [162, 168, 210], [108, 136, 168],
+], dtype=float)
+
+
+class TangentTestMachine:
+    """Smooth test machine; ``screw`` = (amplitude mm, pitch mm) of a periodic X/Y error.
+
+    ``scale`` multiplies every error but the periodic one.
+    """
+
+    def __init__(self, screw=(0.001, 16.0), scale: float = 2.0) -> None:
+        self.screw = screw
+        self.scale = scale
+
+    def errors(self, q):
+        q = np.asarray(q, dtype=float)
+        x, y, z = (q[:, j] / SIDE_MM for j in range(3))
+        # Linear part: offset, scale and squareness (what the static method removes).
+        lin = np.array([0.045, -0.030, 0.020]) + q @ (np.array([
+            [420e-6, -260e-6, 180e-6],
+            [0.0, 330e-6, -240e-6],
+            [0.0, 0.0, 280e-6],
+        ]).T)
+        # Curved axes: positioning and straightness, as smooth functions of one axis.
+        curved = np.column_stack([
+            0.060 * np.sin(np.pi * x) + 0.035 * y**2 - 0.030 * np.sin(1.5 * np.pi * z),
+            0.050 * x**2 - 0.055 * np.sin(np.pi * y) + 0.030 * z**3,
+            -0.045 * np.sin(np.pi * x) + 0.040 * y**2 - 0.040 * np.sin(np.pi * z),
+        ])
+        # Angular errors of X and Y acting on the lever of the axes above them.
+        eps_x = np.column_stack([120e-6 * np.sin(np.pi * x), -150e-6 * x**2, 80e-6 * x])
+        eps_y = np.column_stack([-130e-6 * y**2, 90e-6 * np.sin(np.pi * y), -60e-6 * y])
+        lever_x = np.column_stack([np.zeros_like(x), q[:, 1], q[:, 2] + 150.0])
+        lever_y = np.column_stack([np.zeros_like(x), np.zeros_like(x), q[:, 2] + 150.0])
+        coupled = np.cross(eps_x, lever_x) + np.cross(eps_y, lever_y)
+        amp, pitch = self.screw
+        periodic = amp * np.column_stack([
+            np.sin(2 * np.pi * q[:, 0] / pitch), np.sin(2 * np.pi * q[:, 1] / pitch + 1.0), np.zeros_like(x)
+        ])
+        eps = eps_x + eps_y + np.column_stack([np.zeros_like(x), 50e-6 * z, -40e-6 * z])
+        return self.scale * (lin + curved + coupled) + periodic, self.scale * eps
+
+    def forward(self, q, r=None, context=None):
+        q = np.asarray(q, dtype=float)
+        r = np.zeros_like(q) if r is None else np.broadcast_to(np.asarray(r, dtype=float), q.shape)
+        rho, eps = self.errors(q)
+        return q + r + rho + np.cross(eps, r)
+
+
+def grid_measurements(machine, step=15.0, side=SIDE_MM, tool=(0.0, 0.0, 0.0), sigma=0.002,
+                      shots=1, seed=0) -> Measurements:
+    """Tracker points on a regular lattice 0..side with the given step (``shots`` per node)."""
+    ax = np.arange(0.0, side + 1e-9, step)
+    q = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
+    q = np.repeat(q, shots, axis=0)
+    r = np.tile(np.asarray(tool, dtype=float), (len(q), 1))
+    rng = np.random.default_rng(seed)
+    m = machine.forward(q, r) + rng.normal(0.0, sigma, q.shape)
+    return Measurements(q=q, m=m, r=r, path="grid.csv")
+
+
+def six_point_measurements(machine, side=SIDE_MM, tool=(0.0, 0.0, 0.0), sigma=0.002, seed=0) -> Measurements:
+    """The seed's static set: two points per axis."""
+    a = side - 15.0
+    q = np.array([[15, 15, 15], [a, 15, 15], [15, 15, 15], [15, a, 15], [15, 15, 15], [15, 15, a]], float)
+    r = np.tile(np.asarray(tool, dtype=float), (len(q), 1))
+    rng = np.random.default_rng(seed)
+    return Measurements(q=q, m=machine.forward(q, r) + rng.normal(0.0, sigma, q.shape), r=r, path="six.csv")
+
+
+# -- the bulk lane against the general path: engine, setup and generated programs ---
+# squareness and scale: a move on one axis moves the others, so words get added
+G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
+ENGINE = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 50.0})
+MODES = {
+    "bulk": {},
+    "general": {"bulk_lane": False},
+}
+
+
+def run_all(text, *, chunk_lines=20_000, setup=SETUP, engine=ENGINE, **options):
+    outs = {}
+    for name, mode in MODES.items():
+        opts = CorrectOptions(chunk_lines=chunk_lines, **options, **mode)
+        try:
+            out, rep = correct_text(text, engine, setup, opts)
+            outs[name] = (out, dataclasses.asdict(rep))
+        except PostprocError as exc:
+            outs[name] = (str(exc), None)
+    return outs
+
+
+def assert_same(outs):
+    ref = outs["general"]
+    assert outs["bulk"][0] == ref[0]
+    assert outs["bulk"][1] == ref[1]
+
+
+# -- generated programs ------------------------------------------------------------------
+def number(draw, lo=-200.0, hi=200.0):
+    v = draw(st.floats(lo, hi, allow_nan=False))
+    d = draw(st.sampled_from([0, 1, 2, 3, 4, 4, 4, 5, 6, 8]))
+    text = f"{v:.{d}f}"
+    style = draw(st.sampled_from(["plain", "plain", "plus", "trail", "lead"]))
+    if style == "plus" and not text.startswith("-"):
+        text = "+" + text
+    elif style == "trail" and "." in text:
+        text = text.rstrip("0")
+    elif style == "lead" and text.startswith("0."):
+        text = text[1:]
+    elif style == "lead" and text.startswith("-0."):
+        text = "-" + text[2:]
+    return text
+
+
+@st.composite
+def plain_line(draw):
+    sp = draw(st.sampled_from([" ", " ", "", "\t", "  "]))
+    words = []
+    if draw(st.booleans()):
+        words.append(f"N{draw(st.integers(0, 99999))}")
+    if draw(st.integers(0, 2)):
+        words.append("G" + draw(st.sampled_from(["0", "1", "00", "01", "1", "1"])))
+    axes = draw(st.lists(st.sampled_from("XYZ"), min_size=1, max_size=3, unique=True))
+    for a in "XYZ":
+        if a in axes:
+            words.append(a + draw(st.sampled_from(["", "", " "])) + number(draw))
+    if draw(st.integers(0, 4)) == 0:
+        words.append(f"F{draw(st.sampled_from(['500', '1200.5', '80']))}")
+    if draw(st.integers(0, 9)) == 0 and len(words) > 1:  # a non-canonical order
+        words[-1], words[-2] = words[-2], words[-1]
+    line = draw(st.sampled_from(["", " ", "\t"])) + sp.join(words) + draw(st.sampled_from(["", "", " "]))
+    return line.lower() if draw(st.integers(0, 9)) == 0 else line
+
+
+@st.composite
+def other_line(draw):
+    return draw(st.sampled_from([
+        "G2 X{a} Y{b} I5 J0", "G3 X{a} Y{b} R40", "(comment X1 Y2)", "", "G91", "G90", "G20", "G21",
+        "G1 X{a} (tail comment)", "G0 Z{b} ; note", "G54", "G43 H1", "G49", "M3 S1000", "/G1 X{a}",
+        "G92 X{a}", "G92.1", "G17", "G18 G2 X{a} Z{b} I3 K3", "G1 F300", "N5", "%", "M30",
+    ])).format(a=draw(st.integers(-150, 150)), b=draw(st.integers(-150, 150)))
+
+
+# -- how far a corrected program lands from the nominal path -----------------------
+def polyline_distance(points: np.ndarray, poly: np.ndarray, step: float = 0.05) -> np.ndarray:
+    """Distance from each point to the polyline through ``poly`` (exact).
+
+    Segments longer than ``step`` are split, so the nearest point of the polyline lies
+    within half a piece of a vertex: every piece that can hold it has a vertex within
+    (best distance found so far + half a piece) of the point. The nearest vertices are
+    searched until the farthest of them is beyond that bound."""
+    points = np.asarray(points, dtype=float)
+    poly = np.asarray(poly, dtype=float)
+    if len(poly) == 1:
+        return np.linalg.norm(points - poly[0], axis=1)
+    seg = np.diff(poly, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    pieces = np.maximum(1, np.ceil(length / step)).astype(int)
+    owner = np.repeat(np.arange(len(seg)), pieces)
+    j = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    dense = np.vstack([poly[owner] + seg[owner] * (j / pieces[owner])[:, None], poly[-1:]])
+    half_piece = 0.5 * float((length / pieces).max())
+    tree = cKDTree(dense)
+    best = np.full(len(points), np.inf)
+    todo = np.arange(len(points))
+    k = 8
+    while len(todo):
+        k = min(k, len(dense))
+        dist, idx = tree.query(points[todo], k=k)
+        dist, idx = dist.reshape(len(todo), k), idx.reshape(len(todo), k)
+        p = points[todo]
+        for col in range(k):
+            for shift in (0, -1):
+                i0 = np.clip(idx[:, col] + shift, 0, len(dense) - 2)
+                a, ab = dense[i0], dense[i0 + 1] - dense[i0]
+                denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30)
+                t = np.clip(np.einsum("ij,ij->i", p - a, ab) / denom, 0.0, 1.0)
+                best[todo] = np.minimum(best[todo], np.linalg.norm(p - (a + t[:, None] * ab), axis=1))
+        done = (dist[:, -1] > best[todo] + half_piece) | (k == len(dense))
+        todo = todo[~done]
+        k *= 4
+    return best
+
+
+def first_known_line(text: str, setup: Setup) -> int:
+    """First line after which every axis has been positioned (before it, the machine's
+    position is unknown and so is the path); programs needing expansion read expanded."""
+    from postproc.gcode.path import for_each_block
+
+    found: list[int] = []
+
+    def visit(lineno, _line, _block, state) -> None:
+        if not found and not any(math.isnan(v) for v in state.pos):
+            found.append(lineno)
+
+    for_each_block(text, setup, visit, found.clear)
+    return found[0] if found else 10**9
+
+
+def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
+    """Largest distance between the actual path of ``corrected`` and the nominal path
+    of ``original``, both ways (feed moves and rapid end points, from the first point
+    where the machine position is known)."""
+    nom = program_path(original, setup, max_step_mm=step)
+    nominal = nom.points_mm[nom.lineno >= first_known_line(original, setup)]
+    pp = program_path(corrected, setup, max_step_mm=step)
+    keep = pp.lineno >= first_known_line(corrected, setup)
+    actual = engine.forward(pp.points_mm - pp.tool_mm, pp.tool_mm, pp.context)[keep]
+    there = polyline_distance(actual, nominal).max()
+    back = polyline_distance(nominal, actual).max()
+    return float(max(there, back))
+
+
+# -- the setup corpus programs are corrected with ----------------------------------
+# every work offset and tool length a corpus program might name, so that the run
+# goes as far as the program's own constructs allow
+ALL_OFFSETS = {n: (0.0, 0.0, 0.0) for n in
+               ["G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3"]}
+ALL_TOOLS = {t: 50.0 + t for t in range(100)}
+BIG = [[-1e5] * 3, [1e5] * 3]
+
+
+# 2-D programs that never name Z: corrected with the machine's Z given by --start
+# (docs/gcode.md, "Start position"); without it they are refused
+CORPUS_START = {"Star_Trek.tap": {"Z": 150.0}, "plug6a.tap": {"Z": 150.0}}
+
+
+def corpus_setup(path: Path) -> Setup:
+    """The setup a corpus program is corrected with (every offset and tool, its start)."""
+    return Setup(offsets=ALL_OFFSETS, tool_lengths=ALL_TOOLS, start=CORPUS_START.get(path.name, {}))
+
+
+# -- emitted arcs and the corrected ideal path -------------------------------------
+PARAMETRIC = ROOT / "calibrations" / "s500_parametric.json"
+TOL = 0.001
+STEP = 0.02  # sampling of both paths (mm): the polyline error of a 0.5 mm arc is 0.1 nm
+
+
+def emitted_arcs(text: str, setup: Setup):
+    """(unit, start radius, end radius) of every arc in ``text``, read by the interpreter."""
+    interp = Interpreter(setup, None)
+    out = []
+    for lineno, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = interp.feed_line(lineno, line)
+        if mv is None or mv.arc is None:
+            continue
+        (a1, a2, _an), _ = PLANES[mv.arc.plane]
+        c = mv.arc.center
+        r0 = math.hypot(mv.q0[a1] - c[a1], mv.q0[a2] - c[a2])
+        r1 = math.hypot(mv.q1[a1] - c[a1], mv.q1[a2] - c[a2])
+        out.append((mv.unit, r0, r1, lineno))
+    return out
+
+
+def ideal_vs_emitted(original: str, corrected: str, engine, setup: Setup) -> float:
+    """Largest distance, both ways over feed moves, between the corrected ideal path (the
+    engine's correction of the original's dense samples) and the emitted path."""
+    nom = program_path(original, setup, max_step_mm=STEP)
+    q = nom.points_mm - nom.tool_mm
+    ideal = q + np.asarray(engine.correction(nom.points_mm, nom.tool_mm, nom.context).q)
+    out = program_path(corrected, setup, max_step_mm=STEP)
+    emitted = out.points_mm - out.tool_mm
+    feed_i, feed_o = ~nom.rapid, ~out.rapid
+    there, _ = Polyline(ideal, feed_i[1:]).nearest(emitted[feed_o])
+    back, _ = Polyline(emitted, feed_o[1:]).nearest(ideal[feed_i])
+    return float(max(there.max(), back.max()))
