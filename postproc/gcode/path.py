@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
-from postproc.gcode.geometry import arc_length, arc_points, line_points
+from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
 from postproc.gcode.interp import Interpreter, plain_moves, start_position
 from postproc.gcode.state import RAPID
 
@@ -173,48 +173,79 @@ MOTION_EPS_MM = 1e-9
 def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEFAULT_MAX_STEP_MM,
                  dialect: str = "generic", subroutine_path=()) -> ProgramPath:
     """Sample the nominal path of a program (path or text); see the module docstring."""
+    return sample_program(source, setup, step_mm=max_step_mm, dialect=dialect, subroutine_path=subroutine_path)
+
+
+def sample_program(source, setup: Setup | None = None, *, step_mm: float | None = None,
+                   chord_mm: float | None = None, dialect: str = "generic", subroutine_path=()) -> ProgramPath:
+    """The program's moves as points: the one sampler of correct's checks, verify and the
+    path API (the program is read by :func:`for_each_block`).
+
+    Each move gives its end point, and before it, on feed moves from a known position:
+    straight moves a point every ``step_mm`` (None: their end alone); arcs a point
+    every ``step_mm`` of their length and, with ``chord_mm``, every chord whose
+    sagitta stays below it (the finer of the two). Rapid moves give their end point
+    only. The context holds each sample's approach directions (from the start position
+    when ``setup.start`` gives it), the rotary axes' positions and ``setup.context``."""
     setup = setup or Setup()
     path, _lines = iter_source_lines(source)
-    qs: list[np.ndarray] = []
-    rs: list[np.ndarray] = []
-    lns: list[np.ndarray] = []
-    rapid: list[np.ndarray] = []
-    rot: list[tuple] = []
+    # per move: end, start, number of samples, tool vector, line, kind, rotary positions;
+    # arcs' samples are made per arc, straight moves' all at once at the end
+    q1s: list = []
+    q0s: list = []
+    counts: list[int] = []
+    rs: list = []
+    lns: list[int] = []
+    rapid: list[bool] = []
+    rot: list[dict] = []
+    arcs: dict[int, np.ndarray] = {}
 
     def visit(lineno: int, _line: str, block, _state) -> None:
         for mv in plain_moves(block):
             q0, q1 = mv.q0, mv.q1
             if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-                pts = np.array([q1], dtype=float)
+                n = 1
+                q0 = q1
             elif mv.arc is not None:
-                n = max(1, math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm))
-                pts = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+                n = max(1, math.ceil(arc_length(mv.arc, q0, q1) / step_mm) if step_mm else 1,
+                        arc_chord_steps(mv.arc, q0, q1, chord_mm) if chord_mm else 1)
+                arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
             else:
-                n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
-                pts = line_points(q0, q1, np.arange(1, n + 1) / n)
-            qs.append(pts)
-            rs.append(np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape))
-            lns.append(np.full(len(pts), lineno))
-            rapid.append(np.full(len(pts), mv.kind == RAPID))
-            rot.append((len(pts), mv.rotary))
+                n = max(1, math.ceil(math.dist(q0, q1) / step_mm)) if step_mm else 1
+            q0s.append(q0)
+            q1s.append(q1)
+            counts.append(n)
+            rs.append(mv.r)
+            lns.append(lineno)
+            rapid.append(mv.kind == RAPID)
+            rot.append(mv.rotary)
 
     def reset() -> None:
-        for acc in (qs, rs, lns, rapid, rot):
+        for acc in (q1s, q0s, counts, rs, lns, rapid, rot):
             acc.clear()
+        arcs.clear()
 
     interp = for_each_block(source, setup, visit, reset, dialect=dialect, subroutine_path=subroutine_path)
-    if not qs:
+    if not counts:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
                            {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
-    q = np.vstack(qs)
-    lineno_arr = np.concatenate(lns)
+    n = np.asarray(counts)
+    move = np.repeat(np.arange(len(n)), n)
+    k = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
+    a, b = np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float)
+    q = a[move] + (b[move] - a[move]) * (k / n[move])[:, None]  # as line_points does
+    if arcs:
+        first = np.cumsum(n) - n
+        for j, pts in arcs.items():
+            q[first[j]:first[j] + n[j]] = pts
+    lineno_arr = np.asarray(lns)[move]
     q = backfill_unknown(q, lineno_arr, path)
-    r = np.vstack(rs)
+    r = np.asarray(rs, dtype=float)[move]
     signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
     context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
-    for a in sorted(interp.used_rotary):
-        context[a] = np.concatenate([np.full(n, d.get(a, 0.0)) for n, d in rot])
-    for k, v in (setup.context or {}).items():
-        context[k] = np.full(len(q), float(v))
-    return ProgramPath(q + r, r, lineno_arr, np.concatenate(rapid), context)
+    for ax in sorted(interp.used_rotary):
+        context[ax] = np.asarray([d.get(ax, 0.0) for d in rot], dtype=float)[move]
+    for key, v in (setup.context or {}).items():
+        context[key] = np.full(len(q), float(v))
+    return ProgramPath(q + r, r, lineno_arr, np.asarray(rapid)[move], context)

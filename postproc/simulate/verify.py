@@ -267,120 +267,27 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
     """Nominal path of a program (path or text) for measuring deviations against.
 
     Straight moves contribute their end points only (a straight segment is exact);
-    arcs are cut into chords bulging at most ``chord_mm`` from them. Same moves, units,
-    offsets and tool vectors as :func:`postproc.gcode.path.program_path`.
+    arcs are cut into chords bulging at most ``chord_mm`` from them
+    (:func:`postproc.gcode.path.sample_program`).
     """
-    import math
+    from postproc.gcode.path import sample_program
 
-    from postproc.gcode.geometry import arc_chord_steps, arc_points
-    from postproc.gcode.interp import plain_moves
-    from postproc.gcode.path import backfill_unknown, for_each_block, iter_source_lines
-    from postproc.gcode.state import RAPID
-
-    path, _lines = iter_source_lines(source)
-    pts, lns, rapid = [], [], []
-
-    def visit(lineno: int, _line: str, block, _state) -> None:
-        for mv in plain_moves(block):
-            if mv.arc is not None and mv.kind != RAPID and not any(math.isnan(v) for v in mv.q0):
-                n = arc_chord_steps(mv.arc, mv.q0, mv.q1, chord_mm)
-                q = arc_points(mv.arc, mv.q0, mv.q1, np.arange(1, n + 1) / n)
-            else:
-                q = np.array([mv.q1], dtype=float)
-            pts.append(q + np.asarray(mv.r, dtype=float))
-            lns.append(np.full(len(q), lineno))
-            rapid.append(np.full(len(q), mv.kind == RAPID))
-
-    def reset() -> None:
-        for acc in (pts, lns, rapid):
-            acc.clear()
-
-    for_each_block(source, setup, visit, reset)
-    if not pts:
-        return NominalPath(np.zeros((0, 3)), np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
-    lineno_arr = np.concatenate(lns)
-    points = np.vstack(pts)
-    # Backfill axes not yet positioned, as the sampled path does (on gauge = point - r
-    # the NaNs are the same).
-    points = backfill_unknown(points, lineno_arr, path)
-    return NominalPath(points, lineno_arr, np.concatenate(rapid))
+    pp = sample_program(source, setup, chord_mm=chord_mm)
+    return NominalPath(pp.points_mm, pp.lineno, pp.rapid)
 
 
 def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
                         chord_mm: float = NOMINAL_CHORD_MM) -> ProgramPath:
     """A program (path or text) sampled to draw its actual path as a polyline.
 
-    Like :func:`postproc.gcode.path.program_path` (straight moves every
-    ``max_step_mm``, the same context), but arcs are cut into chords within
-    ``chord_mm`` of them, so that the polyline of the actual points does not cut
-    the corners of arcs by the sagitta of a ``max_step_mm`` chord.
+    Straight moves every ``max_step_mm``; arcs also cut into chords within ``chord_mm``
+    of them, so that the polyline of the actual points does not cut the corners of
+    arcs by the sagitta of a ``max_step_mm`` chord
+    (:func:`postproc.gcode.path.sample_program`).
     """
-    import math
+    from postproc.gcode.path import sample_program
 
-    from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
-    from postproc.gcode.interp import plain_moves
-    from postproc.gcode.path import (
-        ProgramPath,
-        backfill_unknown,
-        for_each_block,
-        iter_source_lines,
-        motion_signs,
-    )
-    from postproc.gcode.state import RAPID
-
-    path, _lines = iter_source_lines(source)
-    # Per move: its end and start, sample count, tool vector, line, kind, rotary
-    # positions; arcs' samples are computed at once per arc, straight moves' all at
-    # once at the end (one move of a long program is a few microseconds of Python).
-    q1s, q0s, counts, rs, lns, rapid, rot, arcs = [], [], [], [], [], [], [], {}
-
-    def visit(lineno: int, _line: str, block, _state) -> None:
-        for mv in plain_moves(block):
-            q0, q1 = mv.q0, mv.q1
-            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-                n = 1
-                q0 = q1
-            elif mv.arc is not None:
-                n = max(math.ceil(arc_length(mv.arc, q0, q1) / max_step_mm),
-                        arc_chord_steps(mv.arc, q0, q1, chord_mm))
-                arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
-            else:
-                n = max(1, math.ceil(math.dist(q0, q1) / max_step_mm))
-            q0s.append(q0)
-            q1s.append(q1)
-            counts.append(n)
-            rs.append(mv.r)
-            lns.append(lineno)
-            rapid.append(mv.kind == RAPID)
-            rot.append(mv.rotary)
-
-    def reset() -> None:
-        for acc in (q1s, q0s, counts, rs, lns, rapid, rot):
-            acc.clear()
-        arcs.clear()
-
-    interp = for_each_block(source, setup, visit, reset)
-    if not counts:
-        empty = np.zeros((0, 3))
-        return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
-                           {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
-    n = np.asarray(counts)
-    move = np.repeat(np.arange(len(n)), n)
-    step = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
-    a, b = np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float)
-    q = a[move] + (b[move] - a[move]) * (step / n[move])[:, None]  # as line_points does
-    for k, pts in arcs.items():
-        q[move == k] = pts
-    lineno_arr = np.asarray(lns)[move]
-    q = backfill_unknown(q, lineno_arr, path)
-    r = np.asarray(rs, dtype=float)[move]
-    signs = motion_signs(q)
-    context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
-    for ax in sorted(interp.used_rotary):
-        context[ax] = np.asarray([d.get(ax, 0.0) for d in rot], dtype=float)[move]
-    for k, v in (setup.context or {}).items():
-        context[k] = np.full(len(q), float(v))
-    return ProgramPath(q + r, r, lineno_arr, np.asarray(rapid)[move], context)
+    return sample_program(source, setup, step_mm=max_step_mm, chord_mm=chord_mm)
 
 
 def machine_directions(q, initial) -> np.ndarray:
