@@ -477,6 +477,10 @@ class EmitterMixin:
         order = np.argsort(np.where(ok, worst, np.inf))
         for j in order[:3].tolist():
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
+            if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
+                # the written centre is the candidate measured (numpy's rounding agreed)
+                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
+                        "dev": float(worst[j]), "mismatch": float(mism[j])}
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
             w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac,
                                      controller_limits=True)
