@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import sys
 
 import click
 
@@ -36,11 +38,19 @@ def diff(original, corrected, as_json, show_all, offset, tool_length):
         postproc diff samples/pocket.nc pocket_corrected.nc
         postproc diff samples/g54_g43.ngc part_corrected.ngc --json
     """
-    from postproc.cli.correct import build_setup
+    from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer, build_setup
     from postproc.gcode.compare import compare_programs
 
     setup = build_setup(offset, tool_length, None, None, ())
-    rep = compare_programs(original, corrected, setup)
+    # a progress line on stderr for a big program, as 'correct' shows (when stderr is a terminal)
+    progress = None
+    if sys.stderr.isatty() and os.path.getsize(original) > PROGRESS_MIN_BYTES:
+        progress = _progress_printer(original)
+    try:
+        rep = compare_programs(original, corrected, setup, progress=progress)
+    finally:
+        if progress is not None:
+            click.echo("", err=True)
     if as_json:
         click.echo(json.dumps(rep.to_dict(), indent=2))
         return
