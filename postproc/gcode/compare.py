@@ -50,6 +50,8 @@ SCAN_AHEAD = 256
 # records are paired at once again, in a window of at least MIN_WINDOW.
 SLOW_STRETCH = 4
 MIN_WINDOW = 256
+# Insertions in one stretch between anchors checked at once (more: paired one at a time).
+MAX_LEVELS = 8
 _SKELETON_DROP = re.compile(r"[XYZIJKRPFxyzijkrpf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|[Gg][ \t]*0*[0-3](?![0-9.])|\s+")
 
 
@@ -420,11 +422,12 @@ class _Reader:
             found = found[:n] if len(found) in (n, n + 1) else None
         if not found:
             return self._general(rows, 0, n)
-        ncol, gcol, xcol, ycol, zcol, arccol, fcol, qcol = zip(*found, strict=True)
-        has = [np.fromiter(map(bool, col), dtype=bool, count=n) for col in (xcol, ycol, zcol)]
-        gcode = np.fromiter(map(_MOTION.__getitem__, gcol), dtype=np.int64, count=n)
-        arc = np.fromiter(map(bool, arccol), dtype=bool, count=n)
-        quiet = np.fromiter(map(bool, qcol), dtype=bool, count=n)
+        cols = np.array(found, dtype=object)
+        present = cols != ""
+        has = [present[:, 2], present[:, 3], present[:, 4]]
+        gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
+        arc = present[:, 5]
+        quiet = present[:, 7]
         has_g = gcode >= 0
         g_arc = gcode >= ARC_CW
         last_g = _last_index(has_g)
@@ -437,16 +440,19 @@ class _Reader:
         if not runnable.any():
             return self._general(rows, 0, n)
         keys = self.keys
+        ncol = cols[:, 0].tolist()
         nk = [keys(t) if t else 0 for t in ncol]
         rows.keys[:, 1] = nk
-        rows.keys[:, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k for t, k in zip(ncol, nk, strict=True)]
+        rows.keys[:, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
+                           for t, k in zip(ncol, nk, strict=True)]
         values = []
-        for k, col in enumerate((xcol, ycol, zcol)):
+        for k in range(3):
             v = np.full(n, np.nan)
-            v[has[k]] = np.array([t for t in col if t], dtype=float)
+            v[has[k]] = cols[has[k], 2 + k].astype(float)
             values.append(v)
+        xcol, ycol, zcol, fcol = cols[:, 2], cols[:, 3], cols[:, 4], cols[:, 6]
         last = [_last_index(h).tolist() for h in has]
-        last_f = _last_index(np.fromiter(map(bool, fcol), dtype=bool, count=n)).tolist()
+        last_f = _last_index(present[:, 6]).tolist()
         next_other = _next_index(~runnable).tolist()
         next_g = _next_index(has_g).tolist()
         moves_before = np.concatenate([[0], np.cumsum(plain)]).tolist()
@@ -595,91 +601,182 @@ def _l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return s
 
 
-def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple, limit: int) -> tuple[int, bool, tuple]:
-    """Pair up to ``limit`` records of orig with those at the same place in corr, as far as
-    the one-at-a-time rule (:func:`_pair_one`) pairs them so: (records paired, whether
-    those were all that could be looked at, the last move's delta)."""
+def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  # noqa: C901
+                limit: int) -> tuple[int, bool, tuple]:
+    """Pair up to ``limit`` records of orig as :func:`_pair_one` would, a chunk at a time.
+
+    The k-th anchor of orig goes with the k-th of corr. Between two anchors, when both
+    programs have as many moves, each move is taken to pair with the line at the same
+    place, and that is checked for all of them at once: the line is compatible and the
+    nearest of those the one-at-a-time scan looks at. Where corr has more lines (inserted
+    ones), the moves before the insertion pair at the place after the previous anchor,
+    those after it at the place before the next anchor (both checked the same way), and
+    the move at the insertion is paired one at a time. Returns (records paired, whether a
+    check failed at the next one, the last move's delta).
+    """
     p, q = orig.pos, corr.pos
     ro, rc = orig.rows, corr.rows
+    m = min(orig.avail(), limit)
     avail = corr.avail()
-    m = min(orig.avail(), avail, limit)
-    if m == 0:
-        return 0, False, last_delta
+    span = min(avail, m + m // 2 + SCAN_AHEAD)
+    if m == 0 or span == 0:
+        return 0, True, last_delta
+    real_end = span == avail and corr.done and corr.error is None
     om = ro.move[p:p + m]
-    same = np.fromiter(map(operator.eq, ro.lines[p:p + m], rc.lines[q:q + m]), dtype=bool, count=m)
-    # anchors against identical anchors, moves against moves
-    ok = np.where(om, rc.move[q:q + m], ~rc.move[q:q + m] & same)
-    bad = np.flatnonzero(~ok)
-    m = int(bad[0]) if len(bad) else m
-    om = om[:m]
+    cmove = rc.move[q:q + span]
+    clines = rc.lines
+    # anchors: the k-th of each, as long as they are identical
+    ao = np.flatnonzero(~om)
+    ac = np.flatnonzero(~cmove)
+    k = min(len(ao), len(ac))
+    if k:
+        equal = np.fromiter(map(operator.eq, [ro.lines[p + i] for i in ao[:k].tolist()],
+                                [clines[q + j] for j in ac[:k].tolist()]), dtype=bool, count=k)
+        k = k if equal.all() else int(np.argmin(equal))
+    ao, ac = ao[:k], ac[:k]
+    # stretch j ends with the j-th anchor (stretch k: the rest of the window)
+    start_o = np.concatenate([[0], ao + 1])
+    off_start = np.concatenate([[0], ac + 1]) - start_o
+    off_end = ac - ao
+    inserted = np.append(off_end != off_start[:-1], False)  # stretches with lines inserted
+    seg = np.searchsorted(ao, np.arange(m))
+    split = inserted[seg]
     oe = ro.end[p:p + m]
-    ce = rc.end[q:q + m]
-    delta = np.where(np.isnan(ce) | np.isnan(oe), 0.0, ce - oe)
-    rows = np.flatnonzero(om)
-    if len(rows):
-        # The scan of a move looks at the corrected records after its own place up to the
-        # next anchor (or the end of the program; not an error not yet reached), and stops
-        # after STOP_AFTER_WORSE compatible ones that are not nearer than the best.
-        span = min(m + SCAN_AHEAD, avail)
-        real_end = span == avail and corr.done and corr.error is None
-        cmove = rc.move[q:q + span]
-        ckeys = rc.keys[q:q + span]
-        stop = np.append(_next_index(~cmove), span)
-        end_at = stop[rows + 1]  # the scan of a move looks at records rows+1 .. end_at-1
+    cend = np.append(rc.end[q:q + span], np.zeros((1, 3)), axis=0)
+    ckeys = rc.keys[q:q + span]
+    stop = np.append(_next_index(~cmove), span)
+    prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
+
+    def place(t: np.ndarray, rows=None):
+        """Lines of corr at places t (of records rows): in the window, identical, delta."""
+        inside = t < span
+        tc = np.minimum(t, span - 1)
+        olines = ro.lines[p:p + m] if rows is None else [ro.lines[p + r] for r in rows.tolist()]
+        same = np.fromiter(map(operator.eq, olines, [clines[q + j] for j in tc.tolist()]), dtype=bool, count=len(t))
+        o = oe if rows is None else oe[rows]
+        ce = cend[tc]
+        return inside, tc, same, np.where(np.isnan(ce) | np.isnan(o), 0.0, ce - o)
+
+    def nearest(rows: np.ndarray, t0: np.ndarray, ld: np.ndarray) -> np.ndarray:
+        """Whether the scan of each move (records rows, own line t0, previous delta ld)
+        picks its own line: it looks at the lines after it up to the next anchor (or the
+        end of the program; not an error not yet reached) and stops after
+        STOP_AFTER_WORSE compatible ones that are not nearer than the best."""
+        end_at = stop[t0 + 1]
         real_stop = (end_at < span) | real_end
-        prev = np.concatenate([[-1], _last_index(om)[:-1]])[rows]  # previous move
-        ld = np.where(prev[:, None] >= 0, delta[np.maximum(prev, 0)], np.asarray(last_delta, dtype=float))
         predicted = oe[rows] + ld
         okeys = ro.keys[p + rows]
-        own = ckeys[rows]
+        own = ckeys[t0]
         good = np.zeros(len(rows), dtype=bool)
         plain = ~okeys.any(axis=1)
         a = np.flatnonzero(plain)
         if len(a):
-            # a move with no N word, skeleton or comment: compatible with the moves of empty
-            # skeleton; its own place must be one, and the nearest of the first few after it
-            ra, ea, pa = rows[a], end_at[a], predicted[a]
+            # no N word, skeleton or comment: compatible with the moves of empty skeleton;
+            # its own line must be one, and the nearest of the first few after it
+            ta, ea, pa = t0[a], end_at[a], predicted[a]
             z = np.flatnonzero(cmove & (ckeys[:, 0] == 0))
-            k = np.searchsorted(z, ra)
+            i = np.searchsorted(z, ta)
             z = np.append(z, [span] * STOP_AFTER_WORSE)
-            cend = np.append(rc.end[q:q + span], np.zeros((1, 3)), axis=0)
-            d0 = _l1(cend[ra], pa)
+            d0 = _l1(cend[ta], pa)
             nearer = np.zeros(len(a), dtype=bool)
             looked = np.zeros(len(a), dtype=np.int64)
             for j in range(1, STOP_AFTER_WORSE + 1):
-                t = z[k + j]
-                scanned = t < ea
-                nearer |= scanned & (_l1(cend[t], pa) < d0)
+                c = z[i + j]
+                scanned = c < ea
+                nearer |= scanned & (_l1(cend[c], pa) < d0)
                 looked += scanned
             good[a] = (own[a, 0] == 0) & ~nearer & ((looked == STOP_AFTER_WORSE) | real_stop[a])
         b = np.flatnonzero(~plain)
         if len(b):
-            # a move with an N word or another skeleton (and no comment): paired in place
-            # when no later record before the anchor has its skeleton or N word
-            rb, eb, ob, cb = rows[b], end_at[b], okeys[b], own[b]
-            after_sk = _next_same(ckeys[:, 0])[rb]
-            after_n = _next_same(ckeys[:, 1])[rb]
+            # an N word or another skeleton (and no comment): its own line when no later
+            # line before the anchor has its skeleton or N word
+            tb, eb, ob, cb = t0[b], end_at[b], okeys[b], own[b]
+            after_sk = _next_same(ckeys[:, 0])[tb]
+            after_n = _next_same(ckeys[:, 1])[tb]
             good[b] = (real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & (after_sk >= eb)
                        & ((ob[:, 1] == 0) | ((ob[:, 1] == cb[:, 1]) & (after_n >= eb))))
-        ok = np.ones(m, dtype=bool)
-        ok[rows] = good
-        bad = np.flatnonzero(~ok)
-        m = int(bad[0]) if len(bad) else m
-    f = m
-    moves = om[:f]
-    n_moves = int(np.count_nonzero(moves))
-    unchanged = int(np.count_nonzero(moves & same[:f]))
-    rep.moves += n_moves
-    rep.moves_unchanged += unchanged
-    rep.lines_unchanged += f - n_moves + unchanged
-    moved = np.flatnonzero(moves & ~same[:f])
-    if len(moved):
-        rep.add_moved_rows(ro.lineno[p + moved], rc.lineno[q + moved], delta[moved])
-    if n_moves:
-        last_delta = tuple(delta[int(np.flatnonzero(moves)[-1])].tolist())
-    orig.pos += f
-    corr.pos += f
-    return f, f == min(orig.avail() + f, avail, limit), last_delta
+        return good
+
+    def previous(rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        pr = prev[rows]
+        return np.where(pr[:, None] >= 0, delta[np.maximum(pr, 0)], np.asarray(last_delta, dtype=float))
+
+    # the line of corr at each record's place: after the previous anchor, or (in a stretch
+    # with inserted lines) before the next one
+    t = np.arange(m) + np.where(split, np.append(off_end, 0)[seg], off_start[seg])
+    inside, tc, same, delta = place(t)
+    tail = seg == k
+    ok = ~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same))
+    rows = np.flatnonzero(om & ok)
+    if len(rows):
+        ok[rows] = nearest(rows, t[rows], previous(rows, delta))
+    # in a stretch with lines inserted, the moves between the e-th and the next insertion
+    # pair at the place after the previous anchor plus e: checked for every e at once
+    levels = []
+    if split.any():
+        n_ins = np.append(off_end - off_start[:-1], 0)
+        for e in range(min(int(n_ins.max()), MAX_LEVELS) + 1):
+            rows_e = np.flatnonzero(split & om & (n_ins[seg] >= e))
+            t_e = rows_e + off_start[seg[rows_e]] + e
+            _in, _tc, same_e, d_e = place(t_e, rows_e)
+            full = np.zeros((m, 3))
+            full[rows_e] = d_e
+            pr = np.maximum(prev[rows_e], 0)
+            within = ((prev[rows_e] >= 0) & (seg[pr] == seg[rows_e]))[:, None]
+            ok_e = np.zeros(m, dtype=bool)
+            ok_e[rows_e] = nearest(rows_e, t_e, np.where(within, full[pr], previous(rows_e, delta)))
+            same_full = np.zeros(m, dtype=bool)
+            same_full[rows_e] = same_e
+            levels.append((ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
+    bad = np.flatnonzero(~(ok | split))
+    f = int(bad[0]) if len(bad) else m
+
+    def take(r0: int, r1: int, last_delta: tuple, same=same, t=t, delta=delta) -> tuple:
+        """Count the records r0:r1, each paired with the line at its place."""
+        moves = om[r0:r1]
+        n_moves = int(np.count_nonzero(moves))
+        unchanged = int(np.count_nonzero(moves & same[r0:r1]))
+        rep.moves += n_moves
+        rep.moves_unchanged += unchanged
+        rep.lines_unchanged += r1 - r0 - n_moves + unchanged
+        moved = np.flatnonzero(moves & ~same[r0:r1]) + r0
+        if len(moved):
+            rep.add_moved_rows(ro.lineno[p + moved], rc.lineno[q + t[moved]], delta[moved])
+        if n_moves:
+            last_delta = tuple(delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
+        return last_delta
+
+    done = 0
+    for j in np.flatnonzero(inserted).tolist():
+        s0, a0 = int(start_o[j]), int(ao[j])
+        if s0 >= f:
+            break
+        last_delta = take(done, s0, last_delta)
+        r, e = s0, 0
+        while True:
+            ok_e, same_e, t_e, delta_e = levels[e]
+            # the next insertion: at the first move not paired at this place
+            x = r + int(np.argmin(ok_e[r:a0])) if not ok_e[r:a0].all() else a0
+            last_delta = take(r, x, last_delta, same_e, t_e, delta_e)
+            orig.pos, corr.pos = p + x, q + int(t_e[x])
+            last_delta = _pair_one(orig, corr, rep, last_delta)
+            done = x + 1
+            if not (orig.rows is ro and corr.rows is rc):
+                return done, False, last_delta
+            if x == a0:
+                break
+            e = corr.pos - q - 1 - x - int(off_start[j])
+            if not (0 <= e < len(levels) and levels[e][2][x] == corr.pos - q - 1
+                    and last_delta == tuple(levels[e][3][x].tolist())):
+                return done, False, last_delta  # paired otherwise than assumed: look again from here
+            r = x + 1
+        if corr.pos != q + ac[j] + 1 or (a0 > s0 and last_delta != tuple(delta[a0 - 1].tolist())):
+            return done, False, last_delta  # the next stretch was checked with another delta
+    f = max(f, done)
+    last_delta = take(done, f, last_delta)
+    orig.pos = p + f
+    corr.pos = q + (int(t[f]) if f < m else m + int(off_start[k]))
+    return f, f < m, last_delta
 
 
 def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> tuple:
@@ -794,9 +891,10 @@ def _compare(original, corrected, setup: Setup | None, progress) -> DiffReport:
             shown = o_reader.count
             progress(shown)
         if not slow:
-            corr.fill(min(orig.avail(), window) + SCAN_AHEAD + 1)
-            n, whole, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
-            if whole and n:
+            w = min(orig.avail(), window)
+            corr.fill(w + w // 2 + SCAN_AHEAD + 1)
+            n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
+            if n and not failed:
                 window = min(CHUNK_LINES, 2 * window)
                 continue
             # a record the rule pairs otherwise (a line inserted here): one at a time for a
