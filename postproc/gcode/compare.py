@@ -12,13 +12,16 @@ coordinates. Offsets and tool lengths neither given nor recorded count as zero.
 Both programs are read in chunks of lines, and memory does not grow with their length
 (apart from the compact list of moved blocks). In a chunk, the stretches of plain
 absolute moves (N, G0 to G3, X/Y/Z, I/J/K/R and F words only, in a simple modal state)
-are read as columns: their end points are their words, carried forward where a line
-does not name an axis. Every other line goes through the interpreter, which carries the
-modal state from one stretch to the next. Pairing first takes each line of the
-corrected program at the place of the original's (no line inserted there) and checks,
-for a whole chunk at once, that the nearest-end-point rule picks that line for every
-move; from the first line where it does not, lines are paired one at a time for a
-while. Both ways give the same pairs.
+and of lines that change nothing (S, M3, M8 and the like, comments) are read as columns:
+a move's end point is its words, carried forward where a line does not name an axis.
+Such arcs are not checked again (``correct`` checks every arc it writes; ``verify``
+runs the program). Every other line goes through the interpreter, which carries the
+modal state from one stretch to the next. The k-th anchor of the original pairs with
+the k-th of the corrected program. Between two anchors, the moves pair with the lines
+at the same place when both have as many, and around each insertion where the
+corrected program has more; the nearest-end-point rule is checked for all of them at
+once, and a move where it picks another line, or where a line was inserted, is paired
+one at a time. Both ways give the same pairs.
 """
 
 from __future__ import annotations
@@ -235,8 +238,6 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
     if hs.home and hasattr(setup, "home") and not setup.home:
         changes["home"] = {k: dict(v) for k, v in hs.home.items()}
     return dataclasses.replace(setup, **changes) if changes else setup
-
-
 
 
 # -- reading ---------------------------------------------------------------------------
