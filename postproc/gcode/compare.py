@@ -639,7 +639,8 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     start_o = np.concatenate([[0], ao + 1])
     off_start = np.concatenate([[0], ac + 1]) - start_o
     off_end = ac - ao
-    inserted = np.append(off_end != off_start[:-1], False)  # stretches with lines inserted
+    more = off_end - off_start[:-1]
+    inserted = np.append(more > 0, False)  # stretches with lines inserted
     seg = np.searchsorted(ao, np.arange(m))
     split = inserted[seg]
     oe = ro.end[p:p + m]
@@ -677,7 +678,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             ta, ea, pa = t0[a], end_at[a], predicted[a]
             z = np.flatnonzero(cmove & (ckeys[:, 0] == 0))
             i = np.searchsorted(z, ta)
-            z = np.append(z, [span] * STOP_AFTER_WORSE)
+            z = np.append(z, [span] * (STOP_AFTER_WORSE + 1))
             d0 = _l1(cend[ta], pa)
             nearer = np.zeros(len(a), dtype=bool)
             looked = np.zeros(len(a), dtype=np.int64)
@@ -707,7 +708,8 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     t = np.arange(m) + np.where(split, np.append(off_end, 0)[seg], off_start[seg])
     inside, tc, same, delta = place(t)
     tail = seg == k
-    ok = ~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same))
+    # (a stretch with fewer lines in corr: paired one at a time, which reports it)
+    ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
     rows = np.flatnonzero(om & ok)
     if len(rows):
         ok[rows] = nearest(rows, t[rows], previous(rows, delta))
@@ -715,7 +717,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     # pair at the place after the previous anchor plus e: checked for every e at once
     levels = []
     if split.any():
-        n_ins = np.append(off_end - off_start[:-1], 0)
+        n_ins = np.append(more, 0)
         for e in range(min(int(n_ins.max()), MAX_LEVELS) + 1):
             rows_e = np.flatnonzero(split & om & (n_ins[seg] >= e))
             t_e = rows_e + off_start[seg[rows_e]] + e
