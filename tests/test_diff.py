@@ -225,3 +225,23 @@ def test_diff_progress(monkeypatch, tmp_path, capsys):
     assert f"\r{src}: {d.lines_original:,} lines" in cap.err
     assert cap.err.endswith("\n")
     assert "moves:" in cap.out
+
+
+def test_diff_of_a_corrected_program_missing_a_move_is_an_error(monkeypatch):
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(8)
+    text = _cam_program(rng, 600)
+    eng = IdentityEngine([[-1e4] * 3, [1e4] * 3])
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0, 2: 0.0, 3: 0.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+    out, _ = correct_text(text, eng, setup)
+    lines = out.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("X"))  # a plain move
+    monkeypatch.setattr(compare, "CHUNK_LINES", 64)
+    with pytest.raises(PostprocError, match="has no counterpart in the corrected program"):
+        compare_programs(text, "".join(lines[:k] + lines[k + 1:]))
+    # the same line written twice: the second one is taken for a line inserted by segmentation
+    d = compare_programs(text, "".join(lines[:k] + [lines[k]] + lines[k:]))
+    assert d.lines_inserted == 1
+    assert d.moved == []
