@@ -769,8 +769,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             if x == a0:
                 break
             e = corr.pos - q - 1 - x - int(off_start[j])
-            if not (0 <= e < len(levels) and levels[e][2][x] == corr.pos - q - 1
-                    and last_delta == tuple(levels[e][3][x].tolist())):
+            if not (0 <= e < len(levels) and last_delta == tuple(levels[e][3][x].tolist())):
                 return done, False, last_delta  # paired otherwise than assumed: look again from here
             r = x + 1
         if corr.pos != q + ac[j] + 1 or (a0 > s0 and last_delta != tuple(delta[a0 - 1].tolist())):
