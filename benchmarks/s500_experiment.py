@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from postproc.calibration.calfile import load_calibration, save_calibration
-from postproc.engine.parametric_tables import fit_tables
+from postproc.calibration.tables import write_tables
 from postproc.engine.registry import fitter
+from postproc.metrology.tables_fit import fit_tables
 from postproc.simulate import grid_points, load_machine, measurement_plan, simulate_plan, static_set
 from postproc.simulate.control import control_experiment, format_control_report, read_control_points
 from postproc.simulate.tables import simulate_tables
-from postproc.simulate.tables_io import write_axis_errors
 
 REPO = Path(__file__).resolve().parents[1]
 MACHINE = REPO / "calibrations" / "s500.machine.json"
@@ -64,7 +64,7 @@ def main() -> None:
     six = simulate_plan(machine, plan(static_set(machine.volume_mm), 0.0, 600.0), rng)
     grid = simulate_plan(machine, plan(grid_points(machine.volume_mm, 15.0), 600.0, 4 * 3600.0), rng)
     tables, squareness = simulate_tables(machine, 2.0, rng, context={"t": 0.0, "load": 0.0} if timed else None)
-    write_axis_errors(out / "tables.csv", out / "tables_squareness.csv", tables, squareness)
+    write_tables(out / "tables.csv", out / "tables_squareness.csv", tables, squareness)
     clock["simulate (6 pts, 15 mm grid x 12 shots, 2 mm tables)"] = time.perf_counter() - t0
 
     cals = {}

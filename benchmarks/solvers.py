@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import SEED_CONTROL_POINTS_MM, synthetic_tables
+from postproc.simulate.s500 import SEED_CONTROL_POINTS_MM, synthetic_tables
 
 TOOL = np.array([0.0, 0.0, -100.0])
 

@@ -61,15 +61,15 @@ def measure(machine, q, shots, rng):
 def parametric(machine, table_step, rng):
     if not hasattr(machine, "geometry"):
         return None
-    from postproc.engine.parametric_tables import fit_tables
+    from postproc.calibration.tables import write_tables
+    from postproc.metrology.tables_fit import fit_tables
     from postproc.simulate.tables import simulate_tables
-    from postproc.simulate.tables_io import write_axis_errors
 
     tables, squareness = simulate_tables(machine, table_step, rng)
     with tempfile.TemporaryDirectory() as tmp:
         tpath = Path(tmp) / "tables.csv"
         spath = Path(tmp) / "tables_squareness.csv"
-        write_axis_errors(tpath, spath, tables, squareness)
+        write_tables(tpath, spath, tables, squareness)
         return fit_tables([tpath], squareness=spath).engine
 
 

@@ -21,6 +21,8 @@ class PostprocError(Exception):
     """Base of every error caused by user input or a refused job."""
 
     exit_code = EXIT_INPUT
+    #: which of the points given to a library call on many points was refused, where one was
+    point_index: int | None = None
 
     def __init__(
         self,

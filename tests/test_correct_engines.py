@@ -13,12 +13,12 @@ from postproc.cli import main
 from postproc.effects import compose, get_effect
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.identity import IdentityEngine
-from postproc.engine.parametric_tables import fit_tables
 from postproc.engine.static import StaticEngine
 from postproc.errors import EXIT_SAFETY, MissingSetupError, OutOfVolumeError, SolverError
 from postproc.gcode import emit
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import SOLVER_ACCEPT_MM, CorrectOptions, Corrector, correct_text
+from postproc.metrology.tables_fit import fit_tables
 
 ROOT = Path(__file__).parents[1]
 TABLES = ROOT / "calibrations" / "s500_tables.csv"

@@ -58,22 +58,70 @@ class WavyEngine(Engine):
         return cls(volume_mm)
 
 
-def _polyline_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Distance from each point to the polyline through ``poly`` (exact for segments)."""
-    tree = cKDTree(poly)
-    _, idx = tree.query(points, k=min(6, len(poly)))
-    idx = np.atleast_2d(idx)
+def _polyline_distance(points: np.ndarray, poly: np.ndarray, step: float = 0.05) -> np.ndarray:
+    """Distance from each point to the polyline through ``poly`` (exact).
+
+    Segments longer than ``step`` are split, so the nearest point of the polyline lies
+    within half a piece of a vertex: every piece that can hold it has a vertex within
+    (best distance found so far + half a piece) of the point. The nearest vertices are
+    searched until the farthest of them is beyond that bound."""
+    points = np.asarray(points, dtype=float)
+    poly = np.asarray(poly, dtype=float)
+    if len(poly) == 1:
+        return np.linalg.norm(points - poly[0], axis=1)
+    seg = np.diff(poly, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    pieces = np.maximum(1, np.ceil(length / step)).astype(int)
+    owner = np.repeat(np.arange(len(seg)), pieces)
+    j = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    dense = np.vstack([poly[owner] + seg[owner] * (j / pieces[owner])[:, None], poly[-1:]])
+    half_piece = 0.5 * float((length / pieces).max())
+    tree = cKDTree(dense)
     best = np.full(len(points), np.inf)
-    for col in range(idx.shape[1]):
-        for shift in (0, -1):
-            i0 = np.clip(idx[:, col] + shift, 0, len(poly) - 2)
-            a, b = poly[i0], poly[i0 + 1]
-            ab = b - a
-            denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30)
-            t = np.clip(np.einsum("ij,ij->i", points - a, ab) / denom, 0.0, 1.0)
-            d = np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
-            best = np.minimum(best, d)
+    todo = np.arange(len(points))
+    k = 8
+    while len(todo):
+        k = min(k, len(dense))
+        dist, idx = tree.query(points[todo], k=k)
+        dist, idx = dist.reshape(len(todo), k), idx.reshape(len(todo), k)
+        p = points[todo]
+        for col in range(k):
+            for shift in (0, -1):
+                i0 = np.clip(idx[:, col] + shift, 0, len(dense) - 2)
+                a, ab = dense[i0], dense[i0 + 1] - dense[i0]
+                denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30)
+                t = np.clip(np.einsum("ij,ij->i", p - a, ab) / denom, 0.0, 1.0)
+                best[todo] = np.minimum(best[todo], np.linalg.norm(p - (a + t[:, None] * ab), axis=1))
+        done = (dist[:, -1] > best[todo] + half_piece) | (k == len(dense))
+        todo = todo[~done]
+        k *= 4
     return best
+
+
+def test_polyline_distance_is_exact():
+    rng = np.random.default_rng(12)
+
+    def brute(points, poly):
+        a, ab = poly[:-1], np.diff(poly, axis=0)
+        t = np.clip(np.einsum("pkj,kj->pk", points[:, None, :] - a[None], ab) / np.maximum((ab * ab).sum(1), 1e-30),
+                    0.0, 1.0)
+        return np.linalg.norm(points[:, None, :] - (a[None] + t[..., None] * ab[None]), axis=2).min(axis=1)
+
+    # a 0.28 mm segment between two passes 0.1 mm above and below it, each sampled every
+    # 0.02 mm: the segment's own end points are farther from its middle than many samples
+    # of the other passes
+    x = np.linspace(0.0, 0.28, 15)
+    above = np.column_stack([x, np.zeros_like(x), np.full_like(x, 0.1)])
+    below = above * [1, 1, -1]
+    poly = np.vstack([above, [[0.0, 0.0, 0.0], [0.28, 0.0, 0.0]], below])
+    mid = np.array([[0.14, 0.0, 0.0], [0.07, 0.0002, 0.0]])
+    assert np.allclose(_polyline_distance(mid, poly), [0.0, 0.0002], atol=1e-15)
+    for _ in range(100):
+        n = int(rng.integers(2, 60))
+        poly = np.cumsum(rng.normal(size=(n, 3)) * rng.choice([1e-3, 0.05, 1.0, 5.0], size=(n, 1)), axis=0)
+        pts = poly[rng.integers(0, n, 40)] + rng.normal(size=(40, 3)) * rng.choice([1e-3, 0.1, 3.0])
+        assert np.allclose(_polyline_distance(pts, poly, step=float(rng.choice([0.01, 0.05, 1.0]))),
+                           brute(pts, poly), rtol=0.0, atol=1e-12)
 
 
 def _first_known_line(text: str, setup: Setup) -> int:

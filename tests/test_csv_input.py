@@ -7,10 +7,11 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from postproc.calibration.measurements import read_measurements
+from postproc.calibration.tables import format_tables, read_tables
 from postproc.cli import main
-from postproc.engine.parametric_tables import format_tables, read_tables, synthetic_tables
 from postproc.errors import MeasurementError
 from postproc.metrology.runs import read_runs
+from postproc.simulate.s500 import synthetic_tables
 
 
 def tables_text(seed=3):

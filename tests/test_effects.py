@@ -208,7 +208,7 @@ def test_geometric_effects_follow_their_documented_formulas():
 def test_squareness_effects_use_the_parametric_model_signs():
     """squareness:XY/XZ/YZ add what the 21-parameter model's EC0Y/EB0Z/EA0Z add."""
     from postproc.engine.parametric import ParametricEngine
-    from postproc.engine.parametric_tables import AxisTables, Squareness
+    from postproc.engine.tables import AxisTables, Squareness
 
     positions = {a: np.array([0.0, 300.0]) for a in "XYZ"}
     zeros = {a: np.zeros((2, 6)) for a in "XYZ"}

@@ -9,8 +9,8 @@ from numpy.testing import assert_allclose
 
 from postproc.calibration.calfile import load_calibration
 from postproc.cli import main
-from postproc.engine.parametric_tables import fit_tables
 from postproc.errors import MeasurementError
+from postproc.metrology.tables_fit import fit_tables
 
 
 def make_runs(path, rng, axis="X", targets=(0.0, 37.5, 81.0, 118.25, 160.0, 203.5, 240.0), n=5):

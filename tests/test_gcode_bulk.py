@@ -1,10 +1,9 @@
-"""The bulk lane gives byte for byte the output of the per-line fast lane and of the
-general path, on generated programs and at every chunk boundary."""
+"""The bulk lane gives byte for byte the output of the general path, on generated
+programs and at every chunk boundary."""
 
 import dataclasses
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -21,8 +20,7 @@ ENGINE = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
 SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 50.0})
 MODES = {
     "bulk": {},
-    "fast": {"bulk_lane": False},
-    "general": {"fast_lane": False},
+    "general": {"bulk_lane": False},
 }
 
 
@@ -40,9 +38,8 @@ def run_all(text, *, chunk_lines=20_000, setup=SETUP, engine=ENGINE, **options):
 
 def assert_same(outs):
     ref = outs["general"]
-    for name in ("bulk", "fast"):
-        assert outs[name][0] == ref[0], name
-        assert outs[name][1] == ref[1], name
+    assert outs["bulk"][0] == ref[0]
+    assert outs["bulk"][1] == ref[1]
 
 
 # -- generated programs ------------------------------------------------------------------
@@ -172,13 +169,12 @@ class ArcModeCorrector(Corrector):
         super()._chunk(entries, write_out)
 
 
-@pytest.mark.parametrize("fast", [True, False])
-def test_first_run_line_gets_the_motion_word_when_the_controller_mode_differs(fast):
+def test_first_run_line_gets_the_motion_word_when_the_controller_mode_differs():
     # chunks: line 1 alone, lines 2-4, lines 5-6 (a run whose first line needs G1)
     text = "G0 X10 Y10 Z10\nG1 X12 Y11\nX13 Y12\nX14 Y11\nX15 Y12\nX16 Y13\n"
     outs = []
-    for opts in ({"chunk_lines": 3}, {"chunk_lines": 3, "fast_lane": False}):
-        c = ArcModeCorrector(ENGINE, Setup(), CorrectOptions(**opts, bulk_lane=fast))
+    for bulk_lane in (True, False):
+        c = ArcModeCorrector(ENGINE, Setup(), CorrectOptions(chunk_lines=3, bulk_lane=bulk_lane))
         out: list[str] = []
         c.run(text.splitlines(keepends=True), out.append)
         outs.append(("".join(out), dataclasses.asdict(c.report)))

@@ -4,8 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import lexer
@@ -112,29 +110,3 @@ def test_errors_name_their_place(text, err):
     with pytest.raises(err) as e:
         ends(text)
     assert e.value.lineno is not None
-
-
-words = st.lists(st.tuples(st.sampled_from("XYZFN"), st.floats(-500, 500).map(lambda v: f"{v:.3f}")),
-                 min_size=1, max_size=4, unique_by=lambda w: w[0])
-
-
-@given(st.lists(st.tuples(st.sampled_from(["", "G0 ", "G1 ", "G01 "]), words), min_size=1, max_size=20),
-       st.booleans(), st.booleans())
-@settings(max_examples=100, deadline=None)
-def test_fast_block_agrees_with_the_full_path(blocks, inch, incremental):
-    setup = Setup(offsets={"G54": (1.0, 2.0, 3.0)})
-    head = f"G{20 if inch else 21} G54 G0 X0 Y0 Z0\n{'G91' if incremental else 'G90'}\n"
-    lines = lexer.split_lines(head + "".join(g + " ".join(a + v for a, v in ws) + "\n" for g, ws in blocks))
-    fast, slow = Interpreter(setup), Interpreter(setup)
-    for i, line in enumerate(lines, 1):
-        a = fast.feed_line(i, line)
-        w = lexer.scan_words(line)
-        b = slow._block(i, w, False) if w else None
-        if a is None or b is None:
-            assert a is None
-            assert b is None
-            continue
-        for f in ("kind", "q0", "q1", "r", "shift", "unit", "incremental", "axis_idx", "feed_idx", "feed", "motion_idx"):
-            va, vb = getattr(a, f), getattr(b, f)
-            same = va == vb or (isinstance(va, float) and math.isnan(va) and math.isnan(vb))
-            assert same or (isinstance(va, tuple) and np.allclose(va, vb, equal_nan=True)), f

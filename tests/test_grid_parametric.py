@@ -6,7 +6,7 @@ from test_grid_machine import TABLE1_POINTS
 from postproc.calibration.measurements import Measurements
 from postproc.engine import grid, interval
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import synthetic_tables
+from postproc.simulate.s500 import synthetic_tables
 
 TOOL = np.array([0.0, 0.0, -50.0])
 

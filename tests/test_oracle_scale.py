@@ -32,12 +32,7 @@ pytestmark = pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 is not i
 
 
 # Known defects found by this oracle, left open (each fails today; strict, so a fix shows):
-KNOWN_DEFECTS = {
-    "Alien.tap": "a tiny input arc is emitted with a centre that rounds onto its end points "
-                 "(LinuxCNC: zero-radius arc)",
-    "test_files__enclosure.nc": "a tiny input arc is emitted with a 0.7 um radius (LinuxCNC: zero-radius arc)",
-    "test_files__communicator.nc": "a stretch of the original path is 100 um from the corrected path",
-}
+KNOWN_DEFECTS: dict[str, str] = {}
 
 
 def _programs():

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import synthetic_tables
+from postproc.simulate.s500 import synthetic_tables
 
 pytest.importorskip("postproc.gcode.pipeline")
 from postproc.gcode.path import Setup, program_path  # noqa: E402

@@ -1,21 +1,15 @@
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
-from scipy.spatial.transform import Rotation
 
 from postproc.calibration.calfile import load_calibration, save_calibration
 from postproc.constants import SOLVER_TOL_MM
-from postproc.engine.parametric import ParametricEngine, rotate
+from postproc.engine.parametric import ParametricEngine
+from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM
 from postproc.engine.parametric_solvers import newton_inverse
-from postproc.engine.parametric_tables import (
-    AXES,
-    SEED_CONTROL_POINTS_MM,
-    SEED_ORDER_POINTS_MM,
-    AxisTables,
-    Squareness,
-    synthetic_tables,
-)
+from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError, SolverError
+from postproc.simulate.s500 import SEED_CONTROL_POINTS_MM, synthetic_tables
 
 RNG = np.random.default_rng(5)
 TOOL = np.array([0.0, 0.0, -100.0])
@@ -67,13 +61,6 @@ def test_signs_of_squareness_follow_formats_md():
     p = eng.forward([[0, 100, 200]])
     # +EB0Z leans Z towards +x, +EC0Y leans Y towards -x, +EA0Z leans Z towards -y.
     assert_allclose(p[0], [-1e-4 * 100 + 2e-4 * 200, 100 - 3e-4 * 200, 200], atol=1e-15)
-
-
-def test_rodrigues_hamilton_rotation_matches_scipy():
-    eps = RNG.normal(0, 0.3, (200, 3))
-    eps[:5] *= 1e-9
-    r = RNG.normal(0, 100, (200, 3))
-    assert_allclose(rotate(eps, r), Rotation.from_rotvec(eps).apply(r), atol=1e-11)
 
 
 def test_orders_differ_by_the_expected_powers_of_the_angles():
@@ -248,7 +235,7 @@ def test_astatic_iteration_count_follows_the_control_law():
     takes the final formula (2) step."""
     import math
 
-    from postproc.engine.parametric_tables import AxisTables
+    from postproc.engine.tables import AxisTables
 
     positions = {a: np.array([0.0, 315.0]) for a in "XYZ"}
     zeros = {a: np.zeros((2, 6)) for a in "XYZ"}

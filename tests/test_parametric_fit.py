@@ -8,8 +8,8 @@ from postproc.calibration.measurements import Measurements, format_measurements
 from postproc.cli import main
 from postproc.engine.parametric import ParametricEngine
 from postproc.engine.parametric_fit import fit
-from postproc.engine.parametric_tables import SEED_CONTROL_POINTS_MM, synthetic_tables
 from postproc.errors import MeasurementError
+from postproc.simulate.s500 import SEED_CONTROL_POINTS_MM, synthetic_tables
 
 SIGMA = 0.002  # mm: a good tracker averaged over several shots
 TOOL = np.array([0.0, 0.0, -100.0])

@@ -7,10 +7,10 @@ from click.testing import CliRunner
 from postproc.calibration.calfile import save_calibration
 from postproc.cli import main
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_orders import compare_orders
-from postproc.engine.parametric_tables import SEED_ORDER_POINTS_MM, synthetic_tables
+from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM, compare_orders
 from postproc.engine.static import StaticEngine
 from postproc.errors import EXIT_CALIBRATION
+from postproc.simulate.s500 import synthetic_tables
 
 
 @pytest.fixture

@@ -6,21 +6,19 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from postproc.calibration.calfile import load_calibration
-from postproc.cli import main
-from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import (
-    AXES,
-    AxisTables,
-    Squareness,
-    fit_tables,
+from postproc.calibration.tables import (
     format_squareness,
     format_tables,
     read_squareness,
     read_tables,
     squareness_path_for,
-    synthetic_tables,
 )
+from postproc.cli import main
+from postproc.engine.parametric import ParametricEngine
+from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import EXIT_INPUT, CalibrationError, MeasurementError
+from postproc.metrology.tables_fit import fit_tables
+from postproc.simulate.s500 import synthetic_tables
 
 RNG = np.random.default_rng(11)
 

@@ -8,13 +8,13 @@ import pytest
 from numpy.testing import assert_allclose
 
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import synthetic_tables
 from postproc.errors import PostprocError
 from postproc.predict import frames
 from postproc.predict.chain import chain_from_dict
 from postproc.predict.operation import load_chain
 from postproc.predict.parametric_chain import chain_from_tables, tool_points
 from postproc.predict.values import evaluate
+from postproc.simulate.s500 import synthetic_tables
 
 RNG = np.random.default_rng(11)
 SAMPLES = Path(__file__).parents[1] / "samples" / "predict"

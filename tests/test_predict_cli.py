@@ -9,11 +9,12 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
+from postproc.calibration.tables import format_squareness, format_tables
 from postproc.cli import main
 from postproc.cli.predict import predict
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import format_squareness, format_tables, synthetic_tables
 from postproc.errors import EXIT_INPUT
+from postproc.simulate.s500 import synthetic_tables
 
 SAMPLES = Path(__file__).parents[1] / "samples" / "predict"
 BORE = str(SAMPLES / "bore_50H7.operation.json")

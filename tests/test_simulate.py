@@ -7,11 +7,11 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from postproc.calibration.measurements import read_measurements
+from postproc.calibration.tables import read_squareness, read_tables
 from postproc.cli import main
-from postproc.engine.parametric_tables import read_squareness, read_tables
 from postproc.engine.static import fit as fit_static
+from postproc.engine.tables import AxisTables
 from postproc.simulate import (
-    AxisErrors,
     Machine,
     MachineError,
     MachineGeometry,
@@ -25,7 +25,6 @@ from postproc.simulate import (
     simulate_points,
     static_set,
 )
-from postproc.simulate.machine import rotate
 from postproc.simulate.s500 import s500_machine
 from postproc.simulate.tables import simulate_tables
 
@@ -42,12 +41,12 @@ def affine_machine(sigma=0.002):
     """Linear positioning/straightness errors + squareness: an affine machine for r = 0."""
     s = np.array([0.0, 300.0])
     slopes = {"X": [3e-4, -1e-4, 5e-5], "Y": [2e-4, 4e-4, -8e-5], "Z": [-6e-5, 1e-4, 2.5e-4]}
-    tables = {}
+    errors = {}
     for ax, sl in slopes.items():
         v = np.zeros((2, 6))
         v[:, :3] = np.outer(s, sl) + np.array([0.01, -0.02, 0.015])
-        tables[ax] = AxisErrors(s, v)
-    geo = MachineGeometry(tables, {"EC0Y": 1e-4, "EB0Z": -5e-5, "EA0Z": 8e-5}, VOLUME)
+        errors[ax] = v
+    geo = MachineGeometry(AxisTables(dict.fromkeys(slopes, s), errors), {"EC0Y": 1e-4, "EB0Z": -5e-5, "EA0Z": 8e-5}, VOLUME)
     return Machine(geo, noise=Noise(tracker_mm=sigma))
 
 
@@ -92,16 +91,6 @@ def test_plan_expands_context_in_measuring_order():
     assert np.all(np.diff(temp) > 0)
 
 
-def test_rotation_matches_matrix_exponential():
-    from scipy.spatial.transform import Rotation
-
-    rng = np.random.default_rng(2)
-    for scale in (1e-5, 0.3):  # series branch and closed form
-        eps = rng.normal(0, scale, (50, 3))
-        r = rng.normal(0, 100, (50, 3))
-        assert_allclose(rotate(eps, r), Rotation.from_rotvec(eps).apply(r), atol=1e-10)
-
-
 def test_forward_follows_formats_md_signs():
     s = np.array([0.0, 300.0])
     geo = MachineGeometry({}, {"EC0Y": 1e-4, "EB0Z": 2e-4, "EA0Z": 3e-4}, VOLUME)
@@ -109,7 +98,7 @@ def test_forward_follows_formats_md_signs():
     assert_allclose(p, [[0 - 1e-4 * 100 + 2e-4 * 200, 100 - 3e-4 * 200, 200]])
     v = np.zeros((2, 6))
     v[:, 4] = [0, 3e-4]  # EB of X: pitch about y grows with X
-    geo = MachineGeometry({"X": AxisErrors(s, v)}, {}, VOLUME, rotation="first")
+    geo = MachineGeometry(AxisTables({"X": s}, {"X": v}), {}, VOLUME, rotation="first")
     p = geo.forward([[150, 0, 0]], [0, 0, -100])
     # eps x r = (0, 1.5e-4, 0) x (0, 0, -100) = (-0.015, 0, 0)
     assert_allclose(p, [[150 - 0.015, 0, -100]], atol=1e-12)
@@ -170,10 +159,10 @@ def test_tables_file_reads_back_and_matches_machine(tmp_path):
     assert tabs.position_mm["X"][-1] == 315  # the end of travel is always measured
     assert_allclose(np.diff(tabs.position_mm["Y"])[:-1], 7)
     for ax in "XYZ":
-        assert_allclose(tabs.errors[ax], m.geometry.tables[ax].at(tabs.position_mm[ax]), atol=1e-15)
-    assert sq.as_dict() == pytest.approx(m.geometry.squareness)
+        assert_allclose(tabs.errors[ax], m.geometry.tables.at(ax, tabs.position_mm[ax]), atol=1e-15)
+    assert sq.as_dict() == pytest.approx(m.geometry.squareness.as_dict())
     noisy, sqn = simulate_tables(m, 7, np.random.default_rng(0))
-    dev = noisy["Z"].values - m.geometry.tables["Z"].at(noisy["Z"].position)
+    dev = noisy.errors["Z"] - m.geometry.tables.at("Z", noisy.position_mm["Z"])
     assert np.std(dev[:, :3]) == pytest.approx(m.noise.interferometer_length_mm, rel=0.25)
     assert np.std(dev[:, 3:]) == pytest.approx(m.noise.interferometer_angle_rad, rel=0.25)
 

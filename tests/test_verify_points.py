@@ -7,15 +7,15 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from postproc.calibration.calfile import save_calibration
+from postproc.calibration.tables import write_tables
 from postproc.cli import main
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import Squareness, fit_tables
 from postproc.engine.static import fit as fit_static
+from postproc.metrology.tables_fit import fit_tables
 from postproc.simulate import grid_points, load_machine, random_points, simulate_points
 from postproc.simulate.control import control_experiment, format_control_report, read_control_points
 from postproc.simulate.s500 import s500_machine
 from postproc.simulate.tables import simulate_tables
-from postproc.simulate.tables_io import to_axis_tables, write_axis_errors
 
 REPO = Path(__file__).parents[1]
 S500 = REPO / "calibrations" / "s500.machine.json"
@@ -61,7 +61,7 @@ def test_parametric_fit_on_simulated_tables_recovers_the_machine(tmp_path):
     m = s500_machine()
     tabs, sq = simulate_tables(m, 2.0, np.random.default_rng(2))
     t_path, sq_path = tmp_path / "t.csv", tmp_path / "t_squareness.csv"
-    write_axis_errors(t_path, sq_path, tabs, sq)
+    write_tables(t_path, sq_path, tabs, sq)
     res = fit_tables([str(t_path)], squareness=str(sq_path))
     eng = res.engine
     p = random_points([[5, 5, 5], [310, 310, 310]], 400, np.random.default_rng(3))
@@ -75,12 +75,12 @@ def test_parametric_fit_on_simulated_tables_recovers_the_machine(tmp_path):
     # A 5 mm step samples the 10 mm lead-screw term at its zeros: it goes unseen and stays
     # in the corrected positions (seed 000: the step must not be a multiple of the pitch).
     tabs5, sq5 = simulate_tables(m, 5.0, np.random.default_rng(2))
-    write_axis_errors(t_path, sq_path, tabs5, sq5)
+    write_tables(t_path, sq_path, tabs5, sq5)
     eng5 = fit_tables([str(t_path)], squareness=str(sq_path)).engine
     err5 = np.linalg.norm(m.forward(eng5.inverse(p, r).q, r) - p, axis=1)
     assert err5.max() > 0.003
     # The same machine from noise-free tables at its own 1 mm rows: exact up to interpolation.
-    exact = ParametricEngine(to_axis_tables(m.geometry.tables), Squareness(**m.geometry.squareness),
+    exact = ParametricEngine(m.geometry.tables, m.geometry.squareness,
                              order="exact", interpolation="linear")
     q = random_points(m.volume_mm, 300, np.random.default_rng(4))
     assert_allclose(exact.forward(q, r), m.forward(q, r), atol=1e-9)

@@ -7,7 +7,8 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from postproc.cli import main
-from postproc.simulate import AxisErrors, Machine, MachineGeometry, save_machine, simulate_points
+from postproc.engine.tables import AxisTables
+from postproc.simulate import Machine, MachineGeometry, save_machine, simulate_points
 from postproc.simulate.program import verify_program
 from postproc.simulate.verify import NOMINAL_CHORD_MM, Polyline, point_segment_distance
 
@@ -23,7 +24,7 @@ def offset_machine(offset):
     s = np.array([0.0, 315.0])
     v = np.zeros((2, 6))
     v[:, :3] = offset
-    return Machine(MachineGeometry({"X": AxisErrors(s, v)}, {}, VOLUME))
+    return Machine(MachineGeometry(AxisTables({"X": s}, {"X": v}), {}, VOLUME))
 
 
 def test_polyline_nearest_is_exact():
@@ -105,14 +106,14 @@ def test_machine_with_backlash_effect_depends_on_approach():
 def s500_parametric(tmp_path_factory):
     """A parametric calibration fitted from simulated 2 mm interferometer tables."""
     from postproc.calibration.calfile import save_calibration
-    from postproc.engine.parametric_tables import fit_tables
+    from postproc.calibration.tables import write_tables
+    from postproc.metrology.tables_fit import fit_tables
     from postproc.simulate.s500 import s500_machine
     from postproc.simulate.tables import simulate_tables
-    from postproc.simulate.tables_io import write_axis_errors
 
     d = tmp_path_factory.mktemp("s500")
     tabs, sq = simulate_tables(s500_machine(), 2.0, np.random.default_rng(11))
-    write_axis_errors(d / "t.csv", d / "t_squareness.csv", tabs, sq)
+    write_tables(d / "t.csv", d / "t_squareness.csv", tabs, sq)
     cal = d / "par.json"
     save_calibration(cal, fit_tables([str(d / "t.csv")]).engine, name="s500_par")
     return cal

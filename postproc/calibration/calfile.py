@@ -25,9 +25,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from postproc import __version__
+from postproc.calibration.sniff import sniff
 from postproc.engine.base import Engine
 from postproc.engine.registry import engine_class
-from postproc.errors import CalibrationError
+from postproc.errors import CalibrationError, MeasurementError
 from postproc.fileio import atomic_write_text, output_mode  # noqa: F401  (re-exported)
 
 FORMAT = "postproc calibration"
@@ -162,9 +163,6 @@ def load_calibration(path) -> Calibration:
 
 def _csv_kind(path: str) -> str | None:
     """What formats.md file ``path`` holds (for a calibration given a CSV), else None."""
-    from postproc.calibration.sniff import sniff
-    from postproc.errors import MeasurementError
-
     names = {"measurements": "point measurements", "tables": "axis error tables", "squareness": "squareness",
              "runs": "ISO 230-2 interferometer runs", "isg": "TF5280 component errors"}
     try:

@@ -107,6 +107,8 @@ class CsvTable:
         return "see the formats section of the README for the columns this file needs"
 
     header_lineno: int = 0
+    #: metadata key -> (line number, line text) of its ``# key: value`` line
+    meta_lines: dict[str, tuple[int, str]] = field(default_factory=dict)
 
 
 def _cell_starts(line: str, n: int, sep: str = ",") -> list[int]:
@@ -184,7 +186,7 @@ def read_csv(path) -> CsvTable:
 
 def _units_place(table: CsvTable, text: str) -> dict:
     """``lineno``/``col`` of ``text`` on the ``# units:`` line, for an error there."""
-    lineno, line = getattr(table, "meta_lines", {}).get("units", (None, ""))
+    lineno, line = table.meta_lines.get("units", (None, ""))
     if lineno is None:
         return {}
     col = line.find(text, line.find(":") + 1) if text else -1

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 from postproc.calibration.csvfile import sniff_separator
 from postproc.errors import MeasurementError
@@ -56,9 +55,3 @@ def sniff(path) -> str:
         col=1,
         hint=f"start it with one of: {'; '.join('# ' + k for k in KINDS)}",
     )
-
-
-def suffix_squareness(path) -> Path:
-    """``tables.csv`` -> ``tables_squareness.csv`` (formats.md's default companion)."""
-    p = Path(path)
-    return p.with_name(f"{p.stem}_squareness{p.suffix or '.csv'}")

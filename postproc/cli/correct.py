@@ -11,79 +11,14 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import (
-    axis_values,
-    parse_context,
-    parse_home,
-    parse_offset,
-    parse_tool_length,
-    parse_vector,
-)
+# build_setup: re-exported for the flags files of tests/cases
+from postproc.cli.options import build_setup as build_setup
+from postproc.cli.options import setup_options
 from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
 from postproc.errors import PostprocError
 
 # Files larger than this get a progress line on stderr (when stderr is a terminal).
 PROGRESS_MIN_BYTES = 2_000_000
-
-
-def read_tool_table(path: str) -> dict[int, float]:
-    """Tool lengths (mm) from a LinuxCNC tool table: lines like ``T1 P1 Z100.5 D6 ;comment``."""
-    lengths: dict[int, float] = {}
-    try:
-        text = Path(path).read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise PostprocError(f"cannot read tool table: {exc.strerror}", path=path) from None
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        body = raw.split(";", 1)[0].strip()
-        if not body:
-            continue
-        fields = {}
-        for item in body.split():
-            letter, value = item[:1].upper(), item[1:]
-            try:
-                fields[letter] = float(value)
-            except ValueError:
-                raise PostprocError(f"tool table field {item!r} is not a letter and a number",
-                                    path=path, lineno=lineno) from None
-        if "T" not in fields:
-            raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
-        lengths[int(fields["T"])] = fields.get("Z", 0.0)
-    return lengths
-
-
-def parse_start(text: str) -> dict[str, float]:
-    """``"X10,Y20,Z150"`` (any of X, Y, Z; end with ``in`` for inches) -> machine mm by axis."""
-    values = axis_values(text, text, "XYZ", param_hint="--start", once=True)
-    if not values:
-        raise click.BadParameter(f"{text!r}: expected X..,Y..,Z.. (any of them)", param_hint="--start")
-    return values
-
-
-def build_setup(offset, tool_length, tool_table, tool_vector, context, start=None, home=()):
-    from postproc.gcode.path import Setup
-
-    offsets = {}
-    for text in offset:
-        name, values = parse_offset(text)
-        missing = [a for a in "XYZ" if a not in values]
-        if missing:
-            raise click.BadParameter(f"{text!r}: give all of X, Y and Z (missing {', '.join(missing)})",
-                                     param_hint="--offset")
-        offsets[name] = (values["X"], values["Y"], values["Z"])
-    tools = read_tool_table(tool_table) if tool_table else {}
-    for text in tool_length:
-        h, length = parse_tool_length(text)
-        tools[h] = length
-    vec = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
-    ctx = dict(parse_context(c) for c in context)
-    homes: dict = {}
-    for text in home:
-        name, values = parse_home(text)
-        if name in homes:
-            raise click.BadParameter(f"{name} is given twice", param_hint="--home")
-        homes[name] = values
-    return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
-                 start=parse_start(start) if start is not None else {}, home=homes)
 
 
 def load_maps(paths) -> list:
@@ -192,20 +127,7 @@ def _progress_printer(total_hint: str):
               type=click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False),
               help="Controller the output is for: its line length, comments, case and arc rule. "
                    "generic is what all of them accept.")
-@click.option("--offset", multiple=True, metavar="G5x=X..,Y..,Z..",
-              help="Work offset value in machine mm (end with 'in' for inches), e.g. G54=X100,Y50,Z-300. Repeatable.")
-@click.option("--tool-length", "tool_length", multiple=True, metavar="H=L",
-              help="Tool length (mm) for G43 H<n>, e.g. 1=100.5. Repeatable.")
-@click.option("--tool-table", "tool_table", default=None, type=click.Path(dir_okay=False),
-              help="LinuxCNC tool table (.tbl) giving tool lengths (Z column, mm).")
-@click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
-              help="Tool vector r (mm) from gauge point to tool tip, overriding (0,0,-length).")
-@click.option("--start", default=None, metavar="X..,Y..,Z..",
-              help="Machine axis positions (mm, as G53; end with 'in' for inches) at program start, for the "
-                   "axes the program has not positioned yet, e.g. Z150. Needs --offset for G54.")
-@click.option("--home", multiple=True, metavar="G28=X..,Y..,Z..",
-              help="Stored position G28 or G30 goes to, in machine mm (end with 'in' for inches), any of X, Y, Z. "
-                   "Without it an axis sent there is unknown until the program positions it again. Repeatable.")
+@setup_options
 @click.option("--cycles", type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
               help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
                    "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")
@@ -214,8 +136,6 @@ def _progress_printer(total_hint: str):
                    "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")
 @click.option("--no-expand", "no_expand", is_flag=True,
               help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")
-@click.option("--context", multiple=True, metavar="NAME=VALUE",
-              help="Constant context value for the engine, e.g. temp=21.5. Repeatable.")
 @click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
               help="Largest distance (mm) between the emitted and the corrected ideal path.")
 @click.option("--decimals", default=None, type=click.IntRange(1, 8),
@@ -228,9 +148,8 @@ def _progress_printer(total_hint: str):
 @click.option("--force", is_flag=True, help="Correct a program that already carries a postproc header.")
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
-def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, tool_table, tool_vector,
-            start, home, cycles, subroutine_path, no_expand, context, tolerance, decimals, max_correction, extrapolate,
-            force, maps, dialect):
+def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subroutine_path, no_expand, tolerance,
+            decimals, max_correction, extrapolate, force, maps, dialect):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -270,7 +189,6 @@ def correct(inputs, calibration, output, output_dir, jobs, offset, tool_length, 
         postproc correct samples/fanuc_drill.nc -c calibrations/s500_static.json \\
             --offset G54=X100,Y100,Z-200 --tool-length 1=100 --home G28=X0,Y0,Z0 -o drill_corrected.nc
     """
-    setup = build_setup(offset, tool_length, tool_table, tool_vector, context, start, home)
     inputs, folder = _expand_inputs(inputs)
     if folder and output is not None:
         raise click.UsageError("a folder as input needs --output-dir, not -o")

@@ -8,6 +8,8 @@ import sys
 
 import click
 
+from postproc.cli.options import setup_options
+
 # Moved blocks listed in the text report (all of them go into --json).
 LIST_MOVED = 15
 
@@ -17,20 +19,18 @@ LIST_MOVED = 15
 @click.argument("corrected", type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
 @click.option("--all", "show_all", is_flag=True, help="List every moved block, not only the largest.")
-@click.option("--offset", multiple=True, metavar="G5x=X..,Y..,Z..",
-              help="Work offset as given to 'correct' [default: the ones the corrected program's header "
-                   "records]. Matters only for programs using G53. Repeatable.")
-@click.option("--tool-length", "tool_length", multiple=True, metavar="H=L",
-              help="Tool length as given to 'correct' [default: the ones the header records]. Matters only "
-                   "for programs using G53. Repeatable.")
-def diff(original, corrected, as_json, show_all, offset, tool_length):
+@setup_options(leave_out=("--context",))
+def diff(original, corrected, as_json, show_all, setup):
     """Compare a program with its corrected version.
 
     Reports which blocks moved and by how much (end points, mm, machine axes), the
     largest and mean correction per axis, the lines inserted by segmentation and
     the lines left unchanged. Lines that are not moves must be identical in both.
-    The work offsets, tool lengths and start the program was corrected with are
-    read from its header (give --offset/--tool-length only to override them).
+    The work offsets, tool lengths, tool vector, start and G28/G30 positions the
+    program was corrected with are read from its header; give --offset,
+    --tool-length (or --tool-table), --tool-vector, --start or --home only to
+    override them (they matter for programs using G53, G28/G30 or an axis the
+    program leaves where it was).
 
     Example:
 
@@ -38,10 +38,9 @@ def diff(original, corrected, as_json, show_all, offset, tool_length):
         postproc diff samples/pocket.nc pocket_corrected.nc
         postproc diff samples/g54_g43.ngc part_corrected.ngc --json
     """
-    from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer, build_setup
+    from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer
     from postproc.gcode.compare import compare_programs
 
-    setup = build_setup(offset, tool_length, None, None, ())
     # a progress line on stderr for a big program, as 'correct' shows (when stderr is a terminal)
     progress = None
     if sys.stderr.isatty() and os.path.getsize(original) > PROGRESS_MIN_BYTES:

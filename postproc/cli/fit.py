@@ -6,40 +6,62 @@ import click
 
 from postproc.cli.options import FINITE_FLOAT, FiniteFloat, parse_vector
 
-#: Options of one tangential method: option name -> the method it belongs to.
-METHOD_OPTIONS = {"--border-blend": "interval", "--grid-model": "grid", "--fill-missing": "grid"}
+#: prefix of the parameter names of the method options (kept apart from the command's own)
+_PREFIX = "method_option_"
 
 
-@click.command()
+def _method_option(opt) -> click.Option:
+    """The click option of a registry :class:`postproc.engine.registry.FitOption`."""
+    attrs: dict = {"help": opt.help, "default": None, "metavar": opt.metavar}
+    if opt.type == "float":
+        attrs["type"] = FINITE_FLOAT if opt.minimum is None else FiniteFloat(min=opt.minimum)
+    elif opt.type == "choice":
+        attrs["type"] = click.Choice(list(opt.choices))
+    elif opt.type == "flag":
+        attrs["is_flag"] = True
+    if opt.multiple:
+        attrs["multiple"] = True
+    return click.Option([opt.flag, _PREFIX + opt.keyword], **attrs)
+
+
+class MethodOptionsCommand(click.Command):
+    """A command whose --method choices and method options are read from
+    :mod:`postproc.engine.registry` when it is used: they go after the parameter
+    named ``after`` (a method registered later is taken without a change here)."""
+
+    def __init__(self, *args, after: str, **kwargs) -> None:
+        self._after = after
+        self._cache: tuple = ((), [])
+        super().__init__(*args, **kwargs)
+
+    @property
+    def params(self) -> list[click.Parameter]:
+        from postproc.engine import registry
+
+        key = tuple((name, id(m)) for name, m in registry.METHODS.items())
+        if self._cache[0] != key:
+            method = click.Option(
+                ["-m", "--method"], type=click.Choice(registry.fit_methods()), default=None,
+                help=f"Model to fit. Default: {' or '.join(registry.tables_methods())} for axis error tables, "
+                     f"{registry.DEFAULT_POINTS_METHOD} for points.")
+            options = [_method_option(opt) for opt, _methods in registry.fit_options().values()]
+            at = next(k for k, p in enumerate(self._static) if p.name == self._after) + 1
+            self._cache = (key, [*self._static[:1], method, *self._static[1:at], *options, *self._static[at:]])
+        return self._cache[1]
+
+    @params.setter
+    def params(self, value: list[click.Parameter]) -> None:
+        self._static = list(value)
+        self._cache = ((), [])
+
+
+@click.command(cls=MethodOptionsCommand, after="squareness")
 @click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
-@click.option("-m", "--method", type=click.Choice(["static", "interval", "grid", "parametric"]),
-              default=None, help="Model to fit. Default: parametric for axis error tables, static for points.")
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
               help="Calibration file to write (JSON text), whatever its name.")
 @click.option("--name", default=None, help="Calibration name recorded in corrected programs (default: output stem).")
 @click.option("--squareness", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Squareness file for axis error tables (default: TABLES_squareness.csv if present).")
-@click.option("--intervals", default=None, metavar="SPEC",
-              help="Interval method: partition, e.g. 'X=0,100,200,315;Y=3;Z=2' (edges, or a count per axis).")
-@click.option("--border-blend", "border_blend", type=FiniteFloat(min=0), default=None, metavar="MM",
-              help="Interval method: width of the zone blending neighbouring cells at each border "
-                   "(default 1 mm; 0: the seed's pure piecewise model).")
-@click.option("--step", default=None, metavar="MM",
-              help="Grid method: grid step u1,u2,u3 in mm (default: the lattice step of the data).")
-@click.option("--screw-pitch", "screw_pitch", multiple=True, metavar="AXIS=P",
-              help="Declared lead-screw pitch (mm) of an axis, to warn about grid steps that alias it.")
-@click.option("--grid-model", "grid_model", type=click.Choice(["trilinear", "cell"]), default=None,
-              help="Grid method: trilinear tangent field (default, continuous) or the seed's "
-                   "piecewise-affine cells.")
-@click.option("--fill-missing", "fill_missing", is_flag=True, default=None,
-              help="Grid method: fill lattice nodes without measurements from their neighbours "
-                   "(listed as a warning) instead of refusing the grid.")
-@click.option("--knot-spacing", "knot_spacing", type=FINITE_FLOAT, default=None, metavar="MM",
-              help="Parametric identification: B-spline knot spacing (default: from the data).")
-@click.option("--order", type=click.Choice(["first", "second", "exact"]), default=None,
-              help="Parametric: forward-model order stored in the calibration (default: first).")
-@click.option("--solver", type=click.Choice(["newton", "astatic"]), default=None,
-              help="Parametric: inverse solver stored in the calibration (default: newton).")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
 @click.option("--effect", "effects", multiple=True, metavar="NAME",
@@ -54,8 +76,8 @@ METHOD_OPTIONS = {"--border-blend": "interval", "--grid-model": "grid", "--fill-
 @click.option("--max-correction", "max_correction", type=FiniteFloat(min=0), default=1.0, show_default=True,
               metavar="MM", help="Refuse to write a calibration whose correction anywhere in its volume "
                                  "exceeds this (an undetermined fit).")
-def fit(files, method, output, name, squareness, intervals, border_blend, step, screw_pitch, grid_model,
-        fill_missing, knot_spacing, order, solver, tool_vector, effects, base_path, register, max_correction):
+def fit(files, method, output, name, squareness, tool_vector, effects, base_path, register, max_correction,
+        **method_options):
     """Fit a calibration from point measurements or axis error tables.
 
     FILES are formats.md CSV files: point measurements (several files are fitted
@@ -78,26 +100,17 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
     from postproc.calibration.calfile import save_calibration
     from postproc.calibration.measurements import read_measurement_files
     from postproc.calibration.sniff import sniff
-    from postproc.engine.registry import fitter
+    from postproc.engine import registry
     from postproc.errors import CalibrationError, MeasurementError
 
     kinds = ["tables" if k == "isg" else k for k in (sniff(f) for f in files)]
+    given = _given(method_options)
     if base_path is not None:
+        if given:
+            raise click.UsageError(f"--base keeps the calibration as it is; drop {', '.join(given)}")
         _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction)
         return
-    options = {
-        "intervals": intervals,
-        "border_blend_mm": border_blend,
-        "step": step,
-        "screw_pitch": list(screw_pitch) or None,
-        "model": grid_model,
-        "fill_missing": fill_missing,
-        "knot_spacing": knot_spacing,
-        "order": order,
-        "solver": solver,
-    }
-    options = {k: v for k, v in options.items() if v is not None}
-    given = {"--border-blend": border_blend, "--grid-model": grid_model, "--fill-missing": fill_missing}
+    options = {opt.keyword: value for flag, (opt, value) in given.items()}
     if ("tables" in kinds or "runs" in kinds) and kinds.count("squareness") == 1 and squareness is None:
         # A squareness file given among FILES is taken as --squareness.
         squareness = files[kinds.index("squareness")]
@@ -111,21 +124,23 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
         if "squareness" in kinds:
             raise MeasurementError("more than one squareness file", path=files[kinds.index("squareness")],
                                    hint="give one squareness file (among FILES or with --squareness)")
-        if method not in (None, "parametric"):
-            raise click.UsageError("axis error tables make a parametric calibration; drop --method or use parametric")
-        _check_method_options("parametric", given)
+        table_methods = " or ".join(registry.tables_methods())
+        if method is not None and method not in registry.tables_methods():
+            raise click.UsageError(f"axis error tables make a {table_methods} calibration; drop --method or use "
+                                   f"{table_methods}")
+        method = method or registry.tables_methods()[0]
+        _check_method_options(method, given, tables=True)
         if effects:
             raise click.UsageError("--effect is fitted from point measurements, not axis error tables; "
                                    "fit the tables alone, then 'postproc check POINTS -c CAL --fixed' tells "
                                    "which effect the points show")
-        from postproc.engine.parametric_tables import fit_tables
+        from postproc.metrology.tables_fit import tables_fitter
 
-        result = fit_tables([f for f, k in zip(files, kinds, strict=True) if k == "tables"], squareness=squareness,
-                            runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], **options)
+        result = tables_fitter(method)(
+            [f for f, k in zip(files, kinds, strict=True) if k == "tables"], squareness=squareness,
+            runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], **options)
     else:
-        method = method or "static"
-        if (order or solver) and method != "parametric":
-            raise click.UsageError("--order and --solver apply to the parametric method only")
+        method = method or registry.DEFAULT_POINTS_METHOD
         _check_method_options(method, given)
         r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
         data = read_measurement_files(files, r)
@@ -135,11 +150,13 @@ def fit(files, method, output, name, squareness, intervals, border_blend, step, 
 
                 result = fit_with_effects(method, data, list(effects), register=bool(register), **options)
             else:
-                result = fitter(method)(data, **options)
+                result = registry.fitter(method)(data, **options)
         except CalibrationError as exc:
-            if border_blend is not None and "border blend" in exc.message:
-                # The blend is checked against the partition, known only once fitted.
-                raise click.UsageError(f"--border-blend {border_blend:g}: {exc.message}") from None
+            for flag, (opt, value) in given.items():
+                if opt.error_phrase and opt.error_phrase in exc.message:
+                    # Such a value is checked against the data, known only once fitted.
+                    shown = f"{value:g}" if isinstance(value, float) else str(value)
+                    raise click.UsageError(f"{flag} {shown}: {exc.message}") from None
             raise
     for line in result.report:
         click.echo(line, err=True)
@@ -186,9 +203,32 @@ def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effect
     click.echo(f"wrote {output}", err=True)
 
 
-def _check_method_options(method: str, given: dict) -> None:
-    """A usage error for an option of another method (``given``: option name -> value or None)."""
-    for opt, value in given.items():
-        if value is not None and METHOD_OPTIONS[opt] != method:
-            raise click.UsageError(f"{opt} applies to the {METHOD_OPTIONS[opt]} method only "
-                                   f"(this fit is {method}); add --method {METHOD_OPTIONS[opt]} or drop {opt}")
+def _given(method_options: dict) -> dict:
+    """The method options given on the command line: flag -> (FitOption, value); a
+    repeatable option's values as a list."""
+    from postproc.engine.registry import fit_options
+
+    given = {}
+    for flag, (opt, _methods) in fit_options().items():
+        value = method_options.get(_PREFIX + opt.keyword)
+        if value is None or value == () or value is False:
+            continue
+        given[flag] = (opt, list(value) if opt.multiple else value)
+    return given
+
+
+def _check_method_options(method: str, given: dict, tables: bool = False) -> None:
+    """A usage error for a method option the fit's method does not take (``given``: flag ->
+    (FitOption, value)); ``tables``: the fit is made from axis error tables."""
+    from postproc.engine.registry import fit_options
+
+    declared = fit_options()
+    for flag, (opt, _value) in given.items():
+        methods = declared[flag][1]
+        if method not in methods:
+            names = " and ".join(methods)
+            raise click.UsageError(f"{flag} applies to the {names} method{'s' if len(methods) > 1 else ''} only "
+                                   f"(this fit is {method}); add --method {methods[0]} or drop {flag}")
+        if tables and not opt.tables:
+            raise click.UsageError(f"{flag} applies to {method} fits from point measurements, not to axis "
+                                   f"error tables; drop {flag}")

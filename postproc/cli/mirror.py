@@ -7,13 +7,7 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import (
-    FINITE_FLOAT,
-    FiniteFloat,
-    parse_offset,
-    parse_tool_length,
-    parse_vector,
-)
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
 from postproc.errors import PostprocError
 
 
@@ -158,16 +152,13 @@ def kfb(semi, t_ref, allowance, origin, thinner, smooth, output):
               help="Average each K_fb node with its neighbours along B (odd N nodes per row); 1 = none.")
 @click.option("--clamp", is_flag=True, help="Hold the edge value for program points outside a map "
                                             "(default: refuse).")
-@click.option("--offset", "offsets", multiple=True, metavar="G54=X..,Y..,Z..", help="Work offset (repeatable).")
-@click.option("--tool-length", "tool_lengths", multiple=True, metavar="H=L", help="Tool length (repeatable).")
-@click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
-              help="Tool vector (mm), e.g. 0,150,0 for a spindle along +Y.")
+@setup_options
 @click.option("--max-correction", "max_correction", type=FINITE_FLOAT, default=1.0, show_default=True, metavar="MM",
               help="Refuse a program whose total correction (geometric + maps + allowance) exceeds this.")
 @click.option("-o", "--output-dir", "outdir", required=True, type=click.Path(file_okay=False),
               help="Directory for the programs and maps of the next pocket.")
-def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, smooth, clamp, offsets,
-            tool_lengths, tool_vector, max_correction, outdir):
+def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, smooth, clamp, setup,
+            max_correction, outdir):
     """Pocket-to-pocket self-tuning: which correction each pocket gets (formulas 7-11).
 
     PLAN is a CSV '# postproc mirror plan v1' with columns pocket,B0,Z0,semi,finish
@@ -179,7 +170,9 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     semi-finish pass. For the next pocket to machine, the corrected program is
     written to OUTPUT_DIR (geometric calibration first, then the maps added along
     the spindle axis): <pocket>_semi.nc (allowance b, plus K_dist) or
-    <pocket>_finish.nc (K_fb, plus K_dist), with the correction map used.
+    <pocket>_finish.nc (K_fb, plus K_dist), with the correction map used. The setup
+    options are those of 'postproc correct' (e.g. --tool-vector 0,150,0 for a spindle
+    along +Y).
 
     Example:
 
@@ -215,7 +208,6 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     corr = fin_corr if fin_corr is not None else semi_corr
     kind = "finish" if fin_corr is not None else "semi"
     out = Path(outdir)
-    setup = _setup(offsets, tool_lengths, tool_vector)
     target = out / f"{last.pocket.name}_{kind}.nc"
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
@@ -239,14 +231,6 @@ def _save_parts(corr, out: Path, name: str) -> None:
             target = out / f"{name}_{part.name.split('@')[0]}.csv"
             save_map(target, part, comments=[f"{part.name}: pocket-local coordinates of pocket {name}"])
             click.echo(f"wrote {target}")
-
-
-def _setup(offsets, tool_lengths, tool_vector):
-    from postproc.gcode.path import Setup
-
-    return Setup(offsets=dict(parse_offset(o) for o in offsets),
-                 tool_lengths=dict(parse_tool_length(t) for t in tool_lengths),
-                 tool_vector=parse_vector(tool_vector, "--tool-vector") if tool_vector else None)
 
 
 def _correct_program(template, calibration, setup, corr, target: Path, max_correction: float) -> str:

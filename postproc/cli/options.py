@@ -1,11 +1,17 @@
-"""Parsers for option values shared by several commands (they raise click.BadParameter)."""
+"""Parsers for option values shared by several commands (they raise click.BadParameter),
+and the options declared once for every command that runs a program (:func:`setup_options`)."""
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import re
+from pathlib import Path
 
 import click
+
+from postproc.errors import PostprocError
 
 _AXES = "XYZ"
 
@@ -118,3 +124,147 @@ def parse_home(text: str) -> tuple[str, dict[str, float]]:
     if not values:
         raise click.BadParameter(f"{text!r}: give at least one of X, Y, Z", param_hint="--home")
     return name, values
+
+
+def parse_start(text: str) -> dict[str, float]:
+    """``"X10,Y20,Z150"`` (any of X, Y, Z; end with ``in`` for inches) -> machine mm by axis."""
+    values = axis_values(text, text, "XYZ", param_hint="--start", once=True)
+    if not values:
+        raise click.BadParameter(f"{text!r}: expected X..,Y..,Z.. (any of them)", param_hint="--start")
+    return values
+
+
+def read_tool_table(path: str) -> dict[int, float]:
+    """Tool lengths (mm) from a LinuxCNC tool table: lines like ``T1 P1 Z100.5 D6 ;comment``."""
+    lengths: dict[int, float] = {}
+    try:
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise PostprocError(f"cannot read tool table: {exc.strerror}", path=path) from None
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        body = raw.split(";", 1)[0].strip()
+        if not body:
+            continue
+        fields = {}
+        for item in body.split():
+            letter, value = item[:1].upper(), item[1:]
+            try:
+                fields[letter] = float(value)
+            except ValueError:
+                raise PostprocError(f"tool table field {item!r} is not a letter and a number",
+                                    path=path, lineno=lineno) from None
+        if "T" not in fields:
+            raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
+        lengths[int(fields["T"])] = fields.get("Z", 0.0)
+    return lengths
+
+
+@contextlib.contextmanager
+def _option(flag: str):
+    """Name ``flag`` in a click.BadParameter raised inside that does not name its option."""
+    try:
+        yield
+    except click.BadParameter as exc:
+        if exc.param is None and exc.param_hint is None:
+            exc.param_hint = flag
+        raise
+
+
+def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=()):
+    """The :class:`postproc.gcode.path.Setup` the options of :func:`setup_options` give (their
+    texts as typed); a partial work offset, a home or an axis given twice is refused."""
+    from postproc.gcode.path import Setup
+
+    offsets = {}
+    for text in offset:
+        with _option("--offset"):
+            name, values = parse_offset(text)
+        missing = [a for a in "XYZ" if a not in values]
+        if missing:
+            raise click.BadParameter(f"{text!r}: give all of X, Y and Z (missing {', '.join(missing)})",
+                                     param_hint="--offset")
+        offsets[name] = (values["X"], values["Y"], values["Z"])
+    tools = read_tool_table(tool_table) if tool_table else {}
+    for text in tool_length:
+        with _option("--tool-length"):
+            h, length = parse_tool_length(text)
+        tools[h] = length
+    vec = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
+    with _option("--context"):
+        ctx = dict(parse_context(c) for c in context)
+    homes: dict = {}
+    for text in home:
+        name, values = parse_home(text)
+        if name in homes:
+            raise click.BadParameter(f"{name} is given twice", param_hint="--home")
+        homes[name] = values
+    return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
+                 start=parse_start(start) if start is not None else {}, home=homes)
+
+
+#: The setup options, in the order they are listed: flag -> (parameter name, click.option arguments).
+#: Their values are the keyword arguments of :func:`build_setup`.
+SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
+    "--offset": ("offset", dict(
+        multiple=True, metavar="G5x=X..,Y..,Z..",
+        help="Work offset in machine mm (end with 'in' for inches), all of X, Y and Z, e.g. "
+             "G54=X100,Y50,Z-300. Repeatable.")),
+    "--tool-length": ("tool_length", dict(
+        multiple=True, metavar="H=L", help="Tool length (mm) for G43 H<n>, e.g. 1=100.5. Repeatable.")),
+    "--tool-table": ("tool_table", dict(
+        default=None, type=click.Path(dir_okay=False),
+        help="LinuxCNC tool table (.tbl) giving tool lengths (Z column, mm); --tool-length overrides "
+             "its entries.")),
+    "--tool-vector": ("tool_vector", dict(
+        default=None, metavar="X,Y,Z",
+        help="Tool vector r (mm) from gauge point to tool tip, overriding (0,0,-length).")),
+    "--start": ("start", dict(
+        default=None, metavar="X..,Y..,Z..",
+        help="Machine axis positions (mm, as G53; end with 'in' for inches) at program start, for the "
+             "axes the program has not positioned yet, e.g. Z150. Needs --offset for G54.")),
+    "--home": ("home", dict(
+        multiple=True, metavar="G28=X..,Y..,Z..",
+        help="Stored position G28 or G30 goes to, in machine mm (end with 'in' for inches), any of X, Y, Z. "
+             "Without it an axis sent there is unknown until the program positions it again. Repeatable.")),
+    "--context": ("context", dict(
+        multiple=True, metavar="NAME=VALUE",
+        help="Constant context value during the run, read by the calibration's model, e.g. temp=21.5. "
+             "Repeatable.")),
+}
+
+
+def setup_options(fn=None, *, leave_out: tuple[str, ...] = ()):
+    """Declare the machine setup options (:data:`SETUP_OPTIONS`: work offsets, tool lengths,
+    tool table, tool vector, start position, G28/G30 positions, context) on a command, and
+    pass the command one ``setup`` argument in their place: the
+    :class:`postproc.gcode.path.Setup` that :func:`build_setup` makes of them, before the
+    command's body runs, so every command refuses the same bad value the same way.
+
+    ``leave_out``: flags that do not apply to the command (not declared).
+    """
+    unknown = set(leave_out) - set(SETUP_OPTIONS)
+    if unknown:
+        raise ValueError(f"not setup options: {sorted(unknown)}")
+    chosen = [flag for flag in SETUP_OPTIONS if flag not in leave_out]
+
+    def decorate(fn):
+        @functools.wraps(fn)
+        def command(*args, **kwargs):
+            given = {SETUP_OPTIONS[flag][0]: kwargs.pop(SETUP_OPTIONS[flag][0]) for flag in chosen}
+            return fn(*args, setup=build_setup(**given), **kwargs)
+
+        for flag in reversed(chosen):
+            name, attrs = SETUP_OPTIONS[flag]
+            command = click.option(flag, name, **attrs)(command)
+        return command
+
+    return decorate(fn) if fn is not None else decorate
+
+
+def context_option(help: str | None = None):
+    """The ``--context NAME=VALUE`` option alone (as in :data:`SETUP_OPTIONS`), passed to the
+    command as a dict of the values parsed (``help``: the command's own wording)."""
+    name, attrs = SETUP_OPTIONS["--context"]
+    attrs = {**attrs, "help": help or attrs["help"]}
+    return click.option("--context", name, callback=lambda ctx, param, value: dict(parse_context(c) for c in value),
+                        **attrs)

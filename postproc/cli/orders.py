@@ -39,8 +39,7 @@ def orders(calibration, points, point, tool_vector, k, as_json):
 
     from postproc.calibration.calfile import load_calibration
     from postproc.engine.parametric import ParametricEngine
-    from postproc.engine.parametric_orders import compare_orders
-    from postproc.engine.parametric_tables import SEED_ORDER_POINTS_MM
+    from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM, compare_orders
     from postproc.errors import CalibrationError
 
     cal = load_calibration(calibration)

@@ -391,7 +391,7 @@ def chain_cmd(tables, squareness, order, angular, output):
         postproc predict chain tables.csv --squareness tables_squareness.csv -o machine.chain.json
     """
     from postproc.calibration.calfile import atomic_write_text
-    from postproc.engine.parametric_tables import read_squareness, read_tables, squareness_path_for
+    from postproc.calibration.tables import read_squareness, read_tables, squareness_path_for
     from postproc.predict.parametric_chain import chain_from_tables
 
     tab = read_tables(tables)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, FiniteFloat, parse_context, parse_vector
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, context_option, parse_vector
 
 
 def _parse_volume(text: str) -> list[list[float]]:
@@ -57,10 +57,9 @@ def _parse_floats(text: str, what: str) -> list[float]:
                    "towards T1 with time constant TAU s.")
 @click.option("--load-values", "load_values", default=None, metavar="L1,L2,...",
               help="Measure the set once per load value and write a load column.")
-@click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
-              help="A constant context column (repeatable).")
+@context_option(help="A constant context column, e.g. temp=21.5. Repeatable.")
 def simulate(machine, grid_step, n_random, static, tables, step, output, seed, no_noise, volume,
-             tool_vectors, approach, repeats, time_span, temp_profile, load_values, contexts):
+             tool_vectors, approach, repeats, time_span, temp_profile, load_values, context):
     """Measure a virtual machine: tracker points or interferometer tables.
 
     MACHINE is a machine definition (JSON, "format": "postproc machine"; see
@@ -79,7 +78,7 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
     import numpy as np
 
     from postproc.calibration.measurements import format_measurements
-    from postproc.fileio import atomic_write_text, atomic_write_texts
+    from postproc.fileio import atomic_write_text
     from postproc.simulate import load_machine
     from postproc.simulate.points import (
         grid_points,
@@ -101,16 +100,13 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
                 f"seed: {seed}", f"noise: {'off' if no_noise else 'on'}"]
 
     if tables:
-        from postproc.calibration.sniff import suffix_squareness
+        from postproc.calibration.tables import squareness_path_for, write_tables
         from postproc.simulate.tables import simulate_tables
-        from postproc.simulate.tables_io import axis_errors_text
 
-        ctx = dict(parse_context(c) for c in contexts)
-        tabs, sq = simulate_tables(mach, step, rng, noise=not no_noise, context=ctx)
-        sq_path = suffix_squareness(output)
-        text, sq_text = axis_errors_text(tabs, sq, comments=comments + [f"step: {step:g} mm"])
-        atomic_write_texts({sq_path: sq_text, output: text})
-        click.echo(f"wrote {output} ({sum(len(t.position) for t in tabs.values())} rows) and {sq_path}",
+        tabs, sq = simulate_tables(mach, step, rng, noise=not no_noise, context=context)
+        sq_path = squareness_path_for(output)
+        write_tables(output, sq_path, tabs, sq, comments=comments + [f"step: {step:g} mm"])
+        click.echo(f"wrote {output} ({sum(len(x) for x in tabs.position_mm.values())} rows) and {sq_path}",
                    err=True)
         return
 
@@ -129,7 +125,7 @@ def simulate(machine, grid_step, n_random, static, tables, step, output, seed, n
         time_span_s=time_span,
         temp_profile=temp_profile,
         load_values=_parse_floats(load_values, "--load-values") if load_values else None,
-        context=dict(parse_context(c) for c in contexts),
+        context=context,
     )
     meas = simulate_plan(mach, plan, rng, noise=not no_noise)
     atomic_write_text(output, format_measurements(meas, comments=comments))

@@ -6,14 +6,7 @@ import json
 
 import click
 
-from postproc.cli.options import (
-    FINITE_FLOAT,
-    FiniteFloat,
-    parse_context,
-    parse_offset,
-    parse_tool_length,
-    parse_vector,
-)
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
 
 
 @click.command()
@@ -27,14 +20,7 @@ from postproc.cli.options import (
               help="Control points CSV (X,Y,Z targets): print a Table-1 style report instead.")
 @click.option("--corrected", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Already corrected program to run instead of correcting PROGRAM in-process.")
-@click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
-              help="Tool vector (mm) from the gauge point to the functional point.")
-@click.option("--offset", "offsets", multiple=True, metavar="G54=X..,Y..,Z..",
-              help="Work offset in machine coordinates (repeatable).")
-@click.option("--tool-length", "tool_lengths", multiple=True, metavar="H=L",
-              help="Tool length of offset number H in mm (repeatable).")
-@click.option("--context", "contexts", multiple=True, metavar="NAME=VALUE",
-              help="Context value during the run (temp=21.5, load=300 ...; repeatable).")
+@setup_options
 @click.option("--tolerance", type=FiniteFloat(min=0, min_open=True), default=None, metavar="MM",
               help="Path tolerance of the in-process correction (default: the correct command's).")
 @click.option("--max-step", "max_step", type=FINITE_FLOAT, default=0.5, show_default=True, metavar="MM",
@@ -46,8 +32,8 @@ from postproc.cli.options import (
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="PNG of the deviation along the program (needs matplotlib).")
-def verify(program, calibrations, machine_path, points, corrected, tool_vector, offsets, tool_lengths,
-           contexts, tolerance, max_step, shots, seed, no_noise, as_json, plot):
+def verify(program, calibrations, machine_path, points, corrected, setup, tolerance, max_step, shots, seed,
+           no_noise, as_json, plot):
     """Run a program, or control points, on a virtual machine and report the errors.
 
     PROGRAM mode: the original program and its corrected version (corrected here with
@@ -64,6 +50,8 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
     --points mode: for each control point, Delta = |actual - target| uncorrected and
     with each calibration, their sums and the improvement in percent, in the layout
     of seed 000's Tables 1 and 5. The tracker is simulated (--shots averaged, --seed).
+    The targets are machine positions: of the setup options only --tool-vector (for
+    points without their own) and --context apply.
 
     Example:
 
@@ -81,35 +69,10 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
 
         require_matplotlib("--plot")
     machine = _load_machine(machine_path)
-    ctx = dict(parse_context(c) for c in contexts)
-    tool = parse_vector(tool_vector, "--tool-vector") if tool_vector else None
     if points is not None:
         if program is not None or corrected is not None:
             raise click.UsageError("give either PROGRAM or --points, not both")
-        from postproc.simulate.control import (
-            control_experiment,
-            format_control_report,
-            read_control_points,
-        )
-
-        cps = read_control_points(points)
-        cals = [load_calibration(c) for c in calibrations]
-        r = cps.tool if cps.tool is not None else (np.asarray(tool) if tool is not None else None)
-        report = control_experiment(machine, cps.targets, [(_label(c), c.engine) for c in cals], r, ctx,
-                                    np.random.default_rng(seed), shots=shots, noise=not no_noise)
-        if as_json:
-            click.echo(json.dumps(report.to_dict(), indent=2))
-            return
-        shot_text = (f"tracker {report.shots} shots averaged per point (sigma {report.sigma_mm * 1000:g} um "
-                     f"per shot), seed {seed}" if report.shots else "no tracker noise")
-        tool_text = ("per-point tool vectors" if cps.tool is not None
-                     else f"tool vector {','.join(f'{v:g}' for v in (tool or (0, 0, 0)))}")
-        click.echo(f"machine {machine.name}: {len(cps.targets)} control points from {points}; {tool_text}; "
-                   f"{shot_text}")
-        click.echo("D = |actual - target| in mm")
-        click.echo(format_control_report(report), nl=False)
-        for note in report.notes:
-            click.echo(f"note: {note}", err=True)
+        _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json)
         return
 
     if program is None:
@@ -120,16 +83,13 @@ def verify(program, calibrations, machine_path, points, corrected, tool_vector, 
         raise click.UsageError("give -c CALIBRATION to correct PROGRAM with, or --corrected FILE")
     from postproc.simulate.program import verify_program
 
-    setup_args = {"offsets": dict(parse_offset(o) for o in offsets),
-                  "tool_lengths": dict(parse_tool_length(t) for t in tool_lengths),
-                  "tool_vector": tool, "context": ctx}
     cals = [load_calibration(c) for c in calibrations]
     options = None
     if tolerance is not None:
         from postproc.gcode.pipeline import CorrectOptions
 
         options = CorrectOptions(tolerance_mm=tolerance)
-    report = verify_program(program, machine, cals, setup_args, corrected=corrected, max_step_mm=max_step,
+    report = verify_program(program, machine, cals, setup, corrected=corrected, max_step_mm=max_step,
                             options=options)
     if plot:
         from postproc.fileio import save_figure
@@ -186,3 +146,41 @@ def _load_machine(path: str):
 
 def _label(cal) -> str:
     return f"{cal.method} ({cal.name})" if cal.name and cal.name != cal.method else cal.method
+
+
+def _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json) -> None:
+    """--points mode of :func:`verify`."""
+    import numpy as np
+
+    from postproc.calibration.calfile import load_calibration
+
+    ctx, tool = setup.context, setup.tool_vector
+    unused = [flag for flag, value in (("--offset", setup.offsets), ("--tool-length/--tool-table", setup.tool_lengths),
+                                       ("--start", setup.start), ("--home", setup.home)) if value]
+    if unused:
+        raise click.UsageError(f"--points takes machine targets: {', '.join(unused)} would not be used; "
+                               "drop it (of the setup options, --tool-vector and --context apply)")
+    from postproc.simulate.control import (
+        control_experiment,
+        format_control_report,
+        read_control_points,
+    )
+
+    cps = read_control_points(points)
+    cals = [load_calibration(c) for c in calibrations]
+    r = cps.tool if cps.tool is not None else (np.asarray(tool) if tool is not None else None)
+    report = control_experiment(machine, cps.targets, [(_label(c), c.engine) for c in cals], r, ctx,
+                                np.random.default_rng(seed), shots=shots, noise=not no_noise)
+    if as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2))
+        return
+    shot_text = (f"tracker {report.shots} shots averaged per point (sigma {report.sigma_mm * 1000:g} um "
+                 f"per shot), seed {seed}" if report.shots else "no tracker noise")
+    tool_text = ("per-point tool vectors" if cps.tool is not None
+                 else f"tool vector {','.join(f'{v:g}' for v in (tool or (0, 0, 0)))}")
+    click.echo(f"machine {machine.name}: {len(cps.targets)} control points from {points}; {tool_text}; "
+               f"{shot_text}")
+    click.echo("D = |actual - target| in mm")
+    click.echo(format_control_report(report), nl=False)
+    for note in report.notes:
+        click.echo(f"note: {note}", err=True)

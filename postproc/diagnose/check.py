@@ -32,6 +32,7 @@ from postproc.diagnose.robust import Screening, screen
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
+from postproc.engine.registry import fit_methods, fold_options, option_flag, refit_options
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
 
 #: A cross-validated RMS within this many times the noise floor is consistent with noise
@@ -41,8 +42,6 @@ CONSISTENT_RATIO = 1.15
 # Points beyond the calibrated volume by more than this (mm) are outside it.
 OUTSIDE_TOLERANCE_MM = 1e-3
 
-#: methods ``postproc fit`` can refit from points (its --method choices)
-FIT_METHODS = ("static", "interval", "grid", "parametric")
 
 
 @dataclass
@@ -111,7 +110,7 @@ class CheckResult:
     def extends(self) -> bool:
         """Suggestions keep the calibration and add effects to it (``fit --base``): the
         calibration is held as it is (--fixed) or its method cannot be refitted from points."""
-        return self.fixed or self.method not in FIT_METHODS
+        return self.fixed or self.method not in fit_methods()
 
     def fit_command(self, names: list[str]) -> str | None:
         stem = Path(self.cal_path).stem if self.cal_path else "calibration"
@@ -128,7 +127,7 @@ class CheckResult:
             return shlex.join([*args, "-o", out])
         args = ["postproc", "fit", *self.files, "--method", self.method]
         for key, value in self.fit_options.items():
-            args += [f"--{key}", str(value)]
+            args += [option_flag(key), str(value)]
         for n in names:
             args += ["--effect", n]
         return shlex.join([*args, "-o", out])
@@ -197,18 +196,6 @@ def measured_residual(engine, ds: Dataset) -> np.ndarray:
         ) from None
 
 
-def refit_options(engine) -> dict:
-    """The fitter options that reproduce the calibration's own partition or grid step,
-    so that the cross-validation refits the same model, not the method's default."""
-    model = engine.model_to_dict()
-    if engine.method == "interval" and "edges_mm" in model:
-        return {"intervals": ";".join(f"{a}={','.join(f'{v:.3f}' for v in e)}"
-                                      for a, e in zip("XYZ", model["edges_mm"], strict=True))}
-    if engine.method == "grid" and "step_mm" in model:
-        return {"step": ",".join(f"{v:g}" for v in model["step_mm"])}
-    return {}
-
-
 def outside_volume(engine, ds: Dataset) -> np.ndarray:
     """(N,) True for rows whose commanded point lies outside the calibrated volume (beyond
     OUTSIDE_TOLERANCE_MM): there the calibration extrapolates."""
@@ -240,10 +227,10 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     if fixed:
         model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual", register)
     else:
-        # A training fold of a grid calibration leaves lattice nodes without points; the
-        # fold's model fills them from neighbours (the held-out points then test that fill).
+        # The method's options for a training fold (a grid fold fills lattice nodes left
+        # without points from their neighbours).
         options = refit_options(base_engine)
-        cv_options = {**options, "fill_missing": True} if cal.method == "grid" else options
+        cv_options = {**options, **fold_options(cal.method)}
         model = base_model(cal.method, cv_options, engine=base_engine, register=register)
     options = refit_options(base_engine)
     keep = np.ones(len(ds_all), dtype=bool)

@@ -1,8 +1,9 @@
 """The walkthrough data set: a machine with one hidden effect, for the README.
 
 ``python -m postproc.diagnose.demo samples`` writes ``samples/walkthrough_points.csv``:
-a static machine (S500-like scale and squareness errors, seed 000 magnitudes) with a
-12 um backlash on X, measured at 80 random points, 3 shots each (tracker noise
+a static machine (S500-like scale and squareness errors, seed 000 magnitudes) with
+12 um of lost motion on X (the axis lags its approach direction by 6 um, so the ISO
+230-2 reversal value b = B = x_up - x_down is -12 um), measured at 80 random points, 3 shots each (tracker noise
 sigma 1.5 um per axis), approach directions, time and temperature recorded. Fixed
 seed: the file is the same on every run.
 """
@@ -21,7 +22,8 @@ from postproc.engine.static import StaticEngine
 
 SEED = 2024
 SIGMA_MM = 0.0015
-BACKLASH_X_MM = 0.012
+# lost motion: the axis stops 6 um short on either side, B = x_up - x_down = -12 um
+BACKLASH_X_MM = -0.012
 N_POINTS = 80
 SHOTS = 3
 VOLUME_MM = [[0.0, 0.0, 0.0], [315.0, 315.0, 315.0]]
@@ -52,7 +54,7 @@ def walkthrough_points(seed: int = SEED) -> Measurements:
 def write(directory) -> Path:
     path = Path(directory) / "walkthrough_points.csv"
     comments = [
-        "walkthrough data: static machine + hidden 12 um backlash on X, tracker sigma 1.5 um,",
+        "walkthrough data: static machine + hidden 12 um lost motion on X, tracker sigma 1.5 um,",
         f"80 points x 3 shots; regenerate with: python -m postproc.diagnose.demo {directory}",
     ]
     atomic_write_text(path, format_measurements(walkthrough_points(), comments=comments))

@@ -24,6 +24,7 @@ MIN_TOOL_SPREAD_MM = 10.0
 
 class Abbe(Effect):
     kind = "abbe"
+    targets = ("tilt", *AXES)
     meaning = "angular error acting through the tool vector (Abbe offset)"
 
     @property

@@ -1,14 +1,22 @@
 """Backlash (lost motion) of one axis.
 
-Physics: the nut, couplings and guides of an axis leave a gap; the axis stops short
-of the commanded position by half the gap, on the side it came from. With ``dir`` the
-direction the axis approached the point (+1 / -1, 0 when it did not move)::
+Physics: the nut, couplings and guides of an axis leave a gap. Moving one way, the
+drive pushes the axis through the gap and the axis stops short of the commanded
+position by half of it; moving the other way, short on the other side. With ``dir``
+the direction the axis approached the point (+1 / -1, 0 when it did not move)::
 
     displacement along the axis = b / 2 * dir
 
-``b`` (``b_mm``) is the reversal error that a bidirectional ISO 230-2 test reads.
-Needs ``dirx`` / ``diry`` / ``dirz``. Compensable: the correction pipeline knows the
-direction of every move of the program.
+``b`` (``b_mm``) is the reversal value that a bidirectional ISO 230-2 test reads,
+with its sign: ``B = x_up - x_down``, the mean positional deviation (reached minus
+commanded) approached from + minus that approached from -. Lost motion makes the
+axis lag: it falls short moving +, so ``b < 0`` (a gap of 12 um is ``b = -0.012``).
+``b > 0`` is an axis that runs ahead of its command, as one does whose controller
+compensates more backlash than there is. Needs ``dirx`` / ``diry`` / ``dirz``.
+Compensable: the correction pipeline commands each point with the direction the
+corrected program moves the axis in, and at a reversal takes the difference up in
+the new direction (:mod:`postproc.gcode.directions`); for an axis that runs ahead the
+take-up moves on in the old direction, so the point overshoots by ``b`` there.
 
 A reversal that varies along the axis (the B_i of an ISO 230-2 evaluation, one per
 target) is a profile in ``config``: ``position_mm`` (increasing) and ``shape``
@@ -22,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import AXES, DIR_COLUMNS, Effect, context_column, unit_basis
+from postproc.effects.base import DIR_COLUMNS, AxisEffect, context_column, unit_basis
 from postproc.errors import CalibrationError
 
 # Fewer rows than this approached from either side cannot show a reversal: the mean on
@@ -30,13 +38,10 @@ from postproc.errors import CalibrationError
 MIN_ROWS_PER_SIDE = 3
 
 
-class Backlash(Effect):
+class Backlash(AxisEffect):
     kind = "backlash"
-    meaning = "lost motion at reversal: the axis lags by b/2 against its approach direction"
-
-    @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
+    meaning = ("reversal value b = x_up - x_down (ISO 230-2): the axis is displaced by b/2 along its approach "
+               "direction; lost motion (the axis lags) has b < 0")
 
     @property
     def needs(self) -> tuple[str, ...]:
@@ -48,7 +53,7 @@ class Backlash(Effect):
 
     @property
     def compensable_reason(self) -> str:
-        return f"compensated from the direction of each {self.target} move in the program"
+        return f"compensated from the direction the corrected program moves {self.target} in"
 
     def untestable_reason(self, q, r, ctx) -> str | None:
         if self.missing(ctx):
@@ -67,6 +72,11 @@ class Backlash(Effect):
             shape = np.asarray(self.config["shape"], dtype=float) * p["b_mm"] * 1000
             text += (f" at most, varying along {self.target} from {shape.min():+.2f} to {shape.max():+.2f} um "
                      f"over {len(shape)} positions")
+        values = p["b_mm"] * np.asarray(self.config.get("shape", [1.0]), dtype=float)
+        if np.all(values < 0):
+            text += f" (lost motion: {self.target} lags its approach direction)"
+        elif np.all(values > 0):
+            text += f" ({self.target} runs ahead of its approach direction: a compensation larger than the gap?)"
         return text
 
     def profile(self, t) -> np.ndarray:

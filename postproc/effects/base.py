@@ -20,7 +20,7 @@ import copy
 import math
 import numbers
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -105,6 +105,14 @@ class Effect:
     meaning: ClassVar[str] = ""
     #: True when ``correct`` can compensate it (given its context); else the reason why not
     compensable: ClassVar[bool] = True
+    #: the targets the kind takes (``backlash``: X, Y, Z); None: any context column
+    targets: ClassVar[tuple[str, ...] | None] = None
+    #: a context-column target must start with this (``thermal:temp...``)
+    target_prefix: ClassVar[str] = ""
+    #: what the target names, where several classes share a kind (``thermal``)
+    target_meaning: ClassVar[str] = ""
+    #: whether ``check`` tries it as a candidate at all
+    candidate: ClassVar[bool] = True
 
     def __init__(self, target: str, config: Mapping | None = None, params: Mapping | None = None):
         self.target = target
@@ -126,6 +134,24 @@ class Effect:
                     continue
                 _check_number(self.name, where, key, value)
         self.params = {k: float(params.get(k, 0.0)) for k in names}
+
+    # -- the registry's questions ---------------------------------------------------
+    @classmethod
+    def accepts(cls, target: str) -> bool:
+        """Whether ``kind:target`` names an effect of this class."""
+        if cls.targets is not None:
+            return target in cls.targets
+        return bool(target) and target.startswith(cls.target_prefix)
+
+    @classmethod
+    def candidates(cls, columns: list[str]) -> list[str]:
+        """The names of this class worth trying on data with these context columns
+        (those whose column is absent too: ``check`` reports them untestable)."""
+        if not cls.candidate:
+            return []
+        if cls.targets is not None:
+            return [f"{cls.kind}:{t}" for t in cls.targets]
+        return [f"{cls.kind}:{c}" for c in columns if cls.accepts(c)] or [f"{cls.kind}:{cls.target_prefix}"]
 
     # -- description -------------------------------------------------------------
     @property
@@ -194,7 +220,7 @@ class Effect:
                         f"otherwise): too little variation to test")
         return None
 
-    def prepare(self, q, r, ctx, resid) -> Effect:
+    def prepare(self, q, r, ctx, resid) -> Self:
         """A copy whose ``config`` is set from training data and the current residual.
 
         Default: no non-linear settings. Periodic errors search the pitch, thermal
@@ -203,7 +229,7 @@ class Effect:
         return self.copy()
 
     # -- serialisation -----------------------------------------------------------
-    def copy(self, *, config: Mapping | None = None, params=None) -> Effect:
+    def copy(self, *, config: Mapping | None = None, params=None) -> Self:
         new = copy.copy(self)
         new.config = copy.deepcopy(dict(self.config if config is None else config))
         if params is None:
@@ -216,12 +242,6 @@ class Effect:
 
     def to_dict(self) -> dict:
         return {"name": self.name, "config": copy.deepcopy(self.config), "params": dict(self.params)}
-
-    @classmethod
-    def from_dict(cls, data: Mapping) -> Effect:
-        from postproc.effects import get_effect
-
-        return get_effect(data["name"], config=data.get("config"), params=data.get("params"))
 
     def __repr__(self) -> str:
         return f"<Effect {self.name} config={self.config} params={self.params}>"
@@ -243,3 +263,84 @@ def lstsq_with_offset(B: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, flo
     coef = solve_ls(A, y)
     sse = float(np.sum((y - A @ coef) ** 2))
     return coef[:k], sse
+
+
+class AxisEffect(Effect):
+    """An effect of one axis: the target is X, Y or Z."""
+
+    targets = tuple(AXES)
+
+    @property
+    def axis(self) -> int:
+        return AXES.index(self.target)
+
+
+class ContextLinear(Effect):
+    """A zero-point shift along x, y and z proportional to a value of one context column::
+
+        displacement = (px, py, pz) * value(ctx[column])      (component-wise with q for
+                                                                 a weight per axis)
+
+    The column is the target (``load:load``, ``linear:humidity``); :meth:`value` turns
+    the column into the factor (by default its departure from the ``reference`` in the
+    config). A subclass names its three parameters and how they read, and overrides
+    :meth:`value` when the factor is not the column itself.
+    """
+
+    #: the parameters of x, y and z
+    param_names_xyz: ClassVar[tuple[str, str, str]] = ("", "", "")
+    #: the config key of the reference value subtracted from the column ("": none)
+    reference_key: ClassVar[str] = ""
+    #: the reference used when the config has none
+    reference_default: ClassVar[float] = 0.0
+    #: how ``--context`` gives the value: "the load ... VALUE"
+    given_as: ClassVar[tuple[str, str]] = ("the value", "VALUE")
+    #: the fitted size: a head "shift per unit of" before the column, and the unit and
+    #: format of each component (value * scale)
+    describe_head: ClassVar[str] = ""
+    describe_unit: ClassVar[str] = "um"
+    describe_scale: ClassVar[float] = 1000.0
+    describe_format: ClassVar[str] = "+.3f"
+
+    @property
+    def column(self) -> str:
+        return self.target
+
+    @property
+    def needs(self) -> tuple[str, ...]:
+        return (self.column,)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return self.param_names_xyz
+
+    @property
+    def compensable_reason(self) -> str:
+        what, unit = self.given_as
+        return f"compensated at {what} given as --context {self.column}={unit}"
+
+    def describe(self, params=None) -> str:
+        p = self.params if params is None else params
+        return (f"{self.describe_head} {self.column} "
+                + " ".join(f"{a} {p[k] * self.describe_scale:{self.describe_format}} {self.describe_unit}"
+                           for a, k in zip(AXES, self.param_names, strict=True)))
+
+    @property
+    def reference(self) -> float:
+        return float(self.config.get(self.reference_key, self.reference_default)) if self.reference_key else 0.0
+
+    def prepare(self, q, r, ctx, resid) -> Self:
+        """The reference set to its default (a subclass may take it from the data)."""
+        return self.copy(config={self.reference_key: self.reference_default}) if self.reference_key else self.copy()
+
+    def value(self, v: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """The factor of each parameter: (N,) for all three axes alike, or (N, 3)."""
+        return v - self.reference if self.reference_key else v
+
+    def basis(self, q, r, ctx) -> np.ndarray:
+        v = context_column(ctx, self.column, len(q), self.name)
+        B = np.zeros((len(q), 3, 3))
+        w = self.value(v, q)
+        diagonal = np.arange(3)
+        B[:, diagonal, diagonal] = w[:, None] if w.ndim == 1 else w
+        return B

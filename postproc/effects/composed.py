@@ -16,6 +16,7 @@ import numpy as np
 
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.effects.base import Effect, context_hint
+from postproc.effects.registry import effect_from_dict
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.errors import CalibrationError, MissingSetupError
 
@@ -34,24 +35,19 @@ class ComposedEngine(Engine):
         self.base = base
         self.effects = list(effects)
         self.method = base.method  # the calibration file's method is the base's
+        # the base's solver stands for the inverse: the fixed point only adds the effects
+        self.solver = base.solver
+        self.accept_residual_mm = base.accept_residual_mm
 
     @property
-    def needs(self) -> list[str]:
+    def needs(self) -> tuple[str, ...]:
         out: list[str] = []
         for e in self.effects:
             out += [c for c in e.needs if c not in out]
-        return out
+        return tuple(out)
 
     def effects_dicts(self) -> list[dict]:
         return [e.to_dict() for e in self.effects]
-
-    @property  # type: ignore[override]
-    def solver(self) -> str:
-        return self.base.solver
-
-    @property  # type: ignore[override]
-    def accept_residual_mm(self) -> float:
-        return self.base.accept_residual_mm
 
     def with_extrapolation(self, mode: str) -> Engine:
         return type(self)(self.base.with_extrapolation(mode), self.effects)
@@ -120,3 +116,51 @@ def _subset_context(context, mask: np.ndarray, n: int):
         a = np.asarray(v)
         out[k] = a[mask] if a.ndim == 1 and a.shape[0] == n else v
     return out
+
+
+#: Value of every context column the effect needs when its config is checked (a valid
+#: approach direction, time, temperature and load alike): only the config is under test.
+CHECK_CONTEXT_VALUE = 1.0
+
+_CONFIG_HINT = ("an effect's config holds the settings its fit found (pitch_mm, tau_s, center_mm, "
+                "half_travel_mm, reference...); refit with 'postproc fit --effect NAME' or correct the file")
+
+
+def check_config(effect: Effect, volume_mm=None) -> None:
+    """Evaluate ``effect`` once, at the corners and centre of ``volume_mm``, so that a
+    config it cannot work with (a ``periodic`` without ``pitch_mm``, ``tau_s <= 0`` ...)
+    is refused when a calibration or machine is loaded, not when it is first used.
+
+    Raises CalibrationError naming the effect (the caller adds the file).
+    """
+    vol = np.asarray(volume_mm if volume_mm is not None else np.zeros((2, 3)), dtype=float)
+    if vol.shape != (2, 3) or not np.all(np.isfinite(vol)):
+        vol = np.zeros((2, 3))
+    q = np.vstack([vol, vol.mean(axis=0)])
+    ctx = {c: np.full(len(q), CHECK_CONTEXT_VALUE) for c in effect.needs}
+    try:
+        B = np.asarray(effect.basis(q, np.zeros_like(q), ctx), dtype=float)
+    except CalibrationError as exc:
+        name = effect.name
+        msg = exc.message if name in exc.message else f"effect {name}: {exc.message}"
+        raise CalibrationError(msg, hint=exc.hint or _CONFIG_HINT) from None
+    except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as exc:
+        raise CalibrationError(f"effect {effect.name}: config {effect.config} cannot be used "
+                               f"({type(exc).__name__}: {exc})", hint=_CONFIG_HINT) from None
+    if B.shape != (len(q), 3, len(effect.param_names)) or not np.all(np.isfinite(B)):
+        raise CalibrationError(f"effect {effect.name}: config {effect.config} does not give a finite "
+                               "displacement in the calibrated volume", hint=_CONFIG_HINT)
+
+
+def compose(engine: Engine, effects_dicts) -> Engine:
+    """Wrap ``engine`` so that forward adds the effects' displacements.
+
+    Each effect is built and its config checked (:func:`check_config`) here, so a wrong
+    one is reported on loading.
+    """
+    effects = [e if isinstance(e, Effect) else effect_from_dict(e) for e in (effects_dicts or [])]
+    if not effects:
+        return engine
+    for e in effects:
+        check_config(e, engine.volume_mm)
+    return ComposedEngine(engine, effects)

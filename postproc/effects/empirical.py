@@ -21,6 +21,7 @@ from itertools import product
 import numpy as np
 
 from postproc.effects.base import AXES, Effect
+from postproc.errors import CalibrationError
 
 DEGREES = {"poly2": 2, "poly3": 3, "poly4": 4}
 # Half extents below this (mm) are floored: one position along an axis gives no shape.
@@ -32,11 +33,13 @@ def _legendre(u: np.ndarray, n: int) -> np.ndarray:
 
 
 def exponents(degree: int) -> list[tuple[int, int, int]]:
-    return [e for e in product(range(degree + 1), repeat=3) if 2 <= sum(e) <= degree]
+    return [(i, j, k) for i, j, k in product(range(degree + 1), repeat=3) if 2 <= i + j + k <= degree]
 
 
 class Empirical(Effect):
     kind = "empirical"
+    targets = tuple(DEGREES)
+    candidate = False
     meaning = "empirical smooth residual field (no physical model): corrects what no known effect explains"
 
     @property
@@ -66,8 +69,6 @@ class Empirical(Effect):
     def basis(self, q, r, ctx) -> np.ndarray:
         ext = self.extent()
         if ext is None:
-            from postproc.errors import CalibrationError
-
             raise CalibrationError(f"effect {self.name} has no extent (center_x_mm ... half_z_mm) in its config")
         c, h = ext.mean(axis=0), np.maximum(0.5 * (ext[1] - ext[0]), MIN_HALF_MM)
         u = np.clip((np.asarray(q, dtype=float) - c) / h, -1.0, 1.0)

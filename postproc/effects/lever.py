@@ -19,10 +19,13 @@ import numpy as np
 from postproc.effects.base import AXES, Effect
 
 ROT_NAMES = ("EA", "EB", "EC")  # rotation about x, y, z (ISO 230-1)
+#: every ordered pair of two axes: XY, XZ, YX ...
+PAIRS = tuple(a + b for a in AXES for b in AXES if a != b)
 
 
 class Lever(Effect):
     kind = "lever"
+    targets = PAIRS
     meaning = "angular error of one axis growing with its travel, acting over another axis's travel"
 
     @property
@@ -35,7 +38,8 @@ class Lever(Effect):
 
     @property
     def rotations(self) -> tuple[int, int]:
-        return tuple(k for k in range(3) if k != self.b)  # type: ignore[return-value]
+        k1, k2 = (k for k in range(3) if k != self.b)
+        return k1, k2
 
     @property
     def param_names(self) -> tuple[str, ...]:

@@ -13,34 +13,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import Effect, context_column
+from postproc.effects.base import DIR_COLUMNS, ContextLinear
+
+# Context columns with an effect of their own, never offered as linear:<column>.
+OWN_COLUMNS = {"t", "load", *DIR_COLUMNS}
 
 
-class Linear(Effect):
+class Linear(ContextLinear):
     kind = "linear"
     meaning = "zero-point shift proportional to a context variable"
+    param_names_xyz = ("ax_mm_per_unit", "ay_mm_per_unit", "az_mm_per_unit")
+    reference_key = "reference"
+    describe_head = "shift per unit of"
 
-    @property
-    def needs(self) -> tuple[str, ...]:
-        return (self.target,)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return ("ax_mm_per_unit", "ay_mm_per_unit", "az_mm_per_unit")
-
-    @property
-    def compensable_reason(self) -> str:
-        return f"compensated at the value given as --context {self.target}=VALUE"
-
-    def describe(self, params=None) -> str:
-        p = self.params if params is None else params
-        return (f"shift per unit of {self.target} "
-                + " ".join(f"{a} {p[k] * 1000:+.3f} um" for a, k in zip("XYZ", self.param_names, strict=True)))
-
-    def basis(self, q, r, ctx) -> np.ndarray:
-        v = context_column(ctx, self.target, len(q), self.name)
-        ref = float(self.config.get("reference", 0.0))
-        return np.einsum("n,jk->njk", v - ref, np.eye(3))
+    @classmethod
+    def candidates(cls, columns: list[str]) -> list[str]:
+        return [f"linear:{c}" for c in columns if c not in OWN_COLUMNS and not c.startswith("temp")]
 
     def prepare(self, q, r, ctx, resid) -> Linear:
         return self.copy(config={"reference": float(np.mean(np.asarray(ctx[self.target], dtype=float)))})

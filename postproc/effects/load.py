@@ -11,32 +11,16 @@ load: ``--context load=VALUE``.
 
 from __future__ import annotations
 
-import numpy as np
-
-from postproc.effects.base import Effect, context_column
+from postproc.effects.base import ContextLinear
 
 
-class Load(Effect):
+class Load(ContextLinear):
     kind = "load"
     meaning = "static deflection: zero-point migration proportional to the table load"
+    param_names_xyz = ("cx_mm_per_unit", "cy_mm_per_unit", "cz_mm_per_unit")
+    given_as = ("the load", "VALUE")
+    describe_head = "deflection per unit of"
 
-    @property
-    def needs(self) -> tuple[str, ...]:
-        return (self.target,)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return ("cx_mm_per_unit", "cy_mm_per_unit", "cz_mm_per_unit")
-
-    @property
-    def compensable_reason(self) -> str:
-        return f"compensated at the load given as --context {self.target}=VALUE"
-
-    def describe(self, params=None) -> str:
-        p = self.params if params is None else params
-        return (f"deflection per unit of {self.target} "
-                + " ".join(f"{a} {p[k] * 1000:+.3f} um" for a, k in zip("XYZ", self.param_names, strict=True)))
-
-    def basis(self, q, r, ctx) -> np.ndarray:
-        w = context_column(ctx, self.target, len(q), self.name)
-        return np.einsum("n,jk->njk", w, np.eye(3))
+    @classmethod
+    def candidates(cls, columns: list[str]) -> list[str]:
+        return ["load:load"]

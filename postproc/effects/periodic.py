@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import AXES, Effect, unit_basis
+from postproc.effects.base import AxisEffect, unit_basis
+from postproc.errors import CalibrationError
 
 # Shortest pitch searched: ball screws on machine tools have leads of 2 mm and more.
 PITCH_MIN_MM = 2.0
@@ -91,13 +92,9 @@ def periodogram(x: np.ndarray, y: np.ndarray, freqs: np.ndarray) -> np.ndarray:
     return ((np.cos(phase) @ yc) ** 2 + (np.sin(phase) @ yc) ** 2) / len(x)
 
 
-class Periodic(Effect):
+class Periodic(AxisEffect):
     kind = "periodic"
     meaning = "periodic positioning error repeating with the lead-screw pitch"
-
-    @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -125,8 +122,6 @@ class Periodic(Effect):
     def basis(self, q, r, ctx) -> np.ndarray:
         pitch = self.config.get("pitch_mm")
         if not pitch or pitch <= 0:
-            from postproc.errors import CalibrationError
-
             raise CalibrationError(f"effect {self.name} has no pitch_mm > 0 in its config")
         phase = 2 * np.pi * q[:, self.axis] / pitch
         return np.stack([unit_basis(np.cos(phase), self.axis), unit_basis(np.sin(phase), self.axis)], axis=2)

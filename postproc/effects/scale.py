@@ -13,16 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import AXES, Effect, unit_basis
+from postproc.effects.base import AxisEffect, unit_basis
 
 
-class Scale(Effect):
+class Scale(AxisEffect):
     kind = "scale"
     meaning = "linear positioning (scale) error of an axis"
-
-    @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
 
     @property
     def param_names(self) -> tuple[str, ...]:

@@ -23,6 +23,7 @@ PAIRS = {"XY": ("EC0Y_rad", 1, 0, -1.0), "XZ": ("EB0Z_rad", 2, 0, 1.0), "YZ": ("
 
 class Squareness(Effect):
     kind = "squareness"
+    targets = tuple(PAIRS)
     meaning = "out-of-squareness of two axes"
 
     @property

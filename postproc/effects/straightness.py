@@ -13,9 +13,12 @@ Parameters are the deviations at the end of the travel, mm. Compensable from pos
 
 from __future__ import annotations
 
+from typing import Self
+
 import numpy as np
 
-from postproc.effects.base import AXES, Effect
+from postproc.effects.base import AXES, AxisEffect
+from postproc.errors import CalibrationError
 
 # Fewer distinct positions along the axis than this cannot show a cubic shape beside
 # the affine terms of the model.
@@ -25,18 +28,39 @@ MIN_DISTINCT_POSITIONS = 5
 MIN_HALF_TRAVEL_MM = 1e-3
 
 
-class Straightness(Effect):
+class AxisShape(AxisEffect):
+    """Bow (u^2) and S-shape (u^3) along one axis, ``u`` its position scaled to [-1, 1]
+    over the travel in ``config``: what straightness and positioning share."""
+
+    def untestable_reason(self, q, r, ctx) -> str | None:
+        n = len(np.unique(np.round(np.asarray(q)[:, self.axis], 6)))
+        if n < MIN_DISTINCT_POSITIONS:
+            return f"only {n} distinct {self.target} positions"
+        return None
+
+    def prepare(self, q, r, ctx, resid) -> Self:
+        x = np.asarray(q)[:, self.axis]
+        lo, hi = float(np.min(x)), float(np.max(x))
+        return self.copy(config={"center_mm": 0.5 * (lo + hi), "half_travel_mm": max(0.5 * (hi - lo), MIN_HALF_TRAVEL_MM)})
+
+    def scaled_position(self, q: np.ndarray) -> np.ndarray:
+        """The axis position scaled to [-1, 1] over the travel in ``config``."""
+        c = float(self.config.get("center_mm", 0.0))
+        h = float(self.config.get("half_travel_mm", 1.0))
+        if h <= 0:
+            raise CalibrationError(f"effect {self.name} has no half_travel_mm > 0 in its config")
+        return (q[:, self.axis] - c) / h
+
+
+class Straightness(AxisShape):
     kind = "straightness"
     meaning = "bow and S-shape of an axis's straightness"
 
     @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
-
-    @property
     def others(self) -> tuple[int, int]:
         a = self.axis
-        return tuple(j for j in range(3) if j != a)  # type: ignore[return-value]
+        o1, o2 = (j for j in range(3) if j != a)
+        return o1, o2
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -52,27 +76,16 @@ class Straightness(Effect):
                          f"S {p[f's_{a}_mm'] * 1000:+.2f} um")
         return f"straightness of {self.target} (at end of travel) " + "; ".join(parts)
 
-    def untestable_reason(self, q, r, ctx) -> str | None:
-        n = len(np.unique(np.round(np.asarray(q)[:, self.axis], 6)))
-        if n < MIN_DISTINCT_POSITIONS:
-            return f"only {n} distinct {self.target} positions"
-        return None
-
     def basis(self, q, r, ctx) -> np.ndarray:
-        u = _scaled_position(self, q)
+        u = self.scaled_position(q)
         B = np.zeros((len(q), 3, 4))
         o1, o2 = self.others
         B[:, o1, 0], B[:, o1, 1] = u**2, u**3
         B[:, o2, 2], B[:, o2, 3] = u**2, u**3
         return B
 
-    def prepare(self, q, r, ctx, resid) -> Straightness:
-        x = np.asarray(q)[:, self.axis]
-        lo, hi = float(np.min(x)), float(np.max(x))
-        return self.copy(config={"center_mm": 0.5 * (lo + hi), "half_travel_mm": max(0.5 * (hi - lo), MIN_HALF_TRAVEL_MM)})
 
-
-class Positioning(Effect):
+class Positioning(AxisShape):
     """Non-linear positioning error of one axis (``positioning:X``): bow and S-shape of
     the error along the axis itself (the linear part is the scale, held by affine
     models). A screw or scale with a progressive pitch error, or a thermal gradient
@@ -85,10 +98,6 @@ class Positioning(Effect):
     meaning = "non-linear positioning error along an axis (bow and S-shape)"
 
     @property
-    def axis(self) -> int:
-        return AXES.index(self.target)
-
-    @property
     def param_names(self) -> tuple[str, ...]:
         return ("bow_mm", "s_mm")
 
@@ -97,22 +106,8 @@ class Positioning(Effect):
         return (f"positioning error of {self.target} (at end of travel): bow {p['bow_mm'] * 1000:+.2f} um, "
                 f"S {p['s_mm'] * 1000:+.2f} um")
 
-    untestable_reason = Straightness.untestable_reason
-    prepare = Straightness.prepare
-
     def basis(self, q, r, ctx) -> np.ndarray:
-        u = _scaled_position(self, q)
+        u = self.scaled_position(q)
         B = np.zeros((len(q), 3, 2))
         B[:, self.axis, 0], B[:, self.axis, 1] = u**2, u**3
         return B
-
-
-def _scaled_position(effect: Effect, q: np.ndarray) -> np.ndarray:
-    """The axis position scaled to [-1, 1] over the travel in ``config``."""
-    c = float(effect.config.get("center_mm", 0.0))
-    h = float(effect.config.get("half_travel_mm", 1.0))
-    if h <= 0:
-        from postproc.errors import CalibrationError
-
-        raise CalibrationError(f"effect {effect.name} has no half_travel_mm > 0 in its config")
-    return (q[:, effect.axis] - c) / h

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.effects.base import Effect, context_column, lstsq_with_offset
+from postproc.effects.base import ContextLinear, lstsq_with_offset
+from postproc.errors import CalibrationError
 
 # Time constants searched, as fractions of the time span of the data: from a lag that
 # is over after the first few percent of the campaign (it looks like a step) to one
@@ -37,21 +38,13 @@ TAU_GRID_POINTS = 48
 REFERENCE_TEMPERATURE_C = 20.0
 
 
-class ThermalTime(Effect):
+class ThermalTime(ContextLinear):
     kind = "thermal"
     meaning = "warm-up drift: zero points migrate along a first-order lag in time"
-
-    @property
-    def needs(self) -> tuple[str, ...]:
-        return ("t",)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return ("dx_mm", "dy_mm", "dz_mm")
-
-    @property
-    def compensable_reason(self) -> str:
-        return "compensated at the warm-up time given as --context t=SECONDS"
+    targets = ("t",)
+    target_meaning = "t (time)"
+    param_names_xyz = ("dx_mm", "dy_mm", "dz_mm")
+    given_as = ("the warm-up time", "SECONDS")
 
     def describe(self, params=None) -> str:
         p = self.params if params is None else params
@@ -60,15 +53,11 @@ class ThermalTime(Effect):
                 + " ".join(f"{a} {p[k] * 1000:+.2f} um" for a, k in zip("XYZ", self.param_names, strict=True))
                 + f", time constant {tau / 60:.1f} min")
 
-    def basis(self, q, r, ctx) -> np.ndarray:
-        t = context_column(ctx, "t", len(q), self.name)
+    def value(self, v: np.ndarray, q: np.ndarray) -> np.ndarray:
         tau = float(self.config.get("tau_s", 0.0))
         if tau <= 0:
-            from postproc.errors import CalibrationError
-
             raise CalibrationError(f"effect {self.name} has no tau_s > 0 in its config")
-        g = 1.0 - np.exp(-np.clip(t, 0.0, None) / tau)
-        return np.einsum("n,jk->njk", g, np.eye(3))
+        return 1.0 - np.exp(-np.clip(v, 0.0, None) / tau)
 
     def prepare(self, q, r, ctx, resid) -> ThermalTime:
         t = np.asarray(ctx["t"], dtype=float)
@@ -83,37 +72,18 @@ class ThermalTime(Effect):
         return self.copy(config={"tau_s": float(best)})
 
 
-class ThermalTemperature(Effect):
+class ThermalTemperature(ContextLinear):
     kind = "thermal"
     meaning = "thermal growth linear in temperature (about 20 °C)"
-
-    @property
-    def needs(self) -> tuple[str, ...]:
-        return (self.target,)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return ("kx_mm_per_C", "ky_mm_per_C", "kz_mm_per_C")
-
-    @property
-    def compensable_reason(self) -> str:
-        return f"compensated at the temperature given as --context {self.target}=°C"
-
-    def describe(self, params=None) -> str:
-        p = self.params if params is None else params
-        return (f"thermal growth per °C of {self.target} "
-                + " ".join(f"{a} {p[k] * 1000:+.2f} um/°C" for a, k in zip("XYZ", self.param_names, strict=True)))
-
-    def basis(self, q, r, ctx) -> np.ndarray:
-        T = context_column(ctx, self.target, len(q), self.name)
-        ref = float(self.config.get("reference_C", REFERENCE_TEMPERATURE_C))
-        return np.einsum("n,jk->njk", T - ref, np.eye(3))
-
-    def prepare(self, q, r, ctx, resid) -> ThermalTemperature:
-        return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})
+    target_prefix = "temp"
+    target_meaning = "temp... (a temperature column)"
+    param_names_xyz = ("kx_mm_per_C", "ky_mm_per_C", "kz_mm_per_C")
+    reference_key, reference_default = "reference_C", REFERENCE_TEMPERATURE_C
+    given_as = ("the temperature", "°C")
+    describe_head, describe_unit, describe_format = "thermal growth per °C of", "um/°C", "+.2f"
 
 
-class ThermalExpansion(Effect):
+class ThermalExpansion(ContextLinear):
     """Thermal expansion of the axes with temperature (``expansion:temp``): each axis's
     positioning error grows with its position from the axis zero and with the
     temperature's departure from 20 °C (ISO 230-3's nominal differential expansion
@@ -126,28 +96,15 @@ class ThermalExpansion(Effect):
 
     kind = "expansion"
     meaning = "thermal expansion of the axes: positioning error growing with position and temperature"
+    param_names_xyz = ("ax_per_C", "ay_per_C", "az_per_C")
+    reference_key, reference_default = "reference_C", REFERENCE_TEMPERATURE_C
+    given_as = ("the temperature", "°C")
+    describe_head, describe_unit, describe_format = "thermal expansion per °C of", "ppm/°C", "+.2f"
+    describe_scale = 1e6
 
-    @property
-    def needs(self) -> tuple[str, ...]:
-        return (self.target,)
+    @classmethod
+    def candidates(cls, columns: list[str]) -> list[str]:
+        return [f"expansion:{c}" for c in columns if c.startswith("temp")] or ["expansion:temp"]
 
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return ("ax_per_C", "ay_per_C", "az_per_C")
-
-    @property
-    def compensable_reason(self) -> str:
-        return f"compensated at the temperature given as --context {self.target}=°C"
-
-    def describe(self, params=None) -> str:
-        p = self.params if params is None else params
-        return (f"thermal expansion per °C of {self.target} "
-                + " ".join(f"{a} {p[k] * 1e6:+.2f} ppm/°C" for a, k in zip("XYZ", self.param_names, strict=True)))
-
-    def basis(self, q, r, ctx) -> np.ndarray:
-        T = context_column(ctx, self.target, len(q), self.name)
-        ref = float(self.config.get("reference_C", REFERENCE_TEMPERATURE_C))
-        return np.einsum("n,nj,jk->njk", T - ref, q, np.eye(3))
-
-    def prepare(self, q, r, ctx, resid) -> ThermalExpansion:
-        return self.copy(config={"reference_C": REFERENCE_TEMPERATURE_C})
+    def value(self, v: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return (v - self.reference)[:, None] * q

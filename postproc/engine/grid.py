@@ -63,6 +63,7 @@ from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
+    Measurements,
     check_points,
     check_tool_vectors,
 )
@@ -423,6 +424,12 @@ def _interpolation_check(origin, step, nodes) -> str | None:
     )
 
 
+def refit_options(engine) -> dict:
+    """The :func:`fit` options that fit ``engine``'s lattice again (its step)."""
+    model = engine.model_to_dict()
+    return {"step": ",".join(f"{v:g}" for v in model["step_mm"])} if "step_mm" in model else {}
+
+
 def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", fill_missing: bool = False,
         **options) -> FitResult:
     """Fit the quasi-differential model from tracker points on a regular lattice.
@@ -432,8 +439,6 @@ def fit(measurements, *, step=None, screw_pitch=None, model: str = "trilinear", 
     ("trilinear" or "cell"), ``fill_missing`` (fill nodes without measurements from
     their neighbours instead of refusing; for cross-validation and partial grids).
     """
-    from postproc.calibration.measurements import Measurements
-
     if model not in MODELS:
         raise PostprocError(f"grid model {model!r} is not one of {', '.join(MODELS)}")
     items = list(measurements)

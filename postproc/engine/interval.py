@@ -54,6 +54,7 @@ from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
+    Measurements,
     check_points,
     check_tool_vectors,
 )
@@ -169,7 +170,7 @@ class IntervalEngine(Engine):
                 continue
             pv = self._apply(q[used], sel[used])
             value[used] += weight[used, None] * pv
-            if jacobian:
+            if jac is not None:
                 i, j, k = sel[used].T
                 jac[used] += weight[used, None, None] * self.G[i, j, k]
                 dw = np.where(np.array(a, dtype=bool)[None, :], dlam, -dlam)[used]
@@ -292,14 +293,21 @@ def partition_edges(q: np.ndarray, spec: list, path: str = "") -> list[np.ndarra
     return edges
 
 
+def refit_options(engine) -> dict:
+    """The :func:`fit` options that fit ``engine``'s partition again (its edges)."""
+    model = engine.model_to_dict()
+    if "edges_mm" not in model:
+        return {}
+    return {"intervals": ";".join(f"{a}={','.join(f'{v:.3f}' for v in e)}"
+                                  for a, e in zip("XYZ", model["edges_mm"], strict=True))}
+
+
 def fit(measurements, *, intervals=None, border_blend_mm: float = BORDER_BLEND_MM, **options) -> FitResult:
     """Fit ``G`` and ``r_O1`` per cell by least squares.
 
     Options: ``intervals`` (spec string, see :func:`parse_intervals`),
     ``border_blend_mm`` (0 for the seed's pure piecewise model).
     """
-    from postproc.calibration.measurements import Measurements
-
     items = list(measurements)
     meas = Measurements.concat(items)
     path = meas.path

@@ -30,15 +30,19 @@ the table ranges; the correction pipeline refuses points outside it unless asked
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
+from postproc.engine import parametric_solvers
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
-from postproc.engine.parametric_tables import AXES, AxisTables, Squareness
 from postproc.engine.pchip import Pchip
+from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError
+from postproc.rotation import cross, rotate
 
 ORDERS = ("first", "second", "exact")
 SOLVERS = ("newton", "astatic")
@@ -101,31 +105,13 @@ class AxisFunctions:
         else:
             v, dv = self._linear(tc)
         outside = t != tc
+        if dv is None:  # pchip without derivative, clamped: the values are all that is asked
+            return v
         if self.extrapolate == "linear":
             v = v + (t - tc)[:, None] * dv
         elif derivative and outside.any():
             dv = np.where(outside[:, None], 0.0, dv)
         return (v, dv) if derivative else v
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (N, 3) arrays (faster than np.cross for 3-vectors)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-
-
-def rotate(eps: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """R(eps) r for rotation vectors eps (N, 3), via Rodrigues-Hamilton parameters.
-
-    lambda0 = cos(theta/2), lambda = sin(theta/2) eps/theta; R r = r + 2 lambda0 (lambda x r)
-    + 2 lambda x (lambda x r). Written with sinc so it is exact and stable at theta -> 0.
-    """
-    theta = np.linalg.norm(eps, axis=1)
-    lam0 = np.cos(theta / 2)
-    lam = 0.5 * np.sinc(theta / (2 * np.pi))[:, None] * eps  # sin(theta/2)/theta * eps
-    lr = cross(lam, r)
-    return r + 2 * lam0[:, None] * lr + 2 * cross(lam, lr)
 
 
 def second_order_displacement(eps: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -148,6 +134,7 @@ class ParametricEngine(Engine):
     def __init__(self, tables: AxisTables, squareness: Squareness | None = None, volume_mm=None, *,
                  order: str = "first", solver: str = "newton", interpolation: str = "pchip",
                  extrapolate: str = "clamp", astatic: AstaticSettings | dict | None = None) -> None:
+        tables.require_all()
         table_volume = tables.volume_mm
         super().__init__(table_volume if volume_mm is None else volume_mm)
         if np.any(self.volume_mm[0] < table_volume[0] - VOLUME_EDGE_SLACK_MM) or np.any(
@@ -172,15 +159,21 @@ class ParametricEngine(Engine):
         elif astatic is not None and not isinstance(astatic, AstaticSettings):
             raise CalibrationError(f"astatic settings must be an object (grid_step_mm, gain, time_step), got {astatic!r}")
         self.astatic = astatic or AstaticSettings()
+        # Largest inverse residual the solver stands for. Newton: SOLVER_TOL_MM (it
+        # converges or raises). Astatic: one grid step u, the method's own criterion; its
+        # measured errors are tens of micrometres (see benchmarks/solvers.py), reported
+        # per point in InverseResult.residual_mm.
+        self.accept_residual_mm = SOLVER_TOL_MM if solver == "newton" else float(self.astatic.grid_step_mm)
         self._functions = [AxisFunctions(tables.position_mm[a], tables.errors[a], interpolation, extrapolate)
                            for a in AXES]
         sq = self.squareness
         # Squareness as a constant matrix: rho += S q.
         self._S = np.array([[0.0, -sq.EC0Y, sq.EB0Z], [0.0, 0.0, -sq.EA0Z], [0.0, 0.0, 0.0]])
+        self._bounds: tuple | None = None  # of the error functions, for line_curvature_bound
 
     def with_options(self, **changes) -> ParametricEngine:
         """A copy with other order / solver / interpolation / extrapolate / astatic settings."""
-        opts = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
+        opts: dict[str, Any] = {"order": self.order, "solver": self.solver, "interpolation": self.interpolation,
                 "extrapolate": self.extrapolate, "astatic": self.astatic}
         unknown = set(changes) - set(opts)
         if unknown:
@@ -192,16 +185,6 @@ class ParametricEngine(Engine):
 
     def with_extrapolation(self, mode: str) -> ParametricEngine:
         return self.with_options(extrapolate=mode)
-
-    @property  # type: ignore[override]
-    def accept_residual_mm(self) -> float:
-        """Largest inverse residual this engine's solver stands for.
-
-        Newton: SOLVER_TOL_MM (it converges or raises). Astatic: one grid step u, the
-        method's own criterion; its measured errors are tens of micrometres (see
-        benchmarks/solvers.py), reported per point in ``InverseResult.residual_mm``.
-        """
-        return SOLVER_TOL_MM if self.solver == "newton" else float(self.astatic.grid_step_mm)
 
     # -- the error functions -----------------------------------------------------------
     def errors_at(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -228,6 +211,51 @@ class ParametricEngine(Engine):
             drho[:, :, i] = d[:, :3]
             deps[:, :, i] = d[:, 3:]
         return drho + self._S, deps
+
+    def line_curvature_bound(self, q0, q1, r_norm_mm, margin_mm: float = 0.0) -> np.ndarray:
+        """See :meth:`Engine.line_curvature_bound`. Each error is a sum of functions of one
+        axis each, so along a unit direction u the second derivative of the linear errors
+        is ``sum_i u_i^2 f_i''`` (squareness adds none): at most the largest ``|f_i''|``;
+        the angles' term adds ``|eps''| |r|``, the second-order terms ``2 |r| (|eps|
+        |eps''| + |eps'|^2)``. The inverse's second derivative is that bound over
+        ``(1 - e)^3``, with e the largest norm of the error Jacobian. Within the tables'
+        span only (PCHIP is twice differentiable there, piecewise); inf elsewhere, and
+        for linear interpolation (its kinks have no bounded second derivative)."""
+        q0 = np.asarray(q0, dtype=float)
+        q1 = np.asarray(q1, dtype=float)
+        r = np.asarray(r_norm_mm, dtype=float)
+        if self.interpolation != "pchip":
+            return np.full(len(q0), np.inf)
+        if self._bounds is None:
+            k_eps = s_rho = s_eps = v_eps = 0.0
+            local = []
+            for f in self._functions:
+                value, slope, _curv = f._f.bounds()
+                c = f._f.interval_curvature()
+                local.append((f.x, np.linalg.norm(c[:, :3], axis=1), np.linalg.norm(c[:, 3:], axis=1)))
+                k_eps = max(k_eps, float(np.linalg.norm(_curv[3:])))
+                s_rho = max(s_rho, float(np.linalg.norm(slope[:3])))
+                s_eps = max(s_eps, float(np.linalg.norm(slope[3:])))
+                v_eps += float(np.linalg.norm(value[3:]))
+            self._bounds = (local, k_eps, s_rho, s_eps, v_eps, float(np.linalg.norm(self._S)))
+        local, k_eps, s_rho, s_eps, v_eps, s_norm = self._bounds
+        # the largest second derivative on the knot intervals each move's axis range meets
+        k_rho = np.zeros(len(q0))
+        k_ang = np.zeros(len(q0))
+        inside = np.ones(len(q0), dtype=bool)
+        for i, (x, c_rho, c_eps) in enumerate(local):
+            a = np.minimum(q0[:, i], q1[:, i]) - margin_mm
+            b = np.maximum(q0[:, i], q1[:, i]) + margin_mm
+            inside &= (a >= x[0]) & (b <= x[-1])
+            j0 = np.clip(np.searchsorted(x, a, side="right") - 1, 0, len(x) - 2)
+            j1 = np.clip(np.searchsorted(x, b, side="left") - 1, 0, len(x) - 2)
+            near = j1 - j0 <= 1  # one or two intervals: their own values; more: the largest anywhere
+            k_rho = np.maximum(k_rho, np.where(near, np.maximum(c_rho[j0], c_rho[j1]), c_rho.max()))
+            k_ang = np.maximum(k_ang, np.where(near, np.maximum(c_eps[j0], c_eps[j1]), c_eps.max()))
+        jac = s_norm + math.sqrt(3.0) * (s_rho + r * s_eps)
+        k = k_rho + r * k_ang + 2.0 * r * (v_eps * k_eps + 3.0 * s_eps * s_eps)
+        bound = np.where(jac < 0.5, k / np.maximum(1.0 - jac, 0.5) ** 3, np.inf)
+        return np.where(inside, bound, np.inf)
 
     # -- the model -----------------------------------------------------------------------
     def forward(self, q, r=None, context=None) -> np.ndarray:
@@ -280,8 +308,6 @@ class ParametricEngine(Engine):
         return J
 
     def inverse(self, p, r=None, context=None, *, solver: str | None = None) -> InverseResult:
-        from postproc.engine import parametric_solvers
-
         p = check_points(p, "p")
         r = check_tool_vectors(r, len(p))
         solver = solver or self.solver
@@ -306,7 +332,8 @@ class ParametricEngine(Engine):
     @classmethod
     def model_from_dict(cls, model: dict, volume_mm) -> ParametricEngine:
         tables = AxisTables.from_dict(model["tables"])
-        sq = Squareness(**{k: float(v) for k, v in model.get("squareness_rad", {}).items()})
+        values: dict[str, Any] = {k: float(v) for k, v in model.get("squareness_rad", {}).items()}
+        sq = Squareness(**values)
         return cls(tables, sq, volume_mm, order=model.get("order", "first"),
                    solver=model.get("solver", "newton"), interpolation=model.get("interpolation", "pchip"),
                    extrapolate=model.get("extrapolate", "clamp"), astatic=model.get("astatic"))

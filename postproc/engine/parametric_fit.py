@@ -36,9 +36,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import BSpline
 
-from postproc.engine.base import FitResult
+from postproc.engine.base import FitResult, Measurements
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.parametric_tables import AXES, COLUMNS, AxisTables, Squareness
+from postproc.engine.tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.errors import MeasurementError
 
 # Relative singular value below which a direction of the (column-normalised) design
@@ -121,8 +121,6 @@ def fit(measurements, knot_spacing: float | None = None, **options) -> FitResult
     ``options`` may carry engine settings (order, solver, interpolation, extrapolate,
     astatic) for the fitted engine; other options are ignored and reported.
     """
-    from postproc.calibration.measurements import Measurements
-
     items = list(measurements) if isinstance(measurements, list | tuple) else [measurements]
     meas = Measurements.concat(items)
     q, r = meas.q, meas.r

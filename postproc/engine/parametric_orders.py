@@ -13,6 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from postproc.engine.base import check_points, check_tool_vectors
+from postproc.engine.parametric import ParametricEngine
+
+#: Seed 000, Tables 3 and 4: the six points (X/Y/Z, mm) where the orders were compared.
+SEED_ORDER_POINTS_MM = (
+    (60, 50, 50), (120, 170, 190), (180, 130, 200), (140, 140, 110), (200, 200, 140), (80, 110, 120),
+)
 
 
 @dataclass
@@ -43,8 +49,6 @@ class OrdersComparison:
 
 def compare_orders(engine, q, r=None, k: float = 1.0) -> OrdersComparison:
     """Seed 000 Table 3 (k = 1) or Table 4 (k = 1000) quantities at commanded points q."""
-    from postproc.engine.parametric import ParametricEngine
-
     q = check_points(q, "q")
     r = check_tool_vectors(r, len(q))
     eng = engine

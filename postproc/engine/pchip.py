@@ -62,3 +62,34 @@ class Pchip:
         y0, y1, d0, d1 = self.y[i], self.y[i + 1], self.d[i], self.d[i + 1]
         s2 = s * s
         return ((6 * s2 - 6 * s) * (y0 - y1) / h + (3 * s2 - 4 * s + 1) * d0 + (3 * s2 - 2 * s) * d1)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Largest ``|f|``, ``|f'|`` and ``|f''|`` of each column over the knots' span
+        (k,) each: exact for the piecewise cubic (``f''`` is linear on each interval, so
+        its extremes are at the interval ends; ``f'`` is quadratic, its extreme at an end
+        or at its vertex)."""
+        y0, y1, d0, d1 = self.y[:-1], self.y[1:], self.d[:-1], self.d[1:]
+        h = self.h[:, None]
+        dy = (y0 - y1) / h
+        # f'(s) = a s^2 + b s + c on s in [0, 1]
+        a = 6.0 * dy + 3.0 * d0 + 3.0 * d1
+        b = -6.0 * dy - 4.0 * d0 - 2.0 * d1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sv = np.where(a != 0.0, -b / (2.0 * a), 0.0)
+        sv = np.clip(sv, 0.0, 1.0)
+        slope = np.maximum.reduce([np.abs(d0), np.abs(d1), np.abs(a * sv * sv + b * sv + d0)])
+        curv = self.interval_curvature()
+        # |f| <= the larger end value plus the most the cubic bulges: h/4 of the slopes
+        value = np.maximum(np.abs(y0), np.abs(y1)) + 0.25 * h * slope
+        return value.max(axis=0), slope.max(axis=0), curv.max(axis=0)
+
+    def interval_curvature(self) -> np.ndarray:
+        """Largest ``|f''|`` of each column on each knot interval (n - 1, k): ``f''`` is
+        linear there, so it is the larger of its two ends."""
+        y0, y1, d0, d1 = self.y[:-1], self.y[1:], self.d[:-1], self.d[1:]
+        h = self.h[:, None]
+        dy = (y0 - y1) / h
+        a = 6.0 * dy + 3.0 * d0 + 3.0 * d1
+        b = -6.0 * dy - 4.0 * d0 - 2.0 * d1
+        # f''(s) h = 2 a s + b on s in [0, 1]
+        return np.maximum(np.abs(b), np.abs(2.0 * a + b)) / h

@@ -17,6 +17,7 @@ from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
+    Measurements,
     check_points,
     check_tool_vectors,
 )
@@ -82,8 +83,6 @@ def fit_affine(q: np.ndarray, target: np.ndarray, where: str = "") -> tuple[np.n
 
 
 def fit(measurements, **options) -> FitResult:
-    from postproc.calibration.measurements import Measurements
-
     meas = Measurements.concat(list(measurements))
     G, origin, resid = fit_affine(meas.q, meas.m - meas.r)
     volume = np.vstack([meas.q.min(axis=0), meas.q.max(axis=0)])

@@ -6,8 +6,7 @@ chunk's text), which splits every such line into its pieces: the text before the
 first axis word, each axis word's letter (with the blanks before it) and number,
 and the rest (feed word, trailing blanks, ``\\r``). The numbers of the whole chunk
 are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
-state is simple (the conditions of the per-line fast lane,
-:func:`postproc.gcode.fastlane.state_allows`) form a :class:`Run`: reading one only
+state is simple (:func:`state_allows`) form a :class:`Run`: reading one only
 advances the modal state to its last line; the nominal targets of all the chunk's
 runs are then made at once (positions carried forward where a line does not name
 an axis).
@@ -17,20 +16,22 @@ every run line are vectorised and the new numbers formatted in one operation; ea
 run is then written in program order by joining its lines' pieces. Only the words
 an axis does not name but whose corrected position moves (squareness) need a
 sequential pass, because whether one is written depends on the position the words
-before it reached. The result is byte for byte that of the per-line fast lane and
-of the general path (tests run all of them on the same programs); every line that
+before it reached. The result is byte for byte that of the general path (tests run both on the same
+programs); every line that
 is not plain, and every line of a chunk with lone ``\\r`` line endings, takes those.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from bisect import bisect_left
 
 import numpy as np
 
-from postproc.gcode import emit
-from postproc.gcode.fastlane import FastMove
+from postproc.errors import PostprocError
+from postproc.gcode import emit, lexer
+from postproc.gcode.interp import Move
 from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.state import LINE, RAPID
 
@@ -56,6 +57,71 @@ def _last_index(present: np.ndarray) -> np.ndarray:
     idx = np.where(present, np.arange(len(present)), -1)
     np.maximum.accumulate(idx, out=idx)
     return idx
+
+
+class RunMove:
+    """A line of a run as a move, for the general emitter (a line the planner splits, or
+    one whose motion word the controller needs written)."""
+
+    __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "spans", "motion_word", "rotary",
+                 "arc", "arc_absolute", "feed", "missing")
+    fixed = False  # never a stored-position move
+    then = None
+    cycle = None
+    probe = 0
+
+    def __init__(self, lineno, kind, q0, q1, r, shift, unit, spans, motion_word, arc_absolute, feed, missing):
+        self.lineno = lineno
+        self.kind = kind
+        self.q0 = q0
+        self.q1 = q1
+        self.r = r
+        self.shift = shift
+        self.unit = unit
+        self.spans = spans  # [(start, end, axis, number_text, value), ...] in line order
+        self.motion_word = motion_word
+        self.rotary = {}
+        self.arc = None
+        self.arc_absolute = arc_absolute
+        self.feed = feed
+        self.missing = missing  # axes the line does not name
+
+    def to_move(self, line: str) -> Move:
+        """The general Move of the same line (for the rare cases the fast emitter hands on)."""
+        words = lexer.scan_words(line)
+        idx = [-1, -1, -1]
+        feed_idx = motion_idx = -1
+        for i, w in enumerate(words):
+            if w[0] in "XYZ":
+                idx["XYZ".index(w[0])] = i
+            elif w[0] == "F":
+                feed_idx = i
+            elif w[0] == "G":
+                motion_idx = i
+        return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
+                    self.arc_absolute, words, tuple(idx), feed_idx, False, self.feed, {}, None, [], False,
+                    motion_idx, ())
+
+
+def prime_shift(interp) -> bool:
+    """Compute the offsets of absolute words in the current state ; False if they cannot be (the general path then reports why)."""
+    if interp._run_shift is None:
+        try:
+            shift = interp.shift(False, None, None)
+        except PostprocError:
+            return False
+        interp._run_shift = shift
+        interp._run_r = interp.tool_r()
+    return True
+
+
+def state_allows(interp, motion_word: bool = False) -> bool:
+    """Whether the modal state lets a run of plain lines start at the next line (``motion_word``:
+    that line names its own G0/G1, so the modal motion does not matter)."""
+    st = interp.state
+    return (not interp.ended and not st.incremental and not st.inverse_time and interp._run_shift is not None
+            and not interp.used_rotary and (motion_word or st.motion in (RAPID, LINE))
+            and not (math.isnan(st.pos[0]) or math.isnan(st.pos[1]) or math.isnan(st.pos[2])))
 
 
 class Block:
@@ -110,7 +176,10 @@ class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
-                 "feed0", "q1", "trow")
+                 "feed0", "q1", "trow", "cut")
+
+    def __init__(self) -> None:
+        self.cut: list[int] = []  # lines (within the run) the planner wants split: written one by one
 
     def __len__(self) -> int:
         return self.b - self.a
@@ -118,13 +187,13 @@ class Run:
 
 def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run:
     """Interpret the plain lines ``a:b`` of ``block``: advance the modal state to the
-    end of the run. The caller checks :func:`postproc.gcode.fastlane.state_allows`."""
+    end of the run. The caller checks :func:`state_allows`."""
     st = interp.state
     run = Run()
     run.block, run.a, run.b, run.lineno = block, a, b, lineno
     run.unit = unit = 25.4 if st.inch else 1.0
-    run.shift = shift = interp._fast_shift
-    run.r = interp._fast_r
+    run.shift = shift = interp._run_shift
+    run.r = interp._run_r
     run.arc_absolute = st.arc_absolute
     run.decimals = decimals
     run.q0 = tuple(st.pos)
@@ -252,13 +321,13 @@ def _format(values: np.ndarray, dout: np.ndarray, prefix: str = "") -> list[str]
     return out
 
 
-def _first_move(run: Run, lineno: int) -> FastMove:
-    """The first line of a run as a FastMove (for the general emitter)."""
+def _first_move(run: Run, lineno: int) -> RunMove:
+    """The first line of a run as a RunMove (for the general emitter)."""
     blk, a = run.block, run.a
     f = blk.cols[_F][a]
     missing = tuple(k for k in range(3) if not blk.has[k][a])
     kind = blk.code(a) if blk.gword[a] else run.motion0
-    return FastMove(lineno, kind, run.q0, tuple(run.q1[0].tolist()), run.r, run.shift, run.unit, [],
+    return RunMove(lineno, kind, run.q0, tuple(run.q1[0].tolist()), run.r, run.shift, run.unit, [],
                     bool(blk.gword[a]), run.arc_absolute, float(f) if f else run.feed0, missing)
 
 
@@ -271,7 +340,8 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
     if not blk.gword[a] and corrector.emitted_motion != kind0:
         # the controller's modal motion differs from the program's here (after a
         # linearised arc): the general emitter adds the motion word
-        corrector._emit_move(blk.lines[a], _first_move(run, run.lineno), T[run.trow].tolist(), None, write)
+        line = blk.lines[a]
+        corrector._emit_move(line, _first_move(run, run.lineno).to_move(line), T[run.trow].tolist(), None, write)
         s = a + 1
         if s == b:
             return
@@ -330,3 +400,50 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
     text = "\n".join(map("".join, zip(cols[_HEAD][s:b], cols[2][s:b], nums[0][s:b], cols[4][s:b], nums[1][s:b],
                                       cols[6][s:b], nums[2][s:b], add_col, cols[_REST][s:b], strict=True)))
     write(text + "\n" if lines[b - 1].endswith("\n") else text)
+
+
+def _modal_at(run: Run, x: int) -> tuple[int, float]:
+    """Modal motion and feed after block line ``x - 1`` of ``run`` (its start state for x == a)."""
+    blk = run.block
+    if x <= run.a:
+        return run.motion0, run.feed0
+    g, f = blk.last_g[x - 1], blk.last_f[x - 1]
+    return (blk.code(g) if g >= run.a else run.motion0,
+            float(blk.cols[_F][f]) if f >= run.a else run.feed0)
+
+
+def kinds(run: Run) -> np.ndarray:
+    """Motion (RAPID or LINE) of every line of the run."""
+    blk = run.block
+    g = np.array(blk.last_g[run.a:run.b])
+    code = np.array([blk.code(i) if i >= run.a else run.motion0 for i in g.tolist()])
+    return code
+
+
+def split_run(run: Run, rows: list[int]):
+    """The run cut at its lines ``rows`` (indices within the run, increasing): yields
+    sub-runs (:class:`Run`) and, for each cut line, ``(index within the run, RunMove)``."""
+    x = run.a
+    for j in [*rows, len(run)]:
+        y = run.a + j
+        if y > x:
+            sub = Run()
+            sub.block, sub.a, sub.b = run.block, x, y
+            sub.lineno = run.lineno + (x - run.a)
+            sub.unit, sub.shift, sub.r, sub.arc_absolute, sub.decimals = (run.unit, run.shift, run.r,
+                                                                          run.arc_absolute, run.decimals)
+            sub.q0 = run.q0 if x == run.a else tuple(run.q1[x - run.a - 1].tolist())
+            sub.motion0, sub.feed0 = _modal_at(run, x)
+            sub.q1 = run.q1[x - run.a:j]
+            sub.trow = run.trow + (x - run.a)
+            yield sub
+        if j == len(run):
+            break
+        blk = run.block
+        motion, feed = _modal_at(run, y)
+        f = blk.cols[_F][y]
+        q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
+        yield j, RunMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
+                          run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
+                          float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
+        x = y + 1

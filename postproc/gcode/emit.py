@@ -88,8 +88,10 @@ def removal_spans(line: str, words: list[tuple[int, int]]) -> list[tuple[int, in
 def style_of(line: str) -> tuple[str, bool]:
     """(separator between words, lower-case letters?) to match a line's own style."""
     sep = " " if (" " in line or "\t" in line) else ""
-    letters = [c for c in line.split("(")[0].split(";")[0] if c.isalpha()]
-    lower = bool(letters) and all(c.islower() for c in letters)
+    code = line.split("(", 1)[0].split(";", 1)[0]
+    # every letter lower case (and at least one): the code part equals its lower case
+    # and differs from its upper case
+    lower = code.islower()
     return sep, lower
 
 

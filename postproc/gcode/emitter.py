@@ -13,16 +13,17 @@ import numpy as np
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
-from postproc.gcode.fastlane import FastMove, emit_fast
 from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
     arc_candidates,
     bisector_centre,
+    bisector_point,
     chord_deviation,
     circle_fit,
     r_center,
+    within_controller_limits,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 
@@ -33,6 +34,10 @@ HALF_UNIT = emit.HALF_UNIT
 FIT_BUDGET = 0.95
 # Smallest share of a move's time given to an inserted line in inverse-time mode (G93).
 MIN_FEED_FRACTION = 1e-3
+# A piece that one segment cannot follow is first tried in 2 .. EQUAL_SHARES equal shares
+# (each one try) to bracket the farthest sample one segment reaches, before the search
+# from the next sample outwards.
+EQUAL_SHARES = 4
 
 
 def _unit_decimals(options, unit: float) -> int:
@@ -86,10 +91,6 @@ class EmitterMixin:
         d = self._decimals.get(mv.unit)
         if d is None:
             d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
-        if type(mv) is FastMove:
-            if emit_fast(self, line, mv, target, write, d):
-                return
-            mv = mv.to_move(line)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
             edits, added = self._axis_words(mv, target, self.qe, d)
@@ -210,17 +211,25 @@ class EmitterMixin:
                 text = "G" + MOTION_TEXT[mv.kind]
                 edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
             self.emitted_motion = mv.kind
-        arc_added: list[str] = []
-        if last["kind"] == "arc":
-            arc_edits, arc_added = self._arc_edits(line, mv, last["spec"])
-            edits = edits + arc_edits
         if mv.inverse_time and inserted and mv.feed_idx >= 0:
             _l, num, start, end, _p = mv.words[mv.feed_idx]
             edits.append((start, end, emit.fmt(mv.feed / max(last["ds"], MIN_FEED_FRACTION),
                                                max(4, emit.decimals_of(num)))))
+        self._finish_line(line, mv, edits, added, last["spec"] if last["kind"] == "arc" else None, sep, lower,
+                          last["qe"], write)
+
+    def _finish_line(self, line: str, mv: Move, edits: list, added: list[str], spec, sep: str, lower: bool,
+                     qe, write) -> None:
+        """Write the move's own line: its word edits, the arc words of ``spec`` (None:
+        not an arc) and the added words; the controller is then at ``qe``."""
+        arc_added: list[str] = []
+        if spec is not None:
+            arc_edits, arc_added = self._arc_edits(line, mv, spec)
+            edits = edits + arc_edits
         if added or arc_added:
             if arc_added:
-                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not last["spec"].get("replace")]
+                arc = mv.arc
+                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not spec.get("replace")]
                 pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
                 words_added = added + arc_added
             else:
@@ -228,8 +237,45 @@ class EmitterMixin:
                 words_added = added
             text = "".join(sep + w for w in words_added) if pos > 0 else "".join(w + sep for w in words_added)
             edits.append((pos, pos, text.lower() if lower else text))
-        self.qe[:] = last["qe"]
+        self.qe[:] = qe
         self._write_line(line, edits, write)
+
+    def _emit_hinted_arc(self, line: str, mv: Move, target, hint, write) -> None:
+        """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
+        as one exact arc when the hint's rounded centre passes for the end points as
+        written, else planned and fitted as any other arc."""
+        d = self._decimals.get(mv.unit)
+        if d is None:
+            d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
+        qn = list(self.qe)
+        edits, added = self._axis_words(mv, target, qn, d)
+        # unchanged end words: the input's own arc words may stay (the general path decides)
+        spec = hint.spec(mv, self.qe, qn, d, self.opt.tolerance_mm * FIT_BUDGET) if edits else None
+        if spec is not None and not self._hint_is_sound(mv, spec, qn):
+            spec = None
+        if spec is None:
+            self._emit_move(line, mv, target, hint.lazy(), write)
+            return
+        self.report.moves += 1
+        sep, lower = emit.style_of(line)
+        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+            text = "G" + MOTION_TEXT[mv.kind]
+            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+        self.emitted_motion = mv.kind
+        self.report.arcs_kept += 1
+        self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
+
+    def _hint_is_sound(self, mv: Move, spec, E) -> bool:
+        """Whether controllers cut the bulk planner's arc ``spec`` (from the emitted
+        position to E, as written) as meant: radius and sweep within the controller
+        limits (:func:`postproc.gcode.segment.within_controller_limits`)."""
+        arc = mv.arc
+        (a1, a2, an), _ = PLANES[arc.plane]
+        S = self.qe
+        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+        (_l1, t1), (_l2, t2) = spec["vals"]
+        centre = (base[0] + float(t1) * mv.unit, base[1] + float(t2) * mv.unit)
+        return within_controller_limits(S, E, centre, (a1, a2, an), arc.clockwise)
 
     def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
@@ -243,6 +289,31 @@ class EmitterMixin:
             if seg is not None:
                 out.append(seg)
                 break
+            # equal shares of what is left (a move cut in two or three is the common case):
+            # the longest share one segment reaches brackets the farthest sample it
+            # reaches, which a bisection between that share and the next longer finds
+            hi = n - 1
+            for k in range(2, EQUAL_SHARES + 1):
+                b = a + math.ceil((n - 1 - a) / k)
+                if b <= a + 1:
+                    break
+                seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, b, cur, final, d, budget)
+                if seg is not None:
+                    break
+                hi = b
+            if seg is not None:
+                lo = b
+                while hi - lo > 1:
+                    mid = (lo + hi) // 2
+                    sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
+                    if sg is None:
+                        hi = mid
+                    else:
+                        lo, seg = mid, sg
+                out.append(seg)
+                cur = seg["qe"]
+                a = lo
+                continue
             lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
             if lo_seg is None:
                 # the samples are too sparse here: follow the curve by subdivision
@@ -354,27 +425,48 @@ class EmitterMixin:
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
+        step = 10.0 ** (-d)
         S2, E2 = S[[a1, a2]], E[[a1, a2]]
         P2 = Qp[:, [a1, a2]]
         c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
+        centres = []
         if math.hypot(*(E2 - S2)) > 0.0:
-            centre = bisector_centre(S2, E2, P2, c0)
+            if chord_deviation(S, E, Qp) <= step * unit:
+                # the path bows from the line S-E by less than one output step: a circle
+                # fitted to it is set by the rounding of S and E, not by the path (a centre
+                # kilometres off, or a circle a few steps wide, where the chord is a few
+                # steps long). The nominal circle, moved with the correction and its centre
+                # brought onto the bisector, is tried first.
+                centres.append(bisector_point(S2, E2, c0))
+            centres.append(bisector_centre(S2, E2, P2, c0))
         else:
             centre = circle_fit(P2)
-            centre = c0 if centre is None or not np.isfinite(centre).all() else centre
+            centres.append(c0 if centre is None or not np.isfinite(centre).all() else centre)
+        for centre in centres:
+            spec = self._arc_about(mv, S, E, centre, nsw, Qp, frac, d, budget)
+            if spec is not None:
+                return spec
+        return None
+
+    def _arc_about(self, mv: Move, S, E, centre, nsw: float, Qp, frac, d: int, budget: float):
+        """The written arc from S to E whose centre is the rounded candidate nearest
+        ``centre`` (2,) that passes (see :meth:`_exact_arc`), or None."""
+        arc = mv.arc
+        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        unit = mv.unit
         step = 10.0 ** (-d)
         agree = 0.5 * step * unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
             spec = self._r_candidates(S, E, centre, (a1, a2, an), arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
                 return spec
-        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S2
+        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
         v0 = np.round((centre - base) / unit, d)
         ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * step
         grid = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
         V = np.round(v0[None, :] + grid, d)
         C = base[None, :] + V * unit
-        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac, controller_limits=True)
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
@@ -382,7 +474,8 @@ class EmitterMixin:
         for j in order[:3].tolist():
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
-            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac,
+                                     controller_limits=True)
             if m[0] <= agree and w[0] <= budget:
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
                         "dev": float(w[0]), "mismatch": float(m[0])}
@@ -409,7 +502,7 @@ class EmitterMixin:
             c = r_center(S[a1], S[a2], E[a1], E[a2], R, clockwise)
             if c is None:
                 continue
-            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac)
+            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac, controller_limits=True)
             if t[0] != 1:
                 continue
             if best is None or w[0] < best[0]:

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import lexer
 from postproc.gcode.state import (
@@ -142,7 +142,6 @@ class Move:
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
-_FAST_SLOT = {"X": 0, "Y": 1, "Z": 2, "F": 3, "G": 4, "N": 5}
 _GKEYS = {"0": 0, "00": 0, "1": 10, "01": 10, "2": 20, "02": 20, "3": 30, "03": 30}
 
 
@@ -252,8 +251,8 @@ class Interpreter:
         # axes sent to a stored position that was not given: unknown until positioned again
         self.unknown_after: dict[int, str] = {}
         self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
-        self._fast_shift: tuple[float, float, float] | None = None
-        self._fast_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._run_shift: tuple[float, float, float] | None = None
+        self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
     def _arc_rule(self):
@@ -327,73 +326,10 @@ class Interpreter:
             return None  # O1234: a program number (or label): no geometry
         if bom:
             words = [(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
-        elif words:
-            mv = self._fast_block(lineno, words)
-            if mv is not None:
-                return mv
         if not words:
             return None
-        self._fast_shift = None  # the slow path may change offsets, units or tool length
+        self._run_shift = None  # the slow path may change offsets, units or tool length
         return self._block(lineno, words, block_delete)
-
-    def _fast_block(self, lineno: int, words) -> Move | None:
-        """The common straight move (N, G0/G1, X/Y/Z, F words only), or None.
-
-        Gives the same Move as :meth:`_block` (tests check both agree); anything
-        else returns None and takes the full path.
-        """
-        st = self.state
-        if st.inverse_time or self.unknown_after:
-            return None
-        idx = [-1, -1, -1]
-        vals = [0.0, 0.0, 0.0]
-        feed_idx = -1
-        motion = st.motion
-        motion_idx = -1
-        if len(words) > 1 and len({w[0] for w in words}) != len(words):
-            return None
-        for i, w in enumerate(words):
-            slot = _FAST_SLOT.get(w[0])
-            if slot is None:
-                return None
-            if slot < 3:
-                idx[slot] = i
-                vals[slot] = float(w[1])
-            elif slot == 3:
-                feed_idx = i
-            elif slot == 4:
-                key = _GKEYS.get(w[1])
-                if key is None or key > 10:
-                    return None
-                motion = MOTION_CODES[key]
-                motion_idx = i
-        if motion not in (RAPID, LINE) or idx == [-1, -1, -1]:
-            return None
-        shift = self._fast_shift
-        if shift is None:
-            col = words[min(i for i in idx if i >= 0)][4] + 1
-            shift = self._fast_shift = self.shift(False, lineno, col)
-            self._fast_r = self.tool_r()
-        unit = MM_PER_INCH if st.inch else 1.0
-        q0 = tuple(st.pos)
-        q1 = list(q0)
-        inc = st.incremental
-        for k in range(3):
-            if idx[k] >= 0:
-                if inc:
-                    if math.isnan(q1[k]):
-                        return None  # the full path raises the error
-                    q1[k] = q1[k] + vals[k] * unit
-                else:
-                    q1[k] = vals[k] * unit + shift[k]
-        if feed_idx >= 0:
-            st.feed = float(words[feed_idx][1])
-        st.motion = motion
-        self.motion_word = motion_idx >= 0
-        st.pos = q1
-        return Move(lineno, motion, q0, tuple(q1), self._fast_r, shift, unit, inc, st.arc_absolute, words,
-                    tuple(idx), feed_idx, False, st.feed, dict(st.rotary) if self.used_rotary else {},
-                    None, [], False, motion_idx, ())
 
     def _slow_words(self, lineno: int, line: str):
         if self.dialect in NESTING_COMMENTS and line.count("(") > 1:

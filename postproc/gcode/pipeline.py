@@ -37,10 +37,16 @@ from postproc.errors import (
     SafetyError,
     SolverError,
 )
-from postproc.gcode import bulk, emit
-from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode import bulk, emit, vplan
+from postproc.gcode.directions import (
+    MACHINE_STEP_MM,
+    direction_axes,
+    plan_pieces,
+    reversals,
+    settle,
+)
+from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
-from postproc.gcode.fastlane import FastMove, emit_fast, prime_shift, read_fast, state_allows
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
@@ -77,8 +83,8 @@ class CorrectOptions:
     expand: bool = True  # flatten parameters, O-words, subprograms and macros (False: refuse them)
     subroutine_path: tuple = ()  # folders searched for o<name> call and M98 subprogram files
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
-    fast_lane: bool = True  # read plain straight moves in one pass (same output; off for comparison)
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
+    bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
 
 
 @dataclass
@@ -141,6 +147,9 @@ class Corrector(EmitterMixin):
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
+        # moves settled in bulk (vplan) unless the correction depends on the approach
+        # direction (take-ups at reversals) or on maps the planner cannot sample in bulk
+        self.bulk_plan = options.bulk_plan and not options.added and not engine.direction_dependent
         self._decimals: dict[float, int] = {}
         self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
@@ -290,21 +299,15 @@ class Corrector(EmitterMixin):
         write(header)
         self.report.lines_out += len(header_rows)
 
-        use_fast = self.linear_exact and self.opt.fast_lane and source is None
-        use_bulk = use_fast and self.opt.bulk_lane
+        # runs of plain lines: for every engine whose moves the planner settles in bulk
+        use_bulk = (self.linear_exact or self.bulk_plan) and self.opt.bulk_lane and source is None
+        run_ok = False  # the modal state lets a run of plain lines start here
         dec_mm = _unit_decimals(self.opt, 1.0)
         dec_in = _unit_decimals(self.opt, MM_PER_INCH)
-        allowed = False
         pending = 0  # lines in entries
 
         def feed(line: str) -> None:
-            nonlocal lineno, allowed
-            if allowed:
-                fm = read_fast(interp, lineno, line)
-                if fm is not None:
-                    entries.append((line, fm, interp.motion_word, interp.state.motion))
-                    lineno += 1
-                    return
+            nonlocal lineno, run_ok
             mv = interp.feed_line(where(lineno), line)
             if mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
@@ -320,10 +323,10 @@ class Corrector(EmitterMixin):
             else:
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
-            allowed = use_fast and state_allows(interp)
+            run_ok = use_bulk and bulk.state_allows(interp)
 
         def feed_block(lines: list[str]) -> None:
-            nonlocal lineno, allowed
+            nonlocal lineno, run_ok
             block = bulk.scan(lines) if use_bulk else None
             if block is None:
                 for line in lines:
@@ -338,8 +341,8 @@ class Corrector(EmitterMixin):
                         feed(lines[i])
                         i += 1
                     # a line naming its own G0/G1 may start a run whatever the modal motion
-                    while i < b and not (allowed or (use_fast and not interp.ended and prime_shift(interp)
-                                                     and state_allows(interp, bool(gword[i])))):
+                    while i < b and not (run_ok or (not interp.ended and bulk.prime_shift(interp)
+                                                    and bulk.state_allows(interp, bool(gword[i])))):
                         feed(lines[i])
                         i += 1
                     if i < b:
@@ -347,7 +350,7 @@ class Corrector(EmitterMixin):
                         entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
                         lineno += b - i
                         i = b
-                        allowed = state_allows(interp)
+                        run_ok = bulk.state_allows(interp)
                 while i < n:
                     feed(lines[i])
                     i += 1
@@ -432,8 +435,10 @@ class Corrector(EmitterMixin):
                 rows.clear()
 
         M = 0
+        runs: list[bulk.Run] = []
         for e in entries:
             if type(e) is bulk.Run:
+                runs.append(e)
                 flush_rows()
                 m = len(e)
                 if e.unit not in self._units_checked:
@@ -459,15 +464,13 @@ class Corrector(EmitterMixin):
         plans: dict[int, object] = {}
         if M:
             T, plans = self._plan(np.vstack(q_parts), np.concatenate(ln_parts), np.vstack(r_parts), rot,
-                                  general, unit0)
+                                  general, unit0, runs)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
         get_plan = plans.get
         k = 0
-        passed = fast = 0
-        dec_mm = _unit_decimals(self.opt, 1.0)
-        dec_in = _unit_decimals(self.opt, MM_PER_INCH)
+        passed = 0
         prepared: dict[int, object] = {}
         blocks: list[bulk.Block] = []
         for e in entries:
@@ -476,7 +479,17 @@ class Corrector(EmitterMixin):
                 if em is None:
                     em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
                     blocks.append(e.block)
-                bulk.emit_run(self, e, em, T, write)
+                cut = e.cut
+                if not cut:
+                    bulk.emit_run(self, e, em, T, write)
+                else:  # lines that must be split: written by the general emitter
+                    for part in bulk.split_run(e, cut):
+                        if type(part) is bulk.Run:
+                            bulk.emit_run(self, part, em, T, write)
+                            continue
+                        j, fm = part
+                        line = e.block.lines[e.a + j]
+                        emit_move(line, fm.to_move(line), T[k + j].tolist(), plans[k + j], write)
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
@@ -504,20 +517,19 @@ class Corrector(EmitterMixin):
                 k += 1
                 continue
             target = T[k].tolist()
-            if type(mv) is FastMove and emit_fast(self, line, mv, target, write,
-                                                  dec_mm if mv.unit == 1.0 else dec_in):
-                fast += 1
+            plan = get_plan(k)
+            if type(plan) is vplan.ArcHint:
+                self._emit_hinted_arc(line, mv, target, plan, write)
             else:
-                emit_move(line, mv, target, get_plan(k), write)
+                emit_move(line, mv, target, plan, write)
             k += 1
         for blk in blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += passed
-        self.report.moves += fast
         write_out("".join(out))
 
     def _plan(self, Q1: np.ndarray, linenos: np.ndarray, R: np.ndarray, rot: list[dict],
-              general: list[tuple[int, Move]], unit0: float):
+              general: list[tuple[int, Move]], unit0: float, runs: list = ()):
         """Corrected targets of a chunk's moves, and the plans of those that need one.
 
         ``Q1``, ``linenos``, ``R``, ``rot``: every move's nominal target, line, tool
@@ -541,8 +553,9 @@ class Corrector(EmitterMixin):
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
         arcs = [i for i, m in general if m.arc is not None]
         arc_prm = {i: arc_params(moves[i].arc, moves[i].q0, moves[i].q1) for i in arcs}
-        breaks: dict[int, np.ndarray] = {}
-        for i in arcs:
+        breaks: dict[int, np.ndarray] = {}  # of the arcs the general planner cuts (made when needed)
+        # the approach directions at arc ends matter only to a correction that reads them
+        for i in arcs if self.engine.direction_dependent or self.opt.added else ():
             m = moves[i]
             prm = arc_prm[i]
             br = breaks[i] = quadrant_breaks(prm[1], prm[2])
@@ -574,12 +587,153 @@ class Corrector(EmitterMixin):
         planned = [(i, m) for i, m in general
                    if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
                    and not np.isnan(S[i]).any() and not any(math.isnan(v) for v in m.q0)]
-        if planned:
-            self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
+        if direction_axes(self.engine):  # the directions the corrected commands take
+            T, D = self._plan_directions(planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans)
+        else:
+            def corr(rows, nom):
+                return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
+
+            def curvature(rows):
+                # the commands the inverse finds lie within the largest allowed correction
+                return self.engine.line_curvature_bound(Q0[rows], Q1[rows], np.linalg.norm(R[rows], axis=1),
+                                                        self.opt.max_correction_mm)
+
+            if runs and not self.linear_exact:
+                # straight moves of the runs of plain lines: those that must be split are
+                # planned when they are written (their Move is made then)
+                per_run = [np.arange(r.trow, r.trow + len(r))[bulk.kinds(r) == LINE] for r in runs]
+                rows = np.concatenate(per_run)
+                ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
+                                        limit=self.opt.tolerance_mm * FIT_BUDGET
+                                        - max(self._round_err(r.unit) for r in runs), curvature=curvature)
+                owner = np.repeat(np.arange(len(runs)), [len(p) for p in per_run])
+                run_lines = []
+                for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
+                    runs[o].cut.append(i - runs[o].trow)
+                    run_lines.append((i, _RunLine(int(linenos[i]))))
+                if run_lines:
+                    self._plan_moves(run_lines, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
+            if planned and self.bulk_plan:
+                ok_lines, hints, planned = vplan.plan_chunk(
+                    planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
+                    min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
+                    rounding=max(self._round_err(m.unit) for _i, m in general), curvature=curvature)
+                for i, hint in hints.items():
+                    hint.lazy = self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
+                    plans[i] = hint
+            if planned:
+                self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
         self.prev_nominal = Q1[-1].copy()
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
         return T, plans
+
+    def _lazy_plan(self, i: int, mv: Move, *arrays):
+        """The general plan of move ``i``, made when asked for."""
+
+        def plan():
+            out: dict[int, object] = {}
+            self._plan_moves([(i, mv)], *arrays, out)
+            return out[i]
+
+        return plan
+
+    def _plan_directions(self, planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans):
+        """Targets, directions and plans of a chunk for a direction-dependent correction
+        (backlash), settled on the directions the corrected commands take
+        (:mod:`postproc.gcode.directions`): the commanded points are every sample of a
+        planned move (sampled as :meth:`_plan_moves` does) and the target of any other
+        move; a point less than one output unit against its axis's direction is held.
+        Fills ``plans``; returns the targets and their directions."""
+        M = len(T)
+        axes = direction_axes(self.engine)
+        counts = np.ones(M, dtype=int)
+        samples: dict[int, tuple] = {}  # i -> (s (n,), nominal (n, 3), dirs (n, 3), given axes)
+        planned = [(i, m) for i, m in planned if not m.fixed]  # a stored position is one point
+        for i, m in planned:
+            if m.arc is None:
+                length = float(np.linalg.norm(Q1[i] - Q0[i]))
+                s = np.linspace(0.0, 1.0, max(3, math.ceil(length / SAMPLE_STEP_MM) + 1))[1:]
+                samples[i] = (s, line_points(Q0[i], Q1[i], s), D[i], [])
+            else:
+                prm = arc_prm[i]
+                (a1, a2, _an), _t0, sweep, _r0, _r1 = prm
+                length = arc_length(m.arc, m.q0, m.q1)
+                cuts = [0.0, *breaks[i].tolist(), 1.0]
+                ss = []
+                for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
+                    n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
+                            math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
+                    ss.append(np.linspace(sa, sb, n)[1:])
+                ends = arc_points(m.arc, m.q0, m.q1, np.array(cuts), prm)
+                dd = np.diff(ends, axis=0)
+                dr = np.where(np.abs(dd) > 1e-12, np.sign(dd), D[i])  # each quarter's own direction
+                s = np.concatenate(ss)
+                dirs = np.repeat(dr, [len(x) for x in ss], axis=0)
+                samples[i] = (s, arc_points(m.arc, m.q0, m.q1, s, prm), dirs, [a1, a2])
+            counts[i] = len(samples[i][0])
+        owner = np.repeat(np.arange(M), counts)
+        last = np.cumsum(counts) - 1
+        first = last - counts + 1
+        nominal, Tx, Dx = Q1[owner], T[owner], D[owner]
+        sx = np.ones(len(owner))
+        given = np.zeros(nominal.shape, dtype=bool)  # an arc's in-plane axes: the direction of its quarter
+        for i, (s, nom, dirs, plane) in samples.items():
+            rows = slice(first[i], last[i] + 1)
+            sx[rows], nominal[rows], Dx[rows] = s, nom, dirs
+            given[rows, plane] = True
+        free = np.ones(M, dtype=bool)
+        free[fixed_rows] = False
+        free = free[owner]
+        hold = max(MACHINE_STEP_MM, *(10.0 ** -_unit_decimals(self.opt, u) * u for u in self._units_checked))
+
+        def solve(rows: np.ndarray, dirs: np.ndarray, at=None) -> np.ndarray:
+            own = owner[rows]
+            return self.corrected(nominal[rows] if at is None else at, R[own], dirs,
+                                  [rot[j] for j in own.tolist()], linenos[own])
+
+        inner = np.flatnonzero(counts[owner] > 1)
+        if len(inner):
+            Tx[inner] = solve(inner, Dx[inner])
+        Ex, Dx = settle(Tx, Dx, self.prev_target, self.dirs, hold, axes, solve, linenos[owner], free, given,
+                        first[owner], path=self.path)
+        T, D = Ex[last], Dx[last]
+        if not planned:
+            return T, D
+        # take-ups: before a point a direction-dependent axis reverses into, the point
+        # before it corrected with the new directions
+        rows = np.concatenate([np.arange(first[i], last[i] + 1) for i, _m in planned])
+        rows = rows[reversals(Dx, self.dirs, axes, rows)]
+        takeups: dict[int, np.ndarray] = {}
+        if len(rows):
+            at = np.array([nominal[j - 1] if j != first[owner[j]] else Q0[owner[j]] for j in rows.tolist()])
+            takeups = dict(zip(rows.tolist(), solve(rows, Dx[rows], at), strict=True))
+        for i, m in planned:
+            j0 = int(first[i])
+            start = Ex[j0 - 1] if j0 > 0 else self.prev_target
+            start_dirs = Dx[j0 - 1] if j0 > 0 else self.dirs
+            if m.arc is not None:
+                prm = arc_prm[i]
+
+                def bulge(s, nom, m=m, prm=prm):
+                    mid = arc_points(m.arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), prm)
+                    return mid - 0.5 * (nom[:-1] + nom[1:])
+            else:
+                def bulge(s, nom):
+                    return np.zeros((len(s) - 1, 3))
+            seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
+                              TAKEUP_MIN_MM, bulge)
+            plan = plans[i] = {"seq": seq, "whole": len(seq) == 1}
+            if m.arc is not None:
+                (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
+                plan["nsweep"] = sweep
+                plan["mismatch"] = abs(r1 - r0)
+                carried = np.array(start_dirs, dtype=float)
+                carried[an] = D[i][an]
+                plan["curve"] = Curve(m.q0, m.q1, m.arc, R[i], carried, m.lineno, m.rotary, arc_prm[i])
+            else:  # a line's standing axes: the direction its corrected command takes
+                plan["curve"] = Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary)
+        return T, D
 
     def _plan_moves(self, planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans) -> None:
         """Sample the corrected ideal path of every planned move in one engine call.
@@ -596,7 +750,10 @@ class Corrector(EmitterMixin):
                 prm = arc_prm[i]
                 _axes, _t0, sweep, r0, r1 = prm
                 length = arc_length(m.arc, m.q0, m.q1)
-                cuts = [0.0, *breaks[i].tolist(), 1.0]
+                br = breaks.get(i)
+                if br is None:
+                    br = breaks[i] = quadrant_breaks(_t0, sweep)
+                cuts = [0.0, *br.tolist(), 1.0]
                 carried = d_in[i]
                 for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
                     n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
@@ -917,6 +1074,17 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, mv.unit)
         edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
         self._write_line(line, edits, write)
+
+
+class _RunLine:
+    """What the planner needs of a straight move read in a run of plain lines."""
+
+    __slots__ = ("lineno",)
+    arc = None
+    rotary: dict = {}
+
+    def __init__(self, lineno: int) -> None:
+        self.lineno = lineno
 
 
 def _chord_fits(points: np.ndarray, budget: float) -> bool:

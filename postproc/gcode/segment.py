@@ -5,7 +5,11 @@
   each rounded candidate centre is judged by how far the arc every controller draws from
   it (LinuxCNC's spiral, or one radius and a jump at the end) strays from the corrected
   samples. The emitter (:mod:`postproc.gcode.emitter`) fits the fewest such arcs, or
-  chords (:func:`chord_deviation`), through each move's samples.
+  chords (:func:`chord_deviation`), through each move's samples. Where the path bows
+  from its chord by less than one output step the fitted centre means nothing and the
+  nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
+  arc is written that a controller refuses or reads as a full circle
+  (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`).
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
 - :func:`subdivide` splits curves adaptively where the samples are too sparse: a chord
   is accepted when the corrected point at the middle of its parameter interval lies
@@ -21,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import SolverError
 from postproc.gcode.geometry import TWO_PI, arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc
@@ -192,6 +196,23 @@ def arc_deviation(arc: Arc, S, E, s_samples: np.ndarray, q_samples: np.ndarray, 
 # -- exact circles --------------------------------------------------------------------
 # Rounded centre candidates tried on each side of the ideal centre (per axis).
 CENTRE_LATTICE = 3
+# Smallest start or end radius of an emitted arc. LinuxCNC (interp_arc.cc arc_data_ijk)
+# refuses "Zero-radius arc" when either radius is below its radius_tolerance,
+# RADIUS_TOLERANCE_INCH 0.00005 in a G20 program and RADIUS_TOLERANCE_MM (the same
+# length, 0.00005 * 25.4) in a G21 one (interp_internal.hh); NIST RS274NGC's limit (a
+# tenth of its 0.002 mm arc tolerance) is smaller. An arc that needs a smaller circle is
+# written as lines. The margin (a millionth of the limit, far above the rounding of the
+# controller's own arithmetic) keeps a radius that lands on the limit, such as I0.00005
+# in a G20 program, on the refused side.
+MIN_ARC_RADIUS_MM = 0.00005 * MM_PER_INCH * (1.0 + 1e-6)
+# Smallest sweep of an emitted arc (rad). LinuxCNC's motion (posemath pmCircleInit) takes
+# the arc's angle from acos of the start and end radius vectors and makes an angle within
+# CIRCLE_FUZZ (1e-6 rad) of zero a full circle; Grbl (mc_arc) does the same below
+# ARC_ANGULAR_TRAVEL_EPSILON (5e-7 rad), computed in single precision. An arc that flat
+# (a short chord on a huge radius, from a centre fitted where the chord is a few output
+# steps long) would be cut as a whole circle: it is written as a line instead, which
+# departs from it by less than chord * sweep / 8.
+MIN_ARC_SWEEP_RAD = 1e-5
 
 
 def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarray) -> np.ndarray:
@@ -229,6 +250,14 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
     return M + t * n
 
 
+def bisector_point(S2: np.ndarray, E2: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The point (2,) of the perpendicular bisector of S2-E2 nearest ``c`` (S2 != E2)."""
+    M = 0.5 * (S2 + E2)
+    D = E2 - S2
+    n = np.array([-D[1], D[0]]) / math.hypot(D[0], D[1])
+    return M + float((np.asarray(c, dtype=float) - M) @ n) * n
+
+
 def circle_fit(P2: np.ndarray) -> np.ndarray | None:
     """Least-squares (Kasa) centre (2,) of points P2 (k, 2), or None when they are collinear."""
     m = P2.mean(axis=0)
@@ -245,7 +274,7 @@ def circle_fit(P2: np.ndarray) -> np.ndarray | None:
 
 
 def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: float, Q: np.ndarray,
-                   frac_nominal: np.ndarray):
+                   frac_nominal: np.ndarray, controller_limits: bool = False):
     """Deviation of the corrected samples ``Q`` (k, 3) from the arcs that controllers draw
     from S to E around each candidate centre ``C`` (m, 2, plane coordinates).
 
@@ -255,7 +284,9 @@ def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: fl
     draws on one radius and jumps at the end, Grbl or Fanuc, adds to it); inf where the
     arc would turn the wrong way or the wrong number of turns. ``frac_nominal`` (k,):
     where each sample lies along the piece (0 at S, 1 at E), which resolves the
-    angle's turn for multi-turn arcs."""
+    angle's turn for multi-turn arcs. ``controller_limits``: ``worst`` is also inf where
+    a controller refuses or misreads the arc: a start or end radius below
+    :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`."""
     a1, a2, an = axes
     c1, c2 = C[:, 0], C[:, 1]
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
@@ -288,8 +319,26 @@ def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: fl
     nrm = S[an] + (E[an] - S[an]) * frac
     dev = np.hypot(np.hypot(v1, v2) - rad, Q[None, :, an] - nrm).max(axis=1)
     mismatch = np.abs(r1 - r0)
+    if controller_limits:
+        bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
     worst = np.where(bad, np.inf, dev + mismatch)
     return worst, mismatch, turns
+
+
+def within_controller_limits(S, E, centre, axes, clockwise: bool) -> bool:
+    """Whether controllers cut the arc from S to E around ``centre`` (2, plane
+    coordinates) as that arc: both radii at least :data:`MIN_ARC_RADIUS_MM` and, unless
+    S and E coincide in the plane (a full circle), a sweep of at least
+    :data:`MIN_ARC_SWEEP_RAD` (the scalar form of ``arc_candidates``' controller limits)."""
+    a1, a2, _an = axes
+    c1, c2 = float(centre[0]), float(centre[1])
+    if min(math.hypot(S[a1] - c1, S[a2] - c2), math.hypot(E[a1] - c1, E[a2] - c2)) < MIN_ARC_RADIUS_MM:
+        return False
+    if S[a1] == E[a1] and S[a2] == E[a2]:
+        return True
+    t0, t1 = math.atan2(S[a2] - c2, S[a1] - c1), math.atan2(E[a2] - c2, E[a1] - c1)
+    sweep = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
+    return sweep >= MIN_ARC_SWEEP_RAD
 
 
 def chord_deviation(S, E, Q: np.ndarray) -> float:

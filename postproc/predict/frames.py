@@ -19,16 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.errors import PostprocError
+from postproc.rotation import matrices_from_rotation_vectors
 
 # Three frame points closer to a line than this (twice the triangle's area over the
 # square of its longest side) do not define a plane; a real base triangle on a machine
 # part has a ratio of order 1, a numerically collinear one 1e-12.
 COLLINEAR_RATIO = 1e-9
-
-# Below this rotation angle (rad) the Rodrigues formula uses its Taylor series: the
-# closed form divides by theta**2 and loses digits for the micro-radian angles of
-# machine errors.
-RODRIGUES_SERIES_RAD = 1e-4
 
 # A rotation block whose R R^T differs from I by less than this is treated as rigid and
 # inverted by transposition; the small-angle matrix of seed 002 (off by angle**2, 1e-8
@@ -116,19 +112,7 @@ def small_angle_matrix(u, v, w, alpha, beta, gamma) -> np.ndarray:
 def rodrigues(alpha, beta, gamma) -> np.ndarray:
     """Finite rotation ``exp([e]x)`` for the rotation vector ``e = (alpha, beta, gamma)``."""
     e = np.stack(np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (alpha, beta, gamma))), axis=-1)
-    theta2 = np.sum(e * e, axis=-1)
-    theta = np.sqrt(theta2)
-    small = theta < RODRIGUES_SERIES_RAD
-    safe = np.where(small, 1.0, theta)
-    # sin(t)/t and (1 - cos t)/t^2, with their series for tiny angles.
-    a = np.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - np.cos(safe)) / safe**2)
-    k = np.zeros(e.shape[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2] = -e[..., 2], e[..., 1]
-    k[..., 1, 0], k[..., 1, 2] = e[..., 2], -e[..., 0]
-    k[..., 2, 0], k[..., 2, 1] = -e[..., 1], e[..., 0]
-    eye = np.broadcast_to(np.eye(3), k.shape)
-    return eye + a[..., None, None] * k + b[..., None, None] * (k @ k)
+    return matrices_from_rotation_vectors(e)
 
 
 def exact_error_matrix(u, v, w, alpha, beta, gamma) -> np.ndarray:

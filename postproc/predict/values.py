@@ -83,15 +83,19 @@ def check_value(spec: Any, where: str) -> None:
             f"got keys {sorted(spec)}",
             hint='e.g. {"var": "X", "table": {"positions": [0, 100], "values": [0, 0.002]}}',
         )
-    body = spec[kinds[0]]
-    if kinds[0] == "table":
+    _check_function(kinds[0], spec[kinds[0]], where)
+
+
+def _check_function(kind: str, body: Any, where: str) -> None:
+    """Raise PostprocError if ``body`` is not a valid ``table``, ``poly`` or ``sine``."""
+    if kind == "table":
         pos = _numbers(body, "positions", where)
         val = _numbers(body, "values", where)
         if pos.shape != val.shape:
             raise _fail(where, f'table needs as many "values" as "positions", got {len(val)} and {len(pos)}')
         if np.any(np.diff(pos) <= 0):
             raise _fail(where, "table positions must increase strictly")
-    elif kinds[0] == "poly":
+    elif kind == "poly":
         if not isinstance(body, list) or not body or not all(_is_number(c) for c in body):
             raise _fail(where, "poly must be a non-empty list of finite coefficients [c0, c1, ...]")
     else:

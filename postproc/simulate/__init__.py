@@ -6,7 +6,6 @@ programs and control points through a machine.
 """
 
 from postproc.simulate.machine import (
-    AxisErrors,
     Machine,
     MachineError,
     MachineGeometry,
@@ -25,7 +24,6 @@ from postproc.simulate.points import (
 )
 
 __all__ = [
-    "AxisErrors",
     "Machine",
     "MachineError",
     "MachineGeometry",

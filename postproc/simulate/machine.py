@@ -31,67 +31,28 @@ value is held. The forward model is formats.md's::
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from postproc.calibration.calfile import atomic_write_text
+from postproc.calibration.tables import read_squareness, read_tables
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
+from postproc.engine.tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.errors import CalibrationError, PostprocError
+from postproc.fileio import atomic_write_text
+from postproc.rotation import cross, rotate
 
 FORMAT = "postproc machine"
 VERSION = 1
 UNITS = {"length": "mm", "angle": "rad"}
-AXES = "XYZ"
-COLUMNS = ("EX", "EY", "EZ", "EA", "EB", "EC")
-SQUARENESS_NAMES = ("EC0Y", "EB0Z", "EA0Z")
-
-# Below this rotation angle the Rodrigues factors use their series: sin(x)/x and
-# (1 - cos x)/x^2 lose all digits in float64 near zero, and machine angles are ~1e-5.
-_SERIES_ANGLE_RAD = 1e-4
 
 
 class MachineError(CalibrationError):
     """A machine definition that is malformed or unusable."""
-
-
-@dataclass
-class AxisErrors:
-    """The six error motions of one axis (formats.md columns) at table positions.
-
-    ``position`` (n,) mm, increasing; ``values`` (n, 6): EX, EY, EZ in mm and EA, EB,
-    EC in rad.
-    """
-
-    position: np.ndarray
-    values: np.ndarray
-
-    def __post_init__(self) -> None:
-        self.position = np.asarray(self.position, dtype=float).reshape(-1)
-        self.values = np.asarray(self.values, dtype=float).reshape(len(self.position), 6)
-        if len(self.position) < 2 or np.any(np.diff(self.position) <= 0):
-            raise MachineError("an axis table needs at least two strictly increasing positions")
-        if not np.all(np.isfinite(self.values)):
-            raise MachineError("an axis table holds a value that is not a finite number")
-
-    def at(self, s) -> np.ndarray:
-        """Errors (N, 6) at axis positions ``s`` (N,), linear between rows, held at the ends."""
-        s = np.asarray(s, dtype=float)
-        return np.column_stack([np.interp(s, self.position, self.values[:, k]) for k in range(6)])
-
-
-def rotate(eps: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """R(eps) r with R = exp([eps]x) (Rodrigues), vectorised over rows."""
-    theta2 = np.sum(eps * eps, axis=1)
-    theta = np.sqrt(theta2)
-    small = theta < _SERIES_ANGLE_RAD
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1 - theta2 / 6, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - theta2 / 24, (1 - np.cos(safe)) / safe**2)
-    exr = np.cross(eps, r)
-    return r + a[:, None] * exr + b[:, None] * np.cross(eps, exr)
 
 
 class MachineGeometry(Engine):
@@ -100,19 +61,21 @@ class MachineGeometry(Engine):
     method = "machine"
     affine = False
 
-    def __init__(self, tables: dict[str, AxisErrors], squareness: dict[str, float], volume_mm,
-                 rotation: str = "finite") -> None:
+    def __init__(self, tables: AxisTables | Mapping[str, Any] | None, squareness: Squareness | Mapping[str, float] | None,
+                 volume_mm, rotation: str = "finite") -> None:
+        """``tables``: the axis error tables (None, or an empty mapping, for none at all);
+        ``squareness``: a :class:`Squareness` or ``{name: rad}`` (missing names are 0)."""
         super().__init__(volume_mm)
-        unknown = set(tables) - set(AXES)
-        if unknown:
-            raise MachineError(f"tables for unknown axis {sorted(unknown)}: axes are X, Y, Z")
-        bad = set(squareness) - set(SQUARENESS_NAMES)
-        if bad:
-            raise MachineError(f"unknown squareness name(s) {sorted(bad)}: use {', '.join(SQUARENESS_NAMES)}")
         if rotation not in ("finite", "first"):
             raise MachineError(f"rotation {rotation!r}: use 'finite' or 'first'")
-        self.tables = dict(tables)
-        self.squareness = {k: float(squareness.get(k, 0.0)) for k in SQUARENESS_NAMES}
+        if tables is None or (isinstance(tables, Mapping) and not tables):
+            tables = AxisTables({}, {})
+        if not isinstance(tables, AxisTables):
+            raise MachineError(f"machine tables must be axis error tables, got {type(tables).__name__}")
+        if not isinstance(squareness, Squareness):
+            squareness = Squareness.from_mapping(squareness or {})
+        self.tables = tables
+        self.squareness = squareness
         self.rotation = rotation
 
     def errors_at(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -120,12 +83,12 @@ class MachineGeometry(Engine):
         q = check_points(q, "q")
         total = np.zeros((len(q), 6))
         for j, axis in enumerate(AXES):
-            if axis in self.tables:
-                total += self.tables[axis].at(q[:, j])
+            if axis in self.tables.axes:
+                total += self.tables.at(axis, q[:, j])
         sq = self.squareness
         rho = total[:, :3].copy()
-        rho[:, 0] += -sq["EC0Y"] * q[:, 1] + sq["EB0Z"] * q[:, 2]
-        rho[:, 1] += -sq["EA0Z"] * q[:, 2]
+        rho[:, 0] += -sq.EC0Y * q[:, 1] + sq.EB0Z * q[:, 2]
+        rho[:, 1] += -sq.EA0Z * q[:, 2]
         return rho, total[:, 3:]
 
     def forward(self, q, r=None, context=None) -> np.ndarray:
@@ -133,7 +96,7 @@ class MachineGeometry(Engine):
         rr = check_tool_vectors(r, len(q))
         rho, eps = self.errors_at(q)
         if self.rotation == "first":
-            return q + rho + rr + np.cross(eps, rr)
+            return q + rho + rr + cross(eps, rr)
         return q + rho + rotate(eps, rr)
 
     def inverse(self, p, r=None, context=None) -> InverseResult:
@@ -141,10 +104,8 @@ class MachineGeometry(Engine):
 
     def model_to_dict(self) -> dict:
         return {
-            "tables": {a: {"position": t.position.tolist(),
-                           **{c: t.values[:, k].tolist() for k, c in enumerate(COLUMNS)}}
-                       for a, t in self.tables.items()},
-            "squareness": dict(self.squareness),
+            "tables": tables_to_dict(self.tables),
+            "squareness": self.squareness.as_dict(),
             "rotation": self.rotation,
         }
 
@@ -172,8 +133,9 @@ def fixed_point_inverse(engine: Engine, p, r=None, context=None) -> InverseResul
     return InverseResult(q, res, iters)
 
 
-def tables_from_dict(data: dict) -> dict[str, AxisErrors]:
-    out = {}
+def tables_from_dict(data: dict) -> AxisTables:
+    """Inline machine tables ``{"X": {"position": [...], "EX": [...], ...}, ...}``."""
+    pos, err = {}, {}
     for axis, cols in data.items():
         missing = [c for c in ("position", *COLUMNS) if c not in cols]
         if missing:
@@ -181,8 +143,16 @@ def tables_from_dict(data: dict) -> dict[str, AxisErrors]:
         n = len(cols["position"])
         if any(len(cols[c]) != n for c in COLUMNS):
             raise MachineError(f"inline table of axis {axis}: columns differ in length")
-        out[axis] = AxisErrors(cols["position"], np.column_stack([cols[c] for c in COLUMNS]))
-    return out
+        pos[axis] = cols["position"]
+        err[axis] = np.column_stack([np.asarray(cols[c], dtype=float) for c in COLUMNS])
+    return AxisTables(pos, err)
+
+
+def tables_to_dict(tables: AxisTables) -> dict:
+    """The inline form of :func:`tables_from_dict`."""
+    return {a: {"position": tables.position_mm[a].tolist(),
+                **{c: tables.errors[a][:, k].tolist() for k, c in enumerate(COLUMNS)}}
+            for a in tables.axes}
 
 
 @dataclass
@@ -269,21 +239,8 @@ class Machine:
         }
 
 
-def _read_table_file(path: Path, where: str) -> dict[str, AxisErrors]:
-    from postproc.simulate.tables_io import read_axis_errors
-
-    return read_axis_errors(path, where)
-
-
-def _read_squareness_file(path: Path, where: str) -> dict[str, float]:
-    from postproc.simulate.tables_io import read_squareness_values
-
-    return read_squareness_values(path, where)
-
-
 def machine_from_dict(data, *, path: str | None = None) -> Machine:
     """Build a Machine from its JSON data; file references are relative to ``path``."""
-    where = path or "machine"
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise MachineError('not a machine definition (no "format": "postproc machine")', path=path,
                            hint="see docs/virtual-machine.md for the layout")
@@ -298,12 +255,12 @@ def machine_from_dict(data, *, path: str | None = None) -> Machine:
     try:
         tables = data.get("tables") or {}
         if isinstance(tables, str):
-            tables = _read_table_file(base / tables, where)
+            tables = read_tables(base / tables)
         else:
             tables = tables_from_dict(tables)
         sq = data.get("squareness") or {}
         if isinstance(sq, str):
-            sq = _read_squareness_file(base / sq, where)
+            sq = read_squareness(base / sq)
         geometry = MachineGeometry(tables, sq, data["volume_mm"], data.get("rotation", "finite"))
         return Machine(
             geometry=geometry,

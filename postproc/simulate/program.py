@@ -17,9 +17,12 @@ from postproc.simulate.verify import (
 
 
 def make_setup(setup_args: dict | None):
-    """A :class:`postproc.gcode.path.Setup` from offsets, tool lengths, tool vector, context."""
+    """A :class:`postproc.gcode.path.Setup` from offsets, tool lengths, tool vector, context
+    (a Setup is taken as it is)."""
     from postproc.gcode.path import Setup
 
+    if isinstance(setup_args, Setup):
+        return setup_args
     args = dict(setup_args or {})
     offsets = {name: (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0)) if isinstance(v, dict) else v
                for name, v in (args.get("offsets") or {}).items()}

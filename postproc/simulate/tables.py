@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.simulate.machine import AXES, AxisErrors, Machine
+from postproc.engine.tables import AXES, AxisTables, Squareness
+from postproc.simulate.machine import Machine
 from postproc.simulate.points import SimulationError
 
 # The last position of a table run is kept when the step falls short of the end of
@@ -35,15 +36,15 @@ def table_positions(lo: float, hi: float, step_mm: float) -> np.ndarray:
 
 def simulate_tables(machine: Machine, step_mm: float, rng: np.random.Generator | None = None,
                     *, noise: bool = True, context: dict | None = None
-                    ) -> tuple[dict[str, AxisErrors], dict[str, float]]:
+                    ) -> tuple[AxisTables, Squareness]:
     """Axis error tables (per axis, every ``step_mm``) and squareness as measured."""
     rng = rng if rng is not None else np.random.default_rng(0)
     vol = machine.volume_mm
     geo = machine.geometry
-    tables: dict[str, AxisErrors] = {}
+    pos, err = {}, {}
     for j, axis in enumerate(AXES):
         s = table_positions(vol[0, j], vol[1, j], step_mm)
-        values = (geo.tables[axis].at(s) if axis in geo.tables else np.zeros((len(s), 6)))
+        values = geo.tables.at(axis, s) if axis in geo.tables.axes else np.zeros((len(s), 6))
         if machine.effects:
             q = np.tile(vol[0], (len(s), 1))
             q[:, j] = s
@@ -55,9 +56,9 @@ def simulate_tables(machine: Machine, step_mm: float, rng: np.random.Generator |
             n = machine.noise
             values[:, :3] += rng.normal(0.0, n.interferometer_length_mm, (len(s), 3))
             values[:, 3:] += rng.normal(0.0, n.interferometer_angle_rad, (len(s), 3))
-        tables[axis] = AxisErrors(s, values)
-    squareness = dict(geo.squareness)
+        pos[axis], err[axis] = s, values
+    squareness = geo.squareness.as_dict()
     if noise:
         for k in squareness:
             squareness[k] += float(rng.normal(0.0, machine.noise.squareness_rad))
-    return tables, squareness
+    return AxisTables(pos, err), Squareness.from_mapping(squareness)

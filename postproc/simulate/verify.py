@@ -26,7 +26,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from postproc.effects.base import DIR_COLUMNS
+from postproc.gcode.directions import MACHINE_STEP_MM
 from postproc.simulate.machine import Machine
+
+#: Commanded motions smaller than this between two samples are float noise, carried as
+#: no motion (as :func:`postproc.gcode.path.motion_signs` does).
+MOTION_EPS_MM = 1e-9
 
 if TYPE_CHECKING:
     from postproc.gcode.path import ProgramPath
@@ -377,10 +383,56 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     return ProgramPath(q + r, r, lineno_arr, np.asarray(rapid)[move], context)
 
 
+def machine_directions(q, initial) -> np.ndarray:
+    """Approach direction (N, 3) of each axis into each commanded sample ``q`` (N, 3),
+    as the machine takes it; ``initial`` (3,): the direction into the first sample.
+
+    An axis reverses when its commanded position has moved back by more than
+    :data:`MACHINE_STEP_MM` from the farthest point it reached, however small the
+    motion that follows, as a controller's backlash compensation does; where it stands
+    the direction is carried. Less is no motion: the machine does not resolve it, and it
+    is the rounding noise of a sampled path (an arc of a huge radius computes its points
+    to about 1e-16 times its radius).
+    """
+    q = np.asarray(q, dtype=float)
+    out = np.empty_like(q)
+    if not len(q):
+        return out
+    out[0] = initial
+    d = np.diff(q, axis=0)
+    n = len(d)
+    if not n:
+        return out
+    for k in range(3):
+        s = np.sign(np.where(np.abs(d[:, k]) > MOTION_EPS_MM, d[:, k], 0.0))
+        # monotone runs of the commanded motion (standing samples carry the direction)
+        idx = np.where(s != 0, np.arange(n), -1)
+        np.maximum.accumulate(idx, out=idx)
+        c = np.where(idx >= 0, s[np.maximum(idx, 0)], 0.0)
+        starts = np.flatnonzero(np.r_[True, c[1:] != c[:-1]])
+        ends = np.r_[starts[1:], n]
+        rdir = c[starts]
+        # a run that moves the axis by more than a step reverses it, once it has
+        # moved a step from where it began (the farthest point the axis reached)
+        real = (rdir != 0) & (np.abs(q[ends, k] - q[starts, k]) > MACHINE_STEP_MM)
+        last = np.where(real, np.arange(len(starts)), -1)
+        np.maximum.accumulate(last, out=last)
+        after = np.where(last >= 0, rdir[np.maximum(last, 0)], float(initial[k]))
+        before = np.r_[float(initial[k]), after[:-1]]
+        run = np.repeat(np.arange(len(starts)), ends - starts)
+        moved = np.abs(q[1:, k] - q[starts[run], k]) > MACHINE_STEP_MM
+        out[1:, k] = np.where(real[run] & moved, rdir[run], before[run])
+    return out
+
+
 def machine_run(machine: Machine, path) -> np.ndarray:
-    """Actual functional-point positions of a sampled program path on the machine."""
+    """Actual functional-point positions of a sampled program path on the machine; the
+    approach directions are those of the commanded samples (:func:`machine_directions`)."""
     q = np.asarray(path.points_mm) - np.asarray(path.tool_mm)
     ctx = {k: np.asarray(v) for k, v in (path.context or {}).items()}
+    if len(q) and all(c in ctx for c in DIR_COLUMNS):
+        dirs = machine_directions(q, [float(ctx[c][0]) for c in DIR_COLUMNS])
+        ctx.update({c: dirs[:, k] for k, c in enumerate(DIR_COLUMNS)})
     return machine.forward(q, path.tool_mm, ctx)
 
 

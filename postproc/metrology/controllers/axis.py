@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.engine.parametric_tables import AXES, COLUMNS, UNMEASURED_HALF_RANGE_MM
+from postproc.calibration.tables import UNMEASURED_HALF_RANGE_MM
+from postproc.effects.composed import ComposedEngine
+from postproc.engine.tables import AXES, COLUMNS
 from postproc.errors import CalibrationError
 
 #: Points per table interval at which an exported table is compared with the model.
@@ -32,8 +34,6 @@ class AxisErrors:
     """Positioning error of one axis of a parametric calibration, per direction (mm)."""
 
     def __init__(self, cal, axis: str) -> None:
-        from postproc.effects.composed import ComposedEngine
-
         engine = cal.engine
         base = engine.base if isinstance(engine, ComposedEngine) else engine
         if base.method != "parametric":

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from postproc.engine.parametric_tables import AXES, COLUMNS, TablePart
+from postproc.calibration.tables import TablePart
+from postproc.engine.tables import AXES, COLUMNS
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import AxisErrors
 from postproc.metrology.controllers.base import Export
@@ -70,6 +71,17 @@ def read_isg_parts(path) -> dict[str, TablePart]:
         text = Path(path).read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise MeasurementError(f"cannot read file: {exc}", path=path) from None
+    parts: dict[str, TablePart] = {}
+    for block in _isg_blocks(text):
+        axis, part = _isg_part(block, path)
+        if axis in parts:
+            raise CalibrationError(f"axis {axis} is given in two blocks", path=path)
+        parts[axis] = part
+    return parts
+
+
+def _isg_blocks(text: str) -> list[list[tuple[int, str]]]:
+    """The non-empty blocks of (line number, line) between '#' file breaks, comments left out."""
     blocks: list[list[tuple[int, str]]] = [[]]
     for lineno, line in enumerate(text.splitlines(), 1):
         body = line.strip()
@@ -79,57 +91,62 @@ def read_isg_parts(path) -> dict[str, TablePart]:
             blocks.append([])
             continue
         blocks[-1].append((lineno, body))
-    parts: dict[str, TablePart] = {}
-    for block in blocks:
-        if not block:
+    return [b for b in blocks if b]
+
+
+def _isg_columns(head: str, head_line: int, path: str) -> tuple[str, dict[int, int]]:
+    """The argument axis of a block's header and its component columns (header index ->
+    formats.md column index)."""
+    names = head.split()
+    args = [n for n in names if n in AXES]
+    comps = [n for n in names if n not in AXES]
+    if not args and comps:
+        raise MeasurementError(f"position errors ({', '.join(comps)}) are not read: give squareness in a "
+                               "formats.md squareness file", path=path, lineno=head_line, col=1)
+    if len(args) != 1:
+        raise MeasurementError(f"header {head!r}: one argument column (X, Y or Z) expected",
+                               path=path, lineno=head_line, col=1,
+                               hint="component errors depending on two axes are not read")
+    axis = args[0]
+    cols = {}
+    for j, n in enumerate(names):
+        if n == axis:
             continue
-        head_line, head = block[0]
-        names = head.split()
-        args = [n for n in names if n in AXES]
-        comps = [n for n in names if n not in AXES]
-        if not args and comps:
-            raise MeasurementError(f"position errors ({', '.join(comps)}) are not read: give squareness in a "
-                                   "formats.md squareness file", path=path, lineno=head_line, col=1)
-        if len(args) != 1:
-            raise MeasurementError(f"header {head!r}: one argument column (X, Y or Z) expected",
-                                   path=path, lineno=head_line, col=1,
-                                   hint="component errors depending on two axes are not read")
-        axis = args[0]
-        measured = np.zeros(6, bool)
-        cols = {}
-        for j, n in enumerate(names):
-            if n == axis:
-                continue
-            m = _COMPONENT.match(n)
-            if not m or m.group(2) != axis:
-                raise MeasurementError(f"column {n!r} is not a component error of {axis} (E<X|Y|Z|A|B|C>{axis})",
-                                       path=path, lineno=head_line, col=head.find(n) + 1)
-            k = COLUMNS.index(f"E{m.group(1)}")
-            measured[k] = True
-            cols[j] = k
-        rows = []
-        for lineno, body in block[1:]:
-            cells = body.split()
-            if len(cells) != len(names):
-                raise MeasurementError(f"row has {len(cells)} values, the header has {len(names)}",
-                                       path=path, lineno=lineno, col=1)
-            try:
-                rows.append([float(c) for c in cells])
-            except ValueError:
-                raise MeasurementError(f"{body!r} holds a value that is not a number", path=path,
-                                       lineno=lineno, col=1) from None
-        if len(rows) < 2:
-            raise MeasurementError(f"axis {axis}: fewer than 2 records", path=path, lineno=head_line, col=1)
-        a = np.array(rows)
-        order = np.argsort(a[:, names.index(axis)], kind="stable")
-        a = a[order]
-        x = a[:, names.index(axis)]
-        if np.any(np.diff(x) <= 0):
-            raise MeasurementError(f"axis {axis}: a position is repeated", path=path, lineno=head_line, col=1)
-        values = np.zeros((len(x), 6))
-        for j, k in cols.items():
-            values[:, k] = a[:, j]
-        if axis in parts:
-            raise CalibrationError(f"axis {axis} is given in two blocks", path=path)
-        parts[axis] = TablePart(x, values, measured, path)
-    return parts
+        m = _COMPONENT.match(n)
+        if not m or m.group(2) != axis:
+            raise MeasurementError(f"column {n!r} is not a component error of {axis} (E<X|Y|Z|A|B|C>{axis})",
+                                   path=path, lineno=head_line, col=head.find(n) + 1)
+        cols[j] = COLUMNS.index(f"E{m.group(1)}")
+    return axis, cols
+
+
+def _isg_part(block: list[tuple[int, str]], path: str) -> tuple[str, TablePart]:
+    """One block: its axis and the columns it gives, sorted by position."""
+    head_line, head = block[0]
+    names = head.split()
+    axis, cols = _isg_columns(head, head_line, path)
+    rows = []
+    for lineno, body in block[1:]:
+        cells = body.split()
+        if len(cells) != len(names):
+            raise MeasurementError(f"row has {len(cells)} values, the header has {len(names)}",
+                                   path=path, lineno=lineno, col=1)
+        try:
+            rows.append([float(c) for c in cells])
+        except ValueError:
+            raise MeasurementError(f"{body!r} holds a value that is not a number", path=path,
+                                   lineno=lineno, col=1) from None
+    if len(rows) < 2:
+        raise MeasurementError(f"axis {axis}: fewer than 2 records", path=path, lineno=head_line, col=1)
+    a = np.array(rows)
+    order = np.argsort(a[:, names.index(axis)], kind="stable")
+    a = a[order]
+    x = a[:, names.index(axis)]
+    if np.any(np.diff(x) <= 0):
+        raise MeasurementError(f"axis {axis}: a position is repeated", path=path, lineno=head_line, col=1)
+    values = np.zeros((len(x), 6))
+    measured = np.zeros(6, bool)
+    for j, k in cols.items():
+        values[:, k] = a[:, j]
+        measured[k] = True
+    return axis, TablePart(x, values, measured, path)

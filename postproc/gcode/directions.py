@@ -1,0 +1,224 @@
+"""Approach directions as the machine sees them: those of the corrected commands.
+
+A controller reverses an axis, and its lost motion (or its own backlash compensation)
+acts, when the *commanded* position of that axis changes direction, by any amount it
+resolves. The corrected program commands other positions than the nominal one: a Z
+plunge whose correction moves X by a few micrometres is an X move on the machine, and
+it may reverse X. A correction that depends on the approach direction (``backlash``)
+must therefore be evaluated with the directions of the corrected commands themselves.
+They are found as a fixed point (:func:`settle`):
+
+1. directions from the nominal program (chord signs, carried where an axis stands);
+2. corrected targets with those directions;
+3. the directions those targets command (:func:`commanded`); the moves whose
+   direction changed are corrected again with it, and so on until nothing changes.
+
+What the controller is commanded, per direction-dependent axis, from the previous
+commanded target to the next:
+
+- a motion along the current direction, or none: no reversal;
+- a motion against it by more than one output unit: a reversal. Rounding both words
+  to the output resolution keeps at least one unit of it, so the controller reverses;
+- a motion against it by one output unit or less is *held*: the target keeps the
+  previous target's value exactly, so the written word does not change and the
+  controller does not move the axis (it would, by one unit or none, depending on where
+  the rounding falls). The point stays within one output unit of the corrected ideal.
+
+Rounding is monotone, so targets that move along their direction or stand still are
+written as words that do too: the directions the correction assumed are the ones the
+controller executes.
+
+For a lagging axis (lost motion, ``b < 0``) the directions settle: a reversal moves
+the corrected target further in the new direction, by the lost motion. For an axis that
+runs ahead (``b > 0``, an over-compensated backlash) a small correction against the
+direction has no consistent answer (reversing moves the target back by ``b``); the
+correction refuses it after :data:`MAX_ITERATIONS` rounds, naming the line.
+
+The points are every sample of a move that is fitted by arcs or split (the samples
+the fits follow), with an arc's quadrant points among them, and the target of any
+other move. Where a direction-dependent axis reverses inside such a move, the plan
+takes the reversal up there (:func:`reversals`, :func:`plan_pieces`), as a
+controller's backlash compensation does: between take-ups every direction-dependent
+axis of the emitted path moves one way. A reversal after points of the same move that
+held the axis is taken up where they start (at the start of the block, for a line).
+
+Not covered: a word the input writes with more decimals than the output keeps them,
+and rounds on a finer grid than its neighbours; the points a fit adds between samples
+(adaptive subdivision) take the directions of their move, not their own.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.effects.base import AXES, DIR_COLUMNS
+from postproc.errors import SafetyError
+
+#: Rounds of re-solving before the directions are declared unsettled.
+MAX_ITERATIONS = 16
+
+#: The finest commanded motion a machine resolves (mm): below the command unit of any
+#: controller (0.1 um for the finest common increment systems), above the rounding
+#: noise of a sampled path. A target closer than this (or than one output unit) to the
+#: previous one against the direction is held; the virtual machine of ``verify`` does
+#: not reverse an axis for less (:func:`postproc.simulate.verify.machine_directions`).
+MACHINE_STEP_MM = 1e-6
+
+
+def direction_axes(engine) -> tuple[int, ...]:
+    """Axes whose approach direction the engine's correction depends on (its effects
+    need ``dirx`` / ``diry`` / ``dirz``); empty for engines without such effects."""
+    needs = set(getattr(engine, "needs", ()) or ())
+    return tuple(k for k, c in enumerate(DIR_COLUMNS) if c in needs)
+
+
+def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, given=None, assumed=None,
+              move_first=None) -> tuple[np.ndarray, np.ndarray]:
+    """Targets as commanded and the direction of each axis into each of them.
+
+    ``T`` (M, 3): corrected points in order; ``start`` (3,): the point before the
+    first (NaN: unknown, no motion into the first); ``dirs0`` (3,): directions before
+    it; ``hold_mm``: one output unit (at least :data:`MACHINE_STEP_MM`); ``axes``: the
+    direction-dependent axes (the others' columns of ``D`` are 0); ``free`` (M,) bool:
+    points that may be held (False: a stored position the machine goes to as it is);
+    ``given`` (M, 3) bool: directions that are the motion's own, taken from ``assumed``
+    (M, 3) (an arc's in-plane axes: the direction of their quarter); ``move_first``
+    (M,) int: the first point of each point's move (the samples of one move).
+
+    Where an axis reverses after points of the same move that held it, the reversal is
+    put at the first of them: the axis did not move before it in this move, and the
+    take-up goes where the motion starts, as a controller takes it up at the start of
+    the block that reverses (``D`` of those points is the new direction; corrected with
+    it they move, and the next round confirms it).
+
+    Returns ``(E, D)``: ``E`` is ``T`` with the held values, ``D`` (M, 3) the sign of
+    each axis's commanded motion into each point, carried where it does not move.
+    """
+    E = np.array(T, dtype=float, copy=True)
+    D = np.zeros_like(E)
+    M = len(E)
+    may_hold = [True] * M if free is None else np.asarray(free, dtype=bool).tolist()
+    firsts = list(range(M)) if move_first is None else np.asarray(move_first, dtype=int).tolist()
+    for k in axes:
+        t = E[:, k].tolist()
+        fixed = {} if given is None else {int(i): float(assumed[i, k]) for i in np.flatnonzero(given[:, k])}
+        e = float(start[k])
+        d = float(dirs0[k])
+        moved = -1  # the last point the axis moved into (or was reversed at)
+        out_d = [0.0] * M
+        for i, v in enumerate(t):
+            if fixed and i in fixed:
+                e = v
+                d = fixed[i]
+                moved = i
+            elif e != e or v != v:  # unknown position: no motion known into this point
+                e = v
+                moved = i
+            else:
+                delta = v - e
+                if delta == 0.0:
+                    pass
+                elif d != 0.0 and (delta > 0.0) == (d > 0.0):
+                    e = v
+                    moved = i
+                elif may_hold[i] and abs(delta) <= hold_mm:
+                    t[i] = e  # held: the word stays, the axis does not move
+                else:
+                    e = v
+                    d = 1.0 if delta > 0.0 else -1.0
+                    for j in range(max(moved + 1, firsts[i]), i):
+                        out_d[j] = d  # reversed at the start of the held stretch
+                    moved = i
+            out_d[i] = d
+        E[:, k] = t
+        D[:, k] = out_d
+    return E, D
+
+
+def settle(T: np.ndarray, D: np.ndarray, start, dirs0, hold_mm: float, axes, solve, lineno,
+           free=None, given=None, move_first=None, *, path: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed point of corrected targets and commanded directions (see the module).
+
+    ``T``: targets corrected with the assumed directions ``D`` (both (M, 3));
+    ``solve(rows, D_rows)``: the targets of ``rows`` corrected with directions
+    ``D_rows``; ``lineno`` (M,): program lines, for the refusal; ``free``, ``given``,
+    ``move_first``: as :func:`commanded`. Returns ``(E, D)``,
+    the targets as commanded (holds applied) and their directions.
+    """
+    axes = tuple(axes)
+    if not axes or not len(T):
+        return T, D
+    T = np.array(T, dtype=float, copy=True)
+    D = np.array(D, dtype=float, copy=True)
+    free_mask = np.ones(len(T), dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    cols = list(axes)
+    for _round in range(MAX_ITERATIONS):
+        E, Dm = commanded(T, start, dirs0, hold_mm, axes, free_mask, given, D, move_first)
+        diff = Dm[:, cols] != D[:, cols]
+        changed = np.flatnonzero(diff.any(axis=1))
+        if not len(changed):
+            return E, D
+        D[np.ix_(changed, cols)] = Dm[np.ix_(changed, cols)]
+        redo = changed[free_mask[changed]]
+        if len(redo):
+            T[redo] = solve(redo, D[redo])
+    i = int(changed[0])
+    ax = AXES[cols[int(np.flatnonzero(diff[i])[0])]]
+    raise SafetyError(
+        f"the approach direction of {ax} does not settle here: the correction commanded with one direction "
+        f"moves {ax} the other way, and the other way back (a reversal value that makes {ax} run ahead, "
+        f"backlash b > 0, cannot be taken up by a small move)",
+        path=path, lineno=int(lineno[i]),
+        hint=f"check the calibration's backlash:{ax}: lost motion has b < 0 (ISO 230-2 B = x_up - x_down); "
+             "b > 0 is an axis that runs ahead, as one does whose controller compensates more backlash than there "
+             "is: lower that compensation and measure again")
+
+
+def reversals(D: np.ndarray, dirs0, axes, rows: np.ndarray) -> np.ndarray:
+    """Which of the points ``rows`` (indices into the sequence) a direction-dependent
+    axis reverses into: its direction differs from the point's before (``dirs0``
+    before the first)."""
+    cols = list(axes)
+    before = np.vstack([np.asarray(dirs0, dtype=float)[None, :], D[:-1]])
+    return (D[rows][:, cols] != before[rows][:, cols]).any(axis=1)
+
+
+def plan_pieces(first: int, last: int, E: np.ndarray, D: np.ndarray, s: np.ndarray, nominal: np.ndarray,
+                start, start_dirs, start_nominal, takeups: dict, keys: np.ndarray, axes, takeup_min_mm: float,
+                bulge):
+    """The plan sequence of one move, whose points are ``first .. last`` of the
+    sequence (``E``: commanded, ``D``: directions, ``s``: move parameter, ``nominal``):
+    pieces of samples, and a take-up before each point a direction-dependent axis
+    reverses into (``takeups``: point index -> the point before it corrected with the
+    new directions; ``keys``: its indices, increasing). ``start``, ``start_dirs``, ``start_nominal``: the commanded point,
+    directions and nominal point the move starts from; ``bulge(s, nominal)``: how the
+    nominal path bulges from its chords between samples. Returns
+    ``[("takeup", point) | ("piece", s, Q, nominal, bulge), ...]``.
+    """
+    cols = list(axes)
+    seq: list = []
+    p_s, p_q, p_n = 0.0, np.asarray(start, dtype=float), np.asarray(start_nominal, dtype=float)
+    a = first
+
+    def close(b: int) -> None:
+        if b > a:  # the piece's start and points a .. b-1
+            ss = np.concatenate(([p_s], s[a:b]))
+            nn = np.vstack([p_n[None, :], nominal[a:b]])
+            seq.append(("piece", ss, np.vstack([p_q[None, :], E[a:b]]), nn, bulge(ss, nn)))
+
+    for j in keys[np.searchsorted(keys, first):np.searchsorted(keys, last, side="right")].tolist():
+        prev_end = E[j - 1] if j > first else np.asarray(start, dtype=float)
+        prev_dirs = D[j - 1] if j > first else np.asarray(start_dirs, dtype=float)
+        tk = np.array(takeups[j], dtype=float)
+        same = [k for k in cols if D[j, k] == prev_dirs[k]]
+        tk[same] = prev_end[same]  # an axis that does not reverse here stays where it is
+        if np.abs(tk - prev_end).max() <= takeup_min_mm:
+            continue
+        close(j)
+        seq.append(("takeup", tk))
+        p_s = float(s[j - 1]) if j > first else 0.0
+        p_n = nominal[j - 1] if j > first else np.asarray(start_nominal, dtype=float)
+        p_q = tk
+        a = j
+    close(last + 1)
+    return seq

@@ -1,0 +1,330 @@
+"""Planning a chunk's moves in bulk: which stay one line or one exact arc.
+
+The planner (:meth:`postproc.gcode.pipeline.Corrector._plan`) must know, for every
+move of a chunk, whether the corrected ideal path stays within the budget of the one
+line or the one exact circle that will be written for it. Nearly every move of a CAM
+program does, so that question is answered here for the whole chunk at once, with one
+engine call and array arithmetic over all samples:
+
+- a straight move stays one line when every corrected sample lies within
+  ``budget - rounding`` of the chord between the corrected (unrounded) end points: the
+  written end points differ from those by at most the rounding, so the written line is
+  within the budget;
+- an arc gets an :class:`ArcHint`: the centre on the bisector of the corrected end
+  points that fits the corrected samples best (Gauss-Newton on the signed distance along
+  the bisector, for all arcs at once) and the largest distance of the samples from that
+  circle. When the line is written, :meth:`ArcHint.spec` moves the centre onto the
+  bisector of the end points as written, rounds it, and accepts it when the bound on
+  its deviation (the ideal circle's deviation plus how far the rounded circle moved)
+  stays within the budget.
+
+What this does not settle (moves that must be split, arcs whose bound fails, full
+circles, R-form or multi-turn arcs, direction-dependent calibrations) takes the
+planner's general path, sample by sample. The samples are those of the general path:
+one every ``step_mm`` along the move and, on arcs, every ``step_rad`` of sweep.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from postproc.gcode import emit
+from postproc.gcode.state import PLANES
+
+TWO_PI = 2.0 * math.pi
+# Gauss-Newton steps of the bisector centre fit (it converges in 3-5 on real arcs; the
+# fit only seeds the rounded centre, whose deviation is bounded separately).
+CENTRE_ITERATIONS = 8
+# Rounded centre candidates tried on each side of the centre moved onto the bisector of
+# the written end points (per axis), as the general path does.
+LATTICE = 3
+
+
+class ArcHint:
+    """What the bulk planner found for one arc (see the module docstring)."""
+
+    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "lazy")
+
+    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends, lazy) -> None:
+        self.c1, self.c2, self.rho, self.worst, self.nsweep = c1, c2, rho, worst, nsweep
+        self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
+        self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
+
+    def spec(self, mv, S, E, d: int, budget: float) -> dict | None:
+        """The arc words for the move written from S to E (machine mm, as written):
+        ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None when no rounded centre
+        on their bisector stays provably within ``budget``."""
+        arc = mv.arc
+        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
+        dx, dy = e1 - s1, e2 - s2
+        L = math.hypot(dx, dy)
+        if L == 0.0:
+            return None
+        # the fitted centre moved onto the written ends' bisector
+        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+        n1, n2 = -dy / L, dx / L
+        t = (self.c1 - m1) * n1 + (self.c2 - m2) * n2
+        p1, p2 = m1 + t * n1, m2 + t * n2
+        unit = mv.unit
+        if mv.arc_absolute:
+            b1, b2 = mv.shift[a1], mv.shift[a2]
+        else:
+            b1, b2 = s1, s2
+        step = 10.0 ** (-d)
+        agree = 0.5 * step * unit
+        v1 = round((p1 - b1) / unit, d)
+        v2 = round((p2 - b2) / unit, d)
+        hyp = math.hypot
+        best = None
+        for k1, k2 in _ORDER:
+            # float(emit.fmt(v, d)) == round(v, d): both are the correctly rounded decimal
+            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+            C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+            mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
+            if mism <= agree:
+                best = (hyp(C1 - self.c1, C2 - self.c2), emit.fmt(w1, d), emit.fmt(w2, d), C1, C2, mism)
+                break
+        if best is None:
+            return None
+        moved, t1, t2, C1, C2, mism = best
+        rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
+        # the arc from S to E around C turns as the nominal arc does (one turn)
+        th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
+        sweep = -((th0 - th1) % TWO_PI) if arc.clockwise else (th1 - th0) % TWO_PI
+        if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
+            return None
+        u1, u2, un, w1, w2, wn = self.ends
+        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - w1, e2 - w2))
+        # in the plane: the samples' distance from the ideal circle, plus how far the
+        # written circle (centre C, radius from rs to re) lies from it anywhere
+        bound = self.worst + moved + max(abs(rs - self.rho), abs(re - self.rho)) + mism
+        # along the normal axis: the written ends, and the shift of each sample's angle
+        # (centre and ends moved) along the helix
+        r_min = min(rs, re, self.rho)
+        if not r_min > 0.0:
+            return None
+        dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
+        bound += max(abs(S[an] - un), abs(E[an] - wn)) + abs(E[an] - S[an]) * dfrac
+        if not bound <= budget:
+            return None
+        return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound, "mismatch": mism}
+
+
+# lattice offsets (per axis, in units of the last decimal), nearest first
+_ORDER = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in range(-LATTICE, LATTICE + 1)),
+                      key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
+
+
+def _ragged(n: np.ndarray):
+    """For counts n (k,): the owner of each of sum(n) slots and its index within its owner."""
+    n = np.asarray(n, dtype=int)
+    owner = np.repeat(np.arange(len(n)), n)
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(int) if len(n) else np.zeros(0, dtype=int)
+    pos = np.arange(int(n.sum())) - np.repeat(starts, n)
+    return owner, pos, starts
+
+
+def _group_max(values: np.ndarray, starts: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Largest value of each group of a ragged array (every group non-empty)."""
+    return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(n))
+
+
+def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None, limit: float = 0.0):
+    """Interior samples of the straight moves ``rows`` (every ``step_mm``, at least one):
+    ``(owner rows, nominal points, check)``; ``check(corrected points, limit)`` tells for
+    each move whether every corrected sample lies within ``limit`` of the chord S-T (a
+    move whose start is unknown passes: it is written as it is read).
+
+    ``curvature(rows)``: the engine's bound on the correction's second derivative along
+    each move (:meth:`postproc.engine.base.Engine.line_curvature_bound`); a move whose
+    chord the bound holds within ``limit`` (bound L^2 / 8) passes unsampled."""
+    length = np.linalg.norm(Q1[rows] - Q0[rows], axis=1) if len(rows) else np.zeros(0)
+    n = np.maximum(3, np.ceil(length / step_mm).astype(int) + 1) if len(rows) else np.zeros(0, dtype=int)
+    settled = np.zeros(len(rows), dtype=bool)
+    if curvature is not None and len(rows):
+        settled = curvature(rows) * length * length / 8.0 <= limit
+        n = np.where(settled, 2, n)  # no interior sample
+    own, pos, start = _ragged(n - 2)
+    s = (pos + 1) / (n[own] - 1)
+    r = rows[own]
+    nom = Q0[r] + (Q1[r] - Q0[r]) * s[:, None]
+
+    def check(P: np.ndarray, limit: float) -> np.ndarray:
+        A, B = S[r], T[r]
+        ab = B - A
+        den = np.einsum("ij,ij->i", ab, ab)
+        tt = np.clip(np.einsum("ij,ij->i", P - A, ab) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+        dist = np.linalg.norm(P - A - tt[:, None] * ab, axis=1)
+        worst = np.zeros(len(rows))
+        some = n > 2
+        if some.any():
+            worst[some] = _group_max(dist, start[some], (n - 2)[some])
+        return settled | (worst <= limit) | ~np.isfinite(S[rows]).all(axis=1)
+
+    return r, nom, check
+
+
+def lines_within(rows: np.ndarray, Q0, Q1, S, T, corrected, *, step_mm: float, limit: float,
+                 curvature=None) -> np.ndarray:
+    """Which straight moves ``rows`` stay within ``limit`` of their corrected chord (see
+    :func:`_line_samples`; ``corrected`` as in :func:`plan_chunk`)."""
+    r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm, curvature, limit)
+    return check(corrected(r, nom) if len(r) else np.zeros((0, 3)), limit)
+
+
+def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, step_rad: float,
+               min_arc_samples: int, budget: float, rounding: float, curvature=None):
+    """Settle in bulk the planned moves of a chunk that stay one line or one exact arc.
+
+    ``planned``: (row, Move) pairs; ``arc_prm``: row -> arc_params of the arcs;
+    ``Q0``/``Q1``: nominal starts and ends, ``S``/``T``: corrected starts and ends (per
+    row); ``corrected(rows, nominal points)``: the engine's corrected points (N, 3) for
+    nominal points on those rows' moves. Returns ``(lines, hints, rest)``: the rows of
+    straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left None), and
+    the (row, Move) pairs left to the general path.
+    """
+    lines_i, arcs_i, rest = [], [], []
+    for i, m in planned:
+        if m.arc is None:
+            lines_i.append(i)
+        elif (m.arc.r_idx < 0 and m.arc.turns == 1 and m.arc.plane in PLANES
+              and abs(arc_prm[i][2]) < TWO_PI - 1e-9):
+            arcs_i.append((i, m))
+        else:
+            rest.append((i, m))
+    li = np.array(lines_i, dtype=int)
+    ai = np.array([i for i, _m in arcs_i], dtype=int)
+    prm = [arc_prm[i] for i in ai.tolist()]
+    sweep = np.array([p[2] for p in prm])
+    r0 = np.array([p[3] for p in prm])
+    r1 = np.array([p[4] for p in prm])
+    t0 = np.array([p[1] for p in prm])
+    axes = np.array([p[0] for p in prm], dtype=int).reshape(-1, 3)
+    dn = Q1[ai, axes[:, 2]] - Q0[ai, axes[:, 2]] if len(ai) else np.zeros(0)
+    length = np.hypot(np.abs(sweep) * 0.5 * (r0 + r1), dn)
+    na = np.maximum.reduce([np.full(len(ai), min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
+                            np.ceil(np.abs(sweep) / step_rad).astype(int) + 1]) if len(ai) else np.zeros(0, int)
+    # interior samples only: the ends are S and T
+    ao, ap, astart = _ragged(na - 2)
+    s_a = (ap + 1) / (na[ao] - 1)
+    # and the middles of the sample intervals (all of them), for the nominal bulge
+    mo, mp, mstart = _ragged(na - 1)
+    s_m = (mp + 0.5) / (na[mo] - 1)
+    centre = np.array([m.arc.center for _i, m in arcs_i], dtype=float).reshape(-1, 3)
+
+    def arc_nominal(owner, s):
+        out = np.empty((len(s), 3))
+        th = t0[owner] + s * sweep[owner]
+        rad = r0[owner] + (r1 - r0)[owner] * s
+        rows = ai[owner]
+        for k in range(3):
+            sel1, sel2, seln = axes[owner, 0] == k, axes[owner, 1] == k, axes[owner, 2] == k
+            out[sel1, k] = centre[owner[sel1], k] + rad[sel1] * np.cos(th[sel1])
+            out[sel2, k] = centre[owner[sel2], k] + rad[sel2] * np.sin(th[sel2])
+            out[seln, k] = Q0[rows[seln], k] + (Q1[rows[seln], k] - Q0[rows[seln], k]) * s[seln]
+        return out
+
+    nom_a = arc_nominal(ao, s_a)
+    lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm, curvature, budget - rounding)
+    rows_all = np.concatenate([lrows, ai[ao]])
+    corr = corrected(rows_all, np.vstack([nom_l, nom_a])) if len(rows_all) else np.zeros((0, 3))
+    P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
+    # -- straight moves: every sample within budget - rounding of the chord ---------------
+    ok_lines: list[int] = []
+    if len(li):
+        good = lcheck(P_l, budget - rounding)
+        ok_lines = li[good].tolist()
+        bad = set(li[~good].tolist())
+        rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
+    hints: dict[int, ArcHint] = {}
+    if not len(ai):
+        return ok_lines, hints, rest
+    # -- arcs: samples and bulged interval middles, in the plane of each arc -------------
+    # every sample with its ends: [S, interior..., T] per arc
+    full_o, full_p, full_start = _ragged(na)
+    Pf = np.empty((len(full_o), 3))
+    first = full_p == 0
+    last = full_p == na[full_o] - 1
+    Pf[first] = S[ai]
+    Pf[last] = T[ai]
+    Pf[~first & ~last] = P_a
+    nom_m = arc_nominal(mo, s_m)
+    nom_f = np.empty_like(Pf)
+    nom_f[first] = Q0[ai]
+    nom_f[last] = Q1[ai]
+    nom_f[~first & ~last] = nom_a
+    # interval k of arc j lies between full slots full_start[j] + k and + k + 1
+    a_idx = full_start[mo] + mp
+    bulge = nom_m - 0.5 * (nom_f[a_idx] + nom_f[a_idx + 1])
+    mid = 0.5 * (Pf[a_idx] + Pf[a_idx + 1]) + bulge
+    pts = np.vstack([Pf, mid])
+    owner = np.concatenate([full_o, mo])
+    frac = np.concatenate([full_p / (na[full_o] - 1), s_m])
+    k = len(ai)
+    j = np.arange(k)
+    ax1, ax2, axn = axes[:, 0], axes[:, 1], axes[:, 2]
+    S1, S2, Sn = S[ai, ax1], S[ai, ax2], S[ai, axn]
+    E1, E2, En = T[ai, ax1], T[ai, ax2], T[ai, axn]
+    P1, P2, Pn = pts[np.arange(len(pts)), ax1[owner]], pts[np.arange(len(pts)), ax2[owner]], \
+        pts[np.arange(len(pts)), axn[owner]]
+    # first guess: the nominal centre moved by the mean correction
+    off = np.zeros((k, 3))
+    cnt = np.bincount(full_o, minlength=k)
+    for c in range(3):
+        off[:, c] = np.bincount(full_o, Pf[:, c] - nom_f[:, c], minlength=k) / cnt
+    c01 = centre[j, ax1] + off[j, ax1]
+    c02 = centre[j, ax2] + off[j, ax2]
+    M1, M2 = 0.5 * (S1 + E1), 0.5 * (S2 + E2)
+    D1, D2 = E1 - S1, E2 - S2
+    L = np.hypot(D1, D2)
+    usable = (L > 0) & np.isfinite(L)
+    Ls = np.where(usable, L, 1.0)
+    n1, n2 = -D2 / Ls, D1 / Ls
+    h = 0.5 * L
+    t = (c01 - M1) * n1 + (c02 - M2) * n2
+    for _ in range(CENTRE_ITERATIONS):
+        c1, c2 = M1 + t * n1, M2 + t * n2
+        v1, v2 = P1 - c1[owner], P2 - c2[owner]
+        dist = np.hypot(v1, v2)
+        dist = np.where(dist > 0, dist, 1e-300)
+        rho = np.hypot(h, t)
+        res = dist - rho[owner]
+        J = -(v1 * n1[owner] + v2 * n2[owner]) / dist - (t / rho)[owner]
+        den = np.bincount(owner, J * J, minlength=k)
+        num = np.bincount(owner, J * res, minlength=k)
+        dt = np.where(den > 0, -num / np.where(den > 0, den, 1.0), 0.0)
+        flip = ((t + dt) * t < 0) & (t != 0)
+        t = t + np.where(flip, -0.5 * t, dt)
+    c1, c2 = M1 + t * n1, M2 + t * n2
+    rho = np.hypot(h, t)
+    # the deviation of every sample from that circle (a helix along the normal axis)
+    th0 = np.arctan2(S2 - c2, S1 - c1)
+    th1 = np.arctan2(E2 - c2, E1 - c1)
+    cw = np.array([m.arc.clockwise for _i, m in arcs_i])
+    base = np.where(cw, -np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
+    sgn = np.where(cw, -1.0, 1.0)
+    asw = np.abs(base)
+    usable &= (asw > 0) & (np.abs(base - sweep) <= math.pi / 2)
+    asw = np.where(asw > 0, asw, 1.0)
+    v1, v2 = P1 - c1[owner], P2 - c2[owner]
+    phi = np.arctan2(v2, v1)
+    alpha = np.mod((phi - th0[owner]) * sgn[owner], TWO_PI)
+    target = frac * asw[owner]
+    alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
+    f = alpha / asw[owner]
+    nrm = Sn[owner] + (En - Sn)[owner] * f
+    dev = np.hypot(np.hypot(v1, v2) - rho[owner], Pn - nrm)
+    worst = np.full(k, -np.inf)
+    np.maximum.at(worst, owner, dev)
+    usable &= np.isfinite(worst) & np.isfinite(rho) & (worst <= budget)
+    for jj, (i, m) in enumerate(arcs_i):
+        if usable[jj]:
+            hints[i] = ArcHint(float(c1[jj]), float(c2[jj]), float(rho[jj]), float(worst[jj]), float(sweep[jj]),
+                               (float(S1[jj]), float(S2[jj]), float(Sn[jj]), float(E1[jj]), float(E2[jj]),
+                                float(En[jj])), None)
+        else:
+            rest.append((i, m))
+    return ok_lines, hints, rest
