@@ -38,13 +38,15 @@ def diff(original, corrected, as_json, show_all, setup):
         postproc diff samples/pocket.nc pocket_corrected.nc
         postproc diff samples/g54_g43.ngc part_corrected.ngc --json
     """
-    from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer
     from postproc.gcode.compare import compare_programs
 
     # a progress line on stderr for a big program, as 'correct' shows (when stderr is a terminal)
     progress = None
-    if sys.stderr.isatty() and os.path.getsize(original) > PROGRESS_MIN_BYTES:
-        progress = _progress_printer(original)
+    if sys.stderr.isatty():
+        from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer
+
+        if os.path.getsize(original) > PROGRESS_MIN_BYTES:
+            progress = _progress_printer(original)
     try:
         rep = compare_programs(original, corrected, setup, progress=progress)
     finally:
