@@ -1,6 +1,7 @@
 """postproc diff: blocks moved, per-axis corrections, inserted and unchanged lines."""
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -245,3 +246,34 @@ def test_diff_of_a_corrected_program_missing_a_move_is_an_error(monkeypatch):
     d = compare_programs(text, "".join(lines[:k] + [lines[k]] + lines[k:]))
     assert d.lines_inserted == 1
     assert d.moved == []
+
+
+def test_diff_pairs_line_for_line_where_no_line_was_inserted():
+    from postproc.engine.static import StaticEngine
+
+    # a jump of 30 mm in Z changes the correction by 0.15 mm, ten times the next steps:
+    # the nearest end point (own + the previous correction) is the next step's line, but
+    # as many moves in both programs between two anchors pair line for line
+    A = np.eye(3) + np.diag([0.0, 0.0, 5e-3]) + np.array([[0, 0, 2e-3], [0, 0, 1e-3], [0, 0, 0]])
+    eng = StaticEngine(A, [0.0, 0.0, 0.0], [[0, 0, 0], [315, 315, 315]])
+    text = ("G21 G90 G0 X10 Y10 Z10\nG1 X20 Z5 F500\n(next pass)\nG0 X50 Y50 Z40\nG1 X50.01 Y50\n"
+            "G1 X50.02 Y50.004\nG1 X50.03\nM2\n")
+    out, rep = correct_text(text, eng, Setup())
+    d = compare_programs(text, out)
+    n_header = len(emit.split_header(out)[0])
+    assert d.moves == rep.moves == 6
+    assert [m.lineno for m in d.moved] == [1, 2, 4, 5, 6, 7]
+    assert [m.lineno_corrected - n_header for m in d.moved] == [1, 2, 4, 5, 6, 7]
+    # each delta is the corrected end point minus the original one, read off the lines
+    ends = {4: (50, 50, 40), 5: (50.01, 50, 40), 6: (50.02, 50.004, 40), 7: (50.03, 50.004, 40)}
+    body = out.splitlines()[n_header:]
+    for m in d.moved:
+        if m.lineno in ends:
+            words = dict(re.findall(r"([XYZ])([-\d.]+)", body[m.lineno - 1]))
+            prev = [body[i] for i in range(m.lineno - 1)]
+            got = []
+            for k, a in enumerate("XYZ"):
+                v = words.get(a) or next(dict(re.findall(r"([XYZ])([-\d.]+)", ln)).get(a) for ln in reversed(prev)
+                                         if a in ln)
+                got.append(float(v) - ends[m.lineno][k])
+            np.testing.assert_allclose(m.delta_mm, got, atol=1e-12)

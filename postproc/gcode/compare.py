@@ -1,13 +1,17 @@
 """Compare an original program with its corrected version, block by block.
 
-Lines that are not moves must be byte-identical in both (they are the anchors).
-Between two anchors, each original move is paired with the corrected line of the
-same skeleton (the line without its numbers, motion and arc words, N words kept)
-whose end point is nearest; the corrected lines left over are the lines inserted by
-segmentation. Positions are compared in the machine frame, with the work offsets, tool lengths,
-start and tool vector the corrected program's header records (those given by the
-caller take their place); they matter for G53 blocks, whose words are machine
-coordinates. Offsets and tool lengths neither given nor recorded count as zero.
+Lines that are not moves must be byte-identical in both (they are the anchors), and
+the k-th anchor of one program pairs with the k-th of the other. Between two anchors,
+when both programs have as many moves, each move pairs with the line at the same place,
+which must be of the same skeleton (the line without its numbers, motion and arc words,
+N words kept; or the same N word, or the same comment). Where the corrected program has
+more lines, each original move is paired with the corrected line of the same skeleton
+whose end point is nearest its own plus the previous move's correction; the corrected
+lines left over are the lines inserted by segmentation. Positions are compared in the
+machine frame, with the work offsets, tool lengths, start and tool vector the corrected
+program's header records (those given by the caller take their place); they matter for
+G53 blocks, whose words are machine coordinates. Offsets and tool lengths neither given
+nor recorded count as zero.
 
 Both programs are read in chunks of lines, and memory does not grow with their length
 (apart from the compact list of moved blocks). In a chunk, the stretches of plain
@@ -16,12 +20,10 @@ and of lines that change nothing (S, M3, M8 and the like, comments) are read as 
 a move's end point is its words, carried forward where a line does not name an axis.
 Such arcs are not checked again (``correct`` checks every arc it writes; ``verify``
 runs the program). Every other line goes through the interpreter, which carries the
-modal state from one stretch to the next. The k-th anchor of the original pairs with
-the k-th of the corrected program. Between two anchors, the moves pair with the lines
-at the same place when both have as many, and around each insertion where the
-corrected program has more; the nearest-end-point rule is checked for all of them at
-once, and a move where it picks another line, or where a line was inserted, is paired
-one at a time. Both ways give the same pairs.
+modal state from one stretch to the next. Pairing takes a chunk at a time: the stretches
+with as many moves in both at once; in a stretch with lines inserted, the moves before
+and after each insertion at once (the nearest-end-point rule checked for all of them),
+the move at the insertion one at a time.
 """
 
 from __future__ import annotations
@@ -604,16 +606,17 @@ def _l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  # noqa: C901
                 limit: int) -> tuple[int, bool, tuple]:
-    """Pair up to ``limit`` records of orig as :func:`_pair_one` would, a chunk at a time.
+    """Pair up to ``limit`` records of orig with the lines of corr (see the module docstring).
 
     The k-th anchor of orig goes with the k-th of corr. Between two anchors, when both
-    programs have as many moves, each move is taken to pair with the line at the same
-    place, and that is checked for all of them at once: the line is compatible and the
-    nearest of those the one-at-a-time scan looks at. Where corr has more lines (inserted
-    ones), the moves before the insertion pair at the place after the previous anchor,
-    those after it at the place before the next anchor (both checked the same way), and
-    the move at the insertion is paired one at a time. Returns (records paired, whether a
-    check failed at the next one, the last move's delta).
+    programs have as many moves, each move pairs with the line at the same place (of a
+    compatible skeleton). Where corr has more lines (inserted ones), the moves before the
+    first insertion pair at the place after the previous anchor, those after it one line
+    further, and so on: each checked at once against the nearest-end-point rule of
+    :func:`_pair_one`, which pairs the move at each insertion. The rest of the window after
+    its last anchor waits for the next window (unless the window has no anchor, or both
+    programs end in it). Returns (records paired, whether a check failed at the next
+    one, the last move's delta).
     """
     p, q = orig.pos, corr.pos
     ro, rc = orig.rows, corr.rows
@@ -710,9 +713,25 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     tail = seg == k
     # (a stretch with fewer lines in corr: paired one at a time, which reports it)
     ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
-    rows = np.flatnonzero(om & ok)
+    # the rest of the window is a stretch too when both programs end in it
+    ends = real_end and orig.done and orig.error is None and m == orig.avail()
+    last = int(start_o[k])
+    direct = np.append(more == 0, ends and m - last == span - last - int(off_start[k]))[seg]
+    rows = np.flatnonzero(om & ok & direct)
     if len(rows):
-        ok[rows] = nearest(rows, t[rows], previous(rows, delta))
+        # as many moves in both: each pairs with the line at its place, of the same skeleton
+        # (or N word, or comment)
+        o3, c3 = ro.keys[p + rows], rc.keys[q + t[rows]]
+        both_n = (o3[:, 1] != 0) & (c3[:, 1] != 0)
+        ok[rows] = ((o3[:, 0] == c3[:, 0]) | (both_n & (o3[:, 1] == c3[:, 1]))
+                    | (~both_n & (o3[:, 2] != 0) & (o3[:, 2] == c3[:, 2])))
+    held = m
+    if k and not ends:
+        held = last  # the rest of the window: with the next window, where its anchor is
+    else:
+        rows = np.flatnonzero(om & ok & ~direct & ~split)
+        if len(rows):  # no anchor in the window: the nearest-end-point rule, checked
+            ok[rows] = nearest(rows, t[rows], previous(rows, delta))
     # in a stretch with lines inserted, the moves between the e-th and the next insertion
     # pair at the place after the previous anchor plus e: checked for every e at once
     levels = []
@@ -732,7 +751,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             same_full[rows_e] = same_e
             levels.append((ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
     bad = np.flatnonzero(~(ok | split))
-    f = int(bad[0]) if len(bad) else m
+    f = min(int(bad[0]) if len(bad) else m, held)
 
     def take(r0: int, r1: int, last_delta: tuple, same=same, t=t, delta=delta) -> tuple:
         """Count the records r0:r1, each paired with the line at its place."""
@@ -778,7 +797,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     last_delta = take(done, f, last_delta)
     orig.pos = p + f
     corr.pos = q + (int(t[f]) if f < m else m + int(off_start[k]))
-    return f, f < m, last_delta
+    return f, f < held, last_delta
 
 
 def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> tuple:
