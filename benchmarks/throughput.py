@@ -1,22 +1,32 @@
-"""Throughput and peak memory of reading/writing, tokenizing and correcting a big program.
+"""Throughput and peak memory of postproc on a realistic CAM program, against the targets.
 
-Makes a program of N lines (default 1,000,000: straight moves with some feed changes
-and small arcs, as CAM output looks), then runs each case in its own child process
-(median of --repeats runs) and prints lines/s and the child's peak RSS:
+The program is made by ``../shared/bench/gencam.py N OUT [SEED]`` (15 % arcs, 20 tools,
+comments, N numbers, an O-number header, G28 at the end). Every case runs in its own
+child process, --repeats times; the median wall time of the child is printed with the
+input lines per second and the child's peak RSS (the largest of the runs):
 
   (a) read and write the file unchanged (the floor: Python line I/O);
-  (b) our tokenizer: lex every line and write tokens_to_src (byte-identical);
-  (b') the fast line scanner that the interpreter uses on plain lines;
-  (c) ``postproc correct`` with a static calibration, end to end.
+  (b) the tokenizer: ``lex`` every line and write ``tokens_to_src`` (byte-identical);
+  (c) ``postproc correct`` with calibrations/s500_static.json;
+  (d) ``postproc correct`` with calibrations/s500_parametric.json;
+  (e) ``postproc diff ORIGINAL CORRECTED`` (the output of (c));
+  (f) ``postproc --help``;
+  (g) a 20-line program corrected with the parametric calibration, end to end;
+  (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once).
 
-Usage: python benchmarks/throughput.py [--lines N] [--repeats R] [--calibration FILE]
+(c), (d) and (e) are also given as ratios of (a)'s and (b)'s rates, and each figure
+that has a target in issue 13 is printed beside it with PASS or FAIL.
+
+Usage: python benchmarks/throughput.py [--lines N] [--memory-lines N] [--repeats R]
+                                       [--seed S] [--json OUT]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import random
+import os
+import platform
 import statistics
 import subprocess
 import sys
@@ -25,98 +35,164 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+GENCAM = ROOT.parent / "shared" / "bench" / "gencam.py"
+STATIC = ROOT / "calibrations" / "s500_static.json"
+PARAMETRIC = ROOT / "calibrations" / "s500_parametric.json"
+
+# The setup a gencam program needs: G54, tool lengths for T1..T20 and the G28 position,
+# chosen so that every move stays inside the S500 calibrations' volume [0, 315]^3 mm.
+SETUP = ["--offset", "G54=X0,Y0,Z100", "--home", "G28=X0,Y0,Z200",
+         *[arg for t in range(1, 21) for arg in ("--tool-length", f"{t}=0")]]
+
+# issue 13's targets: (what, test on the figure, text)
+TARGETS = {
+    "static": (lambda r: r >= 150_000, ">= 150,000 lines/s"),
+    "parametric": (lambda r: r >= 50_000, ">= 50,000 lines/s"),
+    "diff": (lambda r: r >= 150_000, ">= 150,000 lines/s"),
+    "rss": (lambda mb: mb <= 150.0, "<= 150 MB"),
+    "help": (lambda s: s <= 0.25, "<= 0.25 s"),
+    "job20": (lambda s: s <= 0.8, "<= 0.8 s"),
+}
 
 CHILD = r"""
-import json, resource, sys, time
-case, src, dst, cal = sys.argv[1:5]
-t0 = time.perf_counter()
+import sys
+case, src, dst = sys.argv[1:4]
 if case == "copy":
     with open(src, encoding="utf-8", newline="") as fi, open(dst, "w", encoding="utf-8", newline="") as fo:
         for line in fi:
             fo.write(line)
-elif case == "lex":
+else:
     from postproc.gcode.lexer import lex, tokens_to_src
     with open(src, encoding="utf-8", newline="") as fi, open(dst, "w", encoding="utf-8", newline="") as fo:
         for line in fi:
             fo.write(tokens_to_src(lex(line)))
-elif case == "scan":
-    from postproc.gcode.lexer import lex, scan_words
-    with open(src, encoding="utf-8", newline="") as fi, open(dst, "w", encoding="utf-8", newline="") as fo:
-        for line in fi:
-            if scan_words(line) is None:
-                lex(line)
-            fo.write(line)
-elif case == "correct":
-    from postproc.cli import main
-    code = main(["correct", src, "-c", cal, "-o", dst], standalone_mode=False)
-    if code:
-        sys.exit(f"postproc correct failed with exit code {code}")
-dt = time.perf_counter() - t0
-ru = resource.getrusage(resource.RUSAGE_SELF)
-print(json.dumps({"seconds": dt, "cpu_seconds": ru.ru_utime + ru.ru_stime, "peak_mb": ru.ru_maxrss / 1024.0}))
 """
 
 
-def make_program(path: Path, n: int, seed: int = 0) -> None:
-    rng = random.Random(seed)
-    x, y = 150.0, 150.0
-    with open(path, "w", encoding="utf-8", newline="") as fh:
-        fh.write("%\n(throughput benchmark program)\nG21 G90 G17 G94\nG0 Z80.0\nG0 X150.0 Y150.0\nG1 Z60.0 F500\n")
-        written = 6
-        after_arc = False
-        while written < n - 2:
-            r = rng.random()
-            if r < 0.01:  # a small arc (radius 2 mm), ending where it starts a quarter further
-                cx, cy = x - 2.0, y
-                fh.write(f"G3 X{cx:.4f} Y{cy + 2.0:.4f} I-2.0 J0.0\n")
-                x, y = cx, cy + 2.0
-                after_arc = True
-            elif r < 0.05:
-                fh.write(f"G1 X{x:.4f} Y{y:.4f} Z{rng.uniform(55, 65):.4f} F{rng.choice([600, 800, 1200])}\n")
-                after_arc = False
-            else:
-                x = min(max(x + rng.uniform(-1.5, 1.5), 20.0), 290.0)
-                y = min(max(y + rng.uniform(-1.5, 1.5), 20.0), 290.0)
-                plain = rng.random() < 0.5 and not after_arc
-                fh.write(f"X{x:.4f} Y{y:.4f}\n" if plain else f"G1 X{x:.4f} Y{y:.4f}\n")
-                after_arc = False
-            written += 1
-        fh.write("G0 Z80.0\nM30\n%\n")
+def run_child(cmd: list[str], log: Path) -> tuple[float, float]:
+    """Run ``cmd`` (cwd: the repository, so that its own postproc is imported): wall
+    seconds and the child's peak RSS in MB. A failing child stops the benchmark."""
+    with open(log, "wb") as out:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        _pid, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        sys.exit(f"benchmark case failed (exit code {proc.returncode}): {' '.join(cmd)}\n"
+                 + log.read_text(errors="replace")[-2000:])
+    return wall, usage.ru_maxrss / 1024.0
 
 
-def run_case(case: str, src: Path, dst: Path, cal: str) -> dict:
-    out = subprocess.run([sys.executable, "-c", CHILD, case, str(src), str(dst), cal],
-                         capture_output=True, text=True, check=True, cwd=ROOT)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+def measure(cmd: list[str], repeats: int, log: Path) -> dict:
+    runs = [run_child(cmd, log) for _ in range(repeats)]
+    walls = [w for w, _ in runs]
+    return {"seconds": statistics.median(walls), "seconds_min": min(walls), "seconds_max": max(walls),
+            "peak_mb": max(mb for _, mb in runs), "repeats": repeats}
+
+
+def gencam(n: int, out: Path, seed: int) -> int:
+    subprocess.run([sys.executable, str(GENCAM), str(n), str(out), str(seed)], check=True, stdout=subprocess.DEVNULL)
+    with open(out, encoding="utf-8", newline="") as fh:
+        return sum(1 for _ in fh)
+
+
+def verdict(key: str, value: float) -> str:
+    test, text = TARGETS[key]
+    return f"target {text}: {'PASS' if test(value) else 'FAIL'}"
+
+
+def machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        for row in Path("/proc/cpuinfo").read_text().splitlines():
+            if row.startswith("model name"):
+                model = row.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}; load average {load}"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--lines", type=int, default=1_000_000)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--calibration", default=str(ROOT / "calibrations" / "s500_static.json"))
+    ap.add_argument("--lines", type=int, default=1_000_000, help="lines of the speed program [1,000,000]")
+    ap.add_argument("--memory-lines", type=int, default=5_000_000,
+                    help="lines of the program whose static correction gives the peak RSS (0: skip) [5,000,000]")
+    ap.add_argument("--repeats", type=int, default=3, help="runs of each case; the median is printed [3]")
+    ap.add_argument("--seed", type=int, default=42, help="gencam.py seed [42]")
+    ap.add_argument("--json", dest="json_out", default=None, help="also save the figures to this JSON file")
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "big.nc"
+    if not GENCAM.is_file():
+        sys.exit(f"{GENCAM} is missing: this benchmark needs the shared folder beside the repository "
+                 "(../shared/bench/gencam.py makes its program)")
+    if args.lines < 1000 or args.repeats < 1 or args.memory_lines < 0:
+        sys.exit("--lines must be at least 1000, --repeats at least 1, --memory-lines 0 or more")
+    py = sys.executable
+    cli = [py, "-m", "postproc"]
+    figures: dict = {"machine": machine(), "lines": args.lines, "repeats": args.repeats, "seed": args.seed,
+                     "cases": {}}
+    print(f"machine: {figures['machine']}")
+    with tempfile.TemporaryDirectory(prefix="postproc-bench-") as tmp:
+        tmp = Path(tmp)
+        log = tmp / "child.log"
+        src = tmp / "gencam.nc"
         t0 = time.perf_counter()
-        make_program(src, args.lines)
-        n = sum(1 for _ in open(src, encoding="utf-8", newline=""))
-        print(f"program: {n:,} lines, {src.stat().st_size / 1e6:.1f} MB (made in {time.perf_counter() - t0:.1f} s)")
-        print(f"calibration: {args.calibration}")
-        results = {}
-        for case, label in (("copy", "(a) read+write unchanged"), ("lex", "(b) tokenizer pass-through"),
-                            ("scan", "(b') fast scanner pass-through"), ("correct", "(c) postproc correct")):
-            runs = [run_case(case, src, Path(tmp) / f"out_{case}.nc", args.calibration)
-                    for _ in range(args.repeats)]
-            secs = statistics.median(r["seconds"] for r in runs)
-            cpu = statistics.median(r["cpu_seconds"] for r in runs)
-            peak = max(r["peak_mb"] for r in runs)
-            results[case] = n / secs
-            print(f"{label:34s} {n / secs:12,.0f} lines/s   peak RSS {peak:7.1f} MB   "
-                  f"(median of {args.repeats}: {secs:.2f} s wall, {cpu:.2f} s CPU)")
-        print(f"ratio (c)/(b)  = {results['correct'] / results['lex']:.2f}   (target >= 0.3)")
-        print(f"ratio (c)/(b') = {results['correct'] / results['scan']:.2f}")
-        print(f"ratio (c)/(a)  = {results['correct'] / results['copy']:.3f}")
+        n = gencam(args.lines, src, args.seed)
+        print(f"program: gencam.py {args.lines} (seed {args.seed}): {n:,} lines, {src.stat().st_size / 1e6:.1f} MB "
+              f"(made in {time.perf_counter() - t0:.1f} s); median of {args.repeats} runs per case")
+        static_out = tmp / "static.nc"
+        cases = [
+            ("copy", "(a) read + write unchanged", [py, "-c", CHILD, "copy", str(src), str(tmp / "copy.nc")]),
+            ("lex", "(b) tokenizer (lex + tokens_to_src)", [py, "-c", CHILD, "lex", str(src), str(tmp / "lex.nc")]),
+            ("static", "(c) correct, s500_static", [*cli, "correct", str(src), "-c", str(STATIC),
+                                                    "-o", str(static_out), *SETUP]),
+            ("parametric", "(d) correct, s500_parametric", [*cli, "correct", str(src), "-c", str(PARAMETRIC),
+                                                            "-o", str(tmp / "parametric.nc"), *SETUP]),
+            ("diff", "(e) diff original (c)-output", [*cli, "diff", str(src), str(static_out)]),
+        ]
+        rates = {}
+        for key, label, cmd in cases:
+            r = measure(cmd, args.repeats, log)
+            r["lines_per_s"] = rate = n / r["seconds"]
+            rates[key] = rate
+            figures["cases"][key] = r
+            line = (f"{label:38s} {rate:11,.0f} lines/s  {r['seconds']:7.2f} s  "
+                    f"(min {r['seconds_min']:.2f}, max {r['seconds_max']:.2f})  peak RSS {r['peak_mb']:6.1f} MB")
+            if key in ("static", "parametric", "diff"):
+                line += (f"\n{'':38s} = {rate / rates['copy']:.4f} x (a), {rate / rates['lex']:.3f} x (b);  "
+                         f"{verdict(key, rate)};  peak RSS {verdict('rss', r['peak_mb'])}")
+            print(line, flush=True)
+
+        r = measure([*cli, "--help"], max(args.repeats, 5), log)
+        figures["cases"]["help"] = r
+        print(f"{'(f) postproc --help':38s} {r['seconds']:7.3f} s wall   peak RSS {r['peak_mb']:6.1f} MB  "
+              + verdict("help", r["seconds"]), flush=True)
+
+        small = tmp / "job20.nc"
+        n20 = gencam(20, small, args.seed)
+        r = measure([*cli, "correct", str(small), "-c", str(PARAMETRIC), "-o", str(tmp / "job20_out.nc"), *SETUP],
+                    max(args.repeats, 5), log)
+        figures["cases"]["job20"] = r
+        print(f"{f'(g) {n20}-line parametric job':38s} {r['seconds']:7.3f} s wall   peak RSS {r['peak_mb']:6.1f} MB  "
+              + verdict("job20", r["seconds"]), flush=True)
+
+        if args.memory_lines:
+            big = tmp / "memory.nc"
+            src.unlink()  # room on the disk for the big program and its output
+            nm = gencam(args.memory_lines, big, args.seed)
+            r = measure([*cli, "correct", str(big), "-c", str(STATIC), "-o", str(tmp / "memory_out.nc"), *SETUP],
+                        1, log)
+            r["lines"] = nm
+            r["lines_per_s"] = nm / r["seconds"]
+            figures["cases"]["memory"] = r
+            print(f"{f'(m) correct static, {nm:,} lines':38s} {r['lines_per_s']:11,.0f} lines/s  "
+                  f"{r['seconds']:7.2f} s  peak RSS {r['peak_mb']:6.1f} MB  " + verdict("rss", r["peak_mb"]),
+                  flush=True)
+    if args.json_out:
+        Path(args.json_out).write_text(json.dumps(figures, indent=2) + "\n")
+        print(f"figures saved to {args.json_out}")
 
 
 if __name__ == "__main__":

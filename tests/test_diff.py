@@ -1,6 +1,7 @@
 """postproc diff: blocks moved, per-axis corrections, inserted and unchanged lines."""
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -103,3 +104,176 @@ def test_diff_of_a_twice_corrected_program_skips_both_headers():
     twice, _ = correct_text(once, cal.engine, Setup(), CorrectOptions(force=True))
     d = compare_programs(text, twice)
     assert d.moves == 26
+
+
+def _cam_program(rng: np.random.Generator, n: int) -> str:
+    """A CAM-like program: straight moves (modal and not), arcs, N numbers, comments,
+    coolant lines, tool changes with G43, an inch stretch, a G91 stretch and G28."""
+    out = ["%", "O1000 (TEST)", "G90 G21 G17 G40 G49 G80", "G54", "T1 M6", "G0 X100 Y100", "G0 G43 H1 Z20",
+           "F1500"]
+    x, y, tool, mode = 100.0, 100.0, 1, "G0"
+    while len(out) < n:
+        r = rng.random()
+        pre = f"N{len(out) * 10} " if rng.random() < 0.2 else ""
+        if r < 0.6:
+            x, y = x + rng.uniform(-2, 2), y + rng.uniform(-2, 2)
+            z = f" Z{rng.uniform(-5, 0):.3f}" if rng.random() < 0.3 else ""
+            out.append(pre + ("G1 " if mode != "G1" or rng.random() < 0.3 else "") + f"X{x:.4f} Y{y:.4f}{z}")
+            mode = "G1"
+        elif r < 0.75:
+            i, j = rng.uniform(-3, 3), rng.uniform(-3, 3)
+            cx, cy = x + i, y + j
+            rad = float(np.hypot(i, j))
+            a = np.arctan2(-j, -i) + rng.uniform(0.3, 2.0)
+            x, y = cx + rad * np.cos(a), cy + rad * np.sin(a)
+            out.append(pre + f"G3 X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}")
+            mode = "G3"
+        elif r < 0.82:
+            out.append(rng.choice(["(PASS)", "; finishing", "M8", "S9000 M3", "M9"]))
+        elif r < 0.85:
+            tool = tool % 3 + 1
+            out += [f"T{tool} M6 (TOOL {tool})", f"G0 G43 H{tool} Z20"]
+            mode = "G0"
+        elif r < 0.87:
+            out += ["G91", "G1 X0.5 Y-0.25", "Z-0.1", "G90"]
+            mode = "G1"
+            x, y = x + 0.5, y - 0.25
+        elif r < 0.89:
+            out += ["G20", f"G1 X{x / 25.4:.5f} Y{y / 25.4:.5f}", "G21"]
+            mode = "G1"
+        else:
+            x, y = x + rng.uniform(-8, 8), y + rng.uniform(-8, 8)
+            out.append(pre + f"G0 X{x:.3f} Y{y:.3f} Z5.000")
+            mode = "G0"
+    out += ["G28 G91 Z0", "G90", "M30", "%"]
+    return "\n".join(out) + "\n"
+
+
+def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
+    from postproc.gcode import compare
+    from postproc.gcode.interp import Interpreter
+
+    rng = np.random.default_rng(11)
+    text = _cam_program(rng, 3000)
+    setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)}, tool_lengths={1: 50.0, 2: 60.0, 3: 70.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 300.0}})
+    interp = Interpreter(setup, None, lenient_setup=True)
+    want_move, want_end = [], []
+    for k, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = interp.feed_line(k, line)
+        want_move.append(mv is not None)
+        want_end.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    for chunk in (20_000, 97):
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        parts = list(compare._Reader(text, setup, compare._Keys()).chunks())
+        assert sum(len(p) for p in parts) == len(want_move)
+        np.testing.assert_array_equal(np.concatenate([p.move for p in parts]), want_move)
+        np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
+
+
+def test_diff_pairs_inserted_lines_at_any_chunk_size(monkeypatch):
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(5)
+    text = _cam_program(rng, 1500)
+    cal = load_calibration(ROOT / "calibrations" / "s500_parametric.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={1: 0.0, 2: 0.0, 3: 0.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+    out, rep = correct_text(text, cal.engine, setup)
+    assert rep.lines_inserted > 10  # moves split: the pairing must skip inserted lines
+    results = []
+    for chunk, scan, window in ((20_000, 256, 256), (31, 4, 2), (200, 9, 16)):
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        monkeypatch.setattr(compare, "SCAN_AHEAD", scan)
+        monkeypatch.setattr(compare, "MIN_WINDOW", window)
+        d = compare_programs(text, out)
+        assert d.lines_inserted == rep.lines_inserted
+        assert d.moves == rep.moves + 1  # diff counts the G28 line too (correct writes it as it is)
+        assert d.lines_original == len(text.splitlines())
+        assert d.lines_corrected == len(out.splitlines()) - len(emit.split_header(out)[0])
+        # no end point moved by more than the largest correction the pipeline applied
+        assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4
+        results.append(d.to_dict())
+    assert results[1] == results[0]
+    assert results[2] == results[0]
+
+
+def test_diff_progress(monkeypatch, tmp_path, capsys):
+    import sys
+
+    from postproc.cli import correct as correct_cli
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(3)
+    src = tmp_path / "p.nc"
+    src.write_text(_cam_program(rng, 400))
+    dst = tmp_path / "q.nc"
+    assert main(["correct", str(src), "-c", str(CASES / "demo_static.json"), "-o", str(dst), "--offset",
+                 "G54=X0,Y0,Z100", "--home", "G28=X0,Y0,Z200", *sum((["--tool-length", f"{h}=0"] for h in (1, 2, 3)),
+                                                                  [])], standalone_mode=False) in (0, None)
+    monkeypatch.setattr(compare, "CHUNK_LINES", 100)
+    seen = []
+    d = compare_programs(str(src), str(dst), progress=seen.append)
+    assert seen == sorted(seen)
+    assert len(seen) >= 3
+    assert seen[-1] == d.lines_original
+    # on a terminal, for a big program, diff shows the lines read on stderr, as correct does
+    capsys.readouterr()
+    monkeypatch.setattr(correct_cli, "PROGRESS_MIN_BYTES", 0)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    main(["diff", str(src), str(dst)], standalone_mode=False)
+    cap = capsys.readouterr()
+    assert f"\r{src}: {d.lines_original:,} lines" in cap.err
+    assert cap.err.endswith("\n")
+    assert "moves:" in cap.out
+
+
+def test_diff_of_a_corrected_program_missing_a_move_is_an_error(monkeypatch):
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(8)
+    text = _cam_program(rng, 600)
+    eng = IdentityEngine([[-1e4] * 3, [1e4] * 3])
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0, 2: 0.0, 3: 0.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+    out, _ = correct_text(text, eng, setup)
+    lines = out.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("X"))  # a plain move
+    monkeypatch.setattr(compare, "CHUNK_LINES", 64)
+    with pytest.raises(PostprocError, match="has no counterpart in the corrected program"):
+        compare_programs(text, "".join(lines[:k] + lines[k + 1:]))
+    # the same line written twice: the second one is taken for a line inserted by segmentation
+    d = compare_programs(text, "".join(lines[:k] + [lines[k]] + lines[k:]))
+    assert d.lines_inserted == 1
+    assert d.moved == []
+
+
+def test_diff_pairs_line_for_line_where_no_line_was_inserted():
+    from postproc.engine.static import StaticEngine
+
+    # a jump of 30 mm in Z changes the correction by 0.15 mm, ten times the next steps:
+    # the nearest end point (own + the previous correction) is the next step's line, but
+    # as many moves in both programs between two anchors pair line for line
+    A = np.eye(3) + np.diag([0.0, 0.0, 5e-3]) + np.array([[0, 0, 2e-3], [0, 0, 1e-3], [0, 0, 0]])
+    eng = StaticEngine(A, [0.0, 0.0, 0.0], [[0, 0, 0], [315, 315, 315]])
+    text = ("G21 G90 G0 X10 Y10 Z10\nG1 X20 Z5 F500\n(next pass)\nG0 X50 Y50 Z40\nG1 X50.01 Y50\n"
+            "G1 X50.02 Y50.004\nG1 X50.03\nM2\n")
+    out, rep = correct_text(text, eng, Setup())
+    d = compare_programs(text, out)
+    n_header = len(emit.split_header(out)[0])
+    assert d.moves == rep.moves == 6
+    assert [m.lineno for m in d.moved] == [1, 2, 4, 5, 6, 7]
+    assert [m.lineno_corrected - n_header for m in d.moved] == [1, 2, 4, 5, 6, 7]
+    # each delta is the corrected end point minus the original one, read off the lines
+    ends = {4: (50, 50, 40), 5: (50.01, 50, 40), 6: (50.02, 50.004, 40), 7: (50.03, 50.004, 40)}
+    body = out.splitlines()[n_header:]
+    for m in d.moved:
+        if m.lineno in ends:
+            words = dict(re.findall(r"([XYZ])([-\d.]+)", body[m.lineno - 1]))
+            prev = [body[i] for i in range(m.lineno - 1)]
+            got = []
+            for k, a in enumerate("XYZ"):
+                v = words.get(a) or next(dict(re.findall(r"([XYZ])([-\d.]+)", ln)).get(a) for ln in reversed(prev)
+                                         if a in ln)
+                got.append(float(v) - ends[m.lineno][k])
+            np.testing.assert_allclose(m.delta_mm, got, atol=1e-12)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import sys
 
 import click
 
@@ -38,7 +40,18 @@ def diff(original, corrected, as_json, show_all, setup):
     """
     from postproc.gcode.compare import compare_programs
 
-    rep = compare_programs(original, corrected, setup)
+    # a progress line on stderr for a big program, as 'correct' shows (when stderr is a terminal)
+    progress = None
+    if sys.stderr.isatty():
+        from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer
+
+        if os.path.getsize(original) > PROGRESS_MIN_BYTES:
+            progress = _progress_printer(original)
+    try:
+        rep = compare_programs(original, corrected, setup, progress=progress)
+    finally:
+        if progress is not None:
+            click.echo("", err=True)
     if as_json:
         click.echo(json.dumps(rep.to_dict(), indent=2))
         return

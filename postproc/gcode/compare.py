@@ -1,22 +1,39 @@
 """Compare an original program with its corrected version, block by block.
 
-Lines that are not moves must be byte-identical in both (they are the anchors).
-Between two anchors, each original move is paired with the corrected line of the
-same skeleton (the line without its numbers, motion and arc words, N words kept)
-whose end point is nearest; the corrected lines left over are the lines inserted by
-segmentation. Positions are compared in the machine frame, with the work offsets, tool lengths,
-start and tool vector the corrected program's header records (those given by the
-caller take their place); they matter for G53 blocks, whose words are machine
-coordinates. Offsets and tool lengths neither given nor recorded count as zero.
+Lines that are not moves must be byte-identical in both (they are the anchors), and
+the k-th anchor of one program pairs with the k-th of the other. Between two anchors,
+when both programs have as many moves, each move pairs with the line at the same place,
+which must be of the same skeleton (the line without its numbers, motion and arc words,
+N words kept; or the same N word, or the same comment). Where the corrected program has
+more lines, each original move is paired with the corrected line of the same skeleton
+whose end point is nearest its own plus the previous move's correction; the corrected
+lines left over are the lines inserted by segmentation. Positions are compared in the
+machine frame, with the work offsets, tool lengths, start and tool vector the corrected
+program's header records (those given by the caller take their place); they matter for
+G53 blocks, whose words are machine coordinates. Offsets and tool lengths neither given
+nor recorded count as zero.
+
+Both programs are read in chunks of lines, and memory does not grow with their length
+(apart from the compact list of moved blocks). In a chunk, the stretches of plain
+absolute moves (N, G0 to G3, X/Y/Z, I/J/K/R and F words only, in a simple modal state)
+and of lines that change nothing (S, M3, M8 and the like, comments) are read as columns:
+a move's end point is its words, carried forward where a line does not name an axis.
+Such arcs are not checked again (``correct`` checks every arc it writes; ``verify``
+runs the program). Every other line goes through the interpreter, which carries the
+modal state from one stretch to the next. Pairing takes a chunk at a time: the stretches
+with as many moves in both at once; in a stretch with lines inserted, the moves before
+and after each insertion at once (the nearest-end-point rule checked for all of them),
+the move at the insertion one at a time.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import gc
 import math
+import operator
 import re
 from array import array
-from collections import deque
 from dataclasses import dataclass, field
 from itertools import islice
 
@@ -26,9 +43,20 @@ from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.path import Setup, iter_source_lines
+from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
 # Pairing stops after this many candidate lines that are farther than the best one.
 STOP_AFTER_WORSE = 8
+# Lines read at a time from each program.
+CHUNK_LINES = 20_000
+# Corrected records looked at past the window for the anchor that ends each scan.
+SCAN_AHEAD = 256
+# After a record that had to be paired one at a time, this many are paired so before
+# records are paired at once again, in a window of at least MIN_WINDOW.
+SLOW_STRETCH = 4
+MIN_WINDOW = 256
+# Insertions in one stretch between anchors checked at once (more: paired one at a time).
+MAX_LEVELS = 8
 _SKELETON_DROP = re.compile(r"[XYZIJKRPFxyzijkrpf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|[Gg][ \t]*0*[0-3](?![0-9.])|\s+")
 
 
@@ -71,6 +99,12 @@ class DiffReport:
         self._clines.append(clineno)
         self._deltas.extend(delta)
 
+    def add_moved_rows(self, linenos: np.ndarray, clinenos: np.ndarray, deltas: np.ndarray) -> None:
+        """Many moved blocks at once (arrays of line numbers and an (n, 3) array of deltas)."""
+        self._lines.frombytes(np.ascontiguousarray(linenos, dtype=np.int64).tobytes())
+        self._clines.frombytes(np.ascontiguousarray(clinenos, dtype=np.int64).tobytes())
+        self._deltas.frombytes(np.ascontiguousarray(deltas, dtype=np.float64).tobytes())
+
     @property
     def n_moved(self) -> int:
         return len(self._lines)
@@ -106,32 +140,6 @@ class DiffReport:
                        "delta_mm": [round(x, 7) for x in m.delta_mm], "size_mm": round(m.size_mm, 7)}
                       for m in self.moved],
         }
-
-
-_PROGRAM_START = emit._PROGRAM_START
-
-
-def _records(source, setup: Setup | None, counter: list, drop_header: bool = False, header: list | None = None):
-    """Yield ``(lineno, line, end or None)`` lazily; counts lines in ``counter[0]``.
-
-    With ``drop_header`` the header lines at the start (after a ``%`` line and an ``O``
-    number line; several headers in a row for a program corrected more than once) are
-    left out and collected in ``header``."""
-    path, lines = iter_source_lines(source)
-    interp = Interpreter(setup or Setup(), path, lenient_setup=True)
-    head_open = drop_header
-    for lineno, line in enumerate(lines, start=1):
-        counter[0] += 1
-        if head_open:
-            if emit.is_header(line):
-                if header is not None:
-                    header.append(line.strip())
-                counter[0] -= 1
-                continue
-            if not _PROGRAM_START.match(line) or lineno > 2:
-                head_open = False
-        mv = interp.feed_line(lineno, line)
-        yield lineno, line, (None if mv is None else mv.q1)
 
 
 _OLD_START = re.compile(r"; start ((?:[XYZ][-+0-9.eE]+,?)+)")
@@ -234,105 +242,703 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
     return dataclasses.replace(setup, **changes) if changes else setup
 
 
+# -- reading ---------------------------------------------------------------------------
+
+_PROGRAM_START = emit._PROGRAM_START
+# lexer.NUMBER_RE, matched possessively (nothing after a number can start with a digit or a dot)
+_NUM = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
+# A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
+# line, which changes nothing the positions depend on: [N..] [S..] [M0, M1, M3-M5, M7-M9
+# words] [comments]. Groups: 1 N word, 2 G number, 3-5 X, Y, Z numbers, 6 the arc words,
+# 7 the F number of a plain move; 8 a quiet line; any other line (and a blank one) matches
+# with every group empty (one match per line).
+_PLAIN = re.compile(
+    rf"^(?:[ \t]*+(?:([Nn][ \t]*+\d++)[ \t]*+)?(?:[Gg][ \t]*+(0?[0-3])(?![0-9.])[ \t]*+)?"
+    rf"(?:[Xx][ \t]*+({_NUM})[ \t]*+)?(?:[Yy][ \t]*+({_NUM})[ \t]*+)?(?:[Zz][ \t]*+({_NUM})[ \t]*+)?"
+    rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
+    rf"|([ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_NUM}[ \t]*+)?"
+    rf"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?)\r?"
+    rf"|[^\n]*)$",
+    re.M,
+)
+_MOTION = {"0": RAPID, "00": RAPID, "1": LINE, "01": LINE, "2": ARC_CW, "02": ARC_CW, "3": ARC_CCW,
+           "03": ARC_CCW, "": -1}
+_N_WORD = re.compile(r"\s*[Nn]\s*\d+")
+
+
+def _last_index(present: np.ndarray) -> np.ndarray:
+    """For each row, the index of the last present row at or before it (-1: none)."""
+    idx = np.where(present, np.arange(len(present)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return idx
+
+
+def _next_index(present: np.ndarray) -> np.ndarray:
+    """For each row, the index of the first present row at or after it (len: none)."""
+    n = len(present)
+    idx = np.where(present, np.arange(n), n)
+    return np.minimum.accumulate(idx[::-1])[::-1]
+
+
+class _Keys:
+    """Integers standing for the pieces of a line that pairing compares (skeleton, N word,
+    comment): 0 for none, n + 1 for the plain N word Nn, negative numbers for the rest."""
+
+    def __init__(self) -> None:
+        self.table: dict[str, int] = {}
+
+    def __call__(self, text: str) -> int:
+        if not text:
+            return 0
+        digits = text[1:]
+        if (text[0] == "N" and digits.isascii() and digits.isdigit() and len(digits) < 16
+                and (digits[0] != "0" or digits == "0")):
+            return int(digits) + 1
+        key = self.table.get(text)
+        if key is None:
+            key = self.table[text] = -1 - len(self.table)
+        return key
+
+    def of_line(self, line: str) -> tuple[int, int, int]:
+        """Skeleton, N word and comment of any line (see :func:`_compatible`)."""
+        n = _N_WORD.match(line)
+        c = line.find("(")
+        return self(skeleton(line)), self(n.group().strip() if n else ""), self(line[c:] if c >= 0 else "")
+
+
+def _compatible_keys(o: tuple, c: tuple) -> bool:
+    """:func:`skeleton` equal or :func:`_compatible`, from the keys of both lines."""
+    if o[0] == c[0]:
+        return True
+    if o[1] and c[1]:
+        return o[1] == c[1]
+    return o[2] != 0 and o[2] == c[2]
+
+
+class _Rows:
+    """Consecutive lines of a program: text, line number, whether each makes a move, its
+    end point (machine mm, NaN where unknown or no move) and its pairing keys."""
+
+    __slots__ = ("lines", "lineno", "move", "end", "keys")
+
+    def __init__(self, lines: list[str], lineno, move, end, keys) -> None:
+        self.lines = lines
+        self.lineno = lineno
+        self.move = move
+        self.end = end
+        self.keys = keys  # (n, 3) int64: skeleton, N word, comment
+
+    @classmethod
+    def blank(cls, lines: list[str], lineno0: int) -> _Rows:
+        n = len(lines)
+        return cls(lines, np.arange(lineno0, lineno0 + n, dtype=np.int64), np.zeros(n, dtype=bool),
+                   np.full((n, 3), np.nan), np.zeros((n, 3), dtype=np.int64))
+
+    def __len__(self) -> int:
+        return len(self.lines)
+
+    def head(self, n: int) -> _Rows:
+        return _Rows(self.lines[:n], self.lineno[:n], self.move[:n], self.end[:n], self.keys[:n])
+
+    @classmethod
+    def join(cls, parts: list[_Rows]) -> _Rows:
+        if len(parts) == 1:
+            return parts[0]
+        return cls([line for p in parts for line in p.lines], np.concatenate([p.lineno for p in parts]),
+                   np.concatenate([p.move for p in parts]), np.concatenate([p.end for p in parts]),
+                   np.concatenate([p.keys for p in parts]))
+
+    def tail(self, start: int) -> _Rows:
+        return _Rows(self.lines[start:], self.lineno[start:], self.move[start:], self.end[start:],
+                     self.keys[start:])
+
+
+class _Reader:
+    """One program read in chunks of :class:`_Rows`; see the module docstring."""
+
+    def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False) -> None:
+        self.path, self._lines = iter_source_lines(source)
+        self.interp = Interpreter(setup, self.path, lenient_setup=True)
+        self.keys = keys
+        self.drop_header = drop_header
+        self.header: list[str] = []
+        self.count = 0  # lines read, header lines left out
+
+    def chunks(self):
+        """Yield :class:`_Rows`; an error of a line comes after the rows before it."""
+        it = self._lines
+        lineno = 0
+        if self.drop_header:
+            # the header lines at the start (after a '%' line and an O number line; several
+            # headers in a row for a program corrected more than once) are left out
+            head: list[str] = []
+            linenos: list[int] = []
+            for line in it:
+                lineno += 1
+                if emit.is_header(line):
+                    self.header.append(line.strip())
+                    continue
+                head.append(line)
+                linenos.append(lineno)
+                if not _PROGRAM_START.match(line) or lineno > 2:
+                    break
+            rows = _Rows.blank(head, 0)
+            rows.lineno = np.array(linenos, dtype=np.int64)
+            n, error = self._general(rows, 0, len(head))
+            self.count += n
+            yield rows.head(n)
+            if error is not None:
+                raise error
+        for lines in iter(lambda: list(islice(it, CHUNK_LINES)), []):
+            rows = _Rows.blank(lines, lineno + 1)
+            lineno += len(lines)
+            n, error = self._chunk(rows)
+            self.count += n
+            yield rows if n == len(lines) else rows.head(n)
+            if error is not None:
+                raise error
+
+    def _general(self, rows: _Rows, a: int, b: int) -> tuple[int, PostprocError | None]:
+        """Interpret lines a:b one at a time: (lines read, the error that stopped it)."""
+        feed = self.interp.feed_line
+        lines, linenos = rows.lines, rows.lineno
+        for i in range(a, b):
+            try:
+                mv = feed(int(linenos[i]), lines[i])
+            except PostprocError as exc:
+                return i, exc
+            if mv is not None:
+                rows.move[i] = True
+                rows.end[i] = mv.q1
+                rows.keys[i] = self.keys.of_line(lines[i])
+        return b, None
+
+    def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:  # noqa: C901
+        """Read a chunk: stretches of plain moves as columns, the other lines one at a time."""
+        lines = rows.lines
+        n = len(lines)
+        text = "".join(lines)
+        found = None
+        if "\r" not in text or text.count("\r") == text.count("\r\n"):
+            found = _PLAIN.findall(text)
+            # one match per line, plus an empty one after a final line ending
+            found = found[:n] if len(found) in (n, n + 1) else None
+        if not found:
+            return self._general(rows, 0, n)
+        cols = np.array(found, dtype=object)
+        present = cols != ""
+        has = [present[:, 2], present[:, 3], present[:, 4]]
+        gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
+        arc = present[:, 5]
+        quiet = present[:, 7]
+        has_g = gcode >= 0
+        g_arc = gcode >= ARC_CW
+        last_g = _last_index(has_g)
+        # a plain move's arc words agree with its motion (its own G word, or the last one
+        # before it in the chunk; the lines before a stretch's first G word are checked
+        # against the modal motion when the stretch is read)
+        plain = (has[0] | has[1] | has[2]) & np.where(
+            has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
+        runnable = plain | quiet
+        if not runnable.any():
+            return self._general(rows, 0, n)
+        keys = self.keys
+        ncol = cols[:, 0].tolist()
+        nk = [keys(t) if t else 0 for t in ncol]
+        rows.keys[:, 1] = nk
+        rows.keys[:, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
+                           for t, k in zip(ncol, nk, strict=True)]
+        values = []
+        for k in range(3):
+            v = np.full(n, np.nan)
+            v[has[k]] = cols[has[k], 2 + k].astype(float)
+            values.append(v)
+        xcol, ycol, zcol, fcol = cols[:, 2], cols[:, 3], cols[:, 4], cols[:, 6]
+        last = [_last_index(h).tolist() for h in has]
+        last_f = _last_index(present[:, 6]).tolist()
+        next_other = _next_index(~runnable).tolist()
+        next_g = _next_index(has_g).tolist()
+        moves_before = np.concatenate([[0], np.cumsum(plain)]).tolist()
+        arcs_before = np.concatenate([[0], np.cumsum(plain & arc)]).tolist()
+        runnable_l, quiet_l = runnable.tolist(), quiet.tolist()
+        gcode_l, last_g_l = gcode.tolist(), last_g.tolist()
+        interp = self.interp
+        st = interp.state
+        linenos = rows.lineno
+        runs = []
+        i = 0
+        error = None
+        while i < n:
+            if runnable_l[i]:
+                pos = st.pos
+                if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
+                        or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]):
+                    b = next_other[i]
+                    p = min(b, next_g[i])  # lines i:p move in the modal motion
+                    moves = moves_before[p] - moves_before[i]
+                    arcs = arcs_before[p] - arcs_before[i]
+                    motion = st.motion
+                    if moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
+                            motion in (ARC_CW, ARC_CCW) and arcs == moves):
+                        unit = st.unit_mm
+                        shift = interp.shift(False, int(linenos[i]), 1)
+                        runs.append((i, b, unit, shift, tuple(pos)))
+                        e = b - 1
+                        pos = list(pos)
+                        for k in range(3):
+                            j = last[k][e]
+                            if j >= i:
+                                pos[k] = float(xcol[j] if k == 0 else ycol[j] if k == 1 else zcol[j]) * unit + shift[k]
+                        st.pos = pos
+                        j = last_g_l[e]
+                        if j >= i:
+                            st.motion = gcode_l[j]
+                        j = last_f[e]
+                        if j >= i:
+                            st.feed = float(fcol[j])
+                        i = b
+                        continue
+                elif quiet_l[i]:
+                    i += 1  # changes nothing, whatever the state
+                    continue
+            i, error = self._general(rows, i, i + 1)
+            if error is not None:
+                break
+        if runs:
+            self._run_ends(rows, runs, has, values, plain)
+        return i, error
+
+    @staticmethod
+    def _run_ends(rows: _Rows, runs: list, has: list, values: list, plain: np.ndarray) -> None:
+        """End points of the plain stretches read: machine = program x unit + shift, the
+        position before the stretch where a line does not name an axis."""
+        lengths = [b - a for a, b, *_ in runs]
+        inside = np.zeros(len(rows), dtype=bool)
+        for a, b, *_ in runs:
+            inside[a:b] = True
+        idx = np.flatnonzero(inside)
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        unit = np.repeat([r[2] for r in runs], lengths)
+        shift = np.repeat(np.array([r[3] for r in runs], dtype=float), lengths, axis=0)
+        q0 = np.array([r[4] for r in runs], dtype=float)
+        for k in range(3):
+            h = has[k][idx]
+            v = values[k][idx] * unit + shift[:, k]
+            missing = ~h[starts]
+            v[starts[missing]] = q0[missing, k]
+            h[starts] = True
+            rows.end[idx, k] = v[_last_index(h)]
+        quiet = idx[~plain[idx]]
+        rows.end[quiet] = np.nan
+        rows.move[idx] = plain[idx]
+
+
+class _Tape:
+    """The records of one program not yet paired, read ahead as needed."""
+
+    def __init__(self, chunks) -> None:
+        self._chunks = chunks
+        self.rows = _Rows.blank([], 1)
+        self.pos = 0
+        self.done = False  # nothing more to read: the end of the program, or an error
+        self.error: PostprocError | None = None
+
+    def avail(self) -> int:
+        return len(self.rows) - self.pos
+
+    def fill(self, need: int) -> None:
+        """Read on until ``need`` records are available (or nothing more can be read)."""
+        if self.avail() >= need or self.done:
+            return
+        parts = [self.rows.tail(self.pos)]
+        have = len(parts[0])
+        while have < need:
+            try:
+                part = next(self._chunks)
+            except StopIteration:
+                self.done = True
+                break
+            except PostprocError as exc:
+                self.done, self.error = True, exc
+                break
+            parts.append(part)
+            have += len(part)
+        self.rows = _Rows.join(parts)
+        self.pos = 0
+
+    def peek(self, i: int) -> int | None:
+        """Row index of the i-th record ahead, None at the end of the program."""
+        if self.avail() <= i:
+            self.fill(max(i + 1, CHUNK_LINES // 2))
+            if self.avail() <= i:
+                if self.error is not None:
+                    raise self.error
+                return None
+        return self.pos + i
+
+
+# -- pairing ---------------------------------------------------------------------------
+
+
 def _distance(a, b) -> float:
     return sum(abs(x - y) for x, y in zip(a, b, strict=True) if not (math.isnan(x) or math.isnan(y)))
 
 
-def compare_programs(original, corrected, setup: Setup | None = None) -> DiffReport:
+def _next_same(keys: np.ndarray) -> np.ndarray:
+    """For each row, the index of the next row with the same key (len: none)."""
+    n = len(keys)
+    order = np.argsort(keys, kind="stable")
+    nxt = np.full(n, n)
+    same = keys[order[1:]] == keys[order[:-1]]
+    nxt[order[:-1][same]] = order[1:][same]
+    return nxt
+
+
+def _l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`_distance` row by row (same sums, in the same order)."""
+    d = np.abs(a - b)
+    s = d[:, 0] + d[:, 1] + d[:, 2]
+    nan = np.isnan(s)
+    if nan.any():
+        s[nan] = np.nansum(d[nan], axis=1)
+    return s
+
+
+def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  # noqa: C901
+                limit: int) -> tuple[int, bool, tuple]:
+    """Pair up to ``limit`` records of orig with the lines of corr (see the module docstring).
+
+    The k-th anchor of orig goes with the k-th of corr. Between two anchors, when both
+    programs have as many moves, each move pairs with the line at the same place (of a
+    compatible skeleton). Where corr has more lines (inserted ones), the moves before the
+    first insertion pair at the place after the previous anchor, those after it one line
+    further, and so on: each checked at once against the nearest-end-point rule of
+    :func:`_pair_one`, which pairs the move at each insertion. The rest of the window after
+    its last anchor waits for the next window (unless the window has no anchor, or both
+    programs end in it). Returns (records paired, whether a check failed at the next
+    one, the last move's delta).
+    """
+    p, q = orig.pos, corr.pos
+    ro, rc = orig.rows, corr.rows
+    m = min(orig.avail(), limit)
+    avail = corr.avail()
+    span = min(avail, m + m // 2 + SCAN_AHEAD)
+    if m == 0 or span == 0:
+        return 0, True, last_delta
+    real_end = span == avail and corr.done and corr.error is None
+    om = ro.move[p:p + m]
+    cmove = rc.move[q:q + span]
+    clines = rc.lines
+    # anchors: the k-th of each, as long as they are identical
+    ao = np.flatnonzero(~om)
+    ac = np.flatnonzero(~cmove)
+    k = min(len(ao), len(ac))
+    if k:
+        equal = np.fromiter(map(operator.eq, [ro.lines[p + i] for i in ao[:k].tolist()],
+                                [clines[q + j] for j in ac[:k].tolist()]), dtype=bool, count=k)
+        k = k if equal.all() else int(np.argmin(equal))
+    ao, ac = ao[:k], ac[:k]
+    # stretch j ends with the j-th anchor (stretch k: the rest of the window)
+    start_o = np.concatenate([[0], ao + 1])
+    off_start = np.concatenate([[0], ac + 1]) - start_o
+    off_end = ac - ao
+    more = off_end - off_start[:-1]
+    inserted = np.append(more > 0, False)  # stretches with lines inserted
+    seg = np.searchsorted(ao, np.arange(m))
+    split = inserted[seg]
+    oe = ro.end[p:p + m]
+    cend = np.append(rc.end[q:q + span], np.zeros((1, 3)), axis=0)
+    ckeys = rc.keys[q:q + span]
+    stop = np.append(_next_index(~cmove), span)
+    prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
+
+    def place(t: np.ndarray, rows=None):
+        """Lines of corr at places t (of records rows): in the window, identical, delta."""
+        inside = t < span
+        tc = np.minimum(t, span - 1)
+        olines = ro.lines[p:p + m] if rows is None else [ro.lines[p + r] for r in rows.tolist()]
+        same = np.fromiter(map(operator.eq, olines, [clines[q + j] for j in tc.tolist()]), dtype=bool, count=len(t))
+        o = oe if rows is None else oe[rows]
+        ce = cend[tc]
+        return inside, tc, same, np.where(np.isnan(ce) | np.isnan(o), 0.0, ce - o)
+
+    def nearest(rows: np.ndarray, t0: np.ndarray, ld: np.ndarray) -> np.ndarray:
+        """Whether the scan of each move (records rows, own line t0, previous delta ld)
+        picks its own line: it looks at the lines after it up to the next anchor (or the
+        end of the program; not an error not yet reached) and stops after
+        STOP_AFTER_WORSE compatible ones that are not nearer than the best."""
+        end_at = stop[t0 + 1]
+        real_stop = (end_at < span) | real_end
+        predicted = oe[rows] + ld
+        okeys = ro.keys[p + rows]
+        own = ckeys[t0]
+        good = np.zeros(len(rows), dtype=bool)
+        plain = ~okeys.any(axis=1)
+        a = np.flatnonzero(plain)
+        if len(a):
+            # no N word, skeleton or comment: compatible with the moves of empty skeleton;
+            # its own line must be one, and the nearest of the first few after it
+            ta, ea, pa = t0[a], end_at[a], predicted[a]
+            z = np.flatnonzero(cmove & (ckeys[:, 0] == 0))
+            i = np.searchsorted(z, ta)
+            z = np.append(z, [span] * (STOP_AFTER_WORSE + 1))
+            d0 = _l1(cend[ta], pa)
+            nearer = np.zeros(len(a), dtype=bool)
+            looked = np.zeros(len(a), dtype=np.int64)
+            for j in range(1, STOP_AFTER_WORSE + 1):
+                c = z[i + j]
+                scanned = c < ea
+                nearer |= scanned & (_l1(cend[c], pa) < d0)
+                looked += scanned
+            good[a] = (own[a, 0] == 0) & ~nearer & ((looked == STOP_AFTER_WORSE) | real_stop[a])
+        b = np.flatnonzero(~plain)
+        if len(b):
+            # an N word or another skeleton (and no comment): its own line when no later
+            # line before the anchor has its skeleton or N word
+            tb, eb, ob, cb = t0[b], end_at[b], okeys[b], own[b]
+            after_sk = _next_same(ckeys[:, 0])[tb]
+            after_n = _next_same(ckeys[:, 1])[tb]
+            good[b] = (real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & (after_sk >= eb)
+                       & ((ob[:, 1] == 0) | ((ob[:, 1] == cb[:, 1]) & (after_n >= eb))))
+        return good
+
+    def previous(rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        pr = prev[rows]
+        return np.where(pr[:, None] >= 0, delta[np.maximum(pr, 0)], np.asarray(last_delta, dtype=float))
+
+    # the line of corr at each record's place: after the previous anchor, or (in a stretch
+    # with inserted lines) before the next one
+    t = np.arange(m) + np.where(split, np.append(off_end, 0)[seg], off_start[seg])
+    inside, tc, same, delta = place(t)
+    tail = seg == k
+    # (a stretch with fewer lines in corr: paired one at a time, which reports it)
+    ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
+    # the rest of the window is a stretch too when both programs end in it
+    ends = real_end and orig.done and orig.error is None and m == orig.avail()
+    last = int(start_o[k])
+    direct = np.append(more == 0, ends and m - last == span - last - int(off_start[k]))[seg]
+    rows = np.flatnonzero(om & ok & direct)
+    if len(rows):
+        # as many moves in both: each pairs with the line at its place, of the same skeleton
+        # (or N word, or comment)
+        o3, c3 = ro.keys[p + rows], rc.keys[q + t[rows]]
+        both_n = (o3[:, 1] != 0) & (c3[:, 1] != 0)
+        ok[rows] = ((o3[:, 0] == c3[:, 0]) | (both_n & (o3[:, 1] == c3[:, 1]))
+                    | (~both_n & (o3[:, 2] != 0) & (o3[:, 2] == c3[:, 2])))
+    held = m
+    if k and not ends:
+        held = last  # the rest of the window: with the next window, where its anchor is
+    else:
+        rows = np.flatnonzero(om & ok & ~direct & ~split)
+        if len(rows):  # no anchor in the window: the nearest-end-point rule, checked
+            ok[rows] = nearest(rows, t[rows], previous(rows, delta))
+    # in a stretch with lines inserted, the moves between the e-th and the next insertion
+    # pair at the place after the previous anchor plus e: checked for every e at once
+    levels = []
+    if split.any():
+        n_ins = np.append(more, 0)
+        for e in range(min(int(n_ins.max()), MAX_LEVELS) + 1):
+            rows_e = np.flatnonzero(split & om & (n_ins[seg] >= e))
+            t_e = rows_e + off_start[seg[rows_e]] + e
+            _in, _tc, same_e, d_e = place(t_e, rows_e)
+            full = np.zeros((m, 3))
+            full[rows_e] = d_e
+            pr = np.maximum(prev[rows_e], 0)
+            within = ((prev[rows_e] >= 0) & (seg[pr] == seg[rows_e]))[:, None]
+            ok_e = np.zeros(m, dtype=bool)
+            ok_e[rows_e] = nearest(rows_e, t_e, np.where(within, full[pr], previous(rows_e, delta)))
+            same_full = np.zeros(m, dtype=bool)
+            same_full[rows_e] = same_e
+            levels.append((ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
+    bad = np.flatnonzero(~(ok | split))
+    f = min(int(bad[0]) if len(bad) else m, held)
+
+    def take(r0: int, r1: int, last_delta: tuple, same=same, t=t, delta=delta) -> tuple:
+        """Count the records r0:r1, each paired with the line at its place."""
+        moves = om[r0:r1]
+        n_moves = int(np.count_nonzero(moves))
+        unchanged = int(np.count_nonzero(moves & same[r0:r1]))
+        rep.moves += n_moves
+        rep.moves_unchanged += unchanged
+        rep.lines_unchanged += r1 - r0 - n_moves + unchanged
+        moved = np.flatnonzero(moves & ~same[r0:r1]) + r0
+        if len(moved):
+            rep.add_moved_rows(ro.lineno[p + moved], rc.lineno[q + t[moved]], delta[moved])
+        if n_moves:
+            last_delta = tuple(delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
+        return last_delta
+
+    done = 0
+    for j in np.flatnonzero(inserted).tolist():
+        s0, a0 = int(start_o[j]), int(ao[j])
+        if s0 >= f:
+            break
+        last_delta = take(done, s0, last_delta)
+        r, e = s0, 0
+        while True:
+            ok_e, same_e, t_e, delta_e = levels[e]
+            # the next insertion: at the first move not paired at this place
+            x = r + int(np.argmin(ok_e[r:a0])) if not ok_e[r:a0].all() else a0
+            last_delta = take(r, x, last_delta, same_e, t_e, delta_e)
+            orig.pos, corr.pos = p + x, q + int(t_e[x])
+            last_delta = _pair_one(orig, corr, rep, last_delta)
+            done = x + 1
+            if not (orig.rows is ro and corr.rows is rc):
+                return done, False, last_delta
+            if x == a0:
+                break
+            e = corr.pos - q - 1 - x - int(off_start[j])
+            if not (0 <= e < len(levels) and last_delta == tuple(levels[e][3][x].tolist())):
+                return done, False, last_delta  # paired otherwise than assumed: look again from here
+            r = x + 1
+        if corr.pos != q + ac[j] + 1 or (a0 > s0 and last_delta != tuple(delta[a0 - 1].tolist())):
+            return done, False, last_delta  # the next stretch was checked with another delta
+    f = max(f, done)
+    last_delta = take(done, f, last_delta)
+    orig.pos = p + f
+    corr.pos = q + (int(t[f]) if f < m else m + int(off_start[k]))
+    return f, f < held, last_delta
+
+
+def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> tuple:
+    """Pair the next record of orig: an anchor with the next anchor of corr (the moves before it
+    were inserted); a move with the compatible move of corr, before corr's next anchor, whose end
+    point is nearest its own plus the previous move's delta. Returns the last move's delta."""
+    ro = orig.rows
+    o = orig.pos
+    orig.pos += 1
+    o_lineno = int(ro.lineno[o])
+    rc = corr.rows
+    if not ro.move[o]:
+        # an anchor: every corrected move before it was inserted
+        while True:
+            c = corr.peek(0)
+            if c is None:
+                raise PostprocError(f"line {o_lineno} of the original is missing from the corrected program",
+                                    path=rep.corrected, hint="is this the corrected version of that program?")
+            rc = corr.rows
+            corr.pos += 1
+            if not rc.move[c]:
+                if rc.lines[c] != ro.lines[o]:
+                    c_lineno = int(rc.lineno[c])
+                    raise PostprocError(
+                        f"line {c_lineno} of the corrected program differs from line {o_lineno} of the original",
+                        path=rep.corrected, lineno=c_lineno,
+                        hint="lines that are not moves must be identical: is this its corrected version?")
+                rep.lines_unchanged += 1
+                return last_delta
+            rep.lines_inserted += 1
+    o_end = ro.end[o].tolist()
+    o_keys = tuple(ro.keys[o].tolist())
+    o_line = ro.lines[o]
+    predicted = tuple(e + d for e, d in zip(o_end, last_delta, strict=True))
+    best = None
+    worse = 0
+    i = 0
+    while True:
+        c = corr.peek(i)
+        rc = corr.rows
+        if c is None or not rc.move[c]:
+            break  # the end, or the next anchor: the pair lies before it
+        if _compatible_keys(o_keys, tuple(rc.keys[c].tolist())):
+            dist = _distance(rc.end[c].tolist(), predicted)
+            if best is None or dist < best[0]:
+                best = (dist, i)
+                worse = 0
+            else:
+                # past the nearest line the end points walk away again (the next
+                # move's inserted lines): stop after a few that do not come closer
+                worse += 1
+                if worse >= STOP_AFTER_WORSE:
+                    break
+        i += 1
+    if best is None:
+        raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
+                            path=rep.corrected)
+    rep.lines_inserted += best[1]
+    c = corr.pos + best[1]
+    corr.pos = c + 1
+    c_end = rc.end[c].tolist()
+    rep.moves += 1
+    delta = tuple(0.0 if (math.isnan(x) or math.isnan(y)) else x - y for x, y in zip(c_end, o_end, strict=True))
+    if rc.lines[c] == o_line:
+        rep.moves_unchanged += 1
+        rep.lines_unchanged += 1
+    else:
+        rep.add_moved(o_lineno, int(rc.lineno[c]), delta)
+    return delta
+
+
+def compare_programs(original, corrected, setup: Setup | None = None, progress=None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
     compact list of moved blocks). ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
-    are machine coordinates.
+    are machine coordinates. ``progress(n)``, if given, is called with the number of
+    lines of the original read so far, after each chunk.
     """
+    # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
+    # only costs time here (the chunks bound the memory).
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _compare(original, corrected, setup, progress)
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+def _compare(original, corrected, setup: Setup | None, progress) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     setup = setup_from_header(corrected, setup)
-    ocount, ccount, header = [0], [0], []
-    opath, _ = iter_source_lines(original)
-    cpath, _ = iter_source_lines(corrected)
-    orecs = _records(original, setup, ocount)
-    crecs = _records(corrected, setup, ccount, drop_header=True, header=header)
-    rep = DiffReport(str(opath or "<text>"), str(cpath or "<text>"))
-    buf: deque = deque()  # corrected records read ahead, not yet paired
-
-    def peek(i: int):
-        while len(buf) <= i:
-            nxt = next(crecs, None)
-            if nxt is None:
-                return None
-            buf.append(nxt)
-        return buf[i]
-
+    keys = _Keys()
+    o_reader = _Reader(original, setup, keys)
+    c_reader = _Reader(corrected, setup, keys, drop_header=True)
+    orig, corr = _Tape(o_reader.chunks()), _Tape(c_reader.chunks())
+    rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"))
     last_delta = (0.0, 0.0, 0.0)
-    for o_lineno, o_line, o_end in orecs:
-        if o_end is None:
-            # an anchor: every corrected move before it was inserted
-            while True:
-                rec = peek(0)
-                if rec is None:
-                    raise PostprocError(f"line {o_lineno} of the original is missing from the corrected program",
-                                        path=rep.corrected, hint="is this the corrected version of that program?")
-                buf.popleft()
-                if rec[2] is None:
-                    if rec[1] != o_line:
-                        raise PostprocError(
-                            f"line {rec[0]} of the corrected program differs from line {o_lineno} of the original",
-                            path=rep.corrected, lineno=rec[0],
-                            hint="lines that are not moves must be identical: is this its corrected version?")
-                    rep.lines_unchanged += 1
-                    break
-                rep.lines_inserted += 1
-            continue
-        sk = skeleton(o_line)
-        predicted = tuple(e + d for e, d in zip(o_end, last_delta, strict=True))
-        best = None
-        worse = 0
-        i = 0
-        while True:
-            rec = peek(i)
-            if rec is None or rec[2] is None:
-                break  # the end, or the next anchor: the pair lies before it
-            if skeleton(rec[1]) == sk or _compatible(o_line, rec[1]):
-                dist = _distance(rec[2], predicted)
-                if best is None or dist < best[0]:
-                    best = (dist, i)
-                    worse = 0
-                else:
-                    # past the nearest line the end points walk away again (the next
-                    # move's inserted lines): stop after a few that do not come closer
-                    worse += 1
-                    if worse >= STOP_AFTER_WORSE:
-                        break
-            i += 1
-        if best is None:
-            raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
-                                path=rep.corrected)
-        for _ in range(best[1]):
-            buf.popleft()
-            rep.lines_inserted += 1
-        c_lineno, c_line, c_end = buf.popleft()
-        rep.moves += 1
-        delta = tuple(0.0 if (math.isnan(c) or math.isnan(o)) else c - o for c, o in zip(c_end, o_end, strict=True))
-        last_delta = delta
-        if c_line == o_line:
-            rep.moves_unchanged += 1
-            rep.lines_unchanged += 1
-        else:
-            rep.add_moved(o_lineno, c_lineno, delta)
+    slow = 0
+    window = CHUNK_LINES
+    shown = 0
     while True:
-        rec = peek(0)
-        if rec is None:
+        orig.fill(1 if slow else CHUNK_LINES // 2)
+        if not orig.avail():
+            if orig.error is not None:
+                raise orig.error
             break
-        buf.popleft()
-        if rec[2] is None:
-            raise PostprocError(f"line {rec[0]} of the corrected program has no counterpart in the original",
-                                path=rep.corrected, lineno=rec[0])
+        if progress is not None and o_reader.count >= shown + CHUNK_LINES:
+            shown = o_reader.count
+            progress(shown)
+        if not slow:
+            w = min(orig.avail(), window)
+            corr.fill(w + w // 2 + SCAN_AHEAD + 1)
+            n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
+            if n and not failed:
+                window = min(CHUNK_LINES, 2 * window)
+                continue
+            # a record the rule pairs otherwise (a line inserted here): one at a time for a
+            # while, then a window about as long as the stretch that was paired at once
+            window = max(MIN_WINDOW, 2 * n)
+            slow = SLOW_STRETCH
+        last_delta = _pair_one(orig, corr, rep, last_delta)
+        slow -= 1
+    while True:
+        c = corr.peek(0)
+        if c is None:
+            break
+        corr.pos += 1
+        if not corr.rows.move[c]:
+            lineno = int(corr.rows.lineno[c])
+            raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
+                                path=rep.corrected, lineno=lineno)
         rep.lines_inserted += 1
-    rep.header = "\n".join(header)
-    rep.lines_original = ocount[0]
-    rep.lines_corrected = ccount[0]
+    if progress is not None:
+        progress(o_reader.count)
+    rep.header = "\n".join(c_reader.header)
+    rep.lines_original = o_reader.count
+    rep.lines_corrected = c_reader.count
     return rep
 
 
