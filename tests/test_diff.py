@@ -277,3 +277,12 @@ def test_diff_pairs_line_for_line_where_no_line_was_inserted():
                                          if a in ln)
                 got.append(float(v) - ends[m.lineno][k])
             np.testing.assert_allclose(m.delta_mm, got, atol=1e-12)
+
+
+def test_diff_pairs_a_line_whose_words_follow_a_comment():
+    cal = load_calibration(CASES / "demo_static.json")
+    text = "G21 G90 G0 X10 Y10 Z10\nG1 (cut) X20 Y15 F100\nG17 G2 (quarter) X30 Y25 I10 J0\nM2\n"
+    out, rep = correct_text(text, cal.engine, Setup())
+    d = compare_programs(text, out)
+    assert d.moves == rep.moves == 3
+    assert [m.lineno for m in d.moved] == [1, 2, 3]

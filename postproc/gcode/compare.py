@@ -57,14 +57,15 @@ SLOW_STRETCH = 4
 MIN_WINDOW = 256
 # Insertions in one stretch between anchors checked at once (more: paired one at a time).
 MAX_LEVELS = 8
+_COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
 _SKELETON_DROP = re.compile(r"[XYZIJKRPFxyzijkrpf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|[Gg][ \t]*0*[0-3](?![0-9.])|\s+")
 
 
 def skeleton(line: str) -> str:
-    """A line without coordinates, arc words, feeds, motion codes and blanks."""
-    body = line.split("(")[0].split(";")[0]
-    rest = line[len(body):]
-    return _SKELETON_DROP.sub("", body) + rest.strip()
+    """A line without coordinates, arc words, feeds, motion codes and blanks (its comments
+    kept as they are, also where words follow a comment)."""
+    parts = _COMMENT_SPLIT.split(line)
+    return "".join(part if k % 2 else _SKELETON_DROP.sub("", part) for k, part in enumerate(parts))
 
 
 @dataclass
