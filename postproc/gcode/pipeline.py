@@ -419,52 +419,46 @@ class Corrector(EmitterMixin):
     # -- one chunk ---------------------------------------------------------------------
     def _chunk(self, entries: list, write_out) -> None:
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
-        q_parts: list[np.ndarray] = []
-        ln_parts: list[np.ndarray] = []
-        r_parts: list[np.ndarray] = []
         rot: list[dict] = []
         general: list[tuple[int, Move]] = []
-        rows: list = []
         unit0 = None
-
-        def flush_rows() -> None:
-            if rows:
-                q_parts.append(np.array([m.q1 for m in rows], dtype=float))
-                ln_parts.append(np.array([m.lineno for m in rows]))
-                r_parts.append(np.array([m.r for m in rows], dtype=float))
-                rows.clear()
-
         M = 0
         runs: list[bulk.Run] = []
         for e in entries:
             if type(e) is bulk.Run:
                 runs.append(e)
-                flush_rows()
-                m = len(e)
                 if e.unit not in self._units_checked:
                     self._check_rounding(e.unit, e.lineno)
                 e.trow = M
-                q_parts.append(e.q1)
-                ln_parts.append(np.arange(e.lineno, e.lineno + m))
-                r_parts.append(np.broadcast_to(np.asarray(e.r, dtype=float), (m, 3)))
-                rot.extend([{}] * m)
+                rot.extend([{}] * len(e))
                 unit0 = e.unit if unit0 is None else unit0
-                M += m
+                M += len(e)
             elif e[1] is not None:
                 mv = e[1]
                 if mv.unit not in self._units_checked:
                     self._check_rounding(mv.unit, mv.lineno)
-                rows.append(mv)
                 rot.append(mv.rotary)
                 general.append((M, mv))
                 unit0 = mv.unit if unit0 is None else unit0
                 M += 1
-        flush_rows()
+        # every move's nominal target, line and tool vector: runs by slices, the others at once
+        Q1 = np.empty((M, 3))
+        lns = np.empty(M, dtype=int)
+        Rt = np.empty((M, 3))
+        for e in runs:
+            sl = slice(e.trow, e.trow + len(e))
+            Q1[sl] = e.q1
+            lns[sl] = np.arange(e.lineno, e.lineno + len(e))
+            Rt[sl] = e.r
+        if general:
+            at = [i for i, _m in general]
+            Q1[at] = [m.q1 for _i, m in general]
+            lns[at] = [m.lineno for _i, m in general]
+            Rt[at] = [m.r for _i, m in general]
         T = np.zeros((0, 3))
         plans: dict[int, object] = {}
         if M:
-            T, plans = self._plan(np.vstack(q_parts), np.concatenate(ln_parts), np.vstack(r_parts), rot,
-                                  general, unit0, runs)
+            T, plans = self._plan(Q1, lns, Rt, rot, general, unit0, runs)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
