@@ -7,6 +7,7 @@ engine's correction of the original program's densely sampled nominal path, and 
 accuracy is measured on the virtual machine through ``verify``."""
 
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -333,3 +334,26 @@ def test_a_bulk_planned_arc_is_held_to_the_controller_limits():
         assert within_controller_limits([100, 0, 0], end, (0.0, 0.0), (0, 1, 2), False) is ok
         assert within_controller_limits(end, [100, 0, 0], (0.0, 0.0), (0, 1, 2), True) is ok
     assert within_controller_limits([5, 0, 0], [5, 0, -1], (0.0, 0.0), (0, 1, 2), True)
+
+
+def test_growth_counts_the_program_not_the_header(tmp_path):
+    """A short program corrected with many tool lengths gets a long header (the setup);
+    the growth and its warning count the program's own lines."""
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    prog = tmp_path / "short.nc"
+    prog.write_text("G21 G90 G17\nG0 X100 Y100 Z120\nG1 X110 F500\nM2\n")
+    tools = [a for t in range(1, 41) for a in ("--tool-length", f"{t}=50")]
+    res = CliRunner().invoke(main, ["correct", str(prog), "-c", str(ROOT / "calibrations" / "s500_static.json"),
+                                    "-o", str(tmp_path / "out.nc"), *tools])
+    assert res.exit_code == 0, res.output
+    m = re.search(r"growth (\d+) / 4 lines = ([\d.]+)x \(\+(\d+) header lines\)", res.output)
+    assert m, res.output
+    body, header = int(m.group(1)), int(m.group(3))
+    out = (tmp_path / "out.nc").read_text().splitlines()
+    assert header == len(emit.split_header("\n".join(out) + "\n")[0]) > 4
+    assert body + header == len(out)
+    assert body == 4
+    assert "warning" not in res.output

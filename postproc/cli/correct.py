@@ -38,7 +38,8 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
         f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
         f"{rep.arcs_linearised}, largest correction {rep.max_correction_mm * 1000:.1f} um"
     ]
-    lines.append(f"  growth {rep.lines_out:,} / {rep.lines_in:,} lines = {rep.growth:.2f}x; arcs split into exact arcs "
+    lines.append(f"  growth {rep.lines_out - rep.header_lines:,} / {rep.lines_in:,} lines = {rep.growth:.2f}x "
+                 f"(+{rep.header_lines} header lines); arcs split into exact arcs "
                  f"{rep.arcs_split}, reversal take-ups {rep.takeups}" + (
                      "  (warning: over 5x; a controller's program memory may not hold it)" if rep.growth > 5.0 else ""))
     if rep.expanded:

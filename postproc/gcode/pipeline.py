@@ -109,11 +109,13 @@ class CorrectReport:
     cycles_expanded: int = 0
     arcs_split: int = 0  # arcs emitted as several exact arcs
     takeups: int = 0  # lines inserted to take up a reversal (backlash)
+    header_lines: int = 0  # the postproc header's lines (counted in lines_out)
 
     @property
     def growth(self) -> float:
-        """Lines out / lines in."""
-        return self.lines_out / self.lines_in if self.lines_in else 1.0
+        """The program's own lines out / lines in: the header, which carries the setup
+        (one line per few tool lengths), is not the program growing."""
+        return (self.lines_out - self.header_lines) / self.lines_in if self.lines_in else 1.0
 
 
 class Corrector(EmitterMixin):
@@ -298,6 +300,7 @@ class Corrector(EmitterMixin):
         head = head[keep:]
         write(header)
         self.report.lines_out += len(header_rows)
+        self.report.header_lines = len(header_rows)
 
         # runs of plain lines: for every engine whose moves the planner settles in bulk
         use_bulk = (self.linear_exact or self.bulk_plan) and self.opt.bulk_lane and source is None
