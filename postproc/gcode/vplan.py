@@ -34,6 +34,9 @@ from postproc.gcode import emit
 from postproc.gcode.state import PLANES
 
 TWO_PI = 2.0 * math.pi
+# Share of the limit left to the path between the samples of a straight move, where the
+# engine bounds the correction's curvature (the samples are then spaced to fit it).
+BETWEEN_SAMPLES_SHARE = 0.1
 # Gauss-Newton steps of the bisector centre fit (it converges in 3-5 on real arcs; the
 # fit only seeds the rounded centre, whose deviation is bounded separately).
 CENTRE_ITERATIONS = 8
@@ -169,14 +172,23 @@ def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None
     each move whether every corrected sample lies within ``limit`` of the chord S-T (a
     move whose start is unknown passes: it is written as it is read).
 
-    ``curvature(rows)``: the engine's bound on the correction's second derivative along
-    each move (:meth:`postproc.engine.base.Engine.line_curvature_bound`); a move whose
-    chord the bound holds within ``limit`` (bound L^2 / 8) passes unsampled."""
+    ``curvature(rows)``: the engine's bound K on the correction's second derivative
+    along each move (:meth:`postproc.engine.base.Engine.line_curvature_bound`). A move
+    whose chord the bound holds within ``limit`` (K L^2 / 8) passes unsampled; the others
+    are sampled at most ``step_mm`` apart, or farther where K allows (between samples h
+    apart the path leaves the polyline of its samples by K h^2 / 8 at most, kept to a
+    tenth of the limit), and their samples are held to the limit less that."""
     length = np.linalg.norm(Q1[rows] - Q0[rows], axis=1) if len(rows) else np.zeros(0)
     n = np.maximum(3, np.ceil(length / step_mm).astype(int) + 1) if len(rows) else np.zeros(0, dtype=int)
     settled = np.zeros(len(rows), dtype=bool)
+    between = np.zeros(len(rows))  # how far the path may leave its samples' polyline
     if curvature is not None and len(rows):
-        settled = curvature(rows) * length * length / 8.0 <= limit
+        K = curvature(rows)
+        settled = K * length * length / 8.0 <= limit
+        bounded = np.isfinite(K) & (K > 0)
+        h = np.where(bounded, np.sqrt(BETWEEN_SAMPLES_SHARE * 8.0 * limit / np.where(bounded, K, 1.0)), step_mm)
+        n = np.where(bounded, np.maximum(3, np.ceil(length / np.maximum(h, step_mm)).astype(int) + 1), n)
+        between = np.where(bounded, K * (length / (n - 1)) ** 2 / 8.0, 0.0)
         n = np.where(settled, 2, n)  # no interior sample
     own, pos, start = _ragged(n - 2)
     s = (pos + 1) / (n[own] - 1)
@@ -193,7 +205,7 @@ def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None
         some = n > 2
         if some.any():
             worst[some] = _group_max(dist, start[some], (n - 2)[some])
-        return settled | (worst <= limit) | ~np.isfinite(S[rows]).all(axis=1)
+        return settled | (worst <= limit - between) | ~np.isfinite(S[rows]).all(axis=1)
 
     return r, nom, check
 
