@@ -16,12 +16,16 @@ engine call and array arithmetic over all samples:
   circle. When the line is written, :meth:`ArcHint.spec` moves the centre onto the
   bisector of the end points as written, rounds it, and accepts it when the bound on
   its deviation (the ideal circle's deviation plus how far the rounded circle moved)
-  stays within the budget.
+  stays within the budget; an arc whose end words do not change keeps its own centre
+  words under the same bound (:meth:`ArcHint.keep`).
 
 What this does not settle (moves that must be split, arcs whose bound fails, full
 circles, R-form or multi-turn arcs, direction-dependent calibrations) takes the
 planner's general path, sample by sample. The samples are those of the general path:
-one every ``step_mm`` along the move and, on arcs, every ``step_rad`` of sweep.
+one every ``step_mm`` along the move and, on arcs, every ``step_rad`` of sweep; where
+the engine bounds the correction's curvature along a straight move
+(:meth:`postproc.engine.base.Engine.line_curvature_bound`), the move is settled with
+fewer samples, or none.
 """
 
 from __future__ import annotations
