@@ -8,6 +8,7 @@ from conftest import landing_error, polyline_distance
 
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine
+from postproc.gcode import emit
 from postproc.gcode.lexer import split_lines
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
@@ -220,3 +221,31 @@ def test_corpus_programs_land_on_their_nominal_path(path):
         assert out.count("Z") > 10
         assert "Z" not in text.upper()
         assert landing_error(text, text, eng, setup, step=0.5) > 20 * TOL
+
+
+@pytest.mark.parametrize("setting", ["G92 X0 Y0", "G10 L20 P1 X0 Y0", "G20 G92 X0 Y0"])
+def test_offsets_set_from_the_machine_position_follow_the_correction(setting):
+    """G92 and G10 L20 set an offset from where the machine is: in the corrected program
+    the machine is at the corrected point there, so the words of the setting move by the
+    correction, or every later absolute move lands off by it."""
+    eng = StaticEngine(G_BAD, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+    inch = setting.startswith("G20")
+    k = 1 / 25.4 if inch else 1.0
+    text = (f"G21 G90 G17 G54\nG0 X100 Y80 Z50\nG1 X120 Y90 F500\n{setting}\n"
+            + "".join(f"G1 X{x * k:.5f} Y{y * k:.5f}\n" for x, y in [(10, 0), (10, 10), (-30, 20), (0, 0)])
+            + "G10 L2 P1 X0 Y0 Z0\nG54 G92.1 G21\nG0 X100 Y100\nM2\n")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)})
+    out, _rep = correct_text(text, eng, setup, CorrectOptions(tolerance_mm=TOL))
+    assert landing_error(text, out, eng, setup) <= TOL * 1.01
+    # the setting's own words changed (the correction at the machine there is ~ 30 um)
+    line = next(ln for ln in emit.split_header(out)[1].splitlines() if setting.split()[-2] in ln and "X" in ln)
+    assert line != setting
+
+
+def test_settings_from_the_position_stay_as_they_are_under_identity():
+    from postproc.engine.identity import IdentityEngine
+
+    text = "G21 G90 G54\nG0 X100 Y80 Z50\nG92 X0 Y0\nG1 X10 F500\nG10 L20 P1 X5\nG92.1\nM2\n"
+    out, _ = correct_text(text, IdentityEngine([[-1e4] * 3, [1e4] * 3]), Setup(offsets={"G54": (0.0, 0.0, 0.0)}),
+                          CorrectOptions())
+    assert emit.split_header(out)[1] == text

@@ -241,6 +241,9 @@ class Interpreter:
         self.used_rotary: set[str] = set()
         self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
         self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
+        # the last line set an offset from where the machine is (G92, G10 L20, G10 L10/L11):
+        # (words, [(word index, axis), ...], nominal position then), else None
+        self.rebase: tuple | None = None
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
@@ -313,6 +316,7 @@ class Interpreter:
     def feed_line(self, lineno: int, line: str) -> Move | None:
         """Interpret one line (with its ending); return the Move it makes, if any."""
         self.motion_word = False
+        self.rebase = None
         if self.ended:
             return None  # after M2/M30 the controller reads no further
         bom = line.startswith("\ufeff")
@@ -481,13 +485,21 @@ class Interpreter:
         if lookahead is not None:
             return None
         if g10:
+            before = tuple(st.pos)
             self._g10(vals, lineno, col_of(next(i for k, i in gcodes if k == 100)))
+            L = int(vals["L"][0]) if "L" in vals else None
+            named = [a for a in AXES if a in vals] if L == 20 else ["Z"] if L in (10, 11) and "Z" in vals else []
+            if named:
+                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in named], before)
             return None
         if g52:
             self._g52(vals, lineno, col_of(next(i for k, i in gcodes if k == 520)))
             return None
         if g92 is not None:
+            before = tuple(st.pos)
             self._g92(g92, vals, lineno, col_of(next(i for k, i in gcodes if k in (920, 921, 922))))
+            if g92 == 920 and any(a in vals for a in AXES):
+                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in AXES if a in vals], before)
             return None
         if "F" in vals:
             st.feed = vals["F"][0]

@@ -312,6 +312,13 @@ class Corrector(EmitterMixin):
         def feed(line: str) -> None:
             nonlocal lineno, run_ok
             mv = interp.feed_line(where(lineno), line)
+            if interp.rebase is not None:
+                # an offset set from where the machine is: its words follow the correction there
+                entries.append((line, _Rebase(*interp.rebase, MM_PER_INCH if interp.state.inch else 1.0), False,
+                                interp.state.motion))
+                lineno += 1
+                run_ok = use_bulk and bulk.state_allows(interp)
+                return
             if mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
             elif mv is not None and mv.spline is not None:
@@ -436,7 +443,7 @@ class Corrector(EmitterMixin):
                 rot.extend([{}] * len(e))
                 unit0 = e.unit if unit0 is None else unit0
                 M += len(e)
-            elif e[1] is not None:
+            elif e[1] is not None and type(e[1]) is not _Rebase:
                 mv = e[1]
                 if mv.unit not in self._units_checked:
                     self._check_rounding(mv.unit, mv.lineno)
@@ -490,6 +497,9 @@ class Corrector(EmitterMixin):
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
+            if type(mv) is _Rebase:
+                self._emit_rebase(line, mv, write)
+                continue
             if mv is None:
                 write(line)
                 passed += 1
@@ -624,6 +634,23 @@ class Corrector(EmitterMixin):
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
         return T, plans
+
+    def _emit_rebase(self, line: str, rb: _Rebase, write) -> None:
+        """Write a G92 / G10 L20 / G10 L10-L11 line so that the offset the controller sets
+        from where it is (the corrected position) is the nominal one: each value it
+        subtracts moves by the correction there."""
+        unit = rb.unit
+        d = _unit_decimals(self.opt, unit)
+        edits = []
+        for idx, k in rb.axes:
+            delta = (self.qe[k] - rb.nominal[k]) / unit
+            if not math.isfinite(delta):
+                continue
+            _l, num, start, end, _p = rb.words[idx]
+            dout = max(d, emit.decimals_of(num))
+            if abs(delta) >= emit.HALF_UNIT[dout]:
+                edits.append((start, end, emit.fmt(float(num) + delta, dout)))
+        self._write_line(line, edits, write)
 
     def _lazy_plan(self, i: int, mv: Move, *arrays):
         """The general plan of move ``i``, made when asked for."""
@@ -1071,6 +1098,18 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, mv.unit)
         edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
         self._write_line(line, edits, write)
+
+
+class _Rebase:
+    """A line that sets an offset from where the machine is (G92, G10 L20, G10 L10/L11)."""
+
+    __slots__ = ("words", "axes", "nominal", "unit")
+
+    def __init__(self, words, axes, nominal, unit: float) -> None:
+        self.words = words  # the line's words
+        self.axes = axes  # [(word index, axis), ...] of the values taken from the position
+        self.nominal = nominal  # the nominal gauge position when the line runs
+        self.unit = unit  # mm per program unit then
 
 
 class _RunLine:
