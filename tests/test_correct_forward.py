@@ -249,3 +249,16 @@ def test_settings_from_the_position_stay_as_they_are_under_identity():
     out, _ = correct_text(text, IdentityEngine([[-1e4] * 3, [1e4] * 3]), Setup(offsets={"G54": (0.0, 0.0, 0.0)}),
                           CorrectOptions())
     assert emit.split_header(out)[1] == text
+
+
+def test_a_position_the_program_stores_is_the_corrected_one():
+    """G28.1 stores where the controller is, the corrected position; a later G28 goes back
+    there, and the moves after it (G91, axes left out) start from it. (A G28 that sends
+    only some axes to a stored position mixes them with others: a machine position, it is
+    not corrected.)"""
+    eng = StaticEngine(G_BAD, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+    text = ("G21 G90 G17 G54\nG0 X100 Y80 Z50\nG1 X120 Y90 F500\nG28.1\nG1 X10 Y10\nG28\n"
+            "G91 G1 X5 Y5\nX-10\nG90 G1 Y20\nG28 X50 Y20\nG1 Y30\nM2\n")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)})
+    out, _rep = correct_text(text, eng, setup, CorrectOptions(tolerance_mm=TOL))
+    assert landing_error(text, out, eng, setup) <= TOL * 1.01

@@ -139,6 +139,8 @@ class Move:
     spline: list | None = None
     # already cut within tolerance (a spline's chords): not split again by the planner
     planned: bool = False
+    # a move to a position the program stored (G28.1/G30.1): its name, and the axes it sets
+    stored: tuple | None = None
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -244,6 +246,9 @@ class Interpreter:
         # the last line set an offset from where the machine is (G92, G10 L20, G10 L10/L11):
         # (words, [(word index, axis), ...], nominal position then), else None
         self.rebase: tuple | None = None
+        # the last line stored the position for G28 or G30 (G28.1/G30.1): its name, else None
+        self.stored_here: str | None = None
+        self.program_stored: set[str] = set()  # stored positions the program set itself
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
@@ -317,6 +322,7 @@ class Interpreter:
         """Interpret one line (with its ending); return the Move it makes, if any."""
         self.motion_word = False
         self.rebase = None
+        self.stored_here = None
         if self.ended:
             return None  # after M2/M30 the controller reads no further
         bom = line.startswith("\ufeff")
@@ -681,7 +687,7 @@ class Interpreter:
         rot = dict(st.rotary) if self.used_rotary else {}
         jump = Move(lineno, RAPID, tuple(inter), tuple(after), r, (0.0, 0.0, 0.0), unit, st.incremental,
                     st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot, stays=True, motion_idx=gi,
-                    fixed=True)
+                    fixed=True, stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
         st.pos = after
         moved = [k for k in named if inter[k] != q0[k] and not (math.isnan(inter[k]) and math.isnan(q0[k]))]
         if not moved:
@@ -1143,6 +1149,8 @@ def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
     if any(a in b.vals for a in AXES):
         raise it._err(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
     it.home[HOME_STORE[key]] = list(it.state.pos)
+    it.stored_here = HOME_STORE[key]
+    it.program_stored.add(HOME_STORE[key])
 
 
 def _g_local_offset(it: Interpreter, b: _Block, key: int, i: int) -> None:

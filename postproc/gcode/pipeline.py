@@ -147,6 +147,7 @@ class Corrector(EmitterMixin):
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
+        self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
         # moves settled in bulk (vplan) unless the correction depends on the approach
@@ -312,6 +313,12 @@ class Corrector(EmitterMixin):
         def feed(line: str) -> None:
             nonlocal lineno, run_ok
             mv = interp.feed_line(where(lineno), line)
+            if interp.stored_here is not None:
+                # G28.1/G30.1: the controller stores where it is, the corrected position
+                entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
+                lineno += 1
+                run_ok = use_bulk and bulk.state_allows(interp)
+                return
             if interp.rebase is not None:
                 # an offset set from where the machine is: its words follow the correction there
                 entries.append((line, _Rebase(*interp.rebase, MM_PER_INCH if interp.state.inch else 1.0), False,
@@ -443,7 +450,7 @@ class Corrector(EmitterMixin):
                 rot.extend([{}] * len(e))
                 unit0 = e.unit if unit0 is None else unit0
                 M += len(e)
-            elif e[1] is not None and type(e[1]) is not _Rebase:
+            elif e[1] is not None and type(e[1]) not in (_Rebase, _Store):
                 mv = e[1]
                 if mv.unit not in self._units_checked:
                     self._check_rounding(mv.unit, mv.lineno)
@@ -500,6 +507,11 @@ class Corrector(EmitterMixin):
             if type(mv) is _Rebase:
                 self._emit_rebase(line, mv, write)
                 continue
+            if type(mv) is _Store:
+                self._stored[mv.name] = list(self.qe)
+                write(line)
+                passed += 1
+                continue
             if mv is None:
                 write(line)
                 passed += 1
@@ -517,6 +529,10 @@ class Corrector(EmitterMixin):
                 continue
             if mv.fixed:  # the machine is at a stored position, uncorrected
                 self.qe = list(mv.q1)
+                if mv.stored is not None and mv.stored[0] in self._stored:
+                    # a position the program stored: the controller stored its corrected one
+                    for ax in mv.stored[1]:
+                        self.qe[ax] = self._stored[mv.stored[0]][ax]
                 k += 1
                 continue
             if mv.then is not None:  # G28/G30: only the intermediate point's own words change
@@ -1098,6 +1114,15 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, mv.unit)
         edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
         self._write_line(line, edits, write)
+
+
+class _Store:
+    """A G28.1/G30.1 line: the controller stores the position it is at."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str) -> None:
+        self.name = name  # "G28" or "G30"
 
 
 class _Rebase:
