@@ -206,12 +206,7 @@ def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -
         if i >= a:
             pos[k] = block.ovl[k][i] * unit + shift[k]
     st.pos = pos
-    i = block.last_g[e]
-    if i >= a:
-        st.motion = block.code(i)
-    i = block.last_f[e]
-    if i >= a:
-        st.feed = float(block.cols[_F][i])
+    st.motion, st.feed = _modal_at(run, b)
     interp.motion_word = bool(block.gword[e])
     block.runs.append(run)
     return run
@@ -321,14 +316,16 @@ def _format(values: np.ndarray, dout: np.ndarray, prefix: str = "") -> list[str]
     return out
 
 
-def _first_move(run: Run, lineno: int) -> RunMove:
-    """The first line of a run as a RunMove (for the general emitter)."""
-    blk, a = run.block, run.a
-    f = blk.cols[_F][a]
-    missing = tuple(k for k in range(3) if not blk.has[k][a])
-    kind = blk.code(a) if blk.gword[a] else run.motion0
-    return RunMove(lineno, kind, run.q0, tuple(run.q1[0].tolist()), run.r, run.shift, run.unit, [],
-                    bool(blk.gword[a]), run.arc_absolute, float(f) if f else run.feed0, missing)
+def _row_move(run: Run, j: int) -> RunMove:
+    """Line ``j`` of a run (an index within it) as a RunMove, for the general emitter."""
+    blk = run.block
+    y = run.a + j
+    motion, feed = _modal_at(run, y)
+    f = blk.cols[_F][y]
+    q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
+    return RunMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
+                   run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
+                   float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
 
 
 def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
@@ -341,7 +338,7 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
         # the controller's modal motion differs from the program's here (after a
         # linearised arc): the general emitter adds the motion word
         line = blk.lines[a]
-        corrector._emit_move(line, _first_move(run, run.lineno).to_move(line), T[run.trow].tolist(), None, write)
+        corrector._emit_move(line, _row_move(run, 0).to_move(line), T[run.trow].tolist(), None, write)
         s = a + 1
         if s == b:
             return
@@ -439,11 +436,5 @@ def split_run(run: Run, rows: list[int]):
             yield sub
         if j == len(run):
             break
-        blk = run.block
-        motion, feed = _modal_at(run, y)
-        f = blk.cols[_F][y]
-        q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
-        yield j, RunMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
-                          run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
-                          float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
+        yield j, _row_move(run, j)
         x = y + 1

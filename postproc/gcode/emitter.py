@@ -96,9 +96,7 @@ class EmitterMixin:
             edits, added = self._axis_words(mv, target, self.qe, d)
             if added or (mv.motion_idx < 0 and self.emitted_motion != mv.kind):
                 sep, lower = emit.style_of(line)
-                if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
-                    text = "G" + MOTION_TEXT[mv.kind]
-                    edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+                self._motion_edit(mv, edits, sep, lower)
                 if added:
                     pos = self._insert_pos(mv)
                     text = "".join(sep + w for w in added)
@@ -124,6 +122,13 @@ class EmitterMixin:
         if mv.motion_idx >= 0:
             return mv.words[mv.motion_idx][3]
         return mv.words[-1][3]
+
+    def _motion_edit(self, mv: Move, edits: list, sep: str, lower: bool) -> None:
+        """Add the move's motion word to a line that has none when the controller's modal
+        motion differs (after a linearised arc, or a line written in G1)."""
+        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
+            text = "G" + MOTION_TEXT[mv.kind]
+            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
 
     def _insert_motion(self, mv: Move, text: str) -> tuple[int, int, str]:
         first = next((w for w in mv.words if w[0] != "N"), mv.words[0])
@@ -207,9 +212,7 @@ class EmitterMixin:
             edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
             self.emitted_motion = LINE
         else:
-            if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
-                text = "G" + MOTION_TEXT[mv.kind]
-                edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+            self._motion_edit(mv, edits, sep, lower)
             self.emitted_motion = mv.kind
         if mv.inverse_time and inserted and mv.feed_idx >= 0:
             _l, num, start, end, _p = mv.words[mv.feed_idx]
@@ -262,9 +265,7 @@ class EmitterMixin:
             return
         self.report.moves += 1
         sep, lower = emit.style_of(line)
-        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
-            text = "G" + MOTION_TEXT[mv.kind]
-            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+        self._motion_edit(mv, edits, sep, lower)
         self.emitted_motion = mv.kind
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
@@ -306,14 +307,7 @@ class EmitterMixin:
                     break
                 hi = b
             if seg is not None:
-                lo = b
-                while hi - lo > 1:
-                    mid = (lo + hi) // 2
-                    sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
-                    if sg is None:
-                        hi = mid
-                    else:
-                        lo, seg = mid, sg
+                lo, seg = self._farthest(mv, plan, s, Q, nom, bulge, a, b, hi, seg, cur, final, d, budget)
                 out.append(seg)
                 cur = seg["qe"]
                 a = lo
@@ -335,13 +329,7 @@ class EmitterMixin:
                     break
                 lo, lo_seg = a + step, sg
                 step *= 2
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
-                if sg is None:
-                    hi = mid
-                else:
-                    lo, lo_seg = mid, sg
+            lo, lo_seg = self._farthest(mv, plan, s, Q, nom, bulge, a, lo, hi, lo_seg, cur, final, d, budget)
             if lo == a + 1:
                 # only the next sample is reached: check the path between them with the
                 # engine itself (a jump or a solver's scatter there is refused)
@@ -355,6 +343,19 @@ class EmitterMixin:
             cur = lo_seg["qe"]
             a = lo
         return out
+
+    def _farthest(self, mv: Move, plan, s, Q, nom, bulge, a: int, lo: int, hi: int, lo_seg, cur, final: bool,
+                  d: int, budget: float) -> tuple[int, dict]:
+        """Bisection for the farthest sample one segment from ``a`` reaches, between ``lo``
+        (reached, by ``lo_seg``) and ``hi`` (not reached): ``(sample, its segment)``."""
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
+            if sg is None:
+                hi = mid
+            else:
+                lo, lo_seg = mid, sg
+        return lo, lo_seg
 
     def _try_segment(self, mv: Move, plan, s, Q, nom, bulge, a: int, b: int, cur, final: bool, d: int,
                      budget: float) -> dict | None:
@@ -574,9 +575,7 @@ class EmitterMixin:
         the target and its centre words keep their offset from the start."""
         edits, added = self._axis_words(mv, target, self.qe, d)
         sep, lower = emit.style_of(line)
-        if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
-            text = "G" + MOTION_TEXT[mv.kind]
-            edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
+        self._motion_edit(mv, edits, sep, lower)
         self.emitted_motion = mv.kind
         if added:
             pos = self._insert_pos(mv)

@@ -316,17 +316,11 @@ class Corrector(EmitterMixin):
             if interp.stored_here is not None:
                 # G28.1/G30.1: the controller stores where it is, the corrected position
                 entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
-                lineno += 1
-                run_ok = use_bulk and bulk.state_allows(interp)
-                return
-            if interp.rebase is not None:
+            elif interp.rebase is not None:
                 # an offset set from where the machine is: its words follow the correction there
                 entries.append((line, _Rebase(*interp.rebase, MM_PER_INCH if interp.state.inch else 1.0), False,
                                 interp.state.motion))
-                lineno += 1
-                run_ok = use_bulk and bulk.state_allows(interp)
-                return
-            if mv is not None and mv.cycle is not None:
+            elif mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, interp.state.motion)
             elif mv is not None and mv.spline is not None:
                 self._feed_spline(entries, line, mv)
