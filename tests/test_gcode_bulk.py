@@ -2,6 +2,7 @@
 programs and at every chunk boundary."""
 
 import dataclasses
+import math
 
 import numpy as np
 from conftest import ENGINE, assert_same, other_line, plain_line, run_all
@@ -31,6 +32,52 @@ def test_bulk_lane_equals_the_general_path_on_generated_programs(text, chunk_lin
     assert_same(run_all(text, chunk_lines=chunk_lines))
 
 
+@st.composite
+def arc_program(draw):
+    """Straight moves and arcs (exact to the written decimals, or with the centre words
+    dropped or broken) from where the program is, with comments and modal lines between."""
+    x, y, z = 10.0, 10.0, 10.0
+    body = ["G21 G90 G17 G94", "G0 X10 Y10 Z10", "G1 F500"]
+    for _ in range(draw(st.integers(1, 30))):
+        kind = draw(st.integers(0, 9))
+        if kind < 4:
+            x, y = draw(st.integers(-1500, 1500)) / 10, draw(st.integers(-1500, 1500)) / 10
+            body.append(draw(st.sampled_from(["G1 ", "", "G0 ", "N10 G01 "])) + f"X{x:.3f} Y{y:.3f}")
+            continue
+        if kind == 4:
+            body.append(draw(st.sampled_from(["(note)", "", "M3 S1000", "X1 Y2 I3 J4", "G1 F300", "G18",
+                                              "G17", "G90.1", "G91.1"])))
+            continue
+        r = draw(st.integers(5, 400)) / 10
+        a0 = math.atan2(-draw(st.integers(-10, 10)) or 1, draw(st.integers(-10, 10)))
+        cx, cy = x - r * math.cos(a0), y - r * math.sin(a0)
+        a1 = a0 + draw(st.integers(-300, 300)) / 100
+        ex, ey = cx + r * math.cos(a1), cy + r * math.sin(a1)
+        if draw(st.integers(0, 5)) == 0:
+            ex += draw(st.sampled_from([0.5, 0.002, 0.0]))  # an end point off the circle
+        i, j = cx - x, cy - y
+        words = [draw(st.sampled_from(["G2", "G3", "G02", "N7 G03"])), f"X{ex:.4f}", f"Y{ey:.4f}"]
+        if draw(st.booleans()):
+            z = draw(st.integers(-50, 50)) / 10
+            words.append(f"Z{z:.3f}")
+        centre = draw(st.sampled_from(["ij", "ij", "ij", "i", "j", "none"]))
+        if "i" in centre:
+            words.append(f"I{i:.4f}")
+        if "j" in centre:
+            words.append(f"J{j:.4f}")
+        if draw(st.integers(0, 3)) == 0:
+            words.append("F800")
+        body.append(" ".join(words))
+        x, y = float(f"{ex:.4f}"), float(f"{ey:.4f}")
+    return "\n".join(body) + "\n"
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(arc_program(), st.sampled_from([1, 2, 5, 20_000]))
+def test_arcs_in_runs_equal_the_general_path(text, chunk_lines):
+    assert_same(run_all(text, chunk_lines=chunk_lines))
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(program(), st.sampled_from([1, 3, 4, 6]))
 def test_bulk_lane_equals_the_general_path_with_other_decimals(text, decimals):
@@ -48,9 +95,9 @@ def test_scan_splits_every_line_into_pieces_that_join_back(lines, ending):
     for i, line in enumerate(lines):
         pieces = [c[i] for c in cols]
         if block.plain[i]:
-            joined = "".join(pieces[j] for j in (0, 2, 3, 4, 5, 6, 7, 8)) + "\n"
+            joined = "".join(pieces[j] for j in (0, *range(2, 13))) + "\n"
             assert joined == line
-            for k, j in enumerate((3, 5, 7)):
+            for k, j in enumerate((3, 5, 7, 9, 11)):
                 assert block.has[k][i] == bool(pieces[j])
                 if pieces[j]:
                     assert block.ov[k][i] == float(pieces[j])

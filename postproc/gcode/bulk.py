@@ -31,24 +31,27 @@ import numpy as np
 
 from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer
-from postproc.gcode.interp import Move
+from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Move
 from postproc.gcode.lexer import NUMBER_RE
-from postproc.gcode.state import LINE, RAPID
+from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
 _N = NUMBER_RE
 # Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks
-# before it, 4/6/8 their numbers, 9 the rest (F word, trailing blanks, \r), 10 the F
-# number; any other line matches with every group empty. Blanks are matched possessively
-# (nothing in the pattern needs one back), which saves the regex engine's backtracking.
+# before it, 4/6/8 their numbers, 9/11 I/J letter with the blanks before it, 10/12 their
+# numbers, 13 the rest (F word, trailing blanks, \r), 14 the F number; any other line
+# matches with every group empty. Blanks are matched possessively (nothing in the
+# pattern needs one back), which saves the regex engine's backtracking.
 _PLAIN = re.compile(
-    rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[01]))?)"
+    rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[0-3]))?)"
     rf"(?:([ \t]*+[Xx][ \t]*+)({_N}))?(?:([ \t]*+[Yy][ \t]*+)({_N}))?(?:([ \t]*+[Zz][ \t]*+)({_N}))?"
+    rf"(?:([ \t]*+[Ii][ \t]*+)({_N}))?(?:([ \t]*+[Jj][ \t]*+)({_N}))?"
     rf"((?:[ \t]*+[Ff][ \t]*+({_N}))?[ \t]*+\r?)|[^\n]*)$",
     re.M,
 )
-_HEAD, _G, _REST, _F = 0, 1, 8, 9
-_LETTER = (2, 4, 6)  # tuple index of each axis letter (with the blanks before it)
-_NUM = (3, 5, 7)  # tuple index of each axis number
+_HEAD, _G, _REST, _F = 0, 1, 12, 13
+_LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
+_NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
+_CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
 
@@ -87,20 +90,29 @@ class RunMove:
         self.missing = missing  # axes the line does not name
 
     def to_move(self, line: str) -> Move:
-        """The general Move of the same line (for the rare cases the fast emitter hands on)."""
+        """The general Move of the same line (a line written one by one: an arc, a line the
+        planner splits, or one whose motion word the controller needs)."""
         words = lexer.scan_words(line)
         idx = [-1, -1, -1]
+        centre_idx = [-1, -1]
         feed_idx = motion_idx = -1
         for i, w in enumerate(words):
-            if w[0] in "XYZ":
-                idx["XYZ".index(w[0])] = i
-            elif w[0] == "F":
+            letter = w[0]
+            if letter in "XYZ":
+                idx["XYZ".index(letter)] = i
+            elif letter == "F":
                 feed_idx = i
-            elif w[0] == "G":
+            elif letter == "G":
                 motion_idx = i
+            elif letter in "IJ":
+                centre_idx["IJ".index(letter)] = i
+        arc, aux = self.arc, ()
+        if arc is not None:
+            arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (centre_idx[0], centre_idx[1]), -1)
+            aux = tuple(i for i in centre_idx if i >= 0)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
-                    self.arc_absolute, words, tuple(idx), feed_idx, False, self.feed, {}, None, [], False,
-                    motion_idx, ())
+                    self.arc_absolute, words, tuple(idx), feed_idx, False, self.feed, {}, arc, [], False,
+                    motion_idx, aux)
 
 
 def prime_shift(interp) -> bool:
@@ -130,32 +142,41 @@ class Block:
     def __init__(self, lines: list[str], found: list[tuple]) -> None:
         n = len(lines)
         self.lines = lines
-        cols = list(zip(*found, strict=True)) if n else [()] * 10
+        cols = list(zip(*found, strict=True)) if n else [()] * 14
         self.cols = cols
         self.has, self.ov, self.ovl, self.frac, self.last = [], [], [], [], []
-        for k in range(3):
+        for k in range(5):  # X, Y, Z, I, J
             nums = cols[_NUM[k]]
             arr = np.array(nums, dtype=str)
             has = arr != ""
             ov = np.zeros(n)
             ov[has] = np.array([x for x in nums if x], dtype=float)
-            dot = np.strings.find(arr, ".")
             self.has.append(has)
             self.ov.append(ov)
             self.ovl.append(ov.tolist())
-            self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
-            self.last.append(_last_index(has))
-        self.plain = self.has[0] | self.has[1] | self.has[2]
+            if k < 3:
+                dot = np.strings.find(arr, ".")
+                self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
+                self.last.append(_last_index(has))
         g = cols[_G]
         self.gword = g
-        self.last_g = _last_index(np.fromiter(map(bool, g), dtype=bool, count=n)).tolist()
+        last_g = _last_index(np.fromiter(map(bool, g), dtype=bool, count=n))
+        digit = np.array([x[-1:] for x in g], dtype="<U1")
+        # G2/G3 lines with centre words (I, J) are arcs; a line without a motion word
+        # after one is an arc too (modal), and one without centre words the
+        # interpreter's: neither is plain
+        self.arc = (digit == "2") | (digit == "3")
+        centre = self.has[3] | self.has[4]
+        modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
+        self.plain = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
+        self.last_g = last_g.tolist()
         self.last_f = _last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
 
     def code(self, i: int) -> int:
-        """Motion of line i's G word (G0, G00, G1 or G01)."""
-        return LINE if self.gword[i][-1] == "1" else RAPID
+        """Motion of line i's G word (G0 to G3, G00 to G03)."""
+        return _CODE[self.gword[i][-1]]
 
 
 def scan(lines: list[str]) -> Block | None:
@@ -176,29 +197,75 @@ class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
-                 "feed0", "q1", "trow", "cut")
+                 "feed0", "q1", "trow", "cut", "arcs")
 
     def __init__(self) -> None:
-        self.cut: list[int] = []  # lines (within the run) the planner wants split: written one by one
+        self.cut: list[int] = []  # lines (within the run) written one by one: arcs, lines the planner splits
+        self.arcs: dict[int, tuple] = {}  # line (within the run) -> (centre (3,), clockwise) of its arc
 
     def __len__(self) -> int:
         return self.b - self.a
 
 
-def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run:
-    """Interpret the plain lines ``a:b`` of ``block``: advance the modal state to the
-    end of the run. The caller checks :func:`state_allows`."""
+def _arc_rows(interp, block: Block, a: int, b: int, unit: float, shift, q0) -> tuple[int, dict]:
+    """The arcs among lines ``a:b``: ``(end, {line within the run: (centre, clockwise)})``,
+    ``end`` the first line the run cannot take (b when it takes every line): an arc out
+    of the XY plane, of zero radius, or whose end radius its controller refuses (the
+    interpreter reports those)."""
+    rows = np.flatnonzero(block.arc[a:b]) + a
+    if not len(rows):
+        return b, {}
+    if interp.state.plane != 170:
+        return int(rows[0]), {}
+    start = np.empty((len(rows), 3))
+    end = np.empty((len(rows), 3))
+    for k in range(3):
+        last = block.last[k]
+        before = np.where(rows > a, last[np.maximum(rows - 1, 0)], -1)
+        start[:, k] = np.where(before >= a, block.ov[k][np.maximum(before, 0)] * unit + shift[k], q0[k])
+        here = last[rows]
+        end[:, k] = np.where(here >= a, block.ov[k][np.maximum(here, 0)] * unit + shift[k], q0[k])
+    if interp.state.arc_absolute:
+        c1 = np.where(block.has[3][rows], block.ov[3][rows] * unit + shift[0], start[:, 0])
+        c2 = np.where(block.has[4][rows], block.ov[4][rows] * unit + shift[1], start[:, 1])
+    else:
+        c1 = start[:, 0] + block.ov[3][rows] * unit
+        c2 = start[:, 1] + block.ov[4][rows] * unit
+    rs = np.hypot(start[:, 0] - c1, start[:, 1] - c2)
+    re_ = np.hypot(end[:, 0] - c1, end[:, 1] - c2)
+    rule = interp._arc_rule()
+    arcs = {}
+    cw = [block.gword[y][-1] == "2" for y in rows.tolist()]
+    for j, y in enumerate(rows.tolist()):
+        if not (rs[j] >= MIN_ARC_RADIUS_MM and rule.arc_end_radius_ok(float(rs[j]), float(re_[j]), unit)):
+            return y, arcs
+        arcs[y - a] = ((float(c1[j]), float(c2[j]), float(start[j, 2])), cw[j])
+    return b, arcs
+
+
+def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run | None:
+    """Interpret the plain lines ``a:b`` of ``block``, or as many of them as a run
+    takes (``run.b``; None: not even the first, an arc the interpreter must read):
+    advance the modal state to the end of the run. The caller checks
+    :func:`state_allows`."""
     st = interp.state
+    unit = 25.4 if st.inch else 1.0
+    shift = interp._run_shift
+    q0 = tuple(st.pos)
+    b, arcs = _arc_rows(interp, block, a, b, unit, shift, q0)
+    if b == a:
+        return None
     run = Run()
     run.block, run.a, run.b, run.lineno = block, a, b, lineno
-    run.unit = unit = 25.4 if st.inch else 1.0
-    run.shift = shift = interp._run_shift
+    run.unit = unit
+    run.shift = shift
     run.r = interp._run_r
     run.arc_absolute = st.arc_absolute
     run.decimals = decimals
-    run.q0 = tuple(st.pos)
+    run.q0 = q0
     run.motion0 = st.motion
     run.feed0 = st.feed
+    run.arcs = arcs
     pos = list(st.pos)
     e = b - 1
     for k in range(3):
@@ -210,6 +277,11 @@ def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -
     interp.motion_word = bool(block.gword[e])
     block.runs.append(run)
     return run
+
+
+def arc_moves(run: Run) -> list[tuple[int, RunMove]]:
+    """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove)."""
+    return [(j, _row_move(run, j)) for j in run.arcs]
 
 
 def finish_block(block: Block) -> None:
@@ -323,9 +395,13 @@ def _row_move(run: Run, j: int) -> RunMove:
     motion, feed = _modal_at(run, y)
     f = blk.cols[_F][y]
     q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
-    return RunMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
-                   run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
-                   float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
+    mv = RunMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
+                 run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
+                 float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
+    arc = run.arcs.get(j)
+    if arc is not None:
+        mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
+    return mv
 
 
 def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
@@ -395,7 +471,8 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
     corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
     cols, nums = blk.cols, em.nums
     text = "\n".join(map("".join, zip(cols[_HEAD][s:b], cols[2][s:b], nums[0][s:b], cols[4][s:b], nums[1][s:b],
-                                      cols[6][s:b], nums[2][s:b], add_col, cols[_REST][s:b], strict=True)))
+                                      cols[6][s:b], nums[2][s:b], add_col, cols[8][s:b], cols[9][s:b],
+                                      cols[10][s:b], cols[11][s:b], cols[_REST][s:b], strict=True)))
     write(text + "\n" if lines[b - 1].endswith("\n") else text)
 
 

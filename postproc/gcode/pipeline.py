@@ -351,17 +351,22 @@ class Corrector(EmitterMixin):
                     while i < a:
                         feed(lines[i])
                         i += 1
-                    # a line naming its own G0/G1 may start a run whatever the modal motion
-                    while i < b and not (run_ok or (not interp.ended and bulk.prime_shift(interp)
-                                                    and bulk.state_allows(interp, bool(gword[i])))):
+                    while i < b:
+                        # a line naming its own motion word may start a run whatever the modal motion
+                        if run_ok or (not interp.ended and bulk.prime_shift(interp)
+                                      and bulk.state_allows(interp, bool(gword[i]))):
+                            dec = dec_in if interp.state.inch else dec_mm
+                            run = bulk.read_run(interp, block, i, b, lineno, dec)
+                            if run is not None:
+                                entries.append(run)
+                                lineno += run.b - i
+                                i = run.b
+                                run_ok = bulk.state_allows(interp)
+                                continue
+                        # the modal state does not allow a run here, or an arc the run does
+                        # not take (the interpreter reads it, and reports it if it must)
                         feed(lines[i])
                         i += 1
-                    if i < b:
-                        dec = dec_in if interp.state.inch else dec_mm
-                        entries.append(bulk.read_run(interp, block, i, b, lineno, dec))
-                        lineno += b - i
-                        i = b
-                        run_ok = bulk.state_allows(interp)
                 while i < n:
                     feed(lines[i])
                     i += 1
@@ -442,6 +447,10 @@ class Corrector(EmitterMixin):
                     self._check_rounding(e.unit, e.lineno)
                 e.trow = M
                 rot.extend([{}] * len(e))
+                if e.arcs:  # written one by one, planned as any other arc
+                    arcs = bulk.arc_moves(e)
+                    general.extend((M + j, mv) for j, mv in arcs)
+                    e.cut = [j for j, _mv in arcs]
                 unit0 = e.unit if unit0 is None else unit0
                 M += len(e)
             elif e[1] is not None and type(e[1]) not in (_Rebase, _Store):
@@ -487,14 +496,18 @@ class Corrector(EmitterMixin):
                 cut = e.cut
                 if not cut:
                     bulk.emit_run(self, e, em, T, write)
-                else:  # lines that must be split: written by the general emitter
-                    for part in bulk.split_run(e, cut):
+                else:  # arcs and lines that must be split: written by the general emitter
+                    for part in bulk.split_run(e, sorted(set(cut))):
                         if type(part) is bulk.Run:
                             bulk.emit_run(self, part, em, T, write)
                             continue
                         j, fm = part
                         line = e.block.lines[e.a + j]
-                        emit_move(line, fm.to_move(line), T[k + j].tolist(), plans[k + j], write)
+                        plan = get_plan(k + j)
+                        if type(plan) is vplan.ArcHint:
+                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), plan, write)
+                        else:
+                            emit_move(line, fm.to_move(line), T[k + j].tolist(), plan, write)
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
