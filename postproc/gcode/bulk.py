@@ -31,6 +31,7 @@ import numpy as np
 
 from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer
+from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Move
 from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
@@ -404,8 +405,10 @@ def _row_move(run: Run, j: int) -> RunMove:
     return mv
 
 
-def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
-    """Write the corrected lines of ``run`` (targets prepared in ``em``)."""
+def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans) -> None:
+    """Write the corrected lines of ``run`` (targets prepared in ``em``; ``plans``: the
+    planner's, by row of T, which hold the :class:`postproc.gcode.vplan.ArcHint` of each
+    of the run's arcs)."""
     blk = run.block
     a, b = run.a, run.b
     s = a
@@ -416,22 +419,42 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
         line = blk.lines[a]
         corrector._emit_move(line, _row_move(run, 0).to_move(line), T[run.trow].tolist(), None, write)
         s = a + 1
-        if s == b:
-            return
+    while s < b:
+        s = _emit_rows(corrector, run, em, T, write, plans, s)
+
+
+def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, s: int) -> int:
+    """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
+    the end points as written, which the general emitter then writes; returns the
+    line after the last one written."""
+    blk = run.block
+    a, b = run.a, run.b
     qe = corrector.qe
+    qe0 = list(qe)
     unit, shift = run.unit, run.shift
     hd = emit.HALF_UNIT[run.decimals]
     n = b - s
     add_col = [""] * n
     lines = blk.lines
-    named = em.named_edits
-    rows_added = newly_changed = 0
+    arc_rows = [a + j for j in run.arcs if a + j >= s]
+    arc_rows.sort()
+    # the written position at each arc's line and the line before it
+    want = {}
+    for y in arc_rows:
+        want[y] = [math.nan] * 3
+        if y > s:
+            want[y - 1] = [math.nan] * 3
+    final = list(qe)
     for k in range(3):
         qk = qe[k]
         miss = em.miss[k]
         lo, hi = bisect_left(miss, s), bisect_left(miss, b)
         nums = em.nums[k]
         sk = shift[k]
+        has = blk.has[k]
+        for y, w in want.items():
+            if has[y]:
+                w[k] = float(nums[y]) * unit + sk
         if lo < hi:
             ts, vs, texts, segs, lasts = em.miss_t[k], em.miss_v[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
             decimals = run.decimals
@@ -447,33 +470,112 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write) -> None:
                 if qk != qk:
                     continue  # never positioned: nothing to compare with, no word
                 for j, t, v in zip(range(x, y), ts[x:y], vs[x:y], strict=True):
-                    if abs(t - qk) / unit < hd:
-                        continue
-                    qk = round(v, decimals) * unit + sk  # the position the added word reaches
                     i = miss[j]
-                    line = lines[i]
-                    sep = " " if (" " in line or "\t" in line) else ""
-                    word = texts[j].lower() if line.islower() else texts[j]
-                    c = i - s
-                    if not add_col[c]:
-                        rows_added += 1
-                        newly_changed += named[i] == 0
-                    add_col[c] += sep + word
-        if blk.has[k][b - 1]:
+                    if abs(t - qk) / unit >= hd:
+                        qk = round(v, decimals) * unit + sk  # the position the added word reaches
+                        line = lines[i]
+                        sep = " " if (" " in line or "\t" in line) else ""
+                        word = texts[j].lower() if line.islower() else texts[j]
+                        add_col[i - s] += sep + word
+                    if want:
+                        w = want.get(i)
+                        if w is not None:
+                            w[k] = qk
+        if has[b - 1]:
             qk = float(nums[b - 1]) * unit + sk
-        qe[k] = qk
-    rep = corrector.report
-    rep.words_changed += em.edits_cum[b] - em.edits_cum[s] + rows_added
-    rep.lines_changed += em.changed_cum[b] - em.changed_cum[s] + newly_changed
-    rep.lines_out += n
-    rep.moves += n
-    i = blk.last_g[b - 1]
-    corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
+        final[k] = qk
     cols, nums = blk.cols, em.nums
-    text = "\n".join(map("".join, zip(cols[_HEAD][s:b], cols[2][s:b], nums[0][s:b], cols[4][s:b], nums[1][s:b],
-                                      cols[6][s:b], nums[2][s:b], add_col, cols[8][s:b], cols[9][s:b],
-                                      cols[10][s:b], cols[11][s:b], cols[_REST][s:b], strict=True)))
-    write(text + "\n" if lines[b - 1].endswith("\n") else text)
+    stop = b
+    arc_edit = {}  # row -> (I text, J text, edits)
+    for y in arc_rows:
+        ok = _arc_words(corrector, run, plans, y, want[y - 1] if y > s else qe0, want[y], em.named_edits[y])
+        if ok is None:
+            stop = y
+            break
+        arc_edit[y] = ok
+    # -- write lines s:stop -----------------------------------------------------------
+    rep = corrector.report
+    if stop > s:
+        c = stop - s
+        rows_added = newly_changed = arc_words = 0
+        named = em.named_edits
+        for col_i, txt in enumerate(add_col[:c]):
+            if txt:
+                rows_added += 1
+                newly_changed += named[s + col_i] == 0
+        centre_i, centre_j = cols[9][s:stop], cols[11][s:stop]
+        if arc_edit:
+            centre_i, centre_j = list(centre_i), list(centre_j)
+            for y, (ti, tj, count) in arc_edit.items():
+                centre_i[y - s], centre_j[y - s] = ti, tj
+                arc_words += count
+                newly_changed += count > 0 and named[y] == 0 and not add_col[y - s]
+            rep.arcs_kept += len(arc_edit)
+        rep.words_changed += em.edits_cum[stop] - em.edits_cum[s] + rows_added + arc_words
+        rep.lines_changed += em.changed_cum[stop] - em.changed_cum[s] + newly_changed
+        rep.lines_out += c
+        rep.moves += c
+        i = blk.last_g[stop - 1]
+        corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
+        text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], nums[0][s:stop], cols[4][s:stop],
+                                          nums[1][s:stop], cols[6][s:stop], nums[2][s:stop], add_col[:c],
+                                          cols[8][s:stop], centre_i, cols[10][s:stop], centre_j,
+                                          cols[_REST][s:stop], strict=True)))
+        write(text + "\n" if lines[stop - 1].endswith("\n") else text)
+        qe[:] = final if stop == b else want[stop - 1]
+    if stop == b:
+        return b
+    # an arc the hint does not settle here (or whose centre word must be added): the
+    # general emitter's
+    j = stop - a
+    line = lines[stop]
+    corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
+                               plans[run.trow + j], write)
+    return stop + 1
+
+
+def _arc_words(corrector, run: Run, plans, y: int, S, E, named_edits: int):
+    """The centre words of the run's arc on block line ``y`` from S to E (as written):
+    ``(I text, J text, words changed)``, or None when its hint does not hold there."""
+    blk = run.block
+    j = y - run.a
+    hint = plans[run.trow + j]
+    centre, cw = run.arcs[j]
+    view = _ArcView(Arc(centre, 170, cw, 1, (-1, -1), -1), run.unit, run.arc_absolute, run.shift)
+    budget = corrector.opt.tolerance_mm * FIT_BUDGET
+    ti, tj = blk.cols[9][y], blk.cols[11][y]
+    if not named_edits:  # unchanged end words: the input's own arc words stay if they still pass
+        unit = run.unit
+        b1, b2 = (run.shift[0], run.shift[1]) if run.arc_absolute else (S[0], S[1])
+        c = (b1 + blk.ov[3][y] * unit, b2 + blk.ov[4][y] * unit)
+        if hint.keep(view, S, E, c, hint.mismatch, budget) is None:
+            return None
+        return ti, tj, 0
+    spec = hint.spec(view, S, E, run.decimals, budget)
+    if spec is None or not corrector._hint_is_sound(view, spec, S, E):
+        return None
+    (_l1, t1), (_l2, t2) = spec["vals"]
+    count = 0
+    if ti:
+        if float(ti) != float(t1):
+            ti, count = t1, count + 1
+    elif float(t1) != 0.0 or run.arc_absolute:
+        return None  # a centre word to add: the general emitter places it
+    if tj:
+        if float(tj) != float(t2):
+            tj, count = t2, count + 1
+    elif float(t2) != 0.0 or run.arc_absolute:
+        return None
+    return ti, tj, count
+
+
+class _ArcView:
+    """What an :class:`postproc.gcode.vplan.ArcHint` reads of a move."""
+
+    __slots__ = ("arc", "unit", "arc_absolute", "shift")
+
+    def __init__(self, arc, unit, arc_absolute, shift) -> None:
+        self.arc, self.unit, self.arc_absolute, self.shift = arc, unit, arc_absolute, shift
 
 
 def _modal_at(run: Run, x: int) -> tuple[int, float]:
@@ -510,6 +612,8 @@ def split_run(run: Run, rows: list[int]):
             sub.motion0, sub.feed0 = _modal_at(run, x)
             sub.q1 = run.q1[x - run.a:j]
             sub.trow = run.trow + (x - run.a)
+            base = x - run.a
+            sub.arcs = {jj - base: v for jj, v in run.arcs.items() if base <= jj < j}
             yield sub
         if j == len(run):
             break

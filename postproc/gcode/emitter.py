@@ -255,7 +255,7 @@ class EmitterMixin:
         budget = self.opt.tolerance_mm * FIT_BUDGET
         if edits:
             spec = hint.spec(mv, self.qe, qn, d, budget)
-            if spec is not None and not self._hint_is_sound(mv, spec, qn):
+            if spec is not None and not self._hint_is_sound(mv, spec, self.qe, qn):
                 spec = None
         else:  # unchanged end words: the input's own arc words stay if they still pass
             centre = self._input_centre(mv, self.qe, qn)
@@ -270,13 +270,12 @@ class EmitterMixin:
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
 
-    def _hint_is_sound(self, mv: Move, spec, E) -> bool:
-        """Whether controllers cut the bulk planner's arc ``spec`` (from the emitted
-        position to E, as written) as meant: radius and sweep within the controller
-        limits (:func:`postproc.gcode.segment.within_controller_limits`)."""
+    def _hint_is_sound(self, mv: Move, spec, S, E) -> bool:
+        """Whether controllers cut the bulk planner's arc ``spec`` (from S to E, as
+        written) as meant: radius and sweep within the controller limits
+        (:func:`postproc.gcode.segment.within_controller_limits`)."""
         arc = mv.arc
         (a1, a2, an), _ = PLANES[arc.plane]
-        S = self.qe
         base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
         (_l1, t1), (_l2, t2) = spec["vals"]
         centre = (base[0] + float(t1) * mv.unit, base[1] + float(t2) * mv.unit)

@@ -447,10 +447,8 @@ class Corrector(EmitterMixin):
                     self._check_rounding(e.unit, e.lineno)
                 e.trow = M
                 rot.extend([{}] * len(e))
-                if e.arcs:  # written one by one, planned as any other arc
-                    arcs = bulk.arc_moves(e)
-                    general.extend((M + j, mv) for j, mv in arcs)
-                    e.cut = [j for j, _mv in arcs]
+                if e.arcs:  # planned as any other arc
+                    general.extend((M + j, mv) for j, mv in bulk.arc_moves(e))
                 unit0 = e.unit if unit0 is None else unit0
                 M += len(e)
             elif e[1] is not None and type(e[1]) not in (_Rebase, _Store):
@@ -479,6 +477,9 @@ class Corrector(EmitterMixin):
         plans: dict[int, object] = {}
         if M:
             T, plans = self._plan(Q1, lns, Rt, rot, general, unit0, runs)
+        for e in runs:
+            # arcs the bulk planner did not settle: written one by one by the general emitter
+            e.cut.extend(j for j in e.arcs if type(plans.get(e.trow + j)) is not vplan.ArcHint)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
@@ -495,11 +496,11 @@ class Corrector(EmitterMixin):
                     blocks.append(e.block)
                 cut = e.cut
                 if not cut:
-                    bulk.emit_run(self, e, em, T, write)
+                    bulk.emit_run(self, e, em, T, write, plans)
                 else:  # arcs and lines that must be split: written by the general emitter
                     for part in bulk.split_run(e, sorted(set(cut))):
                         if type(part) is bulk.Run:
-                            bulk.emit_run(self, part, em, T, write)
+                            bulk.emit_run(self, part, em, T, write, plans)
                             continue
                         j, fm = part
                         line = e.block.lines[e.a + j]
