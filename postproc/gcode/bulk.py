@@ -167,6 +167,8 @@ class Block:
         # after one is an arc too (modal), and one without centre words the
         # interpreter's: neither is plain
         self.arc = (digit == "2") | (digit == "3")
+        self.arc_rows = np.flatnonzero(self.arc).tolist()
+        self.has_l = [h.tolist() for h in self.has]
         centre = self.has[3] | self.has[4]
         modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         self.plain = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
@@ -213,34 +215,41 @@ def _arc_rows(interp, block: Block, a: int, b: int, unit: float, shift, q0) -> t
     ``end`` the first line the run cannot take (b when it takes every line): an arc out
     of the XY plane, of zero radius, or whose end radius its controller refuses (the
     interpreter reports those)."""
-    rows = np.flatnonzero(block.arc[a:b]) + a
-    if not len(rows):
+    arc_rows = block.arc_rows
+    lo = bisect_left(arc_rows, a)
+    if lo == len(arc_rows) or arc_rows[lo] >= b:
         return b, {}
     if interp.state.plane != 170:
-        return int(rows[0]), {}
-    start = np.empty((len(rows), 3))
-    end = np.empty((len(rows), 3))
-    for k in range(3):
-        last = block.last[k]
-        before = np.where(rows > a, last[np.maximum(rows - 1, 0)], -1)
-        start[:, k] = np.where(before >= a, block.ov[k][np.maximum(before, 0)] * unit + shift[k], q0[k])
-        here = last[rows]
-        end[:, k] = np.where(here >= a, block.ov[k][np.maximum(here, 0)] * unit + shift[k], q0[k])
-    if interp.state.arc_absolute:
-        c1 = np.where(block.has[3][rows], block.ov[3][rows] * unit + shift[0], start[:, 0])
-        c2 = np.where(block.has[4][rows], block.ov[4][rows] * unit + shift[1], start[:, 1])
-    else:
-        c1 = start[:, 0] + block.ov[3][rows] * unit
-        c2 = start[:, 1] + block.ov[4][rows] * unit
-    rs = np.hypot(start[:, 0] - c1, start[:, 1] - c2)
-    re_ = np.hypot(end[:, 0] - c1, end[:, 1] - c2)
+        return arc_rows[lo], {}
     rule = interp._arc_rule()
+    absolute = interp.state.arc_absolute
+    (lx, ly, lz), (vx, vy, vz) = block.last_l[:3], block.ovl[:3]
+    vi, vj, has_i, has_j = block.ovl[3], block.ovl[4], block.has_l[3], block.has_l[4]
+    gword = block.gword
+    sx, sy, sz = shift[0], shift[1], shift[2]
+    hyp = math.hypot
     arcs = {}
-    cw = [block.gword[y][-1] == "2" for y in rows.tolist()]
-    for j, y in enumerate(rows.tolist()):
-        if not (rs[j] >= MIN_ARC_RADIUS_MM and rule.arc_end_radius_ok(float(rs[j]), float(re_[j]), unit)):
+    for y in arc_rows[lo:bisect_left(arc_rows, b, lo)]:
+        # the start: where the line before left each axis (the run's start before its first word)
+        p = lx[y - 1] if y > a else -1
+        x0 = vx[p] * unit + sx if p >= a else q0[0]
+        p = ly[y - 1] if y > a else -1
+        y0 = vy[p] * unit + sy if p >= a else q0[1]
+        p = lz[y - 1] if y > a else -1
+        z0 = vz[p] * unit + sz if p >= a else q0[2]
+        p = lx[y]
+        x1 = vx[p] * unit + sx if p >= a else q0[0]
+        p = ly[y]
+        y1 = vy[p] * unit + sy if p >= a else q0[1]
+        if absolute:
+            c1 = vi[y] * unit + sx if has_i[y] else x0
+            c2 = vj[y] * unit + sy if has_j[y] else y0
+        else:
+            c1, c2 = x0 + vi[y] * unit, y0 + vj[y] * unit
+        rs, re_ = hyp(x0 - c1, y0 - c2), hyp(x1 - c1, y1 - c2)
+        if not (rs >= MIN_ARC_RADIUS_MM and rule.arc_end_radius_ok(rs, re_, unit)):
             return y, arcs
-        arcs[y - a] = ((float(c1[j]), float(c2[j]), float(start[j, 2])), cw[j])
+        arcs[y - a] = ((c1, c2, z0), gword[y][-1] == "2")
     return b, arcs
 
 
