@@ -597,12 +597,25 @@ def _modal_at(run: Run, x: int) -> tuple[int, float]:
             float(blk.cols[_F][f]) if f >= run.a else run.feed0)
 
 
-def kinds(run: Run) -> np.ndarray:
-    """Motion (RAPID or LINE) of every line of the run."""
-    blk = run.block
-    g = np.array(blk.last_g[run.a:run.b])
-    code = np.array([blk.code(i) if i >= run.a else run.motion0 for i in g.tolist()])
-    return code
+def line_rows(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
+    """The straight (G1) moves of ``runs``: their rows of T, and the index of the run of each."""
+    rows, owner = [], []
+    for blk in {id(r.block): r.block for r in runs}.values():
+        mine = [(o, r) for o, r in enumerate(runs) if r.block is blk]
+        lengths = [r.b - r.a for _o, r in mine]
+        idx = np.concatenate([np.arange(r.a, r.b) for _o, r in mine])
+        a = np.repeat([r.a for _o, r in mine], lengths)
+        g = np.asarray(blk.last_g)[idx]
+        code = np.array([_CODE[w[-1]] if w else -1 for w in blk.gword])
+        kind = np.where(g >= a, code[np.maximum(g, 0)], np.repeat([r.motion0 for _o, r in mine], lengths))
+        trow = np.concatenate([np.arange(r.trow, r.trow + r.b - r.a) for _o, r in mine])
+        own = np.repeat([o for o, _r in mine], lengths)
+        rows.append(trow[kind == LINE])
+        owner.append(own[kind == LINE])
+    order = np.argsort(np.concatenate(rows), kind="stable") if rows else np.zeros(0, dtype=int)
+    if not rows:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+    return np.concatenate(rows)[order], np.concatenate(owner)[order]
 
 
 def split_run(run: Run, rows: list[int]):

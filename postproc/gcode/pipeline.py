@@ -632,12 +632,10 @@ class Corrector(EmitterMixin):
             if runs and not self.linear_exact:
                 # straight moves of the runs of plain lines: those that must be split are
                 # planned when they are written (their Move is made then)
-                per_run = [np.arange(r.trow, r.trow + len(r))[bulk.kinds(r) == LINE] for r in runs]
-                rows = np.concatenate(per_run)
+                rows, owner = bulk.line_rows(runs)
                 ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
                                         limit=self.opt.tolerance_mm * FIT_BUDGET
                                         - max(self._round_err(r.unit) for r in runs), curvature=curvature)
-                owner = np.repeat(np.arange(len(runs)), [len(p) for p in per_run])
                 run_lines = []
                 for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
                     runs[o].cut.append(i - runs[o].trow)
