@@ -5,6 +5,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 from conftest import ENGINE, assert_same, other_line, plain_line, run_all
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -72,6 +73,20 @@ def arc_program(draw):
     return "\n".join(body) + "\n"
 
 
+@pytest.mark.parametrize("chunk_lines", [1, 2, 3, 4, 5, 20_000])
+def test_lines_that_move_nothing_inside_runs_and_at_chunk_ends(chunk_lines):
+    text = ("G21 G90 G17 G94\nG0 X10 Y10 Z10\nf500 x0\nx0 y0\n(comment X1 Y2)\nG2 X0 Y0 I5 J0\n"
+            "(a)\n\nG1 X5 Y5\nS1200 M3\nX6\nM8 (coolant)\nY7\nN30 M9\n  \n"
+            "G2 X16 Y7 I5 J0\n(b)\nG3 X16 Y7 I-5 J0\nG1 X3\n(end)\n")
+    outs = run_all(text, chunk_lines=chunk_lines)
+    assert_same(outs)
+    out, rep = outs["bulk"]
+    # every line that moves nothing is written as it is, and is no move
+    for line in ["(a)", "S1200 M3", "M8 (coolant)", "N30 M9", "(end)"]:
+        assert line in out.splitlines()
+    assert rep["moves"] == 10
+
+
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(arc_program(), st.sampled_from([1, 2, 5, 20_000]))
 def test_arcs_in_runs_equal_the_general_path(text, chunk_lines):
@@ -107,9 +122,12 @@ def test_scan_splits_every_line_into_pieces_that_join_back(lines, ending):
 
 def test_scan_refuses_lone_carriage_returns_and_keeps_the_other_lines_apart():
     assert bulk.scan(["X1\r", "X2\r"]) is None
-    block = bulk.scan(["X1 Y2\n", "(c)\n", "\n", "G1 X3\r\n", "X4"])
-    assert block.plain.tolist() == [True, False, False, True, True]
-    assert not any(c[1] for c in block.cols)
+    block = bulk.scan(["X1 Y2\n", "(c)\n", "\n", "G1 X3\r\n", "M3 S100\n", "S100 M3\n", "X4"])
+    # a comment and a blank line move nothing: they stay in a run, written whole from one piece
+    assert block.plain.tolist() == [True, True, True, True, False, True, True]
+    assert block.neutral.tolist() == [False, True, True, False, False, True, False]
+    assert [c[1] for c in block.cols if c[1]] == ["(c)"]
+    assert not any(c[2] for c in block.cols)
 
 
 # -- fixed cases --------------------------------------------------------------------------

@@ -53,10 +53,16 @@ _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
+# A line that moves nothing and sets nothing the correction reads: blank, one comment,
+# or spindle and coolant words (S, M3 M4 M5 M7 M8 M9) with an optional N word and
+# comment. Such a line inside a run is written as it is, as the interpreter would.
+_NEUTRAL = re.compile(
+    rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_N}[ \t]*+)?(?:[Mm][ \t]*+0?[3-57-9][ \t]*+)?"
+    r"(?:\([^()\n]*\)[ \t]*+)?\r?\n?")
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
 
-def _last_index(present: np.ndarray) -> np.ndarray:
+def last_index(present: np.ndarray) -> np.ndarray:
     """For each row, the index of the last present row at or before it (-1: none)."""
     idx = np.where(present, np.arange(len(present)), -1)
     np.maximum.accumulate(idx, out=idx)
@@ -158,10 +164,10 @@ class Block:
             if k < 3:
                 dot = np.strings.find(arr, ".")
                 self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
-                self.last.append(_last_index(has))
+                self.last.append(last_index(has))
         g = cols[_G]
         self.gword = g
-        last_g = _last_index(np.fromiter(map(bool, g), dtype=bool, count=n))
+        last_g = last_index(np.fromiter(map(bool, g), dtype=bool, count=n))
         digit = np.array([x[-1:] for x in g], dtype="<U1")
         # G2/G3 lines with centre words (I, J) are arcs; a line without a motion word
         # after one is an arc too (modal), and one without centre words the
@@ -171,9 +177,23 @@ class Block:
         self.has_l = [h.tolist() for h in self.has]
         centre = self.has[3] | self.has[4]
         modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
-        self.plain = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
+        moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
+        neutral = np.zeros(n, dtype=bool)
+        head = cols[_HEAD] = list(cols[_HEAD])
+        rest = cols[_REST] = list(cols[_REST])
+        match = _NEUTRAL.fullmatch
+        for i in np.flatnonzero(~moving & ~self.arc & ~centre & (digit == "")).tolist():
+            line = lines[i]
+            if match(line):
+                # written whole from its last piece
+                neutral[i] = True
+                head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
+        self.neutral = neutral
+        self.neutral_rows = np.flatnonzero(neutral).tolist()
+        self.last_moving = last_index(~neutral).tolist()
+        self.plain = moving | neutral
         self.last_g = last_g.tolist()
-        self.last_f = _last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
+        self.last_f = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
 
@@ -200,11 +220,12 @@ class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
-                 "feed0", "q1", "trow", "cut", "arcs")
+                 "feed0", "q1", "trow", "cut", "arcs", "inert")
 
     def __init__(self) -> None:
         self.cut: list[int] = []  # lines (within the run) written one by one: arcs, lines the planner splits
         self.arcs: dict[int, tuple] = {}  # line (within the run) -> (centre (3,), clockwise) of its arc
+        self.inert: list[int] = []  # lines (within the run) that move nothing (blank, comment, S/M words)
 
     def __len__(self) -> int:
         return self.b - self.a
@@ -276,6 +297,9 @@ def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -
     run.motion0 = st.motion
     run.feed0 = st.feed
     run.arcs = arcs
+    nr = block.neutral_rows
+    if nr:
+        run.inert = [y - a for y in nr[bisect_left(nr, a):bisect_left(nr, b)]]
     pos = list(st.pos)
     e = b - 1
     for k in range(3):
@@ -313,7 +337,7 @@ def finish_block(block: Block) -> None:
         first_missing = ~has[starts]
         val[starts[first_missing]] = q0[first_missing, k]
         has[starts] = True
-        q[:, k] = val[_last_index(has)]
+        q[:, k] = val[last_index(has)]
     for r, s, n in zip(runs, starts.tolist(), lengths, strict=True):
         r.q1 = q[s:s + n]
 
@@ -358,7 +382,7 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
             nums = col.tolist()
             named[idx[sel]] += 1
         em.nums.append(nums)
-        miss = np.flatnonzero(~has)
+        miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
         em.miss_text.append(_format(vm, dec[miss], "XYZ"[k]) if len(miss) else [])
         em.miss_v.append(vm.tolist())
@@ -421,13 +445,18 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans) ->
     blk = run.block
     a, b = run.a, run.b
     s = a
-    kind0 = blk.code(a) if blk.gword[a] else run.motion0
-    if not blk.gword[a] and corrector.emitted_motion != kind0:
+    f = a  # the first line that moves
+    while f < b and blk.neutral[f]:
+        f += 1
+    if f < b and not blk.gword[f] and corrector.emitted_motion != _modal_at(run, f)[0]:
         # the controller's modal motion differs from the program's here (after a
         # linearised arc): the general emitter adds the motion word
-        line = blk.lines[a]
-        corrector._emit_move(line, _row_move(run, 0).to_move(line), T[run.trow].tolist(), None, write)
-        s = a + 1
+        if f > a:
+            write("".join(blk.lines[a:f]))
+            corrector.report.lines_out += f - a
+        line = blk.lines[f]
+        corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
+        s = f + 1
     while s < b:
         s = _emit_rows(corrector, run, em, T, write, plans, s)
 
@@ -447,12 +476,14 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
     lines = blk.lines
     arc_rows = [a + j for j in run.arcs if a + j >= s]
     arc_rows.sort()
-    # the written position at each arc's line and the line before it
+    moved = blk.last_moving
+    # the written position at each arc's line and the last line before it that moves
     want = {}
     for y in arc_rows:
         want[y] = [math.nan] * 3
-        if y > s:
-            want[y - 1] = [math.nan] * 3
+        p = moved[y - 1] if y > s else -1
+        if p >= s:
+            want[p] = [math.nan] * 3
     final = list(qe)
     for k in range(3):
         qk = qe[k]
@@ -490,14 +521,16 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
                         w = want.get(i)
                         if w is not None:
                             w[k] = qk
-        if has[b - 1]:
-            qk = float(nums[b - 1]) * unit + sk
+        e = moved[b - 1]  # the last line that moves
+        if e >= s and has[e]:
+            qk = float(nums[e]) * unit + sk
         final[k] = qk
     cols, nums = blk.cols, em.nums
     stop = b
     arc_edit = {}  # row -> (I text, J text, edits)
     for y in arc_rows:
-        ok = _arc_words(corrector, run, plans, y, want[y - 1] if y > s else qe0, want[y], em.named_edits[y])
+        p = moved[y - 1] if y > s else -1
+        ok = _arc_words(corrector, run, plans, y, want[p] if p >= s else qe0, want[y], em.named_edits[y])
         if ok is None:
             stop = y
             break
@@ -524,6 +557,8 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
         rep.lines_changed += em.changed_cum[stop] - em.changed_cum[s] + newly_changed
         rep.lines_out += c
         rep.moves += c
+        if run.inert:
+            rep.moves -= bisect_left(run.inert, stop - a) - bisect_left(run.inert, s - a)
         i = blk.last_g[stop - 1]
         corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
         text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], nums[0][s:stop], cols[4][s:stop],
@@ -531,7 +566,11 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
                                           cols[8][s:stop], centre_i, cols[10][s:stop], centre_j,
                                           cols[_REST][s:stop], strict=True)))
         write(text + "\n" if lines[stop - 1].endswith("\n") else text)
-        qe[:] = final if stop == b else want[stop - 1]
+        if stop == b:
+            qe[:] = final
+        else:
+            p = moved[stop - 1]
+            qe[:] = want[p] if p >= s else qe0
     if stop == b:
         return b
     # an arc the hint does not settle here (or whose centre word must be added): the
@@ -608,6 +647,7 @@ def line_rows(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
         g = np.asarray(blk.last_g)[idx]
         code = np.array([_CODE[w[-1]] if w else -1 for w in blk.gword])
         kind = np.where(g >= a, code[np.maximum(g, 0)], np.repeat([r.motion0 for _o, r in mine], lengths))
+        kind[blk.neutral[idx]] = -1  # moves nothing
         trow = np.concatenate([np.arange(r.trow, r.trow + r.b - r.a) for _o, r in mine])
         own = np.repeat([o for o, _r in mine], lengths)
         rows.append(trow[kind == LINE])
@@ -636,6 +676,7 @@ def split_run(run: Run, rows: list[int]):
             sub.trow = run.trow + (x - run.a)
             base = x - run.a
             sub.arcs = {jj - base: v for jj, v in run.arcs.items() if base <= jj < j}
+            sub.inert = [jj - base for jj in run.inert if base <= jj < j]
             yield sub
         if j == len(run):
             break

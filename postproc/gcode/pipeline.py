@@ -346,15 +346,16 @@ class Corrector(EmitterMixin):
             try:
                 edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
                 i, n = 0, len(lines)
-                gword = block.gword
+                gword, neutral = block.gword, block.neutral
                 for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
                     while i < a:
                         feed(lines[i])
                         i += 1
                     while i < b:
                         # a line naming its own motion word may start a run whatever the modal motion
-                        if run_ok or (not interp.ended and bulk.prime_shift(interp)
-                                      and bulk.state_allows(interp, bool(gword[i]))):
+                        # (a run starts at a line that moves: one that moves nothing is the interpreter's)
+                        if not neutral[i] and (run_ok or (not interp.ended and bulk.prime_shift(interp)
+                                                          and bulk.state_allows(interp, bool(gword[i])))):
                             dec = dec_in if interp.state.inch else dec_mm
                             run = bulk.read_run(interp, block, i, b, lineno, dec)
                             if run is not None:
@@ -601,14 +602,23 @@ class Corrector(EmitterMixin):
             idx = np.where(col != 0, np.arange(M), -1)
             np.maximum.accumulate(idx, out=idx)
             D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
-        if fixed_rows:
+        inert = [r.trow + j for r in runs for j in r.inert]
+        if fixed_rows or inert:
             live = np.ones(M, dtype=bool)
             live[fixed_rows] = False
+            live[inert] = False
             T = np.empty_like(Q1)
             T[live] = self.corrected(Q1[live], R[live], D[live], [rot[i] for i in np.flatnonzero(live)],
                                      linenos[live])
-            T[fixed_rows] = fixed_q
-            Q1[fixed_rows] = fixed_q
+            if fixed_rows:
+                T[fixed_rows] = fixed_q
+                Q1[fixed_rows] = fixed_q
+            if inert:
+                # a line of a run that moves nothing stays where the line before it went
+                # (a run starts at a line that moves)
+                moved = np.ones(M, dtype=bool)
+                moved[inert] = False
+                T[inert] = T[bulk.last_index(moved)[inert]]
         else:
             T = self.corrected(Q1, R, D, rot, linenos)
         plans: dict[int, object] = {}
