@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -581,7 +582,8 @@ class Interpreter:
             incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
 
         shift = self.shift(g53, lineno, first_axis_col)
-        q0 = tuple(st.pos)
+        pos = st.pos
+        q0 = (pos[0], pos[1], pos[2])
         q1 = list(q0)
         axis_idx = [-1, -1, -1]
         for k, a in enumerate(AXES):
@@ -618,9 +620,9 @@ class Interpreter:
 
         st.pos = q1
         move = Move(
-            lineno=lineno, kind=st.motion, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift,
+            lineno=lineno, kind=st.motion, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
             unit=unit, incremental=incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=tuple(axis_idx), feed_idx=vals["F"][1] if "F" in vals else -1,
+            axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
             prefix_words=prefix + (["S" + words[vals["S"][1]][1]] if "S" in vals else []) + before_m,
@@ -658,7 +660,8 @@ class Interpreter:
             raise self._err(GcodeSyntaxError, f"{name} with arc words", lineno, col)
         unit = st.unit_mm
         named = [k for k, a in enumerate(AXES) if a in vals]
-        q0 = tuple(st.pos)
+        pos = st.pos
+        q0 = (pos[0], pos[1], pos[2])
         inter = list(q0)
         axis_idx = [-1, -1, -1]
         shift = self.shift(False, lineno, col) if named and not st.incremental else (0.0, 0.0, 0.0)
@@ -685,7 +688,7 @@ class Interpreter:
                 self.unknown_after.pop(k, None)
         r = self.tool_r()
         rot = dict(st.rotary) if self.used_rotary else {}
-        jump = Move(lineno, RAPID, tuple(inter), tuple(after), r, (0.0, 0.0, 0.0), unit, st.incremental,
+        jump = Move(lineno, RAPID, (inter[0], inter[1], inter[2]), (after[0], after[1], after[2]), r, (0.0, 0.0, 0.0), unit, st.incremental,
                     st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot, stays=True, motion_idx=gi,
                     fixed=True, stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
         st.pos = after
@@ -693,8 +696,8 @@ class Interpreter:
         if not moved:
             return jump
         self._check_known(inter, lineno, col)
-        return Move(lineno, RAPID, q0, tuple(inter), r, shift, unit, st.incremental, st.arc_absolute, words,
-                    tuple(axis_idx), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
+        return Move(lineno, RAPID, q0, (inter[0], inter[1], inter[2]), r, shift, unit, st.incremental,
+                    st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
 
     def _spline(self, lineno, words, vals, motion_idx, prefix) -> Move:
         """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
@@ -721,7 +724,8 @@ class Interpreter:
         if "F" in vals:
             st.feed = vals["F"][0]
         shift = self.shift(False, lineno, col)
-        q0 = tuple(st.pos)
+        pos = st.pos
+        q0 = (pos[0], pos[1], pos[2])
         q1 = list(q0)
         axis_idx = [-1, -1, -1]
         for k, a in enumerate("XY"):
@@ -748,8 +752,9 @@ class Interpreter:
                 raise self._err(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
             ctrl = [p0, (p0[0] + vals["I"][0] * unit, p0[1] + vals["J"][0] * unit), p3]
         st.pos = q1
-        return Move(lineno=lineno, kind=LINE, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift, unit=unit,
-                    incremental=st.incremental, arc_absolute=st.arc_absolute, words=words, axis_idx=tuple(axis_idx),
+        return Move(lineno=lineno, kind=LINE, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
+                    unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+                    axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]),
                     feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
                     rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
                     motion_idx=motion_idx, spline=ctrl)
@@ -766,6 +771,8 @@ class Interpreter:
         """
         st = self.state
         key = st.motion
+        if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
+            raise AssertionError("a canned-cycle block without its cycle")
         col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
         name = f"G{key / 10:g}"
         if st.plane != 170:
@@ -790,12 +797,14 @@ class Interpreter:
             st.cycle_z = vals["Z"][0]
         if st.cycle_z is None:
             raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
+        peck_mm = 0.0  # G73/G83 peck depth
         if key in (730, 830):
             if "Q" in vals:
                 st.cycle_q = vals["Q"][0]
             if st.cycle_q is None or st.cycle_q <= 0:
                 raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
                                 lineno, col)
+            peck_mm = st.cycle_q * unit
         if "P" in vals:
             st.cycle_p = vals["P"][0]
         if "F" in vals:
@@ -838,7 +847,7 @@ class Interpreter:
                 steps.append((kind, (x, y, z)))
                 cur[:] = (x, y, z)
 
-        holes = []
+        holes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
         if z0 < r_m:
             go(RAPID, x0, y0, r_m)
         for _ in range(repeats):
@@ -846,7 +855,7 @@ class Interpreter:
             go(RAPID, x, y, cur[2])
             go(RAPID, x, y, r_m)
             if key in (730, 830):
-                q = st.cycle_q * unit
+                q = peck_mm
                 depth = r_m - q
                 while depth > z_m:
                     go(LINE, x, y, depth)
@@ -861,8 +870,9 @@ class Interpreter:
                 go(LINE, x, y, r_m)
             go(RAPID, x, y, clear)
             holes.append(((x, y, z_m), (x, y, r_m)))
-        axis_idx = tuple(vals[a][1] if a in vals else -1 for a in AXES)
-        q0 = tuple(st.pos)
+        axis_idx = (vals["X"][1] if "X" in vals else -1, vals["Y"][1] if "Y" in vals else -1,
+                    vals["Z"][1] if "Z" in vals else -1)
+        q0 = (x0, y0, z0)
         st.pos = list(cur)
         return Move(
             lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
@@ -893,6 +903,7 @@ class Interpreter:
 
     def _g43(self, vals, lineno, col) -> None:
         st = self.state
+        h: int | None
         if "H" in vals:
             h = int(vals["H"][0])
         else:
@@ -989,11 +1000,11 @@ class Interpreter:
             w = self._work_offset(lineno, col)
             self.tool_lengths[tool] = st.pos[2] - w[2] - st.g92[2] - z
         else:
-            w = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
-            if w is None:
+            g593 = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
+            if g593 is None:
                 raise self._err(MissingSetupError, "G10 L11 uses the work offset G59.3, whose value was not given",
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
-            self.tool_lengths[tool] = st.pos[2] - w[2] - z
+            self.tool_lengths[tool] = st.pos[2] - g593[2] - z
 
     def _arc(self, lineno, words, vals, q0, q1, shift, unit, gcodes) -> Arc:
         st = self.state
@@ -1075,7 +1086,7 @@ class Interpreter:
             r_idx = -1
         center = [0.0, 0.0, 0.0]
         center[a1], center[a2], center[an] = c1, c2, q0[an]
-        return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
+        return Arc((center[0], center[1], center[2]), st.plane, clockwise, turns, idx, r_idx)
 
 
 @dataclass(slots=True)
@@ -1264,7 +1275,7 @@ def spline_samples(ctrl, chord_mm: float) -> np.ndarray:
 SPLINE_SAMPLE_MM = 1e-4
 
 
-def plain_moves(mv: Move):
+def plain_moves(mv: Move) -> Iterator[Move]:
     """The straight and arc moves a Move stands for, in order: a cycle block's rapids
     and feeds, a G28/G30 line's two legs, or the move itself."""
     if mv.cycle is not None:
@@ -1286,10 +1297,11 @@ def plain_moves(mv: Move):
                        (-1, -1, -1), -1, False, mv.feed, mv.rotary)
             q0 = q
         return
-    while mv is not None:
-        if not (mv.fixed and any(math.isnan(v) for v in mv.q1)):  # an unknown stored position
-            yield mv
-        mv = mv.then
+    leg: Move | None = mv
+    while leg is not None:
+        if not (leg.fixed and any(math.isnan(v) for v in leg.q1)):  # an unknown stored position
+            yield leg
+        leg = leg.then
 
 
 def col_of_word(words, i: int) -> int:
