@@ -18,13 +18,19 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
-from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
+from postproc.errors import (
+    GcodeSyntaxError,
+    MissingSetupError,
+    PostprocError,
+    UnsupportedGcodeError,
+)
 from postproc.gcode import lexer
 from postproc.gcode.state import (
     ARC_CCW,
@@ -50,6 +56,16 @@ from postproc.gcode.state import (
     WORK_SYSTEMS,
     ModalState,
 )
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from postproc.gcode.dialect import Dialect
+    from postproc.gcode.path import Setup
+
+#: a block's words by letter, G and M aside: (value, word index)
+Vals = dict[str, tuple[float, int]]
+_E = TypeVar("_E", bound=PostprocError)
 
 
 class NeedsExpansion(UnsupportedGcodeError):
@@ -207,7 +223,7 @@ def blank_nested_comments(line: str) -> str:
     return "".join(out)
 
 
-def _is_program_number(tokens) -> bool:
+def _is_program_number(tokens: list[lexer.Token]) -> bool:
     """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
     content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
                                                        lexer.NEWLINE)]
@@ -223,7 +239,7 @@ def _is_program_number(tokens) -> bool:
 class Interpreter:
     """Advance a :class:`ModalState` line by line; see the module docstring."""
 
-    def __init__(self, setup, path: str | None = None, *, lenient_setup: bool = False,
+    def __init__(self, setup: Setup, path: str | None = None, *, lenient_setup: bool = False,
                  dialect: str = "generic") -> None:
         self.setup = setup
         # lenient: every work offset and tool length is taken as zero (for comparing
@@ -264,21 +280,21 @@ class Interpreter:
         self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
-    def _arc_rule(self):
+    def _arc_rule(self) -> Dialect:
         """The controller whose input-arc rule applies: the dialect's own (generic reads
         arcs as LinuxCNC, the reference interpreter, does)."""
         from postproc.gcode import dialect
 
         return dialect.get("linuxcnc" if self.dialect == "generic" else self.dialect)
 
-    def _construct_error(self, what: str):
+    def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
         """The error class for a refused construct: NeedsExpansion when expanding is allowed
         and the construct is one the expansion stage flattens."""
         if self.may_expand and not what.startswith("polar"):
             return NeedsExpansion
         return UnsupportedGcodeError
 
-    def _err(self, cls, msg, lineno, col, hint=None):
+    def _err(self, cls: type[_E], msg: str, lineno: int, col: int, hint: str | None = None) -> _E:
         return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
 
     def _work_offset(self, lineno: int, col: int) -> list[float]:
@@ -342,7 +358,7 @@ class Interpreter:
         self._run_shift = None  # the slow path may change offsets, units or tool length
         return self._block(lineno, words, block_delete)
 
-    def _slow_words(self, lineno: int, line: str):
+    def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
         if self.dialect in NESTING_COMMENTS and line.count("(") > 1:
             line = blank_nested_comments(line)
         try:
@@ -409,7 +425,7 @@ class Interpreter:
                 raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
         return words, block_delete
 
-    def _block(self, lineno: int, words, block_delete: bool) -> Move | None:  # noqa: C901
+    def _block(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:  # noqa: C901
         st = self.state
         gcodes: list[tuple[int, int]] = []  # (key, word index)
         mcodes: list[tuple[int, int]] = []
@@ -633,7 +649,7 @@ class Interpreter:
         return move
 
     @staticmethod
-    def _is_lookahead(key: int, vals) -> bool:
+    def _is_lookahead(key: int, vals: Vals) -> bool:
         """Fanuc/Haas look-ahead and smoothing codes (G5 P.., G5.1 Q.., G8 P.., G187, G103)."""
         if key in (1870, 1030):
             return True
@@ -647,7 +663,8 @@ class Interpreter:
             return "P" in vals
         return False
 
-    def _home(self, home_code, words, vals, lineno: int, col: int) -> Move | None:
+    def _home(self, home_code: tuple[int, int], words: list[lexer.Word], vals: Vals, lineno: int,
+              col: int) -> Move | None:
         """G28/G30: through the intermediate point (the axis words) to the stored position."""
         key, gi = home_code
         name = HOME_CODES[key]
@@ -699,7 +716,7 @@ class Interpreter:
         return Move(lineno, RAPID, q0, (inter[0], inter[1], inter[2]), r, shift, unit, st.incremental,
                     st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
 
-    def _spline(self, lineno, words, vals, motion_idx, prefix) -> Move:
+    def _spline(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int, prefix: list[str]) -> Move:
         """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
         offset the first control point from the start (the previous P/Q mirrored when
         left out), P/Q the second from the end; G5.1's I/J offset its control point."""
@@ -759,7 +776,8 @@ class Interpreter:
                     rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
                     motion_idx=motion_idx, spline=ctrl)
 
-    def _cycle(self, lineno, words, vals, motion_idx, gcodes, prefix, stays) -> Move:  # noqa: C901
+    def _cycle(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int,  # noqa: C901
+               gcodes: list[tuple[int, int]], prefix: list[str], stays: bool) -> Move:
         """A canned-cycle block: the holes it drills and the moves the controller makes.
 
         Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
@@ -812,11 +830,11 @@ class Interpreter:
         repeat_letter = "K" if self.dialect in ("fanuc", "haas") and "K" in vals else "L"
         repeats = 1
         if repeat_letter in vals:
-            repeats = vals[repeat_letter][0]
-            if repeats != int(repeats) or repeats < 0:
+            given = vals[repeat_letter][0]
+            if given != int(given) or given < 0:
                 raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
                                 lineno, words[vals[repeat_letter][1]][4] + 1)
-            repeats = int(repeats)
+            repeats = int(given)
         if any(math.isnan(v) for v in st.pos):
             raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
                             hint="position every axis with a G90 move before the cycle, or give --start")
@@ -882,7 +900,7 @@ class Interpreter:
             motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
                                                r_m, z_m, repeats, st.retract_r, st.cycle_p))
 
-    def _check_known(self, q1, lineno: int, col: int) -> None:
+    def _check_known(self, q1: Sequence[float], lineno: int, col: int) -> None:
         """Refuse a move that needs an axis left at a stored position that was not given."""
         for k, name in self.unknown_after.items():
             if math.isnan(q1[k]):
@@ -892,7 +910,7 @@ class Interpreter:
                     hint=f"give it with --home {name}=X..,Y..,Z.. (machine mm), or position {AXES[k]} with an "
                          "absolute move first")
 
-    def _g52(self, vals, lineno, col) -> None:
+    def _g52(self, vals: Vals, lineno: int, col: int) -> None:
         """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""
         st = self.state
         if any(a in vals for a in ROTARY):
@@ -901,7 +919,7 @@ class Interpreter:
             if a in vals:
                 st.g92[k] = vals[a][0] * st.unit_mm
 
-    def _g43(self, vals, lineno, col) -> None:
+    def _g43(self, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
         h: int | None
         if "H" in vals:
@@ -923,7 +941,7 @@ class Interpreter:
                             lineno, col, hint=f"give it with --tool-length {h}=L (mm) or --tool-table FILE")
         st.tlo, st.tlo_active = float(lengths[h]), True
 
-    def _g92(self, key, vals, lineno, col) -> None:
+    def _g92(self, key: int, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
         if key in (921, 922):
             st.g92 = [0.0, 0.0, 0.0]
@@ -947,7 +965,7 @@ class Interpreter:
                 w = self._work_offset(lineno, col)
                 st.g92[k] = st.pos[k] - (w[k] + (st.tlo if k == 2 else 0.0)) - vals[a][0] * unit
 
-    def _g10(self, vals, lineno, col) -> None:
+    def _g10(self, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
         L = int(vals["L"][0]) if "L" in vals else None
         if L in (1, 10, 11):
@@ -981,7 +999,7 @@ class Interpreter:
                             lineno, col, hint=f"give --offset {name}=X..,Y..,Z..")
         self.program_offsets[name] = new
 
-    def _g10_tool(self, L: int, vals, lineno, col) -> None:
+    def _g10_tool(self, L: int, vals: Vals, lineno: int, col: int) -> None:
         """G10 L1/L10/L11 P<tool> Z..: write a tool length (used by later G43)."""
         st = self.state
         if "P" not in vals:
@@ -1006,7 +1024,8 @@ class Interpreter:
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
             self.tool_lengths[tool] = st.pos[2] - g593[2] - z
 
-    def _arc(self, lineno, words, vals, q0, q1, shift, unit, gcodes) -> Arc:
+    def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
+             q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
         st = self.state
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
         col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
@@ -1250,7 +1269,7 @@ for _keys, _handler in (
         _G_HANDLERS[_key] = _handler
 
 
-def spline_points(ctrl, s) -> np.ndarray:
+def spline_points(ctrl: npt.ArrayLike, s: npt.ArrayLike) -> np.ndarray:
     """Points (k, 2) of a Bezier curve with control points ``ctrl`` at parameters ``s``."""
     s = np.asarray(s, dtype=float)[:, None]
     c = np.asarray(ctrl, dtype=float)
@@ -1259,7 +1278,7 @@ def spline_points(ctrl, s) -> np.ndarray:
     return (1 - s) ** 3 * c[0] + 3 * (1 - s) ** 2 * s * c[1] + 3 * (1 - s) * s ** 2 * c[2] + s ** 3 * c[3]
 
 
-def spline_samples(ctrl, chord_mm: float) -> np.ndarray:
+def spline_samples(ctrl: npt.ArrayLike, chord_mm: float) -> np.ndarray:
     """Parameters along a spline whose chords stay within ``chord_mm`` of it (from the
     bound on the second derivative: error <= max|B''| h^2 / 8)."""
     c = np.asarray(ctrl, dtype=float)
@@ -1304,11 +1323,11 @@ def plain_moves(mv: Move) -> Iterator[Move]:
         leg = leg.then
 
 
-def col_of_word(words, i: int) -> int:
+def col_of_word(words: list[lexer.Word], i: int) -> int:
     return words[i][4] + 1
 
 
-def _offset_tuple(v, partial: bool = False) -> tuple[float, float, float]:
+def _offset_tuple(v: dict | Iterable[float], partial: bool = False) -> tuple[float, float, float]:
     if isinstance(v, dict):
         d = NAN if partial else 0.0
         up = {str(k).upper(): x for k, x in v.items()}
@@ -1319,7 +1338,7 @@ def _offset_tuple(v, partial: bool = False) -> tuple[float, float, float]:
     return t
 
 
-def start_position(start) -> list[float]:
+def start_position(start: dict | Iterable[float] | None) -> list[float]:
     """Machine gauge position at program start: ``{"X":.., "Z":..}`` (any subset) or
     (x, y, z); NaN for an axis not given."""
     if not start:
