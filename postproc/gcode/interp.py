@@ -20,7 +20,7 @@ import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import numpy as np
 
@@ -61,11 +61,19 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from postproc.gcode.dialect import Dialect
-    from postproc.gcode.path import Setup
 
 #: a block's words by letter, G and M aside: (value, word index)
 Vals = dict[str, tuple[float, int]]
 _E = TypeVar("_E", bound=PostprocError)
+
+
+class _Setup(Protocol):
+    """What the interpreter reads of a :class:`postproc.gcode.path.Setup` (which imports
+    this module), besides its optional ``start`` and ``home``."""
+
+    offsets: dict
+    tool_lengths: dict
+    tool_vector: tuple | None
 
 
 class NeedsExpansion(UnsupportedGcodeError):
@@ -239,7 +247,7 @@ def _is_program_number(tokens: list[lexer.Token]) -> bool:
 class Interpreter:
     """Advance a :class:`ModalState` line by line; see the module docstring."""
 
-    def __init__(self, setup: Setup, path: str | None = None, *, lenient_setup: bool = False,
+    def __init__(self, setup: _Setup, path: str | None = None, *, lenient_setup: bool = False,
                  dialect: str = "generic") -> None:
         self.setup = setup
         # lenient: every work offset and tool length is taken as zero (for comparing
