@@ -433,7 +433,8 @@ class Interpreter:
                 raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
         return words, block_delete
 
-    def _block(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:  # noqa: C901
+    def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
+               block_delete: bool) -> Move | None:
         st = self.state
         gcodes: list[tuple[int, int]] = []  # (key, word index)
         mcodes: list[tuple[int, int]] = []
@@ -713,16 +714,18 @@ class Interpreter:
                 self.unknown_after.pop(k, None)
         r = self.tool_r()
         rot = dict(st.rotary) if self.used_rotary else {}
-        jump = Move(lineno, RAPID, (inter[0], inter[1], inter[2]), (after[0], after[1], after[2]), r, (0.0, 0.0, 0.0), unit, st.incremental,
-                    st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot, stays=True, motion_idx=gi,
-                    fixed=True, stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
+        jump = Move(lineno, RAPID, (inter[0], inter[1], inter[2]), (after[0], after[1], after[2]), r,
+                    (0.0, 0.0, 0.0), unit, st.incremental, st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot,
+                    stays=True, motion_idx=gi, fixed=True,
+                    stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
         st.pos = after
         moved = [k for k in named if inter[k] != q0[k] and not (math.isnan(inter[k]) and math.isnan(q0[k]))]
         if not moved:
             return jump
         self._check_known(inter, lineno, col)
         return Move(lineno, RAPID, q0, (inter[0], inter[1], inter[2]), r, shift, unit, st.incremental,
-                    st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
+                    st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot,
+                    stays=True, motion_idx=gi, then=jump)
 
     def _spline(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int, prefix: list[str]) -> Move:
         """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
