@@ -1,5 +1,6 @@
 """mypy runs clean on the core packages listed under [tool.mypy] in pyproject.toml
-(engine, effects, calibration and the modules built on the axis tables)."""
+(engine, effects, calibration, the modules built on the axis tables, and the G-code
+reader: lexer, expansion, interpreter, dialects, path sampling and diff)."""
 
 import importlib.util
 import subprocess

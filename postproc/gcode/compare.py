@@ -36,6 +36,7 @@ import re
 from array import array
 from dataclasses import dataclass, field
 from itertools import islice
+from typing import Any
 
 import numpy as np
 
@@ -122,7 +123,8 @@ class DiffReport:
     def largest(self, n: int) -> list[MovedBlock]:
         d = self._delta_array()
         order = np.argsort(-np.linalg.norm(d, axis=1), kind="stable")[:n]
-        return [MovedBlock(self._lines[i], self._clines[i], tuple(float(x) for x in d[i])) for i in order]
+        return [MovedBlock(self._lines[i], self._clines[i], (x, y, z))
+                for i, (x, y, z) in zip(order.tolist(), d[order].tolist(), strict=True)]
 
     def axis_stats(self) -> dict:
         d = np.abs(self._delta_array())
@@ -190,8 +192,8 @@ def header_setup(source) -> HeaderSetup:
                     hs.offsets[m.group(1).upper()] = tuple(float(m.group(i)) for i in (2, 3, 4))
                 elif part.startswith("tools "):
                     for item in part[6:].split(","):
-                        h, _, v = item.partition("=")
-                        hs.tool_lengths[int(float(h))] = float(v)
+                        h, _, length = item.partition("=")
+                        hs.tool_lengths[int(float(h))] = float(length)
                 elif part.startswith("tool vector "):
                     hs.tool_vector = tuple(float(v) for v in part[12:].split(","))
                 elif re.match(r"G(28|30)=", part):
@@ -229,7 +231,7 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
     from the corrected program's header: the setup the program was corrected with."""
     hs = header_setup(corrected)
     setup = setup or Setup()
-    changes = {}
+    changes: dict[str, Any] = {}  # Setup fields to replace
     if not setup.offsets and hs.offsets:
         changes["offsets"] = dict(hs.offsets)
     if not setup.tool_lengths and hs.tool_lengths:

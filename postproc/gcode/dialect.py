@@ -21,7 +21,9 @@ block; ``arc_mismatch`` says what it does with a difference inside that toleranc
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TypedDict
 
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
@@ -110,7 +112,7 @@ class Dialect:
     arc_mismatch: str  # what the controller does with an arc inside the tolerance, and beyond it
     source: str  # where the values come from
 
-    def arc_end_radius_tolerance(self, r_start_mm: float, units="mm") -> float:
+    def arc_end_radius_tolerance(self, r_start_mm: float, units: str | float = "mm") -> float:
         """Largest |r_end - r_start| (mm) this controller accepts on a centre-format arc.
 
         ``units``: the program's units, ``"mm"`` or ``"inch"`` (or the factor 1.0 or 25.4),
@@ -130,7 +132,7 @@ class Dialect:
             return min(LINUXCNC_ARC_CAP_FACTOR * a, max(a, self.arc_rel * r))
         return a
 
-    def arc_end_radius_ok(self, r_start_mm: float, r_end_mm: float, units="mm") -> bool:
+    def arc_end_radius_ok(self, r_start_mm: float, r_end_mm: float, units: str | float = "mm") -> bool:
         """Would this controller accept a centre-format arc with these start and end radii?"""
         if self.arc_rule == "strictest":
             return all(DIALECTS[n].arc_end_radius_ok(r_start_mm, r_end_mm, units) for n in _ALL_BUT_GENERIC)
@@ -142,11 +144,11 @@ class Dialect:
             return not (err > LINUXCNC_ARC_CAP_FACTOR * a or (rel > self.arc_rel and err > a))
         return err <= self.arc_end_radius_tolerance(r0, units)
 
-    def decimals(self, units="mm") -> int:
+    def decimals(self, units: str | float = "mm") -> int:
         return self.decimals_inch if _is_inch(units) else self.decimals_mm
 
 
-def _is_inch(units) -> bool:
+def _is_inch(units: str | float) -> bool:
     if isinstance(units, str):
         u = units.strip().lower()
         if u in ("mm", "g21"):
@@ -244,7 +246,7 @@ def get(name: str | Dialect) -> Dialect:
     return d
 
 
-def _comments(body: str):
+def _comments(body: str) -> Iterator[tuple[int, str, str]]:
     """Yield ``(start, text, kind)`` for each comment of a line without its ending; kind is
     ``"("``, ``";"``, ``"nested"`` (a "(" inside a comment) or ``"unclosed"``."""
     i, n = 0, len(body)
@@ -267,6 +269,13 @@ def _comments(body: str):
         i += 1
 
 
+class _Where(TypedDict):
+    """The place of an output line, passed to each error about it."""
+
+    path: str | None
+    lineno: int | None
+
+
 def check_output_line(d: str | Dialect, line: str, path: str | None = None, lineno: int | None = None) -> None:
     """Raise a PostprocError when controller ``d`` would refuse ``line`` (with or without its ending)."""
     d = get(d)
@@ -276,7 +285,7 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
         body = body[:-1]
     else:
         count = len(body.encode("utf-8", errors="surrogateescape"))
-    where = {"path": path, "lineno": lineno}
+    where: _Where = {"path": path, "lineno": lineno}
     if count > d.max_line_chars:
         raise PostprocError(
             f"line of {count} characters is longer than {d.title} reads ({d.max_line_chars})", col=d.max_line_chars + 1,
@@ -294,9 +303,9 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
                                     hint="write the program in upper case", **where)
     if "(" not in body and ";" not in body and ")" not in body:  # no comment: the common line
         if d.max_word_chars is not None and len(body) > d.max_word_chars:
-            _check_words(d, body, [(0, len(body))], where)
+            _check_words(d, d.max_word_chars, body, [(0, len(body))], where)
         return
-    words = []  # (start, end) of the text outside comments
+    words: list[tuple[int, int]] = []  # (start, end) of the text outside comments
     pos = 0
     for start, text, kind in _comments(body):
         if kind in ("(", "unclosed", ";"):
@@ -321,13 +330,14 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
     else:
         words.append((pos, len(body)))
     if d.max_word_chars is not None:
-        _check_words(d, body, words, where)
+        _check_words(d, d.max_word_chars, body, words, where)
 
 
-def _check_words(d: Dialect, body: str, words: list[tuple[int, int]], where: dict) -> None:
-    """Grbl keeps a line's words without blanks and comments in a buffer of its own."""
+def _check_words(d: Dialect, max_word_chars: int, body: str, words: list[tuple[int, int]], where: _Where) -> None:
+    """Grbl keeps a line's words without blanks and comments in a buffer of its own
+    (``max_word_chars``: ``d.max_word_chars``, which the caller has checked is set)."""
     cols = [k for a, b in words for k in range(a, b) if body[k] > " "]
-    if len(cols) > d.max_word_chars:
+    if len(cols) > max_word_chars:
         raise PostprocError(f"{len(cols)} characters of words on one line, more than {d.title} holds "
-                            f"({d.max_word_chars})", col=cols[d.max_word_chars] + 1, hint="split the block",
+                            f"({max_word_chars})", col=cols[max_word_chars] + 1, hint="split the block",
                             **where)

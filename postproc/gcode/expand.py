@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
 from postproc.gcode.expand_syntax import (
@@ -168,11 +169,11 @@ class _Offset:
 class _Frame:
     named: dict[str, float] = field(default_factory=dict)
     call_type: str = ""  # "", "oword", "m98", "g65"
-    ret_unit: Unit | None = None
+    ret_unit: Unit | None = None  # None only on the main program's frame, which never returns
     ret_idx: int = 0
     saved: list | None = None  # numbered locals of the caller (o-word call / G65)
     repeats_left: int = 0  # M98/G65 L count still to run after this pass
-    start_unit: Unit | None = None
+    start_unit: Unit | None = None  # set on M98/G65 frames (where their L repeats start)
     start_idx: int = 0
     sub_name: str | None = None
     call_lineno: int = 0
@@ -230,17 +231,19 @@ class _Expander(Env):
     def lineno(self) -> int:
         return self.cur_idx + 1
 
-    def error(self, col: int, message: str, hint: str | None = None):
+    def error(self, col: int, message: str, hint: str | None = None) -> GcodeSyntaxError:
         return GcodeSyntaxError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
 
-    def refuse(self, col: int, message: str, hint: str | None = None):
+    def refuse(self, col: int, message: str, hint: str | None = None) -> ExpansionError:
         return ExpansionError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
 
     # -- parameters ---------------------------------------------------------
     def _fanuc_locals(self) -> list:
         for fr in reversed(self.frames):
             if fr.call_type in ("", "g65"):
-                return fr.saved  # type: ignore[return-value]
+                if fr.saved is None:  # pragma: no cover - set on the main frame and by _g65
+                    raise AssertionError("a Fanuc macro level without its local variables")
+                return fr.saved
         raise AssertionError  # pragma: no cover
 
     def read_numbered(self, index: int, col: int):
@@ -380,7 +383,7 @@ class _Expander(Env):
                     if b.oword is not None:
                         target = self.skipping_to_sub or self.skipping_o
                         if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
-                            yield from self._oword(b)
+                            yield from self._oword(b, b.oword)
                 continue
             words = scan_words(line)
             if words is not None and not any(
@@ -418,9 +421,9 @@ class _Expander(Env):
                 first_code = False
             try:
                 if b.oword is not None:
-                    yield from self._oword(b)
+                    yield from self._oword(b, b.oword)
                 elif b.macro is not None:
-                    self._macro(b)
+                    self._macro(b, b.macro)
                 else:
                     yield from self._block(b, line)
             except _Stop:
@@ -439,17 +442,18 @@ class _Expander(Env):
                 f"'o{_oname(name)} sub' has no matching 'o{_oname(name)} endsub'",
                 path=unit.path, lineno=idx + 1, col=1,
                 hint=f"end the subroutine with 'o{_oname(name)} endsub'")
-        if self.skipping_to_sub is not None or self.skipping_o is not None:
-            name = self.skipping_to_sub or self.skipping_o
+        skipping = self.skipping_to_sub if self.skipping_to_sub is not None else self.skipping_o
+        if skipping is not None:
             unit, idx = self.skip_from or (self.unit, self.idx)
             if self.skipping_to_sub is not None:
                 raise GcodeSyntaxError(
-                    f"subroutine o{_oname(name)} not found: neither in the file nor as {name}.ngc on "
+                    f"subroutine o{_oname(skipping)} not found: neither in the file nor as {skipping}.ngc on "
                     "the subroutine path", path=unit.path, lineno=idx + 1, col=1,
-                    hint=f"define 'o{_oname(name)} sub' in the file or put {name}.ngc on --subroutine-path")
-            kw = unit.block(idx).oword.kw if unit.block(idx).oword is not None else ""
+                    hint=f"define 'o{_oname(skipping)} sub' in the file or put {skipping}.ngc on --subroutine-path")
+            ow = unit.block(idx).oword
+            kw = ow.kw if ow is not None else ""
             raise GcodeSyntaxError(
-                f"'o{_oname(name)} {kw}': the file ended before the o{_oname(name)} line that closes it",
+                f"'o{_oname(skipping)} {kw}': the file ended before the o{_oname(skipping)} line that closes it",
                 path=unit.path, lineno=idx + 1, col=1,
                 hint="close the block with its matching o-word line (endif, endwhile, endrepeat, while)")
         if len(self.frames) > 1:
@@ -562,10 +566,12 @@ class _Expander(Env):
         self.pending_names = set()
 
     # -- subprogram calls (M98 / M99 / G65) ----------------------------------
-    def _call_words(self, words, m_codes, g_codes):
-        """The call a block makes and the indices of the words it uses."""
+    def _call_words(self, words: list[tuple[Word, Any]], m_codes: list[float],
+                    g_codes: list[float]) -> tuple[Callable[[], None] | None, set[int]]:
+        """The call a block makes and the indices of the words it uses (``words``: each
+        word with its value, a number or NULL)."""
         drop: set[int] = set()
-        letters = {}
+        letters: dict[str, list[tuple[int, Word, Any]]] = {}
         for k, (w, v) in enumerate(words):
             letters.setdefault(w.letter, []).append((k, w, v))
         if 99.0 in m_codes and len(self.frames) == 1 and "P" not in letters:
@@ -578,7 +584,7 @@ class _Expander(Env):
             for k, _w, v in letters.get("M", []):
                 if v == 99.0:
                     drop.add(k)
-            target = None
+            target: tuple[int, int] | None = None
             for k, w, v in letters.get("P", []):
                 drop.add(k)
                 target = (int(round(v)), w.col)
@@ -607,15 +613,15 @@ class _Expander(Env):
             for k, _, _ in p + letters.get("L", []):
                 drop.add(k)
             number = int(round(p[0][2]))
-            count = int(round(letters["L"][0][2])) if "L" in letters else None
-            return (lambda: self._m98(number, count, p[0][1].col)), drop
+            repeats = int(round(letters["L"][0][2])) if "L" in letters else None
+            return (lambda: self._m98(number, repeats, p[0][1].col)), drop
         # G65 P.. L.. args
         gw = next(w for k, w, v in letters["G"] if v == 65.0)
         if not self.fanuc:
             raise self.refuse(gw.col, "G65 macro call is Fanuc/Haas syntax",
                               hint="choose --dialect fanuc or haas for this program")
-        args = {}
-        number = None
+        args: dict[str, Any] = {}
+        macro: int | None = None
         count = 1
         for k, (w, v) in enumerate(words):
             drop.add(k)
@@ -623,7 +629,7 @@ class _Expander(Env):
                 if v != 65.0:
                     raise self.refuse(w.col, "G65 must be alone in its block with its arguments")
             elif w.letter == "P":
-                number = int(round(v))
+                macro = int(round(v))
             elif w.letter == "L":
                 count = int(round(v))
             elif w.letter == "N":
@@ -639,9 +645,9 @@ class _Expander(Env):
                 args[w.letter] = v
             else:
                 raise self.error(w.col, f"address {w.letter} cannot be a G65 argument")
-        if number is None:
+        if macro is None:
             raise self.error(gw.col, "G65 needs P (the macro program number)")
-        return (lambda: self._g65(number, count, args, gw.col)), drop
+        return (lambda: self._g65(macro, count, args, gw.col)), drop
 
     def _program_target(self, number: int, col: int) -> tuple[Unit, int, int] | None:
         progs = self.main.programs()
@@ -692,7 +698,8 @@ class _Expander(Env):
             local[FANUC_ARGUMENTS_I[letter]] = v
         self._enter("g65", f"O{number}", unit, start + 1, count - 1, saved=local)
 
-    def _enter(self, call_type, name, unit, start, repeats, saved=None) -> None:
+    def _enter(self, call_type: str, name: str, unit: Unit, start: int, repeats: int,
+               saved: list | None = None) -> None:
         if len(self.frames) > MAX_CALL_DEPTH:
             raise self.refuse(1, f"subprogram calls nested deeper than {MAX_CALL_DEPTH} levels",
                               hint="check for a subprogram that calls itself")
@@ -713,13 +720,21 @@ class _Expander(Env):
             fr.repeats_left -= 1
             if fr.call_type == "g65":
                 pass  # locals persist across G65 L repeats
+            if fr.start_unit is None:  # pragma: no cover - _enter sets it
+                raise AssertionError(f"{fr.call_type} frame without the start of its repeats")
             self.unit, self.idx = fr.start_unit, fr.start_idx
             return
-        self.frames.pop()
-        self.unit, self.idx = fr.ret_unit, fr.ret_idx
+        self._leave(fr)
         if target is not None:
             number, col = target
-            self.idx = self._sequence(fr.ret_unit, number, fr.ret_idx, col)
+            self.idx = self._sequence(self.unit, number, fr.ret_idx, col)
+
+    def _leave(self, fr: _Frame) -> None:
+        """Return from ``fr``, the innermost subprogram frame, to the line after its call."""
+        self.frames.pop()
+        if fr.ret_unit is None:  # pragma: no cover - callers never leave the main program's frame
+            raise AssertionError("the main program's frame has no caller to return to")
+        self.unit, self.idx = fr.ret_unit, fr.ret_idx
 
     def _sequence(self, unit: Unit, number: int, start: int, col: int) -> int:
         """Fanuc sequence-number search: forward from ``start``, then from the program start."""
@@ -743,34 +758,42 @@ class _Expander(Env):
         return lo
 
     # -- Fanuc macro statements -------------------------------------------------
-    def _macro(self, b: Block) -> None:
-        m = b.macro
+    def _macro(self, b: Block, m: Macro) -> None:
+        """Run the macro statement ``m`` (``b.macro``) of block ``b``."""
         if b.slash:
             raise self.refuse(1, "a macro statement on a block-delete ('/') line")
         if m.kind == "goto":
             self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
         elif m.kind == "if_goto":
-            if self._cond(m.cond):
+            if self._cond(m):
                 self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
         elif m.kind == "if_then":
-            if self._cond(m.cond):
-                v = self._value(m.assign.node)
+            if self._cond(m):
+                a = m.assign
+                if a is None:  # pragma: no cover - the parser sets it
+                    raise AssertionError("IF .. THEN without its setting")
+                v = self._value(a.node)
                 self.pending = []
-                self._queue_setting(m.assign, v)
+                self._queue_setting(a, v)
                 self._apply_pending()
         elif m.kind == "while":
-            if not self._cond(m.cond):
+            if not self._cond(m):
                 self.idx = self._find_end(m.loop, m.col) + 1
         elif m.kind == "do":
             pass
         elif m.kind == "end":
             self.idx = self._find_do(m.loop, m.col)
 
-    def _cond(self, node: tuple) -> bool:
-        v = self._value(node)
+    def _cond(self, m: Macro) -> bool:
+        """Is the condition of IF or WHILE statement ``m`` true?"""
+        if m.cond is None:  # pragma: no cover - the parser sets it
+            raise AssertionError(f"{m.kind} statement without its condition")
+        v = self._value(m.cond)
         return v is not NULL and v != 0.0
 
     def _target(self, m: Macro) -> int:
+        if m.target is None:  # pragma: no cover - the parser sets it
+            raise AssertionError(f"{m.kind} statement without its target")
         v = self._value(m.target)
         if v is NULL:
             raise self.error(m.col, "GOTO to a vacant variable")
@@ -826,8 +849,8 @@ class _Expander(Env):
         op = self.offsets[name]
         self.unit, self.idx = op.unit, op.idx
 
-    def _oword(self, b: Block) -> Iterator[SourceLine]:
-        ow = b.oword
+    def _oword(self, b: Block, ow: OWord) -> Iterator[SourceLine]:
+        """Run the o-word statement ``ow`` (``b.oword``) of block ``b``."""
         if b.slash:
             raise self.refuse(ow.col, "an o-word on a block-delete ('/') line")
         if b.items:
@@ -879,8 +902,7 @@ class _Expander(Env):
                 self.globals["_value_returned"] = 1.0
             for k, v in enumerate(fr.saved or []):
                 self.params[k + 1] = v
-            self.frames.pop()
-            self.unit, self.idx = fr.ret_unit, fr.ret_idx
+            self._leave(fr)
             return
         if kw == "call":
             yield from ()

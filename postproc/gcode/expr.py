@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from postproc.errors import GcodeSyntaxError, UnsupportedGcodeError
+from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
 
 # rs274ngc TOLERANCE_EQUAL (interp_internal.hh): EQ/NE compare within this.
 LINUXCNC_EQUAL_TOLERANCE = 0.0001
@@ -354,7 +354,7 @@ class Env:
     def exists_named(self, name: str) -> bool:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def error(self, col: int, message: str, hint: str | None = None):  # pragma: no cover
+    def error(self, col: int, message: str, hint: str | None = None) -> PostprocError:  # pragma: no cover
         raise NotImplementedError
 
 

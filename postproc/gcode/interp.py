@@ -18,12 +18,19 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
-from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
+from postproc.errors import (
+    GcodeSyntaxError,
+    MissingSetupError,
+    PostprocError,
+    UnsupportedGcodeError,
+)
 from postproc.gcode import lexer
 from postproc.gcode.state import (
     ARC_CCW,
@@ -49,6 +56,24 @@ from postproc.gcode.state import (
     WORK_SYSTEMS,
     ModalState,
 )
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from postproc.gcode.dialect import Dialect
+
+#: a block's words by letter, G and M aside: (value, word index)
+Vals = dict[str, tuple[float, int]]
+_E = TypeVar("_E", bound=PostprocError)
+
+
+class _Setup(Protocol):
+    """What the interpreter reads of a :class:`postproc.gcode.path.Setup` (which imports
+    this module), besides its optional ``start`` and ``home``."""
+
+    offsets: dict
+    tool_lengths: dict
+    tool_vector: tuple | None
 
 
 class NeedsExpansion(UnsupportedGcodeError):
@@ -206,7 +231,7 @@ def blank_nested_comments(line: str) -> str:
     return "".join(out)
 
 
-def _is_program_number(tokens) -> bool:
+def _is_program_number(tokens: list[lexer.Token]) -> bool:
     """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
     content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
                                                        lexer.NEWLINE)]
@@ -222,7 +247,7 @@ def _is_program_number(tokens) -> bool:
 class Interpreter:
     """Advance a :class:`ModalState` line by line; see the module docstring."""
 
-    def __init__(self, setup, path: str | None = None, *, lenient_setup: bool = False,
+    def __init__(self, setup: _Setup, path: str | None = None, *, lenient_setup: bool = False,
                  dialect: str = "generic") -> None:
         self.setup = setup
         # lenient: every work offset and tool length is taken as zero (for comparing
@@ -263,21 +288,21 @@ class Interpreter:
         self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # -- helpers -----------------------------------------------------------------------
-    def _arc_rule(self):
+    def _arc_rule(self) -> Dialect:
         """The controller whose input-arc rule applies: the dialect's own (generic reads
         arcs as LinuxCNC, the reference interpreter, does)."""
         from postproc.gcode import dialect
 
         return dialect.get("linuxcnc" if self.dialect == "generic" else self.dialect)
 
-    def _construct_error(self, what: str):
+    def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
         """The error class for a refused construct: NeedsExpansion when expanding is allowed
         and the construct is one the expansion stage flattens."""
         if self.may_expand and not what.startswith("polar"):
             return NeedsExpansion
         return UnsupportedGcodeError
 
-    def _err(self, cls, msg, lineno, col, hint=None):
+    def _err(self, cls: type[_E], msg: str, lineno: int, col: int, hint: str | None = None) -> _E:
         return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
 
     def _work_offset(self, lineno: int, col: int) -> list[float]:
@@ -341,7 +366,7 @@ class Interpreter:
         self._run_shift = None  # the slow path may change offsets, units or tool length
         return self._block(lineno, words, block_delete)
 
-    def _slow_words(self, lineno: int, line: str):
+    def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
         if self.dialect in NESTING_COMMENTS and line.count("(") > 1:
             line = blank_nested_comments(line)
         try:
@@ -408,7 +433,8 @@ class Interpreter:
                 raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
         return words, block_delete
 
-    def _block(self, lineno: int, words, block_delete: bool) -> Move | None:  # noqa: C901
+    def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
+               block_delete: bool) -> Move | None:
         st = self.state
         gcodes: list[tuple[int, int]] = []  # (key, word index)
         mcodes: list[tuple[int, int]] = []
@@ -581,7 +607,8 @@ class Interpreter:
             incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
 
         shift = self.shift(g53, lineno, first_axis_col)
-        q0 = tuple(st.pos)
+        pos = st.pos
+        q0 = (pos[0], pos[1], pos[2])
         q1 = list(q0)
         axis_idx = [-1, -1, -1]
         for k, a in enumerate(AXES):
@@ -618,9 +645,9 @@ class Interpreter:
 
         st.pos = q1
         move = Move(
-            lineno=lineno, kind=st.motion, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift,
+            lineno=lineno, kind=st.motion, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
             unit=unit, incremental=incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=tuple(axis_idx), feed_idx=vals["F"][1] if "F" in vals else -1,
+            axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
             prefix_words=prefix + (["S" + words[vals["S"][1]][1]] if "S" in vals else []) + before_m,
@@ -631,7 +658,7 @@ class Interpreter:
         return move
 
     @staticmethod
-    def _is_lookahead(key: int, vals) -> bool:
+    def _is_lookahead(key: int, vals: Vals) -> bool:
         """Fanuc/Haas look-ahead and smoothing codes (G5 P.., G5.1 Q.., G8 P.., G187, G103)."""
         if key in (1870, 1030):
             return True
@@ -645,7 +672,8 @@ class Interpreter:
             return "P" in vals
         return False
 
-    def _home(self, home_code, words, vals, lineno: int, col: int) -> Move | None:
+    def _home(self, home_code: tuple[int, int], words: list[lexer.Word], vals: Vals, lineno: int,
+              col: int) -> Move | None:
         """G28/G30: through the intermediate point (the axis words) to the stored position."""
         key, gi = home_code
         name = HOME_CODES[key]
@@ -658,7 +686,8 @@ class Interpreter:
             raise self._err(GcodeSyntaxError, f"{name} with arc words", lineno, col)
         unit = st.unit_mm
         named = [k for k, a in enumerate(AXES) if a in vals]
-        q0 = tuple(st.pos)
+        pos = st.pos
+        q0 = (pos[0], pos[1], pos[2])
         inter = list(q0)
         axis_idx = [-1, -1, -1]
         shift = self.shift(False, lineno, col) if named and not st.incremental else (0.0, 0.0, 0.0)
@@ -685,18 +714,20 @@ class Interpreter:
                 self.unknown_after.pop(k, None)
         r = self.tool_r()
         rot = dict(st.rotary) if self.used_rotary else {}
-        jump = Move(lineno, RAPID, tuple(inter), tuple(after), r, (0.0, 0.0, 0.0), unit, st.incremental,
-                    st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot, stays=True, motion_idx=gi,
-                    fixed=True, stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
+        jump = Move(lineno, RAPID, (inter[0], inter[1], inter[2]), (after[0], after[1], after[2]), r,
+                    (0.0, 0.0, 0.0), unit, st.incremental, st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot,
+                    stays=True, motion_idx=gi, fixed=True,
+                    stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
         st.pos = after
         moved = [k for k in named if inter[k] != q0[k] and not (math.isnan(inter[k]) and math.isnan(q0[k]))]
         if not moved:
             return jump
         self._check_known(inter, lineno, col)
-        return Move(lineno, RAPID, q0, tuple(inter), r, shift, unit, st.incremental, st.arc_absolute, words,
-                    tuple(axis_idx), -1, False, st.feed, rot, stays=True, motion_idx=gi, then=jump)
+        return Move(lineno, RAPID, q0, (inter[0], inter[1], inter[2]), r, shift, unit, st.incremental,
+                    st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot,
+                    stays=True, motion_idx=gi, then=jump)
 
-    def _spline(self, lineno, words, vals, motion_idx, prefix) -> Move:
+    def _spline(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int, prefix: list[str]) -> Move:
         """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
         offset the first control point from the start (the previous P/Q mirrored when
         left out), P/Q the second from the end; G5.1's I/J offset its control point."""
@@ -721,7 +752,8 @@ class Interpreter:
         if "F" in vals:
             st.feed = vals["F"][0]
         shift = self.shift(False, lineno, col)
-        q0 = tuple(st.pos)
+        pos = st.pos
+        q0 = (pos[0], pos[1], pos[2])
         q1 = list(q0)
         axis_idx = [-1, -1, -1]
         for k, a in enumerate("XY"):
@@ -748,13 +780,15 @@ class Interpreter:
                 raise self._err(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
             ctrl = [p0, (p0[0] + vals["I"][0] * unit, p0[1] + vals["J"][0] * unit), p3]
         st.pos = q1
-        return Move(lineno=lineno, kind=LINE, q0=q0, q1=tuple(q1), r=self.tool_r(), shift=shift, unit=unit,
-                    incremental=st.incremental, arc_absolute=st.arc_absolute, words=words, axis_idx=tuple(axis_idx),
+        return Move(lineno=lineno, kind=LINE, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
+                    unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+                    axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]),
                     feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
                     rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
                     motion_idx=motion_idx, spline=ctrl)
 
-    def _cycle(self, lineno, words, vals, motion_idx, gcodes, prefix, stays) -> Move:  # noqa: C901
+    def _cycle(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int,  # noqa: C901
+               gcodes: list[tuple[int, int]], prefix: list[str], stays: bool) -> Move:
         """A canned-cycle block: the holes it drills and the moves the controller makes.
 
         Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
@@ -766,6 +800,8 @@ class Interpreter:
         """
         st = self.state
         key = st.motion
+        if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
+            raise AssertionError("a canned-cycle block without its cycle")
         col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
         name = f"G{key / 10:g}"
         if st.plane != 170:
@@ -790,12 +826,14 @@ class Interpreter:
             st.cycle_z = vals["Z"][0]
         if st.cycle_z is None:
             raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
+        peck_mm = 0.0  # G73/G83 peck depth
         if key in (730, 830):
             if "Q" in vals:
                 st.cycle_q = vals["Q"][0]
             if st.cycle_q is None or st.cycle_q <= 0:
                 raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
                                 lineno, col)
+            peck_mm = st.cycle_q * unit
         if "P" in vals:
             st.cycle_p = vals["P"][0]
         if "F" in vals:
@@ -803,11 +841,11 @@ class Interpreter:
         repeat_letter = "K" if self.dialect in ("fanuc", "haas") and "K" in vals else "L"
         repeats = 1
         if repeat_letter in vals:
-            repeats = vals[repeat_letter][0]
-            if repeats != int(repeats) or repeats < 0:
+            given = vals[repeat_letter][0]
+            if given != int(given) or given < 0:
                 raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
                                 lineno, words[vals[repeat_letter][1]][4] + 1)
-            repeats = int(repeats)
+            repeats = int(given)
         if any(math.isnan(v) for v in st.pos):
             raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
                             hint="position every axis with a G90 move before the cycle, or give --start")
@@ -838,7 +876,7 @@ class Interpreter:
                 steps.append((kind, (x, y, z)))
                 cur[:] = (x, y, z)
 
-        holes = []
+        holes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
         if z0 < r_m:
             go(RAPID, x0, y0, r_m)
         for _ in range(repeats):
@@ -846,7 +884,7 @@ class Interpreter:
             go(RAPID, x, y, cur[2])
             go(RAPID, x, y, r_m)
             if key in (730, 830):
-                q = st.cycle_q * unit
+                q = peck_mm
                 depth = r_m - q
                 while depth > z_m:
                     go(LINE, x, y, depth)
@@ -861,8 +899,9 @@ class Interpreter:
                 go(LINE, x, y, r_m)
             go(RAPID, x, y, clear)
             holes.append(((x, y, z_m), (x, y, r_m)))
-        axis_idx = tuple(vals[a][1] if a in vals else -1 for a in AXES)
-        q0 = tuple(st.pos)
+        axis_idx = (vals["X"][1] if "X" in vals else -1, vals["Y"][1] if "Y" in vals else -1,
+                    vals["Z"][1] if "Z" in vals else -1)
+        q0 = (x0, y0, z0)
         st.pos = list(cur)
         return Move(
             lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
@@ -872,7 +911,7 @@ class Interpreter:
             motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
                                                r_m, z_m, repeats, st.retract_r, st.cycle_p))
 
-    def _check_known(self, q1, lineno: int, col: int) -> None:
+    def _check_known(self, q1: Sequence[float], lineno: int, col: int) -> None:
         """Refuse a move that needs an axis left at a stored position that was not given."""
         for k, name in self.unknown_after.items():
             if math.isnan(q1[k]):
@@ -882,7 +921,7 @@ class Interpreter:
                     hint=f"give it with --home {name}=X..,Y..,Z.. (machine mm), or position {AXES[k]} with an "
                          "absolute move first")
 
-    def _g52(self, vals, lineno, col) -> None:
+    def _g52(self, vals: Vals, lineno: int, col: int) -> None:
         """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""
         st = self.state
         if any(a in vals for a in ROTARY):
@@ -891,8 +930,9 @@ class Interpreter:
             if a in vals:
                 st.g92[k] = vals[a][0] * st.unit_mm
 
-    def _g43(self, vals, lineno, col) -> None:
+    def _g43(self, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
+        h: int | None
         if "H" in vals:
             h = int(vals["H"][0])
         else:
@@ -912,7 +952,7 @@ class Interpreter:
                             lineno, col, hint=f"give it with --tool-length {h}=L (mm) or --tool-table FILE")
         st.tlo, st.tlo_active = float(lengths[h]), True
 
-    def _g92(self, key, vals, lineno, col) -> None:
+    def _g92(self, key: int, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
         if key in (921, 922):
             st.g92 = [0.0, 0.0, 0.0]
@@ -936,7 +976,7 @@ class Interpreter:
                 w = self._work_offset(lineno, col)
                 st.g92[k] = st.pos[k] - (w[k] + (st.tlo if k == 2 else 0.0)) - vals[a][0] * unit
 
-    def _g10(self, vals, lineno, col) -> None:
+    def _g10(self, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
         L = int(vals["L"][0]) if "L" in vals else None
         if L in (1, 10, 11):
@@ -970,7 +1010,7 @@ class Interpreter:
                             lineno, col, hint=f"give --offset {name}=X..,Y..,Z..")
         self.program_offsets[name] = new
 
-    def _g10_tool(self, L: int, vals, lineno, col) -> None:
+    def _g10_tool(self, L: int, vals: Vals, lineno: int, col: int) -> None:
         """G10 L1/L10/L11 P<tool> Z..: write a tool length (used by later G43)."""
         st = self.state
         if "P" not in vals:
@@ -989,13 +1029,14 @@ class Interpreter:
             w = self._work_offset(lineno, col)
             self.tool_lengths[tool] = st.pos[2] - w[2] - st.g92[2] - z
         else:
-            w = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
-            if w is None:
+            g593 = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
+            if g593 is None:
                 raise self._err(MissingSetupError, "G10 L11 uses the work offset G59.3, whose value was not given",
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
-            self.tool_lengths[tool] = st.pos[2] - w[2] - z
+            self.tool_lengths[tool] = st.pos[2] - g593[2] - z
 
-    def _arc(self, lineno, words, vals, q0, q1, shift, unit, gcodes) -> Arc:
+    def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
+             q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
         st = self.state
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
         col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
@@ -1075,7 +1116,7 @@ class Interpreter:
             r_idx = -1
         center = [0.0, 0.0, 0.0]
         center[a1], center[a2], center[an] = c1, c2, q0[an]
-        return Arc(tuple(center), st.plane, clockwise, turns, idx, r_idx)
+        return Arc((center[0], center[1], center[2]), st.plane, clockwise, turns, idx, r_idx)
 
 
 @dataclass(slots=True)
@@ -1239,7 +1280,7 @@ for _keys, _handler in (
         _G_HANDLERS[_key] = _handler
 
 
-def spline_points(ctrl, s) -> np.ndarray:
+def spline_points(ctrl: npt.ArrayLike, s: npt.ArrayLike) -> np.ndarray:
     """Points (k, 2) of a Bezier curve with control points ``ctrl`` at parameters ``s``."""
     s = np.asarray(s, dtype=float)[:, None]
     c = np.asarray(ctrl, dtype=float)
@@ -1248,7 +1289,7 @@ def spline_points(ctrl, s) -> np.ndarray:
     return (1 - s) ** 3 * c[0] + 3 * (1 - s) ** 2 * s * c[1] + 3 * (1 - s) * s ** 2 * c[2] + s ** 3 * c[3]
 
 
-def spline_samples(ctrl, chord_mm: float) -> np.ndarray:
+def spline_samples(ctrl: npt.ArrayLike, chord_mm: float) -> np.ndarray:
     """Parameters along a spline whose chords stay within ``chord_mm`` of it (from the
     bound on the second derivative: error <= max|B''| h^2 / 8)."""
     c = np.asarray(ctrl, dtype=float)
@@ -1264,7 +1305,7 @@ def spline_samples(ctrl, chord_mm: float) -> np.ndarray:
 SPLINE_SAMPLE_MM = 1e-4
 
 
-def plain_moves(mv: Move):
+def plain_moves(mv: Move) -> Iterator[Move]:
     """The straight and arc moves a Move stands for, in order: a cycle block's rapids
     and feeds, a G28/G30 line's two legs, or the move itself."""
     if mv.cycle is not None:
@@ -1286,17 +1327,18 @@ def plain_moves(mv: Move):
                        (-1, -1, -1), -1, False, mv.feed, mv.rotary)
             q0 = q
         return
-    while mv is not None:
-        if not (mv.fixed and any(math.isnan(v) for v in mv.q1)):  # an unknown stored position
-            yield mv
-        mv = mv.then
+    leg: Move | None = mv
+    while leg is not None:
+        if not (leg.fixed and any(math.isnan(v) for v in leg.q1)):  # an unknown stored position
+            yield leg
+        leg = leg.then
 
 
-def col_of_word(words, i: int) -> int:
+def col_of_word(words: list[lexer.Word], i: int) -> int:
     return words[i][4] + 1
 
 
-def _offset_tuple(v, partial: bool = False) -> tuple[float, float, float]:
+def _offset_tuple(v: dict | Iterable[float], partial: bool = False) -> tuple[float, float, float]:
     if isinstance(v, dict):
         d = NAN if partial else 0.0
         up = {str(k).upper(): x for k, x in v.items()}
@@ -1307,7 +1349,7 @@ def _offset_tuple(v, partial: bool = False) -> tuple[float, float, float]:
     return t
 
 
-def start_position(start) -> list[float]:
+def start_position(start: dict | Iterable[float] | None) -> list[float]:
     """Machine gauge position at program start: ``{"X":.., "Z":..}`` (any subset) or
     (x, y, z); NaN for an axis not given."""
     if not start:

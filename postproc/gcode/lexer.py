@@ -103,6 +103,8 @@ def lex(text: str, path: str | None = None, lineno: int = 1) -> list[Token]:
                 hint="non-ASCII text and control characters may appear only inside comments",
             )
         kind = m.lastgroup
+        if kind is None:  # every alternative of _MASTER is a named group
+            raise AssertionError(f"token without a kind at {pos} in {text!r}")
         tokens.append(Token(kind, m.group(), lineno, pos - line_start + 1))
         pos = m.end()
         if kind == NEWLINE:
@@ -144,7 +146,7 @@ def scan_words(line: str) -> list[Word] | None:
     """
     if _FAST_LINE.fullmatch(line) is None:
         return None
-    out = []
+    out: list[Word] = []
     pos = 0
     for ws1, letter, ws2, num in _WORD_RUN.findall(line):
         lpos = pos + len(ws1)
@@ -156,7 +158,7 @@ def scan_words(line: str) -> list[Word] | None:
 
 def words_from_tokens(tokens: list[Token]) -> list[Word]:
     """The same list as :func:`scan_words`, from :func:`lex` tokens of one line."""
-    out = []
+    out: list[Word] = []
     for t in tokens:
         if t.kind == WORD:
             start = t.col - 1 + t.number_offset
