@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 from hypothesis import strategies as st
-from scipy.spatial import cKDTree
 
 from postproc.calibration.measurements import Measurements
 from postproc.engine.static import StaticEngine
@@ -19,6 +18,7 @@ from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 from postproc.gcode.state import PLANES
 from postproc.simulate.verify import Polyline
+from postproc.simulate.verify import polyline_distance as verify_polyline_distance
 
 ROOT = Path(__file__).parents[1]
 SAMPLES = ROOT / "samples"
@@ -180,43 +180,9 @@ def other_line(draw):
 
 # -- how far a corrected program lands from the nominal path -----------------------
 def polyline_distance(points: np.ndarray, poly: np.ndarray, step: float = 0.05) -> np.ndarray:
-    """Distance from each point to the polyline through ``poly`` (exact).
-
-    Segments longer than ``step`` are split, so the nearest point of the polyline lies
-    within half a piece of a vertex: every piece that can hold it has a vertex within
-    (best distance found so far + half a piece) of the point. The nearest vertices are
-    searched until the farthest of them is beyond that bound."""
-    points = np.asarray(points, dtype=float)
-    poly = np.asarray(poly, dtype=float)
-    if len(poly) == 1:
-        return np.linalg.norm(points - poly[0], axis=1)
-    seg = np.diff(poly, axis=0)
-    length = np.linalg.norm(seg, axis=1)
-    pieces = np.maximum(1, np.ceil(length / step)).astype(int)
-    owner = np.repeat(np.arange(len(seg)), pieces)
-    j = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-    dense = np.vstack([poly[owner] + seg[owner] * (j / pieces[owner])[:, None], poly[-1:]])
-    half_piece = 0.5 * float((length / pieces).max())
-    tree = cKDTree(dense)
-    best = np.full(len(points), np.inf)
-    todo = np.arange(len(points))
-    k = 8
-    while len(todo):
-        k = min(k, len(dense))
-        dist, idx = tree.query(points[todo], k=k)
-        dist, idx = dist.reshape(len(todo), k), idx.reshape(len(todo), k)
-        p = points[todo]
-        for col in range(k):
-            for shift in (0, -1):
-                i0 = np.clip(idx[:, col] + shift, 0, len(dense) - 2)
-                a, ab = dense[i0], dense[i0 + 1] - dense[i0]
-                denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-30)
-                t = np.clip(np.einsum("ij,ij->i", p - a, ab) / denom, 0.0, 1.0)
-                best[todo] = np.minimum(best[todo], np.linalg.norm(p - (a + t[:, None] * ab), axis=1))
-        done = (dist[:, -1] > best[todo] + half_piece) | (k == len(dense))
-        todo = todo[~done]
-        k *= 4
-    return best
+    """Distance from each point to the polyline through ``poly`` (exact; the package's
+    own, indexed by pieces of at most ``step``)."""
+    return verify_polyline_distance(points, poly, piece_mm=step)
 
 
 def first_known_line(text: str, setup: Setup) -> int:

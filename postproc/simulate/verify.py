@@ -62,8 +62,6 @@ RUN_STEP_MM = 0.5
 
 #: How many of the worst program lines a report lists.
 WORST_LINES = 5
-# Widens the ball query by rounding only, so that a segment exactly at the bound is found.
-BALL_QUERY_GUARD_MM = 1e-12
 
 
 def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -108,34 +106,44 @@ class Polyline:
 
         Exact: a piece whose midpoint is at distance m from p is at least m - h from it
         (h: half the longest piece). The pieces of the K nearest midpoints are measured;
-        where the K-th midpoint is not far enough to rule out all others, every
-        midpoint within (best distance) + h is measured instead.
+        a point whose K-th midpoint is not far enough to rule out all others is asked
+        again with four times as many (overlapping passes put many pieces near a point).
         """
         p = np.asarray(p, dtype=float)
         if len(p) > QUERY_CHUNK:
             parts = [self.nearest(p[i:i + QUERY_CHUNK]) for i in range(0, len(p), QUERY_CHUNK)]
             return np.concatenate([d for d, _ in parts]), np.concatenate([s for _, s in parts])
-        k = min(NEAREST_K, len(self.a))
-        dk, ik = self.tree.query(p, k=k, workers=QUERY_WORKERS)
-        dk, ik = dk.reshape(len(p), k), ik.reshape(len(p), k)
-        dist = point_segment_distance(np.repeat(p, k, axis=0), self.a[ik.ravel()],
-                                      self.b[ik.ravel()]).reshape(len(p), k)
-        j = np.argmin(dist, axis=1)
-        rows = np.arange(len(p))
-        best, seg = dist[rows, j], ik[rows, j]
-        unsure = np.flatnonzero((dk[:, -1] - self.half_len < best) & (k < len(self.a)))
-        if len(unsure):
-            cand = self.tree.query_ball_point(p[unsure], best[unsure] + self.half_len + BALL_QUERY_GUARD_MM)
-            counts = np.fromiter((len(c) for c in cand), dtype=int, count=len(unsure))
-            r = np.repeat(np.arange(len(unsure)), counts)
-            segs = np.fromiter((x for c in cand for x in c), dtype=int, count=int(counts.sum()))
-            d = point_segment_distance(p[unsure][r], self.a[segs], self.b[segs])
-            order = np.lexsort((d, r))
-            first = order[np.r_[0, np.cumsum(counts)[:-1]]]
-            better = d[first] < best[unsure]
-            best[unsure[better]] = d[first][better]
-            seg[unsure[better]] = segs[first][better]
+        best = np.full(len(p), np.inf)
+        seg = np.zeros(len(p), dtype=int)
+        todo = np.arange(len(p))
+        n = len(self.a)
+        k = NEAREST_K
+        while len(todo):
+            k = min(k, n)
+            q = p[todo]
+            # threads only pay on large queries (the later, unsure ones are few)
+            dk, ik = self.tree.query(q, k=k, workers=QUERY_WORKERS if len(q) * k > 200_000 else 1)
+            dk, ik = dk.reshape(len(todo), k), ik.reshape(len(todo), k)
+            dist = point_segment_distance(np.repeat(q, k, axis=0), self.a[ik.ravel()],
+                                          self.b[ik.ravel()]).reshape(len(todo), k)
+            j = np.argmin(dist, axis=1)
+            rows = np.arange(len(todo))
+            better = dist[rows, j] < best[todo]
+            best[todo[better]] = dist[rows, j][better]
+            seg[todo[better]] = ik[rows, j][better]
+            sure = (dk[:, -1] - self.half_len >= best[todo]) | (k == n)
+            todo = todo[~sure]
+            k *= 4
         return best, self.index[seg]
+
+
+def polyline_distance(points, poly, piece_mm: float = INDEX_PIECE_MM) -> np.ndarray:
+    """Distance (N,) of each point from the polyline through ``poly`` (exact)."""
+    poly = np.asarray(poly, dtype=float)
+    points = np.asarray(points, dtype=float)
+    if len(poly) == 1:
+        return np.linalg.norm(points - poly[0], axis=1)
+    return Polyline(poly, piece_mm=piece_mm).nearest(points)[0]
 
 
 def _max(d: np.ndarray) -> float:
