@@ -1,24 +1,36 @@
-"""The bulk lane: runs of plain absolute straight moves read and rewritten per chunk.
+"""The bulk lane: runs of plain absolute moves read and rewritten per chunk.
 
-Most lines of CAM output are ``[N..] [G0|G1] [X..] [Y..] [Z..] [F..]`` in that order.
-A chunk of lines is matched by one regular expression (one ``findall`` over the
-chunk's text), which splits every such line into its pieces: the text before the
-first axis word, each axis word's letter (with the blanks before it) and number,
-and the rest (feed word, trailing blanks, ``\\r``). The numbers of the whole chunk
-are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
-state is simple (:func:`state_allows`) form a :class:`Run`: reading one only
-advances the modal state to its last line; the nominal targets of all the chunk's
-runs are then made at once (positions carried forward where a line does not name
-an axis).
+Most lines of CAM output are ``[N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I..] [J..] [F..]``
+in that order. A chunk of lines is matched by one regular expression (one ``findall``
+over the chunk's text), which splits every such line into its pieces: the text before
+the first axis word, each axis and centre word's letter (with the blanks before it) and
+number, and the rest (feed word, trailing blanks, ``\\r``). The numbers of the whole
+chunk are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
+state is simple (:func:`state_allows`) form a :class:`Run`: reading one only advances
+the modal state to its last line; the nominal targets of all the chunk's runs are then
+made at once (positions carried forward where a line does not name an axis).
 
-After the chunk's targets are corrected, the comparisons of old and new values of
-every run line are vectorised and the new numbers formatted in one operation; each
-run is then written in program order by joining its lines' pieces. Only the words
-an axis does not name but whose corrected position moves (squareness) need a
-sequential pass, because whether one is written depends on the position the words
-before it reached. The result is byte for byte that of the general path (tests run both on the same
-programs); every line that
-is not plain, and every line of a chunk with lone ``\\r`` line endings, takes those.
+A run holds three kinds of lines:
+
+- straight moves (G0/G1, or no motion word under G0/G1);
+- arcs in the XY plane with centre words (G2/G3 with I and/or J): their centre is found
+  from the run's columns, and the controller's checks the interpreter makes (zero
+  radius, end radius) end the run before an arc that fails them, so the interpreter
+  reads and reports it. A line with no motion word after an arc is an arc (modal) and
+  never plain;
+- lines that move nothing (blank, one comment, S and M3-M9 words: :data:`_NEUTRAL`):
+  written whole, no move, no word added; a run never starts with one.
+
+After the chunk's targets are corrected, the comparisons of old and new values of every
+run line are vectorised and the new numbers formatted in one operation; each run is then
+written in program order by joining its lines' pieces. The words an axis does not name
+but whose corrected position moves (squareness) need a sequential pass, because whether
+one is written depends on the position the words before it reached; so do an arc's
+centre words, which the planner's :class:`postproc.gcode.vplan.ArcHint` gives for the
+end points as written. A line the planner splits, and an arc whose hint does not hold
+there, are written by the general emitter between the run's pieces. The result is byte
+for byte that of the general path (tests run both on the same programs); every line
+that is not plain, and every line of a chunk with lone ``\\r`` line endings, takes it.
 """
 
 from __future__ import annotations
