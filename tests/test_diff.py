@@ -58,6 +58,58 @@ def test_diff_per_axis_statistics():
     assert stats["X"]["max_mm"] > 0.03  # r_O1 x = 35 um dominates
 
 
+def test_diff_keeping_only_the_largest_blocks_reports_what_keeping_all_does():
+    """With ``keep``, memory holds the largest blocks only (pruned many times here); the
+    largest blocks, ties in the original's order, and the per-axis figures are the same."""
+    from postproc.gcode.compare import DiffReport
+
+    rng = np.random.default_rng(20261126)
+    full, kept = DiffReport("a", "b"), DiffReport("a", "b", keep=15)
+    line = 1
+    for size in rng.integers(1, 30_000, size=40):
+        deltas = np.round(rng.normal(0.0, 0.05, size=(size, 3)), 4)  # rounded: many equal sizes
+        deltas[rng.integers(0, size, size=3)] = [0.2, -0.1, 0.0]  # ties among the largest
+        linenos = np.arange(line, line + size)
+        line += size
+        for rep in (full, kept):
+            if size % 7 == 0:  # one at a time, as the slow pairing adds them
+                for a, d in zip(linenos.tolist(), deltas.tolist(), strict=True):
+                    rep.add_moved(a, a + 5, d)
+            else:
+                rep.add_moved_rows(linenos, linenos + 5, deltas)
+    assert kept.n_moved == full.n_moved == line - 1
+    assert len(kept._lines) <= max(8 * 15, 65_536) + 30_000
+    assert kept.largest(15) == full.largest(15)
+    assert kept.largest(3) == full.largest(3)
+    stats, exact = kept.axis_stats(), full.axis_stats()
+    for a in "XYZ":
+        assert stats[a]["max_mm"] == exact[a]["max_mm"]
+        assert stats[a]["mean_mm"] == pytest.approx(exact[a]["mean_mm"], rel=1e-12)
+    with pytest.raises(ValueError, match="15 largest"):
+        kept.moved  # noqa: B018
+    with pytest.raises(ValueError, match="15 largest"):
+        kept.largest(16)
+
+
+def test_cli_diff_text_report_equals_the_full_comparison(tmp_path):
+    """The text report keeps only the blocks it lists; its figures are those of --json."""
+    cal = load_calibration(CASES / "demo_static.json")
+    text = (ROOT / "samples" / "pocket.nc").read_text()
+    out, _ = correct_text(text, cal.engine, Setup())
+    (tmp_path / "o.nc").write_text(text)
+    (tmp_path / "c.nc").write_text(out)
+    args = ["diff", str(tmp_path / "o.nc"), str(tmp_path / "c.nc")]
+    short, every = CliRunner().invoke(main, args), CliRunner().invoke(main, [*args, "--all"])
+    assert short.exit_code == every.exit_code == 0, short.output + every.output
+    full = compare_programs(text, out)
+    listed = [line for line in short.output.splitlines() if line.strip().startswith("line ")]
+    assert len(listed) == min(15, full.n_moved)
+    for m, row in zip(full.largest(15), listed, strict=True):
+        assert row.split(":")[0].split() == ["line", str(m.lineno), "->", str(m.lineno_corrected)]
+    per_axis = [line for line in short.output.splitlines() if "correction per axis" in line]
+    assert per_axis == [line for line in every.output.splitlines() if "correction per axis" in line]
+
+
 def test_cli_diff_text_and_json(tmp_path):
     out = tmp_path / "o.nc"
     r = CliRunner().invoke(main, ["correct", str(CASES / "arcs_linearised.nc"), "-c",

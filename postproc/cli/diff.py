@@ -48,7 +48,10 @@ def diff(original, corrected, as_json, show_all, setup):
         if os.path.getsize(original) > PROGRESS_MIN_BYTES:
             progress = _progress_printer(original)
     try:
-        rep = compare_programs(original, corrected, setup, progress=progress)
+        # the text report lists the largest moved blocks only: keep just those (memory
+        # then does not grow with the program); --all and --json list every one
+        keep = None if (as_json or show_all) else LIST_MOVED
+        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep)
     finally:
         if progress is not None:
             click.echo("", err=True)

@@ -14,7 +14,7 @@ G53 blocks, whose words are machine coordinates. Offsets and tool lengths neithe
 nor recorded count as zero.
 
 Both programs are read in chunks of lines, and memory does not grow with their length
-(apart from the compact list of moved blocks). In a chunk, the stretches of plain
+(apart from the compact list of moved blocks, unless only the largest are kept). In a chunk, the stretches of plain
 absolute moves (N, G0 to G3, X/Y/Z, I/J/K/R and F words only, in a simple modal state)
 and of lines that change nothing (S, M3, M8 and the like, comments) are read as columns:
 a move's end point is its words, carried forward where a line does not name an axis.
@@ -91,42 +91,94 @@ class DiffReport:
     lines_inserted: int = 0
     moves: int = 0
     moves_unchanged: int = 0
+    # Moved blocks kept: all of them (None), or only the ``keep`` largest, so that memory
+    # does not grow with the program (the per-axis figures still count every block).
+    keep: int | None = None
     # moved blocks, stored compactly: original line, corrected line, dX, dY, dZ
     _lines: array = field(default_factory=lambda: array("q"))
     _clines: array = field(default_factory=lambda: array("q"))
     _deltas: array = field(default_factory=lambda: array("d"))
+    # with ``keep``: every moved block's count, largest and summed |delta| per axis
+    _n_moved: int = 0
+    _abs_max: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    _abs_sum: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
     def add_moved(self, lineno: int, clineno: int, delta) -> None:
         self._lines.append(lineno)
         self._clines.append(clineno)
         self._deltas.extend(delta)
+        self._n_moved += 1
+        if self.keep is not None:
+            for k in range(3):
+                a = abs(delta[k])
+                self._abs_sum[k] += a
+                if a > self._abs_max[k]:
+                    self._abs_max[k] = a
+            self._prune()
 
     def add_moved_rows(self, linenos: np.ndarray, clinenos: np.ndarray, deltas: np.ndarray) -> None:
         """Many moved blocks at once (arrays of line numbers and an (n, 3) array of deltas)."""
         self._lines.frombytes(np.ascontiguousarray(linenos, dtype=np.int64).tobytes())
         self._clines.frombytes(np.ascontiguousarray(clinenos, dtype=np.int64).tobytes())
         self._deltas.frombytes(np.ascontiguousarray(deltas, dtype=np.float64).tobytes())
+        self._n_moved += len(linenos)
+        if self.keep is not None and len(linenos):
+            a = np.abs(np.asarray(deltas, dtype=float).reshape(-1, 3))
+            for k, (mx, sm) in enumerate(zip(a.max(axis=0).tolist(), a.sum(axis=0).tolist(), strict=True)):
+                self._abs_sum[k] += sm
+                if mx > self._abs_max[k]:
+                    self._abs_max[k] = mx
+            self._prune()
+
+    def _prune(self) -> None:
+        """With ``keep``: once many are stored, drop all but the ``keep`` largest (in the
+        order :meth:`largest` gives: size, then the order they came in)."""
+        keep = self.keep
+        assert keep is not None
+        if len(self._lines) <= max(8 * keep, 65_536):
+            return
+        order = np.sort(self._largest_order(keep))
+        lines = np.frombuffer(self._lines, dtype=np.int64)[order]
+        clines = np.frombuffer(self._clines, dtype=np.int64)[order]
+        deltas = self._delta_array()[order]
+        self._lines, self._clines, self._deltas = array("q"), array("q"), array("d")
+        self._lines.frombytes(lines.tobytes())
+        self._clines.frombytes(clines.tobytes())
+        self._deltas.frombytes(np.ascontiguousarray(deltas).tobytes())
 
     @property
     def n_moved(self) -> int:
-        return len(self._lines)
+        return self._n_moved
 
     def _delta_array(self) -> np.ndarray:
         return np.frombuffer(self._deltas, dtype=float).reshape(-1, 3) if self._lines else np.zeros((0, 3))
 
+    def _largest_order(self, n: int) -> np.ndarray:
+        return np.argsort(-np.linalg.norm(self._delta_array(), axis=1), kind="stable")[:n]
+
     @property
     def moved(self) -> list[MovedBlock]:
+        """Every moved block, in the original's order (not with ``keep``: see :meth:`largest`)."""
+        if self.keep is not None and len(self._lines) < self._n_moved:
+            raise ValueError(f"only the {self.keep} largest moved blocks were kept (DiffReport.keep)")
         d = self._delta_array()
         return [MovedBlock(int(a), int(b), (float(x), float(y), float(z)))
                 for a, b, (x, y, z) in zip(self._lines, self._clines, d.tolist(), strict=True)]
 
     def largest(self, n: int) -> list[MovedBlock]:
+        """The ``n`` largest moved blocks, largest first (equal ones in the original's order)."""
+        if self.keep is not None and n > self.keep:
+            raise ValueError(f"only the {self.keep} largest moved blocks were kept (DiffReport.keep)")
         d = self._delta_array()
-        order = np.argsort(-np.linalg.norm(d, axis=1), kind="stable")[:n]
+        order = self._largest_order(n)
         return [MovedBlock(self._lines[i], self._clines[i], (x, y, z))
                 for i, (x, y, z) in zip(order.tolist(), d[order].tolist(), strict=True)]
 
     def axis_stats(self) -> dict:
+        if self.keep is not None:
+            n = self._n_moved
+            return {a: {"max_mm": self._abs_max[k] if n else 0.0, "mean_mm": self._abs_sum[k] / n if n else 0.0}
+                    for k, a in enumerate("XYZ")}
         d = np.abs(self._delta_array())
         if not len(d):
             return {a: {"max_mm": 0.0, "mean_mm": 0.0} for a in "XYZ"}
@@ -872,11 +924,13 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
     return delta
 
 
-def compare_programs(original, corrected, setup: Setup | None = None, progress=None) -> DiffReport:
+def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
+                     keep: int | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
-    compact list of moved blocks). ``setup`` gives work offsets and tool lengths
+    compact list of moved blocks, 40 bytes each; with ``keep``, only the ``keep``
+    largest are kept and memory is bounded). ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates. ``progress(n)``, if given, is called with the number of
     lines of the original read so far, after each chunk.
@@ -886,13 +940,13 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress)
+        return _compare(original, corrected, setup, progress, keep)
     finally:
         if was_enabled:
             gc.enable()
 
 
-def _compare(original, corrected, setup: Setup | None, progress) -> DiffReport:
+def _compare(original, corrected, setup: Setup | None, progress, keep: int | None) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     setup = setup_from_header(corrected, setup)
@@ -900,7 +954,7 @@ def _compare(original, corrected, setup: Setup | None, progress) -> DiffReport:
     o_reader = _Reader(original, setup, keys)
     c_reader = _Reader(corrected, setup, keys, drop_header=True)
     orig, corr = _Tape(o_reader.chunks()), _Tape(c_reader.chunks())
-    rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"))
+    rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep)
     last_delta = (0.0, 0.0, 0.0)
     slow = 0
     window = CHUNK_LINES
