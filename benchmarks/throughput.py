@@ -12,7 +12,8 @@ input lines per second and the child's peak RSS (the largest of the runs):
   (e) ``postproc diff ORIGINAL CORRECTED`` (the output of (c));
   (f) ``postproc --help``;
   (g) a 20-line program corrected with the parametric calibration, end to end;
-  (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once).
+  (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once);
+  (n) ``postproc diff`` of (m)'s input and output: peak RSS (once).
 
 (c), (d) and (e) are also given as ratios of (a)'s and (b)'s rates, and each figure
 that has a target in issue 13 is printed beside it with PASS or FAIL.
@@ -119,7 +120,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=1_000_000, help="lines of the speed program [1,000,000]")
     ap.add_argument("--memory-lines", type=int, default=5_000_000,
-                    help="lines of the program whose static correction gives the peak RSS (0: skip) [5,000,000]")
+                    help="lines of the program whose static correction and diff give the peak RSS (0: skip) "
+                         "[5,000,000]")
     ap.add_argument("--repeats", type=int, default=3, help="runs of each case; the median is printed [3]")
     ap.add_argument("--seed", type=int, default=42, help="gencam.py seed [42]")
     ap.add_argument("--json", dest="json_out", default=None, help="also save the figures to this JSON file")
@@ -188,6 +190,13 @@ def main() -> None:
             r["lines_per_s"] = nm / r["seconds"]
             figures["cases"]["memory"] = r
             print(f"{f'(m) correct static, {nm:,} lines':38s} {r['lines_per_s']:11,.0f} lines/s  "
+                  f"{r['seconds']:7.2f} s  peak RSS {r['peak_mb']:6.1f} MB  " + verdict("rss", r["peak_mb"]),
+                  flush=True)
+            r = measure([*cli, "diff", str(big), str(tmp / "memory_out.nc")], 1, log)
+            r["lines"] = nm
+            r["lines_per_s"] = nm / r["seconds"]
+            figures["cases"]["memory_diff"] = r
+            print(f"{f'(n) diff of (m), {nm:,} lines':38s} {r['lines_per_s']:11,.0f} lines/s  "
                   f"{r['seconds']:7.2f} s  peak RSS {r['peak_mb']:6.1f} MB  " + verdict("rss", r["peak_mb"]),
                   flush=True)
     if args.json_out:
