@@ -178,6 +178,8 @@ def _gkey(text: str) -> int:
 
 
 _COMMENTS = re.compile(r"\([^)]*\)?|;.*")
+# tokens of a line that carry no word
+_BLANK_KINDS = frozenset((lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE))
 _OWORD = re.compile(r"^\s*/?\s*(?:N\s*\d+\s*)?O\s*(?:\d+|<[^>]*>)\s*([A-Z]+)?")
 _MACRO_KEYWORDS = re.compile(r"\b(IF|WHILE|GOTO|END|DO)\s*[\[\d]|\bGOTO")
 _ASSIGN = re.compile(r"#\s*(?:\d+|<[^>]*>|\[)[^=]*=")
@@ -394,44 +396,55 @@ class Interpreter:
                                 tok.col,
                                 hint="O words other than a program number are expanded only when their "
                                      "subroutine is in the program or on --subroutine-path")
+        return self._plain_words(tokens, line, lineno)
+
+    def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
+        """The words of a lexed line and whether it starts with '/' (block delete);
+        anything else than words, blanks and comments is refused."""
         words = []
         block_delete = False
         seen_content = False
         for tok in tokens:
             kind = tok.kind
-            if kind in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE):
-                pass
-            elif kind == lexer.PERCENT:
-                if seen_content or any(t.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL, lexer.NUMBER) for t in tokens):
-                    raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
+            if kind == lexer.WORD:
+                seen_content = True
+                start = tok.col - 1 + tok.number_offset
+                num = tok.number_text
+                words.append((tok.letter, num, start, start + len(num), tok.col - 1))
             elif kind == lexer.SLASH:
                 if seen_content:
                     raise self._err(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
                                     lineno, tok.col)
                 block_delete = True
-            elif kind == lexer.OPEN_COMMENT:
-                raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
-                                hint="add the closing ')'")
-            elif kind == lexer.WORD:
-                seen_content = True
-                start = tok.col - 1 + tok.number_offset
-                num = tok.number_text
-                words.append((tok.letter, num, start, start + len(num), tok.col - 1))
-            elif kind == lexer.LETTER:
-                what, hint = classify_construct(line)
-                if what:
-                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-                raise self._err(UnsupportedGcodeError,
-                                f"word {tok.letter} without a plain number (macro, expression or parameter)",
-                                lineno, tok.col, hint="expand macros and expressions before correcting")
-            elif kind == lexer.SYMBOL:
-                what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
-                if what:
-                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-                raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
-            elif kind == lexer.NUMBER:
-                raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
+            elif kind not in _BLANK_KINDS:
+                self._refuse_token(tok, tokens, seen_content, line, lineno)
         return words, block_delete
+
+    def _refuse_token(self, tok: lexer.Token, tokens: list[lexer.Token], seen_content: bool, line: str,
+                      lineno: int) -> None:
+        """Raise the error for a token that is not a word, blank, comment or '/' (a '%'
+        standing alone on its line passes)."""
+        kind = tok.kind
+        if kind == lexer.PERCENT:
+            if seen_content or any(t.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL, lexer.NUMBER) for t in tokens):
+                raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
+        elif kind == lexer.OPEN_COMMENT:
+            raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
+                            hint="add the closing ')'")
+        elif kind == lexer.LETTER:
+            what, hint = classify_construct(line)
+            if what:
+                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
+            raise self._err(UnsupportedGcodeError,
+                            f"word {tok.letter} without a plain number (macro, expression or parameter)",
+                            lineno, tok.col, hint="expand macros and expressions before correcting")
+        elif kind == lexer.SYMBOL:
+            what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
+            if what:
+                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
+            raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
+        elif kind == lexer.NUMBER:
+            raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
 
     def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
                block_delete: bool) -> Move | None:
