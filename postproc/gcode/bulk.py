@@ -39,7 +39,7 @@ import math
 import re
 from bisect import bisect_left
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import TYPE_CHECKING, Protocol, TypeAlias, final
+from typing import Protocol, TypeAlias, final
 
 import numpy as np
 
@@ -50,9 +50,6 @@ from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, ArcSpec, BoolArray, FloatArray, IntArray, Plan
-
-if TYPE_CHECKING:
-    from postproc.gcode.pipeline import CorrectOptions, CorrectReport
 
 _N = NUMBER_RE
 # Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks
@@ -86,6 +83,23 @@ Point: TypeAlias = tuple[float, float, float]
 RunArc: TypeAlias = tuple[Point, bool]
 
 
+class _Report(Protocol):
+    """The counts the bulk writer adds to (:class:`postproc.gcode.pipeline.CorrectReport`)."""
+
+    lines_out: int
+    moves: int
+    words_changed: int
+    lines_changed: int
+    arcs_kept: int
+
+
+class _Options(Protocol):
+    """The option the bulk writer reads (:class:`postproc.gcode.pipeline.CorrectOptions`)."""
+
+    @property
+    def tolerance_mm(self) -> float: ...
+
+
 class Corrector(Protocol):
     """What the bulk writer uses of :class:`postproc.gcode.pipeline.Corrector`: the
     emitted position and motion, the report, the options and the general emitter."""
@@ -95,9 +109,9 @@ class Corrector(Protocol):
     @property
     def qe(self) -> list[float]: ...
     @property
-    def report(self) -> CorrectReport: ...
+    def report(self) -> _Report: ...
     @property
-    def opt(self) -> CorrectOptions: ...
+    def opt(self) -> _Options: ...
 
     def _emit_move(self, line: str, mv: Move, target: list[float], plan: Plan | None, write: Write) -> None: ...
 
