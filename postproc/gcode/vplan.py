@@ -278,9 +278,10 @@ def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
     return owner, pos, starts
 
 
-def _group_max(values: FloatArray, starts: IntArray, n: IntArray) -> FloatArray:
-    """Largest value of each group of a ragged array (every group non-empty)."""
-    return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(n))
+def _group_max(values: FloatArray, starts: IntArray) -> FloatArray:
+    """Largest value of each group of a ragged array (every group non-empty; ``starts``:
+    the first slot of each)."""
+    return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(starts))
 
 
 def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray, step_mm: float,
@@ -323,7 +324,7 @@ def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray,
         worst = np.zeros(len(rows))
         some = n > 2
         if some.any():
-            worst[some] = _group_max(dist, start[some], (n - 2)[some])
+            worst[some] = _group_max(dist, start[some])
         return settled | (worst <= limit - between) | ~np.isfinite(S[rows]).all(axis=1)
 
     return r, nom, check
