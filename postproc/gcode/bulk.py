@@ -38,15 +38,18 @@ from __future__ import annotations
 import math
 import re
 from bisect import bisect_left
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Protocol, TypeAlias, final
 
 import numpy as np
 
 from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer
 from postproc.gcode.emitter import FIT_BUDGET
-from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Move
+from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
+from postproc.gcode.vplan import ArcHint, ArcSpec, BoolArray, FloatArray, IntArray, Plan
 
 _N = NUMBER_RE
 # Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks
@@ -73,8 +76,52 @@ _NEUTRAL = re.compile(
     r"(?:\([^()\n]*\)[ \t]*+)?\r?\n?")
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
+#: where text is written (what it returns is ignored)
+Write: TypeAlias = Callable[[str], object]
+Point: TypeAlias = tuple[float, float, float]
+#: an arc of a run: its centre (machine mm) and whether it turns clockwise
+RunArc: TypeAlias = tuple[Point, bool]
 
-def last_index(present: np.ndarray) -> np.ndarray:
+
+class _Report(Protocol):
+    """The counts the bulk writer adds to (:class:`postproc.gcode.pipeline.CorrectReport`)."""
+
+    lines_out: int
+    moves: int
+    words_changed: int
+    lines_changed: int
+    arcs_kept: int
+
+
+class _Options(Protocol):
+    """The option the bulk writer reads (:class:`postproc.gcode.pipeline.CorrectOptions`)."""
+
+    @property
+    def tolerance_mm(self) -> float: ...
+
+
+class Corrector(Protocol):
+    """What the bulk writer uses of :class:`postproc.gcode.pipeline.Corrector`: the
+    emitted position and motion, the report, the options and the general emitter."""
+
+    emitted_motion: int | None
+
+    @property
+    def qe(self) -> list[float]: ...
+    @property
+    def report(self) -> _Report: ...
+    @property
+    def opt(self) -> _Options: ...
+
+    def _emit_move(self, line: str, mv: Move, target: list[float], plan: Plan | None, write: Write) -> None: ...
+
+    def _emit_hinted_arc(self, line: str, mv: Move, target: list[float], hint: ArcHint, write: Write) -> None: ...
+
+    # mv: what emitter.py declares; the bulk writer passes an ArcMove (_ArcView), all it reads
+    def _hint_is_sound(self, mv: Move, spec: ArcSpec, S: Sequence[float], E: Sequence[float]) -> bool: ...
+
+
+def last_index(present: BoolArray) -> IntArray:
     """For each row, the index of the last present row at or before it (-1: none)."""
     idx = np.where(present, np.arange(len(present)), -1)
     np.maximum.accumulate(idx, out=idx)
@@ -85,14 +132,12 @@ class RunMove:
     """A line of a run as a move, for the general emitter (a line the planner splits, or
     one whose motion word the controller needs written)."""
 
-    __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "spans", "motion_word", "rotary",
-                 "arc", "arc_absolute", "feed", "missing")
+    __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "rotary", "arc", "arc_absolute", "feed")
     fixed = False  # never a stored-position move
-    then = None
-    cycle = None
-    probe = 0
+    planned = False  # never a spline's chord
 
-    def __init__(self, lineno, kind, q0, q1, r, shift, unit, spans, motion_word, arc_absolute, feed, missing):
+    def __init__(self, lineno: int, kind: int, q0: Point, q1: Point, r: Point, shift: Point, unit: float,
+                 arc_absolute: bool, feed: float) -> None:
         self.lineno = lineno
         self.kind = kind
         self.q0 = q0
@@ -100,18 +145,17 @@ class RunMove:
         self.r = r
         self.shift = shift
         self.unit = unit
-        self.spans = spans  # [(start, end, axis, number_text, value), ...] in line order
-        self.motion_word = motion_word
-        self.rotary = {}
-        self.arc = None
+        self.rotary: dict[str, float] = {}
+        self.arc: Arc | None = None
         self.arc_absolute = arc_absolute
         self.feed = feed
-        self.missing = missing  # axes the line does not name
 
     def to_move(self, line: str) -> Move:
         """The general Move of the same line (a line written one by one: an arc, a line the
         planner splits, or one whose motion word the controller needs)."""
         words = lexer.scan_words(line)
+        if words is None:  # a plain line: words and blanks only
+            raise AssertionError(f"line {self.lineno} of a run is not plain: {line!r}")
         idx = [-1, -1, -1]
         centre_idx = [-1, -1]
         feed_idx = motion_idx = -1
@@ -125,20 +169,21 @@ class RunMove:
                 motion_idx = i
             elif letter in "IJ":
                 centre_idx["IJ".index(letter)] = i
-        arc, aux = self.arc, ()
+        arc = self.arc
+        aux: tuple[int, ...] = ()
         if arc is not None:
             arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (centre_idx[0], centre_idx[1]), -1)
             aux = tuple(i for i in centre_idx if i >= 0)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
-                    self.arc_absolute, words, tuple(idx), feed_idx, False, self.feed, {}, arc, [], False,
+                    self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, [], False,
                     motion_idx, aux)
 
 
-def prime_shift(interp) -> bool:
+def prime_shift(interp: Interpreter) -> bool:
     """Compute the offsets of absolute words in the current state ; False if they cannot be (the general path then reports why)."""
     if interp._run_shift is None:
         try:
-            shift = interp.shift(False, None, None)
+            shift = interp.shift(False, 0, 0)  # no line: its error is dropped here
         except PostprocError:
             return False
         interp._run_shift = shift
@@ -146,7 +191,7 @@ def prime_shift(interp) -> bool:
     return True
 
 
-def state_allows(interp, motion_word: bool = False) -> bool:
+def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
     """Whether the modal state lets a run of plain lines start at the next line (``motion_word``:
     that line names its own G0/G1, so the modal motion does not matter)."""
     st = interp.state
@@ -158,12 +203,17 @@ def state_allows(interp, motion_word: bool = False) -> bool:
 class Block:
     """One chunk of lines split into pieces, with the plain lines' numbers parsed."""
 
-    def __init__(self, lines: list[str], found: list[tuple]) -> None:
+    def __init__(self, lines: list[str], found: list[tuple[str, ...]]) -> None:
         n = len(lines)
         self.lines = lines
-        cols = list(zip(*found, strict=True)) if n else [()] * 14
+        # the text of each group, by group (a column per group, a row per line)
+        cols: list[Sequence[str]] = list(zip(*found, strict=True)) if n else [()] * 14
         self.cols = cols
-        self.has, self.ov, self.ovl, self.frac, self.last = [], [], [], [], []
+        self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
+        self.ov: list[FloatArray] = []  # their values (0 where not named)
+        self.ovl: list[list[float]] = []
+        self.frac: list[IntArray] = []  # digits after the point of X, Y, Z
+        self.last: list[IntArray] = []  # the last line at or before each that names X, Y, Z
         for k in range(5):  # X, Y, Z, I, J
             nums = cols[_NUM[k]]
             arr = np.array(nums, dtype=str)
@@ -185,8 +235,8 @@ class Block:
         # after one is an arc too (modal), and one without centre words the
         # interpreter's: neither is plain
         self.arc = (digit == "2") | (digit == "3")
-        self.arc_rows = np.flatnonzero(self.arc).tolist()
-        self.has_l = [h.tolist() for h in self.has]
+        self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
+        self.has_l: list[list[bool]] = [h.tolist() for h in self.has]
         centre = self.has[3] | self.has[4]
         modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
@@ -201,12 +251,12 @@ class Block:
                 neutral[i] = True
                 head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
         self.neutral = neutral
-        self.neutral_rows = np.flatnonzero(neutral).tolist()
-        self.last_moving = last_index(~neutral).tolist()
+        self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
+        self.last_moving: list[int] = last_index(~neutral).tolist()
         self.plain = moving | neutral
-        self.last_g = last_g.tolist()
-        self.last_f = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
-        self.last_l = [a.tolist() for a in self.last]
+        self.last_g: list[int] = last_g.tolist()
+        self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
+        self.last_l: list[list[int]] = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
 
     def code(self, i: int) -> int:
@@ -228,22 +278,38 @@ def scan(lines: list[str]) -> Block | None:
     return Block(lines, found[:n] if len(found) > n else found)
 
 
+@final
 class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
                  "feed0", "q1", "trow", "cut", "arcs", "inert")
+    block: Block
+    a: int
+    b: int
+    lineno: int  # of line a
+    unit: float  # mm per program unit
+    shift: Point  # machine = program x unit + shift
+    r: Point  # tool vector
+    arc_absolute: bool
+    decimals: int  # of the words written
+    q0: Point  # the nominal position before the run
+    motion0: int | None  # modal motion and feed before the run
+    feed0: float
+    q1: FloatArray  # (b - a, 3) nominal targets (finish_block)
+    trow: int  # row of line a among the chunk's targets
 
     def __init__(self) -> None:
         self.cut: list[int] = []  # lines (within the run) written one by one: arcs, lines the planner splits
-        self.arcs: dict[int, tuple] = {}  # line (within the run) -> (centre (3,), clockwise) of its arc
+        self.arcs: dict[int, RunArc] = {}  # line (within the run) -> its arc
         self.inert: list[int] = []  # lines (within the run) that move nothing (blank, comment, S/M words)
 
     def __len__(self) -> int:
         return self.b - self.a
 
 
-def _arc_rows(interp, block: Block, a: int, b: int, unit: float, shift, q0) -> tuple[int, dict]:
+def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, shift: Point,
+              q0: Point) -> tuple[int, dict[int, RunArc]]:
     """The arcs among lines ``a:b``: ``(end, {line within the run: (centre, clockwise)})``,
     ``end`` the first line the run cannot take (b when it takes every line): an arc out
     of the XY plane, of zero radius, or whose end radius its controller refuses (the
@@ -261,7 +327,7 @@ def _arc_rows(interp, block: Block, a: int, b: int, unit: float, shift, q0) -> t
     gword = block.gword
     sx, sy, sz = shift[0], shift[1], shift[2]
     hyp = math.hypot
-    arcs = {}
+    arcs: dict[int, RunArc] = {}
     for y in arc_rows[lo:bisect_left(arc_rows, b, lo)]:
         # the start: where the line before left each axis (the run's start before its first word)
         p = lx[y - 1] if y > a else -1
@@ -286,7 +352,7 @@ def _arc_rows(interp, block: Block, a: int, b: int, unit: float, shift, q0) -> t
     return b, arcs
 
 
-def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run | None:
+def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run | None:
     """Interpret the plain lines ``a:b`` of ``block``, or as many of them as a run
     takes (``run.b``; None: not even the first, an arc the interpreter must read):
     advance the modal state to the end of the run. The caller checks
@@ -294,7 +360,10 @@ def read_run(interp, block: Block, a: int, b: int, lineno: int, decimals: int) -
     st = interp.state
     unit = 25.4 if st.inch else 1.0
     shift = interp._run_shift
-    q0 = tuple(st.pos)
+    if shift is None:
+        raise AssertionError("a run read before the offsets of its words are known (prime_shift)")
+    pos = st.pos
+    q0 = (pos[0], pos[1], pos[2])
     b, arcs = _arc_rows(interp, block, a, b, unit, shift, q0)
     if b == a:
         return None
@@ -354,14 +423,25 @@ def finish_block(block: Block) -> None:
         r.q1 = q[s:s + n]
 
 
-class _Emission:
-    """What the emitter needs of a block's run lines once their targets are known."""
+class Emission:
+    """What the emitter needs of a block's run lines once their targets are known (per
+    axis X, Y, Z: the lists of that axis)."""
 
     __slots__ = ("nums", "miss", "miss_t", "miss_v", "miss_text", "miss_last", "miss_seg", "edits_cum",
                  "changed_cum", "named_edits")
+    nums: list[Sequence[str]]  # by line: the number text written for the named word
+    miss: list[list[int]]  # lines that do not name the axis (inert ones aside), increasing
+    miss_t: list[list[float]]  # their corrected targets
+    miss_v: list[list[float]]  # the value a word added for it would carry
+    miss_text: list[list[str]]  # that word's text
+    miss_last: list[list[int]]  # the last line at or before each that names the axis
+    miss_seg: list[list[int]]  # where miss_last changes (indices into miss)
+    named_edits: list[int]  # by line: named words that change
+    edits_cum: list[int]  # cumulative sums of named_edits, from 0
+    changed_cum: list[int]  # cumulative count of lines with a named word that changes, from 0
 
 
-def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
+def prepare_emission(block: Block, T: FloatArray) -> Emission:
     """Vectorised part of writing the block's runs (``run.trow``: first row in T).
 
     Named words: the new number where it changes. Axes a line does not name: the
@@ -376,7 +456,7 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
     shift = np.repeat(np.array([r.shift for r in runs], dtype=float), lengths, axis=0)
     dec = np.repeat([r.decimals for r in runs], lengths)
     n = len(block.lines)
-    em = _Emission()
+    em = Emission()
     em.nums, em.miss, em.miss_t, em.miss_v, em.miss_text, em.miss_last, em.miss_seg = [], [], [], [], [], [], []
     named = np.zeros(n, dtype=int)
     for k in range(3):
@@ -410,7 +490,7 @@ def prepare_emission(block: Block, T: np.ndarray) -> _Emission:
     return em
 
 
-def _format(values: np.ndarray, dout: np.ndarray, prefix: str = "") -> list[str]:
+def _format(values: FloatArray, dout: IntArray, prefix: str = "") -> list[str]:
     """``prefix + emit.fmt(v, d)`` for every value, in bulk (grouped by number of decimals)."""
     if not np.isfinite(values).all():
         raise ValueError("cannot write a non-finite value into a program")
@@ -439,21 +519,25 @@ def _row_move(run: Run, j: int) -> RunMove:
     blk = run.block
     y = run.a + j
     motion, feed = _modal_at(run, y)
+    if blk.gword[y]:
+        motion = blk.code(y)
+    elif motion is None:  # a run's first line names its motion when none is modal
+        raise AssertionError(f"line {run.lineno + j} of a run without a motion")
     f = blk.cols[_F][y]
     q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
-    mv = RunMove(run.lineno + j, blk.code(y) if blk.gword[y] else motion, q0, tuple(run.q1[j].tolist()),
-                 run.r, run.shift, run.unit, [], bool(blk.gword[y]), run.arc_absolute,
-                 float(f) if f else feed, tuple(k for k in range(3) if not blk.has[k][y]))
+    mv = RunMove(run.lineno + j, motion, q0, tuple(run.q1[j].tolist()), run.r, run.shift, run.unit,
+                 run.arc_absolute, float(f) if f else feed)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
     return mv
 
 
-def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans) -> None:
-    """Write the corrected lines of ``run`` (targets prepared in ``em``; ``plans``: the
-    planner's, by row of T, which hold the :class:`postproc.gcode.vplan.ArcHint` of each
-    of the run's arcs)."""
+def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
+             hints: Mapping[int, ArcHint]) -> None:
+    """Write the corrected lines of ``run`` (targets prepared in ``em``; ``hints``: the
+    planner's :class:`postproc.gcode.vplan.ArcHint` of each of the run's arcs, by row
+    of T)."""
     blk = run.block
     a, b = run.a, run.b
     s = a
@@ -470,10 +554,11 @@ def emit_run(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans) ->
         corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
         s = f + 1
     while s < b:
-        s = _emit_rows(corrector, run, em, T, write, plans, s)
+        s = _emit_rows(corrector, run, em, T, write, hints, s)
 
 
-def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, s: int) -> int:
+def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
+               hints: Mapping[int, ArcHint], s: int) -> int:
     """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
     the end points as written, which the general emitter then writes; returns the
     line after the last one written."""
@@ -490,7 +575,7 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
     arc_rows.sort()
     moved = blk.last_moving
     # the written position at each arc's line and the last line before it that moves
-    want = {}
+    want: dict[int, list[float]] = {}
     for y in arc_rows:
         want[y] = [math.nan] * 3
         p = moved[y - 1] if y > s else -1
@@ -530,19 +615,19 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
                         word = texts[j].lower() if line.islower() else texts[j]
                         add_col[i - s] += sep + word
                     if want:
-                        w = want.get(i)
-                        if w is not None:
-                            w[k] = qk
+                        wi = want.get(i)
+                        if wi is not None:
+                            wi[k] = qk
         e = moved[b - 1]  # the last line that moves
         if e >= s and has[e]:
             qk = float(nums[e]) * unit + sk
         final[k] = qk
-    cols, nums = blk.cols, em.nums
+    cols, num_cols = blk.cols, em.nums
     stop = b
     arc_edit = {}  # row -> (I text, J text, edits)
     for y in arc_rows:
         p = moved[y - 1] if y > s else -1
-        ok = _arc_words(corrector, run, plans, y, want[p] if p >= s else qe0, want[y], em.named_edits[y])
+        ok = _arc_words(corrector, run, hints, y, want[p] if p >= s else qe0, want[y], em.named_edits[y])
         if ok is None:
             stop = y
             break
@@ -573,8 +658,8 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
             rep.moves -= bisect_left(run.inert, stop - a) - bisect_left(run.inert, s - a)
         i = blk.last_g[stop - 1]
         corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
-        text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], nums[0][s:stop], cols[4][s:stop],
-                                          nums[1][s:stop], cols[6][s:stop], nums[2][s:stop], add_col[:c],
+        text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], num_cols[0][s:stop], cols[4][s:stop],
+                                          num_cols[1][s:stop], cols[6][s:stop], num_cols[2][s:stop], add_col[:c],
                                           cols[8][s:stop], centre_i, cols[10][s:stop], centre_j,
                                           cols[_REST][s:stop], strict=True)))
         write(text + "\n" if lines[stop - 1].endswith("\n") else text)
@@ -590,16 +675,17 @@ def _emit_rows(corrector, run: Run, em: _Emission, T: np.ndarray, write, plans, 
     j = stop - a
     line = lines[stop]
     corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
-                               plans[run.trow + j], write)
+                               hints[run.trow + j], write)
     return stop + 1
 
 
-def _arc_words(corrector, run: Run, plans, y: int, S, E, named_edits: int):
+def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: int, S: list[float],
+               E: list[float], named_edits: int) -> tuple[str, str, int] | None:
     """The centre words of the run's arc on block line ``y`` from S to E (as written):
     ``(I text, J text, words changed)``, or None when its hint does not hold there."""
     blk = run.block
     j = y - run.a
-    hint = plans[run.trow + j]
+    hint = hints[run.trow + j]
     centre, cw = run.arcs[j]
     view = _ArcView(Arc(centre, 170, cw, 1, (-1, -1), -1), run.unit, run.arc_absolute, run.shift)
     budget = corrector.opt.tolerance_mm * FIT_BUDGET
@@ -612,7 +698,8 @@ def _arc_words(corrector, run: Run, plans, y: int, S, E, named_edits: int):
             return None
         return ti, tj, 0
     spec = hint.spec(view, S, E, run.decimals, budget)
-    if spec is None or not corrector._hint_is_sound(view, spec, S, E):
+    # emitter.py declares mv a Move; _hint_is_sound reads only the ArcMove part of it
+    if spec is None or not corrector._hint_is_sound(view, spec, S, E):  # type: ignore[arg-type]
         return None
     (_l1, t1), (_l2, t2) = spec["vals"]
     count = 0
@@ -634,11 +721,11 @@ class _ArcView:
 
     __slots__ = ("arc", "unit", "arc_absolute", "shift")
 
-    def __init__(self, arc, unit, arc_absolute, shift) -> None:
+    def __init__(self, arc: Arc, unit: float, arc_absolute: bool, shift: Point) -> None:
         self.arc, self.unit, self.arc_absolute, self.shift = arc, unit, arc_absolute, shift
 
 
-def _modal_at(run: Run, x: int) -> tuple[int, float]:
+def _modal_at(run: Run, x: int) -> tuple[int | None, float]:
     """Modal motion and feed after block line ``x - 1`` of ``run`` (its start state for x == a)."""
     blk = run.block
     if x <= run.a:
@@ -648,7 +735,7 @@ def _modal_at(run: Run, x: int) -> tuple[int, float]:
             float(blk.cols[_F][f]) if f >= run.a else run.feed0)
 
 
-def line_rows(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
+def line_rows(runs: Sequence[Run]) -> tuple[IntArray, IntArray]:
     """The straight (G1) moves of ``runs``: their rows of T, and the index of the run of each."""
     rows, owner = [], []
     for blk in {id(r.block): r.block for r in runs}.values():
@@ -670,7 +757,7 @@ def line_rows(runs: list[Run]) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(rows)[order], np.concatenate(owner)[order]
 
 
-def split_run(run: Run, rows: list[int]):
+def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:
     """The run cut at its lines ``rows`` (indices within the run, increasing): yields
     sub-runs (:class:`Run`) and, for each cut line, ``(index within the run, RunMove)``."""
     x = run.a

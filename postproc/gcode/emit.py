@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import math
 import re
+from typing import TYPE_CHECKING
 
 from postproc import __version__
+
+if TYPE_CHECKING:
+    from postproc.gcode.path import Setup
 
 # half of the last written digit, by number of decimals (a program's numbers may carry
 # any number of them; beyond 323 the half unit is below the smallest double, 0.0)
@@ -134,7 +138,7 @@ def _num(v: float) -> str:
     return "0" if text in ("-0", "") else text
 
 
-def _setup_parts(setup_note: str, setup) -> list[str]:
+def _setup_parts(setup_note: str, setup: Setup | None) -> list[str]:
     """The setup note as header words, one entry per part (offsets, tools, start, ...)."""
     parts: list[str] = []
     exact = setup is not None
@@ -164,7 +168,7 @@ def _setup_parts(setup_note: str, setup) -> list[str]:
                 parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(float(v))}" for a, v in zip("XYZ", vals, strict=False)))
             continue
         parts.append(_safe(raw))
-    if exact:
+    if setup is not None:
         offs = setup.offsets or {}
         for k in sorted(offs):
             v = offs[k]
@@ -226,8 +230,8 @@ def _wrap(words: str, width: int) -> list[str]:
     return [f"{HEADER_PREFIX}{t})" for t in lines]
 
 
-def header_lines(dialect, cal_name: str, cal_sha: str, tolerance_mm: float, setup_note: str, ending: str,
-                 expanded: bool = False, setup=None) -> list[str]:
+def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float, setup_note: str, ending: str,
+                 expanded: bool = False, setup: Setup | None = None) -> list[str]:
     """The comment lines that open every corrected program (and mark it as corrected).
 
     Each is a short ``(POSTPROC ...)`` comment that ``dialect`` accepts (length, case,

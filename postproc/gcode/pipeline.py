@@ -17,10 +17,11 @@ import math
 import os
 import re
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import islice
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeAlias, final
 
 import numpy as np
 
@@ -48,10 +49,24 @@ from postproc.gcode.directions import (
 from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
-from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
+from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion, start_position
+from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
 from postproc.gcode.state import DWELL, LINE, RAPID
+from postproc.gcode.vplan import (
+    ArcHint,
+    ArcParams,
+    FloatArray,
+    IntArray,
+    Piece,
+    Plan,
+    PlanMove,
+    Step,
+)
+
+if TYPE_CHECKING:
+    from postproc.engine.base import Engine
 
 DEFAULT_CHUNK_LINES = 20_000
 _PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
@@ -68,6 +83,12 @@ ARC_CHECK_MIN_SAMPLES = 5
 TAKEUP_MIN_MM = 1e-7
 # Output growth (lines out / lines in) above which the summary warns.
 GROWTH_WARN = 5.0
+
+Write: TypeAlias = bulk.Write
+#: a line queued for its chunk: (its text, "" for a move it makes without a line of its
+#: own; its Move, the offset or stored position it sets, or None when it moves nothing;
+#: whether it names a motion word; the program's modal motion after it)
+Entry: TypeAlias = "tuple[str, Move | _Rebase | _Store | None, bool, int | None]"
 
 
 @dataclass
@@ -121,12 +142,12 @@ class CorrectReport:
 class Corrector(EmitterMixin):
     """State of one correction run; see the module docstring."""
 
-    def __init__(self, engine, setup: Setup, options: CorrectOptions, *, path: str | None = None,
+    def __init__(self, engine: Engine, setup: Setup, options: CorrectOptions, *, path: str | None = None,
                  calibration_name: str = "", calibration_sha256: str = "") -> None:
         if options.extrapolate not in ("refuse", "clamp", "linear"):
             raise PostprocError(f"--extrapolate must be refuse, clamp or linear, got {options.extrapolate!r}")
         engine = prepare_engine(engine, options.extrapolate, (setup.context or {}).keys(), path)
-        self.engine = engine
+        self.engine: Engine = engine
         self.setup = setup
         self.opt = options
         self.path = path
@@ -142,7 +163,9 @@ class Corrector(EmitterMixin):
         self.prev_nominal = np.array(start, dtype=float)
         self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
-        self.emitted_motion: int | None = None
+        # the motion the controller holds (None: none yet); EmitterMixin (emitter.py) infers
+        # int from its own assignments, the declaration int | None belongs there
+        self.emitted_motion: int | None = None  # type: ignore[assignment]
         self.expanded = False  # correcting the expanded program (recorded in the header)
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
@@ -160,16 +183,16 @@ class Corrector(EmitterMixin):
         self.report.solver = engine.solver
 
     # -- safety-checked engine calls ----------------------------------------------------
-    def _context(self, dirs: np.ndarray, rotary: list[dict]) -> dict:
-        ctx: dict = {"dirx": dirs[:, 0], "diry": dirs[:, 1], "dirz": dirs[:, 2]}
+    def _context(self, dirs: FloatArray, rotary: Sequence[dict[str, float]]) -> dict[str, FloatArray]:
+        ctx: dict[str, FloatArray] = {"dirx": dirs[:, 0], "diry": dirs[:, 1], "dirz": dirs[:, 2]}
         for a in sorted(self.interp.used_rotary):
             ctx[a] = np.array([d.get(a, 0.0) for d in rotary])
         for k, v in (self.setup.context or {}).items():
             ctx[k] = np.full(len(dirs), float(v))
         return ctx
 
-    def corrected(self, q_nom: np.ndarray, r: np.ndarray, dirs: np.ndarray, rotary: list[dict],
-                  lineno: np.ndarray) -> np.ndarray:
+    def corrected(self, q_nom: FloatArray, r: FloatArray, dirs: FloatArray, rotary: Sequence[dict[str, float]],
+                  lineno: IntArray) -> FloatArray:
         """Corrected gauge positions for nominal gauge positions (all safety checks)."""
         eng = self.engine
         p = q_nom + r
@@ -214,8 +237,8 @@ class Corrector(EmitterMixin):
                 d = np.asarray(add.delta(p, ctx_added), dtype=float)
             except PostprocError as exc:
                 # a map names the point it refused (point_index); name its program line
-                i = getattr(exc, "point_index", None)
-                ln = int(lineno[i]) if i is not None and 0 <= i < len(lineno) else None
+                at = getattr(exc, "point_index", None)
+                ln = int(lineno[at]) if at is not None and 0 <= at < len(lineno) else None
                 raise exc.at(path=self.path, lineno=ln) from None
             if d.shape != delta.shape or not np.isfinite(d).all():
                 raise SolverError(f"correction map {add.name!r} gave no finite correction here",
@@ -234,8 +257,8 @@ class Corrector(EmitterMixin):
         return q_nom + delta
 
     # -- the run -----------------------------------------------------------------------
-    def run(self, lines: Iterable[str], write: Callable[[str], None], progress=None,
-            source: deque | None = None) -> CorrectReport:
+    def run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
+            source: deque[tuple[int, str | None]] | None = None) -> CorrectReport:
         # Millions of small short-lived objects, none of them cyclic: the cyclic
         # garbage collector only costs time here (the chunks bound the memory).
         was_enabled = gc.isenabled()
@@ -246,8 +269,8 @@ class Corrector(EmitterMixin):
             if was_enabled:
                 gc.enable()
 
-    def _run(self, lines: Iterable[str], write: Callable[[str], None], progress=None,
-             source: deque | None = None) -> CorrectReport:
+    def _run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
+             source: deque[tuple[int, str | None]] | None = None) -> CorrectReport:
         """``source``: for an expanded program, the (line, file) each of ``lines`` comes
         from, in order (the lines are then read one by one, never in bulk)."""
         it = iter(lines)
@@ -288,7 +311,7 @@ class Corrector(EmitterMixin):
         header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
                                         self._setup_note(), ending, expanded=self.expanded, setup=self.setup)
         header = "".join(header_rows)
-        entries: list = []
+        entries: list[Entry | bulk.Run] = []
         lineno = 1
         for line in head[:keep]:
             self.interp.feed_line(where(lineno), line)
@@ -318,19 +341,20 @@ class Corrector(EmitterMixin):
                 entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
             elif interp.rebase is not None:
                 # an offset set from where the machine is: its words follow the correction there
-                entries.append((line, _Rebase(*interp.rebase, MM_PER_INCH if interp.state.inch else 1.0), False,
+                words, axes, nominal = interp.rebase
+                entries.append((line, _Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
                                 interp.state.motion))
             elif mv is not None and mv.cycle is not None:
-                self._feed_cycle(entries, line, mv, interp.state.motion)
+                self._feed_cycle(entries, line, mv, mv.cycle, interp.state.motion)
             elif mv is not None and mv.spline is not None:
-                self._feed_spline(entries, line, mv)
+                self._feed_spline(entries, line, mv, mv.spline)
             elif mv is not None and mv.fixed:
                 # the line only sends the machine to a stored position: written as it is
                 entries.append((line, None, False, interp.state.motion))
-                entries.append((None, mv, False, interp.state.motion))
+                entries.append(("", mv, False, interp.state.motion))
             elif mv is not None and mv.then is not None:
                 entries.append((line, mv, False, interp.state.motion))
-                entries.append((None, mv.then, False, interp.state.motion))
+                entries.append(("", mv.then, False, interp.state.motion))
             else:
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
             lineno += 1
@@ -434,11 +458,10 @@ class Corrector(EmitterMixin):
         return "; ".join(parts)
 
     # -- one chunk ---------------------------------------------------------------------
-    def _chunk(self, entries: list, write_out) -> None:
+    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
-        rot: list[dict] = []
-        general: list[tuple[int, Move]] = []
-        unit0 = None
+        rot: list[dict[str, float]] = []
+        general: list[tuple[int, PlanMove]] = []
         M = 0
         runs: list[bulk.Run] = []
         for e in entries:
@@ -450,15 +473,12 @@ class Corrector(EmitterMixin):
                 rot.extend([{}] * len(e))
                 if e.arcs:  # planned as any other arc
                     general.extend((M + j, mv) for j, mv in bulk.arc_moves(e))
-                unit0 = e.unit if unit0 is None else unit0
                 M += len(e)
-            elif e[1] is not None and type(e[1]) not in (_Rebase, _Store):
-                mv = e[1]
+            elif type(mv := e[1]) is Move:
                 if mv.unit not in self._units_checked:
                     self._check_rounding(mv.unit, mv.lineno)
                 rot.append(mv.rotary)
                 general.append((M, mv))
-                unit0 = mv.unit if unit0 is None else unit0
                 M += 1
         # every move's nominal target, line and tool vector: runs by slices, the others at once
         Q1 = np.empty((M, 3))
@@ -474,20 +494,22 @@ class Corrector(EmitterMixin):
             Q1[at] = [m.q1 for _i, m in general]
             lns[at] = [m.lineno for _i, m in general]
             Rt[at] = [m.r for _i, m in general]
-        T = np.zeros((0, 3))
-        plans: dict[int, object] = {}
+        T: FloatArray = np.zeros((0, 3))
+        plans: dict[int, Plan] = {}
+        hints: dict[int, ArcHint] = {}
         if M:
-            T, plans = self._plan(Q1, lns, Rt, rot, general, unit0, runs)
+            T, plans, hints = self._plan(Q1, lns, Rt, rot, general, runs)
         for e in runs:
             # arcs the bulk planner did not settle: written one by one by the general emitter
-            e.cut.extend(j for j in e.arcs if type(plans.get(e.trow + j)) is not vplan.ArcHint)
+            e.cut.extend(j for j in e.arcs if e.trow + j not in hints)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
         get_plan = plans.get
+        get_hint = hints.get
         k = 0
         passed = 0
-        prepared: dict[int, object] = {}
+        prepared: dict[int, bulk.Emission] = {}
         blocks: list[bulk.Block] = []
         for e in entries:
             if type(e) is bulk.Run:
@@ -497,19 +519,19 @@ class Corrector(EmitterMixin):
                     blocks.append(e.block)
                 cut = e.cut
                 if not cut:
-                    bulk.emit_run(self, e, em, T, write, plans)
+                    bulk.emit_run(self, e, em, T, write, hints)
                 else:  # arcs and lines that must be split: written by the general emitter
                     for part in bulk.split_run(e, sorted(set(cut))):
                         if type(part) is bulk.Run:
-                            bulk.emit_run(self, part, em, T, write, plans)
+                            bulk.emit_run(self, part, em, T, write, hints)
                             continue
                         j, fm = part
                         line = e.block.lines[e.a + j]
-                        plan = get_plan(k + j)
-                        if type(plan) is vplan.ArcHint:
-                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), plan, write)
+                        hint = get_hint(k + j)
+                        if hint is not None:
+                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, write)
                         else:
-                            emit_move(line, fm.to_move(line), T[k + j].tolist(), plan, write)
+                            emit_move(line, fm.to_move(line), T[k + j].tolist(), get_plan(k + j), write)
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
@@ -533,7 +555,7 @@ class Corrector(EmitterMixin):
                 k += 1
                 continue
             if mv.cycle is not None:
-                self._emit_cycle(line, mv, T[k].tolist(), T[k + 1].tolist(), write)
+                self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
                 k += 1
                 continue
             if mv.fixed:  # the machine is at a stored position, uncorrected
@@ -549,20 +571,22 @@ class Corrector(EmitterMixin):
                 k += 1
                 continue
             target = T[k].tolist()
-            plan = get_plan(k)
-            if type(plan) is vplan.ArcHint:
-                self._emit_hinted_arc(line, mv, target, plan, write)
+            hint = get_hint(k)
+            if hint is not None:
+                self._emit_hinted_arc(line, mv, target, hint, write)
             else:
-                emit_move(line, mv, target, plan, write)
+                emit_move(line, mv, target, get_plan(k), write)
             k += 1
         for blk in blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += passed
         write_out("".join(out))
 
-    def _plan(self, Q1: np.ndarray, linenos: np.ndarray, R: np.ndarray, rot: list[dict],
-              general: list[tuple[int, Move]], unit0: float, runs: list = ()):
-        """Corrected targets of a chunk's moves, and the plans of those that need one.
+    def _plan(self, Q1: FloatArray, linenos: IntArray, R: FloatArray, rot: list[dict[str, float]],
+              general: list[tuple[int, PlanMove]], runs: Sequence[bulk.Run] = ()
+              ) -> tuple[FloatArray, dict[int, Plan], dict[int, ArcHint]]:
+        """Corrected targets of a chunk's moves, the plans of those that need one, and
+        the hints of the arcs the bulk planner settles (:class:`vplan.ArcHint`).
 
         ``Q1``, ``linenos``, ``R``, ``rot``: every move's nominal target, line, tool
         vector and rotary positions; ``general``: (index, Move) of the moves not read
@@ -583,17 +607,16 @@ class Corrector(EmitterMixin):
         # approach directions: chord signs (end tangent for arcs), carried where zero
         d = Q1 - Q0
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
-        arcs = [i for i, m in general if m.arc is not None]
-        arc_prm = {i: arc_params(moves[i].arc, moves[i].q0, moves[i].q1) for i in arcs}
-        breaks: dict[int, np.ndarray] = {}  # of the arcs the general planner cuts (made when needed)
+        arcs = [(i, m, m.arc) for i, m in general if m.arc is not None]
+        arc_prm = {i: arc_params(arc, m.q0, m.q1) for i, m, arc in arcs}
+        breaks: dict[int, FloatArray] = {}  # of the arcs the general planner cuts (made when needed)
         # the approach directions at arc ends matter only to a correction that reads them
-        for i in arcs if self.engine.direction_dependent or self.opt.added else ():
-            m = moves[i]
+        for i, m, arc in arcs if self.engine.direction_dependent or self.opt.added else ():
             prm = arc_prm[i]
             br = breaks[i] = quadrant_breaks(prm[1], prm[2])
             # the approach direction at the end: the motion over the arc's last piece
             # (between quadrant points every axis moves one way)
-            ends = arc_points(m.arc, m.q0, m.q1, np.array([float(br[-1]) if len(br) else 0.0, 1.0]), prm)
+            ends = arc_points(arc, m.q0, m.q1, np.array([float(br[-1]) if len(br) else 0.0, 1.0]), prm)
             dd = ends[1] - ends[0]
             sign[i] = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
         D = np.empty_like(sign)
@@ -621,7 +644,8 @@ class Corrector(EmitterMixin):
                 T[inert] = T[bulk.last_index(moved)[inert]]
         else:
             T = self.corrected(Q1, R, D, rot, linenos)
-        plans: dict[int, object] = {}
+        plans: dict[int, Plan] = {}
+        hints: dict[int, ArcHint] = {}
         # starts: the corrected previous target (unrounded)
         S = np.vstack([self.prev_target[None, :], T[:-1]])
         d_in = np.vstack([self.dirs[None, :], D[:-1]])
@@ -631,10 +655,10 @@ class Corrector(EmitterMixin):
         if direction_axes(self.engine):  # the directions the corrected commands take
             T, D = self._plan_directions(planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans)
         else:
-            def corr(rows, nom):
+            def corr(rows: IntArray, nom: FloatArray) -> FloatArray:
                 return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
 
-            def curvature(rows):
+            def curvature(rows: IntArray) -> FloatArray:
                 # the commands the inverse finds lie within the largest allowed correction
                 return self.engine.line_curvature_bound(Q0[rows], Q1[rows], np.linalg.norm(R[rows], axis=1),
                                                         self.opt.max_correction_mm)
@@ -646,7 +670,7 @@ class Corrector(EmitterMixin):
                 ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
                                         limit=self.opt.tolerance_mm * FIT_BUDGET
                                         - max(self._round_err(r.unit) for r in runs), curvature=curvature)
-                run_lines = []
+                run_lines: list[tuple[int, PlanMove | _RunLine]] = []
                 for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
                     runs[o].cut.append(i - runs[o].trow)
                     run_lines.append((i, _RunLine(int(linenos[i]))))
@@ -659,15 +683,14 @@ class Corrector(EmitterMixin):
                     rounding=max(self._round_err(m.unit) for _i, m in general), curvature=curvature)
                 for i, hint in hints.items():
                     hint.lazy = self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
-                    plans[i] = hint
             if planned:
                 self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
         self.prev_nominal = Q1[-1].copy()
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
-        return T, plans
+        return T, plans, hints
 
-    def _emit_rebase(self, line: str, rb: _Rebase, write) -> None:
+    def _emit_rebase(self, line: str, rb: _Rebase, write: Write) -> None:
         """Write a G92 / G10 L20 / G10 L10-L11 line so that the offset the controller sets
         from where it is (the corrected position) is the nominal one: each value it
         subtracts moves by the correction there."""
@@ -684,17 +707,22 @@ class Corrector(EmitterMixin):
                 edits.append((start, end, emit.fmt(float(num) + delta, dout)))
         self._write_line(line, edits, write)
 
-    def _lazy_plan(self, i: int, mv: Move, *arrays):
+    def _lazy_plan(self, i: int, mv: PlanMove, arc_prm: dict[int, ArcParams], breaks: dict[int, FloatArray],
+                   Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray, S: FloatArray, T: FloatArray,
+                   d_in: FloatArray, rot: list[dict[str, float]], linenos: IntArray) -> Callable[[], Plan]:
         """The general plan of move ``i``, made when asked for."""
 
-        def plan():
-            out: dict[int, object] = {}
-            self._plan_moves([(i, mv)], *arrays, out)
+        def plan() -> Plan:
+            out: dict[int, Plan] = {}
+            self._plan_moves([(i, mv)], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, out)
             return out[i]
 
         return plan
 
-    def _plan_directions(self, planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans):
+    def _plan_directions(self, planned: list[tuple[int, PlanMove]], arc_prm: dict[int, ArcParams],
+                         breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, R: FloatArray,
+                         T: FloatArray, D: FloatArray, rot: list[dict[str, float]], linenos: IntArray,
+                         fixed_rows: list[int], plans: dict[int, Plan]) -> tuple[FloatArray, FloatArray]:
         """Targets, directions and plans of a chunk for a direction-dependent correction
         (backlash), settled on the directions the corrected commands take
         (:mod:`postproc.gcode.directions`): the commanded points are every sample of a
@@ -704,29 +732,31 @@ class Corrector(EmitterMixin):
         M = len(T)
         axes = direction_axes(self.engine)
         counts = np.ones(M, dtype=int)
-        samples: dict[int, tuple] = {}  # i -> (s (n,), nominal (n, 3), dirs (n, 3), given axes)
+        # i -> (s (n,), nominal (n, 3), dirs (n, 3), given axes)
+        samples: dict[int, tuple[FloatArray, FloatArray, FloatArray, list[int]]] = {}
         planned = [(i, m) for i, m in planned if not m.fixed]  # a stored position is one point
         for i, m in planned:
-            if m.arc is None:
+            arc = m.arc
+            if arc is None:
                 length = float(np.linalg.norm(Q1[i] - Q0[i]))
                 s = np.linspace(0.0, 1.0, max(3, math.ceil(length / SAMPLE_STEP_MM) + 1))[1:]
                 samples[i] = (s, line_points(Q0[i], Q1[i], s), D[i], [])
             else:
                 prm = arc_prm[i]
                 (a1, a2, _an), _t0, sweep, _r0, _r1 = prm
-                length = arc_length(m.arc, m.q0, m.q1)
+                length = arc_length(arc, m.q0, m.q1)
                 cuts = [0.0, *breaks[i].tolist(), 1.0]
                 ss = []
                 for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
                     n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
                             math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
                     ss.append(np.linspace(sa, sb, n)[1:])
-                ends = arc_points(m.arc, m.q0, m.q1, np.array(cuts), prm)
+                ends = arc_points(arc, m.q0, m.q1, np.array(cuts), prm)
                 dd = np.diff(ends, axis=0)
                 dr = np.where(np.abs(dd) > 1e-12, np.sign(dd), D[i])  # each quarter's own direction
                 s = np.concatenate(ss)
                 dirs = np.repeat(dr, [len(x) for x in ss], axis=0)
-                samples[i] = (s, arc_points(m.arc, m.q0, m.q1, s, prm), dirs, [a1, a2])
+                samples[i] = (s, arc_points(arc, m.q0, m.q1, s, prm), dirs, [a1, a2])
             counts[i] = len(samples[i][0])
         owner = np.repeat(np.arange(M), counts)
         last = np.cumsum(counts) - 1
@@ -735,15 +765,15 @@ class Corrector(EmitterMixin):
         sx = np.ones(len(owner))
         given = np.zeros(nominal.shape, dtype=bool)  # an arc's in-plane axes: the direction of its quarter
         for i, (s, nom, dirs, plane) in samples.items():
-            rows = slice(first[i], last[i] + 1)
-            sx[rows], nominal[rows], Dx[rows] = s, nom, dirs
-            given[rows, plane] = True
+            sl = slice(first[i], last[i] + 1)
+            sx[sl], nominal[sl], Dx[sl] = s, nom, dirs
+            given[sl, plane] = True
         free = np.ones(M, dtype=bool)
         free[fixed_rows] = False
         free = free[owner]
         hold = max(MACHINE_STEP_MM, *(10.0 ** -_unit_decimals(self.opt, u) * u for u in self._units_checked))
 
-        def solve(rows: np.ndarray, dirs: np.ndarray, at=None) -> np.ndarray:
+        def solve(rows: IntArray, dirs: FloatArray, at: FloatArray | None = None) -> FloatArray:
             own = owner[rows]
             return self.corrected(nominal[rows] if at is None else at, R[own], dirs,
                                   [rot[j] for j in own.tolist()], linenos[own])
@@ -760,7 +790,7 @@ class Corrector(EmitterMixin):
         # before it corrected with the new directions
         rows = np.concatenate([np.arange(first[i], last[i] + 1) for i, _m in planned])
         rows = rows[reversals(Dx, self.dirs, axes, rows)]
-        takeups: dict[int, np.ndarray] = {}
+        takeups: dict[int, FloatArray] = {}
         if len(rows):
             at = np.array([nominal[j - 1] if j != first[owner[j]] else Q0[owner[j]] for j in rows.tolist()])
             takeups = dict(zip(rows.tolist(), solve(rows, Dx[rows], at), strict=True))
@@ -768,30 +798,36 @@ class Corrector(EmitterMixin):
             j0 = int(first[i])
             start = Ex[j0 - 1] if j0 > 0 else self.prev_target
             start_dirs = Dx[j0 - 1] if j0 > 0 else self.dirs
-            if m.arc is not None:
+            arc = m.arc
+            bulge: Callable[[FloatArray, FloatArray], FloatArray]
+            if arc is not None:
                 prm = arc_prm[i]
 
-                def bulge(s, nom, m=m, prm=prm):
-                    mid = arc_points(m.arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), prm)
+                def arc_bulge(s: FloatArray, nom: FloatArray, arc: Arc = arc, m: PlanMove = m,
+                              prm: ArcParams = prm) -> FloatArray:
+                    mid = arc_points(arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), prm)
                     return mid - 0.5 * (nom[:-1] + nom[1:])
+
+                bulge = arc_bulge
             else:
-                def bulge(s, nom):
-                    return np.zeros((len(s) - 1, 3))
+                bulge = _no_bulge
             seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
                               TAKEUP_MIN_MM, bulge)
-            plan = plans[i] = {"seq": seq, "whole": len(seq) == 1}
-            if m.arc is not None:
+            if arc is not None:
                 (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
-                plan["nsweep"] = sweep
-                plan["mismatch"] = abs(r1 - r0)
                 carried = np.array(start_dirs, dtype=float)
                 carried[an] = D[i][an]
-                plan["curve"] = Curve(m.q0, m.q1, m.arc, R[i], carried, m.lineno, m.rotary, arc_prm[i])
+                plans[i] = {"seq": seq, "whole": len(seq) == 1, "nsweep": sweep, "mismatch": abs(r1 - r0),
+                            "curve": Curve(m.q0, m.q1, arc, R[i], carried, m.lineno, m.rotary, arc_prm[i])}
             else:  # a line's standing axes: the direction its corrected command takes
-                plan["curve"] = Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary)
+                plans[i] = {"seq": seq, "whole": len(seq) == 1,
+                            "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary)}
         return T, D
 
-    def _plan_moves(self, planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans) -> None:
+    def _plan_moves(self, planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: dict[int, ArcParams],
+                    breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray,
+                    S: FloatArray, T: FloatArray, d_in: FloatArray, rot: list[dict[str, float]], linenos: IntArray,
+                    plans: dict[int, Plan]) -> None:
         """Sample the corrected ideal path of every planned move in one engine call.
 
         A move is cut into pieces along which every axis moves one way (arcs at their
@@ -799,7 +835,8 @@ class Corrector(EmitterMixin):
         the correction differs across a reversal (backlash), the plan takes up the
         difference there, as a controller's backlash compensation does; elsewhere the
         pieces are joined again."""
-        layout = []  # (i, [(s, nominal, dirs), ...])
+        # (i, move, [(s, nominal, dirs), ...])
+        layout: list[tuple[int, PlanMove | _RunLine, list[tuple[FloatArray, FloatArray, FloatArray]]]] = []
         for i, m in planned:
             pieces = []
             if m.arc is not None:
@@ -826,17 +863,17 @@ class Corrector(EmitterMixin):
                 n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
                 s = np.linspace(0.0, 1.0, n)
                 pieces.append((s, line_points(Q0[i], Q1[i], s), D[i]))
-            layout.append((i, pieces))
-        noms = [nom for _i, pcs in layout for _s, nom, _d in pcs]
+            layout.append((i, m, pieces))
+        noms = [nom for _i, _m, pcs in layout for _s, nom, _d in pcs]
         counts = [len(nom) for nom in noms]
-        owner = np.repeat(np.array([i for i, pcs in layout for _p in pcs]), counts)
+        owner = np.repeat(np.array([i for i, _m, pcs in layout for _p in pcs]), counts)
         nom_all = np.vstack(noms)
-        dirs_all = np.repeat(np.array([dr for _i, pcs in layout for _s, _n, dr in pcs]), counts, axis=0)
+        dirs_all = np.repeat(np.array([dr for _i, _m, pcs in layout for _s, _n, dr in pcs]), counts, axis=0)
         corr = self.corrected(nom_all, R[owner], dirs_all, [rot[i] for i in owner.tolist()], linenos[owner])
         off = 0
-        m_of = dict(planned)
-        for i, pieces in layout:
-            seq: list = []
+        for i, m, pieces in layout:
+            seq: list[Step] = []
+            last: Piece | None = None  # the last step, a piece (pieces are joined to it)
             prev_end = S[i]
             prev_dirs = d_in[i]
             for s, nom, dr in pieces:
@@ -845,8 +882,8 @@ class Corrector(EmitterMixin):
                 off += n
                 # how the nominal path bulges from its chord between samples: the fits
                 # check the middle of every sample interval too
-                if m_of[i].arc is not None:
-                    mid = arc_points(m_of[i].arc, m_of[i].q0, m_of[i].q1, 0.5 * (s[:-1] + s[1:]), arc_prm[i])
+                if m.arc is not None:
+                    mid = arc_points(m.arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), arc_prm[i])
                     bulge = mid - 0.5 * (nom[:-1] + nom[1:])
                 else:
                     bulge = np.zeros((n - 1, 3))
@@ -854,24 +891,24 @@ class Corrector(EmitterMixin):
                     seq.append(("takeup", Q[0].copy()))
                 else:
                     Q[0] = prev_end
-                    if seq and seq[-1][0] == "piece":
-                        _t, s0, Qa, na, ba = seq.pop()
+                    if last is not None:
+                        seq.pop()
+                        _t, s0, Qa, na, ba = last
                         s, Q, nom, bulge = (np.concatenate([s0, s[1:]]), np.vstack([Qa, Q[1:]]),
                                             np.vstack([na, nom[1:]]), np.vstack([ba, bulge]))
-                seq.append(("piece", s, Q, nom, bulge))
+                piece: Piece = ("piece", s, Q, nom, bulge)
+                seq.append(piece)
+                last = piece
                 prev_end = Q[-1]
                 prev_dirs = dr
-            seq[-1][2][-1] = T[i]
-            plans[i] = {"seq": seq, "whole": len(seq) == 1}
-        for i, m in planned:
-            plan = plans[i]
+            Q[-1] = T[i]  # the last piece's end: the move's target
             if m.arc is not None:
                 _axes, _t0, sweep, r0, r1 = arc_prm[i]
-                plan["nsweep"] = sweep
-                plan["mismatch"] = abs(r1 - r0)
-                plan["curve"] = Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])
+                plans[i] = {"seq": seq, "whole": len(seq) == 1, "nsweep": sweep, "mismatch": abs(r1 - r0),
+                            "curve": Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])}
             else:
-                plan["curve"] = Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary)
+                plans[i] = {"seq": seq, "whole": len(seq) == 1,
+                            "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary)}
 
     def _check_rounding(self, unit: float, lineno: int) -> None:
         """Refuse when rounding the words to their decimals alone exceeds the tolerance."""
@@ -889,7 +926,8 @@ class Corrector(EmitterMixin):
         d = _unit_decimals(self.opt, unit)
         return 0.5 * 10.0 ** (-d) * unit * math.sqrt(3.0)
 
-    def _subdivide(self, curves: list[Curve], s_init: list[np.ndarray], unit: float):
+    def _subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
+                   ) -> list[tuple[FloatArray, FloatArray]]:
         rerr = self._round_err(unit)
         line_ids = np.array([c.arc is None for c in curves])
         Q0 = np.array([c.q0 for c in curves], dtype=float)
@@ -927,8 +965,9 @@ class Corrector(EmitterMixin):
 
     # -- moves written out for a cycle or a spline -------------------------------------
     @staticmethod
-    def _generated_move(mv: Move, kind: int, prev, q, axes, with_feed: bool, decimals: int, sep: str,
-                        lower: bool, ending: str, planned: bool = False) -> tuple:
+    def _generated_move(mv: Move, kind: int, prev: tuple[float, float, float], q: tuple[float, float, float],
+                        axes: Iterable[int], with_feed: bool, decimals: int, sep: str, lower: bool, ending: str,
+                        planned: bool = False) -> Entry:
         """The entry of a G0/G1 line written in place of ``mv`` (a cycle step, a spline
         chord): its nominal words on ``axes`` in the program's distance mode, the F word
         of ``mv`` when ``with_feed``, and the Move the corrector rewrites."""
@@ -943,14 +982,17 @@ class Corrector(EmitterMixin):
             words.append("F" + mv.words[mv.feed_idx][1])
         text = sep.join(words) + ending
         ws = scan_words(text)
-        idx = tuple(next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
-        step = Move(mv.lineno, kind, tuple(prev), tuple(q), mv.r, mv.shift, unit, mv.incremental,
-                    mv.arc_absolute, ws, idx, next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False,
+        if ws is None:  # words and blanks only
+            raise AssertionError(f"a generated line that is not plain: {text!r}")
+        ix, iy, iz = (next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+        step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
+                    mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False,
                     mv.feed, mv.rotary, motion_idx=0, planned=planned)
         return (text.lower() if lower else text), step, True, kind
 
     # -- splines -------------------------------------------------------------------------
-    def _feed_spline(self, entries: list, line: str, mv: Move) -> None:
+    def _feed_spline(self, entries: list[Entry | bulk.Run], line: str, mv: Move,
+                     spline: list[tuple[float, float]]) -> None:
         """Queue a G5/G5.1 spline as the fewest G1 chords whose corrected path stays within
         --tolerance of the corrected spline (checked at samples 1/10 of the tolerance apart
         in chord error)."""
@@ -958,16 +1000,16 @@ class Corrector(EmitterMixin):
 
         tol = self.opt.tolerance_mm - self._round_err(mv.unit)
         has_ij = any(w[0] == "I" for w in mv.words)
-        kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv)
+        kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv, spline)
         self._spline_kept = kept
         if kept:
             # an affine correction maps the spline onto itself: the line stays as it is
             entries.append((line, None, True, LINE))
-            entries.append((None, replace(mv, q0=mv.q1, fixed=True, spline=None, words=[],
+            entries.append(("", replace(mv, q0=mv.q1, fixed=True, spline=None, words=[],
                                           axis_idx=(-1, -1, -1)), False, None))
             return
-        s = spline_samples(mv.spline, tol / 10.0)
-        xy = spline_points(mv.spline, s)
+        s = spline_samples(spline, tol / 10.0)
+        xy = spline_points(spline, s)
         nom = np.column_stack([xy, np.full(len(s), mv.q1[2])])
         d = np.diff(np.vstack([np.asarray(mv.q0)[None, :], nom]), axis=0)
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
@@ -1002,10 +1044,10 @@ class Corrector(EmitterMixin):
             prev = q
         self.report.splines_linearised += 1
 
-    def _spline_unmoved(self, mv: Move) -> bool:
+    def _spline_unmoved(self, mv: Move, spline: list[tuple[float, float]]) -> bool:
         """Whether the correction at the spline's control points rounds to nothing (for an
         affine correction the corrected spline is then the spline itself)."""
-        pts = np.array([(x, y, mv.q1[2]) for x, y in mv.spline], dtype=float)
+        pts = np.array([(x, y, mv.q1[2]) for x, y in spline], dtype=float)
         n = len(pts)
         t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
                            np.broadcast_to(self.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
@@ -1013,24 +1055,23 @@ class Corrector(EmitterMixin):
         return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
     # -- canned cycles -------------------------------------------------------------------
-    def _feed_cycle(self, entries: list, line: str, mv: Move, motion) -> None:
-        """Queue a cycle block: kept (its bottom and R point corrected) or expanded into
-        the controller's own G0/G1 moves, each corrected like any other move."""
-        c = mv.cycle
+    def _feed_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move, c: Cycle, motion: int | None) -> None:
+        """Queue the cycle block ``c`` of ``mv``: kept (its bottom and R point corrected) or
+        expanded into the controller's own G0/G1 moves, each corrected like any other move."""
         if self.opt.cycles != "expand":
             if c.repeats == 1 and not mv.incremental:
                 entries.append((line, mv, True, motion))
                 bottom, rpoint = c.holes[0]
-                entries.append((None, replace(mv, q1=rpoint, cycle=None, probe=1), False, motion))
+                entries.append(("", replace(mv, q1=rpoint, cycle=None, probe=1), False, motion))
                 return
             # several holes from one line, or increments: one word cannot carry each hole's
             # correction; kept only where nothing is corrected
             for bottom, rpoint in c.holes:
                 for q in (bottom, rpoint):
-                    entries.append((None, replace(mv, q1=q, cycle=None, probe=2), False, motion))
+                    entries.append(("", replace(mv, q1=q, cycle=None, probe=2), False, motion))
             entries.append((line, None, True, None))
             end = c.steps[-1][1] if c.steps else mv.q0
-            entries.append((None, replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
+            entries.append(("", replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
                                           axis_idx=(-1, -1, -1)), False, None))
             return
         ending = emit.line_ending(line) or "\n"
@@ -1056,7 +1097,7 @@ class Corrector(EmitterMixin):
             prev = q
         self.report.cycles_expanded += 1
 
-    def _check_unmoved(self, mv: Move, target) -> None:
+    def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
         """A cycle block that stays as it is, with several holes or increments: refuse it
         when a hole's correction does not round to nothing."""
         d = _unit_decimals(self.opt, mv.unit)
@@ -1069,9 +1110,10 @@ class Corrector(EmitterMixin):
                 path=self.path, lineno=mv.lineno,
                 hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
 
-    def _emit_cycle(self, line: str, mv: Move, t_bottom, t_r, write) -> None:
-        """Write a kept cycle block: X/Y at the corrected bottom, Z and R along the tool axis."""
-        c = mv.cycle
+    def _emit_cycle(self, line: str, mv: Move, c: Cycle, t_bottom: list[float], t_r: list[float],
+                    write: Write) -> None:
+        """Write a kept cycle block (``mv``, its cycle ``c``): X/Y at the corrected bottom, Z
+        and R along the tool axis."""
         unit, shift = mv.unit, mv.shift
         d = _unit_decimals(self.opt, unit)
         rerr = self._round_err(unit)
@@ -1091,13 +1133,15 @@ class Corrector(EmitterMixin):
         sep, lower = emit.style_of(line)
         same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
         self._cycle_nominal = (c.z_mm, c.r_mm)
-        for letter, idx, t, attr, nominal in (("Z", mv.axis_idx[2], t_bottom[2], "_cycle_z", c.z_mm),
-                                              ("R", c.r_idx, t_r[2], "_cycle_rz", c.r_mm)):
+        held = [self._cycle_z, self._cycle_rz]  # the Z and R words the controller holds
+        written: list[float] = []  # ... and holds after this block
+        for n, (letter, idx, t, nominal) in enumerate((("Z", mv.axis_idx[2], t_bottom[2], c.z_mm),
+                                                       ("R", c.r_idx, t_r[2], c.r_mm))):
             v = (t - shift[2]) / unit
             if idx < 0 and not same_group:
                 # the controller holds the program's own value (given earlier, or R taken as
                 # the initial level)
-                setattr(self, attr, (nominal - shift[2]) / unit)
+                held[n] = (nominal - shift[2]) / unit
             if idx >= 0:
                 _l, num, start, end, _p = mv.words[idx]
                 dout = max(d, emit.decimals_of(num))
@@ -1107,23 +1151,26 @@ class Corrector(EmitterMixin):
                     edits.append((start, end, text))
                     val = float(text)
             else:
-                val = getattr(self, attr)
-                if val is None or abs(v - val) >= emit.HALF_UNIT[d]:
+                h = held[n]
+                if h is None or abs(v - h) >= emit.HALF_UNIT[d]:
                     text = emit.fmt(v, d)
                     added.append(letter + text)
                     val = float(text)
-            setattr(self, attr, val)
+                else:
+                    val = h
+            written.append(val)
+        self._cycle_z, self._cycle_rz = written
         if added:
             pos = self._insert_pos(mv)
             text = "".join(sep + w for w in added)
             edits.append((pos, pos, text.lower() if lower else text))
-        r_machine = self._cycle_rz * unit + shift[2]
+        r_machine = written[1] * unit + shift[2]
         qe[2] = r_machine if c.retract_r else max(z_before, r_machine)
         self.emitted_motion = c.code
         self._write_line(line, edits, write)
 
     # -- emission ----------------------------------------------------------------------
-    def _emit_words_only(self, line: str, mv: Move, target, write) -> None:
+    def _emit_words_only(self, line: str, mv: Move, target: list[float], write: Write) -> None:
         """Rewrite the axis words a line names, adding none and keeping the modal motion
         (G28/G30 intermediate points)."""
         self.report.moves += 1
@@ -1132,6 +1179,7 @@ class Corrector(EmitterMixin):
         self._write_line(line, edits, write)
 
 
+@final
 class _Store:
     """A G28.1/G30.1 line: the controller stores the position it is at."""
 
@@ -1141,30 +1189,38 @@ class _Store:
         self.name = name  # "G28" or "G30"
 
 
+@final
 class _Rebase:
     """A line that sets an offset from where the machine is (G92, G10 L20, G10 L10/L11)."""
 
     __slots__ = ("words", "axes", "nominal", "unit")
 
-    def __init__(self, words, axes, nominal, unit: float) -> None:
+    def __init__(self, words: list[Word], axes: list[tuple[int, int]], nominal: Sequence[float],
+                 unit: float) -> None:
         self.words = words  # the line's words
         self.axes = axes  # [(word index, axis), ...] of the values taken from the position
         self.nominal = nominal  # the nominal gauge position when the line runs
         self.unit = unit  # mm per program unit then
 
 
+@final
 class _RunLine:
     """What the planner needs of a straight move read in a run of plain lines."""
 
     __slots__ = ("lineno",)
-    arc = None
-    rotary: dict = {}
+    arc: None = None
+    rotary: dict[str, float] = {}
 
     def __init__(self, lineno: int) -> None:
         self.lineno = lineno
 
 
-def _chord_fits(points: np.ndarray, budget: float) -> bool:
+def _no_bulge(s: FloatArray, nom: FloatArray) -> FloatArray:
+    """A straight move's nominal path does not bulge from its chords."""
+    return np.zeros((len(s) - 1, 3))
+
+
+def _chord_fits(points: FloatArray, budget: float) -> bool:
     """Whether every point lies within ``budget`` of the chord from the first to the last."""
     a, b = points[0], points[-1]
     ab = b - a
@@ -1176,8 +1232,9 @@ def _chord_fits(points: np.ndarray, budget: float) -> bool:
 
 
 # -- entry points ---------------------------------------------------------------------
-def correct_text(text: str, engine, setup: Setup | None = None, options: CorrectOptions | None = None, *,
-                 path: str | None = None, calibration_name: str = "", calibration_sha256: str = ""):
+def correct_text(text: str, engine: Engine, setup: Setup | None = None, options: CorrectOptions | None = None, *,
+                 path: str | None = None, calibration_name: str = "",
+                 calibration_sha256: str = "") -> tuple[str, CorrectReport]:
     """Correct G-code ``text``; returns ``(corrected_text, CorrectReport)``."""
     from postproc.gcode.lexer import split_lines
 
@@ -1188,8 +1245,9 @@ def correct_text(text: str, engine, setup: Setup | None = None, options: Correct
     return "".join(out), report
 
 
-def _correct_lines(get_lines, write, restart, engine, setup, options, path, calibration_name, calibration_sha256,
-                   progress=None) -> CorrectReport:
+def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None], engine: Engine,
+                   setup: Setup | None, options: CorrectOptions | None, path: str | None, calibration_name: str,
+                   calibration_sha256: str, progress: Callable[[int], None] | None = None) -> CorrectReport:
     """Correct the lines ``get_lines()`` gives; when the program turns out to need
     expansion, ``restart()`` drops what was written and the expanded program is corrected."""
     from postproc.gcode.interp import NeedsExpansion
@@ -1210,9 +1268,9 @@ def _correct_lines(get_lines, write, restart, engine, setup, options, path, cali
 
     restart()
     lines = list(get_lines())
-    source: deque = deque()
+    source: deque[tuple[int, str | None]] = deque()
 
-    def texts():
+    def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
                          subroutine_path=[Path(p) for p in options.subroutine_path]):
             source.append((sl.lineno, sl.path))
@@ -1225,9 +1283,9 @@ def _correct_lines(get_lines, write, restart, engine, setup, options, path, cali
     return report
 
 
-def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, setup: Setup | None = None,
-                 options: CorrectOptions | None = None, *, calibration_name: str = "",
-                 calibration_sha256: str = "", progress=None) -> CorrectReport:
+def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str], engine: Engine,
+                 setup: Setup | None = None, options: CorrectOptions | None = None, *, calibration_name: str = "",
+                 calibration_sha256: str = "", progress: Callable[[int], None] | None = None) -> CorrectReport:
     """Correct the program at ``source`` into ``output`` safely (``postproc.fileio.output_path``).
 
     On any error nothing is left at ``output`` (an existing file there is untouched); a
@@ -1250,12 +1308,12 @@ def correct_file(source: str | os.PathLike, output: str | os.PathLike, engine, s
     # staged: a device or pipe gets the whole program at the end (the run may start over)
     try:
         with output_path(output, stage_special=True) as tmp, \
-                open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
+                open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as out:
             def restart() -> None:
-                fh.seek(0)
-                fh.truncate()
+                out.seek(0)
+                out.truncate()
 
-            report = _correct_lines(lambda: iter_source_lines(Path(source))[1], fh.write, restart, engine, setup,
+            report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
                                     options, path, calibration_name, calibration_sha256, progress)
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
         raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None

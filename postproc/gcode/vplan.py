@@ -31,11 +31,32 @@ fewer samples, or none.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from typing import (
+    TYPE_CHECKING,
+    Literal,
+    NotRequired,
+    Protocol,
+    Required,
+    TypeAlias,
+    TypedDict,
+    TypeVar,
+    final,
+)
 
 import numpy as np
+import numpy.typing as npt
 
 from postproc.gcode import emit
 from postproc.gcode.state import PLANES
+
+if TYPE_CHECKING:
+    from postproc.gcode.interp import Arc
+    from postproc.gcode.segment import Curve
+
+FloatArray: TypeAlias = npt.NDArray[np.float64]
+IntArray: TypeAlias = npt.NDArray[np.intp]
+BoolArray: TypeAlias = npt.NDArray[np.bool_]
 
 TWO_PI = 2.0 * math.pi
 # Share of the limit left to the path between the samples of a straight move, where the
@@ -51,24 +72,111 @@ KEEP_MISMATCH_SLACK_MM = 1e-9
 # the written end points (per axis), as the general path does.
 LATTICE = 3
 
+# -- what the planner hands the emitter ------------------------------------------------
+#: A step of a general plan: a take-up to a point (the corrected point before a reversal,
+#: (3,)), or a piece of corrected samples: (s (n,), corrected (n, 3), nominal (n, 3),
+#: bulge (n - 1, 3): how the nominal path bulges from its chord between samples).
+TakeUp: TypeAlias = tuple[Literal["takeup"], FloatArray]
+Piece: TypeAlias = tuple[Literal["piece"], FloatArray, FloatArray, FloatArray, FloatArray]
+Step: TypeAlias = TakeUp | Piece
 
+
+class Plan(TypedDict):
+    """The general plan of a move (:meth:`postproc.gcode.pipeline.Corrector._plan_moves`):
+    its steps, whether it is one piece, the curve the fits refine along and, for an arc,
+    its nominal sweep (rad) and end-radius mismatch (mm)."""
+
+    seq: list[Step]
+    whole: bool
+    curve: Curve
+    nsweep: NotRequired[float]
+    mismatch: NotRequired[float]
+
+
+class ArcSpec(TypedDict, total=False):
+    """The arc words written for an arc: ``form`` "keep" (the input's own words stay),
+    "ij" (centre words) or "r" (radius word); ``vals``: (letter, number text) of each
+    word; ``dev``/``mismatch``: its deviation bound and end-radius mismatch (mm);
+    ``replace``: set by the emitter when the line's old arc words give way to these."""
+
+    form: Required[Literal["keep", "ij", "r"]]
+    turns: Required[int]
+    vals: tuple[tuple[str, str], ...]
+    dev: float
+    mismatch: float
+    replace: bool
+
+
+class ArcMove(Protocol):
+    """What :class:`ArcHint` reads of the move it writes (a
+    :class:`postproc.gcode.interp.Move`, or the bulk writer's view of a line of a run)."""
+
+    @property
+    def arc(self) -> Arc | None: ...
+    @property
+    def unit(self) -> float: ...
+    @property
+    def arc_absolute(self) -> bool: ...
+    @property
+    def shift(self) -> tuple[float, float, float]: ...
+
+
+class PlanMove(Protocol):
+    """What the planner reads of a move it plans (a :class:`postproc.gcode.interp.Move`,
+    or a :class:`postproc.gcode.bulk.RunMove` for an arc of a run of plain lines)."""
+
+    @property
+    def arc(self) -> Arc | None: ...
+    @property
+    def kind(self) -> int: ...
+    @property
+    def lineno(self) -> int: ...
+    @property
+    def q0(self) -> tuple[float, float, float]: ...
+    @property
+    def q1(self) -> tuple[float, float, float]: ...
+    @property
+    def r(self) -> tuple[float, float, float]: ...
+    @property
+    def unit(self) -> float: ...
+    @property
+    def rotary(self) -> dict[str, float]: ...
+    @property
+    def fixed(self) -> bool: ...
+    @property
+    def planned(self) -> bool: ...
+
+
+_M = TypeVar("_M", bound=PlanMove)
+#: ``arc_params`` of an arc: (plane axes, start angle, sweep, start radius, end radius)
+ArcParams: TypeAlias = tuple[tuple[int, int, int], float, float, float, float]
+#: ``corrected(rows, nominal points (N, 3))``: the engine's corrected points (N, 3)
+Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
+#: ``curvature(rows)``: the engine's bound on the correction's curvature along each move
+Curvature: TypeAlias = Callable[[IntArray], FloatArray]
+Ends: TypeAlias = tuple[float, float, float, float, float, float]
+
+
+@final
 class ArcHint:
     """What the bulk planner found for one arc (see the module docstring)."""
 
     __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy")
 
-    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends, lazy,
-                 mismatch: float = 0.0) -> None:
+    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
+                 lazy: Callable[[], Plan] | None, mismatch: float = 0.0) -> None:
         self.c1, self.c2, self.rho, self.worst, self.nsweep = c1, c2, rho, worst, nsweep
         self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
         self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
 
-    def spec(self, mv, S, E, d: int, budget: float) -> dict | None:
+    def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
         """The arc words for the move written from S to E (machine mm, as written):
         ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None when no rounded centre
         on their bisector stays provably within ``budget``."""
         arc = mv.arc
+        if arc is None:
+            raise AssertionError("an arc hint asked for a move that is no arc")
         (a1, a2, an), (l1, l2) = PLANES[arc.plane]
         s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
         dx, dy = e1 - s1, e2 - s2
@@ -97,33 +205,37 @@ class ArcHint:
             C1, C2 = b1 + w1 * unit, b2 + w2 * unit
             mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
             if mism <= agree:
-                best = (hyp(C1 - self.c1, C2 - self.c2), emit.fmt(w1, d), emit.fmt(w2, d), C1, C2, mism)
+                best = (emit.fmt(w1, d), emit.fmt(w2, d), C1, C2, mism)
                 break
         if best is None:
             return None
-        moved, t1, t2, C1, C2, mism = best
-        bound = self._bound(arc, S, E, C1, C2, (a1, a2, an))
+        t1, t2, C1, C2, mism = best
+        bound = self._bound(arc.clockwise, S, E, C1, C2, (a1, a2, an))
         if bound is None or not bound + mism <= budget:
             return None
         return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound + mism, "mismatch": mism}
 
-    def keep(self, mv, S, E, centre, nominal_mismatch: float, budget: float) -> dict | None:
+    def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
+             nominal_mismatch: float, budget: float) -> ArcSpec | None:
         """``{"form": "keep", "turns": 1}`` when the input's own arc words, around
         ``centre`` from S to E (as written), still pass: their radius mismatch no larger
         than the input's own (``nominal_mismatch``, which its controller accepts) and
         the arc within ``budget`` of the samples; else None."""
         arc = mv.arc
+        if arc is None:
+            raise AssertionError("an arc hint asked for a move that is no arc")
         (a1, a2, an), _ = PLANES[arc.plane]
         C1, C2 = float(centre[0]), float(centre[1])
         mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
         if not mism <= nominal_mismatch + KEEP_MISMATCH_SLACK_MM:
             return None
-        bound = self._bound(arc, S, E, C1, C2, (a1, a2, an))
+        bound = self._bound(arc.clockwise, S, E, C1, C2, (a1, a2, an))
         if bound is None or not bound <= budget:
             return None
         return {"form": "keep", "turns": 1}
 
-    def _bound(self, arc, S, E, C1: float, C2: float, axes) -> float | None:
+    def _bound(self, clockwise: bool, S: Sequence[float], E: Sequence[float], C1: float, C2: float,
+               axes: tuple[int, int, int]) -> float | None:
         """How far the arc a controller draws from S to E around (C1, C2) (radius from
         the start to the end radius, the normal axis linear) can lie from the corrected
         samples: the ideal circle's deviation plus how far the drawn arc lies from that
@@ -133,7 +245,7 @@ class ArcHint:
         s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
         rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
         th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
-        sweep = -((th0 - th1) % TWO_PI) if arc.clockwise else (th1 - th0) % TWO_PI
+        sweep = -((th0 - th1) % TWO_PI) if clockwise else (th1 - th0) % TWO_PI
         if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
             return None
         moved = hyp(C1 - self.c1, C2 - self.c2)
@@ -156,8 +268,9 @@ _ORDER = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in
                       key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
 
 
-def _ragged(n: np.ndarray):
-    """For counts n (k,): the owner of each of sum(n) slots and its index within its owner."""
+def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+    """For counts n (k,): the owner of each of sum(n) slots, its index within its owner,
+    and the first slot of each owner."""
     n = np.asarray(n, dtype=int)
     owner = np.repeat(np.arange(len(n)), n)
     starts = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(int) if len(n) else np.zeros(0, dtype=int)
@@ -165,16 +278,19 @@ def _ragged(n: np.ndarray):
     return owner, pos, starts
 
 
-def _group_max(values: np.ndarray, starts: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Largest value of each group of a ragged array (every group non-empty)."""
-    return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(n))
+def _group_max(values: FloatArray, starts: IntArray) -> FloatArray:
+    """Largest value of each group of a ragged array (every group non-empty; ``starts``:
+    the first slot of each)."""
+    return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(starts))
 
 
-def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None, limit: float = 0.0):
+def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray, step_mm: float,
+                  curvature: Curvature | None, limit: float
+                  ) -> tuple[IntArray, FloatArray, Callable[[FloatArray], BoolArray]]:
     """Interior samples of the straight moves ``rows`` (every ``step_mm``, at least one):
-    ``(owner rows, nominal points, check)``; ``check(corrected points, limit)`` tells for
-    each move whether every corrected sample lies within ``limit`` of the chord S-T (a
-    move whose start is unknown passes: it is written as it is read).
+    ``(owner rows, nominal points, check)``; ``check(corrected points)`` tells for each
+    move whether every corrected sample lies within ``limit`` of the chord S-T (a move
+    whose start is unknown passes: it is written as it is read).
 
     ``curvature(rows)``: the engine's bound K on the correction's second derivative
     along each move (:meth:`postproc.engine.base.Engine.line_curvature_bound`). A move
@@ -199,7 +315,7 @@ def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None
     r = rows[own]
     nom = Q0[r] + (Q1[r] - Q0[r]) * s[:, None]
 
-    def check(P: np.ndarray, limit: float) -> np.ndarray:
+    def check(P: FloatArray) -> BoolArray:
         A, B = S[r], T[r]
         ab = B - A
         den = np.einsum("ij,ij->i", ab, ab)
@@ -208,22 +324,25 @@ def _line_samples(rows: np.ndarray, Q0, Q1, S, T, step_mm: float, curvature=None
         worst = np.zeros(len(rows))
         some = n > 2
         if some.any():
-            worst[some] = _group_max(dist, start[some], (n - 2)[some])
+            worst[some] = _group_max(dist, start[some])
         return settled | (worst <= limit - between) | ~np.isfinite(S[rows]).all(axis=1)
 
     return r, nom, check
 
 
-def lines_within(rows: np.ndarray, Q0, Q1, S, T, corrected, *, step_mm: float, limit: float,
-                 curvature=None) -> np.ndarray:
+def lines_within(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray,
+                 corrected: Corrected, *, step_mm: float, limit: float,
+                 curvature: Curvature | None = None) -> BoolArray:
     """Which straight moves ``rows`` stay within ``limit`` of their corrected chord (see
     :func:`_line_samples`; ``corrected`` as in :func:`plan_chunk`)."""
     r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm, curvature, limit)
-    return check(corrected(r, nom) if len(r) else np.zeros((0, 3)), limit)
+    return check(corrected(r, nom) if len(r) else np.zeros((0, 3)))
 
 
-def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, step_rad: float,
-               min_arc_samples: int, budget: float, rounding: float, curvature=None):
+def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0: FloatArray, Q1: FloatArray,
+               S: FloatArray, T: FloatArray, corrected: Corrected, *, step_mm: float, step_rad: float,
+               min_arc_samples: int, budget: float, rounding: float, curvature: Curvature | None = None
+               ) -> tuple[list[int], dict[int, ArcHint], list[tuple[int, _M]]]:
     """Settle in bulk the planned moves of a chunk that stay one line or one exact arc.
 
     ``planned``: (row, Move) pairs; ``arc_prm``: row -> arc_params of the arcs;
@@ -233,17 +352,20 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
     straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left None), and
     the (row, Move) pairs left to the general path.
     """
-    lines_i, arcs_i, rest = [], [], []
+    lines_i: list[int] = []
+    arcs_i: list[tuple[int, _M, Arc]] = []
+    rest: list[tuple[int, _M]] = []
     for i, m in planned:
-        if m.arc is None:
+        arc = m.arc
+        if arc is None:
             lines_i.append(i)
-        elif (m.arc.r_idx < 0 and m.arc.turns == 1 and m.arc.plane in PLANES
+        elif (arc.r_idx < 0 and arc.turns == 1 and arc.plane in PLANES
               and abs(arc_prm[i][2]) < TWO_PI - 1e-9):
-            arcs_i.append((i, m))
+            arcs_i.append((i, m, arc))
         else:
             rest.append((i, m))
     li = np.array(lines_i, dtype=int)
-    ai = np.array([i for i, _m in arcs_i], dtype=int)
+    ai = np.array([i for i, _m, _a in arcs_i], dtype=int)
     prm = [arc_prm[i] for i in ai.tolist()]
     sweep = np.array([p[2] for p in prm])
     r0 = np.array([p[3] for p in prm])
@@ -260,9 +382,9 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
     # and the middles of the sample intervals (all of them), for the nominal bulge
     mo, mp, mstart = _ragged(na - 1)
     s_m = (mp + 0.5) / (na[mo] - 1)
-    centre = np.array([m.arc.center for _i, m in arcs_i], dtype=float).reshape(-1, 3)
+    centre = np.array([arc.center for _i, _m, arc in arcs_i], dtype=float).reshape(-1, 3)
 
-    def arc_nominal(owner, s):
+    def arc_nominal(owner: IntArray, s: FloatArray) -> FloatArray:
         out = np.empty((len(s), 3))
         th = t0[owner] + s * sweep[owner]
         rad = r0[owner] + (r1 - r0)[owner] * s
@@ -282,7 +404,7 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
     # -- straight moves: every sample within budget - rounding of the chord ---------------
     ok_lines: list[int] = []
     if len(li):
-        good = lcheck(P_l, budget - rounding)
+        good = lcheck(P_l)
         ok_lines = li[good].tolist()
         bad = set(li[~good].tolist())
         rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
@@ -350,7 +472,7 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
     # the deviation of every sample from that circle (a helix along the normal axis)
     th0 = np.arctan2(S2 - c2, S1 - c1)
     th1 = np.arctan2(E2 - c2, E1 - c1)
-    cw = np.array([m.arc.clockwise for _i, m in arcs_i])
+    cw = np.array([arc.clockwise for _i, _m, arc in arcs_i])
     base = np.where(cw, -np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
     sgn = np.where(cw, -1.0, 1.0)
     asw = np.abs(base)
@@ -367,7 +489,7 @@ def plan_chunk(planned, arc_prm, Q0, Q1, S, T, corrected, *, step_mm: float, ste
     worst = np.full(k, -np.inf)
     np.maximum.at(worst, owner, dev)
     usable &= np.isfinite(worst) & np.isfinite(rho) & (worst <= budget)
-    for jj, (i, m) in enumerate(arcs_i):
+    for jj, (i, m, _arc) in enumerate(arcs_i):
         if usable[jj]:
             hints[i] = ArcHint(float(c1[jj]), float(c2[jj]), float(rho[jj]), float(worst[jj]), float(sweep[jj]),
                                (float(S1[jj]), float(S2[jj]), float(Sn[jj]), float(E1[jj]), float(E2[jj]),
