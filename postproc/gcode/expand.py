@@ -383,7 +383,7 @@ class _Expander(Env):
                     if b.oword is not None:
                         target = self.skipping_to_sub or self.skipping_o
                         if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
-                            yield from self._oword(b, b.oword)
+                            self._oword(b, b.oword)
                 continue
             words = scan_words(line)
             if words is not None and not any(
@@ -421,7 +421,7 @@ class _Expander(Env):
                 first_code = False
             try:
                 if b.oword is not None:
-                    yield from self._oword(b, b.oword)
+                    self._oword(b, b.oword)
                 elif b.macro is not None:
                     self._macro(b, b.macro)
                 else:
@@ -849,7 +849,20 @@ class _Expander(Env):
         op = self.offsets[name]
         self.unit, self.idx = op.unit, op.idx
 
-    def _oword(self, b: Block, ow: OWord) -> Iterator[SourceLine]:
+    def _skip_block(self, name: str) -> None:
+        """Skip the lines up to the o-word line ``name`` that ends the block begun here."""
+        self.skipping_o = name
+        self.skip_from = (self.unit_cur, self.cur_idx)
+
+    def _label(self, ow: OWord, allow_do: bool = False) -> _Offset:
+        """The position of the loop or if ``ow`` begins, recorded the first time it runs."""
+        op = self._check_label(ow, allow_do)
+        if op is None:
+            self._save_offset(ow)
+            op = self.offsets[ow.name]
+        return op
+
+    def _oword(self, b: Block, ow: OWord) -> None:
         """Run the o-word statement ``ow`` (``b.oword``) of block ``b``."""
         if b.slash:
             raise self.refuse(ow.col, "an o-word on a block-delete ('/') line")
@@ -857,156 +870,151 @@ class _Expander(Env):
             w = b.items[0]
             if not (isinstance(w, Word) and w.letter == "N" and len(b.items) == 1):
                 raise self.error(ow.col, "an o-word line holds nothing but the o-word (and a line number)")
-        kw = ow.kw
-        name = ow.name
         if self.fanuc:
             raise self.error(ow.col, "o-word control is LinuxCNC syntax",
                              hint="choose --dialect linuxcnc for this program")
         if self.defining_sub is not None and self.skipping_o == self.defining_sub and not (
-                name == self.defining_sub and kw == "endsub"):
+                ow.name == self.defining_sub and ow.kw == "endsub"):
             return  # inside a definition met in sequence: only its endsub counts
-        if kw in ("sub", ""):
-            if self.skipping_o is not None:
-                if self.offsets.get(name) is None:
-                    self.offsets[name] = _Offset(self.unit_cur, self.cur_idx, kw)
+        self._OWORD_HANDLERS[ow.kw](self, ow)
+
+    def _end_skip_at(self, ow: OWord) -> None:
+        """A sub or bare o-number line ends the skip to it, and records its position."""
+        if self.skipping_o is not None:
+            if self.offsets.get(ow.name) is None:
+                self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+            self.skipping_o = None
+        self.skipping_to_sub = None
+
+    def _o_number(self, ow: OWord) -> None:
+        """``o100`` alone (a Fanuc-style O number): execution continues into it."""
+        self._end_skip_at(ow)
+
+    def _o_sub(self, ow: OWord) -> None:
+        self._end_skip_at(ow)
+        fr = self.frames[-1]
+        if len(self.frames) > 1 and fr.call_type == "oword" and fr.sub_name == ow.name:
+            return  # the called subroutine starts here
+        if self.defining_sub is not None:
+            raise self.error(ow.col, "a subroutine defined inside another subroutine definition")
+        # a definition met in sequence: skipped up to its endsub
+        self._save_offset(ow)
+        self._skip_block(ow.name)
+        self.defining_sub = ow.name
+
+    def _o_return(self, ow: OWord) -> None:
+        """``endsub`` or ``return [value]``."""
+        name, kw = ow.name, ow.kw
+        if self.defining_sub == name:
+            if kw == "endsub":  # end of a definition met in sequence
                 self.skipping_o = None
-            self.skipping_to_sub = None
-            if kw == "":
-                return  # Fanuc-style O number: execution continues into it
-            if len(self.frames) > 1 and self.frames[-1].call_type == "oword" and (
-                    self.frames[-1].sub_name == name):
-                return  # the called subroutine starts here
-            if self.defining_sub is not None:
-                raise self.error(ow.col, "a subroutine defined inside another subroutine definition")
+                self.defining_sub = None
+            return
+        if len(self.frames) == 1:
+            raise self.error(ow.col, f"'o{_oname(name)} {kw}' outside a subroutine")
+        fr = self.frames[-1]
+        if fr.call_type != "oword":
+            raise self.error(ow.col, f"'o{_oname(name)} {kw}' in a subprogram called with M98",
+                             hint="end an M98 subprogram with M99")
+        if kw == "endsub" and self.skipping_o is not None:
+            self.skipping_o = None
+        if ow.args:
+            self.globals["_value"] = self._num(ow.args[0], ow.col)
+            self.globals["_value_returned"] = 1.0
+        for k, v in enumerate(fr.saved or []):
+            self.params[k + 1] = v
+        self._leave(fr)
+
+    def _o_do(self, ow: OWord) -> None:
+        self.skipping_o = None
+        if ow.name not in self.offsets:
             self._save_offset(ow)
-            self.skipping_o = name
-            self.skip_from = (self.unit_cur, self.cur_idx)
-            self.defining_sub = name
-            return
-        if kw in ("endsub", "return"):
-            if self.defining_sub == name:
-                if kw == "endsub":  # end of a definition met in sequence
-                    self.skipping_o = None
-                    self.defining_sub = None
-                return
-            if len(self.frames) == 1:
-                raise self.error(ow.col, f"'o{_oname(name)} {kw}' outside a subroutine")
-            fr = self.frames[-1]
-            if fr.call_type != "oword":
-                raise self.error(ow.col, f"'o{_oname(name)} {kw}' in a subprogram called with M98",
-                                 hint="end an M98 subprogram with M99")
-            if kw == "endsub" and self.skipping_o is not None:
-                self.skipping_o = None
-            if ow.args:
-                self.globals["_value"] = self._num(ow.args[0], ow.col)
-                self.globals["_value_returned"] = 1.0
-            for k, v in enumerate(fr.saved or []):
-                self.params[k + 1] = v
-            self._leave(fr)
-            return
-        if kw == "call":
-            yield from ()
-            self._ocall(ow)
-            return
-        if kw == "do":
-            self.skipping_o = None
-            if name not in self.offsets:
-                self._save_offset(ow)
-            return
-        if kw == "repeat":
-            op = self._check_label(ow)
-            if op is None:
-                self._save_offset(ow)
-                op = self.offsets[name]
-            self.skipping_o = None
-            if op.repeat_count == -1:
-                op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
-            if op.repeat_count > 0:
-                op.repeat_count -= 1
-            else:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                op.repeat_count = -1
-            return
-        if kw == "while":
-            op = self._check_label(ow, allow_do=True)
-            if op is None:
-                self._save_offset(ow)
-                op = self.offsets[name]
-            self.skipping_o = None
-            test = self._num(ow.args[0], ow.col)
-            if op.kind == "while":
-                if test == 0.0:
-                    self.skipping_o = name
-                    self.skip_from = (self.unit_cur, self.cur_idx)
-            else:  # end of a do loop
-                if test != 0.0 and not self.doing_break:
-                    self._back_to(name)
-                else:
-                    self.doing_break = False
-            return
-        if kw == "if":
-            if self._check_label(ow) is None:
-                self._save_offset(ow)
-            if self._num(ow.args[0], ow.col) != 0.0:
-                self.skipping_o = None
-                self.executed_if = True
-            else:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                self.executed_if = False
-            return
-        if kw == "elseif":
-            self._need(ow, ("if",), "'if'")
-            test = self._num(ow.args[0], ow.col)  # rs274ngc reads (evaluates) it in any case
-            if self.executed_if:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                return
-            if test != 0.0:
-                self.skipping_o = None
-                self.executed_if = True
-            return
-        if kw == "else":
-            self._need(ow, ("if",), "'if'")
-            if self.executed_if:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                return
-            if self.skipping_o == name:
-                self.executed_if = True
-                self.skipping_o = None
-            return
-        if kw == "endif":
-            self._need(ow, ("if",), "'if'")
+
+    def _o_repeat(self, ow: OWord) -> None:
+        op = self._label(ow)
+        self.skipping_o = None
+        if op.repeat_count == -1:
+            op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
+        if op.repeat_count > 0:
+            op.repeat_count -= 1
+        else:
+            self._skip_block(ow.name)
+            op.repeat_count = -1
+
+    def _o_while(self, ow: OWord) -> None:
+        """``while [test]``: the start of a while loop, or the end of a do loop."""
+        op = self._label(ow, allow_do=True)
+        self.skipping_o = None
+        test = self._num(ow.args[0], ow.col)
+        if op.kind == "while":
+            if test == 0.0:
+                self._skip_block(ow.name)
+        elif test != 0.0 and not self.doing_break:  # end of a do loop
+            self._back_to(ow.name)
+        else:
+            self.doing_break = False
+
+    def _o_if(self, ow: OWord) -> None:
+        self._label(ow)
+        if self._num(ow.args[0], ow.col) != 0.0:
             self.skipping_o = None
             self.executed_if = True
+        else:
+            self._skip_block(ow.name)
+            self.executed_if = False
+
+    def _o_elseif(self, ow: OWord) -> None:
+        self._need(ow, ("if",), "'if'")
+        test = self._num(ow.args[0], ow.col)  # rs274ngc reads (evaluates) it in any case
+        if self.executed_if:
+            self._skip_block(ow.name)
+        elif test != 0.0:
+            self.skipping_o = None
+            self.executed_if = True
+
+    def _o_else(self, ow: OWord) -> None:
+        self._need(ow, ("if",), "'if'")
+        if self.executed_if:
+            self._skip_block(ow.name)
+        elif self.skipping_o == ow.name:
+            self.executed_if = True
+            self.skipping_o = None
+
+    def _o_endif(self, ow: OWord) -> None:
+        self._need(ow, ("if",), "'if'")
+        self.skipping_o = None
+        self.executed_if = True
+
+    def _o_break(self, ow: OWord) -> None:
+        self._need(ow, ("while", "do"), "loop")
+        self._skip_block(ow.name)
+        self.doing_break = True
+
+    def _o_continue(self, ow: OWord) -> None:
+        self._need(ow, ("while", "do"), "loop")
+        if self.skipping_o == ow.name:
             return
-        if kw == "break":
-            self._need(ow, ("while", "do"), "loop")
-            self.skipping_o = name
-            self.skip_from = (self.unit_cur, self.cur_idx)
-            self.doing_break = True
+        self._skip_block(ow.name)
+        self.doing_continue = True
+
+    def _o_endwhile(self, ow: OWord) -> None:
+        self._need(ow, ("while",), "loop start")
+        self._loop_end(ow.name)
+
+    def _o_endrepeat(self, ow: OWord) -> None:
+        self._need(ow, ("repeat",), "loop start")
+        self._loop_end(ow.name)
+
+    def _loop_end(self, name: str) -> None:
+        """``endwhile``/``endrepeat``: back to the loop's start, unless the loop is being
+        left (its skip ends here) or a continue skipped to here."""
+        if self.skipping_o == name:
+            self.skipping_o = None
+            if self.doing_continue:
+                self.doing_continue = False
+                self._back_to(name)
             return
-        if kw == "continue":
-            self._need(ow, ("while", "do"), "loop")
-            if self.skipping_o == name:
-                return
-            self.skipping_o = name
-            self.skip_from = (self.unit_cur, self.cur_idx)
-            self.doing_continue = True
-            return
-        if kw in ("endwhile", "endrepeat"):
-            self._need(ow, ("repeat",) if kw == "endrepeat" else ("while",), "loop start")
-            if self.skipping_o == name:
-                self.skipping_o = None
-                if self.doing_continue:
-                    self.doing_continue = False
-                    self._back_to(name)
-                return
-            self._back_to(name)
-            return
-        raise AssertionError(kw)  # pragma: no cover
+        self._back_to(name)
 
     def _ocall(self, ow: OWord) -> None:
         args = [self._num(a, ow.col) for a in ow.args]
@@ -1035,6 +1043,14 @@ class _Expander(Env):
         self.skipping_to_sub = ow.name
         self.skipping_o = ow.name
         self.skip_from = (self.unit_cur, self.cur_idx)
+
+    # o-word keyword -> the method that runs it ("" is a bare o-number)
+    _OWORD_HANDLERS: dict[str, Callable[[_Expander, OWord], None]] = {
+        "": _o_number, "sub": _o_sub, "endsub": _o_return, "return": _o_return, "call": _ocall,
+        "do": _o_do, "while": _o_while, "endwhile": _o_endwhile, "repeat": _o_repeat,
+        "endrepeat": _o_endrepeat, "break": _o_break, "continue": _o_continue,
+        "if": _o_if, "elseif": _o_elseif, "else": _o_else, "endif": _o_endif,
+    }
 
 
 def _round_to_int(v: float) -> int:
