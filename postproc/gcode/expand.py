@@ -359,14 +359,13 @@ class _Expander(Env):
 
     # -- main loop ----------------------------------------------------------
     def run(self) -> Iterator[SourceLine]:
-        stopped_at_end = False
         percent_open = False
         first_code = True
         while True:
             unit = self.unit
             if self.idx >= len(unit.lines):
                 self._end_of_file()
-                break
+                return
             idx = self.idx
             self.idx += 1
             self.cur_idx = idx
@@ -376,14 +375,8 @@ class _Expander(Env):
                 raise self.refuse(1, f"the program runs more than {self.max_lines} lines: an endless loop or "
                                   "recursion", hint="check the loop conditions and subprogram returns")
             line = unit.lines[idx]
-            # LinuxCNC skipping states: only o-word lines can stop them
             if self.skipping_o is not None or self.skipping_to_sub is not None:
-                if not self.fanuc and unit.maybe_oword(idx):
-                    b = unit.block(idx)
-                    if b.oword is not None:
-                        target = self.skipping_to_sub or self.skipping_o
-                        if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
-                            self._oword(b, b.oword)
+                self._skipped_line(unit, idx)
                 continue
             words = scan_words(line)
             if words is not None and not any(
@@ -394,28 +387,21 @@ class _Expander(Env):
                     first_code = False
                 yield SourceLine(idx + 1, unit.path, line, True)
                 continue
-            stripped = line.strip()
-            if stripped.startswith("%"):
-                if unit is not self.main:
-                    continue  # a subprogram file's own tape marks stay out of the flat program
-                yield SourceLine(idx + 1, unit.path, line, True)
-                if unit is self.main:
+            if line.strip().startswith("%"):
+                if unit is self.main:  # a subprogram file's own tape marks stay out of the flat program
+                    yield SourceLine(idx + 1, unit.path, line, True)
                     if percent_open:
                         return
                     percent_open = True
                 continue
             b = unit.block(idx)
-            if b.program_number is not None:
-                if unit is self.main and first_code:
-                    first_code = False
-                    yield SourceLine(idx + 1, unit.path, line, True)
-                    continue
-                if len(self.frames) == 1:
-                    break  # the main program ran into the next program in the file
-                continue
-            if b.oword is not None and b.oword.kw == "" and unit is self.main and first_code:
+            if first_code and unit is self.main and _opens_program(b):
                 first_code = False
                 yield SourceLine(idx + 1, unit.path, line, True)
+                continue
+            if b.program_number is not None:
+                if len(self.frames) == 1:
+                    return  # the main program ran into the next program in the file
                 continue
             if b.items or b.oword or b.macro:
                 first_code = False
@@ -427,12 +413,28 @@ class _Expander(Env):
                 else:
                     yield from self._block(b, line)
             except _Stop:
-                stopped_at_end = True
-                break
-        if stopped_at_end:
-            last = _last_code_line(self.main.lines)
-            if last is not None and self.main.lines[last].strip().startswith("%") and last > self.cur_idx:
-                yield SourceLine(last + 1, self.main.path, self.main.lines[last], True)
+                yield from self._closing_percent()
+                return
+
+    def _skipped_line(self, unit: Unit, idx: int) -> None:
+        """A line met while skipping (LinuxCNC): only the o-word line the skip is looking
+        for ends it (``skipping_to_sub``: the sub or label called; ``skipping_o``: the
+        o-word that closes the skipped block)."""
+        if self.fanuc or not unit.maybe_oword(idx):
+            return
+        b = unit.block(idx)
+        if b.oword is None:
+            return
+        target = self.skipping_to_sub or self.skipping_o
+        if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
+            self._oword(b, b.oword)
+
+    def _closing_percent(self) -> Iterator[SourceLine]:
+        """After the program's end (M2/M30, M99 in the main program): the main file's
+        closing '%' line, when it comes later in the file."""
+        last = _last_code_line(self.main.lines)
+        if last is not None and self.main.lines[last].strip().startswith("%") and last > self.cur_idx:
+            yield SourceLine(last + 1, self.main.path, self.main.lines[last], True)
 
     def _end_of_file(self) -> None:
         if self.defining_sub is not None and self.skipping_o == self.defining_sub:
@@ -1051,6 +1053,11 @@ class _Expander(Env):
         "endrepeat": _o_endrepeat, "break": _o_break, "continue": _o_continue,
         "if": _o_if, "elseif": _o_elseif, "else": _o_else, "endif": _o_endif,
     }
+
+
+def _opens_program(b: Block) -> bool:
+    """A program-number line (Fanuc ``O1234``, ``:1234``) or a bare LinuxCNC ``o100``."""
+    return b.program_number is not None or (b.oword is not None and b.oword.kw == "")
 
 
 def _round_to_int(v: float) -> int:
