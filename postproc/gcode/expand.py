@@ -480,25 +480,7 @@ class _Expander(Env):
         if b.slash and b.assigns:
             raise self.refuse(1, "a parameter setting on a block-delete ('/') line: whether it runs depends on "
                               "the operator's block-delete switch", hint="remove the '/' or the setting")
-        # evaluate every value in source order (rs274ngc: settings apply after the line)
-        values: list = []
-        self.pending = []
-        self.pending_names = set()
-        for it in b.items:
-            if isinstance(it, Word):
-                if it.node is None:
-                    values.append(float(it.raw))
-                else:
-                    values.append(self._value(it.node))
-            else:
-                v = self._value(it.node)
-                if v is not NULL and not self.fanuc:
-                    v = float(v)
-                self._queue_setting(it, v)
-                values.append(None)
-                if self.fanuc:
-                    self._apply_pending()
-        self._apply_pending()
+        values = self._item_values(b)
         words = [(w, v) for w, v in zip(b.items, values, strict=True) if isinstance(w, Word)]
         by_letter: dict[str, list[float]] = {}
         for w, v in words:
@@ -514,7 +496,42 @@ class _Expander(Env):
             w = next(w for w, v in words if w.letter == "G" and v == 66.0)
             raise self.refuse(w.col, "G66 modal macro call is not supported",
                               hint="call the macro with G65 at each position")
-        # rewrite
+        edits, kept = self._edits(b, words, drop)
+        if kept or (not b.assigns and call is None):
+            if edits:
+                text = _apply_edits(line, edits)
+                yield SourceLine(idx + 1, unit.path, text, False)
+            else:
+                yield SourceLine(idx + 1, unit.path, line, True)
+        if any(m in (2.0, 30.0) for m in m_codes) or (99.0 in m_codes and call is None and len(self.frames) == 1):
+            raise _Stop
+        if call is not None:
+            call()
+
+    def _item_values(self, b: Block) -> list:
+        """The value of each item of ``b`` in source order: a word's number (or NULL), None
+        for a setting. Settings are applied after the line (rs274ngc), each one at once in Fanuc."""
+        values: list = []
+        self.pending = []
+        self.pending_names = set()
+        for it in b.items:
+            if isinstance(it, Word):
+                values.append(float(it.raw) if it.node is None else self._value(it.node))
+                continue
+            v = self._value(it.node)
+            if v is not NULL and not self.fanuc:
+                v = float(v)
+            self._queue_setting(it, v)
+            values.append(None)
+            if self.fanuc:
+                self._apply_pending()
+        self._apply_pending()
+        return values
+
+    def _edits(self, b: Block, words: list[tuple[Word, Any]], drop: set[int]) -> tuple[list[tuple[int, int, str]], int]:
+        """How the line of ``b`` is rewritten (``(start, end, text)`` replacements: computed
+        values written, settings, vacant words and the call words ``drop`` removed) and the
+        number of words it keeps besides N."""
         edits: list[tuple[int, int, str]] = []
         kept = 0
         for k, (w, v) in enumerate(words):
@@ -529,16 +546,7 @@ class _Expander(Env):
                 edits.append((w.span[0], w.span[1], format_number(v, w.letter)))
         for a in b.assigns:
             edits.append((a.span[0], a.span[1], ""))
-        if kept or (not b.assigns and call is None):
-            if edits:
-                text = _apply_edits(line, edits)
-                yield SourceLine(idx + 1, unit.path, text, False)
-            else:
-                yield SourceLine(idx + 1, unit.path, line, True)
-        if any(m in (2.0, 30.0) for m in m_codes) or (99.0 in m_codes and call is None and len(self.frames) == 1):
-            raise _Stop
-        if call is not None:
-            call()
+        return edits, kept
 
     def _queue_setting(self, a: Assign, v) -> None:
         t = a.target
