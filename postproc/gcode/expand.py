@@ -580,52 +580,62 @@ class _Expander(Env):
                     g_codes: list[float]) -> tuple[Callable[[], None] | None, set[int]]:
         """The call a block makes and the indices of the words it uses (``words``: each
         word with its value, a number or NULL)."""
-        drop: set[int] = set()
         letters: dict[str, list[tuple[int, Word, Any]]] = {}
         for k, (w, v) in enumerate(words):
             letters.setdefault(w.letter, []).append((k, w, v))
-        if 99.0 in m_codes and len(self.frames) == 1 and "P" not in letters:
-            # M99 ending the main program: the end of one pass (a subprogram file
-            # corrected on its own, or a program the controller repeats: each pass is
-            # corrected alike; the interpreter refuses it in G91, where each pass would
-            # start elsewhere). The line stays as it is and expansion stops there.
-            return None, set()
         if 99.0 in m_codes:
-            for k, _w, v in letters.get("M", []):
-                if v == 99.0:
-                    drop.add(k)
-            target: tuple[int, int] | None = None
-            for k, w, v in letters.get("P", []):
-                drop.add(k)
-                target = (int(round(v)), w.col)
-            return (lambda: self._m99(target)), drop
+            if len(self.frames) == 1 and "P" not in letters:
+                # M99 ending the main program: the end of one pass (a subprogram file
+                # corrected on its own, or a program the controller repeats: each pass is
+                # corrected alike; the interpreter refuses it in G91, where each pass would
+                # start elsewhere). The line stays as it is and expansion stops there.
+                return None, set()
+            return self._m99_words(letters)
         if 97.0 in m_codes and self.fanuc:
-            mw = next(w for k, w, v in letters["M"] if v == 97.0)
-            for k, _w, v in letters.get("M", []):
-                if v == 97.0:
-                    drop.add(k)
-            p = letters.get("P")
-            if not p:
-                raise self.error(mw.col, "M97 needs P (the sequence number of the local subprogram)")
-            for k, _, _ in p + letters.get("L", []):
-                drop.add(k)
-            number = int(round(p[0][2]))
-            count = int(round(letters["L"][0][2])) if "L" in letters else 1
-            return (lambda: self._m97(number, count, p[0][1].col)), drop
+            return self._m97_words(letters)
         if 98.0 in m_codes:
-            mw = next(w for k, w, v in letters["M"] if v == 98.0)
-            for k, _w, v in letters.get("M", []):
-                if v == 98.0:
-                    drop.add(k)
-            p = letters.get("P")
-            if not p:
-                raise self.error(mw.col, "M98 needs P (the subprogram number)")
-            for k, _, _ in p + letters.get("L", []):
-                drop.add(k)
-            number = int(round(p[0][2]))
-            repeats = int(round(letters["L"][0][2])) if "L" in letters else None
-            return (lambda: self._m98(number, repeats, p[0][1].col)), drop
-        # G65 P.. L.. args
+            return self._m98_words(letters)
+        return self._g65_words(words, letters)
+
+    def _m99_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """M99 [P..]: return from the subprogram (to sequence number P)."""
+        drop = {k for k, _w, v in letters.get("M", []) if v == 99.0}
+        target: tuple[int, int] | None = None
+        for k, w, v in letters.get("P", []):
+            drop.add(k)
+            target = (int(round(v)), w.col)
+        return (lambda: self._m99(target)), drop
+
+    def _m97_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """M97 P.. [L..] (Haas): call the local subprogram at sequence number P, L times."""
+        p, drop = self._p_l_words(letters, 97.0, "M97 needs P (the sequence number of the local subprogram)")
+        number = int(round(p[2]))
+        count = int(round(letters["L"][0][2])) if "L" in letters else 1
+        return (lambda: self._m97(number, count, p[1].col)), drop
+
+    def _m98_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """M98 P.. [L..]: call subprogram O(P), L times."""
+        p, drop = self._p_l_words(letters, 98.0, "M98 needs P (the subprogram number)")
+        number = int(round(p[2]))
+        repeats = int(round(letters["L"][0][2])) if "L" in letters else None
+        return (lambda: self._m98(number, repeats, p[1].col)), drop
+
+    def _p_l_words(self, letters: dict[str, list[tuple[int, Word, Any]]], code: float,
+                   missing_p: str) -> tuple[tuple[int, Word, Any], set[int]]:
+        """The first P of an M97/M98 call (``code``) and the indices of its M, P and L words;
+        ``missing_p`` is the error when there is no P."""
+        mw = next(w for k, w, v in letters["M"] if v == code)
+        drop = {k for k, _w, v in letters.get("M", []) if v == code}
+        p = letters.get("P")
+        if not p:
+            raise self.error(mw.col, missing_p)
+        drop.update(k for k, _, _ in p + letters.get("L", []))
+        return p[0], drop
+
+    def _g65_words(self, words: list[tuple[Word, Any]],
+                   letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """G65 P.. [L..] arguments: call macro O(P), L times, with the arguments as its locals
+        (argument specification I). Every word of the block belongs to the call."""
         gw = next(w for k, w, v in letters["G"] if v == 65.0)
         if not self.fanuc:
             raise self.refuse(gw.col, "G65 macro call is Fanuc/Haas syntax",
@@ -633,8 +643,7 @@ class _Expander(Env):
         args: dict[str, Any] = {}
         macro: int | None = None
         count = 1
-        for k, (w, v) in enumerate(words):
-            drop.add(k)
+        for w, v in words:
             if w.letter == "G":
                 if v != 65.0:
                     raise self.refuse(w.col, "G65 must be alone in its block with its arguments")
@@ -642,22 +651,24 @@ class _Expander(Env):
                 macro = int(round(v))
             elif w.letter == "L":
                 count = int(round(v))
-            elif w.letter == "N":
-                continue
-            elif w.letter in FANUC_ARGUMENTS_I:
-                if w.node is None and "." not in w.raw and v != 0.0:
-                    raise self.refuse(w.col, f"G65 argument {w.letter}{w.raw} has no decimal point: the "
-                                      "control scales it by its least input increment, which is "
-                                      "machine configuration", hint=f"write {w.letter}{w.raw}. (with a point)")
-                if w.letter in args:
-                    raise self.refuse(w.col, f"argument {w.letter} given twice (argument specification II "
-                                      "is not supported)")
-                args[w.letter] = v
-            else:
-                raise self.error(w.col, f"address {w.letter} cannot be a G65 argument")
+            elif w.letter != "N":
+                self._g65_argument(args, w, v)
         if macro is None:
             raise self.error(gw.col, "G65 needs P (the macro program number)")
-        return (lambda: self._g65(macro, count, args, gw.col)), drop
+        return (lambda: self._g65(macro, count, args, gw.col)), set(range(len(words)))
+
+    def _g65_argument(self, args: dict[str, Any], w: Word, v: Any) -> None:
+        """Add word ``w`` (value ``v``) to the arguments ``args`` of a G65 call."""
+        if w.letter not in FANUC_ARGUMENTS_I:
+            raise self.error(w.col, f"address {w.letter} cannot be a G65 argument")
+        if w.node is None and "." not in w.raw and v != 0.0:
+            raise self.refuse(w.col, f"G65 argument {w.letter}{w.raw} has no decimal point: the "
+                              "control scales it by its least input increment, which is "
+                              "machine configuration", hint=f"write {w.letter}{w.raw}. (with a point)")
+        if w.letter in args:
+            raise self.refuse(w.col, f"argument {w.letter} given twice (argument specification II "
+                              "is not supported)")
+        args[w.letter] = v
 
     def _program_target(self, number: int, col: int) -> tuple[Unit, int, int] | None:
         progs = self.main.programs()
