@@ -413,8 +413,8 @@ class _Expander(Env):
                 else:
                     yield from self._block(b, line)
             except _Stop:
-                yield from self._closing_percent()
-                return
+                break  # the program's end (M2/M30, M99 ending the main program)
+        yield from self._closing_percent()
 
     def _skipped_line(self, unit: Unit, idx: int) -> None:
         """A line met while skipping (LinuxCNC): only the o-word line the skip is looking
@@ -430,8 +430,8 @@ class _Expander(Env):
             self._oword(b, b.oword)
 
     def _closing_percent(self) -> Iterator[SourceLine]:
-        """After the program's end (M2/M30, M99 in the main program): the main file's
-        closing '%' line, when it comes later in the file."""
+        """After the program's end: the main file's closing '%' line, when it comes later
+        in the file."""
         last = _last_code_line(self.main.lines)
         if last is not None and self.main.lines[last].strip().startswith("%") and last > self.cur_idx:
             yield SourceLine(last + 1, self.main.path, self.main.lines[last], True)
