@@ -280,17 +280,27 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
     """Raise a PostprocError when controller ``d`` would refuse ``line`` (with or without its ending)."""
     d = get(d)
     body = line.rstrip("\n")
+    count = len(body.encode("utf-8", errors="surrogateescape"))  # a carriage return counts
     if body.endswith("\r"):
-        count = len(body.encode("utf-8", errors="surrogateescape"))
         body = body[:-1]
-    else:
-        count = len(body.encode("utf-8", errors="surrogateescape"))
     where: _Where = {"path": path, "lineno": lineno}
     if count > d.max_line_chars:
         raise PostprocError(
             f"line of {count} characters is longer than {d.title} reads ({d.max_line_chars})", col=d.max_line_chars + 1,
             hint="shorten the comment on this line" if "(" in body or ";" in body else
             f"this line cannot be written for --dialect {d.name}", **where)
+    _check_characters(d, body, where)
+    if "(" not in body and ";" not in body and ")" not in body:  # no comment: the common line
+        if d.max_word_chars is not None and len(body) > d.max_word_chars:
+            _check_words(d, d.max_word_chars, body, [(0, len(body))], where)
+        return
+    words = _check_comments(d, body, where)
+    if d.max_word_chars is not None:
+        _check_words(d, d.max_word_chars, body, words, where)
+
+
+def _check_characters(d: Dialect, body: str, where: _Where) -> None:
+    """Refuse the first character that ``d`` does not read: non-ISO, or lower case."""
     if d.ascii_only and not (body.isascii() and body.replace("\t", " ").isprintable()):
         for k, c in enumerate(body):
             if not (" " <= c <= "~" or c == "\t"):
@@ -301,11 +311,12 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
             if c.isalpha() and c.islower():
                 raise PostprocError(f"lower-case {c!r}: {d.title} reads upper-case letters only", col=k + 1,
                                     hint="write the program in upper case", **where)
-    if "(" not in body and ";" not in body and ")" not in body:  # no comment: the common line
-        if d.max_word_chars is not None and len(body) > d.max_word_chars:
-            _check_words(d, d.max_word_chars, body, [(0, len(body))], where)
-        return
-    words: list[tuple[int, int]] = []  # (start, end) of the text outside comments
+
+
+def _check_comments(d: Dialect, body: str, where: _Where) -> list[tuple[int, int]]:
+    """Refuse the first comment of ``body`` that ``d`` does not read; return the
+    ``(start, end)`` spans of the text outside the comments."""
+    words: list[tuple[int, int]] = []
     pos = 0
     for start, text, kind in _comments(body):
         if kind in ("(", "unclosed", ";"):
@@ -320,17 +331,15 @@ def check_output_line(d: str | Dialect, line: str, path: str | None = None, line
             if not d.semicolon_comments:
                 raise PostprocError(f"';' comment: {d.title} does not read ';' as a comment", col=start + 1,
                                     hint="write the comment in parentheses", **where)
-            break
+            return words
         bad = [c for c in text if c in d.comment_forbidden]
         if bad:
             k = start + 1 + text.index(bad[0])
             raise PostprocError(f"{bad[0]!r} inside a comment, which {d.title} refuses", col=k + 1,
                                 hint="remove it from the comment", **where)
         pos = start + len(text) + 2
-    else:
-        words.append((pos, len(body)))
-    if d.max_word_chars is not None:
-        _check_words(d, d.max_word_chars, body, words, where)
+    words.append((pos, len(body)))
+    return words
 
 
 def _check_words(d: Dialect, max_word_chars: int, body: str, words: list[tuple[int, int]], where: _Where) -> None:

@@ -359,14 +359,13 @@ class _Expander(Env):
 
     # -- main loop ----------------------------------------------------------
     def run(self) -> Iterator[SourceLine]:
-        stopped_at_end = False
         percent_open = False
         first_code = True
         while True:
             unit = self.unit
             if self.idx >= len(unit.lines):
                 self._end_of_file()
-                break
+                return
             idx = self.idx
             self.idx += 1
             self.cur_idx = idx
@@ -376,14 +375,8 @@ class _Expander(Env):
                 raise self.refuse(1, f"the program runs more than {self.max_lines} lines: an endless loop or "
                                   "recursion", hint="check the loop conditions and subprogram returns")
             line = unit.lines[idx]
-            # LinuxCNC skipping states: only o-word lines can stop them
             if self.skipping_o is not None or self.skipping_to_sub is not None:
-                if not self.fanuc and unit.maybe_oword(idx):
-                    b = unit.block(idx)
-                    if b.oword is not None:
-                        target = self.skipping_to_sub or self.skipping_o
-                        if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
-                            yield from self._oword(b, b.oword)
+                self._skipped_line(unit, idx)
                 continue
             words = scan_words(line)
             if words is not None and not any(
@@ -394,45 +387,54 @@ class _Expander(Env):
                     first_code = False
                 yield SourceLine(idx + 1, unit.path, line, True)
                 continue
-            stripped = line.strip()
-            if stripped.startswith("%"):
-                if unit is not self.main:
-                    continue  # a subprogram file's own tape marks stay out of the flat program
-                yield SourceLine(idx + 1, unit.path, line, True)
-                if unit is self.main:
+            if line.strip().startswith("%"):
+                if unit is self.main:  # a subprogram file's own tape marks stay out of the flat program
+                    yield SourceLine(idx + 1, unit.path, line, True)
                     if percent_open:
                         return
                     percent_open = True
                 continue
             b = unit.block(idx)
-            if b.program_number is not None:
-                if unit is self.main and first_code:
-                    first_code = False
-                    yield SourceLine(idx + 1, unit.path, line, True)
-                    continue
-                if len(self.frames) == 1:
-                    break  # the main program ran into the next program in the file
-                continue
-            if b.oword is not None and b.oword.kw == "" and unit is self.main and first_code:
+            if first_code and unit is self.main and _opens_program(b):
                 first_code = False
                 yield SourceLine(idx + 1, unit.path, line, True)
+                continue
+            if b.program_number is not None:
+                if len(self.frames) == 1:
+                    return  # the main program ran into the next program in the file
                 continue
             if b.items or b.oword or b.macro:
                 first_code = False
             try:
                 if b.oword is not None:
-                    yield from self._oword(b, b.oword)
+                    self._oword(b, b.oword)
                 elif b.macro is not None:
                     self._macro(b, b.macro)
                 else:
                     yield from self._block(b, line)
             except _Stop:
-                stopped_at_end = True
-                break
-        if stopped_at_end:
-            last = _last_code_line(self.main.lines)
-            if last is not None and self.main.lines[last].strip().startswith("%") and last > self.cur_idx:
-                yield SourceLine(last + 1, self.main.path, self.main.lines[last], True)
+                break  # the program's end (M2/M30, M99 ending the main program)
+        yield from self._closing_percent()
+
+    def _skipped_line(self, unit: Unit, idx: int) -> None:
+        """A line met while skipping (LinuxCNC): only the o-word line the skip is looking
+        for ends it (``skipping_to_sub``: the sub or label called; ``skipping_o``: the
+        o-word that closes the skipped block)."""
+        if self.fanuc or not unit.maybe_oword(idx):
+            return
+        b = unit.block(idx)
+        if b.oword is None:
+            return
+        target = self.skipping_to_sub or self.skipping_o
+        if b.oword.name == target and (self.skipping_to_sub is None or b.oword.kw in ("sub", "")):
+            self._oword(b, b.oword)
+
+    def _closing_percent(self) -> Iterator[SourceLine]:
+        """After the program's end: the main file's closing '%' line, when it comes later
+        in the file."""
+        last = _last_code_line(self.main.lines)
+        if last is not None and self.main.lines[last].strip().startswith("%") and last > self.cur_idx:
+            yield SourceLine(last + 1, self.main.path, self.main.lines[last], True)
 
     def _end_of_file(self) -> None:
         if self.defining_sub is not None and self.skipping_o == self.defining_sub:
@@ -478,25 +480,7 @@ class _Expander(Env):
         if b.slash and b.assigns:
             raise self.refuse(1, "a parameter setting on a block-delete ('/') line: whether it runs depends on "
                               "the operator's block-delete switch", hint="remove the '/' or the setting")
-        # evaluate every value in source order (rs274ngc: settings apply after the line)
-        values: list = []
-        self.pending = []
-        self.pending_names = set()
-        for it in b.items:
-            if isinstance(it, Word):
-                if it.node is None:
-                    values.append(float(it.raw))
-                else:
-                    values.append(self._value(it.node))
-            else:
-                v = self._value(it.node)
-                if v is not NULL and not self.fanuc:
-                    v = float(v)
-                self._queue_setting(it, v)
-                values.append(None)
-                if self.fanuc:
-                    self._apply_pending()
-        self._apply_pending()
+        values = self._item_values(b)
         words = [(w, v) for w, v in zip(b.items, values, strict=True) if isinstance(w, Word)]
         by_letter: dict[str, list[float]] = {}
         for w, v in words:
@@ -512,7 +496,42 @@ class _Expander(Env):
             w = next(w for w, v in words if w.letter == "G" and v == 66.0)
             raise self.refuse(w.col, "G66 modal macro call is not supported",
                               hint="call the macro with G65 at each position")
-        # rewrite
+        edits, kept = self._edits(b, words, drop)
+        if kept or (not b.assigns and call is None):
+            if edits:
+                text = _apply_edits(line, edits)
+                yield SourceLine(idx + 1, unit.path, text, False)
+            else:
+                yield SourceLine(idx + 1, unit.path, line, True)
+        if any(m in (2.0, 30.0) for m in m_codes) or (99.0 in m_codes and call is None and len(self.frames) == 1):
+            raise _Stop
+        if call is not None:
+            call()
+
+    def _item_values(self, b: Block) -> list:
+        """The value of each item of ``b`` in source order: a word's number (or NULL), None
+        for a setting. Settings are applied after the line (rs274ngc), each one at once in Fanuc."""
+        values: list = []
+        self.pending = []
+        self.pending_names = set()
+        for it in b.items:
+            if isinstance(it, Word):
+                values.append(float(it.raw) if it.node is None else self._value(it.node))
+                continue
+            v = self._value(it.node)
+            if v is not NULL and not self.fanuc:
+                v = float(v)
+            self._queue_setting(it, v)
+            values.append(None)
+            if self.fanuc:
+                self._apply_pending()
+        self._apply_pending()
+        return values
+
+    def _edits(self, b: Block, words: list[tuple[Word, Any]], drop: set[int]) -> tuple[list[tuple[int, int, str]], int]:
+        """How the line of ``b`` is rewritten (``(start, end, text)`` replacements: computed
+        values written, settings, vacant words and the call words ``drop`` removed) and the
+        number of words it keeps besides N."""
         edits: list[tuple[int, int, str]] = []
         kept = 0
         for k, (w, v) in enumerate(words):
@@ -527,16 +546,7 @@ class _Expander(Env):
                 edits.append((w.span[0], w.span[1], format_number(v, w.letter)))
         for a in b.assigns:
             edits.append((a.span[0], a.span[1], ""))
-        if kept or (not b.assigns and call is None):
-            if edits:
-                text = _apply_edits(line, edits)
-                yield SourceLine(idx + 1, unit.path, text, False)
-            else:
-                yield SourceLine(idx + 1, unit.path, line, True)
-        if any(m in (2.0, 30.0) for m in m_codes) or (99.0 in m_codes and call is None and len(self.frames) == 1):
-            raise _Stop
-        if call is not None:
-            call()
+        return edits, kept
 
     def _queue_setting(self, a: Assign, v) -> None:
         t = a.target
@@ -570,52 +580,62 @@ class _Expander(Env):
                     g_codes: list[float]) -> tuple[Callable[[], None] | None, set[int]]:
         """The call a block makes and the indices of the words it uses (``words``: each
         word with its value, a number or NULL)."""
-        drop: set[int] = set()
         letters: dict[str, list[tuple[int, Word, Any]]] = {}
         for k, (w, v) in enumerate(words):
             letters.setdefault(w.letter, []).append((k, w, v))
-        if 99.0 in m_codes and len(self.frames) == 1 and "P" not in letters:
-            # M99 ending the main program: the end of one pass (a subprogram file
-            # corrected on its own, or a program the controller repeats: each pass is
-            # corrected alike; the interpreter refuses it in G91, where each pass would
-            # start elsewhere). The line stays as it is and expansion stops there.
-            return None, set()
         if 99.0 in m_codes:
-            for k, _w, v in letters.get("M", []):
-                if v == 99.0:
-                    drop.add(k)
-            target: tuple[int, int] | None = None
-            for k, w, v in letters.get("P", []):
-                drop.add(k)
-                target = (int(round(v)), w.col)
-            return (lambda: self._m99(target)), drop
+            if len(self.frames) == 1 and "P" not in letters:
+                # M99 ending the main program: the end of one pass (a subprogram file
+                # corrected on its own, or a program the controller repeats: each pass is
+                # corrected alike; the interpreter refuses it in G91, where each pass would
+                # start elsewhere). The line stays as it is and expansion stops there.
+                return None, set()
+            return self._m99_words(letters)
         if 97.0 in m_codes and self.fanuc:
-            mw = next(w for k, w, v in letters["M"] if v == 97.0)
-            for k, _w, v in letters.get("M", []):
-                if v == 97.0:
-                    drop.add(k)
-            p = letters.get("P")
-            if not p:
-                raise self.error(mw.col, "M97 needs P (the sequence number of the local subprogram)")
-            for k, _, _ in p + letters.get("L", []):
-                drop.add(k)
-            number = int(round(p[0][2]))
-            count = int(round(letters["L"][0][2])) if "L" in letters else 1
-            return (lambda: self._m97(number, count, p[0][1].col)), drop
+            return self._m97_words(letters)
         if 98.0 in m_codes:
-            mw = next(w for k, w, v in letters["M"] if v == 98.0)
-            for k, _w, v in letters.get("M", []):
-                if v == 98.0:
-                    drop.add(k)
-            p = letters.get("P")
-            if not p:
-                raise self.error(mw.col, "M98 needs P (the subprogram number)")
-            for k, _, _ in p + letters.get("L", []):
-                drop.add(k)
-            number = int(round(p[0][2]))
-            repeats = int(round(letters["L"][0][2])) if "L" in letters else None
-            return (lambda: self._m98(number, repeats, p[0][1].col)), drop
-        # G65 P.. L.. args
+            return self._m98_words(letters)
+        return self._g65_words(words, letters)
+
+    def _m99_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """M99 [P..]: return from the subprogram (to sequence number P)."""
+        drop = {k for k, _w, v in letters.get("M", []) if v == 99.0}
+        target: tuple[int, int] | None = None
+        for k, w, v in letters.get("P", []):
+            drop.add(k)
+            target = (int(round(v)), w.col)
+        return (lambda: self._m99(target)), drop
+
+    def _m97_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """M97 P.. [L..] (Haas): call the local subprogram at sequence number P, L times."""
+        p, drop = self._p_l_words(letters, 97.0, "M97 needs P (the sequence number of the local subprogram)")
+        number = int(round(p[2]))
+        count = int(round(letters["L"][0][2])) if "L" in letters else 1
+        return (lambda: self._m97(number, count, p[1].col)), drop
+
+    def _m98_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """M98 P.. [L..]: call subprogram O(P), L times."""
+        p, drop = self._p_l_words(letters, 98.0, "M98 needs P (the subprogram number)")
+        number = int(round(p[2]))
+        repeats = int(round(letters["L"][0][2])) if "L" in letters else None
+        return (lambda: self._m98(number, repeats, p[1].col)), drop
+
+    def _p_l_words(self, letters: dict[str, list[tuple[int, Word, Any]]], code: float,
+                   missing_p: str) -> tuple[tuple[int, Word, Any], set[int]]:
+        """The first P of an M97/M98 call (``code``) and the indices of its M, P and L words;
+        ``missing_p`` is the error when there is no P."""
+        mw = next(w for k, w, v in letters["M"] if v == code)
+        drop = {k for k, _w, v in letters.get("M", []) if v == code}
+        p = letters.get("P")
+        if not p:
+            raise self.error(mw.col, missing_p)
+        drop.update(k for k, _, _ in p + letters.get("L", []))
+        return p[0], drop
+
+    def _g65_words(self, words: list[tuple[Word, Any]],
+                   letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
+        """G65 P.. [L..] arguments: call macro O(P), L times, with the arguments as its locals
+        (argument specification I). Every word of the block belongs to the call."""
         gw = next(w for k, w, v in letters["G"] if v == 65.0)
         if not self.fanuc:
             raise self.refuse(gw.col, "G65 macro call is Fanuc/Haas syntax",
@@ -623,8 +643,7 @@ class _Expander(Env):
         args: dict[str, Any] = {}
         macro: int | None = None
         count = 1
-        for k, (w, v) in enumerate(words):
-            drop.add(k)
+        for w, v in words:
             if w.letter == "G":
                 if v != 65.0:
                     raise self.refuse(w.col, "G65 must be alone in its block with its arguments")
@@ -632,22 +651,24 @@ class _Expander(Env):
                 macro = int(round(v))
             elif w.letter == "L":
                 count = int(round(v))
-            elif w.letter == "N":
-                continue
-            elif w.letter in FANUC_ARGUMENTS_I:
-                if w.node is None and "." not in w.raw and v != 0.0:
-                    raise self.refuse(w.col, f"G65 argument {w.letter}{w.raw} has no decimal point: the "
-                                      "control scales it by its least input increment, which is "
-                                      "machine configuration", hint=f"write {w.letter}{w.raw}. (with a point)")
-                if w.letter in args:
-                    raise self.refuse(w.col, f"argument {w.letter} given twice (argument specification II "
-                                      "is not supported)")
-                args[w.letter] = v
-            else:
-                raise self.error(w.col, f"address {w.letter} cannot be a G65 argument")
+            elif w.letter != "N":
+                self._g65_argument(args, w, v)
         if macro is None:
             raise self.error(gw.col, "G65 needs P (the macro program number)")
-        return (lambda: self._g65(macro, count, args, gw.col)), drop
+        return (lambda: self._g65(macro, count, args, gw.col)), set(range(len(words)))
+
+    def _g65_argument(self, args: dict[str, Any], w: Word, v: Any) -> None:
+        """Add word ``w`` (value ``v``) to the arguments ``args`` of a G65 call."""
+        if w.letter not in FANUC_ARGUMENTS_I:
+            raise self.error(w.col, f"address {w.letter} cannot be a G65 argument")
+        if w.node is None and "." not in w.raw and v != 0.0:
+            raise self.refuse(w.col, f"G65 argument {w.letter}{w.raw} has no decimal point: the "
+                              "control scales it by its least input increment, which is "
+                              "machine configuration", hint=f"write {w.letter}{w.raw}. (with a point)")
+        if w.letter in args:
+            raise self.refuse(w.col, f"argument {w.letter} given twice (argument specification II "
+                              "is not supported)")
+        args[w.letter] = v
 
     def _program_target(self, number: int, col: int) -> tuple[Unit, int, int] | None:
         progs = self.main.programs()
@@ -849,7 +870,20 @@ class _Expander(Env):
         op = self.offsets[name]
         self.unit, self.idx = op.unit, op.idx
 
-    def _oword(self, b: Block, ow: OWord) -> Iterator[SourceLine]:
+    def _skip_block(self, name: str) -> None:
+        """Skip the lines up to the o-word line ``name`` that ends the block begun here."""
+        self.skipping_o = name
+        self.skip_from = (self.unit_cur, self.cur_idx)
+
+    def _label(self, ow: OWord, allow_do: bool = False) -> _Offset:
+        """The position of the loop or if ``ow`` begins, recorded the first time it runs."""
+        op = self._check_label(ow, allow_do)
+        if op is None:
+            self._save_offset(ow)
+            op = self.offsets[ow.name]
+        return op
+
+    def _oword(self, b: Block, ow: OWord) -> None:
         """Run the o-word statement ``ow`` (``b.oword``) of block ``b``."""
         if b.slash:
             raise self.refuse(ow.col, "an o-word on a block-delete ('/') line")
@@ -857,156 +891,151 @@ class _Expander(Env):
             w = b.items[0]
             if not (isinstance(w, Word) and w.letter == "N" and len(b.items) == 1):
                 raise self.error(ow.col, "an o-word line holds nothing but the o-word (and a line number)")
-        kw = ow.kw
-        name = ow.name
         if self.fanuc:
             raise self.error(ow.col, "o-word control is LinuxCNC syntax",
                              hint="choose --dialect linuxcnc for this program")
         if self.defining_sub is not None and self.skipping_o == self.defining_sub and not (
-                name == self.defining_sub and kw == "endsub"):
+                ow.name == self.defining_sub and ow.kw == "endsub"):
             return  # inside a definition met in sequence: only its endsub counts
-        if kw in ("sub", ""):
-            if self.skipping_o is not None:
-                if self.offsets.get(name) is None:
-                    self.offsets[name] = _Offset(self.unit_cur, self.cur_idx, kw)
+        self._OWORD_HANDLERS[ow.kw](self, ow)
+
+    def _end_skip_at(self, ow: OWord) -> None:
+        """A sub or bare o-number line ends the skip to it, and records its position."""
+        if self.skipping_o is not None:
+            if self.offsets.get(ow.name) is None:
+                self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+            self.skipping_o = None
+        self.skipping_to_sub = None
+
+    def _o_number(self, ow: OWord) -> None:
+        """``o100`` alone (a Fanuc-style O number): execution continues into it."""
+        self._end_skip_at(ow)
+
+    def _o_sub(self, ow: OWord) -> None:
+        self._end_skip_at(ow)
+        fr = self.frames[-1]
+        if len(self.frames) > 1 and fr.call_type == "oword" and fr.sub_name == ow.name:
+            return  # the called subroutine starts here
+        if self.defining_sub is not None:
+            raise self.error(ow.col, "a subroutine defined inside another subroutine definition")
+        # a definition met in sequence: skipped up to its endsub
+        self._save_offset(ow)
+        self._skip_block(ow.name)
+        self.defining_sub = ow.name
+
+    def _o_return(self, ow: OWord) -> None:
+        """``endsub`` or ``return [value]``."""
+        name, kw = ow.name, ow.kw
+        if self.defining_sub == name:
+            if kw == "endsub":  # end of a definition met in sequence
                 self.skipping_o = None
-            self.skipping_to_sub = None
-            if kw == "":
-                return  # Fanuc-style O number: execution continues into it
-            if len(self.frames) > 1 and self.frames[-1].call_type == "oword" and (
-                    self.frames[-1].sub_name == name):
-                return  # the called subroutine starts here
-            if self.defining_sub is not None:
-                raise self.error(ow.col, "a subroutine defined inside another subroutine definition")
+                self.defining_sub = None
+            return
+        if len(self.frames) == 1:
+            raise self.error(ow.col, f"'o{_oname(name)} {kw}' outside a subroutine")
+        fr = self.frames[-1]
+        if fr.call_type != "oword":
+            raise self.error(ow.col, f"'o{_oname(name)} {kw}' in a subprogram called with M98",
+                             hint="end an M98 subprogram with M99")
+        if kw == "endsub" and self.skipping_o is not None:
+            self.skipping_o = None
+        if ow.args:
+            self.globals["_value"] = self._num(ow.args[0], ow.col)
+            self.globals["_value_returned"] = 1.0
+        for k, v in enumerate(fr.saved or []):
+            self.params[k + 1] = v
+        self._leave(fr)
+
+    def _o_do(self, ow: OWord) -> None:
+        self.skipping_o = None
+        if ow.name not in self.offsets:
             self._save_offset(ow)
-            self.skipping_o = name
-            self.skip_from = (self.unit_cur, self.cur_idx)
-            self.defining_sub = name
-            return
-        if kw in ("endsub", "return"):
-            if self.defining_sub == name:
-                if kw == "endsub":  # end of a definition met in sequence
-                    self.skipping_o = None
-                    self.defining_sub = None
-                return
-            if len(self.frames) == 1:
-                raise self.error(ow.col, f"'o{_oname(name)} {kw}' outside a subroutine")
-            fr = self.frames[-1]
-            if fr.call_type != "oword":
-                raise self.error(ow.col, f"'o{_oname(name)} {kw}' in a subprogram called with M98",
-                                 hint="end an M98 subprogram with M99")
-            if kw == "endsub" and self.skipping_o is not None:
-                self.skipping_o = None
-            if ow.args:
-                self.globals["_value"] = self._num(ow.args[0], ow.col)
-                self.globals["_value_returned"] = 1.0
-            for k, v in enumerate(fr.saved or []):
-                self.params[k + 1] = v
-            self._leave(fr)
-            return
-        if kw == "call":
-            yield from ()
-            self._ocall(ow)
-            return
-        if kw == "do":
-            self.skipping_o = None
-            if name not in self.offsets:
-                self._save_offset(ow)
-            return
-        if kw == "repeat":
-            op = self._check_label(ow)
-            if op is None:
-                self._save_offset(ow)
-                op = self.offsets[name]
-            self.skipping_o = None
-            if op.repeat_count == -1:
-                op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
-            if op.repeat_count > 0:
-                op.repeat_count -= 1
-            else:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                op.repeat_count = -1
-            return
-        if kw == "while":
-            op = self._check_label(ow, allow_do=True)
-            if op is None:
-                self._save_offset(ow)
-                op = self.offsets[name]
-            self.skipping_o = None
-            test = self._num(ow.args[0], ow.col)
-            if op.kind == "while":
-                if test == 0.0:
-                    self.skipping_o = name
-                    self.skip_from = (self.unit_cur, self.cur_idx)
-            else:  # end of a do loop
-                if test != 0.0 and not self.doing_break:
-                    self._back_to(name)
-                else:
-                    self.doing_break = False
-            return
-        if kw == "if":
-            if self._check_label(ow) is None:
-                self._save_offset(ow)
-            if self._num(ow.args[0], ow.col) != 0.0:
-                self.skipping_o = None
-                self.executed_if = True
-            else:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                self.executed_if = False
-            return
-        if kw == "elseif":
-            self._need(ow, ("if",), "'if'")
-            test = self._num(ow.args[0], ow.col)  # rs274ngc reads (evaluates) it in any case
-            if self.executed_if:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                return
-            if test != 0.0:
-                self.skipping_o = None
-                self.executed_if = True
-            return
-        if kw == "else":
-            self._need(ow, ("if",), "'if'")
-            if self.executed_if:
-                self.skipping_o = name
-                self.skip_from = (self.unit_cur, self.cur_idx)
-                return
-            if self.skipping_o == name:
-                self.executed_if = True
-                self.skipping_o = None
-            return
-        if kw == "endif":
-            self._need(ow, ("if",), "'if'")
+
+    def _o_repeat(self, ow: OWord) -> None:
+        op = self._label(ow)
+        self.skipping_o = None
+        if op.repeat_count == -1:
+            op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
+        if op.repeat_count > 0:
+            op.repeat_count -= 1
+        else:
+            self._skip_block(ow.name)
+            op.repeat_count = -1
+
+    def _o_while(self, ow: OWord) -> None:
+        """``while [test]``: the start of a while loop, or the end of a do loop."""
+        op = self._label(ow, allow_do=True)
+        self.skipping_o = None
+        test = self._num(ow.args[0], ow.col)
+        if op.kind == "while":
+            if test == 0.0:
+                self._skip_block(ow.name)
+        elif test != 0.0 and not self.doing_break:  # end of a do loop
+            self._back_to(ow.name)
+        else:
+            self.doing_break = False
+
+    def _o_if(self, ow: OWord) -> None:
+        self._label(ow)
+        if self._num(ow.args[0], ow.col) != 0.0:
             self.skipping_o = None
             self.executed_if = True
+        else:
+            self._skip_block(ow.name)
+            self.executed_if = False
+
+    def _o_elseif(self, ow: OWord) -> None:
+        self._need(ow, ("if",), "'if'")
+        test = self._num(ow.args[0], ow.col)  # rs274ngc reads (evaluates) it in any case
+        if self.executed_if:
+            self._skip_block(ow.name)
+        elif test != 0.0:
+            self.skipping_o = None
+            self.executed_if = True
+
+    def _o_else(self, ow: OWord) -> None:
+        self._need(ow, ("if",), "'if'")
+        if self.executed_if:
+            self._skip_block(ow.name)
+        elif self.skipping_o == ow.name:
+            self.executed_if = True
+            self.skipping_o = None
+
+    def _o_endif(self, ow: OWord) -> None:
+        self._need(ow, ("if",), "'if'")
+        self.skipping_o = None
+        self.executed_if = True
+
+    def _o_break(self, ow: OWord) -> None:
+        self._need(ow, ("while", "do"), "loop")
+        self._skip_block(ow.name)
+        self.doing_break = True
+
+    def _o_continue(self, ow: OWord) -> None:
+        self._need(ow, ("while", "do"), "loop")
+        if self.skipping_o == ow.name:
             return
-        if kw == "break":
-            self._need(ow, ("while", "do"), "loop")
-            self.skipping_o = name
-            self.skip_from = (self.unit_cur, self.cur_idx)
-            self.doing_break = True
+        self._skip_block(ow.name)
+        self.doing_continue = True
+
+    def _o_endwhile(self, ow: OWord) -> None:
+        self._need(ow, ("while",), "loop start")
+        self._loop_end(ow.name)
+
+    def _o_endrepeat(self, ow: OWord) -> None:
+        self._need(ow, ("repeat",), "loop start")
+        self._loop_end(ow.name)
+
+    def _loop_end(self, name: str) -> None:
+        """``endwhile``/``endrepeat``: back to the loop's start, unless the loop is being
+        left (its skip ends here) or a continue skipped to here."""
+        if self.skipping_o == name:
+            self.skipping_o = None
+            if self.doing_continue:
+                self.doing_continue = False
+                self._back_to(name)
             return
-        if kw == "continue":
-            self._need(ow, ("while", "do"), "loop")
-            if self.skipping_o == name:
-                return
-            self.skipping_o = name
-            self.skip_from = (self.unit_cur, self.cur_idx)
-            self.doing_continue = True
-            return
-        if kw in ("endwhile", "endrepeat"):
-            self._need(ow, ("repeat",) if kw == "endrepeat" else ("while",), "loop start")
-            if self.skipping_o == name:
-                self.skipping_o = None
-                if self.doing_continue:
-                    self.doing_continue = False
-                    self._back_to(name)
-                return
-            self._back_to(name)
-            return
-        raise AssertionError(kw)  # pragma: no cover
+        self._back_to(name)
 
     def _ocall(self, ow: OWord) -> None:
         args = [self._num(a, ow.col) for a in ow.args]
@@ -1035,6 +1064,19 @@ class _Expander(Env):
         self.skipping_to_sub = ow.name
         self.skipping_o = ow.name
         self.skip_from = (self.unit_cur, self.cur_idx)
+
+    # o-word keyword -> the method that runs it ("" is a bare o-number)
+    _OWORD_HANDLERS: dict[str, Callable[[_Expander, OWord], None]] = {
+        "": _o_number, "sub": _o_sub, "endsub": _o_return, "return": _o_return, "call": _ocall,
+        "do": _o_do, "while": _o_while, "endwhile": _o_endwhile, "repeat": _o_repeat,
+        "endrepeat": _o_endrepeat, "break": _o_break, "continue": _o_continue,
+        "if": _o_if, "elseif": _o_elseif, "else": _o_else, "endif": _o_endif,
+    }
+
+
+def _opens_program(b: Block) -> bool:
+    """A program-number line (Fanuc ``O1234``, ``:1234``) or a bare LinuxCNC ``o100``."""
+    return b.program_number is not None or (b.oword is not None and b.oword.kw == "")
 
 
 def _round_to_int(v: float) -> int:

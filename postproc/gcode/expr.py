@@ -30,6 +30,7 @@ Fanuc macro B (Fanuc/Haas manuals, "Arithmetic and logic operation"):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
@@ -411,42 +412,64 @@ def evaluate(node: tuple, env: Env):
 
 
 def _unary(name: str, v: float, env: Env, col: int) -> float:
-    if name == "abs":
-        return abs(v)
-    if name in ("acos", "asin"):
-        if v < -1.0 or v > 1.0:
-            raise env.error(col, f"argument {v!r} of {name.upper()} is outside [-1, 1]")
-        return math.degrees(math.acos(v) if name == "acos" else math.asin(v))
-    if name == "atan":  # pragma: no cover - parsed as ("atan", ...)
-        raise AssertionError
-    if name == "cos":
-        return math.cos(math.radians(v))
-    if name == "sin":
-        return math.sin(math.radians(v))
-    if name == "tan":
-        return math.tan(math.radians(v))
-    if name == "exp":
-        try:
-            return math.exp(v)
-        except OverflowError:
-            raise env.error(col, f"EXP[{v!r}] overflows") from None
-    if name == "ln":
-        if v <= 0.0:
-            raise env.error(col, f"LN of a zero or negative number ({v!r})")
-        return math.log(v)
-    if name in ("sqrt", "sqr"):
-        if v < 0.0:
-            raise env.error(col, f"SQRT of a negative number ({v!r})")
-        return math.sqrt(v)
-    if name == "fix":
-        return float(math.trunc(v)) if env.fanuc else float(math.floor(v))
-    if name == "fup":
-        if env.fanuc:  # away from zero (Fanuc: FUP[-1.2] = -2)
-            return float(math.ceil(v)) if v >= 0 else float(math.floor(v))
-        return float(math.ceil(v))
-    if name in ("round", "roun"):
-        return _round_half_away(v)
-    raise AssertionError(name)  # pragma: no cover
+    fn = _UNARY.get(name)
+    if fn is None:  # pragma: no cover - ATAN, EXISTS and POW are parsed as nodes of their own
+        raise AssertionError(name)
+    return fn(v, env, col)
+
+
+def _inverse_trig(name: str, v: float, env: Env, col: int) -> float:
+    if v < -1.0 or v > 1.0:
+        raise env.error(col, f"argument {v!r} of {name.upper()} is outside [-1, 1]")
+    return math.degrees(math.acos(v) if name == "acos" else math.asin(v))
+
+
+def _exp(v: float, env: Env, col: int) -> float:
+    try:
+        return math.exp(v)
+    except OverflowError:
+        raise env.error(col, f"EXP[{v!r}] overflows") from None
+
+
+def _ln(v: float, env: Env, col: int) -> float:
+    if v <= 0.0:
+        raise env.error(col, f"LN of a zero or negative number ({v!r})")
+    return math.log(v)
+
+
+def _sqrt(v: float, env: Env, col: int) -> float:
+    if v < 0.0:
+        raise env.error(col, f"SQRT of a negative number ({v!r})")
+    return math.sqrt(v)
+
+
+def _fix(v: float, env: Env, col: int) -> float:
+    return float(math.trunc(v)) if env.fanuc else float(math.floor(v))
+
+
+def _fup(v: float, env: Env, col: int) -> float:
+    if env.fanuc:  # away from zero (Fanuc: FUP[-1.2] = -2)
+        return float(math.ceil(v)) if v >= 0 else float(math.floor(v))
+    return float(math.ceil(v))
+
+
+# unary function name -> its value at v (trigonometry in degrees)
+_UNARY: dict[str, Callable[[float, Env, int], float]] = {
+    "abs": lambda v, env, col: abs(v),
+    "acos": lambda v, env, col: _inverse_trig("acos", v, env, col),
+    "asin": lambda v, env, col: _inverse_trig("asin", v, env, col),
+    "cos": lambda v, env, col: math.cos(math.radians(v)),
+    "sin": lambda v, env, col: math.sin(math.radians(v)),
+    "tan": lambda v, env, col: math.tan(math.radians(v)),
+    "exp": _exp,
+    "ln": _ln,
+    "sqrt": _sqrt,
+    "sqr": _sqrt,
+    "fix": _fix,
+    "fup": _fup,
+    "round": lambda v, env, col: _round_half_away(v),
+    "roun": lambda v, env, col: _round_half_away(v),
+}
 
 
 def _bits(env: Env, v: float, col: int, op: str) -> int:
@@ -456,61 +479,93 @@ def _bits(env: Env, v: float, col: int, op: str) -> int:
 
 
 def _binary(op: str, a, b, env: Env, col: int):
-    if env.fanuc and op in ("eq", "ne"):
-        if a is NULL or b is NULL:
-            same = a is b
-            return 1.0 if same == (op == "eq") else 0.0
-        return 1.0 if (a == b) == (op == "eq") else 0.0
-    a = _num(a)
-    b = _num(b)
-    if op == "+":
-        return a + b
-    if op == "-":
-        return a - b
-    if op == "*":
-        return a * b
-    if op == "/":
-        if b == 0.0:
-            raise env.error(col, "division by zero")
-        return a / b
-    if op == "mod":
-        if b == 0.0:
-            raise env.error(col, "MOD by zero")
-        if env.fanuc:
-            return math.fmod(a, b)
-        r = math.fmod(a, b)
-        return r + abs(b) if r < 0.0 else r
-    if op == "**":
-        if a < 0.0 and b != math.floor(b):
-            raise env.error(col, "a negative number raised to a non-integer power")
-        if a == 0.0 and b < 0.0:
-            raise env.error(col, "zero raised to a negative power")
-        try:
-            return math.pow(a, b)
-        except OverflowError:
-            raise env.error(col, "power overflows") from None
-    if op == "eq":
-        return 1.0 if abs(a - b) < LINUXCNC_EQUAL_TOLERANCE else 0.0
-    if op == "ne":
-        return 1.0 if abs(a - b) >= LINUXCNC_EQUAL_TOLERANCE else 0.0
-    if op == "gt":
-        return 1.0 if a > b else 0.0
-    if op == "ge":
-        return 1.0 if a >= b else 0.0
-    if op == "lt":
-        return 1.0 if a < b else 0.0
-    if op == "le":
-        return 1.0 if a <= b else 0.0
     if env.fanuc:
-        x, y = _bits(env, a, col, op), _bits(env, b, col, op)
-        return float(x & y if op == "and" else x | y if op == "or" else x ^ y)
-    if op == "and":
-        return 0.0 if a == 0.0 or b == 0.0 else 1.0
-    if op == "or":
-        return 1.0 if a != 0.0 or b != 0.0 else 0.0
-    if op == "xor":
-        return 1.0 if (a == 0.0) != (b == 0.0) else 0.0
-    raise AssertionError(op)  # pragma: no cover
+        if op == "eq" or op == "ne":
+            return _fanuc_equal(op == "eq", a, b)
+        return _FANUC_BINARY[op](_num(a), _num(b), env, col)
+    return _LINUXCNC_BINARY[op](_num(a), _num(b), env, col)
+
+
+def _fanuc_equal(eq: bool, a, b) -> float:
+    """Fanuc EQ (``eq``) or NE: exact, and a vacant value equals only a vacant one."""
+    if a is NULL or b is NULL:
+        return 1.0 if (a is b) == eq else 0.0
+    return 1.0 if (a == b) == eq else 0.0
+
+
+def _divide(a: float, b: float, env: Env, col: int) -> float:
+    if b == 0.0:
+        raise env.error(col, "division by zero")
+    return a / b
+
+
+def _mod_fanuc(a: float, b: float, env: Env, col: int) -> float:
+    if b == 0.0:
+        raise env.error(col, "MOD by zero")
+    return math.fmod(a, b)
+
+
+def _mod_linuxcnc(a: float, b: float, env: Env, col: int) -> float:
+    """``fmod`` made non-negative."""
+    if b == 0.0:
+        raise env.error(col, "MOD by zero")
+    r = math.fmod(a, b)
+    return r + abs(b) if r < 0.0 else r
+
+
+def _power(a: float, b: float, env: Env, col: int) -> float:
+    if a < 0.0 and b != math.floor(b):
+        raise env.error(col, "a negative number raised to a non-integer power")
+    if a == 0.0 and b < 0.0:
+        raise env.error(col, "zero raised to a negative power")
+    try:
+        return math.pow(a, b)
+    except OverflowError:
+        raise env.error(col, "power overflows") from None
+
+
+def _bitwise(op: str) -> Callable[[float, float, Env, int], float]:
+    """Fanuc AND/OR/XOR: bit by bit on integers."""
+    combine = {"and": int.__and__, "or": int.__or__, "xor": int.__xor__}[op]
+
+    def apply(a: float, b: float, env: Env, col: int) -> float:
+        x = _bits(env, a, col, op)
+        y = _bits(env, b, col, op)
+        return float(combine(x, y))
+    return apply
+
+
+_BinaryOp = Callable[[float, float, Env, int], float]
+
+# operators that both dialects evaluate alike (on numbers, a vacant value taken as 0)
+_COMMON_BINARY: dict[str, _BinaryOp] = {
+    "+": lambda a, b, env, col: a + b,
+    "-": lambda a, b, env, col: a - b,
+    "*": lambda a, b, env, col: a * b,
+    "/": _divide,
+    "**": _power,
+    "gt": lambda a, b, env, col: 1.0 if a > b else 0.0,
+    "ge": lambda a, b, env, col: 1.0 if a >= b else 0.0,
+    "lt": lambda a, b, env, col: 1.0 if a < b else 0.0,
+    "le": lambda a, b, env, col: 1.0 if a <= b else 0.0,
+}
+_LINUXCNC_BINARY: dict[str, _BinaryOp] = {
+    **_COMMON_BINARY,
+    "mod": _mod_linuxcnc,
+    "eq": lambda a, b, env, col: 1.0 if abs(a - b) < LINUXCNC_EQUAL_TOLERANCE else 0.0,
+    "ne": lambda a, b, env, col: 1.0 if abs(a - b) >= LINUXCNC_EQUAL_TOLERANCE else 0.0,
+    "and": lambda a, b, env, col: 0.0 if a == 0.0 or b == 0.0 else 1.0,
+    "or": lambda a, b, env, col: 1.0 if a != 0.0 or b != 0.0 else 0.0,
+    "xor": lambda a, b, env, col: 1.0 if (a == 0.0) != (b == 0.0) else 0.0,
+}
+# (EQ and NE are _fanuc_equal: they tell a vacant value from 0)
+_FANUC_BINARY: dict[str, _BinaryOp] = {
+    **_COMMON_BINARY,
+    "mod": _mod_fanuc,
+    "and": _bitwise("and"),
+    "or": _bitwise("or"),
+    "xor": _bitwise("xor"),
+}
 
 
 # ---------------------------------------------------------------------------
