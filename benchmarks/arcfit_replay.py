@@ -28,7 +28,8 @@ def _plain(seg: Any) -> Any:
         d = dict(seg)
     else:
         d = {k: getattr(seg, k) for k in type(seg).__slots__ if getattr(seg, k, None) is not None}
-    d.pop("spec_replace", None)
+    if not d.get("takeup"):
+        d.pop("takeup", None)
     if isinstance(d.get("spec"), dict):
         d["spec"] = {k: v for k, v in d["spec"].items() if k != "replace"}
     d["qe"] = [float(v) for v in d["qe"]]

@@ -27,7 +27,7 @@ import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import SolverError
-from postproc.gcode.geometry import TWO_PI, arc_params, arc_points, line_points
+from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI, arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc
 
 # Deepest subdivision: 2**20 pieces of one move means the correction field is not
@@ -229,18 +229,25 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
     n = np.array([-D[1], D[0]]) / L
     h = 0.5 * L
     t = float((np.asarray(c0, dtype=float) - M) @ n)
+    m0, m1 = float(M[0]), float(M[1])
+    n0, n1 = float(n[0]), float(n[1])
+    c = np.empty(2)
     for _ in range(12):
-        c = M + t * n
+        # the centre M + t n, element by element as numpy computes it
+        c[0] = m0 + t * n0
+        c[1] = m1 + t * n1
         v = P2 - c
         dist = np.hypot(v[:, 0], v[:, 1])
         dist = np.where(dist > 0, dist, 1e-300)
         rho = math.hypot(h, t)
         res = dist - rho
-        J = -(v @ n) / dist - t / rho
-        den = float(J @ J)
+        # minus the Jacobian, -J = (v . n) / dist + t / rho: negating a rounded result is
+        # exact, so the step is the same as with J itself
+        mJ = (v @ n) / dist + t / rho
+        den = float(mJ @ mJ)
         if den <= 0.0:
             break
-        dt = -float(J @ res) / den
+        dt = float(mJ @ res) / den
         # a step across the chord would flip the arc to the other side: halve it
         if (t + dt) * t < 0 and abs(t) > 0:
             dt = -0.5 * t
@@ -273,8 +280,9 @@ def circle_fit(P2: np.ndarray) -> np.ndarray | None:
     return m + 0.5 * sol[:2]
 
 
-def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: float, Q: np.ndarray,
-                   frac_nominal: np.ndarray, controller_limits: bool = False):
+def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: bool, nominal_sweep: float,
+                   Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool = False,
+                   mismatch_limit: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Deviation of the corrected samples ``Q`` (k, 3) from the arcs that controllers draw
     from S to E around each candidate centre ``C`` (m, 2, plane coordinates).
 
@@ -286,7 +294,10 @@ def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: fl
     where each sample lies along the piece (0 at S, 1 at E), which resolves the
     angle's turn for multi-turn arcs. ``controller_limits``: ``worst`` is also inf where
     a controller refuses or misreads the arc: a start or end radius below
-    :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`."""
+    :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`.
+    ``mismatch_limit``: ``worst`` is inf, unmeasured, where the radius mismatch exceeds it
+    (a candidate the caller refuses anyway); the samples are measured against the others
+    only, each value as it would be among all."""
     a1, a2, an = axes
     c1, c2 = C[:, 0], C[:, 1]
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
@@ -299,13 +310,25 @@ def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: fl
     else:
         base = np.mod(t1 - t0, TWO_PI)
     chord = math.hypot(e1 - s1, e2 - s2)
-    from postproc.gcode.geometry import FULL_CIRCLE_MM
-
     full = (np.abs(base) < 1e-12) | (chord < FULL_CIRCLE_MM)
     base = np.where(full, -TWO_PI if clockwise else TWO_PI, base)
     turns = np.maximum(1, np.round((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
     sweep = base + np.sign(base) * (turns - 1) * TWO_PI
     bad = np.abs(sweep - nominal_sweep) > math.pi / 2
+    mismatch = np.abs(r1 - r0)
+    if controller_limits:
+        bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
+    if mismatch_limit is not None:
+        # only the candidates that can pass are measured (every value below is computed
+        # element by element, so a candidate's worst is the same in any company)
+        sel = np.flatnonzero(~bad & (mismatch <= mismatch_limit))
+        worst = np.full(len(C), np.inf)
+        if len(sel) == 0:
+            return worst, mismatch, turns
+        if len(sel) < len(C):
+            c1, c2, t0, sweep, r0, r1 = c1[sel], c2[sel], t0[sel], sweep[sel], r0[sel], r1[sel]
+        else:
+            sel = None
     v1 = Q[None, :, a1] - c1[:, None]
     v2 = Q[None, :, a2] - c2[:, None]
     phi = np.arctan2(v2, v1)
@@ -318,10 +341,9 @@ def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: fl
     rad = r0[:, None] + (r1 - r0)[:, None] * frac
     nrm = S[an] + (E[an] - S[an]) * frac
     dev = np.hypot(np.hypot(v1, v2) - rad, Q[None, :, an] - nrm).max(axis=1)
-    mismatch = np.abs(r1 - r0)
-    if controller_limits:
-        bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    worst = np.where(bad, np.inf, dev + mismatch)
+    if mismatch_limit is None or sel is None:
+        return np.where(bad, np.inf, dev + mismatch), mismatch, turns
+    worst[sel] = dev + mismatch[sel]
     return worst, mismatch, turns
 
 
