@@ -115,7 +115,9 @@ class _Samples:
 
     def offset(self, a: int, b: int) -> np.ndarray:
         """The mean correction over samples a..b: corrected minus nominal."""
-        return self.dq[a:b + 1].mean(axis=0)
+        # as ndarray.mean: the sum divided by the count
+        mean: np.ndarray = np.add.reduce(self.dq[a:b + 1], axis=0) / (b + 1 - a)
+        return mean
 
 
 def _free_move(mv: Move) -> Move:
@@ -520,7 +522,7 @@ class EmitterMixin:
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
         step = 10.0 ** (-d)
-        S2, E2 = S[[a1, a2]], E[[a1, a2]]
+        S2, E2 = np.array([S[a1], S[a2]]), np.array([E[a1], E[a2]])
         cx, cy = arc.center[a1] + offset[a1], arc.center[a2] + offset[a2]
         centres = []
         if math.hypot(E2[0] - S2[0], E2[1] - S2[1]) > 0.0:
@@ -556,8 +558,8 @@ class EmitterMixin:
             if spec is not None:
                 return spec
         base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
-        v0 = np.round((centre - base) / unit, d)
-        V = np.round(v0[None, :] + _lattice(d), d)
+        v0 = ((centre - base) / unit).round(d)  # ndarray.round: np.round without its wrapper
+        V = (v0 + _lattice(d)).round(d)
         C = base[None, :] + V * unit
         # candidates whose radii disagree are refused unmeasured (their worst is inf)
         worst, mism, turns = arc_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, controller_limits=True,

@@ -20,7 +20,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +29,10 @@ from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import SolverError
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI, arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc
+
+# A point (x, y, z) in machine coordinates; the plane's axes as (first, second, normal).
+Point = Sequence[float] | np.ndarray
+Axes = tuple[int, int, int]
 
 # Deepest subdivision: 2**20 pieces of one move means the correction field is not
 # smooth at the tolerance's scale (or is broken); refuse rather than emit millions of lines.
@@ -296,15 +300,18 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     a controller refuses or misreads the arc: a start or end radius below
     :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`.
     ``mismatch_limit``: ``worst`` is inf, unmeasured, where the radius mismatch exceeds it
-    (a candidate the caller refuses anyway); the samples are measured against the others
-    only, each value as it would be among all."""
+    (a candidate the caller refuses anyway); the samples are measured against the other
+    candidates only, each value as it would be among all (numpy computes every one element
+    by element)."""
     a1, a2, an = axes
-    c1, c2 = C[:, 0], C[:, 1]
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    t0 = np.arctan2(s2 - c2, s1 - c1)
-    t1 = np.arctan2(e2 - c2, e1 - c1)
-    r0 = np.hypot(s1 - c1, s2 - c2)
-    r1 = np.hypot(e1 - c1, e2 - c2)
+    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
+    dx = np.array([[s1], [e1]]) - C[:, 0]
+    dy = np.array([[s2], [e2]]) - C[:, 1]
+    ang = np.arctan2(dy, dx)
+    rad = np.hypot(dx, dy)
+    t0, t1 = ang[0], ang[1]
+    r0, r1 = rad[0], rad[1]
     if clockwise:
         base = -np.mod(t0 - t1, TWO_PI)
     else:
@@ -312,39 +319,44 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     chord = math.hypot(e1 - s1, e2 - s2)
     full = (np.abs(base) < 1e-12) | (chord < FULL_CIRCLE_MM)
     base = np.where(full, -TWO_PI if clockwise else TWO_PI, base)
-    turns = np.maximum(1, np.round((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
+    # np.rint: np.round with no decimals, without its wrapper
+    turns = np.maximum(1, np.rint((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
     sweep = base + np.sign(base) * (turns - 1) * TWO_PI
     bad = np.abs(sweep - nominal_sweep) > math.pi / 2
     mismatch = np.abs(r1 - r0)
     if controller_limits:
         bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
     if mismatch_limit is not None:
-        # only the candidates that can pass are measured (every value below is computed
-        # element by element, so a candidate's worst is the same in any company)
+        # only the candidates that can pass are measured
         sel = np.flatnonzero(~bad & (mismatch <= mismatch_limit))
         worst = np.full(len(C), np.inf)
-        if len(sel) == 0:
-            return worst, mismatch, turns
-        if len(sel) < len(C):
-            c1, c2, t0, sweep, r0, r1 = c1[sel], c2[sel], t0[sel], sweep[sel], r0[sel], r1[sel]
-        else:
-            sel = None
-    v1 = Q[None, :, a1] - c1[:, None]
-    v2 = Q[None, :, a2] - c2[:, None]
+        if len(sel):
+            worst[sel] = _deviation(S, E, C[sel], t0[sel], sweep[sel], r0[sel], r1[sel], axes, clockwise, Q,
+                                    frac_nominal) + mismatch[sel]
+        return worst, mismatch, turns
+    dev = _deviation(S, E, C, t0, sweep, r0, r1, axes, clockwise, Q, frac_nominal)
+    return np.where(bad, np.inf, dev + mismatch), mismatch, turns
+
+
+def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndarray, r0: np.ndarray,
+               r1: np.ndarray, axes: Axes, clockwise: bool, Q: np.ndarray, frac_nominal: np.ndarray) -> np.ndarray:
+    """Largest distance (m,) of the samples Q (k, 3) from the spiral a controller draws
+    around each centre C (m, 2) from angle ``t0`` sweeping ``sweep``, radius ``r0`` to
+    ``r1`` (see :func:`arc_candidates`)."""
+    a1, a2, an = axes
+    v1 = Q[:, a1] - C[:, 0:1]
+    v2 = Q[:, a2] - C[:, 1:2]
     phi = np.arctan2(v2, v1)
-    sgn = -1.0 if clockwise else 1.0
     asw = np.abs(sweep)[:, None]
-    alpha = np.mod((phi - t0[:, None]) * sgn, TWO_PI)
-    target = frac_nominal[None, :] * asw
-    alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
+    # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly)
+    alpha = np.mod(t0[:, None] - phi if clockwise else phi - t0[:, None], TWO_PI)
+    target = frac_nominal * asw
+    alpha = alpha + TWO_PI * np.rint((target - alpha) / TWO_PI)
     frac = alpha / asw
     rad = r0[:, None] + (r1 - r0)[:, None] * frac
     nrm = S[an] + (E[an] - S[an]) * frac
-    dev = np.hypot(np.hypot(v1, v2) - rad, Q[None, :, an] - nrm).max(axis=1)
-    if mismatch_limit is None or sel is None:
-        return np.where(bad, np.inf, dev + mismatch), mismatch, turns
-    worst[sel] = dev + mismatch[sel]
-    return worst, mismatch, turns
+    dev: np.ndarray = np.hypot(np.hypot(v1, v2) - rad, Q[:, an] - nrm).max(axis=1)
+    return dev
 
 
 def within_controller_limits(S, E, centre, axes, clockwise: bool) -> bool:
@@ -363,15 +375,20 @@ def within_controller_limits(S, E, centre, axes, clockwise: bool) -> bool:
     return sweep >= MIN_ARC_SWEEP_RAD
 
 
-def chord_deviation(S, E, Q: np.ndarray) -> float:
+def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
     """Largest distance of the points Q (k, 3) from the segment S-E."""
     a = np.asarray(S, dtype=float)
     ab = np.asarray(E, dtype=float) - a
     den = float(ab @ ab)
     if den == 0.0:
-        return float(np.linalg.norm(Q - a, axis=1).max())
-    t = np.clip(((Q - a) @ ab) / den, 0.0, 1.0)
-    return float(np.linalg.norm(Q - (a + t[:, None] * ab), axis=1).max())
+        d = Q - a
+    else:
+        # the parameter of the nearest point of the segment, clipped to [0, 1] (as np.clip)
+        t = np.minimum(np.maximum(((Q - a) @ ab) / den, 0.0), 1.0)
+        d = Q - (a + t[:, None] * ab)
+    # the largest norm of the rows: numpy's norm sums the squares as add.reduce does, and
+    # the root of the largest sum is the largest root (both correctly rounded)
+    return math.sqrt(float(np.add.reduce(d * d, axis=1).max()))
 
 
 def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:
