@@ -4,7 +4,7 @@
 emitter's ``_fit_piece`` (its arguments, the engine subdivisions it asks for and the
 segments it returns) in a pickle. ``run``: replay the recorded calls with the
 checkout's emitter, check that every call returns the recorded segments and print the
-median time of the replays (``--repeats``). Paired A/B: record once, then replay with
+median wall and CPU time of the replays (``--repeats``). Paired A/B: record once, then replay with
 each checkout (``PYTHONPATH=CHECKOUT``).
 
   python benchmarks/arcfit_replay.py capture PROGRAM CALIBRATION OUT.pkl [correct options...]
@@ -86,22 +86,24 @@ def run(path: str, repeats: int) -> None:
     with open(path, "rb") as f:
         calls = pickle.load(f)
     arcs = sum(1 for c in calls if c[0][0].arc is not None)
-    times = []
+    times, cpu = [], []
     for rep in range(repeats):
         obj = Replay()
         bad = 0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         results = []
         for args, subs, _want in calls:
             obj.subs = list(subs)
             results.append(obj._fit_piece(*args))
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         if rep == 0:
             for (_a, _s, want), got in zip(calls, results, strict=True):
                 if [_plain(x) for x in got] != want:
                     bad += 1
             print(f"{len(calls)} pieces ({arcs} of arcs): {bad} differ from the recording")
-    print(f"replay: median {statistics.median(times):.3f} s over {repeats} (min {min(times):.3f})")
+    print(f"replay: median {statistics.median(times):.3f} s wall, {statistics.median(cpu):.3f} s cpu "
+          f"over {repeats} (min {min(times):.3f} wall, {min(cpu):.3f} cpu)")
 
 
 if __name__ == "__main__":

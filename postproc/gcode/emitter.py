@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, NotRequired, TypedDict
+from typing import Generic, Literal, Protocol, TypedDict, TypeVar
 
 import numpy as np
 
@@ -19,6 +19,10 @@ from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
+    ArcSpec,
+    Axes,
+    Curve,
+    Point,
     arc_candidates,
     bisector_centre,
     bisector_point,
@@ -30,23 +34,91 @@ from postproc.gcode.segment import (
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 
 Edit = tuple[int, int, str]  # replace line[start:end] by the text
+Write = Callable[[str], object]  # writes one output line
 
 
-class ArcSpec(TypedDict):
-    """The written form of an exact arc: ``keep`` (the input's own centre words), ``ij``
-    (centre offsets ``vals``: ((letter, text), (letter, text))) or ``r`` (``vals``:
-    (("R", text),)); ``turns``; ``dev``, ``mismatch``: its measured deviation and radius
-    mismatch; ``replace``: set when the move's own arc words are replaced."""
-
-    form: str
-    turns: int
-    vals: NotRequired[tuple[tuple[str, str], ...]]
-    dev: NotRequired[float]
-    mismatch: NotRequired[float]
-    replace: NotRequired[bool]
+# One step of a move's plan: a take-up to the point, or a piece of samples (parameters
+# s (n,), corrected points Q (n, 3), nominal points (n, 3), the nominal path's bulge at the
+# middles of the intervals (n - 1, 3)).
+TakeupStep = tuple[Literal["takeup"], np.ndarray]
+PieceStep = tuple[Literal["piece"], np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-Plan = dict[str, Any]
+class Plan(TypedDict, total=False):
+    """How the corrector plans a move that is fitted by pieces: its steps (``seq``),
+    whether one piece is the whole move (``whole``), and for arcs the nominal sweep, the
+    input's own radius mismatch and the move as a curve (for subdivision)."""
+
+    seq: list[TakeupStep | PieceStep]
+    whole: bool
+    nsweep: float
+    mismatch: float
+    curve: Curve
+
+
+class _Options(Protocol):
+    """What the emitter reads of the corrector's options
+    (:class:`postproc.gcode.pipeline.CorrectOptions`, whose module imports this one)."""
+
+    @property
+    def tolerance_mm(self) -> float: ...
+    @property
+    def decimals(self) -> int | None: ...
+
+
+class _Report(Protocol):
+    """The counts of the corrector's report (:class:`postproc.gcode.pipeline.CorrectReport`)
+    that the emitter keeps."""
+
+    moves: int
+    words_changed: int
+    lines_changed: int
+    lines_out: int
+    lines_inserted: int
+    takeups: int
+    arcs_kept: int
+    arcs_split: int
+    arcs_linearised: int
+
+
+_O = TypeVar("_O", bound=_Options)
+_R = TypeVar("_R", bound=_Report)
+
+
+class ArcOwner(Protocol):
+    """What the arc checks read of a move (a :class:`Move`, or the bulk writer's view of one)."""
+
+    @property
+    def arc(self) -> Arc | None: ...
+    @property
+    def unit(self) -> float: ...
+    @property
+    def arc_absolute(self) -> bool: ...
+    @property
+    def shift(self) -> Sequence[float]: ...
+
+
+class SettledArc(Protocol):
+    """What the emitter asks of an arc the bulk planner settled
+    (:class:`postproc.gcode.vplan.ArcHint`)."""
+
+    @property
+    def mismatch(self) -> float: ...
+
+    def spec(self, mv: ArcOwner, S: Point, E: Point, d: int, budget: float) -> ArcSpec | None: ...
+
+    def keep(self, mv: ArcOwner, S: Point, E: Point, centre: np.ndarray, nominal_mismatch: float,
+             budget: float) -> ArcSpec | None: ...
+
+    def lazy(self) -> Plan: ...
+
+
+def _arc_of(mv: ArcOwner) -> Arc:
+    """The arc of an arc move (the callers' moves are arcs)."""
+    arc = mv.arc
+    if arc is None:
+        raise TypeError("not an arc move")
+    return arc
 
 
 MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
@@ -62,7 +134,7 @@ MIN_FEED_FRACTION = 1e-3
 EQUAL_SHARES = 4
 
 
-def _unit_decimals(options, unit: float) -> int:
+def _unit_decimals(options: _Options, unit: float) -> int:
     if options.decimals is not None:
         return options.decimals
     return 5 if unit == MM_PER_INCH else 4
@@ -138,12 +210,28 @@ def _lattice(d: int) -> np.ndarray:
     return grid
 
 
-class EmitterMixin:
-    """Line emission for the corrector (see the module docstring)."""
+class EmitterMixin(Generic[_O, _R]):
+    """Line emission for the corrector (see the module docstring); generic in the
+    corrector's options and report."""
 
-    def _axis_words(self, mv: Move, target, qe: list[float], d: int, present_only: bool = False):
+    # the corrector's state that the emitter reads and updates
+    opt: _O
+    report: _R
+    path: str | None
+    qe: list[float]  # emitted gauge position (what the controller will hold)
+    emitted_motion: int | None
+    _decimals: dict[float, int]
+
+    def _subdivide(self, curves: list[Curve], s_init: list[np.ndarray],
+                   unit: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Adaptive subdivision of the curves with the engine (the corrector's)."""
+        raise NotImplementedError
+
+    def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
+                    present_only: bool = False) -> tuple[list[Edit], list[str]]:
         """Edits for the axis words of ``mv``'s line and the words to add; updates qe."""
-        edits, added = [], []
+        edits: list[Edit] = []
+        added: list[str] = []
         unit, shift, inc = mv.unit, mv.shift, mv.incremental
         half = HALF_UNIT[d]
         fmt = emit.fmt
@@ -173,7 +261,7 @@ class EmitterMixin:
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
         return edits, added
 
-    def _emit_move(self, line: str, mv: Move, target, plan, write) -> None:
+    def _emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
         self.report.moves += 1
         d = self._decimals.get(mv.unit)
         if d is None:
@@ -196,11 +284,9 @@ class EmitterMixin:
             return
         self._emit_planned(line, mv, target, plan, d, write)
 
-    def _axis_words_free(self, mv: Move, q, qe, d):
+    def _axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]:
         """Words for an inserted line (no original words): every axis that moves."""
-        fake = Move(mv.lineno, LINE, mv.q0, mv.q1, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute,
-                    [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary)
-        return self._axis_words(fake, q, qe, d)
+        return self._axis_words(_free_move(mv), q, qe, d)
 
     def _insert_pos(self, mv: Move) -> int:
         idx = [i for i in mv.axis_idx if i >= 0]
@@ -210,25 +296,25 @@ class EmitterMixin:
             return mv.words[mv.motion_idx][3]
         return mv.words[-1][3]
 
-    def _motion_edit(self, mv: Move, edits: list, sep: str, lower: bool) -> None:
+    def _motion_edit(self, mv: Move, edits: list[Edit], sep: str, lower: bool) -> None:
         """Add the move's motion word to a line that has none when the controller's modal
         motion differs (after a linearised arc, or a line written in G1)."""
         if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
             text = "G" + MOTION_TEXT[mv.kind]
             edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
 
-    def _insert_motion(self, mv: Move, text: str) -> tuple[int, int, str]:
+    def _insert_motion(self, mv: Move, text: str) -> Edit:
         first = next((w for w in mv.words if w[0] != "N"), mv.words[0])
         return (first[4], first[4], text)
 
-    def _write_line(self, line: str, edits, write) -> None:
+    def _write_line(self, line: str, edits: list[Edit], write: Write) -> None:
         self.report.words_changed += len(edits)
         self.report.lines_changed += bool(edits)
         write(emit.edit_line(line, edits))
         self.report.lines_out += 1
 
     # -- planned moves: pieces of corrected samples fitted by exact arcs and lines ----------
-    def _emit_planned(self, line: str, mv: Move, target, plan, d: int, write) -> None:
+    def _emit_planned(self, line: str, mv: Move, target: Point, plan: Plan, d: int, write: Write) -> None:
         """Emit a move from its plan: take-ups and pieces of corrected samples, each piece
         fitted by the fewest exact arcs (arc moves) or chords that stay within the budget;
         the last segment is written on the move's own line."""
@@ -308,18 +394,20 @@ class EmitterMixin:
         self._finish_line(line, mv, edits, added, last.spec if last.kind == "arc" else None, sep, lower,
                           last.qe, write)
 
-    def _finish_line(self, line: str, mv: Move, edits: list, added: list[str], spec, sep: str, lower: bool,
-                     qe, write) -> None:
+    def _finish_line(self, line: str, mv: Move, edits: list[Edit], added: list[str], spec: ArcSpec | None, sep: str,
+                     lower: bool, qe: Sequence[float], write: Write) -> None:
         """Write the move's own line: its word edits, the arc words of ``spec`` (None:
         not an arc) and the added words; the controller is then at ``qe``."""
         arc_added: list[str] = []
+        replace = False
         if spec is not None:
             arc_edits, arc_added = self._arc_edits(line, mv, spec)
             edits = edits + arc_edits
+            replace = spec.get("replace", False)  # set by _arc_edits
         if added or arc_added:
             if arc_added:
-                arc = mv.arc
-                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not spec.get("replace")]
+                arc = _arc_of(mv)
+                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not replace]
                 pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
                 words_added = added + arc_added
             else:
@@ -330,7 +418,7 @@ class EmitterMixin:
         self.qe[:] = qe
         self._write_line(line, edits, write)
 
-    def _emit_hinted_arc(self, line: str, mv: Move, target, hint, write) -> None:
+    def _emit_hinted_arc(self, line: str, mv: Move, target: Point, hint: SettledArc, write: Write) -> None:
         """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
         as one exact arc when the hint's rounded centre passes for the end points as
         written, else planned and fitted as any other arc."""
@@ -357,11 +445,11 @@ class EmitterMixin:
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
 
-    def _hint_is_sound(self, mv: Move, spec, S, E) -> bool:
+    def _hint_is_sound(self, mv: ArcOwner, spec: ArcSpec, S: Point, E: Point) -> bool:
         """Whether controllers cut the bulk planner's arc ``spec`` (from S to E, as
         written) as meant: radius and sweep within the controller limits
         (:func:`postproc.gcode.segment.within_controller_limits`)."""
-        arc = mv.arc
+        arc = _arc_of(mv)
         (a1, a2, an), _ = PLANES[arc.plane]
         base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
         (_l1, t1), (_l2, t2) = spec["vals"]
@@ -586,7 +674,9 @@ class EmitterMixin:
                         "dev": float(w[0]), "mismatch": float(m[0])}
         return None
 
-    def _r_candidates(self, S, E, centre, axes, clockwise, nsw, Qp, frac, d, unit, budget):
+    def _r_candidates(self, S: np.ndarray, E: np.ndarray, centre: np.ndarray, axes: Axes, clockwise: bool,
+                      nsw: float, Qp: np.ndarray, frac: np.ndarray, d: int, unit: float,
+                      budget: float) -> ArcSpec | None:
         a1, a2, an = axes
         step = 10.0 ** (-d)
         half = 0.5 * math.hypot(E[a1] - S[a1], E[a2] - S[a2])
@@ -616,10 +706,10 @@ class EmitterMixin:
             return None
         return {"form": "r", "vals": (("R", best[1]),), "turns": 1, "dev": best[0], "mismatch": best[2]}
 
-    def _input_centre(self, mv: Move, S, E) -> np.ndarray | None:
+    def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None:
         """Centre (2,) a controller finds from the input line's own arc words, with the
         emitted start and end."""
-        arc = mv.arc
+        arc = _arc_of(mv)
         (a1, a2, _an), _ = PLANES[arc.plane]
         unit = mv.unit
         if arc.r_idx >= 0:
@@ -639,9 +729,9 @@ class EmitterMixin:
             words.append(f"P{spec['turns']}")
         return words
 
-    def _arc_edits(self, line: str, mv: Move, spec) -> tuple[list, list[str]]:
+    def _arc_edits(self, line: str, mv: Move, spec: ArcSpec) -> tuple[list[Edit], list[str]]:
         """Edits of the move's own arc words for the arc ``spec`` and the words to add."""
-        arc = mv.arc
+        arc = _arc_of(mv)
         if spec["form"] == "keep":
             return [], []
         p_idx = [i for i in mv.aux_idx if mv.words[i][0] == "P"]
@@ -653,6 +743,7 @@ class EmitterMixin:
             edits = [(a, b, "") for a, b in emit.removal_spans(line, spans)]
             return edits, self._arc_words(spec)
         edits, added = [], []
+        idxs: tuple[int, ...]
         if spec["form"] == "r":
             idxs = (arc.r_idx,)
         else:
@@ -667,7 +758,7 @@ class EmitterMixin:
         del p_idx
         return edits, added
 
-    def _emit_unplanned_arc(self, line: str, mv: Move, target, d: int, write) -> None:
+    def _emit_unplanned_arc(self, line: str, mv: Move, target: Point, d: int, write: Write) -> None:
         """An arc whose start is not known (the program's first move): its end words follow
         the target and its centre words keep their offset from the start."""
         edits, added = self._axis_words(mv, target, self.qe, d)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
@@ -33,6 +34,20 @@ from postproc.gcode.interp import Arc
 # A point (x, y, z) in machine coordinates; the plane's axes as (first, second, normal).
 Point = Sequence[float] | np.ndarray
 Axes = tuple[int, int, int]
+
+class ArcSpec(TypedDict):
+    """The written form of an exact arc: ``keep`` (the input's own centre words), ``ij``
+    (centre offsets ``vals``: ((letter, text), (letter, text))) or ``r`` (``vals``:
+    (("R", text),)); ``turns``; ``dev``, ``mismatch``: its measured deviation and radius
+    mismatch; ``replace``: set when the move's own arc words are replaced."""
+
+    form: str
+    turns: int
+    vals: NotRequired[tuple[tuple[str, str], ...]]
+    dev: NotRequired[float]
+    mismatch: NotRequired[float]
+    replace: NotRequired[bool]
+
 
 # Deepest subdivision: 2**20 pieces of one move means the correction field is not
 # smooth at the tolerance's scale (or is broken); refuse rather than emit millions of lines.
@@ -47,14 +62,14 @@ MIDPOINT_SAFETY = 0.5
 class Curve:
     """A move to follow: nominal gauge points as a function of s in [0, 1]."""
 
-    q0: tuple
-    q1: tuple
+    q0: tuple[float, float, float]
+    q1: tuple[float, float, float]
     arc: Arc | None
     r: np.ndarray  # (3,) tool vector
     dirs: np.ndarray  # (3,) approach signs carried into the move
     lineno: int
-    rotary: dict
-    params: tuple | None = None  # arc_params of an arc (computed once)
+    rotary: dict[str, float]
+    params: tuple[Axes, float, float, float, float] | None = None  # arc_params of an arc (computed once)
 
     def nominal(self, s: np.ndarray) -> np.ndarray:
         if self.arc is None:
@@ -76,10 +91,12 @@ class Curve:
         return np.where(d == 0, self.dirs, d)
 
 
-Evaluate = Callable[[np.ndarray, list, list], np.ndarray]
+# corrected gauge points (N, 3) of curves (N,) at parameters (N,)
+Evaluate = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate, threshold_mm: float):
+def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate: Evaluate,
+              threshold_mm: float) -> list[tuple[np.ndarray, np.ndarray]]:
     """Adaptive subdivision of every curve; returns ``[(s (k,), q (k, 3)), ...]``.
 
     ``evaluate(curve_index (N,), s (N,))`` returns corrected gauge points (N, 3) for
@@ -91,19 +108,23 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate, threshold
     cid = np.concatenate([np.full(len(s), i) for i, s in enumerate(s_init)])
     ss = np.concatenate(s_init)
     q = evaluate(cid, ss)
-    knots: list[list] = [[] for _ in curves]
+    knots: list[list[tuple[float, np.ndarray]]] = [[] for _ in curves]
     offs = np.cumsum([0] + [len(s) for s in s_init])
-    pend_c, pend_a, pend_b, qa, qb = [], [], [], [], []
+    pend_c: list[np.ndarray] = []
+    pend_a: list[np.ndarray] = []
+    pend_b: list[np.ndarray] = []
+    pend_qa: list[np.ndarray] = []
+    pend_qb: list[np.ndarray] = []
     for i, s in enumerate(s_init):
         qi = q[offs[i]:offs[i + 1]]
         knots[i].extend(zip(s.tolist(), qi, strict=True))
         pend_c.append(np.full(len(s) - 1, i))
         pend_a.append(s[:-1])
         pend_b.append(s[1:])
-        qa.append(qi[:-1])
-        qb.append(qi[1:])
+        pend_qa.append(qi[:-1])
+        pend_qb.append(qi[1:])
     pc, pa, pb = np.concatenate(pend_c), np.concatenate(pend_a), np.concatenate(pend_b)
-    qa, qb = np.vstack(qa), np.vstack(qb)
+    qa, qb = np.vstack(pend_qa), np.vstack(pend_qb)
     depth = 0
     while len(pc):
         depth += 1
@@ -128,7 +149,7 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate, threshold
     return out
 
 
-def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool):
+def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool) -> tuple[float, float] | None:
     """Centre the controller computes for an R-format arc, or None if R is too small."""
     dx, dy = e1 - s1, e2 - s2
     chord = math.hypot(dx, dy)
@@ -165,13 +186,13 @@ def centre_estimate(arc: Arc, s_nom: np.ndarray, q_nom: np.ndarray, q_corr: np.n
     return c + coef[0]
 
 
-def _plane(arc: Arc):
+def _plane(arc: Arc) -> tuple[Axes, tuple[str, str]]:
     from postproc.gcode.state import PLANES
 
     return PLANES[arc.plane]
 
 
-def arc_deviation(arc: Arc, S, E, s_samples: np.ndarray, q_samples: np.ndarray, nominal_sweep: float,
+def arc_deviation(arc: Arc, S: Point, E: Point, s_samples: np.ndarray, q_samples: np.ndarray, nominal_sweep: float,
                   input_mismatch_mm: float = 0.0) -> float:
     """Largest distance from the corrected samples to the arc a controller draws from
     S to E around ``arc.center`` (spiral radius, linear normal axis); inf if the
@@ -359,7 +380,8 @@ def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndar
     return dev
 
 
-def within_controller_limits(S, E, centre, axes, clockwise: bool) -> bool:
+def within_controller_limits(S: Point, E: Point, centre: Sequence[float] | np.ndarray, axes: Axes,
+                             clockwise: bool) -> bool:
     """Whether controllers cut the arc from S to E around ``centre`` (2, plane
     coordinates) as that arc: both radii at least :data:`MIN_ARC_RADIUS_MM` and, unless
     S and E coincide in the plane (a full circle), a sweep of at least
