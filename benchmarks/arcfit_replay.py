@@ -8,7 +8,7 @@ median wall and CPU time of the replays (``--repeats``). Paired A/B: record once
 each checkout (``PYTHONPATH=CHECKOUT``).
 
   python benchmarks/arcfit_replay.py capture PROGRAM CALIBRATION OUT.pkl [correct options...]
-  python benchmarks/arcfit_replay.py run OUT.pkl [--repeats R]
+  python benchmarks/arcfit_replay.py run OUT.pkl [--repeats R] [--limit N]   (N: the first N pieces)
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def capture(program: str, calibration: str, out: str, extra: list[str]) -> None:
     print(f"{len(calls)} pieces recorded in {out}")
 
 
-def run(path: str, repeats: int) -> None:
+def run(path: str, repeats: int, limit: int | None = None) -> None:
     from postproc.gcode.emitter import EmitterMixin
 
     class Replay(EmitterMixin):
@@ -84,7 +84,7 @@ def run(path: str, repeats: int) -> None:
             return self.subs.pop(0)
 
     with open(path, "rb") as f:
-        calls = pickle.load(f)
+        calls = pickle.load(f)[:limit]
     arcs = sum(1 for c in calls if c[0][0].arc is not None)
     times, cpu = [], []
     for rep in range(repeats):
@@ -112,4 +112,5 @@ if __name__ == "__main__":
         capture(sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5:])
     else:
         reps = int(sys.argv[sys.argv.index("--repeats") + 1]) if "--repeats" in sys.argv else 3
-        run(sys.argv[2], reps)
+        lim = int(sys.argv[sys.argv.index("--limit") + 1]) if "--limit" in sys.argv else None
+        run(sys.argv[2], reps, lim)

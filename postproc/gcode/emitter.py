@@ -660,11 +660,12 @@ class EmitterMixin(Generic[_O, _R]):
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
             if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
                 # the written centre is the candidate measured (numpy's rounding agreed)
-                wj = worst[j]
-                if not ok[j]:  # its measure, as the spec records it
-                    wj = arc_candidates(S, E, C[j:j + 1], axes, arc.clockwise, nsw, Qp, frac,
-                                        controller_limits=True)[0][0]
-                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
+                wj, tj = worst[j], turns[j]
+                if not ok[j]:  # measured in full (it may not have been), as the spec records it
+                    w1, _m1, t1 = arc_candidates(S, E, C[j:j + 1], axes, arc.clockwise, nsw, Qp, frac,
+                                                 controller_limits=True)
+                    wj, tj = w1[0], t1[0]
+                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(tj),
                         "dev": float(wj), "mismatch": float(mism[j])}
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
             w, m, t = arc_candidates(S, E, ctrl[None, :], axes, arc.clockwise, nsw, Qp, frac,

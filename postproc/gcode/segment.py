@@ -320,19 +320,23 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     angle's turn for multi-turn arcs. ``controller_limits``: ``worst`` is also inf where
     a controller refuses or misreads the arc: a start or end radius below
     :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`.
-    ``mismatch_limit``: ``worst`` is inf, unmeasured, where the radius mismatch exceeds it
-    (a candidate the caller refuses anyway); the samples are measured against the other
-    candidates only, each value as it would be among all (numpy computes every one element
-    by element)."""
+
+    ``mismatch_limit``: the candidates whose radius mismatch exceeds it (which the caller
+    refuses anyway) are not measured: their ``worst`` is inf and their ``turns`` 0. The
+    others get the values they get among all (see :func:`_limited_candidates`)."""
     a1, a2, an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
     # start (row 0) and end (row 1) about every candidate, in contiguous arrays
     dx = np.array([[s1], [e1]]) - C[:, 0]
     dy = np.array([[s2], [e2]]) - C[:, 1]
-    ang = np.arctan2(dy, dx)
     rad = np.hypot(dx, dy)
-    t0, t1 = ang[0], ang[1]
     r0, r1 = rad[0], rad[1]
+    mismatch = np.abs(r1 - r0)
+    if mismatch_limit is not None:
+        return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
+                                   Q, frac_nominal, controller_limits)
+    ang = np.arctan2(dy, dx)
+    t0, t1 = ang[0], ang[1]
     if clockwise:
         base = -np.mod(t0 - t1, TWO_PI)
     else:
@@ -344,19 +348,56 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     turns = np.maximum(1, np.rint((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
     sweep = base + np.sign(base) * (turns - 1) * TWO_PI
     bad = np.abs(sweep - nominal_sweep) > math.pi / 2
-    mismatch = np.abs(r1 - r0)
     if controller_limits:
         bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    if mismatch_limit is not None:
-        # only the candidates that can pass are measured
-        sel = np.flatnonzero(~bad & (mismatch <= mismatch_limit))
-        worst = np.full(len(C), np.inf)
-        if len(sel):
-            worst[sel] = _deviation(S, E, C[sel], t0[sel], sweep[sel], r0[sel], r1[sel], axes, clockwise, Q,
-                                    frac_nominal) + mismatch[sel]
-        return worst, mismatch, turns
     dev = _deviation(S, E, C, t0, sweep, r0, r1, axes, clockwise, Q, frac_nominal)
     return np.where(bad, np.inf, dev + mismatch), mismatch, turns
+
+
+def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: np.ndarray, rad: np.ndarray,
+                        mismatch: np.ndarray, limit: float, axes: Axes, clockwise: bool, nominal_sweep: float,
+                        Q: np.ndarray, frac_nominal: np.ndarray,
+                        controller_limits: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`arc_candidates` with a mismatch limit: the few candidates within it are
+    taken one by one in plain floats (their mismatch is finite, so are all their values),
+    with the same operations as numpy's element by element (``%`` is np.mod's floored
+    remainder, ``round`` np.rint's half to even, ``copysign`` np.sign of a nonzero
+    sweep); their angles come from numpy's arctan2 as among all, and the samples are
+    measured with numpy."""
+    m = len(C)
+    worst = np.full(m, np.inf)
+    turns = np.zeros(m, dtype=int)
+    sel = np.flatnonzero(mismatch <= limit)
+    if len(sel) == 0:
+        return worst, mismatch, turns
+    a1, a2, _an = axes
+    s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
+    ang = np.arctan2(dy[:, sel], dx[:, sel])
+    full_chord = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
+    full_sweep = -TWO_PI if clockwise else TWO_PI
+    nsw = abs(nominal_sweep)
+    idx, t0k, swk, r0k, r1k = [], [], [], [], []
+    for i, t0, t1, r0, r1 in zip(sel.tolist(), ang[0].tolist(), ang[1].tolist(), rad[0, sel].tolist(),
+                                 rad[1, sel].tolist(), strict=True):
+        base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
+        if abs(base) < 1e-12 or full_chord:
+            base = full_sweep
+        tr = max(1, round((nsw - abs(base)) / TWO_PI) + 1)
+        turns[i] = tr
+        sweep = base + math.copysign(1.0, base) * (tr - 1) * TWO_PI
+        if abs(sweep - nominal_sweep) > math.pi / 2:
+            continue
+        if controller_limits and (min(r0, r1) < MIN_ARC_RADIUS_MM or abs(sweep) < MIN_ARC_SWEEP_RAD):
+            continue
+        idx.append(i)
+        t0k.append(t0)
+        swk.append(sweep)
+        r0k.append(r0)
+        r1k.append(r1)
+    if idx:
+        worst[idx] = _deviation(S, E, C[idx], np.array(t0k), np.array(swk), np.array(r0k), np.array(r1k), axes,
+                                clockwise, Q, frac_nominal) + mismatch[idx]
+    return worst, mismatch, turns
 
 
 def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndarray, r0: np.ndarray,
@@ -367,16 +408,30 @@ def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndar
     a1, a2, an = axes
     v1 = Q[:, a1] - C[:, 0:1]
     v2 = Q[:, a2] - C[:, 1:2]
-    phi = np.arctan2(v2, v1)
     asw = np.abs(sweep)[:, None]
-    # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly)
-    alpha = np.mod(t0[:, None] - phi if clockwise else phi - t0[:, None], TWO_PI)
-    target = frac_nominal * asw
-    alpha = alpha + TWO_PI * np.rint((target - alpha) / TWO_PI)
-    frac = alpha / asw
-    rad = r0[:, None] + (r1 - r0)[:, None] * frac
-    nrm = S[an] + (E[an] - S[an]) * frac
-    dev: np.ndarray = np.hypot(np.hypot(v1, v2) - rad, Q[:, an] - nrm).max(axis=1)
+    # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly);
+    # the arithmetic in place (the same operations, fewer temporary arrays)
+    phi = np.arctan2(v2, v1)
+    if clockwise:
+        alpha = np.subtract(t0[:, None], phi, out=phi)
+    else:
+        alpha = np.subtract(phi, t0[:, None], out=phi)
+    np.mod(alpha, TWO_PI, out=alpha)
+    turn = frac_nominal * asw  # the target angle, then the turns to add
+    np.subtract(turn, alpha, out=turn)
+    np.divide(turn, TWO_PI, out=turn)
+    np.rint(turn, out=turn)
+    np.multiply(turn, TWO_PI, out=turn)
+    np.add(alpha, turn, out=alpha)
+    frac = np.divide(alpha, asw, out=alpha)
+    rad = (r1 - r0)[:, None] * frac
+    np.add(r0[:, None], rad, out=rad)
+    nrm = (E[an] - S[an]) * frac
+    np.add(S[an], nrm, out=nrm)
+    np.subtract(Q[:, an], nrm, out=nrm)
+    radial = np.hypot(v1, v2, out=v1)
+    np.subtract(radial, rad, out=radial)
+    dev: np.ndarray = np.hypot(radial, nrm, out=radial).max(axis=1)
     return dev
 
 
