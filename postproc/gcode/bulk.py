@@ -48,8 +48,9 @@ from postproc.gcode import emit, lexer
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
+from postproc.gcode.segment import ArcSpec
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
-from postproc.gcode.vplan import ArcHint, ArcSpec, BoolArray, FloatArray, IntArray, Plan
+from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
 _N = NUMBER_RE
 # Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks

@@ -7,6 +7,8 @@ emitted position ``qe``, options, report and engine-call helpers.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -17,6 +19,10 @@ from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
+    ArcSpec,
+    Axes,
+    Curve,
+    Point,
     arc_candidates,
     bisector_centre,
     bisector_point,
@@ -26,6 +32,48 @@ from postproc.gcode.segment import (
     within_controller_limits,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
+from postproc.gcode.vplan import ArcHint, ArcMove, Plan
+
+Edit = tuple[int, int, str]  # replace line[start:end] by the text
+Write = Callable[[str], object]  # writes one output line
+
+
+class _Options(Protocol):
+    """What the emitter reads of the corrector's options
+    (:class:`postproc.gcode.pipeline.CorrectOptions`, whose module imports this one)."""
+
+    @property
+    def tolerance_mm(self) -> float: ...
+    @property
+    def decimals(self) -> int | None: ...
+
+
+class _Report(Protocol):
+    """The counts of the corrector's report (:class:`postproc.gcode.pipeline.CorrectReport`)
+    that the emitter keeps."""
+
+    moves: int
+    words_changed: int
+    lines_changed: int
+    lines_out: int
+    lines_inserted: int
+    takeups: int
+    arcs_kept: int
+    arcs_split: int
+    arcs_linearised: int
+
+
+_O = TypeVar("_O", bound=_Options)
+_R = TypeVar("_R", bound=_Report)
+
+
+def _arc_of(mv: ArcMove) -> Arc:
+    """The arc of an arc move (the callers' moves are arcs)."""
+    arc = mv.arc
+    if arc is None:
+        raise TypeError("not an arc move")
+    return arc
+
 
 MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
 HALF_UNIT = emit.HALF_UNIT
@@ -40,23 +88,104 @@ MIN_FEED_FRACTION = 1e-3
 EQUAL_SHARES = 4
 
 
-def _unit_decimals(options, unit: float) -> int:
+def _unit_decimals(options: _Options, unit: float) -> int:
     if options.decimals is not None:
         return options.decimals
     return 5 if unit == MM_PER_INCH else 4
 
 
-def _nominal_offset(Q, nom, a: int, b: int) -> np.ndarray:
-    """The mean correction over samples a..b (broadcast): corrected minus nominal."""
-    return (Q[a:b + 1] - nom[a:b + 1]).mean(axis=0)
+class _Piece:
+    """One written segment of a planned move: an exact arc (``spec``) or a line to ``qe``
+    (the emitted position after it), the word edits of the move's own line or the words
+    of an inserted line, and ``ds``, its share of the move's parameter."""
+
+    __slots__ = ("kind", "qe", "edits", "added", "ds", "spec", "takeup")
+
+    def __init__(self, kind: str, qe: list[float], edits: list[Edit], added: list[str], ds: float,
+                 spec: ArcSpec | None = None, takeup: bool = False) -> None:
+        self.kind = kind  # "arc" | "line"
+        self.qe = qe
+        self.edits = edits
+        self.added = added
+        self.ds = ds
+        self.spec = spec
+        self.takeup = takeup
 
 
-class EmitterMixin:
-    """Line emission for the corrector (see the module docstring)."""
+class _Samples:
+    """A piece's corrected samples prepared once for all the tries of its fit: the samples
+    and the middles of their intervals interleaved (``Qs`` (2n - 1, 3), the chord's middle
+    moved by the nominal path's bulge there; ``ss`` their parameters), their plane
+    coordinates (``P2``) and the corrections (``dq``: corrected minus nominal)."""
 
-    def _axis_words(self, mv: Move, target, qe: list[float], d: int, present_only: bool = False):
+    __slots__ = ("s", "Q", "Qs", "ss", "P2", "dq", "free")
+
+    def __init__(self, mv: Move, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray) -> None:
+        n = len(Q)
+        self.s = s
+        self.Q = Q
+        Qs = np.empty((2 * n - 1, 3))
+        Qs[0::2] = Q
+        Qs[1::2] = 0.5 * (Q[:-1] + Q[1:]) + bulge[:n - 1]
+        ss = np.empty(2 * n - 1)
+        ss[0::2] = s
+        ss[1::2] = 0.5 * (s[:-1] + s[1:])
+        self.Qs = Qs
+        self.ss = ss
+        self.dq = Q - nom
+        self.P2: np.ndarray | None = None
+        if mv.arc is not None:
+            (a1, a2, _an), _ = PLANES[mv.arc.plane]
+            self.P2 = Qs[:, [a1, a2]]
+        self.free = _free_move(mv)
+
+    def offset(self, a: int, b: int) -> np.ndarray:
+        """The mean correction over samples a..b: corrected minus nominal."""
+        # as ndarray.mean: the sum divided by the count
+        mean: np.ndarray = np.add.reduce(self.dq[a:b + 1], axis=0) / (b + 1 - a)
+        return mean
+
+
+def _free_move(mv: Move) -> Move:
+    """``mv`` without its words: the move an inserted line writes."""
+    return Move(mv.lineno, LINE, mv.q0, mv.q1, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute,
+                [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary)
+
+
+# Offsets of the rounded centre candidates tried around the ideal one, per number of decimals.
+_LATTICES: dict[int, np.ndarray] = {}
+
+
+def _lattice(d: int) -> np.ndarray:
+    grid = _LATTICES.get(d)
+    if grid is None:
+        ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * 10.0 ** (-d)
+        grid = _LATTICES[d] = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
+    return grid
+
+
+class EmitterMixin(Generic[_O, _R]):
+    """Line emission for the corrector (see the module docstring); generic in the
+    corrector's options and report."""
+
+    # the corrector's state that the emitter reads and updates
+    opt: _O
+    report: _R
+    path: str | None
+    qe: list[float]  # emitted gauge position (what the controller will hold)
+    emitted_motion: int | None
+    _decimals: dict[float, int]
+
+    def _subdivide(self, curves: list[Curve], s_init: list[np.ndarray],
+                   unit: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Adaptive subdivision of the curves with the engine (the corrector's)."""
+        raise NotImplementedError
+
+    def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
+                    present_only: bool = False) -> tuple[list[Edit], list[str]]:
         """Edits for the axis words of ``mv``'s line and the words to add; updates qe."""
-        edits, added = [], []
+        edits: list[Edit] = []
+        added: list[str] = []
         unit, shift, inc = mv.unit, mv.shift, mv.incremental
         half = HALF_UNIT[d]
         fmt = emit.fmt
@@ -86,7 +215,7 @@ class EmitterMixin:
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
         return edits, added
 
-    def _emit_move(self, line: str, mv: Move, target, plan, write) -> None:
+    def _emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
         self.report.moves += 1
         d = self._decimals.get(mv.unit)
         if d is None:
@@ -109,11 +238,9 @@ class EmitterMixin:
             return
         self._emit_planned(line, mv, target, plan, d, write)
 
-    def _axis_words_free(self, mv: Move, q, qe, d):
+    def _axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]:
         """Words for an inserted line (no original words): every axis that moves."""
-        fake = Move(mv.lineno, LINE, mv.q0, mv.q1, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute,
-                    [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary)
-        return self._axis_words(fake, q, qe, d)
+        return self._axis_words(_free_move(mv), q, qe, d)
 
     def _insert_pos(self, mv: Move) -> int:
         idx = [i for i in mv.axis_idx if i >= 0]
@@ -123,44 +250,44 @@ class EmitterMixin:
             return mv.words[mv.motion_idx][3]
         return mv.words[-1][3]
 
-    def _motion_edit(self, mv: Move, edits: list, sep: str, lower: bool) -> None:
+    def _motion_edit(self, mv: Move, edits: list[Edit], sep: str, lower: bool) -> None:
         """Add the move's motion word to a line that has none when the controller's modal
         motion differs (after a linearised arc, or a line written in G1)."""
         if mv.motion_idx < 0 and self.emitted_motion != mv.kind:
             text = "G" + MOTION_TEXT[mv.kind]
             edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
 
-    def _insert_motion(self, mv: Move, text: str) -> tuple[int, int, str]:
+    def _insert_motion(self, mv: Move, text: str) -> Edit:
         first = next((w for w in mv.words if w[0] != "N"), mv.words[0])
         return (first[4], first[4], text)
 
-    def _write_line(self, line: str, edits, write) -> None:
+    def _write_line(self, line: str, edits: list[Edit], write: Write) -> None:
         self.report.words_changed += len(edits)
         self.report.lines_changed += bool(edits)
         write(emit.edit_line(line, edits))
         self.report.lines_out += 1
 
     # -- planned moves: pieces of corrected samples fitted by exact arcs and lines ----------
-    def _emit_planned(self, line: str, mv: Move, target, plan, d: int, write) -> None:
+    def _emit_planned(self, line: str, mv: Move, target: Point, plan: Plan, d: int, write: Write) -> None:
         """Emit a move from its plan: take-ups and pieces of corrected samples, each piece
         fitted by the fewest exact arcs (arc moves) or chords that stay within the budget;
         the last segment is written on the move's own line."""
         budget = self.opt.tolerance_mm * FIT_BUDGET
         qe = list(self.qe)
-        segs: list[dict] = []
+        segs: list[_Piece] = []
         seq = plan["seq"]
         for k, st in enumerate(seq):
             if st[0] == "takeup":
                 qn = list(qe)
                 _e, added = self._axis_words_free(mv, st[1], qn, d)
                 if added:
-                    segs.append({"kind": "line", "qe": qn, "added": added, "ds": 0.0, "takeup": True})
+                    segs.append(_Piece("line", qn, [], added, 0.0, takeup=True))
                     qe = qn
                 continue
             _tag, s, Q, nom, bulge = st
             final = k == len(seq) - 1
             segs.extend(self._fit_piece(mv, plan, s, Q, nom, bulge, qe, final, d, budget))
-            qe = segs[-1]["qe"]
+            qe = segs[-1].qe
         last = segs[-1]
         inserted = segs[:-1]
         if inserted and mv.stays:
@@ -173,26 +300,26 @@ class EmitterMixin:
         arc = mv.arc
         for j, sg in enumerate(inserted):
             words = list(mv.prefix_words) if j == 0 else []
-            if sg["kind"] == "arc":
+            if sg.kind == "arc" and sg.spec is not None and arc is not None:
                 words.append("G2" if arc.clockwise else "G3")
-                words.extend(sg["added"])
-                words.extend(self._arc_words(sg["spec"], arc, final=False))
+                words.extend(sg.added)
+                words.extend(self._arc_words(sg.spec))
             else:
                 words.append("G1")
-                words.extend(sg["added"])
+                words.extend(sg.added)
             if mv.inverse_time:
-                words.append("F" + emit.fmt(mv.feed / max(sg["ds"], MIN_FEED_FRACTION), 4))
+                words.append("F" + emit.fmt(mv.feed / max(sg.ds, MIN_FEED_FRACTION), 4))
             elif j == 0 and mv.feed_idx >= 0:
                 words.append("F" + mv.words[mv.feed_idx][1])
             text = sep.join(words)
             write((text.lower() if lower else text) + ending)
             self.report.lines_inserted += 1
             self.report.lines_out += 1
-            if sg.get("takeup"):
+            if sg.takeup:
                 self.report.takeups += 1
-            self.emitted_motion = mv.kind if sg["kind"] == "arc" else LINE
+            self.emitted_motion = mv.kind if sg.kind == "arc" else LINE
         if arc is not None:
-            kinds = [sg["kind"] for sg in segs if not sg.get("takeup")]
+            kinds = [sg.kind for sg in segs if not sg.takeup]
             if all(kd == "arc" for kd in kinds):
                 if len(kinds) == 1:
                     self.report.arcs_kept += 1
@@ -200,8 +327,8 @@ class EmitterMixin:
                     self.report.arcs_split += 1
             else:
                 self.report.arcs_linearised += 1
-        edits, added = last["edits"], last["added"]
-        if last["kind"] == "line" and arc is not None:
+        edits, added = last.edits, last.added
+        if last.kind == "line" and arc is not None:
             g1 = "g1" if lower else "G1"
             if mv.motion_idx >= 0:
                 _l, num, start, end, _p = mv.words[mv.motion_idx]
@@ -216,23 +343,25 @@ class EmitterMixin:
             self.emitted_motion = mv.kind
         if mv.inverse_time and inserted and mv.feed_idx >= 0:
             _l, num, start, end, _p = mv.words[mv.feed_idx]
-            edits.append((start, end, emit.fmt(mv.feed / max(last["ds"], MIN_FEED_FRACTION),
+            edits.append((start, end, emit.fmt(mv.feed / max(last.ds, MIN_FEED_FRACTION),
                                                max(4, emit.decimals_of(num)))))
-        self._finish_line(line, mv, edits, added, last["spec"] if last["kind"] == "arc" else None, sep, lower,
-                          last["qe"], write)
+        self._finish_line(line, mv, edits, added, last.spec if last.kind == "arc" else None, sep, lower,
+                          last.qe, write)
 
-    def _finish_line(self, line: str, mv: Move, edits: list, added: list[str], spec, sep: str, lower: bool,
-                     qe, write) -> None:
+    def _finish_line(self, line: str, mv: Move, edits: list[Edit], added: list[str], spec: ArcSpec | None, sep: str,
+                     lower: bool, qe: Sequence[float], write: Write) -> None:
         """Write the move's own line: its word edits, the arc words of ``spec`` (None:
         not an arc) and the added words; the controller is then at ``qe``."""
         arc_added: list[str] = []
+        replace = False
         if spec is not None:
             arc_edits, arc_added = self._arc_edits(line, mv, spec)
             edits = edits + arc_edits
+            replace = spec.get("replace", False)  # set by _arc_edits
         if added or arc_added:
             if arc_added:
-                arc = mv.arc
-                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not spec.get("replace")]
+                arc = _arc_of(mv)
+                aux = [i for i in (arc.offset_idx + (arc.r_idx,)) if i >= 0 and not replace]
                 pos = mv.words[max(aux)][3] if aux else self._insert_pos(mv)
                 words_added = added + arc_added
             else:
@@ -243,7 +372,7 @@ class EmitterMixin:
         self.qe[:] = qe
         self._write_line(line, edits, write)
 
-    def _emit_hinted_arc(self, line: str, mv: Move, target, hint, write) -> None:
+    def _emit_hinted_arc(self, line: str, mv: Move, target: Point, hint: ArcHint, write: Write) -> None:
         """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
         as one exact arc when the hint's rounded centre passes for the end points as
         written, else planned and fitted as any other arc."""
@@ -261,7 +390,10 @@ class EmitterMixin:
             centre = self._input_centre(mv, self.qe, qn)
             spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, hint.mismatch, budget)
         if spec is None:
-            self._emit_move(line, mv, target, hint.lazy(), write)
+            lazy = hint.lazy
+            if lazy is None:  # the corrector gives every hint it hands here its general plan
+                raise TypeError("an arc hint without its general plan")
+            self._emit_move(line, mv, target, lazy(), write)
             return
         self.report.moves += 1
         sep, lower = emit.style_of(line)
@@ -270,26 +402,32 @@ class EmitterMixin:
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
 
-    def _hint_is_sound(self, mv: Move, spec, S, E) -> bool:
+    def _hint_is_sound(self, mv: ArcMove, spec: ArcSpec, S: Point, E: Point) -> bool:
         """Whether controllers cut the bulk planner's arc ``spec`` (from S to E, as
         written) as meant: radius and sweep within the controller limits
         (:func:`postproc.gcode.segment.within_controller_limits`)."""
-        arc = mv.arc
+        arc = _arc_of(mv)
         (a1, a2, an), _ = PLANES[arc.plane]
         base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
         (_l1, t1), (_l2, t2) = spec["vals"]
         centre = (base[0] + float(t1) * mv.unit, base[1] + float(t2) * mv.unit)
         return within_controller_limits(S, E, centre, (a1, a2, an), arc.clockwise)
 
-    def _fit_piece(self, mv: Move, plan, s, Q, nom, bulge, qe, final: bool, d: int, budget: float) -> list[dict]:
+    def _fit_piece(self, mv: Move, plan: Plan, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray,
+                   qe: list[float], final: bool, d: int, budget: float) -> list[_Piece]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
         exact arc (or, failing that, one chord) reaches within the budget."""
         n = len(Q)
         a = 0
         cur = list(qe)
-        out: list[dict] = []
+        out: list[_Piece] = []
+        smp = _Samples(mv, s, Q, nom, bulge)
+
+        def attempt(b: int) -> _Piece | None:
+            return self._try_segment(mv, plan, smp, a, b, cur, final, d, budget)
+
         while a < n - 1:
-            seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, n - 1, cur, final, d, budget)
+            seg = attempt(n - 1)
             if seg is not None:
                 out.append(seg)
                 break
@@ -297,96 +435,92 @@ class EmitterMixin:
             # the longest share one segment reaches brackets the farthest sample it
             # reaches, which a bisection between that share and the next longer finds
             hi = n - 1
+            b = a
             for k in range(2, EQUAL_SHARES + 1):
                 b = a + math.ceil((n - 1 - a) / k)
                 if b <= a + 1:
                     break
-                seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, b, cur, final, d, budget)
+                seg = attempt(b)
                 if seg is not None:
                     break
                 hi = b
             if seg is not None:
-                lo, seg = self._farthest(mv, plan, s, Q, nom, bulge, a, b, hi, seg, cur, final, d, budget)
+                lo, seg = self._farthest(attempt, b, hi, seg)
                 out.append(seg)
-                cur = seg["qe"]
+                cur = seg.qe
                 a = lo
                 continue
-            lo_seg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + 1, cur, final, d, budget)
+            lo_seg = attempt(a + 1)
             if lo_seg is None:
                 # the samples are too sparse here: follow the curve by subdivision
                 segs = self._refine(mv, plan, s[a], s[a + 1], Q[a + 1], cur, final and a + 1 == n - 1, d)
                 out.extend(segs)
-                cur = segs[-1]["qe"]
+                cur = segs[-1].qe
                 a += 1
                 continue
             lo, hi = a + 1, n - 1
             step = 2
             while a + step < hi:
-                sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, a + step, cur, final, d, budget)
+                sg = attempt(a + step)
                 if sg is None:
                     hi = a + step
                     break
                 lo, lo_seg = a + step, sg
                 step *= 2
-            lo, lo_seg = self._farthest(mv, plan, s, Q, nom, bulge, a, lo, hi, lo_seg, cur, final, d, budget)
+            lo, lo_seg = self._farthest(attempt, lo, hi, lo_seg)
             if lo == a + 1:
                 # only the next sample is reached: check the path between them with the
                 # engine itself (a jump or a solver's scatter there is refused)
                 segs = self._refine(mv, plan, s[a], s[a + 1], Q[a + 1], cur, final and a + 1 == n - 1, d)
-                if len(segs) > 1 or lo_seg["kind"] == "line":
+                if len(segs) > 1 or lo_seg.kind == "line":
                     out.extend(segs)
-                    cur = segs[-1]["qe"]
+                    cur = segs[-1].qe
                     a += 1
                     continue
             out.append(lo_seg)
-            cur = lo_seg["qe"]
+            cur = lo_seg.qe
             a = lo
         return out
 
-    def _farthest(self, mv: Move, plan, s, Q, nom, bulge, a: int, lo: int, hi: int, lo_seg, cur, final: bool,
-                  d: int, budget: float) -> tuple[int, dict]:
-        """Bisection for the farthest sample one segment from ``a`` reaches, between ``lo``
-        (reached, by ``lo_seg``) and ``hi`` (not reached): ``(sample, its segment)``."""
+    @staticmethod
+    def _farthest(attempt: Callable[[int], _Piece | None], lo: int, hi: int, lo_seg: _Piece) -> tuple[int, _Piece]:
+        """Bisection for the farthest sample one segment (``attempt(sample)``, None where
+        it fails) reaches, between ``lo`` (reached, by ``lo_seg``) and ``hi`` (not
+        reached): ``(sample, its segment)``."""
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            sg = self._try_segment(mv, plan, s, Q, nom, bulge, a, mid, cur, final, d, budget)
+            sg = attempt(mid)
             if sg is None:
                 hi = mid
             else:
                 lo, lo_seg = mid, sg
         return lo, lo_seg
 
-    def _try_segment(self, mv: Move, plan, s, Q, nom, bulge, a: int, b: int, cur, final: bool, d: int,
-                     budget: float) -> dict | None:
-        last = final and b == len(Q) - 1
+    def _try_segment(self, mv: Move, plan: Plan, smp: _Samples, a: int, b: int, cur: list[float], final: bool,
+                     d: int, budget: float) -> _Piece | None:
+        """One segment from sample ``a`` (the controller at ``cur``) to sample ``b``: an
+        exact arc (arc moves) or a chord within ``budget`` of the samples and the middles
+        of their intervals, or None."""
+        last = final and b == len(smp.Q) - 1
         qn = list(cur)
         if last:
-            edits, added = self._axis_words(mv, Q[b], qn, d)
+            edits, added = self._axis_words(mv, smp.Q[b], qn, d)
         else:
-            edits, added = self._axis_words_free(mv, Q[b], qn, d)
-        ds = float(s[b] - s[a])
-        seg = {"qe": qn, "edits": edits, "added": added, "ds": ds}
-        # the samples and the middles of their intervals (the chord's middle moved by the
-        # nominal path's bulge there)
-        Qs = np.empty((2 * (b - a) + 1, 3))
-        Qs[0::2] = Q[a:b + 1]
-        Qs[1::2] = 0.5 * (Q[a:b] + Q[a + 1:b + 1]) + bulge[a:b]
-        ss = np.empty(len(Qs))
-        ss[0::2] = s[a:b + 1]
-        ss[1::2] = 0.5 * (s[a:b] + s[a + 1:b + 1])
-        if mv.arc is not None:
-            spec = self._exact_arc(mv, plan, cur, qn, Qs, _nominal_offset(Q, nom, a, b), ss,
-                                   last and not edits, d, budget)
+            edits, added = self._axis_words(smp.free, smp.Q[b], qn, d)
+        ds = float(smp.s[b] - smp.s[a])
+        Qs = smp.Qs[2 * a:2 * b + 1]
+        chord = chord_deviation(cur, qn, Qs)
+        if mv.arc is not None and smp.P2 is not None:
+            spec = self._exact_arc(mv, mv.arc, plan, cur, qn, Qs, smp.P2[2 * a:2 * b + 1], smp.offset(a, b),
+                                   smp.ss[2 * a:2 * b + 1], chord, last and not edits, d, budget)
             if spec is not None:
-                seg["kind"] = "arc"
-                seg["spec"] = spec
-                return seg
-        if chord_deviation(cur, qn, Qs) <= budget:
-            seg["kind"] = "line"
-            return seg
+                return _Piece("arc", qn, edits, added, ds, spec)
+        if chord <= budget:
+            return _Piece("line", qn, edits, added, ds)
         return None
 
-    def _refine(self, mv: Move, plan, sa: float, sb: float, qb, cur, last: bool, d: int) -> list[dict]:
+    def _refine(self, mv: Move, plan: Plan, sa: float, sb: float, qb: np.ndarray, cur: list[float], last: bool,
+                d: int) -> list[_Piece]:
         (ss, qq), = self._subdivide([plan["curve"]], [np.array([sa, sb])], mv.unit)
         qq = np.array(qq, dtype=float)
         qq[-1] = qb
@@ -397,25 +531,28 @@ class EmitterMixin:
                 edits, added = self._axis_words(mv, qq[j], qn, d)
             else:
                 edits, added = self._axis_words_free(mv, qq[j], qn, d)
-            out.append({"kind": "line", "qe": qn, "edits": edits, "added": added, "ds": float(ss[j] - ss[j - 1])})
+            out.append(_Piece("line", qn, edits, added, float(ss[j] - ss[j - 1])))
             cur = qn
         return out
 
-    def _exact_arc(self, mv: Move, plan, S, E, Qp, offset, sp, may_keep: bool, d: int, budget: float):
+    def _exact_arc(self, mv: Move, arc: Arc, plan: Plan, S_: Sequence[float], E_: Sequence[float], Qp: np.ndarray,
+                   P2: np.ndarray, offset: np.ndarray, sp: np.ndarray, chord: float, may_keep: bool, d: int,
+                   budget: float) -> ArcSpec | None:
         """The arc from S to E (both as written) that stays within ``budget`` of the
-        corrected samples ``Qp`` (``offset``: their mean correction, which moves the nominal
-        centre to the first guess): its centre on the bisector of S and E, the written centre
-        (I/J/K, or R where the input used R) chosen among rounded candidates so that the
-        start and end radii agree to half the output resolution. None if none passes.
+        corrected samples ``Qp`` (``P2``: their plane coordinates; ``offset``: their mean
+        correction, which moves the nominal centre to the first guess; ``chord``: their
+        largest distance from the chord S-E): its centre on the bisector of S and E, the
+        written centre (I/J/K, or R where the input used R) chosen among rounded
+        candidates so that the start and end radii agree to half the output resolution.
+        None if none passes.
 
         ``may_keep``: the piece is the whole move and its end words are unchanged: the
         input's own centre words are kept when their arc still passes (identity keeps
         every input arc as it is)."""
-        arc = mv.arc
-        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        (a1, a2, an), _letters = PLANES[arc.plane]
         unit = mv.unit
-        S = np.asarray(S, dtype=float)
-        E = np.asarray(E, dtype=float)
+        S = np.asarray(S_, dtype=float)
+        E = np.asarray(E_, dtype=float)
         span = float(sp[-1] - sp[0])
         if span <= 0.0:
             return None
@@ -430,12 +567,12 @@ class EmitterMixin:
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
         step = 10.0 ** (-d)
-        S2, E2 = S[[a1, a2]], E[[a1, a2]]
-        P2 = Qp[:, [a1, a2]]
-        c0 = np.asarray(arc.center, dtype=float)[[a1, a2]] + offset[[a1, a2]]
+        S2, E2 = np.array([S[a1], S[a2]]), np.array([E[a1], E[a2]])
+        cx, cy = arc.center[a1] + offset[a1], arc.center[a2] + offset[a2]
         centres = []
-        if math.hypot(*(E2 - S2)) > 0.0:
-            if chord_deviation(S, E, Qp) <= step * unit:
+        if math.hypot(E2[0] - S2[0], E2[1] - S2[1]) > 0.0:
+            c0 = np.array([cx, cy])
+            if chord <= step * unit:
                 # the path bows from the line S-E by less than one output step: a circle
                 # fitted to it is set by the rounding of S and E, not by the path (a centre
                 # kilometres off, or a circle a few steps wide, where the chord is a few
@@ -445,32 +582,33 @@ class EmitterMixin:
             centres.append(bisector_centre(S2, E2, P2, c0))
         else:
             centre = circle_fit(P2)
-            centres.append(c0 if centre is None or not np.isfinite(centre).all() else centre)
+            centres.append(np.array([cx, cy]) if centre is None or not np.isfinite(centre).all() else centre)
         for centre in centres:
-            spec = self._arc_about(mv, S, E, centre, nsw, Qp, frac, d, budget)
+            spec = self._arc_about(mv, arc, S, E, centre, nsw, Qp, frac, d, budget)
             if spec is not None:
                 return spec
         return None
 
-    def _arc_about(self, mv: Move, S, E, centre, nsw: float, Qp, frac, d: int, budget: float):
+    def _arc_about(self, mv: Move, arc: Arc, S: np.ndarray, E: np.ndarray, centre: np.ndarray, nsw: float,
+                   Qp: np.ndarray, frac: np.ndarray, d: int, budget: float) -> ArcSpec | None:
         """The written arc from S to E whose centre is the rounded candidate nearest
         ``centre`` (2,) that passes (see :meth:`_exact_arc`), or None."""
-        arc = mv.arc
         (a1, a2, an), (l1, l2) = PLANES[arc.plane]
+        axes = (a1, a2, an)
         unit = mv.unit
         step = 10.0 ** (-d)
         agree = 0.5 * step * unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
-            spec = self._r_candidates(S, E, centre, (a1, a2, an), arc.clockwise, nsw, Qp, frac, d, unit, budget)
+            spec = self._r_candidates(S, E, centre, axes, arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
                 return spec
         base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
-        v0 = np.round((centre - base) / unit, d)
-        ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * step
-        grid = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
-        V = np.round(v0[None, :] + grid, d)
+        v0 = ((centre - base) / unit).round(d)  # ndarray.round: np.round without its wrapper
+        V = (v0 + _lattice(d)).round(d)
         C = base[None, :] + V * unit
-        worst, mism, turns = arc_candidates(S, E, C, (a1, a2, an), arc.clockwise, nsw, Qp, frac, controller_limits=True)
+        # candidates whose radii disagree are refused unmeasured (their worst is inf)
+        worst, mism, turns = arc_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, controller_limits=True,
+                                            mismatch_limit=agree)
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
@@ -479,17 +617,24 @@ class EmitterMixin:
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
             if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
                 # the written centre is the candidate measured (numpy's rounding agreed)
-                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
-                        "dev": float(worst[j]), "mismatch": float(mism[j])}
+                wj, tj = worst[j], turns[j]
+                if not ok[j]:  # measured in full (it may not have been), as the spec records it
+                    w1, _m1, t1 = arc_candidates(S, E, C[j:j + 1], axes, arc.clockwise, nsw, Qp, frac,
+                                                 controller_limits=True)
+                    wj, tj = w1[0], t1[0]
+                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(tj),
+                        "dev": float(wj), "mismatch": float(mism[j])}
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
-            w, m, t = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac,
+            w, m, t = arc_candidates(S, E, ctrl[None, :], axes, arc.clockwise, nsw, Qp, frac,
                                      controller_limits=True)
             if m[0] <= agree and w[0] <= budget:
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
                         "dev": float(w[0]), "mismatch": float(m[0])}
         return None
 
-    def _r_candidates(self, S, E, centre, axes, clockwise, nsw, Qp, frac, d, unit, budget):
+    def _r_candidates(self, S: np.ndarray, E: np.ndarray, centre: np.ndarray, axes: Axes, clockwise: bool,
+                      nsw: float, Qp: np.ndarray, frac: np.ndarray, d: int, unit: float,
+                      budget: float) -> ArcSpec | None:
         a1, a2, an = axes
         step = 10.0 ** (-d)
         half = 0.5 * math.hypot(E[a1] - S[a1], E[a2] - S[a2])
@@ -519,10 +664,10 @@ class EmitterMixin:
             return None
         return {"form": "r", "vals": (("R", best[1]),), "turns": 1, "dev": best[0], "mismatch": best[2]}
 
-    def _input_centre(self, mv: Move, S, E) -> np.ndarray | None:
+    def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None:
         """Centre (2,) a controller finds from the input line's own arc words, with the
         emitted start and end."""
-        arc = mv.arc
+        arc = _arc_of(mv)
         (a1, a2, _an), _ = PLANES[arc.plane]
         unit = mv.unit
         if arc.r_idx >= 0:
@@ -535,15 +680,16 @@ class EmitterMixin:
             out.append(base + val * unit)
         return np.array(out)
 
-    def _arc_words(self, spec, arc: Arc, final: bool) -> list[str]:
+    @staticmethod
+    def _arc_words(spec: ArcSpec) -> list[str]:
         words = [letter + text for letter, text in spec["vals"]]
         if spec["turns"] > 1:
             words.append(f"P{spec['turns']}")
         return words
 
-    def _arc_edits(self, line: str, mv: Move, spec) -> tuple[list, list[str]]:
+    def _arc_edits(self, line: str, mv: Move, spec: ArcSpec) -> tuple[list[Edit], list[str]]:
         """Edits of the move's own arc words for the arc ``spec`` and the words to add."""
-        arc = mv.arc
+        arc = _arc_of(mv)
         if spec["form"] == "keep":
             return [], []
         p_idx = [i for i in mv.aux_idx if mv.words[i][0] == "P"]
@@ -553,8 +699,9 @@ class EmitterMixin:
             spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
             spec["replace"] = True
             edits = [(a, b, "") for a, b in emit.removal_spans(line, spans)]
-            return edits, self._arc_words(spec, arc, final=True)
+            return edits, self._arc_words(spec)
         edits, added = [], []
+        idxs: tuple[int, ...]
         if spec["form"] == "r":
             idxs = (arc.r_idx,)
         else:
@@ -569,7 +716,7 @@ class EmitterMixin:
         del p_idx
         return edits, added
 
-    def _emit_unplanned_arc(self, line: str, mv: Move, target, d: int, write) -> None:
+    def _emit_unplanned_arc(self, line: str, mv: Move, target: Point, d: int, write: Write) -> None:
         """An arc whose start is not known (the program's first move): its end words follow
         the target and its centre words keep their offset from the start."""
         edits, added = self._axis_words(mv, target, self.qe, d)

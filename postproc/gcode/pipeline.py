@@ -163,9 +163,7 @@ class Corrector(EmitterMixin):
         self.prev_nominal = np.array(start, dtype=float)
         self.prev_target = np.array(start, dtype=float)
         self.dirs = np.zeros(3)
-        # the motion the controller holds (None: none yet); EmitterMixin (emitter.py) infers
-        # int from its own assignments, the declaration int | None belongs there
-        self.emitted_motion: int | None = None  # type: ignore[assignment]
+        self.emitted_motion: int | None = None  # the motion the controller holds (None: none yet)
         self.expanded = False  # correcting the expanded program (recorded in the header)
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None

@@ -20,15 +20,34 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Literal, NotRequired, TypedDict
 
 import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import SolverError
-from postproc.gcode.geometry import TWO_PI, arc_params, arc_points, line_points
+from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI, arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc
+
+# A point (x, y, z) in machine coordinates; the plane's axes as (first, second, normal).
+Point = Sequence[float] | np.ndarray
+Axes = tuple[int, int, int]
+
+class ArcSpec(TypedDict):
+    """The written form of an exact arc: ``keep`` (the input's own centre words), ``ij``
+    (centre offsets ``vals``: ((letter, text), (letter, text))) or ``r`` (``vals``:
+    (("R", text),)); ``turns``; ``dev``, ``mismatch``: its measured deviation and radius
+    mismatch; ``replace``: set when the move's own arc words are replaced."""
+
+    form: Literal["keep", "ij", "r"]
+    turns: int
+    vals: NotRequired[tuple[tuple[str, str], ...]]
+    dev: NotRequired[float]
+    mismatch: NotRequired[float]
+    replace: NotRequired[bool]
+
 
 # Deepest subdivision: 2**20 pieces of one move means the correction field is not
 # smooth at the tolerance's scale (or is broken); refuse rather than emit millions of lines.
@@ -43,14 +62,14 @@ MIDPOINT_SAFETY = 0.5
 class Curve:
     """A move to follow: nominal gauge points as a function of s in [0, 1]."""
 
-    q0: tuple
-    q1: tuple
+    q0: tuple[float, float, float]
+    q1: tuple[float, float, float]
     arc: Arc | None
     r: np.ndarray  # (3,) tool vector
     dirs: np.ndarray  # (3,) approach signs carried into the move
     lineno: int
-    rotary: dict
-    params: tuple | None = None  # arc_params of an arc (computed once)
+    rotary: dict[str, float]
+    params: tuple[Axes, float, float, float, float] | None = None  # arc_params of an arc (computed once)
 
     def nominal(self, s: np.ndarray) -> np.ndarray:
         if self.arc is None:
@@ -72,10 +91,12 @@ class Curve:
         return np.where(d == 0, self.dirs, d)
 
 
-Evaluate = Callable[[np.ndarray, list, list], np.ndarray]
+# corrected gauge points (N, 3) of curves (N,) at parameters (N,)
+Evaluate = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate, threshold_mm: float):
+def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate: Evaluate,
+              threshold_mm: float) -> list[tuple[np.ndarray, np.ndarray]]:
     """Adaptive subdivision of every curve; returns ``[(s (k,), q (k, 3)), ...]``.
 
     ``evaluate(curve_index (N,), s (N,))`` returns corrected gauge points (N, 3) for
@@ -87,19 +108,23 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate, threshold
     cid = np.concatenate([np.full(len(s), i) for i, s in enumerate(s_init)])
     ss = np.concatenate(s_init)
     q = evaluate(cid, ss)
-    knots: list[list] = [[] for _ in curves]
+    knots: list[list[tuple[float, np.ndarray]]] = [[] for _ in curves]
     offs = np.cumsum([0] + [len(s) for s in s_init])
-    pend_c, pend_a, pend_b, qa, qb = [], [], [], [], []
+    pend_c: list[np.ndarray] = []
+    pend_a: list[np.ndarray] = []
+    pend_b: list[np.ndarray] = []
+    pend_qa: list[np.ndarray] = []
+    pend_qb: list[np.ndarray] = []
     for i, s in enumerate(s_init):
         qi = q[offs[i]:offs[i + 1]]
         knots[i].extend(zip(s.tolist(), qi, strict=True))
         pend_c.append(np.full(len(s) - 1, i))
         pend_a.append(s[:-1])
         pend_b.append(s[1:])
-        qa.append(qi[:-1])
-        qb.append(qi[1:])
+        pend_qa.append(qi[:-1])
+        pend_qb.append(qi[1:])
     pc, pa, pb = np.concatenate(pend_c), np.concatenate(pend_a), np.concatenate(pend_b)
-    qa, qb = np.vstack(qa), np.vstack(qb)
+    qa, qb = np.vstack(pend_qa), np.vstack(pend_qb)
     depth = 0
     while len(pc):
         depth += 1
@@ -124,7 +149,7 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate, threshold
     return out
 
 
-def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool):
+def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool) -> tuple[float, float] | None:
     """Centre the controller computes for an R-format arc, or None if R is too small."""
     dx, dy = e1 - s1, e2 - s2
     chord = math.hypot(dx, dy)
@@ -161,13 +186,13 @@ def centre_estimate(arc: Arc, s_nom: np.ndarray, q_nom: np.ndarray, q_corr: np.n
     return c + coef[0]
 
 
-def _plane(arc: Arc):
+def _plane(arc: Arc) -> tuple[Axes, tuple[str, str]]:
     from postproc.gcode.state import PLANES
 
     return PLANES[arc.plane]
 
 
-def arc_deviation(arc: Arc, S, E, s_samples: np.ndarray, q_samples: np.ndarray, nominal_sweep: float,
+def arc_deviation(arc: Arc, S: Point, E: Point, s_samples: np.ndarray, q_samples: np.ndarray, nominal_sweep: float,
                   input_mismatch_mm: float = 0.0) -> float:
     """Largest distance from the corrected samples to the arc a controller draws from
     S to E around ``arc.center`` (spiral radius, linear normal axis); inf if the
@@ -229,18 +254,25 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
     n = np.array([-D[1], D[0]]) / L
     h = 0.5 * L
     t = float((np.asarray(c0, dtype=float) - M) @ n)
+    m0, m1 = float(M[0]), float(M[1])
+    n0, n1 = float(n[0]), float(n[1])
+    c = np.empty(2)
     for _ in range(12):
-        c = M + t * n
+        # the centre M + t n, element by element as numpy computes it
+        c[0] = m0 + t * n0
+        c[1] = m1 + t * n1
         v = P2 - c
         dist = np.hypot(v[:, 0], v[:, 1])
         dist = np.where(dist > 0, dist, 1e-300)
         rho = math.hypot(h, t)
         res = dist - rho
-        J = -(v @ n) / dist - t / rho
-        den = float(J @ J)
+        # minus the Jacobian, -J = (v . n) / dist + t / rho: negating a rounded result is
+        # exact, so the step is the same as with J itself
+        mJ = (v @ n) / dist + t / rho
+        den = float(mJ @ mJ)
         if den <= 0.0:
             break
-        dt = -float(J @ res) / den
+        dt = float(mJ @ res) / den
         # a step across the chord would flip the arc to the other side: halve it
         if (t + dt) * t < 0 and abs(t) > 0:
             dt = -0.5 * t
@@ -273,8 +305,9 @@ def circle_fit(P2: np.ndarray) -> np.ndarray | None:
     return m + 0.5 * sol[:2]
 
 
-def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: float, Q: np.ndarray,
-                   frac_nominal: np.ndarray, controller_limits: bool = False):
+def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: bool, nominal_sweep: float,
+                   Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool = False,
+                   mismatch_limit: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Deviation of the corrected samples ``Q`` (k, 3) from the arcs that controllers draw
     from S to E around each candidate centre ``C`` (m, 2, plane coordinates).
 
@@ -286,46 +319,124 @@ def arc_candidates(S, E, C: np.ndarray, axes, clockwise: bool, nominal_sweep: fl
     where each sample lies along the piece (0 at S, 1 at E), which resolves the
     angle's turn for multi-turn arcs. ``controller_limits``: ``worst`` is also inf where
     a controller refuses or misreads the arc: a start or end radius below
-    :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`."""
+    :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`.
+
+    ``mismatch_limit``: the candidates whose radius mismatch exceeds it (which the caller
+    refuses anyway) are not measured: their ``worst`` is inf and their ``turns`` 0. The
+    others get the values they get among all (see :func:`_limited_candidates`)."""
     a1, a2, an = axes
-    c1, c2 = C[:, 0], C[:, 1]
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    t0 = np.arctan2(s2 - c2, s1 - c1)
-    t1 = np.arctan2(e2 - c2, e1 - c1)
-    r0 = np.hypot(s1 - c1, s2 - c2)
-    r1 = np.hypot(e1 - c1, e2 - c2)
+    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
+    dx = np.array([[s1], [e1]]) - C[:, 0]
+    dy = np.array([[s2], [e2]]) - C[:, 1]
+    rad = np.hypot(dx, dy)
+    r0, r1 = rad[0], rad[1]
+    mismatch = np.abs(r1 - r0)
+    if mismatch_limit is not None:
+        return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
+                                   Q, frac_nominal, controller_limits)
+    ang = np.arctan2(dy, dx)
+    t0, t1 = ang[0], ang[1]
     if clockwise:
         base = -np.mod(t0 - t1, TWO_PI)
     else:
         base = np.mod(t1 - t0, TWO_PI)
     chord = math.hypot(e1 - s1, e2 - s2)
-    from postproc.gcode.geometry import FULL_CIRCLE_MM
-
     full = (np.abs(base) < 1e-12) | (chord < FULL_CIRCLE_MM)
     base = np.where(full, -TWO_PI if clockwise else TWO_PI, base)
-    turns = np.maximum(1, np.round((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
+    # np.rint: np.round with no decimals, without its wrapper
+    turns = np.maximum(1, np.rint((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
     sweep = base + np.sign(base) * (turns - 1) * TWO_PI
     bad = np.abs(sweep - nominal_sweep) > math.pi / 2
-    v1 = Q[None, :, a1] - c1[:, None]
-    v2 = Q[None, :, a2] - c2[:, None]
-    phi = np.arctan2(v2, v1)
-    sgn = -1.0 if clockwise else 1.0
-    asw = np.abs(sweep)[:, None]
-    alpha = np.mod((phi - t0[:, None]) * sgn, TWO_PI)
-    target = frac_nominal[None, :] * asw
-    alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
-    frac = alpha / asw
-    rad = r0[:, None] + (r1 - r0)[:, None] * frac
-    nrm = S[an] + (E[an] - S[an]) * frac
-    dev = np.hypot(np.hypot(v1, v2) - rad, Q[None, :, an] - nrm).max(axis=1)
-    mismatch = np.abs(r1 - r0)
     if controller_limits:
         bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    worst = np.where(bad, np.inf, dev + mismatch)
+    dev = _deviation(S, E, C, t0, sweep, r0, r1, axes, clockwise, Q, frac_nominal)
+    return np.where(bad, np.inf, dev + mismatch), mismatch, turns
+
+
+def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: np.ndarray, rad: np.ndarray,
+                        mismatch: np.ndarray, limit: float, axes: Axes, clockwise: bool, nominal_sweep: float,
+                        Q: np.ndarray, frac_nominal: np.ndarray,
+                        controller_limits: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`arc_candidates` with a mismatch limit: the few candidates within it are
+    taken one by one in plain floats (their mismatch is finite, so are all their values),
+    with the same operations as numpy's element by element (``%`` is np.mod's floored
+    remainder, ``round`` np.rint's half to even, ``copysign`` np.sign of a nonzero
+    sweep); their angles come from numpy's arctan2 as among all, and the samples are
+    measured with numpy."""
+    m = len(C)
+    worst = np.full(m, np.inf)
+    turns = np.zeros(m, dtype=int)
+    sel = np.flatnonzero(mismatch <= limit)
+    if len(sel) == 0:
+        return worst, mismatch, turns
+    a1, a2, _an = axes
+    s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
+    ang = np.arctan2(dy[:, sel], dx[:, sel])
+    full_chord = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
+    full_sweep = -TWO_PI if clockwise else TWO_PI
+    nsw = abs(nominal_sweep)
+    idx, t0k, swk, r0k, r1k = [], [], [], [], []
+    for i, t0, t1, r0, r1 in zip(sel.tolist(), ang[0].tolist(), ang[1].tolist(), rad[0, sel].tolist(),
+                                 rad[1, sel].tolist(), strict=True):
+        base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
+        if abs(base) < 1e-12 or full_chord:
+            base = full_sweep
+        tr = max(1, round((nsw - abs(base)) / TWO_PI) + 1)
+        turns[i] = tr
+        sweep = base + math.copysign(1.0, base) * (tr - 1) * TWO_PI
+        if abs(sweep - nominal_sweep) > math.pi / 2:
+            continue
+        if controller_limits and (min(r0, r1) < MIN_ARC_RADIUS_MM or abs(sweep) < MIN_ARC_SWEEP_RAD):
+            continue
+        idx.append(i)
+        t0k.append(t0)
+        swk.append(sweep)
+        r0k.append(r0)
+        r1k.append(r1)
+    if idx:
+        worst[idx] = _deviation(S, E, C[idx], np.array(t0k), np.array(swk), np.array(r0k), np.array(r1k), axes,
+                                clockwise, Q, frac_nominal) + mismatch[idx]
     return worst, mismatch, turns
 
 
-def within_controller_limits(S, E, centre, axes, clockwise: bool) -> bool:
+def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndarray, r0: np.ndarray,
+               r1: np.ndarray, axes: Axes, clockwise: bool, Q: np.ndarray, frac_nominal: np.ndarray) -> np.ndarray:
+    """Largest distance (m,) of the samples Q (k, 3) from the spiral a controller draws
+    around each centre C (m, 2) from angle ``t0`` sweeping ``sweep``, radius ``r0`` to
+    ``r1`` (see :func:`arc_candidates`)."""
+    a1, a2, an = axes
+    v1 = Q[:, a1] - C[:, 0:1]
+    v2 = Q[:, a2] - C[:, 1:2]
+    asw = np.abs(sweep)[:, None]
+    # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly);
+    # the arithmetic in place (the same operations, fewer temporary arrays)
+    phi = np.arctan2(v2, v1)
+    if clockwise:
+        alpha = np.subtract(t0[:, None], phi, out=phi)
+    else:
+        alpha = np.subtract(phi, t0[:, None], out=phi)
+    np.mod(alpha, TWO_PI, out=alpha)
+    turn = frac_nominal * asw  # the target angle, then the turns to add
+    np.subtract(turn, alpha, out=turn)
+    np.divide(turn, TWO_PI, out=turn)
+    np.rint(turn, out=turn)
+    np.multiply(turn, TWO_PI, out=turn)
+    np.add(alpha, turn, out=alpha)
+    frac = np.divide(alpha, asw, out=alpha)
+    rad = (r1 - r0)[:, None] * frac
+    np.add(r0[:, None], rad, out=rad)
+    nrm = (E[an] - S[an]) * frac
+    np.add(S[an], nrm, out=nrm)
+    np.subtract(Q[:, an], nrm, out=nrm)
+    radial = np.hypot(v1, v2, out=v1)
+    np.subtract(radial, rad, out=radial)
+    dev: np.ndarray = np.hypot(radial, nrm, out=radial).max(axis=1)
+    return dev
+
+
+def within_controller_limits(S: Point, E: Point, centre: Sequence[float] | np.ndarray, axes: Axes,
+                             clockwise: bool) -> bool:
     """Whether controllers cut the arc from S to E around ``centre`` (2, plane
     coordinates) as that arc: both radii at least :data:`MIN_ARC_RADIUS_MM` and, unless
     S and E coincide in the plane (a full circle), a sweep of at least
@@ -341,15 +452,20 @@ def within_controller_limits(S, E, centre, axes, clockwise: bool) -> bool:
     return sweep >= MIN_ARC_SWEEP_RAD
 
 
-def chord_deviation(S, E, Q: np.ndarray) -> float:
+def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
     """Largest distance of the points Q (k, 3) from the segment S-E."""
     a = np.asarray(S, dtype=float)
     ab = np.asarray(E, dtype=float) - a
     den = float(ab @ ab)
     if den == 0.0:
-        return float(np.linalg.norm(Q - a, axis=1).max())
-    t = np.clip(((Q - a) @ ab) / den, 0.0, 1.0)
-    return float(np.linalg.norm(Q - (a + t[:, None] * ab), axis=1).max())
+        d = Q - a
+    else:
+        # the parameter of the nearest point of the segment, clipped to [0, 1] (as np.clip)
+        t = np.minimum(np.maximum(((Q - a) @ ab) / den, 0.0), 1.0)
+        d = Q - (a + t[:, None] * ab)
+    # the largest norm of the rows: numpy's norm sums the squares as add.reduce does, and
+    # the root of the largest sum is the largest root (both correctly rounded)
+    return math.sqrt(float(np.add.reduce(d * d, axis=1).max()))
 
 
 def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:

@@ -37,7 +37,6 @@ from typing import (
     Literal,
     NotRequired,
     Protocol,
-    Required,
     TypeAlias,
     TypedDict,
     TypeVar,
@@ -52,7 +51,7 @@ from postproc.gcode.state import PLANES
 
 if TYPE_CHECKING:
     from postproc.gcode.interp import Arc
-    from postproc.gcode.segment import Curve
+    from postproc.gcode.segment import ArcSpec, Curve
 
 FloatArray: TypeAlias = npt.NDArray[np.float64]
 IntArray: TypeAlias = npt.NDArray[np.intp]
@@ -91,20 +90,6 @@ class Plan(TypedDict):
     curve: Curve
     nsweep: NotRequired[float]
     mismatch: NotRequired[float]
-
-
-class ArcSpec(TypedDict, total=False):
-    """The arc words written for an arc: ``form`` "keep" (the input's own words stay),
-    "ij" (centre words) or "r" (radius word); ``vals``: (letter, number text) of each
-    word; ``dev``/``mismatch``: its deviation bound and end-radius mismatch (mm);
-    ``replace``: set by the emitter when the line's old arc words give way to these."""
-
-    form: Required[Literal["keep", "ij", "r"]]
-    turns: Required[int]
-    vals: tuple[tuple[str, str], ...]
-    dev: float
-    mismatch: float
-    replace: bool
 
 
 class ArcMove(Protocol):
