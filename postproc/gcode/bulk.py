@@ -558,7 +558,8 @@ def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write:
         s = _emit_rows(corrector, run, em, T, write, hints, s)
 
 
-def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
+# C901: the run writer's inner loops, kept in one frame for speed (every line of a run)
+def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,  # noqa: C901
                hints: Mapping[int, ArcHint], s: int) -> int:
     """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
     the end points as written, which the general emitter then writes; returns the

@@ -139,54 +139,62 @@ def _num(v: float) -> str:
 
 
 def _setup_parts(setup_note: str, setup: Setup | None) -> list[str]:
-    """The setup note as header words, one entry per part (offsets, tools, start, ...)."""
+    """The setup note as header words, one entry per part (offsets, tools, start, ...).
+    With the ``setup`` itself, its numbers are written from it, exactly."""
+    if setup is None:
+        return _note_parts(setup_note, False, False)
+    return _note_parts(setup_note, True, bool(getattr(setup, "home", None))) + _exact_parts(setup)
+
+
+def _note_parts(setup_note: str, exact: bool, home: bool) -> list[str]:
+    """The parts of the setup note; with ``exact``, those the setup writes (offsets,
+    tools, start, tool vector; G28/G30 when it has ``home``) are left out."""
     parts: list[str] = []
-    exact = setup is not None
     for raw in (p.strip() for p in setup_note.split(";") if p.strip()) if setup_note else ():
         m = re.fullmatch(r"(G5[0-9.]+)=([-+0-9.eE]+),([-+0-9.eE]+),([-+0-9.eE]+)", raw)
         if m:
             if not exact:
                 parts.append(f"OFFSET {m.group(1)} X{_num(float(m.group(2)))} Y{_num(float(m.group(3)))} "
                              f"Z{_num(float(m.group(4)))}")
-            continue
-        if raw.startswith("tools "):
+        elif raw.startswith("tools "):
             if not exact:
                 pairs = [item.split("=") for item in raw[6:].split(",") if "=" in item]
                 parts.append("TOOL LENGTHS " + " ".join(f"H{int(float(h))} {_num(float(v))}" for h, v in pairs))
-            continue
-        if raw.startswith("start "):
+        elif raw.startswith("start "):
             if not exact:
                 parts.append("START " + " ".join(item for item in raw[6:].split(",") if item))
-            continue
-        if re.match(r"G(28|30)=", raw) and exact and getattr(setup, "home", None):
-            continue  # written from the setup below, exactly
-        if raw.lower().startswith("expanded"):
-            continue  # the EXPANDED line of header_lines says it
-        if raw.startswith("tool vector "):
+        elif (re.match(r"G(28|30)=", raw) and exact and home) or raw.lower().startswith("expanded"):
+            continue  # written from the setup, exactly; the EXPANDED line of header_lines says it
+        elif raw.startswith("tool vector "):
             if not exact:
                 vals = raw[12:].split(",")
                 parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(float(v))}" for a, v in zip("XYZ", vals, strict=False)))
-            continue
-        parts.append(_safe(raw))
-    if setup is not None:
-        offs = setup.offsets or {}
-        for k in sorted(offs):
-            v = offs[k]
-            if isinstance(v, dict):
-                v = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
-            parts.append(f"OFFSET {_safe(k)} " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", v, strict=True)))
-        if setup.tool_lengths:
-            parts.append("TOOL LENGTHS " + " ".join(f"H{int(h)} {_num(v)}" for h, v in sorted(setup.tool_lengths.items())))
-        if setup.start:
-            from postproc.gcode.interp import start_position
+        else:
+            parts.append(_safe(raw))
+    return parts
 
-            pos = start_position(setup.start)
-            parts.append("START " + " ".join(f"{a}{_num(v)}" for a, v in zip("XYZ", pos, strict=True) if v == v))
-        for name, v in sorted((getattr(setup, "home", None) or {}).items()):
-            v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
-            parts.append(f"{_safe(name)} " + " ".join(f"{a}{_num(x)}" for a, x in sorted(v.items())))
-        if setup.tool_vector is not None:
-            parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", setup.tool_vector, strict=True)))
+
+def _exact_parts(setup: Setup) -> list[str]:
+    """Offsets, tool lengths, start, G28/G30 positions and tool vector, from the setup."""
+    parts: list[str] = []
+    offs = setup.offsets or {}
+    for k in sorted(offs):
+        v = offs[k]
+        if isinstance(v, dict):
+            v = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+        parts.append(f"OFFSET {_safe(k)} " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", v, strict=True)))
+    if setup.tool_lengths:
+        parts.append("TOOL LENGTHS " + " ".join(f"H{int(h)} {_num(v)}" for h, v in sorted(setup.tool_lengths.items())))
+    if setup.start:
+        from postproc.gcode.interp import start_position
+
+        pos = start_position(setup.start)
+        parts.append("START " + " ".join(f"{a}{_num(v)}" for a, v in zip("XYZ", pos, strict=True) if v == v))
+    for name, v in sorted((getattr(setup, "home", None) or {}).items()):
+        v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
+        parts.append(f"{_safe(name)} " + " ".join(f"{a}{_num(x)}" for a, x in sorted(v.items())))
+    if setup.tool_vector is not None:
+        parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", setup.tool_vector, strict=True)))
     return parts
 
 

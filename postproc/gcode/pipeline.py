@@ -139,6 +139,27 @@ class CorrectReport:
         return (self.lines_out - self.header_lines) / self.lines_in if self.lines_in else 1.0
 
 
+def _start_lines(it: Iterator[str]) -> tuple[list[str], int]:
+    """The first lines of a program, read from ``it``, and how many of them stay before
+    the header: blank lines before a '%' tape mark (LinuxCNC wants '%' first of the
+    non-blank lines), the '%' and the program number (O1234, O0001 (NAME), :1234), which
+    Fanuc and Haas controls need first."""
+    head = list(islice(it, 1))
+    keep = 0
+    while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
+        keep += 1
+        head.extend(islice(it, 1))
+    if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
+        keep += 1
+        head.extend(islice(it, 1))
+    elif keep:
+        keep = 0  # blank lines without a '%' after them: the header goes first as before
+    if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
+        keep += 1
+        head.extend(islice(it, 1))
+    return head, keep
+
+
 class Corrector(EmitterMixin):
     """State of one correction run; see the module docstring."""
 
@@ -267,7 +288,10 @@ class Corrector(EmitterMixin):
             if was_enabled:
                 gc.enable()
 
-    def _run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
+    # C901: the reading loop; its closures (a line, a block of lines) share the loop's
+    # state (line number, whether a run may start) and run for every line read
+    def _run(self, lines: Iterable[str], write: Write,  # noqa: C901
+             progress: Callable[[int], None] | None = None,
              source: deque[tuple[int, str | None]] | None = None) -> CorrectReport:
         """``source``: for an expanded program, the (line, file) each of ``lines`` comes
         from, in order (the lines are then read one by one, never in bulk)."""
@@ -283,46 +307,10 @@ class Corrector(EmitterMixin):
             interp.path = p or self.path
             return ln
 
-        # the lines that stay before the header: a '%' tape mark and the program number
-        # (O1234, O0001 (NAME), :1234), which Fanuc and Haas controls need first
-        head = [ln for ln in islice(it, 1)]
-        keep = 0
-        # blank lines before the '%' stay before it (LinuxCNC wants '%' first of the non-blank lines)
-        while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
-            keep += 1
-            head.extend(islice(it, 1))
-        if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
-            keep += 1
-            head.extend(islice(it, 1))
-        elif keep:
-            keep = 0  # blank lines without a '%' after them: the header goes first as before
-        if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
-            keep += 1
-            head.extend(islice(it, 1))
-        for k, line in enumerate(head):
-            if emit.is_header(line) and not self.opt.force:
-                raise AlreadyCorrectedError(
-                    "this program already carries a postproc header: it has been corrected before",
-                    path=self.path, lineno=k + 1, col=1,
-                    hint="correct the original program instead, or use --force to correct it again")
-        ending = (emit.line_ending(head[0]) if head else "") or "\n"
-        header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
-                                        self._setup_note(), ending, expanded=self.expanded, setup=self.setup)
-        header = "".join(header_rows)
+        head, keep = _start_lines(it)
         entries: list[Entry | bulk.Run] = []
-        lineno = 1
-        for line in head[:keep]:
-            self.interp.feed_line(where(lineno), line)
-            write(line if emit.line_ending(line) else line + ending)
-            self.report.lines_out += 1
-            lineno += 1
-        if head and not keep and head[0].startswith("\ufeff"):
-            write("\ufeff")  # the byte-order mark stays the file's first bytes
-            head[0] = head[0][1:]
+        lineno = self._write_start(head, keep, write, where)
         head = head[keep:]
-        write(header)
-        self.report.lines_out += len(header_rows)
-        self.report.header_lines = len(header_rows)
 
         # runs of plain lines: for every engine whose moves the planner settles in bulk
         use_bulk = (self.linear_exact or self.bulk_plan) and self.opt.bulk_lane and source is None
@@ -426,6 +414,33 @@ class Corrector(EmitterMixin):
         self.report.g54_assumed_zero = self.interp.implicit_g54
         return self.report
 
+    def _write_start(self, head: list[str], keep: int, write: Write, where: Callable[[int], int]) -> int:
+        """Write the first ``keep`` lines of ``head`` (they stay before the header), then
+        the header; returns the number of the next line. Refuses a program that carries a
+        header already (unless forced)."""
+        for k, line in enumerate(head):
+            if emit.is_header(line) and not self.opt.force:
+                raise AlreadyCorrectedError(
+                    "this program already carries a postproc header: it has been corrected before",
+                    path=self.path, lineno=k + 1, col=1,
+                    hint="correct the original program instead, or use --force to correct it again")
+        ending = (emit.line_ending(head[0]) if head else "") or "\n"
+        header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
+                                        self._setup_note(), ending, expanded=self.expanded, setup=self.setup)
+        lineno = 1
+        for line in head[:keep]:
+            self.interp.feed_line(where(lineno), line)
+            write(line if emit.line_ending(line) else line + ending)
+            self.report.lines_out += 1
+            lineno += 1
+        if head and not keep and head[0].startswith("\ufeff"):
+            write("\ufeff")  # the byte-order mark stays the file's first bytes
+            head[0] = head[0][1:]
+        write("".join(header_rows))
+        self.report.lines_out += len(header_rows)
+        self.report.header_lines = len(header_rows)
+        return lineno
+
     def _setup_note(self) -> str:
         parts = []
         if self.expanded:
@@ -456,7 +471,8 @@ class Corrector(EmitterMixin):
         return "; ".join(parts)
 
     # -- one chunk ---------------------------------------------------------------------
-    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:
+    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
+    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
         rot: list[dict[str, float]] = []
         general: list[tuple[int, PlanMove]] = []
