@@ -66,6 +66,22 @@ def test_m99_p_returns_to_a_sequence_number():
     assert flat(text) == "O1\nG0 Z1.\nN20 G0 X2.\nM30\n"
 
 
+def test_a_vacant_variable_in_a_call_address_is_ignored():
+    """The control ignores an address holding a vacant variable: L#0 calls once, M99 P#0
+    returns to the caller, and M98 P#0 or G65 P#0 is a call without its program number
+    (a clear error naming the line and column, not a crash)."""
+    step = "G91 G01 X1. F100.\nG90\n"
+    assert flat(SUBPROGRAMS.replace("M98 P1000 L2", "M98 P1000 L#0").replace("M98 P21000\n", "")) == (
+        "%\nO0100 (MAIN)\nG90 G54 G00 X0. Y0.\n" + step + "G00 X5.\nM30\n%\n")
+    assert flat("O1\nM98 P2\nN10 G0 X1.\nN20 G0 X2.\nM30\nO2\nG0 Z1.\nM99 P#0\n") == (
+        "O1\nG0 Z1.\nN10 G0 X1.\nN20 G0 X2.\nM30\n")
+    assert flat("O1\nG65 P2 L#0 A1.\nM30\nO2\nG0 X#1\nM99\n") == "O1\nG0 X1.0\nM30\n"
+    for text, message in (("O1\nM98 P#0\nM30\n", "M98 needs P"), ("O1\nG65 P#0 A1.\nM30\n", "G65 needs P")):
+        with pytest.raises(PostprocError, match=message) as err:
+            flat(text)
+        assert err.value.lineno == 2 and err.value.col == 1
+
+
 def test_macro_variables_if_goto_and_while_hand_checked():
     text = """O2000
 #100 = 3

@@ -603,21 +603,23 @@ class _Expander(Env):
         target: tuple[int, int] | None = None
         for k, w, v in letters.get("P", []):
             drop.add(k)
-            target = (int(round(v)), w.col)
+            if v is not NULL:  # a vacant variable's address is ignored (P#0: none)
+                target = (int(round(v)), w.col)
         return (lambda: self._m99(target)), drop
 
     def _m97_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
         """M97 P.. [L..] (Haas): call the local subprogram at sequence number P, L times."""
         p, drop = self._p_l_words(letters, 97.0, "M97 needs P (the sequence number of the local subprogram)")
         number = int(round(p[2]))
-        count = int(round(letters["L"][0][2])) if "L" in letters else 1
+        given = _count(letters)
+        count = 1 if given is None else given
         return (lambda: self._m97(number, count, p[1].col)), drop
 
     def _m98_words(self, letters: dict[str, list[tuple[int, Word, Any]]]) -> tuple[Callable[[], None], set[int]]:
         """M98 P.. [L..]: call subprogram O(P), L times."""
         p, drop = self._p_l_words(letters, 98.0, "M98 needs P (the subprogram number)")
         number = int(round(p[2]))
-        repeats = int(round(letters["L"][0][2])) if "L" in letters else None
+        repeats = _count(letters)
         return (lambda: self._m98(number, repeats, p[1].col)), drop
 
     def _p_l_words(self, letters: dict[str, list[tuple[int, Word, Any]]], code: float,
@@ -626,10 +628,11 @@ class _Expander(Env):
         ``missing_p`` is the error when there is no P."""
         mw = next(w for k, w, v in letters["M"] if v == code)
         drop = {k for k, _w, v in letters.get("M", []) if v == code}
-        p = letters.get("P")
+        drop.update(k for k, _, _ in letters.get("P", []) + letters.get("L", []))
+        # a vacant variable's address is ignored (P#0: as if no P)
+        p = [x for x in letters.get("P", []) if x[2] is not NULL]
         if not p:
             raise self.error(mw.col, missing_p)
-        drop.update(k for k, _, _ in p + letters.get("L", []))
         return p[0], drop
 
     def _g65_words(self, words: list[tuple[Word, Any]],
@@ -648,9 +651,11 @@ class _Expander(Env):
                 if v != 65.0:
                     raise self.refuse(w.col, "G65 must be alone in its block with its arguments")
             elif w.letter == "P":
-                macro = int(round(v))
+                if v is not NULL:  # a vacant variable's address is ignored
+                    macro = int(round(v))
             elif w.letter == "L":
-                count = int(round(v))
+                if v is not NULL:
+                    count = int(round(v))
             elif w.letter != "N":
                 self._g65_argument(args, w, v)
         if macro is None:
@@ -1127,3 +1132,10 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     """
     ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
     return ex.run()
+
+
+def _count(letters: dict[str, list[tuple[int, Word, Any]]]) -> int | None:
+    """The repeat count of a call's first L word, or None without one (an L of a vacant
+    variable is ignored, as the control ignores any such address)."""
+    ls = [v for _k, _w, v in letters.get("L", []) if v is not NULL]
+    return int(round(ls[0])) if ls else None
