@@ -96,6 +96,41 @@ def newton_inverse(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLV
     return InverseResult(q, resid, iterations)
 
 
+def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLVER_TOL_MM,
+                           max_iter: int = SOLVER_MAX_ITER) -> InverseResult:
+    """:func:`newton_inverse` for the parametric engine, to the last bit the same iterates:
+    the Jacobian of the points not yet converged is built from where the error tables
+    were just located for their residual (no second search, no re-evaluated values)."""
+    n = len(p)
+    q = p - r
+    iterations = np.zeros(n, dtype=int)
+    resid = np.full(n, np.inf)
+    active = np.arange(n)
+    order = engine.order
+    for k in range(max_iter + 1):
+        qa, ra = q[active], r[active]
+        value, loc = engine._forward_located(qa, ra, order)
+        f = value - p[active]
+        res = np.sqrt(np.add.reduce(f * f, axis=1))  # np.linalg.norm(f, axis=1), without its checks
+        resid[active] = res
+        keep = ~(res <= NEWTON_STOP_MM)
+        if keep.all():
+            rows = None
+        else:
+            rows = keep
+            active, f, ra = active[keep], f[keep], ra[keep]
+        if not len(active) or k == max_iter:
+            break
+        J = engine._jacobian_located(loc, rows, ra)
+        q[active] -= _solve(J, f, "Newton inverse", active, p)
+        iterations[active] += 1
+    bad = np.flatnonzero(~(resid <= tol_mm))
+    if len(bad):
+        worst = bad[np.argmax(np.where(np.isfinite(resid[bad]), resid[bad], np.inf))]
+        raise _solver_error("Newton inverse", int(worst), p, float(resid[worst]), int(iterations[worst]))
+    return InverseResult(q, resid, iterations)
+
+
 def cell_matrix(engine, node: np.ndarray, r: np.ndarray, step_mm: float) -> np.ndarray:
     """G_M (N, 3, 3): column i = (F(node + u e_i) - F(node)) / u, the axis directions of the cell."""
     f0 = engine.forward(node, r)

@@ -1,0 +1,159 @@
+"""The parametric model's 18 error functions evaluated together, axis-major.
+
+The six functions of an axis interpolate that axis's table rows (PCHIP or linear, see
+:mod:`postproc.engine.parametric`). Instead of one interpolant per axis, each asked on
+its own, :class:`StackedErrors` keeps the interval data of all three axes in two
+stacked tables, built once:
+
+- values:  per knot interval ``[y0, h d0-free rows]``: ``y0, d0, y1, d1`` (PCHIP) or
+  ``y0, y1`` (linear), six columns each;
+- slopes:  ``y0 - y1, d0, d1`` (PCHIP) or the secant slope (linear).
+
+A call locates the points once (one ``searchsorted`` per axis on the clamped positions),
+takes the rows of all three axes with one gather, and evaluates the Hermite basis on
+(3, N) arrays. The slopes are evaluated only when asked, and only for the rows asked,
+from the located state (the Newton solver asks them for the points it has not yet
+converged, at the positions whose values it has just evaluated).
+
+Every value is computed with the same floating-point operations in the same order as
+the one-interpolant-per-axis evaluation (tests/parametric_reference.py), so the results
+are identical to the last bit: nothing is refactored algebraically (no power-basis
+coefficients, no products of constants moved across a division).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from postproc.engine.pchip import Pchip
+
+
+class Located:
+    """Where the points of one call lie: (3, N) arrays, axis-major.
+
+    ``t``: the positions; ``tc``: clamped to the tables; ``g``: the stacked interval row;
+    ``s``: the position in the interval (0..1), ``h``: its length; ``dv``: the slopes of
+    all rows when the values needed them (linear extrapolation), else None.
+    """
+
+    __slots__ = ("t", "tc", "g", "s", "s2", "h", "dv")
+
+    def __init__(self, t, tc, g, s, s2, h, dv) -> None:
+        self.t, self.tc, self.g, self.s, self.s2, self.h, self.dv = t, tc, g, s, s2, h, dv
+
+
+class StackedErrors:
+    """Values (N, 6) summed over the axes, and per-axis slopes (3, N, 6), at points (N, 3).
+
+    ``knots[a]`` (n_a,) strictly increasing, ``rows[a]`` (n_a, 6): the table of axis a.
+    """
+
+    def __init__(self, knots, rows, interpolation: str, extrapolate: str) -> None:
+        self.interpolation, self.extrapolate = interpolation, extrapolate
+        self.knots = [np.ascontiguousarray(x, dtype=float) for x in knots]
+        self.pchip = interpolation == "pchip"
+        self.linear_extrapolation = extrapolate == "linear"
+        values, slopes, starts, lengths = [], [], [], []
+        start = 0
+        for x, y in zip(self.knots, rows, strict=True):
+            y = np.asarray(y, dtype=float)
+            h = np.diff(x)
+            if self.pchip:
+                d = Pchip(x, y).d
+                values.append(np.hstack([y[:-1], d[:-1], y[1:], d[1:]]))
+                slopes.append(np.hstack([y[:-1] - y[1:], d[:-1], d[1:]]))
+            else:
+                values.append(np.hstack([y[:-1], y[1:]]))
+                slopes.append(np.diff(y, axis=0) / h[:, None])
+            starts.append(start)
+            lengths.append(h)
+            start += len(h)
+        self._values = np.ascontiguousarray(np.vstack(values))
+        self._slopes = np.ascontiguousarray(np.vstack(slopes))
+        self._left = np.concatenate([x[:-1] for x in self.knots])
+        self._h = np.concatenate(lengths)
+        self._lo = np.array([x[0] for x in self.knots])[:, None]
+        self._hi = np.array([x[-1] for x in self.knots])[:, None]
+        first = np.array(starts)
+        # searchsorted(x, tc, "right") - 1, clipped to 0 .. n - 2, plus the axis's first row
+        self._gmin = first[:, None]
+        self._gmax = (first + np.array([len(x) - 2 for x in self.knots]))[:, None]
+        self._gshift = (first - 1)[:, None]
+
+    # -- locating ------------------------------------------------------------------------
+    def locate(self, q: np.ndarray) -> Located:
+        """The interval of every point's position on every axis; q (N, 3) float."""
+        t = q.T
+        tc = np.clip(t, self._lo, self._hi)
+        n = t.shape[1]
+        g = np.empty((3, n), dtype=np.intp)
+        for a, x in enumerate(self.knots):
+            g[a] = np.searchsorted(x, tc[a], side="right")
+        g += self._gshift
+        np.clip(g, self._gmin, self._gmax, out=g)
+        h = self._h[g]
+        s = (tc - self._left[g]) / h
+        return Located(t, tc, g, s, s * s if self.pchip else None, h, None)
+
+    # -- values --------------------------------------------------------------------------
+    def _axis_values(self, loc: Located) -> np.ndarray:
+        """(3, N, 6): each axis's six functions at its clamped positions."""
+        rows = self._values[loc.g]
+        s = loc.s
+        if self.pchip:
+            h, s2 = loc.h, loc.s2
+            s3 = s * s * s
+            b0 = (2 * s3 - 3 * s2 + 1)[..., None]
+            b1 = ((s3 - 2 * s2 + s) * h)[..., None]
+            b2 = (-2 * s3 + 3 * s2)[..., None]
+            b3 = ((s3 - s2) * h)[..., None]
+            return (b0 * rows[..., 0:6] + b1 * rows[..., 6:12]
+                    + b2 * rows[..., 12:18] + b3 * rows[..., 18:24])
+        return rows[..., 0:6] * (1 - s)[..., None] + rows[..., 6:12] * s[..., None]
+
+    def _axis_slopes(self, loc: Located, g: np.ndarray, s: np.ndarray, s2, h: np.ndarray) -> np.ndarray:
+        """(3, M, 6): the slopes at the clamped positions of the rows g, s, h."""
+        rows = self._slopes[g]
+        if not self.pchip:
+            return rows
+        a = (6 * s2 - 6 * s)[..., None]
+        b = (3 * s2 - 4 * s + 1)[..., None]
+        c = (3 * s2 - 2 * s)[..., None]
+        return a * rows[..., 0:6] / h[..., None] + b * rows[..., 6:12] + c * rows[..., 12:18]
+
+    def values(self, loc: Located) -> np.ndarray:
+        """The six errors summed over the axes (N, 6) (squareness not included)."""
+        v = self._axis_values(loc)
+        if self.linear_extrapolation:
+            dv = self._axis_slopes(loc, loc.g, loc.s, loc.s2, loc.h)
+            loc.dv = dv
+            v = v + (loc.t - loc.tc)[..., None] * dv
+        total = v[0] + 0.0
+        total += v[1]
+        total += v[2]
+        return total
+
+    def axis_values(self, loc: Located) -> np.ndarray:
+        """The six errors of each axis (3, N, 6), not summed."""
+        v = self._axis_values(loc)
+        if self.linear_extrapolation:
+            dv = self._axis_slopes(loc, loc.g, loc.s, loc.s2, loc.h)
+            loc.dv = dv
+            v = v + (loc.t - loc.tc)[..., None] * dv
+        return v
+
+    def slopes(self, loc: Located, rows=None) -> np.ndarray:
+        """Derivatives (3, M, 6) of each axis's functions along its axis, at the located
+        points (``rows``: a boolean mask or index of them, None: all). Clamped outside
+        the tables: 0 there; extrapolated linearly: the end slope."""
+        if loc.dv is not None:
+            return loc.dv if rows is None else loc.dv[:, rows]
+        if rows is None:
+            g, s, s2, h, t, tc = loc.g, loc.s, loc.s2, loc.h, loc.t, loc.tc
+        else:
+            g, s, h, t, tc = loc.g[:, rows], loc.s[:, rows], loc.h[:, rows], loc.t[:, rows], loc.tc[:, rows]
+            s2 = None if loc.s2 is None else loc.s2[:, rows]
+        dv = self._axis_slopes(loc, g, s, s2, h)
+        if self.linear_extrapolation:
+            return dv
+        return np.where((t != tc)[..., None], 0.0, dv)
