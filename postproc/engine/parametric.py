@@ -174,7 +174,8 @@ class ParametricEngine(Engine):
         # Squareness as a constant matrix: rho += S q.
         self._S = np.array([[0.0, -sq.EC0Y, sq.EB0Z], [0.0, 0.0, -sq.EA0Z], [0.0, 0.0, 0.0]])
         self._ST = self._S.T
-        self._eye = np.eye(3)
+        self._S3 = self._S[:, :, None]
+        self._eye3 = np.eye(3)[:, :, None]
         self._bounds: tuple | None = None  # of the error functions, for line_curvature_bound
 
     def with_options(self, **changes) -> ParametricEngine:
@@ -210,8 +211,8 @@ class ParametricEngine(Engine):
         q = check_points(q, "q")
         d = self._stacked.slopes(self._stacked.locate(q))
         drho = np.empty((len(q), 3, 3))
-        np.add(d[:, :, :3].transpose(1, 2, 0), self._S, out=drho)
-        return drho, np.ascontiguousarray(d[:, :, 3:].transpose(1, 2, 0))
+        np.add(d[:3].transpose(2, 0, 1), self._S, out=drho)
+        return drho, np.ascontiguousarray(d[3:].transpose(2, 0, 1))
 
     def line_curvature_bound(self, q0, q1, r_norm_mm, margin_mm: float = 0.0) -> np.ndarray:
         """See :meth:`Engine.line_curvature_bound`. Each error is a sum of functions of one
@@ -308,21 +309,22 @@ class ParametricEngine(Engine):
         """dF/dq (N, 3, 3) of the first-order model (the other orders differ by O(|eps|^2))."""
         q = check_points(q, "q")
         r = check_tool_vectors(r, len(q))
-        return self._jacobian_located(self._stacked.locate(q), None, r)
+        return np.ascontiguousarray(self._jacobian_located(self._stacked.locate(q), None, r))
 
     def _jacobian_located(self, loc: Located, rows, r: np.ndarray) -> np.ndarray:
-        """:meth:`jacobian` at located points (``rows``: which of them, None: all), r (M, 3)."""
+        """:meth:`jacobian` at located points (``rows``: which of them, None: all), r (M, 3).
+        The (M, 3, 3) answer is a view of a (3, 3, M) array (row, column, point)."""
         d = self._stacked.slopes(loc, rows)
-        J = np.empty((d.shape[1], 3, 3))
-        np.add(d[:, :, :3].transpose(1, 2, 0), self._S, out=J)
-        J += self._eye
+        JT = np.empty((3, 3, d.shape[2]))
+        np.add(d[:3], self._S3, out=JT)
+        JT += self._eye3
         # column i += (d eps / d q_i) x r, the three columns at once
-        e0, e1, e2 = d[:, :, 3], d[:, :, 4], d[:, :, 5]
+        e0, e1, e2 = d[3], d[4], d[5]
         r0, r1, r2 = r[:, 0], r[:, 1], r[:, 2]
-        J[:, 0, :] += (e1 * r2 - e2 * r1).T
-        J[:, 1, :] += (e2 * r0 - e0 * r2).T
-        J[:, 2, :] += (e0 * r1 - e1 * r0).T
-        return J
+        JT[0] += e1 * r2 - e2 * r1
+        JT[1] += e2 * r0 - e0 * r2
+        JT[2] += e0 * r1 - e1 * r0
+        return JT.transpose(2, 0, 1)
 
     def inverse(self, p, r=None, context=None, *, solver: str | None = None) -> InverseResult:
         p = check_points(p, "p")

@@ -33,7 +33,7 @@ class Located:
 
     ``t``: the positions; ``tc``: clamped to the tables; ``g``: the stacked interval row;
     ``s``: the position in the interval (0..1), ``h``: its length; ``dv``: the slopes of
-    all rows when the values needed them (linear extrapolation), else None.
+    all rows (6, 3, N) when the values needed them (linear extrapolation), else None.
     """
 
     __slots__ = ("t", "tc", "g", "s", "s2", "h", "dv")
@@ -43,9 +43,11 @@ class Located:
 
 
 class StackedErrors:
-    """Values (N, 6) summed over the axes, and per-axis slopes (3, N, 6), at points (N, 3).
+    """Values (N, 6) summed over the axes, and per-axis slopes (6, 3, N), at points (N, 3).
 
     ``knots[a]`` (n_a,) strictly increasing, ``rows[a]`` (n_a, 6): the table of axis a.
+    Arrays are component-major inside (the long point axis last), so that every numpy
+    operation runs over all points of all axes at once.
     """
 
     def __init__(self, knots, rows, interpolation: str, extrapolate: str) -> None:
@@ -68,8 +70,9 @@ class StackedErrors:
             starts.append(start)
             lengths.append(h)
             start += len(h)
-        self._values = np.ascontiguousarray(np.vstack(values))
-        self._slopes = np.ascontiguousarray(np.vstack(slopes))
+        # (columns, interval rows of all axes)
+        self._values = np.ascontiguousarray(np.vstack(values).T)
+        self._slopes = np.ascontiguousarray(np.vstack(slopes).T)
         self._left = np.concatenate([x[:-1] for x in self.knots])
         self._h = np.concatenate(lengths)
         self._lo = np.array([x[0] for x in self.knots])[:, None]
@@ -83,10 +86,9 @@ class StackedErrors:
     # -- locating ------------------------------------------------------------------------
     def locate(self, q: np.ndarray) -> Located:
         """The interval of every point's position on every axis; q (N, 3) float."""
-        t = q.T
+        t = np.ascontiguousarray(q.T)
         tc = np.clip(t, self._lo, self._hi)
-        n = t.shape[1]
-        g = np.empty((3, n), dtype=np.intp)
+        g = np.empty(t.shape, dtype=np.intp)
         for a, x in enumerate(self.knots):
             g[a] = np.searchsorted(x, tc[a], side="right")
         g += self._gshift
@@ -97,63 +99,61 @@ class StackedErrors:
 
     # -- values --------------------------------------------------------------------------
     def _axis_values(self, loc: Located) -> np.ndarray:
-        """(3, N, 6): each axis's six functions at its clamped positions."""
-        rows = self._values[loc.g]
+        """(6, 3, N): each axis's six functions at its clamped positions."""
+        rows = np.take(self._values, loc.g, axis=1)
         s = loc.s
         if self.pchip:
             h, s2 = loc.h, loc.s2
             s3 = s * s * s
-            b0 = (2 * s3 - 3 * s2 + 1)[..., None]
-            b1 = ((s3 - 2 * s2 + s) * h)[..., None]
-            b2 = (-2 * s3 + 3 * s2)[..., None]
-            b3 = ((s3 - s2) * h)[..., None]
-            return (b0 * rows[..., 0:6] + b1 * rows[..., 6:12]
-                    + b2 * rows[..., 12:18] + b3 * rows[..., 18:24])
-        return rows[..., 0:6] * (1 - s)[..., None] + rows[..., 6:12] * s[..., None]
+            b0 = 2 * s3 - 3 * s2 + 1
+            b1 = (s3 - 2 * s2 + s) * h
+            b2 = -2 * s3 + 3 * s2
+            b3 = (s3 - s2) * h
+            return b0 * rows[0:6] + b1 * rows[6:12] + b2 * rows[12:18] + b3 * rows[18:24]
+        return rows[0:6] * (1 - s) + rows[6:12] * s
 
-    def _axis_slopes(self, loc: Located, g: np.ndarray, s: np.ndarray, s2, h: np.ndarray) -> np.ndarray:
-        """(3, M, 6): the slopes at the clamped positions of the rows g, s, h."""
-        rows = self._slopes[g]
+    def _axis_slopes(self, g: np.ndarray, s: np.ndarray, s2, h: np.ndarray) -> np.ndarray:
+        """(6, 3, M): the slopes at the clamped positions of the rows g, s, h."""
+        rows = np.take(self._slopes, g, axis=1)
         if not self.pchip:
             return rows
-        a = (6 * s2 - 6 * s)[..., None]
-        b = (3 * s2 - 4 * s + 1)[..., None]
-        c = (3 * s2 - 2 * s)[..., None]
-        return a * rows[..., 0:6] / h[..., None] + b * rows[..., 6:12] + c * rows[..., 12:18]
-
-    def values(self, loc: Located) -> np.ndarray:
-        """The six errors summed over the axes (N, 6) (squareness not included)."""
-        v = self._axis_values(loc)
-        if self.linear_extrapolation:
-            dv = self._axis_slopes(loc, loc.g, loc.s, loc.s2, loc.h)
-            loc.dv = dv
-            v = v + (loc.t - loc.tc)[..., None] * dv
-        total = v[0] + 0.0
-        total += v[1]
-        total += v[2]
-        return total
+        a = 6 * s2 - 6 * s
+        b = 3 * s2 - 4 * s + 1
+        c = 3 * s2 - 2 * s
+        return a * rows[0:6] / h + b * rows[6:12] + c * rows[12:18]
 
     def axis_values(self, loc: Located) -> np.ndarray:
-        """The six errors of each axis (3, N, 6), not summed."""
+        """The six errors of each axis (6, 3, N), not summed; the slopes are kept in
+        ``loc`` when the extrapolation needed them."""
         v = self._axis_values(loc)
         if self.linear_extrapolation:
-            dv = self._axis_slopes(loc, loc.g, loc.s, loc.s2, loc.h)
+            dv = self._axis_slopes(loc.g, loc.s, loc.s2, loc.h)
             loc.dv = dv
-            v = v + (loc.t - loc.tc)[..., None] * dv
+            v = v + (loc.t - loc.tc) * dv
         return v
 
+    def values(self, loc: Located) -> np.ndarray:
+        """The six errors summed over the axes (N, 6), C-ordered (squareness not included)."""
+        v = self.axis_values(loc)
+        total = np.empty((v.shape[2], 6))
+        tt = total.T
+        np.add(v[:, 0], 0.0, out=tt)
+        tt += v[:, 1]
+        tt += v[:, 2]
+        return total
+
     def slopes(self, loc: Located, rows=None) -> np.ndarray:
-        """Derivatives (3, M, 6) of each axis's functions along its axis, at the located
+        """Derivatives (6, 3, M) of each axis's functions along its axis, at the located
         points (``rows``: a boolean mask or index of them, None: all). Clamped outside
         the tables: 0 there; extrapolated linearly: the end slope."""
         if loc.dv is not None:
-            return loc.dv if rows is None else loc.dv[:, rows]
+            return loc.dv if rows is None else loc.dv[:, :, rows]
         if rows is None:
             g, s, s2, h, t, tc = loc.g, loc.s, loc.s2, loc.h, loc.t, loc.tc
         else:
             g, s, h, t, tc = loc.g[:, rows], loc.s[:, rows], loc.h[:, rows], loc.t[:, rows], loc.tc[:, rows]
             s2 = None if loc.s2 is None else loc.s2[:, rows]
-        dv = self._axis_slopes(loc, g, s, s2, h)
+        dv = self._axis_slopes(g, s, s2, h)
         if self.linear_extrapolation:
             return dv
-        return np.where((t != tc)[..., None], 0.0, dv)
+        return np.where(t != tc, 0.0, dv)

@@ -53,8 +53,77 @@ def _solver_error(what: str, idx: int, p: np.ndarray, resid: float, n: int) -> S
 MIN_JACOBIAN_DET = 1e-6
 
 
+# From this many points on, 3 x 3 systems are solved by :func:`_lu_solve_3x3` (numpy
+# operations over all points at once) rather than one LAPACK call per point; below it
+# the fixed cost of the numpy operations is the larger.
+LU_VECTOR_MIN_POINTS = 48
+# |det| of the vectorised LU at least this: LAPACK's determinant (the same LU's pivots
+# through log and exp, a few ulps apart) is certainly above MIN_JACOBIAN_DET.
+_LU_DET_MARGIN = 2.0
+
+
+def _swap_rows(a: np.ndarray, b: np.ndarray, k: int, jp: np.ndarray) -> None:
+    """Swap rows k and jp[n] of a[:, :, n] (3, 3, N) and of b[:, n] (3, N), where they differ."""
+    sw = np.flatnonzero(jp != k)
+    if len(sw):
+        other = jp[sw]
+        rows_k, rows_o = a[k][:, sw], a[other, :, sw].T
+        a[k][:, sw], a[other, :, sw] = rows_o, rows_k.T
+        bk, bo = b[k, sw], b[other, sw]
+        b[k, sw], b[other, sw] = bo, bk
+
+
+def _lu_solve_3x3(J: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """x with J x = f (N, 3) and the determinants up to their sign (N,), or None when a
+    matrix is not finite (LAPACK then decides).
+
+    The operations of LAPACK's dgetrf (unblocked, left-looking, partial pivoting on the
+    first largest magnitude, multipliers scaled by the pivot's reciprocal) and dgetrs
+    (forward then backward substitution, dividing by the pivots) as numpy's solve runs
+    them for a 3 x 3 system, in the same order: the results are the same to the last bit
+    (tests/test_parametric_speed.py holds them equal on many matrices, pivoting ones too).
+    """
+    if not np.isfinite(J).all():
+        return None
+    a = J.transpose(1, 2, 0).copy()  # (row, column, point)
+    b = f.T.copy()
+    # column 0: pivot, scale
+    _swap_rows(a, b, 0, np.argmax(np.abs(a[:, 0]), axis=0))
+    u00, u01, u02 = a[0]
+    rec = 1.0 / u00
+    l10 = a[1, 0] * rec
+    l20 = a[2, 0] * rec
+    # column 1: update, pivot, scale
+    a[1, 1] = a[1, 1] - l10 * u01
+    a[2, 1] = a[2, 1] - l20 * u01
+    a[1, 0], a[2, 0] = l10, l20
+    _swap_rows(a, b, 1, 1 + np.argmax(np.abs(a[1:, 1]), axis=0))
+    l10, l20 = a[1, 0], a[2, 0]
+    u11 = a[1, 1]
+    l21 = a[2, 1] * (1.0 / u11)
+    # column 2: update
+    u12 = a[1, 2] - l10 * u02
+    u22 = a[2, 2] - (l20 * u02 + l21 * u12)
+    # forward substitution (unit lower), then backward (upper)
+    b0 = b[0]
+    b1 = b[1] + (-b0) * l10
+    b2 = b[2] + (-b0) * l20
+    b2 = b2 + (-b1) * l21
+    x = np.empty_like(f)
+    x2 = b2 / u22
+    b0 = b0 + (-x2) * u02
+    b1 = b1 + (-x2) * u12
+    x1 = b1 / u11
+    x[:, 2], x[:, 1], x[:, 0] = x2, x1, (b0 + (-x1) * u01) / u00
+    return x, u00 * u11 * u22
+
+
 def _solve(J: np.ndarray, f: np.ndarray, what: str, idx: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Solve J x = f per point; a singular J raises SolverError naming the point."""
+    if len(J) >= LU_VECTOR_MIN_POINTS:
+        lu = _lu_solve_3x3(J, f)
+        if lu is not None and np.all(np.abs(lu[1]) >= _LU_DET_MARGIN * MIN_JACOBIAN_DET):
+            return lu[0]
     det = np.linalg.det(J)
     bad = np.flatnonzero(~(np.abs(det) >= MIN_JACOBIAN_DET))
     if len(bad):
