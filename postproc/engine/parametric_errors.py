@@ -27,6 +27,10 @@ import numpy as np
 
 from postproc.engine.pchip import Pchip
 
+# From this many points on, positions are located by buckets (a dozen whole-array
+# operations) rather than by three binary searches.
+BUCKET_MIN_POINTS = 64
+
 
 class Located:
     """Where the points of one call lie: (3, N) arrays, axis-major.
@@ -36,10 +40,11 @@ class Located:
     all rows (6, 3, N) when the values needed them (linear extrapolation), else None.
     """
 
-    __slots__ = ("t", "tc", "g", "s", "s2", "h", "dv")
+    __slots__ = ("t", "tc", "g", "s", "s2", "h", "dv", "rows")
 
     def __init__(self, t, tc, g, s, s2, h, dv) -> None:
         self.t, self.tc, self.g, self.s, self.s2, self.h, self.dv = t, tc, g, s, s2, h, dv
+        self.rows: np.ndarray | None = None  # the PCHIP rows (24, 3, N) the values took
 
 
 class StackedErrors:
@@ -82,17 +87,71 @@ class StackedErrors:
         self._gmin = first[:, None]
         self._gmax = (first + np.array([len(x) - 2 for x in self.knots]))[:, None]
         self._gshift = (first - 1)[:, None]
+        self._init_buckets(first)
+
+    def _init_buckets(self, first: np.ndarray) -> None:
+        """Buckets for locating many points without a binary search: each axis's span cut
+        into pieces no longer than its shortest interval, each knowing the interval its
+        start lies in. A point's bucket (one multiplication) then names its interval or the
+        one next to it; two steps up and one down, checked against the interval's ends,
+        find it. The ends of each axis's outer intervals are -inf and +inf for the steps
+        and the check (the clamped positions never leave them)."""
+        starts, sizes, x0s, inv_w = [], [], [], []
+        offset = 0
+        for a, x in enumerate(self.knots):
+            w = float(np.min(np.diff(x)))
+            nb = int(np.ceil((x[-1] - x[0]) / w)) + 1
+            if not (np.isfinite(w) and nb <= 8 * len(x) + 16):
+                self._buckets = None  # far from uniform knots: binary search
+                return
+            edges = x[0] + w * np.arange(nb)
+            starts.append(np.clip(np.searchsorted(x, edges, side="right") - 1, 0, len(x) - 2) + first[a])
+            sizes.append(nb)
+            x0s.append(x[0])
+            inv_w.append(1.0 / w)
+            offset += nb
+        self._buckets = np.concatenate(starts)
+        self._bucket_first = np.cumsum([0] + sizes[:-1])[:, None]
+        self._bucket_last = (np.cumsum(sizes) - 1)[:, None]
+        self._bucket_x0 = np.array(x0s)[:, None]
+        self._bucket_inv_w = np.array(inv_w)[:, None]
+        left = self._left.copy()
+        right = np.concatenate([x[1:] for x in self.knots])
+        left[self._gmin[:, 0]] = -np.inf
+        right[self._gmax[:, 0]] = np.inf
+        self._step_left, self._step_right = left, right
+
+    def _bucket_locate(self, tc: np.ndarray) -> np.ndarray | None:
+        """The stacked interval rows (3, N) of clamped positions, or None when a position
+        is not where the buckets say (not finite): the binary search then answers."""
+        if self._buckets is None:
+            return None
+        with np.errstate(invalid="ignore"):  # not finite: no bucket, the check below refuses it
+            b = ((tc - self._bucket_x0) * self._bucket_inv_w).astype(np.intp)
+        np.clip(b + self._bucket_first, self._bucket_first, self._bucket_last, out=b)
+        g = self._buckets[b]
+        right, left = self._step_right, self._step_left
+        g += right[g] <= tc
+        g += right[g] <= tc
+        g -= left[g] > tc
+        if not ((left[g] <= tc) & (tc < right[g])).all():
+            return None
+        return g
 
     # -- locating ------------------------------------------------------------------------
     def locate(self, q: np.ndarray) -> Located:
         """The interval of every point's position on every axis; q (N, 3) float."""
         t = np.ascontiguousarray(q.T)
         tc = np.clip(t, self._lo, self._hi)
-        g = np.empty(t.shape, dtype=np.intp)
-        for a, x in enumerate(self.knots):
-            g[a] = np.searchsorted(x, tc[a], side="right")
-        g += self._gshift
-        np.clip(g, self._gmin, self._gmax, out=g)
+        g = self._bucket_locate(tc) if t.shape[1] >= BUCKET_MIN_POINTS else None
+        if g is None:
+            g = np.empty(t.shape, dtype=np.intp)
+            for a, x in enumerate(self.knots):
+                g[a] = np.searchsorted(x, tc[a], side="right")
+            g += self._gshift
+            # clamped positions are at least the first knot: only the upper clip acts
+            # (the last knot, and NaN, which sorts last)
+            np.minimum(g, self._gmax, out=g)
         h = self._h[g]
         s = (tc - self._left[g]) / h
         return Located(t, tc, g, s, s * s if self.pchip else None, h, None)
@@ -103,31 +162,55 @@ class StackedErrors:
         rows = np.take(self._values, loc.g, axis=1)
         s = loc.s
         if self.pchip:
+            loc.rows = rows
             h, s2 = loc.h, loc.s2
-            s3 = s * s * s
-            b0 = 2 * s3 - 3 * s2 + 1
+            s3 = s2 * s  # s * s * s
+            # the basis 2 s3 - 3 s2 + 1, (s3 - 2 s2 + s) h, -2 s3 + 3 s2, (s3 - s2) h, the
+            # products shared (-2 s3 + 3 s2 is 3 s2 - 2 s3 to the last bit, zeros' signs too)
+            t2 = 2 * s3
+            t3 = 3 * s2
+            b0 = t2 - t3 + 1
             b1 = (s3 - 2 * s2 + s) * h
-            b2 = -2 * s3 + 3 * s2
+            b2 = t3 - t2
             b3 = (s3 - s2) * h
-            return b0 * rows[0:6] + b1 * rows[6:12] + b2 * rows[12:18] + b3 * rows[18:24]
+            # b0 y0 + b1 d0 + b2 y1 + b3 d1, left to right, without temporaries
+            v = np.multiply(b0, rows[0:6])
+            term = np.multiply(b1, rows[6:12])
+            v += term
+            v += np.multiply(b2, rows[12:18], out=term)
+            v += np.multiply(b3, rows[18:24], out=term)
+            return v
         return rows[0:6] * (1 - s) + rows[6:12] * s
 
-    def _axis_slopes(self, g: np.ndarray, s: np.ndarray, s2, h: np.ndarray) -> np.ndarray:
-        """(6, 3, M): the slopes at the clamped positions of the rows g, s, h."""
-        rows = np.take(self._slopes, g, axis=1)
+    def _axis_slopes(self, g: np.ndarray, s: np.ndarray, s2, h: np.ndarray,
+                     values_rows: np.ndarray | None = None) -> np.ndarray:
+        """(6, 3, M): the slopes at the clamped positions of the rows g, s, h (PCHIP: from
+        the rows the values took, when given)."""
         if not self.pchip:
-            return rows
+            return np.take(self._slopes, g, axis=1)
+        if values_rows is None:
+            rows = np.take(self._slopes, g, axis=1)
+            dy, d0, d1 = rows[0:6], rows[6:12], rows[12:18]
+        else:
+            dy = values_rows[0:6] - values_rows[12:18]
+            d0, d1 = values_rows[6:12], values_rows[18:24]
         a = 6 * s2 - 6 * s
         b = 3 * s2 - 4 * s + 1
         c = 3 * s2 - 2 * s
-        return a * rows[0:6] / h + b * rows[6:12] + c * rows[12:18]
+        # a dy / h + b d0 + c d1, left to right
+        dv = np.multiply(a, dy)
+        dv /= h
+        term = np.multiply(b, d0)
+        dv += term
+        dv += np.multiply(c, d1, out=term)
+        return dv
 
     def axis_values(self, loc: Located) -> np.ndarray:
         """The six errors of each axis (6, 3, N), not summed; the slopes are kept in
         ``loc`` when the extrapolation needed them."""
         v = self._axis_values(loc)
         if self.linear_extrapolation:
-            dv = self._axis_slopes(loc.g, loc.s, loc.s2, loc.h)
+            dv = self._axis_slopes(loc.g, loc.s, loc.s2, loc.h, loc.rows)
             loc.dv = dv
             v = v + (loc.t - loc.tc) * dv
         return v
@@ -150,10 +233,11 @@ class StackedErrors:
             return loc.dv if rows is None else loc.dv[:, :, rows]
         if rows is None:
             g, s, s2, h, t, tc = loc.g, loc.s, loc.s2, loc.h, loc.t, loc.tc
+            dv = self._axis_slopes(g, s, s2, h, loc.rows)
         else:
             g, s, h, t, tc = loc.g[:, rows], loc.s[:, rows], loc.h[:, rows], loc.t[:, rows], loc.tc[:, rows]
             s2 = None if loc.s2 is None else loc.s2[:, rows]
-        dv = self._axis_slopes(g, s, s2, h)
+            dv = self._axis_slopes(g, s, s2, h)
         if self.linear_extrapolation:
             return dv
         return np.where(t != tc, 0.0, dv)

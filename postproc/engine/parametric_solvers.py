@@ -121,7 +121,8 @@ def _lu_solve_3x3(J: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 def _solve(J: np.ndarray, f: np.ndarray, what: str, idx: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Solve J x = f per point; a singular J raises SolverError naming the point."""
     if len(J) >= LU_VECTOR_MIN_POINTS:
-        lu = _lu_solve_3x3(J, f)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # singular: LAPACK says so below
+            lu = _lu_solve_3x3(J, f)
         if lu is not None and np.all(np.abs(lu[1]) >= _LU_DET_MARGIN * MIN_JACOBIAN_DET):
             return lu[0]
     det = np.linalg.det(J)
@@ -175,24 +176,35 @@ def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: floa
     iterations = np.zeros(n, dtype=int)
     resid = np.full(n, np.inf)
     active = np.arange(n)
+    # all points still iterate: whole arrays, no gathering and scattering (C-ordered, as
+    # gathered rows are: the squareness product and the residual's sum see the same layout)
+    everyone = q.flags.c_contiguous and p.flags.c_contiguous and r.flags.c_contiguous
     order = engine.order
     for k in range(max_iter + 1):
-        qa, ra = q[active], r[active]
+        if everyone:
+            qa, ra, pa = q, r, p
+        else:
+            qa, ra, pa = q[active], r[active], p[active]
         value, loc = engine._forward_located(qa, ra, order)
-        f = value - p[active]
+        f = value - pa
         res = np.sqrt(np.add.reduce(f * f, axis=1))  # np.linalg.norm(f, axis=1), without its checks
         resid[active] = res
         keep = ~(res <= NEWTON_STOP_MM)
-        if keep.all():
+        if everyone and keep.all():
             rows = None
         else:
             rows = keep
+            everyone = False
             active, f, ra = active[keep], f[keep], ra[keep]
         if not len(active) or k == max_iter:
             break
         J = engine._jacobian_located(loc, rows, ra)
-        q[active] -= _solve(J, f, "Newton inverse", active, p)
-        iterations[active] += 1
+        if everyone:
+            q -= _solve(J, f, "Newton inverse", active, p)
+            iterations += 1
+        else:
+            q[active] -= _solve(J, f, "Newton inverse", active, p)
+            iterations[active] += 1
     bad = np.flatnonzero(~(resid <= tol_mm))
     if len(bad):
         worst = bad[np.argmax(np.where(np.isfinite(resid[bad]), resid[bad], np.inf))]
