@@ -207,3 +207,27 @@ def test_solve_falls_back_to_lapack_and_names_the_singular_point():
     with pytest.raises(Exception, match="point #37") as info:
         parametric_solvers._solve(J, f, "Newton inverse", np.arange(n), p)
     assert info.value.point_index == 37
+
+
+def test_scratch_arrays_never_reach_the_caller(s500):
+    """The evaluation reuses its temporaries: answers must not change by later calls, and
+    slopes asked for earlier located points must not read rows reused since."""
+    ref = ReferenceParametric(s500)
+    rng = np.random.default_rng(9)
+    for n in (1, 3, 200):
+        q1, q2 = points(s500, n, rng), points(s500, n, rng)
+        r = tool_vectors(n, rng)
+        answers = [s500.forward(q1, r), s500.jacobian(q1, r), *s500.errors_at(q1), *s500.error_derivatives(q1)]
+        kept = [a.copy() for a in answers]
+        s500.forward(q2, r)
+        s500.jacobian(q2, r)
+        s500.error_derivatives(q2)
+        s500.inverse(points(s500, n, rng, outside=False), r)
+        for a, b in zip(answers, kept, strict=True):
+            assert same_bits(a, b)
+        st = s500._stacked
+        loc1 = st.locate(q1)
+        st.values(loc1)
+        st.values(st.locate(q2))  # reuses the rows loc1 took
+        d = st.slopes(loc1)
+        assert same_bits(np.ascontiguousarray(d[:3].transpose(2, 0, 1)) + s500._S, ref.error_derivatives(q1)[0])

@@ -39,7 +39,7 @@ import numpy as np
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
 from postproc.engine import parametric_solvers
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
-from postproc.engine.parametric_errors import Located, StackedErrors
+from postproc.engine.parametric_errors import Located, StackedErrors, scratch
 from postproc.engine.pchip import Pchip
 from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError
@@ -212,7 +212,7 @@ class ParametricEngine(Engine):
         d = self._stacked.slopes(self._stacked.locate(q))
         drho = np.empty((len(q), 3, 3))
         np.add(d[:3].transpose(2, 0, 1), self._S, out=drho)
-        return drho, np.ascontiguousarray(d[3:].transpose(2, 0, 1))
+        return drho, d[3:].transpose(2, 0, 1).copy()  # d is scratch: always a copy
 
     def line_curvature_bound(self, q0, q1, r_norm_mm, margin_mm: float = 0.0) -> np.ndarray:
         """See :meth:`Engine.line_curvature_bound`. Each error is a sum of functions of one
@@ -309,13 +309,14 @@ class ParametricEngine(Engine):
         """dF/dq (N, 3, 3) of the first-order model (the other orders differ by O(|eps|^2))."""
         q = check_points(q, "q")
         r = check_tool_vectors(r, len(q))
-        return np.ascontiguousarray(self._jacobian_located(self._stacked.locate(q), None, r))
+        return self._jacobian_located(self._stacked.locate(q), None, r).copy()  # scratch: a copy
 
     def _jacobian_located(self, loc: Located, rows, r: np.ndarray) -> np.ndarray:
         """:meth:`jacobian` at located points (``rows``: which of them, None: all), r (M, 3).
-        The (M, 3, 3) answer is a view of a (3, 3, M) array (row, column, point)."""
+        The (M, 3, 3) answer is a view of a (3, 3, M) scratch array (row, column, point),
+        valid until the next evaluation in this thread."""
         d = self._stacked.slopes(loc, rows)
-        JT = np.empty((3, 3, d.shape[2]))
+        JT = scratch("jacobian", (3, 3, d.shape[2]))
         np.add(d[:3], self._S3, out=JT)
         JT += self._eye3
         # column i += (d eps / d q_i) x r, the three columns at once

@@ -23,6 +23,9 @@ coefficients, no products of constants moved across a division).
 
 from __future__ import annotations
 
+import math
+import threading
+
 import numpy as np
 
 from postproc.engine.pchip import Pchip
@@ -40,11 +43,13 @@ class Located:
     all rows (6, 3, N) when the values needed them (linear extrapolation), else None.
     """
 
-    __slots__ = ("t", "tc", "g", "s", "s2", "h", "dv", "rows")
+    __slots__ = ("t", "tc", "g", "s", "s2", "h", "dv", "rows", "generation")
 
     def __init__(self, t, tc, g, s, s2, h, dv) -> None:
         self.t, self.tc, self.g, self.s, self.s2, self.h, self.dv = t, tc, g, s, s2, h, dv
-        self.rows: np.ndarray | None = None  # the PCHIP rows (24, 3, N) the values took
+        # the PCHIP rows (24, 3, N) the values took (a scratch array) and its generation
+        self.rows: np.ndarray | None = None
+        self.generation = -1
 
 
 class StackedErrors:
@@ -158,12 +163,12 @@ class StackedErrors:
 
     # -- values --------------------------------------------------------------------------
     def _axis_values(self, loc: Located) -> np.ndarray:
-        """(6, 3, N): each axis's six functions at its clamped positions."""
-        rows = np.take(self._values, loc.g, axis=1)
-        s = loc.s
+        """(6, 3, N): each axis's six functions at its clamped positions (a scratch array)."""
+        n = loc.g.shape[1]
         if self.pchip:
-            loc.rows = rows
-            h, s2 = loc.h, loc.s2
+            rows = np.take(self._values, loc.g, axis=1, out=scratch("rows", (24, 3, n)), mode="clip")
+            loc.rows, loc.generation = rows, _generation()
+            s, h, s2 = loc.s, loc.h, loc.s2
             s3 = s2 * s  # s * s * s
             # the basis 2 s3 - 3 s2 + 1, (s3 - 2 s2 + s) h, -2 s3 + 3 s2, (s3 - s2) h, the
             # products shared (-2 s3 + 3 s2 is 3 s2 - 2 s3 to the last bit, zeros' signs too)
@@ -174,50 +179,53 @@ class StackedErrors:
             b2 = t3 - t2
             b3 = (s3 - s2) * h
             # b0 y0 + b1 d0 + b2 y1 + b3 d1, left to right, without temporaries
-            v = np.multiply(b0, rows[0:6])
-            term = np.multiply(b1, rows[6:12])
+            v = np.multiply(b0, rows[0:6], out=scratch("v", (6, 3, n)))
+            term = np.multiply(b1, rows[6:12], out=scratch("term", (6, 3, n)))
             v += term
             v += np.multiply(b2, rows[12:18], out=term)
             v += np.multiply(b3, rows[18:24], out=term)
             return v
-        return rows[0:6] * (1 - s) + rows[6:12] * s
+        rows = np.take(self._values, loc.g, axis=1, out=scratch("rows", (12, 3, n)), mode="clip")
+        s = loc.s
+        v = np.multiply(rows[0:6], 1 - s, out=scratch("v", (6, 3, n)))
+        term = np.multiply(rows[6:12], s, out=scratch("term", (6, 3, n)))
+        v += term
+        return v
 
     def _axis_slopes(self, g: np.ndarray, s: np.ndarray, s2, h: np.ndarray,
                      values_rows: np.ndarray | None = None) -> np.ndarray:
         """(6, 3, M): the slopes at the clamped positions of the rows g, s, h (PCHIP: from
-        the rows the values took, when given)."""
+        the rows the values took, when given); a scratch array."""
+        m = g.shape[1]
         if not self.pchip:
-            return np.take(self._slopes, g, axis=1)
+            return np.take(self._slopes, g, axis=1, out=scratch("dv", (6, 3, m)), mode="clip")
+        dv = scratch("dv", (6, 3, m))
+        term = scratch("dterm", (6, 3, m))
         if values_rows is None:
-            rows = np.take(self._slopes, g, axis=1)
+            rows = np.take(self._slopes, g, axis=1, out=scratch("drows", (18, 3, m)), mode="clip")
             dy, d0, d1 = rows[0:6], rows[6:12], rows[12:18]
         else:
-            dy = values_rows[0:6] - values_rows[12:18]
+            dy = np.subtract(values_rows[0:6], values_rows[12:18], out=term)
             d0, d1 = values_rows[6:12], values_rows[18:24]
         a = 6 * s2 - 6 * s
         b = 3 * s2 - 4 * s + 1
         c = 3 * s2 - 2 * s
         # a dy / h + b d0 + c d1, left to right
-        dv = np.multiply(a, dy)
+        np.multiply(a, dy, out=dv)
         dv /= h
-        term = np.multiply(b, d0)
-        dv += term
+        dv += np.multiply(b, d0, out=term)
         dv += np.multiply(c, d1, out=term)
         return dv
 
-    def axis_values(self, loc: Located) -> np.ndarray:
-        """The six errors of each axis (6, 3, N), not summed; the slopes are kept in
-        ``loc`` when the extrapolation needed them."""
+    def values(self, loc: Located) -> np.ndarray:
+        """The six errors summed over the axes (N, 6), C-ordered (squareness not included)."""
         v = self._axis_values(loc)
         if self.linear_extrapolation:
             dv = self._axis_slopes(loc.g, loc.s, loc.s2, loc.h, loc.rows)
-            loc.dv = dv
-            v = v + (loc.t - loc.tc) * dv
-        return v
-
-    def values(self, loc: Located) -> np.ndarray:
-        """The six errors summed over the axes (N, 6), C-ordered (squareness not included)."""
-        v = self.axis_values(loc)
+            # kept for the Jacobian at these points (a copy: the scratch is reused)
+            loc.dv = dv = dv.copy()
+            term = np.multiply(loc.t - loc.tc, dv, out=scratch("term", dv.shape))
+            v += term
         total = np.empty((v.shape[2], 6))
         tt = total.T
         np.add(v[:, 0], 0.0, out=tt)
@@ -228,16 +236,48 @@ class StackedErrors:
     def slopes(self, loc: Located, rows=None) -> np.ndarray:
         """Derivatives (6, 3, M) of each axis's functions along its axis, at the located
         points (``rows``: a boolean mask or index of them, None: all). Clamped outside
-        the tables: 0 there; extrapolated linearly: the end slope."""
+        the tables: 0 there; extrapolated linearly: the end slope. The answer may be a
+        scratch array, valid until the next evaluation in this thread."""
         if loc.dv is not None:
             return loc.dv if rows is None else loc.dv[:, :, rows]
         if rows is None:
             g, s, s2, h, t, tc = loc.g, loc.s, loc.s2, loc.h, loc.t, loc.tc
-            dv = self._axis_slopes(g, s, s2, h, loc.rows)
+            # the rows the values took, unless another evaluation has reused them since
+            taken = loc.rows if loc.generation == _generation() else None
+            dv = self._axis_slopes(g, s, s2, h, taken)
         else:
             g, s, h, t, tc = loc.g[:, rows], loc.s[:, rows], loc.h[:, rows], loc.t[:, rows], loc.tc[:, rows]
             s2 = None if loc.s2 is None else loc.s2[:, rows]
             dv = self._axis_slopes(g, s, s2, h)
         if self.linear_extrapolation:
             return dv
-        return np.where(t != tc, 0.0, dv)
+        outside = t != tc
+        return np.where(outside, 0.0, dv) if outside.any() else dv
+
+
+# -- scratch arrays --------------------------------------------------------------------
+# The evaluation's large temporaries (tens of kilobytes to megabytes) live in buffers kept
+# per thread and reused from call to call: fresh arrays of that size come from mmap and
+# cost a page fault per 4 kB on first touch, as much time as the arithmetic itself.
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """A C-ordered float array of ``shape`` for temporary use, the same memory each call
+    with this name in this thread (valid until the next call with this name)."""
+    size = math.prod(shape)
+    pool = getattr(_SCRATCH, "pool", None)
+    if pool is None:
+        pool = _SCRATCH.pool = {}
+        _SCRATCH.generation = 0
+    buf = pool.get(name)
+    if buf is None or buf.size < size:
+        buf = pool[name] = np.empty(max(size, 2 * (0 if buf is None else buf.size)))
+    if name == "rows":
+        _SCRATCH.generation += 1
+    return buf[:size].reshape(shape)
+
+
+def _generation() -> int:
+    """How many times the values' rows scratch has been handed out in this thread."""
+    return getattr(_SCRATCH, "generation", 0)

@@ -28,6 +28,7 @@ import numpy as np
 
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine.base import InverseResult
+from postproc.engine.parametric_errors import scratch
 from postproc.errors import SolverError
 
 # Newton stops at a hundredth of the tolerance: one more cheap iteration puts the
@@ -85,7 +86,8 @@ def _lu_solve_3x3(J: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """
     if not np.isfinite(J).all():
         return None
-    a = J.transpose(1, 2, 0).copy()  # (row, column, point)
+    a = scratch("lu", (3, 3, len(J)))  # (row, column, point)
+    np.copyto(a, J.transpose(1, 2, 0))
     b = f.T.copy()
     # column 0: pivot, scale
     _swap_rows(a, b, 0, np.argmax(np.abs(a[:, 0]), axis=0))
