@@ -214,7 +214,8 @@ def test_scratch_arrays_never_reach_the_caller(s500):
     slopes asked for earlier located points must not read rows reused since."""
     ref = ReferenceParametric(s500)
     rng = np.random.default_rng(9)
-    for n in (1, 3, 200):
+    assert 24 * 3 * 8000 > parametric_errors.SCRATCH_MAX_DOUBLES  # 8000 points: fresh arrays
+    for n in (1, 3, 200, 8000):
         q1, q2 = points(s500, n, rng), points(s500, n, rng)
         r = tool_vectors(n, rng)
         answers = [s500.forward(q1, r), s500.jacobian(q1, r), *s500.errors_at(q1), *s500.error_derivatives(q1)]

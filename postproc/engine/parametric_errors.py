@@ -259,7 +259,10 @@ class StackedErrors:
 # The evaluation's large temporaries (tens of kilobytes to megabytes) live in buffers kept
 # per thread and reused from call to call: fresh arrays of that size come from mmap and
 # cost a page fault per 4 kB on first touch, as much time as the arithmetic itself.
+# Larger temporaries (calls of more than some 7000 points) are allocated afresh and not
+# kept: at most a few tens of megabytes stay per thread.
 _SCRATCH = threading.local()
+SCRATCH_MAX_DOUBLES = 1 << 19
 
 
 def scratch(name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -270,11 +273,14 @@ def scratch(name: str, shape: tuple[int, ...]) -> np.ndarray:
     if pool is None:
         pool = _SCRATCH.pool = {}
         _SCRATCH.generation = 0
-    buf = pool.get(name)
-    if buf is None or buf.size < size:
-        buf = pool[name] = np.empty(max(size, 2 * (0 if buf is None else buf.size)))
     if name == "rows":
         _SCRATCH.generation += 1
+    if size > SCRATCH_MAX_DOUBLES:
+        return np.empty(shape)
+    buf = pool.get(name)
+    if buf is None or buf.size < size:
+        grown = 2 * (0 if buf is None else buf.size)
+        buf = pool[name] = np.empty(min(max(size, grown), SCRATCH_MAX_DOUBLES))
     return buf[:size].reshape(shape)
 
 
