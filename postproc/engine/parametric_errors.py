@@ -3,17 +3,19 @@
 The six functions of an axis interpolate that axis's table rows (PCHIP or linear, see
 :mod:`postproc.engine.parametric`). Instead of one interpolant per axis, each asked on
 its own, :class:`StackedErrors` keeps the interval data of all three axes in two
-stacked tables, built once:
+stacked tables, built once, one column per knot interval of any axis:
 
-- values:  per knot interval ``[y0, h d0-free rows]``: ``y0, d0, y1, d1`` (PCHIP) or
-  ``y0, y1`` (linear), six columns each;
-- slopes:  ``y0 - y1, d0, d1`` (PCHIP) or the secant slope (linear).
+- values: ``y0, d0, y1, d1`` (PCHIP: end values and end slopes of the interval) or
+  ``y0, y1`` (linear), six rows each;
+- slopes: ``y0 - y1, d0, d1`` (PCHIP) or the secant slope (linear).
 
-A call locates the points once (one ``searchsorted`` per axis on the clamped positions),
-takes the rows of all three axes with one gather, and evaluates the Hermite basis on
-(3, N) arrays. The slopes are evaluated only when asked, and only for the rows asked,
-from the located state (the Newton solver asks them for the points it has not yet
-converged, at the positions whose values it has just evaluated).
+A call locates the points once (buckets or one ``searchsorted`` per axis on the clamped
+positions), takes the columns of all three axes with one gather, and evaluates the
+Hermite basis on (3, N) arrays, component-major (6, 3, N) after that. The slopes are
+evaluated only when asked, and only for the points asked, from the located state and
+the rows the values took (the Newton solver asks them for the points it has not yet
+converged, at the positions whose values it has just evaluated). Large temporaries live
+in per-thread scratch buffers (:func:`scratch`).
 
 Every value is computed with the same floating-point operations in the same order as
 the one-interpolant-per-axis evaluation (tests/parametric_reference.py), so the results
