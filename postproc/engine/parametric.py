@@ -39,6 +39,7 @@ import numpy as np
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
 from postproc.engine import parametric_solvers
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
+from postproc.engine.parametric_errors import Located, StackedErrors, scratch
 from postproc.engine.pchip import Pchip
 from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError
@@ -166,9 +167,15 @@ class ParametricEngine(Engine):
         self.accept_residual_mm = SOLVER_TOL_MM if solver == "newton" else float(self.astatic.grid_step_mm)
         self._functions = [AxisFunctions(tables.position_mm[a], tables.errors[a], interpolation, extrapolate)
                            for a in AXES]
+        # the same functions, all evaluated at once (the engine's hot path)
+        self._stacked = StackedErrors([tables.position_mm[a] for a in AXES], [tables.errors[a] for a in AXES],
+                                      interpolation, extrapolate)
         sq = self.squareness
         # Squareness as a constant matrix: rho += S q.
         self._S = np.array([[0.0, -sq.EC0Y, sq.EB0Z], [0.0, 0.0, -sq.EA0Z], [0.0, 0.0, 0.0]])
+        self._ST = self._S.T
+        self._S3 = self._S[:, :, None]
+        self._eye3 = np.eye(3)[:, :, None]
         self._bounds: tuple | None = None  # of the error functions, for line_curvature_bound
 
     def with_options(self, **changes) -> ParametricEngine:
@@ -190,10 +197,8 @@ class ParametricEngine(Engine):
     def errors_at(self, q) -> tuple[np.ndarray, np.ndarray]:
         """Summed linear errors rho (N, 3) mm (squareness included) and angles eps (N, 3) rad."""
         q = check_points(q, "q")
-        total = np.zeros((len(q), 6))
-        for i, f in enumerate(self._functions):
-            total += f.evaluate(q[:, i])
-        return total[:, :3] + q @ self._S.T, total[:, 3:]
+        total = self._stacked.values(self._stacked.locate(q))
+        return total[:, :3] + q @ self._ST, total[:, 3:]
 
     def axis_errors(self, axis: str, t) -> np.ndarray:
         """The six error functions (N, 6) of one axis at its positions t (N,): EX, EY,
@@ -204,13 +209,10 @@ class ParametricEngine(Engine):
     def error_derivatives(self, q) -> tuple[np.ndarray, np.ndarray]:
         """d rho / dq and d eps / dq as (N, 3, 3) arrays (column i: derivative along axis i)."""
         q = check_points(q, "q")
+        d = self._stacked.slopes(self._stacked.locate(q))
         drho = np.empty((len(q), 3, 3))
-        deps = np.empty((len(q), 3, 3))
-        for i, f in enumerate(self._functions):
-            _, d = f.evaluate(q[:, i], derivative=True)
-            drho[:, :, i] = d[:, :3]
-            deps[:, :, i] = d[:, 3:]
-        return drho + self._S, deps
+        np.add(d[:3].transpose(2, 0, 1), self._S, out=drho)
+        return drho, d[3:].transpose(2, 0, 1).copy()  # d is scratch: always a copy
 
     def line_curvature_bound(self, q0, q1, r_norm_mm, margin_mm: float = 0.0) -> np.ndarray:
         """See :meth:`Engine.line_curvature_bound`. Each error is a sum of functions of one
@@ -265,15 +267,21 @@ class ParametricEngine(Engine):
         """Forward model with an explicit order ("first", "second", "exact")."""
         q = check_points(q, "q")
         r = check_tool_vectors(r, len(q))
-        rho, eps = self.errors_at(q)
-        order = order or self.order
+        return self._forward_located(q, r, order or self.order)[0]
+
+    def _forward_located(self, q: np.ndarray, r: np.ndarray, order: str) -> tuple[np.ndarray, Located]:
+        """F(q, r) (N, 3) of checked arrays, and where q lies in the tables (for the
+        Jacobian at the same points: :meth:`_jacobian_located`)."""
+        loc = self._stacked.locate(q)
+        total = self._stacked.values(loc)
+        rho, eps = total[:, :3] + q @ self._ST, total[:, 3:]
         if order == "first":
-            return q + r + rho + cross(eps, r)
+            return q + r + rho + cross(eps, r), loc
         if order == "second":
             s = 1.0 / (1.0 + 0.25 * np.sum(eps**2, axis=1))
-            return q + r + rho + second_order_displacement(eps, r, s)
+            return q + r + rho + second_order_displacement(eps, r, s), loc
         if order == "exact":
-            return q + rho + rotate(eps, r)
+            return q + rho + rotate(eps, r), loc
         raise CalibrationError(f"parametric order {order!r} is not one of {', '.join(ORDERS)}")
 
     def second_order_bounds(self, q, r=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -301,18 +309,30 @@ class ParametricEngine(Engine):
         """dF/dq (N, 3, 3) of the first-order model (the other orders differ by O(|eps|^2))."""
         q = check_points(q, "q")
         r = check_tool_vectors(r, len(q))
-        drho, deps = self.error_derivatives(q)
-        J = drho + np.eye(3)
-        for i in range(3):
-            J[:, :, i] += cross(deps[:, :, i], r)
-        return J
+        return self._jacobian_located(self._stacked.locate(q), None, r).copy()  # scratch: a copy
+
+    def _jacobian_located(self, loc: Located, rows, r: np.ndarray) -> np.ndarray:
+        """:meth:`jacobian` at located points (``rows``: which of them, None: all), r (M, 3).
+        The (M, 3, 3) answer is a view of a (3, 3, M) scratch array (row, column, point),
+        valid until the next evaluation in this thread."""
+        d = self._stacked.slopes(loc, rows)
+        JT = scratch("jacobian", (3, 3, d.shape[2]))
+        np.add(d[:3], self._S3, out=JT)
+        JT += self._eye3
+        # column i += (d eps / d q_i) x r, the three columns at once
+        e0, e1, e2 = d[3], d[4], d[5]
+        r0, r1, r2 = r[:, 0], r[:, 1], r[:, 2]
+        JT[0] += e1 * r2 - e2 * r1
+        JT[1] += e2 * r0 - e0 * r2
+        JT[2] += e0 * r1 - e1 * r0
+        return JT.transpose(2, 0, 1)
 
     def inverse(self, p, r=None, context=None, *, solver: str | None = None) -> InverseResult:
         p = check_points(p, "p")
         r = check_tool_vectors(r, len(p))
         solver = solver or self.solver
         if solver == "newton":
-            return parametric_solvers.newton_inverse(self, p, r)
+            return parametric_solvers.newton_inverse_located(self, p, r)
         if solver == "astatic":
             return parametric_solvers.astatic_inverse(self, p, r, self.astatic)
         raise CalibrationError(f"parametric solver {solver!r} is not one of {', '.join(SOLVERS)}")

@@ -28,6 +28,7 @@ import numpy as np
 
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine.base import InverseResult
+from postproc.engine.parametric_errors import scratch
 from postproc.errors import SolverError
 
 # Newton stops at a hundredth of the tolerance: one more cheap iteration puts the
@@ -53,8 +54,79 @@ def _solver_error(what: str, idx: int, p: np.ndarray, resid: float, n: int) -> S
 MIN_JACOBIAN_DET = 1e-6
 
 
+# From this many points on, 3 x 3 systems are solved by :func:`_lu_solve_3x3` (numpy
+# operations over all points at once) rather than one LAPACK call per point; below it
+# the fixed cost of the numpy operations is the larger.
+LU_VECTOR_MIN_POINTS = 48
+# |det| of the vectorised LU at least this: LAPACK's determinant (the same LU's pivots
+# through log and exp, a few ulps apart) is certainly above MIN_JACOBIAN_DET.
+_LU_DET_MARGIN = 2.0
+
+
+def _swap_rows(a: np.ndarray, b: np.ndarray, k: int, jp: np.ndarray) -> None:
+    """Swap rows k and jp[n] of a[:, :, n] (3, 3, N) and of b[:, n] (3, N), where they differ."""
+    sw = np.flatnonzero(jp != k)
+    if len(sw):
+        other = jp[sw]
+        rows_k, rows_o = a[k][:, sw], a[other, :, sw].T
+        a[k][:, sw], a[other, :, sw] = rows_o, rows_k.T
+        bk, bo = b[k, sw], b[other, sw]
+        b[k, sw], b[other, sw] = bo, bk
+
+
+def _lu_solve_3x3(J: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """x with J x = f (N, 3) and the determinants up to their sign (N,), or None when a
+    matrix is not finite (LAPACK then decides).
+
+    The operations of LAPACK's dgetrf (unblocked, left-looking, partial pivoting on the
+    first largest magnitude, multipliers scaled by the pivot's reciprocal) and dgetrs
+    (forward then backward substitution, dividing by the pivots) as numpy's solve runs
+    them for a 3 x 3 system, in the same order: the results are the same to the last bit
+    (tests/test_parametric_speed.py holds them equal on many matrices, pivoting ones too).
+    """
+    if not np.isfinite(J).all():
+        return None
+    a = scratch("lu", (3, 3, len(J)))  # (row, column, point)
+    np.copyto(a, J.transpose(1, 2, 0))
+    b = f.T.copy()
+    # column 0: pivot, scale
+    _swap_rows(a, b, 0, np.argmax(np.abs(a[:, 0]), axis=0))
+    u00, u01, u02 = a[0]
+    rec = 1.0 / u00
+    l10 = a[1, 0] * rec
+    l20 = a[2, 0] * rec
+    # column 1: update, pivot, scale
+    a[1, 1] = a[1, 1] - l10 * u01
+    a[2, 1] = a[2, 1] - l20 * u01
+    a[1, 0], a[2, 0] = l10, l20
+    _swap_rows(a, b, 1, 1 + np.argmax(np.abs(a[1:, 1]), axis=0))
+    l10, l20 = a[1, 0], a[2, 0]
+    u11 = a[1, 1]
+    l21 = a[2, 1] * (1.0 / u11)
+    # column 2: update
+    u12 = a[1, 2] - l10 * u02
+    u22 = a[2, 2] - (l20 * u02 + l21 * u12)
+    # forward substitution (unit lower), then backward (upper)
+    b0 = b[0]
+    b1 = b[1] + (-b0) * l10
+    b2 = b[2] + (-b0) * l20
+    b2 = b2 + (-b1) * l21
+    x = np.empty_like(f)
+    x2 = b2 / u22
+    b0 = b0 + (-x2) * u02
+    b1 = b1 + (-x2) * u12
+    x1 = b1 / u11
+    x[:, 2], x[:, 1], x[:, 0] = x2, x1, (b0 + (-x1) * u01) / u00
+    return x, u00 * u11 * u22
+
+
 def _solve(J: np.ndarray, f: np.ndarray, what: str, idx: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Solve J x = f per point; a singular J raises SolverError naming the point."""
+    if len(J) >= LU_VECTOR_MIN_POINTS:
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # singular: LAPACK says so below
+            lu = _lu_solve_3x3(J, f)
+        if lu is not None and np.all(np.abs(lu[1]) >= _LU_DET_MARGIN * MIN_JACOBIAN_DET):
+            return lu[0]
     det = np.linalg.det(J)
     bad = np.flatnonzero(~(np.abs(det) >= MIN_JACOBIAN_DET))
     if len(bad):
@@ -89,6 +161,52 @@ def newton_inverse(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLV
         J = engine.jacobian(q[active], r[active])
         q[active] -= _solve(J, f, "Newton inverse", active, p)
         iterations[active] += 1
+    bad = np.flatnonzero(~(resid <= tol_mm))
+    if len(bad):
+        worst = bad[np.argmax(np.where(np.isfinite(resid[bad]), resid[bad], np.inf))]
+        raise _solver_error("Newton inverse", int(worst), p, float(resid[worst]), int(iterations[worst]))
+    return InverseResult(q, resid, iterations)
+
+
+def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLVER_TOL_MM,
+                           max_iter: int = SOLVER_MAX_ITER) -> InverseResult:
+    """:func:`newton_inverse` for the parametric engine, to the last bit the same iterates:
+    the Jacobian of the points not yet converged is built from where the error tables
+    were just located for their residual (no second search, no re-evaluated values)."""
+    n = len(p)
+    q = p - r
+    iterations = np.zeros(n, dtype=int)
+    resid = np.full(n, np.inf)
+    active = np.arange(n)
+    # all points still iterate: whole arrays, no gathering and scattering (C-ordered, as
+    # gathered rows are: the squareness product and the residual's sum see the same layout)
+    everyone = q.flags.c_contiguous and p.flags.c_contiguous and r.flags.c_contiguous
+    order = engine.order
+    for k in range(max_iter + 1):
+        if everyone:
+            qa, ra, pa = q, r, p
+        else:
+            qa, ra, pa = q[active], r[active], p[active]
+        value, loc = engine._forward_located(qa, ra, order)
+        f = value - pa
+        res = np.sqrt(np.add.reduce(f * f, axis=1))  # np.linalg.norm(f, axis=1), without its checks
+        resid[active] = res
+        keep = ~(res <= NEWTON_STOP_MM)
+        if everyone and keep.all():
+            rows = None
+        else:
+            rows = keep
+            everyone = False
+            active, f, ra = active[keep], f[keep], ra[keep]
+        if not len(active) or k == max_iter:
+            break
+        J = engine._jacobian_located(loc, rows, ra)
+        if everyone:
+            q -= _solve(J, f, "Newton inverse", active, p)
+            iterations += 1
+        else:
+            q[active] -= _solve(J, f, "Newton inverse", active, p)
+            iterations[active] += 1
     bad = np.flatnonzero(~(resid <= tol_mm))
     if len(bad):
         worst = bad[np.argmax(np.where(np.isfinite(resid[bad]), resid[bad], np.inf))]
