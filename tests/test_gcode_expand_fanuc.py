@@ -79,7 +79,8 @@ def test_a_vacant_variable_in_a_call_address_is_ignored():
     for text, message in (("O1\nM98 P#0\nM30\n", "M98 needs P"), ("O1\nG65 P#0 A1.\nM30\n", "G65 needs P")):
         with pytest.raises(PostprocError, match=message) as err:
             flat(text)
-        assert err.value.lineno == 2 and err.value.col == 1
+        assert err.value.lineno == 2
+        assert err.value.col == 1
 
 
 def test_macro_variables_if_goto_and_while_hand_checked():
