@@ -613,17 +613,14 @@ class EmitterMixin(Generic[_O, _R]):
         if not ok.any():
             return None
         order = np.argsort(np.where(ok, worst, np.inf))
-        for j in order[:3].tolist():
+        # the three best candidates that pass (never one that fails: its radii disagree or
+        # it leaves the budget)
+        for j in order[:min(3, int(ok.sum()))].tolist():
             texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
             if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
                 # the written centre is the candidate measured (numpy's rounding agreed)
-                wj, tj = worst[j], turns[j]
-                if not ok[j]:  # measured in full (it may not have been), as the spec records it
-                    w1, _m1, t1 = arc_candidates(S, E, C[j:j + 1], axes, arc.clockwise, nsw, Qp, frac,
-                                                 controller_limits=True)
-                    wj, tj = w1[0], t1[0]
-                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(tj),
-                        "dev": float(wj), "mismatch": float(mism[j])}
+                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
+                        "dev": float(worst[j]), "mismatch": float(mism[j])}
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
             w, m, t = arc_candidates(S, E, ctrl[None, :], axes, arc.clockwise, nsw, Qp, frac,
                                      controller_limits=True)
