@@ -68,7 +68,7 @@ MACHINE_STEP_MM = 1e-6
 def direction_axes(engine) -> tuple[int, ...]:
     """Axes whose approach direction the engine's correction depends on (its effects
     need ``dirx`` / ``diry`` / ``dirz``); empty for engines without such effects."""
-    needs = set(getattr(engine, "needs", ()) or ())
+    needs = set(engine.needs)
     return tuple(k for k, c in enumerate(DIR_COLUMNS) if c in needs)
 
 

@@ -251,7 +251,7 @@ class Element:
         except PostprocError as exc:
             place = f"{exc.place}: " if exc.place else ""
             raise type(exc)(f"{w}: calibration {place}{exc.message}", hint=exc.hint) from None
-        missing = [c for c in getattr(self._cal.engine, "needs", []) if c not in ctx]
+        missing = [c for c in self._cal.engine.needs if c not in ctx]
         if missing:
             raise _fail(w, f"the effects of calibration {name} need the context value(s) {missing}",
                         hint='map each to a value: "context": {' + ", ".join(f'"{c}": "{c}"' for c in missing)
