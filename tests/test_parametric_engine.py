@@ -6,7 +6,7 @@ from postproc.calibration.calfile import load_calibration, save_calibration
 from postproc.constants import SOLVER_TOL_MM
 from postproc.engine.parametric import ParametricEngine
 from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM
-from postproc.engine.parametric_solvers import newton_inverse
+from postproc.engine.parametric_solvers import newton_inverse_located
 from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError, SolverError
 from postproc.simulate.s500 import SEED_CONTROL_POINTS_MM, synthetic_tables
@@ -140,7 +140,7 @@ def test_newton_failure_names_the_point():
     eng = machine(0)
     p = CONTROL + TOOL
     with pytest.raises(SolverError, match=r"point #\d+ \(target") as info:
-        newton_inverse(eng, p, np.tile(TOOL, (len(p), 1)), max_iter=0)
+        newton_inverse_located(eng, p, np.tile(TOOL, (len(p), 1)), max_iter=0)
     assert 0 <= info.value.point_index < len(p)
 
 

@@ -1,6 +1,6 @@
 """Inverse solvers of the parametric model: find q with F(q, r) = p*.
 
-``newton_inverse``: vectorised Newton with the analytic Jacobian of the first-order
+``newton_inverse_located``: vectorised Newton with the analytic Jacobian of the first-order
 model, converged to a hundredth of SOLVER_TOL_MM; a point that does not reach
 SOLVER_TOL_MM raises SolverError naming it.
 
@@ -142,37 +142,12 @@ def _solve(J: np.ndarray, f: np.ndarray, what: str, idx: np.ndarray, p: np.ndarr
     return np.linalg.solve(J, f[:, :, None])[:, :, 0]
 
 
-def newton_inverse(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLVER_TOL_MM,
-                   max_iter: int = SOLVER_MAX_ITER) -> InverseResult:
-    """Newton iteration q <- q - J^-1 (F(q) - p*), per point, from q = p* - r."""
-    n = len(p)
-    q = p - r
-    iterations = np.zeros(n, dtype=int)
-    resid = np.full(n, np.inf)
-    active = np.arange(n)
-    for k in range(max_iter + 1):
-        f = engine.forward(q[active], r[active]) - p[active]
-        res = np.linalg.norm(f, axis=1)
-        resid[active] = res
-        keep = ~(res <= NEWTON_STOP_MM)
-        active, f = active[keep], f[keep]
-        if not len(active) or k == max_iter:
-            break
-        J = engine.jacobian(q[active], r[active])
-        q[active] -= _solve(J, f, "Newton inverse", active, p)
-        iterations[active] += 1
-    bad = np.flatnonzero(~(resid <= tol_mm))
-    if len(bad):
-        worst = bad[np.argmax(np.where(np.isfinite(resid[bad]), resid[bad], np.inf))]
-        raise _solver_error("Newton inverse", int(worst), p, float(resid[worst]), int(iterations[worst]))
-    return InverseResult(q, resid, iterations)
-
-
 def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: float = SOLVER_TOL_MM,
                            max_iter: int = SOLVER_MAX_ITER) -> InverseResult:
-    """:func:`newton_inverse` for the parametric engine, to the last bit the same iterates:
-    the Jacobian of the points not yet converged is built from where the error tables
-    were just located for their residual (no second search, no re-evaluated values)."""
+    """Newton iteration q <- q - J^-1 (F(q) - p*), per point, from q = p* - r. The
+    Jacobian of the points not yet converged is built from where the error tables were
+    just located for their residual (no second search, no re-evaluated values); the
+    iterates are those of the plain loop (tests/parametric_reference.py) to the last bit."""
     n = len(p)
     q = p - r
     iterations = np.zeros(n, dtype=int)
