@@ -184,21 +184,19 @@ def main() -> None:
             big = tmp / "memory.nc"
             src.unlink()  # room on the disk for the big program and its output
             nm = gencam(args.memory_lines, big, args.seed)
-            r = measure([*cli, "correct", str(big), "-c", str(STATIC), "-o", str(tmp / "memory_out.nc"), *SETUP],
-                        1, log)
-            r["lines"] = nm
-            r["lines_per_s"] = nm / r["seconds"]
-            figures["cases"]["memory"] = r
-            print(f"{f'(m) correct static, {nm:,} lines':38s} {r['lines_per_s']:11,.0f} lines/s  "
-                  f"{r['seconds']:7.2f} s  peak RSS {r['peak_mb']:6.1f} MB  " + verdict("rss", r["peak_mb"]),
-                  flush=True)
-            r = measure([*cli, "diff", str(big), str(tmp / "memory_out.nc")], 1, log)
-            r["lines"] = nm
-            r["lines_per_s"] = nm / r["seconds"]
-            figures["cases"]["memory_diff"] = r
-            print(f"{f'(n) diff of (m), {nm:,} lines':38s} {r['lines_per_s']:11,.0f} lines/s  "
-                  f"{r['seconds']:7.2f} s  peak RSS {r['peak_mb']:6.1f} MB  " + verdict("rss", r["peak_mb"]),
-                  flush=True)
+            out = tmp / "memory_out.nc"
+            for key, label, cmd in (
+                ("memory", f"(m) correct static, {nm:,} lines",
+                 [*cli, "correct", str(big), "-c", str(STATIC), "-o", str(out), *SETUP]),
+                ("memory_diff", f"(n) diff of (m), {nm:,} lines", [*cli, "diff", str(big), str(out)]),
+            ):
+                r = measure(cmd, 1, log)
+                r["lines"] = nm
+                r["lines_per_s"] = nm / r["seconds"]
+                figures["cases"][key] = r
+                print(f"{label:38s} {r['lines_per_s']:11,.0f} lines/s  "
+                      f"{r['seconds']:7.2f} s  peak RSS {r['peak_mb']:6.1f} MB  " + verdict("rss", r["peak_mb"]),
+                      flush=True)
     if args.json_out:
         Path(args.json_out).write_text(json.dumps(figures, indent=2) + "\n")
         print(f"figures saved to {args.json_out}")
