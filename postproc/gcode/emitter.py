@@ -84,7 +84,8 @@ FIT_BUDGET = 0.95
 MIN_FEED_FRACTION = 1e-3
 # A piece that one segment cannot follow is first tried in 2 .. EQUAL_SHARES equal shares
 # (each one try) to bracket the farthest sample one segment reaches, before the search
-# from the next sample outwards.
+# from the next sample outwards. Where the first half fits, the second is tried at once:
+# two segments are then the fewest, with no search.
 EQUAL_SHARES = 4
 
 
@@ -416,15 +417,19 @@ class EmitterMixin(Generic[_O, _R]):
     def _fit_piece(self, mv: Move, plan: Plan, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray,
                    qe: list[float], final: bool, d: int, budget: float) -> list[_Piece]:
         """Greedy fit of one piece's samples: from each start, the farthest sample that one
-        exact arc (or, failing that, one chord) reaches within the budget."""
+        exact arc (or, failing that, one chord) reaches within the budget, or the two
+        halves of what is left when each fits in one segment."""
         n = len(Q)
         a = 0
         cur = list(qe)
         out: list[_Piece] = []
         smp = _Samples(mv, s, Q, nom, bulge)
 
+        def attempt_from(a0: int, b: int, cur0: list[float]) -> _Piece | None:
+            return self._try_segment(mv, plan, smp, a0, b, cur0, final, d, budget)
+
         def attempt(b: int) -> _Piece | None:
-            return self._try_segment(mv, plan, smp, a, b, cur, final, d, budget)
+            return attempt_from(a, b, cur)
 
         while a < n - 1:
             seg = attempt(n - 1)
@@ -445,6 +450,14 @@ class EmitterMixin(Generic[_O, _R]):
                     break
                 hi = b
             if seg is not None:
+                if k == 2:
+                    # one segment did not reach the end, so two are the fewest: when the
+                    # second half fits too, the piece is cut in the middle (the search
+                    # for the farthest sample would give two as well)
+                    rest = attempt_from(b, n - 1, seg.qe)
+                    if rest is not None:
+                        out += [seg, rest]
+                        break
                 lo, seg = self._farthest(attempt, b, hi, seg)
                 out.append(seg)
                 cur = seg.qe
