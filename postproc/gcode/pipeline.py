@@ -663,9 +663,10 @@ class Corrector(EmitterMixin):
         # starts: the corrected previous target (unrounded)
         S = np.vstack([self.prev_target[None, :], T[:-1]])
         d_in = np.vstack([self.dirs[None, :], D[:-1]])
+        start_unknown: list[bool] = np.isnan(S).any(axis=1).tolist()
         planned = [(i, m) for i, m in general
                    if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
-                   and not np.isnan(S[i]).any() and not any(math.isnan(v) for v in m.q0)]
+                   and not start_unknown[i] and not any(math.isnan(v) for v in m.q0)]
         if direction_axes(self.engine):  # the directions the corrected commands take
             T, D = self._plan_directions(planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans)
         else:
