@@ -18,6 +18,7 @@ import pytest
 from postproc.gcode.emitter import EmitterMixin
 from postproc.gcode.geometry import arc_params, arc_points
 from postproc.gcode.interp import Arc, Move
+from postproc.gcode.lexer import Word
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE
 
 BUDGET = 0.01 * 0.95
@@ -44,7 +45,7 @@ def build(center, q0, q1, clockwise=False, turns=1, plane=170, n=25, amp=0.05, u
     if not line:
         r_idx = -1
         if r_word is not None:
-            words = [("R", r_word, 0, len(r_word) + 1, 0)]
+            words = [Word("R", r_word, 0, len(r_word) + 1, 0)]
             r_idx = 0
         arc = Arc(tuple(map(float, center)), plane, clockwise, turns, (-1, -1), r_idx)
     kind = LINE if line else (ARC_CW if clockwise else ARC_CCW)

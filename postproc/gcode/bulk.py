@@ -161,7 +161,7 @@ class RunMove:
         centre_idx = [-1, -1]
         feed_idx = motion_idx = -1
         for i, w in enumerate(words):
-            letter = w[0]
+            letter = w.letter
             if letter in "XYZ":
                 idx["XYZ".index(letter)] = i
             elif letter == "F":

@@ -248,8 +248,8 @@ class EmitterMixin(Generic[_O, _R]):
         if idx:
             return mv.words[max(idx)][3]
         if mv.motion_idx >= 0:
-            return mv.words[mv.motion_idx][3]
-        return mv.words[-1][3]
+            return mv.words[mv.motion_idx].end
+        return mv.words[-1].end
 
     def _motion_edit(self, mv: Move, edits: list[Edit], sep: str, lower: bool) -> None:
         """Add the move's motion word to a line that has none when the controller's modal
@@ -259,7 +259,7 @@ class EmitterMixin(Generic[_O, _R]):
             edits.append(self._insert_motion(mv, (text.lower() if lower else text) + sep))
 
     def _insert_motion(self, mv: Move, text: str) -> Edit:
-        first = next((w for w in mv.words if w[0] != "N"), mv.words[0])
+        first = next((w for w in mv.words if w.letter != "N"), mv.words[0])
         return (first[4], first[4], text)
 
     def _write_line(self, line: str, edits: list[Edit], write: Write) -> None:
@@ -311,7 +311,7 @@ class EmitterMixin(Generic[_O, _R]):
             if mv.inverse_time:
                 words.append("F" + emit.fmt(mv.feed / max(sg.ds, MIN_FEED_FRACTION), 4))
             elif j == 0 and mv.feed_idx >= 0:
-                words.append("F" + mv.words[mv.feed_idx][1])
+                words.append("F" + mv.words[mv.feed_idx].number)
             text = sep.join(words)
             write((text.lower() if lower else text) + ending)
             self.report.lines_inserted += 1
@@ -336,7 +336,7 @@ class EmitterMixin(Generic[_O, _R]):
                 edits.append((start, end, ("0" if num.startswith("0") else "") + "1"))
             else:
                 edits.append(self._insert_motion(mv, g1 + sep))
-            spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
+            spans = [(mv.words[ai].letter_pos, mv.words[ai].end) for ai in mv.aux_idx]
             edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
             self.emitted_motion = LINE
         else:
@@ -681,12 +681,12 @@ class EmitterMixin(Generic[_O, _R]):
         (a1, a2, _an), _ = PLANES[arc.plane]
         unit = mv.unit
         if arc.r_idx >= 0:
-            c = r_center(S[a1], S[a2], E[a1], E[a2], float(mv.words[arc.r_idx][1]) * unit, arc.clockwise)
+            c = r_center(S[a1], S[a2], E[a1], E[a2], float(mv.words[arc.r_idx].number) * unit, arc.clockwise)
             return None if c is None else np.array(c)
         out = []
         for axis, idx in ((a1, arc.offset_idx[0]), (a2, arc.offset_idx[1])):
             base = mv.shift[axis] if mv.arc_absolute else S[axis]
-            val = float(mv.words[idx][1]) if idx >= 0 else 0.0
+            val = float(mv.words[idx].number) if idx >= 0 else 0.0
             out.append(base + val * unit)
         return np.array(out)
 
@@ -702,11 +702,11 @@ class EmitterMixin(Generic[_O, _R]):
         arc = _arc_of(mv)
         if spec["form"] == "keep":
             return [], []
-        p_idx = [i for i in mv.aux_idx if mv.words[i][0] == "P"]
+        p_idx = [i for i in mv.aux_idx if mv.words[i].letter == "P"]
         same_form = (spec["form"] == "r") == (arc.r_idx >= 0)
         if not same_form or spec["turns"] != arc.turns:
             # a different form or number of turns: the old words go, the new ones are added
-            spans = [(mv.words[ai][4], mv.words[ai][3]) for ai in mv.aux_idx]
+            spans = [(mv.words[ai].letter_pos, mv.words[ai].end) for ai in mv.aux_idx]
             spec["replace"] = True
             edits = [(a, b, "") for a, b in emit.removal_spans(line, spans)]
             return edits, self._arc_words(spec)

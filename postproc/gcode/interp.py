@@ -139,7 +139,7 @@ class Move:
     unit: float
     incremental: bool
     arc_absolute: bool
-    words: list[lexer.Word]  # (LETTER, number text, start, end, letter position) per word
+    words: list[lexer.Word]
     axis_idx: tuple[int, int, int]
     feed_idx: int
     inverse_time: bool
@@ -359,10 +359,10 @@ class Interpreter:
         block_delete = False
         if words is None:
             words, block_delete = self._slow_words(lineno, line)
-        elif words and words[0][0] == "O" and len(words) == 1 and words[0][1].isdigit():
+        elif words and words[0].letter == "O" and len(words) == 1 and words[0].number.isdigit():
             return None  # O1234: a program number (or label): no geometry
         if bom:
-            words = [(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
+            words = [lexer.Word(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
         if not words:
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
@@ -410,7 +410,7 @@ class Interpreter:
                 seen_content = True
                 start = tok.col - 1 + tok.number_offset
                 num = tok.number_text
-                words.append((tok.letter, num, start, start + len(num), tok.col - 1))
+                words.append(lexer.Word(tok.letter, num, start, start + len(num), tok.col - 1))
             elif kind == lexer.SLASH:
                 if seen_content:
                     raise self._err(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
@@ -465,13 +465,13 @@ class Interpreter:
                     raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
                                     hint="expand subroutines and loops in the CAM system before correcting")
                 if letter in "UVW" or (letter == "E" and not any(
-                        (w[0] == "M" and _gkey(w[1]) // 10 in IO_M and _gkey(w[1]) % 10 == 0)
-                        or (w[0] == "G" and _gkey(w[1]) in (1870, 470)) for w in words)):
+                        (w.letter == "M" and _gkey(w.number) // 10 in IO_M and _gkey(w.number) % 10 == 0)
+                        or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 vals[letter] = (float(num), i)
         def col_of(i: int) -> int:
-            return words[i][4] + 1  # 1-based column of the word's letter
+            return words[i].letter_pos + 1  # 1-based column of the word's letter
 
         # M codes
         tool_change = False
@@ -499,7 +499,7 @@ class Interpreter:
             if m > 199:
                 raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
             if m in BEFORE_MOTION_M:
-                before_m.append(f"M{words[i][1]}")
+                before_m.append(f"M{words[i].number}")
             if m == 6:
                 tool_change = True
             if m in (2, 30):
@@ -518,7 +518,7 @@ class Interpreter:
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
             if handler is None:
-                raise self._err(UnsupportedGcodeError, f"G{words[i][1]} (unknown G code)", lineno, col_of(i))
+                raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
             handler(self, blk, key, i)
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
@@ -747,7 +747,7 @@ class Interpreter:
         st = self.state
         key = st.motion
         name = "G5" if key == 50 else "G5.1"
-        col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[0][4] + 1
+        col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[0].letter_pos + 1
         if st.plane != 170:
             raise self._err(GcodeSyntaxError, f"{name} spline outside the G17 plane", lineno, col)
         other = [a for a in "ZABCKR" if a in vals]
@@ -815,7 +815,7 @@ class Interpreter:
         key = st.motion
         if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
             raise AssertionError("a canned-cycle block without its cycle")
-        col = words[motion_idx][4] + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)][4] + 1
+        col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)].letter_pos + 1
         name = f"G{key / 10:g}"
         if st.plane != 170:
             raise self._err(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
@@ -1152,10 +1152,10 @@ class _Block:
     prefix: list = field(default_factory=list)
 
     def col(self, i: int) -> int:
-        return self.words[i][4] + 1
+        return self.words[i].letter_pos + 1
 
     def gtext(self, i: int) -> str:
-        return f"G{self.words[i][1]}"
+        return f"G{self.words[i].number}"
 
 
 def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
@@ -1348,7 +1348,7 @@ def plain_moves(mv: Move) -> Iterator[Move]:
 
 
 def col_of_word(words: list[lexer.Word], i: int) -> int:
-    return words[i][4] + 1
+    return words[i].letter_pos + 1
 
 
 def _offset_tuple(v: dict | Iterable[float], partial: bool = False) -> tuple[float, float, float]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from postproc.errors import GcodeSyntaxError
 
@@ -126,11 +127,16 @@ def split_lines(text: str) -> list[str]:
     return _LINE_SPLIT.findall(text)
 
 
-#: a word of a block: (upper-case letter, raw number text, start and end of the number text
-#: in the line, index of the letter). Plain tuples: a NamedTuple costs 7x more to build
-#: (0.59 against 0.09 us each, measured), and a program has millions of words.
-Word = tuple[str, str, int, int, int]
-WORD_LETTER, WORD_NUMBER, WORD_START, WORD_END, WORD_LETTER_POS = range(5)
+class Word(NamedTuple):
+    """A word of a block. Built only for the lines the interpreter reads one by one (the
+    runs of plain lines are read as columns), so its cost of building (about 0.6 us
+    against 0.1 us for a plain tuple) stays below a hundredth of a correction."""
+
+    letter: str  # upper case
+    number: str  # the number's text as written
+    start: int  # span of the number text in the line
+    end: int
+    letter_pos: int  # index of the letter in the line
 
 # A line made only of words and blanks (the overwhelming majority of CAM output).
 _WORD_RUN = re.compile(rf"([ \t]*)([A-Za-z])([ \t]*)({NUMBER_RE})")
@@ -152,7 +158,7 @@ def scan_words(line: str) -> list[Word] | None:
         lpos = pos + len(ws1)
         start = lpos + 1 + len(ws2)
         pos = start + len(num)
-        out.append((letter.upper(), num, start, pos, lpos))
+        out.append(Word(letter.upper(), num, start, pos, lpos))
     return out
 
 
@@ -163,5 +169,5 @@ def words_from_tokens(tokens: list[Token]) -> list[Word]:
         if t.kind == WORD:
             start = t.col - 1 + t.number_offset
             num = t.number_text
-            out.append((t.letter, num, start, start + len(num), t.col - 1))
+            out.append(Word(t.letter, num, start, start + len(num), t.col - 1))
     return out

@@ -994,14 +994,14 @@ class Corrector(EmitterMixin):
             v = (q[k] - prev[k]) / unit if mv.incremental else (q[k] - mv.shift[k]) / unit
             words.append("XYZ"[k] + emit.fmt(v, decimals))
         if with_feed and mv.feed_idx >= 0:
-            words.append("F" + mv.words[mv.feed_idx][1])
+            words.append("F" + mv.words[mv.feed_idx].number)
         text = sep.join(words) + ending
         ws = scan_words(text)
         if ws is None:  # words and blanks only
             raise AssertionError(f"a generated line that is not plain: {text!r}")
-        ix, iy, iz = (next((i for i, w in enumerate(ws) if w[0] == a), -1) for a in "XYZ")
+        ix, iy, iz = (next((i for i, w in enumerate(ws) if w.letter == a), -1) for a in "XYZ")
         step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
-                    mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w[0] == "F"), -1), False,
+                    mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w.letter == "F"), -1), False,
                     mv.feed, mv.rotary, motion_idx=0, planned=planned)
         return (text.lower() if lower else text), step, True, kind
 
@@ -1014,7 +1014,7 @@ class Corrector(EmitterMixin):
         from postproc.gcode.interp import spline_points, spline_samples
 
         tol = self.opt.tolerance_mm - self._round_err(mv.unit)
-        has_ij = any(w[0] == "I" for w in mv.words)
+        has_ij = any(w.letter == "I" for w in mv.words)
         kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv, spline)
         self._spline_kept = kept
         if kept:
