@@ -850,58 +850,23 @@ class Corrector(EmitterMixin):
         the correction differs across a reversal (backlash), the plan takes up the
         difference there, as a controller's backlash compensation does; elsewhere the
         pieces are joined again."""
-        # (i, move, [(s, nominal, dirs), ...])
-        layout: list[tuple[int, PlanMove | _RunLine, list[tuple[FloatArray, FloatArray, FloatArray]]]] = []
-        for i, m in planned:
-            pieces = []
-            if m.arc is not None:
-                prm = arc_prm[i]
-                _axes, _t0, sweep, r0, r1 = prm
-                length = arc_length(m.arc, m.q0, m.q1)
-                br = breaks.get(i)
-                if br is None:
-                    br = breaks[i] = quadrant_breaks(_t0, sweep)
-                cuts = [0.0, *br.tolist(), 1.0]
-                carried = d_in[i]
-                for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
-                    n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
-                            math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
-                    s = np.linspace(sa, sb, n)
-                    nom = arc_points(m.arc, m.q0, m.q1, s, prm)
-                    dd = nom[-1] - nom[0]
-                    dr = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
-                    dr = np.where(dr == 0, carried, dr)
-                    carried = dr
-                    pieces.append((s, nom, dr))
-            else:
-                length = float(np.linalg.norm(Q1[i] - Q0[i]))
-                n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
-                s = np.linspace(0.0, 1.0, n)
-                pieces.append((s, line_points(Q0[i], Q1[i], s), D[i]))
-            layout.append((i, m, pieces))
-        noms = [nom for _i, _m, pcs in layout for _s, nom, _d in pcs]
-        counts = [len(nom) for nom in noms]
-        owner = np.repeat(np.array([i for i, _m, pcs in layout for _p in pcs]), counts)
-        nom_all = np.vstack(noms)
-        dirs_all = np.repeat(np.array([dr for _i, _m, pcs in layout for _s, _n, dr in pcs]), counts, axis=0)
-        corr = self.corrected(nom_all, R[owner], dirs_all, [rot[i] for i in owner.tolist()], linenos[owner])
+        smp = _sample_moves(planned, arc_prm, breaks, Q0, Q1, D, d_in)
+        owner = np.repeat(np.array(smp.piece_move, dtype=int), smp.counts)
+        corr = self.corrected(smp.nom, R[owner], np.repeat(smp.dirs, smp.counts, axis=0),
+                              [rot[i] for i in owner.tolist()], linenos[owner])
+        layout = [(i, m, [(smp.s[a:b], smp.nom[a:b], smp.dirs[p], smp.bulge[a - p:b - p - 1])
+                          for p, a, b in pieces])
+                  for (i, m), pieces in zip(planned, smp.pieces_of, strict=True)]
         off = 0
         for i, m, pieces in layout:
             seq: list[Step] = []
             last: Piece | None = None  # the last step, a piece (pieces are joined to it)
             prev_end = S[i]
             prev_dirs = d_in[i]
-            for s, nom, dr in pieces:
+            for s, nom, dr, bulge in pieces:
                 n = len(s)
                 Q = corr[off:off + n].copy()
                 off += n
-                # how the nominal path bulges from its chord between samples: the fits
-                # check the middle of every sample interval too
-                if m.arc is not None:
-                    mid = arc_points(m.arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), arc_prm[i])
-                    bulge = mid - 0.5 * (nom[:-1] + nom[1:])
-                else:
-                    bulge = np.zeros((n - 1, 3))
                 if (dr != prev_dirs).any() and np.abs(Q[0] - prev_end).max() > TAKEUP_MIN_MM:
                     seq.append(("takeup", Q[0].copy()))
                 else:
@@ -1228,6 +1193,151 @@ class _RunLine:
 
     def __init__(self, lineno: int) -> None:
         self.lineno = lineno
+
+
+@final
+class _Sampled:
+    """The nominal samples of a chunk's planned moves, cut into pieces along which every
+    axis moves one way (see :func:`_sample_moves`)."""
+
+    __slots__ = ("s", "nom", "bulge", "dirs", "counts", "piece_move", "pieces_of")
+
+    def __init__(self, s: FloatArray, nom: FloatArray, bulge: FloatArray, dirs: FloatArray, counts: IntArray,
+                 piece_move: list[int], pieces_of: list[list[tuple[int, int, int]]]) -> None:
+        self.s = s  # parameters of every sample, piece after piece
+        self.nom = nom  # their nominal points
+        self.bulge = bulge  # how the nominal path bulges from the chord of each sample interval
+        self.dirs = dirs  # (pieces, 3) each piece's approach directions
+        self.counts = counts  # samples per piece
+        self.piece_move = piece_move  # the row of each piece's move
+        self.pieces_of = pieces_of  # per move: (piece, first sample, end) of its pieces
+
+
+def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: dict[int, ArcParams],
+                  breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, D: FloatArray,
+                  d_in: FloatArray) -> _Sampled:
+    """Samples of the planned moves, every one at once: an arc cut at its quadrant points
+    (``breaks`` filled where missing), each piece sampled at least every
+    SAMPLE_STEP_MM and ARC_CHECK_STEP_RAD (ARC_CHECK_MIN_SAMPLES at least), a line every
+    SAMPLE_STEP_MM (3 samples at least). The parameters are np.linspace's and the
+    points :func:`~postproc.gcode.geometry.arc_points`' and
+    :func:`~postproc.gcode.geometry.line_points`', element by element the same
+    operations. An arc piece's directions are the signs of its chord, carried from the
+    piece before (from ``d_in``) where an axis stands; a line's are ``D``."""
+    sa_l: list[float] = []
+    sb_l: list[float] = []
+    n_l: list[int] = []
+    piece_move: list[int] = []
+    arc_piece: list[int] = []  # per piece: its arc's index in arc_rows, or -1 for a line
+    arc_rows: list[tuple[Arc, ArcParams, tuple[float, ...], tuple[float, ...]]] = []
+    pieces_of: list[list[tuple[int, int, int]]] = []
+    total = 0
+    for i, m in planned:
+        own: list[tuple[int, int, int]] = []
+        if m.arc is not None:
+            arc = m.arc
+            prm = arc_prm[i]
+            (_a1, _a2, an), t0, sweep, r0, r1 = prm
+            length = math.hypot(abs(sweep) * 0.5 * (r0 + r1), m.q1[an] - m.q0[an])  # geometry.arc_length
+            br = breaks.get(i)
+            if br is None:
+                br = breaks[i] = quadrant_breaks(t0, sweep)
+            cuts = [0.0, *br.tolist(), 1.0]
+            k = len(arc_rows)
+            arc_rows.append((arc, prm, tuple(m.q0), tuple(m.q1)))
+            for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
+                n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
+                        math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
+                own.append((len(n_l), total, total + n))
+                sa_l.append(sa)
+                sb_l.append(sb)
+                n_l.append(n)
+                piece_move.append(i)
+                arc_piece.append(k)
+                total += n
+        else:
+            length = float(np.linalg.norm(Q1[i] - Q0[i]))
+            n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
+            own.append((len(n_l), total, total + n))
+            sa_l.append(0.0)
+            sb_l.append(1.0)
+            n_l.append(n)
+            piece_move.append(i)
+            arc_piece.append(-1)
+            total += n
+        pieces_of.append(own)
+    counts = np.array(n_l, dtype=int)
+    P = len(counts)
+    first = np.cumsum(counts) - counts
+    sa, sb = np.array(sa_l), np.array(sb_l)
+    # np.linspace(sa, sb, n): arange(n) * ((sb - sa) / (n - 1)) + sa, its last value sb
+    k_in = (np.arange(total) - np.repeat(first, counts)).astype(float)
+    s = k_in * np.repeat((sb - sa) / (counts - 1), counts) + np.repeat(sa, counts)
+    s[first + counts - 1] = sb
+    owner_piece = np.repeat(np.arange(P), counts)
+    rows = np.array(piece_move, dtype=int)
+    ap = np.array(arc_piece, dtype=int)
+    nom = np.empty((total, 3))
+    # lines: q0 + (q1 - q0) * s
+    line_smp = np.flatnonzero(ap[owner_piece] < 0)
+    if len(line_smp):
+        r = rows[owner_piece[line_smp]]
+        nom[line_smp] = Q0[r] + (Q1[r] - Q0[r]) * s[line_smp, None]
+    # the middle of every sample interval within a piece
+    inner = np.ones(total, dtype=bool)
+    inner[first + counts - 1] = False
+    j = np.flatnonzero(inner)
+    s_mid = 0.5 * (s[j] + s[j + 1])
+    owner_mid = owner_piece[j]
+    bulge = np.zeros((len(j), 3))
+    arc_smp = np.flatnonzero(ap[owner_piece] >= 0)
+    if len(arc_smp):
+        arc_mid = np.flatnonzero(ap[owner_mid] >= 0)
+        mid = _arc_nominal(arc_rows, ap[owner_mid[arc_mid]], s_mid[arc_mid])
+        nom[arc_smp] = _arc_nominal(arc_rows, ap[owner_piece[arc_smp]], s[arc_smp])
+        jm = j[arc_mid]
+        bulge[arc_mid] = mid - 0.5 * (nom[jm] + nom[jm + 1])
+    # directions: an arc piece's chord signs, an axis that stands carried from the piece
+    # before (the first from d_in); a line's own
+    last = first + counts - 1
+    dd = nom[last] - nom[first]
+    sign = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
+    dirs = np.empty((P, 3))
+    carried = np.zeros(3)
+    for p in range(P):
+        i = piece_move[p]
+        if arc_piece[p] < 0:
+            dirs[p] = D[i]
+            continue
+        if p == 0 or arc_piece[p - 1] != arc_piece[p]:  # an arc's first piece
+            carried = d_in[i]
+        dirs[p] = carried = np.where(sign[p] == 0, carried, sign[p])
+    return _Sampled(s, nom, bulge, dirs, counts, piece_move, pieces_of)
+
+
+def _arc_nominal(arcs: list[tuple[Arc, ArcParams, tuple[float, ...], tuple[float, ...]]], which: IntArray,
+                 s: FloatArray) -> FloatArray:
+    """Points (len(s), 3) of arcs ``arcs[which]`` at parameters ``s``: arc_points'
+    operations element by element (angle t0 + s sweep, radius r0 + (r1 - r0) s about
+    the centre, the normal axis q0 + (q1 - q0) s)."""
+    t0 = np.array([prm[1] for _a, prm, _q0, _q1 in arcs])[which]
+    sweep = np.array([prm[2] for _a, prm, _q0, _q1 in arcs])[which]
+    r0 = np.array([prm[3] for _a, prm, _q0, _q1 in arcs])[which]
+    dr = np.array([prm[4] - prm[3] for _a, prm, _q0, _q1 in arcs])[which]
+    th = t0 + s * sweep
+    rad = r0 + dr * s
+    cos, sin = rad * np.cos(th), rad * np.sin(th)
+    out = np.empty((len(s), 3))
+    axes = np.array([prm[0] for _a, prm, _q0, _q1 in arcs], dtype=int).reshape(-1, 3)[which]
+    centre = np.array([arc.center for arc, _p, _q0, _q1 in arcs], dtype=float).reshape(-1, 3)[which]
+    q0 = np.array([q0 for _a, _p, q0, _q1 in arcs], dtype=float).reshape(-1, 3)[which]
+    dq = np.array([[q1[k] - q0[k] for k in range(3)] for _a, _p, q0, q1 in arcs], dtype=float).reshape(-1, 3)[which]
+    idx = np.arange(len(s))
+    a1, a2, an = axes[:, 0], axes[:, 1], axes[:, 2]
+    out[idx, a1] = centre[idx, a1] + cos
+    out[idx, a2] = centre[idx, a2] + sin
+    out[idx, an] = q0[idx, an] + dq[idx, an] * s
+    return out
 
 
 def _no_bulge(s: FloatArray, nom: FloatArray) -> FloatArray:
