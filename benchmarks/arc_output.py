@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).parents[1]
 sys.path.insert(0, str(ROOT))
 
-from postproc.calibration.calfile import load_calibration  # noqa: E402
+from postproc.calfile import load_calibration  # noqa: E402
 from postproc.gcode import emit  # noqa: E402
 from postproc.gcode.path import Setup  # noqa: E402
 from postproc.gcode.pipeline import CorrectOptions, correct_text  # noqa: E402

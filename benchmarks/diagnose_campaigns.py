@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from postproc.calibration.calfile import (
+from postproc.calfile import (
     calibration_from_dict,
     calibration_to_dict,
     load_calibration,

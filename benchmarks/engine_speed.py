@@ -46,7 +46,7 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from parametric_reference import ReferenceParametric  # noqa: E402
 
-from postproc.calibration.calfile import load_calibration  # noqa: E402
+from postproc.calfile import load_calibration  # noqa: E402
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM  # noqa: E402
 
 SIZES = (1, 10, 100, 1000, 10_000, 100_000)

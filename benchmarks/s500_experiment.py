@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.calfile import load_calibration, save_calibration
 from postproc.calibration.tables import write_tables
 from postproc.engine.registry import fitter
 from postproc.metrology.tables_fit import fit_tables

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.gcode.path import Setup, program_path
 from postproc.simulate import load_machine
 from postproc.simulate.program import verify_program

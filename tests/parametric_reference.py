@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES
 from postproc.engine.base import InverseResult, check_points, check_tool_vectors
 from postproc.engine.parametric import second_order_displacement
 from postproc.engine.parametric_solvers import NEWTON_STOP_MM, _solve, _solver_error
 from postproc.engine.pchip import Pchip
-from postproc.engine.tables import AXES
 from postproc.rotation import cross, rotate
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.calibration.measurements import format_measurements, read_measurements
 from postproc.cli import main
 from postproc.diagnose import demo
@@ -136,7 +136,7 @@ def test_interval_calibration_is_refitted_with_its_own_partition(walk):
 
 
 def test_fixed_ranks_effects_on_the_calibration_as_it_is(tmp_path, monkeypatch):
-    from postproc.calibration.calfile import save_calibration
+    from postproc.calfile import save_calibration
     from postproc.diagnose.synthetic import static_machine
 
     monkeypatch.chdir(tmp_path)

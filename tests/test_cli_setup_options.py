@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import save_calibration
+from postproc.calfile import save_calibration
 from postproc.cli import main
 from postproc.cli.options import SETUP_OPTIONS
 from postproc.engine.static import StaticEngine

@@ -17,7 +17,7 @@ import pytest
 from conftest import PARAMETRIC, STEP, TOL, emitted_arcs, ideal_vs_emitted
 from oracle import requires_rs274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.path import Setup, program_path

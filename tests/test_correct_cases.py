@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import landing_error
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.cli.correct import build_setup
 from postproc.errors import EXIT_SAFETY

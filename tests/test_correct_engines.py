@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.calfile import load_calibration, save_calibration
 from postproc.cli import main
 from postproc.effects import compose, get_effect
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors

@@ -148,7 +148,7 @@ def test_arcs_are_kept_when_the_corrected_arc_is_still_an_arc(name):
 
 
 def test_demo_calibration_keeps_small_arcs_and_lands():
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
 
     cal = load_calibration(ROOT / "tests" / "cases" / "demo_static.json")
     text = (SAMPLES / "pocket.nc").read_text()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import save_calibration
+from postproc.calfile import save_calibration
 from postproc.cli import main
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine

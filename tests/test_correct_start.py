@@ -123,7 +123,7 @@ def test_cli_start_option(tmp_path):
     src = tmp_path / "flat.nc"
     src.write_text(FLAT)
     cal = tmp_path / "cal.json"
-    from postproc.calibration.calfile import save_calibration
+    from postproc.calfile import save_calibration
 
     save_calibration(cal, ENGINE, name="zsq")
     runner = CliRunner()

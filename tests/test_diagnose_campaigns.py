@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.calibration.measurements import Measurements, format_measurements
 from postproc.cli import main
 from postproc.simulate import Machine, load_machine, measurement_plan, random_points, simulate_plan
@@ -322,7 +322,7 @@ def test_campaign_warnings(tmp_path):
 def test_suggested_size_is_the_joint_one_fit_delivers():
     """A backlash held out of a parametric calibration refitted from points: the
     suggestion's size is sized jointly with the base, exactly as 'fit --effect' sizes it."""
-    from postproc.calibration.calfile import calibration_from_dict, calibration_to_dict
+    from postproc.calfile import calibration_from_dict, calibration_to_dict
     from postproc.diagnose.check import run_check
     from postproc.diagnose.refit import fit_with_effects
 

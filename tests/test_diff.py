@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.engine.identity import IdentityEngine
 from postproc.errors import PostprocError

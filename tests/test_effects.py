@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.calfile import load_calibration, save_calibration
 from postproc.effects import candidate_names, compose, effect_from_dict, get_effect
 from postproc.effects.composed import ComposedEngine
 from postproc.engine.static import StaticEngine
@@ -207,8 +207,8 @@ def test_geometric_effects_follow_their_documented_formulas():
 
 def test_squareness_effects_use_the_parametric_model_signs():
     """squareness:XY/XZ/YZ add what the 21-parameter model's EC0Y/EB0Z/EA0Z add."""
+    from postproc.calibration.axis_tables import AxisTables, Squareness
     from postproc.engine.parametric import ParametricEngine
-    from postproc.engine.tables import AxisTables, Squareness
 
     positions = {a: np.array([0.0, 300.0]) for a in "XYZ"}
     zeros = {a: np.zeros((2, 6)) for a in "XYZ"}

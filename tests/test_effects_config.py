@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.effects import compose, get_effect
 from postproc.engine.static import StaticEngine

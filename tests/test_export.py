@@ -7,7 +7,7 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.metrology.controllers.fanuc import fanuc_compensation, read_fanuc
 from postproc.metrology.controllers.linuxcnc import read_linuxcnc

@@ -7,7 +7,7 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.errors import MeasurementError
 from postproc.metrology.tables_fit import fit_tables

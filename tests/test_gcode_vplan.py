@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import PARAMETRIC, TOL, emitted_arcs, ideal_vs_emitted
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.effects import compose
 from postproc.engine.static import StaticEngine
 from postproc.gcode import emit

@@ -4,7 +4,7 @@ import numpy as np
 from click.testing import CliRunner
 from conftest import TangentTestMachine, grid_measurements
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.calibration.measurements import format_measurements
 from postproc.cli import main
 from postproc.errors import EXIT_INPUT

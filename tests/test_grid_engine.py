@@ -9,7 +9,7 @@ from conftest import (
 )
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.calfile import load_calibration, save_calibration
 from postproc.calibration.measurements import Measurements
 from postproc.engine.grid import (
     GridEngine,

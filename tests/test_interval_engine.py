@@ -3,7 +3,7 @@ import pytest
 from conftest import TABLE1_POINTS, TangentTestMachine, grid_measurements
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.calfile import load_calibration, save_calibration
 from postproc.calibration.measurements import Measurements
 from postproc.engine._tangents import parse_intervals
 from postproc.engine.interval import IntervalEngine, fit

@@ -12,7 +12,7 @@ import re
 import numpy as np
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.gcode.path import program_path
 from postproc.mirror.synthetic import (

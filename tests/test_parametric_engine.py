@@ -2,12 +2,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration, save_calibration
+from postproc.calfile import load_calibration, save_calibration
+from postproc.calibration.axis_tables import AXES, AxisTables, Squareness
 from postproc.constants import SOLVER_TOL_MM
 from postproc.engine.parametric import ParametricEngine
 from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM
 from postproc.engine.parametric_solvers import newton_inverse_located
-from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError, SolverError
 from postproc.simulate.s500 import SEED_CONTROL_POINTS_MM, synthetic_tables
 
@@ -235,7 +235,7 @@ def test_astatic_iteration_count_follows_the_control_law():
     takes the final formula (2) step."""
     import math
 
-    from postproc.engine.tables import AxisTables
+    from postproc.calibration.axis_tables import AxisTables
 
     positions = {a: np.array([0.0, 315.0]) for a in "XYZ"}
     zeros = {a: np.zeros((2, 6)) for a in "XYZ"}

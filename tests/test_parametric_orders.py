@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import save_calibration
+from postproc.calfile import save_calibration
 from postproc.cli import main
 from postproc.engine.parametric import ParametricEngine
 from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM, compare_orders

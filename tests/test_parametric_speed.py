@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from parametric_reference import ReferenceParametric
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
+from postproc.calibration.axis_tables import AXES, AxisTables
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine import parametric_errors, parametric_solvers
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.tables import AXES, AxisTables
 from postproc.simulate.s500 import synthetic_tables
 
 CAL = "calibrations/s500_parametric.json"

@@ -5,7 +5,8 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
+from postproc.calibration.axis_tables import AXES, AxisTables, Squareness
 from postproc.calibration.tables import (
     format_squareness,
     format_tables,
@@ -15,7 +16,6 @@ from postproc.calibration.tables import (
 )
 from postproc.cli import main
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import EXIT_INPUT, CalibrationError, MeasurementError
 from postproc.metrology.tables_fit import fit_tables
 from postproc.simulate.s500 import synthetic_tables

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.errors import EXIT_CALIBRATION, EXIT_NOT_HELD
 from postproc.predict.chain import chain_from_dict

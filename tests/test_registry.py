@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from postproc.calibration.calfile import load_calibration
+from postproc.calfile import load_calibration
 from postproc.calibration.measurements import (
     Measurements,
     format_measurements,

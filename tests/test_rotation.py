@@ -10,8 +10,8 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
+from postproc.calibration.axis_tables import AXES, AxisTables
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.tables import AXES, AxisTables
 from postproc.predict import frames
 from postproc.rotation import (
     cross,

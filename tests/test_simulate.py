@@ -6,11 +6,11 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
+from postproc.calibration.axis_tables import AxisTables
 from postproc.calibration.measurements import read_measurements
 from postproc.calibration.tables import read_squareness, read_tables
 from postproc.cli import main
 from postproc.engine.static import fit as fit_static
-from postproc.engine.tables import AxisTables
 from postproc.simulate import (
     Machine,
     MachineError,

@@ -6,7 +6,7 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from postproc.calibration.calfile import save_calibration
+from postproc.calfile import save_calibration
 from postproc.calibration.tables import write_tables
 from postproc.cli import main
 from postproc.engine.parametric import ParametricEngine

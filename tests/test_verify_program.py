@@ -6,8 +6,8 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
+from postproc.calibration.axis_tables import AxisTables
 from postproc.cli import main
-from postproc.engine.tables import AxisTables
 from postproc.simulate import Machine, MachineGeometry, save_machine, simulate_points
 from postproc.simulate.program import verify_program
 from postproc.simulate.verify import NOMINAL_CHORD_MM, Polyline, point_segment_distance
@@ -105,7 +105,7 @@ def test_machine_with_backlash_effect_depends_on_approach():
 @pytest.fixture(scope="module")
 def s500_parametric(tmp_path_factory):
     """A parametric calibration fitted from simulated 2 mm interferometer tables."""
-    from postproc.calibration.calfile import save_calibration
+    from postproc.calfile import save_calibration
     from postproc.calibration.tables import write_tables
     from postproc.metrology.tables_fit import fit_tables
     from postproc.simulate.s500 import s500_machine
@@ -131,7 +131,7 @@ def test_corrected_pocket_stays_within_2um_on_s500(s500_parametric):
 
 
 def test_corrected_pocket_with_a_tool_and_work_offset(s500_parametric):
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.simulate.s500 import s500_machine
 
     # The same pocket moved by G54 and cut with a 100 mm tool: the gauge point runs 100 mm
@@ -165,7 +165,7 @@ def test_a_skipped_stretch_shows_in_the_nominal_to_actual_direction(tmp_path):
 
 
 def test_a_corrected_program_that_stops_early_scores_badly(s500_parametric, tmp_path):
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.simulate.program import correct_program_text, make_setup
     from postproc.simulate.s500 import s500_machine
 

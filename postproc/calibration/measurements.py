@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from postproc.calibration.csvfile import (
@@ -11,8 +13,86 @@ from postproc.calibration.csvfile import (
     length_scale,
     read_csv,
 )
-from postproc.engine.base import Measurements, carried_directions
 from postproc.errors import MeasurementError
+
+
+@dataclass
+class Measurements:
+    """What a fitter fits: measured points (formats.md section 1), in mm.
+
+    Commanded ``q``, measured ``m`` and tool vectors ``r`` (N, 3). ``direction`` (N, 3)
+    holds the approach direction of each axis (1, -1, 0) or is None when the file has
+    no dir columns. ``context`` maps every other numeric column (``t``, ``temp*``,
+    ``load``, anything else) to an (N,) array. Files are read by
+    :func:`read_measurements`.
+    """
+
+    q: np.ndarray
+    m: np.ndarray
+    r: np.ndarray
+    direction: np.ndarray | None = None
+    context: dict[str, np.ndarray] = field(default_factory=dict)
+    path: str = ""
+    meta: dict[str, str] = field(default_factory=dict)
+    linenos: np.ndarray | None = None
+    has_tool_columns: bool = True
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    def context_full(self) -> dict[str, np.ndarray]:
+        """Context including the approach directions as ``dirx``, ``diry``, ``dirz``.
+
+        A ``0`` (the axis did not move on the way to this point) is replaced by the
+        axis's last approach direction in file order, as formats.md defines it
+        (:func:`carried_directions`); rows before an axis's first move stay 0 (unknown).
+        """
+        ctx = dict(self.context)
+        if self.direction is not None:
+            carried = carried_directions(self.direction)
+            for j, name in enumerate(("dirx", "diry", "dirz")):
+                ctx[name] = carried[:, j]
+        return ctx
+
+    def unknown_direction_rows(self) -> np.ndarray:
+        """(N,) True where some axis has no approach state yet (0 before its first move)."""
+        if self.direction is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.any(carried_directions(self.direction) == 0, axis=1)
+
+    @staticmethod
+    def concat(items: list[Measurements]) -> Measurements:
+        """Several files at once: context columns present in only some files are dropped."""
+        if len(items) == 1:
+            return items[0]
+        common = set.intersection(*(set(m.context) for m in items))
+        directions = [m.direction for m in items if m.direction is not None]
+        direction = np.vstack(directions) if len(directions) == len(items) else None
+        return Measurements(
+            q=np.vstack([m.q for m in items]),
+            m=np.vstack([m.m for m in items]),
+            r=np.vstack([m.r for m in items]),
+            direction=direction,
+            context={k: np.concatenate([m.context[k] for m in items]) for k in sorted(common)},
+            path=",".join(m.path for m in items),
+            meta={},
+            linenos=None,
+        )
+
+
+def carried_directions(direction: np.ndarray) -> np.ndarray:
+    """Approach directions (N, 3) with each ``0`` replaced by the last non-zero value
+    above it in the same column: the axis did not move, so its backlash state is that of
+    its last move (formats.md section 1). Leading zeros stay 0: the state is unknown."""
+    d = np.asarray(direction, dtype=float)
+    if d.size == 0:
+        return d.copy()
+    n = len(d)
+    rows = np.arange(n)[:, None]
+    last = np.where(d != 0, rows, -1)
+    last = np.maximum.accumulate(last, axis=0)
+    out = np.where(last >= 0, d[np.maximum(last, 0), np.arange(d.shape[1])], 0.0)
+    return out
 
 __all__ = ["Measurements", "carried_directions", "format_measurements", "measurements_from_table",
            "read_measurement_files", "read_measurements"]

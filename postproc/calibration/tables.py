@@ -1,7 +1,7 @@
 """Axis error tables and squareness files (formats.md section 2): readers and writers.
 
-The data are :class:`postproc.engine.tables.AxisTables` and
-:class:`~postproc.engine.tables.Squareness`, in mm and rad. ``read_tables`` reads one
+The data are :class:`postproc.calibration.axis_tables.AxisTables` and
+:class:`~postproc.calibration.axis_tables.Squareness`, in mm and rad. ``read_tables`` reads one
 complete tables file; ``partial_parts`` and ``merge_parts`` read files that give only
 the components that were measured and put them together (what ``postproc fit`` does
 with several tables files, ISO 230-2 runs and TF5280 files, see
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, COLUMNS, SQUARENESS_NAMES, AxisTables, Squareness
 from postproc.calibration.csvfile import (
     CsvTable,
     angle_scale,
@@ -25,7 +26,6 @@ from postproc.calibration.csvfile import (
     length_scale,
     read_csv,
 )
-from postproc.engine.tables import AXES, COLUMNS, SQUARENESS_NAMES, AxisTables, Squareness
 from postproc.errors import MeasurementError
 from postproc.fileio import atomic_write_texts
 

@@ -51,7 +51,7 @@ def check(files, cal_path, sigma, as_json, plot_dir, folds, max_effects, fixed, 
     """
     import json
 
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.calibration.measurements import read_measurement_files
     from postproc.cli.options import parse_vector
     from postproc.diagnose.check import json_safe, run_check

@@ -63,7 +63,7 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
 
 def _run_one(job: dict) -> tuple[str, str | None, int]:
     """Correct one file (runs in a worker process with -j); returns (summary, error, exit code)."""
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.gcode.pipeline import CorrectOptions, correct_file
 
     try:
@@ -275,7 +275,7 @@ def _check_not_same(src: str, dst: str) -> None:
 
 
 def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) -> None:
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.gcode.pipeline import CorrectOptions, correct_file
 
     _check_not_same(src, dst)

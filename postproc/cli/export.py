@@ -74,7 +74,7 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
     import json
     from pathlib import Path
 
-    from postproc.calibration.calfile import calibration_from_dict, load_calibration
+    from postproc.calfile import calibration_from_dict, load_calibration
     from postproc.fileio import atomic_write_text, atomic_write_texts
     from postproc.metrology.controllers.axis import AxisErrors, default_step
     from postproc.metrology.controllers.base import axis_order, remainder_dict

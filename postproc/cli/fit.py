@@ -97,7 +97,7 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
         postproc fit --base tables_cal.json tracker.csv --effect backlash:Y -o tables_backlash.json
         postproc fit samples/iso230_runs_x.csv -o x_runs.json
     """
-    from postproc.calibration.calfile import save_calibration
+    from postproc.calfile import save_calibration
     from postproc.calibration.measurements import read_measurement_files
     from postproc.calibration.sniff import sniff
     from postproc.engine import registry
@@ -176,7 +176,7 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
 
 def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction):
     """``fit --base CAL POINTS... --effect NAME``: effects added to a calibration kept as it is."""
-    from postproc.calibration.calfile import load_calibration, save_calibration
+    from postproc.calfile import load_calibration, save_calibration
     from postproc.calibration.measurements import read_measurement_files
     from postproc.diagnose.refit import extend_calibration, refuse_large_correction
     from postproc.errors import MeasurementError

@@ -235,7 +235,7 @@ def _save_parts(corr, out: Path, name: str) -> None:
 
 def _correct_program(template, calibration, setup, corr, target: Path, max_correction: float) -> str:
     """Correct the template with the calibration, ``corr`` added; write ``target`` atomically."""
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.gcode.path import program_path
     from postproc.gcode.pipeline import CorrectOptions, correct_file
 
@@ -318,7 +318,7 @@ def deadband(sensor, gap, tau, correction, learn, plot, output):
         save_map(learn, m, comments=[f"deadband: E = V - W along {Path(sensor).name}, gap {gap:g} mm"])
         click.echo(f"wrote {learn}")
     if output:
-        from postproc.calibration.calfile import atomic_write_text
+        from postproc.calfile import atomic_write_text
 
         head = "B,Z,V,V_gap,W,E" + (",K,residual" if k is not None else "")
         lines = ["# deadband trace (mm)", head]

@@ -37,7 +37,7 @@ def orders(calibration, points, point, tool_vector, k, as_json):
     """
     import numpy as np
 
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.engine.parametric import ParametricEngine
     from postproc.engine.parametric_orders import SEED_ORDER_POINTS_MM, compare_orders
     from postproc.errors import CalibrationError

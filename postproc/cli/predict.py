@@ -390,7 +390,7 @@ def chain_cmd(tables, squareness, order, angular, output):
     \b
         postproc predict chain tables.csv --squareness tables_squareness.csv -o machine.chain.json
     """
-    from postproc.calibration.calfile import atomic_write_text
+    from postproc.calfile import atomic_write_text
     from postproc.calibration.tables import read_squareness, read_tables, squareness_path_for
     from postproc.predict.parametric_chain import chain_from_tables
 
@@ -425,7 +425,7 @@ def init(layout, calibration, output):
     import os
     from pathlib import Path
 
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.fileio import atomic_write_text
     from postproc.predict.chain import chain_from_dict
     from postproc.predict.layouts import layout_chain

@@ -62,7 +62,7 @@ def verify(program, calibrations, machine_path, points, corrected, setup, tolera
     """
     import numpy as np
 
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
 
     if plot:
         from postproc.fileio import require_matplotlib
@@ -134,7 +134,7 @@ def _load_machine(path: str):
         return load_machine(path)  # which names what is wrong with the file
     if not isinstance(data, dict) or data.get("format") != "postproc calibration":
         return load_machine(path)
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
     from postproc.simulate.machine import Machine, MachineGeometry
 
     cal = load_calibration(path)
@@ -152,7 +152,7 @@ def _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, 
     """--points mode of :func:`verify`."""
     import numpy as np
 
-    from postproc.calibration.calfile import load_calibration
+    from postproc.calfile import load_calibration
 
     ctx, tool = setup.context, setup.tool_vector
     unused = [flag for flag, value in (("--offset", setup.offsets), ("--tool-length/--tool-table", setup.tool_lengths),

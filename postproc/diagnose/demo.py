@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from postproc.calibration.calfile import atomic_write_text
+from postproc.calfile import atomic_write_text
 from postproc.calibration.measurements import Measurements, format_measurements
 from postproc.effects import get_effect
 from postproc.engine.static import StaticEngine

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from postproc.calibration.measurements import Measurements
 from postproc.engine._tangents import (
     AXES,
     LATTICE_TOL_MM,
@@ -63,7 +64,6 @@ from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
-    Measurements,
     check_points,
     check_tool_vectors,
 )

@@ -36,12 +36,12 @@ from typing import Any
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, AxisTables, Squareness
 from postproc.constants import SOLVER_TOL_MM, VOLUME_EDGE_SLACK_MM
 from postproc.engine import parametric_solvers
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.parametric_errors import Located, StackedErrors, scratch
 from postproc.engine.pchip import Pchip
-from postproc.engine.tables import AXES, AxisTables, Squareness
 from postproc.errors import CalibrationError
 from postproc.rotation import cross, rotate
 

@@ -36,9 +36,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import BSpline
 
-from postproc.engine.base import FitResult, Measurements
+from postproc.calibration.axis_tables import AXES, COLUMNS, AxisTables, Squareness
+from postproc.calibration.measurements import Measurements
+from postproc.engine.base import FitResult
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.errors import MeasurementError
 
 # Relative singular value below which a direction of the (column-normalised) design

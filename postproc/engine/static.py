@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from postproc.calibration.measurements import Measurements
 from postproc.engine.base import (
     Engine,
     FitResult,
     InverseResult,
-    Measurements,
     check_points,
     check_tool_vectors,
 )

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, COLUMNS, Squareness
 from postproc.calibration.csvfile import read_csv
 from postproc.calibration.sniff import sniff
 from postproc.calibration.tables import (
@@ -26,7 +27,6 @@ from postproc.calibration.tables import (
 from postproc.effects import get_effect
 from postproc.engine.base import FitResult
 from postproc.engine.parametric import ParametricEngine
-from postproc.engine.tables import AXES, COLUMNS, Squareness
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.beckhoff import read_isg_parts
 from postproc.metrology.iso230 import evaluate

@@ -430,7 +430,7 @@ def _fixed(x: float, decimals: int) -> str:
 
 
 def save_map(path, m: CorrectionMap, *, comments: Sequence[str] = (), units: str = "mm") -> None:
-    from postproc.calibration.calfile import atomic_write_text
+    from postproc.calfile import atomic_write_text
 
     atomic_write_text(path, format_map(m, comments=comments, units=units))
 

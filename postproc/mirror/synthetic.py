@@ -192,7 +192,7 @@ def write_sample_set(directory, *, seed: int = 3, finished: int = 4) -> list:
     """
     from pathlib import Path
 
-    from postproc.calibration.calfile import atomic_write_text
+    from postproc.calfile import atomic_write_text
     from postproc.mirror.feedback import Band, pocket_corrections, read_plan, self_tune
     from postproc.mirror.kdist import fit_kdist, kdist_comments
     from postproc.mirror.maps import format_map
@@ -245,7 +245,7 @@ def shell_calibration_text(identity: bool = False) -> str:
     """
     import json
 
-    from postproc.calibration.calfile import calibration_to_dict
+    from postproc.calfile import calibration_to_dict
     from postproc.engine.identity import IdentityEngine
     from postproc.engine.static import StaticEngine
 

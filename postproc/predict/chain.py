@@ -228,7 +228,7 @@ class Element:
         self._nodes, self._frame = nodes, frame
 
     def _check_calibration(self) -> None:
-        from postproc.calibration.calfile import load_calibration
+        from postproc.calfile import load_calibration
 
         b, w = self.body, self.where
         name = b.get("file")

@@ -38,10 +38,10 @@ from typing import Any
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.calibration.tables import read_squareness, read_tables
 from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
-from postproc.engine.tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.errors import CalibrationError, PostprocError
 from postproc.fileio import atomic_write_text
 from postproc.rotation import cross, rotate

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.calibration.tables import write_tables
-from postproc.engine.tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.simulate.machine import Machine, MachineGeometry, Noise, save_machine
 
 TRAVEL_MM = 315.0

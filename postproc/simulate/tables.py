@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from postproc.engine.tables import AXES, AxisTables, Squareness
+from postproc.calibration.axis_tables import AXES, AxisTables, Squareness
 from postproc.simulate.machine import Machine
 from postproc.simulate.points import SimulationError
 

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, COLUMNS
 from postproc.calibration.tables import UNMEASURED_HALF_RANGE_MM
 from postproc.effects.composed import ComposedEngine
-from postproc.engine.tables import AXES, COLUMNS
 from postproc.errors import CalibrationError
 
 #: Points per table interval at which an exported table is compared with the model.

@@ -5,7 +5,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field
 
-from postproc.engine.tables import AXES, COLUMNS
+from postproc.calibration.axis_tables import AXES, COLUMNS
 
 
 @dataclass

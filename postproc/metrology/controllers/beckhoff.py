@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from postproc.calibration.axis_tables import AXES, COLUMNS
 from postproc.calibration.tables import TablePart
-from postproc.engine.tables import AXES, COLUMNS
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import AxisErrors
 from postproc.metrology.controllers.base import Export
