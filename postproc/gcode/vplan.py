@@ -155,6 +155,12 @@ class ArcHint:
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
         self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
 
+    @property
+    def fields(self) -> tuple[float, ...]:
+        """The hint as one row of :func:`settle_arcs`' table: c1, c2, rho, worst, nsweep,
+        the six ends, mismatch."""
+        return (self.c1, self.c2, self.rho, self.worst, self.nsweep, *self.ends, self.mismatch)
+
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
         """The arc words for the move written from S to E (machine mm, as written):
         ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None when no rounded centre
@@ -199,6 +205,67 @@ class ArcHint:
         if bound is None or not bound + mism <= budget:
             return None
         return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound + mism, "mismatch": mism}
+
+    def words_xy(self, S: Sequence[float], E: Sequence[float], clockwise: bool, d: int, unit: float,
+                 base: tuple[float, float], budget: float, min_radius: float, min_sweep: float
+                 ) -> tuple[float, float] | None:
+        """:meth:`spec` and the controller-limit check after it in one (an arc in the XY
+        plane; ``base``: what the centre words are relative to, machine mm; ``min_radius``
+        and ``min_sweep`` those of :func:`postproc.gcode.segment.within_controller_limits`):
+        the values of the centre words ``spec`` writes (``float`` of their text), or None
+        where ``spec`` gives none or the controller would not cut that arc. The same
+        arithmetic as those, in the same order, without the objects they make."""
+        s1, s2, sn = S[0], S[1], S[2]
+        e1, e2, en = E[0], E[1], E[2]
+        dx, dy = e1 - s1, e2 - s2
+        hyp = math.hypot
+        L = hyp(dx, dy)
+        if L == 0.0:
+            return None
+        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+        n1, n2 = -dy / L, dx / L
+        t = (self.c1 - m1) * n1 + (self.c2 - m2) * n2
+        b1, b2 = base
+        step = 10.0 ** (-d)
+        agree = 0.5 * step * unit
+        v1 = round((m1 + t * n1 - b1) / unit, d)
+        v2 = round((m2 + t * n2 - b2) / unit, d)
+        for k1, k2 in _ORDER:
+            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+            C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+            mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
+            if mism <= agree:
+                break
+        else:
+            return None
+        # _bound
+        rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
+        th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
+        sweep = -((th0 - th1) % TWO_PI) if clockwise else (th1 - th0) % TWO_PI
+        if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
+            return None
+        moved = hyp(C1 - self.c1, C2 - self.c2)
+        u1, u2, un, x1, x2, xn = self.ends
+        rho = self.rho
+        bound = self.worst + moved + max(abs(rs - rho), abs(re - rho))
+        r_min = min(rs, re, rho)
+        if not r_min > 0.0:
+            return None
+        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - x1, e2 - x2))
+        dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
+        bound = bound + max(abs(sn - un), abs(en - xn)) + abs(en - sn) * dfrac
+        if not bound + mism <= budget:
+            return None
+        # within_controller_limits around the centre of the words as written (float of
+        # the text: -0.0 reads back 0.0); S and E differ in the plane (L > 0)
+        w1, w2 = w1 + 0.0, w2 + 0.0
+        c1, c2 = b1 + w1 * unit, b2 + w2 * unit
+        if min(hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)) < min_radius:
+            return None
+        t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
+        if not ((t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI) >= min_sweep:
+            return None
+        return w1, w2
 
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
              nominal_mismatch: float, budget: float) -> ArcSpec | None:
@@ -251,6 +318,132 @@ class ArcHint:
 # lattice offsets (per axis, in units of the last decimal), nearest first
 _ORDER = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in range(-LATTICE, LATTICE + 1)),
                       key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
+
+
+_LATTICE_K = np.array(_ORDER, dtype=float).T  # (2, candidates): the offsets of _ORDER, per axis
+
+# -- settling the words of many arcs at once -------------------------------------------
+#: what :func:`settle_arcs` found for an arc: its words pass, they do not, or the array
+#: arithmetic cannot tell (a value within float noise of a threshold: ask the arc's hint)
+SETTLED, FAILS, UNSURE = 0, 1, 2
+# How far (relative to the magnitudes involved) a value computed here may lie from the
+# one :class:`ArcHint` computes (numpy's hypot and arctan2 may differ from math's by an
+# ulp, and so may values derived from them); a comparison closer than that is unsure.
+_REL = 1e-12
+# The same for angles (rad): atan2 differs by an ulp of pi at most.
+_ANGLE_TOL = 1e-12
+
+
+def settle_arcs(H: FloatArray, clockwise: BoolArray, S: FloatArray, E: FloatArray, keep: BoolArray,
+                keep_centre: FloatArray, *, axes: tuple[int, int, int], d: int, unit: float, absolute: bool,
+                shift: Sequence[float], budget: float, min_radius: float, min_sweep: float
+                ) -> tuple[npt.NDArray[np.int8], FloatArray]:
+    """For k arcs at once, what :meth:`ArcHint.keep` (where ``keep``) or :meth:`ArcHint.spec`
+    followed by the controller-limit check (``min_radius``, ``min_sweep``: those of
+    :func:`postproc.gcode.segment.within_controller_limits`) decides for each.
+
+    ``H`` (k, 12): the hints' :attr:`ArcHint.fields`; ``S``/``E`` (k, 3): the end points
+    as written; ``keep_centre`` (k, 2): the input's own centre of the arcs kept (read
+    where ``keep``). The others as :meth:`ArcHint.spec` takes them (one unit, plane and
+    decimals for all). Returns ``(state, W)``: :data:`SETTLED`, :data:`FAILS` or
+    :data:`UNSURE` per arc, and for the settled arcs not kept the centre words' values
+    (``float(text)`` of the words ``spec`` gives). The values compared are computed as
+    the scalar methods compute them; an arc is :data:`UNSURE` where a comparison is
+    closer to its threshold than the two ways of computing may differ, or where a value
+    is not finite.
+    """
+    a1, a2, an = axes
+    hc1, hc2, rho, worst, nsweep = H[:, 0], H[:, 1], H[:, 2], H[:, 3], H[:, 4]
+    u1, u2, un, x1, x2, xn, mismatch = H[:, 5], H[:, 6], H[:, 7], H[:, 8], H[:, 9], H[:, 10], H[:, 11]
+    s1, s2, sn, e1, e2, en = S[:, a1], S[:, a2], S[:, an], E[:, a1], E[:, a2], E[:, an]
+    unsure = ~(np.isfinite(H).all(axis=1) & np.isfinite(S).all(axis=1) & np.isfinite(E).all(axis=1))
+    spec = ~keep
+    # -- ArcHint.spec: the fitted centre moved onto the written ends' bisector, rounded --
+    # (array arithmetic in the order the method's; where it picks a value, a sum with a
+    # boolean does: x + False is x)
+    dx, dy = e1 - s1, e2 - s2
+    L = np.hypot(dx, dy)
+    flat = L == 0.0  # spec gives None
+    Ls = L + flat
+    m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+    n1, n2 = -dy / Ls, dx / Ls
+    t = (hc1 - m1) * n1 + (hc2 - m2) * n2
+    p1, p2 = m1 + t * n1, m2 + t * n2
+    if absolute:
+        b1: FloatArray | float = shift[a1]
+        b2: FloatArray | float = shift[a2]
+    else:
+        b1, b2 = s1, s2
+    step = 10.0 ** (-d)
+    scale = 10.0 ** d
+    agree = 0.5 * step * unit
+    y1, y2 = (p1 - b1) / unit * scale, (p2 - b2) / unit * scale
+    r1, r2 = np.rint(y1), np.rint(y2)
+    # round(v, d) is rint(v * 10**d) / 10**d unless v * 10**d lies about halfway
+    slack = _REL * (1.0 + np.abs(t) + np.abs(m1) + np.abs(m2) + np.abs(b1) + np.abs(b2)) / unit * scale
+    unsure |= spec & ((np.abs(np.abs(y1 - r1) - 0.5) <= slack) | (np.abs(np.abs(y2 - r2) - 0.5) <= slack))
+    w1, w2 = r1 / scale, r2 / scale
+    # the lattice's first candidate, the rounded centre itself (round(w + 0 * step, d) is w)
+    C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+    rs, re = np.hypot(s1 - C1, s2 - C2), np.hypot(e1 - C1, e2 - C2)
+    mism = np.abs(rs - re)
+    other = spec & ~flat & ((mism > agree) | (np.abs(mism - agree) <= _REL * (1.0 + rs + re)))
+    found = spec & ~flat
+    if other.any():  # the others, nearest first, for the arcs whose first one does not pass
+        o = np.flatnonzero(other)
+        bo1 = b1[o, None] if isinstance(b1, np.ndarray) else b1
+        bo2 = b2[o, None] if isinstance(b2, np.ndarray) else b2
+        cw1 = np.rint((w1[o, None] + _LATTICE_K[0] * step) * scale) / scale
+        cw2 = np.rint((w2[o, None] + _LATTICE_K[1] * step) * scale) / scale
+        cc1, cc2 = bo1 + cw1 * unit, bo2 + cw2 * unit
+        crs = np.hypot(s1[o, None] - cc1, s2[o, None] - cc2)
+        cre = np.hypot(e1[o, None] - cc1, e2[o, None] - cc2)
+        cm = np.abs(crs - cre)
+        near = np.abs(cm - agree) <= _REL * (1.0 + crs + cre)
+        take = (cm <= agree) | near
+        first = np.argmax(take, axis=1)
+        jo = np.arange(len(o))
+        found[o] = take.any(axis=1)
+        unsure[o] |= found[o] & near[jo, first]
+        w1[o], w2[o] = cw1[jo, first], cw2[jo, first]
+        C1[o], C2[o], mism[o] = cc1[jo, first], cc2[jo, first], cm[jo, first]
+    if keep.any():  # -- ArcHint.keep: the input's own centre ----------------------------
+        kc1, kc2 = keep_centre[keep, 0], keep_centre[keep, 1]
+        krs, kre = np.hypot(s1[keep] - kc1, s2[keep] - kc2), np.hypot(e1[keep] - kc1, e2[keep] - kc2)
+        kmism = np.abs(krs - kre)
+        klimit = mismatch[keep] + KEEP_MISMATCH_SLACK_MM
+        found[keep] = kmism <= klimit
+        unsure[keep] |= np.abs(kmism - klimit) <= _REL * (1.0 + krs + kre)
+        C1[keep], C2[keep], mism[keep] = kc1, kc2, 0.0
+    # -- ArcHint._bound around the centre taken --------------------------------------------
+    rs, re = np.hypot(s1 - C1, s2 - C2), np.hypot(e1 - C1, e2 - C2)
+    th0, th1 = np.arctan2(s2 - C2, s1 - C1), np.arctan2(e2 - C2, e1 - C1)
+    diff = th1 - th0
+    diff[clockwise] *= -1.0  # th0 - th1 exactly
+    turn = np.mod(diff, TWO_PI)  # |sweep|
+    sweep = turn.copy()
+    sweep[clockwise] *= -1.0
+    unsure |= (turn <= _ANGLE_TOL) | (turn >= TWO_PI - _ANGLE_TOL)
+    off = np.abs(sweep - nsweep)
+    unsure |= np.abs(off - math.pi / 2) <= _ANGLE_TOL
+    moved = np.hypot(C1 - hc1, C2 - hc2)
+    shifted = np.maximum(np.hypot(s1 - u1, s2 - u2), np.hypot(e1 - x1, e2 - x2))
+    bound = worst + moved + np.maximum(np.abs(rs - rho), np.abs(re - rho))
+    r_min = np.minimum(np.minimum(rs, re), rho)
+    positive = r_min > 0.0
+    turned = (turn != 0.0) & (off <= math.pi / 2) & positive
+    turn1 = turn + (turn == 0.0)
+    helix = np.abs(en - sn) * (3.0 * (moved + shifted) / ((r_min + ~positive) * turn1))
+    total = bound + np.maximum(np.abs(sn - un), np.abs(en - xn)) + helix + mism
+    within = total <= budget
+    unsure |= np.abs(total - budget) <= _REL * (1.0 + total + rs + re) + helix * (_ANGLE_TOL / turn1)
+    # -- the controller limits (Corrector._hint_is_sound), for the words spec gives ------------
+    r_low = np.minimum(rs, re)
+    limits = keep | ((r_low >= min_radius) & (turn >= min_sweep))
+    unsure |= spec & ((np.abs(r_low - min_radius) <= _REL * (1.0 + r_low)) | (np.abs(turn - min_sweep) <= _ANGLE_TOL))
+    state = (~(found & turned & within & limits)).astype(np.int8)  # SETTLED 0, FAILS 1
+    state[unsure & ~(spec & flat)] = UNSURE  # spec gives None where the ends coincide in the plane
+    return state, np.column_stack([w1, w2])
 
 
 def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
