@@ -1,11 +1,11 @@
-"""The run writer's ways of settling an arc's centre words agree with the per-arc one.
+"""The run writer settles an arc's centre words as the general emitter does.
 
-The per-arc decision is :meth:`ArcHint.spec` followed by the controller-limit check
-(:meth:`Corrector._hint_is_sound`), or :meth:`ArcHint.keep` for an arc whose end words
-do not change. :meth:`ArcHint.words_xy` makes the first in one call and
-:func:`vplan.settle_arcs` makes both for many arcs in array arithmetic, saying UNSURE
-where float noise could tip a comparison. On many generated arcs (seeded), near every
-threshold the decision has: the same words, the same refusals, and UNSURE only rarely.
+The general emitter's decision is :meth:`ArcHint.spec` followed by the controller-limit
+check (:meth:`Corrector._hint_is_sound`); the run writer makes it in one call,
+:meth:`ArcHint.words_xy`. On many generated arcs (seeded), near every threshold the
+decision has (smallest radius and sweep, whole turns, ends that coincide in the plane, a
+bound about the budget, values that are not finite): the same words and the same
+refusals.
 """
 
 import math
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from postproc.gcode import emit, vplan
-from postproc.gcode.pipeline import Corrector
 from postproc.gcode.interp import Arc
+from postproc.gcode.pipeline import Corrector
 from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
@@ -118,68 +118,12 @@ def test_words_xy_is_spec_and_the_controller_check(seed):
         got = hint.words_xy(S, E, cw, d, unit, base, budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD)
         assert _same(got, ref), (case, got, ref)
         if got is not None:
-            assert emit.fmt(got[0], d) == emit.fmt(ref[0], d) and emit.fmt(got[1], d) == emit.fmt(ref[1], d)
+            assert emit.fmt(got[0], d) == emit.fmt(ref[0], d)
+            assert emit.fmt(got[1], d) == emit.fmt(ref[1], d)
         taken += ref is not None
         refused += ref is None
-    assert taken > 200 and refused > 200  # both outcomes exercised
-
-
-def _settle(cases):
-    """settle_arcs on cases that share a setup, grouped as the run writer groups them."""
-    groups = {}
-    for c in cases:
-        groups.setdefault((c[4], c[5], c[6], c[7], c[9]), []).append(c)
-    out = []
-    for (d, unit, absolute, shift, budget), cs in groups.items():
-        H = np.array([c[0].fields for c in cs])
-        S, E = np.array([c[1] for c in cs]), np.array([c[2] for c in cs])
-        keep = np.array([c[10] for c in cs])
-        kc = np.array([(c[8][0] + c[11][0] * unit, c[8][1] + c[11][1] * unit) for c in cs])
-        cw = np.array([c[3] for c in cs])
-        state, W = vplan.settle_arcs(H, cw, S, E, keep, kc, axes=(0, 1, 2), d=d, unit=unit, absolute=absolute,
-                                     shift=shift, budget=budget, min_radius=MIN_ARC_RADIUS_MM,
-                                     min_sweep=MIN_ARC_SWEEP_RAD)
-        out.extend(zip(cs, state.tolist(), W.tolist(), strict=True))
-    return out
-
-
-def _long(case):
-    """A finite arc whose chord spans more than 20 steps of the words' last decimal."""
-    S, E, d, unit = case[1], case[2], case[4], case[5]
-    return (all(math.isfinite(v) for v in (*S, *E))
-            and math.hypot(E[0] - S[0], E[1] - S[1]) > 20 * 10.0 ** -d * unit)
-
-
-@pytest.mark.parametrize("seed", [21, 22, 23])
-def test_settle_arcs_decides_as_the_per_arc_path(seed):
-    count = {vplan.SETTLED: 0, vplan.FAILS: 0, vplan.UNSURE: 0}
-    cases = _cases(seed, 2400)
-    results = _settle(cases)
-    for case, state, w in results:
-        count[state] += 1
-        if state == vplan.UNSURE:
-            continue
-        ref = _reference(case)
-        if state == vplan.FAILS:
-            assert ref is None, (case, ref)
-        elif case[10]:  # kept: the input's own words
-            assert ref is not None, case
-        else:
-            assert ref is not None and (w[0], w[1]) == ref, (case, w, ref)
-    assert count[vplan.SETTLED] > 300 and count[vplan.FAILS] > 300
-    # unsure: the non-finite cases and, among the others, arcs whose chord spans a few
-    # grid steps (their rounded centre can lie halfway); rarely an arc of a longer chord
-    assert sum(1 for c, st, _w in results if st == vplan.UNSURE and _long(c)) <= sum(map(_long, cases)) // 100
-
-
-def test_settle_arcs_is_unsure_on_non_finite_ends_and_fails_on_flat_ones():
-    cases = _cases(5, 240)
-    for case, state, _w in _settle(cases):
-        S, E = case[1], case[2]
-        if not all(math.isfinite(v) for v in (*S, *E)):
-            assert state == vplan.UNSURE
-        elif (S[0], S[1]) == (E[0], E[1]) and not case[10]:
-            assert state == vplan.FAILS
+    assert taken > 200
+    assert refused > 200
 
 
 def test_plane_of_the_run_writer_is_xy():

@@ -44,7 +44,7 @@ from typing import Protocol, TypeAlias, final
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit, lexer, vplan
+from postproc.gcode import emit, lexer
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
@@ -633,12 +633,8 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
         for y in arc_rows:
             p = moved[y - 1] if y > s else -1
             starts.append(want[p] if p >= s else qe0)
-        ends = [want[y] for y in arc_rows]
-        settled = (_arcs_words(corrector, run, hints, arc_rows, starts, ends, em.named_edits)
-                   if len(arc_rows) >= _BULK_ARCS else [_ASK] * len(arc_rows))
-        for y, S, E, ok in zip(arc_rows, starts, ends, settled, strict=True):
-            if ok is _ASK:
-                ok = _arc_words(corrector, run, hints, y, S, E, em.named_edits[y])
+        for y, S in zip(arc_rows, starts, strict=True):
+            ok = _arc_words(corrector, run, hints, y, S, want[y], em.named_edits[y])
             if ok is None:
                 stop = y
                 break
@@ -725,60 +721,6 @@ def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: 
     elif w2 != 0.0 or run.arc_absolute:
         return None
     return ti, tj, count
-
-
-# Arcs written between two general moves from which the run writer settles their words
-# in one array pass (:func:`_arcs_words`); fewer are settled one by one.
-_BULK_ARCS = 2
-_ASK = ("", "", -1)  # :func:`_arcs_words`: this arc's words are settled by :func:`_arc_words`
-_ArcWords: TypeAlias = tuple[str, str, int] | None
-
-
-def _arcs_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], rows: list[int],
-                starts: list[list[float]], ends: list[list[float]], named_edits: list[int]) -> list[_ArcWords]:
-    """:func:`_arc_words` of the run's arcs on block lines ``rows``, from ``starts`` to
-    ``ends`` (as written), decided in one array pass (:func:`postproc.gcode.vplan.settle_arcs`);
-    :data:`_ASK` for an arc that pass cannot settle."""
-    blk = run.block
-    a, trow = run.a, run.trow
-    arcs = run.arcs
-    H = np.array([hints[trow + y - a].fields for y in rows])
-    cw = np.array([arcs[y - a][1] for y in rows])
-    S, E = np.array(starts), np.array(ends)
-    ix = np.array(rows)
-    keep = np.array([named_edits[y] for y in rows]) == 0
-    unit, absolute, d = run.unit, run.arc_absolute, run.decimals
-    gi, gj = blk.ov[3][ix], blk.ov[4][ix]
-    if absolute:
-        kc = np.column_stack([run.shift[0] + gi * unit, run.shift[1] + gj * unit])
-    else:
-        kc = np.column_stack([S[:, 0] + gi * unit, S[:, 1] + gj * unit])
-    state, W = vplan.settle_arcs(H, cw, S, E, keep, kc, axes=(0, 1, 2), d=d, unit=unit, absolute=absolute,
-                                 shift=run.shift, budget=corrector.opt.tolerance_mm * FIT_BUDGET,
-                                 min_radius=SEGMENT_MIN_RADIUS_MM, min_sweep=MIN_ARC_SWEEP_RAD)
-    has_i, has_j = blk.has[3][ix], blk.has[4][ix]
-    w1, w2 = W[:, 0], W[:, 1]
-    new = (state == vplan.SETTLED) & ~keep
-    # a centre word the input lacks is added by the general emitter (none is needed when
-    # the new value is 0 and the centre incremental)
-    absent = (~has_i & ((w1 != 0.0) | absolute)) | (~has_j & ((w2 != 0.0) | absolute))
-    fails = (state == vplan.FAILS) | (new & absent)
-    ci = new & ~absent & has_i & (gi != w1)
-    cj = new & ~absent & has_j & (gj != w2)
-    ti, tj = blk.cols[9], blk.cols[11]
-    out: list[_ArcWords] = [_ASK if st == vplan.UNSURE else (ti[y], tj[y], 0)
-                            for y, st in zip(rows, state.tolist(), strict=True)]
-    for x in np.flatnonzero(fails).tolist():
-        out[x] = None
-    sel = np.flatnonzero(ci | cj)
-    if len(sel):
-        dd = np.full(len(sel), d)
-        texts_i, texts_j = _format(w1[sel], dd), _format(w2[sel], dd)
-        for x, c_i, c_j, t_i, t_j in zip(sel.tolist(), ci[sel].tolist(), cj[sel].tolist(), texts_i, texts_j,
-                                         strict=True):
-            y = rows[x]
-            out[x] = (t_i if c_i else ti[y], t_j if c_j else tj[y], c_i + c_j)
-    return out
 
 
 class _ArcView:
