@@ -225,18 +225,25 @@ class ArcHint:
         agree = 0.5 * step * unit
         v1 = round((m1 + t * n1 - b1) / unit, d)
         v2 = round((m2 + t * n2 - b2) / unit, d)
-        for k1, k2 in _ORDER:
-            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
-            C1, C2 = b1 + w1 * unit, b2 + w2 * unit
-            mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
-            if mism <= agree:
-                break
-        else:
-            return None
-        # _bound
+        # the first candidate, round(v + 0 * step, d), is v + 0.0 (v is rounded already)
+        w1, w2 = v1 + 0.0, v2 + 0.0
+        C1, C2 = b1 + w1 * unit, b2 + w2 * unit
         rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
+        mism = abs(rs - re)
+        if not mism <= agree:
+            for k1, k2 in _ORDER[1:]:
+                w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+                C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+                rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
+                mism = abs(rs - re)
+                if mism <= agree:
+                    break
+            else:
+                return None
+        # _bound
         th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
-        sweep = -((th0 - th1) % TWO_PI) if clockwise else (th1 - th0) % TWO_PI
+        turn = (th0 - th1) % TWO_PI if clockwise else (th1 - th0) % TWO_PI
+        sweep = -turn if clockwise else turn
         if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
             return None
         moved = hyp(C1 - self.c1, C2 - self.c2)
@@ -252,13 +259,15 @@ class ArcHint:
         if not bound + mism <= budget:
             return None
         # within_controller_limits around the centre of the words as written (float of
-        # the text: -0.0 reads back 0.0); S and E differ in the plane (L > 0)
-        w1, w2 = w1 + 0.0, w2 + 0.0
-        c1, c2 = b1 + w1 * unit, b2 + w2 * unit
-        if min(hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)) < min_radius:
-            return None
-        t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
-        if not ((t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI) >= min_sweep:
+        # the text: -0.0 reads back 0.0, else the same centre, radii and sweep); S and E
+        # differ in the plane (L > 0)
+        if w1 == 0.0 or w2 == 0.0:
+            w1, w2 = w1 + 0.0, w2 + 0.0
+            c1, c2 = b1 + w1 * unit, b2 + w2 * unit
+            rs, re = hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)
+            t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
+            turn = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
+        if min(rs, re) < min_radius or not turn >= min_sweep:
             return None
         return w1, w2
 
