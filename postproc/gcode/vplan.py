@@ -545,11 +545,13 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     worst = np.full(k, -np.inf)
     np.maximum.at(worst, owner, dev)
     usable &= np.isfinite(worst) & np.isfinite(rho) & (worst <= budget)
-    for jj, (i, m, _arc) in enumerate(arcs_i):
-        if usable[jj]:
-            hints[i] = ArcHint(float(c1[jj]), float(c2[jj]), float(rho[jj]), float(worst[jj]), float(sweep[jj]),
-                               (float(S1[jj]), float(S2[jj]), float(Sn[jj]), float(E1[jj]), float(E2[jj]),
-                                float(En[jj])), None, float(abs(r1[jj] - r0[jj])))
-        else:
-            rest.append((i, m))
+    # the hints made from the arrays' rows as Python floats (tolist), all at once
+    sel = np.flatnonzero(usable)
+    rows = zip(*(x[sel].tolist() for x in (c1, c2, rho, worst, sweep, S1, S2, Sn, E1, E2, En, np.abs(r1 - r0))),
+               strict=True)
+    for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
+                                                                               rows, strict=True):
+        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
+    if len(sel) < k:
+        rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
     return ok_lines, hints, rest
