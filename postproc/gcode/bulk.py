@@ -398,7 +398,10 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
 
 def arc_moves(run: Run) -> list[tuple[int, RunMove]]:
     """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove)."""
-    return [(j, _row_move(run, j)) for j in run.arcs]
+    if not run.arcs:
+        return []
+    q1 = run.q1.tolist()  # the targets as tuples of floats, converted at once
+    return [(j, _row_move(run, j, tuple(q1[j - 1]) if j else run.q0, tuple(q1[j]))) for j in run.arcs]
 
 
 def finish_block(block: Block) -> None:
@@ -516,8 +519,9 @@ def _format(values: FloatArray, dout: IntArray, prefix: str = "") -> list[str]:
     return out
 
 
-def _row_move(run: Run, j: int) -> RunMove:
-    """Line ``j`` of a run (an index within it) as a RunMove, for the general emitter."""
+def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None) -> RunMove:
+    """Line ``j`` of a run (an index within it) as a RunMove, for the general emitter
+    (``q0``, ``q1``: its start and target, when the caller has them)."""
     blk = run.block
     y = run.a + j
     motion, feed = _modal_at(run, y)
@@ -526,9 +530,12 @@ def _row_move(run: Run, j: int) -> RunMove:
     elif motion is None:  # a run's first line names its motion when none is modal
         raise AssertionError(f"line {run.lineno + j} of a run without a motion")
     f = blk.cols[_F][y]
-    q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
-    mv = RunMove(run.lineno + j, motion, q0, tuple(run.q1[j].tolist()), run.r, run.shift, run.unit,
-                 run.arc_absolute, float(f) if f else feed)
+    if q0 is None:
+        q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
+    if q1 is None:
+        q1 = tuple(run.q1[j].tolist())
+    mv = RunMove(run.lineno + j, motion, q0, q1, run.r, run.shift, run.unit, run.arc_absolute,
+                 float(f) if f else feed)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
