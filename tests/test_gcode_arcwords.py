@@ -41,10 +41,13 @@ def _case(rng, kind):
     cx, cy = rng.uniform(-300, 300, 2)
     a0 = float(rng.uniform(-math.pi, math.pi))
     sw = float(rng.choice([1e-4, 0.02, 0.3, 1.5, 3.0, 6.0]))
-    if kind == "sweep":  # about the smallest sweep, or about a whole turn
-        sw = float(rng.choice([MIN_ARC_SWEEP_RAD * rng.uniform(0.5, 2.0), 2 * math.pi - rng.uniform(0, 1e-5)]))
     if r > 100:
         sw = min(sw, 0.01)
+    if kind == "sweep":  # about the smallest sweep (on a large radius: a chord of a few steps), or a whole turn
+        if rng.integers(2):
+            r, sw = 700.0, MIN_ARC_SWEEP_RAD * float(rng.uniform(0.5, 2.0))
+        else:
+            sw = 2 * math.pi - float(rng.uniform(0, 1e-5))
     a1 = a0 - sw if cw else a0 + sw
     z0 = float(rng.uniform(-50, 50))
     z1 = z0 + float(rng.choice([0.0, 0.0, rng.uniform(-2, 2)]))
@@ -55,7 +58,14 @@ def _case(rng, kind):
          round(z1 / unit, d) * unit]
     if kind == "flat":  # the ends coincide in the plane
         E[0], E[1] = S[0], S[1]
-    # the hint: the fitted centre near the true one, the corrected ends near the written ones
+    # the hint: the fitted centre near the true one moved onto the bisector of the ends
+    # (as the planner fits it), the corrected ends near the written ones
+    L = math.hypot(E[0] - S[0], E[1] - S[1])
+    if L > 0:
+        m1, m2 = 0.5 * (S[0] + E[0]), 0.5 * (S[1] + E[1])
+        n1, n2 = -(E[1] - S[1]) / L, (E[0] - S[0]) / L
+        t = (cx - m1) * n1 + (cy - m2) * n2
+        cx, cy = m1 + t * n1, m2 + t * n2
     noise = float(rng.choice([0.0, 1e-6, 1e-4, step]))
     c1, c2 = cx + rng.normal(0, noise + 1e-12), cy + rng.normal(0, noise + 1e-12)
     rho = math.hypot(S[0] - c1, S[1] - c2)
