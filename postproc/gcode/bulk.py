@@ -49,7 +49,7 @@ from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.segment import MIN_ARC_RADIUS_MM as SEGMENT_MIN_RADIUS_MM
-from postproc.gcode.segment import MIN_ARC_SWEEP_RAD, ArcSpec
+from postproc.gcode.segment import MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
@@ -118,9 +118,6 @@ class Corrector(Protocol):
     def _emit_move(self, line: str, mv: Move, target: list[float], plan: Plan | None, write: Write) -> None: ...
 
     def _emit_hinted_arc(self, line: str, mv: Move, target: list[float], hint: ArcHint, write: Write) -> None: ...
-
-    # mv: what emitter.py declares; the bulk writer passes an ArcMove (_ArcView), all it reads
-    def _hint_is_sound(self, mv: Move, spec: ArcSpec, S: Sequence[float], E: Sequence[float]) -> bool: ...
 
 
 def last_index(present: BoolArray) -> IntArray:
@@ -635,17 +632,13 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
     cols, num_cols = blk.cols, em.nums
     stop = b
     arc_edit = {}  # row -> (I text, J text, edits)
-    if arc_rows:
-        starts = []
-        for y in arc_rows:
-            p = moved[y - 1] if y > s else -1
-            starts.append(want[p] if p >= s else qe0)
-        for y, S in zip(arc_rows, starts, strict=True):
-            ok = _arc_words(corrector, run, hints, y, S, want[y], em.named_edits[y])
-            if ok is None:
-                stop = y
-                break
-            arc_edit[y] = ok
+    for y in arc_rows:
+        p = moved[y - 1] if y > s else -1
+        ok = _arc_words(corrector, run, hints, y, want[p] if p >= s else qe0, want[y], em.named_edits[y])
+        if ok is None:
+            stop = y
+            break
+        arc_edit[y] = ok
     # -- write lines s:stop -----------------------------------------------------------
     rep = corrector.report
     if stop > s:

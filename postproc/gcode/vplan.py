@@ -155,7 +155,6 @@ class ArcHint:
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
         self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
 
-
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
         """The arc words for the move written from S to E (machine mm, as written):
         ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None when no rounded centre
