@@ -48,7 +48,8 @@ from postproc.gcode import emit, lexer
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
-from postproc.gcode.segment import ArcSpec
+from postproc.gcode.segment import MIN_ARC_RADIUS_MM as SEGMENT_MIN_RADIUS_MM
+from postproc.gcode.segment import MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
@@ -117,9 +118,6 @@ class Corrector(Protocol):
     def _emit_move(self, line: str, mv: Move, target: list[float], plan: Plan | None, write: Write) -> None: ...
 
     def _emit_hinted_arc(self, line: str, mv: Move, target: list[float], hint: ArcHint, write: Write) -> None: ...
-
-    # mv: what emitter.py declares; the bulk writer passes an ArcMove (_ArcView), all it reads
-    def _hint_is_sound(self, mv: Move, spec: ArcSpec, S: Sequence[float], E: Sequence[float]) -> bool: ...
 
 
 def last_index(present: BoolArray) -> IntArray:
@@ -397,7 +395,10 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
 
 def arc_moves(run: Run) -> list[tuple[int, RunMove]]:
     """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove)."""
-    return [(j, _row_move(run, j)) for j in run.arcs]
+    if not run.arcs:
+        return []
+    q1 = run.q1.tolist()  # the targets as tuples of floats, converted at once
+    return [(j, _row_move(run, j, tuple(q1[j - 1]) if j else run.q0, tuple(q1[j]))) for j in run.arcs]
 
 
 def finish_block(block: Block) -> None:
@@ -515,8 +516,9 @@ def _format(values: FloatArray, dout: IntArray, prefix: str = "") -> list[str]:
     return out
 
 
-def _row_move(run: Run, j: int) -> RunMove:
-    """Line ``j`` of a run (an index within it) as a RunMove, for the general emitter."""
+def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None) -> RunMove:
+    """Line ``j`` of a run (an index within it) as a RunMove, for the general emitter
+    (``q0``, ``q1``: its start and target, when the caller has them)."""
     blk = run.block
     y = run.a + j
     motion, feed = _modal_at(run, y)
@@ -525,9 +527,12 @@ def _row_move(run: Run, j: int) -> RunMove:
     elif motion is None:  # a run's first line names its motion when none is modal
         raise AssertionError(f"line {run.lineno + j} of a run without a motion")
     f = blk.cols[_F][y]
-    q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
-    mv = RunMove(run.lineno + j, motion, q0, tuple(run.q1[j].tolist()), run.r, run.shift, run.unit,
-                 run.arc_absolute, float(f) if f else feed)
+    if q0 is None:
+        q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
+    if q1 is None:
+        q1 = tuple(run.q1[j].tolist())
+    mv = RunMove(run.lineno + j, motion, q0, q1, run.r, run.shift, run.unit, run.arc_absolute,
+                 float(f) if f else feed)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
@@ -689,31 +694,31 @@ def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: 
     j = y - run.a
     hint = hints[run.trow + j]
     centre, cw = run.arcs[j]
-    view = _ArcView(Arc(centre, 170, cw, 1, (-1, -1), -1), run.unit, run.arc_absolute, run.shift)
     budget = corrector.opt.tolerance_mm * FIT_BUDGET
     ti, tj = blk.cols[9][y], blk.cols[11][y]
+    unit = run.unit
+    base = (run.shift[0], run.shift[1]) if run.arc_absolute else (S[0], S[1])
     if not named_edits:  # unchanged end words: the input's own arc words stay if they still pass
-        unit = run.unit
-        b1, b2 = (run.shift[0], run.shift[1]) if run.arc_absolute else (S[0], S[1])
-        c = (b1 + blk.ov[3][y] * unit, b2 + blk.ov[4][y] * unit)
+        view = _ArcView(Arc(centre, 170, cw, 1, (-1, -1), -1), unit, run.arc_absolute, run.shift)
+        c = (base[0] + blk.ov[3][y] * unit, base[1] + blk.ov[4][y] * unit)
         if hint.keep(view, S, E, c, hint.mismatch, budget) is None:
             return None
         return ti, tj, 0
-    spec = hint.spec(view, S, E, run.decimals, budget)
-    # emitter.py declares mv a Move; _hint_is_sound reads only the ArcMove part of it
-    if spec is None or not corrector._hint_is_sound(view, spec, S, E):  # type: ignore[arg-type]
+    # ArcHint.spec and Corrector._hint_is_sound in one
+    w = hint.words_xy(S, E, cw, run.decimals, unit, base, budget, SEGMENT_MIN_RADIUS_MM, MIN_ARC_SWEEP_RAD)
+    if w is None:
         return None
-    (_l1, t1), (_l2, t2) = spec["vals"]
+    w1, w2 = w
     count = 0
     if ti:
-        if float(ti) != float(t1):
-            ti, count = t1, count + 1
-    elif float(t1) != 0.0 or run.arc_absolute:
+        if blk.ovl[3][y] != w1:
+            ti, count = emit.fmt(w1, run.decimals), count + 1
+    elif w1 != 0.0 or run.arc_absolute:
         return None  # a centre word to add: the general emitter places it
     if tj:
-        if float(tj) != float(t2):
-            tj, count = t2, count + 1
-    elif float(t2) != 0.0 or run.arc_absolute:
+        if blk.ovl[4][y] != w2:
+            tj, count = emit.fmt(w2, run.decimals), count + 1
+    elif w2 != 0.0 or run.arc_absolute:
         return None
     return ti, tj, count
 

@@ -200,6 +200,76 @@ class ArcHint:
             return None
         return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound + mism, "mismatch": mism}
 
+    def words_xy(self, S: Sequence[float], E: Sequence[float], clockwise: bool, d: int, unit: float,
+                 base: tuple[float, float], budget: float, min_radius: float, min_sweep: float
+                 ) -> tuple[float, float] | None:
+        """:meth:`spec` and the controller-limit check after it in one (an arc in the XY
+        plane; ``base``: what the centre words are relative to, machine mm; ``min_radius``
+        and ``min_sweep`` those of :func:`postproc.gcode.segment.within_controller_limits`):
+        the values of the centre words ``spec`` writes (``float`` of their text), or None
+        where ``spec`` gives none or the controller would not cut that arc. The same
+        arithmetic as those, in the same order, without the objects they make."""
+        s1, s2, sn = S[0], S[1], S[2]
+        e1, e2, en = E[0], E[1], E[2]
+        dx, dy = e1 - s1, e2 - s2
+        hyp = math.hypot
+        L = hyp(dx, dy)
+        if L == 0.0:
+            return None
+        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+        n1, n2 = -dy / L, dx / L
+        t = (self.c1 - m1) * n1 + (self.c2 - m2) * n2
+        b1, b2 = base
+        step = 10.0 ** (-d)
+        agree = 0.5 * step * unit
+        v1 = round((m1 + t * n1 - b1) / unit, d)
+        v2 = round((m2 + t * n2 - b2) / unit, d)
+        # the first candidate, round(v + 0 * step, d), is v + 0.0 (v is rounded already)
+        w1, w2 = v1 + 0.0, v2 + 0.0
+        C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+        rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
+        mism = abs(rs - re)
+        if not mism <= agree:
+            for k1, k2 in _ORDER[1:]:
+                w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+                C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+                rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
+                mism = abs(rs - re)
+                if mism <= agree:
+                    break
+            else:
+                return None
+        # _bound
+        th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
+        turn = (th0 - th1) % TWO_PI if clockwise else (th1 - th0) % TWO_PI
+        sweep = -turn if clockwise else turn
+        if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
+            return None
+        moved = hyp(C1 - self.c1, C2 - self.c2)
+        u1, u2, un, x1, x2, xn = self.ends
+        rho = self.rho
+        bound = self.worst + moved + max(abs(rs - rho), abs(re - rho))
+        r_min = min(rs, re, rho)
+        if not r_min > 0.0:
+            return None
+        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - x1, e2 - x2))
+        dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
+        bound = bound + max(abs(sn - un), abs(en - xn)) + abs(en - sn) * dfrac
+        if not bound + mism <= budget:
+            return None
+        # within_controller_limits around the centre of the words as written (float of
+        # the text: -0.0 reads back 0.0, else the same centre, radii and sweep); S and E
+        # differ in the plane (L > 0)
+        if w1 == 0.0 or w2 == 0.0:
+            w1, w2 = w1 + 0.0, w2 + 0.0
+            c1, c2 = b1 + w1 * unit, b2 + w2 * unit
+            rs, re = hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)
+            t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
+            turn = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
+        if min(rs, re) < min_radius or not turn >= min_sweep:
+            return None
+        return w1, w2
+
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
              nominal_mismatch: float, budget: float) -> ArcSpec | None:
         """``{"form": "keep", "turns": 1}`` when the input's own arc words, around
@@ -474,11 +544,13 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     worst = np.full(k, -np.inf)
     np.maximum.at(worst, owner, dev)
     usable &= np.isfinite(worst) & np.isfinite(rho) & (worst <= budget)
-    for jj, (i, m, _arc) in enumerate(arcs_i):
-        if usable[jj]:
-            hints[i] = ArcHint(float(c1[jj]), float(c2[jj]), float(rho[jj]), float(worst[jj]), float(sweep[jj]),
-                               (float(S1[jj]), float(S2[jj]), float(Sn[jj]), float(E1[jj]), float(E2[jj]),
-                                float(En[jj])), None, float(abs(r1[jj] - r0[jj])))
-        else:
-            rest.append((i, m))
+    # the hints made from the arrays' rows as Python floats (tolist), all at once
+    sel = np.flatnonzero(usable)
+    rows = zip(*(x[sel].tolist() for x in (c1, c2, rho, worst, sweep, S1, S2, Sn, E1, E2, En, np.abs(r1 - r0))),
+               strict=True)
+    for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
+                                                                               rows, strict=True):
+        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
+    if len(sel) < k:
+        rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
     return ok_lines, hints, rest

@@ -1,0 +1,141 @@
+"""The run writer settles an arc's centre words as the general emitter does.
+
+The general emitter's decision is :meth:`ArcHint.spec` followed by the controller-limit
+check (:meth:`Corrector._hint_is_sound`); the run writer makes it in one call,
+:meth:`ArcHint.words_xy`. On many generated arcs (seeded), near every threshold the
+decision has (smallest radius and sweep, whole turns, ends that coincide in the plane, a
+bound about the budget, values that are not finite): the same words and the same
+refusals.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from postproc.gcode import emit, vplan
+from postproc.gcode.interp import Arc
+from postproc.gcode.pipeline import Corrector
+from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
+from postproc.gcode.state import PLANES
+
+
+class _View:
+    __slots__ = ("arc", "unit", "arc_absolute", "shift")
+
+    def __init__(self, arc, unit, arc_absolute, shift):
+        self.arc, self.unit, self.arc_absolute, self.shift = arc, unit, arc_absolute, shift
+
+
+def _case(rng, kind):
+    """One arc as the run writer sees it: the hint, the ends as written, the setup."""
+    unit = float(rng.choice([1.0, 25.4]))
+    d = int(rng.choice([3, 4])) if unit == 1.0 else int(rng.choice([4, 5]))
+    absolute = bool(rng.integers(2))
+    cw = bool(rng.integers(2))
+    budget = 0.95 * float(rng.choice([0.001, 0.005, 0.01]))
+    step = 10.0 ** -d * unit
+    r = float(rng.choice([0.002, 0.05, 0.5, 4.0, 40.0, 700.0]))
+    if kind == "small":  # about the controllers' smallest radius
+        r = MIN_ARC_RADIUS_MM * float(rng.uniform(0.9, 1.6))
+    cx, cy = rng.uniform(-300, 300, 2)
+    a0 = float(rng.uniform(-math.pi, math.pi))
+    sw = float(rng.choice([1e-4, 0.02, 0.3, 1.5, 3.0, 6.0]))
+    if r > 100:
+        sw = min(sw, 0.01)
+    if kind == "sweep":  # about the smallest sweep (on a large radius: a chord of a few steps), or a whole turn
+        if rng.integers(2):
+            r, sw = 700.0, MIN_ARC_SWEEP_RAD * float(rng.uniform(0.5, 2.0))
+        else:
+            sw = 2 * math.pi - float(rng.uniform(0, 1e-5))
+    a1 = a0 - sw if cw else a0 + sw
+    z0 = float(rng.uniform(-50, 50))
+    z1 = z0 + float(rng.choice([0.0, 0.0, rng.uniform(-2, 2)]))
+    # written ends: the corrected ends rounded to the words' decimals
+    S = [round((cx + r * math.cos(a0)) / unit, d) * unit, round((cy + r * math.sin(a0)) / unit, d) * unit,
+         round(z0 / unit, d) * unit]
+    E = [round((cx + r * math.cos(a1)) / unit, d) * unit, round((cy + r * math.sin(a1)) / unit, d) * unit,
+         round(z1 / unit, d) * unit]
+    if kind == "flat":  # the ends coincide in the plane
+        E[0], E[1] = S[0], S[1]
+    # the hint: the fitted centre near the true one moved onto the bisector of the ends
+    # (as the planner fits it), the corrected ends near the written ones
+    L = math.hypot(E[0] - S[0], E[1] - S[1])
+    if L > 0:
+        m1, m2 = 0.5 * (S[0] + E[0]), 0.5 * (S[1] + E[1])
+        n1, n2 = -(E[1] - S[1]) / L, (E[0] - S[0]) / L
+        t = (cx - m1) * n1 + (cy - m2) * n2
+        cx, cy = m1 + t * n1, m2 + t * n2
+    noise = float(rng.choice([0.0, 1e-6, 1e-4, step]))
+    c1, c2 = cx + rng.normal(0, noise + 1e-12), cy + rng.normal(0, noise + 1e-12)
+    rho = math.hypot(S[0] - c1, S[1] - c2)
+    worst = float(rng.uniform(0, budget))
+    if kind == "budget":  # the bound about the budget
+        worst = budget - float(rng.uniform(0, 2 * step))
+    ends = tuple(float(v + rng.normal(0, step / 3)) for v in (*S, *E))
+    nsweep = -sw if cw else sw
+    mismatch = float(rng.choice([0.0, 1e-5, step]))
+    hint = vplan.ArcHint(c1, c2, rho, worst, nsweep, ends, None, mismatch)
+    if kind == "nan":
+        S[int(rng.integers(3))] = math.nan
+    shift = (float(rng.choice([0.0, -0.0, 12.5])), float(rng.choice([0.0, 7.25])), 100.0)
+    base = (shift[0], shift[1]) if absolute else (S[0], S[1])
+    # the input's own centre words (for the arcs kept): the nominal centre as read
+    gi, gj = round((cx - base[0]) / unit, d), round((cy - base[1]) / unit, d)
+    keep = kind == "keep"
+    return hint, S, E, cw, d, unit, absolute, shift, base, budget, keep, (gi, gj)
+
+
+def _reference(case):
+    """The per-arc decision: (I, J) values of the words written, or None."""
+    hint, S, E, cw, d, unit, absolute, shift, base, budget, keep, (gi, gj) = case
+    view = _View(Arc((0.0, 0.0, 0.0), 170, cw, 1, (-1, -1), -1), unit, absolute, shift)
+    if keep:
+        c = (base[0] + gi * unit, base[1] + gj * unit)
+        return None if hint.keep(view, S, E, c, hint.mismatch, budget) is None else (gi, gj)
+    spec = hint.spec(view, S, E, d, budget)
+    if spec is None or not Corrector._hint_is_sound(None, view, spec, S, E):  # type: ignore[arg-type]
+        return None
+    (_l1, t1), (_l2, t2) = spec["vals"]
+    assert (t1, t2) == (emit.fmt(float(t1), d), emit.fmt(float(t2), d))
+    return float(t1), float(t2)
+
+
+KINDS = ["plain"] * 6 + ["small", "sweep", "flat", "budget", "nan", "keep"]
+
+
+def _cases(seed, n):
+    rng = np.random.default_rng(seed)
+    return [_case(rng, KINDS[i % len(KINDS)]) for i in range(n)]
+
+
+def _same(a, b):
+    """Equal decisions: both None, or the same word values (bit for bit but the sign of zero,
+    which the words' text does not keep)."""
+    if a is None or b is None:
+        return a is None and b is None
+    return a[0] == b[0] and a[1] == b[1]
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_words_xy_is_spec_and_the_controller_check(seed):
+    taken = refused = 0
+    for case in _cases(seed, 1200):
+        hint, S, E, cw, d, unit, _absolute, _shift, base, budget, keep, _g = case
+        if keep:
+            continue
+        ref = _reference(case)
+        got = hint.words_xy(S, E, cw, d, unit, base, budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD)
+        assert _same(got, ref), (case, got, ref)
+        if got is not None:
+            assert emit.fmt(got[0], d) == emit.fmt(ref[0], d)
+            assert emit.fmt(got[1], d) == emit.fmt(ref[1], d)
+        taken += ref is not None
+        refused += ref is None
+    assert taken > 200
+    assert refused > 200
+
+
+def test_plane_of_the_run_writer_is_xy():
+    # words_xy and the run writer read axes 0 and 1 as the plane, 2 as its normal
+    assert PLANES[170][0] == (0, 1, 2)
