@@ -4,7 +4,7 @@ or fails with a PostprocError naming its place (never a traceback)."""
 from pathlib import Path
 
 import pytest
-from conftest import ALL_OFFSETS, ALL_TOOLS, BIG, CORPUS_START, corpus_setup
+from conftest import ALL_OFFSETS, ALL_TOOLS, BIG, CORPUS_START, corpus_programs, corpus_setup
 
 from postproc.engine.identity import IdentityEngine
 from postproc.errors import PostprocError
@@ -19,9 +19,9 @@ EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 
 def _files():
     files = sorted(p for p in (ROOT / "samples").rglob("*") if p.suffix.lower() in EXTS)
-    if CORPUS.is_dir():
-        files += sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS)
-    return files
+    # every corpus program with POSTPROC_FULL_CORPUS=1, else a subset naming every
+    # construct, source and suffix they name (conftest.representative)
+    return files + corpus_programs()
 
 
 def strip_header(text: str) -> str:
@@ -57,7 +57,7 @@ def test_the_corpus_is_mostly_corrected_not_refused():
     if not CORPUS.is_dir():
         pytest.skip("no shared corpus")
     ok, refused = [], []
-    for path in sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS):
+    for path in corpus_programs():
         text = path.read_bytes().decode("utf-8", errors="surrogateescape")
         try:
             correct_text(text, IdentityEngine(BIG), corpus_setup(path))
