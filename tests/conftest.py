@@ -324,14 +324,15 @@ def _corpus_index() -> dict[Path, tuple[frozenset[str], int, int]]:
     return {p: program_features(p) for p in paths}
 
 
-def representative(paths: list[Path]) -> list[Path]:
+def representative(paths: list[Path], every_below: int = 0) -> list[Path]:
     """A deterministic subset of ``paths`` that names every construct they name at least
     once: each source folder, file suffix, G and M code, parameters (numbered, named),
     O-words (each kind), expressions (each function and operator), R words, CRLF, non-ASCII bytes, lower case, ; comments, % lines, and a length over each
-    chunk size; with the programs that need a start position (CORPUS_START). Chosen
-    greedily, most new constructs per line first, so that short programs are preferred."""
+    chunk size; with the programs that need a start position (CORPUS_START) and every
+    program of fewer than ``every_below`` lines. Chosen greedily, most new constructs per
+    line first, so that short programs are preferred."""
     left = {p: program_features(p) for p in paths}
-    chosen = [p for p in paths if p.name in CORPUS_START]
+    chosen = [p for p in paths if p.name in CORPUS_START or left[p][1] < every_below]
     covered: set[str] = set().union(*(left.pop(p)[0] for p in chosen))
     wanted: set[str] = covered.union(*(f for f, _, _ in left.values()))
     while covered != wanted:
@@ -342,11 +343,12 @@ def representative(paths: list[Path]) -> list[Path]:
 
 
 def corpus_programs(*, max_lines: int | None = None, max_bytes: int | None = None,
-                    keep=None) -> list[Path]:
+                    keep=None, every_below: int = 0) -> list[Path]:
     """The corpus programs a test runs (empty without ../shared/corpus): those within
     ``max_lines`` / ``max_bytes`` for which ``keep(path)`` holds; all of them with
-    POSTPROC_FULL_CORPUS=1, else their :func:`representative` subset."""
+    POSTPROC_FULL_CORPUS=1, else their :func:`representative` subset (which keeps every
+    one of fewer than ``every_below`` lines)."""
     paths = [p for p, (_, lines, size) in _corpus_index().items()
              if (max_lines is None or lines <= max_lines) and (max_bytes is None or size <= max_bytes)
              and (keep is None or keep(p))]
-    return paths if FULL_CORPUS else representative(paths)
+    return paths if FULL_CORPUS else representative(paths, every_below)

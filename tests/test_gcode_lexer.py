@@ -20,9 +20,10 @@ def _program_files():
     files = sorted((ROOT / "samples").glob("*.*"))
     if CORPUS.is_dir():
         corpus = sorted(p for p in CORPUS.rglob("*") if p.is_file() and p.name != "README.md")
-        # every file with POSTPROC_FULL_CORPUS=1, else a subset naming every construct,
-        # source and suffix they name (conftest.representative)
-        files += corpus if FULL_CORPUS else representative(corpus)
+        # every file with POSTPROC_FULL_CORPUS=1, else every one under 2000 lines and of
+        # the longer ones a subset naming every construct, source and suffix they name
+        # (conftest.representative)
+        files += corpus if FULL_CORPUS else representative(corpus, every_below=2_000)
     return files
 
 
