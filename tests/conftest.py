@@ -4,7 +4,10 @@ the distances the path checks use."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +27,10 @@ ROOT = Path(__file__).parents[1]
 SAMPLES = ROOT / "samples"
 SHARED = ROOT.parent / "shared"  # corpus and benchmark generator; tests that need them skip without
 CORPUS = SHARED / "corpus"
+CORPUS_EXTS = frozenset({".nc", ".ngc", ".tap", ".gcode"})
+#: POSTPROC_FULL_CORPUS=1 runs the corpus tests on every program of ../shared/corpus
+#: (minutes); by default they run on the representative subset of corpus_programs().
+FULL_CORPUS = os.environ.get("POSTPROC_FULL_CORPUS", "") not in ("", "0")
 
 # -- the smooth test machine of the tangential engines and its measurements --------
 SIDE_MM = 315.0
@@ -267,3 +274,81 @@ def ideal_vs_emitted(original: str, corrected: str, engine, setup: Setup) -> flo
     there, _ = Polyline(ideal, feed_i[1:]).nearest(emitted[feed_o])
     back, _ = Polyline(emitted, feed_o[1:]).nearest(ideal[feed_i])
     return float(max(there.max(), back.max()))
+
+
+# -- the corpus programs a test runs -----------------------------------------------
+_CODE = re.compile(rb"([GM]) ?0*(\d+(?:\.\d)?)")
+_LOWER = re.compile(rb"[gxyz] ?-?[.\d]")
+_R_WORD = re.compile(rb"[^A-Z(]R ?[-+.\d]")
+_O_WORD = re.compile(rb"O ?(?:<[^>\n]*>|\d+) ?(SUB|ENDSUB|CALL|RETURN|DO|WHILE|ENDWHILE|IF|ELSEIF|ELSE|ENDIF|"
+                     rb"REPEAT|ENDREPEAT|BREAK|CONTINUE)")
+_OPERATOR = re.compile(rb"(ATAN|ASIN|ACOS|SIN|COS|TAN|SQRT|ABS|FIX|FUP|ROUND|EXISTS|LN|EXP) ?\[|"
+                       rb"[^A-Z](MOD|EQ|NE|GT|GE|LT|LE|AND|OR|XOR)[^A-Z]")
+#: constructs are read from each program's first bytes (the whole of all but the largest)
+_SCAN_BYTES = 1 << 17
+#: program lengths that span several chunks of the pipeline (SEGMENTED_CHUNK_LINES,
+#: DEFAULT_CHUNK_LINES): a subset keeps a program over each that the test allows
+_CHUNK_LINES = (2_000, 20_000)
+
+
+@functools.cache
+def program_features(path: Path) -> tuple[frozenset[str], int, int]:
+    """(the constructs a program names, its lines, its bytes)."""
+    raw = path.read_bytes()
+    head = raw[:_SCAN_BYTES]
+    upper = head.upper()
+    lines = raw.count(b"\n")
+    feats = {f"source {path.parent.name}", f"suffix {path.suffix.lower()}"}
+    feats.update((c + n).decode() for c, n in _CODE.findall(upper))
+    feats.update(f"over {n} lines" for n in _CHUNK_LINES if lines > n)
+    if b"#" in head:  # O-word kinds and expression operators
+        feats.update(f"O-word {k.decode()}" for k in _O_WORD.findall(upper))
+        feats.update(f"operator {(a or b).decode()}" for a, b in _OPERATOR.findall(upper))
+    markers = {
+        "parameter": b"#" in head, "named parameter": b"#<" in head, "O-word": upper.startswith(b"O") or b"\nO" in upper,
+        "expression": b"[" in head, "R word": _R_WORD.search(upper) is not None,
+        "CRLF": b"\r\n" in head, "non-ASCII": not raw.isascii(),
+        "lower case": _LOWER.search(head) is not None, "; comment": b";" in head,
+        "% line": head.startswith(b"%") or b"\n%" in head,
+    }
+    feats.update(name for name, present in markers.items() if present)
+    return frozenset(feats), lines, len(raw)
+
+
+@functools.lru_cache(maxsize=1)
+def _corpus_index() -> dict[Path, tuple[frozenset[str], int, int]]:
+    """Every corpus program (by suffix) with its :func:`program_features`."""
+    if not CORPUS.is_dir():
+        return {}
+    paths = sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in CORPUS_EXTS and p.is_file())
+    return {p: program_features(p) for p in paths}
+
+
+def representative(paths: list[Path], every_below: int = 0) -> list[Path]:
+    """A deterministic subset of ``paths`` that names every construct they name at least
+    once: each source folder, file suffix, G and M code, parameters (numbered, named),
+    O-words (each kind), expressions (each function and operator), R words, CRLF, non-ASCII bytes, lower case, ; comments, % lines, and a length over each
+    chunk size; with the programs that need a start position (CORPUS_START) and every
+    program of fewer than ``every_below`` lines. Chosen greedily, most new constructs per
+    line first, so that short programs are preferred."""
+    left = {p: program_features(p) for p in paths}
+    chosen = [p for p in paths if p.name in CORPUS_START or left[p][1] < every_below]
+    covered: set[str] = set().union(*(left.pop(p)[0] for p in chosen))
+    wanted: set[str] = covered.union(*(f for f, _, _ in left.values()))
+    while covered != wanted:
+        best = max(left, key=lambda p: (len(left[p][0] - covered) / (left[p][1] + 50), -left[p][1], str(p)))
+        chosen.append(best)
+        covered |= left.pop(best)[0]
+    return sorted(chosen)
+
+
+def corpus_programs(*, max_lines: int | None = None, max_bytes: int | None = None,
+                    keep=None, every_below: int = 0) -> list[Path]:
+    """The corpus programs a test runs (empty without ../shared/corpus): those within
+    ``max_lines`` / ``max_bytes`` for which ``keep(path)`` holds; all of them with
+    POSTPROC_FULL_CORPUS=1, else their :func:`representative` subset (which keeps every
+    one of fewer than ``every_below`` lines)."""
+    paths = [p for p, (_, lines, size) in _corpus_index().items()
+             if (max_lines is None or lines <= max_lines) and (max_bytes is None or size <= max_bytes)
+             and (keep is None or keep(p))]
+    return paths if FULL_CORPUS else representative(paths, every_below)

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import landing_error, polyline_distance
+from conftest import corpus_programs, landing_error, polyline_distance
 
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.engine.static import StaticEngine
@@ -182,10 +182,9 @@ CORPUS_MAX_LINES = 600
 
 
 def _corpus_files():
-    if not CORPUS.is_dir():
-        return []
-    files = sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in {".nc", ".ngc", ".tap", ".gcode"})
-    return [p for p in files if p.read_bytes().count(b"\n") <= CORPUS_MAX_LINES]
+    # every one with POSTPROC_FULL_CORPUS=1, else a subset naming every construct, source
+    # and suffix they name (conftest.representative)
+    return corpus_programs(max_lines=CORPUS_MAX_LINES)
 
 
 @pytest.mark.parametrize("path", _corpus_files(), ids=lambda p: p.name)

@@ -4,7 +4,7 @@ or fails with a PostprocError naming its place (never a traceback)."""
 from pathlib import Path
 
 import pytest
-from conftest import ALL_OFFSETS, ALL_TOOLS, BIG, CORPUS_START, corpus_setup
+from conftest import ALL_OFFSETS, ALL_TOOLS, BIG, CORPUS_START, corpus_programs, corpus_setup
 
 from postproc.engine.identity import IdentityEngine
 from postproc.errors import PostprocError
@@ -15,13 +15,16 @@ from postproc.gcode.pipeline import CorrectOptions, correct_text
 ROOT = Path(__file__).parents[1]
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 EXTS = {".nc", ".ngc", ".tap", ".gcode"}
+# Every corpus program shorter than this runs (the refusals are found among them: each
+# kind of refusal the corpus gives has a program this short); of the longer ones, a
+# subset naming every construct, source and suffix they name. All of them with
+# POSTPROC_FULL_CORPUS=1 (conftest.corpus_programs).
+EVERY_BELOW_LINES = 2_000
 
 
 def _files():
     files = sorted(p for p in (ROOT / "samples").rglob("*") if p.suffix.lower() in EXTS)
-    if CORPUS.is_dir():
-        files += sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS)
-    return files
+    return files + corpus_programs(every_below=EVERY_BELOW_LINES)
 
 
 def strip_header(text: str) -> str:
@@ -57,7 +60,7 @@ def test_the_corpus_is_mostly_corrected_not_refused():
     if not CORPUS.is_dir():
         pytest.skip("no shared corpus")
     ok, refused = [], []
-    for path in sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS):
+    for path in corpus_programs(every_below=EVERY_BELOW_LINES):
         text = path.read_bytes().decode("utf-8", errors="surrogateescape")
         try:
             correct_text(text, IdentityEngine(BIG), corpus_setup(path))

@@ -65,9 +65,9 @@ def test_every_command_has_help_with_an_example(name, cmd):
 def test_readme_quick_start_commands():
     text = README.read_text(encoding="utf-8")
     ci = (Path(__file__).parents[1] / ".ci" / "run").read_text()
-    test_cmd = 'pip install -e ".[test]" && python3 -m pytest -q -p no:cacheprovider'
+    test_cmd = 'pip install -e ".[test]" && python3 -m pytest -q -p no:cacheprovider -n auto'
     assert test_cmd in text
-    assert 'python3 -m pip install --quiet -e ".[test]" && python3 -m pytest -q -p no:cacheprovider' in ci
+    assert 'python3 -m pip install --quiet -e ".[test]" && python3 -m pytest -q -p no:cacheprovider -n auto' in ci
     m = re.search(r"pip install -e \. && postproc correct (\S+) -c (\S+) -o (\S+)", text)
     assert m, "README has no install-and-correct command"
     for path in m.group(1, 2):

@@ -19,6 +19,7 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import FULL_CORPUS, representative
 from oracle import requires_rs274, run_rs274, same_motions
 
 from postproc.errors import PostprocError
@@ -62,6 +63,9 @@ def _programs() -> list[Path]:
 
 
 PROGRAMS = _programs()
+# every one with POSTPROC_FULL_CORPUS=1, else a subset naming every construct, source and
+# suffix they name (conftest.representative)
+RUN = PROGRAMS if FULL_CORPUS else representative(PROGRAMS)
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +95,7 @@ def test_corpus_has_programs_to_expand():
 
 @requires_rs274
 @pytest.mark.skipif(not CORPUS.is_dir(), reason="../shared/corpus is absent")
-@pytest.mark.parametrize("path", PROGRAMS, ids=[p.name[-40:] for p in PROGRAMS])
+@pytest.mark.parametrize("path", RUN, ids=[p.name[-40:] for p in RUN])
 def test_corpus_program_expands_like_linuxcnc(path, subroutines):
     sub_dir, rs_files = subroutines
     text = _read(path)

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import corpus_programs
 
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
@@ -25,9 +26,11 @@ def _files():
     files += sorted((ROOT / "tests" / "cases").glob("*.nc"))
     if CORPUS.is_dir():
         # the longer ones take minutes each; generated programs of every shape are
-        # compared in test_gcode_bulk.py
-        files += sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in {".nc", ".ngc", ".tap"}
-                        and p.read_bytes().count(b"\n") <= CORPUS_MAX_LINES)
+        # compared in test_gcode_bulk.py; every one within the limit with
+        # POSTPROC_FULL_CORPUS=1, else a subset naming every construct, source and suffix
+        # they name (conftest.representative)
+        files += corpus_programs(max_lines=CORPUS_MAX_LINES,
+                                 keep=lambda p: p.suffix.lower() in {".nc", ".ngc", ".tap"})
     return files
 
 

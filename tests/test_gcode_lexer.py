@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import pytest
+from conftest import FULL_CORPUS, representative
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,7 +19,11 @@ GCODE_ALPHABET = "GXYZIJKRFNMSTOPgxyz0123456789.+- \t()%;/#[]=*<>\r\n@^"
 def _program_files():
     files = sorted((ROOT / "samples").glob("*.*"))
     if CORPUS.is_dir():
-        files += sorted(p for p in CORPUS.rglob("*") if p.is_file() and p.name != "README.md")
+        corpus = sorted(p for p in CORPUS.rglob("*") if p.is_file() and p.name != "README.md")
+        # every file with POSTPROC_FULL_CORPUS=1, else every one under 2000 lines and of
+        # the longer ones a subset naming every construct, source and suffix they name
+        # (conftest.representative)
+        files += corpus if FULL_CORPUS else representative(corpus, every_below=2_000)
     return files
 
 

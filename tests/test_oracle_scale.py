@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import polyline_distance
+from conftest import corpus_programs, polyline_distance
 from oracle import RS274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
 
 from postproc.engine.static import StaticEngine
@@ -37,14 +37,14 @@ KNOWN_DEFECTS: dict[str, str] = {}
 
 def _programs():
     files = sorted(p for p in (ROOT / "samples").rglob("*") if p.suffix.lower() in EXTS)
-    if CORPUS.is_dir():
-        files += sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in EXTS)
+    files = [p for p in files if p.read_bytes().count(b"\n") <= MAX_LINES]
+    # every corpus program with POSTPROC_FULL_CORPUS=1, else a subset naming every
+    # construct, source and suffix they name (conftest.representative)
+    files += corpus_programs(max_lines=MAX_LINES)
     out = []
     for p in files:
-        with open(p, "rb") as fh:
-            if sum(1 for _ in fh) <= MAX_LINES:
-                reason = KNOWN_DEFECTS.get(p.name)
-                out.append(pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=reason)) if reason else p)
+        reason = KNOWN_DEFECTS.get(p.name)
+        out.append(pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=reason)) if reason else p)
     return out
 
 
