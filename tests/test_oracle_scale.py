@@ -24,7 +24,7 @@ ROOT = Path(__file__).parents[1]
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 K = 1.0002
-MAX_LINES = 10_000  # longer corpus programs: benchmarks/corpus_survey.py --oracle
+MAX_LINES = 10_000  # longer corpus programs are not run through the oracle here (rs274 takes minutes on them)
 _CANON = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED|ARC_FEED|SET_G5X_OFFSET|SET_G92_OFFSET|"
                     r"USE_TOOL_LENGTH_OFFSET)\(([^)]*)\)")
 
