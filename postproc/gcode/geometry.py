@@ -52,10 +52,30 @@ def arc_points(arc: Arc, q0, q1, s: np.ndarray, params=None) -> np.ndarray:
     return out
 
 
-def arc_length(arc: Arc, q0, q1) -> float:
-    (a1, a2, an), _t0, sweep, r0, r1 = arc_params(arc, q0, q1)
+def arc_length(arc: Arc, q0, q1, params=None) -> float:
+    """Length of the arc (``params``: its :func:`arc_params`, when already known)."""
+    (a1, a2, an), _t0, sweep, r0, r1 = params or arc_params(arc, q0, q1)
     planar = abs(sweep) * 0.5 * (r0 + r1)
     return math.hypot(planar, q1[an] - q0[an])
+
+
+def arcs_points(owner: np.ndarray, s: np.ndarray, axes: np.ndarray, t0: np.ndarray, sweep: np.ndarray,
+                r0: np.ndarray, r1: np.ndarray, centre: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Points (len(s), 3) of many arcs at once: sample j on arc ``owner[j]`` at parameter
+    ``s[j]``. Per arc: ``axes`` (k, 3) the plane axes and the normal axis, ``t0``,
+    ``sweep``, ``r0``, ``r1`` (k,) as :func:`arc_params` gives them, ``centre``, ``q0``,
+    ``q1`` (k, 3). Element by element the operations of :func:`arc_points`, so each point
+    is the one it gives."""
+    th = t0[owner] + s * sweep[owner]
+    rad = r0[owner] + (r1 - r0)[owner] * s
+    out = np.empty((len(s), 3))
+    idx = np.arange(len(s))
+    ax = axes[owner]
+    a1, a2, an = ax[:, 0], ax[:, 1], ax[:, 2]
+    out[idx, a1] = centre[owner, a1] + rad * np.cos(th)
+    out[idx, a2] = centre[owner, a2] + rad * np.sin(th)
+    out[idx, an] = q0[owner, an] + (q1 - q0)[owner, an] * s
+    return out
 
 
 def line_points(q0, q1, s: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ from postproc.gcode.directions import (
 )
 from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
-from postproc.gcode.geometry import arc_length, arc_params, arc_points, line_points
+from postproc.gcode.geometry import arc_length, arc_params, arc_points, arcs_points, line_points
 from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
@@ -779,13 +779,10 @@ class Corrector(EmitterMixin):
             else:
                 prm = arc_prm[i]
                 (a1, a2, _an), _t0, sweep, _r0, _r1 = prm
-                length = arc_length(arc, m.q0, m.q1)
+                length = arc_length(arc, m.q0, m.q1, prm)
                 cuts = [0.0, *breaks[i].tolist(), 1.0]
-                ss = []
-                for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
-                    n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
-                            math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
-                    ss.append(np.linspace(sa, sb, n)[1:])
+                ss = [np.linspace(sa, sb, _arc_piece_samples(sb - sa, length, sweep))[1:]
+                      for sa, sb in zip(cuts[:-1], cuts[1:], strict=True)]
                 ends = arc_points(arc, m.q0, m.q1, np.array(cuts), prm)
                 dd = np.diff(ends, axis=0)
                 dr = np.where(np.abs(dd) > 1e-12, np.sign(dd), D[i])  # each quarter's own direction
@@ -1249,25 +1246,23 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: d
     n_l: list[int] = []
     piece_move: list[int] = []
     arc_piece: list[int] = []  # per piece: its arc's index in arc_rows, or -1 for a line
-    arc_rows: list[tuple[Arc, ArcParams, tuple[float, ...], tuple[float, ...]]] = []
+    arc_rows: list[tuple[ArcParams, Sequence[float], Sequence[float], Sequence[float]]] = []  # prm, q0, q1, centre
     pieces_of: list[list[tuple[int, int, int]]] = []
     total = 0
     for i, m in planned:
         own: list[tuple[int, int, int]] = []
         if m.arc is not None:
-            arc = m.arc
             prm = arc_prm[i]
-            (_a1, _a2, an), t0, sweep, r0, r1 = prm
-            length = math.hypot(abs(sweep) * 0.5 * (r0 + r1), m.q1[an] - m.q0[an])  # geometry.arc_length
+            _axes, t0, sweep, _r0, _r1 = prm
+            length = arc_length(m.arc, m.q0, m.q1, prm)
             br = breaks.get(i)
             if br is None:
                 br = breaks[i] = quadrant_breaks(t0, sweep)
             cuts = [0.0, *br.tolist(), 1.0]
             k = len(arc_rows)
-            arc_rows.append((arc, prm, tuple(m.q0), tuple(m.q1)))
+            arc_rows.append((prm, m.q0, m.q1, m.arc.center))
             for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
-                n = max(ARC_CHECK_MIN_SAMPLES, math.ceil((sb - sa) * length / SAMPLE_STEP_MM) + 1,
-                        math.ceil((sb - sa) * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
+                n = _arc_piece_samples(sb - sa, length, sweep)
                 own.append((len(n_l), total, total + n))
                 sa_l.append(sa)
                 sb_l.append(sb)
@@ -1312,9 +1307,16 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: d
     bulge = np.zeros((len(j), 3))
     arc_smp = np.flatnonzero(ap[owner_piece] >= 0)
     if len(arc_smp):
+        axes = np.array([prm[0] for prm, _q0, _q1, _c in arc_rows], dtype=int)
+        t0s, sweeps, r0s, r1s = (np.array([prm[f] for prm, _q0, _q1, _c in arc_rows]) for f in (1, 2, 3, 4))
+        q0s, q1s, centres = (np.array([row[f] for row in arc_rows], dtype=float) for f in (1, 2, 3))
+
+        def arc_nominal(which: IntArray, at: FloatArray) -> FloatArray:
+            return arcs_points(which, at, axes, t0s, sweeps, r0s, r1s, centres, q0s, q1s)
+
         arc_mid = np.flatnonzero(ap[owner_mid] >= 0)
-        mid = _arc_nominal(arc_rows, ap[owner_mid[arc_mid]], s_mid[arc_mid])
-        nom[arc_smp] = _arc_nominal(arc_rows, ap[owner_piece[arc_smp]], s[arc_smp])
+        mid = arc_nominal(ap[owner_mid[arc_mid]], s_mid[arc_mid])
+        nom[arc_smp] = arc_nominal(ap[owner_piece[arc_smp]], s[arc_smp])
         jm = j[arc_mid]
         bulge[arc_mid] = mid - 0.5 * (nom[jm] + nom[jm + 1])
     # directions: an arc piece's chord signs, an axis that stands carried from the piece
@@ -1335,29 +1337,12 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: d
     return _Sampled(s, nom, bulge, dirs, counts, piece_move, pieces_of)
 
 
-def _arc_nominal(arcs: list[tuple[Arc, ArcParams, tuple[float, ...], tuple[float, ...]]], which: IntArray,
-                 s: FloatArray) -> FloatArray:
-    """Points (len(s), 3) of arcs ``arcs[which]`` at parameters ``s``: arc_points'
-    operations element by element (angle t0 + s sweep, radius r0 + (r1 - r0) s about
-    the centre, the normal axis q0 + (q1 - q0) s)."""
-    t0 = np.array([prm[1] for _a, prm, _q0, _q1 in arcs])[which]
-    sweep = np.array([prm[2] for _a, prm, _q0, _q1 in arcs])[which]
-    r0 = np.array([prm[3] for _a, prm, _q0, _q1 in arcs])[which]
-    dr = np.array([prm[4] - prm[3] for _a, prm, _q0, _q1 in arcs])[which]
-    th = t0 + s * sweep
-    rad = r0 + dr * s
-    cos, sin = rad * np.cos(th), rad * np.sin(th)
-    out = np.empty((len(s), 3))
-    axes = np.array([prm[0] for _a, prm, _q0, _q1 in arcs], dtype=int).reshape(-1, 3)[which]
-    centre = np.array([arc.center for arc, _p, _q0, _q1 in arcs], dtype=float).reshape(-1, 3)[which]
-    q0 = np.array([q0 for _a, _p, q0, _q1 in arcs], dtype=float).reshape(-1, 3)[which]
-    dq = np.array([[q1[k] - q0[k] for k in range(3)] for _a, _p, q0, q1 in arcs], dtype=float).reshape(-1, 3)[which]
-    idx = np.arange(len(s))
-    a1, a2, an = axes[:, 0], axes[:, 1], axes[:, 2]
-    out[idx, a1] = centre[idx, a1] + cos
-    out[idx, a2] = centre[idx, a2] + sin
-    out[idx, an] = q0[idx, an] + dq[idx, an] * s
-    return out
+def _arc_piece_samples(span: float, length: float, sweep: float) -> int:
+    """Samples of an arc piece spanning ``span`` of the arc's parameter (``length``,
+    ``sweep``: the whole arc's): at least every SAMPLE_STEP_MM and ARC_CHECK_STEP_RAD,
+    and ARC_CHECK_MIN_SAMPLES at least."""
+    return max(ARC_CHECK_MIN_SAMPLES, math.ceil(span * length / SAMPLE_STEP_MM) + 1,
+               math.ceil(span * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
 
 
 def _given(plan: Plan) -> Callable[[], Plan]:

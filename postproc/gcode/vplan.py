@@ -47,6 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from postproc.gcode import emit
+from postproc.gcode.geometry import arcs_points
 from postproc.gcode.state import PLANES
 
 if TYPE_CHECKING:
@@ -439,17 +440,10 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     s_m = (mp + 0.5) / (na[mo] - 1)
     centre = np.array([arc.center for _i, _m, arc in arcs_i], dtype=float).reshape(-1, 3)
 
+    q0_a, q1_a = Q0[ai], Q1[ai]
+
     def arc_nominal(owner: IntArray, s: FloatArray) -> FloatArray:
-        out = np.empty((len(s), 3))
-        th = t0[owner] + s * sweep[owner]
-        rad = r0[owner] + (r1 - r0)[owner] * s
-        rows = ai[owner]
-        for k in range(3):
-            sel1, sel2, seln = axes[owner, 0] == k, axes[owner, 1] == k, axes[owner, 2] == k
-            out[sel1, k] = centre[owner[sel1], k] + rad[sel1] * np.cos(th[sel1])
-            out[sel2, k] = centre[owner[sel2], k] + rad[sel2] * np.sin(th[sel2])
-            out[seln, k] = Q0[rows[seln], k] + (Q1[rows[seln], k] - Q0[rows[seln], k]) * s[seln]
-        return out
+        return arcs_points(owner, s, axes, t0, sweep, r0, r1, centre, q0_a, q1_a)
 
     nom_a = arc_nominal(ao, s_a)
     lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm, curvature, budget - rounding)
