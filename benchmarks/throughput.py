@@ -154,10 +154,10 @@ def main() -> None:
         small = tmp / "job20.nc"
         n20 = gencam(20, small, args.seed)
         for cal in (STATIC, PARAMETRIC):  # untimed: compiles what the timed cases import
-            run_child([py, "-m", "postproc", "correct", str(small), "-c", str(cal), "-o", str(tmp / "warm.nc"),
+            run_child([*cli, "correct", str(small), "-c", str(cal), "-o", str(tmp / "warm.nc"),
                        *SETUP], log)
-        run_child([py, "-m", "postproc", "diff", str(small), str(tmp / "warm.nc")], log)
-        run_child([py, "-m", "postproc", "--help"], log)
+        run_child([*cli, "diff", str(small), str(tmp / "warm.nc")], log)
+        run_child([*cli, "--help"], log)
         src = tmp / "gencam.nc"
         t0 = time.perf_counter()
         n = gencam(args.lines, src, args.seed)
