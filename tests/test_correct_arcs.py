@@ -22,7 +22,7 @@ from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
-from postproc.gcode.segment import arc_candidates, within_controller_limits
+from postproc.gcode.segment import arc_candidates
 from postproc.simulate.machine import load_machine
 from postproc.simulate.program import verify_program
 
@@ -311,6 +311,8 @@ def test_arc_candidates_with_controller_limits_refuse_zero_radius_and_flat_arcs(
 
 
 def test_a_bulk_planned_arc_is_held_to_the_controller_limits():
+    from arcwords_reference import spec as spec_without_limits
+
     from postproc.gcode.vplan import ArcHint
 
     # a chord of 0.3 um: the bulk planner's circle through the ends, fitted to rounding
@@ -321,19 +323,25 @@ def test_a_bulk_planned_arc_is_held_to_the_controller_limits():
     mv = interp.feed_line(2, "G3 X10.0003 Y10 I0.00015 J0.0005\n")
     S, E = [10.0, 10.0, 0.0], [10.0003, 10.0, 0.0]
     far = ArcHint(10.00015, 10.0 + 6e6, 6e6, 0.0, 5e-11, (10.0, 10.0, 0.0, 10.0003, 10.0, 0.0), None)
-    spec = far.spec(mv, S, E, 4, 0.00095)
-    assert spec is not None
-    centre = (S[0] + float(spec["vals"][0][1]), S[1] + float(spec["vals"][1][1]))
-    assert not within_controller_limits(S, E, centre, (0, 1, 2), False)
-    # limits by hand: radius 0.0013 mm passes, 0.0012 mm does not; a sweep of 2e-5 rad
-    # passes, 5e-6 rad does not; a full circle (S == E) passes
+    assert spec_without_limits(far, mv, S, E, 4, 0.00095) is not None  # the bound alone passes it
+    assert far.spec(mv, S, E, 4, 0.00095) is None
+    # limits by hand, on exact circles about the origin (centre words 0, bound 0):
+    # radius 0.0013 mm passes, 0.0012 mm does not; a sweep of 2e-5 rad passes, 5e-6 rad
+    # does not, either way round
+    axes, base, budget = (0, 1, 2), (0.0, 0.0), 0.00095
+
+    def words(S, E, sweep, clockwise):
+        rho = math.hypot(S[0], S[1])
+        hint = ArcHint(0.0, 0.0, rho, 0.0, -sweep if clockwise else sweep, (*S, *E), None)
+        return hint.words(S, E, axes, clockwise, 4, 1.0, base, budget)
+
     for r, ok in ((0.0013, True), (0.0012, False)):
-        assert within_controller_limits([r, 0, 0], [0, r, 0], (0.0, 0.0), (0, 1, 2), False) is ok
+        got = words([r, 0.0, 0.0], [0.0, r, 0.0], math.pi / 2, False)
+        assert (got is not None and got[:2] == (0.0, 0.0)) is ok
     for sweep, ok in ((2e-5, True), (5e-6, False)):
-        end = [100 * math.cos(sweep), 100 * math.sin(sweep), 0]
-        assert within_controller_limits([100, 0, 0], end, (0.0, 0.0), (0, 1, 2), False) is ok
-        assert within_controller_limits(end, [100, 0, 0], (0.0, 0.0), (0, 1, 2), True) is ok
-    assert within_controller_limits([5, 0, 0], [5, 0, -1], (0.0, 0.0), (0, 1, 2), True)
+        end = [100 * math.cos(sweep), 100 * math.sin(sweep), 0.0]
+        assert (words([100.0, 0.0, 0.0], end, sweep, False) is not None) is ok
+        assert (words(end, [100.0, 0.0, 0.0], sweep, True) is not None) is ok
 
 
 def test_growth_counts_the_program_not_the_header(tmp_path):

@@ -1,22 +1,22 @@
-"""The run writer settles an arc's centre words as the general emitter does.
+"""The centre words of an arc the bulk planner settled: one decision, held to the old one.
 
-The general emitter's decision is :meth:`ArcHint.spec` followed by the controller-limit
-check (:meth:`Corrector._hint_is_sound`); the run writer makes it in one call,
-:meth:`ArcHint.words_xy`. On many generated arcs (seeded), near every threshold the
-decision has (smallest radius and sweep, whole turns, ends that coincide in the plane, a
-bound about the budget, values that are not finite): the same words and the same
-refusals.
+:meth:`ArcHint.words` (the run writer's call, XY plane) and :meth:`ArcHint.spec` (the
+general emitter's, any plane) make the decision that was once ``ArcHint.spec`` followed
+by the emitter's controller-limit check, kept as it was in ``arcwords_reference``. On
+many generated arcs (seeded) in the three planes, near every threshold the decision has
+(smallest radius and sweep, whole turns, ends that coincide in the plane, a bound about
+the budget, values that are not finite): the same words, bounds and refusals.
 """
 
 import math
 
 import numpy as np
 import pytest
+from arcwords_reference import decision  # noqa: I001  (the tests' own reference, a sibling module)
 
 from postproc.gcode import emit, vplan
 from postproc.gcode.interp import Arc
-from postproc.gcode.pipeline import Corrector
-from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
+from postproc.gcode.segment import MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
 
@@ -37,7 +37,7 @@ def _case(rng, kind):
     step = 10.0 ** -d * unit
     r = float(rng.choice([0.002, 0.05, 0.5, 4.0, 40.0, 700.0]))
     if kind == "small":  # about the controllers' smallest radius
-        r = MIN_ARC_RADIUS_MM * float(rng.uniform(0.9, 1.6))
+        r = vplan.MIN_ARC_RADIUS_MM * float(rng.uniform(0.9, 1.6))
     cx, cy = rng.uniform(-300, 300, 2)
     a0 = float(rng.uniform(-math.pi, math.pi))
     sw = float(rng.choice([1e-4, 0.02, 0.3, 1.5, 3.0, 6.0]))
@@ -86,19 +86,34 @@ def _case(rng, kind):
     return hint, S, E, cw, d, unit, absolute, shift, base, budget, keep, (gi, gj)
 
 
-def _reference(case):
-    """The per-arc decision: (I, J) values of the words written, or None."""
-    hint, S, E, cw, d, unit, absolute, shift, base, budget, keep, (gi, gj) = case
-    view = _View(Arc((0.0, 0.0, 0.0), 170, cw, 1, (-1, -1), -1), unit, absolute, shift)
+def _in_plane(case, plane):
+    """The XY case moved to ``plane``: its first, second and normal coordinates on the
+    plane's axes."""
+    hint, S, E, cw, d, unit, absolute, shift, base, budget, keep, g = case
+    axes, _letters = PLANES[plane]
+
+    def place(p):
+        out = [0.0, 0.0, 0.0]
+        for k, a in enumerate(axes):
+            out[a] = p[k]
+        return out
+
+    return hint, place(S), place(E), cw, d, unit, absolute, place(shift), base, budget, keep, g, axes
+
+
+def _reference(case, plane=170):
+    """The old per-arc decision: (I, J) values of the words written and the spec, or None."""
+    hint, S, E, cw, d, unit, absolute, shift, base, budget, keep, (gi, gj), axes = _in_plane(case, plane)
+    view = _View(Arc((0.0, 0.0, 0.0), plane, cw, 1, (-1, -1), -1), unit, absolute, shift)
     if keep:
         c = (base[0] + gi * unit, base[1] + gj * unit)
-        return None if hint.keep(view, S, E, c, hint.mismatch, budget) is None else (gi, gj)
-    spec = hint.spec(view, S, E, d, budget)
-    if spec is None or not Corrector._hint_is_sound(None, view, spec, S, E):  # type: ignore[arg-type]
+        return None if hint.keep(view, S, E, c, budget) is None else (gi, gj)
+    spec = decision(hint, view, S, E, d, budget)
+    if spec is None:
         return None
     (_l1, t1), (_l2, t2) = spec["vals"]
     assert (t1, t2) == (emit.fmt(float(t1), d), emit.fmt(float(t2), d))
-    return float(t1), float(t2)
+    return float(t1), float(t2), spec
 
 
 KINDS = ["plain"] * 6 + ["small", "sweep", "flat", "budget", "nan", "keep"]
@@ -118,24 +133,44 @@ def _same(a, b):
 
 
 @pytest.mark.parametrize("seed", [11, 12, 13])
-def test_words_xy_is_spec_and_the_controller_check(seed):
+def test_words_is_the_old_spec_and_controller_check(seed):
     taken = refused = 0
     for case in _cases(seed, 1200):
         hint, S, E, cw, d, unit, _absolute, _shift, base, budget, keep, _g = case
         if keep:
             continue
         ref = _reference(case)
-        got = hint.words_xy(S, E, cw, d, unit, base, budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD)
+        got = hint.words(S, E, (0, 1, 2), cw, d, unit, base, budget)
         assert _same(got, ref), (case, got, ref)
         if got is not None:
             assert emit.fmt(got[0], d) == emit.fmt(ref[0], d)
             assert emit.fmt(got[1], d) == emit.fmt(ref[1], d)
+            assert got[2] == ref[2]["mismatch"]
+            assert got[2] + got[3] == ref[2]["dev"]
         taken += ref is not None
         refused += ref is None
     assert taken > 200
     assert refused > 200
 
 
+@pytest.mark.parametrize("plane", [170, 180, 190])
+def test_spec_is_the_old_spec_and_controller_check_in_every_plane(plane):
+    taken = 0
+    for case in _cases(20 + plane, 600):
+        if case[10]:  # keep
+            continue
+        ref = _reference(case, plane)
+        hint, S, E, cw, d, unit, absolute, shift, _base, budget, _keep, _g, _axes = _in_plane(case, plane)
+        view = _View(Arc((0.0, 0.0, 0.0), plane, cw, 1, (-1, -1), -1), unit, absolute, shift)
+        got = hint.spec(view, S, E, d, budget)
+        if ref is None:
+            assert got is None, (case, got)
+            continue
+        assert got == ref[2], (case, got, ref)
+        taken += 1
+    assert taken > 100
+
+
 def test_plane_of_the_run_writer_is_xy():
-    # words_xy and the run writer read axes 0 and 1 as the plane, 2 as its normal
+    # the run writer reads axes 0 and 1 as the plane, 2 as its normal
     assert PLANES[170][0] == (0, 1, 2)

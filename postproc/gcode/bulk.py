@@ -48,8 +48,6 @@ from postproc.gcode import emit, lexer
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
-from postproc.gcode.segment import MIN_ARC_RADIUS_MM as SEGMENT_MIN_RADIUS_MM
-from postproc.gcode.segment import MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
@@ -76,6 +74,7 @@ _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's 
 _NEUTRAL = re.compile(
     rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_N}[ \t]*+)?(?:[Mm][ \t]*+0?[3-57-9][ \t]*+)?"
     r"(?:\([^()\n]*\)[ \t]*+)?\r?\n?")
+_XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
 #: where text is written (what it returns is ignored)
@@ -701,14 +700,13 @@ def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: 
     if not named_edits:  # unchanged end words: the input's own arc words stay if they still pass
         view = _ArcView(Arc(centre, 170, cw, 1, (-1, -1), -1), unit, run.arc_absolute, run.shift)
         c = (base[0] + blk.ov[3][y] * unit, base[1] + blk.ov[4][y] * unit)
-        if hint.keep(view, S, E, c, hint.mismatch, budget) is None:
+        if hint.keep(view, S, E, c, budget) is None:
             return None
         return ti, tj, 0
-    # ArcHint.spec and Corrector._hint_is_sound in one
-    w = hint.words_xy(S, E, cw, run.decimals, unit, base, budget, SEGMENT_MIN_RADIUS_MM, MIN_ARC_SWEEP_RAD)
+    w = hint.words(S, E, _XY, cw, run.decimals, unit, base, budget)
     if w is None:
         return None
-    w1, w2 = w
+    w1, w2 = w[0], w[1]
     count = 0
     if ti:
         if blk.ovl[3][y] != w1:

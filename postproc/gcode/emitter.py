@@ -29,7 +29,6 @@ from postproc.gcode.segment import (
     chord_deviation,
     circle_fit,
     r_center,
-    within_controller_limits,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 from postproc.gcode.vplan import ArcHint, ArcMove, Plan
@@ -385,11 +384,9 @@ class EmitterMixin(Generic[_O, _R]):
         budget = self.opt.tolerance_mm * FIT_BUDGET
         if edits:
             spec = hint.spec(mv, self.qe, qn, d, budget)
-            if spec is not None and not self._hint_is_sound(mv, spec, self.qe, qn):
-                spec = None
         else:  # unchanged end words: the input's own arc words stay if they still pass
             centre = self._input_centre(mv, self.qe, qn)
-            spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, hint.mismatch, budget)
+            spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, budget)
         if spec is None:
             lazy = hint.lazy
             if lazy is None:  # the corrector gives every hint it hands here its general plan
@@ -402,17 +399,6 @@ class EmitterMixin(Generic[_O, _R]):
         self.emitted_motion = mv.kind
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, sep, lower, qn, write)
-
-    def _hint_is_sound(self, mv: ArcMove, spec: ArcSpec, S: Point, E: Point) -> bool:
-        """Whether controllers cut the bulk planner's arc ``spec`` (from S to E, as
-        written) as meant: radius and sweep within the controller limits
-        (:func:`postproc.gcode.segment.within_controller_limits`)."""
-        arc = _arc_of(mv)
-        (a1, a2, an), _ = PLANES[arc.plane]
-        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
-        (_l1, t1), (_l2, t2) = spec["vals"]
-        centre = (base[0] + float(t1) * mv.unit, base[1] + float(t2) * mv.unit)
-        return within_controller_limits(S, E, centre, (a1, a2, an), arc.clockwise)
 
     def _fit_piece(self, mv: Move, plan: Plan, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray,
                    qe: list[float], final: bool, d: int, budget: float) -> list[_Piece]:

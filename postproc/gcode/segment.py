@@ -435,23 +435,6 @@ def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndar
     return dev
 
 
-def within_controller_limits(S: Point, E: Point, centre: Sequence[float] | np.ndarray, axes: Axes,
-                             clockwise: bool) -> bool:
-    """Whether controllers cut the arc from S to E around ``centre`` (2, plane
-    coordinates) as that arc: both radii at least :data:`MIN_ARC_RADIUS_MM` and, unless
-    S and E coincide in the plane (a full circle), a sweep of at least
-    :data:`MIN_ARC_SWEEP_RAD` (the scalar form of ``arc_candidates``' controller limits)."""
-    a1, a2, _an = axes
-    c1, c2 = float(centre[0]), float(centre[1])
-    if min(math.hypot(S[a1] - c1, S[a2] - c2), math.hypot(E[a1] - c1, E[a2] - c2)) < MIN_ARC_RADIUS_MM:
-        return False
-    if S[a1] == E[a1] and S[a2] == E[a2]:
-        return True
-    t0, t1 = math.atan2(S[a2] - c2, S[a1] - c1), math.atan2(E[a2] - c2, E[a1] - c1)
-    sweep = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
-    return sweep >= MIN_ARC_SWEEP_RAD
-
-
 def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
     """Largest distance of the points Q (k, 3) from the segment S-E."""
     a = np.asarray(S, dtype=float)

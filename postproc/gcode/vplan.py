@@ -48,6 +48,7 @@ import numpy.typing as npt
 
 from postproc.gcode import emit
 from postproc.gcode.geometry import arcs_points
+from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
 if TYPE_CHECKING:
@@ -158,60 +159,37 @@ class ArcHint:
 
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
         """The arc words for the move written from S to E (machine mm, as written):
-        ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None when no rounded centre
-        on their bisector stays provably within ``budget``."""
+        ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None where :meth:`words`
+        gives none."""
         arc = mv.arc
         if arc is None:
             raise AssertionError("an arc hint asked for a move that is no arc")
-        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
-        s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-        dx, dy = e1 - s1, e2 - s2
-        L = math.hypot(dx, dy)
-        if L == 0.0:
+        axes, (l1, l2) = PLANES[arc.plane]
+        a1, a2 = axes[0], axes[1]
+        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+        w = self.words(S, E, axes, arc.clockwise, d, mv.unit, base, budget)
+        if w is None:
             return None
-        # the fitted centre moved onto the written ends' bisector
-        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
-        n1, n2 = -dy / L, dx / L
-        t = (self.c1 - m1) * n1 + (self.c2 - m2) * n2
-        p1, p2 = m1 + t * n1, m2 + t * n2
-        unit = mv.unit
-        if mv.arc_absolute:
-            b1, b2 = mv.shift[a1], mv.shift[a2]
-        else:
-            b1, b2 = s1, s2
-        step = 10.0 ** (-d)
-        agree = 0.5 * step * unit
-        v1 = round((p1 - b1) / unit, d)
-        v2 = round((p2 - b2) / unit, d)
-        hyp = math.hypot
-        best = None
-        for k1, k2 in _ORDER:
-            # float(emit.fmt(v, d)) == round(v, d): both are the correctly rounded decimal
-            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
-            C1, C2 = b1 + w1 * unit, b2 + w2 * unit
-            mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
-            if mism <= agree:
-                best = (emit.fmt(w1, d), emit.fmt(w2, d), C1, C2, mism)
-                break
-        if best is None:
-            return None
-        t1, t2, C1, C2, mism = best
-        bound = self._bound(arc.clockwise, S, E, C1, C2, (a1, a2, an))
-        if bound is None or not bound + mism <= budget:
-            return None
-        return {"form": "ij", "vals": ((l1, t1), (l2, t2)), "turns": 1, "dev": bound + mism, "mismatch": mism}
+        w1, w2, mism, bound = w
+        return {"form": "ij", "vals": ((l1, emit.fmt(w1, d)), (l2, emit.fmt(w2, d))), "turns": 1,
+                "dev": bound + mism, "mismatch": mism}
 
-    def words_xy(self, S: Sequence[float], E: Sequence[float], clockwise: bool, d: int, unit: float,
-                 base: tuple[float, float], budget: float, min_radius: float, min_sweep: float
-                 ) -> tuple[float, float] | None:
-        """:meth:`spec` and the controller-limit check after it in one (an arc in the XY
-        plane; ``base``: what the centre words are relative to, machine mm; ``min_radius``
-        and ``min_sweep`` those of :func:`postproc.gcode.segment.within_controller_limits`):
-        the values of the centre words ``spec`` writes (``float`` of their text), or None
-        where ``spec`` gives none or the controller would not cut that arc. The same
-        arithmetic as those, in the same order, without the objects they make."""
-        s1, s2, sn = S[0], S[1], S[2]
-        e1, e2, en = E[0], E[1], E[2]
+    def words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
+              unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
+        """The centre words of the arc written from S to E (machine mm, as written; ``axes``:
+        the plane's two axes and its normal; ``base``: what the centre words are relative
+        to, machine mm): ``(w1, w2, mismatch, bound)``, the words' values (``float`` of
+        their text, ``d`` decimals), the radius mismatch of the centre they give and the
+        bound on the arc's distance from the corrected samples (:meth:`_bound`). The
+        centre is the fitted one moved onto the written ends' bisector and rounded, or
+        the nearest lattice point around it whose radii agree within half a step. None
+        when no such centre stays within ``budget`` or a controller would not cut the
+        arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
+        :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
+        limits decide)."""
+        a1, a2, an = axes
+        s1, s2, sn = S[a1], S[a2], S[an]
+        e1, e2, en = E[a1], E[a2], E[an]
         dx, dy = e1 - s1, e2 - s2
         hyp = math.hypot
         L = hyp(dx, dy)
@@ -228,38 +206,24 @@ class ArcHint:
         # the first candidate, round(v + 0 * step, d), is v + 0.0 (v is rounded already)
         w1, w2 = v1 + 0.0, v2 + 0.0
         C1, C2 = b1 + w1 * unit, b2 + w2 * unit
-        rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
-        mism = abs(rs - re)
+        mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
         if not mism <= agree:
             for k1, k2 in _ORDER[1:]:
                 w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
                 C1, C2 = b1 + w1 * unit, b2 + w2 * unit
-                rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
-                mism = abs(rs - re)
+                mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
                 if mism <= agree:
                     break
             else:
                 return None
-        # _bound
-        th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
-        turn = (th0 - th1) % TWO_PI if clockwise else (th1 - th0) % TWO_PI
-        sweep = -turn if clockwise else turn
-        if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
+        got = self._bound(clockwise, s1, s2, sn, e1, e2, en, C1, C2)
+        if got is None:
             return None
-        moved = hyp(C1 - self.c1, C2 - self.c2)
-        u1, u2, un, x1, x2, xn = self.ends
-        rho = self.rho
-        bound = self.worst + moved + max(abs(rs - rho), abs(re - rho))
-        r_min = min(rs, re, rho)
-        if not r_min > 0.0:
-            return None
-        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - x1, e2 - x2))
-        dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
-        bound = bound + max(abs(sn - un), abs(en - xn)) + abs(en - sn) * dfrac
+        bound, rs, re, turn = got
         if not bound + mism <= budget:
             return None
-        # within_controller_limits around the centre of the words as written (float of
-        # the text: -0.0 reads back 0.0, else the same centre, radii and sweep); S and E
+        # the controller limits around the centre of the words as written (float of the
+        # text: -0.0 reads back 0.0, else the same centre, radii and sweep); S and E
         # differ in the plane (L > 0)
         if w1 == 0.0 or w2 == 0.0:
             w1, w2 = w1 + 0.0, w2 + 0.0
@@ -267,56 +231,58 @@ class ArcHint:
             rs, re = hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)
             t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
             turn = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
-        if min(rs, re) < min_radius or not turn >= min_sweep:
+        if min(rs, re) < MIN_ARC_RADIUS_MM or not turn >= MIN_ARC_SWEEP_RAD:
             return None
-        return w1, w2
+        return w1, w2, mism, bound
 
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
-             nominal_mismatch: float, budget: float) -> ArcSpec | None:
+             budget: float) -> ArcSpec | None:
         """``{"form": "keep", "turns": 1}`` when the input's own arc words, around
         ``centre`` from S to E (as written), still pass: their radius mismatch no larger
-        than the input's own (``nominal_mismatch``, which its controller accepts) and
-        the arc within ``budget`` of the samples; else None."""
+        than the input's own (:attr:`mismatch`, which its controller accepts) and the arc
+        within ``budget`` of the samples; else None."""
         arc = mv.arc
         if arc is None:
             raise AssertionError("an arc hint asked for a move that is no arc")
         (a1, a2, an), _ = PLANES[arc.plane]
         C1, C2 = float(centre[0]), float(centre[1])
         mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
-        if not mism <= nominal_mismatch + KEEP_MISMATCH_SLACK_MM:
+        if not mism <= self.mismatch + KEEP_MISMATCH_SLACK_MM:
             return None
-        bound = self._bound(arc.clockwise, S, E, C1, C2, (a1, a2, an))
-        if bound is None or not bound <= budget:
+        got = self._bound(arc.clockwise, S[a1], S[a2], S[an], E[a1], E[a2], E[an], C1, C2)
+        if got is None or not got[0] <= budget:
             return None
         return {"form": "keep", "turns": 1}
 
-    def _bound(self, clockwise: bool, S: Sequence[float], E: Sequence[float], C1: float, C2: float,
-               axes: tuple[int, int, int]) -> float | None:
-        """How far the arc a controller draws from S to E around (C1, C2) (radius from
-        the start to the end radius, the normal axis linear) can lie from the corrected
-        samples: the ideal circle's deviation plus how far the drawn arc lies from that
-        circle anywhere. None when it does not turn as the nominal arc does (one turn)."""
-        a1, a2, an = axes
+    def _bound(self, clockwise: bool, s1: float, s2: float, sn: float, e1: float, e2: float, en: float,
+               C1: float, C2: float) -> tuple[float, float, float, float] | None:
+        """How far the arc a controller draws from S to E (plane coordinates s1, s2, e1,
+        e2, normal sn, en) around (C1, C2) (radius from the start to the end radius, the
+        normal axis linear) can lie from the corrected samples: the ideal circle's
+        deviation plus how far the drawn arc lies from that circle anywhere. Returned
+        with the start and end radii and the turn from S to E (in the arc's sense,
+        [0, 2 pi)). None when it does not turn as the nominal arc does (one turn)."""
         hyp = math.hypot
-        s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
         rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
         th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
-        sweep = -((th0 - th1) % TWO_PI) if clockwise else (th1 - th0) % TWO_PI
+        turn = (th0 - th1) % TWO_PI if clockwise else (th1 - th0) % TWO_PI
+        sweep = -turn if clockwise else turn
         if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
             return None
         moved = hyp(C1 - self.c1, C2 - self.c2)
-        u1, u2, un, w1, w2, wn = self.ends
-        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - w1, e2 - w2))
+        u1, u2, un, x1, x2, xn = self.ends
+        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - x1, e2 - x2))
         # in the plane: the samples' distance from the ideal circle, plus how far the
         # written circle (centre C, radius from rs to re) lies from it anywhere
-        bound = self.worst + moved + max(abs(rs - self.rho), abs(re - self.rho))
+        rho = self.rho
+        bound = self.worst + moved + max(abs(rs - rho), abs(re - rho))
         # along the normal axis: the written ends, and the shift of each sample's angle
         # (centre and ends moved) along the helix
-        r_min = min(rs, re, self.rho)
+        r_min = min(rs, re, rho)
         if not r_min > 0.0:
             return None
         dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
-        return bound + max(abs(S[an] - un), abs(E[an] - wn)) + abs(E[an] - S[an]) * dfrac
+        return bound + max(abs(sn - un), abs(en - xn)) + abs(en - sn) * dfrac, rs, re, turn
 
 
 # lattice offsets (per axis, in units of the last decimal), nearest first
