@@ -642,23 +642,29 @@ class EmitterMixin(Generic[_O, _R]):
         r0 = round(rho / unit, d)
         vals = {round(r0 + k * step, d) for k in range(-CENTRE_LATTICE, CENTRE_LATTICE + 1)}
         vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
-        best = None
+        texts, centres = [], []
         for val in sorted(vals):
             text = emit.fmt(sign * val, d)
             R = float(text) * unit
             if abs(R) <= half:
                 continue  # every controller must find a centre without its own tolerance
             c = r_center(S[a1], S[a2], E[a1], E[a2], R, clockwise)
-            if c is None:
-                continue
-            w, m, t = arc_candidates(S, E, np.array([c]), axes, clockwise, nsw, Qp, frac, controller_limits=True)
-            if t[0] != 1:
-                continue
-            if best is None or w[0] < best[0]:
-                best = (float(w[0]), text, float(m[0]))
-        if best is None or not best[0] <= budget:
+            if c is not None:
+                texts.append(text)
+                centres.append(c)
+        if not centres:
             return None
-        return {"form": "r", "vals": (("R", best[1]),), "turns": 1, "dev": best[0], "mismatch": best[2]}
+        # every radius's arc measured at once (each row as on its own), the best in the
+        # order of the radii: the first of the smallest deviations among one-turn arcs
+        w, m, t = arc_candidates(S, E, np.array(centres), axes, clockwise, nsw, Qp, frac, controller_limits=True)
+        best = -1
+        for j, (wj, tj) in enumerate(zip(w.tolist(), t.tolist(), strict=True)):
+            if tj == 1 and (best < 0 or wj < w[best]):
+                best = j
+        if best < 0 or not w[best] <= budget:
+            return None
+        return {"form": "r", "vals": (("R", texts[best]),), "turns": 1, "dev": float(w[best]),
+                "mismatch": float(m[best])}
 
     def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None:
         """Centre (2,) a controller finds from the input line's own arc words, with the
