@@ -4,7 +4,7 @@ the corrected ideal path, with the centre moved by no more than the bound allows
 
 import numpy as np
 import pytest
-from conftest import PARAMETRIC, TOL, emitted_arcs, ideal_vs_emitted
+from conftest import PARAMETRIC, ROOT, TOL, emitted_arcs, ideal_vs_emitted
 
 from postproc.calfile import load_calibration
 from postproc.effects import compose
@@ -157,3 +157,45 @@ def test_arcs_whose_words_do_not_change_keep_their_own_centre_words(seed):
     assert emit.split_header(bulk)[1] == text
     assert bulk == general
     assert rep.arcs_kept == text.count("\nG2 ") + text.count("\nG3 ")
+
+
+def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch):
+    """Small arcs whose corrected ends, rounded, leave no centre words on their bisector
+    (an odd last step across a short chord) fail when written: their general plans are
+    made with the chunk's, in one engine call, not one by one when each fails; the output
+    is the same either way."""
+    from postproc.gcode import pipeline
+
+    static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
+    rng = np.random.default_rng(5)
+    out = ["G21 G90 G17\n", "G0 X150 Y150 Z100\n", "G1 Z90 F500\n"]
+    x, y = 150.0, 150.0
+    for _ in range(40):
+        # a half-turn of radius 0.1-0.3 mm and back, as CAM links two passes
+        r = float(rng.uniform(0.1, 0.3))
+        out.append(f"G3 X{x:.3f} Y{y + 2 * r:.3f} I0 J{r:.3f}\n")
+        out.append(f"G1 X{x + 1:.3f} Y{y + 2 * r:.3f}\n")
+        x += 1.0
+        out.append(f"G2 X{x:.3f} Y{y:.3f} I0 J{-r:.3f}\n")
+    out.append("M2\n")
+    text = "".join(out)
+    lazy = []
+    made = pipeline.Corrector._lazy_plan
+
+    def counted(self, *args):
+        plan = made(self, *args)
+
+        def asked():
+            lazy.append(1)
+            return plan()
+
+        return asked
+
+    monkeypatch.setattr(pipeline.Corrector, "_lazy_plan", counted)
+    new, rep = correct_text(text, static, Setup())
+    assert rep.arcs_split > 20  # the hints failed: the arcs were fitted from their plans
+    assert lazy == []  # every one of those plans made with the chunk's
+    monkeypatch.setattr(pipeline.Corrector, "_hint_fails_rounded", lambda self, mv, hint, budget: False)
+    old, _ = correct_text(text, static, Setup())
+    assert len(lazy) > 20  # without the guess: one by one
+    assert new == old

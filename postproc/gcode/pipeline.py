@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeAlias, final
+from typing import TYPE_CHECKING, TypeAlias, cast, final
 
 import numpy as np
 
@@ -53,9 +53,10 @@ from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion,
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import DWELL, LINE, RAPID
+from postproc.gcode.state import DWELL, LINE, PLANES, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
+    ArcMove,
     ArcParams,
     FloatArray,
     IntArray,
@@ -731,16 +732,46 @@ class Corrector(EmitterMixin):
                     linenos: IntArray) -> None:
         """Give every hint its general plan, for when the hint does not do: made now, in
         one engine call, for the arcs whose fit comes near the budget (their hints often
-        fail when written: rounded centre, written ends), else when asked for."""
-        near = HINT_PREPLAN_SHARE * self.opt.tolerance_mm * FIT_BUDGET
+        fail when written: rounded centre, written ends) and those whose centre words
+        already fail for their corrected ends rounded as words are
+        (:meth:`_hint_fails_rounded`), else when asked for."""
+        budget = self.opt.tolerance_mm * FIT_BUDGET
+        near = HINT_PREPLAN_SHARE * budget
         made: dict[int, Plan] = {}
-        marginal = [(i, moves[i]) for i, hint in hints.items() if hint.worst > near]
+        # a hint is only ever made for an arc (a Move or a RunMove: an ArcMove)
+        marginal = [(i, moves[i]) for i, hint in hints.items()
+                    if hint.worst > near or self._hint_fails_rounded(cast("ArcMove", moves[i]), hint, budget)]
         if marginal:
             self._plan_moves(marginal, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, made)
         for i, hint in hints.items():
             plan = made.get(i)
             hint.lazy = (self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
                          if plan is None else _given(plan))
+
+    def _hint_fails_rounded(self, mv: ArcMove, hint: ArcHint, budget: float) -> bool:
+        """Whether the hint gives no centre words for the arc's corrected ends rounded to
+        the output's decimals: the end points as written but for the input's own longer
+        decimals and the words added for unnamed axes, so that such a hint most likely
+        fails when written too (an arc whose centre no rounded words put on the bisector
+        of its ends within half a step, e.g. an end's coordinate one odd step beyond the
+        other's across a short chord). A guess for planning only: what is written is
+        settled by the hint or the plan either way."""
+        arc = mv.arc
+        if arc is None:
+            return False
+        axes, _letters = PLANES[arc.plane]
+        unit = mv.unit
+        d = self._decimals.get(unit)
+        if d is None:
+            d = self._decimals[unit] = _unit_decimals(self.opt, unit)
+        shift = mv.shift
+        S, E = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        for a, s, e in zip(axes, hint.ends[:3], hint.ends[3:], strict=True):
+            S[a] = round((s - shift[a]) / unit, d) * unit + shift[a]
+            E[a] = round((e - shift[a]) / unit, d) * unit + shift[a]
+        a1, a2 = axes[0], axes[1]
+        base = (shift[a1], shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+        return hint.words(S, E, axes, arc.clockwise, d, unit, base, budget) is None
 
     def _lazy_plan(self, i: int, mv: PlanMove, arc_prm: dict[int, ArcParams], breaks: dict[int, FloatArray],
                    Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray, S: FloatArray, T: FloatArray,
