@@ -338,3 +338,74 @@ def test_diff_pairs_a_line_whose_words_follow_a_comment():
     d = compare_programs(text, out)
     assert d.moves == rep.moves == 3
     assert [m.lineno for m in d.moved] == [1, 2, 3]
+
+
+def _numbered_program(rng: np.random.Generator, n: int) -> str:
+    """A program whose every line is a move with its own N word (as some CAM programs are):
+    no anchor between the first line and the last; long straight moves and arcs, which a
+    parametric correction splits."""
+    out = ["N10 G90 G21 G17 G0 X100 Y100 Z120"]
+    x, y = 100.0, 100.0
+    while len(out) < n:
+        nw = f"N{10 * (len(out) + 1)}"
+        if rng.random() < 0.8:
+            step = 60.0 if rng.random() < 0.2 else 2.0
+            x = float(np.clip(x + rng.uniform(-step, step), 50, 250))
+            y = float(np.clip(y + rng.uniform(-step, step), 50, 250))
+            out.append(f"{nw} G1 X{x:.4f} Y{y:.4f} F900")
+        else:
+            i, j = rng.uniform(-20, 20), rng.uniform(-20, 20)
+            cx, cy = x + i, y + j
+            a = np.arctan2(-j, -i) + rng.uniform(0.3, 2.0)
+            rad = float(np.hypot(i, j))
+            x, y = cx + rad * np.cos(a), cy + rad * np.sin(a)
+            out.append(f"{nw} G3 X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}")
+    return "\n".join(out + ["M30"]) + "\n"
+
+
+def test_diff_of_a_program_without_anchors_pairs_in_windows(monkeypatch):
+    # Every move's N word is its own: no later line can pair with it, which the pairing
+    # knows from the N words' index, without reading every line up to the next anchor
+    # (the end of the program) for each move.
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(21)
+    text = _numbered_program(rng, 3000)
+    cal = load_calibration(ROOT / "calibrations" / "s500_parametric.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)})
+    out, rep = correct_text(text, cal.engine, setup)
+    assert rep.lines_inserted > 100
+    calls = {"one": 0, "indexed": 0}
+    pair_one, index_init = compare._pair_one, compare._Index.__init__
+
+    def counted_pair_one(*args):
+        calls["one"] += 1
+        return pair_one(*args)
+
+    def counted_index(self, rows):
+        calls["indexed"] += len(rows)
+        index_init(self, rows)
+
+    monkeypatch.setattr(compare, "_pair_one", counted_pair_one)
+    monkeypatch.setattr(compare._Index, "__init__", counted_index)
+    results = []
+    for chunk in (20_000, 300):
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        calls.update(one=0, indexed=0)
+        d = compare_programs(text, out)
+        assert d.lines_inserted == rep.lines_inserted
+        assert d.moves == rep.moves
+        assert d.lines_original == 3001
+        assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4
+        # one at a time only where lines were inserted (and a few records after)
+        places = sum(1 for m in re.finditer(r"\n(?!N)", out.split("N10 ", 1)[1]))
+        assert calls["one"] <= (compare.SLOW_STRETCH + 1) * places + 10
+        # the keys indexed a few times over, not once per record
+        assert calls["indexed"] <= 10 * len(out.splitlines())
+        results.append(d.to_dict())
+    assert results[1] == results[0]
+    # a move left out: still found missing
+    lines = out.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("N"))
+    with pytest.raises(PostprocError, match="has no counterpart in the corrected program"):
+        compare_programs(text, "".join(lines[:k] + lines[k + 1:]))

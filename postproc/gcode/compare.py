@@ -23,7 +23,11 @@ runs the program). Every other line goes through the interpreter, which carries 
 modal state from one stretch to the next. Pairing takes a chunk at a time: the stretches
 with as many moves in both at once; in a stretch with lines inserted, the moves before
 and after each insertion at once (the nearest-end-point rule checked for all of them),
-the move at the insertion one at a time.
+the move at the insertion one at a time. The rule looks at the corrected lines up to the
+next anchor; the compatible ones are looked up by their keys (skeleton, N word,
+comment), so a program with no anchor for long, every move with its own N word, is
+paired in windows too. Its corrected version is then held up to that anchor (the whole
+program when it has none), as the rule needs.
 """
 
 from __future__ import annotations
@@ -374,7 +378,7 @@ class _Rows:
     """Consecutive lines of a program: text, line number, whether each makes a move, its
     end point (machine mm, NaN where unknown or no move) and its pairing keys."""
 
-    __slots__ = ("lines", "lineno", "move", "end", "keys")
+    __slots__ = ("lines", "lineno", "move", "end", "keys", "_index")
 
     def __init__(self, lines: list[str], lineno, move, end, keys) -> None:
         self.lines = lines
@@ -382,6 +386,13 @@ class _Rows:
         self.move = move
         self.end = end
         self.keys = keys  # (n, 3) int64: skeleton, N word, comment
+        self._index: _Index | None = None
+
+    def index(self) -> _Index:
+        """Where each key lies in these rows (built when first asked for, then kept)."""
+        if self._index is None:
+            self._index = _Index(self)
+        return self._index
 
     @classmethod
     def blank(cls, lines: list[str], lineno0: int) -> _Rows:
@@ -588,6 +599,43 @@ class _Reader:
         rows.move[idx] = plain[idx]
 
 
+class _Index:
+    """Where the pairing keys lie in a tape's rows: for each column (skeleton, N word,
+    comment) the rows in the order of their keys (equal keys in row order) and each row's
+    next row of the same key, and the anchors. With it, the rows of one key that follow a
+    place are found without looking at the others: a line whose N word is its own is
+    paired without reading every line up to the next anchor."""
+
+    __slots__ = ("order", "sorted", "next_same", "anchors")
+
+    def __init__(self, rows: _Rows) -> None:
+        n = len(rows)
+        self.order, self.sorted, self.next_same = [], [], []
+        for col in range(3):
+            keys = rows.keys[:, col]
+            order = np.argsort(keys, kind="stable").astype(np.int32)
+            ordered = keys[order]
+            self.order.append(order)
+            self.sorted.append(ordered)
+            if col < 2:  # (the comments' next rows are not asked for)
+                nxt = np.full(n, n, dtype=np.int32)
+                same = ordered[1:] == ordered[:-1]
+                nxt[order[:-1][same]] = order[1:][same]
+                self.next_same.append(nxt)
+        self.anchors = np.flatnonzero(~rows.move)
+
+    def next_anchor(self, i: int, n: int) -> int:
+        """The first anchor at or after row i (n: none)."""
+        k = int(np.searchsorted(self.anchors, i))
+        return int(self.anchors[k]) if k < len(self.anchors) else n
+
+    def rows_of(self, col: int, key: int, lo: int, hi: int) -> np.ndarray:
+        """The rows in lo:hi whose key in column col is key, in order."""
+        ordered = self.sorted[col]
+        group = self.order[col][np.searchsorted(ordered, key, "left"):np.searchsorted(ordered, key, "right")]
+        return group[np.searchsorted(group, lo):np.searchsorted(group, hi)]
+
+
 class _Tape:
     """The records of one program not yet paired, read ahead as needed."""
 
@@ -621,6 +669,12 @@ class _Tape:
         self.rows = _Rows.join(parts)
         self.pos = 0
 
+    def reach_anchor(self, i: int) -> None:
+        """Read on until a record at or after the i-th ahead is an anchor (or nothing
+        more can be read), the whole program at most; more at a time as it goes on."""
+        while not self.done and self.rows.move[self.pos + i:].all():
+            self.fill(2 * self.avail() + CHUNK_LINES)
+
     def peek(self, i: int) -> int | None:
         """Row index of the i-th record ahead, None at the end of the program."""
         if self.avail() <= i:
@@ -637,16 +691,6 @@ class _Tape:
 
 def _distance(a, b) -> float:
     return sum(abs(x - y) for x, y in zip(a, b, strict=True) if not (math.isnan(x) or math.isnan(y)))
-
-
-def _next_same(keys: np.ndarray) -> np.ndarray:
-    """For each row, the index of the next row with the same key (len: none)."""
-    n = len(keys)
-    order = np.argsort(keys, kind="stable")
-    nxt = np.full(n, n)
-    same = keys[order[1:]] == keys[order[:-1]]
-    nxt[order[:-1][same]] = order[1:][same]
-    return nxt
 
 
 def _l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -673,16 +717,29 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     programs end in it). Returns (records paired, whether a check failed at the next
     one, the last move's delta).
     """
+    m = min(orig.avail(), limit)
+    want = m + m // 2 + SCAN_AHEAD
+    if (m and not corr.done and corr.rows.move[corr.pos:corr.pos + want].all()
+            and orig.rows.keys[orig.pos:orig.pos + m].any()):
+        # no anchor in the window, and moves with N words, skeletons or comments: their
+        # scans run to corr's next anchor (or its end), which is read now
+        corr.reach_anchor(want)
     p, q = orig.pos, corr.pos
     ro, rc = orig.rows, corr.rows
-    m = min(orig.avail(), limit)
     avail = corr.avail()
-    span = min(avail, m + m // 2 + SCAN_AHEAD)
+    span = min(avail, want)
     if m == 0 or span == 0:
         return 0, True, last_delta
     real_end = span == avail and corr.done and corr.error is None
     om = ro.move[p:p + m]
     cmove = rc.move[q:q + span]
+    # the scans of the nearest-end-point rule look at corr up to its next anchor: past
+    # the window when there is none in it (ext lines from q)
+    ext = span
+    if not real_end and cmove.all():
+        later = np.flatnonzero(~rc.move[q + span:q + avail])
+        ext = span + int(later[0]) + 1 if len(later) else avail
+    real_end_x = ext == avail and corr.done and corr.error is None
     clines = rc.lines
     # anchors: the k-th of each, as long as they are identical
     ao = np.flatnonzero(~om)
@@ -702,9 +759,10 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     seg = np.searchsorted(ao, np.arange(m))
     split = inserted[seg]
     oe = ro.end[p:p + m]
-    cend = np.append(rc.end[q:q + span], np.zeros((1, 3)), axis=0)
-    ckeys = rc.keys[q:q + span]
-    stop = np.append(_next_index(~cmove), span)
+    cend = np.append(rc.end[q:q + ext], np.zeros((1, 3)), axis=0)
+    ckeys = rc.keys[q:q + ext]
+    cmove_x = rc.move[q:q + ext]
+    stop = np.append(_next_index(~cmove_x), ext)
     prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
 
     def place(t: np.ndarray, rows=None):
@@ -723,7 +781,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
         end of the program; not an error not yet reached) and stops after
         STOP_AFTER_WORSE compatible ones that are not nearer than the best."""
         end_at = stop[t0 + 1]
-        real_stop = (end_at < span) | real_end
+        real_stop = (end_at < ext) | real_end_x
         predicted = oe[rows] + ld
         okeys = ro.keys[p + rows]
         own = ckeys[t0]
@@ -734,9 +792,9 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             # no N word, skeleton or comment: compatible with the moves of empty skeleton;
             # its own line must be one, and the nearest of the first few after it
             ta, ea, pa = t0[a], end_at[a], predicted[a]
-            z = np.flatnonzero(cmove & (ckeys[:, 0] == 0))
+            z = np.flatnonzero(cmove_x & (ckeys[:, 0] == 0))
             i = np.searchsorted(z, ta)
-            z = np.append(z, [span] * (STOP_AFTER_WORSE + 1))
+            z = np.append(z, [ext] * (STOP_AFTER_WORSE + 1))
             d0 = _l1(cend[ta], pa)
             nearer = np.zeros(len(a), dtype=bool)
             looked = np.zeros(len(a), dtype=np.int64)
@@ -751,8 +809,9 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             # an N word or another skeleton (and no comment): its own line when no later
             # line before the anchor has its skeleton or N word
             tb, eb, ob, cb = t0[b], end_at[b], okeys[b], own[b]
-            after_sk = _next_same(ckeys[:, 0])[tb]
-            after_n = _next_same(ckeys[:, 1])[tb]
+            nxt = rc.index().next_same
+            after_sk = nxt[0][q + tb] - q
+            after_n = nxt[1][q + tb] - q
             good[b] = (real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & (after_sk >= eb)
                        & ((ob[:, 1] == 0) | ((ob[:, 1] == cb[:, 1]) & (after_n >= eb))))
         return good
@@ -855,6 +914,89 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     return f, f < held, last_delta
 
 
+# Lines of corr the pairing of one record looks at one by one before it looks up the
+# compatible lines by their keys.
+SCAN_NEAR = 64
+
+
+def _scan_near(corr: _Tape, o_keys: tuple, predicted: tuple) -> tuple[bool, tuple | None]:
+    """The scan of :func:`_pair_one` over the first SCAN_NEAR lines of corr read: whether
+    these lines settle it, and (distance, offset from corr.pos) of the compatible move it
+    pairs with (None: none before the next anchor)."""
+    rc = corr.rows
+    c0 = corr.pos
+    n = min(len(rc), c0 + SCAN_NEAR)
+    move, keys, end = rc.move, rc.keys, rc.end
+    best = None
+    worse = 0
+    for c in range(c0, n):
+        if not move[c]:
+            return True, best  # the next anchor: the pair lies before it
+        if _compatible_keys(o_keys, tuple(keys[c].tolist())):
+            dist = _distance(end[c].tolist(), predicted)
+            if best is None or dist < best[0]:
+                best = (dist, c - c0)
+                worse = 0
+            else:
+                # past the nearest line the end points walk away again (the next
+                # move's inserted lines): stop after a few that do not come closer
+                worse += 1
+                if worse >= STOP_AFTER_WORSE:
+                    return True, best
+    return False, None
+
+
+def _scan(corr: _Tape, o_keys: tuple, predicted: tuple) -> tuple | None:
+    """The scan of :func:`_pair_one` over every line of corr up to its next anchor (or its
+    end): the compatible moves are looked up by their keys (:class:`_Index`), more of
+    them at a time until the rule stops among those known, and corr is read on only as
+    far as that needs. Returns (distance, offset from corr.pos) or None (no compatible
+    move); raises the error that ended corr's reading when the scan reaches it."""
+    o0, o1, o2 = o_keys
+    take = 4 * (STOP_AFTER_WORSE + 1)
+    while True:
+        rc, c0 = corr.rows, corr.pos
+        n = len(rc)
+        idx = rc.index()
+        a = idx.next_anchor(c0, n)
+        lists = [idx.rows_of(0, o0, c0, a)]
+        if o1:
+            lists.append(idx.rows_of(1, o1, c0, a))
+        if o2:
+            lists.append(idx.rows_of(2, o2, c0, a))
+        while True:
+            # the first `take` rows of each key; every compatible row up to `known` is among them
+            known = min((int(rows[take - 1]) for rows in lists if len(rows) > take), default=a)
+            cand = np.unique(np.concatenate([rows[:take] for rows in lists]))
+            keys = rc.keys[cand]
+            both_n = (o1 != 0) & (keys[:, 1] != 0)
+            cand = cand[(keys[:, 0] == o0) | np.where(both_n, keys[:, 1] == o1, (o2 != 0) & (keys[:, 2] == o2))]
+            best = None
+            worse = 0
+            stopped = None
+            for j, dist in enumerate(_l1(rc.end[cand], np.array(predicted)).tolist()):
+                if best is None or dist < best[0]:
+                    best = (dist, j)
+                    worse = 0
+                else:
+                    worse += 1
+                    if worse >= STOP_AFTER_WORSE:
+                        stopped = int(cand[j])
+                        break
+            if stopped is not None and stopped <= known:
+                break
+            if known == a:
+                if a == n and not corr.done:
+                    best = None  # the scan runs past the lines read: read on, look again
+                break
+            take *= 4
+        if stopped is not None or a < n or corr.done:
+            if stopped is None and a == n and corr.error is not None:
+                raise corr.error
+            return None if best is None else (best[0], int(cand[best[1]]) - c0)
+        corr.fill(2 * corr.avail() + CHUNK_LINES)
+
+
 def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> tuple:
     """Pair the next record of orig: an anchor with the next anchor of corr (the moves before it
     were inserted); a move with the compatible move of corr, before corr's next anchor, whose end
@@ -887,29 +1029,13 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
     o_keys = tuple(ro.keys[o].tolist())
     o_line = ro.lines[o]
     predicted = tuple(e + d for e, d in zip(o_end, last_delta, strict=True))
-    best = None
-    worse = 0
-    i = 0
-    while True:
-        c = corr.peek(i)
-        rc = corr.rows
-        if c is None or not rc.move[c]:
-            break  # the end, or the next anchor: the pair lies before it
-        if _compatible_keys(o_keys, tuple(rc.keys[c].tolist())):
-            dist = _distance(rc.end[c].tolist(), predicted)
-            if best is None or dist < best[0]:
-                best = (dist, i)
-                worse = 0
-            else:
-                # past the nearest line the end points walk away again (the next
-                # move's inserted lines): stop after a few that do not come closer
-                worse += 1
-                if worse >= STOP_AFTER_WORSE:
-                    break
-        i += 1
+    settled, best = _scan_near(corr, o_keys, predicted)
+    if not settled:
+        best = _scan(corr, o_keys, predicted)
     if best is None:
         raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
                             path=rep.corrected)
+    rc = corr.rows
     rep.lines_inserted += best[1]
     c = corr.pos + best[1]
     corr.pos = c + 1
