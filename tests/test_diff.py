@@ -409,3 +409,32 @@ def test_diff_of_a_program_without_anchors_pairs_in_windows(monkeypatch):
     k = next(i for i in range(len(lines) // 2, len(lines)) if lines[i].startswith("N"))
     with pytest.raises(PostprocError, match="has no counterpart in the corrected program"):
         compare_programs(text, "".join(lines[:k] + lines[k + 1:]))
+
+
+def test_diff_pairs_moves_shorter_than_the_change_of_the_correction():
+    from postproc.engine.static import StaticEngine
+
+    # Over the 20 mm move to X70 Y55 the correction changes by 40 um, over the two moves
+    # after it by less than 1 um: the line nearest the prediction (the previous delta) is
+    # the next move's, not the own one. The arc is split (lines inserted in the stretch),
+    # so the stretch is paired by the nearest-end-point rule, not line for line.
+    A = np.eye(3) + np.array([[1.5e-3, 2e-3, 0], [-1e-3, 2e-3, 0], [0, 0, 1e-3]])
+    eng = StaticEngine(A, [0.0, 0.0, 0.0], [[0, 0, 0], [315, 315, 315]])
+    text = ("G21 G90 G17\nG0 X50 Y50 Z20\nG1 Z10 F300\nG1 X70 Y55\nX70.0004 Y55.0004\nX70.0008 Y55.0001\n"
+            "G1 Z9\nG1 X90 Y60\nG2 X130 Y60 I20 J0\nG1 X131 Y61\nM2\n")
+    out, rep = correct_text(text, eng, Setup())
+    assert rep.lines_inserted >= 1
+    d = compare_programs(text, out)
+    n_header = len(emit.split_header(out)[0])
+    assert d.moves == rep.moves
+    assert d.lines_inserted == rep.lines_inserted
+    pairs = {m.lineno: m.lineno_corrected - n_header for m in d.moved}
+    assert all(pairs[k] == k for k in range(2, 9))  # line for line up to the arc
+    assert pairs[9] == 9 + rep.lines_inserted
+    assert pairs[10] == 10 + rep.lines_inserted
+    # each delta is the correction of its own end point (A c = q), within the output's rounding
+    ends = {2: (50, 50, 20), 3: (50, 50, 10), 4: (70, 55, 10), 5: (70.0004, 55.0004, 10), 6: (70.0008, 55.0001, 10),
+            7: (70.0008, 55.0001, 9), 8: (90, 60, 9), 9: (130, 60, 9), 10: (131, 61, 9)}
+    for m in d.moved:
+        q = np.array(ends[m.lineno], dtype=float)
+        np.testing.assert_allclose(m.delta_mm, np.linalg.solve(A, q) - q, atol=1e-4)

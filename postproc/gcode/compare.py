@@ -27,7 +27,11 @@ the move at the insertion one at a time. The rule looks at the corrected lines u
 next anchor; the compatible ones are looked up by their keys (skeleton, N word,
 comment), so a program with no anchor for long, every move with its own N word, is
 paired in windows too. Its corrected version is then held up to that anchor (the whole
-program when it has none), as the rule needs.
+program when it has none), as the rule needs. Where the nearest line is not much nearer
+than an earlier one (a move shorter than the change of the correction over the move
+before it, whose own line the prediction misses by more than its length), the next few
+records are aligned with the lines at once, the one where the deltas change least from
+move to move taken.
 """
 
 from __future__ import annotations
@@ -917,53 +921,64 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
 # Lines of corr the pairing of one record looks at one by one before it looks up the
 # compatible lines by their keys.
 SCAN_NEAR = 64
+# When the nearest line is a later one than the move's own place and less than this
+# many times nearer than it, the next records are aligned to choose (_align_ahead).
+AMBIGUOUS = 16.0
+# End points nearer each other than this (the output's rounding, a few times over) are
+# not told apart by their distances alone.
+RESOLUTION_MM = 1e-3
+# Records aligned at once, and lines of corr beyond those they need at the least.
+ALIGN_RECORDS = 8
+ALIGN_SLACK = 16
 
 
-def _scan_near(corr: _Tape, o_keys: tuple, predicted: tuple) -> tuple[bool, tuple | None]:
-    """The scan of :func:`_pair_one` over the first SCAN_NEAR lines of corr read: whether
-    these lines settle it, and (distance, offset from corr.pos) of the compatible move it
-    pairs with (None: none before the next anchor)."""
+def _scan_near(corr: _Tape, o_keys: tuple, predicted: tuple, skip: int) -> tuple[bool, tuple | None, tuple | None]:
+    """The scan of :func:`_pair_one` over the lines of corr read, from ``skip`` lines
+    after corr.pos, SCAN_NEAR of them at most: whether these lines settle it, the nearest
+    compatible move and the nearest before it (the one it displaced; None when it is the
+    first), each as (distance, offset from corr.pos), or None (none before the next
+    anchor)."""
     rc = corr.rows
     c0 = corr.pos
-    n = min(len(rc), c0 + SCAN_NEAR)
+    n = min(len(rc), c0 + skip + SCAN_NEAR)
     move, keys, end = rc.move, rc.keys, rc.end
-    best = None
+    best = runner = None
     worse = 0
-    for c in range(c0, n):
+    for c in range(c0 + skip, n):
         if not move[c]:
-            return True, best  # the next anchor: the pair lies before it
+            return True, best, runner  # the next anchor: the pair lies before it
         if _compatible_keys(o_keys, tuple(keys[c].tolist())):
             dist = _distance(end[c].tolist(), predicted)
             if best is None or dist < best[0]:
-                best = (dist, c - c0)
+                runner, best = best, (dist, c - c0)
                 worse = 0
             else:
                 # past the nearest line the end points walk away again (the next
                 # move's inserted lines): stop after a few that do not come closer
                 worse += 1
                 if worse >= STOP_AFTER_WORSE:
-                    return True, best
-    return False, None
+                    return True, best, runner
+    return False, None, None
 
 
-def _scan(corr: _Tape, o_keys: tuple, predicted: tuple) -> tuple | None:
-    """The scan of :func:`_pair_one` over every line of corr up to its next anchor (or its
-    end): the compatible moves are looked up by their keys (:class:`_Index`), more of
-    them at a time until the rule stops among those known, and corr is read on only as
-    far as that needs. Returns (distance, offset from corr.pos) or None (no compatible
-    move); raises the error that ended corr's reading when the scan reaches it."""
+def _scan(corr: _Tape, o_keys: tuple, predicted: tuple, skip: int) -> tuple[tuple | None, tuple | None]:
+    """:func:`_scan_near` over every line of corr up to its next anchor (or its end): the
+    compatible moves are looked up by their keys (:class:`_Index`), more of them at a time
+    until the rule stops among those known, and corr is read on only as far as that needs.
+    Returns the nearest compatible move and the nearest before it (or None, None); raises
+    the error that ended corr's reading when the scan reaches it."""
     o0, o1, o2 = o_keys
     take = 4 * (STOP_AFTER_WORSE + 1)
     while True:
         rc, c0 = corr.rows, corr.pos
         n = len(rc)
         idx = rc.index()
-        a = idx.next_anchor(c0, n)
-        lists = [idx.rows_of(0, o0, c0, a)]
+        a = idx.next_anchor(c0 + skip, n)
+        lists = [idx.rows_of(0, o0, c0 + skip, a)]
         if o1:
-            lists.append(idx.rows_of(1, o1, c0, a))
+            lists.append(idx.rows_of(1, o1, c0 + skip, a))
         if o2:
-            lists.append(idx.rows_of(2, o2, c0, a))
+            lists.append(idx.rows_of(2, o2, c0 + skip, a))
         while True:
             # the first `take` rows of each key; every compatible row up to `known` is among them
             known = min((int(rows[take - 1]) for rows in lists if len(rows) > take), default=a)
@@ -971,12 +986,13 @@ def _scan(corr: _Tape, o_keys: tuple, predicted: tuple) -> tuple | None:
             keys = rc.keys[cand]
             both_n = (o1 != 0) & (keys[:, 1] != 0)
             cand = cand[(keys[:, 0] == o0) | np.where(both_n, keys[:, 1] == o1, (o2 != 0) & (keys[:, 2] == o2))]
-            best = None
+            dists = _l1(rc.end[cand], np.array(predicted)).tolist()
+            best = runner = None
             worse = 0
             stopped = None
-            for j, dist in enumerate(_l1(rc.end[cand], np.array(predicted)).tolist()):
+            for j, dist in enumerate(dists):
                 if best is None or dist < best[0]:
-                    best = (dist, j)
+                    runner, best = best, (dist, j)
                     worse = 0
                 else:
                     worse += 1
@@ -993,8 +1009,72 @@ def _scan(corr: _Tape, o_keys: tuple, predicted: tuple) -> tuple | None:
         if stopped is not None or a < n or corr.done:
             if stopped is None and a == n and corr.error is not None:
                 raise corr.error
-            return None if best is None else (best[0], int(cand[best[1]]) - c0)
+            if best is None:
+                return None, None
+            return (best[0], int(cand[best[1]]) - c0), None if runner is None else (runner[0], int(cand[runner[1]]) - c0)
         corr.fill(2 * corr.avail() + CHUNK_LINES)
+
+
+def _nearest(corr: _Tape, o_keys: tuple, predicted: tuple, skip: int = 0) -> tuple[tuple | None, tuple | None]:
+    """The compatible move of corr nearest ``predicted`` from ``skip`` lines after corr.pos
+    up to the next anchor, and the nearest one before it: (distance, offset from corr.pos)
+    each, or None."""
+    settled, best, runner = _scan_near(corr, o_keys, predicted, skip)
+    if not settled:
+        best, runner = _scan(corr, o_keys, predicted, skip)
+    return best, runner
+
+
+def _align_ahead(orig: _Tape, corr: _Tape, o_end: list, o_keys: tuple, last_delta: tuple, best: tuple) -> tuple:
+    """The line to pair the current move with when the nearest one is not much nearer
+    than the nearest before it: the first line of the alignment of the next records (up to
+    ALIGN_RECORDS, none past an anchor) with the lines of corr (the current ones, up to
+    the next anchor) in which the delta changes least from one move to the next, lines
+    left out being inserted ones. A run of moves shorter than the change of the correction
+    over one long move would otherwise each be paired with the next one's line."""
+    orig.fill(ALIGN_RECORDS)
+    ro, pos = orig.rows, orig.pos
+    ends, keys = [o_end], [o_keys]
+    for r in range(pos, min(len(ro), pos + ALIGN_RECORDS - 1)):
+        if not ro.move[r]:
+            break
+        ends.append(ro.end[r].tolist())
+        keys.append(tuple(ro.keys[r].tolist()))
+    width = best[1] + 1 + len(ends) + ALIGN_SLACK
+    corr.fill(width)
+    rc, c0 = corr.rows, corr.pos
+    a = rc.index().next_anchor(c0, len(rc))
+    width = min(width, a - c0)
+    c_end = rc.end[c0:c0 + width]
+    c_keys = rc.keys[c0:c0 + width]
+    cost = None
+    choice = []
+    prev_delta = np.asarray(last_delta, dtype=float)[None, :]
+    for end, key in zip(ends, keys, strict=True):
+        ok = np.fromiter((_compatible_keys(key, tuple(k)) for k in c_keys.tolist()), dtype=bool, count=width)
+        e = np.asarray(end, dtype=float)
+        delta = np.where(np.isnan(c_end) | np.isnan(e), 0.0, c_end - e)
+        step = np.abs(delta[:, None, :] - prev_delta[None, :, :]).sum(axis=2)  # (line, previous line)
+        if cost is None:
+            new = step[:, 0]
+            came = np.zeros(width, dtype=np.int64)
+        else:
+            # the previous record on an earlier line
+            total = cost[None, :] + step
+            total[np.triu_indices(width)] = np.inf
+            came = np.argmin(total, axis=1)
+            new = total[np.arange(width), came]
+        new = np.where(ok, new, np.inf)
+        if not np.isfinite(new).any():
+            break
+        cost = new
+        choice.append(came)
+        prev_delta = delta
+    assert cost is not None  # (the nearest line itself is a path)
+    j = int(np.argmin(cost))
+    for came in choice[:0:-1]:
+        j = int(came[j])
+    return (best[0], j)
 
 
 def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> tuple:
@@ -1029,9 +1109,10 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
     o_keys = tuple(ro.keys[o].tolist())
     o_line = ro.lines[o]
     predicted = tuple(e + d for e, d in zip(o_end, last_delta, strict=True))
-    settled, best = _scan_near(corr, o_keys, predicted)
-    if not settled:
-        best = _scan(corr, o_keys, predicted)
+    best, runner = _nearest(corr, o_keys, predicted)
+    if best is not None and runner is not None and runner[0] <= AMBIGUOUS * best[0] + RESOLUTION_MM:
+        # lines skipped as inserted, the nearest one not much nearer than an earlier one
+        best = _align_ahead(orig, corr, o_end, o_keys, last_delta, best)
     if best is None:
         raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
                             path=rep.corrected)
