@@ -438,3 +438,34 @@ def test_diff_pairs_moves_shorter_than_the_change_of_the_correction():
     for m in d.moved:
         q = np.array(ends[m.lineno], dtype=float)
         np.testing.assert_allclose(m.delta_mm, np.linalg.solve(A, q) - q, atol=1e-4)
+
+
+def test_diff_finds_the_header_after_blank_lines_and_reads_in_the_dialect(tmp_path):
+    # correct keeps blank lines before '%', the '%' and the O number before its header;
+    # diff takes the header from the same place, and reads G53 in G91 as Haas does
+    cal = load_calibration(CASES / "demo_static.json")
+    text = "\n%\nO1000\nG21 G90 G54 G0 X10 Y10 Z10\nG1 X20 F100\nG91 G53 Z0\nG90\nM30\n%\n"
+    out, rep = correct_text(text, cal.engine, Setup(offsets={"G54": (0.0, 0.0, 0.0)}),
+                            CorrectOptions(dialect="haas"))
+    assert out.startswith("\n%\nO1000\n(POSTPROC ")
+    head, body = emit.split_header(out)
+    assert body == "\n%\nO1000\n" + "".join(out.splitlines(keepends=True)[3 + len(head):])
+    with pytest.raises(PostprocError, match="G53 is not allowed in G91"):
+        compare_programs(text, out)
+    d = compare_programs(text, out, dialect="haas")
+    assert d.header == "".join(head).strip()
+    assert d.moves == rep.moves == 3
+    assert d.lines_unchanged == len(text.splitlines()) - 3
+    src, dst = tmp_path / "o1000.nc", tmp_path / "o1000_c.nc"
+    src.write_text(text)
+    dst.write_text(out)
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst), "--dialect", "haas", "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.output)["moves_moved"] == 3
+
+
+def test_dialect_choices_are_the_dialects():
+    from postproc.cli.options import DIALECT_CHOICE
+    from postproc.gcode.dialect import DIALECTS
+
+    assert set(DIALECT_CHOICE.choices) == set(DIALECTS)

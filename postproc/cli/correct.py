@@ -11,9 +11,10 @@ from pathlib import Path
 
 import click
 
+from postproc.cli.options import DIALECT_CHOICE, setup_options
+
 # build_setup: re-exported for the flags files of tests/cases
 from postproc.cli.options import build_setup as build_setup
-from postproc.cli.options import setup_options
 from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
 from postproc.errors import PostprocError
 
@@ -125,7 +126,7 @@ def _progress_printer(total_hint: str):
               help="Correct this many files in parallel processes (several inputs or a folder); "
                    "ends with a tally of corrected and refused files.")
 @click.option("--dialect", default="generic", show_default=True,
-              type=click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False),
+              type=DIALECT_CHOICE,
               help="Controller the output is for: its line length, comments, case and arc rule. "
                    "generic is what all of them accept.")
 @setup_options

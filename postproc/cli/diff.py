@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from postproc.cli.options import setup_options
+from postproc.cli.options import DIALECT_CHOICE, setup_options
 
 # Moved blocks listed in the text report (all of them go into --json).
 LIST_MOVED = 15
@@ -19,8 +19,12 @@ LIST_MOVED = 15
 @click.argument("corrected", type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
 @click.option("--all", "show_all", is_flag=True, help="List every moved block, not only the largest.")
+@click.option("--dialect", default="generic", show_default=True,
+              type=DIALECT_CHOICE,
+              help="Controller the programs are for, as given to correct (how G53 in G91, comments "
+                   "and the like read).")
 @setup_options(leave_out=("--context",))
-def diff(original, corrected, as_json, show_all, setup):
+def diff(original, corrected, as_json, show_all, dialect, setup):
     """Compare a program with its corrected version.
 
     Reports which blocks moved and by how much (end points, mm, machine axes), the
@@ -37,6 +41,7 @@ def diff(original, corrected, as_json, show_all, setup):
     \b
         postproc diff samples/pocket.nc pocket_corrected.nc
         postproc diff samples/g54_g43.ngc part_corrected.ngc --json
+        postproc diff o1234.nc o1234_corrected.nc --dialect fanuc
     """
     from postproc.gcode.compare import compare_programs
 
@@ -51,7 +56,7 @@ def diff(original, corrected, as_json, show_all, setup):
         # the text report lists the largest moved blocks only: keep just those (memory
         # then does not grow with the program); --all and --json list every one
         keep = None if (as_json or show_all) else LIST_MOVED
-        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep)
+        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, dialect=dialect.lower())
     finally:
         if progress is not None:
             click.echo("", err=True)

@@ -13,6 +13,10 @@ import click
 
 from postproc.errors import PostprocError
 
+# The controllers --dialect names (postproc.gcode.dialect.DIALECTS; a test keeps them equal,
+# and this module stays light for --help).
+DIALECT_CHOICE = click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False)
+
 _AXES = "XYZ"
 
 

@@ -43,7 +43,7 @@ import operator
 import re
 from array import array
 from dataclasses import dataclass, field
-from itertools import islice
+from itertools import chain, islice
 from typing import Any
 
 import numpy as np
@@ -225,11 +225,11 @@ def _header_rows(source, limit: int = 200) -> list[str]:
     _path, lines = iter_source_lines(source)
     rows: list[str] = []
     try:
-        for k, line in enumerate(islice(lines, limit), start=1):
-            if emit.is_header(line):
-                rows.append(line.strip())
-            elif rows or not (_PROGRAM_START.match(line) and k <= 2):
+        head, keep = emit.start_lines(lines)
+        for line in chain(head[keep:], islice(lines, limit)):
+            if not emit.is_header(line):
                 break
+            rows.append(line.strip())
     finally:
         close = getattr(lines, "close", None)
         if close is not None:
@@ -307,7 +307,6 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
 
 # -- reading ---------------------------------------------------------------------------
 
-_PROGRAM_START = emit._PROGRAM_START
 # lexer.NUMBER_RE, matched possessively (nothing after a number can start with a digit or a dot)
 _NUM = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
 # A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
@@ -426,9 +425,10 @@ class _Rows:
 class _Reader:
     """One program read in chunks of :class:`_Rows`; see the module docstring."""
 
-    def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False) -> None:
+    def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
+                 dialect: str = "generic") -> None:
         self.path, self._lines = iter_source_lines(source)
-        self.interp = Interpreter(setup, self.path, lenient_setup=True)
+        self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
         self.keys = keys
         self.drop_header = drop_header
         self.header: list[str] = []
@@ -439,19 +439,21 @@ class _Reader:
         it = self._lines
         lineno = 0
         if self.drop_header:
-            # the header lines at the start (after a '%' line and an O number line; several
+            # the header lines after the lines kept before them (emit.start_lines; several
             # headers in a row for a program corrected more than once) are left out
-            head: list[str] = []
-            linenos: list[int] = []
-            for line in it:
+            head, keep = emit.start_lines(it)
+            linenos = list(range(1, keep + 1))
+            lineno = keep
+            for line in chain(head[keep:], it):
                 lineno += 1
                 if emit.is_header(line):
                     self.header.append(line.strip())
                     continue
-                head.append(line)
                 linenos.append(lineno)
-                if not _PROGRAM_START.match(line) or lineno > 2:
-                    break
+                head = head[:keep] + [line]
+                break
+            else:
+                head = head[:keep]
             rows = _Rows.blank(head, 0)
             rows.lineno = np.array(linenos, dtype=np.int64)
             n, error = self._general(rows, 0, len(head))
@@ -1132,7 +1134,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
-                     keep: int | None = None) -> DiffReport:
+                     keep: int | None = None, dialect: str = "generic") -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1140,26 +1142,27 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     largest are kept and memory is bounded). ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates. ``progress(n)``, if given, is called with the number of
-    lines of the original read so far, after each chunk.
+    lines of the original read so far, after each chunk. ``dialect`` is the controller
+    both are read for, as ``correct`` was given it (G53 in G91, comments, ...).
     """
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress, keep)
+        return _compare(original, corrected, setup, progress, keep, dialect)
     finally:
         if was_enabled:
             gc.enable()
 
 
-def _compare(original, corrected, setup: Setup | None, progress, keep: int | None) -> DiffReport:
+def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     setup = setup_from_header(corrected, setup)
     keys = _Keys()
-    o_reader = _Reader(original, setup, keys)
-    c_reader = _Reader(corrected, setup, keys, drop_header=True)
+    o_reader = _Reader(original, setup, keys, dialect=dialect)
+    c_reader = _Reader(corrected, setup, keys, drop_header=True, dialect=dialect)
     orig, corr = _Tape(o_reader.chunks()), _Tape(c_reader.chunks())
     rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep)
     last_delta = (0.0, 0.0, 0.0)

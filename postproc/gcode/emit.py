@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
+from itertools import islice
 from typing import TYPE_CHECKING
 
 from postproc import __version__
@@ -116,7 +118,7 @@ HEADER_PREFIX = "(POSTPROC "
 HEADER_LINE_CHARS = 96  # inside every dialect's line (generic: 127); the sha256 line needs 82
 _HEADER_OPEN = re.compile(r"\s*\(POSTPROC \S+ CORRECTED\)\s*$", re.IGNORECASE)
 _HEADER_ANY = re.compile(r"\s*\(POSTPROC [A-Z0-9 .+\-]*\)\s*$", re.IGNORECASE)
-_PROGRAM_START = re.compile(r"\ufeff?\s*(%|[Oo]\s*\d|:\s*\d)")  # tape mark, program number
+_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
 _HEADER_SAFE = re.compile(r"[^A-Z0-9 .+\-]")
 
 
@@ -285,16 +287,36 @@ def is_header_start(line: str) -> bool:
     return (s.startswith(HEADER_TAG) and HEADER_MARK in s) or bool(_HEADER_OPEN.match(s))
 
 
+def start_lines(it: Iterator[str]) -> tuple[list[str], int]:
+    """The first lines of a program, read from ``it`` (one past those kept), and how many of
+    them stay before the header: blank lines before a '%' tape mark (LinuxCNC wants '%'
+    first of the non-blank lines), the '%' and the program number (O1234, O0001 (NAME),
+    :1234), which Fanuc and Haas controls need first. The one rule for where ``correct``
+    writes its header and where ``diff`` and :func:`split_header` find it."""
+    head = list(islice(it, 1))
+    keep = 0
+    while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
+        keep += 1
+        head.extend(islice(it, 1))
+    if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
+        keep += 1
+        head.extend(islice(it, 1))
+    elif keep:
+        keep = 0  # blank lines without a '%' after them: the header goes first as before
+    if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
+        keep += 1
+        head.extend(islice(it, 1))
+    return head, keep
+
+
 def split_header(text: str) -> tuple[list[str], str]:
     """``(header lines, the rest)`` of a corrected program's text: the header lines are the
-    run of header lines after an opening ``%`` and ``O`` number line (those stay in the rest)."""
+    run of header lines after the lines :func:`start_lines` keeps before it (those stay in
+    the rest)."""
     lines = text.splitlines(keepends=True)
+    _head, i = start_lines(iter(lines))
+    rest = lines[:i]
     head: list[str] = []
-    rest: list[str] = []
-    i = 0
-    while i < len(lines) and i < 2 and not is_header(lines[i]) and _PROGRAM_START.match(lines[i]):
-        rest.append(lines[i])
-        i += 1
     while i < len(lines) and is_header(lines[i]):
         head.append(lines[i])
         i += 1

@@ -15,7 +15,6 @@ from __future__ import annotations
 import gc
 import math
 import os
-import re
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -70,7 +69,6 @@ if TYPE_CHECKING:
     from postproc.engine.base import Engine
 
 DEFAULT_CHUNK_LINES = 20_000
-_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
 # engine together: smaller chunks keep the peak memory low at the same speed.
 SEGMENTED_CHUNK_LINES = 2_000
@@ -142,27 +140,6 @@ class CorrectReport:
         """The program's own lines out / lines in: the header, which carries the setup
         (one line per few tool lengths), is not the program growing."""
         return (self.lines_out - self.header_lines) / self.lines_in if self.lines_in else 1.0
-
-
-def _start_lines(it: Iterator[str]) -> tuple[list[str], int]:
-    """The first lines of a program, read from ``it``, and how many of them stay before
-    the header: blank lines before a '%' tape mark (LinuxCNC wants '%' first of the
-    non-blank lines), the '%' and the program number (O1234, O0001 (NAME), :1234), which
-    Fanuc and Haas controls need first."""
-    head = list(islice(it, 1))
-    keep = 0
-    while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
-        keep += 1
-        head.extend(islice(it, 1))
-    if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
-        keep += 1
-        head.extend(islice(it, 1))
-    elif keep:
-        keep = 0  # blank lines without a '%' after them: the header goes first as before
-    if len(head) > keep and _PROGRAM_NUMBER.match(head[keep].lstrip("\ufeff")):
-        keep += 1
-        head.extend(islice(it, 1))
-    return head, keep
 
 
 class Corrector(EmitterMixin):
@@ -312,7 +289,7 @@ class Corrector(EmitterMixin):
             interp.path = p or self.path
             return ln
 
-        head, keep = _start_lines(it)
+        head, keep = emit.start_lines(it)
         entries: list[Entry | bulk.Run] = []
         lineno = self._write_start(head, keep, write, where)
         head = head[keep:]
