@@ -26,8 +26,11 @@ lines, corrected in the linuxcnc dialect with --cycles expand, in three cases:
   not its way there). The model error is how far the calibration's exact correction of
   the original's feed points lands from them on the same forward model.
 
-Both paths start at the end of the first motion (where the machine came from is not
-compared). A case is SKIP when rs274 refuses the original, the original makes splines
+The scale case's paths start at the end of the first motion (where the machine came
+from is unknown), as in the test. The calibrated cases' start at the start position:
+the points there before the machine leaves it are not compared (it sits there
+uncorrected), the way from there is.
+A case is SKIP when rs274 refuses the original, the original makes splines
 (rs274 prints no NURBS geometry) or correct refuses the program (with its message);
 FAIL when rs274 refuses the corrected program or a distance exceeds its bound. Prints
 one row per program and case: lines, the result with the largest distance and its bound
@@ -123,13 +126,17 @@ class Oracle:
         self.cache: dict[str, tuple] = {}
 
     def run(self, text: str, calibrated: bool, line_step: float | None):
-        if calibrated:
-            res = run_rs274(from_start(text), tools=TOOLS, params=calibrated_params(), timeout=RS274_TIMEOUT)
-            ends, dense, rapid = machine_path(res, line_step, skip=1)
-        else:
+        """(rs274's result, end points, dense path, traverse ends, how many of the path's
+        first points are at the start position, before the machine leaves it)."""
+        if not calibrated:
             res = run_rs274(text, tools=TOOLS, timeout=RS274_TIMEOUT)
-            ends, dense, rapid = machine_path(res, line_step)
-        return res, ends, dense, rapid
+            return (res, *machine_path(res, line_step), 0)
+        res = run_rs274(from_start(text), tools=TOOLS, params=calibrated_params(), timeout=RS274_TIMEOUT)
+        ends, dense, rapid = machine_path(res, line_step)  # starts at the start position
+        start = np.array([ABOVE[a] for a in "XYZ"])
+        still = np.linalg.norm(dense - start, axis=1) <= ROUNDING
+        lead = int(np.argmin(still)) if not still.all() else len(still)
+        return res, ends[1:], dense, rapid, lead
 
     def original(self, calibrated: bool, line_step: float | None):
         key = f"{calibrated}/{line_step}"
@@ -149,14 +156,17 @@ def check_scale(ref_ends, ref_path, got_path) -> tuple[float, float]:
     return float(worst), tol
 
 
-def check_calibrated(engine, ref_path, ref_rapid, got_path) -> tuple[float, float, float]:
+def check_calibrated(engine, ref_path, ref_rapid, ref_lead, got_path, got_lead) -> tuple[float, float, float]:
     """(largest distance, bound, model error): the corrected path on the forward model
-    against the original's, both ways."""
-    actual = engine.forward(got_path)
-    feed = ref_path[~ref_rapid]
+    against the original's, both ways. The paths' first ``*_lead`` points are at the start
+    position (the machine sits there uncorrected): not compared, though the original's way
+    from the start is."""
+    actual = engine.forward(got_path[got_lead:])
+    ref_points = ref_path[ref_lead:]
+    feed = ref_points[~ref_rapid[ref_lead:]]
     ideal = feed + np.asarray(engine.correction(feed).q)
     model = float(np.linalg.norm(engine.forward(ideal) - feed, axis=1).max()) if len(feed) else 0.0
-    worst = max(polyline_distance(actual, ref_path).max(), polyline_distance(ref_path, actual).max())
+    worst = max(polyline_distance(actual, ref_path).max(), polyline_distance(ref_points, actual).max())
     return float(worst), CorrectOptions().tolerance_mm + model + ROUNDING, model
 
 
@@ -164,7 +174,7 @@ def run_case(path: Path, lines: int, case: str, oracle: Oracle, engines: dict) -
     row: dict = {"program": str(path.relative_to(CORPUS)), "case": case, "lines": lines}
     calibrated = case != "scale"
     line_step = LINE_STEP if case == "parametric" else None
-    res, ref_ends, ref_path, ref_rapid, row["rs274_s"] = oracle.original(calibrated, line_step)
+    res, ref_ends, ref_path, ref_rapid, ref_lead, row["rs274_s"] = oracle.original(calibrated, line_step)
     if not res.ok or not len(ref_ends):
         row.update(result="SKIP", reason="rs274 refuses the original: " + (res.error.splitlines() or ["no motion"])[0])
         return row
@@ -188,14 +198,15 @@ def run_case(path: Path, lines: int, case: str, oracle: Oracle, engines: dict) -
         return row
     row["correct_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    res2, _, got_path, _ = oracle.run(out, calibrated, line_step)
+    res2, _, got_path, _, got_lead = oracle.run(out, calibrated, line_step)
     row["rs274_out_s"] = time.perf_counter() - t0
     if not res2.ok:
         row.update(result="FAIL", reason="rs274 refuses the corrected program: " + res2.error.replace("\n", " | ")[:300])
         return row
     t0 = time.perf_counter()
     if calibrated:
-        worst, bound, model = check_calibrated(engines["forward_" + case], ref_path, ref_rapid, got_path)
+        worst, bound, model = check_calibrated(engines["forward_" + case], ref_path, ref_rapid, ref_lead,
+                                               got_path, got_lead)
         row["model_error_um"] = model * 1e3
     else:
         worst, bound = check_scale(ref_ends, ref_path, got_path)

@@ -205,8 +205,7 @@ def uses_nurbs(res: Rs274Result) -> bool:
     return any(c.startswith("NURBS_FEED") for c in res.calls)
 
 
-def machine_path(res: Rs274Result, line_step: float | None = None,
-                 skip: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def machine_path(res: Rs274Result, line_step: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(end points of the motions, the path as a dense polyline, which points of that
     polyline end a traverse) in machine coordinates, from an rs274 run.
 
@@ -215,9 +214,7 @@ def machine_path(res: Rs274Result, line_step: float | None = None,
     motion's end (where the machine came from is unknown); arcs are sampled as LinuxCNC
     draws them (radius and normal axis varying linearly with the angle) every
     :data:`ARC_STEP_MM`; straight feeds are end points only, or sampled every
-    ``line_step`` mm when given. Traverses are always end points only. The first ``skip``
-    motions only move the machine: they are not drawn, and the path starts at the end of
-    the next one."""
+    ``line_step`` mm when given. Traverses are always end points only."""
     off = {"G5X": np.zeros(3), "G92": np.zeros(3), "TLO": np.zeros(3)}
     motions = iter(res.motions)
     ends: list[np.ndarray] = []
@@ -242,9 +239,6 @@ def machine_path(res: Rs274Result, line_step: float | None = None,
         mo = next(motions)
         shift = off["G5X"] + off["G92"] + off["TLO"]
         end = np.array(mo.end[:3]) + shift
-        if skip:
-            skip -= 1
-            continue
         if prev is None:
             pts = end[None, :]
         elif mo.kind == "ARC_FEED":
