@@ -10,32 +10,37 @@ lines, corrected in the linuxcnc dialect with --cycles expand, in three cases:
   coordinates coincide). Checked as the test checks it: rs274 accepts the corrected
   program; every canonical end point of the original over k lies on the corrected path,
   and the two paths (arcs drawn as LinuxCNC draws them) are within the tolerance plus
-  0.2 um of rs274's rounding of each other, both ways.
+  rs274's rounding of each other, both ways.
 - ``static`` and ``parametric``: calibrations/s500_static.json and s500_parametric.json,
   the program placed in the calibrated volume as benchmarks/corpus_speed.py's setup()
   does (every work offset at X150 Y150 Z150, tool lengths 0, the start and the G28/G30
   positions at X150 Y150 Z300, --extrapolate linear); rs274 gets the same offsets and
   stored positions as parameters and starts from the same point (a G53 G0 line put before
-  the program's first line, or after a leading %, in both runs; that move is not
-  compared). Checked: rs274 accepts the corrected program, and the corrected path as
-  rs274 gives it, run on the calibration's forward model (linearly extrapolated, tool
-  offset zero), lies within tolerance + model error + 0.2 um of the original's path as
-  rs274 gives it, both ways. Arcs are sampled every 0.02 mm; straight feeds every
-  0.5 mm for the parametric model (the static one is affine: their ends suffice);
-  traverses are compared by their end points only (the corrector moves a rapid's end,
-  not its way there). The model error is how far the calibration's exact correction of
-  the original's feed points lands from them on the same forward model.
+  the program's first line, or after a leading %, in both runs). Checked: rs274 accepts
+  the corrected program, and the corrected path as rs274 gives it, run on the
+  calibration's forward model (linearly extrapolated, tool offset zero), lies within
+  tolerance + model error + rs274's rounding of the original's path as rs274 gives it,
+  both ways. Arcs are sampled every 0.02 mm; straight feeds every 0.5 mm for the
+  parametric model (the static one is affine: their ends suffice); traverses are
+  compared by their end points only (the corrector moves a rapid's end, not its way
+  there). The model error is how far the calibration's exact correction of the
+  original's feed points lands from them on the same forward model.
 
-The scale case's paths start at the end of the first motion (where the machine came
-from is unknown), as in the test. The calibrated cases' start at the start position:
-the points there before the machine leaves it are not compared (it sits there
-uncorrected), the way from there is.
-A case is SKIP when rs274 refuses the original, the original makes splines
-(rs274 prints no NURBS geometry) or correct refuses the program (with its message);
-FAIL when rs274 refuses the corrected program or a distance exceeds its bound. Prints
-one row per program and case: lines, the result with the largest distance and its bound
-(or the reason), and the seconds taken by rs274 on the original, correct, rs274 on the
-output and the check. Exits 1 when a case fails. ``--json OUT`` saves the rows.
+Paths are compared in mm. rs274 prints 4 decimals in the program's units: its rounding
+adds 0.2 um to a bound (as in the test), 5.08 um for a program in inches (G20), whose
+check is correspondingly coarser (the test compares such programs in inches against
+the mm tolerance). The scale case's paths start at the end of the first motion (where
+the machine came from is unknown), as in the test. The calibrated cases' start at the
+start position: the points there before the machine leaves it are not compared (it sits
+there uncorrected), the way from there is.
+
+A case is SKIP when rs274 refuses the original, the original makes splines (rs274
+prints no NURBS geometry) or correct refuses the program (with its message); FAIL when
+rs274 refuses the corrected program or a distance exceeds its bound. Prints one row per
+program and case: lines, the result with the largest distance and its bound (um; or the
+reason), and the seconds taken by rs274 on the original, correct, rs274 on the output
+and the check. Exits 1 when a case fails. ``--json OUT`` saves the rows (with the model
+error).
 
 Usage: python benchmarks/corpus_oracle.py [--only SUBSTRING] [--cases scale,static,parametric]
                                           [--json OUT]
@@ -59,7 +64,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from conftest import polyline_distance  # noqa: E402
 from corpus_speed import ABOVE, OFFSETS  # noqa: E402
 from corpus_speed import setup as calibrated_setup  # noqa: E402
-from oracle import RS274, machine_path, run_rs274, uses_nurbs  # noqa: E402
+from oracle import RS274, machine_path, run_rs274, uses_inches, uses_nurbs  # noqa: E402
 from test_oracle_scale import MAX_LINES, TOOLS, K  # noqa: E402
 from test_oracle_scale import _setup as scale_setup  # noqa: E402
 
@@ -75,6 +80,7 @@ CASES = ("scale", "static", "parametric")
 CALIBRATIONS = {"static": ROOT / "calibrations" / "s500_static.json",
                 "parametric": ROOT / "calibrations" / "s500_parametric.json"}
 ROUNDING = 2e-4  # rs274 prints 4 decimals: 0.09 um on each side (as in test_oracle_scale)
+INCH_ROUNDING = ROUNDING * 25.4  # the same in inches: 2.2 um on each side
 LINE_STEP = 0.5  # sampling of straight feeds on a non-affine forward model (mm)
 RS274_TIMEOUT = 1800.0
 # rs274's parameter file holds lengths in inches: (G54..G59.3 offsets, G28, G30)
@@ -130,11 +136,11 @@ class Oracle:
         first points are at the start position, before the machine leaves it)."""
         if not calibrated:
             res = run_rs274(text, tools=TOOLS, timeout=RS274_TIMEOUT)
-            return (res, *machine_path(res, line_step), 0)
+            return (res, *machine_path(res, line_step, mm=True), 0)
         res = run_rs274(from_start(text), tools=TOOLS, params=calibrated_params(), timeout=RS274_TIMEOUT)
-        ends, dense, rapid = machine_path(res, line_step)  # starts at the start position
+        ends, dense, rapid = machine_path(res, line_step, mm=True)  # starts at the start position
         start = np.array([ABOVE[a] for a in "XYZ"])
-        still = np.linalg.norm(dense - start, axis=1) <= ROUNDING
+        still = np.linalg.norm(dense - start, axis=1) <= rounding(res)
         lead = int(np.argmin(still)) if not still.all() else len(still)
         return res, ends[1:], dense, rapid, lead
 
@@ -147,16 +153,22 @@ class Oracle:
         return self.cache[key]
 
 
-def check_scale(ref_ends, ref_path, got_path) -> tuple[float, float]:
+def rounding(*runs) -> float:
+    """What rs274's printing (4 decimals) can add to a distance between two of its paths."""
+    return INCH_ROUNDING if any(uses_inches(r) for r in runs) else ROUNDING
+
+
+def check_scale(ref_ends, ref_path, got_path, rnd: float) -> tuple[float, float]:
     """(largest distance, bound) of test_oracle_scale's three checks."""
-    tol = CorrectOptions().tolerance_mm + ROUNDING
+    tol = CorrectOptions().tolerance_mm + rnd
     target = ref_path / K
     worst = max(polyline_distance(ref_ends / K, got_path).max(), polyline_distance(got_path, target).max(),
                 polyline_distance(target, got_path).max())
     return float(worst), tol
 
 
-def check_calibrated(engine, ref_path, ref_rapid, ref_lead, got_path, got_lead) -> tuple[float, float, float]:
+def check_calibrated(engine, ref_path, ref_rapid, ref_lead, got_path, got_lead,
+                     rnd: float) -> tuple[float, float, float]:
     """(largest distance, bound, model error): the corrected path on the forward model
     against the original's, both ways. The paths' first ``*_lead`` points are at the start
     position (the machine sits there uncorrected): not compared, though the original's way
@@ -167,7 +179,7 @@ def check_calibrated(engine, ref_path, ref_rapid, ref_lead, got_path, got_lead) 
     ideal = feed + np.asarray(engine.correction(feed).q)
     model = float(np.linalg.norm(engine.forward(ideal) - feed, axis=1).max()) if len(feed) else 0.0
     worst = max(polyline_distance(actual, ref_path).max(), polyline_distance(ref_points, actual).max())
-    return float(worst), CorrectOptions().tolerance_mm + model + ROUNDING, model
+    return float(worst), CorrectOptions().tolerance_mm + model + rnd, model
 
 
 def run_case(path: Path, lines: int, case: str, oracle: Oracle, engines: dict) -> dict:
@@ -206,10 +218,10 @@ def run_case(path: Path, lines: int, case: str, oracle: Oracle, engines: dict) -
     t0 = time.perf_counter()
     if calibrated:
         worst, bound, model = check_calibrated(engines["forward_" + case], ref_path, ref_rapid, ref_lead,
-                                               got_path, got_lead)
+                                               got_path, got_lead, rounding(res, res2))
         row["model_error_um"] = model * 1e3
     else:
-        worst, bound = check_scale(ref_ends, ref_path, got_path)
+        worst, bound = check_scale(ref_ends, ref_path, got_path, rounding(res, res2))
     row["check_s"] = time.perf_counter() - t0
     row.update(max_um=worst * 1e3, bound_um=bound * 1e3, result="PASS" if worst <= bound else "FAIL")
     if worst > bound:

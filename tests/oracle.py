@@ -200,12 +200,18 @@ _MACHINE_CALL = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED|ARC_FEED|SET_G5X_O
 ARC_STEP_MM = 0.02
 
 
+def uses_inches(res: Rs274Result) -> bool:
+    """Some of the program's positions are printed in inches (4 decimals: 2.54 um)."""
+    return "USE_LENGTH_UNITS(CANON_UNITS_INCHES)" in res.calls
+
+
 def uses_nurbs(res: Rs274Result) -> bool:
     """The program made splines, whose geometry rs274 does not print."""
     return any(c.startswith("NURBS_FEED") for c in res.calls)
 
 
-def machine_path(res: Rs274Result, line_step: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def machine_path(res: Rs274Result, line_step: float | None = None,
+                 mm: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(end points of the motions, the path as a dense polyline, which points of that
     polyline end a traverse) in machine coordinates, from an rs274 run.
 
@@ -214,19 +220,24 @@ def machine_path(res: Rs274Result, line_step: float | None = None) -> tuple[np.n
     motion's end (where the machine came from is unknown); arcs are sampled as LinuxCNC
     draws them (radius and normal axis varying linearly with the angle) every
     :data:`ARC_STEP_MM`; straight feeds are end points only, or sampled every
-    ``line_step`` mm when given. Traverses are always end points only."""
+    ``line_step`` when given. Traverses are always end points only. Positions are as
+    printed (in the program's units at each call), or in mm with ``mm`` (converted as
+    rs274 announces its units, ``USE_LENGTH_UNITS``)."""
     off = {"G5X": np.zeros(3), "G92": np.zeros(3), "TLO": np.zeros(3)}
     motions = iter(res.motions)
     ends: list[np.ndarray] = []
     path: list[np.ndarray] = []
     rapid: list[np.ndarray] = []
     prev = None
+    unit = 1.0
     for call in res.calls:
+        if mm and call.startswith("USE_LENGTH_UNITS("):
+            unit = 25.4 if "INCHES" in call else 0.1 if "CM" in call else 1.0
         m = _MACHINE_CALL.match(call)
         if m is None:
             continue
         name = m.group(1)
-        v = [float(x) for x in re.split(r"[,\s]+", m.group(2).strip()) if x]
+        v = [float(x) * unit for x in re.split(r"[,\s]+", m.group(2).strip()) if x]
         if name == "SET_G5X_OFFSET":
             off["G5X"] = np.array(v[1:4])
             continue
@@ -238,12 +249,12 @@ def machine_path(res: Rs274Result, line_step: float | None = None) -> tuple[np.n
             continue
         mo = next(motions)
         shift = off["G5X"] + off["G92"] + off["TLO"]
-        end = np.array(mo.end[:3]) + shift
+        end = np.array(mo.end[:3]) * unit + shift
         if prev is None:
             pts = end[None, :]
         elif mo.kind == "ARC_FEED":
             a1, a2, an = _PLANE_AXES["CANON_PLANE_" + mo.plane]
-            c = np.array(mo.centre) + shift
+            c = np.array(mo.centre) * unit + shift
             t0 = np.arctan2(prev[a2] - c[a2], prev[a1] - c[a1])
             t1 = np.arctan2(end[a2] - c[a2], end[a1] - c[a1])
             r0, r1 = np.hypot(prev[a1] - c[a1], prev[a2] - c[a2]), np.hypot(end[a1] - c[a1], end[a2] - c[a2])
