@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 RS274 = shutil.which("rs274")
@@ -122,13 +123,14 @@ def _write_var_file(path: Path, params: dict[int, float]) -> None:
 
 
 def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | None = None,
-              *, files: dict[str, str] | None = None) -> Rs274Result:
+              *, files: dict[str, str] | None = None, timeout: float = RS274_TIMEOUT_S) -> Rs274Result:
     """Run ``text`` through rs274 and parse what it did.
 
     ``tools`` is the text of a LinuxCNC tool table (``T1 P1 D6 Z10``; default
     :data:`DEFAULT_TOOLS`), ``params`` the
     numbered parameters to start with (a .var file), ``files`` extra files (name ->
-    text) put in a directory that is the interpreter's SUBROUTINE_PATH.
+    text) put in a directory that is the interpreter's SUBROUTINE_PATH, ``timeout`` the
+    wall-clock cap of one run (s).
     """
     if RS274 is None:
         pytest.skip("LinuxCNC's rs274 is not installed")
@@ -162,7 +164,7 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
                 for attempt in range(RS274_ATTEMPTS):
                     out.unlink(missing_ok=True)
                     proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True,
-                                          text=True, timeout=RS274_TIMEOUT_S, env=env)
+                                          text=True, timeout=timeout, env=env)
                     if proc.returncode >= 0:
                         break
                     time.sleep(0.2 * (attempt + 1))  # another rs274 (not under this lock) is running
@@ -190,3 +192,96 @@ def same_motions(a: list[Motion], b: list[Motion], tol: float = RS274_RESOLUTION
     if len(a) != len(b):
         return f"{len(a)} motions != {len(b)} motions"
     return ""
+
+
+_MACHINE_CALL = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED|ARC_FEED|SET_G5X_OFFSET|SET_G92_OFFSET|"
+                           r"USE_TOOL_LENGTH_OFFSET)\(([^)]*)\)")
+# sampling of arcs in machine_path (mm of arc length)
+ARC_STEP_MM = 0.02
+
+
+def uses_inches(res: Rs274Result) -> bool:
+    """Some of the program's positions are printed in inches (4 decimals: 2.54 um)."""
+    return "USE_LENGTH_UNITS(CANON_UNITS_INCHES)" in res.calls
+
+
+def uses_nurbs(res: Rs274Result) -> bool:
+    """The program made splines, whose geometry rs274 does not print."""
+    return any(c.startswith("NURBS_FEED") for c in res.calls)
+
+
+def machine_path(res: Rs274Result, line_step: float | None = None,
+                 mm: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(end points of the motions, the path as a dense polyline, which points of that
+    polyline end a traverse) in machine coordinates, from an rs274 run.
+
+    Canonical positions are in the program's frame; machine = canonical + G5x + G92 +
+    tool length offset, tracked as rs274 announces them. The polyline starts at the first
+    motion's end (where the machine came from is unknown); arcs are sampled as LinuxCNC
+    draws them (radius and normal axis varying linearly with the angle) every
+    :data:`ARC_STEP_MM`; straight feeds are end points only, or sampled every
+    ``line_step`` when given. Traverses are always end points only. Positions are as
+    printed (in the program's units at each call), or in mm with ``mm`` (converted as
+    rs274 announces its units, ``USE_LENGTH_UNITS``)."""
+    off = {"G5X": np.zeros(3), "G92": np.zeros(3), "TLO": np.zeros(3)}
+    motions = iter(res.motions)
+    ends: list[np.ndarray] = []
+    path: list[np.ndarray] = []
+    rapid: list[np.ndarray] = []
+    prev = None
+    unit = 1.0
+    for call in res.calls:
+        if mm and call.startswith("USE_LENGTH_UNITS("):
+            unit = 25.4 if "INCHES" in call else 0.1 if "CM" in call else 1.0
+        m = _MACHINE_CALL.match(call)
+        if m is None:
+            continue
+        name = m.group(1)
+        v = [float(x) * unit for x in re.split(r"[,\s]+", m.group(2).strip()) if x]
+        if name == "SET_G5X_OFFSET":
+            off["G5X"] = np.array(v[1:4])
+            continue
+        if name == "SET_G92_OFFSET":
+            off["G92"] = np.array(v[:3])
+            continue
+        if name == "USE_TOOL_LENGTH_OFFSET":
+            off["TLO"] = np.array(v[:3])
+            continue
+        mo = next(motions)
+        shift = off["G5X"] + off["G92"] + off["TLO"]
+        end = np.array(mo.end[:3]) * unit + shift
+        if prev is None:
+            pts = end[None, :]
+        elif mo.kind == "ARC_FEED":
+            a1, a2, an = _PLANE_AXES["CANON_PLANE_" + mo.plane]
+            c = np.array(mo.centre) * unit + shift
+            t0 = np.arctan2(prev[a2] - c[a2], prev[a1] - c[a1])
+            t1 = np.arctan2(end[a2] - c[a2], end[a1] - c[a1])
+            r0, r1 = np.hypot(prev[a1] - c[a1], prev[a2] - c[a2]), np.hypot(end[a1] - c[a1], end[a2] - c[a2])
+            turns = abs(mo.turn)
+            if mo.turn > 0:
+                sweep = (t1 - t0) % (2 * np.pi)
+                sweep = sweep if sweep > 1e-12 else 2 * np.pi
+                sweep += (turns - 1) * 2 * np.pi
+            else:
+                sweep = -((t0 - t1) % (2 * np.pi))
+                sweep = sweep if sweep < -1e-12 else -2 * np.pi
+                sweep -= (turns - 1) * 2 * np.pi
+            n = max(8, int(np.ceil(abs(sweep) * max(r0, r1) / ARC_STEP_MM)))
+            u = np.linspace(0.0, 1.0, n + 1)[1:]
+            pts = np.empty((n, 3))
+            rad = r0 + (r1 - r0) * u
+            pts[:, a1] = c[a1] + rad * np.cos(t0 + sweep * u)
+            pts[:, a2] = c[a2] + rad * np.sin(t0 + sweep * u)
+            pts[:, an] = prev[an] + (end[an] - prev[an]) * u
+        elif mo.kind == "STRAIGHT_FEED" and line_step is not None:
+            n = max(1, int(np.ceil(np.linalg.norm(end - prev) / line_step)))
+            pts = prev + (end - prev) * (np.arange(1, n + 1) / n)[:, None]
+        else:
+            pts = end[None, :]
+        path.append(pts)
+        rapid.append(np.full(len(pts), mo.kind == "STRAIGHT_TRAVERSE" and prev is not None))
+        ends.append(end)
+        prev = end
+    dense = np.vstack(path) if path else np.zeros((0, 3))
+    return np.array(ends).reshape(-1, 3), dense, np.concatenate(rapid) if rapid else np.zeros(0, bool)

@@ -2,6 +2,8 @@
 writes them: straight moves byte for byte; arcs as exact circles within --tolerance of
 the corrected ideal path, with the centre moved by no more than the bound allows."""
 
+import warnings
+
 import numpy as np
 import pytest
 from conftest import PARAMETRIC, ROOT, TOL, emitted_arcs, ideal_vs_emitted
@@ -199,3 +201,20 @@ def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch
     old, _ = correct_text(text, static, Setup())
     assert len(lazy) > 20  # without the guess: one by one
     assert new == old
+
+
+@pytest.mark.parametrize("extrapolate", ["clamp", "linear"])
+def test_a_move_of_no_length_outside_the_tables_is_planned_without_a_floating_point_warning(parametric, extrapolate):
+    # outside the tables the curvature bound is inf: inf * 0 (the move's length) made a
+    # RuntimeWarning (invalid value) in the planner; the output is that of the move before
+    q = np.array([[400.0, 10.0, 10.0]])
+    assert np.isinf(parametric.line_curvature_bound(q, q, np.zeros(1))).all()
+    text = "G90 G21\nG1 X400 Y10 Z10 F100\nG1 X400 Y10 Z10\nG1 X401\nM2\n"
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, start={"X": 10.0, "Y": 10.0, "Z": 10.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out, rep = correct_text(text, parametric, setup, CorrectOptions(extrapolate=extrapolate))
+    body = emit.split_header(out)[1].splitlines()
+    end = max(i for i, line in enumerate(body) if line.endswith(" F100"))  # the end of G1 X400 Y10 Z10
+    assert body[end + 1] + " F100" == body[end]
+    assert rep.extrapolated_points > 0

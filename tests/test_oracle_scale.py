@@ -7,13 +7,12 @@ by k, within the output rounding.
 Programs run with every work offset zero, tool lengths zero and the stored G28/G30
 positions at the origin, so that program and machine coordinates coincide."""
 
-import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import corpus_programs, polyline_distance
-from oracle import RS274, run_rs274  # noqa: I001  (the tests' own helper, a sibling module)
+from oracle import RS274, machine_path, run_rs274, uses_nurbs  # noqa: I001  (the tests' own helper, a sibling module)
 
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
@@ -25,8 +24,6 @@ CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 K = 1.0002
 MAX_LINES = 10_000  # longer corpus programs are not run through the oracle here (rs274 takes minutes on them)
-_CANON = re.compile(r"(STRAIGHT_TRAVERSE|STRAIGHT_FEED|ARC_FEED|SET_G5X_OFFSET|SET_G92_OFFSET|"
-                    r"USE_TOOL_LENGTH_OFFSET)\(([^)]*)\)")
 
 pytestmark = pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 is not installed")
 
@@ -51,72 +48,14 @@ def _programs():
 TOOLS = "".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100))
 
 
-_PLANE_AXES = {"XY": (0, 1, 2), "XZ": (2, 0, 1), "YZ": (1, 2, 0)}
-_MOTION_CALLS = ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "ARC_FEED")
-
-
 def rs274(text: str, tmp: Path):
     """(accepted, end points of the motions in machine coordinates, the path sampled as a
     dense polyline in machine coordinates, error) of ``text`` run through rs274."""
     res = run_rs274(text, tools=TOOLS)
-    if any(c.startswith("NURBS_FEED") for c in res.calls):
+    if uses_nurbs(res):
         pytest.skip("rs274 prints no geometry for splines (NURBS_FEED): the original path is unknown")
-    # canonical positions are in the program's frame; machine = canonical + G5x + G92 +
-    # tool length offset, tracked as rs274 announces them
-    off = {"G5X": np.zeros(3), "G92": np.zeros(3), "TLO": np.zeros(3)}
-    motions = iter(res.motions)
-    ends: list[np.ndarray] = []
-    path: list[np.ndarray] = []
-    prev = None
-    for call in res.calls:
-        m = _CANON.match(call)
-        if m is None:
-            continue
-        name = m.group(1)
-        v = [float(x) for x in re.split(r"[,\s]+", m.group(2).strip()) if x]
-        if name == "SET_G5X_OFFSET":
-            off["G5X"] = np.array(v[1:4])
-            continue
-        if name == "SET_G92_OFFSET":
-            off["G92"] = np.array(v[:3])
-            continue
-        if name == "USE_TOOL_LENGTH_OFFSET":
-            off["TLO"] = np.array(v[:3])
-            continue
-        mo = next(motions)
-        shift = off["G5X"] + off["G92"] + off["TLO"]
-        end = np.array(mo.end[:3]) + shift
-        if prev is None:
-            path.append(end[None, :])
-        elif mo.kind == "ARC_FEED":
-            a1, a2, an = _PLANE_AXES[mo.plane]
-            c = np.array(mo.centre) + shift
-            t0 = np.arctan2(prev[a2] - c[a2], prev[a1] - c[a1])
-            t1 = np.arctan2(end[a2] - c[a2], end[a1] - c[a1])
-            r0, r1 = np.hypot(prev[a1] - c[a1], prev[a2] - c[a2]), np.hypot(end[a1] - c[a1], end[a2] - c[a2])
-            turns = abs(mo.turn)
-            if mo.turn > 0:
-                sweep = (t1 - t0) % (2 * np.pi)
-                sweep = sweep if sweep > 1e-12 else 2 * np.pi
-                sweep += (turns - 1) * 2 * np.pi
-            else:
-                sweep = -((t0 - t1) % (2 * np.pi))
-                sweep = sweep if sweep < -1e-12 else -2 * np.pi
-                sweep -= (turns - 1) * 2 * np.pi
-            n = max(8, int(np.ceil(abs(sweep) * max(r0, r1) / 0.02)))
-            u = np.linspace(0.0, 1.0, n + 1)[1:]
-            pts = np.empty((n, 3))
-            rad = r0 + (r1 - r0) * u
-            pts[:, a1] = c[a1] + rad * np.cos(t0 + sweep * u)
-            pts[:, a2] = c[a2] + rad * np.sin(t0 + sweep * u)
-            pts[:, an] = prev[an] + (end[an] - prev[an]) * u
-            path.append(pts)
-        else:
-            path.append(end[None, :])
-        ends.append(end)
-        prev = end
-    dense = np.vstack(path) if path else np.zeros((0, 3))
-    return res.ok, np.array(ends).reshape(-1, 3), dense, res.error
+    ends, dense, _ = machine_path(res)
+    return res.ok, ends, dense, res.error
 
 
 def _setup():

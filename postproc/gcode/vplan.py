@@ -326,11 +326,16 @@ def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray,
     between = np.zeros(len(rows))  # how far the path may leave its samples' polyline
     if curvature is not None and len(rows):
         K = curvature(rows)
-        settled = K * length * length / 8.0 <= limit
+        # K L^2 / 8 within the limit; an unbounded K settles nothing, a move of no length
+        # included (its inf * 0 is not evaluated)
+        settled = np.zeros(len(rows), dtype=bool)
+        finite = np.isfinite(K)
+        settled[finite] = K[finite] * length[finite] ** 2 / 8.0 <= limit
         bounded = np.isfinite(K) & (K > 0)
-        h = np.where(bounded, np.sqrt(BETWEEN_SAMPLES_SHARE * 8.0 * limit / np.where(bounded, K, 1.0)), step_mm)
+        K_b = np.where(bounded, K, 1.0)
+        h = np.where(bounded, np.sqrt(BETWEEN_SAMPLES_SHARE * 8.0 * limit / K_b), step_mm)
         n = np.where(bounded, np.maximum(3, np.ceil(length / np.maximum(h, step_mm)).astype(int) + 1), n)
-        between = np.where(bounded, K * (length / (n - 1)) ** 2 / 8.0, 0.0)
+        between = np.where(bounded, K_b * (length / (n - 1)) ** 2 / 8.0, 0.0)
         n = np.where(settled, 2, n)  # no interior sample
     own, pos, start = _ragged(n - 2)
     s = (pos + 1) / (n[own] - 1)
