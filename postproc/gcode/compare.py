@@ -1183,7 +1183,10 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
             corr.fill(w + w // 2 + SCAN_AHEAD + 1)
             n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
             if n and not failed:
-                window = min(CHUNK_LINES, 2 * window)
+                # a longer window next; about twice what was paired when that stopped short
+                # of the window (more insertions in a stretch than MAX_LEVELS), so that the
+                # levels are not checked over a long window for a few records each time
+                window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
                 continue
             # a record the rule pairs otherwise (a line inserted here): one at a time for a
             # while, then a window about as long as the stretch that was paired at once
