@@ -469,3 +469,22 @@ def test_dialect_choices_are_the_dialects():
     from postproc.gcode.dialect import DIALECTS
 
     assert set(DIALECT_CHOICE.choices) == set(DIALECTS)
+
+
+def test_diff_takes_a_g92_line_correct_rewrote():
+    # G92 names the current position; correct rewrites its axis words by the correction
+    # there, so that the coordinates after it stay nominal: diff pairs it as rewritten
+    cal = load_calibration(CASES / "demo_static.json")
+    text = "G21 G90 G0 X10 Y10 Z10\nG1 X20 F100\nG92 X110 (re-zero)\nG1 X120 Y20\nG1 X130\nM2\n"
+    out, rep = correct_text(text, cal.engine, Setup())
+    assert "G92 X110 (re-zero)" not in out
+    d = compare_programs(text, out)
+    assert d.lines_rewritten == 1
+    assert d.moves == rep.moves == 4
+    assert d.lines_unchanged == 1  # M2
+    # the moves after it are compared in the machine frame: deltas as small as before it
+    assert max(m.size_mm for m in d.moved) < 0.1
+    # any other difference on such a line is still refused
+    wrong = out.replace("(re-zero)", "(re-zero) T2")
+    with pytest.raises(PostprocError, match="differs from line 3 of the original"):
+        compare_programs(text, wrong)

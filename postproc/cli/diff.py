@@ -68,7 +68,8 @@ def diff(original, corrected, as_json, show_all, dialect, setup):
     for row in rep.header.splitlines():
         click.echo(f"  {row}")
     click.echo(f"  lines: {rep.lines_original} original, {rep.lines_corrected} corrected "
-               f"(+{rep.lines_inserted} inserted by segmentation), {rep.lines_unchanged} unchanged")
+               f"(+{rep.lines_inserted} inserted by segmentation), {rep.lines_unchanged} unchanged"
+               + (f", {rep.lines_rewritten} G92 rewritten" if rep.lines_rewritten else ""))
     click.echo(f"  moves: {rep.moves}, {rep.n_moved} moved, {rep.moves_unchanged} unchanged")
     click.echo("  correction per axis (um):  " + "   ".join(
         f"{a} max {stats[a]['max_mm'] * 1000:.1f} mean {stats[a]['mean_mm'] * 1000:.1f}" for a in "XYZ"))
