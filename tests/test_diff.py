@@ -488,3 +488,35 @@ def test_diff_takes_a_g92_line_correct_rewrote():
     wrong = out.replace("(re-zero)", "(re-zero) T2")
     with pytest.raises(PostprocError, match="differs from line 3 of the original"):
         compare_programs(text, wrong)
+
+
+def test_diff_pairs_a_program_that_numbers_its_blocks_again_in_windows(monkeypatch):
+    # N10, N20, ... twice over (a second operation numbered from N10 again), no anchor
+    # between: a move's N word comes once more later; its own line is still the nearest,
+    # which the window checks instead of pairing every record one at a time
+    from postproc.engine.static import StaticEngine
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(4)
+    A = np.eye(3) + np.diag([1e-3, -5e-4, 2e-4])
+    eng = StaticEngine(A, [0.01, 0.0, 0.0], [[0, 0, 0], [315, 315, 315]])
+    lines = ["G21 G90 G0 X100 Y100 Z50"]
+    for _ in range(2):
+        lines += [f"N{10 * (k + 1)} G1 X{x:.3f} Y{y:.3f} F500"
+                  for k, (x, y) in enumerate(rng.uniform(50, 250, size=(400, 2)))]
+    text = "\n".join(lines + ["M2"]) + "\n"
+    out, rep = correct_text(text, eng, Setup())
+    calls = {"one": 0}
+    pair_one = compare._pair_one
+
+    def counted(*args):
+        calls["one"] += 1
+        return pair_one(*args)
+
+    monkeypatch.setattr(compare, "_pair_one", counted)
+    monkeypatch.setattr(compare, "CHUNK_LINES", 100)  # windows without the anchor at the end
+    d = compare_programs(text, out)
+    assert d.moves == rep.moves == 801
+    n_header = len(emit.split_header(out)[0])
+    assert all(m.lineno_corrected - n_header == m.lineno for m in d.moved)
+    assert calls["one"] <= 10

@@ -815,14 +815,21 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             good[a] = (own[a, 0] == 0) & ~nearer & ((looked == STOP_AFTER_WORSE) | real_stop[a])
         b = np.flatnonzero(~plain)
         if len(b):
-            # an N word or another skeleton (and no comment): its own line when no later
-            # line before the anchor has its skeleton or N word
+            # an N word or another skeleton (and no comment): its own line when the later
+            # lines before the anchor with its skeleton or N word (one of each at most, a
+            # program that numbers its blocks again) are not nearer
             tb, eb, ob, cb = t0[b], end_at[b], okeys[b], own[b]
+            pb = predicted[b]
             nxt = rc.index().next_same
-            after_sk = nxt[0][q + tb] - q
-            after_n = nxt[1][q + tb] - q
-            good[b] = (real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & (after_sk >= eb)
-                       & ((ob[:, 1] == 0) | ((ob[:, 1] == cb[:, 1]) & (after_n >= eb))))
+            ok_b = real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & ((ob[:, 1] == 0) | (ob[:, 1] == cb[:, 1]))
+            d_own = _l1(cend[tb], pb)
+            for col, named in ((0, ok_b), (1, ok_b & (ob[:, 1] != 0))):
+                after = nxt[col][q + tb] - q
+                r = np.flatnonzero(named & (after < eb))
+                if len(r):
+                    second = nxt[col][q + after[r]] - q
+                    ok_b[r] &= (second >= eb[r]) & (_l1(cend[after[r]], pb[r]) >= d_own[r])
+            good[b] = ok_b
         return good
 
     def previous(rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
