@@ -148,7 +148,7 @@ Ends: TypeAlias = tuple[float, float, float, float, float, float]
 class ArcHint:
     """What the bulk planner found for one arc (see the module docstring)."""
 
-    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy")
+    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy", "_last")
 
     def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
                  lazy: Callable[[], Plan] | None, mismatch: float = 0.0) -> None:
@@ -156,6 +156,7 @@ class ArcHint:
         self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
         self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
+        self._last: tuple | None = None  # (arguments, result) of the last call of words
 
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
         """The arc words for the move written from S to E (machine mm, as written):
@@ -187,6 +188,19 @@ class ArcHint:
         arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
         :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
         limits decide)."""
+        # the planner's guess (Corrector._hint_fails_rounded) and the writer usually ask
+        # with the same ends: the second time is the first one's answer
+        key = (tuple(S), tuple(E), axes, clockwise, d, unit, base, budget)
+        last = self._last
+        if last is not None and last[0] == key:
+            return last[1]
+        result = self._words(S, E, axes, clockwise, d, unit, base, budget)
+        self._last = (key, result)
+        return result
+
+    def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
+               unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
+        """:meth:`words`, computed."""
         a1, a2, an = axes
         s1, s2, sn = S[a1], S[a2], S[an]
         e1, e2, en = E[a1], E[a2], E[an]
