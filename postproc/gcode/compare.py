@@ -112,18 +112,14 @@ class DiffReport:
     _n_moved: int = 0
     _abs_max: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     _abs_sum: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    _counted: int = 0  # stored blocks already in _abs_max and _abs_sum
 
     def add_moved(self, lineno: int, clineno: int, delta) -> None:
         self._lines.append(lineno)
         self._clines.append(clineno)
         self._deltas.extend(delta)
         self._n_moved += 1
-        if self.keep is not None:
-            for k in range(3):
-                a = abs(delta[k])
-                self._abs_sum[k] += a
-                if a > self._abs_max[k]:
-                    self._abs_max[k] = a
+        if self.keep is not None and len(self._lines) > self._limit():
             self._prune()
 
     def add_moved_rows(self, linenos: np.ndarray, clinenos: np.ndarray, deltas: np.ndarray) -> None:
@@ -132,21 +128,31 @@ class DiffReport:
         self._clines.frombytes(np.ascontiguousarray(clinenos, dtype=np.int64).tobytes())
         self._deltas.frombytes(np.ascontiguousarray(deltas, dtype=np.float64).tobytes())
         self._n_moved += len(linenos)
-        if self.keep is not None and len(linenos):
-            a = np.abs(np.asarray(deltas, dtype=float).reshape(-1, 3))
+        if self.keep is not None and len(self._lines) > self._limit():
+            self._prune()
+
+    def _limit(self) -> int:
+        assert self.keep is not None
+        return max(8 * self.keep, 65_536)
+
+    def _count(self) -> None:
+        """With ``keep``: the blocks stored since the last count into the per-axis largest
+        and summed |delta| (counted when they are pruned or the figures are asked for)."""
+        d = self._delta_array()[self._counted:]
+        if len(d):
+            a = np.abs(d)
             for k, (mx, sm) in enumerate(zip(a.max(axis=0).tolist(), a.sum(axis=0).tolist(), strict=True)):
                 self._abs_sum[k] += sm
                 if mx > self._abs_max[k]:
                     self._abs_max[k] = mx
-            self._prune()
+        self._counted = len(self._lines)
 
     def _prune(self) -> None:
-        """With ``keep``: once many are stored, drop all but the ``keep`` largest (in the
-        order :meth:`largest` gives: size, then the order they came in)."""
+        """With ``keep``: drop all but the ``keep`` largest blocks stored (in the order
+        :meth:`largest` gives: size, then the order they came in), once they are counted."""
         keep = self.keep
         assert keep is not None
-        if len(self._lines) <= max(8 * keep, 65_536):
-            return
+        self._count()
         order = np.sort(self._largest_order(keep))
         lines = np.frombuffer(self._lines, dtype=np.int64)[order]
         clines = np.frombuffer(self._clines, dtype=np.int64)[order]
@@ -155,6 +161,7 @@ class DiffReport:
         self._lines.frombytes(lines.tobytes())
         self._clines.frombytes(clines.tobytes())
         self._deltas.frombytes(np.ascontiguousarray(deltas).tobytes())
+        self._counted = len(self._lines)
 
     @property
     def n_moved(self) -> int:
@@ -186,6 +193,7 @@ class DiffReport:
 
     def axis_stats(self) -> dict:
         if self.keep is not None:
+            self._count()
             n = self._n_moved
             return {a: {"max_mm": self._abs_max[k] if n else 0.0, "mean_mm": self._abs_sum[k] / n if n else 0.0}
                     for k, a in enumerate("XYZ")}
