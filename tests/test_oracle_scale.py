@@ -1,8 +1,9 @@
 """LinuxCNC's own interpreter as the oracle: every sample and corpus program that rs274
 accepts, corrected for a machine that moves k times what it is told (a uniform scale about
 the machine origin, so circles stay circles and nothing needs splitting), must be accepted
-by rs274 too, and every canonical end point and arc centre must be the original's divided
-by k, within the output rounding.
+by rs274 too: every canonical end point of the original, divided by k, must lie on the
+corrected program's path, and the two paths (arcs drawn as LinuxCNC draws them) must stay
+within the tolerance and rs274's print rounding of each other both ways, in mm.
 
 Programs run with every work offset zero, tool lengths zero and the stored G28/G30
 positions at the origin, so that program and machine coordinates coincide."""
