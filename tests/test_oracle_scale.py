@@ -24,7 +24,9 @@ ROOT = Path(__file__).parents[1]
 CORPUS = Path(__file__).parents[2] / "shared" / "corpus"
 EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 K = 1.0002
-MAX_LINES = 10_000  # longer corpus programs are not run through the oracle here (rs274 takes minutes on them)
+# Longer corpus programs are run through the oracle by benchmarks/corpus_oracle.py (rs274
+# takes under a second on them, but correcting and comparing the 15 take minutes in all).
+MAX_LINES = 10_000
 
 pytestmark = pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 is not installed")
 
