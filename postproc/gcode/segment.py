@@ -240,6 +240,11 @@ MIN_ARC_RADIUS_MM = 0.00005 * MM_PER_INCH * (1.0 + 1e-6)
 MIN_ARC_SWEEP_RAD = 1e-5
 
 
+# Gauss-Newton steps of bisector_centre stop below this (mm): far below the finest
+# output step (1e-4 mm, 1e-5 inch).
+CENTRE_SETTLED_MM = 1e-9
+
+
 def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarray) -> np.ndarray:
     """Centre (2,) on the perpendicular bisector of S2-E2 whose circle through both fits
     the points P2 (k, 2) best (least squares on the radial distance); ``c0``: first guess.
@@ -277,7 +282,11 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
         if (t + dt) * t < 0 and abs(t) > 0:
             dt = -0.5 * t
         t += dt
-        if abs(dt) <= 1e-13 * (1.0 + abs(t)):
+        # settled far below any output step: the steps after the third or fourth are
+        # rounding noise (about 1e-12 mm on a radius of a few mm), iterating on only makes
+        # t wander within it. (On a radius of kilometres the noise stays above it, and all
+        # the steps are taken.)
+        if abs(dt) <= CENTRE_SETTLED_MM:
             break
     return M + t * n
 
