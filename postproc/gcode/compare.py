@@ -952,33 +952,55 @@ ALIGN_RECORDS = 8
 ALIGN_SLACK = 16
 
 
+def _pick(dists) -> tuple[tuple | None, tuple | None, int | None]:
+    """The nearest-end-point rule over the distances of the compatible moves in order (an
+    iterable, consumed only as far as the rule looks): the nearest and the nearest before
+    it (the one it displaced; None when it is the first), each as (distance, index), and
+    the index where the rule stopped (None: it ran to the end of ``dists``). Past the
+    nearest line the end points walk away again (the next move's inserted lines): it
+    stops after STOP_AFTER_WORSE that do not come closer."""
+    best = runner = None
+    worse = 0
+    for j, dist in enumerate(dists):
+        if best is None or dist < best[0]:
+            runner, best = best, (dist, j)
+            worse = 0
+        else:
+            worse += 1
+            if worse >= STOP_AFTER_WORSE:
+                return best, runner, j
+    return best, runner, None
+
+
 def _scan_near(corr: _Tape, o_keys: tuple, predicted: tuple, skip: int) -> tuple[bool, tuple | None, tuple | None]:
     """The scan of :func:`_pair_one` over the lines of corr read, from ``skip`` lines
     after corr.pos, SCAN_NEAR of them at most: whether these lines settle it, the nearest
-    compatible move and the nearest before it (the one it displaced; None when it is the
-    first), each as (distance, offset from corr.pos), or None (none before the next
-    anchor)."""
+    compatible move and the nearest before it (:func:`_pick`), each as (distance, offset
+    from corr.pos), or None (none before the next anchor)."""
     rc = corr.rows
     c0 = corr.pos
     n = min(len(rc), c0 + skip + SCAN_NEAR)
     move, keys, end = rc.move, rc.keys, rc.end
-    best = runner = None
-    worse = 0
-    for c in range(c0 + skip, n):
-        if not move[c]:
-            return True, best, runner  # the next anchor: the pair lies before it
-        if _compatible_keys(o_keys, tuple(keys[c].tolist())):
-            dist = _distance(end[c].tolist(), predicted)
-            if best is None or dist < best[0]:
-                runner, best = best, (dist, c - c0)
-                worse = 0
-            else:
-                # past the nearest line the end points walk away again (the next
-                # move's inserted lines): stop after a few that do not come closer
-                worse += 1
-                if worse >= STOP_AFTER_WORSE:
-                    return True, best, runner
-    return False, None, None
+    offsets: list[int] = []
+    anchor = [False]
+
+    def dists():
+        for c in range(c0 + skip, n):
+            if not move[c]:
+                anchor[0] = True  # the next anchor: the pair lies before it
+                return
+            if _compatible_keys(o_keys, tuple(keys[c].tolist())):
+                offsets.append(c - c0)
+                yield _distance(end[c].tolist(), predicted)
+
+    best, runner, stopped = _pick(dists())
+    if stopped is None and not anchor[0]:
+        return False, None, None
+
+    def at(found: tuple | None) -> tuple | None:
+        return None if found is None else (found[0], offsets[found[1]])
+
+    return True, at(best), at(runner)
 
 
 def _scan(corr: _Tape, o_keys: tuple, predicted: tuple, skip: int) -> tuple[tuple | None, tuple | None]:
@@ -1006,19 +1028,8 @@ def _scan(corr: _Tape, o_keys: tuple, predicted: tuple, skip: int) -> tuple[tupl
             keys = rc.keys[cand]
             both_n = (o1 != 0) & (keys[:, 1] != 0)
             cand = cand[(keys[:, 0] == o0) | np.where(both_n, keys[:, 1] == o1, (o2 != 0) & (keys[:, 2] == o2))]
-            dists = _l1(rc.end[cand], np.array(predicted)).tolist()
-            best = runner = None
-            worse = 0
-            stopped = None
-            for j, dist in enumerate(dists):
-                if best is None or dist < best[0]:
-                    runner, best = best, (dist, j)
-                    worse = 0
-                else:
-                    worse += 1
-                    if worse >= STOP_AFTER_WORSE:
-                        stopped = int(cand[j])
-                        break
+            best, runner, stop_j = _pick(_l1(rc.end[cand], np.array(predicted)).tolist())
+            stopped = None if stop_j is None else int(cand[stop_j])
             if stopped is not None and stopped <= known:
                 break
             if known == a:
