@@ -43,7 +43,7 @@ import operator
 import re
 from array import array
 from dataclasses import dataclass, field
-from itertools import chain, islice
+from itertools import islice
 from typing import Any
 
 import numpy as np
@@ -231,21 +231,16 @@ class HeaderSetup:
     home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
 
 
-def _header_rows(source, limit: int = 200) -> list[str]:
+def _header_rows(source) -> list[str]:
     """The header lines at the start of a program (old one-line form or the new lines)."""
     _path, lines = iter_source_lines(source)
-    rows: list[str] = []
     try:
-        head, keep = emit.start_lines(lines)
-        for line in chain(head[keep:], islice(lines, limit)):
-            if not emit.is_header(line):
-                break
-            rows.append(line.strip())
+        _kept, header, _after = emit.header_run(lines)
     finally:
         close = getattr(lines, "close", None)
         if close is not None:
             close()
-    return rows
+    return [line.strip() for line in header]
 
 
 def _axis_values(text: str) -> dict[str, float]:
@@ -450,21 +445,14 @@ class _Reader:
         it = self._lines
         lineno = 0
         if self.drop_header:
-            # the header lines after the lines kept before them (emit.start_lines; several
-            # headers in a row for a program corrected more than once) are left out
-            head, keep = emit.start_lines(it)
-            linenos = list(range(1, keep + 1))
-            lineno = keep
-            for line in chain(head[keep:], it):
+            # the header lines after the lines kept before them (emit.header_run) are left out
+            kept, header, after = emit.header_run(it)
+            self.header += [line.strip() for line in header]
+            head, linenos = kept, list(range(1, len(kept) + 1))
+            lineno = len(kept) + len(header)
+            if after is not None:
                 lineno += 1
-                if emit.is_header(line):
-                    self.header.append(line.strip())
-                    continue
-                linenos.append(lineno)
-                head = head[:keep] + [line]
-                break
-            else:
-                head = head[:keep]
+                head, linenos = [*kept, after], [*linenos, lineno]
             rows = _Rows.blank(head, 0)
             rows.lineno = np.array(linenos, dtype=np.int64)
             n, error = self._general(rows, 0, len(head))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterator
-from itertools import islice
+from itertools import chain, islice
 from typing import TYPE_CHECKING
 
 from postproc import __version__
@@ -309,15 +309,23 @@ def start_lines(it: Iterator[str]) -> tuple[list[str], int]:
     return head, keep
 
 
+def header_run(it: Iterator[str]) -> tuple[list[str], list[str], str | None]:
+    """Read from ``it`` the lines :func:`start_lines` keeps before the header, the run of
+    header lines after them (several headers for a program corrected more than once), and
+    the first line after those (None at the end): ``(kept, header, after)``. ``it`` goes
+    on after that line."""
+    head, keep = start_lines(it)
+    header: list[str] = []
+    for line in chain(head[keep:], it):
+        if not is_header(line):
+            return head[:keep], header, line
+        header.append(line)
+    return head[:keep], header, None
+
+
 def split_header(text: str) -> tuple[list[str], str]:
-    """``(header lines, the rest)`` of a corrected program's text: the header lines are the
-    run of header lines after the lines :func:`start_lines` keeps before it (those stay in
-    the rest)."""
-    lines = text.splitlines(keepends=True)
-    _head, i = start_lines(iter(lines))
-    rest = lines[:i]
-    head: list[str] = []
-    while i < len(lines) and is_header(lines[i]):
-        head.append(lines[i])
-        i += 1
-    return head, "".join(rest + lines[i:])
+    """``(header lines, the rest)`` of a corrected program's text (:func:`header_run`;
+    the lines kept before the header stay in the rest)."""
+    it = iter(text.splitlines(keepends=True))
+    kept, header, after = header_run(it)
+    return header, "".join(kept + ([] if after is None else [after]) + list(it))
