@@ -38,8 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from corpus_speed import CORPUS, programs, setup  # noqa: E402
-from corpus_survey import DIALECT_BY_SOURCE  # noqa: E402
+from corpus_speed import CORPUS, dialect_of, programs, setup  # noqa: E402
 
 from postproc.calfile import load_calibration  # noqa: E402
 from postproc.errors import PostprocError  # noqa: E402
@@ -52,10 +51,8 @@ PAIRING_ERRORS = ("has no counterpart", "differs from line", "is missing from")
 
 
 def run(path: Path, lines: int, cal_name: str, engine, suspect_mm: float, tmp: Path) -> dict:
-    rel = path.relative_to(CORPUS)
-    source = rel.parts[1] if rel.parts[0] == "real" else rel.parts[0]
-    dialect = DIALECT_BY_SOURCE.get(source, "generic")
-    row: dict = {"program": str(rel), "calibration": cal_name, "lines": lines}
+    dialect = dialect_of(path)
+    row: dict = {"program": str(path.relative_to(CORPUS)), "calibration": cal_name, "lines": lines}
     out = tmp / "out.nc"
     try:
         correct_file(path, out, engine, setup(), CorrectOptions(extrapolate="linear", dialect=dialect))

@@ -64,10 +64,14 @@ def programs(min_lines: int, only: str) -> list[tuple[Path, int]]:
     return out
 
 
+def dialect_of(path: Path) -> str:
+    """The dialect of a corpus program's source (real/SOURCE/..., or the set's folder)."""
+    parts = path.relative_to(CORPUS).parts
+    return DIALECT_BY_SOURCE.get(parts[1] if parts[0] == "real" else parts[0], "generic")
+
+
 def run(path: Path, lines: int, engine, repeats: int) -> dict:
-    source = path.relative_to(CORPUS).parts[1] if path.relative_to(CORPUS).parts[0] == "real" else \
-        path.relative_to(CORPUS).parts[0]
-    opts = CorrectOptions(extrapolate="linear", dialect=DIALECT_BY_SOURCE.get(source, "generic"))
+    opts = CorrectOptions(extrapolate="linear", dialect=dialect_of(path))
     row: dict = {"program": str(path.relative_to(CORPUS)), "lines": lines}
     text = path.read_text(encoding="utf-8", errors="replace")
     row["r_arcs"] = sum(1 for line in text.splitlines() if _R_ARC.search(line.split("(")[0].split(";")[0]))
