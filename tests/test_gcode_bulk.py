@@ -130,6 +130,23 @@ def test_scan_refuses_lone_carriage_returns_and_keeps_the_other_lines_apart():
     assert not any(c[2] for c in block.cols)
 
 
+
+def test_stops_and_semicolon_comments_move_nothing_and_stay_in_a_run():
+    lines = ["G1 X1 Y2\n", "; finishing pass\n", "M1\n", "N5 M0 (check)\n", "(a) ; b\n", "M6\n", "M2\n", "X2\n"]
+    block = bulk.scan(lines)
+    # M6 (tool change) and M2 (end) are the interpreter's
+    assert block.neutral.tolist() == [False, True, True, True, True, False, False, False]
+    assert block.plain.tolist() == [True, True, True, True, True, False, False, True]
+
+
+def test_runs_keep_semicolon_comments_and_stops_byte_for_byte():
+    text = ("G0 X10 Y10 Z10\n" + "".join(f"G1 X{10 + i * 0.7:.3f} Y{20 - i * 0.3:.4f}\n; pass {i}\nM1\n"
+                                         for i in range(12)) + "M30\n")
+    for chunk in (1, 5, 20_000):
+        outs = run_all(text, chunk_lines=chunk)
+        assert_same(outs)
+        assert "; pass 3\nM1\n" in outs["bulk"][0]
+
 # -- fixed cases --------------------------------------------------------------------------
 def test_runs_across_chunks_arcs_units_and_incremental_sections():
     text = ("%\nG21 G90 G17\nG0 X10 Y10 Z10\n" + "".join(f"G1 X{10 + i * 0.7:.3f} Y{20 - i * 0.3:.4f}\n" for i in range(30))

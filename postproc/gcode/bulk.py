@@ -18,7 +18,7 @@ A run holds three kinds of lines:
   radius, end radius) end the run before an arc that fails them, so the interpreter
   reads and reports it. A line with no motion word after an arc is an arc (modal) and
   never plain;
-- lines that move nothing (blank, one comment, S and M3-M9 words: :data:`_NEUTRAL`):
+- lines that move nothing (blank, comments, S and M0-M9 words but M2 and M6: :data:`_NEUTRAL`):
   written whole, no move, no word added; a run never starts with one.
 
 After the chunk's targets are corrected, the comparisons of old and new values of every
@@ -68,12 +68,14 @@ _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
-# A line that moves nothing and sets nothing the correction reads: blank, one comment,
-# or spindle and coolant words (S, M3 M4 M5 M7 M8 M9) with an optional N word and
-# comment. Such a line inside a run is written as it is, as the interpreter would.
+# A line that moves nothing and sets nothing the correction reads: blank, a comment
+# (one in parentheses, then one after ';' to the end of the line, as the lexer reads
+# both in every dialect), or a program stop, spindle or coolant word (S, M0 M1 M3 M4 M5
+# M7 M8 M9) with an optional N word and comments. Such a line inside a run is written as
+# it is, as the interpreter would (which reads no geometry from it).
 _NEUTRAL = re.compile(
-    rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_N}[ \t]*+)?(?:[Mm][ \t]*+0?[3-57-9][ \t]*+)?"
-    r"(?:\([^()\n]*\)[ \t]*+)?\r?\n?")
+    rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_N}[ \t]*+)?(?:[Mm][ \t]*+0?[013-57-9][ \t]*+)?"
+    r"(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
