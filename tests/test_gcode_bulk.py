@@ -147,6 +147,20 @@ def test_runs_keep_semicolon_comments_and_stops_byte_for_byte():
         assert_same(outs)
         assert "; pass 3\nM1\n" in outs["bulk"][0]
 
+
+def test_a_tool_change_stays_in_a_run_and_a_later_g43_without_h_takes_its_length():
+    lines = ["G1 X1\n", "T2 M6\n", "N40 M06 T03 (FLAT D6)\n", "T4\n", "T5 M6 X1\n", "X2\n"]
+    block = bulk.scan(lines)
+    assert block.neutral.tolist() == [False, True, True, False, False, False]
+    assert block.tools == {1: 2, 2: 3}
+    setup = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 0.0, 2: 5.0, 3: 7.0})
+    text = ("G0 X10 Y10 Z10\nG1 X11 Y10.5\nX12 Y11\nT2 M6 (T2)\nX13 Y12\nX14\nN7 M6 T3\nX15\nG43 Z40\nX16\nX17 Y13\n"
+            "T2 M6\nG43\nX18\n")
+    for chunk in (1, 4, 20_000):
+        outs = run_all(text, chunk_lines=chunk, setup=setup)
+        assert_same(outs)
+        assert outs["bulk"][1] is not None  # corrected, not refused
+
 # -- fixed cases --------------------------------------------------------------------------
 def test_runs_across_chunks_arcs_units_and_incremental_sections():
     text = ("%\nG21 G90 G17\nG0 X10 Y10 Z10\n" + "".join(f"G1 X{10 + i * 0.7:.3f} Y{20 - i * 0.3:.4f}\n" for i in range(30))

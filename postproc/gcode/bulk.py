@@ -18,7 +18,8 @@ A run holds three kinds of lines:
   radius, end radius) end the run before an arc that fails them, so the interpreter
   reads and reports it. A line with no motion word after an arc is an arc (modal) and
   never plain;
-- lines that move nothing (blank, comments, S and M0-M9 words but M2 and M6: :data:`_NEUTRAL`):
+- lines that move nothing (blank, comments, S and M0-M9 words but M2 and M6: :data:`_NEUTRAL`;
+  a tool change alone: :data:`_TOOL`):
   written whole, no move, no word added; a run never starts with one.
 
 After the chunk's targets are corrected, the comparisons of old and new values of every
@@ -76,6 +77,13 @@ _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's 
 _NEUTRAL = re.compile(
     rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_N}[ \t]*+)?(?:[Mm][ \t]*+0?[013-57-9][ \t]*+)?"
     r"(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
+# A tool change and nothing else (``T2 M6``, ``N40 M06 T02 (FLAT D6)``): it moves nothing
+# and changes nothing of a run's geometry (the tool length offset stays what G43 set),
+# only the tool the interpreter holds (group 1 or 2: the T number), which the run sets
+# when it is read (:func:`read_run`).
+_TOOL = re.compile(
+    r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6|[Mm][ \t]*+0?6[ \t]*+[Tt][ \t]*+(\d++))"
+    r"[ \t]*+(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
@@ -243,13 +251,18 @@ class Block:
         neutral = np.zeros(n, dtype=bool)
         head = cols[_HEAD] = list(cols[_HEAD])
         rest = cols[_REST] = list(cols[_REST])
-        match = _NEUTRAL.fullmatch
+        match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
+        self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
         for i in np.flatnonzero(~moving & ~self.arc & ~centre & (digit == "")).tolist():
             line = lines[i]
-            if match(line):
-                # written whole from its last piece
-                neutral[i] = True
-                head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
+            if not match(line):
+                m = tool(line)
+                if m is None:
+                    continue
+                self.tools[i] = int(m.group(1) or m.group(2))
+            # written whole from its last piece
+            neutral[i] = True
+            head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
         self.neutral = neutral
         self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
         self.last_moving: list[int] = last_index(~neutral).tolist()
@@ -381,6 +394,11 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
     nr = block.neutral_rows
     if nr:
         run.inert = [y - a for y in nr[bisect_left(nr, a):bisect_left(nr, b)]]
+        tools = block.tools
+        changes = [tools[a + j] for j in run.inert if a + j in tools] if tools else None
+        if changes:
+            # the run's tool changes, as the interpreter reads them (T, then M6 loads it)
+            st.tool = st.spindle_tool = changes[-1]
     pos = list(st.pos)
     e = b - 1
     for k in range(3):
