@@ -223,6 +223,27 @@ def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
+
+def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch):
+    # a tool change alone on its line stays in a stretch read as columns; the tool it
+    # loads is the one a later G43 without H takes
+    from postproc.gcode import compare
+    from postproc.gcode.interp import Interpreter
+
+    text = ("G21 G90 G54\nT1 M6\nG0 G43 H1 Z50\nX10 Y10\nG1 X11 Y12 F500\nT2 M6 (D6 FLAT)\nX12 Y13\n"
+            "N40 M06 T03\nX13\nG43 Z40\nX14 Y15\n(next)\nT1 M6 ; back\nX15\nG43\nX16 Z35\nM30\n")
+    setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)}, tool_lengths={1: 50.0, 2: 60.0, 3: 70.0})
+    interp = Interpreter(setup, None, lenient_setup=True)
+    want_end = []
+    for k, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = interp.feed_line(k, line)
+        want_end.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    assert want_end[9][2] != want_end[2][2]  # G43 without H took tool 3's length
+    for chunk in (20_000, 5, 1):
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        parts = list(compare._Reader(text, setup, compare._Keys()).chunks())
+        np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
+
 def test_diff_pairs_inserted_lines_at_any_chunk_size(monkeypatch):
     from postproc.gcode import compare
 

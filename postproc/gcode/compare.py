@@ -317,8 +317,10 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
 _NUM = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
 # A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
 # line, which changes nothing the positions depend on: [N..] [S..] [M0, M1, M3-M5, M7-M9
-# words] [comments]. Groups: 1 N word, 2 G number, 3-5 X, Y, Z numbers, 6 the arc words,
-# 7 the F number of a plain move; 8 a quiet line; any other line (and a blank one) matches
+# words] [comments]. A tool change alone: [N..] T.. M6 (or M6 T..) [comments]; it changes
+# only the tool the interpreter holds (for a later G43 without H). Groups: 1 N word, 2 G
+# number, 3-5 X, Y, Z numbers, 6 the arc words, 7 the F number of a plain move; 8 a quiet
+# line; 9 or 10 the T number of a tool change; any other line (and a blank one) matches
 # with every group empty (one match per line).
 _PLAIN = re.compile(
     rf"^(?:[ \t]*+(?:([Nn][ \t]*+\d++)[ \t]*+)?(?:[Gg][ \t]*+(0?[0-3])(?![0-9.])[ \t]*+)?"
@@ -326,6 +328,8 @@ _PLAIN = re.compile(
     rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
     rf"|([ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_NUM}[ \t]*+)?"
     rf"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?)\r?"
+    rf"|[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6|[Mm][ \t]*+0?6[ \t]*+[Tt][ \t]*+(\d++))"
+    rf"(?![0-9.])[ \t]*+(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?\r?"
     rf"|[^\n]*)$",
     re.M,
 )
@@ -501,7 +505,8 @@ class _Reader:
         has = [present[:, 2], present[:, 3], present[:, 4]]
         gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
         arc = present[:, 5]
-        quiet = present[:, 7]
+        tool = present[:, 8] | present[:, 9]  # a tool change: quiet but for the tool it loads
+        quiet = present[:, 7] | tool
         has_g = gcode >= 0
         g_arc = gcode >= ARC_CW
         last_g = _last_index(has_g)
@@ -532,6 +537,9 @@ class _Reader:
         moves_before = np.concatenate([[0], np.cumsum(plain)]).tolist()
         arcs_before = np.concatenate([[0], np.cumsum(plain & arc)]).tolist()
         runnable_l, quiet_l = runnable.tolist(), quiet.tolist()
+        # the last tool change at or before each line, and the tool it loads
+        last_tool = _last_index(tool).tolist() if tool.any() else None
+        tool_no = {i: int(cols[i, 8] or cols[i, 9]) for i in np.flatnonzero(tool).tolist()}
         gcode_l, last_g_l = gcode.tolist(), last_g.tolist()
         interp = self.interp
         st = interp.state
@@ -567,10 +575,15 @@ class _Reader:
                         j = last_f[e]
                         if j >= i:
                             st.feed = float(fcol[j])
+                        if last_tool is not None and last_tool[e] >= i:
+                            # T, then M6 loads it, as the interpreter reads them
+                            st.tool = st.spindle_tool = tool_no[last_tool[e]]
                         i = b
                         continue
                 elif quiet_l[i]:
-                    i += 1  # changes nothing, whatever the state
+                    if last_tool is not None and last_tool[i] == i and not interp.ended:
+                        st.tool = st.spindle_tool = tool_no[i]
+                    i += 1  # changes nothing else, whatever the state
                     continue
             i, error = self._general(rows, i, i + 1)
             if error is not None:
