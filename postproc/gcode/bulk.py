@@ -82,7 +82,7 @@ _NEUTRAL = re.compile(
 # only the tool the interpreter holds (group 1 or 2: the T number), which the run sets
 # when it is read (:func:`read_run`).
 _TOOL = re.compile(
-    r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6|[Mm][ \t]*+0?6[ \t]*+[Tt][ \t]*+(\d++))"
+    rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?{lexer.TOOL_CHANGE_RE}"
     r"[ \t]*+(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])

@@ -51,6 +51,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
+from postproc.gcode.lexer import TOOL_CHANGE_RE
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
@@ -328,8 +329,8 @@ _PLAIN = re.compile(
     rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
     rf"|([ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_NUM}[ \t]*+)?"
     rf"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?)\r?"
-    rf"|[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6|[Mm][ \t]*+0?6[ \t]*+[Tt][ \t]*+(\d++))"
-    rf"(?![0-9.])[ \t]*+(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?\r?"
+    rf"|[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?{TOOL_CHANGE_RE}"
+    rf"[ \t]*+(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?\r?"
     rf"|[^\n]*)$",
     re.M,
 )

@@ -37,6 +37,10 @@ SYMBOL = "symbol"  # # [ ] = * < > @ ^ and other printable ASCII
 NEWLINE = "newline"
 
 NUMBER_RE = r"[+-]?(?:\d+\.?\d*|\.\d+)"
+# A tool change: T<n> M6 or M6 T<n> (M06, T02 too), the T number in group 1 or 2 (of the
+# fragment). Read as a line of its own by the bulk writer and by diff's reader.
+TOOL_CHANGE_RE = (r"(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6(?![0-9.])"
+                  r"|[Mm][ \t]*+0?6(?![0-9.])[ \t]*+[Tt][ \t]*+(\d++)(?![0-9.]))")
 
 _MASTER = re.compile(
     r"(?P<newline>\r\n|\n|\r)"
