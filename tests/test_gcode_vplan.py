@@ -93,6 +93,19 @@ def test_arcs_settled_in_bulk_are_exact_and_within_tolerance(parametric, seed):
     assert rep.arcs_kept > 0
 
 
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_an_arc_is_written_alike_whatever_the_chunk_it_is_planned_with(parametric, seed):
+    # each arc's centre fit stops on its own step, not on the chunk's
+    text = _arcs_program(seed)
+    outs = {c: correct_text(text, parametric, Setup(), CorrectOptions(chunk_lines=c)) for c in (5, 64, 20_000)}
+    ref = outs[20_000]
+    assert ref[1].arcs_kept > 0
+    for out, rep in outs.values():
+        assert out == ref[0]
+        assert rep.arcs_kept == ref[1].arcs_kept
+        assert rep.lines_inserted == ref[1].lines_inserted
+
 def test_direction_dependent_calibration_takes_the_general_path():
     base = StaticEngine(np.eye(3), [0, 0, 0], [[0] * 3, [315] * 3])
     eng = compose(base, [{"name": "backlash:X", "params": {"b_mm": -0.012}}])

@@ -48,7 +48,7 @@ import numpy.typing as npt
 
 from postproc.gcode import emit
 from postproc.gcode.geometry import arcs_points
-from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
+from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
 if TYPE_CHECKING:
@@ -488,6 +488,10 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     n1, n2 = -D2 / Ls, D1 / Ls
     h = 0.5 * L
     t = (c01 - M1) * n1 + (c02 - M2) * n2
+    # each arc's fit stops once its step is below CENTRE_SETTLED_MM (the steps after are
+    # rounding noise), as segment.bisector_centre's does: what an arc gets does not
+    # depend on the arcs fitted with it
+    active = np.ones(k, dtype=bool)
     for _ in range(CENTRE_ITERATIONS):
         c1, c2 = M1 + t * n1, M2 + t * n2
         v1, v2 = P1 - c1[owner], P2 - c2[owner]
@@ -500,7 +504,11 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
         num = np.bincount(owner, J * res, minlength=k)
         dt = np.where(den > 0, -num / np.where(den > 0, den, 1.0), 0.0)
         flip = ((t + dt) * t < 0) & (t != 0)
-        t = t + np.where(flip, -0.5 * t, dt)
+        step = np.where(flip, -0.5 * t, dt)
+        t = np.where(active, t + step, t)
+        active &= ~(np.abs(step) <= CENTRE_SETTLED_MM)
+        if not active.any():
+            break
     c1, c2 = M1 + t * n1, M2 + t * n2
     rho = np.hypot(h, t)
     # the deviation of every sample from that circle (a helix along the normal axis)
