@@ -106,6 +106,22 @@ def test_an_arc_is_written_alike_whatever_the_chunk_it_is_planned_with(parametri
         assert rep.arcs_kept == ref[1].arcs_kept
         assert rep.lines_inserted == ref[1].lines_inserted
 
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_run_writer_writes_alike_in_stretches_of_any_length(parametric, monkeypatch, seed):
+    # the run writer takes a run in stretches (ending at arcs whose hints are expected to
+    # fail, or after MAX_STRETCH lines): the words added and the positions carry over
+    from postproc.gcode import bulk
+
+    text = _arcs_program(seed) + _lines_program(seed, 200).replace("G21 G90 G17\n", "").replace("M2\n", "")
+    text = text.replace("M2\n", "") + "M2\n"
+    ref = correct_text(text, parametric, Setup(), CorrectOptions())
+    for stretch in (1, 3, 50):
+        monkeypatch.setattr(bulk, "MAX_STRETCH", stretch)
+        out, rep = correct_text(text, parametric, Setup(), CorrectOptions())
+        assert out == ref[0]
+        assert rep == ref[1]
+
 def test_direction_dependent_calibration_takes_the_general_path():
     base = StaticEngine(np.eye(3), [0, 0, 0], [[0] * 3, [315] * 3])
     eng = compose(base, [{"name": "backlash:X", "params": {"b_mm": -0.012}}])

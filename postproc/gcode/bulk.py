@@ -85,6 +85,9 @@ _TOOL = re.compile(
     rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?{lexer.TOOL_CHANGE_RE}"
     r"[ \t]*+(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
+# Most lines the run writer takes in one stretch (see _emit_rows): an arc whose hint
+# fails unexpectedly makes the writer read again at most this many lines.
+MAX_STRETCH = 2048
 _HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
 
 #: where text is written (what it returns is ignored)
@@ -296,7 +299,7 @@ class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
-                 "feed0", "q1", "trow", "cut", "arcs", "inert")
+                 "feed0", "q1", "trow", "cut", "arcs", "inert", "_arc_rows")
     block: Block
     a: int
     b: int
@@ -316,6 +319,13 @@ class Run:
         self.cut: list[int] = []  # lines (within the run) written one by one: arcs, lines the planner splits
         self.arcs: dict[int, RunArc] = {}  # line (within the run) -> its arc
         self.inert: list[int] = []  # lines (within the run) that move nothing (blank, comment, S/M words)
+        self._arc_rows: list[int] | None = None
+
+    def arc_rows(self) -> list[int]:
+        """The block lines of the run's arcs, in order (made once)."""
+        if self._arc_rows is None:
+            self._arc_rows = sorted(self.a + j for j in self.arcs)
+        return self._arc_rows
 
     def __len__(self) -> int:
         return self.b - self.a
@@ -587,9 +597,24 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
                hints: Mapping[int, ArcHint], s: int) -> int:
     """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
     the end points as written, which the general emitter then writes; returns the
-    line after the last one written."""
+    line after the last one written. One call takes a stretch of the run: up to the
+    first arc whose hint the planner expects to fail there (:attr:`ArcHint.edge`), and
+    at most :data:`MAX_STRETCH` lines, so that the pass over the words to add, made
+    again from the line after such an arc, reads each line of a long run about once."""
     blk = run.block
     a, b = run.a, run.b
+    arcs = run.arc_rows()
+    first = bisect_left(arcs, s)
+    end = min(b, s + MAX_STRETCH)
+    trow = run.trow - a
+    for x in range(first, len(arcs)):
+        y = arcs[x]
+        if y >= end:
+            break
+        if hints[trow + y].edge:
+            end = y + 1
+            break
+    b = end
     qe = corrector.qe
     qe0 = list(qe)
     unit, shift = run.unit, run.shift
@@ -597,8 +622,7 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
     n = b - s
     add_col = [""] * n
     lines = blk.lines
-    arc_rows = [a + j for j in run.arcs if a + j >= s]
-    arc_rows.sort()
+    arc_rows = arcs[first:bisect_left(arcs, b, first)]
     moved = blk.last_moving
     # the written position at each arc's line and the last line before it that moves
     want: dict[int, list[float]] = {}
@@ -786,6 +810,8 @@ def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:
     """The run cut at its lines ``rows`` (indices within the run, increasing): yields
     sub-runs (:class:`Run`) and, for each cut line, ``(index within the run, RunMove)``."""
     x = run.a
+    arc_keys = sorted(run.arcs)  # the run's arcs and inert lines, by index: each sub-run takes a slice
+    inert = run.inert
     for j in [*rows, len(run)]:
         y = run.a + j
         if y > x:
@@ -799,8 +825,8 @@ def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:
             sub.q1 = run.q1[x - run.a:j]
             sub.trow = run.trow + (x - run.a)
             base = x - run.a
-            sub.arcs = {jj - base: v for jj, v in run.arcs.items() if base <= jj < j}
-            sub.inert = [jj - base for jj in run.inert if base <= jj < j]
+            sub.arcs = {jj - base: run.arcs[jj] for jj in arc_keys[bisect_left(arc_keys, base):bisect_left(arc_keys, j)]}
+            sub.inert = [jj - base for jj in inert[bisect_left(inert, base):bisect_left(inert, j)]]
             yield sub
         if j == len(run):
             break

@@ -722,6 +722,7 @@ class Corrector(EmitterMixin):
             self._plan_moves(marginal, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, made)
         for i, hint in hints.items():
             plan = made.get(i)
+            hint.edge = plan is not None
             hint.lazy = (self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
                          if plan is None else _given(plan))
 

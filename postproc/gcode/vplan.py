@@ -148,7 +148,7 @@ Ends: TypeAlias = tuple[float, float, float, float, float, float]
 class ArcHint:
     """What the bulk planner found for one arc (see the module docstring)."""
 
-    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy", "_last")
+    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy", "edge", "_last")
 
     def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
                  lazy: Callable[[], Plan] | None, mismatch: float = 0.0) -> None:
@@ -156,6 +156,9 @@ class ArcHint:
         self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
         self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
+        # the planner expects the hint may fail where written (its general plan is made with
+        # the chunk): the run writer ends a stretch at this arc
+        self.edge = False
         self._last: tuple | None = None  # (arguments, result) of the last call of words
 
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
