@@ -132,11 +132,12 @@ def test_scan_refuses_lone_carriage_returns_and_keeps_the_other_lines_apart():
 
 
 def test_stops_and_semicolon_comments_move_nothing_and_stay_in_a_run():
-    lines = ["G1 X1 Y2\n", "; finishing pass\n", "M1\n", "N5 M0 (check)\n", "(a) ; b\n", "M6\n", "M2\n", "X2\n"]
+    lines = ["G1 X1 Y2\n", "; finishing pass\n", "M1\n", "N5 M0 (check)\n", "(a) ; b\n", "M6\n", "M2\n", "X2\n",
+             "M5 M9\n", "S1000 M3 M8 (on) (flood)\n", "M30\n", "M3 S100\n"]
     block = bulk.scan(lines)
-    # M6 (tool change) and M2 (end) are the interpreter's
-    assert block.neutral.tolist() == [False, True, True, True, True, False, False, False]
-    assert block.plain.tolist() == [True, True, True, True, True, False, False, True]
+    # M6 (tool change), M2 and M30 (end) are the interpreter's, and an S word after M words
+    assert block.neutral.tolist() == [False, True, True, True, True, False, False, False, True, True, False, False]
+    assert block.plain.tolist() == [True, True, True, True, True, False, False, True, True, True, False, False]
 
 
 def test_runs_keep_semicolon_comments_and_stops_byte_for_byte():

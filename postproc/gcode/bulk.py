@@ -18,7 +18,7 @@ A run holds three kinds of lines:
   radius, end radius) end the run before an arc that fails them, so the interpreter
   reads and reports it. A line with no motion word after an arc is an arc (modal) and
   never plain;
-- lines that move nothing (blank, comments, S and M0-M9 words but M2 and M6: :data:`_NEUTRAL`;
+- lines that move nothing (blank, comments, S words, M0 M1 M3-M5 M7-M9: :data:`_NEUTRAL`;
   a tool change alone: :data:`_TOOL`):
   written whole, no move, no word added; a run never starts with one.
 
@@ -69,14 +69,9 @@ _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
-# A line that moves nothing and sets nothing the correction reads: blank, a comment
-# (one in parentheses, then one after ';' to the end of the line, as the lexer reads
-# both in every dialect), or a program stop, spindle or coolant word (S, M0 M1 M3 M4 M5
-# M7 M8 M9) with an optional N word and comments. Such a line inside a run is written as
-# it is, as the interpreter would (which reads no geometry from it).
-_NEUTRAL = re.compile(
-    rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_N}[ \t]*+)?(?:[Mm][ \t]*+0?[013-57-9][ \t]*+)?"
-    r"(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
+# A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
+# as the interpreter would.
+_NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
 # A tool change and nothing else (``T2 M6``, ``N40 M06 T02 (FLAT D6)``): it moves nothing
 # and changes nothing of a run's geometry (the tool length offset stays what G43 set),
 # only the tool the interpreter holds (group 1 or 2: the T number), which the run sets

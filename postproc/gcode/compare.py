@@ -51,7 +51,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import TOOL_CHANGE_RE
+from postproc.gcode.lexer import QUIET_LINE_RE, TOOL_CHANGE_RE
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
@@ -317,8 +317,8 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
 # lexer.NUMBER_RE, matched possessively (nothing after a number can start with a digit or a dot)
 _NUM = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
 # A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
-# line, which changes nothing the positions depend on: [N..] [S..] [M0, M1, M3-M5, M7-M9
-# words] [comments]. A tool change alone: [N..] T.. M6 (or M6 T..) [comments]; it changes
+# line, which changes nothing the positions depend on (lexer.QUIET_LINE_RE): [N..] [S..]
+# [M0, M1, M3-M5, M7-M9 words] [comments]. A tool change alone: [N..] T.. M6 (or M6 T..) [comments]; it changes
 # only the tool the interpreter holds (for a later G43 without H). Groups: 1 N word, 2 G
 # number, 3-5 X, Y, Z numbers, 6 the arc words, 7 the F number of a plain move; 8 a quiet
 # line; 9 or 10 the T number of a tool change; any other line (and a blank one) matches
@@ -327,8 +327,7 @@ _PLAIN = re.compile(
     rf"^(?:[ \t]*+(?:([Nn][ \t]*+\d++)[ \t]*+)?(?:[Gg][ \t]*+(0?[0-3])(?![0-9.])[ \t]*+)?"
     rf"(?:[Xx][ \t]*+({_NUM})[ \t]*+)?(?:[Yy][ \t]*+({_NUM})[ \t]*+)?(?:[Zz][ \t]*+({_NUM})[ \t]*+)?"
     rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
-    rf"|([ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+{_NUM}[ \t]*+)?"
-    rf"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?)\r?"
+    rf"|({QUIET_LINE_RE})\r?"
     rf"|[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?{TOOL_CHANGE_RE}"
     rf"[ \t]*+(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?\r?"
     rf"|[^\n]*)$",
