@@ -76,9 +76,7 @@ _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
 # and changes nothing of a run's geometry (the tool length offset stays what G43 set),
 # only the tool the interpreter holds (group 1 or 2: the T number), which the run sets
 # when it is read (:func:`read_run`).
-_TOOL = re.compile(
-    rf"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?{lexer.TOOL_CHANGE_RE}"
-    r"[ \t]*+(?:\([^()\n]*\)[ \t]*+)?(?:;[^\r\n]*+)?\r?\n?")
+_TOOL = re.compile(lexer.TOOL_LINE_RE + r"\r?\n?")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 # Most lines the run writer takes in one stretch (see _emit_rows): an arc whose hint
 # fails unexpectedly makes the writer read again at most this many lines.

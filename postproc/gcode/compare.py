@@ -51,7 +51,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import QUIET_LINE_RE, TOOL_CHANGE_RE
+from postproc.gcode.lexer import QUIET_LINE_RE, TOOL_LINE_RE
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
@@ -328,8 +328,7 @@ _PLAIN = re.compile(
     rf"(?:[Xx][ \t]*+({_NUM})[ \t]*+)?(?:[Yy][ \t]*+({_NUM})[ \t]*+)?(?:[Zz][ \t]*+({_NUM})[ \t]*+)?"
     rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
     rf"|({QUIET_LINE_RE})\r?"
-    rf"|[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?{TOOL_CHANGE_RE}"
-    rf"[ \t]*+(?:\([^)\r\n]*\)[ \t]*+)*(?:;[^\n]*)?\r?"
+    rf"|{TOOL_LINE_RE}\r?"
     rf"|[^\n]*)$",
     re.M,
 )

@@ -37,16 +37,20 @@ SYMBOL = "symbol"  # # [ ] = * < > @ ^ and other printable ASCII
 NEWLINE = "newline"
 
 NUMBER_RE = r"[+-]?(?:\d+\.?\d*|\.\d+)"
+# Comments at the end of a line: in parentheses (no '(' inside), then one after ';'.
+_END_COMMENTS = r"(?:\([^()\r\n]*\)[ \t]*+)*(?:;[^\r\n]*+)?"
 # A line that moves nothing and sets nothing a correction reads (without its ending):
 # blank, or an N word, an S word, program stop, spindle and coolant M words (M0 M1 M3-M5
-# M7-M9), comments in parentheses, then one after ';'. Read as such by the bulk writer
-# and by diff's reader (the interpreter reads no geometry from it either).
+# M7-M9) and comments. Read as such by the bulk writer and by diff's reader (the
+# interpreter reads no geometry from it either).
 QUIET_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+[+-]?+(?:\d++\.?+\d*+|\.\d++)[ \t]*+)?"
-                 r"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*(?:\([^()\r\n]*\)[ \t]*+)*(?:;[^\r\n]*+)?")
-# A tool change: T<n> M6 or M6 T<n> (M06, T02 too), the T number in group 1 or 2 (of the
-# fragment). Read as a line of its own by the bulk writer and by diff's reader.
-TOOL_CHANGE_RE = (r"(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6(?![0-9.])"
-                  r"|[Mm][ \t]*+0?6(?![0-9.])[ \t]*+[Tt][ \t]*+(\d++)(?![0-9.]))")
+                 r"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*" + _END_COMMENTS)
+# A tool change alone on its line (without its ending): [N..] T<n> M6 or M6 T<n> (M06,
+# T02 too) and comments; the T number in group 1 or 2 (of the pattern). It changes only
+# the tool the interpreter holds (for a later G43 without H).
+TOOL_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?"
+                r"(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6(?![0-9.])"
+                r"|[Mm][ \t]*+0?6(?![0-9.])[ \t]*+[Tt][ \t]*+(\d++)(?![0-9.]))[ \t]*+" + _END_COMMENTS)
 
 _MASTER = re.compile(
     r"(?P<newline>\r\n|\n|\r)"
