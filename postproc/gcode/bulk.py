@@ -400,8 +400,7 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
         tools = block.tools
         changes = [tools[a + j] for j in run.inert if a + j in tools] if tools else None
         if changes:
-            # the run's tool changes, as the interpreter reads them (T, then M6 loads it)
-            st.tool = st.spindle_tool = changes[-1]
+            interp.load_tool(changes[-1])  # the run's last tool change
     pos = list(st.pos)
     e = b - 1
     for k in range(3):

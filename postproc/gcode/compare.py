@@ -51,7 +51,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import QUIET_LINE_RE, TOOL_LINE_RE
+from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LINE_RE
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
@@ -314,8 +314,7 @@ def setup_from_header(corrected, setup: Setup | None) -> Setup:
 
 # -- reading ---------------------------------------------------------------------------
 
-# lexer.NUMBER_RE, matched possessively (nothing after a number can start with a digit or a dot)
-_NUM = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
+_NUM = NUMBER_POSSESSIVE_RE
 # A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
 # line, which changes nothing the positions depend on (lexer.QUIET_LINE_RE): [N..] [S..]
 # [M0, M1, M3-M5, M7-M9 words] [comments]. A tool change alone: [N..] T.. M6 (or M6 T..) [comments]; it changes
@@ -575,13 +574,12 @@ class _Reader:
                         if j >= i:
                             st.feed = float(fcol[j])
                         if last_tool is not None and last_tool[e] >= i:
-                            # T, then M6 loads it, as the interpreter reads them
-                            st.tool = st.spindle_tool = tool_no[last_tool[e]]
+                            interp.load_tool(tool_no[last_tool[e]])  # the stretch's last tool change
                         i = b
                         continue
                 elif quiet_l[i]:
                     if last_tool is not None and last_tool[i] == i and not interp.ended:
-                        st.tool = st.spindle_tool = tool_no[i]
+                        interp.load_tool(tool_no[i])
                     i += 1  # changes nothing else, whatever the state
                     continue
             i, error = self._general(rows, i, i + 1)

@@ -338,6 +338,14 @@ class Interpreter:
         w = self._work_offset(lineno, col)
         return (w[0] + st.g92[0], w[1] + st.g92[1], w[2] + st.g92[2] + st.tlo)
 
+    def load_tool(self, tool: int) -> None:
+        """What a line of a tool change alone (``T<tool> M6``, lexer.TOOL_LINE_RE) does to
+        the state, for the readers that take such lines as columns: T selects the tool,
+        then M6 loads it (as :meth:`_block` reads them)."""
+        st = self.state
+        st.tool = tool
+        st.spindle_tool = st.tool
+
     def tool_r(self) -> tuple[float, float, float]:
         if self.tool_vector is not None:
             return self.tool_vector

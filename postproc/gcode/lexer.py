@@ -37,13 +37,15 @@ SYMBOL = "symbol"  # # [ ] = * < > @ ^ and other printable ASCII
 NEWLINE = "newline"
 
 NUMBER_RE = r"[+-]?(?:\d+\.?\d*|\.\d+)"
+# NUMBER_RE matched possessively (nothing after a number can start with a digit or a dot)
+NUMBER_POSSESSIVE_RE = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
 # Comments at the end of a line: in parentheses (no '(' inside), then one after ';'.
 _END_COMMENTS = r"(?:\([^()\r\n]*\)[ \t]*+)*(?:;[^\r\n]*+)?"
 # A line that moves nothing and sets nothing a correction reads (without its ending):
 # blank, or an N word, an S word, program stop, spindle and coolant M words (M0 M1 M3-M5
 # M7-M9) and comments. Read as such by the bulk writer and by diff's reader (the
 # interpreter reads no geometry from it either).
-QUIET_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+[+-]?+(?:\d++\.?+\d*+|\.\d++)[ \t]*+)?"
+QUIET_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+" + NUMBER_POSSESSIVE_RE + r"[ \t]*+)?"
                  r"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*" + _END_COMMENTS)
 # A tool change alone on its line (without its ending): [N..] T<n> M6 or M6 T<n> (M06,
 # T02 too) and comments; the T number in group 1 or 2 (of the pattern). It changes only
