@@ -541,3 +541,84 @@ def test_diff_pairs_a_program_that_numbers_its_blocks_again_in_windows(monkeypat
     n_header = len(emit.split_header(out)[0])
     assert all(m.lineno_corrected - n_header == m.lineno for m in d.moved)
     assert calls["one"] <= 10
+
+
+def _written_pair(tmp_path, rng_seed: int, n: int) -> tuple[Path, Path, str, str]:
+    """A CAM-like program and its version corrected with the S500 parametric calibration,
+    both written to files (the corrected one with its header)."""
+    rng = np.random.default_rng(rng_seed)
+    text = _cam_program(rng, n)
+    cal = load_calibration(ROOT / "calibrations" / "s500_parametric.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={1: 0.0, 2: 0.0, 3: 0.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+    out, rep = correct_text(text, cal.engine, setup)
+    assert rep.lines_inserted > 10
+    src, dst = tmp_path / "p.nc", tmp_path / "q.nc"
+    src.write_text(text)
+    dst.write_text(out)
+    return src, dst, text, out
+
+
+def _forked_reads(monkeypatch) -> dict:
+    """Count the corrected programs read by a child process."""
+    from postproc.gcode import compare
+
+    seen = {"forked": 0}
+    chunks = compare._ForkedReader.chunks
+
+    def counted(self):
+        seen["forked"] += 1
+        return chunks(self)
+
+    monkeypatch.setattr(compare._ForkedReader, "chunks", counted)
+    return seen
+
+
+_NO_FORK = pytest.mark.skipif(not __import__("sys").platform.startswith("linux"), reason="no fork here")
+
+
+@_NO_FORK
+def test_diff_reads_the_corrected_program_in_a_child_as_it_does_itself(monkeypatch, tmp_path):
+    from postproc.gcode import compare
+
+    src, dst, _text, _out = _written_pair(tmp_path, 5, 1500)
+    seen = _forked_reads(monkeypatch)
+    monkeypatch.setattr(compare, "CHUNK_LINES", 97)  # many chunks: the keys of each mapped
+    reports = []
+    for least in (10**15, 0):  # read here, then in a child
+        monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
+        reports.append(compare_programs(str(src), str(dst)).to_dict())
+    assert seen["forked"] == 1
+    assert reports[1] == reports[0]
+    assert reports[0]["lines_inserted"] > 10
+    assert reports[0]["header"]
+
+
+@_NO_FORK
+def test_diff_reports_an_error_of_the_corrected_program_read_in_a_child(monkeypatch, tmp_path):
+    import multiprocessing
+
+    from postproc.gcode import compare
+
+    src, dst, text, out = _written_pair(tmp_path, 5, 1500)
+    lines = out.splitlines(keepends=True)
+    k = next(i for i in range(len(lines) * 3 // 4, len(lines)) if lines[i].startswith("X"))
+    dst.write_text("".join(lines[:k] + ["G1 X#1\n"] + lines[k + 1:]))
+    seen = _forked_reads(monkeypatch)
+    monkeypatch.setattr(compare, "CHUNK_LINES", 100)
+    errors = []
+    for least in (10**15, 0):
+        monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
+        with pytest.raises(PostprocError) as exc:
+            compare_programs(str(src), str(dst))
+        errors.append((type(exc.value), str(exc.value), exc.value.lineno))
+    assert seen["forked"] == 1
+    assert errors[1] == errors[0]
+    assert errors[0][2] == k + 1
+    assert str(dst) in errors[0][1]
+    # an error of the original stops the child reading the corrected program
+    src.write_text("".join(text.splitlines(keepends=True)[:50] + ["G1 X#1\n"]))
+    with pytest.raises(PostprocError, match=":51:"):
+        compare_programs(str(src), str(dst))
+    assert multiprocessing.active_children() == []
+    assert seen["forked"] == 2

@@ -14,7 +14,9 @@ G53 blocks, whose words are machine coordinates. Offsets and tool lengths neithe
 nor recorded count as zero.
 
 Both programs are read in chunks of lines, and memory does not grow with their length
-(apart from the compact list of moved blocks, unless only the largest are kept). In a chunk, the stretches of plain
+(apart from the compact list of moved blocks, unless only the largest are kept). A large
+corrected program file is read by a forked child process while this one reads the original
+and pairs (:class:`_ForkedReader`; the same chunks, keys and errors). In a chunk, the stretches of plain
 absolute moves (N, G0 to G3, X/Y/Z, I/J/K/R and F words only, in a simple modal state)
 and of lines that change nothing (S, M3, M8 and the like, comments) are read as columns:
 a move's end point is its words, carried forward where a line does not name an axis.
@@ -39,8 +41,12 @@ from __future__ import annotations
 import dataclasses
 import gc
 import math
+import multiprocessing
 import operator
+import os
 import re
+import signal
+import sys
 from array import array
 from dataclasses import dataclass, field
 from itertools import islice
@@ -67,6 +73,9 @@ SLOW_STRETCH = 4
 MIN_WINDOW = 256
 # Insertions in one stretch between anchors checked at once (more: paired one at a time).
 MAX_LEVELS = 8
+# A corrected program file at least this large is read by a child process while this one
+# reads the original (where processes can be forked): two cores read the two programs.
+FORK_MIN_BYTES = 2_000_000
 _COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
 _SKELETON_DROP = re.compile(r"[XYZIJKRPFxyzijkrpf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|[Gg][ \t]*0*[0-3](?![0-9.])|\s+")
 
@@ -356,6 +365,7 @@ class _Keys:
 
     def __init__(self) -> None:
         self.table: dict[str, int] = {}
+        self.texts: list[str] | None = None  # when a list: every new text is added to it
 
     def __call__(self, text: str) -> int:
         if not text:
@@ -367,6 +377,8 @@ class _Keys:
         key = self.table.get(text)
         if key is None:
             key = self.table[text] = -1 - len(self.table)
+            if self.texts is not None:
+                self.texts.append(text)
         return key
 
     def of_line(self, line: str) -> tuple[int, int, int]:
@@ -612,6 +624,104 @@ class _Reader:
         quiet = idx[~plain[idx]]
         rows.end[quiet] = np.nan
         rows.move[idx] = plain[idx]
+
+
+class _ForkedReader:
+    """A :class:`_Reader` run in a child process (forked): the same chunks, header, count
+    and errors, the chunks' keys mapped to this process's :class:`_Keys`. The child reads
+    ahead as far as the pipe between them holds (a chunk), so memory stays bounded."""
+
+    def __init__(self, reader: _Reader, keys: _Keys) -> None:
+        self._reader = reader
+        self.keys = keys
+        self.path = reader.path
+        self.header: list[str] = []
+        self.count = 0
+
+    @staticmethod
+    def usable(source) -> bool:
+        """Whether ``source`` (a path or G-code text) is large enough to be read so, on a
+        system that forks, from a process that may have children (not a daemon, as a
+        ``multiprocessing.Pool`` worker is)."""
+        if (sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods()
+                or multiprocessing.current_process().daemon):
+            return False
+        path = _source_path(source)
+        try:
+            return path is not None and os.path.getsize(path) >= FORK_MIN_BYTES
+        except OSError:
+            return False  # the reader names the file it cannot read
+
+    def chunks(self):
+        """Yield :class:`_Rows` as :meth:`_Reader.chunks` does, read by the child."""
+        ctx = multiprocessing.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        child = ctx.Process(target=_read_in_child, args=(self._reader, send), daemon=True)
+        child.start()
+        send.close()
+        glob = np.zeros(0, dtype=np.int64)  # the child's key -1 - j is this process's glob[j]
+        try:
+            while True:
+                try:
+                    kind, payload, new_keys, self.count, header = recv.recv()
+                except EOFError:
+                    raise RuntimeError("the process reading the corrected program ended without a word") from None
+                self.header[:] = header
+                if new_keys:
+                    glob = np.concatenate([glob, np.array([self.keys(t) for t in new_keys], dtype=np.int64)])
+                if kind == "rows":
+                    lines, lineno, move, end, keys = payload
+                    neg = keys < 0
+                    if neg.any():
+                        keys[neg] = glob[-1 - keys[neg]]
+                    yield _Rows(lines, lineno, move, end, keys)
+                elif kind == "end":
+                    return
+                else:  # "error": the reader's own error (after its rows), or a failure
+                    raise payload
+        finally:
+            recv.close()
+            if child.is_alive():
+                child.terminate()
+            child.join()
+
+
+def _source_path(source) -> str | None:
+    """The path of a source that is a file (else None), without opening it."""
+    path, lines = iter_source_lines(source)
+    close = getattr(lines, "close", None)  # a file's generator, not started: nothing is open
+    if close is not None:
+        close()
+    return path
+
+
+def _read_in_child(reader: _Reader, conn) -> None:
+    """The child's side of :class:`_ForkedReader`: send each chunk's rows, with the key
+    texts it added, the lines read and the header, then the end or the error."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
+    keys = reader.keys = _Keys()
+    texts = keys.texts = []  # the key texts in the order of their keys (-1, -2, ...)
+    sent = 0
+
+    def new_keys() -> list[str]:
+        nonlocal sent
+        new = texts[sent:]
+        sent = len(texts)
+        return new
+
+    try:
+        for rows in reader.chunks():
+            conn.send(("rows", (rows.lines, rows.lineno, rows.move, rows.end, rows.keys), new_keys(),
+                       reader.count, reader.header))
+        conn.send(("end", None, new_keys(), reader.count, reader.header))
+    except BaseException as exc:  # noqa: BLE001 - every failure is the parent's to raise
+        try:
+            conn.send(("error", exc, new_keys(), reader.count, reader.header))
+        except Exception:  # noqa: BLE001 - an exception that does not pickle
+            conn.send(("error", RuntimeError(f"reading the corrected program failed: {exc!r}"), [],
+                       reader.count, reader.header))
+    finally:
+        conn.close()
 
 
 class _Index:
@@ -1192,50 +1302,56 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     setup = setup_from_header(corrected, setup)
     keys = _Keys()
     o_reader = _Reader(original, setup, keys, dialect=dialect)
-    c_reader = _Reader(corrected, setup, keys, drop_header=True, dialect=dialect)
-    orig, corr = _Tape(o_reader.chunks()), _Tape(c_reader.chunks())
-    rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep)
-    last_delta = (0.0, 0.0, 0.0)
-    slow = 0
-    window = CHUNK_LINES
-    shown = 0
-    while True:
-        orig.fill(1 if slow else CHUNK_LINES // 2)
-        if not orig.avail():
-            if orig.error is not None:
-                raise orig.error
-            break
-        if progress is not None and o_reader.count >= shown + CHUNK_LINES:
-            shown = o_reader.count
-            progress(shown)
-        if not slow:
-            w = min(orig.avail(), window)
-            corr.fill(w + w // 2 + SCAN_AHEAD + 1)
-            n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
-            if n and not failed:
-                # a longer window next; about twice what was paired when that stopped short
-                # of the window (more insertions in a stretch than MAX_LEVELS), so that the
-                # levels are not checked over a long window for a few records each time
-                window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
-                continue
-            # a record the rule pairs otherwise (a line inserted here): one at a time for a
-            # while, then a window about as long as the stretch that was paired at once
-            window = max(MIN_WINDOW, 2 * n)
-            slow = SLOW_STRETCH
-        last_delta = _pair_one(orig, corr, rep, last_delta)
-        slow -= 1
-    while True:
-        c = corr.peek(0)
-        if c is None:
-            break
-        corr.pos += 1
-        if not corr.rows.move[c]:
-            lineno = int(corr.rows.lineno[c])
-            raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
-                                path=rep.corrected, lineno=lineno)
-        rep.lines_inserted += 1
-    if progress is not None:
-        progress(o_reader.count)
+    reader = _Reader(corrected, setup, keys, drop_header=True, dialect=dialect)
+    c_reader = _ForkedReader(reader, keys) if _ForkedReader.usable(corrected) else reader
+    o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
+    try:
+        orig, corr = _Tape(o_chunks), _Tape(c_chunks)
+        rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep)
+        last_delta = (0.0, 0.0, 0.0)
+        slow = 0
+        window = CHUNK_LINES
+        shown = 0
+        while True:
+            orig.fill(1 if slow else CHUNK_LINES // 2)
+            if not orig.avail():
+                if orig.error is not None:
+                    raise orig.error
+                break
+            if progress is not None and o_reader.count >= shown + CHUNK_LINES:
+                shown = o_reader.count
+                progress(shown)
+            if not slow:
+                w = min(orig.avail(), window)
+                corr.fill(w + w // 2 + SCAN_AHEAD + 1)
+                n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
+                if n and not failed:
+                    # a longer window next; about twice what was paired when that stopped short
+                    # of the window (more insertions in a stretch than MAX_LEVELS), so that the
+                    # levels are not checked over a long window for a few records each time
+                    window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
+                    continue
+                # a record the rule pairs otherwise (a line inserted here): one at a time for a
+                # while, then a window about as long as the stretch that was paired at once
+                window = max(MIN_WINDOW, 2 * n)
+                slow = SLOW_STRETCH
+            last_delta = _pair_one(orig, corr, rep, last_delta)
+            slow -= 1
+        while True:
+            c = corr.peek(0)
+            if c is None:
+                break
+            corr.pos += 1
+            if not corr.rows.move[c]:
+                lineno = int(corr.rows.lineno[c])
+                raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
+                                    path=rep.corrected, lineno=lineno)
+            rep.lines_inserted += 1
+        if progress is not None:
+            progress(o_reader.count)
+    finally:  # a child reading the corrected program stops here, whatever happened
+        o_chunks.close()
+        c_chunks.close()
     rep.header = "\n".join(c_reader.header)
     rep.lines_original = o_reader.count
     rep.lines_corrected = c_reader.count
