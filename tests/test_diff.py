@@ -622,3 +622,72 @@ def test_diff_reports_an_error_of_the_corrected_program_read_in_a_child(monkeypa
         compare_programs(str(src), str(dst))
     assert multiprocessing.active_children() == []
     assert seen["forked"] == 2
+
+
+def test_diff_reads_the_original_expanded_when_the_program_was_corrected_expanded(tmp_path):
+    # a Fanuc subprogram called three times (M98 L3) and a macro variable: correct writes
+    # the program flat; diff reads the original the same way and numbers its blocks by
+    # their source lines (a subprogram's line once per call)
+    text = ("%\nO1000\nG21 G90 G17\nG54\nT1 M6\nG0 G43 H1 Z20.\n#101=10.\nG0 X#101 Y10.\nM98 P2000 L3\n"
+            "G0 Z50.\nM30\nO2000\nG91 G1 X5. F500.\nG90\nM99\n%\n")
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={1: 0.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+    out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="fanuc"))
+    assert rep.expanded
+    src, dst = tmp_path / "o1000.nc", tmp_path / "o1000_c.nc"
+    src.write_text(text)
+    dst.write_text(out)
+    d = compare_programs(str(src), str(dst), dialect="fanuc")
+    assert d.expanded
+    assert d.moves == rep.moves == 6
+    assert d.lines_inserted == 0
+    assert d.lines_corrected == len(out.splitlines()) - len(emit.split_header(out)[0])
+    assert d.lines_original == d.lines_corrected  # the program as executed, line for line
+    assert sorted(m.lineno for m in d.moved) == [6, 8, 10, 13, 13, 13]
+    assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4
+    # the text report says so
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst), "--dialect", "fanuc"])
+    assert res.exit_code == 0, res.output
+    assert "original (expanded)" in res.output
+    js = json.loads(CliRunner().invoke(main, ["diff", str(src), str(dst), "--dialect", "fanuc", "--json"]).output)
+    assert js["expanded"] is True
+
+
+def test_diff_reads_a_linuxcnc_subroutine_from_the_subroutine_path(tmp_path):
+    sub = tmp_path / "subs"
+    sub.mkdir()
+    (sub / "step.ngc").write_text("o<step> sub\nG91 G1 X[#1] F300\nG90\no<step> endsub\nM2\n")
+    text = "G21 G90 G17\nG0 X10 Y10 Z10\no<step> call [4]\no<step> call [2.5]\nG0 Z30\nM2\n"
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)})
+    out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="linuxcnc", subroutine_path=(str(sub),)))
+    assert rep.expanded
+    src, dst = tmp_path / "p.ngc", tmp_path / "q.ngc"
+    src.write_text(text)
+    dst.write_text(out)
+    with pytest.raises(PostprocError):  # the subroutine is not found without its folder
+        compare_programs(str(src), str(dst), dialect="linuxcnc")
+    d = compare_programs(str(src), str(dst), dialect="linuxcnc", subroutine_path=[sub])
+    assert d.moves == rep.moves == 4
+    assert sorted(m.lineno for m in d.moved) == [2, 2, 2, 5]  # step.ngc's line 2, twice
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst), "--dialect", "linuxcnc",
+                                    "--subroutine-path", str(sub)])
+    assert res.exit_code == 0, res.output
+
+
+@pytest.mark.parametrize("spline", ["G5.1 X20 Y20 I5 J0", "G5 X20 Y18 I3 J0 P-3 Q4", "G05.1 X20 Y20 I5 J0"])
+def test_diff_pairs_a_spline_with_the_last_of_its_chords(spline):
+    text = f"G21 G90 G17\nG0 X10 Y10 Z10\nG1 Z5 F100\n{spline}\nG1 X30\nM2\n"
+    cal = load_calibration(ROOT / "calibrations" / "s500_parametric.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)})
+    out, rep = correct_text(text, cal.engine, setup)
+    d = compare_programs(text, out)
+    chords = len(out.splitlines()) - len(emit.split_header(out)[0]) - len(text.splitlines()) + 1
+    assert chords > 10
+    assert d.moves == 4
+    assert d.lines_inserted == chords - 1
+    spline_end = next(m for m in d.moved if m.lineno == 4)
+    n_header = len(emit.split_header(out)[0])
+    assert spline_end.lineno_corrected == n_header + 3 + chords  # the last chord
+    assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4

@@ -23,8 +23,11 @@ LIST_MOVED = 15
               type=DIALECT_CHOICE,
               help="Controller the programs are for, as given to correct (how G53 in G91, comments "
                    "and the like read).")
+@click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
+              help="Folder searched for o<name> call subroutine files, as given to correct (for a "
+                   "program corrected expanded; repeatable).")
 @setup_options(leave_out=("--context",))
-def diff(original, corrected, as_json, show_all, dialect, setup):
+def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup):
     """Compare a program with its corrected version.
 
     Reports which blocks moved and by how much (end points, mm, machine axes), the
@@ -35,6 +38,10 @@ def diff(original, corrected, as_json, show_all, dialect, setup):
     --tool-length (or --tool-table), --tool-vector, --start or --home only to
     override them (they matter for programs using G53, G28/G30 or an axis the
     program leaves where it was).
+
+    A program corrected expanded (subprograms, loops and macros written out, as
+    its header says) is compared with its original read expanded the same way;
+    blocks are then numbered by their source lines.
 
     Example:
 
@@ -56,7 +63,8 @@ def diff(original, corrected, as_json, show_all, dialect, setup):
         # the text report lists the largest moved blocks only: keep just those (memory
         # then does not grow with the program); --all and --json list every one
         keep = None if (as_json or show_all) else LIST_MOVED
-        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, dialect=dialect.lower())
+        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, dialect=dialect.lower(),
+                               subroutine_path=subroutine_path)
     finally:
         if progress is not None:
             click.echo("", err=True)
@@ -67,7 +75,8 @@ def diff(original, corrected, as_json, show_all, dialect, setup):
     click.echo(f"{rep.original} -> {rep.corrected}")
     for row in rep.header.splitlines():
         click.echo(f"  {row}")
-    click.echo(f"  lines: {rep.lines_original} original, {rep.lines_corrected} corrected "
+    click.echo(f"  lines: {rep.lines_original} original{' (expanded)' if rep.expanded else ''}, "
+               f"{rep.lines_corrected} corrected "
                f"(+{rep.lines_inserted} inserted by segmentation), {rep.lines_unchanged} unchanged"
                + (f", {rep.lines_rewritten} G92 rewritten" if rep.lines_rewritten else ""))
     click.echo(f"  moves: {rep.moves}, {rep.n_moved} moved, {rep.moves_unchanged} unchanged")

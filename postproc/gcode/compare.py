@@ -48,8 +48,10 @@ import re
 import signal
 import sys
 from array import array
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import islice
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -77,7 +79,10 @@ MAX_LEVELS = 8
 # reads the original (where processes can be forked): two cores read the two programs.
 FORK_MIN_BYTES = 2_000_000
 _COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
-_SKELETON_DROP = re.compile(r"[XYZIJKRPFxyzijkrpf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|[Gg][ \t]*0*[0-3](?![0-9.])|\s+")
+# (a spline, G5 or G5.1 with its I J P Q words, is written as straight chords: its last
+# chord has the skeleton of the original line)
+_SKELETON_DROP = re.compile(r"[XYZIJKRPQFxyzijkrpqf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)"
+                            r"|[Gg][ \t]*0*(?:[0-3]|5(?:\.1)?)(?![0-9.])|\s+")
 
 
 def skeleton(line: str) -> str:
@@ -103,7 +108,7 @@ class DiffReport:
     original: str
     corrected: str
     header: str = ""
-    lines_original: int = 0
+    lines_original: int = 0  # read: the lines executed when the original is read expanded
     lines_corrected: int = 0
     lines_unchanged: int = 0
     # G92 lines whose axis words correct rewrote (to keep the nominal coordinates)
@@ -114,6 +119,9 @@ class DiffReport:
     # Moved blocks kept: all of them (None), or only the ``keep`` largest, so that memory
     # does not grow with the program (the per-axis figures still count every block).
     keep: int | None = None
+    # the original was read expanded (subprograms, loops and macros written out), as the
+    # corrected program was written
+    expanded: bool = False
     # moved blocks, stored compactly: original line, corrected line, dX, dY, dZ
     _lines: array = field(default_factory=lambda: array("q"))
     _clines: array = field(default_factory=lambda: array("q"))
@@ -215,6 +223,7 @@ class DiffReport:
     def to_dict(self) -> dict:
         return {
             "original": self.original, "corrected": self.corrected, "header": self.header,
+            "expanded": self.expanded,
             "lines_original": self.lines_original, "lines_corrected": self.lines_corrected,
             "lines_unchanged": self.lines_unchanged, "lines_inserted": self.lines_inserted,
             "lines_rewritten": self.lines_rewritten,
@@ -239,6 +248,7 @@ class HeaderSetup:
     start: dict = field(default_factory=dict)  # axis -> machine mm
     tool_vector: tuple | None = None
     home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
+    expanded: bool = False  # the program was corrected expanded (subprograms, loops, macros written out)
 
 
 def _header_rows(source) -> list[str]:
@@ -262,21 +272,7 @@ def header_setup(source) -> HeaderSetup:
     hs = HeaderSetup()
     for row in _header_rows(source):
         if row.startswith(emit.HEADER_TAG):  # the one-line header of earlier versions
-            for part in (p.strip() for p in row.rstrip(")").split(";")[1:]):
-                m = re.fullmatch(rf"(G5\S*?)=({_NUMBER}),({_NUMBER}),({_NUMBER})", part)
-                if m:
-                    hs.offsets[m.group(1).upper()] = tuple(float(m.group(i)) for i in (2, 3, 4))
-                elif part.startswith("tools "):
-                    for item in part[6:].split(","):
-                        h, _, length = item.partition("=")
-                        hs.tool_lengths[int(float(h))] = float(length)
-                elif part.startswith("tool vector "):
-                    hs.tool_vector = tuple(float(v) for v in part[12:].split(","))
-                elif re.match(r"G(28|30)=", part):
-                    hs.home[part[:3]] = _axis_values(part[4:])
-            m = _OLD_START.search(row)
-            if m:
-                hs.start.update({item[0]: float(item[1:]) for item in m.group(1).split(",") if item})
+            _old_header_row(hs, row)
             continue
         words = row[len(emit.HEADER_PREFIX):].rstrip(")").strip().upper()
         m = re.fullmatch(r"OFFSET (G5\S+) (.*)", words)
@@ -293,7 +289,30 @@ def header_setup(source) -> HeaderSetup:
         elif words.startswith("TOOL VECTOR "):
             v = _axis_values(words[12:])
             hs.tool_vector = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+        elif words.startswith("EXPANDED"):
+            hs.expanded = True
     return hs
+
+
+def _old_header_row(hs: HeaderSetup, row: str) -> None:
+    """Read the one-line header of earlier versions into ``hs``."""
+    for part in (p.strip() for p in row.rstrip(")").split(";")[1:]):
+        m = re.fullmatch(rf"(G5\S*?)=({_NUMBER}),({_NUMBER}),({_NUMBER})", part)
+        if m:
+            hs.offsets[m.group(1).upper()] = tuple(float(m.group(i)) for i in (2, 3, 4))
+        elif part.startswith("tools "):
+            for item in part[6:].split(","):
+                h, _, length = item.partition("=")
+                hs.tool_lengths[int(float(h))] = float(length)
+        elif part.startswith("tool vector "):
+            hs.tool_vector = tuple(float(v) for v in part[12:].split(","))
+        elif re.match(r"G(28|30)=", part):
+            hs.home[part[:3]] = _axis_values(part[4:])
+        elif part.lower().startswith("expanded"):
+            hs.expanded = True
+    m = _OLD_START.search(row)
+    if m:
+        hs.start.update({item[0]: float(item[1:]) for item in m.group(1).split(",") if item})
 
 
 def header_start(source) -> dict[str, float]:
@@ -446,11 +465,16 @@ class _Reader:
     """One program read in chunks of :class:`_Rows`; see the module docstring."""
 
     def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
-                 dialect: str = "generic") -> None:
+                 dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = ()) -> None:
         self.path, self._lines = iter_source_lines(source)
         self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
         self.keys = keys
         self.drop_header = drop_header
+        # read the program as executed: subprograms, loops and macros written out, as
+        # correct writes them (each line numbered by its source line)
+        self.expand = expand
+        self.dialect = dialect
+        self.subroutine_path = tuple(subroutine_path)
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
 
@@ -474,12 +498,29 @@ class _Reader:
             yield rows.head(n)
             if error is not None:
                 raise error
+        if self.expand:
+            yield from self._expanded_chunks(it)
+            return
         for lines in iter(lambda: list(islice(it, CHUNK_LINES)), []):
             rows = _Rows.blank(lines, lineno + 1)
             lineno += len(lines)
             n, error = self._chunk(rows)
             self.count += n
             yield rows if n == len(lines) else rows.head(n)
+            if error is not None:
+                raise error
+
+    def _expanded_chunks(self, lines: Iterator[str]):
+        """:meth:`chunks` of the program as executed (:func:`postproc.gcode.expand.expand`)."""
+        from postproc.gcode.expand import expand
+
+        flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path)
+        for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
+            rows = _Rows.blank([sl.text for sl in part], 0)
+            rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)
+            n, error = self._chunk(rows)
+            self.count += n
+            yield rows if n == len(part) else rows.head(n)
             if error is not None:
                 raise error
 
@@ -1274,7 +1315,8 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
-                     keep: int | None = None, dialect: str = "generic") -> DiffReport:
+                     keep: int | None = None, dialect: str = "generic",
+                     subroutine_path: Sequence[Path] = ()) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1284,30 +1326,39 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     are machine coordinates. ``progress(n)``, if given, is called with the number of
     lines of the original read so far, after each chunk. ``dialect`` is the controller
     both are read for, as ``correct`` was given it (G53 in G91, comments, ...).
+
+    When the corrected program's header says it was corrected expanded (subprograms,
+    loops, macros written out), the original is read expanded the same way (its external
+    subroutines looked up on ``subroutine_path``, as ``correct`` was given it); its
+    blocks are then numbered by their source lines, a subprogram's line once per call.
     """
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress, keep, dialect)
+        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path)
     finally:
         if was_enabled:
             gc.enable()
 
 
-def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str) -> DiffReport:
+def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str,
+             subroutine_path: Sequence[Path]) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     setup = setup_from_header(corrected, setup)
+    expanded = header_setup(corrected).expanded
     keys = _Keys()
-    o_reader = _Reader(original, setup, keys, dialect=dialect)
+    o_reader = _Reader(original, setup, keys, dialect=dialect, expand=expanded,
+                       subroutine_path=[Path(p) for p in subroutine_path])
     reader = _Reader(corrected, setup, keys, drop_header=True, dialect=dialect)
     c_reader = _ForkedReader(reader, keys) if _ForkedReader.usable(corrected) else reader
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:
         orig, corr = _Tape(o_chunks), _Tape(c_chunks)
-        rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep)
+        rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep,
+                         expanded=expanded)
         last_delta = (0.0, 0.0, 0.0)
         slow = 0
         window = CHUNK_LINES
