@@ -244,6 +244,44 @@ def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch)
         parts = list(compare._Reader(text, setup, compare._Keys()).chunks())
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
+def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_columns_as_the_interpreter_does(monkeypatch):
+    # a move that sets the tool length (G43 H..) starts a stretch of its own; axis words
+    # after the X, Y, Z run (the words correct adds: Z X Y) are read one by one; a line
+    # naming an axis twice is the interpreter's (which refuses it)
+    from postproc.gcode import compare
+    from postproc.gcode.interp import Interpreter
+
+    text = ("G21 G90 G54\nT1 M6\nG0 G43 H1 Z50 X1 Y2\nX10 Y10\nG1 Z-1 X11 Y12 F500\nY13 X12\n"
+            "N7 G0 G43 H2 Z45\nZ30 Y14\nX14 Z29 Y15\ng1 g43 h3 z20 x16 f300\nG43 H0 Z10\nG0 X17\nG43 H2 Y18 Z11\n"
+            "G43 H3\nX19\nM30\n")
+    setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)}, tool_lengths={1: 50.0, 2: 60.0, 3: 70.0})
+    interp = Interpreter(setup, None, lenient_setup=True)
+    want_end = []
+    for k, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = interp.feed_line(k, line)
+        want_end.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    # the tool lengths along the program: 50, 60, 70, 0, 60 (G54 Z 30)
+    assert [want_end[k][2] for k in (2, 6, 9, 10, 12)] == [130.0, 135.0, 120.0, 40.0, 101.0]
+    keys = compare._Keys()
+    general = compare._Reader._general
+    results = []
+    for chunk, columns in ((20_000, False), (20_000, True), (4, True), (1, True)):
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        reader = compare._Reader(text, setup, keys)
+        if not columns:  # every line through the interpreter
+            monkeypatch.setattr(reader, "_chunk", lambda rows, reader=reader: general(reader, rows, 0, len(rows)))
+        parts = list(reader.chunks())
+        np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
+        results.append(np.concatenate([p.keys for p in parts]))
+    for got in results[1:]:
+        np.testing.assert_array_equal(got, results[0])
+    # an axis named twice: refused with the interpreter's error, stretch or not
+    for bad in ("X1 Z2 X3\n", "G0 G43 H1 Z5 Z6\n"):
+        with pytest.raises(PostprocError, match="appears twice") as exc:
+            list(compare._Reader("G21 G90 G54\nG0 X0 Y0 Z50\nX1\n" + bad, setup, compare._Keys()).chunks())
+        assert exc.value.lineno == 4
+
+
 def test_diff_pairs_inserted_lines_at_any_chunk_size(monkeypatch):
     from postproc.gcode import compare
 

@@ -346,13 +346,19 @@ _NUM = NUMBER_POSSESSIVE_RE
 # A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
 # line, which changes nothing the positions depend on (lexer.QUIET_LINE_RE): [N..] [S..]
 # [M0, M1, M3-M5, M7-M9 words] [comments]. A tool change alone: [N..] T.. M6 (or M6 T..) [comments]; it changes
-# only the tool the interpreter holds (for a later G43 without H). Groups: 1 N word, 2 G
-# number, 3-5 X, Y, Z numbers, 6 the arc words, 7 the F number of a plain move; 8 a quiet
-# line; 9 or 10 the T number of a tool change; any other line (and a blank one) matches
-# with every group empty (one match per line).
+# only the tool the interpreter holds (for a later G43 without H). A plain move may set the
+# tool length offset first (G43 H.., after its motion word): a stretch starts there.
+# Axis words out of X, Y, Z order (the words correct adds after those a line names: Z X
+# Y) come whole in a group of their own, read one by one. Groups: 1 N word, 2 G number, 3
+# the H number of G43, 4-6 X, Y, Z numbers, 7 the axis words after those, 8 the arc
+# words, 9 the F number of a plain move; 10 a quiet line; 11 or 12 the T number of a tool
+# change; any other line (and a blank one) matches with every group empty (one match per
+# line).
 _PLAIN = re.compile(
     rf"^(?:[ \t]*+(?:([Nn][ \t]*+\d++)[ \t]*+)?(?:[Gg][ \t]*+(0?[0-3])(?![0-9.])[ \t]*+)?"
+    rf"(?:[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+(\d++)[ \t]*+)?"
     rf"(?:[Xx][ \t]*+({_NUM})[ \t]*+)?(?:[Yy][ \t]*+({_NUM})[ \t]*+)?(?:[Zz][ \t]*+({_NUM})[ \t]*+)?"
+    rf"((?:[XxYyZz][ \t]*+{_NUM}[ \t]*+)++)?"
     rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
     rf"|({QUIET_LINE_RE})\r?"
     rf"|{TOOL_LINE_RE}\r?"
@@ -553,36 +559,46 @@ class _Reader:
             return self._general(rows, 0, n)
         cols = np.array(found, dtype=object)
         present = cols != ""
-        has = [present[:, 2], present[:, 3], present[:, 4]]
+        twice = _later_axis_words(cols, present)
+        has = [present[:, 3], present[:, 4], present[:, 5]]
         gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
-        arc = present[:, 5]
-        tool = present[:, 8] | present[:, 9]  # a tool change: quiet but for the tool it loads
-        quiet = present[:, 7] | tool
+        arc = present[:, 7]
+        tool = present[:, 10] | present[:, 11]  # a tool change: quiet but for the tool it loads
+        quiet = present[:, 9] | tool
         has_g = gcode >= 0
         g_arc = gcode >= ARC_CW
         last_g = _last_index(has_g)
         # a plain move's arc words agree with its motion (its own G word, or the last one
         # before it in the chunk; the lines before a stretch's first G word are checked
         # against the modal motion when the stretch is read)
-        plain = (has[0] | has[1] | has[2]) & np.where(
+        plain = (has[0] | has[1] | has[2]) & ~twice & np.where(
             has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
         runnable = plain | quiet
         if not runnable.any():
             return self._general(rows, 0, n)
         keys = self.keys
-        ncol = cols[:, 0].tolist()
-        nk = [keys(t) if t else 0 for t in ncol]
-        rows.keys[:, 1] = nk
-        rows.keys[:, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
-                           for t, k in zip(ncol, nk, strict=True)]
+        # N words (the lines without one keep 0): a plain line's skeleton is its N word
+        numbered = np.flatnonzero(present[:, 0])
+        if len(numbered):
+            ncol = cols[numbered, 0].tolist()
+            nk = [keys(t) for t in ncol]
+            rows.keys[numbered, 1] = nk
+            rows.keys[numbered, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
+                                      for t, k in zip(ncol, nk, strict=True)]
+        # a move that sets the tool length offset (G43 H..) starts a stretch of its own
+        tlo = present[:, 2] & plain
+        tlo_rows = np.flatnonzero(tlo).tolist()
+        for i in tlo_rows:  # (its skeleton: the line's, G43 H.. kept)
+            rows.keys[i, 0] = keys(skeleton(lines[i]))
+        next_tlo = _next_index(tlo).tolist() + [n] if tlo_rows else None
         values = []
         for k in range(3):
             v = np.full(n, np.nan)
-            v[has[k]] = cols[has[k], 2 + k].astype(float)
+            v[has[k]] = cols[has[k], 3 + k].astype(float)
             values.append(v)
-        xcol, ycol, zcol, fcol = cols[:, 2], cols[:, 3], cols[:, 4], cols[:, 6]
+        xcol, ycol, zcol, fcol = cols[:, 3], cols[:, 4], cols[:, 5], cols[:, 8]
         last = [_last_index(h).tolist() for h in has]
-        last_f = _last_index(present[:, 6]).tolist()
+        last_f = _last_index(present[:, 8]).tolist()
         next_other = _next_index(~runnable).tolist()
         next_g = _next_index(has_g).tolist()
         moves_before = np.concatenate([[0], np.cumsum(plain)]).tolist()
@@ -590,7 +606,7 @@ class _Reader:
         runnable_l, quiet_l = runnable.tolist(), quiet.tolist()
         # the last tool change at or before each line, and the tool it loads
         last_tool = _last_index(tool).tolist() if tool.any() else None
-        tool_no = {i: int(cols[i, 8] or cols[i, 9]) for i in np.flatnonzero(tool).tolist()}
+        tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
         gcode_l, last_g_l = gcode.tolist(), last_g.tolist()
         interp = self.interp
         st = interp.state
@@ -604,12 +620,16 @@ class _Reader:
                 if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
                         or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]):
                     b = next_other[i]
+                    if next_tlo is not None:  # a stretch ends before a line that sets the tool length
+                        b = min(b, next_tlo[i + 1])
                     p = min(b, next_g[i])  # lines i:p move in the modal motion
                     moves = moves_before[p] - moves_before[i]
                     arcs = arcs_before[p] - arcs_before[i]
                     motion = st.motion
                     if moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
                             motion in (ARC_CW, ARC_CCW) and arcs == moves):
+                        if next_tlo is not None and next_tlo[i] == i:  # G43 H.. before the move
+                            interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
                         unit = st.unit_mm
                         shift = interp.shift(False, int(linenos[i]), 1)
                         runs.append((i, b, unit, shift, tuple(pos)))
@@ -763,6 +783,22 @@ def _read_in_child(reader: _Reader, conn) -> None:
                        reader.count, reader.header))
     finally:
         conn.close()
+
+
+_AXIS_WORD = re.compile(rf"([XxYyZz])[ \t]*+({_NUM})")
+
+
+def _later_axis_words(cols: np.ndarray, present: np.ndarray) -> np.ndarray:
+    """Move the numbers of the axis words after a line's X, Y, Z run (column 6) into the
+    X, Y, Z columns (3 to 5); returns the lines that name an axis twice (not plain)."""
+    twice = np.zeros(len(cols), dtype=bool)
+    for i in np.flatnonzero(present[:, 6]).tolist():
+        for letter, num in _AXIS_WORD.findall(cols[i, 6]):
+            k = 3 + "XYZ".index(letter.upper())
+            if present[i, k]:
+                twice[i] = True
+            cols[i, k], present[i, k] = num, True
+    return twice
 
 
 class _Index:

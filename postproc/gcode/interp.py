@@ -346,6 +346,12 @@ class Interpreter:
         st.tool = tool
         st.spindle_tool = st.tool
 
+    def set_tool_length(self, h: int, lineno: int, col: int) -> None:
+        """What ``G43 H<h>`` does to the state, for the readers that take such a line as
+        columns (as :meth:`_block` reads it)."""
+        self._g43({"H": (float(h), -1)}, lineno, col)
+        self._run_shift = None
+
     def tool_r(self) -> tuple[float, float, float]:
         if self.tool_vector is not None:
             return self.tool_vector
