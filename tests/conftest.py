@@ -179,7 +179,7 @@ def plain_line(draw):
 def other_line(draw):
     return draw(st.sampled_from([
         "G2 X{a} Y{b} I5 J0", "G3 X{a} Y{b} R40", "(comment X1 Y2)", "", "G91", "G90", "G20", "G21",
-        "G1 X{a} (tail comment)", "G0 Z{b} ; note", "G54", "G43 H1", "G49", "M3 S1000", "/G1 X{a}",
+        "G1 X{a} (tail comment)", "G0 Z{b} ; note", "G54", "G43 H1", "G0 G43 H1 Z{b}", "G1 G43 H0 X{a} Y{b}", "G49", "M3 S1000", "/G1 X{a}",
         "G92 X{a}", "G92.1", "G17", "G18 G2 X{a} Z{b} I3 K3", "G1 F300", "N5", "%", "M30",
         "S1200 M3", "M9", "N20 (note)", "  ", "(MSG, hello)", "M8 (coolant)",
     ])).format(a=draw(st.integers(-150, 150)), b=draw(st.integers(-150, 150)))

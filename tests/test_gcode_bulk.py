@@ -162,6 +162,28 @@ def test_a_tool_change_stays_in_a_run_and_a_later_g43_without_h_takes_its_length
         assert_same(outs)
         assert outs["bulk"][1] is not None  # corrected, not refused
 
+def test_a_move_that_sets_the_tool_length_starts_a_run():
+    lines = ["G1 X1\n", "G0 G43 H2 Z40\n", "N7 G1 G43 H3 X16 Z20\n", "g0g43h0z5\n", "G43 H2\n", "G2 G43 H1 X1 I1\n"]
+    block = bulk.scan(lines)
+    assert block.tlo == {1: 2, 2: 3, 3: 0}
+    assert block.plain.tolist() == [True, False, False, False, False, False]
+    assert block.plain_tlo.tolist() == [True, True, True, True, False, False]
+    setup = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 10.0, 2: 25.0, 3: 7.0})
+    text = ("G0 X10 Y10 Z80\nT1 M6\nG0 G43 H1 Z60\nG1 X11 Y10.5 F300\nX12 Y11\nT2 M6 (T2)\nN10 G0 G43 H2 Z50\n"
+            "X13 Y12\nG1 Z45 X14\nT3 M6\ng0g43h3x15z40\nX16\nG43 H0 Z30\nX17 Y13\nG0 G43 H2 Y14 X18 Z35\nX19\n"
+            "G91\nG43 H1 Z-5\nG90\nX20\nM30\n")
+    for chunk in (1, 3, 20_000):
+        outs = run_all(text, chunk_lines=chunk, setup=setup)
+        assert_same(outs)
+        assert outs["bulk"][1] is not None  # corrected, not refused
+    # a tool length not given: the same refusal, at the same line and column
+    missing = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 10.0})
+    outs = run_all("G0 X10 Y10 Z80\nG0 G43 H1 Z60\nX11\nN5 G0 G43 H2 Z50\nX12\n", setup=missing)
+    assert_same(outs)
+    assert outs["bulk"][1] is None
+    assert outs["bulk"][0].startswith("4:7: tool length of tool 2 is used (G43)")  # line 4, the G43 word
+
+
 # -- fixed cases --------------------------------------------------------------------------
 def test_runs_across_chunks_arcs_units_and_incremental_sections():
     text = ("%\nG21 G90 G17\nG0 X10 Y10 Z10\n" + "".join(f"G1 X{10 + i * 0.7:.3f} Y{20 - i * 0.3:.4f}\n" for i in range(30))

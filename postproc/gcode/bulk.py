@@ -22,6 +22,10 @@ A run holds three kinds of lines:
   a tool change alone: :data:`_TOOL`):
   written whole, no move, no word added; a run never starts with one.
 
+A straight move that sets the tool length first (``G0 G43 H2 Z25``, :attr:`Block.tlo`)
+starts a run of its own where the corrector never splits a line (an affine
+calibration): the length is set (``Interpreter.set_tool_length``), then the run read.
+
 After the chunk's targets are corrected, the comparisons of old and new values of every
 run line are vectorised and the new numbers formatted in one operation; each run is then
 written in program order by joining its lines' pieces. The words an axis does not name
@@ -38,7 +42,7 @@ from __future__ import annotations
 
 import math
 import re
-from bisect import bisect_left
+from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol, TypeAlias, final
 
@@ -53,13 +57,14 @@ from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
 _N = NUMBER_RE
-# Groups: 1 head (N and G words), 2 G number, 3/5/7 X/Y/Z letter with the blanks
+# Groups: 1 head (N and G words, and G43 H.. after them: see Block.tlo), 2 G number, 3/5/7 X/Y/Z letter with the blanks
 # before it, 4/6/8 their numbers, 9/11 I/J letter with the blanks before it, 10/12 their
 # numbers, 13 the rest (F word, trailing blanks, \r), 14 the F number; any other line
 # matches with every group empty. Blanks are matched possessively (nothing in the
 # pattern needs one back), which saves the regex engine's backtracking.
 _PLAIN = re.compile(
-    rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[0-3]))?)"
+    rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[0-3]))?"
+    rf"(?:[ \t]*+[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+\d++)?)"
     rf"(?:([ \t]*+[Xx][ \t]*+)({_N}))?(?:([ \t]*+[Yy][ \t]*+)({_N}))?(?:([ \t]*+[Zz][ \t]*+)({_N}))?"
     rf"(?:([ \t]*+[Ii][ \t]*+)({_N}))?(?:([ \t]*+[Jj][ \t]*+)({_N}))?"
     rf"((?:[ \t]*+[Ff][ \t]*+({_N}))?[ \t]*+\r?)|[^\n]*)$",
@@ -77,6 +82,8 @@ _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
 # only the tool the interpreter holds (group 1 or 2: the T number), which the run sets
 # when it is read (:func:`read_run`).
 _TOOL = re.compile(lexer.TOOL_LINE_RE + r"\r?\n?")
+# The G43 H.. of a line's head (a straight move that sets the tool length first).
+_TLO = re.compile(r"[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+(\d++)")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 # Most lines the run writer takes in one stretch (see _emit_rows): an arc whose hint
 # fails unexpectedly makes the writer read again at most this many lines.
@@ -183,6 +190,12 @@ class RunMove:
                     motion_idx, aux)
 
 
+def tlo_col(line: str) -> int:
+    """The column of a line's G43 word (of :attr:`Block.tlo`), for its errors."""
+    m = _TLO.search(line)
+    return m.start() + 1 if m is not None else 1
+
+
 def prime_shift(interp: Interpreter) -> bool:
     """Compute the offsets of absolute words in the current state ; False if they cannot be (the general path then reports why)."""
     if interp._run_shift is None:
@@ -259,10 +272,26 @@ class Block:
             # written whole from its last piece
             neutral[i] = True
             head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
+        # straight moves that set the tool length first (G43 H..: line -> H): a run starts at
+        # one (set_tool_length before it is read) when the corrector takes them (its lines
+        # are never split), else they are the interpreter's, as an arc that does is
+        self.tlo: dict[int, int] = {}
+        for i, h in enumerate(head):
+            if ("H" in h or "h" in h) and moving[i]:
+                m = _TLO.search(h)
+                if m is not None:
+                    moving[i] = False
+                    if not self.arc[i]:
+                        self.tlo[i] = int(m.group(1))
+        self.tlo_rows: list[int] = sorted(self.tlo)
         self.neutral = neutral
         self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
         self.last_moving: list[int] = last_index(~neutral).tolist()
-        self.plain = moving | neutral
+        self.plain = moving | neutral  # (G43 H.. lines aside)
+        self.plain_tlo = self.plain
+        if self.tlo:
+            self.plain_tlo = self.plain.copy()
+            self.plain_tlo[self.tlo_rows] = True
         self.last_g: list[int] = last_g.tolist()
         self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l: list[list[int]] = [a.tolist() for a in self.last]
@@ -380,6 +409,11 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
         raise AssertionError("a run read before the offsets of its words are known (prime_shift)")
     pos = st.pos
     q0 = (pos[0], pos[1], pos[2])
+    tr = block.tlo_rows
+    if tr:  # a run ends before a line that sets the tool length
+        k = bisect_right(tr, a)
+        if k < len(tr) and tr[k] < b:
+            b = tr[k]
     b, arcs = _arc_rows(interp, block, a, b, unit, shift, q0)
     if b == a:
         return None

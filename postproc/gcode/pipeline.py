@@ -336,7 +336,11 @@ class Corrector(EmitterMixin):
                     feed(line)
                 return
             try:
-                edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
+                # a straight move that sets the tool length (G43 H..) starts a run where no
+                # line is split
+                tlo = block.tlo if self.linear_exact else {}
+                plain = block.plain_tlo if tlo else block.plain
+                edges = np.diff(np.concatenate([[0], plain.view(np.int8), [0]]))
                 i, n = 0, len(lines)
                 gword, neutral = block.gword, block.neutral
                 for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
@@ -344,6 +348,10 @@ class Corrector(EmitterMixin):
                         feed(lines[i])
                         i += 1
                     while i < b:
+                        if tlo and i in tlo and not interp.ended:
+                            # the tool length first (again when the interpreter reads the line)
+                            interp.set_tool_length(tlo[i], lineno, bulk.tlo_col(lines[i]))
+                            run_ok = False
                         # a line naming its own motion word may start a run whatever the modal motion
                         # (a run starts at a line that moves: one that moves nothing is the interpreter's)
                         if not neutral[i] and (run_ok or (not interp.ended and bulk.prime_shift(interp)
