@@ -598,7 +598,7 @@ def _written_pair(tmp_path, rng_seed: int, n: int) -> tuple[Path, Path, str, str
 
 
 def _forked_reads(monkeypatch) -> dict:
-    """Count the corrected programs read by a child process."""
+    """Count the programs read by a child process."""
     from postproc.gcode import compare
 
     seen = {"forked": 0}
@@ -616,7 +616,7 @@ _NO_FORK = pytest.mark.skipif(not __import__("sys").platform.startswith("linux")
 
 
 @_NO_FORK
-def test_diff_reads_the_corrected_program_in_a_child_as_it_does_itself(monkeypatch, tmp_path):
+def test_diff_reads_the_programs_in_children_as_it_does_itself(monkeypatch, tmp_path):
     from postproc.gcode import compare
 
     src, dst, _text, _out = _written_pair(tmp_path, 5, 1500)
@@ -626,14 +626,14 @@ def test_diff_reads_the_corrected_program_in_a_child_as_it_does_itself(monkeypat
     for least in (10**15, 0):  # read here, then in a child
         monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
         reports.append(compare_programs(str(src), str(dst)).to_dict())
-    assert seen["forked"] == 1
+    assert seen["forked"] == 2  # the original and the corrected program
     assert reports[1] == reports[0]
     assert reports[0]["lines_inserted"] > 10
     assert reports[0]["header"]
 
 
 @_NO_FORK
-def test_diff_reports_an_error_of_the_corrected_program_read_in_a_child(monkeypatch, tmp_path):
+def test_diff_reports_an_error_of_a_program_read_in_a_child(monkeypatch, tmp_path):
     import multiprocessing
 
     from postproc.gcode import compare
@@ -650,16 +650,17 @@ def test_diff_reports_an_error_of_the_corrected_program_read_in_a_child(monkeypa
         with pytest.raises(PostprocError) as exc:
             compare_programs(str(src), str(dst))
         errors.append((type(exc.value), str(exc.value), exc.value.lineno))
-    assert seen["forked"] == 1
+    assert seen["forked"] == 2
     assert errors[1] == errors[0]
     assert errors[0][2] == k + 1
     assert str(dst) in errors[0][1]
-    # an error of the original stops the child reading the corrected program
+    # an error of the original (read in a child too) stops the child reading the corrected
+    # program
     src.write_text("".join(text.splitlines(keepends=True)[:50] + ["G1 X#1\n"]))
     with pytest.raises(PostprocError, match=":51:"):
         compare_programs(str(src), str(dst))
     assert multiprocessing.active_children() == []
-    assert seen["forked"] == 2
+    assert seen["forked"] == 4
 
 
 def test_diff_reads_the_original_expanded_when_the_program_was_corrected_expanded(tmp_path):

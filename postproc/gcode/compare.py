@@ -15,8 +15,8 @@ nor recorded count as zero.
 
 Both programs are read in chunks of lines, and memory does not grow with their length
 (apart from the compact list of moved blocks, unless only the largest are kept). A large
-corrected program file is read by a forked child process while this one reads the original
-and pairs (:class:`_ForkedReader`; the same chunks, keys and errors). In a chunk, the stretches of plain
+program file is read by a forked child process of its own while this one pairs
+(:class:`_ForkedReader`; the same chunks, keys and errors). In a chunk, the stretches of plain
 absolute moves (N, G0 to G3, X/Y/Z, I/J/K/R and F words only, in a simple modal state)
 and of lines that change nothing (S, M3, M8 and the like, comments) are read as columns:
 a move's end point is its words, carried forward where a line does not name an axis.
@@ -75,8 +75,8 @@ SLOW_STRETCH = 4
 MIN_WINDOW = 256
 # Insertions in one stretch between anchors checked at once (more: paired one at a time).
 MAX_LEVELS = 8
-# A corrected program file at least this large is read by a child process while this one
-# reads the original (where processes can be forked): two cores read the two programs.
+# A program file at least this large is read by a child process of its own (where
+# processes can be forked): two cores read the two programs while this one pairs them.
 FORK_MIN_BYTES = 2_000_000
 _COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
 # (a spline, G5 or G5.1 with its I J P Q words, is written as straight chords: its last
@@ -1386,8 +1386,10 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     setup = setup_from_header(corrected, setup)
     expanded = header_setup(corrected).expanded
     keys = _Keys()
-    o_reader = _Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                       subroutine_path=[Path(p) for p in subroutine_path])
+    o_reader: _Reader | _ForkedReader = _Reader(original, setup, keys, dialect=dialect, expand=expanded,
+                                                subroutine_path=[Path(p) for p in subroutine_path])
+    if _ForkedReader.usable(original):
+        o_reader = _ForkedReader(o_reader, keys)
     reader = _Reader(corrected, setup, keys, drop_header=True, dialect=dialect)
     c_reader = _ForkedReader(reader, keys) if _ForkedReader.usable(corrected) else reader
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
