@@ -1386,12 +1386,11 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     setup = setup_from_header(corrected, setup)
     expanded = header_setup(corrected).expanded
     keys = _Keys()
-    o_reader: _Reader | _ForkedReader = _Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                                                subroutine_path=[Path(p) for p in subroutine_path])
-    if _ForkedReader.usable(original):
-        o_reader = _ForkedReader(o_reader, keys)
-    reader = _Reader(corrected, setup, keys, drop_header=True, dialect=dialect)
-    c_reader = _ForkedReader(reader, keys) if _ForkedReader.usable(corrected) else reader
+    readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
+                       subroutine_path=[Path(p) for p in subroutine_path]),
+               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect))
+    o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(src) else r
+                          for r, src in zip(readers, (original, corrected), strict=True))
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:
         orig, corr = _Tape(o_chunks), _Tape(c_chunks)
