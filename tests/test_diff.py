@@ -730,3 +730,57 @@ def test_diff_pairs_a_spline_with_the_last_of_its_chords(spline):
     n_header = len(emit.split_header(out)[0])
     assert spline_end.lineno_corrected == n_header + 3 + chords  # the last chord
     assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4
+
+
+def test_diff_reads_canned_cycles_as_correct_wrote_them_expanded(tmp_path):
+    # --cycles expand writes each cycle block as its G0/G1 moves (and its other modal
+    # words, its dwells as G4 lines); the header says so and diff reads the original's
+    # cycle blocks the same way: each step pairs with its line
+    text = ("G21 G90 G17 G54\nT1 M6\nG0 G43 H1 Z30\nG0 X20 Y20\nG90 G98 G81 X20 Y20 Z-5 R2 F100\nX40\n"
+            "G99 G82 X60 Y20 Z-4 R2 P0.5\nG83 X60 Y40 Z-12 R2 Q3\nG91 G81 X10 Z-7 R-28 L3\nG90 G80\nG0 Z50\nM2\n")
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (50.0, 50.0, 100.0)}, tool_lengths={1: 20.0})
+    out, rep = correct_text(text, cal.engine, setup, CorrectOptions(cycles="expand"))
+    assert rep.cycles_expanded == 5
+    assert "(POSTPROC CYCLES EXPANDED)" in out.splitlines()
+    assert "G4 P0.5" in out.splitlines()
+    kept, _ = correct_text(text.replace("G91 G81 X10 Z-7 R-28 L3\n", ""), cal.engine, setup,
+                           CorrectOptions(tolerance_mm=0.05))
+    assert "CYCLES EXPANDED" not in kept
+    d = compare_programs(text, out)
+    assert d.moves == rep.moves
+    assert d.lines_inserted == 0
+    assert d.lines_original == len(text.splitlines())
+    assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4
+    # every step of a cycle block is numbered by the block's line: G83 pecks 3 mm to 14 mm
+    # deep (Q3), each with its retract and rapid down
+    assert sum(m.lineno == 8 for m in d.moved) > 10
+    # each move of the corrected program (as the interpreter reads it) pairs once
+    from postproc.gcode.interp import Interpreter
+
+    interp = Interpreter(setup, None)
+    moving = [k for k, line in enumerate(out.splitlines(keepends=True), start=1) if interp.feed_line(k, line)]
+    assert d.moves_unchanged == 0
+    assert sorted(m.lineno_corrected for m in d.moved) == moving
+    # the CLI on the files
+    src, dst = tmp_path / "p.ngc", tmp_path / "q.ngc"
+    src.write_text(text)
+    dst.write_text(out)
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst)])
+    assert res.exit_code == 0, res.output
+    assert "CYCLES EXPANDED" in res.output
+
+
+def test_diff_of_the_fanuc_sample_expanded_with_its_cycles():
+    text = (ROOT / "samples" / "fanuc_drill.nc").read_text()
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (100.0, 100.0, 100.0)}, tool_lengths={1: 100.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 300.0}})
+    out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="fanuc", cycles="expand"))
+    assert rep.expanded
+    assert rep.cycles_expanded == 5
+    d = compare_programs(text, out, dialect="fanuc")
+    assert d.expanded
+    assert d.moves == rep.moves + 2  # and the two G28 lines, written as they are
+    assert d.lines_inserted == 0
+    assert max(m.size_mm for m in d.moved) == pytest.approx(rep.max_correction_mm, abs=1e-4)

@@ -249,6 +249,7 @@ class HeaderSetup:
     tool_vector: tuple | None = None
     home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
     expanded: bool = False  # the program was corrected expanded (subprograms, loops, macros written out)
+    cycles_expanded: bool = False  # its canned cycles were written as their moves (--cycles expand)
 
 
 def _header_rows(source) -> list[str]:
@@ -291,6 +292,8 @@ def header_setup(source) -> HeaderSetup:
             hs.tool_vector = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
         elif words.startswith("EXPANDED"):
             hs.expanded = True
+        elif words == "CYCLES EXPANDED":
+            hs.cycles_expanded = True
     return hs
 
 
@@ -471,7 +474,8 @@ class _Reader:
     """One program read in chunks of :class:`_Rows`; see the module docstring."""
 
     def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
-                 dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = ()) -> None:
+                 dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = (),
+                 expand_cycles: bool = False) -> None:
         self.path, self._lines = iter_source_lines(source)
         self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
         self.keys = keys
@@ -481,6 +485,9 @@ class _Reader:
         self.expand = expand
         self.dialect = dialect
         self.subroutine_path = tuple(subroutine_path)
+        # read each canned cycle block as the lines correct writes it as (--cycles expand)
+        self.expand_cycles = expand_cycles
+        self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
 
@@ -501,7 +508,7 @@ class _Reader:
             rows.lineno = np.array(linenos, dtype=np.int64)
             n, error = self._general(rows, 0, len(head))
             self.count += n
-            yield rows.head(n)
+            yield self._with_cycles(rows.head(n))
             if error is not None:
                 raise error
         if self.expand:
@@ -512,7 +519,7 @@ class _Reader:
             lineno += len(lines)
             n, error = self._chunk(rows)
             self.count += n
-            yield rows if n == len(lines) else rows.head(n)
+            yield self._with_cycles(rows if n == len(lines) else rows.head(n))
             if error is not None:
                 raise error
 
@@ -526,7 +533,7 @@ class _Reader:
             rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)
             n, error = self._chunk(rows)
             self.count += n
-            yield rows if n == len(part) else rows.head(n)
+            yield self._with_cycles(rows if n == len(part) else rows.head(n))
             if error is not None:
                 raise error
 
@@ -543,7 +550,52 @@ class _Reader:
                 rows.move[i] = True
                 rows.end[i] = mv.q1
                 rows.keys[i] = self.keys.of_line(lines[i])
+                if mv.cycle is not None and self.expand_cycles:
+                    self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle)
         return b, None
+
+    def _with_cycles(self, rows: _Rows) -> _Rows:
+        """``rows`` with each canned cycle block read (:attr:`expand_cycles`) replaced by
+        the records of the lines correct writes it as: the lines that move nothing as they
+        are, each G0/G1 step a move to its point (of empty skeleton, numbered by the
+        block's line)."""
+        cycles = self._cycles
+        if not cycles:
+            return rows
+        self._cycles = {}
+        n = len(rows)
+        lines: list[str] = []
+        lineno: list[int] = []
+        move: list[bool] = []
+        end: list = []
+        keys: list = []
+        nan3 = (math.nan, math.nan, math.nan)
+        last = 0
+        for i in sorted(c for c in cycles if c < n):
+            lines += rows.lines[last:i]
+            lineno += rows.lineno[last:i].tolist()
+            move += rows.move[last:i].tolist()
+            end += rows.end[last:i].tolist()
+            keys += rows.keys[last:i].tolist()
+            for step in cycles[i]:
+                if isinstance(step, str):
+                    lines.append(step)
+                    move.append(False)
+                    end.append(nan3)
+                else:
+                    lines.append("")  # (never a corrected line's text)
+                    move.append(True)
+                    end.append(tuple(step[2]))
+                lineno.append(int(rows.lineno[i]))
+                keys.append((0, 0, 0))
+            last = i + 1
+        lines += rows.lines[last:]
+        lineno += rows.lineno[last:].tolist()
+        move += rows.move[last:].tolist()
+        end += rows.end[last:].tolist()
+        keys += rows.keys[last:].tolist()
+        return _Rows(lines, np.array(lineno, dtype=np.int64), np.array(move, dtype=bool),
+                     np.array(end, dtype=float).reshape(-1, 3), np.array(keys, dtype=np.int64).reshape(-1, 3))
 
     def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:  # noqa: C901
         """Read a chunk: stretches of plain moves as columns, the other lines one at a time."""
@@ -1384,10 +1436,11 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     setup = setup_from_header(corrected, setup)
-    expanded = header_setup(corrected).expanded
+    hs = header_setup(corrected)
+    expanded = hs.expanded
     keys = _Keys()
     readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                       subroutine_path=[Path(p) for p in subroutine_path]),
+                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=hs.cycles_expanded),
                _Reader(corrected, setup, keys, drop_header=True, dialect=dialect))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(src) else r
                           for r, src in zip(readers, (original, corrected), strict=True))

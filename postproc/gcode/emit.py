@@ -11,12 +11,18 @@ import math
 import re
 from collections.abc import Iterator
 from itertools import chain, islice
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeAlias
 
 from postproc import __version__
+from postproc.gcode.state import DWELL, RAPID
 
 if TYPE_CHECKING:
+    from postproc.gcode.interp import Cycle, Move
     from postproc.gcode.path import Setup
+
+#: a G0/G1 step of an expanded canned cycle (cycle_lines): motion, from, to (machine mm),
+#: the axes it names, whether it carries the block's F word
+CycleStep: TypeAlias = tuple[int, tuple[float, float, float], tuple[float, float, float], tuple[int, ...], bool]
 
 # half of the last written digit, by number of decimals (a program's numbers may carry
 # any number of them; beyond 323 the half unit is below the smallest double, 0.0)
@@ -241,14 +247,15 @@ def _wrap(words: str, width: int) -> list[str]:
 
 
 def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float, setup_note: str, ending: str,
-                 expanded: bool = False, setup: Setup | None = None) -> list[str]:
+                 expanded: bool = False, setup: Setup | None = None, cycles_expanded: bool = False) -> list[str]:
     """The comment lines that open every corrected program (and mark it as corrected).
 
     Each is a short ``(POSTPROC ...)`` comment that ``dialect`` accepts (length, case,
     characters; checked line by line). They carry the version, the calibration's name and
     sha256, the tolerance, the setup (``setup_note`` as the pipeline writes it; when
     ``setup`` is given, offsets, tool lengths, start and tool vector are written from it
-    exactly) and EXPANDED when subprograms or macros were expanded.
+    exactly), EXPANDED when subprograms or macros were expanded and CYCLES EXPANDED when
+    canned cycles are written as their moves (``--cycles expand``).
     Each line ends with ``ending`` (``"\r\n"`` for a lone ``"\r"``).
     """
     from postproc.gcode import dialect as dialects
@@ -267,6 +274,8 @@ def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float,
         body += _wrap(part, width)
     if expanded:
         body += _wrap("EXPANDED SUBPROGRAMS LOOPS AND MACROS", width)
+    if cycles_expanded:
+        body += _wrap("CYCLES EXPANDED", width)
     for k, line in enumerate(body, start=1):
         dialects.check_output_line(d, line, path="<header>", lineno=k)
     return [line + end for line in body]
@@ -329,3 +338,32 @@ def split_header(text: str) -> tuple[list[str], str]:
     it = iter(text.splitlines(keepends=True))
     kept, header, after = header_run(it)
     return header, "".join(kept + ([] if after is None else [after]) + list(it))
+
+
+def cycle_lines(line: str, mv: Move, c: Cycle) -> list[str | CycleStep]:
+    """The lines a canned cycle block (``line``, its Move ``mv`` and Cycle ``c``) is written
+    as when expanded (``--cycles expand``), in order: the text of a line that moves nothing
+    (the block's other modal words but G98/G99, a G4 dwell), or ``(kind, prev, q, axes,
+    first_feed)`` for a G0/G1 step from ``prev`` to ``q`` (machine mm) naming ``axes``
+    (those that change), with the block's F word when ``first_feed``. ``diff`` reads an
+    original's cycle blocks so when the corrected program says CYCLES EXPANDED."""
+    ending = line_ending(line) or "\n"
+    sep, lower = style_of(line)
+    sep = sep or " "
+    out: list[str | CycleStep] = []
+    prefix = [w for w in mv.prefix_words if not w.upper().startswith(("G98", "G99"))]
+    if prefix:
+        text = sep.join(prefix)
+        out.append((text.lower() if lower else text) + ending)
+    prev = mv.q0
+    feed_done = False
+    for kind, q in c.steps:
+        if kind == DWELL:
+            text = f"G4{sep}P{fmt(q[0], 4).rstrip('0').rstrip('.') or '0'}"
+            out.append((text.lower() if lower else text) + ending)
+            continue
+        first_feed = kind != RAPID and not feed_done
+        feed_done = feed_done or first_feed
+        out.append((kind, prev, q, tuple(k for k in range(3) if q[k] != prev[k]), first_feed))
+        prev = q
+    return out

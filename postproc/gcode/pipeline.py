@@ -52,7 +52,7 @@ from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion,
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import DWELL, LINE, PLANES, RAPID
+from postproc.gcode.state import LINE, PLANES, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
@@ -416,7 +416,8 @@ class Corrector(EmitterMixin):
                     hint="correct the original program instead, or use --force to correct it again")
         ending = (emit.line_ending(head[0]) if head else "") or "\n"
         header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
-                                        self._setup_note(), ending, expanded=self.expanded, setup=self.setup)
+                                        self._setup_note(), ending, expanded=self.expanded, setup=self.setup,
+                                        cycles_expanded=self.opt.cycles == "expand")
         lineno = 1
         for line in head[:keep]:
             self.interp.feed_line(where(lineno), line)
@@ -1091,24 +1092,13 @@ class Corrector(EmitterMixin):
         ending = emit.line_ending(line) or "\n"
         sep, lower = emit.style_of(line)
         sep = sep or " "
-        unit = mv.unit
-        d = _unit_decimals(self.opt, unit)
-        prefix = [w for w in mv.prefix_words if not w.upper().startswith(("G98", "G99"))]
-        if prefix:
-            text = sep.join(prefix)
-            entries.append(((text.lower() if lower else text) + ending, None, False, None))
-        prev = mv.q0
-        feed_done = False
-        for kind, q in c.steps:
-            if kind == DWELL:
-                text = f"G4{sep}P{emit.fmt(q[0], 4).rstrip('0').rstrip('.') or '0'}"
-                entries.append(((text.lower() if lower else text) + ending, None, False, None))
-                continue
-            first_feed = kind != RAPID and not feed_done
-            feed_done = feed_done or first_feed
-            moved = tuple(k for k in range(3) if q[k] != prev[k])
-            entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
-            prev = q
+        d = _unit_decimals(self.opt, mv.unit)
+        for step in emit.cycle_lines(line, mv, c):
+            if isinstance(step, str):
+                entries.append((step, None, False, None))
+            else:
+                kind, prev, q, moved, first_feed = step
+                entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
         self.report.cycles_expanded += 1
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
