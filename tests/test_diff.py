@@ -784,3 +784,22 @@ def test_diff_of_the_fanuc_sample_expanded_with_its_cycles():
     assert d.moves == rep.moves + 2  # and the two G28 lines, written as they are
     assert d.lines_inserted == 0
     assert max(m.size_mm for m in d.moved) == pytest.approx(rep.max_correction_mm, abs=1e-4)
+
+
+@pytest.mark.parametrize("radius", [40, 140])
+def test_diff_pairs_a_full_circle_cut_into_many_arcs_with_its_last_piece(radius):
+    # the plunge before the circle ends where the circle ends; the circle is cut into
+    # 18 to 62 arcs whose ends walk away from that point and back: the nearest line lies
+    # beyond the first eight pieces, which are all farther than the first one
+    text = (f"G21 G90 G17\nG0 X{150 - radius} Y150 Z20\nG1 Z5 F500\nG1 Z5\nG2 X{150 - radius} Y150 I{radius} J0\n"
+            "G0 Z20\nG0 X10 Y10\nM2\n")
+    cal = load_calibration(ROOT / "calibrations" / "s500_parametric.json")
+    out, rep = correct_text(text, cal.engine, Setup(offsets={"G54": (0.0, 0.0, 100.0)}))
+    assert rep.lines_inserted > 15
+    d = compare_programs(text, out)
+    assert d.lines_inserted == rep.lines_inserted
+    assert max(m.size_mm for m in d.moved) <= rep.max_correction_mm + 1e-4
+    lines = out.splitlines()
+    circle = next(m for m in d.moved if m.lineno == 5)
+    assert lines[circle.lineno_corrected - 1].startswith("G2 ")
+    assert lines[circle.lineno_corrected].startswith("G0 Z")  # the next line: the retract

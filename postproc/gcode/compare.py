@@ -63,8 +63,14 @@ from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LINE_
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
-# Pairing stops after this many candidate lines that are farther than the best one.
+# Pairing stops after this many candidate lines that are farther than the best one,
 STOP_AFTER_WORSE = 8
+# unless the best is farther than this from the predicted end point (no correction changes
+# so much from one move to the next: the move's own line lies further on, e.g. the last
+# piece of a full circle cut into many arcs, whose first pieces walk away and back), up
+# to FAR_SCAN candidates.
+PLAUSIBLE_MM = 1.0
+FAR_SCAN = 512
 # Lines read at a time from each program.
 CHUNK_LINES = 20_000
 # Corrected records looked at past the window for the anchor that ends each scan.
@@ -1057,7 +1063,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
                 scanned = c < ea
                 nearer |= scanned & (_l1(cend[c], pa) < d0)
                 looked += scanned
-            good[a] = (own[a, 0] == 0) & ~nearer & ((looked == STOP_AFTER_WORSE) | real_stop[a])
+            good[a] = (own[a, 0] == 0) & ~nearer & ((looked == STOP_AFTER_WORSE) | real_stop[a]) & (d0 <= PLAUSIBLE_MM)
         b = np.flatnonzero(~plain)
         if len(b):
             # an N word or another skeleton (and no comment): its own line when the later
@@ -1074,7 +1080,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
                 if len(r):
                     second = nxt[col][q + after[r]] - q
                     ok_b[r] &= (second >= eb[r]) & (_l1(cend[after[r]], pb[r]) >= d_own[r])
-            good[b] = ok_b
+            good[b] = ok_b & (d_own <= PLAUSIBLE_MM)
         return good
 
     def previous(rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -1204,7 +1210,7 @@ def _pick(dists) -> tuple[tuple | None, tuple | None, int | None]:
             worse = 0
         else:
             worse += 1
-            if worse >= STOP_AFTER_WORSE:
+            if worse >= STOP_AFTER_WORSE and (best[0] <= PLAUSIBLE_MM or j >= FAR_SCAN):
                 return best, runner, j
     return best, runner, None
 
