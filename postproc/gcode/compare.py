@@ -60,7 +60,7 @@ from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LINE_RE
-from postproc.gcode.path import Setup, iter_source_lines
+from postproc.gcode.path import Setup, iter_source_lines, open_source
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
 # Pairing stops after this many candidate lines that are farther than the best one,
@@ -499,7 +499,17 @@ class _Reader:
 
     def chunks(self):
         """Yield :class:`_Rows`; an error of a line comes after the rows before it."""
-        it = self._lines
+        if self.path is None:
+            yield from self._chunks(self._lines)
+            return
+        close = getattr(self._lines, "close", None)  # (a file's generator, not started)
+        if close is not None:
+            close()
+        with open_source(self.path) as fh:  # its lines taken straight from the file, a chunk at a time
+            yield from self._chunks(fh)
+
+    def _chunks(self, it: Iterator[str]):
+        """:meth:`chunks` of the lines of ``it``."""
         lineno = 0
         if self.drop_header:
             # the header lines after the lines kept before them (emit.header_run) are left out
@@ -639,7 +649,9 @@ class _Reader:
         numbered = np.flatnonzero(present[:, 0])
         if len(numbered):
             ncol = cols[numbered, 0].tolist()
-            nk = [keys(t) for t in ncol]
+            # a plain N word Nn is n + 1 (as _Keys makes it), the others through the table
+            nk = [int(t[1:]) + 1 if (t[0] == "N" and t[1:].isdigit() and t[1:].isascii() and len(t) < 17
+                                     and (t[1] != "0" or t == "N0")) else keys(t) for t in ncol]
             rows.keys[numbered, 1] = nk
             rows.keys[numbered, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
                                       for t, k in zip(ncol, nk, strict=True)]
@@ -648,24 +660,25 @@ class _Reader:
         tlo_rows = np.flatnonzero(tlo).tolist()
         for i in tlo_rows:  # (its skeleton: the line's, G43 H.. kept)
             rows.keys[i, 0] = keys(skeleton(lines[i]))
-        next_tlo = _next_index(tlo).tolist() + [n] if tlo_rows else None
+        next_tlo = np.append(_next_index(tlo), n) if tlo_rows else None
         values = []
         for k in range(3):
             v = np.full(n, np.nan)
             v[has[k]] = cols[has[k], 3 + k].astype(float)
             values.append(v)
         xcol, ycol, zcol, fcol = cols[:, 3], cols[:, 4], cols[:, 5], cols[:, 8]
-        last = [_last_index(h).tolist() for h in has]
-        last_f = _last_index(present[:, 8]).tolist()
-        next_other = _next_index(~runnable).tolist()
-        next_g = _next_index(has_g).tolist()
-        moves_before = np.concatenate([[0], np.cumsum(plain)]).tolist()
-        arcs_before = np.concatenate([[0], np.cumsum(plain & arc)]).tolist()
+        # (numpy arrays indexed a few times per stretch, not made lists of every line)
+        last = [_last_index(h) for h in has]
+        last_f = _last_index(present[:, 8])
+        next_other = _next_index(~runnable)
+        next_g = _next_index(has_g)
+        moves_before = np.concatenate([[0], np.cumsum(plain)])
+        arcs_before = np.concatenate([[0], np.cumsum(plain & arc)])
         runnable_l, quiet_l = runnable.tolist(), quiet.tolist()
         # the last tool change at or before each line, and the tool it loads
-        last_tool = _last_index(tool).tolist() if tool.any() else None
+        last_tool = _last_index(tool) if tool.any() else None
         tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
-        gcode_l, last_g_l = gcode.tolist(), last_g.tolist()
+        gcode_l, last_g_l = gcode, last_g
         interp = self.interp
         st = interp.state
         linenos = rows.lineno
@@ -677,16 +690,16 @@ class _Reader:
                 pos = st.pos
                 if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
                         or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]):
-                    b = next_other[i]
+                    b = int(next_other[i])
                     if next_tlo is not None:  # a stretch ends before a line that sets the tool length
-                        b = min(b, next_tlo[i + 1])
-                    p = min(b, next_g[i])  # lines i:p move in the modal motion
-                    moves = moves_before[p] - moves_before[i]
-                    arcs = arcs_before[p] - arcs_before[i]
+                        b = min(b, int(next_tlo[i + 1]))
+                    p = min(b, int(next_g[i]))  # lines i:p move in the modal motion
+                    moves = int(moves_before[p] - moves_before[i])
+                    arcs = int(arcs_before[p] - arcs_before[i])
                     motion = st.motion
                     if moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
                             motion in (ARC_CW, ARC_CCW) and arcs == moves):
-                        if next_tlo is not None and next_tlo[i] == i:  # G43 H.. before the move
+                        if next_tlo is not None and int(next_tlo[i]) == i:  # G43 H.. before the move
                             interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
                         unit = st.unit_mm
                         shift = interp.shift(False, int(linenos[i]), 1)
@@ -694,22 +707,22 @@ class _Reader:
                         e = b - 1
                         pos = list(pos)
                         for k in range(3):
-                            j = last[k][e]
+                            j = int(last[k][e])
                             if j >= i:
                                 pos[k] = float(xcol[j] if k == 0 else ycol[j] if k == 1 else zcol[j]) * unit + shift[k]
                         st.pos = pos
-                        j = last_g_l[e]
+                        j = int(last_g_l[e])
                         if j >= i:
-                            st.motion = gcode_l[j]
-                        j = last_f[e]
+                            st.motion = int(gcode_l[j])
+                        j = int(last_f[e])
                         if j >= i:
                             st.feed = float(fcol[j])
                         if last_tool is not None and last_tool[e] >= i:
-                            interp.load_tool(tool_no[last_tool[e]])  # the stretch's last tool change
+                            interp.load_tool(tool_no[int(last_tool[e])])  # the stretch's last tool change
                         i = b
                         continue
                 elif quiet_l[i]:
-                    if last_tool is not None and last_tool[i] == i and not interp.ended:
+                    if last_tool is not None and int(last_tool[i]) == i and not interp.ended:
                         interp.load_tool(tool_no[i])
                     i += 1  # changes nothing else, whatever the state
                     continue

@@ -19,6 +19,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -78,17 +79,22 @@ def _looks_like_path(text: str) -> bool:
     return os.sep in text or Path(text).suffix.lower() in PROGRAM_SUFFIXES or Path(text).is_file()
 
 
+def open_source(path: str) -> TextIO:
+    """A program file opened for reading its lines as they are (line endings kept, bytes
+    that are not UTF-8 carried through); PostprocError when it cannot be read."""
+    try:
+        return open(path, encoding="utf-8", errors="surrogateescape", newline="")
+    except OSError as exc:
+        raise PostprocError(f"cannot read program: {exc.strerror}", path=path) from None
+
+
 def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
     """``(path_or_None, iterator of lines with endings)`` for a path or G-code text."""
     if isinstance(source, os.PathLike) or (isinstance(source, str) and _looks_like_path(source)):
         path = str(source)
 
         def gen():
-            try:
-                fh = open(path, encoding="utf-8", errors="surrogateescape", newline="")
-            except OSError as exc:
-                raise PostprocError(f"cannot read program: {exc.strerror}", path=path) from None
-            with fh:
+            with open_source(path) as fh:
                 yield from fh
 
         return path, gen()
