@@ -3,6 +3,7 @@ programs and at every chunk boundary."""
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,8 +167,7 @@ def test_a_move_that_sets_the_tool_length_starts_a_run():
     lines = ["G1 X1\n", "G0 G43 H2 Z40\n", "N7 G1 G43 H3 X16 Z20\n", "g0g43h0z5\n", "G43 H2\n", "G2 G43 H1 X1 I1\n"]
     block = bulk.scan(lines)
     assert block.tlo == {1: 2, 2: 3, 3: 0}
-    assert block.plain.tolist() == [True, False, False, False, False, False]
-    assert block.plain_tlo.tolist() == [True, True, True, True, False, False]
+    assert block.plain.tolist() == [True, True, True, True, False, False]
     setup = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 10.0, 2: 25.0, 3: 7.0})
     text = ("G0 X10 Y10 Z80\nT1 M6\nG0 G43 H1 Z60\nG1 X11 Y10.5 F300\nX12 Y11\nT2 M6 (T2)\nN10 G0 G43 H2 Z50\n"
             "X13 Y12\nG1 Z45 X14\nT3 M6\ng0g43h3x15z40\nX16\nG43 H0 Z30\nX17 Y13\nG0 G43 H2 Y14 X18 Z35\nX19\n"
@@ -176,6 +176,18 @@ def test_a_move_that_sets_the_tool_length_starts_a_run():
         outs = run_all(text, chunk_lines=chunk, setup=setup)
         assert_same(outs)
         assert outs["bulk"][1] is not None  # corrected, not refused
+    # under a calibration that splits lines, a split G43 line carries its G43 H.. on its
+    # first piece, as the interpreter's move does
+    from postproc.calfile import load_calibration
+
+    curved = load_calibration(Path(__file__).parents[1] / "calibrations" / "s500_parametric.json").engine
+    far = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={1: 10.0, 2: 25.0})
+    long = "G0 X10 Y10 Z200\nT1 M6\nG1 G43 H1 X290 Y280 Z20 F900\nG1 X20 Y30 F500\nG1 G43 H2 X280 Y20 Z150\nX15 Y290\n"
+    for chunk in (1, 20_000):
+        outs = run_all(long, chunk_lines=chunk, setup=far, engine=curved)
+        assert_same(outs)
+        assert outs["bulk"][1]["lines_inserted"] > 4
+        assert outs["bulk"][0].count("G43 H1") == 2  # the first piece and the line itself
     # a tool length not given: the same refusal, at the same line and column
     missing = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 10.0})
     outs = run_all("G0 X10 Y10 Z80\nG0 G43 H1 Z60\nX11\nN5 G0 G43 H2 Z50\nX12\n", setup=missing)

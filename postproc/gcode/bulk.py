@@ -23,8 +23,9 @@ A run holds three kinds of lines:
   written whole, no move, no word added; a run never starts with one.
 
 A straight move that sets the tool length first (``G0 G43 H2 Z25``, :attr:`Block.tlo`)
-starts a run of its own where the corrector never splits a line (an affine
-calibration): the length is set (``Interpreter.set_tool_length``), then the run read.
+starts a run of its own: the length is set (``Interpreter.set_tool_length``), then the
+run read (split, it is written with the G43 H.. words on its first piece, as the
+interpreter's move is).
 
 After the chunk's targets are corrected, the comparisons of old and new values of every
 run line are vectorised and the new numbers formatted in one operation; each run is then
@@ -170,6 +171,7 @@ class RunMove:
         idx = [-1, -1, -1]
         centre_idx = [-1, -1]
         feed_idx = motion_idx = -1
+        prefix: list[str] = []
         for i, w in enumerate(words):
             letter = w.letter
             if letter in "XYZ":
@@ -177,7 +179,11 @@ class RunMove:
             elif letter == "F":
                 feed_idx = i
             elif letter == "G":
-                motion_idx = i
+                if w.number.lstrip("0") == "43":  # G43 H..: the words the interpreter keeps for a split
+                    h = next(x for x in words if x.letter == "H")
+                    prefix.append(f"G{w.number} H{h.number}")
+                else:
+                    motion_idx = i
             elif letter in "IJ":
                 centre_idx["IJ".index(letter)] = i
         arc = self.arc
@@ -186,8 +192,8 @@ class RunMove:
             arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (centre_idx[0], centre_idx[1]), -1)
             aux = tuple(i for i in centre_idx if i >= 0)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
-                    self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, [], False,
-                    motion_idx, aux)
+                    self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, prefix,
+                    False, motion_idx, aux)
 
 
 def tlo_col(line: str) -> int:
@@ -273,8 +279,7 @@ class Block:
             neutral[i] = True
             head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
         # straight moves that set the tool length first (G43 H..: line -> H): a run starts at
-        # one (set_tool_length before it is read) when the corrector takes them (its lines
-        # are never split), else they are the interpreter's, as an arc that does is
+        # one (set_tool_length before it is read); an arc that does is the interpreter's
         self.tlo: dict[int, int] = {}
         for i, h in enumerate(head):
             if ("H" in h or "h" in h) and moving[i]:
@@ -287,11 +292,9 @@ class Block:
         self.neutral = neutral
         self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
         self.last_moving: list[int] = last_index(~neutral).tolist()
-        self.plain = moving | neutral  # (G43 H.. lines aside)
-        self.plain_tlo = self.plain
+        self.plain = moving | neutral
         if self.tlo:
-            self.plain_tlo = self.plain.copy()
-            self.plain_tlo[self.tlo_rows] = True
+            self.plain[self.tlo_rows] = True
         self.last_g: list[int] = last_g.tolist()
         self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l: list[list[int]] = [a.tolist() for a in self.last]

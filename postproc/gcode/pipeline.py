@@ -336,11 +336,8 @@ class Corrector(EmitterMixin):
                     feed(line)
                 return
             try:
-                # a straight move that sets the tool length (G43 H..) starts a run where no
-                # line is split
-                tlo = block.tlo if self.linear_exact else {}
-                plain = block.plain_tlo if tlo else block.plain
-                edges = np.diff(np.concatenate([[0], plain.view(np.int8), [0]]))
+                tlo = block.tlo  # a straight move that sets the tool length (G43 H..) starts a run
+                edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
                 i, n = 0, len(lines)
                 gword, neutral = block.gword, block.neutral
                 for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
