@@ -803,3 +803,37 @@ def test_diff_pairs_a_full_circle_cut_into_many_arcs_with_its_last_piece(radius)
     circle = next(m for m in d.moved if m.lineno == 5)
     assert lines[circle.lineno_corrected - 1].startswith("G2 ")
     assert lines[circle.lineno_corrected].startswith("G0 Z")  # the next line: the retract
+
+
+@_NO_FORK
+@pytest.mark.parametrize("variant", ["crlf", "form feed", "lone cr"])
+def test_diff_in_children_keeps_every_line_ending_and_character(monkeypatch, tmp_path, variant):
+    # the children send a chunk's lines joined where str.splitlines gives them back
+    # unchanged, else as a list: either way the parent pairs the same lines
+    from postproc.gcode import compare
+
+    rng = np.random.default_rng(21)
+    text = _cam_program(rng, 600)
+    if variant == "crlf":
+        text = text.replace("\n", "\r\n")
+    elif variant == "form feed":
+        text = text.replace("(PASS)", "(PA\x0cSS)")
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={1: 0.0, 2: 0.0, 3: 0.0},
+                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+    out, _rep = correct_text(text, cal.engine, setup)
+    if variant == "lone cr":  # the same line of each ends with a lone carriage return
+        assert "\nM9\n" in text
+        text, out = text.replace("\nM9\n", "\nM9\r", 1), out.replace("\nM9\n", "\nM9\r", 1)
+    src, dst = tmp_path / "p.nc", tmp_path / "q.nc"
+    src.write_bytes(text.encode())
+    dst.write_bytes(out.encode())
+    seen = _forked_reads(monkeypatch)
+    monkeypatch.setattr(compare, "CHUNK_LINES", 64)
+    reports = []
+    for least in (10**15, 0):
+        monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
+        reports.append(compare_programs(str(src), str(dst)).to_dict())
+    assert seen["forked"] == 2
+    assert reports[1] == reports[0]
+    assert reports[0]["moves"] > 100

@@ -467,7 +467,10 @@ class _Rows:
     def join(cls, parts: list[_Rows]) -> _Rows:
         if len(parts) == 1:
             return parts[0]
-        return cls([line for p in parts for line in p.lines], np.concatenate([p.lineno for p in parts]),
+        lines: list[str] = []
+        for p in parts:
+            lines += p.lines
+        return cls(lines, np.concatenate([p.lineno for p in parts]),
                    np.concatenate([p.move for p in parts]), np.concatenate([p.end for p in parts]),
                    np.concatenate([p.keys for p in parts]))
 
@@ -803,6 +806,8 @@ class _ForkedReader:
                     glob = np.concatenate([glob, np.array([self.keys(t) for t in new_keys], dtype=np.int64)])
                 if kind == "rows":
                     lines, lineno, move, end, keys = payload
+                    if isinstance(lines, str):  # the lines joined (see _read_in_child)
+                        lines = lines.splitlines(keepends=True)
                     neg = keys < 0
                     if neg.any():
                         keys[neg] = glob[-1 - keys[neg]]
@@ -827,6 +832,10 @@ def _source_path(source) -> str | None:
     return path
 
 
+# The characters str.splitlines splits at besides "\n", "\r" and "\r\n".
+_SPLITS_ELSE = re.compile("[\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029]")
+
+
 def _read_in_child(reader: _Reader, conn) -> None:
     """The child's side of :class:`_ForkedReader`: send each chunk's rows, with the key
     texts it added, the lines read and the header, then the end or the error."""
@@ -843,7 +852,13 @@ def _read_in_child(reader: _Reader, conn) -> None:
 
     try:
         for rows in reader.chunks():
-            conn.send(("rows", (rows.lines, rows.lineno, rows.move, rows.end, rows.keys), new_keys(),
+            # the lines as one text where str.splitlines gives them back as they are (a lone
+            # "\r" or another character it splits at inside a line: the list itself)
+            text = "".join(rows.lines)
+            lines: str | list[str] = text
+            if _SPLITS_ELSE.search(text) or ("\r" in text and text.count("\r") != text.count("\r\n")):
+                lines = rows.lines
+            conn.send(("rows", (lines, rows.lineno, rows.move, rows.end, rows.keys), new_keys(),
                        reader.count, reader.header))
         conn.send(("end", None, new_keys(), reader.count, reader.header))
     except BaseException as exc:  # noqa: BLE001 - every failure is the parent's to raise
@@ -1019,8 +1034,8 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
     ac = np.flatnonzero(~cmove)
     k = min(len(ao), len(ac))
     if k:
-        equal = np.fromiter(map(operator.eq, [ro.lines[p + i] for i in ao[:k].tolist()],
-                                [clines[q + j] for j in ac[:k].tolist()]), dtype=bool, count=k)
+        equal = np.fromiter(map(operator.eq, map(ro.lines.__getitem__, (ao[:k] + p).tolist()),
+                                map(clines.__getitem__, (ac[:k] + q).tolist())), dtype=bool, count=k)
         k = k if equal.all() else int(np.argmin(equal))
     ao, ac = ao[:k], ac[:k]
     # stretch j ends with the j-th anchor (stretch k: the rest of the window)
@@ -1042,8 +1057,9 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
         """Lines of corr at places t (of records rows): in the window, identical, delta."""
         inside = t < span
         tc = np.minimum(t, span - 1)
-        olines = ro.lines[p:p + m] if rows is None else [ro.lines[p + r] for r in rows.tolist()]
-        same = np.fromiter(map(operator.eq, olines, [clines[q + j] for j in tc.tolist()]), dtype=bool, count=len(t))
+        olines = ro.lines[p:p + m] if rows is None else map(ro.lines.__getitem__, (rows + p).tolist())
+        same = np.fromiter(map(operator.eq, olines, map(clines.__getitem__, (tc + q).tolist())), dtype=bool,
+                           count=len(t))
         o = oe if rows is None else oe[rows]
         ce = cend[tc]
         return inside, tc, same, np.where(np.isnan(ce) | np.isnan(o), 0.0, ce - o)
