@@ -47,6 +47,7 @@ import os
 import re
 import signal
 import sys
+import warnings
 from array import array
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -792,7 +793,11 @@ class _ForkedReader:
         ctx = multiprocessing.get_context("fork")
         recv, send = ctx.Pipe(duplex=False)
         child = ctx.Process(target=_read_in_child, args=(self._reader, send), daemon=True)
-        child.start()
+        with warnings.catch_warnings():
+            # Python 3.12 and later warn of a fork in a process with threads (numpy's BLAS
+            # pool, idle here); the child runs only this package's reading code
+            warnings.filterwarnings("ignore", message=r".*multi-threaded, use of fork\(\)", category=DeprecationWarning)
+            child.start()
         send.close()
         glob = np.zeros(0, dtype=np.int64)  # the child's key -1 - j is this process's glob[j]
         try:
