@@ -805,7 +805,7 @@ class _ForkedReader:
                 try:
                     kind, payload, new_keys, self.count, header = recv.recv()
                 except EOFError:
-                    raise RuntimeError("the process reading the corrected program ended without a word") from None
+                    raise RuntimeError(f"the process reading {self.path} ended without a word") from None
                 self.header[:] = header
                 if new_keys:
                     glob = np.concatenate([glob, np.array([self.keys(t) for t in new_keys], dtype=np.int64)])
@@ -870,7 +870,7 @@ def _read_in_child(reader: _Reader, conn) -> None:
         try:
             conn.send(("error", exc, new_keys(), reader.count, reader.header))
         except Exception:  # noqa: BLE001 - an exception that does not pickle
-            conn.send(("error", RuntimeError(f"reading the corrected program failed: {exc!r}"), [],
+            conn.send(("error", RuntimeError(f"reading {reader.path} failed: {exc!r}"), [],
                        reader.count, reader.header))
     finally:
         conn.close()
