@@ -837,3 +837,25 @@ def test_diff_in_children_keeps_every_line_ending_and_character(monkeypatch, tmp
     assert seen["forked"] == 2
     assert reports[1] == reports[0]
     assert reports[0]["moves"] > 100
+
+
+@_NO_FORK
+def test_diff_raises_a_failure_of_a_reading_child_and_leaves_no_child(monkeypatch, tmp_path):
+    import multiprocessing
+
+    from postproc.gcode import compare
+
+    src, dst, _text, _out = _written_pair(tmp_path, 5, 1500)
+    monkeypatch.setattr(compare, "FORK_MIN_BYTES", 0)
+    monkeypatch.setattr(compare, "CHUNK_LINES", 200)
+    chunk = compare._Reader._chunk
+
+    def failing(self, rows):
+        if rows.lineno[0] > 600:
+            raise ValueError("reader bug")
+        return chunk(self, rows)
+
+    monkeypatch.setattr(compare._Reader, "_chunk", failing)
+    with pytest.raises(ValueError, match="reader bug"):
+        compare_programs(str(src), str(dst))
+    assert multiprocessing.active_children() == []
