@@ -201,20 +201,28 @@ def _cam_program(rng: np.random.Generator, n: int) -> str:
     return "\n".join(out) + "\n"
 
 
+def _interpreter_ends(text: str, setup: Setup) -> tuple[list[bool], list[tuple]]:
+    """For each line, as the interpreter reads it (lenient setup, as diff reads): whether
+    it makes a move, and its end point (NaN for none)."""
+    from postproc.gcode.interp import Interpreter
+
+    interp = Interpreter(setup, None, lenient_setup=True)
+    moves, ends = [], []
+    for k, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = interp.feed_line(k, line)
+        moves.append(mv is not None)
+        ends.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    return moves, ends
+
+
 def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
     from postproc.gcode import compare
-    from postproc.gcode.interp import Interpreter
 
     rng = np.random.default_rng(11)
     text = _cam_program(rng, 3000)
     setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)}, tool_lengths={1: 50.0, 2: 60.0, 3: 70.0},
                   home={"G28": {"X": 0.0, "Y": 0.0, "Z": 300.0}})
-    interp = Interpreter(setup, None, lenient_setup=True)
-    want_move, want_end = [], []
-    for k, line in enumerate(text.splitlines(keepends=True), start=1):
-        mv = interp.feed_line(k, line)
-        want_move.append(mv is not None)
-        want_end.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    want_move, want_end = _interpreter_ends(text, setup)
     for chunk in (20_000, 97):
         monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
         parts = list(compare._Reader(text, setup, compare._Keys()).chunks())
@@ -223,43 +231,33 @@ def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
-
 def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch):
     # a tool change alone on its line stays in a stretch read as columns; the tool it
     # loads is the one a later G43 without H takes
     from postproc.gcode import compare
-    from postproc.gcode.interp import Interpreter
 
     text = ("G21 G90 G54\nT1 M6\nG0 G43 H1 Z50\nX10 Y10\nG1 X11 Y12 F500\nT2 M6 (D6 FLAT)\nX12 Y13\n"
             "N40 M06 T03\nX13\nG43 Z40\nX14 Y15\n(next)\nT1 M6 ; back\nX15\nG43\nX16 Z35\nM30\n")
     setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)}, tool_lengths={1: 50.0, 2: 60.0, 3: 70.0})
-    interp = Interpreter(setup, None, lenient_setup=True)
-    want_end = []
-    for k, line in enumerate(text.splitlines(keepends=True), start=1):
-        mv = interp.feed_line(k, line)
-        want_end.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    _moves, want_end = _interpreter_ends(text, setup)
     assert want_end[9][2] != want_end[2][2]  # G43 without H took tool 3's length
     for chunk in (20_000, 5, 1):
         monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
         parts = list(compare._Reader(text, setup, compare._Keys()).chunks())
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
+
 def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_columns_as_the_interpreter_does(monkeypatch):
     # a move that sets the tool length (G43 H..) starts a stretch of its own; axis words
     # after the X, Y, Z run (the words correct adds: Z X Y) are read one by one; a line
     # naming an axis twice is the interpreter's (which refuses it)
     from postproc.gcode import compare
-    from postproc.gcode.interp import Interpreter
 
     text = ("G21 G90 G54\nT1 M6\nG0 G43 H1 Z50 X1 Y2\nX10 Y10\nG1 Z-1 X11 Y12 F500\nY13 X12\n"
             "N7 G0 G43 H2 Z45\nZ30 Y14\nX14 Z29 Y15\ng1 g43 h3 z20 x16 f300\nG43 H0 Z10\nG0 X17\nG43 H2 Y18 Z11\n"
             "G43 H3\nX19\nM30\n")
     setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)}, tool_lengths={1: 50.0, 2: 60.0, 3: 70.0})
-    interp = Interpreter(setup, None, lenient_setup=True)
-    want_end = []
-    for k, line in enumerate(text.splitlines(keepends=True), start=1):
-        mv = interp.feed_line(k, line)
-        want_end.append(mv.q1 if mv is not None else (np.nan,) * 3)
+    _moves, want_end = _interpreter_ends(text, setup)
     # the tool lengths along the program: 50, 60, 70, 0, 60 (G54 Z 30)
     assert [want_end[k][2] for k in (2, 6, 9, 10, 12)] == [130.0, 135.0, 120.0, 40.0, 101.0]
     keys = compare._Keys()

@@ -330,11 +330,10 @@ def header_start(source) -> dict[str, float]:
     return header_setup(source).start
 
 
-def setup_from_header(corrected, setup: Setup | None) -> Setup:
+def setup_from_header(hs: HeaderSetup, setup: Setup | None) -> Setup:
     """``setup`` with what it leaves out (offsets, tool lengths, start, tool vector, G28/G30
-    stored positions) taken
-    from the corrected program's header: the setup the program was corrected with."""
-    hs = header_setup(corrected)
+    stored positions) taken from the corrected program's header (``hs``,
+    :func:`header_setup`): the setup the program was corrected with."""
     setup = setup or Setup()
     changes: dict[str, Any] = {}  # Setup fields to replace
     if not setup.offsets and hs.offsets:
@@ -394,6 +393,10 @@ def _next_index(present: np.ndarray) -> np.ndarray:
     return np.minimum.accumulate(idx[::-1])[::-1]
 
 
+# A plain N word: N and 1 to 15 digits, no leading zero (N0 itself is one).
+_PLAIN_N = re.compile(r"N(?:0|[1-9][0-9]{0,14})").fullmatch
+
+
 class _Keys:
     """Integers standing for the pieces of a line that pairing compares (skeleton, N word,
     comment): 0 for none, n + 1 for the plain N word Nn, negative numbers for the rest."""
@@ -405,10 +408,8 @@ class _Keys:
     def __call__(self, text: str) -> int:
         if not text:
             return 0
-        digits = text[1:]
-        if (text[0] == "N" and digits.isascii() and digits.isdigit() and len(digits) < 16
-                and (digits[0] != "0" or digits == "0")):
-            return int(digits) + 1
+        if _PLAIN_N(text):
+            return int(text[1:]) + 1
         key = self.table.get(text)
         if key is None:
             key = self.table[text] = -1 - len(self.table)
@@ -537,11 +538,7 @@ class _Reader:
         for lines in iter(lambda: list(islice(it, CHUNK_LINES)), []):
             rows = _Rows.blank(lines, lineno + 1)
             lineno += len(lines)
-            n, error = self._chunk(rows)
-            self.count += n
-            yield self._with_cycles(rows if n == len(lines) else rows.head(n))
-            if error is not None:
-                raise error
+            yield from self._read(rows)
 
     def _expanded_chunks(self, lines: Iterator[str]):
         """:meth:`chunks` of the program as executed (:func:`postproc.gcode.expand.expand`)."""
@@ -551,11 +548,16 @@ class _Reader:
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
             rows = _Rows.blank([sl.text for sl in part], 0)
             rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)
-            n, error = self._chunk(rows)
-            self.count += n
-            yield self._with_cycles(rows if n == len(part) else rows.head(n))
-            if error is not None:
-                raise error
+            yield from self._read(rows)
+
+    def _read(self, rows: _Rows):
+        """Read a chunk's rows (:meth:`_chunk`): yield those read, then raise the error
+        that stopped it, if any."""
+        n, error = self._chunk(rows)
+        self.count += n
+        yield self._with_cycles(rows if n == len(rows) else rows.head(n))
+        if error is not None:
+            raise error
 
     def _general(self, rows: _Rows, a: int, b: int) -> tuple[int, PostprocError | None]:
         """Interpret lines a:b one at a time: (lines read, the error that stopped it)."""
@@ -653,9 +655,9 @@ class _Reader:
         numbered = np.flatnonzero(present[:, 0])
         if len(numbered):
             ncol = cols[numbered, 0].tolist()
-            # a plain N word Nn is n + 1 (as _Keys makes it), the others through the table
-            nk = [int(t[1:]) + 1 if (t[0] == "N" and t[1:].isdigit() and t[1:].isascii() and len(t) < 17
-                                     and (t[1] != "0" or t == "N0")) else keys(t) for t in ncol]
+            # a plain N word Nn is n + 1 (as _Keys makes it; here without a call for each),
+            # the others through the table
+            nk = [int(t[1:]) + 1 if _PLAIN_N(t) else keys(t) for t in ncol]
             rows.keys[numbered, 1] = nk
             rows.keys[numbered, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
                                       for t, k in zip(ncol, nk, strict=True)]
@@ -682,7 +684,6 @@ class _Reader:
         # the last tool change at or before each line, and the tool it loads
         last_tool = _last_index(tool) if tool.any() else None
         tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
-        gcode_l, last_g_l = gcode, last_g
         interp = self.interp
         st = interp.state
         linenos = rows.lineno
@@ -715,9 +716,9 @@ class _Reader:
                             if j >= i:
                                 pos[k] = float(xcol[j] if k == 0 else ycol[j] if k == 1 else zcol[j]) * unit + shift[k]
                         st.pos = pos
-                        j = int(last_g_l[e])
+                        j = int(last_g[e])
                         if j >= i:
-                            st.motion = int(gcode_l[j])
+                            st.motion = int(gcode[j])
                         j = int(last_f[e])
                         if j >= i:
                             st.feed = float(fcol[j])
@@ -775,14 +776,14 @@ class _ForkedReader:
         self.count = 0
 
     @staticmethod
-    def usable(source) -> bool:
-        """Whether ``source`` (a path or G-code text) is large enough to be read so, on a
-        system that forks, from a process that may have children (not a daemon, as a
+    def usable(reader: _Reader) -> bool:
+        """Whether ``reader``'s program is a file large enough to be read so, on a system
+        that forks, from a process that may have children (not a daemon, as a
         ``multiprocessing.Pool`` worker is)."""
         if (sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods()
                 or multiprocessing.current_process().daemon):
             return False
-        path = _source_path(source)
+        path = reader.path
         try:
             return path is not None and os.path.getsize(path) >= FORK_MIN_BYTES
         except OSError:
@@ -826,15 +827,6 @@ class _ForkedReader:
             if child.is_alive():
                 child.terminate()
             child.join()
-
-
-def _source_path(source) -> str | None:
-    """The path of a source that is a file (else None), without opening it."""
-    path, lines = iter_source_lines(source)
-    close = getattr(lines, "close", None)  # a file's generator, not started: nothing is open
-    if close is not None:
-        close()
-    return path
 
 
 # The characters str.splitlines splits at besides "\n", "\r" and "\r\n".
@@ -1475,15 +1467,14 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
              subroutine_path: Sequence[Path]) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
-    setup = setup_from_header(corrected, setup)
     hs = header_setup(corrected)
+    setup = setup_from_header(hs, setup)
     expanded = hs.expanded
     keys = _Keys()
     readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
                        subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=hs.cycles_expanded),
                _Reader(corrected, setup, keys, drop_header=True, dialect=dialect))
-    o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(src) else r
-                          for r, src in zip(readers, (original, corrected), strict=True))
+    o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:
         orig, corr = _Tape(o_chunks), _Tape(c_chunks)
