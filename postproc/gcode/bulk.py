@@ -65,7 +65,7 @@ _N = NUMBER_RE
 # pattern needs one back), which saves the regex engine's backtracking.
 _PLAIN = re.compile(
     rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[0-3]))?"
-    rf"(?:[ \t]*+[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+\d++)?)"
+    rf"(?:[ \t]*+{lexer.TOOL_LENGTH_RE}\d++)?)"
     rf"(?:([ \t]*+[Xx][ \t]*+)({_N}))?(?:([ \t]*+[Yy][ \t]*+)({_N}))?(?:([ \t]*+[Zz][ \t]*+)({_N}))?"
     rf"(?:([ \t]*+[Ii][ \t]*+)({_N}))?(?:([ \t]*+[Jj][ \t]*+)({_N}))?"
     rf"((?:[ \t]*+[Ff][ \t]*+({_N}))?[ \t]*+\r?)|[^\n]*)$",
@@ -84,7 +84,7 @@ _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
 # when it is read (:func:`read_run`).
 _TOOL = re.compile(lexer.TOOL_LINE_RE + r"\r?\n?")
 # The G43 H.. of a line's head (a straight move that sets the tool length first).
-_TLO = re.compile(r"[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+(\d++)")
+_TLO = re.compile(lexer.TOOL_LENGTH_RE + r"(\d++)")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 # Most lines the run writer takes in one stretch (see _emit_rows): an arc whose hint
 # fails unexpectedly makes the writer read again at most this many lines.

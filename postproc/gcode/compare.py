@@ -60,7 +60,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LINE_RE
+from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LENGTH_RE, TOOL_LINE_RE
 from postproc.gcode.path import Setup, iter_source_lines, open_source
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 
@@ -365,7 +365,7 @@ _NUM = NUMBER_POSSESSIVE_RE
 # line).
 _PLAIN = re.compile(
     rf"^(?:[ \t]*+(?:([Nn][ \t]*+\d++)[ \t]*+)?(?:[Gg][ \t]*+(0?[0-3])(?![0-9.])[ \t]*+)?"
-    rf"(?:[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+(\d++)[ \t]*+)?"
+    rf"(?:{TOOL_LENGTH_RE}(\d++)[ \t]*+)?"
     rf"(?:[Xx][ \t]*+({_NUM})[ \t]*+)?(?:[Yy][ \t]*+({_NUM})[ \t]*+)?(?:[Zz][ \t]*+({_NUM})[ \t]*+)?"
     rf"((?:[XxYyZz][ \t]*+{_NUM}[ \t]*+)++)?"
     rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"

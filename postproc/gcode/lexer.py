@@ -47,6 +47,10 @@ _END_COMMENTS = r"(?:\([^()\r\n]*\)[ \t]*+)*(?:;[^\r\n]*+)?"
 # interpreter reads no geometry from it either).
 QUIET_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+" + NUMBER_POSSESSIVE_RE + r"[ \t]*+)?"
                  r"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*" + _END_COMMENTS)
+# The words that set the tool length from a table entry, G43 H (the H number follows;
+# G43.1 and G43.2 are not this): the bulk writer and diff's reader take a straight move
+# that starts with them.
+TOOL_LENGTH_RE = r"[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+"
 # A tool change alone on its line (without its ending): [N..] T<n> M6 or M6 T<n> (M06,
 # T02 too) and comments; the T number in group 1 or 2 (of the pattern). It changes only
 # the tool the interpreter holds (for a later G43 without H).
