@@ -122,9 +122,11 @@ def _progress_printer(total_hint: str):
                    "a device such as /dev/null is written, never replaced.")
 @click.option("--output-dir", default=None, type=click.Path(file_okay=False),
               help="Directory for the corrected programs (same names); for several inputs or a folder.")
-@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
-              help="Correct this many files in parallel processes (several inputs or a folder); "
-                   "ends with a tally of corrected and refused files.")
+@click.option("-j", "--jobs", default=None, type=click.IntRange(1, 256),
+              help="Processes. Several inputs or a folder: this many files at a time [default: 1], ending "
+                   "with a tally of corrected and refused files. One large program (from 160,000 lines, "
+                   "16,000 when moves are split): corrected in two processes where the machine has two "
+                   "cores, with the output of one; -j 1 keeps it in one.")
 @click.option("--dialect", default="generic", show_default=True,
               type=DIALECT_CHOICE,
               help="Controller the output is for: its line length, comments, case and arc rule. "
@@ -206,7 +208,8 @@ def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subrou
                "extrapolate": extrapolate, "force": force, "cycles": cycles,
                "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
-        _single(inputs[0], output or "-", calibration, setup, options, maps)
+        processes = jobs if jobs is not None else len(os.sched_getaffinity(0))
+        _single(inputs[0], output or "-", calibration, setup, {**options, "processes": min(2, processes)}, maps)
         return
     if output_dir is None:
         raise click.UsageError("several inputs need --output-dir")
@@ -225,7 +228,7 @@ def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subrou
         _check_not_same(src, dst)
         jobs_list.append({"src": src, "dst": dst, "calibration": calibration, "setup": setup,
                           "options": options, "maps": list(maps)})
-    _batch(jobs_list, jobs)
+    _batch(jobs_list, jobs or 1)
 
 
 def _batch(jobs_list: list[dict], jobs: int) -> None:

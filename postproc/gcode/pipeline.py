@@ -109,6 +109,7 @@ class CorrectOptions:
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
+    processes: int = 1  # 2: a large program file is corrected in two processes (postproc.gcode.split)
 
 
 @dataclass
@@ -258,14 +259,25 @@ class Corrector(EmitterMixin):
         return q_nom + delta
 
     # -- the run -----------------------------------------------------------------------
+    @property
+    def chunk_lines(self) -> int:
+        """Lines read before the moves read are corrected and written (at least)."""
+        return self.opt.chunk_lines or (DEFAULT_CHUNK_LINES if self.linear_exact else SEGMENTED_CHUNK_LINES)
+
     def run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
-            source: deque[tuple[int, str | None]] | None = None) -> CorrectReport:
+            source: deque[tuple[int, str | None]] | None = None, *, skip_until: int = 0,
+            boundary: Callable[[int], bool] | None = None) -> CorrectReport:
+        """Correct ``lines`` into ``write``. For a program corrected in two processes
+        (:mod:`postproc.gcode.split`): the chunks that end at or before line ``skip_until``
+        are read but not corrected (the modal state advances, nothing is written), and
+        ``boundary(lines read)`` is asked after each chunk: True stops the run there (the
+        rest is another process's)."""
         # Millions of small short-lived objects, none of them cyclic: the cyclic
         # garbage collector only costs time here (the chunks bound the memory).
         was_enabled = gc.isenabled()
         gc.disable()
         try:
-            return self._run(lines, write, progress, source)
+            return self._run(lines, write, progress, source, skip_until, boundary)
         finally:
             if was_enabled:
                 gc.enable()
@@ -274,7 +286,8 @@ class Corrector(EmitterMixin):
     # state (line number, whether a run may start) and run for every line read
     def _run(self, lines: Iterable[str], write: Write,  # noqa: C901
              progress: Callable[[int], None] | None = None,
-             source: deque[tuple[int, str | None]] | None = None) -> CorrectReport:
+             source: deque[tuple[int, str | None]] | None = None, skip_until: int = 0,
+             boundary: Callable[[int], bool] | None = None) -> CorrectReport:
         """``source``: for an expanded program, the (line, file) each of ``lines`` comes
         from, in order (the lines are then read one by one, never in bulk)."""
         it = iter(lines)
@@ -374,7 +387,7 @@ class Corrector(EmitterMixin):
         for line in head:
             feed(line)
             pending += 1
-        chunk = self.opt.chunk_lines or (DEFAULT_CHUNK_LINES if self.linear_exact else SEGMENTED_CHUNK_LINES)
+        chunk = self.chunk_lines
         for block in iter(lambda: list(islice(it, chunk)), []):
             try:
                 feed_block(block)
@@ -389,11 +402,15 @@ class Corrector(EmitterMixin):
                 raise exc from None
             pending += len(block)
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
-                self._chunk(entries, write)
+                if lineno - 1 > skip_until:
+                    self._chunk(entries, write)
                 entries.clear()
                 pending = 0
                 if progress is not None:
                     progress(lineno - 1)
+                if boundary is not None and boundary(lineno - 1):
+                    self.report.lines_in = lineno - 1
+                    return self.report
         self._chunk(entries, write)
         if progress is not None:
             progress(lineno - 1)
@@ -1386,9 +1403,11 @@ def correct_text(text: str, engine: Engine, setup: Setup | None = None, options:
 
 def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None], engine: Engine,
                    setup: Setup | None, options: CorrectOptions | None, path: str | None, calibration_name: str,
-                   calibration_sha256: str, progress: Callable[[int], None] | None = None) -> CorrectReport:
+                   calibration_sha256: str, progress: Callable[[int], None] | None = None,
+                   count: int | None = None) -> CorrectReport:
     """Correct the lines ``get_lines()`` gives; when the program turns out to need
-    expansion, ``restart()`` drops what was written and the expanded program is corrected."""
+    expansion, ``restart()`` drops what was written and the expanded program is corrected.
+    ``count``: the number of lines, when the program may be corrected in two processes."""
     from postproc.gcode.interp import NeedsExpansion
 
     setup = setup or Setup()
@@ -1399,6 +1418,10 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
                          calibration_sha256=calibration_sha256)
 
     try:
+        if count is not None:
+            from postproc.gcode import split
+
+            return split.run(corrector, get_lines, write, progress, count)
         return corrector().run(get_lines(), write, progress=progress)
     except NeedsExpansion:
         if not options.expand:
@@ -1444,6 +1467,15 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
         raise PostprocError("the program is empty: nothing to correct", path=str(source),
                             hint="check that this is the program you meant (was it written completely?)")
     path, _lines = iter_source_lines(Path(source))
+    count = None
+    if options is not None and options.processes > 1:
+        from postproc.gcode import split
+
+        if split.usable():
+            try:
+                count = split.count_lines(str(source))
+            except OSError:
+                count = None  # the reader names the problem
     # staged: a device or pipe gets the whole program at the end (the run may start over)
     try:
         with output_path(output, stage_special=True) as tmp, \
@@ -1453,7 +1485,7 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
                 out.truncate()
 
             report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
-                                    options, path, calibration_name, calibration_sha256, progress)
+                                    options, path, calibration_name, calibration_sha256, progress, count)
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
         raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None
     return report

@@ -1,0 +1,222 @@
+"""A program corrected in two processes (postproc.gcode.split) is the program one process
+writes: the same bytes, report and errors, whether the child's part is taken or the
+state at the cut disagrees and this process goes on alone."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import multiprocessing
+
+import numpy as np
+import pytest
+
+from postproc.calfile import load_calibration
+from postproc.errors import PostprocError
+from postproc.gcode import split
+from postproc.gcode.interp import NeedsExpansion
+from postproc.gcode.path import Setup
+from postproc.gcode.pipeline import CorrectOptions, Corrector, CorrectReport, correct_file
+from tests.conftest import PARAMETRIC, ROOT
+
+pytestmark = pytest.mark.skipif(not split.usable(), reason="splitting a run needs fork (Linux)")
+
+STATIC = ROOT / "calibrations" / "s500_static.json"
+SETUP = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={t: 0.0 for t in range(1, 5)})
+
+
+@pytest.fixture(scope="module")
+def engines():
+    return {"static": load_calibration(STATIC).engine, "parametric": load_calibration(PARAMETRIC).engine}
+
+
+def program(n_moves: int, seed: int, *, extra: dict[int, str] | None = None, ending: str = "\n") -> str:
+    """A CAM-like program inside the S500 volume (G54 Z100): straight moves, arcs with
+    centre words, tool changes with G43, comments, N numbers, feeds; ``extra``: lines put
+    before move k."""
+    rng = np.random.default_rng(seed)
+    out = ["%", "O1000 (SPLIT TEST)", "G90 G21 G17 G40 G49 G80", "G54", "T1 M6", "S9000 M3",
+           "G0 X150.000 Y150.000", "G0 G43 H1 Z25.000", "F1200"]
+    x, y, z = 150.0, 150.0, -2.0
+    out.append(f"G1 X{x:.4f} Y{y:.4f} Z{z:.4f}")
+    tool = 1
+    modal_arc = False
+    for k in range(n_moves):
+        if extra and k in extra:
+            out.append(extra[k])
+        r = rng.random()
+        if r < 0.02:
+            tool = tool % 4 + 1
+            out += [f"(TOOL {tool})", "G0 Z25.000", f"T{tool} M6", f"G0 G43 H{tool} Z25.000",
+                    f"G1 X{x:.4f} Y{y:.4f} Z{z:.4f} F900"]
+            modal_arc = False
+        elif r < 0.17:
+            # an arc about a centre 1-4 mm away, a quarter to half a turn
+            rad = rng.uniform(1.0, 4.0)
+            a0 = rng.uniform(0, 2 * math.pi)
+            cx, cy = x - rad * math.cos(a0), y - rad * math.sin(a0)
+            cw = rng.random() < 0.5
+            a1 = a0 + (-1 if cw else 1) * rng.uniform(math.pi / 4, math.pi)
+            ex, ey = round(cx + rad * math.cos(a1), 4), round(cy + rad * math.sin(a1), 4)
+            if not (20 < ex < 290 and 20 < ey < 290):
+                continue
+            out.append(f"G{2 if cw else 3} X{ex:.4f} Y{ey:.4f} I{cx - x:.4f} J{cy - y:.4f}")
+            x, y = ex, ey
+            modal_arc = True
+        elif r < 0.2:
+            out.append(f"(PASS {k})")
+        else:
+            x = float(np.clip(x + rng.normal(0, 4), 30, 280))
+            y = float(np.clip(y + rng.normal(0, 4), 30, 280))
+            words = [f"X{x:.4f}", f"Y{y:.4f}"]
+            if rng.random() < 0.3:
+                z = float(np.clip(z + rng.normal(0, 1), -8, 0))
+                words.append(f"Z{z:.4f}")
+            head = f"N{10 * k} " if rng.random() < 0.2 else ""
+            motion = "G1 " if modal_arc or rng.random() < 0.4 else ""
+            modal_arc = False
+            feed = f" F{rng.choice([800, 1200, 1500])}" if rng.random() < 0.05 else ""
+            out.append(head + motion + " ".join(words) + feed)
+    out += ["G0 Z25.000", "M5", "M30", "%"]
+    return ending.join(out) + ending
+
+
+def correct(tmp_path, text: str, engine, processes: int, chunk: int, name: str = "p.nc", **options):
+    src = tmp_path / name
+    src.write_bytes(text.encode())
+    dst = tmp_path / f"out{processes}_{name}"
+    rep = correct_file(src, dst, engine, SETUP, CorrectOptions(processes=processes, chunk_lines=chunk, **options))
+    return dst.read_bytes(), rep
+
+
+@pytest.fixture
+def agreements(monkeypatch):
+    """The decisions at the cut (True: the child's part taken)."""
+    seen: list[bool] = []
+    agree = split._agree
+
+    def record(*args):
+        seen.append(agree(*args))
+        return seen[-1]
+
+    monkeypatch.setattr(split, "_agree", record)
+    return seen
+
+
+@pytest.mark.parametrize(("cal", "chunk"), [("static", 40), ("static", 97), ("parametric", 40)])
+def test_two_processes_write_what_one_writes(tmp_path, engines, agreements, cal, chunk):
+    text = program(900, seed=3)
+    one = correct(tmp_path, text, engines[cal], 1, chunk)
+    two = correct(tmp_path, text, engines[cal], 2, chunk)
+    assert agreements == [True]  # the child's part was taken
+    assert two[0] == one[0]
+    assert two[1] == one[1]
+    assert not multiprocessing.active_children()
+
+
+def test_crlf_endings_and_a_cut_at_every_share(tmp_path, engines, agreements, monkeypatch):
+    text = program(600, seed=5, ending="\r\n")
+    one = correct(tmp_path, text, engines["static"], 1, 30)
+    for share in (0.0, 0.5, 0.9):  # where the program is cut moves with the read share
+        monkeypatch.setattr(split, "READ_SHARE_AFFINE", share)
+        assert correct(tmp_path, text, engines["static"], 2, 30) == one
+    assert agreements == [True, True, True]
+
+
+def test_a_state_that_disagrees_leaves_the_run_to_this_process(tmp_path, engines, monkeypatch):
+    text = program(700, seed=7)
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+    monkeypatch.setattr(split, "_agree", lambda *args: False)
+    assert correct(tmp_path, text, engines["static"], 2, 40) == one
+    assert not multiprocessing.active_children()
+
+
+def test_an_axis_that_never_moves_in_the_window_is_not_taken_as_known(tmp_path, engines, agreements):
+    # Z moves once, at the start: the child's approach direction of Z is not the one
+    # this process carries, so the states disagree and this process goes on alone
+    lines = ["G90 G21 G54", "G0 X100 Y100 Z20", "G1 Z-1 F500"] + [
+        f"G1 X{100 + 50 * math.sin(k / 9):.4f} Y{100 + 50 * math.cos(k / 7):.4f}" for k in range(400)] + ["M30"]
+    text = "\n".join(lines) + "\n"
+    one = correct(tmp_path, text, engines["static"], 1, 20)
+    assert correct(tmp_path, text, engines["static"], 2, 20) == one
+    assert agreements == [False]
+
+
+def _error(tmp_path, text, engine, processes, chunk, **options):
+    with pytest.raises(PostprocError) as info:
+        correct(tmp_path, text, engine, processes, chunk, **options)
+    assert not (tmp_path / f"out{processes}_p.nc").exists()  # nothing half-written
+    return str(info.value), type(info.value)
+
+
+@pytest.mark.parametrize("where", [50, 800])  # before the cut (this process's) and after (the child's)
+def test_an_error_is_the_one_one_process_raises(tmp_path, engines, where):
+    text = program(900, seed=11, extra={where: "G1 X20000 Y150"})  # far outside the calibrated volume
+    one = _error(tmp_path, text, engines["static"], 1, 40)
+    assert _error(tmp_path, text, engines["static"], 2, 40) == one
+    assert f":{text.splitlines().index('G1 X20000 Y150') + 1}:" in one[0]
+    assert not multiprocessing.active_children()
+
+
+def test_an_unsupported_code_after_the_cut(tmp_path, engines):
+    text = program(900, seed=13, extra={820: "G1 X150 Y150 G41 D1"})
+    one = _error(tmp_path, text, engines["parametric"], 1, 40)
+    assert _error(tmp_path, text, engines["parametric"], 2, 40) == one
+
+
+def test_a_program_needing_expansion_after_the_cut_is_expanded(tmp_path, engines, agreements):
+    text = program(900, seed=17, extra={850: "#1 = 150.0\nG1 X#1 Y150"})
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+    two = correct(tmp_path, text, engines["static"], 2, 40)
+    assert two == one
+    assert one[1].expanded
+    assert agreements == [True]  # the child's part was taken, and raised NeedsExpansion
+    assert issubclass(NeedsExpansion, PostprocError)
+
+
+def test_a_short_program_stays_in_one_process(tmp_path, engines, agreements):
+    text = program(100, seed=19)
+    assert correct(tmp_path, text, engines["static"], 2, 40) == correct(tmp_path, text, engines["static"], 1, 40)
+    assert agreements == []
+    assert split.cut(split.MIN_CHUNKS * 40 - 1, 40, True) is None
+
+
+def test_the_cut_balances_the_two_parts():
+    s, w = split.cut(1_000_000, 20_000, True)
+    r = split.READ_SHARE_AFFINE
+    # this process corrects S lines; the child reads W and corrects the rest
+    assert abs(s - (r * w + (1_000_000 - w))) < 2
+    assert s - w == split.WARMUP_CHUNKS * 20_000
+
+
+def test_every_report_field_merges():
+    fields = {f.name: f for f in dataclasses.fields(CorrectReport)}
+    named = split._TAKE_TAIL | split._LARGEST | split._SAME
+    assert named <= set(fields)
+    for name in set(fields) - named:  # the rest are counts
+        assert fields[name].type in ("int", int), name
+    head = CorrectReport(lines_in=100, lines_out=110, moves=50, max_correction_mm=0.2, header_lines=8,
+                         solver="newton", max_residual_mm=1e-9, g54_assumed_zero=False)
+    tail = CorrectReport(lines_in=300, lines_out=200, moves=120, max_correction_mm=0.3, solver="newton",
+                         max_residual_mm=1e-10, g54_assumed_zero=True)
+    both = split.merge(head, tail)
+    assert (both.lines_in, both.lines_out, both.moves, both.header_lines) == (300, 310, 170, 8)
+    assert (both.max_correction_mm, both.max_residual_mm, both.g54_assumed_zero) == (0.3, 1e-9, True)
+
+
+def test_the_state_compared_is_data(engines):
+    c = Corrector(engines["parametric"], SETUP, CorrectOptions())
+    state = split.state_of(c)
+    assert state == split.state_of(Corrector(engines["parametric"], SETUP, CorrectOptions()))
+    c.qe[0] = 1.0
+    assert state != split.state_of(c)
+    nan = split._canon(float("nan"))
+    assert nan == split._canon(float("nan")) and split._canon(-0.0) != split._canon(0.0)
+    with pytest.raises(TypeError):
+        split._canon(lambda: None)
+
+
+def test_count_lines(tmp_path):
+    for text, n in (("", 0), ("a", 1), ("a\n", 1), ("a\nb", 2), ("a\r\nb\r\n", 2)):
+        (tmp_path / "f").write_bytes(text.encode())
+        assert split.count_lines(str(tmp_path / "f")) == n
