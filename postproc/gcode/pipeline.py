@@ -404,6 +404,10 @@ class Corrector(EmitterMixin):
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 if lineno - 1 > skip_until:
                     self._chunk(entries, write)
+                else:  # read, not corrected: the runs let go of their blocks as _chunk has them
+                    for e in entries:
+                        if type(e) is bulk.Run:
+                            e.block.runs = []
                 entries.clear()
                 pending = 0
                 if progress is not None:
