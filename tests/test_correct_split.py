@@ -220,3 +220,33 @@ def test_count_lines(tmp_path):
     for text, n in (("", 0), ("a", 1), ("a\n", 1), ("a\nb", 2), ("a\r\nb\r\n", 2)):
         (tmp_path / "f").write_bytes(text.encode())
         assert split.count_lines(str(tmp_path / "f")) == n
+
+
+def test_chunks_read_without_correcting_let_go_of_their_blocks(engines, monkeypatch):
+    # the run disables the cyclic collector: a block whose runs still point back to it
+    # would stay in memory for good (the reading child's memory grew with the program)
+    import weakref
+
+    from postproc.gcode import bulk
+    from postproc.gcode.lexer import split_lines
+
+    alive: weakref.WeakSet = weakref.WeakSet()
+    scan = bulk.scan
+
+    def counting(lines):
+        block = scan(lines)
+        if block is not None:
+            alive.add(block)
+        return block
+
+    monkeypatch.setattr(bulk, "scan", counting)
+    seen = []
+
+    def boundary(n: int) -> bool:
+        seen.append(len(alive))
+        return False
+
+    c = Corrector(engines["static"], SETUP, CorrectOptions(chunk_lines=40))
+    c.run(split_lines(program(900, seed=23)), lambda _text: None, skip_until=10**9, boundary=boundary)
+    assert len(seen) > 10
+    assert max(seen) <= 1
