@@ -124,7 +124,7 @@ def _progress_printer(total_hint: str):
               help="Directory for the corrected programs (same names); for several inputs or a folder.")
 @click.option("-j", "--jobs", default=None, type=click.IntRange(1, 256),
               help="Processes. Several inputs or a folder: this many files at a time [default: 1], ending "
-                   "with a tally of corrected and refused files. One large program (from 160,000 lines, "
+                   "with a tally of corrected and refused files. One large program (from 40,000 lines, "
                    "16,000 when moves are split): corrected in two processes where the machine has two "
                    "cores, with the output of one; -j 1 keeps it in one.")
 @click.option("--dialect", default="generic", show_default=True,
