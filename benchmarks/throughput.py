@@ -15,9 +15,13 @@ input lines per second and the child's peak RSS (the largest of the runs):
   (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once);
   (n) ``postproc diff`` of (m)'s input and output: peak RSS (once).
 
+``correct`` runs as a user runs it: a program this large is corrected in two processes
+where the machine has two cores (``postproc.gcode.split``; ``-j 1`` keeps it in one).
+
 Peak RSS is that of the case's largest process; beside it, the peak of the summed PSS of
-all its processes (``diff`` reads large programs in child processes of its own), sampled
-every half second from /proc. The memory target is checked on the larger of the two.
+all its processes (``diff`` reads large programs in child processes of its own, and
+``correct`` splits them in two), sampled every half second from /proc. The memory target
+is checked on the larger of the two.
 
 The children import the package from byte-code compiled once, before the timed runs, into
 the benchmark's temporary folder (as an installed package is), whatever
