@@ -211,7 +211,8 @@ def test_the_state_compared_is_data(engines):
     c.qe[0] = 1.0
     assert state != split.state_of(c)
     nan = split._canon(float("nan"))
-    assert nan == split._canon(float("nan")) and split._canon(-0.0) != split._canon(0.0)
+    assert nan == split._canon(float("nan"))
+    assert split._canon(-0.0) != split._canon(0.0)
     with pytest.raises(TypeError):
         split._canon(lambda: None)
 
@@ -250,3 +251,63 @@ def test_chunks_read_without_correcting_let_go_of_their_blocks(engines, monkeypa
     c.run(split_lines(program(900, seed=23)), lambda _text: None, skip_until=10**9, boundary=boundary)
     assert len(seen) > 10
     assert max(seen) <= 1
+
+
+# state the cut must carry: an offset set from where the machine is (G92), incremental
+# moves, inch units, a cycle kept or expanded, a stored G28 position, a tool change
+FEATURES = {
+    "g92": "G92 X10 Y10\nG1 X150 Y150\nG92.1",
+    "g91": "G91\nG1 X1.5 Y-2.25\nG1 X-1.5 Y2.25\nG90",
+    "inch": "G20\nG1 X5.9 Y5.9\nG21",
+    "cycle": "G0 Z5\nG81 X140 Y140 Z-3 R2 F100\nX150\nY150\nG80",
+    "g28": "G28.1\nG0 Z20\nG28 Z20",
+}
+
+
+def outcome(tmp_path, text, engine, processes, chunk, **options):
+    """(output, report) of a correction, or the error's type and message."""
+    try:
+        return correct(tmp_path, text, engine, processes, chunk, **options)
+    except PostprocError as exc:
+        return type(exc).__name__, str(exc)
+
+
+@pytest.mark.parametrize("feature", sorted(FEATURES))
+@pytest.mark.parametrize("at", [300, 780])  # across the cut (state carried), after it (the child's)
+def test_features_around_the_cut(tmp_path, engines, agreements, feature, at):
+    text = program(900, seed=29, extra={at: FEATURES[feature], at + 5: FEATURES[feature]})
+    for options in ({}, {"cycles": "expand"}) if feature == "cycle" else ({},):
+        one = outcome(tmp_path, text, engines["parametric"], 1, 40, **options)
+        two = outcome(tmp_path, text, engines["parametric"], 2, 40, **options)
+        assert two == one
+    if feature == "g28" and at == 300:
+        # the controller stored the corrected position before the cut: the child, which did
+        # not correct that line, cannot know it; this process goes on alone
+        assert agreements == [False]
+    else:
+        assert agreements
+        assert all(agreements)
+
+
+def test_a_child_that_fails_leaves_the_run_to_one_process(tmp_path, engines, agreements, monkeypatch):
+    # a failure of the child's own (not the program's) after the cut: the program is
+    # corrected again in one process, to the same output
+    import os
+
+    parent = os.getpid()
+    calls = []
+    chunk = Corrector._chunk
+
+    def failing(self, entries, write):
+        if os.getpid() != parent:
+            calls.append(1)
+            if len(calls) > split.WARMUP_CHUNKS + 1:
+                raise OSError(28, "No space left on device")
+        return chunk(self, entries, write)
+
+    monkeypatch.setattr(Corrector, "_chunk", failing)
+    text = program(900, seed=31)
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+    assert correct(tmp_path, text, engines["static"], 2, 40) == one
+    assert agreements == [True]
+    assert not multiprocessing.active_children()

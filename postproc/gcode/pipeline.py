@@ -408,7 +408,9 @@ class Corrector(EmitterMixin):
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 if lineno - 1 > skip_until:
                     self._chunk(entries, write)
-                else:  # read, not corrected: the runs let go of their blocks as _chunk has them
+                else:  # read, not corrected: the units are checked and the runs let go of their
+                    # blocks, as _chunk does
+                    self._check_units(entries)
                     for e in entries:
                         if type(e) is bulk.Run:
                             e.block.runs = []
@@ -485,25 +487,33 @@ class Corrector(EmitterMixin):
 
     # -- one chunk ---------------------------------------------------------------------
     # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
+    def _check_units(self, entries: list[Entry | bulk.Run]) -> None:
+        """Check the output rounding of each unit (mm, inch) the first time a move in it
+        comes (:meth:`_check_rounding`)."""
+        checked = self._units_checked
+        for e in entries:
+            if type(e) is bulk.Run:
+                if e.unit not in checked:
+                    self._check_rounding(e.unit, e.lineno)
+            elif type(mv := e[1]) is Move and mv.unit not in checked:
+                self._check_rounding(mv.unit, mv.lineno)
+
     def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
         rot: list[dict[str, float]] = []
         general: list[tuple[int, PlanMove]] = []
         M = 0
         runs: list[bulk.Run] = []
+        self._check_units(entries)
         for e in entries:
             if type(e) is bulk.Run:
                 runs.append(e)
-                if e.unit not in self._units_checked:
-                    self._check_rounding(e.unit, e.lineno)
                 e.trow = M
                 rot.extend([{}] * len(e))
                 if e.arcs:  # planned as any other arc
                     general.extend((M + j, mv) for j, mv in bulk.arc_moves(e))
                 M += len(e)
             elif type(mv := e[1]) is Move:
-                if mv.unit not in self._units_checked:
-                    self._check_rounding(mv.unit, mv.lineno)
                 rot.append(mv.rotary)
                 general.append((M, mv))
                 M += 1
@@ -1429,7 +1439,10 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
         if count is not None:
             from postproc.gcode import split
 
-            return split.run(corrector, get_lines, write, progress, count)
+            try:
+                return split.run(corrector, get_lines, write, progress, count)
+            except split.Failed:
+                restart()  # the second process failed (not the program): once more, in one
         return corrector().run(get_lines(), write, progress=progress)
     except NeedsExpansion:
         if not options.expand:

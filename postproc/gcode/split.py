@@ -37,6 +37,8 @@ from typing import IO, Any, Protocol
 
 import numpy as np
 
+from postproc.errors import PostprocError
+
 #: a run's report (:class:`postproc.gcode.pipeline.CorrectReport`, a dataclass)
 CorrectReport = Any
 
@@ -214,23 +216,35 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
             try:
                 kind, payload = recv.recv()
             except EOFError:
-                raise RuntimeError("the process correcting the program's second part ended without a word") from None
+                raise Failed("the process correcting the program's second part ended without a word") from None
             if kind == "progress":
                 if progress is not None:
                     progress(payload)
             elif kind == "done":
                 tail = payload
                 break
-            else:  # "error": the child's part refused, as one process would have
+            elif isinstance(payload, PostprocError):  # the child's part refused, as one process would have
                 raise payload
-        part.seek(0)
-        while text := part.read(1 << 20):
-            write(text)
+            else:  # it failed otherwise (its temporary file could not be written, ...)
+                raise Failed(f"the process correcting the program's second part failed: {payload!r}")
+        try:
+            part.seek(0)
+            while text := part.read(1 << 20):
+                write(text)
+        except OSError as exc:
+            if exc.filename is None:  # the temporary file (a failing output names itself)
+                raise Failed(f"the second part could not be read back: {exc}") from None
+            raise
         return merge(report, tail)
     finally:
         recv.close()
         _stop(child)
         part.close()
+
+
+class Failed(Exception):
+    """The child failed for a reason of its own (not the program's): the caller corrects
+    the program again in one process."""
 
 
 def _agree(recv, n: int, c: Corrector) -> bool:
