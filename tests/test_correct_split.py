@@ -311,3 +311,17 @@ def test_a_child_that_fails_leaves_the_run_to_one_process(tmp_path, engines, agr
     assert correct(tmp_path, text, engines["static"], 2, 40) == one
     assert agreements == [True]
     assert not multiprocessing.active_children()
+
+
+def test_progress_goes_on_through_the_second_part(tmp_path, engines, agreements):
+    text = program(900, seed=37)
+    src = tmp_path / "p.nc"
+    src.write_text(text)
+    counts: dict[int, list[int]] = {1: [], 2: []}
+    for processes in (1, 2):
+        correct_file(src, tmp_path / "o.nc", engines["static"], SETUP,
+                     CorrectOptions(processes=processes, chunk_lines=40), progress=counts[processes].append)
+    assert agreements == [True]
+    assert counts[2] == sorted(counts[2])
+    assert counts[2][-1] == counts[1][-1] == len(text.splitlines())
+    assert len(counts[2]) > 10

@@ -222,6 +222,8 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
                     progress(payload)
             elif kind == "done":
                 tail = payload
+                if progress is not None:
+                    progress(tail.lines_in)  # the last lines, after the child's last boundary
                 break
             elif isinstance(payload, PostprocError):  # the child's part refused, as one process would have
                 raise payload
