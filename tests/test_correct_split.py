@@ -117,7 +117,7 @@ def test_two_processes_write_what_one_writes(tmp_path, engines, agreements, cal,
 def test_crlf_endings_and_a_cut_at_every_share(tmp_path, engines, agreements, monkeypatch):
     text = program(600, seed=5, ending="\r\n")
     one = correct(tmp_path, text, engines["static"], 1, 30)
-    for share in (0.0, 0.5, 0.9):  # where the program is cut moves with the read share
+    for share in (0.0, 0.4, 0.7):  # where the program is cut moves with the read share
         monkeypatch.setattr(split, "READ_SHARE_AFFINE", share)
         assert correct(tmp_path, text, engines["static"], 2, 30) == one
     assert agreements == [True, True, True]
@@ -325,3 +325,54 @@ def test_progress_goes_on_through_the_second_part(tmp_path, engines, agreements)
     assert counts[2] == sorted(counts[2])
     assert counts[2][-1] == counts[1][-1] == len(text.splitlines())
     assert len(counts[2]) > 10
+
+
+# -- more than two processes -----------------------------------------------------------------
+def test_three_and_four_processes_write_what_one_writes(tmp_path, engines, monkeypatch):
+    starts: list[object] = []
+    starts_at = split._starts_at
+
+    def record(recv, end):
+        starts.append(starts_at(recv, end))
+        return starts[-1]
+
+    monkeypatch.setattr(split, "_starts_at", record)
+    text = program(1500, seed=41)
+    for cal in ("static", "parametric"):
+        one = correct(tmp_path, text, engines[cal], 1, 40)
+        for processes in (3, 4):
+            starts.clear()
+            assert correct(tmp_path, text, engines[cal], processes, 40) == one
+            assert starts == [True] * (processes - 2)  # every later cut agreed
+    assert not multiprocessing.active_children()
+
+
+def test_a_later_cut_that_disagrees_corrects_again_in_one_process(tmp_path, engines, monkeypatch):
+    text = program(1500, seed=43)
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+    monkeypatch.setattr(split, "_starts_at", lambda recv, end: False)
+    assert correct(tmp_path, text, engines["static"], 3, 40) == one
+    assert not multiprocessing.active_children()
+
+
+@pytest.mark.parametrize("where", [100, 700, 1300])  # in the first, second and third part
+def test_an_error_in_any_of_three_parts(tmp_path, engines, where):
+    text = program(1500, seed=47, extra={where: "G1 X20000 Y150"})
+    assert _error(tmp_path, text, engines["static"], 3, 40) == _error(tmp_path, text, engines["static"], 1, 40)
+    assert not multiprocessing.active_children()
+
+
+def test_cuts_share_the_work():
+    for affine, chunk in ((True, 5000), (False, 2000)):
+        r = split.READ_SHARE_AFFINE if affine else split.READ_SHARE_SAMPLED
+        window = split.WARMUP_CHUNKS * chunk
+        for k in (2, 3, 4):
+            at = split.cuts(1_000_000, chunk, affine, k)
+            assert at == sorted(at)
+            assert len(at) == k - 1
+            ends = [*at, 1_000_000]
+            # every process: the same cost (reading W_j at r, correcting the rest of its part)
+            costs = [at[0]] + [r * (s - window) + (e - (s - window)) for s, e in zip(at, ends[1:], strict=False)]
+            assert max(costs) - min(costs) < 2
+    assert split.cuts(split.MIN_CHUNKS * 5000 - 1, 5000, True, 4) is None
+    assert len(split.cuts(split.MIN_CHUNKS * 5000, 5000, True, 4)) == 1  # parts of a window at least

@@ -125,8 +125,8 @@ def _progress_printer(total_hint: str):
 @click.option("-j", "--jobs", default=None, type=click.IntRange(1, 256),
               help="Processes. Several inputs or a folder: this many files at a time [default: 1], ending "
                    "with a tally of corrected and refused files. One large program (from 40,000 lines, "
-                   "16,000 when moves are split): corrected in two processes where the machine has two "
-                   "cores, with the output of one; -j 1 keeps it in one.")
+                   "16,000 when moves are split): cut into parts corrected in up to this many processes "
+                   "[default: one per core], with the output of one process; -j 1 keeps it in one.")
 @click.option("--dialect", default="generic", show_default=True,
               type=DIALECT_CHOICE,
               help="Controller the output is for: its line length, comments, case and arc rule. "
@@ -209,7 +209,7 @@ def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subrou
                "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         processes = jobs if jobs is not None else len(os.sched_getaffinity(0))
-        _single(inputs[0], output or "-", calibration, setup, {**options, "processes": min(2, processes)}, maps)
+        _single(inputs[0], output or "-", calibration, setup, {**options, "processes": processes}, maps)
         return
     if output_dir is None:
         raise click.UsageError("several inputs need --output-dir")

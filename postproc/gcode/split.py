@@ -1,26 +1,29 @@
-"""One large program corrected in two processes, with the output one process writes.
+"""One large program corrected in several processes, with the output one process writes.
 
-The program is cut at a chunk boundary, line S (about the middle, weighted so that both
-processes end together). This process corrects lines 1 to S as usual. A forked child
-reads the same program from its first line, but corrects nothing before a warm-up
-window of a few chunks that ends at S: until then it only reads (the interpreter's modal
-state advances, nothing is planned or written), in the window it corrects and throws the
-output away, from S on it writes the corrected lines to a temporary file.
+The program is cut at chunk boundaries S1 < S2 < ... (weighted so that all processes end
+together). This process corrects lines 1 to S1 as usual. Forked child j reads the same
+program from its first line, but corrects nothing before a warm-up window of a few
+chunks that ends at Sj: until then it only reads (the interpreter's modal state advances,
+nothing is planned or written), in the window it corrects and throws the output away,
+from Sj to S(j+1) (the last child: to the end) it writes the corrected lines to a
+temporary file.
 
-Whether the child's lines after S are the lines one process writes is checked, not
-assumed: at S both processes take the whole state a run carries from one chunk to the
-next (:func:`state_of`: the corrector's emitted position, motion and previous targets,
-the interpreter's modal state, offsets, tool table, stored positions, ...), and the
-child's part is used only when the two are equal, value for value. Everything after S
-is a function of that state and the lines after S (the output does not depend on where
-chunks end: tests check it), so the child writes what this process would have. When they
-differ (the window was too short for every axis to be named, a program that stores a
-corrected position before S, ...) the child is stopped and this process goes on alone
-from S: the same output, only slower.
+Whether a child's lines are the lines one process writes is checked, not assumed: at
+each cut the process that ends there and the child that starts there take the whole
+state a run carries from one chunk to the next (:func:`state_of`: the corrector's
+emitted position, motion and previous targets, the interpreter's modal state, offsets,
+tool table, stored positions, ...), and the parts are joined only when the two are
+equal, value for value. Everything after a cut is a function of that state and the lines
+after it (the output does not depend on where chunks end: tests check it), so each child
+writes what one process would have. When they differ at S1 (the window was too short for
+every axis to move, a program that stores a corrected position before S1, ...) the
+children are stopped and this process goes on alone from S1; at a later cut, the program
+is corrected again in one process (:class:`Failed`): the same output either way, only
+slower.
 
-An error of the child's part is raised here, as one process would have raised it (the
-state agreed); an error before S is this process's own. The child's temporary file is
-removed however the run ends.
+An error in a child's part is raised here, as one process would have raised it (every
+cut before it agreed); an error before S1 is this process's own. The children's
+temporary files have no name: nothing is left however the run ends.
 """
 
 from __future__ import annotations
@@ -99,17 +102,39 @@ def count_lines(path: str) -> int:
     return n + (last != b"\n")
 
 
-def cut(lines: int, chunk: int, affine: bool) -> tuple[int, int] | None:
-    """``(S, W)``: split after line S (the first chunk boundary at or after it), the child
-    correcting from line W (WARMUP_CHUNKS chunks before S); None when the program is too
-    short to gain. The child reads W lines at the read share of the cost and corrects the
-    rest; this process corrects S lines: S = (N + W_lines (1 - r)) / (2 - r)."""
-    if lines < MIN_CHUNKS * chunk:
-        return None
+def cuts(lines: int, chunk: int, affine: bool, processes: int) -> list[int] | None:
+    """The cuts S1 < S2 < ... for at most ``processes`` processes (each part ends at the
+    first chunk boundary at or after its cut), or None when the program is too short to
+    gain. This process corrects S1 lines; child j reads W_j = S_j - (the window) lines at
+    the read share r of the cost and corrects the rest of its part: every process's cost
+    equal, S(j+1) = S1 + (1 - r) W_j, the last part ending at the program's end. Fewer
+    processes where a part would be shorter than the window."""
     r = READ_SHARE_AFFINE if affine else READ_SHARE_SAMPLED
     window = WARMUP_CHUNKS * chunk
-    s = int((lines + window * (1.0 - r)) / (2.0 - r))
-    return s, max(0, s - window)
+    for k in range(min(processes, lines // max(1, chunk)), 1, -1):
+        lo, hi = 0.0, float(lines)
+        for _ in range(60):  # the last end grows with S1: bisection for the program's end
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _ends(mid, k, r, window)[-1] < lines else (lo, mid)
+        at = [int(x) for x in _ends(hi, k, r, window)[:-1]]
+        parts = [b - a for a, b in zip([0, *at], [*at, lines], strict=True)]
+        if lines >= MIN_CHUNKS * chunk and min(parts) >= WARMUP_CHUNKS * chunk:
+            return at
+    return None
+
+
+def _ends(s1: float, k: int, r: float, window: int) -> list[float]:
+    """Where each of ``k`` parts ends when the first ends at ``s1`` and all cost alike."""
+    out = [s1]
+    for _ in range(k - 1):
+        out.append(s1 + (1.0 - r) * max(0.0, out[-1] - window))
+    return out
+
+
+def cut(lines: int, chunk: int, affine: bool) -> tuple[int, int] | None:
+    """``(S, W)`` of two processes: the cut, and the line the child corrects from."""
+    at = cuts(lines, chunk, affine, 2)
+    return None if at is None else (at[0], max(0, at[0] - WARMUP_CHUNKS * chunk))
 
 
 def state_of(c: Corrector) -> object:
@@ -175,73 +200,105 @@ _SAME = frozenset({"solver", "accept_residual_mm", "expanded", "header_lines"})
 
 
 def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], write: Write,
-        progress: Callable[[int], None] | None, lines: int) -> CorrectReport:
-    """Correct the program ``get_lines()`` gives (``lines`` lines) in this process and a
-    forked child (see the module docstring); ``make()``: a new Corrector for the run.
-    The same output, report and errors as ``make().run(get_lines(), write, progress)``."""
+        progress: Callable[[int], None] | None, lines: int, processes: int = 2) -> CorrectReport:
+    """Correct the program ``get_lines()`` gives (``lines`` lines) in this process and up
+    to ``processes - 1`` forked children (see the module docstring); ``make()``: a new
+    Corrector for the run. The same output, report and errors as
+    ``make().run(get_lines(), write, progress)``."""
     first = make()
-    where = cut(lines, first.chunk_lines, first.linear_exact)
-    if where is None:
+    at = cuts(lines, first.chunk_lines, first.linear_exact, processes)
+    if at is None:
         return first.run(get_lines(), write, progress=progress)
-    s, w = where
-    # the child's lines, in a file without a name (gone however the run ends), opened
-    # before the fork: the child writes it, this process reads it once the child is done
-    part = tempfile.TemporaryFile("w+", encoding="utf-8", errors="surrogateescape", newline="")
+    window = WARMUP_CHUNKS * first.chunk_lines
     ctx = multiprocessing.get_context("fork")
-    recv, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_child, args=(make, get_lines, part, s, w, max(1, lines // 100), send), daemon=True)
+    every = max(1, lines // 100)
+    children = []  # (process, its pipe's end here, its lines: a file without a name)
     try:
-        with warnings.catch_warnings():
-            # Python 3.12 and later warn of a fork in a process with threads (numpy's BLAS
-            # pool, idle here); the child runs only this package's correcting code
-            warnings.filterwarnings("ignore", message=r".*multi-threaded, use of fork\(\)",
-                                    category=DeprecationWarning)
-            child.start()
-        send.close()
-        agreed = None  # decided at the first boundary at or after S
+        for j, start in enumerate(at):
+            # opened before the fork: the child writes it, this process reads it once the
+            # child is done (gone however the run ends)
+            part = tempfile.TemporaryFile("w+", encoding="utf-8", errors="surrogateescape", newline="")
+            recv, send = ctx.Pipe(duplex=False)
+            stop = at[j + 1] if j + 1 < len(at) else None
+            child = ctx.Process(target=_child, args=(make, get_lines, part, start, stop, max(0, start - window),
+                                                     every, send), daemon=True)
+            children.append((child, recv, part))
+            with warnings.catch_warnings():
+                # Python 3.12 and later warn of a fork in a process with threads (numpy's
+                # BLAS pool, idle here); the child runs only this package's correcting code
+                warnings.filterwarnings("ignore", message=r".*multi-threaded, use of fork\(\)",
+                                        category=DeprecationWarning)
+                child.start()
+            send.close()
+        agreed = None  # decided at the first boundary at or after S1
 
         def boundary(n: int) -> bool:
             nonlocal agreed
-            if agreed is not None or n < s:
+            if agreed is not None or n < at[0]:
                 return False
-            agreed = _agree(recv, n, first)
+            agreed = _agree(children[0][1], n, first)
             if not agreed:
-                _stop(child)
+                for child, _recv, _part in children:
+                    _stop(child)
             return agreed
 
         report = first.run(get_lines(), write, progress=progress, boundary=boundary)
         if not agreed:
             return report
-        while True:
+        end: tuple[int, object] | None = None  # the boundary and state where the last part ended
+        for j, (_child_process, recv, part) in enumerate(children):
+            if j and not _starts_at(recv, end):
+                raise Failed(f"the state at the cut before part {j + 1} disagreed")
+            tail, end = _part_of(recv, progress)
+            report = merge(report, tail)
             try:
-                kind, payload = recv.recv()
-            except EOFError:
-                raise Failed("the process correcting the program's second part ended without a word") from None
-            if kind == "progress":
-                if progress is not None:
-                    progress(payload)
-            elif kind == "done":
-                tail = payload
-                if progress is not None:
-                    progress(tail.lines_in)  # the last lines, after the child's last boundary
-                break
-            elif isinstance(payload, PostprocError):  # the child's part refused, as one process would have
-                raise payload
-            else:  # it failed otherwise (its temporary file could not be written, ...)
-                raise Failed(f"the process correcting the program's second part failed: {payload!r}")
-        try:
-            part.seek(0)
-            while text := part.read(1 << 20):
-                write(text)
-        except OSError as exc:
-            if exc.filename is None:  # the temporary file (a failing output names itself)
-                raise Failed(f"the second part could not be read back: {exc}") from None
-            raise
-        return merge(report, tail)
+                part.seek(0)
+                while text := part.read(1 << 20):
+                    write(text)
+            except OSError as exc:
+                if exc.filename is None:  # the temporary file (a failing output names itself)
+                    raise Failed(f"a part could not be read back: {exc}") from None
+                raise
+        return report
     finally:
-        recv.close()
-        _stop(child)
-        part.close()
+        for child, recv, part in children:
+            recv.close()
+            _stop(child)
+            part.close()
+
+
+def _starts_at(recv, end: tuple[int, object] | None) -> bool:
+    """Whether the child behind ``recv`` started where the part before it ended (``end``:
+    its boundary and state), from the child's first word."""
+    try:
+        kind, payload = recv.recv()
+    except EOFError:
+        return False
+    return kind == "split" and end is not None and payload == end
+
+
+def _part_of(recv, progress: Callable[[int], None] | None) -> tuple[CorrectReport, tuple[int, object] | None]:
+    """Wait for a child's part: (its report, where it ended and its state there, None
+    for the last part); raise its refusal, or Failed."""
+    end = None
+    while True:
+        try:
+            kind, payload = recv.recv()
+        except EOFError:
+            raise Failed("a process correcting a part of the program ended without a word") from None
+        if kind == "progress":
+            if progress is not None:
+                progress(payload)
+        elif kind == "end":
+            end = payload
+        elif kind == "done":
+            if progress is not None:
+                progress(payload.lines_in)  # the last lines, after the child's last boundary
+            return payload, end
+        elif isinstance(payload, PostprocError):  # the part refused, as one process would have
+            raise payload
+        else:  # it failed otherwise (its temporary file could not be written, ...)
+            raise Failed(f"a process correcting a part of the program failed: {payload!r}")
 
 
 class Failed(Exception):
@@ -271,12 +328,14 @@ def _stop(child) -> None:
     child.join()
 
 
-def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], part: IO[str], s: int, w: int,
-           every: int, conn) -> None:
-    """The child's side of :func:`run`: read to line W, correct to S throwing the output
-    away, send the state at S, then write the rest to ``part``; send progress (about
-    every ``every`` lines: the parent reads it only once its own part is done, and the
-    pipe holds a few kB), then the report of the part from S, or its error."""
+def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], part: IO[str], start: int,
+           stop: int | None, w: int, every: int, conn) -> None:
+    """A child's side of :func:`run`: read to line W, correct to the first boundary at or
+    after ``start`` throwing the output away, send the state there, then write its part
+    to ``part`` up to the first boundary at or after ``stop`` (None: the end), where it
+    sends the state again; send progress (about every ``every`` lines: the parent reads
+    it only once the parts before are done, and a pipe holds a few kB), then the report
+    of its part, or its error."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
     live = False
     told = 0
@@ -290,10 +349,13 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
         def boundary(n: int) -> bool:
             nonlocal live, told
             if live:
+                if stop is not None and n >= stop:
+                    conn.send(("end", (n, state_of(c))))
+                    return True
                 if n - told >= every:
                     conn.send(("progress", n))
                     told = n
-            elif n >= s:
+            elif n >= start:
                 try:
                     state = state_of(c)
                 except TypeError:
@@ -303,7 +365,7 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
                     raise _Abandon
                 live = True
                 told = n
-                # the report counts from S (the parent's counts the lines before)
+                # the report counts from the cut (the part before counts the lines before)
                 c.report = type(c.report)(solver=c.report.solver,
                                           accept_residual_mm=c.report.accept_residual_mm)
             return False
@@ -313,12 +375,12 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
         conn.send(("done", report) if live else ("abandoned", None))
     except _Abandon:
         pass
-    except BaseException as exc:  # noqa: BLE001 - every failure after S is the parent's to raise
+    except BaseException as exc:  # noqa: BLE001 - every failure after the cut is the parent's to raise
         if live:
             try:
                 conn.send(("error", exc))
             except Exception:  # noqa: BLE001 - an exception that does not pickle
-                conn.send(("error", RuntimeError(f"correcting the program's second part failed: {exc!r}")))
+                conn.send(("error", RuntimeError(f"correcting a part of the program failed: {exc!r}")))
         else:
             conn.send(("abandoned", None))
     finally:
