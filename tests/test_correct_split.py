@@ -376,3 +376,24 @@ def test_cuts_share_the_work():
             assert max(costs) - min(costs) < 2
     assert split.cuts(split.MIN_CHUNKS * 5000 - 1, 5000, True, 4) is None
     assert len(split.cuts(split.MIN_CHUNKS * 5000, 5000, True, 4)) == 1  # parts of a window at least
+
+
+def test_the_command_cuts_a_large_program_unless_told_j_1(tmp_path, agreements):
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    text = program(38_000, seed=53)
+    assert len(text.splitlines()) >= split.MIN_CHUNKS * 5000
+    src = tmp_path / "big.nc"
+    src.write_text(text)
+    outs = {}
+    for jobs in ("1", "2"):
+        dst = tmp_path / f"big_{jobs}.nc"
+        r = CliRunner().invoke(main, ["correct", str(src), "-c", str(STATIC), "-o", str(dst), "-j", jobs,
+                                      "--offset", "G54=X0,Y0,Z100", *[a for t in range(1, 5)
+                                                                      for a in ("--tool-length", f"{t}=0")]])
+        assert r.exit_code == 0, r.output
+        outs[jobs] = (dst.read_bytes(), r.output.replace(dst.name, "OUT"))
+    assert outs["2"] == outs["1"]  # the same program and the same summary
+    assert agreements == [True]
