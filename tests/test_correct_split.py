@@ -397,3 +397,13 @@ def test_the_command_cuts_a_large_program_unless_told_j_1(tmp_path, agreements):
         outs[jobs] = (dst.read_bytes(), r.output.replace(dst.name, "OUT"))
     assert outs["2"] == outs["1"]  # the same program and the same summary
     assert agreements == [True]
+
+
+def test_a_program_that_changes_while_it_is_read_is_refused(tmp_path, engines, agreements, monkeypatch):
+    # every process opens the file itself: parts of two versions must not be joined
+    seen = iter(range(100))
+    monkeypatch.setattr(split, "_identity", lambda path: next(seen))
+    text = program(900, seed=59)
+    message, kind = _error(tmp_path, text, engines["static"], 2, 40)
+    assert "changed while it was being corrected" in message
+    assert agreements == [True]

@@ -1440,7 +1440,7 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
             from postproc.gcode import split
 
             try:
-                return split.run(corrector, get_lines, write, progress, count, options.processes)
+                return split.run(corrector, get_lines, write, progress, count, options.processes, path)
             except split.Failed:
                 restart()  # the second process failed (not the program): once more, in one
         return corrector().run(get_lines(), write, progress=progress)

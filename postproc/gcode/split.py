@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import multiprocessing
+import os
 import signal
 import sys
 import tempfile
@@ -200,11 +201,15 @@ _SAME = frozenset({"solver", "accept_residual_mm", "expanded", "header_lines"})
 
 
 def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], write: Write,
-        progress: Callable[[int], None] | None, lines: int, processes: int = 2) -> CorrectReport:
+        progress: Callable[[int], None] | None, lines: int, processes: int = 2,
+        path: str | None = None) -> CorrectReport:
     """Correct the program ``get_lines()`` gives (``lines`` lines) in this process and up
     to ``processes - 1`` forked children (see the module docstring); ``make()``: a new
     Corrector for the run. The same output, report and errors as
-    ``make().run(get_lines(), write, progress)``."""
+    ``make().run(get_lines(), write, progress)``. Every process opens the program file
+    ``path`` itself: a file that changes while they read it is refused (the parts would
+    come from different versions of it)."""
+    before = _identity(path)
     first = make()
     at = cuts(lines, first.chunk_lines, first.linear_exact, processes)
     if at is None:
@@ -259,12 +264,27 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
                 if exc.filename is None:  # the temporary file (a failing output names itself)
                     raise Failed(f"a part could not be read back: {exc}") from None
                 raise
+        if _identity(path) != before:
+            raise PostprocError("the program file changed while it was being corrected", path=path,
+                                hint="correct it again once it is written completely")
         return report
     finally:
         for child, recv, part in children:
             recv.close()
             _stop(child)
             part.close()
+
+
+def _identity(path: str | None) -> tuple[int, ...] | None:
+    """What tells a version of the file at ``path`` from another: device, inode, size and
+    modification time (None without a path or a file)."""
+    if path is None:
+        return None
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
 
 
 def _starts_at(recv, end: tuple[int, object] | None) -> bool:
