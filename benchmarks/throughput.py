@@ -7,16 +7,17 @@ input lines per second and the child's peak RSS (the largest of the runs):
 
   (a) read and write the file unchanged (the floor: Python line I/O);
   (b) the tokenizer: ``lex`` every line and write ``tokens_to_src`` (byte-identical);
-  (c) ``postproc correct`` with calibrations/s500_static.json;
-  (d) ``postproc correct`` with calibrations/s500_parametric.json;
+  (c) ``postproc correct`` with calibrations/s500_static.json; (c1) the same with -j 1;
+  (d) ``postproc correct`` with calibrations/s500_parametric.json; (d1) the same with -j 1;
   (e) ``postproc diff ORIGINAL CORRECTED`` (the output of (c));
   (f) ``postproc --help``;
   (g) a 20-line program corrected with the parametric calibration, end to end;
   (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once);
   (n) ``postproc diff`` of (m)'s input and output: peak RSS (once).
 
-``correct`` runs as a user runs it: a program this large is corrected in two processes
-where the machine has two cores (``postproc.gcode.split``; ``-j 1`` keeps it in one).
+``correct`` runs as a user runs it: a program this large is cut into parts corrected in
+one process per core (``postproc.gcode.split``); (c1) and (d1) (``--cases static1,
+parametric1``; (c1) by default) run it with ``-j 1``, in one process, for the ratio.
 
 Peak RSS is that of the case's largest process; beside it, the peak of the summed PSS of
 all its processes (``diff`` reads large programs in child processes of its own, and
@@ -31,7 +32,7 @@ PYTHONDONTWRITEBYTECODE says.
 that has a target in issue 13 is printed beside it with PASS or FAIL.
 
 Usage: python benchmarks/throughput.py [--lines N] [--memory-lines N] [--repeats R]
-                                       [--seed S] [--json OUT] [--cases static,parametric,diff]
+                                       [--seed S] [--json OUT] [--cases static,static1,parametric,diff]
 """
 
 from __future__ import annotations
@@ -171,13 +172,14 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3, help="runs of each case; the median is printed [3]")
     ap.add_argument("--seed", type=int, default=42, help="gencam.py seed [42]")
     ap.add_argument("--json", dest="json_out", default=None, help="also save the figures to this JSON file")
-    ap.add_argument("--cases", default="static,parametric,diff",
-                    help="which of static, parametric, diff to time ((a) and (b) always run; diff needs "
-                         "static's output, made untimed when static is left out) [static,parametric,diff]")
+    ap.add_argument("--cases", default="static,static1,parametric,diff",
+                    help="which of static, static1, parametric, parametric1, diff to time (static1 and "
+                         "parametric1: in one process, -j 1; (a) and (b) always run; diff needs static's "
+                         "output, made untimed when static is left out) [static,static1,parametric,diff]")
     args = ap.parse_args()
     chosen = {c.strip() for c in args.cases.split(",") if c.strip()}
-    if not chosen <= {"static", "parametric", "diff"}:
-        sys.exit("--cases takes static, parametric and diff")
+    if not chosen <= {"static", "static1", "parametric", "parametric1", "diff"}:
+        sys.exit("--cases takes static, static1, parametric, parametric1 and diff")
     if not GENCAM.is_file():
         sys.exit(f"{GENCAM} is missing: this benchmark needs the shared folder beside the repository "
                  "(../shared/bench/gencam.py makes its program)")
@@ -210,8 +212,13 @@ def main() -> None:
             ("lex", "(b) tokenizer (lex + tokens_to_src)", [py, "-c", CHILD, "lex", str(src), str(tmp / "lex.nc")]),
             ("static", "(c) correct, s500_static", [*cli, "correct", str(src), "-c", str(STATIC),
                                                     "-o", str(static_out), *SETUP]),
+            ("static1", "(c1) correct, s500_static, -j 1", [*cli, "correct", str(src), "-c", str(STATIC),
+                                                            "-o", str(tmp / "static1.nc"), "-j", "1", *SETUP]),
             ("parametric", "(d) correct, s500_parametric", [*cli, "correct", str(src), "-c", str(PARAMETRIC),
                                                             "-o", str(tmp / "parametric.nc"), *SETUP]),
+            ("parametric1", "(d1) correct, s500_parametric, -j 1",
+             [*cli, "correct", str(src), "-c", str(PARAMETRIC), "-o", str(tmp / "parametric1.nc"), "-j", "1",
+              *SETUP]),
             ("diff", "(e) diff original (c)-output", [*cli, "diff", str(src), str(static_out)]),
         ]
         rates = {}
@@ -227,6 +234,8 @@ def main() -> None:
             line = (f"{label:38s} {rate:11,.0f} lines/s  {r['seconds']:7.2f} s  "
                     f"(min {r['seconds_min']:.2f}, max {r['seconds_max']:.2f})  peak RSS {r['peak_mb']:6.1f} MB"
                     f"  (all processes: PSS {r['peak_pss_mb']:.1f} MB)")
+            if key in ("static1", "parametric1") and key[:-1] in rates:
+                line += f"\n{'':38s} ({'c' if key == 'static1' else 'd'}) is {rates[key[:-1]] / rate:.2f} x this rate"
             if key in ("static", "parametric", "diff"):
                 mem = max(r["peak_mb"], r["peak_pss_mb"])
                 line += (f"\n{'':38s} = {rate / rates['copy']:.4f} x (a), {rate / rates['lex']:.3f} x (b);  "
