@@ -408,12 +408,8 @@ class Corrector(EmitterMixin):
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 if lineno - 1 > skip_until:
                     self._chunk(entries, write)
-                else:  # read, not corrected: the units are checked and the runs let go of their
-                    # blocks, as _chunk does
-                    self._check_units(entries)
-                    for e in entries:
-                        if type(e) is bulk.Run:
-                            e.block.runs = []
+                else:  # read, not corrected
+                    self._read_only(entries)
                 entries.clear()
                 pending = 0
                 if progress is not None:
@@ -498,19 +494,25 @@ class Corrector(EmitterMixin):
             elif type(mv := e[1]) is Move and mv.unit not in checked:
                 self._check_rounding(mv.unit, mv.lineno)
 
-    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
+    def _gather(self, entries: list[Entry | bulk.Run], arcs: bool = True
+                ) -> tuple[int, FloatArray, IntArray, FloatArray, list[dict[str, float]], list[tuple[int, PlanMove]],
+                           list[bulk.Run]]:
+        """A chunk's moves in order, runs of plain lines as blocks and other moves one by
+        one: ``(M, Q1, linenos, R, rot, general, runs)``, every move's nominal target,
+        line, tool vector and rotary positions, the (row, Move) of the moves not read in
+        bulk (with the runs' arcs unless ``arcs`` is False) and the runs (each given its
+        first row, ``trow``)."""
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
         rot: list[dict[str, float]] = []
         general: list[tuple[int, PlanMove]] = []
         M = 0
         runs: list[bulk.Run] = []
-        self._check_units(entries)
         for e in entries:
             if type(e) is bulk.Run:
                 runs.append(e)
                 e.trow = M
                 rot.extend([{}] * len(e))
-                if e.arcs:  # planned as any other arc
+                if e.arcs and arcs:  # planned as any other arc
                     general.extend((M + j, mv) for j, mv in bulk.arc_moves(e))
                 M += len(e)
             elif type(mv := e[1]) is Move:
@@ -531,14 +533,36 @@ class Corrector(EmitterMixin):
             Q1[at] = [m.q1 for _i, m in general]
             lns[at] = [m.lineno for _i, m in general]
             Rt[at] = [m.r for _i, m in general]
+        return M, Q1, lns, Rt, rot, general, runs
+
+    def _read_only(self, entries: list[Entry | bulk.Run]) -> None:
+        """What a chunk read but not corrected carries to the next (a process correcting a
+        later part of the program reads up to it so, :mod:`postproc.gcode.split`): its
+        units checked, the runs' blocks let go of (as :meth:`_chunk` does), and, where the
+        approach directions are the nominal moves' own (no direction-dependent engine or
+        added map), the last nominal target and the direction each axis last moved in."""
+        self._check_units(entries)
+        if not (self.engine.direction_dependent or self.opt.added):
+            M, Q1, lns, _R, _rot, general, _runs = self._gather(entries, arcs=False)
+            if M:
+                Q1, _Q0, D, *_ = self._approach(Q1, lns, general, arc_ends=False)
+                self.prev_nominal = Q1[-1].copy()
+                self.dirs = D[-1].copy()
+        for e in entries:
+            if type(e) is bulk.Run:
+                e.block.runs = []
+
+    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
+        self._check_units(entries)
+        M, Q1, lns, Rt, rot, general, runs = self._gather(entries)
         T: FloatArray = np.zeros((0, 3))
         plans: dict[int, Plan] = {}
         hints: dict[int, ArcHint] = {}
         if M:
             T, plans, hints = self._plan(Q1, lns, Rt, rot, general, runs)
-        for e in runs:
+        for run in runs:
             # arcs the bulk planner did not settle: written one by one by the general emitter
-            e.cut.extend(j for j in e.arcs if e.trow + j not in hints)
+            run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
         emit_move = self._emit_move
@@ -630,38 +654,8 @@ class Corrector(EmitterMixin):
         in bulk (arcs among them; all moves when straight moves may be split).
         """
         M = len(Q1)
-        fixed_rows = [i for i, m in general if m.fixed]
-        fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
-        if fixed_rows:
-            # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it
-            for i in fixed_rows:  # unknown axes: taken as not moving (no approach direction)
-                before = Q1[i - 1] if i > 0 else self.prev_nominal
-                Q1[i] = np.where(np.isnan(Q1[i]), before, Q1[i])
-        Q1 = backfill_unknown(Q1, linenos, self.path)
-        Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
-        Q0 = np.where(np.isnan(Q0), Q1, Q0)
+        Q1, Q0, D, fixed_rows, fixed_q, arc_prm, breaks = self._approach(Q1, linenos, general)
         moves = dict(general)
-        # approach directions: chord signs (end tangent for arcs), carried where zero
-        d = Q1 - Q0
-        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
-        arcs = [(i, m, m.arc) for i, m in general if m.arc is not None]
-        arc_prm = {i: arc_params(arc, m.q0, m.q1) for i, m, arc in arcs}
-        breaks: dict[int, FloatArray] = {}  # of the arcs the general planner cuts (made when needed)
-        # the approach directions at arc ends matter only to a correction that reads them
-        for i, m, arc in arcs if self.engine.direction_dependent or self.opt.added else ():
-            prm = arc_prm[i]
-            br = breaks[i] = quadrant_breaks(prm[1], prm[2])
-            # the approach direction at the end: the motion over the arc's last piece
-            # (between quadrant points every axis moves one way)
-            ends = arc_points(arc, m.q0, m.q1, np.array([float(br[-1]) if len(br) else 0.0, 1.0]), prm)
-            dd = ends[1] - ends[0]
-            sign[i] = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
-        D = np.empty_like(sign)
-        for ax in range(3):
-            col = sign[:, ax]
-            idx = np.where(col != 0, np.arange(M), -1)
-            np.maximum.accumulate(idx, out=idx)
-            D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
         inert = [r.trow + j for r in runs for j in r.inert]
         if fixed_rows or inert:
             live = np.ones(M, dtype=bool)
@@ -726,6 +720,48 @@ class Corrector(EmitterMixin):
         self.prev_target = T[-1].copy()
         self.dirs = D[-1].copy()
         return T, plans, hints
+
+    def _approach(self, Q1: FloatArray, linenos: IntArray, general: list[tuple[int, PlanMove]],
+                  arc_ends: bool = True) -> tuple[FloatArray, FloatArray, FloatArray, list[int], FloatArray | None,
+                                                  dict[int, ArcParams], dict[int, FloatArray]]:
+        """A chunk's nominal targets with the unknown filled, its nominal starts and the
+        approach direction of every move on each axis: ``(Q1, Q0, D, fixed rows, their
+        targets as given, arc_params of the arcs, quadrant breaks of the arcs whose end
+        tangent was taken)``. ``arc_ends`` False: the arcs' end tangents are not taken
+        (chord signs serve where no direction-dependent engine or added map reads them)."""
+        M = len(Q1)
+        fixed_rows = [i for i, m in general if m.fixed]
+        fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
+        if fixed_rows:
+            # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it
+            for i in fixed_rows:  # unknown axes: taken as not moving (no approach direction)
+                before = Q1[i - 1] if i > 0 else self.prev_nominal
+                Q1[i] = np.where(np.isnan(Q1[i]), before, Q1[i])
+        Q1 = backfill_unknown(Q1, linenos, self.path)
+        Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
+        Q0 = np.where(np.isnan(Q0), Q1, Q0)
+        # approach directions: chord signs (end tangent for arcs), carried where zero
+        d = Q1 - Q0
+        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
+        arcs = [(i, m, m.arc) for i, m in general if m.arc is not None] if arc_ends else []
+        arc_prm = {i: arc_params(arc, m.q0, m.q1) for i, m, arc in arcs}
+        breaks: dict[int, FloatArray] = {}  # of the arcs the general planner cuts (made when needed)
+        # the approach directions at arc ends matter only to a correction that reads them
+        for i, m, arc in arcs if self.engine.direction_dependent or self.opt.added else ():
+            prm = arc_prm[i]
+            br = breaks[i] = quadrant_breaks(prm[1], prm[2])
+            # the approach direction at the end: the motion over the arc's last piece
+            # (between quadrant points every axis moves one way)
+            ends = arc_points(arc, m.q0, m.q1, np.array([float(br[-1]) if len(br) else 0.0, 1.0]), prm)
+            dd = ends[1] - ends[0]
+            sign[i] = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
+        D = np.empty_like(sign)
+        for ax in range(3):
+            col = sign[:, ax]
+            idx = np.where(col != 0, np.arange(M), -1)
+            np.maximum.accumulate(idx, out=idx)
+            D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
+        return Q1, Q0, D, fixed_rows, fixed_q, arc_prm, breaks
 
     def _emit_rebase(self, line: str, rb: _Rebase, write: Write) -> None:
         """Write a G92 / G10 L20 / G10 L10-L11 line so that the offset the controller sets
