@@ -65,13 +65,14 @@ class Corrector(Protocol):
             progress: Callable[[int], None] | None = None, source: Any = None, *, skip_until: int = 0,
             boundary: Callable[[int], bool] | None = None) -> CorrectReport: ...
 
-#: a program is split only when it has at least this many chunks
+
+#: a program is cut only when it has at least this many chunks
 MIN_CHUNKS = 8
-#: the chunks the child corrects before S (output thrown away) to settle its state
+#: the chunks a child corrects before its cut (output thrown away) to settle its state
 WARMUP_CHUNKS = 2
 #: the cost of reading a line without correcting it, as a share of correcting it
-#: (measured on the gencam program: about 0.3 with an affine engine, 0.1 with a model
-#: whose moves are sampled); sets where the program is cut so that both parts end together
+#: (measured on the gencam program: 0.36 to 0.4 with an affine engine, about 0.1 with a
+#: model whose moves are sampled); sets where the program is cut so that all parts end together
 READ_SHARE_AFFINE = 0.4
 READ_SHARE_SAMPLED = 0.1
 
