@@ -107,6 +107,12 @@ def _expand_inputs(inputs) -> tuple[list[str], bool]:
     return out, folder
 
 
+def _cores() -> int:
+    """The cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)  # Linux
+    return len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
+
+
 def _progress_printer(total_hint: str):
     def show(n: int) -> None:
         click.echo(f"\r{total_hint}: {n:,} lines", nl=False, err=True)
@@ -124,8 +130,9 @@ def _progress_printer(total_hint: str):
               help="Directory for the corrected programs (same names); for several inputs or a folder.")
 @click.option("-j", "--jobs", default=None, type=click.IntRange(1, 256),
               help="Processes. Several inputs or a folder: this many files at a time [default: 1], ending "
-                   "with a tally of corrected and refused files. One large program (from 40,000 lines, "
-                   "16,000 when moves are split): cut into parts corrected in up to this many processes "
+                   "with a tally of corrected and refused files. One large program (from 40,000 lines; "
+                   "16,000 when the calibration's moves are sampled): cut into parts corrected in up to "
+                   "this many processes "
                    "[default: one per core], with the output of one process; -j 1 keeps it in one.")
 @click.option("--dialect", default="generic", show_default=True,
               type=DIALECT_CHOICE,
@@ -208,7 +215,7 @@ def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subrou
                "extrapolate": extrapolate, "force": force, "cycles": cycles,
                "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
-        processes = jobs if jobs is not None else len(os.sched_getaffinity(0))
+        processes = jobs if jobs is not None else _cores()
         _single(inputs[0], output or "-", calibration, setup, {**options, "processes": processes}, maps)
         return
     if output_dir is None:

@@ -113,7 +113,7 @@ class CorrectOptions:
     cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
-    processes: int = 1  # 2: a large program file is corrected in two processes (postproc.gcode.split)
+    processes: int = 1  # more: a large program file is cut into parts corrected in that many (postproc.gcode.split)
 
 
 @dataclass
@@ -271,7 +271,7 @@ class Corrector(EmitterMixin):
     def run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
             source: deque[tuple[int, str | None]] | None = None, *, skip_until: int = 0,
             boundary: Callable[[int], bool] | None = None) -> CorrectReport:
-        """Correct ``lines`` into ``write``. For a program corrected in two processes
+        """Correct ``lines`` into ``write``. For a program corrected in several processes
         (:mod:`postproc.gcode.split`): the chunks that end at or before line ``skip_until``
         are read but not corrected (the modal state advances, nothing is written), and
         ``boundary(lines read)`` is asked after each chunk: True stops the run there (the
@@ -482,7 +482,6 @@ class Corrector(EmitterMixin):
         return "; ".join(parts)
 
     # -- one chunk ---------------------------------------------------------------------
-    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
     def _check_units(self, entries: list[Entry | bulk.Run]) -> None:
         """Check the output rounding of each unit (mm, inch) the first time a move in it
         comes (:meth:`_check_rounding`)."""
@@ -552,6 +551,7 @@ class Corrector(EmitterMixin):
             if type(e) is bulk.Run:
                 e.block.runs = []
 
+    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
     def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
         self._check_units(entries)
         M, Q1, lns, Rt, rot, general, runs = self._gather(entries)
