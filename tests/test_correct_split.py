@@ -412,3 +412,19 @@ def test_a_program_that_changes_while_it_is_read_is_refused(tmp_path, engines, a
     message, kind = _error(tmp_path, text, engines["static"], 2, 40)
     assert "changed while it was being corrected" in message
     assert agreements == [True]
+
+
+def test_bytes_that_are_not_utf8_after_the_cut(tmp_path, engines, agreements):
+    # a comment in Latin-1 on either side of the cut: the parts go through files of their
+    # own and come back byte for byte
+    text = program(900, seed=61, extra={100: "(CAF\u00c9 1)", 800: "(CAF\u00c9 2)"})
+    src = tmp_path / "p.nc"
+    src.write_bytes(text.encode("latin-1"))
+    outs = []
+    for processes in (1, 2):
+        dst = tmp_path / f"o{processes}.nc"
+        correct_file(src, dst, engines["static"], SETUP, CorrectOptions(processes=processes, chunk_lines=40))
+        outs.append(dst.read_bytes())
+    assert outs[0] == outs[1]
+    assert b"(CAF\xc9 2)" in outs[1]
+    assert agreements == [True]
