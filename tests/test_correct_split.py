@@ -428,3 +428,20 @@ def test_bytes_that_are_not_utf8_after_the_cut(tmp_path, engines, agreements):
     assert outs[0] == outs[1]
     assert b"(CAF\xc9 2)" in outs[1]
     assert agreements == [True]
+
+
+@pytest.mark.parametrize("cal", ["static", "parametric"])
+def test_incremental_moves_across_the_cut(tmp_path, engines, agreements, cal):
+    # G91 for the whole program: an incremental word is the corrected target less the
+    # position written before it, which a child (that corrected nothing before its
+    # window) cannot know: it gives up, and this process corrects the whole program
+    rng = np.random.default_rng(67)
+    lines = ["G90 G21 G54", "G0 X150 Y150 Z5", "G1 Z-1 F800", "G91"]
+    for k in range(1200):
+        dx, dy = rng.normal(0, 0.7, 2)
+        lines.append(f"G1 X{dx:.4f} Y{dy:.4f}" + (f" Z{(-1) ** k * 0.05:.3f}" if k % 7 == 0 else ""))
+    lines += ["G90", "G0 Z20", "M30"]
+    text = "\n".join(lines) + "\n"
+    one = correct(tmp_path, text, engines[cal], 1, 40)
+    assert correct(tmp_path, text, engines[cal], 2, 40) == one
+    assert agreements == [False]
