@@ -91,6 +91,23 @@ def test_diff_keeping_only_the_largest_blocks_reports_what_keeping_all_does():
         kept.largest(16)
 
 
+def test_the_largest_blocks_are_the_first_of_a_stable_sort_by_size():
+    # found without sorting them all: the same rows, ties in the order they came in
+    from postproc.gcode.compare import DiffReport
+
+    rng = np.random.default_rng(20261127)
+    for trial in range(200):
+        m = int(rng.integers(1, 2000))
+        deltas = np.round(rng.normal(0.0, 1.0, size=(m, 3)), int(rng.integers(0, 3)))  # ties
+        if trial % 4 == 0:
+            deltas[:] = deltas[0]  # all equal
+        rep = DiffReport("a", "b")
+        rep.add_moved_rows(np.arange(m), np.arange(m), deltas)
+        want = np.argsort(-np.linalg.norm(deltas, axis=1), kind="stable")
+        for n in (1, 2, 7, m - 1, m, m + 3):
+            assert np.array_equal(rep._largest_order(n), want[:n]), (trial, n)
+
+
 def test_cli_diff_text_report_equals_the_full_comparison(tmp_path):
     """The text report keeps only the blocks it lists; its figures are those of --json."""
     cal = load_calibration(CASES / "demo_static.json")

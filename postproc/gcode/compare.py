@@ -196,7 +196,14 @@ class DiffReport:
         return np.frombuffer(self._deltas, dtype=float).reshape(-1, 3) if self._lines else np.zeros((0, 3))
 
     def _largest_order(self, n: int) -> np.ndarray:
-        return np.argsort(-np.linalg.norm(self._delta_array(), axis=1), kind="stable")[:n]
+        """The rows of the ``n`` largest deltas, largest first, equal ones in the order
+        they came in (the first ``n`` of a stable sort by size, found without sorting all)."""
+        neg = -np.linalg.norm(self._delta_array(), axis=1)
+        if 0 < n < len(neg) and np.isfinite(neg).all():
+            # every row at or above the n-th largest size, then those sorted stably
+            rows = np.flatnonzero(neg <= np.partition(neg, n - 1)[n - 1])
+            return rows[np.argsort(neg[rows], kind="stable")][:n]
+        return np.argsort(neg, kind="stable")[:n]
 
     @property
     def moved(self) -> list[MovedBlock]:
