@@ -445,3 +445,15 @@ def test_incremental_moves_across_the_cut(tmp_path, engines, agreements, cal):
     one = correct(tmp_path, text, engines[cal], 1, 40)
     assert correct(tmp_path, text, engines[cal], 2, 40) == one
     assert agreements == [False]
+
+
+def test_no_process_to_be_had(tmp_path, engines, monkeypatch):
+    # a fork that fails (too many processes, no memory): one process corrects the program
+    text = program(900, seed=71)
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+
+    def refuse(self):
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(multiprocessing.get_context("fork").Process, "start", refuse)
+    assert correct(tmp_path, text, engines["static"], 3, 40) == one

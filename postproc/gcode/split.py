@@ -234,7 +234,10 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
                 # BLAS pool, idle here); the child runs only this package's correcting code
                 warnings.filterwarnings("ignore", message=r".*multi-threaded, use of fork\(\)",
                                         category=DeprecationWarning)
-                child.start()
+                try:
+                    child.start()
+                except OSError as exc:  # no process to be had (EAGAIN, ENOMEM): one process does it
+                    raise Failed(f"no process for a part of the program: {exc}") from None
             send.close()
         agreed = None  # decided at the first boundary at or after S1
 
@@ -344,6 +347,8 @@ def _agree(recv, n: int, c: Corrector) -> bool:
 
 
 def _stop(child) -> None:
+    if child.pid is None:  # never started
+        return
     if child.is_alive():
         child.terminate()
     child.join()
