@@ -343,6 +343,7 @@ def test_three_and_four_processes_write_what_one_writes(tmp_path, engines, monke
 
     monkeypatch.setattr(split, "_starts_at", record)
     text = program(1500, seed=41)
+    monkeypatch.setattr(split, "MIN_GAIN", 0.0)  # as many processes as asked (parts of a window at least)
     for cal in ("static", "parametric"):
         one = correct(tmp_path, text, engines[cal], 1, 40)
         for processes in (3, 4):
@@ -367,7 +368,8 @@ def test_an_error_in_any_of_three_parts(tmp_path, engines, where):
     assert not multiprocessing.active_children()
 
 
-def test_cuts_share_the_work():
+def test_cuts_share_the_work(monkeypatch):
+    monkeypatch.setattr(split, "MIN_GAIN", 0.0)
     for affine, chunk in ((True, 5000), (False, 2000)):
         r = split.READ_SHARE_AFFINE if affine else split.READ_SHARE_SAMPLED
         window = split.WARMUP_CHUNKS * chunk
@@ -457,3 +459,15 @@ def test_no_process_to_be_had(tmp_path, engines, monkeypatch):
 
     monkeypatch.setattr(multiprocessing.get_context("fork").Process, "start", refuse)
     assert correct(tmp_path, text, engines["static"], 3, 40) == one
+
+
+def test_a_process_is_added_only_where_it_gains():
+    # each child repeats the reading of the program before its part: with an affine
+    # calibration (reading 0.4 of correcting) a fourth process would shorten the first
+    # part by less than MIN_GAIN; with a sampled one (0.1) six processes still gain
+    assert len(split.cuts(1_000_000, 5000, True, 64)) + 1 == 3
+    sampled = split.cuts(1_000_000, 2000, False, 64)
+    assert len(sampled) + 1 == 6
+    more = split.cuts(1_000_000, 2000, False, 7)
+    assert more == sampled  # a seventh would gain less than MIN_GAIN
+    assert len(split.cuts(10_000_000, 2000, False, 64)) + 1 <= split.MAX_PROCESSES

@@ -75,6 +75,10 @@ WARMUP_CHUNKS = 2
 #: model whose moves are sampled); sets where the program is cut so that all parts end together
 READ_SHARE_AFFINE = 0.4
 READ_SHARE_SAMPLED = 0.1
+#: a further process is used only where it shortens the first part by this share
+MIN_GAIN = 0.1
+#: and never more processes than this (each holds its own chunk: some 60 MB)
+MAX_PROCESSES = 16
 
 Write = Callable[[str], object]
 
@@ -109,20 +113,26 @@ def cuts(lines: int, chunk: int, affine: bool, processes: int) -> list[int] | No
     first chunk boundary at or after its cut), or None when the program is too short to
     gain. This process corrects S1 lines; child j reads W_j = S_j - (the window) lines at
     the read share r of the cost and corrects the rest of its part: every process's cost
-    equal, S(j+1) = S1 + (1 - r) W_j, the last part ending at the program's end. Fewer
-    processes where a part would be shorter than the window."""
+    equal, S(j+1) = S1 + (1 - r) W_j, the last part ending at the program's end. A process
+    is added only while it shortens the first part by :data:`MIN_GAIN` at least (the
+    reading every child repeats makes each one gain less), and only while no part is
+    shorter than the window."""
+    if lines < MIN_CHUNKS * chunk:
+        return None
     r = READ_SHARE_AFFINE if affine else READ_SHARE_SAMPLED
     window = WARMUP_CHUNKS * chunk
-    for k in range(min(processes, lines // max(1, chunk)), 1, -1):
+    best: list[int] | None = None
+    for k in range(2, min(processes, MAX_PROCESSES) + 1):
         lo, hi = 0.0, float(lines)
         for _ in range(60):  # the last end grows with S1: bisection for the program's end
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if _ends(mid, k, r, window)[-1] < lines else (lo, mid)
         at = [int(x) for x in _ends(hi, k, r, window)[:-1]]
         parts = [b - a for a, b in zip([0, *at], [*at, lines], strict=True)]
-        if lines >= MIN_CHUNKS * chunk and min(parts) >= WARMUP_CHUNKS * chunk:
-            return at
-    return None
+        if min(parts) < window or (best is not None and at[0] > (1.0 - MIN_GAIN) * best[0]):
+            break
+        best = at
+    return best
 
 
 def _ends(s1: float, k: int, r: float, window: int) -> list[float]:
