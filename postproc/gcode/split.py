@@ -373,6 +373,7 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
     it only once the parts before are done, and a pipe holds a few kB), then the report
     of its part, or its error."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
+    _die_with_parent()
     live = False
     told = 0
     try:
@@ -421,6 +422,18 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
             conn.send(("abandoned", None))
     finally:
         conn.close()
+
+
+def _die_with_parent() -> None:
+    """Have the kernel end this process when its parent ends (Linux's PR_SET_PDEATHSIG):
+    a parent killed outright (SIGKILL, SIGTERM) runs no cleanup that would stop it."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # then it ends at its next word to the parent (the pipe is gone)
 
 
 class _Abandon(Exception):
