@@ -471,3 +471,37 @@ def test_a_process_is_added_only_where_it_gains():
     more = split.cuts(1_000_000, 2000, False, 7)
     assert more == sampled  # a seventh would gain less than MIN_GAIN
     assert len(split.cuts(10_000_000, 2000, False, 64)) + 1 <= split.MAX_PROCESSES
+
+
+def test_a_parent_killed_outright_leaves_no_child(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    src = tmp_path / "big.nc"
+    src.write_text(program(110_000, seed=73))
+    cmd = [sys.executable, "-m", "postproc", "correct", str(src), "-c", str(STATIC), "-o", str(tmp_path / "o.nc"),
+           "-j", "2", "--offset", "G54=X0,Y0,Z100", *[a for t in range(1, 5) for a in ("--tool-length", f"{t}=0")]]
+    parent = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children: list[str] = []
+    deadline = time.monotonic() + 30
+    while not children and parent.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+        try:
+            children = Path(f"/proc/{parent.pid}/task/{parent.pid}/children").read_text().split()
+        except OSError:
+            pass
+    if not children:
+        parent.kill()
+        parent.wait()
+        pytest.skip("the run ended before its second process could be seen")
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(os.path.exists(f"/proc/{c}") for c in children):
+        time.sleep(0.05)
+    assert not any(os.path.exists(f"/proc/{c}") for c in children)
+    assert not (tmp_path / "o.nc").exists()
