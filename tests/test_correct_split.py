@@ -13,13 +13,13 @@ import pytest
 
 from postproc.calfile import load_calibration
 from postproc.errors import PostprocError
-from postproc.gcode import split
+from postproc.gcode import forking, split
 from postproc.gcode.interp import NeedsExpansion
 from postproc.gcode.path import Setup
 from postproc.gcode.pipeline import CorrectOptions, Corrector, CorrectReport, correct_file
 from tests.conftest import PARAMETRIC, ROOT
 
-pytestmark = pytest.mark.skipif(not split.usable(), reason="splitting a run needs fork (Linux)")
+pytestmark = pytest.mark.skipif(not forking.available(), reason="splitting a run needs fork (Linux)")
 
 STATIC = ROOT / "calibrations" / "s500_static.json"
 SETUP = Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={t: 0.0 for t in range(1, 5)})
@@ -183,15 +183,17 @@ def test_a_short_program_stays_in_one_process(tmp_path, engines, agreements):
     text = program(100, seed=19)
     assert correct(tmp_path, text, engines["static"], 2, 40) == correct(tmp_path, text, engines["static"], 1, 40)
     assert agreements == []
-    assert split.cut(split.MIN_CHUNKS * 40 - 1, 40, True) is None
+    assert split.cuts(split.MIN_CHUNKS * 40 - 1, 40, True, 2) is None
 
 
 def test_the_cut_balances_the_two_parts():
-    s, w = split.cut(1_000_000, 20_000, True)
+    at = split.cuts(1_000_000, 20_000, True, 2)
+    assert len(at) == 1
+    s = at[0]
+    w = s - split.WARMUP_CHUNKS * 20_000  # where the child starts correcting (run's window)
     r = split.READ_SHARE_AFFINE
     # this process corrects S lines; the child reads W and corrects the rest
     assert abs(s - (r * w + (1_000_000 - w))) < 2
-    assert s - w == split.WARMUP_CHUNKS * 20_000
 
 
 def test_every_report_field_merges():
@@ -349,15 +351,24 @@ def test_three_and_four_processes_write_what_one_writes(tmp_path, engines, monke
         for processes in (3, 4):
             starts.clear()
             assert correct(tmp_path, text, engines[cal], processes, 40) == one
-            assert starts == [True] * (processes - 2)  # every later cut agreed
+            assert starts == [True] * (processes - 1)  # every cut agreed
     assert not multiprocessing.active_children()
 
 
 def test_a_later_cut_that_disagrees_corrects_again_in_one_process(tmp_path, engines, monkeypatch):
     text = program(1500, seed=43)
     one = correct(tmp_path, text, engines["static"], 1, 40)
-    monkeypatch.setattr(split, "_starts_at", lambda recv, end: False)
+    monkeypatch.setattr(split, "MIN_GAIN", 0.0)  # three processes, two cuts
+    starts: list[bool] = []
+    starts_at = split._starts_at
+
+    def first_only(recv, end):  # the first cut as it is, the second taken as disagreeing
+        starts.append(starts_at(recv, end) if not starts else False)
+        return starts[-1]
+
+    monkeypatch.setattr(split, "_starts_at", first_only)
     assert correct(tmp_path, text, engines["static"], 3, 40) == one
+    assert starts == [True, False]
     assert not multiprocessing.active_children()
 
 

@@ -45,9 +45,6 @@ import multiprocessing
 import operator
 import os
 import re
-import signal
-import sys
-import warnings
 from array import array
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -58,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit
+from postproc.gcode import emit, forking
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LENGTH_RE, TOOL_LINE_RE
 from postproc.gcode.path import Setup, iter_source_lines, open_source
@@ -787,8 +784,7 @@ class _ForkedReader:
         """Whether ``reader``'s program is a file large enough to be read so, on a system
         that forks, from a process that may have children (not a daemon, as a
         ``multiprocessing.Pool`` worker is)."""
-        if (sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods()
-                or multiprocessing.current_process().daemon):
+        if not forking.available():
             return False
         path = reader.path
         try:
@@ -801,11 +797,7 @@ class _ForkedReader:
         ctx = multiprocessing.get_context("fork")
         recv, send = ctx.Pipe(duplex=False)
         child = ctx.Process(target=_read_in_child, args=(self._reader, send), daemon=True)
-        with warnings.catch_warnings():
-            # Python 3.12 and later warn of a fork in a process with threads (numpy's BLAS
-            # pool, idle here); the child runs only this package's reading code
-            warnings.filterwarnings("ignore", message=r".*multi-threaded, use of fork\(\)", category=DeprecationWarning)
-            child.start()
+        forking.start(child)
         send.close()
         glob = np.zeros(0, dtype=np.int64)  # the child's key -1 - j is this process's glob[j]
         try:
@@ -843,7 +835,7 @@ _SPLITS_ELSE = re.compile("[\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029]")
 def _read_in_child(reader: _Reader, conn) -> None:
     """The child's side of :class:`_ForkedReader`: send each chunk's rows, with the key
     texts it added, the lines read and the header, then the end or the error."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
+    forking.in_child()
     keys = reader.keys = _Keys()
     texts = keys.texts = []  # the key texts in the order of their keys (-1, -2, ...)
     sent = 0

@@ -1461,7 +1461,8 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
                    count: int | None = None) -> CorrectReport:
     """Correct the lines ``get_lines()`` gives; when the program turns out to need
     expansion, ``restart()`` drops what was written and the expanded program is corrected.
-    ``count``: the number of lines, when the program may be corrected in two processes."""
+    ``count``: the number of lines, when the program may be cut into parts corrected in
+    several processes (:mod:`postproc.gcode.split`)."""
     from postproc.gcode.interp import NeedsExpansion
 
     setup = setup or Setup()
@@ -1478,7 +1479,7 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
             try:
                 return split.run(corrector, get_lines, write, progress, count, options.processes, path)
             except split.Failed:
-                restart()  # the second process failed (not the program): once more, in one
+                restart()  # a process for a part failed (not the program): once more, in one
         return corrector().run(get_lines(), write, progress=progress)
     except NeedsExpansion:
         if not options.expand:
@@ -1526,9 +1527,9 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
     path, _lines = iter_source_lines(Path(source))
     count = None
     if options is not None and options.processes > 1:
-        from postproc.gcode import split
+        from postproc.gcode import forking, split
 
-        if split.usable():
+        if forking.available():
             try:
                 count = split.count_lines(str(source))
             except OSError:

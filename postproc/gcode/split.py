@@ -32,16 +32,14 @@ import dataclasses
 import math
 import multiprocessing
 import os
-import signal
-import sys
 import tempfile
-import warnings
 from collections.abc import Callable, Iterable
 from typing import IO, Any, Protocol
 
 import numpy as np
 
 from postproc.errors import PostprocError
+from postproc.gcode import forking
 
 #: a run's report (:class:`postproc.gcode.pipeline.CorrectReport`, a dataclass)
 CorrectReport = Any
@@ -90,13 +88,6 @@ _CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "r
 _INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup"})
 
 
-def usable() -> bool:
-    """Whether this process may fork a child for a run: Linux with the "fork" start
-    method, not from a daemon process (a ``multiprocessing.Pool`` worker)."""
-    return (sys.platform == "linux" and "fork" in multiprocessing.get_all_start_methods()
-            and not multiprocessing.current_process().daemon)
-
-
 def count_lines(path: str) -> int:
     """The number of lines of the file (a last line without an ending counts)."""
     n = 0
@@ -141,12 +132,6 @@ def _ends(s1: float, k: int, r: float, window: int) -> list[float]:
     for _ in range(k - 1):
         out.append(s1 + (1.0 - r) * max(0.0, out[-1] - window))
     return out
-
-
-def cut(lines: int, chunk: int, affine: bool) -> tuple[int, int] | None:
-    """``(S, W)`` of two processes: the cut, and the line the child corrects from."""
-    at = cuts(lines, chunk, affine, 2)
-    return None if at is None else (at[0], max(0, at[0] - WARMUP_CHUNKS * chunk))
 
 
 def state_of(c: Corrector) -> object:
@@ -239,15 +224,10 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
             child = ctx.Process(target=_child, args=(make, get_lines, part, start, stop, max(0, start - window),
                                                      every, send), daemon=True)
             children.append((child, recv, part))
-            with warnings.catch_warnings():
-                # Python 3.12 and later warn of a fork in a process with threads (numpy's
-                # BLAS pool, idle here); the child runs only this package's correcting code
-                warnings.filterwarnings("ignore", message=r".*multi-threaded, use of fork\(\)",
-                                        category=DeprecationWarning)
-                try:
-                    child.start()
-                except OSError as exc:  # no process to be had (EAGAIN, ENOMEM): one process does it
-                    raise Failed(f"no process for a part of the program: {exc}") from None
+            try:
+                forking.start(child)
+            except OSError as exc:  # no process to be had (EAGAIN, ENOMEM): one process does it
+                raise Failed(f"no process for a part of the program: {exc}") from None
             send.close()
         agreed = None  # decided at the first boundary at or after S1
 
@@ -341,19 +321,13 @@ class Failed(Exception):
 
 
 def _agree(recv, n: int, c: Corrector) -> bool:
-    """Whether the child reached the same boundary ``n`` with this process's state."""
-    try:
-        kind, payload = recv.recv()
-    except EOFError:
-        return False
-    if kind != "split":
-        return False  # the child stopped before S (an error there is this process's to find)
-    at, theirs = payload
+    """Whether the first child started at boundary ``n`` with this process's state there
+    (one that stopped before, or a state that cannot be compared: no)."""
     try:
         mine = state_of(c)
     except TypeError:
         return False
-    return at == n and theirs == mine
+    return _starts_at(recv, (n, mine))
 
 
 def _stop(child) -> None:
@@ -372,8 +346,7 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
     sends the state again; send progress (about every ``every`` lines: the parent reads
     it only once the parts before are done, and a pipe holds a few kB), then the report
     of its part, or its error."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
-    _die_with_parent()
+    forking.in_child()
     live = False
     told = 0
     try:
@@ -422,18 +395,6 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
             conn.send(("abandoned", None))
     finally:
         conn.close()
-
-
-def _die_with_parent() -> None:
-    """Have the kernel end this process when its parent ends (Linux's PR_SET_PDEATHSIG):
-    a parent killed outright (SIGKILL, SIGTERM) runs no cleanup that would stop it."""
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # then it ends at its next word to the parent (the pipe is gone)
 
 
 class _Abandon(Exception):
