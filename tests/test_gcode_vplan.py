@@ -226,7 +226,7 @@ def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch
     new, rep = correct_text(text, static, Setup())
     assert rep.arcs_split > 20  # the hints failed: the arcs were fitted from their plans
     assert lazy == []  # every one of those plans made with the chunk's
-    monkeypatch.setattr(pipeline.Corrector, "_hint_fails_rounded", lambda self, mv, hint, budget: False)
+    monkeypatch.setattr(pipeline.Corrector, "_hints_failing_rounded", lambda self, arcs, budget: set())
     old, _ = correct_text(text, static, Setup())
     assert len(lazy) > 20  # without the guess: one by one
     assert new == old

@@ -788,13 +788,14 @@ class Corrector(EmitterMixin):
         one engine call, for the arcs whose fit comes near the budget (their hints often
         fail when written: rounded centre, written ends) and those whose centre words
         already fail for their corrected ends rounded as words are
-        (:meth:`_hint_fails_rounded`), else when asked for."""
+        (:meth:`_hints_failing_rounded`), else when asked for."""
         budget = self.opt.tolerance_mm * FIT_BUDGET
         near = HINT_PREPLAN_SHARE * budget
         made: dict[int, Plan] = {}
         # a hint is only ever made for an arc (a Move or a RunMove: an ArcMove)
-        marginal = [(i, moves[i]) for i, hint in hints.items()
-                    if hint.worst > near or self._hint_fails_rounded(cast("ArcMove", moves[i]), hint, budget)]
+        fails = self._hints_failing_rounded([(i, cast("ArcMove", moves[i]), hint) for i, hint in hints.items()
+                                             if not hint.worst > near], budget)
+        marginal = [(i, moves[i]) for i, hint in hints.items() if hint.worst > near or i in fails]
         if marginal:
             self._plan_moves(marginal, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, made)
         for i, hint in hints.items():
@@ -803,30 +804,39 @@ class Corrector(EmitterMixin):
             hint.lazy = (self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
                          if plan is None else _given(plan))
 
-    def _hint_fails_rounded(self, mv: ArcMove, hint: ArcHint, budget: float) -> bool:
-        """Whether the hint gives no centre words for the arc's corrected ends rounded to
-        the output's decimals: the end points as written but for the input's own longer
-        decimals and the words added for unnamed axes, so that such a hint most likely
-        fails when written too (an arc whose centre no rounded words put on the bisector
-        of its ends within half a step, e.g. an end's coordinate one odd step beyond the
-        other's across a short chord). A guess for planning only: what is written is
-        settled by the hint or the plan either way."""
-        arc = mv.arc
-        if arc is None:
-            return False
-        axes, _letters = PLANES[arc.plane]
-        unit = mv.unit
-        d = self._decimals.get(unit)
-        if d is None:
-            d = self._decimals[unit] = _unit_decimals(self.opt, unit)
-        shift = mv.shift
-        S, E = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-        for a, s, e in zip(axes, hint.ends[:3], hint.ends[3:], strict=True):
-            S[a] = round((s - shift[a]) / unit, d) * unit + shift[a]
-            E[a] = round((e - shift[a]) / unit, d) * unit + shift[a]
-        a1, a2 = axes[0], axes[1]
-        base = (shift[a1], shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
-        return hint.words(S, E, axes, arc.clockwise, d, unit, base, budget) is None
+    def _hints_failing_rounded(self, arcs: list[tuple[int, ArcMove, ArcHint]], budget: float) -> set[int]:
+        """The rows of the arcs whose hint gives no centre words for their corrected ends
+        rounded to the output's decimals: the end points as written but for the input's
+        own longer decimals and the words added for unnamed axes, so that such a hint most
+        likely fails when written too (an arc whose centre no rounded words put on the
+        bisector of its ends within half a step, e.g. an end's coordinate one odd step
+        beyond the other's across a short chord). A guess for planning only: what is
+        written is settled by the hint or the plan either way. All the arcs are asked at
+        once (:func:`vplan.words_many`); the writer, asking with the same ends, gets the
+        answers given here."""
+        arcs = [(i, mv, hint) for i, mv, hint in arcs if mv.arc is not None]
+        if not arcs:
+            return set()
+        axes = np.array([PLANES[cast("Arc", mv.arc).plane][0] for _i, mv, _h in arcs], dtype=int)
+        unit = np.array([mv.unit for _i, mv, _h in arcs], dtype=float)
+        decimals = self._decimals
+        for u in set(unit.tolist()) - decimals.keys():
+            decimals[u] = _unit_decimals(self.opt, u)
+        d = [decimals[u] for u in unit.tolist()]
+        shift = np.array([mv.shift for _i, mv, _h in arcs], dtype=float)
+        ends = np.array([hint.ends for _i, _mv, hint in arcs], dtype=float)
+        rows = np.arange(len(arcs))[:, None]
+        sh = shift[rows, axes]  # each arc's shift in its plane's order, as its ends
+        u = unit[:, None]
+        # the corrected ends rounded as words are: round((q - shift) / unit, d) * unit + shift
+        S, E = np.empty_like(sh), np.empty_like(sh)
+        S[rows, axes] = vplan.round_many((ends[:, :3] - sh) / u, d) * u + sh
+        E[rows, axes] = vplan.round_many((ends[:, 3:] - sh) / u, d) * u + sh
+        absolute = np.array([mv.arc_absolute for _i, mv, _h in arcs], dtype=bool)[:, None]
+        base = np.where(absolute, sh[:, :2], S[rows, axes[:, :2]])
+        clockwise = [cast("Arc", mv.arc).clockwise for _i, mv, _h in arcs]
+        got = vplan.words_many([h for _i, _mv, h in arcs], S, E, axes, clockwise, d, unit, base, budget)
+        return {i for (i, _mv, _h), w in zip(arcs, got, strict=True) if w is None}
 
     def _lazy_plan(self, i: int, mv: PlanMove, arc_prm: dict[int, ArcParams], breaks: dict[int, FloatArray],
                    Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray, S: FloatArray, T: FloatArray,

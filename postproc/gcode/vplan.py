@@ -191,7 +191,7 @@ class ArcHint:
         arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
         :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
         limits decide)."""
-        # the planner's guess (Corrector._hint_fails_rounded) and the writer usually ask
+        # the planner's guess (Corrector._hints_failing_rounded, by words_many) and the writer usually ask
         # with the same ends: the second time is the first one's answer
         key = (tuple(S), tuple(E), axes, clockwise, d, unit, base, budget)
         last = self._last
@@ -305,6 +305,148 @@ class ArcHint:
 # lattice offsets (per axis, in units of the last decimal), nearest first
 _ORDER = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in range(-LATTICE, LATTICE + 1)),
                       key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
+_ORDER_ARRAY = np.array(_ORDER, dtype=float)
+# lattice candidates :func:`words_many` tries at a time (most arcs that need the lattice
+# find their centre among the first few)
+LATTICE_BLOCK = 8
+
+
+def _map_floats(f: Callable[..., float], *cols: FloatArray) -> FloatArray:
+    """``f`` (a function of Python floats: math.hypot, math.atan2) on every element of ``cols``."""
+    return np.array(list(map(f, *(c.ravel().tolist() for c in cols))), dtype=float).reshape(cols[0].shape)
+
+
+def round_many(values: FloatArray, d: Sequence[int] | IntArray) -> FloatArray:
+    """``round(v, d)`` (Python's, correctly rounded) of every row of ``values`` (k,) or
+    (k, m), each row to its own ``d`` (0 to 15).
+
+    ``rint(v * 10**d) / 10**d``: the quotient of the integer and the exact power of ten
+    is the double nearest the decimal, as Python's is, so the two agree wherever the
+    integer does. The product is rounded once (half a unit in its last place, and the
+    fraction ``y - floor(y)`` is then exact or off by as little), so they agree unless
+    the product lies within a few units of its last place of a half: those values, and
+    any that is not finite or too large to have a fraction, are Python's own."""
+    values = np.asarray(values, dtype=float)
+    dd = np.broadcast_to(np.asarray(d, dtype=int).reshape(-1, *([1] * (values.ndim - 1))), values.shape)
+    p = 10.0 ** dd
+    with np.errstate(all="ignore"):
+        y = values * p
+        out = np.rint(y) / p
+        frac = y - np.floor(y)
+        near = ~(np.abs(frac - 0.5) > 1e-9 + 8.0 * np.spacing(np.abs(y))) | ~(np.abs(y) < 2.0 ** 51)
+    if near.any():
+        idx = np.flatnonzero(near.ravel())
+        flat = out.reshape(-1)
+        flat[idx] = list(map(round, values.ravel()[idx].tolist(), dd.ravel()[idx].tolist()))
+    return out
+
+
+def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: IntArray, clockwise: Sequence[bool],
+               d: Sequence[int], unit: FloatArray, base: FloatArray, budget: float
+               ) -> list[tuple[float, float, float, float] | None]:
+    """:meth:`ArcHint.words` of many arcs at once (row k: ``hints[k].words(S[k], E[k],
+    axes[k], clockwise[k], d[k], unit[k], base[k], budget)``; S, E (k, 3) machine
+    axes, ``axes`` (k, 3), ``base`` (k, 2)): the same results, bit for bit, and each
+    hint left with its answer as :meth:`ArcHint.words` leaves it (the writer asking
+    again with the same ends gets this answer).
+
+    The arithmetic of :meth:`ArcHint._words` and :meth:`ArcHint._bound` over arrays:
+    elementwise ``+ - * /``, ``abs`` and ``%`` (``np.mod`` is Python's floored
+    remainder) round as Python's floats do; ``math.hypot``, ``math.atan2`` and
+    ``round(x, d)`` (which numpy's own functions do not always match in the last bit)
+    are Python's, mapped over the rows. The lattice of rounded centres is searched for
+    all the arcs whose first centre misses the radius agreement at once, in the same
+    order. An arc with a value that is not finite, or whose lattice centre has a word
+    rounded to zero, is answered by :meth:`ArcHint.words` itself."""
+    n = len(hints)
+    out: list[tuple[float, float, float, float] | None] = [None] * n
+    if not n:
+        return out
+    hyp, atan2 = math.hypot, math.atan2
+    rows = np.arange(n)
+    s1, s2, sn = S[rows, axes[:, 0]], S[rows, axes[:, 1]], S[rows, axes[:, 2]]
+    e1, e2, en = E[rows, axes[:, 0]], E[rows, axes[:, 1]], E[rows, axes[:, 2]]
+    B1, B2 = base[:, 0], base[:, 1]
+    H1, H2, RHO, WORST, NSW = np.array([(h.c1, h.c2, h.rho, h.worst, h.nsweep) for h in hints], dtype=float).T
+    u1, u2, un, x1, x2, xn = np.array([h.ends for h in hints], dtype=float).T
+    cw = np.asarray(clockwise, dtype=bool)
+    step = np.array([10.0 ** (-k) for k in d])
+    agree = 0.5 * step * unit
+    with np.errstate(all="ignore"):
+        dx, dy = e1 - s1, e2 - s2
+        L = _map_floats(hyp, dx, dy)
+        Ls = np.where(L == 0.0, 1.0, L)
+        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+        n1, n2 = -dy / Ls, dx / Ls
+        t = (H1 - m1) * n1 + (H2 - m2) * n2
+        # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
+        v1 = round_many((m1 + t * n1 - B1) / unit, d) + 0.0
+        v2 = round_many((m2 + t * n2 - B2) / unit, d) + 0.0
+        w1, w2 = v1, v2
+        C1, C2 = B1 + w1 * unit, B2 + w2 * unit
+        rs = _map_floats(hyp, s1 - C1, s2 - C2)
+        re_ = _map_floats(hyp, e1 - C1, e2 - C2)
+        mism = np.abs(rs - re_)
+        found = mism <= agree
+        lattice = np.zeros(n, dtype=bool)
+        search = np.flatnonzero(~found & (L != 0.0))
+        w1, w2, C1, C2, rs, re_, mism = w1.copy(), w2.copy(), C1.copy(), C2.copy(), rs.copy(), re_.copy(), mism.copy()
+        # the lattice around (v1, v2), nearest first: the first centre whose radii agree
+        # (asked a few candidates at a time, of the arcs still without one)
+        for lo in range(1, len(_ORDER), LATTICE_BLOCK):
+            if not len(search):
+                break
+            k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
+            st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
+            c1w = round_many(v1[search][:, None] + k1 * st, dk)
+            c2w = round_many(v2[search][:, None] + k2 * st, dk)
+            cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
+            ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
+            rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
+            mm = np.abs(rs_c - re_c)
+            agrees = mm <= agree[search][:, None]
+            hit = agrees.any(axis=1)
+            pick = np.argmax(agrees, axis=1)[hit]
+            sel = search[hit]
+            w1[sel], w2[sel] = c1w[hit, pick], c2w[hit, pick]
+            C1[sel], C2[sel] = cc1[hit, pick], cc2[hit, pick]
+            rs[sel], re_[sel], mism[sel] = rs_c[hit, pick], re_c[hit, pick], mm[hit, pick]
+            found[sel] = True
+            lattice[sel] = True
+            search = search[~hit]
+        # ArcHint._bound about (C1, C2)
+        th0 = _map_floats(atan2, s2 - C2, s1 - C1)
+        th1 = _map_floats(atan2, e2 - C2, e1 - C1)
+        turn = np.where(cw, np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
+        sweep = np.where(cw, -turn, turn)
+        moved = _map_floats(hyp, C1 - H1, C2 - H2)
+        shift = np.maximum(_map_floats(hyp, s1 - u1, s2 - u2), _map_floats(hyp, e1 - x1, e2 - x2))
+        bound = WORST + moved + np.maximum(np.abs(rs - RHO), np.abs(re_ - RHO))
+        r_min = np.minimum(np.minimum(rs, re_), RHO)
+        dfrac = 3.0 * (moved + shift) / (r_min * np.abs(sweep))
+        bound = bound + np.maximum(np.abs(sn - un), np.abs(en - xn)) + np.abs(en - sn) * dfrac
+        finite = np.isfinite(np.stack([s1, s2, sn, e1, e2, en, B1, B2, unit, H1, H2, RHO, WORST, NSW, u1, u2, un,
+                                       x1, x2, xn, bound, mism])).all(axis=0)
+        passes = (found & (sweep != 0.0) & ~(np.abs(sweep - NSW) > math.pi / 2) & (r_min > 0.0)
+                  & (bound + mism <= budget) & ~(np.minimum(rs, re_) < MIN_ARC_RADIUS_MM)
+                  & (turn >= MIN_ARC_SWEEP_RAD))
+    # answered here: a chord of no length (None), else every value finite and, for a
+    # lattice centre, no word of zero (whose sign ArcHint._words settles)
+    here = (L == 0.0) | (finite & ~(lattice & ((w1 == 0.0) | (w2 == 0.0))))
+    passes &= L != 0.0
+    Sl, El, axl, cwl, ul, bl = S.tolist(), E.tolist(), axes.tolist(), cw.tolist(), unit.tolist(), base.tolist()
+    for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), w1.tolist(), w2.tolist(),
+                                                      mism.tolist(), bound.tolist(), strict=True)):
+        h = hints[k]
+        ax = tuple(axl[k])
+        b = tuple(bl[k])
+        if ok:
+            got = (wa, wb, mm_k, bd) if p else None
+            h._last = ((tuple(Sl[k]), tuple(El[k]), ax, cwl[k], d[k], ul[k], b, budget), got)
+        else:
+            got = h.words(Sl[k], El[k], ax, cwl[k], d[k], ul[k], b, budget)
+        out[k] = got
+    return out
 
 
 def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
