@@ -27,6 +27,7 @@ from postproc.gcode.segment import (
     bisector_centre,
     bisector_point,
     chord_deviation,
+    chord_exceeds,
     circle_fit,
     r_center,
 )
@@ -508,12 +509,25 @@ class EmitterMixin(Generic[_O, _R]):
             edits, added = self._axis_words(smp.free, smp.Q[b], qn, d)
         ds = float(smp.s[b] - smp.s[a])
         Qs = smp.Qs[2 * a:2 * b + 1]
-        chord = chord_deviation(cur, qn, Qs)
+        # the chord's deviation is measured only where needed: the middle sample alone
+        # often shows it above the limit it is compared with
+        mid = Qs[len(Qs) // 2].tolist()
+        chord: float | None = None
         if mv.arc is not None and smp.P2 is not None:
+            step_mm = 10.0 ** (-d) * mv.unit
+            if chord_exceeds(cur, qn, mid, step_mm):
+                flat = False
+            else:
+                chord = chord_deviation(cur, qn, Qs)
+                flat = chord <= step_mm
             spec = self._exact_arc(mv, mv.arc, plan, cur, qn, Qs, smp.P2[2 * a:2 * b + 1], smp.offset(a, b),
-                                   smp.ss[2 * a:2 * b + 1], chord, last and not edits, d, budget)
+                                   smp.ss[2 * a:2 * b + 1], flat, last and not edits, d, budget)
             if spec is not None:
                 return _Piece("arc", qn, edits, added, ds, spec)
+        if chord is None:
+            if chord_exceeds(cur, qn, mid, budget):
+                return None
+            chord = chord_deviation(cur, qn, Qs)
         if chord <= budget:
             return _Piece("line", qn, edits, added, ds)
         return None
@@ -535,12 +549,13 @@ class EmitterMixin(Generic[_O, _R]):
         return out
 
     def _exact_arc(self, mv: Move, arc: Arc, plan: Plan, S_: Sequence[float], E_: Sequence[float], Qp: np.ndarray,
-                   P2: np.ndarray, offset: np.ndarray, sp: np.ndarray, chord: float, may_keep: bool, d: int,
+                   P2: np.ndarray, offset: np.ndarray, sp: np.ndarray, flat: bool, may_keep: bool, d: int,
                    budget: float) -> ArcSpec | None:
         """The arc from S to E (both as written) that stays within ``budget`` of the
         corrected samples ``Qp`` (``P2``: their plane coordinates; ``offset``: their mean
-        correction, which moves the nominal centre to the first guess; ``chord``: their
-        largest distance from the chord S-E): its centre on the bisector of S and E, the
+        correction, which moves the nominal centre to the first guess; ``flat``: their
+        largest distance from the chord S-E is at most one output step): its centre on the
+        bisector of S and E, the
         written centre (I/J/K, or R where the input used R) chosen among rounded
         candidates so that the start and end radii agree to half the output resolution.
         None if none passes.
@@ -549,7 +564,6 @@ class EmitterMixin(Generic[_O, _R]):
         input's own centre words are kept when their arc still passes (identity keeps
         every input arc as it is)."""
         (a1, a2, an), _letters = PLANES[arc.plane]
-        unit = mv.unit
         S = np.asarray(S_, dtype=float)
         E = np.asarray(E_, dtype=float)
         span = float(sp[-1] - sp[0])
@@ -565,13 +579,12 @@ class EmitterMixin(Generic[_O, _R]):
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
-        step = 10.0 ** (-d)
         S2, E2 = np.array([S[a1], S[a2]]), np.array([E[a1], E[a2]])
         cx, cy = arc.center[a1] + offset[a1], arc.center[a2] + offset[a2]
         centres = []
         if math.hypot(E2[0] - S2[0], E2[1] - S2[1]) > 0.0:
             c0 = np.array([cx, cy])
-            if chord <= step * unit:
+            if flat:
                 # the path bows from the line S-E by less than one output step: a circle
                 # fitted to it is set by the rounding of S and E, not by the path (a centre
                 # kilometres off, or a circle a few steps wide, where the chord is a few

@@ -460,6 +460,25 @@ def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
     return math.sqrt(float(np.add.reduce(d * d, axis=1).max()))
 
 
+def chord_exceeds(S: Sequence[float], E: Sequence[float], q: Sequence[float], limit: float) -> bool:
+    """True when the point q (3,) lies so far from the segment S-E that
+    :func:`chord_deviation` of any points that include q exceeds ``limit``: a cheap
+    test in plain floats that spares the full measure where its answer is known.
+
+    Both this and :func:`chord_deviation` come within a few units in the last place of
+    the coordinates' magnitude of q's exact distance from the segment; the margin, a
+    billionth of that magnitude, is millions of times more. False also where it cannot
+    tell (within the margin, or a value that is not finite)."""
+    s0, s1, s2 = S
+    d0, d1, d2 = E[0] - s0, E[1] - s1, E[2] - s2
+    p0, p1, p2 = q[0] - s0, q[1] - s1, q[2] - s2
+    den = d0 * d0 + d1 * d1 + d2 * d2
+    t = min(max((p0 * d0 + p1 * d1 + p2 * d2) / den, 0.0), 1.0) if den > 0.0 else 0.0
+    r0, r1, r2 = p0 - t * d0, p1 - t * d1, p2 - t * d2
+    scale = max(abs(s0), abs(s1), abs(s2), abs(q[0]), abs(q[1]), abs(q[2])) + math.sqrt(den)
+    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > limit + 1e-9 * (1.0 + scale)
+
+
 def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:
     """Parameters s in (0, 1) where an arc from angle t0 sweeping ``sweep`` passes a
     quadrant point (an in-plane axis reverses there)."""
