@@ -29,6 +29,7 @@ from postproc.gcode.segment import (
     chord_deviation,
     chord_exceeds,
     circle_fit,
+    limited_candidates,
     r_center,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
@@ -619,8 +620,23 @@ class EmitterMixin(Generic[_O, _R]):
         V = (v0 + _lattice(d)).round(d)
         C = base[None, :] + V * unit
         # candidates whose radii disagree are refused unmeasured (their worst is inf)
-        worst, mism, turns = arc_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, controller_limits=True,
-                                            mismatch_limit=agree)
+        meas = limited_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, agree, controller_limits=True)
+        if budget < math.inf:
+            # the measured candidates within the budget (those within the mismatch limit,
+            # not refused); the first of the order below is the best of them when no other
+            # ties with it, and is taken when its written centre is the one measured
+            passing = [w for w in meas.worst if w <= budget]
+            if not passing:
+                return None
+            best = min(passing)
+            if passing.count(best) == 1:
+                k = meas.worst.index(best)
+                j = meas.idx[k]
+                texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
+                if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
+                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": meas.turns[k],
+                            "dev": best, "mismatch": meas.mism[k]}
+        worst, mism, turns = meas.full()
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
