@@ -96,6 +96,32 @@ def _unit_decimals(options: _Options, unit: float) -> int:
     return 5 if unit == MM_PER_INCH else 4
 
 
+# exact powers of ten (10.0 ** k is exact up to 1e22), as numpy's round takes them
+_POW10 = [10.0 ** k for k in range(23)]
+# at and beyond 2**52 every double is a whole number
+_WHOLE = 2.0 ** 52
+
+
+def _np_round(v: float, d: int) -> float:
+    """numpy's round of v to d decimals (0 <= d), as a Python float: the product by 10**d
+    rounded half to even (as Python's round of a float) and divided by 10**d, a zero
+    keeping the product's sign."""
+    if d < len(_POW10):
+        x = v * _POW10[d]
+        if -_WHOLE < x < _WHOLE:
+            return (float(round(x)) or math.copysign(0.0, x)) / _POW10[d]
+    return float(np.round(v, d))
+
+
+def _rounded(v: float, d: int) -> float:
+    """``round(v, d)``, the same number of the same type, at a fraction of the time where
+    v is a numpy float (numpy's round, :func:`_np_round`). (A Python float's round, the
+    correctly rounded decimal, is taken as it is.)"""
+    if type(v) is np.float64:
+        return np.float64(_np_round(float(v), d))
+    return round(v, d)
+
+
 class _Piece:
     """One written segment of a planned move: an exact arc (``spec``) or a line to ``qe``
     (the emitted position after it), the word edits of the move's own line or the words
@@ -205,7 +231,7 @@ class EmitterMixin(Generic[_O, _R]):
                 else:
                     text = fmt(v, dout)
                     edits.append((start, end, text))
-                    val = round(v, dout)  # == float(text): both correctly rounded
+                    val = _rounded(v, dout)
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
             elif not present_only:
                 if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
@@ -580,19 +606,18 @@ class EmitterMixin(Generic[_O, _R]):
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
-        S2, E2 = np.array([S[a1], S[a2]]), np.array([E[a1], E[a2]])
+        S2, E2 = (float(S[a1]), float(S[a2])), (float(E[a1]), float(E[a2]))
         cx, cy = arc.center[a1] + offset[a1], arc.center[a2] + offset[a2]
         centres = []
         if math.hypot(E2[0] - S2[0], E2[1] - S2[1]) > 0.0:
-            c0 = np.array([cx, cy])
             if flat:
                 # the path bows from the line S-E by less than one output step: a circle
                 # fitted to it is set by the rounding of S and E, not by the path (a centre
                 # kilometres off, or a circle a few steps wide, where the chord is a few
                 # steps long). The nominal circle, moved with the correction and its centre
                 # brought onto the bisector, is tried first.
-                centres.append(bisector_point(S2, E2, c0))
-            centres.append(bisector_centre(S2, E2, P2, c0))
+                centres.append(bisector_point(np.array(S2), np.array(E2), np.array([cx, cy])))
+            centres.append(bisector_centre(S2, E2, P2, (cx, cy)))
         else:
             centre = circle_fit(P2)
             centres.append(np.array([cx, cy]) if centre is None or not np.isfinite(centre).all() else centre)
@@ -615,9 +640,11 @@ class EmitterMixin(Generic[_O, _R]):
             spec = self._r_candidates(S, E, centre, axes, arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
                 return spec
-        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
-        v0 = ((centre - base) / unit).round(d)  # ndarray.round: np.round without its wrapper
-        V = (v0 + _lattice(d)).round(d)
+        b1, b2 = (float(mv.shift[a1]), float(mv.shift[a2])) if mv.arc_absolute else (float(S[a1]), float(S[a2]))
+        base = np.array([b1, b2])
+        # ((centre - base) / unit).round(d), element by element as numpy computes it
+        v0 = np.array([_np_round((float(centre[0]) - b1) / unit, d), _np_round((float(centre[1]) - b2) / unit, d)])
+        V = (v0 + _lattice(d)).round(d)  # ndarray.round: np.round without its wrapper
         C = base[None, :] + V * unit
         # candidates whose radii disagree are refused unmeasured (their worst is inf)
         meas = limited_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, agree, controller_limits=True)
@@ -625,17 +652,18 @@ class EmitterMixin(Generic[_O, _R]):
             # the measured candidates within the budget (those within the mismatch limit,
             # not refused); the first of the order below is the best of them when no other
             # ties with it, and is taken when its written centre is the one measured
-            passing = [w for w in meas.worst if w <= budget]
+            worst_l = meas.worst.tolist()
+            passing = [w for w in worst_l if w <= budget]
             if not passing:
                 return None
             best = min(passing)
             if passing.count(best) == 1:
-                k = meas.worst.index(best)
-                j = meas.idx[k]
+                k = worst_l.index(best)
+                j = int(meas.idx[k])
                 texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
                 if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
-                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": meas.turns[k],
-                            "dev": best, "mismatch": meas.mism[k]}
+                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(meas.turns[k]),
+                            "dev": best, "mismatch": float(meas.mism[k])}
         worst, mism, turns = meas.full()
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():

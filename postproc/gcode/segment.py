@@ -245,7 +245,7 @@ MIN_ARC_SWEEP_RAD = 1e-5
 CENTRE_SETTLED_MM = 1e-9
 
 
-def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarray) -> np.ndarray:
+def bisector_centre(S2: Point, E2: Point, P2: np.ndarray, c0: Point) -> np.ndarray:
     """Centre (2,) on the perpendicular bisector of S2-E2 whose circle through both fits
     the points P2 (k, 2) best (least squares on the radial distance); ``c0``: first guess.
 
@@ -263,7 +263,7 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
     n0, n1 = -d1 / L, d0 / L
     n = np.array([n0, n1])
     h = 0.5 * L
-    t = float((np.asarray(c0, dtype=float) - np.array([m0, m1])) @ n)
+    t = float(np.array([float(c0[0]) - m0, float(c0[1]) - m1]) @ n)
     c = np.array([m0 + t * n0, m1 + t * n1])
     # the offsets in an array laid out as P2 - c lays them out (the product with n, by
     # BLAS, depends on the layout)
@@ -395,18 +395,14 @@ class Measured:
     """The candidates of :func:`limited_candidates`: ``mismatch`` (m,) of all; ``sel``
     the candidates within the limit and ``sel_turns`` their turns; ``idx`` those measured
     (within the limit, turning the right way and, with controller limits, within them),
-    ``worst``, ``turns`` and ``mism``: theirs, in plain numbers."""
+    ``worst``, ``turns`` and ``mism``: theirs."""
 
     __slots__ = ("mismatch", "sel", "sel_turns", "idx", "worst", "turns", "mism")
 
     def __init__(self, mismatch: np.ndarray) -> None:
         self.mismatch = mismatch
-        self.sel: list[int] = []
-        self.sel_turns: list[int] = []
-        self.idx: list[int] = []
-        self.worst: list[float] = []
-        self.turns: list[int] = []
-        self.mism: list[float] = []
+        self.sel = self.sel_turns = self.idx = self.turns = np.zeros(0, dtype=int)
+        self.worst = self.mism = np.zeros(0)
 
     def full(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(worst (m,), mismatch (m,), turns (m,))`` as :func:`arc_candidates` gives
@@ -414,10 +410,8 @@ class Measured:
         m = len(self.mismatch)
         worst = np.full(m, np.inf)
         turns = np.zeros(m, dtype=int)
-        if self.sel:
-            turns[self.sel] = self.sel_turns
-            if self.idx:
-                worst[self.idx] = self.worst
+        turns[self.sel] = self.sel_turns
+        worst[self.idx] = self.worst
         return worst, self.mismatch, turns
 
 
@@ -425,55 +419,40 @@ def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: n
                         mismatch: np.ndarray, limit: float, axes: Axes, clockwise: bool, nominal_sweep: float,
                         Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool) -> Measured:
     """:func:`arc_candidates` with a mismatch limit: the few candidates within it are
-    taken one by one in plain floats (their mismatch is finite, so are all their values),
-    with the same operations as numpy's element by element (``%`` is np.mod's floored
-    remainder, ``round`` np.rint's half to even, ``copysign`` np.sign of a nonzero
-    sweep); their angles come from numpy's arctan2 as among all, and the samples are
-    measured with numpy."""
+    taken with the operations :func:`arc_candidates` does on all (element by element the
+    same), and only those that pass its checks are measured."""
     out = Measured(mismatch)
     sel = (mismatch <= limit).nonzero()[0]
     if len(sel) == 0:
         return out
     a1, a2, _an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    ang = np.arctan2(dy[:, sel], dx[:, sel])
-    full_chord = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
+    t0, t1 = np.arctan2(dy[:, sel], dx[:, sel])
+    r0, r1 = rad[:, sel]
+    if clockwise:
+        base = -np.mod(t0 - t1, TWO_PI)
+    else:
+        base = np.mod(t1 - t0, TWO_PI)
     full_sweep = -TWO_PI if clockwise else TWO_PI
-    nsw = abs(nominal_sweep)
-    sel_l: list[int] = sel.tolist()
-    t0s, t1s = ang.tolist()
-    r0s, r1s = rad[:, sel].tolist()
-    cxs, cys = C[sel].T.tolist()
-    ms = mismatch[sel].tolist()
-    idx, turns, mism = out.idx, out.turns, out.mism
-    sel_turns = out.sel_turns
-    # per measured candidate: start angle, |sweep|, start radius, end minus start radius, centre
-    cols: list[list[float]] = [[], [], [], [], [], []]
-    t0k, swk, r0k, drk, cxk, cyk = cols
-    for i, t0, t1, r0, r1, cx, cy, mi in zip(sel_l, t0s, t1s, r0s, r1s, cxs, cys, ms, strict=True):
-        base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
-        if abs(base) < 1e-12 or full_chord:
-            base = full_sweep
-        tr = max(1, round((nsw - abs(base)) / TWO_PI) + 1)
-        sel_turns.append(tr)
-        sweep = base + math.copysign(1.0, base) * (tr - 1) * TWO_PI
-        if abs(sweep - nominal_sweep) > math.pi / 2:
-            continue
-        if controller_limits and (min(r0, r1) < MIN_ARC_RADIUS_MM or abs(sweep) < MIN_ARC_SWEEP_RAD):
-            continue
-        idx.append(i)
-        turns.append(tr)
-        mism.append(mi)
-        t0k.append(t0)
-        swk.append(abs(sweep))
-        r0k.append(r0)
-        drk.append(r1 - r0)
-        cxk.append(cx)
-        cyk.append(cy)
-    out.sel = sel_l
-    if idx:
-        dev = _deviation(S, E, np.array(cols), axes, clockwise, Q, frac_nominal).tolist()
-        out.worst = [dv + mi for dv, mi in zip(dev, mism, strict=True)]
+    if math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM:
+        base = np.full(len(sel), full_sweep)
+    else:
+        base = np.where(np.abs(base) < 1e-12, full_sweep, base)
+    turns = np.maximum(1, np.rint((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
+    sweep = base + np.sign(base) * (turns - 1) * TWO_PI
+    bad = np.abs(sweep - nominal_sweep) > math.pi / 2
+    if controller_limits:
+        bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
+    keep = ~bad
+    out.sel, out.sel_turns = sel, turns
+    idx = out.idx = sel[keep]
+    if len(idx):
+        Cs = C[sel]
+        # per candidate: start angle, |sweep|, start radius, end minus start radius, centre
+        cols = np.array([t0, np.abs(sweep), r0, r1 - r0, Cs[:, 0], Cs[:, 1]])[:, keep]
+        out.turns = turns[keep]
+        out.mism = mismatch[idx]
+        out.worst = _deviation(S, E, cols, axes, clockwise, Q, frac_nominal) + out.mism
     return out
 
 
@@ -538,12 +517,18 @@ def chord_exceeds(S: Sequence[float], E: Sequence[float], q: Sequence[float], li
     billionth of that magnitude, is millions of times more. False also where it cannot
     tell (within the margin, or a value that is not finite)."""
     s0, s1, s2 = S
+    q0, q1, q2 = q
     d0, d1, d2 = E[0] - s0, E[1] - s1, E[2] - s2
-    p0, p1, p2 = q[0] - s0, q[1] - s1, q[2] - s2
+    p0, p1, p2 = q0 - s0, q1 - s1, q2 - s2
     den = d0 * d0 + d1 * d1 + d2 * d2
-    t = min(max((p0 * d0 + p1 * d1 + p2 * d2) / den, 0.0), 1.0) if den > 0.0 else 0.0
+    t = (p0 * d0 + p1 * d1 + p2 * d2) / den if den > 0.0 else 0.0
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
     r0, r1, r2 = p0 - t * d0, p1 - t * d1, p2 - t * d2
-    scale = max(abs(s0), abs(s1), abs(s2), abs(q[0]), abs(q[1]), abs(q[2])) + math.sqrt(den)
+    # the magnitude: at least the largest coordinate and the segment's length
+    scale = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2 + q0 * q0 + q1 * q1 + q2 * q2 + den)
     return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > limit + 1e-9 * (1.0 + scale)
 
 
