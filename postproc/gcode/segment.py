@@ -391,6 +391,11 @@ def limited_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise:
                                Q, frac_nominal, controller_limits)
 
 
+_NO_INDEX = np.zeros(0, dtype=int)
+_NO_VALUE = np.zeros(0)
+_NO_INDEX.flags.writeable = _NO_VALUE.flags.writeable = False
+
+
 class Measured:
     """The candidates of :func:`limited_candidates`: ``mismatch`` (m,) of all; ``sel``
     the candidates within the limit and ``sel_turns`` their turns; ``idx`` those measured
@@ -401,8 +406,8 @@ class Measured:
 
     def __init__(self, mismatch: np.ndarray) -> None:
         self.mismatch = mismatch
-        self.sel = self.sel_turns = self.idx = self.turns = np.zeros(0, dtype=int)
-        self.worst = self.mism = np.zeros(0)
+        self.sel = self.sel_turns = self.idx = self.turns = _NO_INDEX
+        self.worst = self.mism = _NO_VALUE
 
     def full(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(worst (m,), mismatch (m,), turns (m,))`` as :func:`arc_candidates` gives
@@ -419,40 +424,54 @@ def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: n
                         mismatch: np.ndarray, limit: float, axes: Axes, clockwise: bool, nominal_sweep: float,
                         Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool) -> Measured:
     """:func:`arc_candidates` with a mismatch limit: the few candidates within it are
-    taken with the operations :func:`arc_candidates` does on all (element by element the
-    same), and only those that pass its checks are measured."""
+    taken one by one in plain floats (their mismatch is finite, so are all their values),
+    with the same operations as numpy's element by element (``%`` is np.mod's floored
+    remainder, ``round`` np.rint's half to even, the sign of a nonzero sweep np.sign's);
+    their angles come from numpy's arctan2 as among all, and the samples are measured
+    with numpy."""
     out = Measured(mismatch)
     sel = (mismatch <= limit).nonzero()[0]
     if len(sel) == 0:
         return out
     a1, a2, _an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    t0, t1 = np.arctan2(dy[:, sel], dx[:, sel])
-    r0, r1 = rad[:, sel]
-    if clockwise:
-        base = -np.mod(t0 - t1, TWO_PI)
-    else:
-        base = np.mod(t1 - t0, TWO_PI)
+    ang = np.arctan2(dy[:, sel], dx[:, sel])
+    rs = rad[:, sel]
+    full = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
     full_sweep = -TWO_PI if clockwise else TWO_PI
-    if math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM:
-        base = np.full(len(sel), full_sweep)
+    nsw = abs(nominal_sweep)
+    half_pi = math.pi / 2
+    turns: list[int] = []
+    asw: list[float] = []  # |sweep|
+    keep: list[bool] = []
+    for t0, t1, r0, r1 in zip(*ang.tolist(), *rs.tolist(), strict=True):
+        base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
+        if full or -1e-12 < base < 1e-12:
+            base = full_sweep
+        tr = round((nsw - (base if base > 0.0 else -base)) / TWO_PI) + 1
+        if tr < 1:
+            tr = 1
+        sweep = base + (1.0 if base > 0.0 else -1.0) * (tr - 1) * TWO_PI
+        a = sweep if sweep > 0.0 else -sweep
+        turns.append(tr)
+        asw.append(a)
+        off = sweep - nominal_sweep
+        keep.append(not (off > half_pi or -off > half_pi or controller_limits and (
+            r0 < MIN_ARC_RADIUS_MM or r1 < MIN_ARC_RADIUS_MM or a < MIN_ARC_SWEEP_RAD)))
+    out.sel = sel
+    out.sel_turns = np.array(turns)
+    # per candidate: start angle, |sweep|, start radius, end minus start radius, centre
+    cols = np.concatenate([ang[:1], [asw], rs[:1], rs[1:] - rs[:1], C[sel].T])
+    if all(keep):
+        out.idx, out.turns = sel, out.sel_turns
     else:
-        base = np.where(np.abs(base) < 1e-12, full_sweep, base)
-    turns = np.maximum(1, np.rint((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
-    sweep = base + np.sign(base) * (turns - 1) * TWO_PI
-    bad = np.abs(sweep - nominal_sweep) > math.pi / 2
-    if controller_limits:
-        bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    keep = ~bad
-    out.sel, out.sel_turns = sel, turns
-    idx = out.idx = sel[keep]
-    if len(idx):
-        Cs = C[sel]
-        # per candidate: start angle, |sweep|, start radius, end minus start radius, centre
-        cols = np.array([t0, np.abs(sweep), r0, r1 - r0, Cs[:, 0], Cs[:, 1]])[:, keep]
-        out.turns = turns[keep]
-        out.mism = mismatch[idx]
-        out.worst = _deviation(S, E, cols, axes, clockwise, Q, frac_nominal) + out.mism
+        kp = np.array(keep)
+        out.idx, out.turns = sel[kp], out.sel_turns[kp]
+        if not len(out.idx):
+            return out
+        cols = cols[:, kp]
+    out.mism = mismatch[out.idx]
+    out.worst = _deviation(S, E, cols, axes, clockwise, Q, frac_nominal) + out.mism
     return out
 
 
