@@ -582,10 +582,9 @@ class EmitterMixin(Generic[_O, _R]):
         corrected samples ``Qp`` (``P2``: their plane coordinates; ``offset``: their mean
         correction, which moves the nominal centre to the first guess; ``flat``: their
         largest distance from the chord S-E is at most one output step): its centre on the
-        bisector of S and E, the
-        written centre (I/J/K, or R where the input used R) chosen among rounded
-        candidates so that the start and end radii agree to half the output resolution.
-        None if none passes.
+        bisector of S and E, the written centre (I/J/K, or R where the input used R)
+        chosen among rounded candidates so that the start and end radii agree to half the
+        output resolution. None if none passes.
 
         ``may_keep``: the piece is the whole move and its end words are unchanged: the
         input's own centre words are kept when their arc still passes (identity keeps

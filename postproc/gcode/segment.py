@@ -5,7 +5,8 @@
   each rounded candidate centre is judged by how far the arc every controller draws from
   it (LinuxCNC's spiral, or one radius and a jump at the end) strays from the corrected
   samples. The emitter (:mod:`postproc.gcode.emitter`) fits the fewest such arcs, or
-  chords (:func:`chord_deviation`), through each move's samples. Where the path bows
+  chords (:func:`chord_deviation`; :func:`chord_exceeds` spares it where one sample
+  settles the answer), through each move's samples. Where the path bows
   from its chord by less than one output step the fitted centre means nothing and the
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
