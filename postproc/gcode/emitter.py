@@ -27,7 +27,9 @@ from postproc.gcode.segment import (
     bisector_centre,
     bisector_point,
     chord_deviation,
+    chord_exceeds,
     circle_fit,
+    limited_candidates,
     r_center,
 )
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
@@ -92,6 +94,32 @@ def _unit_decimals(options: _Options, unit: float) -> int:
     if options.decimals is not None:
         return options.decimals
     return 5 if unit == MM_PER_INCH else 4
+
+
+# exact powers of ten (10.0 ** k is exact up to 1e22), as numpy's round takes them
+_POW10 = [10.0 ** k for k in range(23)]
+# at and beyond 2**52 every double is a whole number
+_WHOLE = 2.0 ** 52
+
+
+def _np_round(v: float, d: int) -> float:
+    """numpy's round of v to d decimals (0 <= d), as a Python float: the product by 10**d
+    rounded half to even (as Python's round of a float) and divided by 10**d, a zero
+    keeping the product's sign."""
+    if d < len(_POW10):
+        x = v * _POW10[d]
+        if -_WHOLE < x < _WHOLE:
+            return (float(round(x)) or math.copysign(0.0, x)) / _POW10[d]
+    return float(np.round(v, d))
+
+
+def _rounded(v: float, d: int) -> float:
+    """``round(v, d)``, the same number of the same type, at a fraction of the time where
+    v is a numpy float (numpy's round, :func:`_np_round`). (A Python float's round, the
+    correctly rounded decimal, is taken as it is.)"""
+    if type(v) is np.float64:
+        return np.float64(_np_round(float(v), d))
+    return round(v, d)
 
 
 class _Piece:
@@ -203,7 +231,7 @@ class EmitterMixin(Generic[_O, _R]):
                 else:
                     text = fmt(v, dout)
                     edits.append((start, end, text))
-                    val = round(v, dout)  # == float(text): both correctly rounded
+                    val = _rounded(v, dout)
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
             elif not present_only:
                 if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
@@ -508,12 +536,25 @@ class EmitterMixin(Generic[_O, _R]):
             edits, added = self._axis_words(smp.free, smp.Q[b], qn, d)
         ds = float(smp.s[b] - smp.s[a])
         Qs = smp.Qs[2 * a:2 * b + 1]
-        chord = chord_deviation(cur, qn, Qs)
+        # the chord's deviation is measured only where needed: the middle sample alone
+        # often shows it above the limit it is compared with
+        mid = Qs[len(Qs) // 2].tolist()
+        chord: float | None = None
         if mv.arc is not None and smp.P2 is not None:
+            step_mm = 10.0 ** (-d) * mv.unit
+            if chord_exceeds(cur, qn, mid, step_mm):
+                flat = False
+            else:
+                chord = chord_deviation(cur, qn, Qs)
+                flat = chord <= step_mm
             spec = self._exact_arc(mv, mv.arc, plan, cur, qn, Qs, smp.P2[2 * a:2 * b + 1], smp.offset(a, b),
-                                   smp.ss[2 * a:2 * b + 1], chord, last and not edits, d, budget)
+                                   smp.ss[2 * a:2 * b + 1], flat, last and not edits, d, budget)
             if spec is not None:
                 return _Piece("arc", qn, edits, added, ds, spec)
+        if chord is None:
+            if chord_exceeds(cur, qn, mid, budget):
+                return None
+            chord = chord_deviation(cur, qn, Qs)
         if chord <= budget:
             return _Piece("line", qn, edits, added, ds)
         return None
@@ -535,21 +576,20 @@ class EmitterMixin(Generic[_O, _R]):
         return out
 
     def _exact_arc(self, mv: Move, arc: Arc, plan: Plan, S_: Sequence[float], E_: Sequence[float], Qp: np.ndarray,
-                   P2: np.ndarray, offset: np.ndarray, sp: np.ndarray, chord: float, may_keep: bool, d: int,
+                   P2: np.ndarray, offset: np.ndarray, sp: np.ndarray, flat: bool, may_keep: bool, d: int,
                    budget: float) -> ArcSpec | None:
         """The arc from S to E (both as written) that stays within ``budget`` of the
         corrected samples ``Qp`` (``P2``: their plane coordinates; ``offset``: their mean
-        correction, which moves the nominal centre to the first guess; ``chord``: their
-        largest distance from the chord S-E): its centre on the bisector of S and E, the
-        written centre (I/J/K, or R where the input used R) chosen among rounded
-        candidates so that the start and end radii agree to half the output resolution.
-        None if none passes.
+        correction, which moves the nominal centre to the first guess; ``flat``: their
+        largest distance from the chord S-E is at most one output step): its centre on the
+        bisector of S and E, the written centre (I/J/K, or R where the input used R)
+        chosen among rounded candidates so that the start and end radii agree to half the
+        output resolution. None if none passes.
 
         ``may_keep``: the piece is the whole move and its end words are unchanged: the
         input's own centre words are kept when their arc still passes (identity keeps
         every input arc as it is)."""
         (a1, a2, an), _letters = PLANES[arc.plane]
-        unit = mv.unit
         S = np.asarray(S_, dtype=float)
         E = np.asarray(E_, dtype=float)
         span = float(sp[-1] - sp[0])
@@ -565,20 +605,18 @@ class EmitterMixin(Generic[_O, _R]):
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
                     return {"form": "keep", "turns": int(turns[0])}
-        step = 10.0 ** (-d)
-        S2, E2 = np.array([S[a1], S[a2]]), np.array([E[a1], E[a2]])
+        S2, E2 = (float(S[a1]), float(S[a2])), (float(E[a1]), float(E[a2]))
         cx, cy = arc.center[a1] + offset[a1], arc.center[a2] + offset[a2]
         centres = []
         if math.hypot(E2[0] - S2[0], E2[1] - S2[1]) > 0.0:
-            c0 = np.array([cx, cy])
-            if chord <= step * unit:
+            if flat:
                 # the path bows from the line S-E by less than one output step: a circle
                 # fitted to it is set by the rounding of S and E, not by the path (a centre
                 # kilometres off, or a circle a few steps wide, where the chord is a few
                 # steps long). The nominal circle, moved with the correction and its centre
                 # brought onto the bisector, is tried first.
-                centres.append(bisector_point(S2, E2, c0))
-            centres.append(bisector_centre(S2, E2, P2, c0))
+                centres.append(bisector_point(np.array(S2), np.array(E2), np.array([cx, cy])))
+            centres.append(bisector_centre(S2, E2, P2, (cx, cy)))
         else:
             centre = circle_fit(P2)
             centres.append(np.array([cx, cy]) if centre is None or not np.isfinite(centre).all() else centre)
@@ -601,13 +639,31 @@ class EmitterMixin(Generic[_O, _R]):
             spec = self._r_candidates(S, E, centre, axes, arc.clockwise, nsw, Qp, frac, d, unit, budget)
             if spec is not None:
                 return spec
-        base = np.array([mv.shift[a1], mv.shift[a2]]) if mv.arc_absolute else S[[a1, a2]]
-        v0 = ((centre - base) / unit).round(d)  # ndarray.round: np.round without its wrapper
-        V = (v0 + _lattice(d)).round(d)
+        b1, b2 = (float(mv.shift[a1]), float(mv.shift[a2])) if mv.arc_absolute else (float(S[a1]), float(S[a2]))
+        base = np.array([b1, b2])
+        # ((centre - base) / unit).round(d), element by element as numpy computes it
+        v0 = np.array([_np_round((float(centre[0]) - b1) / unit, d), _np_round((float(centre[1]) - b2) / unit, d)])
+        V = (v0 + _lattice(d)).round(d)  # ndarray.round: np.round without its wrapper
         C = base[None, :] + V * unit
         # candidates whose radii disagree are refused unmeasured (their worst is inf)
-        worst, mism, turns = arc_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, controller_limits=True,
-                                            mismatch_limit=agree)
+        meas = limited_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, agree, controller_limits=True)
+        if budget < math.inf:
+            # the measured candidates within the budget (those within the mismatch limit,
+            # not refused); the first of the order below is the best of them when no other
+            # ties with it, and is taken when its written centre is the one measured
+            worst_l = meas.worst.tolist()
+            passing = [w for w in worst_l if w <= budget]
+            if not passing:
+                return None
+            best = min(passing)
+            if passing.count(best) == 1:
+                k = worst_l.index(best)
+                j = int(meas.idx[k])
+                texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
+                if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
+                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(meas.turns[k]),
+                            "dev": best, "mismatch": float(meas.mism[k])}
+        worst, mism, turns = meas.full()
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None

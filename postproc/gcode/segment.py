@@ -5,7 +5,8 @@
   each rounded candidate centre is judged by how far the arc every controller draws from
   it (LinuxCNC's spiral, or one radius and a jump at the end) strays from the corrected
   samples. The emitter (:mod:`postproc.gcode.emitter`) fits the fewest such arcs, or
-  chords (:func:`chord_deviation`), through each move's samples. Where the path bows
+  chords (:func:`chord_deviation`; :func:`chord_exceeds` spares it where one sample
+  settles the answer), through each move's samples. Where the path bows
   from its chord by less than one output step the fitted centre means nothing and the
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
@@ -245,35 +246,47 @@ MIN_ARC_SWEEP_RAD = 1e-5
 CENTRE_SETTLED_MM = 1e-9
 
 
-def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarray) -> np.ndarray:
+def bisector_centre(S2: Point, E2: Point, P2: np.ndarray, c0: Point) -> np.ndarray:
     """Centre (2,) on the perpendicular bisector of S2-E2 whose circle through both fits
     the points P2 (k, 2) best (least squares on the radial distance); ``c0``: first guess.
 
     Gauss-Newton on the one free parameter, the signed distance ``t`` of the centre
-    from the chord's midpoint along the bisector."""
-    M = 0.5 * (S2 + E2)
-    D = E2 - S2
-    L = math.hypot(D[0], D[1])
+    from the chord's midpoint along the bisector. The two-element vectors are plain
+    floats (element by element the operations numpy does on them); the samples' arrays
+    are written in place."""
+    s0, s1 = float(S2[0]), float(S2[1])
+    e0, e1 = float(E2[0]), float(E2[1])
+    m0, m1 = 0.5 * (s0 + e0), 0.5 * (s1 + e1)
+    d0, d1 = e0 - s0, e1 - s1
+    L = math.hypot(d0, d1)
     if L == 0.0:
         return np.asarray(c0, dtype=float)
-    n = np.array([-D[1], D[0]]) / L
+    n0, n1 = -d1 / L, d0 / L
+    n = np.array([n0, n1])
     h = 0.5 * L
-    t = float((np.asarray(c0, dtype=float) - M) @ n)
-    m0, m1 = float(M[0]), float(M[1])
-    n0, n1 = float(n[0]), float(n[1])
-    c = np.empty(2)
-    for _ in range(12):
-        # the centre M + t n, element by element as numpy computes it
-        c[0] = m0 + t * n0
-        c[1] = m1 + t * n1
-        v = P2 - c
-        dist = np.hypot(v[:, 0], v[:, 1])
-        dist = np.where(dist > 0, dist, 1e-300)
+    t = float(np.array([float(c0[0]) - m0, float(c0[1]) - m1]) @ n)
+    c = np.array([m0 + t * n0, m1 + t * n1])
+    # the offsets in an array laid out as P2 - c lays them out (the product with n, by
+    # BLAS, depends on the layout)
+    v = P2 - c
+    vx, vy = v[:, 0], v[:, 1]
+    res = np.empty(len(P2))
+    for it in range(12):
+        if it:
+            # the centre M + t n, element by element as numpy computes it
+            c[0] = m0 + t * n0
+            c[1] = m1 + t * n1
+            np.subtract(P2, c, out=v)
+        dist = np.hypot(vx, vy)
+        if not np.minimum.reduce(dist) > 0.0:  # a sample on the centre (or not finite)
+            dist = np.where(dist > 0, dist, 1e-300)
         rho = math.hypot(h, t)
-        res = dist - rho
+        np.subtract(dist, rho, out=res)
         # minus the Jacobian, -J = (v . n) / dist + t / rho: negating a rounded result is
         # exact, so the step is the same as with J itself
-        mJ = (v @ n) / dist + t / rho
+        mJ = v @ n
+        np.divide(mJ, dist, out=mJ)
+        np.add(mJ, t / rho, out=mJ)
         den = float(mJ @ mJ)
         if den <= 0.0:
             break
@@ -288,7 +301,7 @@ def bisector_centre(S2: np.ndarray, E2: np.ndarray, P2: np.ndarray, c0: np.ndarr
         # the steps are taken.)
         if abs(dt) <= CENTRE_SETTLED_MM:
             break
-    return M + t * n
+    return np.array([m0 + t * n0, m1 + t * n1])
 
 
 def bisector_point(S2: np.ndarray, E2: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -343,7 +356,7 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     mismatch = np.abs(r1 - r0)
     if mismatch_limit is not None:
         return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
-                                   Q, frac_nominal, controller_limits)
+                                   Q, frac_nominal, controller_limits).full()
     ang = np.arctan2(dy, dx)
     t0, t1 = ang[0], ang[1]
     if clockwise:
@@ -359,72 +372,126 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     bad = np.abs(sweep - nominal_sweep) > math.pi / 2
     if controller_limits:
         bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    dev = _deviation(S, E, C, t0, sweep, r0, r1, axes, clockwise, Q, frac_nominal)
+    dev = _deviation(S, E, np.array([t0, np.abs(sweep), r0, r1 - r0, C[:, 0], C[:, 1]]), axes, clockwise, Q,
+                     frac_nominal)
     return np.where(bad, np.inf, dev + mismatch), mismatch, turns
+
+
+def limited_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: bool, nominal_sweep: float,
+                       Q: np.ndarray, frac_nominal: np.ndarray, mismatch_limit: float,
+                       controller_limits: bool = False) -> Measured:
+    """:func:`arc_candidates` with a mismatch limit, its results as they come (see
+    :class:`Measured`)."""
+    a1, a2, _an = axes
+    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
+    dx = np.array([[S[a1]], [E[a1]]]) - C[:, 0]
+    dy = np.array([[S[a2]], [E[a2]]]) - C[:, 1]
+    rad = np.hypot(dx, dy)
+    mismatch = np.abs(rad[1] - rad[0])
+    return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
+                               Q, frac_nominal, controller_limits)
+
+
+_NO_INDEX = np.zeros(0, dtype=int)
+_NO_VALUE = np.zeros(0)
+_NO_INDEX.flags.writeable = _NO_VALUE.flags.writeable = False
+
+
+class Measured:
+    """The candidates of :func:`limited_candidates`: ``mismatch`` (m,) of all; ``sel``
+    the candidates within the limit and ``sel_turns`` their turns; ``idx`` those measured
+    (within the limit, turning the right way and, with controller limits, within them),
+    ``worst``, ``turns`` and ``mism``: theirs."""
+
+    __slots__ = ("mismatch", "sel", "sel_turns", "idx", "worst", "turns", "mism")
+
+    def __init__(self, mismatch: np.ndarray) -> None:
+        self.mismatch = mismatch
+        self.sel = self.sel_turns = self.idx = self.turns = _NO_INDEX
+        self.worst = self.mism = _NO_VALUE
+
+    def full(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(worst (m,), mismatch (m,), turns (m,))`` as :func:`arc_candidates` gives
+        them: inf and 0 turns for the candidates beyond the limit, inf for those refused."""
+        m = len(self.mismatch)
+        worst = np.full(m, np.inf)
+        turns = np.zeros(m, dtype=int)
+        turns[self.sel] = self.sel_turns
+        worst[self.idx] = self.worst
+        return worst, self.mismatch, turns
 
 
 def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: np.ndarray, rad: np.ndarray,
                         mismatch: np.ndarray, limit: float, axes: Axes, clockwise: bool, nominal_sweep: float,
-                        Q: np.ndarray, frac_nominal: np.ndarray,
-                        controller_limits: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool) -> Measured:
     """:func:`arc_candidates` with a mismatch limit: the few candidates within it are
     taken one by one in plain floats (their mismatch is finite, so are all their values),
     with the same operations as numpy's element by element (``%`` is np.mod's floored
-    remainder, ``round`` np.rint's half to even, ``copysign`` np.sign of a nonzero
-    sweep); their angles come from numpy's arctan2 as among all, and the samples are
-    measured with numpy."""
-    m = len(C)
-    worst = np.full(m, np.inf)
-    turns = np.zeros(m, dtype=int)
-    sel = np.flatnonzero(mismatch <= limit)
+    remainder, ``round`` np.rint's half to even, the sign of a nonzero sweep np.sign's);
+    their angles come from numpy's arctan2 as among all, and the samples are measured
+    with numpy."""
+    out = Measured(mismatch)
+    sel = (mismatch <= limit).nonzero()[0]
     if len(sel) == 0:
-        return worst, mismatch, turns
+        return out
     a1, a2, _an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
     ang = np.arctan2(dy[:, sel], dx[:, sel])
-    full_chord = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
+    rs = rad[:, sel]
+    full = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
     full_sweep = -TWO_PI if clockwise else TWO_PI
     nsw = abs(nominal_sweep)
-    idx, t0k, swk, r0k, r1k = [], [], [], [], []
-    for i, t0, t1, r0, r1 in zip(sel.tolist(), ang[0].tolist(), ang[1].tolist(), rad[0, sel].tolist(),
-                                 rad[1, sel].tolist(), strict=True):
+    half_pi = math.pi / 2
+    turns: list[int] = []
+    asw: list[float] = []  # |sweep|
+    keep: list[bool] = []
+    for t0, t1, r0, r1 in zip(*ang.tolist(), *rs.tolist(), strict=True):
         base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
-        if abs(base) < 1e-12 or full_chord:
+        if full or -1e-12 < base < 1e-12:
             base = full_sweep
-        tr = max(1, round((nsw - abs(base)) / TWO_PI) + 1)
-        turns[i] = tr
-        sweep = base + math.copysign(1.0, base) * (tr - 1) * TWO_PI
-        if abs(sweep - nominal_sweep) > math.pi / 2:
-            continue
-        if controller_limits and (min(r0, r1) < MIN_ARC_RADIUS_MM or abs(sweep) < MIN_ARC_SWEEP_RAD):
-            continue
-        idx.append(i)
-        t0k.append(t0)
-        swk.append(sweep)
-        r0k.append(r0)
-        r1k.append(r1)
-    if idx:
-        worst[idx] = _deviation(S, E, C[idx], np.array(t0k), np.array(swk), np.array(r0k), np.array(r1k), axes,
-                                clockwise, Q, frac_nominal) + mismatch[idx]
-    return worst, mismatch, turns
+        tr = round((nsw - (base if base > 0.0 else -base)) / TWO_PI) + 1
+        if tr < 1:
+            tr = 1
+        sweep = base + (1.0 if base > 0.0 else -1.0) * (tr - 1) * TWO_PI
+        a = sweep if sweep > 0.0 else -sweep
+        turns.append(tr)
+        asw.append(a)
+        off = sweep - nominal_sweep
+        keep.append(not (off > half_pi or -off > half_pi or controller_limits and (
+            r0 < MIN_ARC_RADIUS_MM or r1 < MIN_ARC_RADIUS_MM or a < MIN_ARC_SWEEP_RAD)))
+    out.sel = sel
+    out.sel_turns = np.array(turns)
+    # per candidate: start angle, |sweep|, start radius, end minus start radius, centre
+    cols = np.concatenate([ang[:1], [asw], rs[:1], rs[1:] - rs[:1], C[sel].T])
+    if all(keep):
+        out.idx, out.turns = sel, out.sel_turns
+    else:
+        kp = np.array(keep)
+        out.idx, out.turns = sel[kp], out.sel_turns[kp]
+        if not len(out.idx):
+            return out
+        cols = cols[:, kp]
+    out.mism = mismatch[out.idx]
+    out.worst = _deviation(S, E, cols, axes, clockwise, Q, frac_nominal) + out.mism
+    return out
 
 
-def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndarray, r0: np.ndarray,
-               r1: np.ndarray, axes: Axes, clockwise: bool, Q: np.ndarray, frac_nominal: np.ndarray) -> np.ndarray:
+def _deviation(S: Point, E: Point, cols: np.ndarray, axes: Axes, clockwise: bool, Q: np.ndarray,
+               frac_nominal: np.ndarray) -> np.ndarray:
     """Largest distance (m,) of the samples Q (k, 3) from the spiral a controller draws
-    around each centre C (m, 2) from angle ``t0`` sweeping ``sweep``, radius ``r0`` to
-    ``r1`` (see :func:`arc_candidates`)."""
+    around each of m centres, ``cols`` (6, m): its start angle, |sweep|, start radius,
+    end minus start radius and the centre's plane coordinates (see :func:`arc_candidates`)."""
     a1, a2, an = axes
-    v1 = Q[:, a1] - C[:, 0:1]
-    v2 = Q[:, a2] - C[:, 1:2]
-    asw = np.abs(sweep)[:, None]
+    t0, asw, r0, dr, cx, cy = cols[:, :, None]
+    v1 = Q[:, a1] - cx
+    v2 = Q[:, a2] - cy
     # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly);
     # the arithmetic in place (the same operations, fewer temporary arrays)
     phi = np.arctan2(v2, v1)
     if clockwise:
-        alpha = np.subtract(t0[:, None], phi, out=phi)
+        alpha = np.subtract(t0, phi, out=phi)
     else:
-        alpha = np.subtract(phi, t0[:, None], out=phi)
+        alpha = np.subtract(phi, t0, out=phi)
     np.mod(alpha, TWO_PI, out=alpha)
     turn = frac_nominal * asw  # the target angle, then the turns to add
     np.subtract(turn, alpha, out=turn)
@@ -433,14 +500,14 @@ def _deviation(S: Point, E: Point, C: np.ndarray, t0: np.ndarray, sweep: np.ndar
     np.multiply(turn, TWO_PI, out=turn)
     np.add(alpha, turn, out=alpha)
     frac = np.divide(alpha, asw, out=alpha)
-    rad = (r1 - r0)[:, None] * frac
-    np.add(r0[:, None], rad, out=rad)
+    rad = dr * frac
+    np.add(r0, rad, out=rad)
     nrm = (E[an] - S[an]) * frac
     np.add(S[an], nrm, out=nrm)
     np.subtract(Q[:, an], nrm, out=nrm)
     radial = np.hypot(v1, v2, out=v1)
     np.subtract(radial, rad, out=radial)
-    dev: np.ndarray = np.hypot(radial, nrm, out=radial).max(axis=1)
+    dev: np.ndarray = np.maximum.reduce(np.hypot(radial, nrm, out=radial), axis=1)
     return dev
 
 
@@ -458,6 +525,31 @@ def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
     # the largest norm of the rows: numpy's norm sums the squares as add.reduce does, and
     # the root of the largest sum is the largest root (both correctly rounded)
     return math.sqrt(float(np.add.reduce(d * d, axis=1).max()))
+
+
+def chord_exceeds(S: Sequence[float], E: Sequence[float], q: Sequence[float], limit: float) -> bool:
+    """True when the point q (3,) lies so far from the segment S-E that
+    :func:`chord_deviation` of any points that include q exceeds ``limit``: a cheap
+    test in plain floats that spares the full measure where its answer is known.
+
+    Both this and :func:`chord_deviation` come within a few units in the last place of
+    the coordinates' magnitude of q's exact distance from the segment; the margin, a
+    billionth of that magnitude, is millions of times more. False also where it cannot
+    tell (within the margin, or a value that is not finite)."""
+    s0, s1, s2 = S
+    q0, q1, q2 = q
+    d0, d1, d2 = E[0] - s0, E[1] - s1, E[2] - s2
+    p0, p1, p2 = q0 - s0, q1 - s1, q2 - s2
+    den = d0 * d0 + d1 * d1 + d2 * d2
+    t = (p0 * d0 + p1 * d1 + p2 * d2) / den if den > 0.0 else 0.0
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    r0, r1, r2 = p0 - t * d0, p1 - t * d1, p2 - t * d2
+    # the magnitude: at least the largest coordinate and the segment's length
+    scale = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2 + q0 * q0 + q1 * q1 + q2 * q2 + den)
+    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > limit + 1e-9 * (1.0 + scale)
 
 
 def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:

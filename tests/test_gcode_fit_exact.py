@@ -1,0 +1,169 @@
+"""The fit's cheap shortcuts give the answers of the full measures they spare."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from postproc.gcode.segment import chord_deviation, chord_exceeds
+
+
+def _chord_cases(seed: int, n: int = 400):
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        scale = 10.0 ** rng.uniform(-3, 3)
+        S = rng.uniform(-500, 500, 3)
+        E = S + rng.normal(0, scale, 3) * (i % 7 != 0)  # every seventh: S == E
+        k = int(rng.integers(1, 40))
+        s = np.sort(rng.uniform(0, 1, k))
+        Q = S + s[:, None] * (E - S) + rng.normal(0, 10.0 ** rng.uniform(-6, 0), (k, 3))
+        yield S.tolist(), E.tolist(), Q
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_chord_exceeds_never_contradicts_chord_deviation(seed):
+    told = 0
+    for S, E, Q in _chord_cases(seed):
+        full = chord_deviation(S, E, Q)
+        for j in (0, len(Q) // 2, len(Q) - 1):
+            q = Q[j].tolist()
+            exact = chord_deviation(S, E, Q[j:j + 1])
+            for limit in (0.0, 0.5 * exact, exact * (1 - 1e-6), exact, exact * (1 + 1e-12), 2 * exact, 1e-4):
+                if chord_exceeds(S, E, q, limit):
+                    told += 1
+                    assert full > limit
+                    assert not full <= limit
+    assert told > 1000  # the test spares the measure in most cases far from the limit
+
+
+def test_chord_exceeds_is_false_where_it_cannot_tell():
+    S, E = [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]
+    assert not chord_exceeds(S, E, [0.5, math.nan, 0.0], 0.1)
+    assert not chord_exceeds(S, E, [0.5, math.inf, 0.0], 0.1)
+    assert not chord_exceeds(S, [math.inf, 0.0, 0.0], [0.5, 1.0, 0.0], 0.1)
+    # at the limit itself, within the margin
+    assert not chord_exceeds(S, E, [0.5, 0.1, 0.0], 0.1)
+    assert chord_exceeds(S, E, [0.5, 0.1 + 1e-6, 0.0], 0.1)
+    # beyond the ends the distance is to the nearer end; a point on the segment is at 0
+    assert chord_exceeds(S, E, [2.0, 0.0, 0.0], 0.99)
+    assert not chord_exceeds(S, E, [0.3, 0.0, 0.0], 0.0)
+    # S == E: the distance from the point
+    assert chord_exceeds(S, S, [0.0, 0.0, 0.2], 0.1)
+
+
+# -- the measures rewritten with less overhead, against their old text (fit_reference) ---------
+
+def _arc_cases(seed: int, n: int = 300):
+    """Random arcs (some helical, multi-turn, tiny or flat) with samples strayed from them,
+    and rounded candidate centres around the true one: S, E, C (m, 2), axes, clockwise,
+    nominal sweep, Q (k, 3), frac (k,)."""
+    rng = np.random.default_rng(seed)
+    planes = [(0, 1, 2), (2, 0, 1), (1, 2, 0)]
+    for i in range(n):
+        axes = planes[i % 3]
+        a1, a2, an = axes
+        R = 10.0 ** rng.uniform(-4.5, 3)
+        cw = bool(i % 2)
+        turns = 1 + (i % 11 == 0)
+        sweep = rng.uniform(1e-6, 2 * math.pi) * (turns if i % 11 == 0 else 1) * (-1 if cw else 1)
+        c = rng.uniform(-200, 200, 2)
+        k = int(rng.integers(2, 60))
+        s = np.linspace(0.0, 1.0, k)
+        th0 = rng.uniform(-math.pi, math.pi)
+        th = th0 + s * sweep
+        Q = np.empty((k, 3))
+        Q[:, a1] = c[0] + R * np.cos(th)
+        Q[:, a2] = c[1] + R * np.sin(th)
+        Q[:, an] = rng.uniform(-50, 50) + s * rng.normal(0, 5) * (i % 4 == 0)
+        Q += rng.normal(0, 10.0 ** rng.uniform(-7, -2), Q.shape)
+        S, E = Q[0].round(4), Q[-1].round(4)
+        if i % 29 == 0:
+            E = S.copy()
+        step = 10.0 ** -int(rng.integers(3, 6))
+        ks = np.arange(-3, 4) * step
+        C = (c.round(4) + np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)).round(5)
+        if i % 7 == 0:
+            C = C[:int(rng.integers(0, 4))]
+        yield S, E, C, axes, cw, sweep, Q, s, 0.5 * step
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_arc_candidates_are_the_old_ones_bit_for_bit(seed):
+    import fit_reference as ref  # noqa: PLC0415  (the tests' own reference, a sibling module)
+
+    from postproc.gcode.segment import arc_candidates, limited_candidates
+
+    measured = 0
+    for S, E, C, axes, cw, sweep, Q, frac, agree in _arc_cases(seed):
+        for limits in (False, True):
+            for limit in (None, agree, 10 * agree, math.inf):
+                old = ref.arc_candidates(S, E, C, axes, cw, sweep, Q, frac, limits, limit)
+                new = arc_candidates(S, E, C, axes, cw, sweep, Q, frac, limits, limit)
+                assert all(_same(a, b) for a, b in zip(old, new, strict=True))
+                if limit is not None:
+                    meas = limited_candidates(S, E, C, axes, cw, sweep, Q, frac, limit, limits)
+                    assert all(_same(a, b) for a, b in zip(old, meas.full(), strict=True))
+                    assert _same(meas.worst, old[0][meas.idx])
+                    assert _same(meas.turns, old[2][meas.idx])
+                    assert _same(meas.mism, old[1][meas.idx])
+                    assert np.isinf(np.delete(old[0], meas.idx)).all()
+                    measured += len(meas.idx)
+    assert measured > 1000
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_bisector_centre_is_the_old_one_bit_for_bit(seed):
+    import fit_reference as ref  # noqa: PLC0415  (the tests' own reference, a sibling module)
+
+    from postproc.gcode.segment import bisector_centre
+
+    rng = np.random.default_rng(seed)
+    for i in range(2000):
+        R = 10.0 ** rng.uniform(-3, 5)
+        c = rng.uniform(-300, 300, 2)
+        th = np.sort(rng.uniform(0, rng.uniform(1e-4, 6), int(rng.integers(2, 60))))
+        P2 = c + R * np.c_[np.cos(th), np.sin(th)] + rng.normal(0, 10.0 ** rng.uniform(-9, -1), (len(th), 2))
+        S2, E2 = P2[0].round(4), P2[-1].round(4)
+        if i % 13 == 0:
+            E2 = S2.copy()  # no bisector: the first guess
+        if i % 17 == 0:
+            P2[len(P2) // 2] = 0.5 * (S2 + E2)  # a sample on the chord's middle
+        if i % 19 == 0:
+            P2[0] = np.nan
+        c0 = c + rng.normal(0, 10.0 ** rng.uniform(-6, 0), 2)
+        # the samples as the fit holds them (plane columns taken from (k, 3) rows, which
+        # numpy lays out by column), by row, and a strided view
+        rows = np.c_[P2, np.zeros(len(P2))]
+        for P in (rows[:, [0, 1]], np.ascontiguousarray(P2), np.asfortranarray(P2), np.c_[P2, P2][:, ::2]):
+            assert _same(ref.bisector_centre(S2, E2, P, c0), bisector_centre(S2, E2, P, c0))
+
+
+def test_rounded_is_round_bit_for_bit():
+    from postproc.gcode.emitter import _np_round, _rounded
+
+    rng = np.random.default_rng(5)
+    n = 8000
+    vals = np.concatenate([
+        rng.uniform(-1, 1, n) * 10.0 ** rng.integers(-8, 8, n),
+        (rng.integers(-10**7, 10**7, n) + 0.5) / 10.0 ** rng.integers(0, 8, n),  # ties, and next to them
+        rng.integers(-10**6, 10**6, n) / 10.0 ** rng.integers(0, 9, n),
+        [0.0, -0.0, 1e-300, -1e-300, 4.5e15, -4.5e15, 2.0**52, -2.0**52, 2.0**53 + 2, 1e300, np.inf, -np.inf, np.nan],
+    ])
+    with np.errstate(over="ignore", invalid="ignore"):
+        for v in vals:
+            for x in (v, float(v)):  # numpy's round and Python's
+                for d in (0, 1, 3, 4, 5, 9, 22, 23):
+                    a, b = round(x, d), _rounded(x, d)
+                    assert type(a) is type(b)
+                    assert np.float64(a).tobytes() == np.float64(b).tobytes()
+                # an array's round, element by element
+                for d in (0, 4, 5, 23):
+                    c = _np_round(float(v), d)
+                    assert type(c) is float
+                    assert np.float64(c).tobytes() == np.array([v, 0.25]).round(d)[:1].tobytes()
