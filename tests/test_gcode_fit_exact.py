@@ -144,8 +144,8 @@ def test_bisector_centre_is_the_old_one_bit_for_bit(seed):
             assert _same(ref.bisector_centre(S2, E2, P, c0), bisector_centre(S2, E2, P, c0))
 
 
-def test_rounded_is_round_bit_for_bit():
-    from postproc.gcode.emitter import _np_round, _rounded
+def test_np_round_is_numpys_round_bit_for_bit():
+    from postproc.gcode.emitter import _np_round
 
     rng = np.random.default_rng(5)
     n = 8000
@@ -157,13 +157,33 @@ def test_rounded_is_round_bit_for_bit():
     ])
     with np.errstate(over="ignore", invalid="ignore"):
         for v in vals:
-            for x in (v, float(v)):  # numpy's round and Python's
-                for d in (0, 1, 3, 4, 5, 9, 22, 23):
-                    a, b = round(x, d), _rounded(x, d)
-                    assert type(a) is type(b)
-                    assert np.float64(a).tobytes() == np.float64(b).tobytes()
-                # an array's round, element by element
-                for d in (0, 4, 5, 23):
-                    c = _np_round(float(v), d)
-                    assert type(c) is float
-                    assert np.float64(c).tobytes() == np.array([v, 0.25]).round(d)[:1].tobytes()
+            for d in (0, 1, 3, 4, 5, 9, 22, 23):
+                # a numpy float's round
+                assert np.float64(_np_round(float(v), d)).tobytes() == np.float64(round(np.float64(v), d)).tobytes()
+            # an array's round, element by element
+            for d in (0, 4, 5, 23):
+                c = _np_round(float(v), d)
+                assert type(c) is float
+                assert np.float64(c).tobytes() == np.array([v, 0.25]).round(d)[:1].tobytes()
+
+
+def test_a_changed_word_moves_the_tracked_position_to_the_value_written():
+    # the emitter's tracked position is what the controller reads: the value of the word's
+    # text. numpy's round of a numpy float (multiply, rint, divide) is a step off it where the
+    # scaled value lies near a half, as 1.1683000257725 to 12 decimals does: text
+    # 1.168300025773, numpy 1.168300025772. In G91 the next word would carry that step.
+    from types import SimpleNamespace
+
+    from postproc.gcode.emitter import EmitterMixin
+
+    v = 1.1683000257725
+    assert round(np.float64(v), 12) != float(f"{v:.12f}")
+    for incremental in (False, True):
+        mv = SimpleNamespace(unit=1.0, shift=(0.0, 0.0, 0.0), incremental=incremental, axis_idx=(0, -1, -1),
+                             words=[("X", "0.000000000001", 1, 15, 0)])
+        qe = [0.0, 5.0, 7.0]
+        target = np.array([v, 5.0, 7.0])  # numpy floats, as a fitted piece's sample is
+        edits, added = EmitterMixin._axis_words(None, mv, target, qe, 12, present_only=True)
+        assert edits == [(1, 15, "1.168300025773")]
+        assert added == []
+        assert qe[0] == 1.168300025773

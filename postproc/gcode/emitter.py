@@ -113,15 +113,6 @@ def _np_round(v: float, d: int) -> float:
     return float(np.round(v, d))
 
 
-def _rounded(v: float, d: int) -> float:
-    """``round(v, d)``, the same number of the same type, at a fraction of the time where
-    v is a numpy float (numpy's round, :func:`_np_round`). (A Python float's round, the
-    correctly rounded decimal, is taken as it is.)"""
-    if type(v) is np.float64:
-        return np.float64(_np_round(float(v), d))
-    return round(v, d)
-
-
 class _Piece:
     """One written segment of a planned move: an exact arc (``spec``) or a line to ``qe``
     (the emitted position after it), the word edits of the move's own line or the words
@@ -231,7 +222,7 @@ class EmitterMixin(Generic[_O, _R]):
                 else:
                     text = fmt(v, dout)
                     edits.append((start, end, text))
-                    val = _rounded(v, dout)
+                    val = float(text)  # what the controller reads (numpy's round of a numpy float can be a step off)
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
             elif not present_only:
                 if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
