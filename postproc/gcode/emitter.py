@@ -234,11 +234,16 @@ class EmitterMixin(Generic[_O, _R]):
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
         return edits, added
 
+    def _decimals_for(self, unit: float) -> int:
+        """Decimals of the words written in ``unit`` (mm per program unit), found once."""
+        d = self._decimals.get(unit)
+        if d is None:
+            d = self._decimals[unit] = _unit_decimals(self.opt, unit)
+        return d
+
     def _emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
         self.report.moves += 1
-        d = self._decimals.get(mv.unit)
-        if d is None:
-            d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
+        d = self._decimals_for(mv.unit)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
             edits, added = self._axis_words(mv, target, self.qe, d)
@@ -395,9 +400,7 @@ class EmitterMixin(Generic[_O, _R]):
         """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
         as one exact arc when the hint's rounded centre passes for the end points as
         written, else planned and fitted as any other arc."""
-        d = self._decimals.get(mv.unit)
-        if d is None:
-            d = self._decimals[mv.unit] = _unit_decimals(self.opt, mv.unit)
+        d = self._decimals_for(mv.unit)
         qn = list(self.qe)
         edits, added = self._axis_words(mv, target, qn, d)
         budget = self.opt.tolerance_mm * FIT_BUDGET

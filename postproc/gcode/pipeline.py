@@ -819,10 +819,7 @@ class Corrector(EmitterMixin):
             return set()
         axes = np.array([PLANES[cast("Arc", mv.arc).plane][0] for _i, mv, _h in arcs], dtype=int)
         unit = np.array([mv.unit for _i, mv, _h in arcs], dtype=float)
-        decimals = self._decimals
-        for u in set(unit.tolist()) - decimals.keys():
-            decimals[u] = _unit_decimals(self.opt, u)
-        d = [decimals[u] for u in unit.tolist()]
+        d = [self._decimals_for(u) for u in unit.tolist()]
         shift = np.array([mv.shift for _i, mv, _h in arcs], dtype=float)
         ends = np.array([hint.ends for _i, _mv, hint in arcs], dtype=float)
         rows = np.arange(len(arcs))[:, None]

@@ -346,6 +346,9 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     ``mismatch_limit``: the candidates whose radius mismatch exceeds it (which the caller
     refuses anyway) are not measured: their ``worst`` is inf and their ``turns`` 0. The
     others get the values they get among all (see :func:`_limited_candidates`)."""
+    if mismatch_limit is not None:
+        return limited_candidates(S, E, C, axes, clockwise, nominal_sweep, Q, frac_nominal, mismatch_limit,
+                                  controller_limits).full()
     a1, a2, an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
     # start (row 0) and end (row 1) about every candidate, in contiguous arrays
@@ -354,9 +357,6 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     rad = np.hypot(dx, dy)
     r0, r1 = rad[0], rad[1]
     mismatch = np.abs(r1 - r0)
-    if mismatch_limit is not None:
-        return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
-                                   Q, frac_nominal, controller_limits).full()
     ang = np.arctan2(dy, dx)
     t0, t1 = ang[0], ang[1]
     if clockwise:

@@ -201,6 +201,13 @@ class ArcHint:
         self._last = (key, result)
         return result
 
+    def remember(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
+                 unit: float, base: tuple[float, float], budget: float,
+                 result: tuple[float, float, float, float] | None) -> None:
+        """Keep ``result`` as the answer of :meth:`words` to these arguments (found by
+        :func:`words_many`)."""
+        self._last = ((tuple(S), tuple(E), axes, clockwise, d, unit, base, budget), result)
+
     def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
                unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
         """:meth:`words`, computed."""
@@ -382,7 +389,7 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
         # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
         v1 = round_many((m1 + t * n1 - B1) / unit, d) + 0.0
         v2 = round_many((m2 + t * n2 - B2) / unit, d) + 0.0
-        w1, w2 = v1, v2
+        w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
         C1, C2 = B1 + w1 * unit, B2 + w2 * unit
         rs = _map_floats(hyp, s1 - C1, s2 - C2)
         re_ = _map_floats(hyp, e1 - C1, e2 - C2)
@@ -390,7 +397,6 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
         found = mism <= agree
         lattice = np.zeros(n, dtype=bool)
         search = np.flatnonzero(~found & (L != 0.0))
-        w1, w2, C1, C2, rs, re_, mism = w1.copy(), w2.copy(), C1.copy(), C2.copy(), rs.copy(), re_.copy(), mism.copy()
         # the lattice around (v1, v2), nearest first: the first centre whose radii agree
         # (asked a few candidates at a time, of the arcs still without one)
         for lo in range(1, len(_ORDER), LATTICE_BLOCK):
@@ -437,14 +443,12 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
     Sl, El, axl, cwl, ul, bl = S.tolist(), E.tolist(), axes.tolist(), cw.tolist(), unit.tolist(), base.tolist()
     for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), w1.tolist(), w2.tolist(),
                                                       mism.tolist(), bound.tolist(), strict=True)):
-        h = hints[k]
-        ax = tuple(axl[k])
-        b = tuple(bl[k])
+        args = (Sl[k], El[k], tuple(axl[k]), cwl[k], d[k], ul[k], tuple(bl[k]), budget)
         if ok:
             got = (wa, wb, mm_k, bd) if p else None
-            h._last = ((tuple(Sl[k]), tuple(El[k]), ax, cwl[k], d[k], ul[k], b, budget), got)
+            hints[k].remember(*args, got)
         else:
-            got = h.words(Sl[k], El[k], ax, cwl[k], d[k], ul[k], b, budget)
+            got = hints[k].words(*args)
         out[k] = got
     return out
 
