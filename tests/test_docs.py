@@ -144,3 +144,13 @@ def test_the_command_list_needs_no_command_module_and_says_what_each_docstring_s
             "print(sorted(m for m in sys.modules if m.startswith(('numpy', 'scipy', 'postproc.cli.'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
+
+
+def test_readme_is_a_front_door_for_users():
+    """The README stays short and about the program; details live on the docs/ pages,
+    history in CHANGELOG.md."""
+    text = README.read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 350, "README over 350 lines: move the details to a page under docs/"
+    assert not re.search(r"\b(sessions?|rounds?|issue \d+)\b", text, re.IGNORECASE), "history belongs in CHANGELOG.md"
+    for page in ("docs/performance.md", "docs/architecture.md", "CHANGELOG.md"):
+        assert f"]({page})" in text, f"README does not link {page}"
