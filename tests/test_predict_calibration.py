@@ -207,8 +207,8 @@ def test_the_corrected_program_bores_the_hole_where_it_belongs(tmp_path):
     assert_allclose(json.loads(res.output)["mid_field"]["error_mm"], [0, 0], atol=1e-4)
 
 
-def test_readme_walkthrough_from_a_calibration_to_a_predicted_bore(tmp_path, monkeypatch):
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+def test_docs_walkthrough_from_a_calibration_to_a_predicted_bore(tmp_path, monkeypatch):
+    text = (ROOT / "docs" / "predict.md").read_text(encoding="utf-8")
     section = text.split("**From a calibration to a predicted bore.**", 1)[1].split("The 21-parameter model", 1)[0]
     blocks = section.split("```\n")[1::2]
     commands = [line.split("postproc ", 1)[1].split() for line in blocks[0].splitlines()]
