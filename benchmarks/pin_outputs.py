@@ -27,10 +27,10 @@ canonical calls (or the first line of its error). The header's version word is w
 as ``VERSION`` before hashing, so that a version bump alone changes no pin.
 
 ``--write DIR`` records DIR/manifest.json; ``--check`` (against tests/data/pinned/ unless
-given DIR) prints every key whose outcome changed, old -> new, and exits 1 if any did;
-changes under the identity and scale calibrations, which must never change, are listed
-apart. Keys in one manifest only are listed too (a program added or removed). ``--only
-SUBSTRING`` limits the run to keys containing it (``--check`` then compares only those).
+given DIR) prints every key whose outcome changed, old -> new, and exits 1 if any did,
+3 if an output under the identity or scale calibration did (those must never change;
+they are listed apart). Keys in one manifest only are listed too (a program added or
+removed). ``--only SUBSTRING`` limits the run to keys containing it (``--check`` then compares only those).
 ``--no-rs274`` leaves the oracle out (its entries are not compared).
 
 Usage: python benchmarks/pin_outputs.py --write tests/data/pinned/
@@ -361,6 +361,8 @@ def main(argv=None) -> int:
     changes = compare(old, records, rs274)
     report(changes)
     print(f"{summary}; {len(changes)} changed against {Path(args.check) / MANIFEST}")
+    if any(calibration_of(key) in FROZEN for key, _, _ in changes):
+        return 3
     return 1 if changes else 0
 
 
