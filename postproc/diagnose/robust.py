@@ -26,15 +26,13 @@ import numpy as np
 
 from postproc.diagnose.data import Dataset
 
-# Chance of flagging one clean row anywhere in the campaign (Bonferroni over rows).
-FAMILY_ALPHA = 1e-3
-# Consistency factor of the median absolute deviation for a Gaussian (MAD * 1.4826 = sigma).
-MAD_TO_SIGMA = 1.4826
+# The rule and its constants are postproc.metrology.outliers' (one rule for check, fit and iso230).
+from postproc.metrology.outliers import FAMILY_ALPHA, MAD_TO_SIGMA, MIN_READINGS, MIN_SIGMA_MM  # noqa: F401
+from postproc.metrology.outliers import robust_sigma as _robust_sigma
+from postproc.metrology.outliers import threshold as _threshold
+
 # Fewer rows than this give no robust spread.
-MIN_ROWS = 8
-# Spreads below this (mm, a nanometre: below any instrument) are rounding, not noise:
-# noise-free simulated data must not make outliers of rounding differences.
-MIN_SIGMA_MM = 1e-6
+MIN_ROWS = MIN_READINGS
 
 
 @dataclass
@@ -48,14 +46,8 @@ class Screening:
 
 
 def threshold(n: int) -> float:
-    from scipy.stats import chi2
-
-    return float(chi2.isf(FAMILY_ALPHA / max(n, 1), 3))
-
-
-def _robust_sigma(dev: np.ndarray) -> np.ndarray:
-    s = MAD_TO_SIGMA * np.median(np.abs(dev - np.median(dev, axis=0)), axis=0)
-    return np.maximum(s, MIN_SIGMA_MM)
+    """The rule's limit for a campaign of ``n`` points in space (3 components)."""
+    return _threshold(n, 3)
 
 
 def duplicate_rows(ds: Dataset) -> np.ndarray:
