@@ -135,13 +135,25 @@ def test_generated_runs_recover_known_errors():
 
 def test_warnings_for_even_spacing_and_order(tmp_path):
     lines = hand_lines(targets={0.0: HAND[0.0], 60.0: HAND[50.0], 120.0: HAND[120.0]})
-    # run 2's up stroke visits 120 before 60
-    i = lines.index("X,60.000,2,+,4")
-    lines[i], lines[i + 1] = lines[i + 1], lines[i]
-    res = evaluate(read_runs(write(tmp_path, lines)))["X"]
+    # with times t: run 2's up stroke visits 120 before 60
+    timed = [lines[0], lines[1], lines[2] + ",t"] + [f"{ln},{k * 10}" for k, ln in enumerate(lines[3:])]
+    i = timed.index("X,60.000,2,+,4,70")
+    timed[i], timed[i + 1] = "X,60.000,2,+,4,80", "X,120.000,2,+,7,70"
+    res = evaluate(read_runs(write(tmp_path, timed)))["X"]
     text = "\n".join(res.warnings)
     assert "evenly spaced (60 mm)" in text
-    assert "run 2 (+) does not visit its targets in increasing order" in text
+    assert "run 2 (+) does not visit its targets in increasing order by its times t" in text
+
+
+def test_row_order_is_not_taken_as_visiting_order(tmp_path):
+    """Exporters sort rows by target, run or direction: without t no order warning (issue 30)."""
+    lines = hand_lines()
+    body = sorted(lines[3:], key=lambda ln: (ln.split(",")[3], float(ln.split(",")[1]), ln.split(",")[2]))
+    res = evaluate(read_runs(write(tmp_path, lines[:3] + body)))["X"]
+    assert not any("order" in w for w in res.warnings)
+    rev = lines[:3] + list(reversed(lines[3:]))
+    res = evaluate(read_runs(write(tmp_path, rev)))["X"]
+    assert not any("order" in w for w in res.warnings)
 
 
 @pytest.mark.parametrize(("old", "new", "line", "col", "words"), [

@@ -34,6 +34,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from postproc.errors import MeasurementError
+from postproc.metrology.iso230_env import (
+    UncertaintyInputs,
+    environment,
+    material_temperature,
+    normal_temperature_correction,
+    report_lines,
+    uncertainty,
+)
+from postproc.metrology.outliers import runs_outliers
 from postproc.metrology.runs import Runs
 
 #: ISO 230-2:2014, 3.2: five runs in each direction (axes up to 2000 mm).
@@ -52,7 +61,14 @@ AXIS_KEYS = ("A", "A_up", "A_down", "E", "E_up", "E_down", "M", "R", "R_up", "R_
 
 @dataclass
 class AxisResult:
-    """The ISO 230-2 figures of one axis; per-target arrays over the sorted targets."""
+    """The ISO 230-2 figures of one axis; per-target arrays over the sorted targets.
+
+    ``directions``: the approach directions measured, (1, -1) for bidirectional runs,
+    (1,) or (-1,) for unidirectional ones (the arrays of the other direction are NaN
+    and only the one-direction figures are given). ``suspicious``: readings beyond the
+    outlier rule (kept in the figures, as the standard asks). ``environment``: the
+    temperature columns; ``uncertainty``: expanded uncertainties (k = 2) of the figures.
+    """
 
     axis: str
     target_mm: np.ndarray
@@ -64,15 +80,29 @@ class AxisResult:
     s_down: np.ndarray
     figures: dict[str, float]
     warnings: list[str] = field(default_factory=list)
+    directions: tuple[int, ...] = (1, -1)
+    suspicious: list = field(default_factory=list)
+    environment: dict = field(default_factory=dict)
+    uncertainty: dict = field(default_factory=dict)
+    temperature_corrected: bool = False
+
+    @property
+    def bidirectional(self) -> bool:
+        return len(self.directions) == 2
 
     @property
     def reversal(self) -> np.ndarray:
-        """B_i = xm_up_i - xm_down_i."""
+        """B_i = xm_up_i - xm_down_i (zero for unidirectional runs: not measured)."""
+        if not self.bidirectional:
+            return np.zeros(len(self.target_mm))
         return self.mean_up - self.mean_down
 
     @property
     def mean(self) -> np.ndarray:
-        """Mean bidirectional positional deviation xm_i."""
+        """Mean bidirectional positional deviation xm_i (unidirectional runs: the one
+        direction's mean)."""
+        if not self.bidirectional:
+            return self.mean_up if self.directions == (1,) else self.mean_down
         return 0.5 * (self.mean_up + self.mean_down)
 
     @property
@@ -91,85 +121,128 @@ class AxisResult:
     def targets_json(self) -> list[dict]:
         out = []
         for i, p in enumerate(self.target_mm):
-            out.append({"target": float(p), "n_up": int(self.n_up[i]), "n_down": int(self.n_down[i]),
-                        "mean_up": float(self.mean_up[i]), "mean_down": float(self.mean_down[i]),
-                        "mean": float(self.mean[i]), "B": float(self.reversal[i]),
-                        "s_up": float(self.s_up[i]), "s_down": float(self.s_down[i]),
-                        "R_up": float(self.R_up[i]), "R_down": float(self.R_down[i]),
-                        "R": float(self.R_bi[i])})
+            row = {"target": float(p), "n_up": int(self.n_up[i]), "n_down": int(self.n_down[i]),
+                   "mean_up": self.mean_up[i], "mean_down": self.mean_down[i], "mean": self.mean[i],
+                   "B": self.reversal[i] if self.bidirectional else math.nan, "s_up": self.s_up[i],
+                   "s_down": self.s_down[i], "R_up": self.R_up[i], "R_down": self.R_down[i],
+                   "R": self.R_bi[i] if self.bidirectional else math.nan}
+            out.append({k: _finite(v) for k, v in row.items()})
         return out
 
     def to_json(self) -> dict:
-        return {**{k: self.figures[k] for k in AXIS_KEYS}, "warnings": list(self.warnings),
+        return {**{k: _finite(self.figures.get(k, math.nan)) for k in AXIS_KEYS},
+                "directions": ["+" if d > 0 else "-" for d in self.directions],
+                "warnings": list(self.warnings), "suspicious": [o.to_json() for o in self.suspicious],
+                "environment": {k: {"mean_C": m, "min_C": lo, "max_C": hi} for k, (m, lo, hi) in self.environment.items()},
+                "temperature_corrected": self.temperature_corrected,
+                "uncertainty_k2": dict(self.uncertainty),
                 "targets": self.targets_json()}
 
 
+def _finite(v):
+    """A JSON value: a float, or None for a figure the runs do not define (NaN)."""
+    if isinstance(v, int | np.integer):
+        return int(v)
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
 def axis_figures(mean_up, mean_down, s_up, s_down) -> dict[str, float]:
-    """The axis figures of ISO 230-2:2014 from the per-target means and estimators."""
+    """The axis figures of ISO 230-2:2014 from the per-target means and estimators;
+    with one direction's arrays all NaN (unidirectional runs) only the other
+    direction's figures (A, E, R of that direction)."""
     mu, md, su, sd = (np.asarray(v, dtype=float) for v in (mean_up, mean_down, s_up, s_down))
+    has_up, has_down = bool(np.isfinite(mu).all()), bool(np.isfinite(md).all())
+    out: dict[str, float] = {}
+    if has_up:
+        out.update({"A_up": float((mu + 2 * su).max() - (mu - 2 * su).min()), "E_up": float(mu.max() - mu.min()),
+                    "R_up": float(4 * su.max())})
+    if has_down:
+        out.update({"A_down": float((md + 2 * sd).max() - (md - 2 * sd).min()), "E_down": float(md.max() - md.min()),
+                    "R_down": float(4 * sd.max())})
+    if not (has_up and has_down):
+        return out
     b = mu - md
     xm = 0.5 * (mu + md)
     r_bi = np.maximum.reduce([2 * su + 2 * sd + np.abs(b), 4 * su, 4 * sd])
     both_hi = np.concatenate([mu + 2 * su, md + 2 * sd])
     both_lo = np.concatenate([mu - 2 * su, md - 2 * sd])
     means = np.concatenate([mu, md])
-    return {
+    out.update({
         "A": float(both_hi.max() - both_lo.min()),
-        "A_up": float((mu + 2 * su).max() - (mu - 2 * su).min()),
-        "A_down": float((md + 2 * sd).max() - (md - 2 * sd).min()),
         "E": float(means.max() - means.min()),
-        "E_up": float(mu.max() - mu.min()),
-        "E_down": float(md.max() - md.min()),
         "M": float(xm.max() - xm.min()),
         "R": float(r_bi.max()),
-        "R_up": float(4 * su.max()),
-        "R_down": float(4 * sd.max()),
         "B": float(np.abs(b).max()),
         "B_mean": float(b.mean()),
-    }
+    })
+    return out
 
 
-def evaluate_axis(runs: Runs, axis: str) -> AxisResult:
-    """ISO 230-2 evaluation of ``axis`` (the rows of that axis in ``runs``)."""
+def evaluate_axis(runs: Runs, axis: str, *, inputs: UncertaintyInputs | None = None,
+                  correct_temperature: bool = False) -> AxisResult:
+    """ISO 230-2 evaluation of ``axis`` (the rows of that axis in ``runs``): every reading
+    counts (suspicious ones are flagged, not dropped). Runs with one approach direction
+    only are evaluated with the one-direction figures. ``correct_temperature``: apply
+    the normal-temperature correction when the runs give ``material_temp``."""
+    inputs = inputs or UncertaintyInputs()
     sub = runs.select(axis)
+    dev = sub.deviation_mm
+    corrected = bool(correct_temperature and material_temperature(sub) is not None)
+    if corrected:
+        dev = dev + normal_temperature_correction(sub, inputs.alpha_um_per_m_k)
     targets = np.unique(sub.target_mm)
     m = len(targets)
+    present = tuple(d for d in (+1, -1) if np.any(sub.direction == d))
     n = {+1: np.zeros(m, int), -1: np.zeros(m, int)}
-    mean = {+1: np.zeros(m), -1: np.zeros(m)}
-    s = {+1: np.zeros(m), -1: np.zeros(m)}
+    mean = {+1: np.full(m, np.nan), -1: np.full(m, np.nan)}
+    s = {+1: np.full(m, np.nan), -1: np.full(m, np.nan)}
     for i, p in enumerate(targets):
         at = sub.target_mm == p
-        for d in (+1, -1):
-            x = sub.deviation_mm[at & (sub.direction == d)]
+        for d in present:
+            x = dev[at & (sub.direction == d)]
             n[d][i] = len(x)
             if len(x) < MIN_RUNS:
                 line = int(sub.linenos[at][0])
                 side = "+" if d > 0 else "-"
                 raise MeasurementError(
                     f"axis {axis}, target {p:g} mm: {len(x)} run(s) approached it in the {side} direction; "
-                    f"the evaluation needs at least {MIN_RUNS} in each direction (ISO 230-2 asks for {ISO_RUNS})",
+                    f"the evaluation needs at least {MIN_RUNS} in each direction measured (ISO 230-2 asks "
+                    f"for {ISO_RUNS})",
                     path=runs.path, lineno=line, col=1,
-                    hint="measure every target in both directions, in every run",
+                    hint="measure every target in the same directions, in every run",
                 )
             mean[d][i] = x.mean()
             s[d][i] = x.std(ddof=1)
     figures = axis_figures(mean[+1], mean[-1], s[+1], s[-1])
-    result = AxisResult(axis, targets, n[+1], n[-1], mean[+1], mean[-1], s[+1], s[-1], figures)
+    result = AxisResult(axis, targets, n[+1], n[-1], mean[+1], mean[-1], s[+1], s[-1], figures,
+                        directions=present, temperature_corrected=corrected)
     result.warnings = standard_warnings(sub, result)
+    result.suspicious = runs_outliers(sub)
+    result.environment = environment(sub)
+    t = material_temperature(sub)
+    result.uncertainty = uncertainty(result, inputs, None if t is None else float(np.mean(t)))
     return result
 
 
 def standard_warnings(sub: Runs, res: AxisResult) -> list[str]:
-    """Where the runs fall short of ISO 230-2:2014 (run count, targets, spacing, order)."""
+    """Where the runs fall short of ISO 230-2:2014 (run count, targets, spacing, order).
+    The visiting order is checked only when the file gives the time (``t``): the row
+    order of a file is not the order the axis moved in (exporters sort by target)."""
     ax = res.axis
     out = []
-    fewest = int(min(res.n_up.min(), res.n_down.min()))
+    counts = [c for d, c in ((1, res.n_up), (-1, res.n_down)) if d in res.directions]
+    fewest = int(min(c.min() for c in counts))
+    most = int(max(c.max() for c in counts))
+    if not res.bidirectional:
+        side = "+" if res.directions == (1,) else "-"
+        out.append(f"{ax}: unidirectional runs (approached in {side} only): evaluated with the one-direction "
+                   f"figures A{side}, E{side}, R{side}; B, M and the bidirectional A, E, R need both directions")
     if fewest < ISO_RUNS:
         out.append(f"{ax}: {fewest} run(s) at some target and direction; ISO 230-2 asks for {ISO_RUNS} "
                    "in each direction: the repeatability figures (s, R, A) are uncertain")
-    if len(set(res.n_up.tolist() + res.n_down.tolist())) > 1:
-        out.append(f"{ax}: the run count differs between targets or directions "
-                   f"({int(min(res.n_up.min(), res.n_down.min()))} to {int(max(res.n_up.max(), res.n_down.max()))})")
+    if fewest != most:
+        out.append(f"{ax}: the run count differs between targets or directions ({fewest} to {most})")
     travel = float(res.target_mm[-1] - res.target_mm[0])
     needed = max(ISO_MIN_TARGETS, math.ceil(ISO_TARGETS_PER_M * travel / 1000.0))
     if len(res.target_mm) < needed:
@@ -179,6 +252,8 @@ def standard_warnings(sub: Runs, res: AxisResult) -> list[str]:
     if len(steps) >= 2 and np.ptp(steps) < EQUAL_SPACING_MM:
         out.append(f"{ax}: the targets are evenly spaced ({steps[0]:g} mm); ISO 230-2 spaces them unevenly "
                    "so that periodic errors (lead-screw pitch, scale period) are not sampled at one phase")
+    if not sub.timed:
+        return out
     for run in np.unique(sub.run):
         for d in (+1, -1):
             k = np.flatnonzero((sub.run == run) & (sub.direction == d))
@@ -187,40 +262,60 @@ def standard_warnings(sub: Runs, res: AxisResult) -> list[str]:
             visited = sub.target_mm[k[np.argsort(sub.order[k], kind="stable")]]
             if np.any(d * np.diff(visited) <= 0):
                 side, way = ("+", "increasing") if d > 0 else ("-", "decreasing")
-                out.append(f"{ax}: run {run} ({side}) does not visit its targets in {way} order "
+                out.append(f"{ax}: run {run} ({side}) does not visit its targets in {way} order by its times t "
                            f"(line {int(sub.linenos[k[0]])}); ISO 230-2's linear cycle approaches "
                            f"each target moving in the run's direction")
                 break
     return out
 
 
-def evaluate(runs: Runs) -> dict[str, AxisResult]:
+def evaluate(runs: Runs, *, inputs: UncertaintyInputs | None = None,
+             correct_temperature: bool = False) -> dict[str, AxisResult]:
     """Every axis of the file, in the order of first appearance."""
-    return {a: evaluate_axis(runs, a) for a in runs.axes}
+    return {a: evaluate_axis(runs, a, inputs=inputs, correct_temperature=correct_temperature) for a in runs.axes}
 
 
 def results_json(results: dict[str, AxisResult]) -> dict:
     return {"units": "mm", "axes": {a: r.to_json() for a, r in results.items()}}
 
 
-def format_results(results: dict[str, AxisResult]) -> list[str]:
+def _um(v: float, width: int) -> str:
+    return f"{v * 1000:{width}.2f}" if math.isfinite(v) else f"{'-':>{width}}"
+
+
+def format_results(results: dict[str, AxisResult], inputs: UncertaintyInputs | None = None) -> list[str]:
     """Text report in micrometres, one block per axis."""
+    inputs = inputs or UncertaintyInputs()
     lines = []
     for a, r in results.items():
+        counts = [c for d, c in ((1, r.n_up), (-1, r.n_down)) if d in r.directions]
+        kind = "" if r.bidirectional else f", unidirectional ({'+' if r.directions == (1,) else '-'})"
         lines.append(f"axis {a}: {len(r.target_mm)} targets, runs per direction "
-                     f"{int(min(r.n_up.min(), r.n_down.min()))}..{int(max(r.n_up.max(), r.n_down.max()))} "
+                     f"{int(min(c.min() for c in counts))}..{int(max(c.max() for c in counts))}{kind} "
                      "(ISO 230-2:2014; values in um)")
         lines.append(f"  {'target mm':>10} {'mean+':>8} {'mean-':>8} {'mean':>8} {'B_i':>8} "
                      f"{'s+':>7} {'s-':>7} {'R+':>7} {'R-':>7} {'R_i':>7}")
-        for t in r.targets_json():
-            lines.append(f"  {t['target']:10.3f} " + " ".join(
-                f"{t[k] * 1000:8.2f}" for k in ("mean_up", "mean_down", "mean", "B")) + " " + " ".join(
-                f"{t[k] * 1000:7.2f}" for k in ("s_up", "s_down", "R_up", "R_down", "R")))
+        for i, p in enumerate(r.target_mm):
+            b = r.reversal[i] if r.bidirectional else math.nan
+            rb = r.R_bi[i] if r.bidirectional else math.nan
+            lines.append(f"  {p:10.3f} " + " ".join(_um(v, 8) for v in (r.mean_up[i], r.mean_down[i], r.mean[i], b))
+                         + " " + " ".join(_um(v, 7) for v in (r.s_up[i], r.s_down[i], r.R_up[i], r.R_down[i], rb)))
         f = {k: v * 1000 for k, v in r.figures.items()}
-        lines.append(f"  A {f['A']:.2f} (A+ {f['A_up']:.2f}, A- {f['A_down']:.2f})   "
-                     f"E {f['E']:.2f} (E+ {f['E_up']:.2f}, E- {f['E_down']:.2f})   M {f['M']:.2f}")
-        lines.append(f"  R {f['R']:.2f} (R+ {f['R_up']:.2f}, R- {f['R_down']:.2f})   "
-                     f"B {f['B']:.2f}   mean reversal {f['B_mean']:+.2f}")
+        if r.bidirectional:
+            lines.append(f"  A {f['A']:.2f} (A+ {f['A_up']:.2f}, A- {f['A_down']:.2f})   "
+                         f"E {f['E']:.2f} (E+ {f['E_up']:.2f}, E- {f['E_down']:.2f})   M {f['M']:.2f}")
+            lines.append(f"  R {f['R']:.2f} (R+ {f['R_up']:.2f}, R- {f['R_down']:.2f})   "
+                         f"B {f['B']:.2f}   mean reversal {f['B_mean']:+.2f}")
+        else:
+            side = "+" if r.directions == (1,) else "-"
+            tag = "up" if side == "+" else "down"
+            lines.append(f"  A{side} {f['A_' + tag]:.2f}   E{side} {f['E_' + tag]:.2f}   R{side} {f['R_' + tag]:.2f}"
+                         "   (unidirectional: no B, M or bidirectional A, E, R)")
+        lines += [f"  {ln}" for ln in report_lines(r, inputs, r.temperature_corrected)]
+        if r.suspicious:
+            lines.append(f"  suspicious readings (outlier rule: {len(r.suspicious)}; kept in the figures, as ISO "
+                         "230-2 asks; 'fit' leaves them out):")
+            lines += [f"    {o.describe()}" for o in r.suspicious]
         for w in r.warnings:
             lines.append(f"  warning: {w}")
     return lines

@@ -123,12 +123,8 @@ def runs_outliers(runs) -> list[Outlier]:
 
 def runs_without(runs, outliers: list[Outlier]):
     """``runs`` without the rows of ``outliers`` (matched by line)."""
-    from postproc.metrology.runs import Runs
-
     drop = {o.lineno for o in outliers}
-    m = np.array([int(n) not in drop for n in runs.linenos], dtype=bool)
-    return Runs(runs.axis[m], runs.target_mm[m], runs.run[m], runs.direction[m], runs.deviation_mm[m],
-                runs.order[m], runs.linenos[m], runs.path)
+    return runs.subset(np.array([int(n) not in drop for n in runs.linenos], dtype=bool))
 
 
 def runs_outliers_used(cal, cal_path: str) -> tuple[list[str], list[str], list[str]]:
