@@ -321,26 +321,75 @@ def format_results(results: dict[str, AxisResult], inputs: UncertaintyInputs | N
     return lines
 
 
+def _span(ax, x: float, lo: float, hi: float, label: str, color: str) -> None:
+    """A vertical double arrow from lo to hi at x (um) with its label beside it."""
+    ax.annotate("", xy=(x, hi), xytext=(x, lo), arrowprops={"arrowstyle": "<->", "color": color, "lw": 1.2},
+                annotation_clip=False)
+    ax.annotate(label, xy=(x, 0.5 * (lo + hi)), xytext=(4, 0), textcoords="offset points", color=color,
+                fontsize=8, va="center", annotation_clip=False)
+
+
 def plot_axis(res: AxisResult, ax=None):
-    """Mean deviation +- 2s per direction against position (um), A/E/R/B in the legend."""
+    """The ISO 230-2 graph as Renishaw CARTO and XCal-View draw it: per direction the mean
+    positional deviation at each target with its mean +- 2s band, the mean bidirectional
+    deviation, and the figures annotated where they are read (A and E as spans at the
+    right edge, R and B at the target where they occur) with a table of the figures
+    and their expanded uncertainty. matplotlib is imported here, only when plotting."""
     import matplotlib.pyplot as plt
 
     if ax is None:
-        _, ax = plt.subplots(figsize=(8, 4.5))
+        _, ax = plt.subplots(figsize=(9, 5))
     p = res.target_mm
     f = {k: v * 1000 for k, v in res.figures.items()}
-    for mean, s, style, label in ((res.mean_up, res.s_up, "-o", "mean +"), (res.mean_down, res.s_down, "-s", "mean -")):
-        line, = ax.plot(p, mean * 1000, style, ms=4, label=label)
-        ax.plot(p, (mean + 2 * s) * 1000, "--", color=line.get_color(), lw=0.8, label=f"{label} ± 2s")
-        ax.plot(p, (mean - 2 * s) * 1000, "--", color=line.get_color(), lw=0.8)
-    ax.plot(p, res.mean * 1000, ":", color="k", lw=1, label="mean bidirectional")
-    ax.plot([], [], " ", label=f"A = {f['A']:.2f} µm, E = {f['E']:.2f} µm")
-    ax.plot([], [], " ", label=f"R = {f['R']:.2f} µm, B = {f['B']:.2f} µm")
+    u = {k: v * 1000 for k, v in res.uncertainty.items() if k != "k"}
+    styles = {1: ("tab:blue", "o", "forward (+)"), -1: ("tab:red", "s", "reverse (-)")}
+    hi_all, lo_all = [], []
+    for d in res.directions:
+        mean, s = (res.mean_up, res.s_up) if d > 0 else (res.mean_down, res.s_down)
+        color, marker, label = styles[d]
+        m_um, s_um = mean * 1000, s * 1000
+        ax.plot(p, m_um, "-", marker=marker, ms=4, color=color, label=f"mean {label}")
+        ax.plot(p, m_um + 2 * s_um, "--", color=color, lw=0.8, label=f"mean ± 2s {label}")
+        ax.plot(p, m_um - 2 * s_um, "--", color=color, lw=0.8)
+        ax.errorbar(p, m_um, yerr=2 * s_um, fmt="none", ecolor=color, elinewidth=0.6, capsize=2)
+        hi_all.append(m_um + 2 * s_um)
+        lo_all.append(m_um - 2 * s_um)
+    if res.bidirectional:
+        ax.plot(p, res.mean * 1000, ":", color="k", lw=1, label="mean bidirectional")
+    hi, lo = np.concatenate(hi_all), np.concatenate(lo_all)
+    means = np.concatenate([(res.mean_up if d > 0 else res.mean_down) * 1000 for d in res.directions])
+    span = float(p[-1] - p[0]) or 1.0
+    x_a, x_e = p[-1] + 0.04 * span, p[-1] + 0.12 * span
+    tag = "" if res.bidirectional else ("+" if res.directions == (1,) else "-")
+    key = "" if res.bidirectional else ("_up" if tag == "+" else "_down")
+    _span(ax, x_a, float(lo.min()), float(hi.max()), f"A{tag}", "tab:green")
+    _span(ax, x_e, float(means.min()), float(means.max()), f"E{tag}", "tab:purple")
+    if res.bidirectional:
+        i = int(np.argmax(res.R_bi))
+        top = max(res.mean_up[i] + 2 * res.s_up[i], res.mean_down[i] + 2 * res.s_down[i]) * 1000
+        _span(ax, float(p[i]), top - f["R"], top, "R", "tab:orange")
+        j = int(np.argmax(np.abs(res.reversal)))
+        _span(ax, float(p[j]) + 0.015 * span, float(res.mean_down[j] * 1000), float(res.mean_up[j] * 1000), "B",
+              "tab:brown")
+        rows = [("A", "A"), ("E", "E"), ("M", "M"), ("R", "R"), ("B", "B")]
+    else:
+        i = int(np.argmax(res.s_up if tag == "+" else res.s_down))
+        mean_i = (res.mean_up if tag == "+" else res.mean_down)[i] * 1000
+        _span(ax, float(p[i]), mean_i - 0.5 * f["R" + key], mean_i + 0.5 * f["R" + key], f"R{tag}", "tab:orange")
+        rows = [(f"A{tag}", "A" + key), (f"E{tag}", "E" + key), (f"R{tag}", "R" + key)]
+    table = "\n".join(f"{name:<3} {f[k]:7.2f} µm  (U {u.get(k, math.nan):.2f})" for name, k in rows)
+    if res.bidirectional:
+        table += f"\nmean reversal {f['B_mean']:+.2f} µm"
+    ax.text(0.01, 0.98, table + "\nU: expanded, k = 2", transform=ax.transAxes, va="top", ha="left", fontsize=8,
+            family="monospace", bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    ax.set_xlim(p[0] - 0.03 * span, p[-1] + 0.2 * span)
     ax.set_xlabel(f"target position {res.axis} (mm)")
     ax.set_ylabel("positional deviation (µm)")
-    ax.set_title(f"ISO 230-2 bidirectional positioning, axis {res.axis}")
+    kind = "bidirectional" if res.bidirectional else f"unidirectional ({tag})"
+    ax.set_title(f"ISO 230-2 {kind} positioning, axis {res.axis}: mean ± 2s per target")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, frameon=False)
     return ax
 
 
@@ -350,7 +399,7 @@ def plot_results(results: dict[str, AxisResult], path) -> None:
 
     from postproc.fileio import save_figure
 
-    fig, axes = plt.subplots(len(results), 1, figsize=(8, 4.5 * len(results)), squeeze=False)
+    fig, axes = plt.subplots(len(results), 1, figsize=(9, 5.6 * len(results)), squeeze=False)
     for ax, res in zip(axes[:, 0], results.values(), strict=True):
         plot_axis(res, ax)
     fig.tight_layout()

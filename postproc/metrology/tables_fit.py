@@ -158,11 +158,21 @@ def _parts_from_runs(path: str, keep_outliers: bool = False) -> tuple[dict[str, 
         b = res.reversal
         ref = float(b[np.argmax(np.abs(b))])
         f = res.figures
-        report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}..{res.target_mm[-1]:.3f} mm; "
-                      f"E{COLUMNS[k][1]} (positioning) = mean bidirectional deviation, M {f['M'] * 1000:.2f} um")
-        if ref == 0.0:
-            report.append(f"{ax}: no reversal in the runs (every B_i is 0): no backlash effect")
+        if not res.bidirectional:
+            side = "+" if res.directions == (1,) else "-"
+            tag = "up" if side == "+" else "down"
+            report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}.."
+                          f"{res.target_mm[-1]:.3f} mm, approached in {side} only; E{COLUMNS[k][1]} (positioning) "
+                          f"= mean deviation in {side}, E{side} {f['E_' + tag] * 1000:.2f} um; no reversal measured: "
+                          "no backlash effect (programs that approach in the other direction are not corrected "
+                          "for it)")
         else:
+            report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}.."
+                          f"{res.target_mm[-1]:.3f} mm; E{COLUMNS[k][1]} (positioning) = mean bidirectional "
+                          f"deviation, M {f['M'] * 1000:.2f} um")
+        if res.bidirectional and ref == 0.0:
+            report.append(f"{ax}: no reversal in the runs (every B_i is 0): no backlash effect")
+        elif res.bidirectional:
             effect = get_effect(f"backlash:{ax}", config={"position_mm": res.target_mm.tolist(),
                                                           "shape": (b / ref).tolist()}, params={"b_mm": ref})
             effects.append(effect.to_dict())
