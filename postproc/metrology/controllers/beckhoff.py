@@ -18,11 +18,13 @@ ones (tool point relative to the workpiece, all axes counted on the tool side):
 set the kinematic chain and ``workpiece_axes`` of the compensation list to match.
 
 Signs: every value is an error, actual minus nominal (formats.md), the quantity an
-interferometer reads; TF5280 subtracts the component errors it reads, so the
-compensation list leaves ``negate`` unset (no axis negated: ``negate XYZ`` would double
-every error instead of removing it) and ``alternative_model`` at 0 (FALSE): the
-standard ISO 230 model, all error motions of an axis counted on the tool side, is the
-one postproc fitted. Both settings are written in the file's comment lines and in
+interferometer reads and ISO 230-1 names, which TF5280's compensation takes away. So
+the compensation list leaves ``negate`` unset (``negate XYZ`` would add every error
+instead of removing it) and ``alternative_model`` at 0 (FALSE): the standard ISO 230
+model, all error motions of an axis counted on the tool side, is the one postproc
+fitted. The TF5280 manual does not print the sign of the compensation value against
+the file's errors; the comment lines say how to check it once on the control (the
+compensation value at a position has the opposite sign of EXX there). Both settings are written in the file's comment lines and in
 the notes. The round trip reads the file back as TF5280's ISG CSV reader does (comment
 lines, file breaks, blank-separated records) and requires every value back to the
 digits written.
@@ -45,7 +47,9 @@ from postproc.metrology.controllers.roundtrip import check_round_trip
 #: Significant digits of the values written; a value read back agrees to this.
 DIGITS = 9
 #: Comment lines naming the compensation list's sign settings for these values.
-SIGN_SETTINGS = ("negate: leave unset (no axis): the values are errors (actual - nominal), which TF5280 subtracts",
+SIGN_SETTINGS = ("negate: leave unset (no axis): the values are errors, actual - nominal (ISO 230-1), which the "
+                 "compensation takes away; check once on the control: the compensation value at a position must "
+                 "have the opposite sign of EXX there, else set negate XYZ",
                  "alternative_model: 0 (FALSE): the standard ISO 230 model, every axis's error motions counted "
                  "on the tool side")
 
