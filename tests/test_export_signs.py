@@ -5,6 +5,7 @@ Data: runs of the virtual machine (postproc.simulate.runs)."""
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from metrology_machines import TARGETS, write_runs, x_machine
 from numpy.testing import assert_allclose
 
 from postproc.calfile import load_calibration
@@ -15,8 +16,6 @@ from postproc.metrology.controllers.axis import AxisErrors
 from postproc.metrology.controllers.fanuc import export_fanuc, fanuc_compensation, read_fanuc
 from postproc.metrology.controllers.linuxcnc import read_linuxcnc
 from postproc.metrology.controllers.siemens import read_siemens
-
-from metrology_machines import TARGETS, write_runs, x_machine
 
 
 def run(*args):
@@ -49,7 +48,8 @@ def test_fanuc_needs_reference_and_return(runs_cal, tmp_path):
     assert "needs the reference position and the direction of the reference return" in res.stderr
     assert "missing --reference and --return" in res.stderr
     res = run("export", runs_cal, "-f", "fanuc", "--step", "5", "--reference", "X=0", "-o", out)
-    assert res.exit_code == 4 and "missing --return" in res.stderr
+    assert res.exit_code == 4
+    assert "missing --return" in res.stderr
     assert not out.exists()
 
 
@@ -86,7 +86,8 @@ def test_fanuc_parameter_tape_gives_reference_and_return(runs_cal, tmp_path):
     a, b = tmp_path / "a.txt", tmp_path / "b.txt"
     res = run("export", runs_cal, "-f", "fanuc", "--step", "5", "--parameters", tape, "-o", a)
     # 1006#5 = 1 (return in -) with the reference at the upper end (315 mm): unreachable
-    assert res.exit_code == 4 and "cannot reach" in res.stderr
+    assert res.exit_code == 4
+    assert "cannot reach" in res.stderr
     tape.write_text("%\nN1006A1P00000000\nN1240A1P315000\n%\n")
     res = run("export", runs_cal, "-f", "fanuc", "--step", "5", "--parameters", tape, "-o", a)
     assert res.exit_code == 0, res.output
@@ -108,7 +109,8 @@ def test_round_trip_refuses_a_table_the_controller_reads_otherwise(runs_cal, tmp
     out = tmp_path / "comp"
     res = run("export", runs_cal, "-f", "linuxcnc", "-o", out)
     assert res.exit_code == 4
-    assert "round trip of the linuxcnc table of X" in res.stderr and "nothing written" in res.stderr
+    assert "round trip of the linuxcnc table of X" in res.stderr
+    assert "nothing written" in res.stderr
     assert not out.exists() or not any(out.iterdir())
 
 
@@ -147,7 +149,8 @@ def test_linuxcnc_reader_refuses_repeated_nominals():
 def test_siemens_needs_the_reference_and_is_zero_there(runs_cal, tmp_path):
     out = tmp_path / "enc.spf"
     res = run("export", runs_cal, "-f", "siemens", "--step", "5", "-o", out)
-    assert res.exit_code == 4 and "zero at the reference point" in res.stderr
+    assert res.exit_code == 4
+    assert "zero at the reference point" in res.stderr
     res = run("export", runs_cal, "-f", "siemens", "--step", "5", "--reference", "X=150", "-o", out)
     assert res.exit_code == 0, res.output
     x, v = read_siemens(out.read_text())["X1"]
@@ -163,4 +166,5 @@ def test_beckhoff_states_negate_and_alternative_model(runs_cal, tmp_path):
     comments = [ln for ln in out.read_text().splitlines() if ln.startswith("//")]
     assert any("negate: leave unset" in ln for ln in comments)
     assert any("alternative_model: 0" in ln for ln in comments)
-    assert "negate" in res.stderr and "alternative_model" in res.stderr
+    assert "negate" in res.stderr
+    assert "alternative_model" in res.stderr

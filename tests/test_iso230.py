@@ -222,6 +222,7 @@ def _vm_runs(tmp_path, name="vm.csv", directions=(1, -1), temps=None, **kw):
 
     sys.path.insert(0, str(Path(__file__).parent))
     from metrology_machines import TARGETS, x_machine
+
     from postproc.simulate.runs import simulate_runs
 
     runs = simulate_runs(x_machine(), "X", TARGETS, rng=np.random.default_rng(4), directions=directions, **kw)
@@ -263,7 +264,8 @@ def test_temperature_is_reported_and_corrected_to_20C(tmp_path):
     assert "temperature (ISO 230-2 §4.2): not in the runs file" in out
     warm, _ = _vm_runs(tmp_path, "warm.csv", temps=["21.0", "22.0"])
     out = CliRunner().invoke(main, ["iso230", str(warm)]).stdout
-    assert "temp 21.00 °C" in out and "material_temp 22.00 °C" in out
+    assert "temp 21.00 °C" in out
+    assert "material_temp 22.00 °C" in out
     assert "normal-temperature correction applied" in out
     a = json.loads(CliRunner().invoke(main, ["iso230", str(plain), "--json"]).stdout)["axes"]["X"]
     b = json.loads(CliRunner().invoke(main, ["iso230", str(warm), "--json"]).stdout)["axes"]["X"]
@@ -288,13 +290,17 @@ def test_unidirectional_runs_get_the_one_direction_figures(tmp_path):
     assert res.figures["E_up"] == pytest.approx(np.ptp(means), abs=2e-7)
     assert res.figures["R_up"] == pytest.approx(4 * s.max(), abs=2e-7)
     assert res.figures["A_up"] == pytest.approx((means + 2 * s).max() - (means - 2 * s).min(), abs=2e-7)
-    assert "B" not in res.figures and "M" not in res.figures
+    assert "B" not in res.figures
+    assert "M" not in res.figures
     js = json.loads(CliRunner().invoke(main, ["iso230", str(path), "--json", "--plot", str(tmp_path / "u.png")])
                     .stdout)["axes"]["X"]
-    assert js["B"] is None and js["E"] is None and js["E_up"] == pytest.approx(np.ptp(means), abs=2e-7)
+    assert js["B"] is None
+    assert js["E"] is None
+    assert js["E_up"] == pytest.approx(np.ptp(means), abs=2e-7)
     assert (tmp_path / "u.png").stat().st_size > 1000
     out = CliRunner().invoke(main, ["iso230", str(path)]).stdout
-    assert "unidirectional (+)" in out and "A+ " in out
+    assert "unidirectional (+)" in out
+    assert "A+ " in out
     # fit takes them: the positioning of that direction, no backlash effect
     res = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "u.json")])
     assert res.exit_code == 0, res.output

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from metrology_machines import TARGETS, write_runs, x_machine
 
 from postproc.calfile import load_calibration
 from postproc.calibration.measurements import format_measurements, read_measurements
@@ -19,8 +20,6 @@ from postproc.cli import main
 from postproc.metrology.controllers.linuxcnc import read_linuxcnc
 from postproc.metrology.outliers import runs_outliers
 from postproc.simulate.runs import simulate_runs
-
-from metrology_machines import TARGETS, write_runs, x_machine
 
 SAMPLE = Path(__file__).parents[1] / "samples" / "walkthrough_points.csv"
 I_162 = TARGETS.index(162.2)
@@ -77,13 +76,15 @@ def test_export_refuses_a_calibration_fitted_from_an_outlier(glitch):
     assert f"glitch.csv:{line}" in res.stderr
     assert not out.exists()
     res = run("export", cal, "-f", "linuxcnc", "-o", out, "--keep-outliers")
-    assert res.exit_code == 0 and "warning: kept (--keep-outliers)" in res.stderr
+    assert res.exit_code == 0
+    assert "warning: kept (--keep-outliers)" in res.stderr
     # a calibration written before the rule was recorded: its runs file is read again
     data = json.loads(cal.read_text())
     del data["fit"]["outliers"]
     cal.write_text(json.dumps(data))
     res = run("export", cal, "-f", "linuxcnc", "-o", tmp / "comp2")
-    assert res.exit_code == 4 and f"glitch.csv:{line}" in res.stderr
+    assert res.exit_code == 4
+    assert f"glitch.csv:{line}" in res.stderr
     # fitted without it: exported, and the export says what fit left out
     assert run("fit", bad, "-o", tmp / "excl.json").exit_code == 0
     res = run("export", tmp / "excl.json", "-f", "linuxcnc", "-o", tmp / "comp3")
@@ -95,7 +96,8 @@ def test_iso230_keeps_every_reading_and_flags_the_suspicious_one(glitch):
     tmp, clean, bad, line = glitch
     res = run("iso230", bad)
     assert res.exit_code == 0, res.output
-    assert "suspicious" in res.output and f"glitch.csv:{line}" in res.output
+    assert "suspicious" in res.output
+    assert f"glitch.csv:{line}" in res.output
     assert "kept in the figures" in res.output
     js = json.loads(run("iso230", bad, "--json").stdout)["axes"]["X"]
     cl = json.loads(run("iso230", clean, "--json").stdout)["axes"]["X"]

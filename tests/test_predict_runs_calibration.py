@@ -4,13 +4,12 @@ import json
 
 import numpy as np
 from click.testing import CliRunner
+from metrology_machines import write_runs, x_machine
 from numpy.testing import assert_allclose
 
 from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.predict.operation import load_chain
-
-from metrology_machines import write_runs, x_machine
 
 
 def test_init_maps_the_direction_context_of_a_runs_calibration(tmp_path):

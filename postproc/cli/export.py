@@ -33,6 +33,44 @@ def _check_outliers(cal, cal_path: str, keep: bool) -> None:
         click.echo(f"warning: kept (--keep-outliers): {o}", err=True)
 
 
+def _reference_settings(fmt: str, reference, return_direction, parameters) -> tuple[dict, dict]:
+    """--reference (mm) and --return (+1 / -1) by axis, checked against the format."""
+    refs_mm = {}
+    for a, v in _axis_map(reference, "--reference").items():
+        try:
+            refs_mm[a] = float(v)
+        except ValueError:
+            refs_mm[a] = math.nan
+        if not math.isfinite(refs_mm[a]):
+            raise click.BadParameter(f"{a}={v}: the reference must be a finite number of mm, e.g. X=300",
+                                     param_hint="--reference")
+    returns = {}
+    for a, v in _axis_map(return_direction, "--return").items():
+        if v not in ("+", "-"):
+            raise click.BadParameter(f"{a}={v}: the return direction is + or -", param_hint="--return")
+        returns[a] = 1 if v == "+" else -1
+    if (return_direction or parameters) and fmt != "fanuc":
+        raise click.UsageError("--return and --parameters are Fanuc settings; drop them for --format " + fmt)
+    if reference and fmt not in ("fanuc", "siemens"):
+        raise click.UsageError(f"--reference applies to fanuc and siemens tables; drop it for --format {fmt}")
+    return refs_mm, returns
+
+
+def _read_parameter_tape(path, du: float, chosen, names, refs_mm: dict, returns: dict) -> None:
+    """Fill the reference and return direction of the axes the options left open from
+    the control's parameter tape (1240, 1006#5)."""
+    from postproc.metrology.controllers.fanuc import DEFAULT_AXIS_NUMBERS, read_reference_parameters
+
+    tape_refs, tape_dirs = read_reference_parameters(Path(path).read_text(encoding="utf-8-sig"), du, path=path)
+    numbers = {**DEFAULT_AXIS_NUMBERS, **names}
+    for e in chosen:
+        n = numbers[e.axis]
+        if e.axis not in refs_mm and n in tape_refs:
+            refs_mm[e.axis] = tape_refs[n]
+        if e.axis not in returns and n in tape_dirs:
+            returns[e.axis] = tape_dirs[n]
+
+
 def _axis_map(values, what: str) -> dict[str, str]:
     out = {}
     for item in values:
@@ -126,24 +164,7 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
     cal = load_calibration(cal_path)
     _check_outliers(cal, cal_path, keep_outliers)
     names = _axis_map(axis_names, "--axis-name")
-    refs_mm = {}
-    for a, v in _axis_map(reference, "--reference").items():
-        try:
-            refs_mm[a] = float(v)
-        except ValueError:
-            refs_mm[a] = math.nan
-        if not math.isfinite(refs_mm[a]):
-            raise click.BadParameter(f"{a}={v}: the reference must be a finite number of mm, e.g. X=300",
-                                     param_hint="--reference")
-    returns = {}
-    for a, v in _axis_map(return_direction, "--return").items():
-        if v not in ("+", "-"):
-            raise click.BadParameter(f"{a}={v}: the return direction is + or -", param_hint="--return")
-        returns[a] = 1 if v == "+" else -1
-    if (return_direction or parameters) and fmt != "fanuc":
-        raise click.UsageError("--return and --parameters are Fanuc settings; drop them for --format " + fmt)
-    if reference and fmt not in ("fanuc", "siemens"):
-        raise click.UsageError(f"--reference applies to fanuc and siemens tables; drop it for --format {fmt}")
+    refs_mm, returns = _reference_settings(fmt, reference, return_direction, parameters)
     chosen = [AxisErrors(cal, a) for a in axis_order(axes or "XYZ")]
     if not axes:
         chosen = [e for e in chosen if e.measured]
@@ -159,17 +180,7 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
         du = detection_unit / 1000.0
         interval = step if step is not None else max(du, round(min(default_step(e) for e in chosen) / du) * du)
         if parameters:
-            from postproc.metrology.controllers.fanuc import DEFAULT_AXIS_NUMBERS, read_reference_parameters
-
-            tape_refs, tape_dirs = read_reference_parameters(Path(parameters).read_text(encoding="utf-8-sig"), du,
-                                                             path=parameters)
-            numbers = {**DEFAULT_AXIS_NUMBERS, **names}
-            for e in chosen:
-                n = numbers[e.axis]
-                if e.axis not in refs_mm and n in tape_refs:
-                    refs_mm[e.axis] = tape_refs[n]
-                if e.axis not in returns and n in tape_dirs:
-                    returns[e.axis] = tape_dirs[n]
+            _read_parameter_tape(parameters, du, chosen, names, refs_mm, returns)
         result = export_fanuc(chosen, interval_mm=interval, detection_unit_mm=du, reference_mm=refs_mm,
                               return_direction=returns, axis_numbers=names)
     elif fmt == "siemens":

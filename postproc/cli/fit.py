@@ -149,23 +149,8 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
         _check_method_options(method, given)
         r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
         data = read_measurement_files(files, r)
-
-        def run_fit(data):
-            if effects or register:
-                from postproc.diagnose.refit import fit_with_effects
-
-                return fit_with_effects(method, data, list(effects), register=bool(register), **options)
-            return registry.fitter(method)(data, **options)
-
         try:
-            result = run_fit(data)
-            from postproc.metrology.outliers import points_outliers
-
-            found = points_outliers(data, result.engine, resid=result.residuals_mm)
-            if found and not keep_outliers:
-                data = _without(data, found)
-                result = run_fit(data)
-            _record_outliers(result, found, keep_outliers)
+            result, data = _fit_points(method, data, effects, register, options, keep_outliers)
         except CalibrationError as exc:
             for flag, (opt, value) in given.items():
                 if opt.error_phrase and opt.error_phrase in exc.message:
@@ -206,14 +191,12 @@ def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effect
     if bad:
         raise MeasurementError("--base fits effects from point measurements; this is not a point file",
                                path=bad[0])
-    from postproc.metrology.outliers import points_outliers
-
     cal = load_calibration(base_path)
     r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
     data = read_measurement_files(files, r)
     register = True if register is None else register
     # as 'check --fixed' screens: against the calibration as it is, the frame registered
-    found = points_outliers(data, cal.engine, register=register)
+    found = _points_outliers(data, cal.engine, register=register)
     if found and not keep_outliers:
         data = _without(data, found)
     result = extend_calibration(cal, data, list(effects), register=register)
@@ -225,6 +208,58 @@ def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effect
     refuse_large_correction(result.engine, data, max_correction, output)
     save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
     click.echo(f"wrote {output}", err=True)
+
+
+def _fit_points(method, data, effects, register, options, keep_outliers):
+    """Fit the point files ``data``; points beyond the outlier rule (screened as 'check'
+    screens, on the first fit's residual) are left out and the fit made again, unless
+    ``keep_outliers``. Returns the result and the data it was fitted to."""
+    from postproc.engine import registry
+
+    def run_fit(data):
+        if effects or register:
+            from postproc.diagnose.refit import fit_with_effects
+
+            return fit_with_effects(method, data, list(effects), register=bool(register), **options)
+        return registry.fitter(method)(data, **options)
+
+    result = run_fit(data)
+    found = _points_outliers(data, result.engine, resid=result.residuals_mm)
+    if found and not keep_outliers:
+        data = _without(data, found)
+        result = run_fit(data)
+    _record_outliers(result, found, keep_outliers)
+    return result, data
+
+
+def _points_outliers(data, engine, *, register: bool = False, resid=None) -> list[dict]:
+    """Points of measurement files ``data`` beyond the rule, screened as ``check`` screens
+    them (:func:`postproc.diagnose.robust.screen`: repeat groups against their other
+    shots, single shots by their residual against ``engine``, or ``resid`` (N, 3) when
+    given, e.g. a fit's own residual), with the measurement frame registered first when
+    ``register``. Each: ``row`` (over the files in order), ``place`` (file:line),
+    ``residual_mm`` and ``why``."""
+    import numpy as np
+
+    from postproc.diagnose.check import measured_residual
+    from postproc.diagnose.data import Dataset
+    from postproc.diagnose.robust import screen
+    from postproc.errors import PostprocError
+
+    ds = Dataset.from_measurements(data)
+    if resid is None or len(resid) != len(ds):
+        resid = measured_residual(engine, ds)
+        if register and len(ds) >= 6:  # a 6-DOF registration needs six points, as in check
+            from postproc.diagnose.models import Fixed
+
+            try:
+                frame = Fixed(engine, "registration", True).fit(ds, []).frame
+                resid = resid - frame.displacement(ds.q, ds.r)
+            except PostprocError:
+                pass
+    sc = screen(ds, np.asarray(resid, dtype=float))
+    return [{"row": int(o["row"]), "place": o["place"], "residual_mm": o["residual_mm"], "why": o["reason"]}
+            for o in sc.outliers]
 
 
 def _without(data, found):

@@ -158,30 +158,3 @@ def runs_outliers_used(cal, cal_path: str) -> tuple[list[str], list[str], list[s
         used += [o.describe() for o in runs_outliers(runs)]
     return used, [], notes
 
-
-def points_outliers(data, engine, *, register: bool = False, resid=None) -> list[dict]:
-    """Points of measurement files ``data`` beyond the rule, screened as ``check`` screens
-    them (:func:`postproc.diagnose.robust.screen`: repeat groups against their other
-    shots, single shots by their residual against ``engine``, or ``resid`` (N, 3) when
-    given, e.g. a fit's own residual), with the measurement frame registered first when
-    ``register``. Each: ``row`` (over the files in order), ``place`` (file:line),
-    ``residual_mm`` and ``why``."""
-    from postproc.diagnose.check import measured_residual
-    from postproc.diagnose.data import Dataset
-    from postproc.diagnose.robust import screen
-    from postproc.errors import PostprocError
-
-    ds = Dataset.from_measurements(data)
-    if resid is None or len(resid) != len(ds):
-        resid = measured_residual(engine, ds)
-        if register and len(ds) >= 6:
-            from postproc.diagnose.models import Fixed
-
-            try:
-                frame = Fixed(engine, "registration", True).fit(ds, []).frame
-                resid = resid - frame.displacement(ds.q, ds.r)
-            except PostprocError:
-                pass
-    sc = screen(ds, np.asarray(resid, dtype=float))
-    return [{"row": int(o["row"]), "place": o["place"], "residual_mm": o["residual_mm"], "why": o["reason"]}
-            for o in sc.outliers]
