@@ -281,7 +281,8 @@ def _record_outliers(result, found, kept: bool) -> None:
     if found:
         what = "kept (--keep-outliers)" if kept else "excluded from the fit (as 'check' excludes them)"
         result.report.append(f"{len(found)} point(s) beyond the outlier rule {what}:")
-        result.report += [f"  {o['place']}: {o['why']}" for o in found]
+        result.report += [f"  {o['place']}: residual ({', '.join(f'{v * 1000:+.1f}' for v in o['residual_mm'])}) um: "
+                          f"{o['why']}" for o in found]
     result.info = dict(result.info or {})
     rows = [{k: v for k, v in o.items() if k != "row"} for o in found]
     result.info["outliers"] = {"rule": RULE, "excluded": [] if kept else rows, "kept": rows if kept else []}
