@@ -46,8 +46,9 @@ class Screening:
 
 
 def threshold(n: int) -> float:
-    """The rule's limit for a campaign of ``n`` points in space (3 components)."""
-    return _threshold(n, 3)
+    """The rule's limit for a campaign of ``n`` points in space (3 components), the
+    spread estimated from those ``n``."""
+    return _threshold(n, 3, n)
 
 
 def duplicate_rows(ds: Dataset) -> np.ndarray:

@@ -7,12 +7,14 @@ context of tracker shots, or, for single shots, the residual against the model).
 deviation is divided by the robust spread of all such deviations in the campaign,
 ``MAD_TO_SIGMA`` x the median absolute deviation (one glitch cannot inflate the
 yardstick it is measured with). The reading is an outlier when the standardised
-squared deviation exceeds the chi-square quantile (1 degree of freedom for a reading
-along one axis, 3 for a point in space) at ``FAMILY_ALPHA / N``, N readings in the
-campaign (Bonferroni): on clean Gaussian data the chance of one false flag anywhere in
-the campaign is about FAMILY_ALPHA = 0.1 %. For 110 interferometer readings
-(11 targets x 5 runs x 2 directions) the limit is 4.44 robust sigma; for 400 tracker
-shots, 5.5.
+squared deviation exceeds the quantile at ``FAMILY_ALPHA / N``, N readings in the
+campaign (Bonferroni), of ``dof`` times an F distribution: dof = 1 for a reading along
+one axis, 3 for a point in space, and the spread's own degrees of freedom
+MAD_EFFICIENCY x N (the chi-square quantile, widened because the spread is
+estimated, as a t quantile widens a normal one). On clean Gaussian data the chance of
+one false flag anywhere in the campaign is about FAMILY_ALPHA = 0.1 %. For 110
+interferometer readings (11 targets x 5 runs x 2 directions) the limit is 5.08 robust
+sigma; for 240 tracker shots, 5.69.
 
 **Who does what with it.** ``check`` and ``fit`` leave outliers out of the data and
 list them (file:line, value, why); ``fit --keep-outliers`` keeps them and records
@@ -31,6 +33,10 @@ import numpy as np
 FAMILY_ALPHA = 1e-3
 #: Consistency factor of the median absolute deviation for a Gaussian (MAD * 1.4826 = sigma).
 MAD_TO_SIGMA = 1.4826
+#: Asymptotic efficiency of the median absolute deviation against the standard deviation
+#: for Gaussian data: a MAD from N deviations is as good as a standard deviation from
+#: 0.37 N (its degrees of freedom in the F quantile of :func:`threshold`).
+MAD_EFFICIENCY = 0.367
 #: Spreads below this (mm, a nanometre: below any instrument) are rounding, not noise:
 #: noise-free simulated data must not make outliers of rounding differences.
 MIN_SIGMA_MM = 1e-6
@@ -40,15 +46,22 @@ MIN_GROUP = 3
 MIN_READINGS = 8
 
 RULE = (f"robust z (deviation from the median of the other readings of its group, over {MAD_TO_SIGMA} x the "
-        f"median absolute deviation of all such deviations) beyond the chi-square quantile at "
-        f"{FAMILY_ALPHA:g}/N (Bonferroni over the N readings)")
+        f"median absolute deviation of all such deviations) beyond the quantile at {FAMILY_ALPHA:g}/N "
+        "(Bonferroni over the N readings) of the F distribution that allows for the spread being estimated")
 
 
-def threshold(n: int, dof: int = 1) -> float:
-    """The limit of the squared robust z for a campaign of ``n`` readings of ``dof`` components."""
-    from scipy.stats import chi2
+def threshold(n: int, dof: int = 1, n_scale: int | None = None) -> float:
+    """The limit of the squared robust z for a campaign of ``n`` readings of ``dof``
+    components. ``n_scale``: the number of deviations the spread was estimated from;
+    the estimate's own scatter (the MAD has MAD_EFFICIENCY of the efficiency of a
+    standard deviation) widens the limit from the chi-square to ``dof`` times the F
+    quantile, as a t replaces a normal quantile when sigma is estimated."""
+    from scipy.stats import chi2, f
 
-    return float(chi2.isf(FAMILY_ALPHA / max(n, 1), dof))
+    alpha = FAMILY_ALPHA / max(n, 1)
+    if n_scale is None:
+        return float(chi2.isf(alpha, dof))
+    return float(dof * f.isf(alpha, dof, max(MAD_EFFICIENCY * n_scale, 1.0)))
 
 
 def robust_sigma(dev: np.ndarray) -> np.ndarray:
@@ -111,7 +124,7 @@ def runs_outliers(runs) -> list[Outlier]:
             continue
         sigma = float(robust_sigma(dev[live]))
         centre = float(np.median(dev[live]))
-        limit = float(np.sqrt(threshold(len(k), 1)))
+        limit = float(np.sqrt(threshold(len(k), 1, int(live.sum()))))
         z = np.abs(dev - centre) / sigma
         for j in np.flatnonzero(live & (z > limit)):
             i = k[j]
