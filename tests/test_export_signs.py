@@ -168,3 +168,29 @@ def test_beckhoff_states_negate_and_alternative_model(runs_cal, tmp_path):
     assert any("alternative_model: 0" in ln for ln in comments)
     assert "negate" in res.stderr
     assert "alternative_model" in res.stderr
+
+
+@pytest.mark.parametrize("reversal_mm", [0.012, -0.012])
+def test_fanuc_on_a_minus_l_to_zero_axis(tmp_path, reversal_mm):
+    """The common -L..0 layout, reference at 0 reached in +: the table lies on the - side of
+    the reference, and the control's summation gives back the correction at every point,
+    both directions, for a reversal of either sign."""
+    targets = tuple(t - 315.0 for t in TARGETS)
+    runs, _ = write_runs(tmp_path / "runs.csv", x_machine(reversal_mm=reversal_mm, lo=-315.0, hi=0.0),
+                         targets=targets, at=[-315.0, 0.0, -400.0])
+    cal = tmp_path / "cal.json"
+    assert run("fit", runs, "-o", cal).exit_code == 0
+    out = tmp_path / "pitch.txt"
+    res = run("export", cal, "-f", "fanuc", "--step", "5", "--reference", "X=0", "--return", "X=+", "-o", out)
+    assert res.exit_code == 0, res.output
+    params, data = read_fanuc(out.read_text())
+    x, c_up, c_down = fanuc_compensation(params, data, "1", return_direction=1)
+    assert x.min() == pytest.approx(-315.0)
+    assert x.max() == pytest.approx(0.0)
+    # every section on the - side: the farthest + point is the reference's own number
+    assert params[3622]["1"] == params[3620]["1"]
+    assert params[3621]["1"] == params[3620]["1"] - 315 // 5 + 1
+    e = AxisErrors(load_calibration(cal), "X")
+    assert control_residual(out.read_text(), e, +1, 0.0) <= 0.0005 + 1e-9
+    res = run("export", cal, "-f", "fanuc", "--step", "5", "--reference", "X=0", "--return", "X=-", "-o", out)
+    assert res.exit_code == 4  # the upper end cannot be reached moving -
