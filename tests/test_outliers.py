@@ -153,3 +153,26 @@ def test_check_and_the_fit_it_suggests_exclude_the_same_glitch(tmp_path, monkeyp
     q = np.random.default_rng(3).uniform(0, 315, (200, 3))
     ctx = {k: np.ones(200) for k in ("dirx", "diry", "dirz")}
     assert np.abs(a.forward(q, None, ctx) - b.forward(q, None, ctx)).max() < 0.5e-3
+
+
+def test_check_fixed_and_fit_base_exclude_the_same_glitch(tmp_path, monkeypatch):
+    """check --fixed suggests 'fit --base': both screen against the calibration as it is,
+    the frame registered, and leave out the same shot."""
+    monkeypatch.chdir(tmp_path)
+    meas = read_measurements(SAMPLE)
+    text = SAMPLE.read_text().splitlines()
+    meas.m[37, 1] -= 0.200
+    Path("glitch.csv").write_text(format_measurements(meas, comments=[ln[2:] for ln in text[2:4]]))
+    line = int(read_measurements("glitch.csv").linenos[37])
+    assert run("fit", "glitch.csv", "--method", "static", "-o", "base.json").exit_code == 0
+    res = run("check", "glitch.csv", "-c", "base.json", "--fixed", "--json", "--folds", "3")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert [o["place"] for o in report["screening"]["outliers"]] == [f"glitch.csv:{line}"]
+    (sug,) = report["suggestions"]
+    args = shlex.split(sug["command"])
+    assert "--base" in args
+    res = run(*args[1:])
+    assert res.exit_code == 0, res.output
+    fitted = load_calibration(args[args.index("-o") + 1])
+    assert [o["place"] for o in fitted.fit["outliers"]["excluded"]] == [f"glitch.csv:{line}"]
