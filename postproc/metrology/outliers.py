@@ -109,7 +109,7 @@ def runs_outliers(runs) -> list[Outlier]:
         k = np.flatnonzero(runs.axis == axis)
         dev = np.full(len(k), np.nan)
         others = np.full(len(k), np.nan)
-        keys = {}
+        keys: dict[tuple[float, int], list[int]] = {}
         for j, i in enumerate(k):
             keys.setdefault((runs.target_mm[i], runs.direction[i]), []).append(j)
         for rows in keys.values():
@@ -127,7 +127,7 @@ def runs_outliers(runs) -> list[Outlier]:
         limit = float(np.sqrt(threshold(len(k), 1, int(live.sum()))))
         z = np.abs(dev - centre) / sigma
         for j in np.flatnonzero(live & (z > limit)):
-            i = k[j]
+            i = int(k[j])
             out.append(Outlier(runs.path, int(runs.linenos[i]), str(axis), float(runs.target_mm[i]), int(runs.run[i]),
                                int(runs.direction[i]), float(runs.deviation_mm[i]), float(z[j]), limit,
                                float(others[j])))

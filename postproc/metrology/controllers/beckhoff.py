@@ -83,9 +83,9 @@ def export_beckhoff(axis_errors: list[AxisErrors], *, name: str = "calibration")
                  + " ".join(f"{k}={v:.6g}" for k, v in sq.items()))
     text = "\n".join(lines) + "\n" + "\n#\n".join(blocks) + "\n"
     # round trip: the file read back as an ISG CSV reader does, every record, every column
-    back = {}
-    for block in _isg_blocks(text):
-        axis, part = _isg_part(block, "volcomp.csv")
+    back: dict[str, TablePart] = {}
+    for read_block in _isg_blocks(text):
+        axis, part = _isg_part(read_block, "volcomp.csv")
         back[axis] = part
     for e in axis_errors:
         part = back[e.axis]

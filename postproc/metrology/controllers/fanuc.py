@@ -161,9 +161,9 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, reference
     lines.append("%")
     text = "\n".join(lines) + "\n"
     # round trip: the tape as the control sums it, every point, both directions
-    params, pitch = read_fanuc(text)
+    tape_params, tape_data = read_fanuc(text)
     for e, ax, ref, ret, x_rel, err_up, err_down, unit in checks:
-        x, c_up, c_down = fanuc_compensation(params, pitch, ax, detection_unit_mm, ret)
+        x, c_up, c_down = fanuc_compensation(tape_params, tape_data, ax, detection_unit_mm, ret)
         if not np.allclose(x, x_rel, rtol=0, atol=detection_unit_mm):
             raise CalibrationError(f"round trip of the fanuc table of {e.axis}: the tape's points are not the "
                                    "table's; nothing written", hint="report it with the calibration file")

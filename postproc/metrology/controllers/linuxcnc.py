@@ -97,8 +97,8 @@ def linuxcnc_loader(text: str, comp_type: int, path: str = "") -> tuple[np.ndarr
     loader's complaints). usrmotLoadComp reads triplets until the first line that is not
     three numbers; motion's SET_JOINT_COMP drops an entry whose nominal is not above the
     last one kept, with "compensation values must increase"."""
-    rows = []
-    errors = []
+    rows: list[tuple[float, float, float]] = []
+    errors: list[str] = []
     for line in text.splitlines():
         parts = line.split()
         try:

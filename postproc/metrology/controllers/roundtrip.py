@@ -24,7 +24,8 @@ def check_round_trip(axis: str, fmt: str, x, got: dict[str, np.ndarray], want: d
     ('+', '-' or 'both'); raises when it exceeds ``resolution_mm`` (plus float slack),
     naming the worst point."""
     x = np.asarray(x, dtype=float)
-    worst, where = 0.0, None
+    worst = 0.0
+    where: tuple[float, str, float, float] = (float("nan"), "", float("nan"), float("nan"))
     for d, g in got.items():
         diff = np.abs(np.asarray(g, dtype=float) - np.asarray(want[d], dtype=float))
         if len(diff) != len(x):
@@ -32,13 +33,13 @@ def check_round_trip(axis: str, fmt: str, x, got: dict[str, np.ndarray], want: d
                                    f"for {len(x)} points; nothing written")
         i = int(np.argmax(diff)) if len(diff) else 0
         if len(diff) and diff[i] > worst:
-            worst, where = float(diff[i]), (float(x[i]), d, float(g[i]), float(want[d][i]))
+            worst, where = float(diff[i]), (float(x[i]), d, float(np.asarray(g)[i]), float(np.asarray(want[d])[i]))
     if worst > resolution_mm + FLOAT_SLACK_MM:
-        at, d, g, w = where
-        side = {"+": "moving +", "-": "moving -"}.get(d, "")
+        at, side_key, g_at, w_at = where
+        side = {"+": "moving +", "-": "moving -"}.get(side_key, "")
         raise CalibrationError(
             f"round trip of the {fmt} table of {axis}: read back as the controller reads it, the table gives "
-            f"{g * 1000:+.4f} um at {at:.4f} mm {side} where the calibration asks {w * 1000:+.4f} um "
+            f"{g_at * 1000:+.4f} um at {at:.4f} mm {side} where the calibration asks {w_at * 1000:+.4f} um "
             f"(off by {worst * 1000:.4f} um, more than the table's resolution {resolution_mm * 1000:.4f} um); "
             "nothing written",
             hint="this is a defect of the export: report it with the calibration file")
