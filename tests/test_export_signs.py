@@ -194,3 +194,15 @@ def test_fanuc_on_a_minus_l_to_zero_axis(tmp_path, reversal_mm):
     assert control_residual(out.read_text(), e, +1, 0.0) <= 0.0005 + 1e-9
     res = run("export", cal, "-f", "fanuc", "--step", "5", "--reference", "X=0", "--return", "X=-", "-o", out)
     assert res.exit_code == 4  # the upper end cannot be reached moving -
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["-f", "fanuc", "--reference", "X=nan", "--return", "X=+"], "must be a finite number of mm"),
+    (["-f", "fanuc", "--reference", "X=300", "--return", "X=up"], "the return direction is + or -"),
+    (["-f", "siemens", "--reference", "X=0", "--return", "X=+"], "--return and --parameters are Fanuc settings"),
+    (["-f", "linuxcnc", "--reference", "X=0"], "--reference applies to fanuc and siemens"),
+])
+def test_reference_options_are_checked(runs_cal, tmp_path, args, words):
+    res = run("export", runs_cal, *args, "-o", tmp_path / "out")
+    assert res.exit_code == 2, res.output
+    assert words in res.stderr
