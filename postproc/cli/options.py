@@ -12,10 +12,10 @@ from pathlib import Path
 import click
 
 from postproc.errors import PostprocError
+from postproc.gcode.dialect import DIALECT_NAMES
 
-# The controllers --dialect names (postproc.gcode.dialect.DIALECTS; a test keeps them equal,
-# and this module stays light for --help).
-DIALECT_CHOICE = click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False)
+# The controllers --dialect names: one entry each in postproc.gcode.dialect (a light module)
+DIALECT_CHOICE = click.Choice(list(DIALECT_NAMES), case_sensitive=False)
 
 _AXES = "XYZ"
 

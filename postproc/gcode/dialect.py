@@ -111,6 +111,24 @@ class Dialect:
     arc_cap_mm: float  # largest tolerance whatever the radius, mm (G21); inf: none
     arc_mismatch: str  # what the controller does with an arc inside the tolerance, and beyond it
     source: str  # where the values come from
+    # -- how programs are read (the interpreter and the expansion ask for these) --------
+    machine: str = "mill"  # mill | lathe: postproc corrects milling machines only
+    reads_arcs_as: str | None = None  # the dialect whose input-arc rule applies (None: its own)
+    comments_nest: bool = False  # "(a (b) c)" is one comment (else LinuxCNC/Grbl: an error or ')' closes)
+    nested_comment_error: bool = False  # a "(" inside a comment is an error (NCE_NESTED_COMMENT_FOUND)
+    text_after_percent: str = "ignored"  # "%" followed by text: ignored | error
+    g80_clears_motion: bool = False  # G80 leaves no motion mode (else the one before the cycle comes back)
+    cycle_keeps_rz: bool = False  # a new canned cycle keeps the last R and Z (else they must be given again)
+    cycle_r_default_initial: bool = False  # a cycle without R retracts to the initial level
+    cycle_repeat_words: str = "L"  # the words counting a cycle's repeats, first given wins ("KL": K, else L)
+    full_circle_without_end: bool = True  # G2/G3 with centre words and no end point is a full circle
+    g53_absolute_in_g91: bool = False  # G53 words are machine positions in G91 too (else an error)
+    off_plane_arc_offset: str = "error"  # an I/J/K word off the arc's plane: error | ignored | zero-ignored
+    # parameters and control: o-word (LinuxCNC) | macro-b (Fanuc custom macro B, M98/M99) | detect
+    macro_syntax: str = "o-word"
+    m98_count_in_p: bool = False  # M98 P(count)(4-digit number) when no program has the whole number
+    program_number_forms: tuple[str, ...] = ("O1234", ":1234")  # program-number lines (no geometry)
+    marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
 
     def arc_end_radius_tolerance(self, r_start_mm: float, units: str | float = "mm") -> float:
         """Largest |r_end - r_start| (mm) this controller accepts on a centre-format arc.
@@ -171,7 +189,10 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="cut as a spiral from the start radius to the end radius; beyond the tolerance the "
                      "block is an error ('Radius to end of arc differs from radius to start')",
         source="linuxcnc.h LINELEN; interp_read.cc read_text; interp_internal.hh CENTER_ARC_RADIUS_TOLERANCE_*, "
-               "SPIRAL_RELATIVE_TOLERANCE; interp_arc.cc arc_data_ijk"),
+               "SPIRAL_RELATIVE_TOLERANCE; interp_arc.cc arc_data_ijk",
+        # interp_read.cc read_comment: NCE_NESTED_COMMENT_FOUND; read_text: "Bad character '%' used";
+        # interp_convert.cc convert_motion(G_80): motion mode G_80 (none)
+        nested_comment_error=True, text_after_percent="error", g80_clears_motion=True),
     "grbl": Dialect(
         name="grbl", title="Grbl 1.1",
         max_line_chars=GRBL_RX_BUFFER_SIZE - 1, max_word_chars=GRBL_LINE_BUFFER_SIZE - 1,
@@ -183,7 +204,9 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="cut on the start radius (mc_arc), the last segment going straight to the end point; "
                      "beyond the tolerance error 33 (STATUS_GCODE_INVALID_TARGET)",
         source="gcode.c (arc radius check), protocol.c/protocol.h LINE_BUFFER_SIZE, serial.h RX_BUFFER_SIZE; "
-               "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals"),
+               "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals",
+        # gcode.c: an arc with no axis words is STATUS_GCODE_NO_AXIS_WORDS
+        full_circle_without_end=False),
     "fanuc": Dialect(
         name="fanuc", title="Fanuc 0i/30i (ISO code)",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -195,7 +218,9 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="cut as a spiral (radius changing linearly); beyond parameter 3410 alarm PS0020 "
                      "OVER TOLERANCE OF RADIUS",
         source="Fanuc operator's manual (control-out/control-in comments, ';' is the end of block in ISO "
-               "code); parameter manual No. 3410"),
+               "code); parameter manual No. 3410",
+        comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
+        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True),
     "haas": Dialect(
         name="haas", title="Haas NGC",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -205,7 +230,9 @@ DIALECTS: dict[str, Dialect] = {
         arc_rule="absolute", arc_abs_mm=HAAS_ARC_ABS_MM, arc_abs_inch=HAAS_ARC_ABS_INCH, arc_rel=0.0,
         arc_cap_mm=HAAS_ARC_ABS_MM,
         arc_mismatch="alarm 'Invalid I, J, K, or R in G02 or G03' beyond the tolerance",
-        source="Haas mill operator's manual (comments, program format); tolerance assumed as Fanuc's"),
+        source="Haas mill operator's manual (comments, program format); tolerance assumed as Fanuc's",
+        comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
+        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True),
     "mach3": Dialect(
         name="mach3", title="Mach3",
         max_line_chars=LINUXCNC_LINELEN - 3, max_word_chars=None,
@@ -215,23 +242,29 @@ DIALECTS: dict[str, Dialect] = {
         arc_rule="absolute", arc_abs_mm=NIST_ARC_ABS_MM, arc_abs_inch=NIST_ARC_ABS_INCH, arc_rel=0.0,
         arc_cap_mm=NIST_ARC_ABS_MM,
         arc_mismatch="beyond the tolerance the block is an error (NIST RS274NGC arc_data_ijk)",
-        source="NIST RS274NGC 3 rs274ngc.hh TOLERANCE_MM/TOLERANCE_INCH, RS274NGC_TEXT_SIZE"),
+        source="NIST RS274NGC 3 rs274ngc.hh TOLERANCE_MM/TOLERANCE_INCH, RS274NGC_TEXT_SIZE",
+        comments_nest=True, off_plane_arc_offset="ignored"),
 }
+# generic is the subset these controllers all accept (later entries are not part of it)
 _ALL_BUT_GENERIC = tuple(DIALECTS)
+_GENERIC_OF = [DIALECTS[n] for n in _ALL_BUT_GENERIC]
 
 DIALECTS["generic"] = Dialect(
     name="generic", title="every dialect above",
-    max_line_chars=min(d.max_line_chars for d in DIALECTS.values()),
-    max_word_chars=min(d.max_word_chars for d in DIALECTS.values() if d.max_word_chars),
+    max_line_chars=min(d.max_line_chars for d in _GENERIC_OF),
+    max_word_chars=min(d.max_word_chars for d in _GENERIC_OF if d.max_word_chars),
     uppercase_only=True, paren_comments=True, semicolon_comments=False,
-    comment_forbidden="".join(sorted(set("".join(d.comment_forbidden for d in DIALECTS.values())))),
+    comment_forbidden="".join(sorted(set("".join(d.comment_forbidden for d in _GENERIC_OF)))),
     nested_comments="refused", ascii_only=True,
     decimals_mm=4, decimals_inch=5,
-    arc_rule="strictest", arc_abs_mm=min(d.arc_abs_mm for d in DIALECTS.values()),
-    arc_abs_inch=min(d.arc_abs_inch for d in DIALECTS.values()), arc_rel=0.0,
-    arc_cap_mm=min(d.arc_cap_mm for d in DIALECTS.values()),
+    arc_rule="strictest", arc_abs_mm=min(d.arc_abs_mm for d in _GENERIC_OF),
+    arc_abs_inch=min(d.arc_abs_inch for d in _GENERIC_OF), arc_rel=0.0,
+    arc_cap_mm=min(d.arc_cap_mm for d in _GENERIC_OF),
     arc_mismatch="the strictest of the dialects: an arc is accepted only where every controller accepts it",
-    source="the intersection of the others")
+    source="the intersection of the others",
+    # input is read as LinuxCNC (the reference interpreter) reads it, macro programs in the
+    # syntax they are written in
+    reads_arcs_as="linuxcnc", off_plane_arc_offset="zero-ignored", macro_syntax="detect", m98_count_in_p=True)
 
 DIALECT_NAMES = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
 

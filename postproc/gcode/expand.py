@@ -31,6 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.gcode.dialect import DIALECTS
+from postproc.gcode.dialect import get as get_dialect
 from postproc.gcode.expand_syntax import (
     CANDIDATE,
     Assign,
@@ -54,8 +56,6 @@ from postproc.gcode.expr import (
     to_index,
 )
 from postproc.gcode.lexer import scan_words, split_lines
-
-DIALECTS = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
 
 # rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
 LINUXCNC_SUB_PARAMS = 30
@@ -133,7 +133,8 @@ def needs_expansion(lines: Sequence[str], dialect: str = "generic") -> bool:
         if not CANDIDATE.search(code):
             continue
         try:
-            b = parse_block(line, fanuc=fanuc, path=None, lineno=k + 1, nested_comments=dialect != "linuxcnc")
+            b = parse_block(line, fanuc=fanuc, path=None, lineno=k + 1,
+                            nested_comments=not get_dialect(dialect).nested_comment_error)
         except PostprocError:
             if "#" in code or "[" in code:
                 return True  # a broken expression: let expand() report it with its place
@@ -191,9 +192,9 @@ class _Expander(Env):
         if dialect not in DIALECTS:
             raise ValueError(f"unknown dialect {dialect!r}")
         self.dialect = dialect
+        self.d = get_dialect(dialect)
         self.fanuc = is_fanuc(lines, dialect)
-        self.linuxcnc_strict = dialect == "linuxcnc"
-        self.nested = dialect != "linuxcnc"
+        self.nested = not self.d.nested_comment_error
         # M97 (Haas local subprogram: call to a sequence number) in the Fanuc-family dialects
         self.call_m_codes = (97.0, 98.0, 99.0) if self.fanuc else (98.0, 99.0)
         self.main = Unit(lines, path, self.fanuc, self.nested)
@@ -692,7 +693,7 @@ class _Expander(Env):
         target = self._program_target(number, col)
         repeat = 1 if count is None else count
         if target is None and count is None and number >= 10000 and (
-                self.fanuc or self.dialect == "generic"):
+                self.fanuc or self.d.m98_count_in_p):
             # Fanuc: P(count)(4-digit program number)
             target = self._program_target(number % 10000, col)
             repeat = number // 10000

@@ -210,10 +210,6 @@ def classify_construct(line: str) -> tuple[str, str]:
     return "", ""
 
 
-# controllers that read "(a (b) c)" as one comment (LinuxCNC and Grbl reject it)
-NESTING_COMMENTS = {"fanuc", "haas", "mach3"}
-
-
 def blank_nested_comments(line: str) -> str:
     """The line with the inside of each outermost balanced ( ... ) blanked, so that a
     nested comment lexes as one comment at the same columns."""
@@ -278,6 +274,9 @@ class Interpreter:
         self.program_stored: set[str] = set()  # stored positions the program set itself
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
+        from postproc.gcode.dialect import get as _dialect
+
+        self.d: Dialect = _dialect(dialect)  # the facts of the controller the program is for
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
         self.repeats = False  # the program ended with M99 (repeated by the controller)
         # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
@@ -295,7 +294,7 @@ class Interpreter:
         arcs as LinuxCNC, the reference interpreter, does)."""
         from postproc.gcode import dialect
 
-        return dialect.get("linuxcnc" if self.dialect == "generic" else self.dialect)
+        return dialect.get(self.d.reads_arcs_as or self.d)
 
     def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
         """The error class for a refused construct: NeedsExpansion when expanding is allowed
@@ -383,7 +382,7 @@ class Interpreter:
         return self._block(lineno, words, block_delete)
 
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
-        if self.dialect in NESTING_COMMENTS and line.count("(") > 1:
+        if self.d.comments_nest and line.count("(") > 1:
             line = blank_nested_comments(line)
         try:
             tokens = lexer.lex(line, self.path, lineno)
@@ -394,7 +393,7 @@ class Interpreter:
             raise
         first = next((t for t in tokens if t.kind != lexer.SPACE), None)
         if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
-            if self.dialect != "linuxcnc":
+            if self.d.text_after_percent == "ignored":
                 return [], False  # '%' tape mark: the controller ignores the rest of the line
             raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
                             hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
@@ -581,15 +580,15 @@ class Interpreter:
         has_axes = any(a in vals for a in AXES)
         if cancel_cycle:
             if st.motion in CANNED_CYCLES:
-                st.motion = None if self.dialect == "linuxcnc" else st.before_cycle
-            elif self.dialect == "linuxcnc":
+                st.motion = None if self.d.g80_clears_motion else st.before_cycle
+            elif self.d.g80_clears_motion:
                 st.motion = None
             st.cycle_r = st.cycle_z = st.cycle_q = st.cycle_p = None
         if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
             if motion_key is not None and st.motion not in CANNED_CYCLES:
                 st.before_cycle = st.motion
             if motion_key is not None and motion_key != st.motion and (
-                    self.dialect not in ("fanuc", "haas") or st.motion not in CANNED_CYCLES):
+                    not self.d.cycle_keeps_rz or st.motion not in CANNED_CYCLES):
                 # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
                 # keep them from one cycle to the next (until G80 or another motion)
                 st.cycle_r = st.cycle_z = None
@@ -609,10 +608,11 @@ class Interpreter:
             if motion_key in (ARC_CW, ARC_CCW) or (arc_words and st.motion in (ARC_CW, ARC_CCW)):
                 i = arc_words[0] if arc_words else next(i for k, i in gcodes if k == motion_key)
                 _, (l1, l2) = PLANES[st.plane]
-                if self.dialect == "grbl" or "R" in vals or not (l1 in vals or l2 in vals):
+                if not self.d.full_circle_without_end or "R" in vals or not (l1 in vals or l2 in vals):
                     raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i),
                                     hint="a full circle needs its centre offsets (I/J/K)"
-                                    + (" and Grbl needs an end point" if self.dialect == "grbl" else ""))
+                                    + ("" if self.d.full_circle_without_end else
+                                       f" and {self.d.title.split()[0]} needs an end point"))
                 full_circle = True  # a full circle back to the start (LinuxCNC, Fanuc)
             elif not rotary_changed:
                 return None
@@ -627,7 +627,7 @@ class Interpreter:
             raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
         incremental = st.incremental
         if g53 and incremental:
-            if self.dialect not in ("fanuc", "haas"):
+            if not self.d.g53_absolute_in_g91:
                 raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
                                 first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
                                                      "machine positions in G91 too (--dialect fanuc|haas)")
@@ -841,7 +841,7 @@ class Interpreter:
         unit = st.unit_mm
         if "R" in vals:
             st.cycle_r = vals["R"][0]
-        if st.cycle_r is None and self.dialect in ("fanuc", "haas") and not math.isnan(st.pos[2]):
+        if st.cycle_r is None and self.d.cycle_r_default_initial and not math.isnan(st.pos[2]):
             # Fanuc and Haas: R is optional; without it the R plane is the initial level
             if st.incremental:
                 st.cycle_r = 0.0
@@ -865,7 +865,7 @@ class Interpreter:
             st.cycle_p = vals["P"][0]
         if "F" in vals:
             st.feed = vals["F"][0]
-        repeat_letter = "K" if self.dialect in ("fanuc", "haas") and "K" in vals else "L"
+        repeat_letter = next((c for c in self.d.cycle_repeat_words if c in vals), "L")
         repeats = 1
         if repeat_letter in vals:
             given = vals[repeat_letter][0]
@@ -1082,9 +1082,9 @@ class Interpreter:
         e1, e2 = q1[a1], q1[a2]
         plane_letters = {"I": 0, "J": 1, "K": 2}
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
-        if wrong and self.dialect in ("fanuc", "haas", "mach3"):
+        if wrong and self.d.off_plane_arc_offset == "ignored":
             wrong = []  # these controllers ignore an offset word off the arc's plane
-        elif wrong and self.dialect == "generic" and all(vals[k][0] == 0 for k in wrong):
+        elif wrong and self.d.off_plane_arc_offset == "zero-ignored" and all(vals[k][0] == 0 for k in wrong):
             wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
