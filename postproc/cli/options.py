@@ -47,7 +47,8 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+)$", re.IGNORECASE)
+# G500 and G505..G599: Sinumerik; E<n>: Fadal fixture offsets; G15H<n>: Okuma work coordinates
+_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+|G5\d\d|E\d+|G15H\d+)$", re.IGNORECASE)
 
 
 def axis_values(text: str, rest: str, letters: str, *, param_hint: str | None = None,
@@ -83,6 +84,7 @@ def parse_offset(text: str) -> tuple[str, dict[str, float]]:
     if not sep or not _OFFSET_NAME.match(name):
         raise click.BadParameter(
             f"{text!r}: expected NAME=X..,Y..,Z.. with NAME one of G54..G59, G59.1..G59.3, G54.1P<n>"
+            " (G500..G599 Sinumerik, E<n> Fadal, G15H<n> Okuma)"
         )
     values = axis_values(text, rest, "XYZABC")
     return name, values

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TypedDict
 
 from postproc.constants import MM_PER_INCH
@@ -88,6 +88,11 @@ HAAS_ARC_ABS_INCH = 0.0008
 # milling programs; DNC links and older memory formats break long blocks. 128 characters
 # is kept as the limit here (the header and every edited line stay far below it).
 FANUC_MAX_LINE = 128
+# Fanuc lathe (G code system A): G70 finishing, G71 stock removal in turning, G72 in facing,
+# G73 pattern repeating, G74 end face peck drilling, G75 outer/inner diameter grooving, G76
+# multiple threading. G73 and G76 are milling cycles on a mill (peck drilling, fine boring),
+# and G74 is left-hand tapping: only the others are read as a lathe's, and only after G96.
+FANUC_TURNING_CYCLES = frozenset({700, 710, 720, 750})
 
 
 @dataclass(frozen=True)
@@ -127,8 +132,15 @@ class Dialect:
     # parameters and control: o-word (LinuxCNC) | macro-b (Fanuc custom macro B, M98/M99) | detect
     macro_syntax: str = "o-word"
     m98_count_in_p: bool = False  # M98 P(count)(4-digit number) when no program has the whole number
-    program_number_forms: tuple[str, ...] = ("O1234", ":1234")  # program-number lines (no geometry)
+    numbered_program_line: bool = False  # "N1 O2 (NAME)": a program number after a sequence number (Fadal)
+    header_forms: tuple[str, ...] = ()  # regexes of header lines read as no geometry ("$NAME.MIN%", Okuma)
+    uvw_axes: bool = False  # U, V, W are axes (LinuxCNC); else U/W mark a lathe program (incremental X/Z)
+    turning_cycles: frozenset[int] = frozenset()  # G keys (10 x number) that are lathe turning cycles here
+    fixture_offset_word: str = ""  # a letter selecting a fixture offset by number ("E": Fadal E1..E48)
+    g15_work_select: bool = False  # "G15 H<n>" selects work coordinate system n (Okuma)
+    g_aliases: tuple[tuple[int, int], ...] = ()  # (this dialect's G key, the ISO G key it means)
     marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
+    refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
 
     def arc_end_radius_tolerance(self, r_start_mm: float, units: str | float = "mm") -> float:
         """Largest |r_end - r_start| (mm) this controller accepts on a centre-format arc.
@@ -148,6 +160,8 @@ class Dialect:
         a = self.arc_abs_inch * MM_PER_INCH if inch else self.arc_abs_mm
         if self.arc_rule == "linuxcnc":
             return min(LINUXCNC_ARC_CAP_FACTOR * a, max(a, self.arc_rel * r))
+        if self.arc_rule == "relative":
+            return max(a, self.arc_rel * r)
         return a
 
     def arc_end_radius_ok(self, r_start_mm: float, r_end_mm: float, units: str | float = "mm") -> bool:
@@ -192,7 +206,9 @@ DIALECTS: dict[str, Dialect] = {
                "SPIRAL_RELATIVE_TOLERANCE; interp_arc.cc arc_data_ijk",
         # interp_read.cc read_comment: NCE_NESTED_COMMENT_FOUND; read_text: "Bad character '%' used";
         # interp_convert.cc convert_motion(G_80): motion mode G_80 (none)
-        nested_comment_error=True, text_after_percent="error", g80_clears_motion=True),
+        nested_comment_error=True, text_after_percent="error", g80_clears_motion=True,
+        # LinuxCNC machines may have U/V/W axes; G70/G71/G72 are its lathe finishing and roughing cycles
+        uvw_axes=True, turning_cycles=frozenset({700, 710, 720})),
     "grbl": Dialect(
         name="grbl", title="Grbl 1.1",
         max_line_chars=GRBL_RX_BUFFER_SIZE - 1, max_word_chars=GRBL_LINE_BUFFER_SIZE - 1,
@@ -220,7 +236,8 @@ DIALECTS: dict[str, Dialect] = {
         source="Fanuc operator's manual (control-out/control-in comments, ';' is the end of block in ISO "
                "code); parameter manual No. 3410",
         comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
-        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True),
+        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True,
+        turning_cycles=FANUC_TURNING_CYCLES),
     "haas": Dialect(
         name="haas", title="Haas NGC",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -264,9 +281,97 @@ DIALECTS["generic"] = Dialect(
     source="the intersection of the others",
     # input is read as LinuxCNC (the reference interpreter) reads it, macro programs in the
     # syntax they are written in
-    reads_arcs_as="linuxcnc", off_plane_arc_offset="zero-ignored", macro_syntax="detect", m98_count_in_p=True)
+    reads_arcs_as="linuxcnc", off_plane_arc_offset="zero-ignored", macro_syntax="detect", m98_count_in_p=True,
+    turning_cycles=FANUC_TURNING_CYCLES)
 
-DIALECT_NAMES = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
+# --- controllers whose programs generic does not read (each one entry) ---------------------
+_FANUC = DIALECTS["fanuc"]
+DIALECTS["fanuc-lathe"] = replace(
+    _FANUC, name="fanuc-lathe", title="Fanuc 0i-T/30i lathe", machine="lathe",
+    source="Fanuc lathe operator's manual (G code system A): postproc corrects milling machines only")
+
+# Fadal (CNC 88HS, "Fadal format 1" native and "format 2" Fanuc-like codes, setting FO): the
+# program starts "N1 O2 (NAME)", E1..E48 select fixture offsets (E0 cancels them). Comments,
+# line length and arc tolerance as Fanuc's (assumed, the manual gives no figure).
+DIALECTS["fadal"] = replace(
+    _FANUC, name="fadal", title="Fadal CNC 88HS", numbered_program_line=True, fixture_offset_word="E",
+    cycle_repeat_words="L", turning_cycles=frozenset(),
+    marks=((r"^\s*N\s*\d+\s*O\s*\d+\b", "N1 O.. program header (Fadal)"),),
+    source="Fadal VMC programming manual: program header N1 O.., fixture offsets E1-E48 (E0 cancel); "
+           "format 2 reads Fanuc's G codes")
+
+# Okuma OSP-P (mill, OSP-P200M/P300M): a program file starts "$NAME.MIN%"; G15 H<n> selects
+# work coordinate system n, G56 H<n> applies tool length offset n and G53 cancels it, CALL O<n>
+# calls a subprogram. Comments in parentheses; the other limits as Fanuc's (assumed).
+DIALECTS["okuma"] = replace(
+    _FANUC, name="okuma", title="Okuma OSP", header_forms=(r"^\s*\$[^%\r\n]*%\s*$",),
+    g15_work_select=True, g_aliases=((560, 430), (530, 490)), cycle_repeat_words="L",
+    turning_cycles=frozenset(), macro_syntax="o-word", m98_count_in_p=False,
+    marks=((r"^\s*\$[\w.\-]*\.(?:MIN|SDF|SSB|SUB|LIB)%?", "$NAME.MIN% program header (Okuma)"),
+           (r"(?i)^\s*(?:N\d+\s*)?CALL\s+O", "CALL O.. subprogram call (Okuma)"),
+           (r"^\s*(?:N\d+\s*)?G\s*15\s*H\s*\d", "G15 H.. work coordinate system (Okuma)")),
+    refused=((r"(?i)\bCALL\s+O\w*", "CALL O.. subprogram call",
+              "write the subprogram's moves in the main program (expand it in CAM)"),),
+    source="Okuma OSP-P programming manual (Mill): $ file header, G15/G16 work coordinates, "
+           "G56/G53 tool length offset, CALL O subprograms")
+
+# Siemens Sinumerik 840D sl (SINUMERIK 840D sl Programming Manual, Fundamentals and Job
+# planning): ";" comments; a block of at most 512 characters; circle end point monitoring by
+# machine data MD21000 CIRCLE_ERROR_CONST (0.01 mm) and MD21010 CIRCLE_ERROR_FACTOR (0.001):
+# the radii may differ by the larger of the two (Fundamentals, "Circular interpolation").
+SINUMERIK_MAX_LINE = 511
+SINUMERIK_ARC_ABS_MM = 0.01
+SINUMERIK_ARC_REL = 0.001
+_SINU_WHAT_INSTEAD = "post the machining as its moves (G1/G2/G3) instead of the cycle call"
+DIALECTS["sinumerik"] = Dialect(
+    name="sinumerik", title="Siemens Sinumerik 840D",
+    max_line_chars=SINUMERIK_MAX_LINE, max_word_chars=None,
+    uppercase_only=False, paren_comments=False, semicolon_comments=True,
+    comment_forbidden="", nested_comments="not a comment: '(' belongs to expressions", ascii_only=True,
+    decimals_mm=3, decimals_inch=4,
+    arc_rule="relative", arc_abs_mm=SINUMERIK_ARC_ABS_MM, arc_abs_inch=SINUMERIK_ARC_ABS_MM / MM_PER_INCH,
+    arc_rel=SINUMERIK_ARC_REL, arc_cap_mm=math.inf,
+    arc_mismatch="alarm 14040 'Error in end point of circle' beyond the tolerance",
+    source="SINUMERIK 840D sl Programming Manual Fundamentals (comments, block length, circular "
+           "interpolation, CR=, AC/IC, frames) and Job planning (DEF, R parameters, control "
+           "structures); Programming Manual Cycles (CYCLE81-89, POCKET1-4, SLOT1-2, CYCLE61-72, CYCLE800); "
+           "MD21000/MD21010",
+    text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
+    marks=((r"^\s*%_N_\w+_(?:MPF|SPF)\b", "%_N_..._MPF program header (Sinumerik)"),
+           (r"^\s*;\s*\$PATH\s*=", ";$PATH= program header (Sinumerik)"),
+           (r"(?i)^\s*(?:N\d+\s*)?DEF\s+(?:REAL|INT|BOOL|CHAR|STRING|AXIS|FRAME)\b",
+            "DEF variable definition (Sinumerik)"),
+           (r"(?i)^\s*(?:N\d+\s*)?.*\b(?:MSG\s*\(|T\s*=\s*\"|CR\s*=|=\s*(?:AC|IC)\s*\(|"
+            r"(?:A?TRANS|A?ROT|MCALL|CYCLE\d+|POCKET\d|SLOT\d|TRAORI|G64\d|SOFT|BRISK|FFWON)\b)",
+            "Sinumerik 840D syntax")),
+    refused=(
+        (r"(?i)\bPOCKET([1-4])\b", "POCKET{0} (pocket milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bSLOT([12])\b", "SLOT{0} (slot milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bLONGHOLE\b", "LONGHOLE (elongated holes cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bCYCLE(6[1-9]|7[0-2])\b", "CYCLE{0} (contour/face milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bCYCLE(7[6-9]|899|90)\b", "CYCLE{0} (milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bTRAORI\b", "TRAORI (5-axis transformation)",
+         "post the program for 3 axes (X, Y, Z with fixed rotary positions): postproc corrects X, Y, Z"),
+        (r"(?i)\bCYCLE800\b", "CYCLE800 (swivel plane)",
+         "post the swivelled-plane moves in the machine's X, Y, Z (without CYCLE800)"),
+        (r"(?i)\bMCALL\b", "MCALL (modal cycle call)",
+         "post the drilling cycles as their moves (or as ISO G81-G89 with --dialect generic)"),
+        (r"(?i)\bA?TRANS\b|\bA?ROT\b|\bA?SCALE\b|\bA?MIRROR\b", "programmable frame (TRANS/ROT/SCALE/MIRROR)",
+         "post the program in the work coordinates the frame gives (without TRANS/ROT)"),
+        (r"(?i)^\s*(?:N\d+\s*)?DEF\b", "DEF variable definition",
+         "post the program with numbers in place of variables"),
+        (r"(?i)\bR\d+\s*=", "R parameter assignment", "post the program with numbers in place of R parameters"),
+        (r"(?i)\b(?:IF|WHILE|LOOP|FOR|REPEAT|GOTOF|GOTOB|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR|UNTIL)\b",
+         "program control (IF/WHILE/LOOP/FOR/REPEAT/GOTO)", "post the program flat (loops written out)"),
+        (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL)\b|^\s*(?:N\d+\s*)?L\d+\b", "subprogram call or PROC",
+         "write the subprogram's moves in the main program"),
+        (r"(?i)=\s*(?:AC|IC)\s*\(", "AC()/IC() absolute/incremental coordinate",
+         "post the coordinate in the program's distance mode (G90/G91)"),
+        (r"(?i)\bTURN\s*=", "TURN= helix turns", "post the helix as its arcs"),
+    ))
+
+DIALECT_NAMES = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3", "fadal", "okuma", "sinumerik",
+                 "fanuc-lathe")
 
 
 def get(name: str | Dialect) -> Dialect:

@@ -124,7 +124,11 @@ HEADER_PREFIX = "(POSTPROC "
 HEADER_LINE_CHARS = 96  # inside every dialect's line (generic: 127); the sha256 line needs 82
 _HEADER_OPEN = re.compile(r"\s*\(POSTPROC \S+ CORRECTED\)\s*$", re.IGNORECASE)
 _HEADER_ANY = re.compile(r"\s*\(POSTPROC [A-Z0-9 .+\-]*\)\s*$", re.IGNORECASE)
-_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
+# O1234, :1234, N1 O2 (Fadal), or Sinumerik's ;$PATH= line after its %_N_..._MPF
+_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:(?:[Nn][ \t]*\d+[ \t]*)?[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*"
+                             r"(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$|[ \t]*;[ \t]*\$PATH[ \t]*=")
+# the tape mark, or Okuma's file header $NAME.MIN% that stands in its place
+_TAPE_MARK = re.compile(r"%|\$[^\r\n%]*%[ \t]*(?:\r\n|\n|\r)?$")
 _HEADER_SAFE = re.compile(r"[^A-Z0-9 .+\-]")
 
 
@@ -159,7 +163,7 @@ def _note_parts(setup_note: str, exact: bool, home: bool) -> list[str]:
     tools, start, tool vector; G28/G30 when it has ``home``) are left out."""
     parts: list[str] = []
     for raw in (p.strip() for p in setup_note.split(";") if p.strip()) if setup_note else ():
-        m = re.fullmatch(r"(G5[0-9.]+)=([-+0-9.eE]+),([-+0-9.eE]+),([-+0-9.eE]+)", raw)
+        m = re.fullmatch(r"(G5[0-9.]+|G15H\d+|E\d+)=([-+0-9.eE]+),([-+0-9.eE]+),([-+0-9.eE]+)", raw)
         if m:
             if not exact:
                 parts.append(f"OFFSET {m.group(1)} X{_num(float(m.group(2)))} Y{_num(float(m.group(3)))} "
@@ -307,7 +311,7 @@ def start_lines(it: Iterator[str]) -> tuple[list[str], int]:
     while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
         keep += 1
         head.extend(islice(it, 1))
-    if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
+    if len(head) > keep and _TAPE_MARK.match(head[keep].lstrip("\ufeff").strip()):
         keep += 1
         head.extend(islice(it, 1))
     elif keep:

@@ -32,6 +32,13 @@ from postproc.errors import (
     UnsupportedGcodeError,
 )
 from postproc.gcode import lexer
+from postproc.gcode.recognise import (
+    LATHE_HINT,
+    LatheMarks,
+    LatheProgramError,
+    foreign_dialect,
+    lathe_message,
+)
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
@@ -229,10 +236,13 @@ def blank_nested_comments(line: str) -> str:
     return "".join(out)
 
 
-def _is_program_number(tokens: list[lexer.Token]) -> bool:
-    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
+def _is_program_number(tokens: list[lexer.Token], after_n: bool = False) -> bool:
+    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else;
+    with ``after_n`` also ``N1 O2 (NAME)`` (Fadal)."""
     content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
                                                        lexer.NEWLINE)]
+    if after_n and len(content) == 2 and content[0].kind == lexer.WORD and content[0].letter == "N":
+        content = content[1:]
     if len(content) == 1:
         t = content[0]
         return t.kind == lexer.WORD and t.letter == "O" and "." not in t.text and "-" not in t.text
@@ -277,6 +287,13 @@ class Interpreter:
         from postproc.gcode.dialect import get as _dialect
 
         self.d: Dialect = _dialect(dialect)  # the facts of the controller the program is for
+        if self.d.machine != "mill":
+            raise LatheProgramError(lathe_message([f"--dialect {self.d.name} ({self.d.title})"]), path=path,
+                                    hint=LATHE_HINT)
+        self.lathe = LatheMarks()
+        self._g_alias = dict(self.d.g_aliases)
+        if self.d.fixture_offset_word:  # E0: fixture offsets cancelled (machine coordinates)
+            self.offsets.setdefault(f"{self.d.fixture_offset_word}0", (0.0, 0.0, 0.0))
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
         self.repeats = False  # the program ended with M99 (repeated by the controller)
         # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
@@ -295,6 +312,21 @@ class Interpreter:
         from postproc.gcode import dialect
 
         return dialect.get(self.d.reads_arcs_as or self.d)
+
+    def _foreign(self, line: str, lineno: int) -> None:
+        """Refuse a line of another dialect naming the dialect to choose, and a construct
+        the chosen dialect's controller reads but postproc does not, in that dialect's words."""
+        for pattern, construct, instead in self.d.refused:
+            m = re.search(pattern, line)
+            if m:
+                what = construct.format(*m.groups())
+                raise self._err(UnsupportedGcodeError, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1,
+                                hint=instead)
+        other = foreign_dialect(line, self.d.name)
+        if other is not None:
+            name, title, construct = other
+            raise self._err(UnsupportedGcodeError, f"{construct}: a program for {title}", lineno, 1,
+                            hint=f"choose --dialect {name} for this program")
 
     def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
         """The error class for a refused construct: NeedsExpansion when expanding is allowed
@@ -374,6 +406,9 @@ class Interpreter:
             words, block_delete = self._slow_words(lineno, line)
         elif words and words[0].letter == "O" and len(words) == 1 and words[0].number.isdigit():
             return None  # O1234: a program number (or label): no geometry
+        elif (self.d.numbered_program_line and len(words) == 2 and words[0].letter == "N"
+              and words[1].letter == "O"):
+            return None  # N1 O2: a program number after a sequence number (Fadal)
         if bom:
             words = [lexer.Word(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
         if not words:
@@ -384,9 +419,14 @@ class Interpreter:
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
         if self.d.comments_nest and line.count("(") > 1:
             line = blank_nested_comments(line)
+        if self.d.header_forms and any(re.match(p, line) for p in self.d.header_forms):
+            return [], False  # the dialect's own header line ("$NAME.MIN%")
+        if "$" in line or "%" in line:
+            self._foreign(line, lineno)  # ";$PATH=", "%_N_..._MPF", "$NAME.MIN%" of another dialect
         try:
             tokens = lexer.lex(line, self.path, lineno)
         except GcodeSyntaxError:
+            self._foreign(line, lineno)
             what, hint = classify_construct(line)
             if what:
                 raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
@@ -397,7 +437,7 @@ class Interpreter:
                 return [], False  # '%' tape mark: the controller ignores the rest of the line
             raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
                             hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
-        if _is_program_number(tokens):
+        if _is_program_number(tokens, self.d.numbered_program_line):
             return [], False
         for tok in tokens:
             if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
@@ -405,6 +445,7 @@ class Interpreter:
                 if what:
                     raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
             if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
+                self._foreign(line, lineno)
                 raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
                                 tok.col,
                                 hint="O words other than a program number are expanded only when their "
@@ -445,6 +486,7 @@ class Interpreter:
             raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
                             hint="add the closing ')'")
         elif kind == lexer.LETTER:
+            self._foreign(line, lineno)
             what, hint = classify_construct(line)
             if what:
                 raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
@@ -452,6 +494,7 @@ class Interpreter:
                             f"word {tok.letter} without a plain number (macro, expression or parameter)",
                             lineno, tok.col, hint="expand macros and expressions before correcting")
         elif kind == lexer.SYMBOL:
+            self._foreign(line, lineno)
             what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
             if what:
                 raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
@@ -467,7 +510,8 @@ class Interpreter:
         vals: dict[str, tuple[float, int]] = {}
         for i, (letter, num, _start, _end, _lpos) in enumerate(words):
             if letter == "G":
-                gcodes.append((_gkey(num), i))
+                key = _gkey(num)
+                gcodes.append((self._g_alias.get(key, key) if self._g_alias else key, i))
             elif letter == "M":
                 mcodes.append((_gkey(num), i))
             else:
@@ -475,8 +519,15 @@ class Interpreter:
                     raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
                                     lineno, _lpos + 1)
                 if letter == "O":
+                    self._foreign(" ".join(w.letter + w.number for w in words), lineno)
                     raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
                                     hint="expand subroutines and loops in the CAM system before correcting")
+                if letter == "E" and self.d.fixture_offset_word == "E":
+                    vals[letter] = (float(num), i)  # Fadal E1..E48: a fixture offset
+                    continue
+                if letter in "UW" and not self.d.uvw_axes:
+                    raise self.lathe.refusal(f"{letter} word (incremental {'X' if letter == 'U' else 'Z'} of a "
+                                             f"lathe) at line {lineno}", self.path, lineno, _lpos + 1)
                 if letter in "UVW" or (letter == "E" and not any(
                         (w.letter == "M" and _gkey(w.number) // 10 in IO_M and _gkey(w.number) % 10 == 0)
                         or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
@@ -530,6 +581,9 @@ class Interpreter:
         blk = _Block(lineno, words, vals)
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
+            if handler is None and key in self.d.turning_cycles and self.lathe.weak:
+                raise self.lathe.refusal(f"G{words[i].number} turning cycle at line {lineno}", self.path, lineno,
+                                         col_of(i))
             if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
             handler(self, blk, key, i)
@@ -537,6 +591,8 @@ class Interpreter:
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
 
+        if self.d.fixture_offset_word and self.d.fixture_offset_word in vals:
+            work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
         if work_name is not None:
             st.work = work_name
             st.work_explicit = True
@@ -1062,11 +1118,19 @@ class Interpreter:
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
             self.tool_lengths[tool] = st.pos[2] - g593[2] - z
 
+    def _lathe_arc(self, vals: Vals, q0: tuple[float, float, float], lineno: int, col: int) -> None:
+        """Refuse a lathe's arc: X and Z with I/K in G17, in a program that never positions Y."""
+        if self.state.plane == 170 and "K" in vals and "J" not in vals and "Y" not in vals and math.isnan(q0[1]):
+            raise self.lathe.refusal(f"an arc in X and Z with I/K centre words at line {lineno} in a program "
+                                     "that never positions Y (a lathe reads G18 by default, X as a diameter)",
+                                     self.path, lineno, col)
+
     def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
              q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
         st = self.state
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
         col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
+        self._lathe_arc(vals, q0, lineno, col)
         if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc, or give their "
@@ -1291,6 +1355,34 @@ def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
 
 
+def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G50: scaling cancel on a mill (no words of its own); a lathe's spindle speed clamp
+    (G50 S) or coordinate setting (G50 X.. Z..)."""
+    lathe = [k for k in "SXZUW" if k in b.vals]
+    if lathe:
+        raise it.lathe.refusal(f"G50 {lathe[0]}{b.words[b.vals[lathe[0]][1]].number} at line {b.lineno} "
+                               "(a lathe's spindle speed clamp or coordinate setting)", it.path, b.lineno, b.col(i))
+
+
+def _g_css(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G96: constant surface speed, a lathe's (noted as a mark; neutral on its own)."""
+    it.lathe.note(f"G96 (constant surface speed) at line {b.lineno}")
+
+
+def _g_diameter_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    raise it.lathe.refusal(f"G7 (diameter mode) at line {b.lineno}", it.path, b.lineno, b.col(i))
+
+
+def _g_g15(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G15: polar coordinates off (Fanuc, neutral); G15 H<n> selects work coordinate
+    system n where the dialect says so (Okuma)."""
+    if it.d.g15_work_select:
+        if "H" not in b.vals:
+            raise it._err(GcodeSyntaxError, "G15 needs H (the work coordinate system number)", b.lineno, b.col(i))
+        b.work_name = f"G15H{int(b.vals['H'][0])}"
+        b.prefix.append(f"{b.gtext(i)} H{b.words[b.vals['H'][1]].number}")
+
+
 #: G code key (10 x number) -> handler(interpreter, block, key, word index)
 _G_HANDLERS: dict = {}
 for _keys, _handler in (
@@ -1301,7 +1393,7 @@ for _keys, _handler in (
     (PLANES, _g_plane), ({200, 210}, _g_units), ({900, 910}, _g_distance), ({901, 911}, _g_arc_distance),
     ({930, 940, 950}, _g_feed_mode), (WORK_SYSTEMS, _g_work), ({541}, _g_work_extended),
     ({430}, _g_tool_length), ({490}, _g_tool_length_cancel), ({530}, _g_machine), ({920, 921, 922}, _g_g92),
-    ({100}, _g_g10),
+    ({100}, _g_g10), ({500}, _g_g50), ({960}, _g_css), ({70}, _g_diameter_mode), ({150}, _g_g15),
 ):
     for _key in _keys:
         _G_HANDLERS[_key] = _handler
