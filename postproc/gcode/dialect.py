@@ -324,7 +324,7 @@ SINUMERIK_ARC_ABS_MM = 0.01
 SINUMERIK_ARC_REL = 0.001
 _SINU_WHAT_INSTEAD = "post the machining as its moves (G1/G2/G3) instead of the cycle call"
 DIALECTS["sinumerik"] = Dialect(
-    name="sinumerik", title="Siemens Sinumerik 840D",
+    name="sinumerik", title="Sinumerik 840D (Siemens)",
     max_line_chars=SINUMERIK_MAX_LINE, max_word_chars=None,
     uppercase_only=False, paren_comments=False, semicolon_comments=True,
     comment_forbidden="", nested_comments="not a comment: '(' belongs to expressions", ascii_only=True,
