@@ -176,7 +176,8 @@ def _option(flag: str):
         raise
 
 
-def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=()):
+def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=(),
+                var=(), vars_file=None):
     """The :class:`postproc.gcode.path.Setup` the options of :func:`setup_options` give (their
     texts as typed); a partial work offset, a home or an axis given twice is refused."""
     from postproc.gcode.path import Setup
@@ -204,8 +205,17 @@ def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, co
         if name in homes:
             raise click.BadParameter(f"{name} is given twice", param_hint="--home")
         homes[name] = values
+    from postproc.gcode.variables import parse_var, read_vars
+
+    variables = read_vars(vars_file) if vars_file else {}
+    for text in var:
+        try:
+            index, value = parse_var(text)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--var") from None
+        variables[index] = value
     return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
-                 start=parse_start(start) if start is not None else {}, home=homes)
+                 start=parse_start(start) if start is not None else {}, home=homes, variables=variables)
 
 
 #: The setup options, in the order they are listed: flag -> (parameter name, click.option arguments).
@@ -232,6 +242,15 @@ SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
         multiple=True, metavar="G28=X..,Y..,Z..",
         help="Stored position G28 or G30 goes to, in machine mm (end with 'in' for inches), any of X, Y, Z. "
              "Without it an axis sent there is unknown until the program positions it again. Repeatable.")),
+    "--var": ("var", dict(
+        multiple=True, metavar="N=VALUE",
+        help="Value of a machine-state variable the program reads (Haas/Fanuc #5405, retained #500, "
+             "LinuxCNC #5221), e.g. 5405=12.5; recorded in the header. Probe results are never taken. "
+             "Repeatable.")),
+    "--vars": ("vars_file", dict(
+        default=None, type=click.Path(dir_okay=False),
+        help="Machine-state variables from a LinuxCNC .var file or a Fanuc/Haas macro-variable listing; "
+             "--var overrides its entries.")),
     "--context": ("context", dict(
         multiple=True, metavar="NAME=VALUE",
         help="Constant context value during the run, read by the calibration's model, e.g. temp=21.5. "

@@ -500,6 +500,7 @@ class _Reader:
         self.expand = expand
         self.dialect = dialect
         self.subroutine_path = tuple(subroutine_path)
+        self.variables = getattr(setup, "variables", None)  # --var: machine state the program reads
         # read each canned cycle block as the lines correct writes it as (--cycles expand)
         self.expand_cycles = expand_cycles
         self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
@@ -548,7 +549,8 @@ class _Reader:
         """:meth:`chunks` of the program as executed (:func:`postproc.gcode.expand.expand`)."""
         from postproc.gcode.expand import expand
 
-        flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path)
+        flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path,
+                      variables=self.variables)
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
             rows = _Rows.blank([sl.text for sl in part], 0)
             rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)

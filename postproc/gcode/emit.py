@@ -205,12 +205,14 @@ def _exact_parts(setup: Setup) -> list[str]:
     for name, v in sorted((getattr(setup, "home", None) or {}).items()):
         v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
         parts.append(f"{_safe(name)} " + " ".join(f"{a}{_num(x)}" for a, x in sorted(v.items())))
+    if getattr(setup, "variables", None):
+        parts.append("VARIABLES " + " ".join(f"{int(k)} {_num(v)}" for k, v in sorted(setup.variables.items())))
     if setup.tool_vector is not None:
         parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", setup.tool_vector, strict=True)))
     return parts
 
 
-_KEYWORDS = {"TOOL LENGTHS": 2, "TOOL VECTOR": 2, "OFFSET": 2, "START": 1, "CALIBRATION": 1, "SHA256": 1,
+_KEYWORDS = {"TOOL LENGTHS": 2, "VARIABLES": 1, "TOOL VECTOR": 2, "OFFSET": 2, "START": 1, "CALIBRATION": 1, "SHA256": 1,
              "MAP": 1}
 
 
@@ -227,7 +229,7 @@ def _wrap(words: str, width: int) -> list[str]:
     lines: list[str] = []
     cur = ""
     body = items[keep:] if keep else items
-    if words.startswith("TOOL LENGTHS "):  # "H1 100.5": a pair stays on one line
+    if words.startswith(("TOOL LENGTHS ", "VARIABLES ")):  # "H1 100.5", "5405 12.5": a pair stays on one line
         body = [" ".join(body[i:i + 2]) for i in range(0, len(body), 2)]
     for w in body:
         base = lead if keep else ""

@@ -56,6 +56,7 @@ from postproc.gcode.expr import (
     to_index,
 )
 from postproc.gcode.lexer import scan_words, split_lines
+from postproc.gcode.variables import PROBE_HINT, PROBE_MESSAGE, PROBE_RESULTS
 
 # rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
 LINUXCNC_SUB_PARAMS = 30
@@ -239,6 +240,12 @@ class _Expander(Env):
         return ExpansionError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
 
     # -- parameters ---------------------------------------------------------
+    def seed(self, variables: dict[int, float]) -> None:
+        """Start with the machine-state values the user gave (locals #1-#33 are not the machine's)."""
+        for index, value in variables.items():
+            if index not in PROBE_RESULTS and (index > FANUC_LOCALS or not self.fanuc):
+                self.params[index] = float(value)
+
     def _fanuc_locals(self) -> list:
         for fr in reversed(self.frames):
             if fr.call_type in ("", "g65"):
@@ -260,20 +267,27 @@ class _Expander(Env):
                     return self.params[index]
                 raise self.refuse(col, f"#{index} is a retained common variable: its value is kept by the "
                                   "controller and unknown before the program runs",
-                                  hint=f"set #{index} in the program before reading it")
+                                  hint=f"give its value with --var {index}=VALUE, or set #{index} in the program "
+                                       "before reading it")
+            if index in PROBE_RESULTS:
+                raise self.refuse(col, PROBE_MESSAGE.format(index), hint=PROBE_HINT)
             if index >= 1000:
+                if index in self.params:
+                    return self.params[index]
                 raise self.refuse(col, f"#{index} is a system variable (machine state, positions, offsets or "
                                   "signals): its value is unknown before the program runs",
-                                  hint="replace it with the value it holds on your machine")
+                                  hint=f"give the value it holds on your machine with --var {index}=VALUE")
             raise self.error(col, f"#{index} is not a macro variable number")
         if not 1 <= index <= LINUXCNC_MAX_PARAMETER:
             raise self.error(col, f"parameter number #{index} is out of range (1..{LINUXCNC_MAX_PARAMETER})")
+        if index in PROBE_RESULTS and index not in self.params:
+            raise self.refuse(col, PROBE_MESSAGE.format(index), hint=PROBE_HINT)
         if index in self.params:
             return self.params[index]
         for lo, hi, what in _LINUXCNC_MACHINE_RANGES:
             if lo <= index <= hi:
                 raise self.refuse(col, f"#{index} reads a {what}: its value is unknown before the program runs",
-                                  hint="replace it with the value it holds on your machine")
+                                  hint=f"give the value it holds on your machine with --var {index}=VALUE")
         return 0.0
 
     def write_numbered(self, index: int, value, col: int) -> None:
@@ -1123,15 +1137,18 @@ def _last_code_line(lines: list[str]) -> int | None:
 
 
 def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "generic",
-           subroutine_path: Sequence[Path] = (), max_lines: int = 50_000_000) -> Iterator[SourceLine]:
+           subroutine_path: Sequence[Path] = (), max_lines: int = 50_000_000,
+           variables: dict[int, float] | None = None) -> Iterator[SourceLine]:
     """Execute the program's control flow and yield the flat program line by line.
 
     ``lines`` are the source lines with their endings (e.g. from
     :func:`postproc.gcode.lexer.split_lines`). Raises :class:`GcodeSyntaxError` for
     malformed constructs and :class:`ExpansionError` for refused ones, both with
-    ``path:line:col``.
+    ``path:line:col``. ``variables``: machine-state values given by the user (``--var``),
+    read where the program reads the controller's state (probe results never).
     """
     ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
+    ex.seed(variables or {})
     return ex.run()
 
 
