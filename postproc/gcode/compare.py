@@ -287,7 +287,7 @@ def header_setup(source) -> HeaderSetup:
             _old_header_row(hs, row)
             continue
         words = row[len(emit.HEADER_PREFIX):].rstrip(")").strip().upper()
-        m = re.fullmatch(r"OFFSET (G5\S+) (.*)", words)
+        m = re.fullmatch(r"OFFSET (\S+) (.*)", words)
         if m:
             v = _axis_values(m.group(2))
             hs.offsets[m.group(1)] = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))

@@ -139,6 +139,12 @@ class Dialect:
     fixture_offset_word: str = ""  # a letter selecting a fixture offset by number ("E": Fadal E1..E48)
     g15_work_select: bool = False  # "G15 H<n>" selects work coordinate system n (Okuma)
     g_aliases: tuple[tuple[int, int], ...] = ()  # (this dialect's G key, the ISO G key it means)
+    block_syntax: str = "iso"  # iso: letter-number words | sinumerik: also NAME=value, keywords, calls
+    program_end_m: tuple[int, ...] = (2, 30)  # M codes that end the program
+    work_codes: tuple[tuple[int, str], ...] = ()  # further work-offset G codes (G key, the offset's name)
+    refused_g: tuple[tuple[int, str, str], ...] = ()  # (G key, construct in the dialect's words, what instead)
+    dwell_f_is_time: bool = False  # "G4 F2": F is the dwell time, the feed stays (Sinumerik)
+    tool_length_word: str = ""  # a word applying a tool length register by number ("D": Sinumerik flat D)
     marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
     refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
 
@@ -337,6 +343,23 @@ DIALECTS["sinumerik"] = Dialect(
            "structures); Programming Manual Cycles (CYCLE81-89, POCKET1-4, SLOT1-2, CYCLE61-72, CYCLE800); "
            "MD21000/MD21010",
     text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
+    block_syntax="sinumerik", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
+    # G500 (settable frames off) and G505-G599 are work offsets; G64x continuous path, G60/G60x/G9
+    # exact stop, G70/G71 and G700/G710 inch/metric (Fundamentals: "Inch/metric dimensions")
+    work_codes=((5000, "G500"), *((k * 10, f"G{k}") for k in range(505, 600))),
+    g_aliases=((6410, 640), (6420, 640), (6430, 640), (6440, 640), (6450, 640), (600, 610), (6010, 610),
+               (6020, 610), (6030, 610), (90, 610), (700, 200), (710, 210), (7000, 200), (7100, 210)),
+    refused_g=((530, "G53 (frames suppressed for the block: the tool length stays)",
+                "write the move in the work coordinates"),
+               (1530, "G153 (frames suppressed for the block)", "write the move in the work coordinates"),
+               (330, "G33 thread cutting", "post the thread as its moves"),
+               (3310, "G331 rigid tapping", "post the tapping as ISO G84 with --dialect generic, or as moves"),
+               (3320, "G332 tapping retraction", "post the tapping as its moves"),
+               (1100, "G110 polar pole", "post the program in Cartesian coordinates"),
+               (1110, "G111 polar pole", "post the program in Cartesian coordinates"),
+               (1120, "G112 polar pole", "post the program in Cartesian coordinates"),
+               (580, "G58 axial programmable offset", "post the program without programmable frames"),
+               (590, "G59 axial programmable offset", "post the program without programmable frames")),
     marks=((r"^\s*%_N_\w+_(?:MPF|SPF)\b", "%_N_..._MPF program header (Sinumerik)"),
            (r"^\s*;\s*\$PATH\s*=", ";$PATH= program header (Sinumerik)"),
            (r"(?i)^\s*(?:N\d+\s*)?DEF\s+(?:REAL|INT|BOOL|CHAR|STRING|AXIS|FRAME)\b",
@@ -365,8 +388,6 @@ DIALECTS["sinumerik"] = Dialect(
          "program control (IF/WHILE/LOOP/FOR/REPEAT/GOTO)", "post the program flat (loops written out)"),
         (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL)\b|^\s*(?:N\d+\s*)?L\d+\b", "subprogram call or PROC",
          "write the subprogram's moves in the main program"),
-        (r"(?i)=\s*(?:AC|IC)\s*\(", "AC()/IC() absolute/incremental coordinate",
-         "post the coordinate in the program's distance mode (G90/G91)"),
         (r"(?i)\bTURN\s*=", "TURN= helix turns", "post the helix as its arcs"),
     ))
 

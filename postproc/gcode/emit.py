@@ -57,6 +57,8 @@ def edit_line(line: str, edits: list[tuple[int, int, str]]) -> str:
     if len(edits) > 1:
         edits = sorted(edits)
     for start, end, text in edits:
+        if start == end and line[start:start + 1] == ")":  # a word added after X=AC(10) (Sinumerik), not in it
+            start = end = start + 1
         out.append(line[pos:start])
         out.append(text)
         pos = end
@@ -122,8 +124,9 @@ def header_line(name: str, sha256: str, tolerance_mm: float, setup_note: str, en
 # version and CORRECTED: it marks the program as corrected.
 HEADER_PREFIX = "(POSTPROC "
 HEADER_LINE_CHARS = 96  # inside every dialect's line (generic: 127); the sha256 line needs 82
-_HEADER_OPEN = re.compile(r"\s*\(POSTPROC \S+ CORRECTED\)\s*$", re.IGNORECASE)
-_HEADER_ANY = re.compile(r"\s*\(POSTPROC [A-Z0-9 .+\-]*\)\s*$", re.IGNORECASE)
+# a dialect without parenthesis comments (Sinumerik) reads the same lines as ";POSTPROC ..."
+_HEADER_OPEN = re.compile(r"\s*(?:\(POSTPROC \S+ CORRECTED\)|;POSTPROC \S+ CORRECTED)\s*$", re.IGNORECASE)
+_HEADER_ANY = re.compile(r"\s*(?:\(POSTPROC [A-Z0-9 .+\-]*\)|;POSTPROC [A-Z0-9 .+\-]*)\s*$", re.IGNORECASE)
 # O1234, :1234, N1 O2 (Fadal), or Sinumerik's ;$PATH= line after its %_N_..._MPF
 _PROGRAM_NUMBER = re.compile(r"[ \t]*(?:(?:[Nn][ \t]*\d+[ \t]*)?[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*"
                              r"(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$|[ \t]*;[ \t]*\$PATH[ \t]*=")
@@ -282,6 +285,8 @@ def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float,
         body += _wrap("EXPANDED SUBPROGRAMS LOOPS AND MACROS", width)
     if cycles_expanded:
         body += _wrap("CYCLES EXPANDED", width)
+    if not d.paren_comments:
+        body = [";" + line[1:-1] for line in body]
     for k, line in enumerate(body, start=1):
         dialects.check_output_line(d, line, path="<header>", lineno=k)
     return [line + end for line in body]
@@ -293,7 +298,7 @@ def is_header(line: str) -> bool:
     s = line.lstrip("\ufeff \t")
     if s.startswith(HEADER_TAG) and HEADER_MARK in s:
         return True
-    return s[:10].upper() == HEADER_PREFIX and bool(_HEADER_ANY.match(s))
+    return s[:10].upper() in (HEADER_PREFIX, ";POSTPROC ") and bool(_HEADER_ANY.match(s))
 
 
 def is_header_start(line: str) -> bool:

@@ -291,7 +291,11 @@ class Interpreter:
             raise LatheProgramError(lathe_message([f"--dialect {self.d.name} ({self.d.title})"]), path=path,
                                     hint=LATHE_HINT)
         self.lathe = LatheMarks()
+        self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
         self._g_alias = dict(self.d.g_aliases)
+        # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
+        self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
+        self._dialect_g.update({k: _refused_g(what, instead) for k, what, instead in self.d.refused_g})
         if self.d.fixture_offset_word:  # E0: fixture offsets cancelled (machine coordinates)
             self.offsets.setdefault(f"{self.d.fixture_offset_word}0", (0.0, 0.0, 0.0))
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
@@ -400,7 +404,7 @@ class Interpreter:
         bom = line.startswith("\ufeff")
         if bom:  # a UTF-8 byte-order mark before the first line: not part of the block
             line = line[1:]
-        words = lexer.scan_words(line)
+        words = lexer.scan_words(line) if self._iso_blocks else None
         block_delete = False
         if words is None:
             words, block_delete = self._slow_words(lineno, line)
@@ -417,6 +421,8 @@ class Interpreter:
         return self._block(lineno, words, block_delete)
 
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
+        if not self._iso_blocks:
+            return self._sinumerik_words(lineno, line)
         if self.d.comments_nest and line.count("(") > 1:
             line = blank_nested_comments(line)
         if self.d.header_forms and any(re.match(p, line) for p in self.d.header_forms):
@@ -451,6 +457,30 @@ class Interpreter:
                                 hint="O words other than a program number are expanded only when their "
                                      "subroutine is in the program or on --subroutine-path")
         return self._plain_words(tokens, line, lineno)
+
+    def _sinumerik_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
+        """A Sinumerik block's words (:mod:`postproc.gcode.sinumerik`); its constructs that
+        postproc does not read are refused by their names first."""
+        from postproc.gcode import sinumerik
+
+        code = sinumerik.code_of(line)
+        if code.strip():
+            self._foreign(code, lineno)
+        blk = sinumerik.read_block(line, self.path, lineno)
+        g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
+        incremental = True if 910 in g else False if 900 in g else self.state.incremental
+        for letter, col in blk.absolute:
+            if incremental or letter in "IJK":
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in "
+                                f"{'G91' if incremental else 'a centre word'}", lineno, col,
+                                hint="post the coordinate in the program's distance mode (G90/G91)")
+        for letter, col in blk.incremental:
+            if not incremental and letter in "XYZABC":
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
+                                lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
+        if blk.ends:
+            self.ended = True  # RET: the end of the program (the block's own words still run)
+        return blk.words, blk.block_delete
 
     def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
         """The words of a lexed line and whether it starts with '/' (block delete);
@@ -566,7 +596,7 @@ class Interpreter:
                 before_m.append(f"M{words[i].number}")
             if m == 6:
                 tool_change = True
-            if m in (2, 30):
+            if m in self.d.program_end_m:
                 self.ended = True
             if m == 61:
                 if "Q" not in vals:
@@ -581,6 +611,8 @@ class Interpreter:
         blk = _Block(lineno, words, vals)
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
+            if self._dialect_g and key in self._dialect_g:
+                handler = self._dialect_g[key]
             if handler is None and key in self.d.turning_cycles and self.lathe.weak:
                 raise self.lathe.refusal(f"G{words[i].number} turning cycle at line {lineno}", self.path, lineno,
                                          col_of(i))
@@ -591,6 +623,8 @@ class Interpreter:
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
 
+        if self.d.tool_length_word and self.d.tool_length_word in vals:  # Sinumerik D: the length register
+            self._g43({"H": vals[self.d.tool_length_word]}, lineno, col_of(vals[self.d.tool_length_word][1]))
         if self.d.fixture_offset_word and self.d.fixture_offset_word in vals:
             work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
         if work_name is not None:
@@ -615,7 +649,7 @@ class Interpreter:
             if g92 == 920 and any(a in vals for a in AXES):
                 self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in AXES if a in vals], before)
             return None
-        if "F" in vals:
+        if "F" in vals and not (self.d.dwell_f_is_time and any(k == 40 for k, _ in gcodes)):
             st.feed = vals["F"][0]
         if home_code is not None:
             return self._home(home_code, words, vals, lineno, col_of(home_code[1]))
@@ -1353,6 +1387,19 @@ def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
 
 def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
+
+
+def _work_code(name: str):
+    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
+        b.work_name = name
+        b.prefix.append(b.gtext(i))
+    return handler
+
+
+def _refused_g(what: str, instead: str):
+    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
+        raise it._err(UnsupportedGcodeError, f"{it.d.title.split(' ')[0]} {what}", b.lineno, b.col(i), hint=instead)
+    return handler
 
 
 def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
