@@ -145,6 +145,7 @@ class Dialect:
     refused_g: tuple[tuple[int, str, str], ...] = ()  # (G key, construct in the dialect's words, what instead)
     dwell_f_is_time: bool = False  # "G4 F2": F is the dwell time, the feed stays (Sinumerik)
     tool_length_word: str = ""  # a word applying a tool length register by number ("D": Sinumerik flat D)
+    chosen_by: tuple[str, ...] = ()  # regexes of opening lines that choose this dialect over generic
     marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
     refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
 
@@ -343,6 +344,7 @@ DIALECTS["sinumerik"] = Dialect(
            "structures); Programming Manual Cycles (CYCLE81-89, POCKET1-4, SLOT1-2, CYCLE61-72, CYCLE800); "
            "MD21000/MD21010",
     text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
+    chosen_by=(r"\s*%_N_\w+_(?:MPF|SPF)\b", r"\s*;\s*\$PATH\s*="),
     block_syntax="sinumerik", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
     # G500 (settable frames off) and G505-G599 are work offsets; G64x continuous path, G60/G60x/G9
     # exact stop, G70/G71 and G700/G710 inch/metric (Fundamentals: "Inch/metric dimensions")

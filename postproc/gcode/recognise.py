@@ -72,3 +72,26 @@ def _compiled(pattern: str) -> re.Pattern[str]:
     if p is None:
         p = _CACHE[pattern] = re.compile(pattern)
     return p
+
+
+#: bytes read from the start of a program to choose its dialect
+HEAD_BYTES = 4096
+
+
+def dialect_of_file(path: str, chosen: str) -> str:
+    """The dialect to read ``path`` in: ``chosen``, or, for ``generic``, the dialect whose
+    header lines (:attr:`Dialect.chosen_by`, e.g. Sinumerik's ``%_N_..._MPF``) open it."""
+    from postproc.gcode.dialect import DIALECTS
+
+    if chosen != "generic":
+        return chosen
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(HEAD_BYTES).decode("utf-8", errors="replace")
+    except OSError:
+        return chosen  # the reader names the problem
+    lines = head.lstrip("\ufeff").splitlines()[:3]
+    for d in DIALECTS.values():
+        if d.chosen_by and any(_compiled(p).match(line) for p in d.chosen_by for line in lines):
+            return d.name
+    return chosen
