@@ -79,7 +79,8 @@ def test_bracket_kept_lines_byte_identical_and_header_in_semicolon_comments():
     out, _ = correct(text)
     lines = out.splitlines(keepends=True)
     assert lines[:2] == text.splitlines(keepends=True)[:2]  # %_N_ and ;$PATH= stay first
-    assert lines[2].startswith(";POSTPROC ") and emit.is_header_start(lines[2])
+    assert lines[2].startswith(";POSTPROC ")
+    assert emit.is_header_start(lines[2])
     assert body(out) == text  # identity: every byte kept
     eng = StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG)
     out, _ = correct(text, Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0}), eng)
