@@ -139,7 +139,10 @@ def test_sample_programs_refused_by_name(name, lineno, construct):
 
 
 @pytest.mark.parametrize(("line", "construct"), [
-    ("N10 TRANS X10 Y10", "programmable frame"),
+    ("N10 ROT Z30", "programmable frame"),
+    ("N10 TRANS X10 A5", "frame with A"),
+    ("N10 TRANS X10 G1 X5", "frame with G"),
+    ("N10 G1 TRANS X10", "TRANS not alone in its block"),
     ("N10 AROT Z30", "programmable frame"),
     ("N10 R1=R2+5", "R parameter assignment"),
     ("N10 IF R1>5 GOTOF END1", "program control"),
@@ -159,6 +162,24 @@ def test_refusals_name_the_sinumerik_construct(line, construct):
     assert construct in str(err.value)
     assert str(err.value).split(": ", 1)[1].startswith("Sinumerik ")
     assert err.value.lineno == 3
+
+
+def test_trans_atrans_and_frame_reset_by_hand():
+    """TRANS replaces the programmable translation, ATRANS adds to it, ROT alone deletes
+    the frame; a move's words are in the frame's coordinates (G54 100, 100, 100; D1 100)."""
+    _, moves = run("G54 D1\nTRANS X10 Y20\nG0 X1 Y1 Z0\nATRANS X5\nG0 X1\nTRANS Z-3\nG0 X0 Y0 Z0\n"
+                   "ROT\nG0 X0 Y0 Z0\nG70\nTRANS X1\nG0 X0\n")
+    assert ends(moves) == [(111.0, 121.0, 200.0), (116.0, 121.0, 200.0), (100.0, 100.0, 197.0),
+                           (100.0, 100.0, 200.0), (125.4, 100.0, 200.0)]
+
+
+def test_trans_output_keeps_frame_words():
+    text = "%_N_T_MPF\n;$PATH=/_N_MPF_DIR\nG54 D1\nTRANS X10 Y20\nG0 X1 Y1 Z0\nTRANS\nG0 X1 Y1\nM30\n"
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0})
+    out, _ = correct(text, setup, StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "TRANS X10 Y20\n" in out
+    # machine (11, 21, 0) / 1.001 less the translation (10, 20)
+    assert "G0 X0.9890 Y0.9790 Z0.0000" in out or "G0 X0.9890 Y0.9790 Z0\n" in out
 
 
 def test_refusals_ignore_strings_and_comments():

@@ -480,7 +480,28 @@ class Interpreter:
                                 lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
         if blk.ends:
             self.ended = True  # RET: the end of the program (the block's own words still run)
+        if blk.frame:
+            self._sinumerik_frame(blk.frame, blk.words, lineno)
+            return [], blk.block_delete
         return blk.words, blk.block_delete
+
+    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int) -> None:
+        """TRANS replaces the programmable frame by a translation, ATRANS adds one, a bare
+        ROT/SCALE/MIRROR deletes it: kept with the G52/G92 shift (program units, work frame)."""
+        st = self.state
+        given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
+        bad = [k for k in given if k not in AXES]
+        if bad or (kind == "RESET" and given):
+            col = given[bad[0]][1] if bad else min(c for _, c in given.values())
+            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {(bad or list(given))[0]} "
+                            "(only a translation in X, Y, Z is read)", lineno, col,
+                            hint="post the program in the coordinates the frame gives")
+        if kind in ("TRANS", "RESET"):
+            st.g92 = [0.0, 0.0, 0.0]
+        for k, a in enumerate(AXES):
+            if a in given:
+                st.g92[k] += given[a][0] * st.unit_mm
+        self._run_shift = None
 
     def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
         """The words of a lexed line and whether it starts with '/' (block delete);

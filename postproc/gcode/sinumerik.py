@@ -11,7 +11,10 @@ number (``X10.5``, ``G1``), addresses with ``=`` (``X=10.5``, ``CR=5``, ``T="CUT
 - ``X=AC(v)`` in G90 and ``X=IC(v)`` in G91, which mean what ``Xv`` means there;
 - ``T="name"``, ``MSG()``, ``CYCLE832()``, ``SOFT``/``BRISK``/``DRIVE``/``FFWON``/``FFWOF``
   and the like: kept as they are (no geometry);
-- ``RET``: the end of the program (as M17 and M30).
+- ``RET``: the end of the program (as M17 and M30);
+- ``TRANS X.. Y.. Z..`` (the programmable frame's translation, replaced) and ``ATRANS``
+  (added to it); ``ROT``, ``SCALE``, ``MIRROR`` without values, which delete the
+  programmable frame (Fundamentals, "Frames").
 
 Everything else is refused naming the construct in Sinumerik's words (the dialect's
 ``refused`` list names the cycles, frames, variables and control with what to post instead).
@@ -34,6 +37,10 @@ KEPT_KEYWORDS = frozenset({
 #: calls that change no geometry: kept as they are
 KEPT_CALLS = frozenset({"MSG", "CYCLE832", "SETMS", "WORKPIECE", "TOOLGEOMETRY"})
 END_KEYWORDS = frozenset({"RET"})
+#: frame instructions read: TRANS/ATRANS with X, Y, Z (a translation); ROT, SCALE, MIRROR
+#: (and their A forms) only without values, which delete the programmable frame
+FRAME_KEYWORDS = frozenset({"TRANS", "ATRANS"})
+FRAME_RESETS = frozenset({"ROT", "SCALE", "MIRROR"})
 _NUMBER_CHARS = "0123456789.+-"
 
 
@@ -47,6 +54,7 @@ class SinumerikBlock:
     absolute: list[tuple[str, int]] = field(default_factory=list)  # (letter, col) given as =AC()
     incremental: list[tuple[str, int]] = field(default_factory=list)  # (letter, col) given as =IC()
     tool_name: str | None = None  # T="name"
+    frame: str = ""  # TRANS (replaces the programmable frame), ATRANS (adds to it), RESET (ROT etc. alone)
 
 
 def _code_end(line: str) -> int:
@@ -152,6 +160,11 @@ class _Reader:
             self.block.ends = True
             return digits
         if ident in KEPT_KEYWORDS:
+            return digits
+        if ident in FRAME_KEYWORDS or ident in FRAME_RESETS:
+            if self.block.frame or any(w.letter != "N" for w in self.block.words):
+                raise self.refuse(k, f"{ident} not alone in its block", "write the frame in a block of its own")
+            self.block.frame = ident if ident in FRAME_KEYWORDS else "RESET"
             return digits
         raise self.refuse(k, f"{ident} (not read by postproc)", "post the program without it")
 
