@@ -128,7 +128,6 @@ def test_ac_ic_against_the_mode():
 @pytest.mark.parametrize(("name", "lineno", "construct"), [
     ("drill_plate.mpf", 8, "Sinumerik MCALL (modal cycle call)"),
     ("pocket_cycle.mpf", 8, "Sinumerik POCKET4 (pocket milling cycle)"),
-    ("frames_rparam.mpf", 4, "Sinumerik DEF variable definition"),
 ])
 def test_sample_programs_refused_by_name(name, lineno, construct):
     with pytest.raises(UnsupportedGcodeError) as err:
@@ -144,7 +143,9 @@ def test_sample_programs_refused_by_name(name, lineno, construct):
     ("N10 TRANS X10 G1 X5", "frame with G"),
     ("N10 G1 TRANS X10", "TRANS not alone in its block"),
     ("N10 AROT Z30", "programmable frame"),
-    ("N10 R1=R2+5", "R parameter assignment"),
+    ("N10 R1=R2+5", "R parameter R2 read before the program sets it"),
+    ("N10 DEF FRAME F1", "DEF FRAME (only REAL, INT and BOOL"),
+    ("N10 G1 X=DEPTH", "DEPTH in an expression (not a variable the program defines)"),
     ("N10 IF R1>5 GOTOF END1", "program control"),
     ("N10 REPEAT LABEL1 P=3", "program control"),
     ("N10 L100", "subprogram call"),
@@ -152,7 +153,7 @@ def test_sample_programs_refused_by_name(name, lineno, construct):
     ("N10 G53 X0", "G53"),
     ("N10 G331 Z-10 K1.5", "G331 rigid tapping"),
     ("N10 CYCLE800(1,\"TC1\",0,57,0,0,0,0,30,0,0,0,0,1)", "CYCLE800 (swivel plane)"),
-    ("N10 X=R1", "X= with an expression"),
+    ("N10 X=R1", "R parameter R1 read before"),
     ("N10 FOO", "FOO (not read by postproc)"),
     ("N10 H5", "address H"),
 ])
@@ -162,6 +163,33 @@ def test_refusals_name_the_sinumerik_construct(line, construct):
     assert construct in str(err.value)
     assert str(err.value).split(": ", 1)[1].startswith("Sinumerik ")
     assert err.value.lineno == 3
+
+
+def test_frames_and_r_parameters_sample_by_hand():
+    """DEF SIDE=40, R1=SIDE/2, R2=-3, TRANS X100 Y50: a 40 mm square about (100, 50) in
+    G54 (100, 100, 100) with D1 100 along Z."""
+    _, moves = run((DATA / "frames_rparam.mpf").read_text())
+    assert ends(moves) == [(180.0, 130.0, 205.0), (180.0, 130.0, 197.0), (220.0, 130.0, 197.0),
+                           (220.0, 170.0, 197.0), (180.0, 170.0, 197.0), (180.0, 130.0, 197.0),
+                           (180.0, 130.0, 220.0)]
+
+
+def test_r_parameter_arithmetic_by_hand():
+    it, moves = run("G54 D1\nDEF REAL A=3, B\nDEF INT N=7\nR1=(A+1)*2.5 R2=N DIV 2 R3=N MOD 4\n"
+                    "R4=SIN(30)+SQRT(16)-POT(2) B=ATAN2(1,1)\nG0 X=R1 Y=R2 Z=R3\nG0 X=R4*10 Y=B\n")
+    assert it.variables["R1"] == 10.0
+    assert ends(moves)[0] == (110.0, 103.0, 203.0)  # 7 DIV 2 = 3, 7 MOD 4 = 3
+    assert ends(moves)[1] == pytest.approx((105.0, 145.0, 203.0))  # (0.5 + 4 - 4) * 10, atan2 = 45 deg
+
+
+def test_expression_words_written_as_numbers_where_moved():
+    text = "%_N_E_MPF\nG54 D1\nR1=10\nG0 X=R1 Y=R1*2 Z0\nG0 X=R1\nM30\n"
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0})
+    out, _ = correct(text, setup)
+    assert body(out) == text  # identity: expressions kept
+    out, _ = correct(text, setup, StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "R1=10\n" in out
+    assert "G0 X=9.9900 Y=19.9800 Z0" in out
 
 
 def test_trans_atrans_and_frame_reset_by_hand():

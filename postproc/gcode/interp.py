@@ -292,6 +292,7 @@ class Interpreter:
                                     hint=LATHE_HINT)
         self.lathe = LatheMarks()
         self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
+        self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
         self._g_alias = dict(self.d.g_aliases)
         # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
         self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
@@ -466,7 +467,7 @@ class Interpreter:
         code = sinumerik.code_of(line)
         if code.strip():
             self._foreign(code, lineno)
-        blk = sinumerik.read_block(line, self.path, lineno)
+        blk = sinumerik.read_block(line, self.path, lineno, self.variables)
         g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
         incremental = True if 910 in g else False if 900 in g else self.state.incremental
         for letter, col in blk.absolute:

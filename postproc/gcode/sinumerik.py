@@ -12,6 +12,9 @@ number (``X10.5``, ``G1``), addresses with ``=`` (``X=10.5``, ``CR=5``, ``T="CUT
 - ``T="name"``, ``MSG()``, ``CYCLE832()``, ``SOFT``/``BRISK``/``DRIVE``/``FFWON``/``FFWOF``
   and the like: kept as they are (no geometry);
 - ``RET``: the end of the program (as M17 and M30);
+- ``DEF REAL|INT|BOOL NAME=value``, ``R1=...``, ``NAME=...`` and words whose value is an
+  expression (``X=R1*2``): evaluated in order, a word's number being the expression's
+  value, its span the expression's text (which the correction replaces with a number);
 - ``TRANS X.. Y.. Z..`` (the programmable frame's translation, replaced) and ``ATRANS``
   (added to it); ``ROT``, ``SCALE``, ``MIRROR`` without values, which delete the
   programmable frame (Fundamentals, "Frames").
@@ -22,6 +25,7 @@ Everything else is refused naming the construct in Sinumerik's words (the dialec
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from postproc.errors import GcodeSyntaxError, UnsupportedGcodeError
@@ -103,12 +107,32 @@ def _closing(code: str, k: int) -> int:
     return -1
 
 
+#: DEF types read (their values are numbers); the others (FRAME, AXIS, STRING, CHAR) are refused
+NUMBER_TYPES = frozenset({"REAL", "INT", "BOOL"})
+#: functions of expressions (Job planning, "Arithmetic functions"; angles in degrees)
+FUNCTIONS = {
+    "SIN": lambda a: math.sin(math.radians(a)), "COS": lambda a: math.cos(math.radians(a)),
+    "TAN": lambda a: math.tan(math.radians(a)), "ASIN": lambda a: math.degrees(math.asin(a)),
+    "ACOS": lambda a: math.degrees(math.acos(a)), "ATAN2": lambda y, x: math.degrees(math.atan2(y, x)),
+    "SQRT": math.sqrt, "ABS": abs, "POT": lambda a: a * a, "TRUNC": math.trunc, "ROUND": lambda a: float(round(a)),
+    "MINVAL": min, "MAXVAL": max,
+}
+KEYWORDS_NOT_NAMES = frozenset({"DEF", "DIV", "MOD"})
+
+
+def number_text(v: float) -> str:
+    """A value read from an expression, as the text of a word's number."""
+    text = f"{v:.10f}".rstrip("0").rstrip(".")
+    return "0" if text in ("", "-0") else text
+
+
 class _Reader:
-    def __init__(self, line: str, path: str | None, lineno: int) -> None:
+    def __init__(self, line: str, path: str | None, lineno: int, env: dict[str, float] | None = None) -> None:
         self.line = line
         self.code = line[:_code_end(line)]
         self.path, self.lineno = path, lineno
         self.block = SinumerikBlock()
+        self.env = {} if env is None else env  # R parameters ("R1") and DEF variables, upper case
 
     def refuse(self, k: int, what: str, hint: str | None = None) -> UnsupportedGcodeError:
         return UnsupportedGcodeError(f"Sinumerik {what}", path=self.path, lineno=self.lineno, col=k + 1, hint=hint)
@@ -137,16 +161,21 @@ class _Reader:
         while j < len(code) and (code[j].isalpha() or code[j] == "_"):
             j += 1
         name = code[k:j].upper()
-        if len(name) == 1:
-            e = _number(code, _skip(code, j))
-            if e > j:
-                return self.word(name, _skip(code, j), e, k)
         digits = j
         while digits < len(code) and code[digits].isdigit():
             digits += 1
         ident = name + code[j:digits]
         after = _skip(code, digits)
-        if after < len(code) and code[after] == "=" and digits == j:
+        assigns = after < len(code) and code[after] == "=" and code[after + 1:after + 2] != "="
+        if assigns and (ident in self.env or (name == "R" and digits > j)):
+            return self.set_variable(ident, k, _skip(code, after + 1))  # R1=..., SIDE=...
+        if name == "DEF" and digits == j:
+            return self.define(k, after)
+        if len(name) == 1:
+            e = _number(code, _skip(code, j))
+            if e > j:
+                return self.word(name, _skip(code, j), e, k)
+        if assigns and digits == j:
             return self.assignment(name, k, _skip(code, after + 1))
         if after < len(code) and code[after] == "(":
             end = _closing(code, after)
@@ -200,11 +229,137 @@ class _Reader:
             self.word(letter, s, e, k)
             return close + 1
         e = _number(code, v)
-        if e == v or (_skip(code, e) < len(code) and code[_skip(code, e)] not in " \t" and
-                      not code[_skip(code, e)].isalpha()):
-            raise self.refuse(k, f"{name}= with an expression (variables or arithmetic)",
-                              "post the program with numbers in place of variables")
-        return self.word(letter, v, e, k)
+        if e > v and (e >= len(code) or code[e] in " \t"):
+            return self.word(letter, v, e, k)
+        value, e = self.expression(v)  # X=R1*2, CR=RADIUS: the word's number is the expression's value
+        self.word(letter, v, e, k)
+        w = self.block.words[-1]
+        self.block.words[-1] = Word(w.letter, number_text(value), w.start, w.end, w.letter_pos)
+        return e
+
+    # -- variables: R parameters and DEF (Job planning, "Flexible NC programming") -------------
+    def define(self, k: int, v: int) -> int:
+        """``DEF REAL NAME[=value][, NAME2[=value]]``: names set to their value or 0."""
+        code = self.code
+        j = v
+        while j < len(code) and code[j].isalpha():
+            j += 1
+        kind = code[v:j].upper()
+        if kind not in NUMBER_TYPES:
+            raise self.refuse(k, f"DEF {kind or '?'} (only REAL, INT and BOOL variables are read)",
+                              "post the program with numbers in place of such variables")
+        j = _skip(code, j)
+        while True:
+            s = j
+            while j < len(code) and (code[j].isalnum() or code[j] == "_"):
+                j += 1
+            name = code[s:j].upper()
+            if not name or not (name[0].isalpha() or name[0] == "_") or name in KEYWORDS_NOT_NAMES:
+                raise GcodeSyntaxError("DEF without a variable name", path=self.path, lineno=self.lineno, col=s + 1)
+            j = _skip(code, j)
+            if j < len(code) and code[j] == "[":
+                raise self.refuse(j, "DEF of an array", "post the program with numbers in place of arrays")
+            value = 0.0
+            if j < len(code) and code[j] == "=":
+                value, j = self.expression(_skip(code, j + 1))
+                j = _skip(code, j)
+            self.env[name] = value
+            if j < len(code) and code[j] == ",":
+                j = _skip(code, j + 1)
+                continue
+            if j < len(code):
+                raise GcodeSyntaxError(f"unexpected {code[j]!r} in DEF", path=self.path, lineno=self.lineno,
+                                       col=j + 1)
+            return j
+
+    def set_variable(self, name: str, k: int, v: int) -> int:
+        value, e = self.expression(v)
+        self.env[name] = value
+        return e
+
+    def expression(self, k: int) -> tuple[float, int]:
+        """The value of the expression at ``k`` and the index after it (no blanks outside
+        parentheses: a blank ends it, as the next word follows)."""
+        value, e = self._sum(k, False)
+        return value, e
+
+    def _sum(self, k: int, blanks: bool) -> tuple[float, int]:
+        value, k = self._product(k, blanks)
+        while True:
+            j = _skip(self.code, k) if blanks else k
+            if j < len(self.code) and self.code[j] in "+-":
+                rhs, k = self._product(j + 1, blanks)
+                value = value + rhs if self.code[j] == "+" else value - rhs
+            else:
+                return value, k
+
+    def _product(self, k: int, blanks: bool) -> tuple[float, int]:
+        value, k = self._factor(k, blanks)
+        while True:
+            # "N DIV 2", "A * 2": a blank before DIV, MOD, * or / keeps the expression going
+            j = _skip(self.code, k)
+            op = self.code[j:j + 1]
+            word = self.code[j:j + 3].upper()
+            if op in ("*", "/"):
+                rhs, k = self._factor(_skip(self.code, j + 1), blanks)
+            elif word in ("DIV", "MOD") and not (self.code[j + 3:j + 4].isalnum()):
+                op = word
+                rhs, k = self._factor(_skip(self.code, j + 3), blanks)
+            else:
+                return value, k
+            if op != "*" and rhs == 0:
+                raise GcodeSyntaxError("division by zero", path=self.path, lineno=self.lineno, col=j + 1)
+            value = (value * rhs if op == "*" else value / rhs if op == "/" else
+                     float(int(value) // int(rhs)) if op == "DIV" else math.fmod(value, rhs))
+
+    def _factor(self, k: int, blanks: bool) -> tuple[float, int]:
+        code = self.code
+        k = _skip(code, k) if blanks else k
+        c = code[k:k + 1]
+        if c in ("+", "-"):
+            value, e = self._factor(k + 1, blanks)
+            return (-value if c == "-" else value), e
+        if c == "(":
+            value, e = self._sum(k + 1, True)
+            e = _skip(code, e)
+            if code[e:e + 1] != ")":
+                raise GcodeSyntaxError("')' missing in the expression", path=self.path, lineno=self.lineno,
+                                       col=e + 1)
+            return value, e + 1
+        e = _number(code, k)
+        if e > k and c not in "+-":
+            return float(code[k:e]), e
+        j = k
+        while j < len(code) and (code[j].isalnum() or code[j] == "_"):
+            j += 1
+        name = code[k:j].upper()
+        if not name:
+            raise GcodeSyntaxError("expected a number, a variable or '(' in the expression", path=self.path,
+                                   lineno=self.lineno, col=k + 1)
+        if name in FUNCTIONS and code[j:j + 1] == "(":
+            args, e = [], j + 1
+            while True:
+                a, e = self._sum(e, True)
+                args.append(a)
+                e = _skip(code, e)
+                if code[e:e + 1] == ",":
+                    e += 1
+                    continue
+                if code[e:e + 1] != ")":
+                    raise GcodeSyntaxError(f"')' missing after the arguments of {name}", path=self.path,
+                                           lineno=self.lineno, col=e + 1)
+                try:
+                    return float(FUNCTIONS[name](*args)), e + 1
+                except (ValueError, TypeError):
+                    raise GcodeSyntaxError(f"{name} of {args} is not defined", path=self.path, lineno=self.lineno,
+                                           col=k + 1) from None
+        if name in self.env:
+            return self.env[name], j
+        if name[0] == "R" and name[1:].isdigit():
+            raise self.refuse(k, f"R parameter {name} read before the program sets it (its value is kept by "
+                              "the controller)", f"set {name} in the program before it is read")
+        raise self.refuse(k, f"{name} in an expression (not a variable the program defines)",
+                          "define it with DEF, or post the program with numbers in its place")
 
 
 def code_of(line: str) -> str:
@@ -220,6 +375,7 @@ def code_of(line: str) -> str:
     return "".join(out)
 
 
-def read_block(line: str, path: str | None, lineno: int) -> SinumerikBlock:
-    """The words of one Sinumerik block (``line`` with or without its ending)."""
-    return _Reader(line, path, lineno).read()
+def read_block(line: str, path: str | None, lineno: int, env: dict[str, float] | None = None) -> SinumerikBlock:
+    """The words of one Sinumerik block (``line`` with or without its ending); ``env``
+    holds the R parameters and DEF variables set so far, and gets the block's settings."""
+    return _Reader(line, path, lineno, env).read()
