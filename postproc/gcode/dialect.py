@@ -146,6 +146,7 @@ class Dialect:
     dwell_f_is_time: bool = False  # "G4 F2": F is the dwell time, the feed stays (Sinumerik)
     tool_length_word: str = ""  # a word applying a tool length register by number ("D": Sinumerik flat D)
     chosen_by: tuple[str, ...] = ()  # regexes of opening lines that choose this dialect over generic
+    yields_to_headers: bool = False  # a program opening with another dialect's chosen_by lines is read in it
     marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
     refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
 
@@ -289,6 +290,7 @@ DIALECTS["generic"] = Dialect(
     # input is read as LinuxCNC (the reference interpreter) reads it, macro programs in the
     # syntax they are written in
     reads_arcs_as="linuxcnc", off_plane_arc_offset="zero-ignored", macro_syntax="detect", m98_count_in_p=True,
+    yields_to_headers=True,
     turning_cycles=FANUC_TURNING_CYCLES)
 
 # --- controllers whose programs generic does not read (each one entry) ---------------------

@@ -81,9 +81,9 @@ HEAD_BYTES = 4096
 def dialect_of_file(path: str, chosen: str) -> str:
     """The dialect to read ``path`` in: ``chosen``, or, for ``generic``, the dialect whose
     header lines (:attr:`Dialect.chosen_by`, e.g. Sinumerik's ``%_N_..._MPF``) open it."""
-    from postproc.gcode.dialect import DIALECTS
+    from postproc.gcode.dialect import DIALECTS, get
 
-    if chosen != "generic":
+    if not get(chosen).yields_to_headers:
         return chosen
     try:
         with open(path, "rb") as fh:
