@@ -242,3 +242,17 @@ def test_arc_end_point_rule():
     assert d.arc_end_radius_tolerance(5.0) == pytest.approx(0.01)  # CIRCLE_ERROR_CONST
     assert d.arc_end_radius_tolerance(100.0) == pytest.approx(0.1)  # CIRCLE_ERROR_FACTOR * r
     assert math.isinf(d.arc_cap_mm)
+
+
+def test_split_arc_written_with_cr():
+    """An arc the correction cuts into several exact arcs keeps Sinumerik's radius word."""
+    from postproc.calfile import load_calibration
+
+    text = (DATA / "inch_g505_ret.spf").read_text()
+    setup = Setup(offsets={"G505": (100.0, 100.0, 100.0)}, tool_lengths={2: 100.0})
+    out, rep = correct_text(text, load_calibration(CAL).engine, setup, CorrectOptions(dialect="sinumerik"),
+                            path="p.spf")
+    arcs = [ln for ln in out.splitlines() if ln.lstrip().startswith(("G2", "N50"))]
+    assert rep.arcs_split >= 1
+    assert len(arcs) >= 2
+    assert all("CR=" in ln and " R" not in ln for ln in arcs)

@@ -139,6 +139,7 @@ class Dialect:
     fixture_offset_word: str = ""  # a letter selecting a fixture offset by number ("E": Fadal E1..E48)
     g15_work_select: bool = False  # "G15 H<n>" selects work coordinate system n (Okuma)
     g_aliases: tuple[tuple[int, int], ...] = ()  # (this dialect's G key, the ISO G key it means)
+    radius_word: str = "R"  # how an arc's radius is written ("CR=" on Sinumerik)
     block_syntax: str = "iso"  # iso: letter-number words | sinumerik: also NAME=value, keywords, calls
     program_end_m: tuple[int, ...] = (2, 30)  # M codes that end the program
     work_codes: tuple[tuple[int, str], ...] = ()  # further work-offset G codes (G key, the offset's name)
@@ -347,7 +348,7 @@ DIALECTS["sinumerik"] = Dialect(
            "MD21000/MD21010",
     text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
     chosen_by=(r"\s*%_N_\w+_(?:MPF|SPF)\b", r"\s*;\s*\$PATH\s*="),
-    block_syntax="sinumerik", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
+    block_syntax="sinumerik", radius_word="CR=", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
     # G500 (settable frames off) and G505-G599 are work offsets; G64x continuous path, G60/G60x/G9
     # exact stop, G70/G71 and G700/G710 inch/metric (Fundamentals: "Inch/metric dimensions")
     work_codes=((5000, "G500"), *((k * 10, f"G{k}") for k in range(505, 600))),
