@@ -26,6 +26,7 @@ Everything else is refused naming the construct in Sinumerik's words (the dialec
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from postproc.errors import GcodeSyntaxError, UnsupportedGcodeError
@@ -110,7 +111,7 @@ def _closing(code: str, k: int) -> int:
 #: DEF types read (their values are numbers); the others (FRAME, AXIS, STRING, CHAR) are refused
 NUMBER_TYPES = frozenset({"REAL", "INT", "BOOL"})
 #: functions of expressions (Job planning, "Arithmetic functions"; angles in degrees)
-FUNCTIONS = {
+FUNCTIONS: dict[str, Callable[..., float]] = {
     "SIN": lambda a: math.sin(math.radians(a)), "COS": lambda a: math.cos(math.radians(a)),
     "TAN": lambda a: math.tan(math.radians(a)), "ASIN": lambda a: math.degrees(math.asin(a)),
     "ACOS": lambda a: math.degrees(math.acos(a)), "ATAN2": lambda y, x: math.degrees(math.atan2(y, x)),
