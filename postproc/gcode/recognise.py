@@ -24,8 +24,8 @@ class LatheProgramError(UnsupportedGcodeError):
     """A lathe program: postproc corrects milling machines only."""
 
 
-LATHE_HINT = ("correct lathe programs with the lathe's own compensation; a milling program that uses "
-              "U/V/W as axes is read with --dialect linuxcnc")
+LATHE_HINT = "correct lathe programs with the lathe's own compensation"
+UVW_HINT = "; a milling program that uses U/V/W as axes is read with --dialect linuxcnc"
 
 
 def lathe_message(marks: list[str]) -> str:
@@ -44,8 +44,8 @@ class LatheMarks:
             self.weak.append(mark)
 
     def refusal(self, strong: str, path: str | None, lineno: int, col: int) -> LatheProgramError:
-        return LatheProgramError(lathe_message([strong, *self.weak]), path=path, lineno=lineno, col=col,
-                                 hint=LATHE_HINT)
+        hint = LATHE_HINT + (UVW_HINT if strong[:1] in ("U", "W") else "")
+        return LatheProgramError(lathe_message([strong, *self.weak]), path=path, lineno=lineno, col=col, hint=hint)
 
 
 def foreign_dialect(line: str, chosen: str) -> tuple[str, str, str] | None:
