@@ -92,6 +92,27 @@ def test_bracket_kept_lines_byte_identical_and_header_in_semicolon_comments():
     assert "N150 G1 X=AC(-4.9950)" in out
 
 
+def test_absolute_centre_words_by_hand():
+    """G2 X20 Y0 I=AC(10) J=AC(0) from (0, 0): the centre (10, 0) in work coordinates, the
+    same arc as I10 J0; the block after it reads I/J incremental again."""
+    it, moves = run("G54 D1\nG0 X0 Y0 Z0\nG2 X20 Y0 I=AC(10) J=AC(0) F100\nG2 X0 Y0 I-10 J0\n")
+    assert moves[1].arc.center[:2] == pytest.approx((110.0, 100.0))
+    assert moves[1].arc_absolute
+    assert moves[2].arc.center[:2] == pytest.approx((110.0, 100.0))
+    assert not it.state.arc_absolute
+    with pytest.raises(UnsupportedGcodeError, match="partly =AC"):
+        run("G54 D1\nG0 X0 Y0 Z0\nG2 X20 Y0 I=AC(10) J0 F100\n")
+    out, _ = correct("G54 D1\nG0 X0 Y0 Z0\nG2 X20 Y0 I=AC(10) J=AC(0) F100\nM30\n",
+                     Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0}),
+                     StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "I=AC(9.9900) J=AC(0)" in out  # 10 / 1.001; J stays 0
+
+
+def test_kept_settings_and_compressor():
+    _, moves = run("G54 D1\nG642 ADIS=0.05 ADISPOS=0.1\nCOMPCAD\nG0 X0 Y0 Z0\nCOMPOF\n")
+    assert len(moves) == 1
+
+
 def test_g4_f_is_a_dwell_time_not_a_feed():
     _, moves = run("G54 D1\nG1 X1 Y1 Z1 F500\nG4 F2\nG1 X2\n")
     assert moves[-1].feed == 500.0

@@ -293,6 +293,7 @@ class Interpreter:
         self.lathe = LatheMarks()
         self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
         self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
+        self._arc_absolute_once = False  # the next block's centre words are absolute (Sinumerik I=AC())
         self._g_alias = dict(self.d.g_aliases)
         # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
         self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
@@ -419,6 +420,13 @@ class Interpreter:
         if not words:
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
+        if self._arc_absolute_once:  # Sinumerik I=AC() J=AC(): G90.1 for this block only
+            st, saved = self.state, self.state.arc_absolute
+            st.arc_absolute, self._arc_absolute_once = True, False
+            try:
+                return self._block(lineno, words, block_delete)
+            finally:
+                st.arc_absolute = saved
         return self._block(lineno, words, block_delete)
 
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
@@ -470,10 +478,18 @@ class Interpreter:
         blk = sinumerik.read_block(line, self.path, lineno, self.variables)
         g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
         incremental = True if 910 in g else False if 900 in g else self.state.incremental
+        centre_ac = [letter for letter, _ in blk.absolute if letter in "IJK"]
+        if centre_ac:
+            given = [w.letter for w in blk.words if w.letter in "IJK"]
+            if len(centre_ac) != len(given):
+                col = next(c for letter, c in blk.absolute if letter in "IJK")
+                raise self._err(UnsupportedGcodeError, "Sinumerik centre words partly =AC() (absolute) and partly "
+                                "incremental", lineno, col, hint="give every centre word of the arc as =AC(), or none")
+            self._arc_absolute_once = True  # I=AC() J=AC(): the centre in work coordinates, this block
         for letter, col in blk.absolute:
-            if incremental or letter in "IJK":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in "
-                                f"{'G91' if incremental else 'a centre word'}", lineno, col,
+            if incremental and letter not in "IJK":
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in G91",
+                                lineno, col,
                                 hint="post the coordinate in the program's distance mode (G90/G91)")
         for letter, col in blk.incremental:
             if not incremental and letter in "XYZABC":

@@ -9,7 +9,10 @@ number (``X10.5``, ``G1``), addresses with ``=`` (``X=10.5``, ``CR=5``, ``T="CUT
   the spans of their numbers in the line, so an edited number is written in its place;
 - ``CR=r`` as the arc radius R (negative: the arc of more than 180 degrees, as R);
 - ``X=AC(v)`` in G90 and ``X=IC(v)`` in G91, which mean what ``Xv`` means there;
-- ``T="name"``, ``MSG()``, ``CYCLE832()``, ``SOFT``/``BRISK``/``DRIVE``/``FFWON``/``FFWOF``
+  ``I=AC(v) J=AC(w)`` (every centre word of the block absolute): the centre in work
+  coordinates, as G90.1 reads it, for that block;
+- ``T="name"``, ``MSG()``, ``CYCLE832()``, ``SOFT``/``BRISK``/``DRIVE``/``FFWON``/``FFWOF``,
+  the compressors ``COMPON``/``COMPCURV``/``COMPCAD``/``COMPOF``, ``ADIS=``/``ADISPOS=``
   and the like: kept as they are (no geometry);
 - ``RET``: the end of the program (as M17 and M30);
 - ``DEF REAL|INT|BOOL NAME=value``, ``R1=...``, ``NAME=...`` and words whose value is an
@@ -37,8 +40,10 @@ WORD_LETTERS = frozenset("NGMXYZABCIJKFSTD")
 #: keywords that change no geometry: kept as they are
 KEPT_KEYWORDS = frozenset({
     "SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "TRAFOOF", "UPATH", "SPATH",
-    "ACC", "WAITM", "COMPOF", "G642", "G641", "G643", "G644", "G645",
+    "WAITM", "COMPOF", "COMPON", "COMPCURV", "COMPCAD", "STOPFIFO", "STARTFIFO", "FIFOCTRL",
 })
+#: settings given as NAME=value that change no geometry (rounding distances of G641/G642)
+KEPT_SETTINGS = frozenset({"ADIS", "ADISPOS"})
 #: calls that change no geometry: kept as they are
 KEPT_CALLS = frozenset({"MSG", "CYCLE832", "SETMS", "WORKPIECE", "TOOLGEOMETRY"})
 END_KEYWORDS = frozenset({"RET"})
@@ -215,6 +220,11 @@ class _Reader:
                                        col=v + 1)
             self.block.tool_name = code[v + 1:end]
             return end + 1
+        if name in KEPT_SETTINGS:
+            e = _number(code, v)
+            if e == v:
+                _value, e = self.expression(v)
+            return e
         letter = "R" if name == "CR" else name
         if len(letter) != 1:
             raise self.refuse(k, f"{name}= (not read by postproc)", "post the program without it")
