@@ -206,3 +206,17 @@ def test_sinumerik_refusals_in_its_words(line, construct):
     assert str(err.value).split(": ", 1)[1].startswith(construct)
     assert err.value.lineno == 4
     assert err.value.hint
+
+
+@pytest.mark.parametrize(("dialect", "line", "construct"), [
+    ("fadal", "#R1=R1+1", "Fadal # macro statement (Fadal macro language)"),
+    ("fadal", "N5 L0102", "Fadal L subroutine call (format 1)"),
+    ("okuma", "VC1=10", "Okuma VC/VS common variable"),
+    ("okuma", "IF [VC1 GT 5] NLAB1", "Okuma IF/GOTO program control"),
+    ("okuma", "MODIN O1000", "Okuma MODIN modal subprogram call"),
+])
+def test_fadal_and_okuma_constructs_refused_in_their_words(dialect, line, construct):
+    with pytest.raises(UnsupportedGcodeError) as err:
+        correct(f"G90\nG0 X0 Y0 Z0\n{line}\nM30\n", Setup(offsets={"G54": (0, 0, 0)}), dialect)
+    assert str(err.value).split(": ", 1)[1].startswith(construct)
+    assert err.value.lineno == 3

@@ -136,6 +136,7 @@ class Dialect:
     header_forms: tuple[str, ...] = ()  # regexes of header lines read as no geometry ("$NAME.MIN%", Okuma)
     uvw_axes: bool = False  # U, V, W are axes (LinuxCNC); else U/W mark a lathe program (incremental X/Z)
     turning_cycles: frozenset[int] = frozenset()  # G keys (10 x number) that are lathe turning cycles here
+    call_words: str = ""  # letters that call a subroutine in a block without G codes ("L": Fadal format 1)
     fixture_offset_word: str = ""  # a letter selecting a fixture offset by number ("E": Fadal E1..E48)
     g15_work_select: bool = False  # "G15 H<n>" selects work coordinate system n (Okuma)
     g_aliases: tuple[tuple[int, int], ...] = ()  # (this dialect's G key, the ISO G key it means)
@@ -304,9 +305,13 @@ DIALECTS["fanuc-lathe"] = replace(
 # program starts "N1 O2 (NAME)", E1..E48 select fixture offsets (E0 cancels them). Comments,
 # line length and arc tolerance as Fanuc's (assumed, the manual gives no figure).
 DIALECTS["fadal"] = replace(
-    _FANUC, name="fadal", title="Fadal CNC 88HS", numbered_program_line=True, fixture_offset_word="E",
+    _FANUC, name="fadal", title="Fadal CNC 88HS", numbered_program_line=True, fixture_offset_word="E", call_words="L",
     cycle_repeat_words="L", turning_cycles=frozenset(),
     marks=((r"^\s*N\s*\d+\s*O\s*\d+\b", "N1 O.. program header (Fadal)"),),
+    refused=((r"^\s*(?:N\d+\s*)?#", "# macro statement (Fadal macro language)",
+              "post the program with numbers in place of the macro"),
+             (r"(?i)^\s*(?:N\d+\s*)?L\d{2,4}\b", "L subroutine call (format 1)",
+              "write the subroutine's moves in the main program")),
     source="Fadal VMC programming manual: program header N1 O.., fixture offsets E1-E48 (E0 cancel); "
            "format 2 reads Fanuc's G codes")
 
@@ -321,7 +326,10 @@ DIALECTS["okuma"] = replace(
            (r"(?i)^\s*(?:N\d+\s*)?CALL\s+O", "CALL O.. subprogram call (Okuma)"),
            (r"^\s*(?:N\d+\s*)?G\s*15\s*H\s*\d", "G15 H.. work coordinate system (Okuma)")),
     refused=((r"(?i)\bCALL\s+O\w*", "CALL O.. subprogram call",
-              "write the subprogram's moves in the main program (expand it in CAM)"),),
+              "write the subprogram's moves in the main program (expand it in CAM)"),
+             (r"(?i)\bMODIN\b", "MODIN modal subprogram call", "write the subprogram's moves in the main program"),
+             (r"(?i)\bV[CS]\d+\s*=", "VC/VS common variable", "post the program with numbers in place of variables"),
+             (r"(?i)\bIF\s*\[|\bGOTO\b", "IF/GOTO program control", "post the program flat (loops written out)")),
     source="Okuma OSP-P programming manual (Mill): $ file header, G15/G16 work coordinates, "
            "G56/G53 tool length offset, CALL O subprograms")
 

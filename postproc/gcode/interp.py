@@ -456,6 +456,8 @@ class Interpreter:
             return [], False
         for tok in tokens:
             if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
+                if self.d.refused:
+                    self._foreign(line, lineno)  # the dialect's own constructs first (Fadal's # macros)
                 what, hint = classify_construct(line)
                 if what:
                     raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
@@ -604,6 +606,9 @@ class Interpreter:
                 vals[letter] = (float(num), i)
         def col_of(i: int) -> int:
             return words[i].letter_pos + 1  # 1-based column of the word's letter
+
+        if self.d.call_words and not gcodes and any(k in vals for k in self.d.call_words):
+            self._foreign(" ".join(w.letter + w.number for w in words), lineno)  # Fadal L0102: a call
 
         # M codes
         tool_change = False
