@@ -93,5 +93,10 @@ def test_cli_var_on_correct_diff_and_verify(tmp_path):
     assert "(POSTPROC VARIABLES 5405 12.5)" in out.read_text()
     res = run(main, ["diff", str(src), str(out), "--dialect", "haas", "--var", "5405=12.5"])
     assert res.exit_code == 0, res.output
+    res = run(main, ["diff", str(src), str(out), "--dialect", "haas"])  # the header's VARIABLES
+    assert res.exit_code == 0, res.output
+    from postproc.gcode.compare import header_setup
+
+    assert header_setup(str(out)).variables == {5405: 12.5}
     for cmd in ("correct", "diff", "verify"):
         assert "--vars FILE" in run(main, [cmd, "--help"]).output

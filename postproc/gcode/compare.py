@@ -259,6 +259,7 @@ class HeaderSetup:
     start: dict = field(default_factory=dict)  # axis -> machine mm
     tool_vector: tuple | None = None
     home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
+    variables: dict = field(default_factory=dict)  # machine-state variables given with --var
     expanded: bool = False  # the program was corrected expanded (subprograms, loops, macros written out)
     cycles_expanded: bool = False  # its canned cycles were written as their moves (--cycles expand)
 
@@ -301,6 +302,9 @@ def header_setup(source) -> HeaderSetup:
         elif words.startswith("TOOL VECTOR "):
             v = _axis_values(words[12:])
             hs.tool_vector = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+        elif words.startswith("VARIABLES "):
+            for n, v in re.findall(rf"(\d+) ({_NUMBER})", words[10:]):
+                hs.variables[int(n)] = float(v)
         elif words.startswith("EXPANDED"):
             hs.expanded = True
         elif words == "CYCLES EXPANDED":
@@ -350,6 +354,8 @@ def setup_from_header(hs: HeaderSetup, setup: Setup | None) -> Setup:
         changes["tool_vector"] = hs.tool_vector
     if hs.home and hasattr(setup, "home") and not setup.home:
         changes["home"] = {k: dict(v) for k, v in hs.home.items()}
+    if hs.variables and not setup.variables:
+        changes["variables"] = dict(hs.variables)
     return dataclasses.replace(setup, **changes) if changes else setup
 
 
