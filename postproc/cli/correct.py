@@ -66,10 +66,12 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
     """Correct one file (runs in a worker process with -j); returns (summary, error, exit code)."""
     from postproc.calfile import load_calibration
     from postproc.gcode.pipeline import CorrectOptions, correct_file
+    from postproc.gcode.recognise import dialect_of_file
 
     try:
         cal = load_calibration(job["calibration"])
         opts = CorrectOptions(**job["options"], added=load_maps(job["maps"]))
+        opts.dialect = dialect_of_file(job["src"], opts.dialect)  # generic: Sinumerik by its header
         rep = correct_file(job["src"], job["dst"], cal.engine, job["setup"], opts,
                            calibration_name=cal.name, calibration_sha256=cal.sha256)
         return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
@@ -288,6 +290,7 @@ def _check_not_same(src: str, dst: str) -> None:
 def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) -> None:
     from postproc.calfile import load_calibration
     from postproc.gcode.pipeline import CorrectOptions, correct_file
+    from postproc.gcode.recognise import dialect_of_file
 
     _check_not_same(src, dst)
     cal = load_calibration(calibration)
@@ -304,6 +307,7 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
                 shutil.copyfileobj(sys.stdin.buffer, fh)
         else:
             src_path = src
+        opts.dialect = dialect_of_file(src_path, opts.dialect)  # generic: Sinumerik by its header
         if dst == "-":
             tmpdir = tmpdir or tempfile.mkdtemp(prefix="postproc-")
             out_path = os.path.join(tmpdir, "out.nc")

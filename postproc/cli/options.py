@@ -12,10 +12,10 @@ from pathlib import Path
 import click
 
 from postproc.errors import PostprocError
+from postproc.gcode.dialect import DIALECT_NAMES
 
-# The controllers --dialect names (postproc.gcode.dialect.DIALECTS; a test keeps them equal,
-# and this module stays light for --help).
-DIALECT_CHOICE = click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False)
+# The controllers --dialect names: one entry each in postproc.gcode.dialect (a light module)
+DIALECT_CHOICE = click.Choice(list(DIALECT_NAMES), case_sensitive=False)
 
 _AXES = "XYZ"
 
@@ -47,7 +47,8 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+)$", re.IGNORECASE)
+# G500 and G505..G599: Sinumerik; E<n>: Fadal fixture offsets; G15H<n>: Okuma work coordinates
+_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+|G5\d\d|E\d+|G15H\d+)$", re.IGNORECASE)
 
 
 def axis_values(text: str, rest: str, letters: str, *, param_hint: str | None = None,
@@ -83,6 +84,7 @@ def parse_offset(text: str) -> tuple[str, dict[str, float]]:
     if not sep or not _OFFSET_NAME.match(name):
         raise click.BadParameter(
             f"{text!r}: expected NAME=X..,Y..,Z.. with NAME one of G54..G59, G59.1..G59.3, G54.1P<n>"
+            " (G500..G599 Sinumerik, E<n> Fadal, G15H<n> Okuma)"
         )
     values = axis_values(text, rest, "XYZABC")
     return name, values
@@ -174,7 +176,8 @@ def _option(flag: str):
         raise
 
 
-def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=()):
+def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=(),
+                var=(), vars_file=None):
     """The :class:`postproc.gcode.path.Setup` the options of :func:`setup_options` give (their
     texts as typed); a partial work offset, a home or an axis given twice is refused."""
     from postproc.gcode.path import Setup
@@ -202,8 +205,17 @@ def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, co
         if name in homes:
             raise click.BadParameter(f"{name} is given twice", param_hint="--home")
         homes[name] = values
+    from postproc.gcode.variables import parse_var, read_vars
+
+    variables = read_vars(vars_file) if vars_file else {}
+    for text in var:
+        try:
+            index, value = parse_var(text)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--var") from None
+        variables[index] = value
     return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
-                 start=parse_start(start) if start is not None else {}, home=homes)
+                 start=parse_start(start) if start is not None else {}, home=homes, variables=variables)
 
 
 #: The setup options, in the order they are listed: flag -> (parameter name, click.option arguments).
@@ -230,6 +242,15 @@ SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
         multiple=True, metavar="G28=X..,Y..,Z..",
         help="Stored position G28 or G30 goes to, in machine mm (end with 'in' for inches), any of X, Y, Z. "
              "Without it an axis sent there is unknown until the program positions it again. Repeatable.")),
+    "--var": ("var", dict(
+        multiple=True, metavar="N=VALUE",
+        help="Value of a machine-state variable the program reads (Haas/Fanuc #5405, retained #500, "
+             "LinuxCNC #5221), e.g. 5405=12.5; recorded in the header. Probe results are never taken. "
+             "Repeatable.")),
+    "--vars": ("vars_file", dict(
+        default=None, type=click.Path(dir_okay=False),
+        help="Machine-state variables from a LinuxCNC .var file or a Fanuc/Haas macro-variable listing; "
+             "--var overrides its entries.")),
     "--context": ("context", dict(
         multiple=True, metavar="NAME=VALUE",
         help="Constant context value during the run, read by the calibration's model, e.g. temp=21.5. "

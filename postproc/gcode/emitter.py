@@ -47,6 +47,8 @@ class _Options(Protocol):
     def tolerance_mm(self) -> float: ...
     @property
     def decimals(self) -> int | None: ...
+    @property
+    def dialect(self) -> str: ...
 
 
 class _Report(Protocol):
@@ -732,12 +734,18 @@ class EmitterMixin(Generic[_O, _R]):
             out.append(base + val * unit)
         return np.array(out)
 
-    @staticmethod
-    def _arc_words(spec: ArcSpec) -> list[str]:
-        words = [letter + text for letter, text in spec["vals"]]
+    def _arc_words(self, spec: ArcSpec) -> list[str]:
+        radius = self._radius_word()
+        words = [(radius if letter == "R" else letter) + text for letter, text in spec["vals"]]
         if spec["turns"] > 1:
             words.append(f"P{spec['turns']}")
         return words
+
+    def _radius_word(self) -> str:
+        """How the dialect writes an arc's radius: ``R`` (``CR=`` for Sinumerik)."""
+        from postproc.gcode.dialect import get
+
+        return get(self.opt.dialect).radius_word
 
     def _arc_edits(self, line: str, mv: Move, spec: ArcSpec) -> tuple[list[Edit], list[str]]:
         """Edits of the move's own arc words for the arc ``spec`` and the words to add."""
@@ -764,7 +772,7 @@ class EmitterMixin(Generic[_O, _R]):
                 if float(num) != float(text):
                     edits.append((start, end, text))
             elif float(text) != 0.0 or mv.arc_absolute:
-                added.append(letter + text)
+                added.append((self._radius_word() if letter == "R" else letter) + text)
         del p_idx
         return edits, added
 
