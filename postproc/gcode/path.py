@@ -53,6 +53,7 @@ class Setup:
     context: dict = field(default_factory=dict)
     start: dict = field(default_factory=dict)
     home: dict = field(default_factory=dict)
+    tool_radii: dict = field(default_factory=dict)  # cutter radius (mm) by tool or D register (None: any)
 
 
 @dataclass
