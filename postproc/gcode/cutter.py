@@ -139,14 +139,12 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
 
 
 def check_block(it: Interpreter, b, gcodes: list, tool_change: bool) -> None:
-    """The controller's rules for a block while compensation is on or turned on or off
-    here, and the state it leaves (``b.comp``: the G40/G41/G42 key and word index)."""
+    """The controller's rules for a block read while compensation is on (before its G codes
+    act: a G43 refused here must not ask for its tool length first)."""
     st = it.state
     lineno = b.lineno
-    on = st.comp != 400
     ctrl = _controller(it)
-    keys = {k: i for k, i in gcodes}
-    if on:
+    if st.comp != 400:
         first = [(k, i) for k, i in gcodes if k in (170, 180, 190)]
         refusals = [
             (first, "Cannot change planes with cutter radius compensation on"),
@@ -169,11 +167,20 @@ def check_block(it: Interpreter, b, gcodes: list, tool_change: bool) -> None:
         if tool_change:
             raise _err(it, UnsupportedGcodeError, "Cannot change tools with cutter radius compensation on",
                        lineno, b.words[0].letter_pos + 1, hint=f"{ctrl} refuses it; G40 first")
-        if b.motion_key is None and st.motion in CANNED_CYCLES and any(a in b.vals for a in "XYZ"):
+        modal = not any(k in (0, 10, 20, 30) or k in CANNED_CYCLES or k in SPLINES for k, _i in gcodes)
+        if modal and st.motion in CANNED_CYCLES and any(a in b.vals for a in "XYZ"):
             raise _err(it, UnsupportedGcodeError, "Cannot use canned cycles with cutter compensation on",
                        lineno, b.words[0].letter_pos + 1)
-    if b.comp is None:
-        return
+
+
+def switch(it: Interpreter, b, gcodes: list) -> None:
+    """G40/G41/G42/G41.1/G42.1 on the block (``b.comp``: key and word index): the state it
+    leaves, and the controller's rules for turning compensation on."""
+    st = it.state
+    lineno = b.lineno
+    on = st.comp != 400
+    ctrl = _controller(it)
+    keys = {k: i for k, i in gcodes}
     key, i = b.comp
     col = b.col(i)
     if key == 400:
@@ -224,8 +231,9 @@ def on_move(it: Interpreter, mv: Move) -> None:
                        lineno, col, hint="alarm PS0034 (no circular interpolation in the start-up or exit "
                                          "block): the lead-in must be G0 or G1")
         if arc is not None:
-            r_arc = math.hypot(mv.q0[a1] - arc.center[a1], mv.q0[a2] - arc.center[a2])
-            if r_arc <= rho:
+            # rs274 (interp_arc.cc, convert_arc_comp1) compares the chord from where the tool
+            # is to the arc's end, not the arc's radius, whatever its message says
+            if in_plane <= rho:
                 raise _err(it, GcodeSyntaxError,
                            "Radius of cutter compensation entry arc is not greater than the tool radius", lineno, col,
                            hint="LinuxCNC refuses it")

@@ -531,13 +531,15 @@ class Interpreter:
             st.spindle_tool = st.tool
 
         blk = _Block(lineno, words, vals)
+        if st.comp != 400:
+            cutter.check_block(self, blk, gcodes, tool_change)
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
             if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
             handler(self, blk, key, i)
-        if st.comp != 400 or blk.comp is not None:
-            cutter.check_block(self, blk, gcodes, tool_change)
+        if blk.comp is not None:
+            cutter.switch(self, blk, gcodes)
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
