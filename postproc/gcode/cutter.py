@@ -131,6 +131,8 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
             return 0.0, "D0"
         name = f"D{tool}"
     r = radii.get(tool, radii.get(None))
+    if r is None and it.lenient_setup:
+        return 0.0, name  # two versions of one program compared: the radius is the same in both
     if r is None:
         raise _err(it, MissingSetupError, f"{CUTTER_COMP[key]} offsets by the radius of {name}, which was not given",
                    lineno, col, hint=f"give --tool-radius {tool}=R, --tool-diameter {tool}=D (mm) or a --tool-table "
