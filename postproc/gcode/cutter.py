@@ -85,8 +85,7 @@ class Bound:
     def note(self) -> str:
         """The header's words for it."""
         radii = ", ".join(f"{k} radius {v:g} mm" for k, v in sorted(self.radii.items())) or "radius 0"
-        return (f"cutter comp {radii}: {self.moves} moves offset by the controller, the correction "
-                f"changing by at most {self.bound_mm * 1000:.2f} um across the radius")
+        return f"cutter comp {radii} bound {self.bound_mm * 1000:.2f} um over {self.moves} moves"
 
 
 def _err(it: Interpreter, cls: type, msg: str, lineno: int, col: int, hint: str | None = None) -> Exception:
@@ -113,6 +112,9 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
             raise _err(it, GcodeSyntaxError, f"negative D word tool radius index used with {CUTTER_COMP[key]}",
                        lineno, col)
         return d * st.unit_mm / 2.0, f"{CUTTER_COMP[key]} D{d:g}"
+    if "D" in vals and vals["D"][0] != int(vals["D"][0]):
+        raise _err(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} requires D word to be a whole number", lineno, col,
+                   hint=f"{_controller(it)} refuses it: D names a tool (LinuxCNC) or an offset register")
     if it.dialect in _D_IS_TOOL:
         if "D" in vals:
             tool = int(vals["D"][0])
