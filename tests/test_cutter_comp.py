@@ -238,3 +238,14 @@ def test_fanuc_refuses_an_arc_as_the_start_up_move():
     text = "G21 G17 G90 F100\nG0 X0 Y0 Z0\nG41 D1\nG2 X10 Y0 I5 J0\nG40 G1 X0\nM30\n"
     with pytest.raises(UnsupportedGcodeError, match="start-up move"):
         correct_text(text, eng, Setup(tool_radii={1: 2.0}), CorrectOptions(dialect="fanuc"))
+
+
+def test_a_backlash_take_up_under_compensation_is_refused():
+    from postproc.effects import compose, get_effect
+    from postproc.engine.identity import IdentityEngine
+
+    eng = compose(IdentityEngine([[-1000.0] * 3, [1000.0] * 3]),
+                  [get_effect("backlash:X", params={"b_mm": 0.004}).to_dict()])
+    text = "G21 G17 G90 F100\nT1 M6\nG0 X0 Y0 Z0\nG41 G1 X10 Y0\nX20\nY10\nX10\nG40 G1 X0 Y0\nM2\n"
+    with pytest.raises(UnsupportedGcodeError, match="take-up"):
+        _correct(text, eng, {1: 1.0}, tol=0.01)

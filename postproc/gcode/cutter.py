@@ -81,6 +81,7 @@ class Bound:
     source: str = ""
     moves: int = 0
     radii: dict = field(default_factory=dict)  # source -> radius (mm)
+    lines: set = field(default_factory=set)  # the lines of the moves the controller offsets
 
     def note(self) -> str:
         """The header's words for it."""
@@ -382,6 +383,7 @@ def check_chunk(c) -> None:
     bound, at = radius_bound(correction, moves)
     b = c.cutter
     b.moves += len(moves)
+    b.lines.update(cm.move.lineno for cm in moves)
     for cm in moves:
         if cm.radius_mm:
             b.radii[cm.source] = cm.radius_mm
@@ -399,3 +401,13 @@ def check_chunk(c) -> None:
             hint="the controller offsets the corrected contour by the radius, so the tool centre is off by that "
                  f"much; allow it with --tolerance {math.ceil(bound[k] * 1e5) / 1e5:g}, or post the tool-centre "
                  "path (compensation done in CAM)")
+
+
+def take_up(c, mv: Move) -> None:
+    """Refuse a backlash take-up move inserted before a move the controller offsets: it
+    would offset the take-up too, as a move of its own (corners and all)."""
+    if mv.lineno in c.cutter.lines:
+        raise UnsupportedGcodeError(
+            "a backlash take-up move would be inserted under cutter radius compensation, where the controller "
+            "would offset it as a move of its own", path=c.path, lineno=mv.lineno,
+            hint="post the tool-centre path (compensation done in CAM) for a calibration with backlash")

@@ -15,6 +15,7 @@ import numpy as np
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
+from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
@@ -305,6 +306,7 @@ class EmitterMixin(Generic[_O, _R]):
                 qn = list(qe)
                 _e, added = self._axis_words_free(mv, st[1], qn, d)
                 if added:
+                    cutter_take_up(self, mv)
                     segs.append(_Piece("line", qn, [], added, 0.0, takeup=True))
                     qe = qn
                 continue
