@@ -411,3 +411,12 @@ def take_up(c, mv: Move) -> None:
             "a backlash take-up move would be inserted under cutter radius compensation, where the controller "
             "would offset it as a move of its own", path=c.path, lineno=mv.lineno,
             hint="post the tool-centre path (compensation done in CAM) for a calibration with backlash")
+
+
+def merge_bounds(a: Bound | None, b: Bound | None) -> Bound | None:
+    """The bound of a program corrected in two parts (:mod:`postproc.gcode.split`)."""
+    if a is None or b is None:
+        return a or b
+    worst = a if a.bound_mm >= b.bound_mm else b
+    return Bound(worst.bound_mm, worst.lineno, worst.radius_mm, worst.source, a.moves + b.moves,
+                 {**a.radii, **b.radii}, a.lines | b.lines)
