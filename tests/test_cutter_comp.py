@@ -129,7 +129,8 @@ def test_corrected_comp_program_lands_on_the_original_tool_centre_path(name, s50
     engine, machine = s500
     text, radii = PROGRAMS[name]
     out, rep = _correct(text, engine, radii)
-    assert rep.cutter is not None and rep.cutter.moves > 0
+    assert rep.cutter is not None
+    assert rep.cutter.moves > 0
     bound = rep.cutter.bound_mm
     assert 0.0 < bound <= TOL_MM
     assert f"{bound * 1000:.2f} UM" in out.upper()  # the header states it
@@ -153,8 +154,6 @@ def test_corrected_comp_program_lands_on_the_original_tool_centre_path(name, s50
     limit = model + TOL_MM + bound + 2 * step
     there = polyline_distance(actual[~got_rapid], ref_path).max()
     back = polyline_distance(ref_path[~ref_rapid], actual).max()
-    print(f"{name}: bound {bound * 1000:.2f} um, model {model * 1000:.2f} um, observed {there * 1000:.2f} / "
-          f"{back * 1000:.2f} um, limit {limit * 1000:.2f} um")
     assert there <= limit
     assert back <= limit
 
@@ -166,7 +165,8 @@ def test_the_bound_is_refused_above_the_tolerance_naming_it(name, s500):
     with pytest.raises(CutterBoundError) as info:
         _correct(text, engine, radii, tol=0.001)
     msg = str(info.value)
-    assert "--tolerance 0.001 mm" in msg and " um across the tool radius" in msg
+    assert "--tolerance 0.001 mm" in msg
+    assert " um across the tool radius" in msg
 
 
 def test_an_identity_calibration_leaves_the_program_as_it_is():
@@ -185,7 +185,8 @@ def test_the_radius_must_be_given():
     eng = StaticEngine(np.eye(3), np.zeros(3), [[-1e6] * 3, [1e6] * 3])
     with pytest.raises(MissingSetupError) as info:
         _correct(POCKET_INSIDE_G41_MM, eng, {})
-    assert "--tool-radius 1=R" in info.value.hint and info.value.lineno == 5
+    assert "--tool-radius 1=R" in info.value.hint
+    assert info.value.lineno == 5
 
 
 def test_radius_from_the_tool_table_and_the_options(tmp_path):
@@ -201,6 +202,7 @@ def test_radius_from_the_tool_table_and_the_options(tmp_path):
 # programs LinuxCNC refuses under compensation, and the message rs274 gives
 LINUXCNC_RULES = [
     ("G41\nG1 X1 Y0\n", "Length of cutter compensation entry move is not greater than the tool radius"),
+    ("G41\nG1 Z-1\nG1 X10 Y0\n", "Length of cutter compensation entry move is not greater than the tool radius"),
     ("G41\nG2 X1 Y1 I1 J0\n", "Radius of cutter compensation entry arc is not greater than the tool radius"),
     ("G41\nG1 X10 Y0\nG41\n", "Cannot turn cutter radius comp on when on"),
     ("G41\nG1 X10 Y0\nG40\nG2 X20 I5\n", "The move just after exiting cutter compensation mode must be straight"),
@@ -228,7 +230,8 @@ def test_linuxcnc_comp_rules_are_refused_with_rs274s_reason(body, message):
     assert message in info.value.message
     if RS274 is not None:
         res = run_rs274(text, tools=rs274_tools({1: 2.0, 2: 1.0}))
-        assert not res.ok and message in res.error
+        assert not res.ok
+        assert message in res.error
 
 
 def test_fanuc_refuses_an_arc_as_the_start_up_move():

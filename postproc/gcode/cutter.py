@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from postproc.errors import GcodeSyntaxError, MissingSetupError, SafetyError, UnsupportedGcodeError
-from postproc.gcode.state import ARC_CCW, ARC_CW, CANNED_CYCLES, CUTTER_COMP, SPLINES
+from postproc.gcode.state import ARC_CCW, ARC_CW, CANNED_CYCLES, CUTTER_COMP, SPLINES, WORK_SYSTEMS
 
 if TYPE_CHECKING:
     from postproc.gcode.interp import Interpreter, Move
@@ -116,21 +116,18 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
     if "D" in vals and vals["D"][0] != int(vals["D"][0]):
         raise _err(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} requires D word to be a whole number", lineno, col,
                    hint=f"{_controller(it)} refuses it: D names a tool (LinuxCNC) or an offset register")
+    tool: int | None
     if it.dialect in _D_IS_TOOL:
-        if "D" in vals:
-            tool = int(vals["D"][0])
-        else:
-            tool = st.spindle_tool
-            if tool is None or tool == 0:
-                return 0.0, "no tool loaded"
-        if tool == 0:
-            return 0.0, "D0"
+        # LinuxCNC: D names a tool; without it, the tool in the spindle (none: radius 0)
+        tool = int(vals["D"][0]) if "D" in vals else st.spindle_tool
+        if not tool:
+            return 0.0, "D0" if "D" in vals else "no tool loaded"
         name = f"tool {tool}"
     else:
-        if "D" in vals:
+        if "D" in vals:  # Fanuc, Haas: an offset register, modal
             st.comp_d = int(vals["D"][0])
         tool = st.comp_d
-        if tool is None or tool == 0:
+        if not tool:
             return 0.0, "D0"
         name = f"D{tool}"
     r = radii.get(tool, radii.get(None))
@@ -157,7 +154,7 @@ def check_block(it: Interpreter, b, gcodes: list, tool_change: bool) -> None:
             ([(k, i) for k, i in gcodes if k == 530], "Cannot use g53 with cutter radius comp"),
             ([(k, i) for k, i in gcodes if k in (430, 490)],
              "Cannot change tool offset with cutter radius compensation on"),
-            ([(k, i) for k, i in gcodes if 540 <= k <= 593 and k not in (550 + 1,)],
+            ([(k, i) for k, i in gcodes if k in WORK_SYSTEMS or k == 541],
              "Cannot change coordinate systems with cutter radius compensation on"),
             ([(k, i) for k, i in gcodes if k in CANNED_CYCLES or k in SPLINES],
              "Cannot use canned cycles with cutter compensation on"),
@@ -222,9 +219,10 @@ def on_move(it: Interpreter, mv: Move) -> None:
     rho = st.comp_radius
     arc = mv.arc
     in_plane = math.hypot(mv.q1[a1] - mv.q0[a1], mv.q1[a2] - mv.q0[a2])
-    if edge and arc is None and in_plane == 0.0 and mv.spline is None:
-        # a move along the normal axis alone (a plunge): LinuxCNC offsets nothing yet, the
-        # entry (or exit) is the next move in the plane
+    if edge and arc is None and in_plane == 0.0 and it.dialect not in _LINUXCNC_LIKE:
+        # a move along the normal axis alone (a plunge): Fanuc and Haas start up (or cancel)
+        # on the next move in the plane; LinuxCNC takes it as the entry move (refused: not
+        # longer than the radius) or the exit move
         if edge == "entry":
             it.comp_moves.append(CompMove(mv, rho, st.comp_source, st.plane))
         return
