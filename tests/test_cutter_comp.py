@@ -252,3 +252,25 @@ def test_a_backlash_take_up_under_compensation_is_refused():
     text = "G21 G17 G90 F100\nT1 M6\nG0 X0 Y0 Z0\nG41 G1 X10 Y0\nX20\nY10\nX10\nG40 G1 X0 Y0\nM2\n"
     with pytest.raises(UnsupportedGcodeError, match="take-up"):
         _correct(text, eng, {1: 1.0}, tol=0.01)
+
+
+def test_the_command_reads_diameters_from_the_tool_table_and_reports_the_bound(tmp_path):
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    prog = tmp_path / "pocket.ngc"
+    prog.write_text(POCKET_INSIDE_G41_MM)
+    table = tmp_path / "tools.tbl"
+    table.write_text("T1 P1 Z0 D6\n")
+    out = tmp_path / "out.ngc"
+    cal = str(ROOT / "calibrations" / "s500_parametric.json")
+    res = CliRunner().invoke(main, ["correct", str(prog), "-c", cal, "--tool-table", str(table),
+                                    "--tolerance", "0.015", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "cutter radius compensation kept: 10 moves" in res.output
+    assert "(line 13, tool 1 radius 3 mm)" in res.output
+    assert "(POSTPROC CUTTER COMP TOOL 1 RADIUS 3 MM BOUND" in out.read_text()
+    res = CliRunner().invoke(main, ["correct", str(prog), "-c", cal, "--tool-table", str(table), "-o", str(out)])
+    assert res.exit_code == 5
+    assert "more than --tolerance 0.001 mm" in res.output
