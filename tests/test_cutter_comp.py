@@ -96,7 +96,23 @@ G0 Z1.2
 M2
 """
 
+# a profile in the XZ plane (G18, as LinuxCNC offsets it: "left" seen from +Y)
+PROFILE_XZ_G41_MM = """G21 G18 G90 G94
+T1 M6
+G0 X40 Y100 Z40
+G1 F300
+G41 D1 G1 X50 Z50 (entry move)
+G1 X120
+G2 X140 Z70 R20
+G1 Z120
+X50
+Z50
+G40 G1 X40 Z40
+M2
+"""
+
 PROGRAMS = {
+    "profile_xz_g41_mm": (PROFILE_XZ_G41_MM, {1: 3.0}),
     "pocket_inside_g41_mm": (POCKET_INSIDE_G41_MM, {1: 3.0}),
     "outline_outside_g42_mm": (OUTLINE_OUTSIDE_G42_MM, {1: 3.0}),
     "outline_outside_g41_inch": (OUTLINE_OUTSIDE_G41_INCH, {2: 2.0}),

@@ -258,7 +258,8 @@ def on_move(it: Interpreter, mv: Move) -> None:
         it.comp_moves.append(CompMove(mv, rho, st.comp_source, st.plane))
         st.comp_radius, st.comp_source = 0.0, ""
         return
-    elif arc is not None and st.comp != 400:
+    elif arc is not None and st.comp != 400 and (st.plane == 170 or it.dialect not in _LINUXCNC_LIKE):
+        # (rs274 does not check an inside arc in the XZ plane: it draws it, and so do we)
         r_arc = math.hypot(mv.q0[a1] - arc.center[a1], mv.q0[a2] - arc.center[a2])
         left = st.comp in (410, 411)
         inside = (left and st.motion == ARC_CCW) or (not left and st.motion == ARC_CW)
