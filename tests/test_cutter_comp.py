@@ -306,3 +306,18 @@ def test_the_command_reads_diameters_from_the_tool_table_and_reports_the_bound(t
     res = CliRunner().invoke(main, ["correct", str(prog), "-c", cal, "--tool-table", str(table), "-o", str(out)])
     assert res.exit_code == 5
     assert "more than --tolerance 0.001 mm" in res.output
+
+
+def test_fanuc_reads_d_as_a_modal_offset_register():
+    from postproc.engine.static import StaticEngine
+
+    eng = StaticEngine(np.eye(3) * 1.0001, np.zeros(3), [[-1e6] * 3, [1e6] * 3])
+    text = ("%\nO1000\nG21 G17 G90 G94\nT1 M6\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG41 D11 G1 X10 Y0\nX20\nG40 G1 X30\n"
+            "G42 G1 X40 Y-10\nX50\nG40 G1 X60\nM30\n%\n")
+    out, rep = correct_text(text, eng, Setup(tool_radii={11: 2.0}), CorrectOptions(dialect="fanuc"))
+    assert rep.cutter.radii == {"D11": 2.0}  # the second G42 offsets by D11 too
+    assert rep.cutter.moves == 6
+    assert "G41 D11 G1" in out
+    assert "(POSTPROC CUTTER COMP D11 RADIUS 2 MM BOUND" in out
+    with pytest.raises(MissingSetupError, match="radius of D11"):
+        correct_text(text, eng, Setup(tool_radii={1: 2.0}), CorrectOptions(dialect="fanuc"))
