@@ -219,7 +219,8 @@ def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, co
             raise click.BadParameter(f"{name} is given twice", param_hint="--home")
         homes[name] = values
     # cutter radii (postproc.gcode.cutter): the table's diameters, then the options
-    radii = {t: d / 2 for t, d in read_tool_table(tool_table, "D").items()} if tool_table else {}
+    radii: dict[int | None, float] = {t: d / 2 for t, d in read_tool_table(tool_table, "D").items()} \
+        if tool_table else {}
     radii.update(parse_tool_radius(t, "--tool-diameter", True) for t in tool_diameter)
     radii.update(parse_tool_radius(t, "--tool-radius", False) for t in tool_radius)
     return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
