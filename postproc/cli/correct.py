@@ -46,6 +46,10 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
     if rep.expanded:
         lines.append("  note: subprograms, loops, parameters and expressions were expanded: the corrected "
                      "program is flat (recorded in the header)")
+    if rep.cutter is not None:
+        lines.append(f"  cutter radius compensation kept: {rep.cutter.moves} moves offset by the controller; the "
+                     f"correction changes by at most {rep.cutter.bound_mm * 1000:.2f} um across the tool radius "
+                     f"(line {rep.cutter.lineno}, {rep.cutter.source} radius {rep.cutter.radius_mm:g} mm)")
     if rep.cycles_kept or rep.cycles_expanded:
         lines.append(f"  canned cycles: {rep.cycles_kept} kept, {rep.cycles_expanded} expanded")
     if rep.g54_assumed_zero:

@@ -15,6 +15,7 @@ import numpy as np
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
+from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
@@ -307,6 +308,7 @@ class EmitterMixin(Generic[_O, _R]):
                 qn = list(qe)
                 _e, added = self._axis_words_free(mv, st[1], qn, d)
                 if added:
+                    cutter_take_up(self, mv)
                     segs.append(_Piece("line", qn, [], added, 0.0, takeup=True))
                     qe = qn
                 continue
@@ -319,8 +321,10 @@ class EmitterMixin(Generic[_O, _R]):
         if inserted and mv.stays:
             raise PostprocError(
                 "this move must be split to stay within tolerance, but its line also changes the tool "
-                "or uses G53", path=self.path, lineno=mv.lineno,
-                hint="put the tool change or G53 on a line of its own")
+                "or uses G53, or it is the entry or exit move of cutter radius compensation (which the "
+                "controller draws from where the tool is to the offset point)", path=self.path, lineno=mv.lineno,
+                hint="put the tool change or G53 on a line of its own; make a lead-in or lead-out move shorter, "
+                     "or raise --tolerance")
         sep, lower = emit.style_of(line)
         ending = emit.line_ending(line) or "\n"
         arc = mv.arc

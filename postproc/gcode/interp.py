@@ -31,7 +31,7 @@ from postproc.errors import (
     PostprocError,
     UnsupportedGcodeError,
 )
-from postproc.gcode import lexer
+from postproc.gcode import cutter, lexer
 from postproc.gcode.recognise import (
     LATHE_HINT,
     LatheMarks,
@@ -44,6 +44,7 @@ from postproc.gcode.state import (
     ARC_CW,
     BEFORE_MOTION_M,
     CANNED_CYCLES,
+    CUTTER_COMP,
     DWELL,
     HOME_CODES,
     HOME_STORE,
@@ -310,6 +311,7 @@ class Interpreter:
         self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
         self._run_shift: tuple[float, float, float] | None = None
         self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.comp_moves: list = []  # moves the controller offsets (cutter.CompMove), taken by the corrector
 
     # -- helpers -----------------------------------------------------------------------
     def _arc_rule(self) -> Dialect:
@@ -652,6 +654,8 @@ class Interpreter:
             st.spindle_tool = st.tool
 
         blk = _Block(lineno, words, vals)
+        if st.comp != 400:
+            cutter.check_block(self, blk, gcodes, tool_change)
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
             if self._dialect_g and key in self._dialect_g:
@@ -662,6 +666,8 @@ class Interpreter:
             if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
             handler(self, blk, key, i)
+        if blk.comp is not None:
+            cutter.switch(self, blk, gcodes)
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
@@ -815,6 +821,8 @@ class Interpreter:
             motion_idx=motion_idx,
             aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
         )
+        if st.comp != 400 or st.comp_edge:
+            cutter.on_move(self, move)
         return move
 
     @staticmethod
@@ -1305,6 +1313,7 @@ class _Block:
     lookahead: int | None = None
     work_name: str | None = None
     prefix: list = field(default_factory=list)
+    comp: tuple[int, int] | None = None  # G40/G41/G42/G41.1/G42.1: (key, word index)
 
     def col(self, i: int) -> int:
         return self.words[i].letter_pos + 1
@@ -1428,6 +1437,11 @@ def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
     b.g10 = True
 
 
+def _g_cutter(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G40/G41/G42/G41.1/G42.1: read by :func:`postproc.gcode.cutter.check_block`."""
+    b.comp = (key, i)
+
+
 def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
 
@@ -1476,7 +1490,7 @@ def _g_g15(it: Interpreter, b: _Block, key: int, i: int) -> None:
 #: G code key (10 x number) -> handler(interpreter, block, key, word index)
 _G_HANDLERS: dict = {}
 for _keys, _handler in (
-    (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused),
+    (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused), (CUTTER_COMP, _g_cutter),
     (MOTION_CODES, _g_motion), (CANNED_CYCLES, _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
     (LOOKAHEAD_G, _g_lookahead), ({50, 51, 80}, _g_lookahead_spline_or_refused),
     (HOME_CODES, _g_home), (HOME_STORE, _g_home_store), ({520}, _g_local_offset),

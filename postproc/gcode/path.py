@@ -55,6 +55,7 @@ class Setup:
     start: dict = field(default_factory=dict)
     home: dict = field(default_factory=dict)
     variables: dict = field(default_factory=dict)  # machine-state variables by number (--var, --vars)
+    tool_radii: dict = field(default_factory=dict)  # cutter radius (mm) by tool or D register (None: any)
 
 
 @dataclass

@@ -40,6 +40,7 @@ import numpy as np
 
 from postproc.errors import PostprocError
 from postproc.gcode import forking
+from postproc.gcode.cutter import merge_bounds
 
 #: a run's report (:class:`postproc.gcode.pipeline.CorrectReport`, a dataclass)
 CorrectReport = Any
@@ -184,6 +185,8 @@ def merge(head: CorrectReport, tail: CorrectReport) -> CorrectReport:
             setattr(out, name, max(a, b))
         elif name in _SAME:
             pass
+        elif name in _COMBINED:  # moves under cutter compensation and their bound
+            setattr(out, name, merge_bounds(a, b))
         else:  # a count
             setattr(out, name, a + b)
     return out
@@ -194,6 +197,7 @@ def merge(head: CorrectReport, tail: CorrectReport) -> CorrectReport:
 _TAKE_TAIL = frozenset({"lines_in", "g54_assumed_zero"})  # as at the program's end
 _LARGEST = frozenset({"max_correction_mm", "max_residual_mm"})
 _SAME = frozenset({"solver", "accept_residual_mm", "expanded", "header_lines"})
+_COMBINED = frozenset({"cutter"})
 
 
 def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], write: Write,
