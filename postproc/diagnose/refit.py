@@ -133,8 +133,39 @@ def extend_calibration(cal, data, effect_names, register: bool = True) -> FitRes
     result.info = _info(ds, resid, fitted)
     result.info["effects"] = [e.name for e in all_effects]
     result.info["base"] = {"path": cal.path, "method": cal.method, "fit": dict(cal.fit or {})}
+    result.info["fixed"] = fixed_record(cal, existing, fitted.effects, register)
     result.effects = [e.to_dict() for e in all_effects]
     return result
+
+
+def fixed_record(cal, held_effects, added_effects, register: bool) -> dict:
+    """What ``fit --base`` held fixed and what it fitted: read back by ``check``, which
+    re-checks such a calibration the same way (the base held, the added effects refitted)."""
+    return {
+        "by": "fit --base",
+        "base": cal.path,
+        "method": cal.method,
+        "held": [f"the {cal.method} model (all its parameters)"] + [f"effect {e.name}" for e in held_effects],
+        "held_effects": [e.name for e in held_effects],
+        "fitted_effects": [e.name for e in added_effects],
+        "register": bool(register),
+    }
+
+
+def recorded_fixed(cal) -> dict | None:
+    """The record of what ``fit --base`` held fixed (:func:`fixed_record`), also for files
+    written before the record existed (their ``fit.base``); None for other calibrations."""
+    fit = cal.fit or {}
+    if isinstance(fit.get("fixed"), dict):
+        return fit["fixed"]
+    base = fit.get("base")
+    if not isinstance(base, dict):
+        return None
+    held = list((base.get("fit") or {}).get("effects") or [])
+    names = [d.get("name") for d in (cal.effects or [])]
+    return {"by": "fit --base", "base": base.get("path"), "method": base.get("method", cal.method),
+            "held": [f"the {cal.method} model (all its parameters)"] + [f"effect {n}" for n in held],
+            "held_effects": held, "fitted_effects": names[len(held):], "register": True}
 
 
 def max_correction(engine, data=None) -> tuple[float, np.ndarray]:

@@ -52,6 +52,12 @@ def format_report(res: CheckResult) -> list[str]:
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")
     else:
         out.append("noise floor: unknown (no repeated points; give --sigma MM, the instrument's sigma per axis)")
+    if res.recorded is not None:
+        rec = res.recorded
+        added = ", ".join(rec.get("fitted_effects") or []) or "none"
+        out.append(f"made by 'fit --base {rec.get('base')}': held fixed as recorded in the file "
+                   f"({'; '.join(rec.get('held') or [])}), refitted on every training fold: {added} "
+                   "(--no-fixed refits the whole method)")
     if res.frame is not None:
         if res.frame.absorbed:
             out.append("measurement frame: its registration is held by the model itself (origin and axes)")
