@@ -21,7 +21,7 @@ import numpy as np
 
 from postproc.diagnose.data import Dataset
 from postproc.effects.base import AXES, DIR_COLUMNS
-from postproc.effects.periodic import PITCH_MAX_MM, PITCH_MIN_MM, REGULAR_STEP_SPREAD
+from postproc.effects.periodic import PITCH_MAX_TRAVEL_FRACTION, PITCH_MIN_MM, REGULAR_STEP_SPREAD
 
 # Share of the variance of ``t`` explained by the positions (quadratic in each axis)
 # above which time and position are confounded.
@@ -82,7 +82,7 @@ def campaign_warnings(ds: Dataset, cal, data, res) -> list[dict]:
             out.append({"kind": "aliasing", "axis": a, "step_mm": step, "shortest_pitch_mm": shortest,
                         "message": f"{a} positions lie on a regular {step:g} mm grid: a periodic error "
                                    f"(lead screw) with a pitch shorter than {shortest:g} mm cannot be "
-                                   f"seen{' at all' if shortest > PITCH_MAX_MM else ''} (it aliases to a "
+                                   f"seen{' at all' if shortest > PITCH_MAX_TRAVEL_FRACTION * np.ptp(ds.q[:, j]) else ''} (it aliases to a "
                                    "longer one); use a step that is no divisor of the screw pitch, or "
                                    "irregular positions"})
     if cal.method == "parametric" and not res.fixed:

@@ -29,15 +29,12 @@ from postproc.diagnose.rank import (
     rank_effects,
 )
 from postproc.diagnose.robust import Screening, screen
+from postproc.diagnose.verdict import Verdict, judge
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
 from postproc.engine.registry import fit_methods, fold_options, option_flag, refit_options
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
-
-#: A cross-validated RMS within this many times the noise floor is consistent with noise
-#: (the verdict "consistent"; after the suggestions, "missing-effect").
-CONSISTENT_RATIO = 1.15
 
 # Points beyond the calibrated volume by more than this (mm) are outside it.
 OUTSIDE_TOLERANCE_MM = 1e-3
@@ -70,6 +67,8 @@ class CheckResult:
     empirical: dict | None = None  # the last-resort empirical field, when the verdict is unexplained
     from_other_data: bool = False  # the calibration was not fitted on these files
     recorded: dict | None = None  # what 'fit --base' held fixed, read from the file (then used)
+    refitted_effects: list = field(default_factory=list)  # effects of the file refitted on every fold
+    verdict_info: Verdict | None = None  # judged on random and spatial held-out points
 
     @property
     def suggestions(self) -> list[dict]:
@@ -96,16 +95,10 @@ class CheckResult:
 
     @property
     def verdict(self) -> str | None:
-        """"consistent" (the cross-validated RMS is within CONSISTENT_RATIO x the noise floor
-        and nothing is suggested), "missing-effect" (the suggestions bring it there) or
-        "unexplained" (above the floor and the catalogue does not explain it); None without
-        a noise floor or a cross-validation."""
-        rk, floor = self.ranking, self.noise.rms_mm
-        if rk is None or not floor:
-            return None
-        if not rk.selected:
-            return "consistent" if rk.base_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
-        return "missing-effect" if rk.final_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
+        """"consistent", "missing-effect", "model-too-stiff", "campaign-limited" or
+        "unexplained", judged on random and spatial held-out points
+        (:mod:`postproc.diagnose.verdict`); None without a noise floor or a cross-validation."""
+        return self.verdict_info.name if self.verdict_info is not None else None
 
     @property
     def extends(self) -> bool:
@@ -151,6 +144,8 @@ class CheckResult:
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
             "cv_note": self.cv_note,
             "verdict": self.verdict,
+            "verdict_evidence": self.verdict_info.evidence if self.verdict_info else None,
+            "verdict_detail": self.verdict_info.to_json() if self.verdict_info else None,
             "conditioning": rk.final_guard.to_json() if rk and rk.final_guard is not None else None,
             "calibration_from_other_data": self.from_other_data,
             "cv_ratio_to_floor": (rk.final_cv_rms_mm / self.noise.rms_mm) if rk and self.noise.rms_mm else None,
@@ -305,6 +300,9 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
     res.outside_excluded = bool(fixed and outside.any() and not outside.all())
     res.warnings = campaign_warnings(ds, cal, data, res)
+    res.refitted_effects = refitted if fixed else existing
+    if ranking is not None:
+        res.verdict_info = judge(res, model, groups, fold_masks)
     if offer_empirical and ranking is not None and res.verdict == "unexplained":
         try:
             offer = empirical_offer(model, ds, ranking, refitted if fixed else existing, fold_masks)

@@ -117,22 +117,11 @@ def _screening(res: CheckResult) -> list[str]:
 
 
 def _verdict(res: CheckResult) -> str:
-    v, rk, floor = res.verdict, res.ranking, res.noise.rms_mm
+    v, rk = res.verdict_info, res.ranking
     if v is None:
         return ("verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
                 if rk is not None else "verdict: none (no cross-validation)")
-    if v == "consistent":
-        return (f"verdict: consistent: the calibration explains these points down to the noise "
-                f"(cross-validated {rk.base_cv_rms_mm / floor:.2f} x the floor)")
-    if v == "missing-effect":
-        names = ", ".join(c.name for c in rk.selected)
-        return (f"verdict: missing effect: {names} explain(s) the residual down to the noise "
-                f"({rk.final_cv_rms_mm / floor:.2f} x the floor with them)")
-    part = (f"; the suggestions explain part of it ({rk.final_cv_rms_mm / floor:.2f} x the floor with them)"
-            if rk.selected else "")
-    return (f"verdict: unexplained: the residual stays {rk.base_cv_rms_mm / floor:.2f} x the noise floor and "
-            f"no effect in the catalogue explains it{part}; the physics is not known to the model "
-            "(see where it fails; an empirical correction is the last resort)")
+    return f"verdict: {v.name}: {v.evidence}"
 
 
 def _where(res: CheckResult) -> list[str]:
