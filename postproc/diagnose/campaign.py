@@ -13,6 +13,8 @@
   travel are not resolved.
 - **Points outside the calibrated volume**: the calibration extrapolates there.
 - **Unknown approach state**: rows before an axis's first move with ``dir`` 0.
+- **Context columns** logged in few rows or by sample and hold (see
+  :func:`postproc.diagnose.data.screen_columns`), with their counts.
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ def regular_step(x: np.ndarray) -> float | None:
 
 
 def campaign_warnings(ds: Dataset, cal, data, res) -> list[dict]:
-    out: list[dict] = []
+    out: list[dict] = [{"kind": "context column", **n} for n in ds.column_notes]
     if "t" in ds.ctx and np.ptp(ds.ctx["t"]) > 0 and len(ds) > 10:
         r2 = _r2_on_positions(ds.ctx["t"], ds.q)
         if r2 > CONFOUNDED_R2:

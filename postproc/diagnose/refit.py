@@ -74,11 +74,25 @@ def _info(ds: Dataset, resid: np.ndarray, fitted: Fitted) -> dict:
         "max_mm": float(np.max(np.linalg.norm(resid, axis=1))),
         "sources": list(ds.paths), "effects": [e.name for e in fitted.effects],
     }
+    notes = column_notes(ds, fitted.effects)
+    if notes:
+        info["notes"] = notes
     if fitted.guard is not None:
         info["conditioning"] = fitted.guard.to_json()
     if fitted.frame is not None and not fitted.frame.absorbed:
         info["registration"] = fitted.frame.to_json(fitted.engine.volume_mm)
     return info
+
+
+def column_notes(ds: Dataset, effects) -> list[str]:
+    """The calibration's notes: each effect fitted on a context column that was sparse,
+    gappy or sample-and-hold (:func:`postproc.diagnose.data.screen_columns`)."""
+    out = []
+    for n in ds.column_notes:
+        users = [e.name for e in effects if n["column"] in e.needs]
+        if users:
+            out.append(f"{', '.join(users)} depend(s) on {n['message']}")
+    return out
 
 
 def fit_with_effects(method: str, data, effect_names, register: bool = False, **options) -> FitResult:
@@ -98,6 +112,7 @@ def fit_with_effects(method: str, data, effect_names, register: bool = False, **
     result.report += fitted.report
     result.report += _effect_lines(fitted)
     result.info = _info(ds, resid, fitted)
+    result.report += [f"note: {n}" for n in result.info.get("notes", [])]
     result.effects = [e.to_dict() for e in fitted.effects]
     return result
 
@@ -131,6 +146,7 @@ def extend_calibration(cal, data, effect_names, register: bool = True) -> FitRes
                      f"fitted on {len(ds)} points ({model.description})"]
     result.report += _effect_lines(fitted)
     result.info = _info(ds, resid, fitted)
+    result.report += [f"note: {n}" for n in result.info.get("notes", [])]
     result.info["effects"] = [e.name for e in all_effects]
     result.info["base"] = {"path": cal.path, "method": cal.method, "fit": dict(cal.fit or {})}
     result.info["fixed"] = fixed_record(cal, existing, fitted.effects, register)

@@ -4,10 +4,12 @@ The ranking (:mod:`postproc.diagnose.rank`) cross-validates on random folds of r
 groups. A random split cannot tell a local error from a global shape: a 15 um bump on
 a tenth of the travel is in the training data of every fold, so a whole-travel S-shape
 fitted to it predicts the held-out points near the bump well enough. The verdict is
-therefore also judged on a **spatial** split: the volume is cut into blocks (a 3 x 3 x 3
-lattice over the measured extent), whole blocks are held out, and the model (base +
-effects) is refitted without them. A shape fitted to a local error is then wrong where
-the error is not, and right nowhere the error was held out.
+therefore also judged on a **spatial** split: the volume is cut into slabs along each axis (or blocks, for a
+flexible base), whole slabs are held out, and the model (base + effects) is refitted
+without them. A shape fitted to a local error is then wrong where the error is not, and
+right nowhere the error was held out. Likewise each tool vector and each level of a
+discrete context column (load steps) is left out in turn: an effect that holds only for
+the conditions it was fitted on is not the physics.
 
 Verdicts, in the order they are tried:
 
@@ -17,11 +19,11 @@ Verdicts, in the order they are tried:
 - ``model-too-stiff``: a finer model of the same family does (a parametric model with
   knots twice as close, an interval model with twice the cells per axis, the static
   model cut into 2 x 2 x 2 cells);
-- ``campaign-limited``: the campaign cannot separate the rest from noise: the noise
-  floor rests on too few repeats to be sure of it, or the residual left is spatially
-  white (neighbouring points do not share it: per-visit scatter, the machine's
-  repeatability, which shots taken seconds apart do not show), or the campaign's
-  sampling is too coarse for the model (see the campaign warnings);
+- ``campaign-limited``: the campaign cannot separate the rest from noise: the residual
+  left is spatially white (neighbouring points do not share it: per-visit scatter, the
+  machine's repeatability, which shots taken seconds apart do not show; the evidence adds
+  how uncertain the floor itself is), or the residual has a shape but the campaign's
+  sampling is too coarse for the model (a one-span refit, time confounded with position);
 - ``unexplained``: none of these.
 """
 
@@ -32,16 +34,22 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from postproc.diagnose.crossval import FOLD_SEED, FoldCache, JointCV, rms3
-from postproc.diagnose.data import Dataset
+from postproc.diagnose.data import DISCRETE_VALUES, Dataset
 from postproc.diagnose.models import Fixed, LinearStatic, Refit
 from postproc.effects import Effect, get_effect
+from postproc.effects.base import DIR_COLUMNS
 from postproc.errors import PostprocError
 
 #: A cross-validated RMS within this many times the noise floor is consistent with noise.
 CONSISTENT_RATIO = 1.15
-# Blocks per axis of the spatial split (3: a held-out block is a third of each travel,
-# wider than a local error of a tenth of it and narrower than a whole-travel shape).
+# Blocks per axis of the spatial split of a flexible base (3: a held-out block is a third
+# of each travel, wider than a local error of a tenth of it).
 SPATIAL_BLOCKS = 3
+# Slabs along each axis of the spatial split of a global base (6: a held-out slab is a
+# sixth of the travel; a local error inside it is not seen by the fit that predicts it).
+SLABS = 6
+# Tool vectors or levels of a discrete context column needed to leave one out.
+MIN_LEVELS = 3
 # One-sided level of the noise floor's upper confidence bound (chi-square on its degrees
 # of freedom): below it the floor is not known well enough to call a ratio above 1.15.
 FLOOR_CONFIDENCE = 0.05
@@ -70,11 +78,7 @@ def spatial_folds(ds: Dataset, groups: np.ndarray, k: int, seed: int = FOLD_SEED
     measured extent); repeat groups stay together (in the block of their first row)."""
     lo, span = ds.q.min(axis=0), np.ptp(ds.q, axis=0)
     cell = np.floor(SPATIAL_BLOCKS * (ds.q - lo) / np.where(span > 0, span, 1.0)).clip(0, SPATIAL_BLOCKS - 1)
-    block = (cell @ np.array([SPATIAL_BLOCKS**2, SPATIAL_BLOCKS, 1])).astype(int)
-    first = np.full(int(groups.max()) + 1, -1)
-    for i in range(len(groups) - 1, -1, -1):
-        first[groups[i]] = block[i]
-    block = first[groups]
+    block = _by_group((cell @ np.array([SPATIAL_BLOCKS**2, SPATIAL_BLOCKS, 1])).astype(int), groups)
     ids = np.unique(block)
     k = max(2, min(k, len(ids)))
     order = np.random.default_rng(seed).permutation(ids)
@@ -83,10 +87,79 @@ def spatial_folds(ds: Dataset, groups: np.ndarray, k: int, seed: int = FOLD_SEED
     return [f == i for i in range(k) if np.any(f == i)]
 
 
+def slab_folds(ds: Dataset, groups: np.ndarray, axis: int) -> list[np.ndarray]:
+    """Test masks of contiguous interior slabs along ``axis``: SLABS of equal width over the
+    measured extent, the two end slabs never held out (a shape fitted without them would be
+    extrapolated, which a real shape of the catalogue does badly too); one fold per
+    distinct position when there are at most SLABS of them (a campaign of a few lines)."""
+    x = ds.q[:, axis]
+    distinct = np.unique(np.round(x, 3))
+    if len(distinct) < 2:
+        return []
+    if len(distinct) <= SLABS:
+        slab = _by_group(np.searchsorted(distinct, np.round(x, 3)), groups)
+        return [slab == i for i in np.unique(slab)]
+    lo, span = x.min(), np.ptp(x)
+    slab = _by_group(np.floor(SLABS * (x - lo) / span).clip(0, SLABS - 1).astype(int), groups)
+    return [slab == i for i in range(1, SLABS - 1) if np.any(slab == i)]
+
+
+def level_folds(values: np.ndarray, groups: np.ndarray) -> list[np.ndarray]:
+    """Leave one level out: one fold per distinct value (tool vectors, load steps)."""
+    _, level = np.unique(values, axis=0, return_inverse=True)
+    level = _by_group(level.ravel(), groups)
+    return [level == i for i in np.unique(level)]
+
+
+def _by_group(label: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """``label`` of each row replaced by that of its repeat group's first row."""
+    first = np.full(int(groups.max()) + 1, -1)
+    for i in range(len(groups) - 1, -1, -1):
+        first[groups[i]] = label[i]
+    return first[groups]
+
+
+def spatial_splits(model, ds: Dataset, groups: np.ndarray, k: int) -> list[tuple[str, list[np.ndarray]]]:
+    """The splits a model is judged on beside the random one, each a list of test masks.
+
+    - Space: for a global base (static, or a calibration held fixed) interior slabs along
+      each axis, so a function of one axis is tested where it was not fitted; for a
+      refitted flexible base (parametric, grid, interval: local support, which a held-out
+      slab would leave without data) blocks of a 3 x 3 x 3 lattice.
+    - Conditions: with MIN_LEVELS or more tool vectors, each tool left out in turn (an
+      effect fitted to the positional part of a tool-dependent error is wrong for the
+      tool it did not see); likewise each level of a discrete context column (load steps:
+      a deflection fitted as load plus a fixed shape is wrong at the load it did not see).
+    """
+    if isinstance(model, LinearStatic | Fixed):
+        out = [(f"{'XYZ'[j]} slabs", slab_folds(ds, groups, j)) for j in range(3)]
+    else:
+        out = [("blocks", spatial_folds(ds, groups, k))]
+    tools = np.round(ds.r, 3)
+    if len(np.unique(tools, axis=0)) >= MIN_LEVELS:
+        out.append(("tools", level_folds(tools, groups)))
+    for name, v in sorted(ds.ctx.items()):
+        if name in DIR_COLUMNS or name == "t":
+            continue
+        if MIN_LEVELS <= len(np.unique(v)) <= DISCRETE_VALUES:
+            out.append((f"{name} levels", level_folds(v, groups)))
+    return [(name, f) for name, f in out if len(f) >= 2]
+
+
 def held_out(model, ds: Dataset, effects: list[Effect], folds: list[np.ndarray]) -> np.ndarray:
-    """Held-out residual (N, 3) of ``model`` with ``effects`` (refitted on every training fold)."""
+    """Held-out residual (N, 3) of ``model`` with ``effects`` (refitted on every training
+    fold); NaN on rows no fold holds out."""
     scorer = JointCV if isinstance(model, LinearStatic | Fixed) else FoldCache
-    return scorer(model, ds, [get_effect(e.name) for e in effects], folds).residuals()
+    out = scorer(model, ds, [get_effect(e.name) for e in effects], folds).residuals()
+    tested = np.any(folds, axis=0)
+    out[~tested] = np.nan
+    return out
+
+
+def held_rms(resid: np.ndarray) -> float:
+    """3D RMS over the rows held out (finite)."""
+    ok = np.all(np.isfinite(resid), axis=1)
+    return rms3(resid[ok])
 
 
 def floor_upper(floor_mm: float, dof: int) -> float:
@@ -173,15 +246,18 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
         return None
     ds = res.ds
     final_effects = [*res.refitted_effects, *(get_effect(c.name) for c in rk.selected)]
-    sfolds = spatial_folds(ds, groups, len(folds))
+    splits = spatial_splits(model, ds, groups, len(folds))
     r_random = rk.final_cv_rms_mm / floor
-    try:
-        e_spatial = held_out(model, ds, final_effects, sfolds)
-        r_spatial = rms3(e_spatial) / floor
-    except PostprocError:
-        e_spatial, r_spatial = None, None
+    r_spatial, where = None, ""
+    for label, sfolds in splits:
+        try:
+            r = held_rms(held_out(model, ds, final_effects, sfolds)) / floor
+        except PostprocError:
+            continue
+        if r_spatial is None or r > r_spatial:
+            r_spatial, where = r, label
     worst = max(r_random, r_spatial or 0.0)
-    split = (f"random {r_random:.2f}, spatial {r_spatial:.2f} x the floor" if r_spatial is not None
+    split = (f"random {r_random:.2f}, spatial {r_spatial:.2f} ({where}) x the floor" if r_spatial is not None
              else f"random {r_random:.2f} x the floor (no spatial split)")
     names = ", ".join(c.name for c in rk.selected)
     if worst <= CONSISTENT_RATIO:
@@ -193,14 +269,15 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
                        {"effects": [c.name for c in rk.selected]})
     local = ""
     if rk.selected and r_random <= CONSISTENT_RATIO and r_spatial is not None:
-        local = (f"{names} hold(s) on random folds but not on blocks it was not fitted to "
+        local = (f"{names} hold(s) on random folds but not on the {where} it was not fitted to "
                  f"(a local error taken for a global shape); ")
     finer = finer_model(model, ds)
     if finer is not None:
+        f_model, f_desc = finer
         try:
-            f_model, f_desc = finer
-            fr = rms3(held_out(f_model, ds, final_effects, folds)) / floor
-            fs = rms3(held_out(f_model, ds, final_effects, sfolds)) / floor
+            fr = held_rms(held_out(f_model, ds, final_effects, folds)) / floor
+            fs = max((held_rms(held_out(f_model, ds, final_effects, f)) / floor
+                      for _, f in spatial_splits(f_model, ds, groups, len(folds))), default=fr)
         except PostprocError:
             fr = fs = float("inf")
         if max(fr, fs) <= CONSISTENT_RATIO:
@@ -209,19 +286,18 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
                            {"finer_model": f_desc, "finer_random_ratio": fr, "finer_spatial_ratio": fs})
     nf = res.noise
     upper = floor_upper(floor, nf.dof) if nf.source == "repeats" else floor
-    if worst * floor <= CONSISTENT_RATIO * upper:
-        return Verdict("campaign-limited", f"{local}held-out RMS {split}, but the floor rests on {nf.dof} "
-                       f"degrees of freedom and may be up to {upper / floor:.2f} x higher (95 %): "
-                       "more repeated shots would tell", r_random, r_spatial, {"cause": "floor uncertain"})
     e_final = rk.final_cv_resid if rk.final_cv_resid is not None else rk.base_cv_resid
     corr, z = neighbour_structure(ds, e_final, groups)
     if z < STRUCTURE_Z and not local:
         excess = float(np.sqrt(max(rms3(e_final) ** 2 - floor**2, 0.0)))
-        return Verdict("campaign-limited", f"held-out RMS {split}; the {excess * 1000:.2f} um above the floor "
-                       f"is spatially white (neighbour correlation {corr:+.2f}, z {z:.1f} < {STRUCTURE_Z:g}): "
-                       "scatter between visits (repeatability), which shots seconds apart do not show; "
-                       "revisit points later in the campaign to measure it", r_random, r_spatial,
-                       {"cause": "repeatability", "neighbour_correlation": corr})
+        why = (f"the {excess * 1000:.2f} um above the floor is spatially white (neighbour correlation "
+               f"{corr:+.2f}, z {z:.1f} < {STRUCTURE_Z:g}): scatter between visits (repeatability), which "
+               "shots seconds apart do not show; revisit points later in the campaign to measure it")
+        if worst * floor <= CONSISTENT_RATIO * upper:
+            why += (f"; and the floor rests on {nf.dof} degrees of freedom (up to {upper / floor:.2f} x "
+                    "higher at 95 %)")
+        return Verdict("campaign-limited", f"held-out RMS {split}; {why}", r_random, r_spatial,
+                       {"cause": "repeatability", "neighbour_correlation": corr, "floor_upper_mm": upper})
     sampling = [w for w in res.warnings if w.get("kind") in SAMPLING_WARNINGS]
     if sampling:
         return Verdict("campaign-limited", f"{local}held-out RMS {split}; the campaign cannot resolve it: "

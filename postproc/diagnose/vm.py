@@ -94,6 +94,15 @@ def tables_calibration():
     return _CACHE["tables"]
 
 
+def write_tables_calibration(path) -> Path:
+    """:func:`tables_calibration` written as a calibration file at ``path``."""
+    from postproc.calfile import save_calibration
+
+    cal = tables_calibration()
+    save_calibration(str(path), cal.engine, name="vm_tables", effects=cal.effects, fit=cal.fit)
+    return Path(path)
+
+
 def _both(q: np.ndarray, repeats: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows of each point approached + then - on every axis, ``repeats`` shots each."""
     signs = np.repeat([1.0, -1.0], repeats)
@@ -173,14 +182,19 @@ def carried(recorded: np.ndarray) -> np.ndarray:
 
 
 def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, context=None, frame: bool = True,
-             noise_df: float | None = NOISE_DF, path: str | None = None) -> Measurements:
+             noise_df: float | None = NOISE_DF, path: str | None = None, extra=None,
+             visit_sigma_mm: float = 0.0) -> Measurements:
     """One campaign of ``shape`` measured on ``machine`` (default: the clean one).
 
-    ``context``: extra columns, name -> function(t, rng) -> (N,) values (logged as
-    written; the machine sees them through its effects); "logged" campaigns add a
+    ``context``: extra columns, name -> function(t, rng) -> (N,) values, or a pair (true
+    values the machine sees through its effects, values as logged in the file: empty
+    cells as NaN, sample and hold); "logged" campaigns add a
     temperature (20 deg C +- a slow wander and sensor noise) and a stepped load
     column of their own. ``noise_df``: Student-t degrees of freedom of the tracker
     noise (None: Gaussian). ``frame``: the tracker's own frame (a rigid motion).
+    ``extra(q, r, ctx) -> (N, 3)``: a displacement outside the effect catalogue (a local
+    bump, a coupling) added to the machine's. ``visit_sigma_mm``: the machine's
+    repeatability, a random offset per visit of a point (shared by its shots).
     """
     rng = np.random.default_rng(seed)
     mach = machine if machine is not None else clean_machine()
@@ -190,11 +204,21 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
     if shape == "logged":
         ctx["temp"] = 20.0 + 0.3 * np.sin(2 * np.pi * t / CAMPAIGN_S + rng.uniform(0, 6)) + rng.normal(0, 0.02, len(t))
         ctx["load"] = np.repeat([0.0, 200.0, 400.0], -(-len(t) // 3))[:len(t)][rng.permutation(len(t))]
+    logged = {}
     for name, fn in (context or {}).items():
-        ctx[name] = np.asarray(fn(t, rng), dtype=float)
+        v = fn(t, rng)
+        true, log = v if isinstance(v, tuple) else (v, v)
+        ctx[name], logged[name] = np.asarray(true, dtype=float), np.asarray(log, dtype=float)
     state = carried(recorded)
     full = {**ctx, "dirx": state[:, 0], "diry": state[:, 1], "dirz": state[:, 2]}
+    ctx.update(logged)  # the file holds what was logged; the machine saw the true values
     m = mach.forward(q, r, full)
+    if extra is not None:
+        m = m + extra(q, r, full)
+    if visit_sigma_mm:
+        moved = np.any(q[1:] != q[:-1], axis=1) | np.any((recorded[1:] != 0) & (recorded[1:] != recorded[:-1]), axis=1)
+        visit = np.cumsum(np.r_[True, moved]) - 1
+        m = m + rng.normal(0.0, visit_sigma_mm, (visit[-1] + 1, 3))[visit]
     sigma = mach.noise.tracker_mm
     if noise_df is None:
         m = m + rng.normal(0.0, sigma, m.shape)
