@@ -176,7 +176,7 @@ def cases():
          {"extra": two_frames([0.0, 0.015, 0.0])}, {}),
         ("static calibration refitted", "s500 bows (static too stiff)", "random", [], {"n": 80},
          {"cal": "static"}),
-        ("parametric refitted, 4 positions per axis", "single-span refit (campaign too coarse)", "raster", [],
+        ("parametric refitted on a 45 mm raster", "s500 bows and waviness, 8 positions per axis", "raster", [],
          {}, {"cal": "parametric"}),
     ]
     return out

@@ -47,17 +47,20 @@ def test_screen_columns_interpolates_sparse_and_held_columns_in_time():
     load[::10] = np.repeat([0.0, 500.0], 12)
     ctx, notes = screen_columns({"t": t, "temp": sparse, "temp_air": held, "load": load})
     by = {n["column"]: n for n in notes}
-    assert by["temp"]["present"] == 5 and by["temp"]["kind"] == "sparse"
+    assert by["temp"]["present"] == 5
+    assert by["temp"]["kind"] == "sparse"
     assert "present in 5 of 240 rows" in by["temp"]["message"]
     assert np.max(np.abs(ctx["temp"] - temp)) < 0.25  # linear between 5 readings of a warm-up
-    assert by["temp_air"]["kind"] == "held" and by["temp_air"]["changes"] == 6
+    assert by["temp_air"]["kind"] == "held"
+    assert by["temp_air"]["changes"] == 6
     assert np.max(np.abs(ctx["temp_air"] - temp)) < np.max(np.abs(held - temp)) / 3
     assert by["load"]["kind"] == "sparse"
     assert set(np.unique(ctx["load"])) == {0.0, 500.0}  # a setting is held, never interpolated
     # without a time column a gappy column is not used, and that is said
     ctx, notes = screen_columns({"temp": sparse})
     assert "temp" not in ctx
-    assert notes[0]["used"] is False and "no time column" in notes[0]["message"]
+    assert notes[0]["used"] is False
+    assert "no time column" in notes[0]["message"]
     # a column logged per shot is left alone
     ctx, notes = screen_columns({"t": t, "temp": temp + np.random.default_rng(1).normal(0, 0.02, 240)})
     assert notes == []
@@ -77,7 +80,8 @@ def test_sparse_temperature_is_warned_about_used_and_noted_in_the_calibration(tm
     assert res.exit_code == 0, res.output
     assert "note: thermal:temp depend(s) on temp is present in 5 of 240 rows" in res.output
     notes = json.loads(Path("cal.json").read_text())["fit"]["notes"]
-    assert len(notes) == 1 and "5 of 240" in notes[0]
+    assert len(notes) == 1
+    assert "5 of 240" in notes[0]
     fitted = json.loads(Path("cal.json").read_text())["effects"][-1]["params"]["kz_mm_per_C"]
     assert fitted == pytest.approx(0.008, rel=0.25)
 

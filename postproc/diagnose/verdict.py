@@ -42,9 +42,9 @@ from postproc.errors import PostprocError
 
 #: A cross-validated RMS within this many times the noise floor is consistent with noise.
 CONSISTENT_RATIO = 1.15
-# Blocks per axis of the spatial split of a flexible base (3: a held-out block is a third
-# of each travel, wider than a local error of a tenth of it).
-SPATIAL_BLOCKS = 3
+# Blocks per axis of the spatial split of a flexible base (4: the 2 x 2 x 2 interior
+# blocks, each a quarter of each travel, are held out).
+SPATIAL_BLOCKS = 4
 # Slabs along each axis of the spatial split of a global base (6: a held-out slab is a
 # sixth of the travel; a local error inside it is not seen by the fit that predicts it).
 SLABS = 6
@@ -74,16 +74,21 @@ class Verdict:
 
 
 def spatial_folds(ds: Dataset, groups: np.ndarray, k: int, seed: int = FOLD_SEED) -> list[np.ndarray]:
-    """Test masks of ``k`` folds of whole spatial blocks (a SPATIAL_BLOCKS^3 lattice over the
-    measured extent); repeat groups stay together (in the block of their first row)."""
+    """Test masks of ``k`` folds of whole interior blocks of a SPATIAL_BLOCKS^3 lattice over
+    the measured extent (blocks on its faces are never held out: a flexible model would be
+    extrapolated there); repeat groups stay together (in the block of their first row)."""
     lo, span = ds.q.min(axis=0), np.ptp(ds.q, axis=0)
     cell = np.floor(SPATIAL_BLOCKS * (ds.q - lo) / np.where(span > 0, span, 1.0)).clip(0, SPATIAL_BLOCKS - 1)
-    block = _by_group((cell @ np.array([SPATIAL_BLOCKS**2, SPATIAL_BLOCKS, 1])).astype(int), groups)
-    ids = np.unique(block)
+    inside = np.all((cell > 0) & (cell < SPATIAL_BLOCKS - 1) | (span == 0), axis=1)
+    block = (cell @ np.array([SPATIAL_BLOCKS**2, SPATIAL_BLOCKS, 1])).astype(int)
+    block = _by_group(np.where(inside, block, -1), groups)
+    ids = np.unique(block[block >= 0])
+    if len(ids) < 2:
+        return []
     k = max(2, min(k, len(ids)))
     order = np.random.default_rng(seed).permutation(ids)
     fold_of = {int(b): i % k for i, b in enumerate(order)}
-    f = np.array([fold_of[int(b)] for b in block])
+    f = np.array([fold_of.get(int(b), -1) for b in block])
     return [f == i for i in range(k) if np.any(f == i)]
 
 
@@ -125,7 +130,7 @@ def spatial_splits(model, ds: Dataset, groups: np.ndarray, k: int) -> list[tuple
     - Space: for a global base (static, or a calibration held fixed) interior slabs along
       each axis, so a function of one axis is tested where it was not fitted; for a
       refitted flexible base (parametric, grid, interval: local support, which a held-out
-      slab would leave without data) blocks of a 3 x 3 x 3 lattice.
+      slab would leave without data) the interior blocks of a 4 x 4 x 4 lattice.
     - Conditions: with MIN_LEVELS or more tool vectors, each tool left out in turn (an
       effect fitted to the positional part of a tool-dependent error is wrong for the
       tool it did not see); likewise each level of a discrete context column (load steps:
@@ -206,15 +211,27 @@ def neighbour_structure(ds: Dataset, resid: np.ndarray, groups: np.ndarray) -> t
     return corr, corr * float(np.sqrt(3 * ok.sum()))
 
 
-def finer_model(model, ds: Dataset):
-    """(model, description) of a finer model of the same family, or None."""
+def finer_models(model, ds: Dataset) -> list:
+    """[(model, description)] of finer models of the same family, coarsest first."""
     from postproc.diagnose.models import base_model
 
     if isinstance(model, Fixed):
-        return None
+        return []
     if isinstance(model, LinearStatic):
-        return (base_model("interval", {"intervals": "X=2;Y=2;Z=2", "border_blend_mm": 0.0},
-                           register=model.register), "the static model cut into 2 x 2 x 2 cells (interval)")
+        # the static model's terms (positioning, straightness, angles) as functions of
+        # position: piecewise in cells, then the 21 smooth error functions
+        return [(base_model("interval", {"intervals": "X=2;Y=2;Z=2", "border_blend_mm": 0.0},
+                            register=model.register), "the static model cut into 2 x 2 x 2 cells (interval)"),
+                (base_model("parametric", {}, register=model.register),
+                 "the parametric model (the static terms as B-spline functions of position)")]
+    finer = finer_model(model, ds)
+    return [finer] if finer is not None else []
+
+
+def finer_model(model, ds: Dataset):
+    """(model, description) of the refitted flexible ``model`` made finer, or None."""
+    from postproc.diagnose.models import base_model
+
     if isinstance(model, Refit) and model.kind == "parametric":
         try:
             res = model.fitter([ds.to_measurements()], **model.options)
@@ -271,15 +288,19 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
     if rk.selected and r_random <= CONSISTENT_RATIO and r_spatial is not None:
         local = (f"{names} hold(s) on random folds but not on the {where} it was not fitted to "
                  f"(a local error taken for a global shape); ")
-    finer = finer_model(model, ds)
-    if finer is not None:
-        f_model, f_desc = finer
+    own = list(res.refitted_effects)
+    tries = [(m, d, own) for m, d in finer_models(model, ds)]
+    if rk.selected:  # the finer model may stand for the suggested shapes, or need them beside it
+        tries += [(m, d + " with " + names, final_effects) for m, d in finer_models(model, ds)]
+    for f_model, f_desc, f_effects in tries:
         try:
-            fr = held_rms(held_out(f_model, ds, final_effects, folds)) / floor
-            fs = max((held_rms(held_out(f_model, ds, final_effects, f)) / floor
+            fr = held_rms(held_out(f_model, ds, f_effects, folds)) / floor
+            if fr > CONSISTENT_RATIO:
+                continue
+            fs = max((held_rms(held_out(f_model, ds, f_effects, f)) / floor
                       for _, f in spatial_splits(f_model, ds, groups, len(folds))), default=fr)
         except PostprocError:
-            fr = fs = float("inf")
+            continue
         if max(fr, fs) <= CONSISTENT_RATIO:
             return Verdict("model-too-stiff", f"{local}held-out RMS {split}; {f_desc}: random {fr:.2f}, "
                            f"spatial {fs:.2f} x the floor", r_random, r_spatial,
@@ -291,8 +312,9 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
     if z < STRUCTURE_Z and not local:
         excess = float(np.sqrt(max(rms3(e_final) ** 2 - floor**2, 0.0)))
         why = (f"the {excess * 1000:.2f} um above the floor is spatially white (neighbour correlation "
-               f"{corr:+.2f}, z {z:.1f} < {STRUCTURE_Z:g}): scatter between visits (repeatability), which "
-               "shots seconds apart do not show; revisit points later in the campaign to measure it")
+               f"{corr:+.2f}, z {z:.1f} < {STRUCTURE_Z:g}): scatter this campaign cannot attribute, between "
+               "visits (the machine's repeatability, which shots seconds apart do not show) or on a scale "
+               "finer than its point spacing; revisit points later in the campaign, or measure denser")
         if worst * floor <= CONSISTENT_RATIO * upper:
             why += (f"; and the floor rests on {nf.dof} degrees of freedom (up to {upper / floor:.2f} x "
                     "higher at 95 %)")
