@@ -50,8 +50,12 @@ SPATIAL_BLOCKS = 4
 SLABS = 6
 # A held-out split this much worse than the random one: the suggestions do not carry over.
 LOCAL_EXCESS = 1.1
-# Tool vectors or levels of a discrete context column needed to leave one out.
+# Levels of a discrete context column needed to leave one out (the two others span it).
 MIN_LEVELS = 3
+# Tool vectors needed to leave one out: with three, a tool left out is an extrapolation
+# of the tool-length lever that the frame rotation and the tilt share (on the virtual
+# machine even the true tilt misses it by 1.1-1.3 x the floor).
+MIN_TOOLS = 4
 # One-sided level of the noise floor's upper confidence bound (chi-square on its degrees
 # of freedom): below it the floor is not known well enough to call a ratio above 1.15.
 FLOOR_CONFIDENCE = 0.05
@@ -135,7 +139,7 @@ def spatial_splits(model, ds: Dataset, groups: np.ndarray, k: int) -> list[tuple
       each axis, so a function of one axis is tested where it was not fitted; for a
       refitted flexible base (parametric, grid, interval: local support, which a held-out
       slab would leave without data) the interior blocks of a 4 x 4 x 4 lattice.
-    - Conditions: with MIN_LEVELS or more tool vectors, each tool left out in turn (an
+    - Conditions: with MIN_TOOLS or more tool vectors, each tool left out in turn (an
       effect fitted to the positional part of a tool-dependent error is wrong for the
       tool it did not see); likewise each level of a discrete context column (load steps:
       a deflection fitted as load plus a fixed shape is wrong at the load it did not see).
@@ -145,7 +149,7 @@ def spatial_splits(model, ds: Dataset, groups: np.ndarray, k: int) -> list[tuple
     else:
         out = [("blocks", spatial_folds(ds, groups, k))]
     tools = np.round(ds.r, 3)
-    if len(np.unique(tools, axis=0)) >= MIN_LEVELS:
+    if len(np.unique(tools, axis=0)) >= MIN_TOOLS:
         out.append(("tools", level_folds(tools, groups)))
     for name, v in sorted(ds.ctx.items()):
         if name in DIR_COLUMNS or name == "t":
