@@ -178,6 +178,13 @@ def cases():
          {"extra": two_frames([0.0, 0.015, 0.0])}, {}),
         ("static calibration refitted", "s500 bows (static too stiff)", "random", [], {"n": 120},
          {"cal": "static"}),
+        ("parametric refitted: lost motion, raster dir=0", "backlash:Y -12 um", "raster",
+         [eff("backlash:Y", {"b_mm": -0.012})], {}, {"cal": "parametric"}),
+        ("parametric refitted: warm-up", "thermal:t 15 um Z, 40 min", "random",
+         [eff("thermal:t", {"dx_mm": 0.0, "dy_mm": 0.0, "dz_mm": 0.015}, tau_s=2400.0)], {"n": 120},
+         {"cal": "parametric"}),
+        ("parametric refitted: spindle tilt", "abbe:tilt 80 urad", "tools",
+         [eff("abbe:tilt", {"wx_rad": 8e-5, "wy_rad": 0.0, "wz_rad": 0.0})], {"n": 80}, {"cal": "parametric"}),
         ("parametric refitted on a 45 mm raster", "s500 bows and waviness, 8 positions per axis", "raster", [],
          {}, {"cal": "parametric"}),
     ]

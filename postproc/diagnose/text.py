@@ -121,7 +121,10 @@ def _verdict(res: CheckResult) -> str:
     if v is None:
         return ("verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
                 if rk is not None else "verdict: none (no cross-validation)")
-    return f"verdict: {v.name}: {v.evidence}"
+    line = f"verdict: {v.name}: {v.evidence}"
+    if v.details.get("finer_command"):
+        line += f"\n  refit with the finer model: {v.details['finer_command']}"
+    return line
 
 
 def _where(res: CheckResult) -> list[str]:

@@ -62,6 +62,8 @@ FLOOR_CONFIDENCE = 0.05
 # Neighbour correlation of the held-out residual (nearest other point) above this many
 # standard errors of white noise is spatial structure; below, the excess is scatter.
 STRUCTURE_Z = 3.0
+# Effects the ranking on a finer model may name.
+FINER_MAX_EFFECTS = 2
 # Nearest groups looked at for a neighbour in the same conditions.
 NEIGHBOURS_SEARCHED = 40
 # Campaign warnings that mean the sampling cannot resolve the model's form.
@@ -271,6 +273,38 @@ def finer_model(model, ds: Dataset):
     return None
 
 
+def _rank_on_finer(res, f_model, f_effects, folds) -> tuple[list[str], str | None]:
+    """The catalogue ranked again on the finer model (a stiff base hides what it cannot
+    follow and what is missing alike): the effects it names, and the fit command."""
+    import shlex
+    from pathlib import Path
+
+    from postproc.diagnose.rank import rank_effects
+    from postproc.effects import candidate_names
+    from postproc.engine.registry import fold_options, option_flag
+
+    held = {e.name for e in f_effects}
+    try:
+        rk = rank_effects(f_model, res.ds, [get_effect(e.name) for e in f_effects],
+                          [n for n in candidate_names(res.ds.ctx) if n not in held], folds,
+                          max_selected=FINER_MAX_EFFECTS)
+        named = [c.name for c in rk.selected]
+    except PostprocError:
+        named = []
+    command = None
+    if isinstance(f_model, Refit) and res.files:
+        skip = set(fold_options(f_model.kind))
+        args = ["postproc", "fit", *res.files, "--method", f_model.kind]
+        for key, value in f_model.options.items():
+            if key not in skip:
+                args += [option_flag(key), f"{value:g}" if isinstance(value, float) else str(value)]
+        for n in [*held, *named]:
+            args += ["--effect", n]
+        stem = Path(res.cal_path).stem if res.cal_path else "calibration"
+        command = shlex.join([*args, "-o", f"{stem}_finer.json"])
+    return named, command
+
+
 def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | None:
     """The verdict of check result ``res`` (ranking done), with its one-line evidence."""
     rk, floor = res.ranking, res.noise.rms_mm
@@ -319,9 +353,13 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
         except PostprocError:
             continue
         if max(fr, fs) <= CONSISTENT_RATIO:
+            named, command = _rank_on_finer(res, f_model, f_effects, folds)
+            also = (f"; on it the ranking names {', '.join(named)}" if named else
+                    "; on it no effect of the catalogue is significant")
             return Verdict("model-too-stiff", f"{local}held-out RMS {split}; {f_desc}: random folds {fr:.2f}, "
-                           f"held-out splits {fs:.2f} x the floor", r_random, r_spatial,
-                           {"finer_model": f_desc, "finer_random_ratio": fr, "finer_spatial_ratio": fs})
+                           f"held-out splits {fs:.2f} x the floor{also}", r_random, r_spatial,
+                           {"finer_model": f_desc, "finer_random_ratio": fr, "finer_spatial_ratio": fs,
+                            "finer_effects": named, "finer_command": command})
     nf = res.noise
     upper = floor_upper(floor, nf.dof) if nf.source == "repeats" else floor
     e_final = rk.final_cv_resid if rk.final_cv_resid is not None else rk.base_cv_resid
