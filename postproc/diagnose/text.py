@@ -87,7 +87,7 @@ def format_report(res: CheckResult) -> list[str]:
         out += ["", "what this campaign cannot show:"] + [f"  {w['message']}" for w in res.warnings]
     out += ["", "where it fails:"] + _where(res)
     out += [""] + _ranking(res)
-    out += ["", _verdict(res)]
+    out += ["", *_verdict(res)]
     if res.empirical:
         e, floor = res.empirical, res.noise.rms_mm
         ratio = f" = {e['cv_rms_after_mm'] / floor:.2f} x the floor" if floor else ""
@@ -116,15 +116,16 @@ def _screening(res: CheckResult) -> list[str]:
     return out
 
 
-def _verdict(res: CheckResult) -> str:
+def _verdict(res: CheckResult) -> list[str]:
+    """The verdict with its evidence in one line (and the finer model's fit command)."""
     v, rk = res.verdict_info, res.ranking
     if v is None:
-        return ("verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
-                if rk is not None else "verdict: none (no cross-validation)")
-    line = f"verdict: {v.name}: {v.evidence}"
+        return ["verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
+                if rk is not None else "verdict: none (no cross-validation)"]
+    out = [f"verdict: {v.name}: {v.evidence}"]
     if v.details.get("finer_command"):
-        line += f"\n  refit with the finer model: {v.details['finer_command']}"
-    return line
+        out.append(f"  refit with the finer model: {v.details['finer_command']}")
+    return out
 
 
 def _where(res: CheckResult) -> list[str]:
