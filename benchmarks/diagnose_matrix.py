@@ -9,7 +9,8 @@ against the parametric calibration fitted from the same machine's interferometer
 (`--fixed`, as a user re-checks a tables calibration) unless the case says otherwise.
 
 Printed: case / truth / verdict / suggestion / cross-validated RMS over the noise floor
-(random folds before -> after the suggestions; spatial folds after), then, with
+(random folds before -> after the suggestions; the worst held-out split after: slabs,
+blocks, load steps; for model-too-stiff, the finer model's), then, with
 ``--clean N``, the false-alarm rate over N seeds of each of the eight clean shapes
 (N = 5: 40 campaigns; a false alarm is any suggestion).
 
@@ -221,7 +222,11 @@ def row(res) -> tuple[str, str, str]:
     if rk is None or not floor or v is None:
         return str(res.verdict), sug, "-"
     after = rk.final_cv_rms_mm / floor
-    spatial = f"; spatial {v.spatial_ratio:.2f}" if v.spatial_ratio is not None else ""
+    spatial = f"; held-out splits {v.spatial_ratio:.2f}" if v.spatial_ratio is not None else ""
+    if v.name == "model-too-stiff":
+        finer = ", ".join(v.details.get("finer_effects") or []) or "none"
+        sug += f" (on the finer model: {finer})"
+        spatial += f"; finer model {max(v.details['finer_random_ratio'], v.details['finer_spatial_ratio']):.2f}"
     return v.name, sug, f"{rk.base_cv_rms_mm / floor:.2f} -> {after:.2f}{spatial}"
 
 
@@ -251,7 +256,8 @@ def main() -> None:
     ap.add_argument("--no-cases", action="store_true")
     args = ap.parse_args()
     if not args.no_cases:
-        print("| case | truth | verdict | suggestion | CV RMS / floor (random: before -> after; spatial after) |")
+        print("| case | truth | verdict | suggestion | CV RMS / floor (random folds: before -> after; "
+              "worst held-out split after) |")
         print("|---|---|---|---|---|")
         for i, case in enumerate(cases()):
             if args.only and args.only not in case[0]:
