@@ -121,16 +121,20 @@ def periodogram_level(power: np.ndarray, n_independent: float, alpha: float = PE
 
 
 def plot_periodogram(x: np.ndarray, y: np.ndarray, axis: str, ax=None, sigma_mm: float | None = None,
-                     label: str = "residual"):
+                     label: str = "residual", y_after: np.ndarray | None = None):
     """Periodogram of the residual along an axis against that axis's position, by pitch,
     with the level its background exceeds at PERIODOGRAM_ALPHA over all pitches
     (:func:`periodogram_level`; about travel * frequency span independent frequencies).
+    ``y_after``: the held-out residual the suggestions leave, drawn beside it;
     ``sigma_mm`` (the instrument's noise) is drawn for reference."""
     ax = _axes(ax)
     freqs = search_frequencies(x)
     if len(freqs):
         power = periodogram(x, y, freqs)
         ax.plot(1.0 / freqs, power * 1e6, lw=0.9, label=label)
+        if y_after is not None:
+            ax.plot(1.0 / freqs, periodogram(x, y_after, freqs) * 1e6, lw=0.9, alpha=0.8,
+                    label="held-out residual after the suggestions")
         ax.set_xscale("log")
         m = max(1.0, float(np.ptp(x)) * float(freqs[-1] - freqs[0]))
         level = periodogram_level(power, m)
@@ -215,15 +219,14 @@ def write_plots(res, directory) -> list[Path]:
 
     rk = res.ranking
     save(plot_residual_slices(ds.q, resid), "residual_slices.png")
-    open_resid = resid
+    after = None
     if rk is not None and rk.selected and rk.final_cv_resid is not None:
-        open_resid = rk.final_cv_resid  # what the suggestions leave: the effects still open
+        after = rk.final_cv_resid  # what the suggestions leave
     for j, a in enumerate(AXES):
         save(plot_residual_vs(ds.q[:, j], resid, f"{a} mm"), f"residual_vs_{a}.png")
         sigma = res.noise.sigma_mm[j] if res.noise.sigma_mm else None
-        label = "held-out residual after the suggestions" if open_resid is not resid else "residual"
-        save(plot_periodogram(ds.q[:, j], open_resid[:, j], a, sigma_mm=sigma, label=label),
-             f"periodogram_{a}.png")
+        save(plot_periodogram(ds.q[:, j], resid[:, j], a, sigma_mm=sigma, label="residual of the calibration",
+                              y_after=None if after is None else after[:, j]), f"periodogram_{a}.png")
     for name, v in sorted(ds.ctx.items()):
         if np.ptp(v) > 0:
             save(plot_residual_vs(v, resid, name), f"residual_vs_{name}.png")
