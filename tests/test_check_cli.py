@@ -84,7 +84,7 @@ def test_plots_and_declared_sigma(walk):
     assert data["noise_floor_source"] == "declared"
     assert data["noise_floor_mm"] == pytest.approx(0.002 * np.sqrt(3))
     names = {p.name for p in (walk / "plots").iterdir()}
-    assert {"residual_vectors.png", "before_after.png", "periodogram_X.png", "residual_vs_t.png",
+    assert {"residual_slices.png", "before_after.png", "periodogram_X.png", "residual_vs_t.png",
             "residual_vs_temp.png", "residual_map_XY.png", "residual_map_YZ.png",
             "after_suggestions_vs_X.png"} <= names
     assert all((walk / "plots" / n).stat().st_size > 1000 for n in names)

@@ -142,7 +142,16 @@ def measurements_from_table(table: CsvTable) -> Measurements:
         try:
             context[name] = table.numeric(name)
         except MeasurementError:
-            continue  # a text column is kept out of the numeric context
+            # a column logged in some rows only (empty cells elsewhere) is kept with NaN
+            # there: the diagnostics interpolate it in time or leave it out, and say so
+            cells = [c.strip() for c in table.text(name)]
+            try:
+                comma = getattr(table, "decimal_comma", False)
+                values = np.array([float(c.replace(",", ".") if comma else c) if c else np.nan for c in cells])
+            except ValueError:
+                continue  # a text column is kept out of the numeric context
+            if np.isfinite(values).any() and not np.isinf(values).any():
+                context[name] = values
     return Measurements(
         q=np.column_stack([cols["X"], cols["Y"], cols["Z"]]),
         m=np.column_stack([cols["mx"], cols["my"], cols["mz"]]),

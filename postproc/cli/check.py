@@ -20,9 +20,11 @@ from postproc.cli.options import FINITE_FLOAT
               help="Cross-validation folds (repeated points stay together).")
 @click.option("--max-effects", "max_effects", type=click.IntRange(0, 10), default=4, show_default=True,
               help="Most effects the greedy search adds (0: rank candidates, add none).")
-@click.option("--fixed", is_flag=True,
+@click.option("--fixed/--no-fixed", "fixed", default=None,
               help="Hold the calibration as it is (no refit of its method): rank effects on its own "
-                   "residual. For checking a calibration made from other data (e.g. axis error tables).")
+                   "residual. For checking a calibration made from other data (e.g. axis error tables). "
+                   "Default: as recorded by 'fit --base' (its base held, the effects it added refitted), "
+                   "else off.")
 @click.option("--tool-vector", "tool_vector", default=None, metavar="X,Y,Z",
               help="Tool vector (mm) for rows that have no tx,ty,tz columns.")
 @click.option("--register/--no-register", "register", default=None,

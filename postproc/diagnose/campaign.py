@@ -13,6 +13,8 @@
   travel are not resolved.
 - **Points outside the calibrated volume**: the calibration extrapolates there.
 - **Unknown approach state**: rows before an axis's first move with ``dir`` 0.
+- **Context columns** logged in few rows or by sample and hold (see
+  :func:`postproc.diagnose.data.screen_columns`), with their counts.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import numpy as np
 
 from postproc.diagnose.data import Dataset
 from postproc.effects.base import AXES, DIR_COLUMNS
-from postproc.effects.periodic import PITCH_MAX_MM, PITCH_MIN_MM, REGULAR_STEP_SPREAD
+from postproc.effects.periodic import PITCH_MAX_TRAVEL_FRACTION, PITCH_MIN_MM, REGULAR_STEP_SPREAD
 
 # Share of the variance of ``t`` explained by the positions (quadratic in each axis)
 # above which time and position are confounded.
@@ -52,7 +54,7 @@ def regular_step(x: np.ndarray) -> float | None:
 
 
 def campaign_warnings(ds: Dataset, cal, data, res) -> list[dict]:
-    out: list[dict] = []
+    out: list[dict] = [{"kind": "context column", **n} for n in ds.column_notes]
     if "t" in ds.ctx and np.ptp(ds.ctx["t"]) > 0 and len(ds) > 10:
         r2 = _r2_on_positions(ds.ctx["t"], ds.q)
         if r2 > CONFOUNDED_R2:
@@ -82,7 +84,7 @@ def campaign_warnings(ds: Dataset, cal, data, res) -> list[dict]:
             out.append({"kind": "aliasing", "axis": a, "step_mm": step, "shortest_pitch_mm": shortest,
                         "message": f"{a} positions lie on a regular {step:g} mm grid: a periodic error "
                                    f"(lead screw) with a pitch shorter than {shortest:g} mm cannot be "
-                                   f"seen{' at all' if shortest > PITCH_MAX_MM else ''} (it aliases to a "
+                                   f"seen{' at all' if shortest > PITCH_MAX_TRAVEL_FRACTION * np.ptp(ds.q[:, j]) else ''} (it aliases to a "
                                    "longer one); use a step that is no divisor of the screw pitch, or "
                                    "irregular positions"})
     if cal.method == "parametric" and not res.fixed:

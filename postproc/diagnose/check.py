@@ -29,15 +29,12 @@ from postproc.diagnose.rank import (
     rank_effects,
 )
 from postproc.diagnose.robust import Screening, screen
+from postproc.diagnose.verdict import Verdict, judge
 from postproc.diagnose.where import components, where_it_fails
 from postproc.effects import candidate_names, effect_from_dict
 from postproc.effects.composed import ComposedEngine
 from postproc.engine.registry import fit_methods, fold_options, option_flag, refit_options
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
-
-#: A cross-validated RMS within this many times the noise floor is consistent with noise
-#: (the verdict "consistent"; after the suggestions, "missing-effect").
-CONSISTENT_RATIO = 1.15
 
 # Points beyond the calibrated volume by more than this (mm) are outside it.
 OUTSIDE_TOLERANCE_MM = 1e-3
@@ -69,6 +66,9 @@ class CheckResult:
     warnings: list[dict] = field(default_factory=list)  # campaign diagnostics
     empirical: dict | None = None  # the last-resort empirical field, when the verdict is unexplained
     from_other_data: bool = False  # the calibration was not fitted on these files
+    recorded: dict | None = None  # what 'fit --base' held fixed, read from the file (then used)
+    refitted_effects: list = field(default_factory=list)  # effects of the file refitted on every fold
+    verdict_info: Verdict | None = None  # judged on random and spatial held-out points
 
     @property
     def suggestions(self) -> list[dict]:
@@ -95,16 +95,10 @@ class CheckResult:
 
     @property
     def verdict(self) -> str | None:
-        """"consistent" (the cross-validated RMS is within CONSISTENT_RATIO x the noise floor
-        and nothing is suggested), "missing-effect" (the suggestions bring it there) or
-        "unexplained" (above the floor and the catalogue does not explain it); None without
-        a noise floor or a cross-validation."""
-        rk, floor = self.ranking, self.noise.rms_mm
-        if rk is None or not floor:
-            return None
-        if not rk.selected:
-            return "consistent" if rk.base_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
-        return "missing-effect" if rk.final_cv_rms_mm <= CONSISTENT_RATIO * floor else "unexplained"
+        """"consistent", "missing-effect", "model-too-stiff", "campaign-limited" or
+        "unexplained", judged on random and spatial held-out points
+        (:mod:`postproc.diagnose.verdict`); None without a noise floor or a cross-validation."""
+        return self.verdict_info.name if self.verdict_info is not None else None
 
     @property
     def extends(self) -> bool:
@@ -150,6 +144,8 @@ class CheckResult:
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
             "cv_note": self.cv_note,
             "verdict": self.verdict,
+            "verdict_evidence": self.verdict_info.evidence if self.verdict_info else None,
+            "verdict_detail": self.verdict_info.to_json() if self.verdict_info else None,
             "conditioning": rk.final_guard.to_json() if rk and rk.final_guard is not None else None,
             "calibration_from_other_data": self.from_other_data,
             "cv_ratio_to_floor": (rk.final_cv_rms_mm / self.noise.rms_mm) if rk and self.noise.rms_mm else None,
@@ -169,6 +165,7 @@ class CheckResult:
             "outside_volume": {"rows": list(self.outside), "excluded": self.outside_excluded},
             "warnings": list(self.warnings),
             "empirical": self.empirical,
+            "fixed_from_file": self.recorded,
         }
 
 
@@ -205,7 +202,7 @@ def outside_volume(engine, ds: Dataset) -> np.ndarray:
 
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
-              fixed: bool = False, register: bool | None = None, offer_empirical: bool = True) -> CheckResult:
+              fixed: bool | None = None, register: bool | None = None, offer_empirical: bool = True) -> CheckResult:
     """Check calibration ``cal`` (a loaded Calibration) against measurements ``data``.
 
     ``fixed``: hold the calibration (with its effects) as it is and rank effects on its
@@ -218,13 +215,27 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     and, with ``fixed``, points outside the calibrated volume (the calibration would be
     extrapolated there); all are listed in the result.
     """
+    from postproc.diagnose.refit import recorded_fixed
+
+    record = recorded_fixed(cal) if fixed is None else None
+    if record is not None:
+        register = bool(record.get("register", True)) if register is None else bool(register)
+    fixed = bool(fixed) or record is not None
     register = fixed if register is None else bool(register)
     ds_all = Dataset.from_measurements(data)
     engine = cal.engine
     base_engine = engine.base if isinstance(engine, ComposedEngine) else engine
     existing = [effect_from_dict(d) for d in (cal.effects or [])]
     resid_all = measured_residual(engine, ds_all)
-    if fixed:
+    refitted: list = []  # effects 'fit --base' added: refitted on every training fold
+    if record is not None:
+        added = set(record.get("fitted_effects") or [])
+        held = [e for e in existing if e.name not in added]
+        refitted = [e for e in existing if e.name in added]
+        held_engine = ComposedEngine(base_engine, held) if held else base_engine
+        model = Fixed(held_engine, "recorded by fit --base: its base held as it is, the effects it added "
+                      "refitted on every training fold", register)
+    elif fixed:
         model = Fixed(engine, "--fixed: the calibration as it is, effects fitted to its residual", register)
     else:
         # The method's options for a training fold (a grid fold fills lattice nodes left
@@ -256,7 +267,11 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
         groups = ds.repeat_groups()
         fold_masks = make_folds(groups, folds)
         names = candidates if candidates is not None else candidate_names(ds.ctx)
-        if fixed:
+        if record is not None:
+            ranking = rank_effects(model, ds, refitted, names, fold_masks, max_selected=max_selected)
+            kept = [e for e in existing if e not in refitted]
+            ranking.in_model[:0] = [Candidate(e.name, "in model", "held as in the base calibration") for e in kept]
+        elif fixed:
             held = {e.name for e in existing}
             ranking = rank_effects(model, ds, [], [n for n in names if n not in held], fold_masks,
                                    max_selected=max_selected)
@@ -265,7 +280,8 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
             ranking = rank_effects(model, ds, existing, names, fold_masks, max_selected=max_selected)
         note = f"{len(fold_masks)} folds; {model.description}"
         if register:
-            frame = model.fit(ds, model.prepare(ds, existing) if not fixed else []).frame
+            frame = model.fit(ds, model.prepare(ds, existing) if not fixed else
+                              model.prepare(ds, refitted)).frame
             if fixed and frame is not None and not frame.absorbed:
                 resid_registered = resid - frame.displacement(ds.q, ds.r)
                 where = where_it_fails(ds, resid_registered)
@@ -277,15 +293,19 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
                       ranking, note, [e.name for e in existing], options, fixed, register, frame,
                       np.asarray(engine.volume_mm, dtype=float), resid_registered)
     res.screening = screening
+    res.recorded = record
     sources = [Path(p).name for p in (cal.fit or {}).get("sources", [])]
     res.from_other_data = bool(cal.fit and (cal.fit.get("kind") == "axis error tables"
                                             or (sources and sorted(sources) != sorted(Path(f).name for f in files))))
     res.outside = [ds_all.place(int(i)) for i in np.nonzero(outside)[0]]
     res.outside_excluded = bool(fixed and outside.any() and not outside.all())
     res.warnings = campaign_warnings(ds, cal, data, res)
+    res.refitted_effects = refitted if fixed else existing
+    if ranking is not None:
+        res.verdict_info = judge(res, model, groups, fold_masks)
     if offer_empirical and ranking is not None and res.verdict == "unexplained":
         try:
-            offer = empirical_offer(model, ds, ranking, [] if fixed else existing, fold_masks)
+            offer = empirical_offer(model, ds, ranking, refitted if fixed else existing, fold_masks)
         except PostprocError:
             offer = None
         if offer is not None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from postproc.diagnose.data import Dataset
-from postproc.diagnose.models import BaseModel, effects_basis, stacked
+from postproc.diagnose.models import BaseModel, effects_basis, stacked, static_design
 from postproc.effects import Effect
 from postproc.effects.linalg import solve_ls
 
@@ -101,12 +101,22 @@ class FoldCache:
         return _project_fold(self.items, self.spans, delta)
 
     def with_effect(self, effect: Effect) -> np.ndarray:
+        """Held-out residual with ``effect`` fitted to the training residual. The base
+        refitted with the effect would also move its own affine terms (origin, scale,
+        squareness, which every fitter holds): the effect's columns are first made
+        orthogonal to them on the training rows, and the same map applied on the held-out
+        rows. (Fitted raw, a drift whose mean the base's origin already took would come
+        out a twentieth of its size.)"""
         out = np.empty_like(self.ds.m)
         for test, train, held, r_train, r_held in self.items:
             e = effect.prepare(train.q, train.r, train.ctx, r_train)
             B = e.basis(train.q, train.r, train.ctx)
-            coef = solve_ls(B.reshape(-1, B.shape[2]), r_train.reshape(-1))
-            out[test] = r_held - e.basis(held.q, held.r, held.ctx) @ coef
+            k = B.shape[2]
+            A, Ah = static_design(train), static_design(held)
+            G = solve_ls(A, B.reshape(-1, k))
+            coef = solve_ls(B.reshape(-1, k) - A @ G, r_train.reshape(-1))
+            Bh = e.basis(held.q, held.r, held.ctx).reshape(-1, k) - Ah @ G
+            out[test] = r_held - (Bh @ coef).reshape(-1, 3)
         return out
 
 

@@ -26,6 +26,84 @@ CONTEXT_NOISE_FACTOR = 5.0
 REPEAT_TIME_S = 60.0
 
 
+# A context column present in fewer than this fraction of the rows is sparse: warned
+# about, with the count, and interpolated in time where a time column exists.
+MIN_PRESENT_FRACTION = 0.8
+# A continuous column whose value stays the same for at least this many consecutive rows
+# (median run, in time order) was logged by sample and hold, not per shot: its steps
+# are the logging interval, not the quantity.
+HELD_RUN_ROWS = 4
+
+
+def _runs(v: np.ndarray) -> np.ndarray:
+    """Indices of the first row of each run of equal consecutive values."""
+    return np.r_[0, np.nonzero(v[1:] != v[:-1])[0] + 1]
+
+
+def screen_columns(ctx: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], list[dict]]:
+    """Context columns checked before use: (columns to use, notes).
+
+    A column missing in some rows (empty cells, NaN) or logged by sample and hold is
+    interpolated in time, linearly between the rows (or the sample times) where it was
+    logged, when a time column ``t`` exists (a discrete setting, a few values such as
+    load steps, is held from its last logged value instead); without ``t`` a column with
+    gaps is not used. A note with the count is made for each column handled, and for
+    any column present in fewer than MIN_PRESENT_FRACTION of the rows.
+    """
+    out, notes = {}, []
+    t = ctx.get("t")
+    has_t = t is not None and bool(np.all(np.isfinite(t)))
+    order = np.argsort(t, kind="stable") if has_t else None
+    for name, v in ctx.items():
+        v = np.asarray(v, dtype=float)
+        n = len(v)
+        present = np.isfinite(v)
+        k = int(present.sum())
+        if name in DIR_COLUMNS or name == "t" or n == 0:
+            out[name] = v
+            continue
+        # a setting (load steps) takes a few values, each logged many times
+        levels = len(np.unique(v[present]))
+        discrete = levels <= DISCRETE_VALUES and levels <= k / 2
+        note = {"column": name, "rows": n, "present": k, "used": True}
+        if k < n:
+            if not has_t or k < 2:
+                why = "no time column to interpolate it" if not has_t else "fewer than 2 logged values"
+                notes.append({**note, "kind": "sparse", "used": False,
+                              "message": f"{name} is present in {k} of {n} rows: not used ({why})"})
+                continue
+            ts, vs, ps = t[order], v[order], present[order]
+            if discrete:
+                last = np.maximum.accumulate(np.where(ps, np.arange(n), 0))
+                filled = np.where(ps | (np.cumsum(ps) > 0), vs[last], vs[np.argmax(ps)])
+                how = "held from its last logged value"
+            else:
+                filled = np.interp(ts, ts[ps], vs[ps])
+                how = "interpolated linearly in time between them"
+            v = np.empty(n)
+            v[order] = filled
+            sparse = k < MIN_PRESENT_FRACTION * n
+            notes.append({**note, "kind": "sparse" if sparse else "gaps",
+                          "message": f"{name} is present in {k} of {n} rows"
+                                     f"{' (fewer than ' + format(MIN_PRESENT_FRACTION, '.0%') + ')' if sparse else ''}: "
+                                     f"{how}; an effect fitted on it rests on {k} readings"})
+        elif has_t and not discrete and n >= 2 * HELD_RUN_ROWS:
+            vs, ts = v[order], t[order]
+            first = _runs(vs)
+            lengths = np.diff(np.r_[first, n])
+            if len(first) > 1 and float(np.median(lengths)) >= HELD_RUN_ROWS:
+                # each value was read at the first row that shows it, then held
+                v = np.empty(n)
+                v[order] = np.interp(ts, ts[first], vs[first])
+                step = float(np.median(np.diff(ts[first])))
+                notes.append({**note, "kind": "held", "changes": len(first),
+                              "message": f"{name} is piecewise constant: {len(first)} values over {n} rows "
+                                         f"(sample and hold, about every {step / 60:.0f} min): interpolated "
+                                         "linearly in time between the readings"})
+        out[name] = v
+    return out, notes
+
+
 def _split_by_gaps(groups: np.ndarray, values: np.ndarray, gap: float) -> np.ndarray:
     """Groups split where, sorted by ``values``, consecutive members differ by more than ``gap``."""
     order = np.lexsort((values, groups))
@@ -49,6 +127,7 @@ class Dataset:
     sources: np.ndarray | None = None  # (N,) file path of each row
     linenos: np.ndarray | None = None  # (N,) file line of each row (0 when unknown)
     paths: list[str] = field(default_factory=list)
+    column_notes: list[dict] = field(default_factory=list)  # context columns checked (screen_columns)
 
     def __len__(self) -> int:
         return len(self.q)
@@ -59,6 +138,7 @@ class Dataset:
         common = set.intersection(*(set(m.context_full()) for m in items)) if items else set()
         ctx = {k: np.concatenate([np.asarray(m.context_full()[k], dtype=float) for m in items])
                for k in sorted(common)}
+        ctx, notes = screen_columns(ctx)
         sources = np.concatenate([np.full(len(m), m.path, dtype=object) for m in items])
         linenos = np.concatenate([
             np.asarray(m.linenos, dtype=int) if m.linenos is not None else np.zeros(len(m), dtype=int)
@@ -68,7 +148,7 @@ class Dataset:
             q=np.vstack([m.q for m in items]).astype(float),
             m=np.vstack([m.m for m in items]).astype(float),
             r=np.vstack([m.r for m in items]).astype(float),
-            ctx=ctx, sources=sources, linenos=linenos, paths=[m.path for m in items],
+            ctx=ctx, sources=sources, linenos=linenos, paths=[m.path for m in items], column_notes=notes,
         )
 
     def subset(self, idx) -> Dataset:
@@ -77,7 +157,7 @@ class Dataset:
             ctx={k: v[idx] for k, v in self.ctx.items()},
             sources=None if self.sources is None else self.sources[idx],
             linenos=None if self.linenos is None else self.linenos[idx],
-            paths=self.paths,
+            paths=self.paths, column_notes=self.column_notes,
         )
 
     def with_m(self, m: np.ndarray) -> Dataset:

@@ -74,11 +74,25 @@ def _info(ds: Dataset, resid: np.ndarray, fitted: Fitted) -> dict:
         "max_mm": float(np.max(np.linalg.norm(resid, axis=1))),
         "sources": list(ds.paths), "effects": [e.name for e in fitted.effects],
     }
+    notes = column_notes(ds, fitted.effects)
+    if notes:
+        info["notes"] = notes
     if fitted.guard is not None:
         info["conditioning"] = fitted.guard.to_json()
     if fitted.frame is not None and not fitted.frame.absorbed:
         info["registration"] = fitted.frame.to_json(fitted.engine.volume_mm)
     return info
+
+
+def column_notes(ds: Dataset, effects) -> list[str]:
+    """The calibration's notes: each effect fitted on a context column that was sparse,
+    gappy or sample-and-hold (:func:`postproc.diagnose.data.screen_columns`)."""
+    out = []
+    for n in ds.column_notes:
+        users = [e.name for e in effects if n["column"] in e.needs]
+        if users:
+            out.append(f"{', '.join(users)} depend(s) on {n['message']}")
+    return out
 
 
 def fit_with_effects(method: str, data, effect_names, register: bool = False, **options) -> FitResult:
@@ -98,6 +112,7 @@ def fit_with_effects(method: str, data, effect_names, register: bool = False, **
     result.report += fitted.report
     result.report += _effect_lines(fitted)
     result.info = _info(ds, resid, fitted)
+    result.report += [f"note: {n}" for n in result.info.get("notes", [])]
     result.effects = [e.to_dict() for e in fitted.effects]
     return result
 
@@ -131,10 +146,42 @@ def extend_calibration(cal, data, effect_names, register: bool = True) -> FitRes
                      f"fitted on {len(ds)} points ({model.description})"]
     result.report += _effect_lines(fitted)
     result.info = _info(ds, resid, fitted)
+    result.report += [f"note: {n}" for n in result.info.get("notes", [])]
     result.info["effects"] = [e.name for e in all_effects]
     result.info["base"] = {"path": cal.path, "method": cal.method, "fit": dict(cal.fit or {})}
+    result.info["fixed"] = fixed_record(cal, existing, fitted.effects, register)
     result.effects = [e.to_dict() for e in all_effects]
     return result
+
+
+def fixed_record(cal, held_effects, added_effects, register: bool) -> dict:
+    """What ``fit --base`` held fixed and what it fitted: read back by ``check``, which
+    re-checks such a calibration the same way (the base held, the added effects refitted)."""
+    return {
+        "by": "fit --base",
+        "base": cal.path,
+        "method": cal.method,
+        "held": [f"the {cal.method} model (all its parameters)"] + [f"effect {e.name}" for e in held_effects],
+        "held_effects": [e.name for e in held_effects],
+        "fitted_effects": [e.name for e in added_effects],
+        "register": bool(register),
+    }
+
+
+def recorded_fixed(cal) -> dict | None:
+    """The record of what ``fit --base`` held fixed (:func:`fixed_record`), also for files
+    written before the record existed (their ``fit.base``); None for other calibrations."""
+    fit = cal.fit or {}
+    if isinstance(fit.get("fixed"), dict):
+        return fit["fixed"]
+    base = fit.get("base")
+    if not isinstance(base, dict):
+        return None
+    held = list((base.get("fit") or {}).get("effects") or [])
+    names = [d.get("name") for d in (cal.effects or [])]
+    return {"by": "fit --base", "base": base.get("path"), "method": base.get("method", cal.method),
+            "held": [f"the {cal.method} model (all its parameters)"] + [f"effect {n}" for n in held],
+            "held_effects": held, "fitted_effects": names[len(held):], "register": True}
 
 
 def max_correction(engine, data=None) -> tuple[float, np.ndarray]:

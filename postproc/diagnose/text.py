@@ -52,6 +52,12 @@ def format_report(res: CheckResult) -> list[str]:
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")
     else:
         out.append("noise floor: unknown (no repeated points; give --sigma MM, the instrument's sigma per axis)")
+    if res.recorded is not None:
+        rec = res.recorded
+        added = ", ".join(rec.get("fitted_effects") or []) or "none"
+        out.append(f"made by 'fit --base {rec.get('base')}': held fixed as recorded in the file "
+                   f"({'; '.join(rec.get('held') or [])}), refitted on every training fold: {added} "
+                   "(--no-fixed refits the whole method)")
     if res.frame is not None:
         if res.frame.absorbed:
             out.append("measurement frame: its registration is held by the model itself (origin and axes)")
@@ -81,7 +87,7 @@ def format_report(res: CheckResult) -> list[str]:
         out += ["", "what this campaign cannot show:"] + [f"  {w['message']}" for w in res.warnings]
     out += ["", "where it fails:"] + _where(res)
     out += [""] + _ranking(res)
-    out += ["", _verdict(res)]
+    out += ["", *_verdict(res)]
     if res.empirical:
         e, floor = res.empirical, res.noise.rms_mm
         ratio = f" = {e['cv_rms_after_mm'] / floor:.2f} x the floor" if floor else ""
@@ -111,23 +117,16 @@ def _screening(res: CheckResult) -> list[str]:
     return out
 
 
-def _verdict(res: CheckResult) -> str:
-    v, rk, floor = res.verdict, res.ranking, res.noise.rms_mm
+def _verdict(res: CheckResult) -> list[str]:
+    """The verdict with its evidence in one line (and the finer model's fit command)."""
+    v, rk = res.verdict_info, res.ranking
     if v is None:
-        return ("verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
-                if rk is not None else "verdict: none (no cross-validation)")
-    if v == "consistent":
-        return (f"verdict: consistent: the calibration explains these points down to the noise "
-                f"(cross-validated {rk.base_cv_rms_mm / floor:.2f} x the floor)")
-    if v == "missing-effect":
-        names = ", ".join(c.name for c in rk.selected)
-        return (f"verdict: missing effect: {names} explain(s) the residual down to the noise "
-                f"({rk.final_cv_rms_mm / floor:.2f} x the floor with them)")
-    part = (f"; the suggestions explain part of it ({rk.final_cv_rms_mm / floor:.2f} x the floor with them)"
-            if rk.selected else "")
-    return (f"verdict: unexplained: the residual stays {rk.base_cv_rms_mm / floor:.2f} x the noise floor and "
-            f"no effect in the catalogue explains it{part}; the physics is not known to the model "
-            "(see where it fails; an empirical correction is the last resort)")
+        return ["verdict: none (no noise floor to compare with: give --sigma or measure repeated points)"
+                if rk is not None else "verdict: none (no cross-validation)"]
+    out = [f"verdict: {v.name}: {v.evidence}"]
+    if v.details.get("finer_command"):
+        out.append(f"  refit with the finer model: {v.details['finer_command']}")
+    return out
 
 
 def _where(res: CheckResult) -> list[str]:

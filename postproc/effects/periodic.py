@@ -25,12 +25,12 @@ from postproc.errors import CalibrationError
 
 # Shortest pitch searched: ball screws on machine tools have leads of 2 mm and more.
 PITCH_MIN_MM = 2.0
-# Longest pitch searched, as a fraction of the travel: a period longer than half the
-# travel is not periodic in the data, it is a straightness/scale shape ...
-PITCH_MAX_TRAVEL_FRACTION = 0.5
-# ... and never longer than this: machine-tool ball screws have leads up to ~40 mm;
-# longer waves are guideway or scale shapes, not a screw's turn.
-PITCH_MAX_MM = 50.0
+# Longest pitch searched, as a fraction of the travel: three periods at least, so that a
+# period is told from a straightness or scale shape (one or two humps over the travel,
+# which the bow/S-shape effects and the base model hold). Ball screws of long-travel and
+# fast axes have leads of 40-80 mm, rack-and-pinion and scale errors longer still: the
+# search is bounded by the travel, not by a typical lead.
+PITCH_MAX_TRAVEL_FRACTION = 1.0 / 3.0
 # Frequency grid oversampling over the natural resolution 1/travel: 3 points per
 # peak width so the peak is not missed between grid frequencies ...
 PERIODOGRAM_OVERSAMPLING = 3
@@ -60,7 +60,7 @@ def search_frequencies(x: np.ndarray) -> np.ndarray:
         regular = np.std(steps) < REGULAR_STEP_SPREAD * step
         if regular:
             f_max = min(f_max, 0.5 / step)
-    f_min = 1.0 / min(PITCH_MAX_TRAVEL_FRACTION * travel, PITCH_MAX_MM)
+    f_min = 1.0 / (PITCH_MAX_TRAVEL_FRACTION * travel) if travel > 0 else np.inf
     if f_max <= f_min:
         return np.zeros(0)
     n = int(np.ceil((f_max - f_min) * travel * PERIODOGRAM_OVERSAMPLING)) + 1

@@ -1,0 +1,89 @@
+"""Verdicts judged on held-out data, random and spatial splits, each naming its cause with
+its evidence in one line (issue 30, item 5). Campaigns from the virtual machine
+(postproc.diagnose.vm); errors outside the catalogue are written here, never with a
+candidate effect's own formula."""
+
+import numpy as np
+
+from postproc.diagnose import vm
+from postproc.diagnose.refit import fit_with_effects
+from postproc.diagnose.text import format_report
+from postproc.diagnose.verdict import CONSISTENT_RATIO
+
+VERDICTS = {"consistent", "missing-effect", "model-too-stiff", "campaign-limited", "unexplained"}
+
+
+def verdict_line(res) -> str:
+    (line,) = [ln for ln in format_report(res) if ln.startswith("verdict: ")]
+    assert "\n" not in line
+    return line
+
+
+def test_clean_campaign_is_consistent_with_its_evidence():
+    res = vm.check_campaign(vm.campaign("planes", 21), offer_empirical=False)
+    assert res.verdict == "consistent"
+    v = res.verdict_info
+    assert v.random_ratio <= CONSISTENT_RATIO
+    assert v.spatial_ratio <= CONSISTENT_RATIO
+    line = verdict_line(res)
+    assert "random folds" in line
+    assert "slabs" in line
+    assert res.to_json()["verdict_evidence"] == v.evidence
+
+
+def test_missing_effect_names_it_and_holds_on_held_out_slabs():
+    mach = vm.machine_with([{"name": "backlash:X", "params": {"b_mm": 0.012}}])
+    res = vm.check_campaign(vm.campaign("random", 22, machine=mach), offer_empirical=False)
+    assert res.verdict == "missing-effect"
+    assert res.verdict_info.details["effects"] == ["backlash:X"]
+    assert verdict_line(res).startswith("verdict: missing-effect: backlash:X: held-out RMS with them")
+
+
+def test_local_bump_fitted_as_a_global_shape_fails():
+    """A 15 um bump on a fifth of the X travel: random folds accept a whole-travel shape,
+    slabs held out do not."""
+    def bump(q, r, ctx):
+        out = np.zeros_like(q)
+        out[:, 0] = 0.015 * np.exp(-0.5 * ((q[:, 0] - 240.0) / 20.0) ** 2)
+        return out
+    res = vm.check_campaign(vm.campaign("random", 319, n=90, extra=bump), offer_empirical=False)
+    assert res.verdict == "unexplained", verdict_line(res)
+    v = res.verdict_info
+    assert v.spatial_ratio > CONSISTENT_RATIO
+    assert v.spatial_ratio > v.random_ratio
+    assert "held out" in v.evidence
+
+
+def test_per_visit_scatter_is_campaign_limited():
+    res = vm.check_campaign(vm.campaign("random", 23, visit_sigma_mm=0.004), offer_empirical=False)
+    assert res.verdict == "campaign-limited", verdict_line(res)
+    assert "spatially white" in res.verdict_info.evidence
+    assert res.verdict_info.details["cause"] == "repeatability"
+
+
+def test_load_times_position_is_not_passed_as_load_plus_a_fixed_shape():
+    """A sag growing with load and with X: load plus a fixed shape fits the loads it saw and
+    misses the load step held out."""
+    def sag(q, r, ctx):
+        out = np.zeros_like(q)
+        out[:, 2] = -1e-4 * ctx["load"] * q[:, 0] / 315.0
+        return out
+
+    def load(t, rng):
+        return np.repeat([0.0, 250.0, 500.0], -(-len(t) // 3))[:len(t)][rng.permutation(len(t))]
+    res = vm.check_campaign(vm.campaign("logged", 24, context={"load": load}, extra=sag), offer_empirical=False)
+    assert res.verdict not in ("consistent", "missing-effect"), verdict_line(res)
+    assert "load levels" in res.verdict_info.evidence
+
+
+def test_stiff_static_model_is_model_too_stiff():
+    """A static calibration of the S500-like machine (bows of 0.1 mm): a finer model of the
+    same family, the static terms as functions of position, explains the points."""
+    from postproc.calfile import calibration_from_dict, calibration_to_dict
+
+    meas = vm.campaign("random", 25, n=120)
+    fitted = fit_with_effects("static", [meas], [])
+    cal = calibration_from_dict(calibration_to_dict(fitted.engine, name="st", fit=fitted.info), path="st.json")
+    res = vm.check_campaign(meas, cal, fixed=False, max_selected=1, offer_empirical=False)
+    assert res.verdict == "model-too-stiff", verdict_line(res)
+    assert "parametric" in res.verdict_info.details["finer_model"]
