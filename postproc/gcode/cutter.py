@@ -51,10 +51,12 @@ BOUND_STEP_MM = 2.0
 # ... and at most this many per move (a long straight move of a smooth calibration needs no more).
 BOUND_MAX_SAMPLES = 64
 
-# dialects whose controller reads D on G41/G42 as a tool number (LinuxCNC, Mach3), the others
-# as an offset register (Fanuc, Haas)
-_D_IS_TOOL = {"generic", "linuxcnc", "mach3"}
-_LINUXCNC_LIKE = {"generic", "linuxcnc", "mach3"}
+
+
+def _linuxcnc_rules(it: Interpreter) -> bool:
+    """The dialect's controller reads D on G41/G42 as a tool number and follows LinuxCNC's
+    rules (LinuxCNC, Mach3, generic); else D is an offset register (Fanuc, Haas)."""
+    return it.d.cutter_comp == "d-tool"
 
 
 class CutterBoundError(SafetyError):
@@ -94,7 +96,7 @@ def _err(it: Interpreter, cls: type, msg: str, lineno: int, col: int, hint: str 
 
 
 def _controller(it: Interpreter) -> str:
-    return "LinuxCNC" if it.dialect in ("generic", "linuxcnc") else it.dialect.capitalize()
+    return it.d.comp_controller or it.d.title
 
 
 def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> tuple[float, str]:
@@ -102,7 +104,7 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
     st = it.state
     radii = getattr(it.setup, "tool_radii", None) or {}
     if key in (411, 421):
-        if it.dialect not in _LINUXCNC_LIKE:
+        if not _linuxcnc_rules(it):
             raise _err(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} (LinuxCNC's dynamic cutter compensation) "
                        f"in the {it.dialect} dialect", lineno, col)
         if "D" not in vals:
@@ -117,7 +119,7 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
         raise _err(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} requires D word to be a whole number", lineno, col,
                    hint=f"{_controller(it)} refuses it: D names a tool (LinuxCNC) or an offset register")
     tool: int | None
-    if it.dialect in _D_IS_TOOL:
+    if _linuxcnc_rules(it):
         # LinuxCNC: D names a tool; without it, the tool in the spindle (none: radius 0)
         tool = int(vals["D"][0]) if "D" in vals else st.spindle_tool
         if not tool:
@@ -189,16 +191,17 @@ def switch(it: Interpreter, b, gcodes: list) -> None:
         if on:  # the radius stays for the exit move
             st.comp, st.comp_edge = 400, "exit"
         return
-    if it.dialect == "grbl":
-        raise _err(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} cutter radius compensation (Grbl has none)",
-                   lineno, col)
-    if on and it.dialect in _LINUXCNC_LIKE:
+    if it.d.cutter_comp == "none":
+        raise _err(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} cutter radius compensation ({it.d.title}: "
+                   "none, or its rules are not modelled)", lineno, col,
+                   hint="post the tool-centre path (compensation done in CAM) for this controller")
+    if on and _linuxcnc_rules(it):
         raise _err(it, GcodeSyntaxError, "Cannot turn cutter radius comp on when on", lineno, col,
                    hint="LinuxCNC refuses it: G40 before turning it on again")
     if st.plane == 190 or 190 in keys:
         raise _err(it, UnsupportedGcodeError, "Cutter radius compensation allowed only in XY, XZ planes",
                    lineno, col)
-    if st.plane == 180 and it.dialect not in _LINUXCNC_LIKE:
+    if st.plane == 180 and not _linuxcnc_rules(it):
         raise _err(it, UnsupportedGcodeError, f"cutter radius compensation in the XZ plane (G18) on {ctrl}",
                    lineno, col, hint="postproc reads G18 compensation as LinuxCNC does only")
     radius, source = radius_of(it, key, b.vals, lineno, col)
@@ -219,7 +222,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
     rho = st.comp_radius
     arc = mv.arc
     in_plane = math.hypot(mv.q1[a1] - mv.q0[a1], mv.q1[a2] - mv.q0[a2])
-    if edge and arc is None and in_plane == 0.0 and it.dialect not in _LINUXCNC_LIKE:
+    if edge and arc is None and in_plane == 0.0 and not _linuxcnc_rules(it):
         # a move along the normal axis alone (a plunge): Fanuc and Haas start up (or cancel)
         # on the next move in the plane; LinuxCNC takes it as the entry move (refused: not
         # longer than the radius) or the exit move
@@ -229,7 +232,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
     if edge == "entry":
         st.comp_edge = ""
         mv.stays = True
-        if arc is not None and it.dialect not in _LINUXCNC_LIKE:
+        if arc is not None and not _linuxcnc_rules(it):
             raise _err(it, UnsupportedGcodeError, f"arc as the start-up move of cutter compensation on {ctrl}",
                        lineno, col, hint="alarm PS0034 (no circular interpolation in the start-up or exit "
                                          "block): the lead-in must be G0 or G1")
@@ -248,7 +251,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
         st.comp_edge = ""
         mv.stays = True
         if arc is not None:
-            if it.dialect in _LINUXCNC_LIKE:
+            if _linuxcnc_rules(it):
                 raise _err(it, GcodeSyntaxError,
                            "The move just after exiting cutter compensation mode must be straight, not an arc",
                            lineno, col, hint="LinuxCNC refuses it")
@@ -258,7 +261,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
         it.comp_moves.append(CompMove(mv, rho, st.comp_source, st.plane))
         st.comp_radius, st.comp_source = 0.0, ""
         return
-    elif arc is not None and st.comp != 400 and (st.plane == 170 or it.dialect not in _LINUXCNC_LIKE):
+    elif arc is not None and st.comp != 400 and (st.plane == 170 or not _linuxcnc_rules(it)):
         # (rs274 does not check an inside arc in the XZ plane: it draws it, and so do we)
         r_arc = math.hypot(mv.q0[a1] - arc.center[a1], mv.q0[a2] - arc.center[a2])
         left = st.comp in (410, 411)

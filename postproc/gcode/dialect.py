@@ -151,6 +151,11 @@ class Dialect:
     yields_to_headers: bool = False  # a program opening with another dialect's chosen_by lines is read in it
     marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
     refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
+    # cutter radius compensation (G41/G42): "d-tool" (D names a tool; LinuxCNC's entry, exit and
+    # plane rules), "d-register" (D names an offset register; no arc as the start-up or exit move,
+    # alarm PS0034) or "none" (the controller has none, or postproc does not model its rules)
+    cutter_comp: str = "d-tool"
+    comp_controller: str = ""  # the controller named in compensation messages ("": the title)
 
     def arc_end_radius_tolerance(self, r_start_mm: float, units: str | float = "mm") -> float:
         """Largest |r_end - r_start| (mm) this controller accepts on a centre-format arc.
@@ -232,7 +237,7 @@ DIALECTS: dict[str, Dialect] = {
         source="gcode.c (arc radius check), protocol.c/protocol.h LINE_BUFFER_SIZE, serial.h RX_BUFFER_SIZE; "
                "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals",
         # gcode.c: an arc with no axis words is STATUS_GCODE_NO_AXIS_WORDS
-        full_circle_without_end=False),
+        full_circle_without_end=False, cutter_comp="none"),
     "fanuc": Dialect(
         name="fanuc", title="Fanuc 0i/30i (ISO code)",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -247,7 +252,7 @@ DIALECTS: dict[str, Dialect] = {
                "code); parameter manual No. 3410",
         comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
         g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True,
-        turning_cycles=FANUC_TURNING_CYCLES),
+        turning_cycles=FANUC_TURNING_CYCLES, cutter_comp="d-register"),
     "haas": Dialect(
         name="haas", title="Haas NGC",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -259,7 +264,8 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="alarm 'Invalid I, J, K, or R in G02 or G03' beyond the tolerance",
         source="Haas mill operator's manual (comments, program format); tolerance assumed as Fanuc's",
         comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
-        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True),
+        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True,
+        cutter_comp="d-register"),
     "mach3": Dialect(
         name="mach3", title="Mach3",
         max_line_chars=LINUXCNC_LINELEN - 3, max_word_chars=None,
@@ -291,7 +297,8 @@ DIALECTS["generic"] = Dialect(
     source="the intersection of the others",
     # input is read as LinuxCNC (the reference interpreter) reads it, macro programs in the
     # syntax they are written in
-    reads_arcs_as="linuxcnc", off_plane_arc_offset="zero-ignored", macro_syntax="detect", m98_count_in_p=True,
+    reads_arcs_as="linuxcnc", cutter_comp="d-tool", comp_controller="LinuxCNC", off_plane_arc_offset="zero-ignored",
+    macro_syntax="detect", m98_count_in_p=True,
     yields_to_headers=True,
     turning_cycles=FANUC_TURNING_CYCLES)
 
@@ -342,7 +349,7 @@ SINUMERIK_ARC_ABS_MM = 0.01
 SINUMERIK_ARC_REL = 0.001
 _SINU_WHAT_INSTEAD = "post the machining as its moves (G1/G2/G3) instead of the cycle call"
 DIALECTS["sinumerik"] = Dialect(
-    name="sinumerik", title="Sinumerik 840D (Siemens)",
+    name="sinumerik", title="Sinumerik 840D (Siemens)", cutter_comp="none",
     max_line_chars=SINUMERIK_MAX_LINE, max_word_chars=None,
     uppercase_only=False, paren_comments=False, semicolon_comments=True,
     comment_forbidden="", nested_comments="not a comment: '(' belongs to expressions", ascii_only=True,
