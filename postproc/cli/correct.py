@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import DIALECT_CHOICE, setup_options
+from postproc.cli.options import DIALECT_CHOICE, FiniteFloat, setup_options
 
 # build_setup: re-exported for the flags files of tests/cases
 from postproc.cli.options import build_setup as build_setup
@@ -147,12 +147,12 @@ def _progress_printer(total_hint: str):
                    "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")
 @click.option("--no-expand", "no_expand", is_flag=True,
               help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")
-@click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
+@click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=FiniteFloat(min=1e-5),
               help="Largest distance (mm) between the emitted and the corrected ideal path.")
 @click.option("--decimals", default=None, type=click.IntRange(1, 8),
               help="Decimals of rewritten coordinates [default: 4 in mm, 5 in inch].")
 @click.option("--max-correction", "max_correction", default=DEFAULT_MAX_CORRECTION_MM, show_default=True,
-              type=click.FloatRange(min=0.0), help="Refuse any correction larger than this (mm).")
+              type=FiniteFloat(min=0.0), help="Refuse any correction larger than this (mm).")
 @click.option("--extrapolate", type=click.Choice(["refuse", "clamp", "linear"]), default="refuse",
               show_default=True, help="Targets outside the calibrated volume: refuse, or correct them with the "
                                       "correction at the nearest point inside (clamp) or the model as is (linear).")

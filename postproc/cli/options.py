@@ -22,13 +22,22 @@ _AXES = "XYZ"
 
 class FiniteFloat(click.FloatRange):
     """A float option that refuses nan and inf (click's float accepts them, and a
-    range check lets nan through); ``min``/``max`` as in :class:`click.FloatRange`."""
+    range check lets nan through); ``min``/``max`` as in :class:`click.FloatRange`.
+    Every float option of every command has this type (tests/test_cli_options.py walks them)."""
+
+    name = "number"
 
     def convert(self, value, param, ctx):
-        number = super().convert(value, param, ctx)
+        number = click.FLOAT.convert(value, param, ctx)
         if not math.isfinite(number):
             self.fail(f"{value!r} is not a finite number", param, ctx)
-        return number
+        return super().convert(number, param, ctx)
+
+    def _describe_range(self) -> str:
+        """The range in --help; none when unbounded (click would show ``x<=None``)."""
+        if self.min is None and self.max is None:
+            return ""
+        return super()._describe_range()
 
 
 #: use as ``type=FINITE_FLOAT`` for every float option

@@ -6,7 +6,7 @@ import json
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
+from postproc.cli.options import FiniteFloat, setup_options
 
 
 @click.command()
@@ -23,7 +23,7 @@ from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
 @setup_options
 @click.option("--tolerance", type=FiniteFloat(min=0, min_open=True), default=None, metavar="MM",
               help="Path tolerance of the in-process correction (default: the correct command's).")
-@click.option("--max-step", "max_step", type=FINITE_FLOAT, default=0.5, show_default=True, metavar="MM",
+@click.option("--max-step", "max_step", type=FiniteFloat(min=0, min_open=True), default=0.5, show_default=True, metavar="MM",
               help="Sampling step along the program's moves.")
 @click.option("--shots", type=click.IntRange(min=1), default=12, show_default=True,
               help="With --points: tracker shots averaged per point.")
