@@ -15,6 +15,8 @@ EXIT_INPUT = 3  # a G-code, measurement or table file cannot be read as given
 EXIT_CALIBRATION = 4  # a calibration file is malformed, in the wrong units or unfit
 EXIT_SAFETY = 5  # a safety rule refused the job (bound, volume, missing offset, twice)
 EXIT_NOT_HELD = 6  # predict --check: the predicted part does not hold its tolerance
+EXIT_DISK_FULL = 7  # no space left on a device (ENOSPC) for the output or a temporary file: nothing written
+# 128 + n: stopped by signal n (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), temporary files removed
 
 
 class PostprocError(Exception):
@@ -82,6 +84,13 @@ class OutputError(PostprocError):
     """An output file that cannot be written where it was asked for (nothing was written)."""
 
     exit_code = EXIT_USAGE
+
+
+class DiskFullError(OutputError):
+    """No space left on the device for the output or a temporary file (ENOSPC); nothing
+    was written (the temporary files were removed)."""
+
+    exit_code = EXIT_DISK_FULL
 
 
 class SafetyError(PostprocError):

@@ -6,6 +6,7 @@ command list is shown), so ``postproc correct`` does not pay for plotting or fit
 
 from __future__ import annotations
 
+import errno
 import importlib
 import os
 import sys
@@ -13,7 +14,7 @@ import sys
 import click
 
 from postproc import __version__
-from postproc.errors import EXIT_INTERNAL, PostprocError
+from postproc.errors import EXIT_DISK_FULL, EXIT_INTERNAL, PostprocError
 
 #: command name -> "module:attribute" (a click.Command)
 COMMANDS = {
@@ -82,27 +83,49 @@ class LazyGroup(click.Group):
         return getattr(importlib.import_module(module), attr)
 
     def invoke(self, ctx):
+        from postproc.cli.signals import exit_code, signal_name, stopping_cleanly
+
         try:
-            return super().invoke(ctx)
+            with stopping_cleanly():
+                return super().invoke(ctx)
         except PostprocError as exc:
             click.echo(f"postproc: error: {exc}", err=True)
             ctx.exit(exc.exit_code)
-        except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt):
+        except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP: the cleanup has run on the way here
+            click.echo(f"postproc: stopped by {signal_name(exc)}; no output file was written or left "
+                       "half-written", err=True)
+            ctx.exit(exit_code(exc))
+        except (click.exceptions.Exit, click.ClickException, click.Abort):
             raise
         except BrokenPipeError:
             # The reader went away (e.g. `| head`): not an error of ours.
             sys.stderr.close()
             ctx.exit(0)
+        except OSError as exc:
+            if exc.errno == errno.ENOSPC:
+                click.echo(f"postproc: error: {_disk_full(exc)}", err=True)
+                ctx.exit(EXIT_DISK_FULL)
+            _internal(ctx, exc)
         except Exception as exc:  # a bug: say so plainly, no traceback unless asked
-            if os.environ.get("POSTPROC_DEBUG"):
-                raise
-            click.echo(
-                f"postproc: internal error: {type(exc).__name__}: {exc}\n"
-                "  hint: this is a bug in postproc; rerun with POSTPROC_DEBUG=1 for the traceback "
-                "and report it. No output file was written.",
-                err=True,
-            )
-            ctx.exit(EXIT_INTERNAL)
+            _internal(ctx, exc)
+
+
+def _disk_full(exc: OSError) -> str:
+    where = f"{exc.filename}: " if exc.filename else ""
+    return (f"{where}disk full (no space left on the device): nothing was written\n"
+            "  hint: free some space, or write the output (-o) and temporary files (TMPDIR) elsewhere")
+
+
+def _internal(ctx, exc: Exception) -> None:
+    if os.environ.get("POSTPROC_DEBUG"):
+        raise exc
+    click.echo(
+        f"postproc: internal error: {type(exc).__name__}: {exc}\n"
+        "  hint: this is a bug in postproc; rerun with POSTPROC_DEBUG=1 for the traceback "
+        "and report it. No output file was written.",
+        err=True,
+    )
+    ctx.exit(EXIT_INTERNAL)
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})

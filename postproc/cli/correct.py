@@ -260,12 +260,24 @@ def _batch(jobs_list: list[dict], jobs: int) -> None:
     if jobs > 1 and total > 1:
         from concurrent.futures import as_completed
 
-        with ProcessPoolExecutor(max_workers=min(jobs, total)) as pool:
-            futures = {pool.submit(_run_one, j): k for k, j in enumerate(jobs_list)}
+        from postproc.cli.signals import run_guarded, worker_init
+
+        pool = ProcessPoolExecutor(max_workers=min(jobs, total), initializer=worker_init)
+        try:
+            futures = {pool.submit(run_guarded, _run_one, j): k for k, j in enumerate(jobs_list)}
             for done, fut in enumerate(as_completed(futures), start=1):
                 k = futures[fut]
                 results[k] = fut.result()
                 report(k, done, results[k])
+        except KeyboardInterrupt:
+            # stopped by a signal: each worker removes its temporary output and ends
+            # (postproc.cli.signals.run_guarded), the files not started are not
+            for process in list(getattr(pool, "_processes", {}).values()):
+                if process.is_alive():
+                    process.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown()
     else:
         for k, j in enumerate(jobs_list):
             results[k] = _run_one(j)
