@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from postproc.cli.options import DIALECT_CHOICE, setup_options
+from postproc.cli.options import program_setup_options
 
 # Moved blocks listed in the text report (all of them go into --json).
 LIST_MOVED = 15
@@ -19,15 +19,8 @@ LIST_MOVED = 15
 @click.argument("corrected", type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
 @click.option("--all", "show_all", is_flag=True, help="List every moved block, not only the largest.")
-@click.option("--dialect", default="generic", show_default=True,
-              type=DIALECT_CHOICE,
-              help="Controller the programs are for, as given to correct (how G53 in G91, comments "
-                   "and the like read).")
-@click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
-              help="Folder searched for o<name> call subroutine files, as given to correct (for a "
-                   "program corrected expanded; repeatable).")
-@setup_options(leave_out=("--context",))
-def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup):
+@program_setup_options(leave_out=("--context",))
+def diff(original, corrected, as_json, show_all, reading, setup):
     """Compare a program with its corrected version.
 
     Reports which blocks moved and by how much (end points, mm, machine axes), the
@@ -41,7 +34,9 @@ def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup
 
     A program corrected expanded (subprograms, loops and macros written out, as
     its header says) is compared with its original read expanded the same way;
-    blocks are then numbered by their source lines.
+    blocks are then numbered by their source lines. Give --dialect,
+    --subroutine-path and --cycles as given to correct (the header's record of
+    expanded cycles is used when it has one).
 
     Example:
 
@@ -63,8 +58,8 @@ def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup
         # the text report lists the largest moved blocks only: keep just those (memory
         # then does not grow with the program); --all and --json list every one
         keep = None if (as_json or show_all) else LIST_MOVED
-        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, dialect=dialect.lower(),
-                               subroutine_path=subroutine_path)
+        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, dialect=reading.dialect,
+                               subroutine_path=reading.subroutine_path, cycles=reading.cycles)
     finally:
         if progress is not None:
             click.echo("", err=True)
