@@ -174,7 +174,7 @@ def test_point_files_without_rows(tmp_path, command):
                      "--machine", MACHINE)
     else:
         result = run("orders", "-c", ROOT / "calibrations" / "s500_parametric.json", "--points", points)
-    assert_user_error(result, 3, f"{points}:2: no ")
+    assert_user_error(result, 3, f"{points}:2:1: no ")
 
 
 def test_kfb_from_a_thickness_file_without_rows(tmp_path):
@@ -182,7 +182,7 @@ def test_kfb_from_a_thickness_file_without_rows(tmp_path):
     semi.write_text("# units: length=mm\nB,Z,T\n")
     out = tmp_path / "kfb.csv"
     result = run("mirror", "kfb", semi, "--t-ref", "2", "--allowance", "0.3", "--origin", "3,100", "-o", out)
-    assert_user_error(result, 3, f"{semi}:2: no thickness rows")
+    assert_user_error(result, 3, f"{semi}:2:1: no thickness rows")
     assert not out.exists()
 
 

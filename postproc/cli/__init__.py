@@ -89,7 +89,7 @@ class LazyGroup(click.Group):
             with stopping_cleanly():
                 return super().invoke(ctx)
         except PostprocError as exc:
-            click.echo(f"postproc: error: {exc}", err=True)
+            click.echo(f"postproc: error: {exc.with_column()}", err=True)
             ctx.exit(exc.exit_code)
         except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP: the cleanup has run on the way here
             click.echo(f"postproc: stopped by {signal_name(exc)}; no output file was written or left "

@@ -72,7 +72,7 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
                            calibration_name=cal.name, calibration_sha256=cal.sha256)
         return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
     except PostprocError as exc:
-        return "", str(exc), exc.exit_code
+        return "", str(exc.with_column()), exc.exit_code
     except Exception as exc:  # a bug: name it for this file and go on with the others
         from postproc.errors import EXIT_INTERNAL
 
@@ -308,8 +308,9 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
                     shutil.copyfileobj(fh, out)
                     out.flush()
     except PostprocError as exc:
-        if src == "-":
-            exc.path = "<stdin>" if exc.path and exc.path.endswith("stdin.nc") else exc.path
+        if src == "-" and exc.path and exc.path.endswith("stdin.nc"):
+            exc.with_column()  # while the copy of the program is there to read
+            exc.path = "<stdin>"
         raise
     finally:
         if tmpdir:

@@ -159,20 +159,32 @@ def read_tool_table(path: str) -> dict[int, float]:
     except OSError as exc:
         raise PostprocError(f"cannot read tool table: {exc.strerror}", path=path) from None
     for lineno, raw in enumerate(text.splitlines(), start=1):
-        body = raw.split(";", 1)[0].strip()
-        if not body:
+        body = raw.split(";", 1)[0]
+        if not body.strip():
             continue
         fields = {}
-        for item in body.split():
+        for m in re.finditer(r"\S+", body):
+            item = m.group()
             letter, value = item[:1].upper(), item[1:]
             try:
-                fields[letter] = float(value)
+                number = float(value)
             except ValueError:
+                number = None
+            if number is None or not letter.isalpha():
                 raise PostprocError(f"tool table field {item!r} is not a letter and a number",
-                                    path=path, lineno=lineno) from None
+                                    path=path, lineno=lineno, col=m.start() + 1)
+            if not math.isfinite(number):
+                raise PostprocError(f"tool table field {item!r} is not a finite number",
+                                    path=path, lineno=lineno, col=m.start() + 1)
+            fields[letter] = number
         if "T" not in fields:
-            raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
-        lengths[int(fields["T"])] = fields.get("Z", 0.0)
+            raise PostprocError("tool table line without a T word", path=path, lineno=lineno,
+                                col=len(body) - len(body.lstrip()) + 1)
+        tool = fields["T"]
+        if tool != int(tool) or tool < 0:
+            raise PostprocError(f"tool number T{tool:g} is not a whole number of 0 or more", path=path,
+                                lineno=lineno, col=body.upper().index("T") + 1)
+        lengths[int(tool)] = fields.get("Z", 0.0)
     return lengths
 
 
