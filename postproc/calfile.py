@@ -50,6 +50,11 @@ class Calibration:
         return self.engine.method
 
 
+#: Largest number a calibration's model or effects may hold: 1 km in mm, a billion
+#: iterations or cells. Anything larger is corrupt, and overflows the model's arithmetic.
+MAX_MODEL_NUMBER = 1e9
+
+
 def _check_finite(obj, path: str, where: str = "model") -> None:
     """Every number in the model must be finite: NaN or inf in a calibration is corrupt."""
     if isinstance(obj, dict):
@@ -60,6 +65,9 @@ def _check_finite(obj, path: str, where: str = "model") -> None:
             _check_finite(v, path, f"{where}[{i}]")
     elif isinstance(obj, float) and not math.isfinite(obj):
         raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+    elif isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
+        raise CalibrationError(f"{where} is {obj:.6g}: beyond any length (mm), angle (rad) or count a "
+                               f"calibration holds (at most {MAX_MODEL_NUMBER:g} in size)", path=path)
 
 
 def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) -> dict:
@@ -106,6 +114,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
     _check_finite(data["model"], path or "", "model")
+    _check_finite(data.get("effects") or [], path or "", "effects")
     if not isinstance(data["method"], str):
         raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
     try:
@@ -138,6 +147,13 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
     )
 
 
+def _json_limit(exc: Exception) -> str:
+    """What a JSON text the parser could not take holds (the parser's own limits)."""
+    if isinstance(exc, RecursionError):
+        return "arrays or objects nested too deeply"
+    return str(exc).split(";")[0]
+
+
 def load_calibration(path) -> Calibration:
     path = str(path)
     try:
@@ -158,6 +174,8 @@ def load_calibration(path) -> Calibration:
                 hint=f"make a calibration from it first: postproc fit {path} -o CAL.json, then give -c CAL.json",
             ) from None
         raise CalibrationError(f"calibration is not valid JSON: {exc.msg}", path=path, lineno=exc.lineno, col=exc.colno) from None
+    except (ValueError, RecursionError) as exc:  # a number of over 4300 digits; nesting deeper than Python's stack
+        raise CalibrationError(f"calibration is not JSON postproc can read: {_json_limit(exc)}", path=path) from None
     return calibration_from_dict(data, path=path, sha256=sha)
 
 

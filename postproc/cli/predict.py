@@ -7,7 +7,7 @@ import json
 import click
 import numpy as np
 
-from postproc.cli.options import FINITE_FLOAT, parse_context, parse_vector
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, parse_context, parse_vector
 
 
 def _use_agg() -> None:
@@ -56,7 +56,7 @@ def predict() -> None:
 
 @predict.command()
 @click.argument("operation", type=click.Path(exists=True, dir_okay=False))
-@click.option("--runout", "runout", type=FINITE_FLOAT, default=None, metavar="RAD",
+@click.option("--runout", "runout", type=FiniteFloat(min=0), default=None, metavar="RAD",
               help="Spindle runout: angular amplitude A (rad). Default: the operation's value.")
 @click.option("--heights", type=int, default=None, help="Number of edge heights sampled (default: the operation's).")
 @click.option("--windows", type=int, default=40, show_default=True, help="Cutting windows (edge passes) sampled.")
