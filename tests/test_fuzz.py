@@ -15,6 +15,7 @@ unbounded loops and huge repeat counts are the iteration limits' test, not this 
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import re
@@ -67,8 +68,35 @@ def check(result, program: Path | None = None) -> None:
                 assert m["col"] is not None, f"no column: {out}"
 
 
+#: address space a fuzzed run may add to this process: a run that would take more fails
+#: with MemoryError (an internal error, reported) instead of pushing a shared machine
+#: into its out-of-memory killer
+RUN_MEMORY_BYTES = 3 << 30
+
+
+@contextlib.contextmanager
+def bounded_memory():
+    try:
+        import resource
+
+        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+        used = int(Path("/proc/self/statm").read_text().split()[0]) * resource.getpagesize()
+    except (ImportError, OSError, ValueError):
+        yield
+        return
+    limit = used + RUN_MEMORY_BYTES
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
 def run(*args, stdin=None):
-    return CliRunner().invoke(main, [str(a) for a in args], input=stdin)
+    with bounded_memory():
+        return CliRunner().invoke(main, [str(a) for a in args], input=stdin)
 
 
 # -- programs ------------------------------------------------------------------------
