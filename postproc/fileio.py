@@ -119,9 +119,9 @@ def disk_full(exc: OSError, target) -> DiskFullError | None:
     (disk full, exit :data:`postproc.errors.EXIT_DISK_FULL`); None for any other error."""
     if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
         return None
-    err = DiskFullError("disk full (no space left on the device): nothing was written", path=str(target),
-                        hint="free some space, or write the output (-o) and temporary files (TMPDIR) elsewhere")
-    return err
+    return DiskFullError("disk full (no space left on the device): nothing was written",
+                         path=str(target) if target is not None else None,
+                         hint="free some space, or write the output (-o) and temporary files (TMPDIR) elsewhere")
 
 
 def _cannot_write(target: Path, exc: OSError) -> OutputError:

@@ -6,7 +6,6 @@ command list is shown), so ``postproc correct`` does not pay for plotting or fit
 
 from __future__ import annotations
 
-import errno
 import importlib
 import os
 import sys
@@ -14,7 +13,7 @@ import sys
 import click
 
 from postproc import __version__
-from postproc.errors import EXIT_DISK_FULL, EXIT_INTERNAL, PostprocError
+from postproc.errors import EXIT_INTERNAL, PostprocError
 
 #: command name -> "module:attribute" (a click.Command)
 COMMANDS = {
@@ -92,8 +91,8 @@ class LazyGroup(click.Group):
             click.echo(f"postproc: error: {exc.with_column()}", err=True)
             ctx.exit(exc.exit_code)
         except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP: the cleanup has run on the way here
-            click.echo(f"postproc: stopped by {signal_name(exc)}; no output file was written or left "
-                       "half-written", err=True)
+            click.echo(f"postproc: stopped by {signal_name(exc)}; temporary files removed, no output file "
+                       "left half-written", err=True)
             ctx.exit(exit_code(exc))
         except (click.exceptions.Exit, click.ClickException, click.Abort):
             raise
@@ -101,19 +100,16 @@ class LazyGroup(click.Group):
             # The reader went away (e.g. `| head`): not an error of ours.
             sys.stderr.close()
             ctx.exit(0)
-        except OSError as exc:
-            if exc.errno == errno.ENOSPC:
-                click.echo(f"postproc: error: {_disk_full(exc)}", err=True)
-                ctx.exit(EXIT_DISK_FULL)
-            _internal(ctx, exc)
+        except OSError as exc:  # disk full where no writer named its file (stdout, a flush)
+            from postproc.fileio import disk_full
+
+            full = disk_full(exc, exc.filename)
+            if full is None:
+                _internal(ctx, exc)
+            click.echo(f"postproc: error: {full}", err=True)
+            ctx.exit(full.exit_code)
         except Exception as exc:  # a bug: say so plainly, no traceback unless asked
             _internal(ctx, exc)
-
-
-def _disk_full(exc: OSError) -> str:
-    where = f"{exc.filename}: " if exc.filename else ""
-    return (f"{where}disk full (no space left on the device): nothing was written\n"
-            "  hint: free some space, or write the output (-o) and temporary files (TMPDIR) elsewhere")
 
 
 def _internal(ctx, exc: Exception) -> None:
