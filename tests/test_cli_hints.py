@@ -150,3 +150,13 @@ def test_options_named_with_their_command_are_theirs():
             assert any(flag in options(n) for n in names), f"{path.relative_to(ROOT)}: {m.group()!r}"
             found += 1
     assert found > 5
+
+
+@pytest.mark.parametrize("extra", [["--dialect", "fanuc"], ["--cycles", "expand"], ["--tolerance", "0.01"],
+                                   ["--extrapolate", "clamp"], ["--no-expand"]])
+def test_verify_points_refuses_program_options_it_would_not_use(extra):
+    result = CliRunner().invoke(main, ["verify", "--points", str(ROOT / "samples" / "s500_control_points.csv"),
+                                       "-c", str(ROOT / "calibrations" / "s500_static.json"),
+                                       "--machine", str(ROOT / "calibrations" / "s500.machine.json"), *extra])
+    assert result.exit_code == 2, result.output
+    assert f"--points runs no program: {extra[0]} would not be used" in result.output

@@ -314,6 +314,8 @@ class Reading:
 
 
 #: How the program is read, in the order listed: flag -> (field of :class:`Reading`, click.option arguments).
+#: A new option of how programs are read (e.g. --var) is one entry here and one field of
+#: :class:`Reading`; correct, verify, diff and mirror pockets then all take it.
 PROGRAM_OPTIONS: dict[str, tuple[str, dict]] = {
     "--dialect": ("dialect", dict(
         default="generic", show_default=True, type=DIALECT_CHOICE,

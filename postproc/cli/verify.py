@@ -71,6 +71,7 @@ def verify(program, calibrations, machine_path, points, corrected, reading, setu
     if points is not None:
         if program is not None or corrected is not None:
             raise click.UsageError("give either PROGRAM or --points, not both")
+        _refuse_program_options_with_points(click.get_current_context())
         _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json)
         return
 
@@ -142,6 +143,16 @@ def _load_machine(path: str):
 
 def _label(cal) -> str:
     return f"{cal.method} ({cal.name})" if cal.name and cal.name != cal.method else cal.method
+
+
+def _refuse_program_options_with_points(ctx) -> None:
+    """--points runs no program: the options of how a program is read and corrected would not be used."""
+    from postproc.cli.options import CORRECTION_OPTIONS, PROGRAM_OPTIONS
+
+    given = [flag for flag, (name, _attrs) in {**PROGRAM_OPTIONS, **CORRECTION_OPTIONS}.items()
+             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE]
+    if given:
+        raise click.UsageError(f"--points runs no program: {', '.join(given)} would not be used; drop it")
 
 
 def _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json) -> None:
