@@ -129,3 +129,15 @@ def test_a_calibrated_volume_of_100_m_is_taken():
     from postproc.engine.identity import IdentityEngine
 
     assert IdentityEngine([[-1e5] * 3, [1e5] * 3]).volume_mm[1, 0] == 1e5
+
+
+@pytest.mark.parametrize("line", ["G0 X١٢ Y10 Z10", "G0 X[١+1] Y10 Z10", "#1=١\nG0 X#1 Y10 Z10",
+                                  "N١ G0 X1 Y10 Z10"])
+def test_digits_of_other_scripts_are_refused_not_read_as_numbers(tmp_path, line):
+    """rs274 refuses 'X١٢' (bad number format); Python's \\d and str.isdigit() took it as 12."""
+    src = tmp_path / "u.nc"
+    src.write_text(f"G21 G90\n{line}\nM2\n", encoding="utf-8")
+    result = run("correct", src, "-c", STATIC, "--offset", "G54=X100,Y100,Z100", "-o", tmp_path / "o.nc")
+    assert result.exit_code == 3, result.output
+    assert PLACE.search(result.output), result.output
+    assert not (tmp_path / "o.nc").exists()
