@@ -26,6 +26,7 @@ from pathlib import Path
 
 from postproc import __version__
 from postproc.calibration.sniff import sniff
+from postproc.constants import MAX_VOLUME_MM
 from postproc.engine.base import Engine
 from postproc.engine.registry import engine_class
 from postproc.errors import CalibrationError, MeasurementError
@@ -129,6 +130,12 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         raise CalibrationError(
             f"malformed {data['method']} model: {type(exc).__name__}: {exc}", path=path
         ) from None
+    vol = engine.volume_mm
+    if any(abs(v) > MAX_VOLUME_MM for corner in vol.tolist() for v in corner):
+        raise CalibrationError(
+            f"calibrated volume {vol.tolist()} mm reaches beyond {MAX_VOLUME_MM / 1000:g} m: no machine "
+            "is that large, and such a volume switches the outside-volume check off", path=path,
+            hint="volume_mm holds the measured travel in mm (a volume in um, or 1e308, is a mistake)")
     effects = data.get("effects") or []
     if effects:
         from postproc.effects import compose  # only calibrations with effects need them

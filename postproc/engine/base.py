@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from postproc.constants import MAX_VOLUME_MM, VOLUME_EDGE_SLACK_MM
+from postproc.constants import VOLUME_EDGE_SLACK_MM
 from postproc.errors import CalibrationError, PostprocError
 
 Context = Mapping[str, Any]
@@ -83,11 +83,6 @@ class Engine(ABC):
             raise CalibrationError(
                 f"calibrated volume must be [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {vol.tolist()}"
             )
-        if np.any(np.abs(vol) > MAX_VOLUME_MM):
-            raise CalibrationError(
-                f"calibrated volume {vol.tolist()} mm reaches beyond {MAX_VOLUME_MM / 1000:g} m: no machine "
-                "is that large, and such a volume switches the outside-volume check off",
-                hint="volume_mm holds the measured travel in mm (a volume in um, or 1e308, is a mistake)")
         self.volume_mm = vol
 
     # -- what the correction pipeline asks of every engine (defaults here) ---------------
