@@ -56,16 +56,18 @@ class Calibration:
 MAX_MODEL_NUMBER = 1e9
 
 
-def _check_finite(obj, path: str, where: str = "model") -> None:
-    """Every number in the model must be finite: NaN or inf in a calibration is corrupt."""
+def _check_finite(obj, path: str, where: str = "model", *, finite: bool = True) -> None:
+    """Every number in the model must be finite (NaN or inf in a calibration is corrupt;
+    ``finite=False``: left to the caller) and at most :data:`MAX_MODEL_NUMBER` in size."""
     if isinstance(obj, dict):
         for k, v in obj.items():
-            _check_finite(v, path, f"{where}.{k}")
+            _check_finite(v, path, f"{where}.{k}", finite=finite)
     elif isinstance(obj, list):
         for i, v in enumerate(obj):
-            _check_finite(v, path, f"{where}[{i}]")
+            _check_finite(v, path, f"{where}[{i}]", finite=finite)
     elif isinstance(obj, float) and not math.isfinite(obj):
-        raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+        if finite:  # (effects name their own non-finite values, with the effect)
+            raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
     elif isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
         raise CalibrationError(f"{where} is {obj:.6g}: beyond any length (mm), angle (rad) or count a "
                                f"calibration holds (at most {MAX_MODEL_NUMBER:g} in size)", path=path)
@@ -115,7 +117,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
     _check_finite(data["model"], path or "", "model")
-    _check_finite(data.get("effects") or [], path or "", "effects")
+    _check_finite(data.get("effects") or [], path or "", "effects", finite=False)
     if not isinstance(data["method"], str):
         raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
     try:
