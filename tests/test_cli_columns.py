@@ -141,3 +141,11 @@ def test_digits_of_other_scripts_are_refused_not_read_as_numbers(tmp_path, line)
     assert result.exit_code == 3, result.output
     assert PLACE.search(result.output), result.output
     assert not (tmp_path / "o.nc").exists()
+
+
+def test_a_number_too_large_for_a_float_is_refused_at_its_word(tmp_path):
+    src = tmp_path / "huge.nc"
+    src.write_text("G21 G90\nG0 X" + "9" * 400 + " Y10 Z10 (a comment: read word by word)\nM2\n")
+    result = run("correct", src, "-c", STATIC, "--offset", "G54=X100,Y100,Z100", "-o", tmp_path / "o.nc")
+    assert result.exit_code == 3, result.output
+    assert f"{src}:2:4: word X999999999999... (400 characters): the number is too large" in result.output

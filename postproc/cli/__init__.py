@@ -9,7 +9,6 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-import warnings
 
 import click
 
@@ -86,11 +85,7 @@ class LazyGroup(click.Group):
         from postproc.cli.signals import exit_code, signal_name, stopping_cleanly
 
         try:
-            with stopping_cleanly(), warnings.catch_warnings():
-                # a numpy RuntimeWarning (overflow, invalid value) means a number the input
-                # checks let through: stop there (an internal error, nothing written) rather
-                # than print the warning and go on computing with inf or nan
-                warnings.simplefilter("error", RuntimeWarning)
+            with stopping_cleanly():
                 return super().invoke(ctx)
         except PostprocError as exc:
             click.echo(f"postproc: error: {exc.with_column()}", err=True)
