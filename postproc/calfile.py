@@ -26,6 +26,7 @@ from pathlib import Path
 
 from postproc import __version__
 from postproc.calibration.sniff import sniff
+from postproc.constants import MAX_VOLUME_MM
 from postproc.engine.base import Engine
 from postproc.engine.registry import engine_class
 from postproc.errors import CalibrationError, MeasurementError
@@ -50,16 +51,26 @@ class Calibration:
         return self.engine.method
 
 
-def _check_finite(obj, path: str, where: str = "model") -> None:
-    """Every number in the model must be finite: NaN or inf in a calibration is corrupt."""
+#: Largest number a calibration's model or effects may hold: 1 km in mm, a billion
+#: iterations or cells. Anything larger is corrupt, and overflows the model's arithmetic.
+MAX_MODEL_NUMBER = 1e9
+
+
+def _check_finite(obj, path: str, where: str = "model", *, finite: bool = True) -> None:
+    """Every number in the model must be finite (NaN or inf in a calibration is corrupt;
+    ``finite=False``: left to the caller) and at most :data:`MAX_MODEL_NUMBER` in size."""
     if isinstance(obj, dict):
         for k, v in obj.items():
-            _check_finite(v, path, f"{where}.{k}")
+            _check_finite(v, path, f"{where}.{k}", finite=finite)
     elif isinstance(obj, list):
         for i, v in enumerate(obj):
-            _check_finite(v, path, f"{where}[{i}]")
+            _check_finite(v, path, f"{where}[{i}]", finite=finite)
     elif isinstance(obj, float) and not math.isfinite(obj):
-        raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+        if finite:  # (effects name their own non-finite values, with the effect)
+            raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+    elif isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
+        raise CalibrationError(f"{where} is {obj:.6g}: beyond any length (mm), angle (rad) or count a "
+                               f"calibration holds (at most {MAX_MODEL_NUMBER:g} in size)", path=path)
 
 
 def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) -> dict:
@@ -106,6 +117,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
     _check_finite(data["model"], path or "", "model")
+    _check_finite(data.get("effects") or [], path or "", "effects", finite=False)
     if not isinstance(data["method"], str):
         raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
     try:
@@ -120,6 +132,12 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         raise CalibrationError(
             f"malformed {data['method']} model: {type(exc).__name__}: {exc}", path=path
         ) from None
+    vol = engine.volume_mm
+    if any(abs(v) > MAX_VOLUME_MM for corner in vol.tolist() for v in corner):
+        raise CalibrationError(
+            f"calibrated volume {vol.tolist()} mm reaches beyond {MAX_VOLUME_MM / 1000:g} m: no machine "
+            "is that large, and such a volume switches the outside-volume check off", path=path,
+            hint="volume_mm holds the measured travel in mm (a volume in um, or 1e308, is a mistake)")
     effects = data.get("effects") or []
     if effects:
         from postproc.effects import compose  # only calibrations with effects need them
@@ -136,6 +154,13 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         effects=effects,
         fit=data.get("fit") or {},
     )
+
+
+def _json_limit(exc: Exception) -> str:
+    """What a JSON text the parser could not take holds (the parser's own limits)."""
+    if isinstance(exc, RecursionError):
+        return "arrays or objects nested too deeply"
+    return str(exc).split(";")[0]
 
 
 def load_calibration(path) -> Calibration:
@@ -158,6 +183,8 @@ def load_calibration(path) -> Calibration:
                 hint=f"make a calibration from it first: postproc fit {path} -o CAL.json, then give -c CAL.json",
             ) from None
         raise CalibrationError(f"calibration is not valid JSON: {exc.msg}", path=path, lineno=exc.lineno, col=exc.colno) from None
+    except (ValueError, RecursionError) as exc:  # a number of over 4300 digits; nesting deeper than Python's stack
+        raise CalibrationError(f"calibration is not JSON postproc can read: {_json_limit(exc)}", path=path) from None
     return calibration_from_dict(data, path=path, sha256=sha)
 
 

@@ -24,4 +24,9 @@ ARC_RADIUS_REL = 0.001
 # re-read from text with rounding is still inside.
 VOLUME_EDGE_SLACK_MM = 1e-6
 
+# Largest coordinate a calibrated volume may reach (100 m). The largest machine tools
+# (gantry mills, ship-propeller lathes) travel some tens of metres; a volume beyond this
+# is a unit mistake or a way of switching the outside-volume check off (1e308).
+MAX_VOLUME_MM = 100_000.0
+
 MM_PER_INCH = 25.4

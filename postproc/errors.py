@@ -15,6 +15,8 @@ EXIT_INPUT = 3  # a G-code, measurement or table file cannot be read as given
 EXIT_CALIBRATION = 4  # a calibration file is malformed, in the wrong units or unfit
 EXIT_SAFETY = 5  # a safety rule refused the job (bound, volume, missing offset, twice)
 EXIT_NOT_HELD = 6  # predict --check: the predicted part does not hold its tolerance
+EXIT_DISK_FULL = 7  # no space left on a device (ENOSPC) for the output or a temporary file: nothing written
+# 128 + n: stopped by signal n (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), temporary files removed
 
 
 class PostprocError(Exception):
@@ -49,6 +51,15 @@ class PostprocError(Exception):
         head = f"{self.place}: {self.message}" if self.place else self.message
         return f"{head}\n  hint: {self.hint}" if self.hint else head
 
+    def with_column(self, source: str | None = None):
+        """Fill in the column of an error that names a line but no column: the first
+        character of that line that is not blank (a refusal about a whole block or row
+        points at its start). ``source``: the file to read the line from, when it is not
+        ``path`` (a piped program's copy). Nothing is read when the column is known."""
+        if self.col is None and self.lineno is not None and (source or self.path):
+            self.col = first_column(source or self.path, self.lineno)
+        return self
+
     def at(self, path: str | None = None, lineno: int | None = None, col: int | None = None):
         """Fill in a place that was not known where the error was raised."""
         if self.path is None and path is not None:
@@ -58,6 +69,20 @@ class PostprocError(Exception):
         if self.col is None and col is not None:
             self.col = col
         return self
+
+
+def first_column(path: str, lineno: int) -> int | None:
+    """1-based column of the first non-blank character of line ``lineno`` of the file at
+    ``path`` (1 for a blank line); None when the file or the line cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            for n, line in enumerate(fh, start=1):
+                if n == lineno:
+                    body = line.rstrip(b"\r\n")
+                    return len(body) - len(body.lstrip(b" \t")) + 1 if body.strip() else 1
+    except (OSError, TypeError, ValueError):
+        return None
+    return None
 
 
 class GcodeSyntaxError(PostprocError):
@@ -82,6 +107,13 @@ class OutputError(PostprocError):
     """An output file that cannot be written where it was asked for (nothing was written)."""
 
     exit_code = EXIT_USAGE
+
+
+class DiskFullError(OutputError):
+    """No space left on the device for the output or a temporary file (ENOSPC); nothing
+    was written (the temporary files were removed)."""
+
+    exit_code = EXIT_DISK_FULL
 
 
 class SafetyError(PostprocError):

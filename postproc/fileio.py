@@ -12,6 +12,7 @@ postproc goes through :func:`output_path`:
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import stat
@@ -20,7 +21,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from postproc.errors import EXIT_USAGE, OutputError, PostprocError
+from postproc.errors import EXIT_USAGE, DiskFullError, OutputError, PostprocError
 
 
 def output_mode(path: Path) -> int:
@@ -60,12 +61,24 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bo
                           hint="give a file name")
     if st is not None and not stat.S_ISREG(st.st_mode):
         if not stage_special:
-            yield str(target)  # a device, pipe or socket: never replaced by a file
+            try:
+                yield str(target)  # a device, pipe or socket: never replaced by a file
+            except OSError as exc:
+                full = disk_full(exc, target)
+                if full is None:
+                    raise
+                raise full from None
             return
         fd, tmp = tempfile.mkstemp(prefix="postproc-", suffix=suffix)
         os.close(fd)
         try:
-            yield tmp
+            try:
+                yield tmp
+            except OSError as exc:
+                full = disk_full(exc, target)
+                if full is None:
+                    raise
+                raise full from None
             try:
                 with open(tmp, "rb") as src, open(target, "wb") as dst:
                     shutil.copyfileobj(src, dst)
@@ -80,7 +93,13 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bo
         raise _cannot_write(real, exc) from None
     os.close(fd)
     try:
-        yield tmp
+        try:
+            yield tmp
+        except OSError as exc:
+            full = disk_full(exc, target)
+            if full is None:
+                raise
+            raise full from None
         os.chmod(tmp, output_mode(real))
         try:
             os.replace(tmp, real)
@@ -95,8 +114,21 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bo
 atomic_path = output_path
 
 
+def disk_full(exc: OSError, target) -> DiskFullError | None:
+    """The error to raise for ``exc`` met while writing ``target``, when it is ENOSPC
+    (disk full, exit :data:`postproc.errors.EXIT_DISK_FULL`); None for any other error."""
+    if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+        return None
+    return DiskFullError("disk full (no space left on the device): nothing was written",
+                         path=str(target) if target is not None else None,
+                         hint="free some space, or write the output (-o) and temporary files (TMPDIR) elsewhere")
+
+
 def _cannot_write(target: Path, exc: OSError) -> OutputError:
     """The error for an output that cannot be created where it was asked for."""
+    full = disk_full(exc, target)
+    if full is not None:
+        return full
     if not target.parent.is_dir():
         return OutputError(f"cannot write the output: directory {str(target.parent)!r} does not exist",
                            path=str(target), hint="create the directory first, or give another output path")

@@ -4,6 +4,7 @@ a non-zero exit code, no traceback and no output file left behind."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -173,7 +174,7 @@ def test_point_files_without_rows(tmp_path, command):
                      "--machine", MACHINE)
     else:
         result = run("orders", "-c", ROOT / "calibrations" / "s500_parametric.json", "--points", points)
-    assert_user_error(result, 3, f"{points}:2: no ")
+    assert_user_error(result, 3, f"{points}:2:1: no ")
 
 
 def test_kfb_from_a_thickness_file_without_rows(tmp_path):
@@ -181,7 +182,7 @@ def test_kfb_from_a_thickness_file_without_rows(tmp_path):
     semi.write_text("# units: length=mm\nB,Z,T\n")
     out = tmp_path / "kfb.csv"
     result = run("mirror", "kfb", semi, "--t-ref", "2", "--allowance", "0.3", "--origin", "3,100", "-o", out)
-    assert_user_error(result, 3, f"{semi}:2: no thickness rows")
+    assert_user_error(result, 3, f"{semi}:2:1: no thickness rows")
     assert not out.exists()
 
 
@@ -275,3 +276,68 @@ def test_operation_sub_objects_of_the_wrong_type(tmp_path, command, source, key)
     op.write_text(json.dumps(data))
     result = run("predict", command, op)
     assert_user_error(result, 3, f'{op}: operation: "{key}" must be an object')
+
+
+# Disk full (ENOSPC): its own exit code, one line, nothing left behind
+
+
+def _runs_writing_to(out):
+    return {
+        "correct": ["correct", ROOT / "samples" / "pocket.nc", "-c", ROOT / "calibrations" / "s500_static.json",
+                    "-o", out],
+        "fit": ["fit", WALKTHROUGH, "-o", out],
+        "simulate": ["simulate", MACHINE, "--random", "5", "-o", out],
+    }
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+@pytest.mark.parametrize("command", ["correct", "fit", "simulate"])
+def test_disk_full_has_its_own_exit_code(command):
+    from postproc.errors import EXIT_DISK_FULL
+
+    result = run(*_runs_writing_to("/dev/full")[command])
+    assert_user_error(result, EXIT_DISK_FULL, "/dev/full: disk full")
+
+
+@pytest.mark.parametrize("command", ["correct", "fit"])
+def test_disk_full_while_writing_leaves_no_temporary_file(tmp_path, monkeypatch, command):
+    """A regular output on a full disk: the temporary file beside it is removed."""
+    import builtins
+    import errno
+
+    from postproc.errors import EXIT_DISK_FULL
+
+    real_open = open
+
+    def full_open(file, mode="r", *args, **kwargs):
+        fh = real_open(file, mode, *args, **kwargs)
+        if "w" in mode and str(file).startswith(str(tmp_path)):
+            def write(_text):
+                raise OSError(errno.ENOSPC, "No space left on device")
+            fh.write = write
+        return fh
+
+    monkeypatch.setattr(builtins, "open", full_open)
+    out = tmp_path / "out.txt"
+    result = run(*_runs_writing_to(out)[command])
+    monkeypatch.undo()
+    assert_user_error(result, EXIT_DISK_FULL, "disk full")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_disk_full_writing_to_stdout():
+    import subprocess
+    import sys
+
+    from postproc.errors import EXIT_DISK_FULL
+
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-m", "postproc", "correct", str(ROOT / "samples" / "pocket.nc"), "-c",
+                               str(ROOT / "calibrations" / "s500_static.json"), "-o", "-"],
+                              stdout=full, stderr=subprocess.PIPE, text=True, env={**os.environ,
+                                                                                  "PYTHONPATH": str(ROOT)})
+    assert proc.returncode == EXIT_DISK_FULL, proc.stderr
+    assert proc.stderr.startswith("postproc: error: "), proc.stderr
+    assert "disk full" in proc.stderr
+    assert "Traceback" not in proc.stderr

@@ -217,15 +217,15 @@ def test_map_refusal_names_the_program_file_and_line(tmp_path):
     out = tmp_path / "o.nc"
     r = invoke(["correct", prog, "-c", ROOT / "tests" / "cases" / "demo_static.json", "--map", small, "-o", out])
     assert r.exit_code == EXIT_SAFETY
-    assert f"error: {prog}:4: program point X=" in r.output
+    assert f"error: {prog}:4:1: program point X=" in r.output
     assert "outside the correction map small" in r.output
     assert not out.exists()
     # the same through -j with several files
     outdir = tmp_path / "outdir"
     r = invoke(["correct", prog, ROOT / "samples" / "pocket.nc", "-c", ROOT / "tests" / "cases" / "demo_static.json",
                 "--map", small, "--output-dir", outdir, "-j", "1"])
-    assert f"refused   {prog}:4: program point X=" in r.output
-    assert f"refused (exit {EXIT_SAFETY}) {prog}:4: program point X=" in r.output
+    assert f"refused   {prog}:4:1: program point X=" in r.output
+    assert f"refused (exit {EXIT_SAFETY}) {prog}:4:1: program point X=" in r.output
 
 
 class IndexOnlyMap:

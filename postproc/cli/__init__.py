@@ -82,27 +82,46 @@ class LazyGroup(click.Group):
         return getattr(importlib.import_module(module), attr)
 
     def invoke(self, ctx):
+        from postproc.cli.signals import exit_code, signal_name, stopping_cleanly
+
         try:
-            return super().invoke(ctx)
+            with stopping_cleanly():
+                return super().invoke(ctx)
         except PostprocError as exc:
-            click.echo(f"postproc: error: {exc}", err=True)
+            click.echo(f"postproc: error: {exc.with_column()}", err=True)
             ctx.exit(exc.exit_code)
-        except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt):
+        except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP: the cleanup has run on the way here
+            click.echo(f"postproc: stopped by {signal_name(exc)}; temporary files removed, no output file "
+                       "left half-written", err=True)
+            ctx.exit(exit_code(exc))
+        except (click.exceptions.Exit, click.ClickException, click.Abort):
             raise
         except BrokenPipeError:
             # The reader went away (e.g. `| head`): not an error of ours.
             sys.stderr.close()
             ctx.exit(0)
+        except OSError as exc:  # disk full where no writer named its file (stdout, a flush)
+            from postproc.fileio import disk_full
+
+            full = disk_full(exc, exc.filename)
+            if full is None:
+                _internal(ctx, exc)
+            click.echo(f"postproc: error: {full}", err=True)
+            ctx.exit(full.exit_code)
         except Exception as exc:  # a bug: say so plainly, no traceback unless asked
-            if os.environ.get("POSTPROC_DEBUG"):
-                raise
-            click.echo(
-                f"postproc: internal error: {type(exc).__name__}: {exc}\n"
-                "  hint: this is a bug in postproc; rerun with POSTPROC_DEBUG=1 for the traceback "
-                "and report it. No output file was written.",
-                err=True,
-            )
-            ctx.exit(EXIT_INTERNAL)
+            _internal(ctx, exc)
+
+
+def _internal(ctx, exc: Exception) -> None:
+    if os.environ.get("POSTPROC_DEBUG"):
+        raise exc
+    click.echo(
+        f"postproc: internal error: {type(exc).__name__}: {exc}\n"
+        "  hint: this is a bug in postproc; rerun with POSTPROC_DEBUG=1 for the traceback "
+        "and report it. No output file was written.",
+        err=True,
+    )
+    ctx.exit(EXIT_INTERNAL)
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})

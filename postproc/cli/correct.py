@@ -11,11 +11,9 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import DIALECT_CHOICE, setup_options
-
 # build_setup: re-exported for the flags files of tests/cases
 from postproc.cli.options import build_setup as build_setup
-from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
+from postproc.cli.options import correction_options, program_setup_options
 from postproc.errors import PostprocError
 
 # Files larger than this get a progress line on stderr (when stderr is a terminal).
@@ -80,7 +78,7 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
                            calibration_name=cal.name, calibration_sha256=cal.sha256)
         return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
     except PostprocError as exc:
-        return "", str(exc), exc.exit_code
+        return "", str(exc.with_column()), exc.exit_code
     except Exception as exc:  # a bug: name it for this file and go on with the others
         from postproc.errors import EXIT_INTERNAL
 
@@ -140,33 +138,11 @@ def _progress_printer(total_hint: str):
                    "16,000 when the calibration's moves are sampled): cut into parts corrected in up to "
                    "this many processes "
                    "[default: one per core], with the output of one process; -j 1 keeps it in one.")
-@click.option("--dialect", default="generic", show_default=True,
-              type=DIALECT_CHOICE,
-              help="Controller the output is for: its line length, comments, case and arc rule. "
-                   "generic is what all of them accept.")
-@setup_options
-@click.option("--cycles", type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
-              help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
-                   "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")
-@click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
-              help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "
-                   "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")
-@click.option("--no-expand", "no_expand", is_flag=True,
-              help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")
-@click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
-              help="Largest distance (mm) between the emitted and the corrected ideal path.")
-@click.option("--decimals", default=None, type=click.IntRange(1, 8),
-              help="Decimals of rewritten coordinates [default: 4 in mm, 5 in inch].")
-@click.option("--max-correction", "max_correction", default=DEFAULT_MAX_CORRECTION_MM, show_default=True,
-              type=click.FloatRange(min=0.0), help="Refuse any correction larger than this (mm).")
-@click.option("--extrapolate", type=click.Choice(["refuse", "clamp", "linear"]), default="refuse",
-              show_default=True, help="Targets outside the calibrated volume: refuse, or correct them with the "
-                                      "correction at the nearest point inside (clamp) or the model as is (linear).")
-@click.option("--force", is_flag=True, help="Correct a program that already carries a postproc header.")
+@program_setup_options
+@correction_options
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
-def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subroutine_path, no_expand, tolerance,
-            decimals, max_correction, extrapolate, force, maps, dialect):
+def correct(inputs, calibration, output, output_dir, jobs, reading, setup, correcting, maps):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -217,9 +193,7 @@ def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subrou
         raise click.UsageError("give -o or --output-dir, not both")
     if "-" in inputs and len(inputs) > 1:
         raise click.UsageError("'-' (stdin) can only be the only input")
-    options = {"tolerance_mm": tolerance, "decimals": decimals, "max_correction_mm": max_correction,
-               "extrapolate": extrapolate, "force": force, "cycles": cycles,
-               "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
+    options = {**correcting, **reading.correct_options()}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         processes = jobs if jobs is not None else _cores()
         _single(inputs[0], output or "-", calibration, setup, {**options, "processes": processes}, maps)
@@ -266,12 +240,24 @@ def _batch(jobs_list: list[dict], jobs: int) -> None:
     if jobs > 1 and total > 1:
         from concurrent.futures import as_completed
 
-        with ProcessPoolExecutor(max_workers=min(jobs, total)) as pool:
-            futures = {pool.submit(_run_one, j): k for k, j in enumerate(jobs_list)}
+        from postproc.cli.signals import run_guarded, worker_init
+
+        pool = ProcessPoolExecutor(max_workers=min(jobs, total), initializer=worker_init)
+        try:
+            futures = {pool.submit(run_guarded, _run_one, j): k for k, j in enumerate(jobs_list)}
             for done, fut in enumerate(as_completed(futures), start=1):
                 k = futures[fut]
                 results[k] = fut.result()
                 report(k, done, results[k])
+        except KeyboardInterrupt:
+            # stopped by a signal: each worker removes its temporary output and ends
+            # (postproc.cli.signals.run_guarded), the files not started are not
+            for process in list(getattr(pool, "_processes", {}).values()):
+                if process.is_alive():
+                    process.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown()
     else:
         for k, j in enumerate(jobs_list):
             results[k] = _run_one(j)
@@ -330,8 +316,9 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
                     shutil.copyfileobj(fh, out)
                     out.flush()
     except PostprocError as exc:
-        if src == "-":
-            exc.path = "<stdin>" if exc.path and exc.path.endswith("stdin.nc") else exc.path
+        if src == "-" and exc.path and exc.path.endswith("stdin.nc"):
+            exc.with_column()  # while the copy of the program is there to read
+            exc.path = "<stdin>"
         raise
     finally:
         if tmpdir:

@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from postproc.cli.options import DIALECT_CHOICE, setup_options
+from postproc.cli.options import CORRECTION_OPTIONS, correction_options, program_setup_options
 
 # Moved blocks listed in the text report (all of them go into --json).
 LIST_MOVED = 15
@@ -19,15 +19,9 @@ LIST_MOVED = 15
 @click.argument("corrected", type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
 @click.option("--all", "show_all", is_flag=True, help="List every moved block, not only the largest.")
-@click.option("--dialect", default="generic", show_default=True,
-              type=DIALECT_CHOICE,
-              help="Controller the programs are for, as given to correct (how G53 in G91, comments "
-                   "and the like read).")
-@click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
-              help="Folder searched for o<name> call subroutine files, as given to correct (for a "
-                   "program corrected expanded; repeatable).")
-@setup_options(leave_out=("--context",))
-def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup):
+@program_setup_options(leave_out=("--context",))
+@correction_options(leave_out=tuple(flag for flag in CORRECTION_OPTIONS if flag != "--max-correction"))
+def diff(original, corrected, as_json, show_all, reading, setup, correcting):
     """Compare a program with its corrected version.
 
     Reports which blocks moved and by how much (end points, mm, machine axes), the
@@ -41,7 +35,11 @@ def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup
 
     A program corrected expanded (subprograms, loops and macros written out, as
     its header says) is compared with its original read expanded the same way;
-    blocks are then numbered by their source lines.
+    blocks are then numbered by their source lines. A block moved by more than
+    --max-correction is named after the report and the exit code is 5, as
+    correct would have refused it. Give --dialect,
+    --subroutine-path and --cycles as given to correct (the header's record of
+    expanded cycles is used when it has one).
 
     Example:
 
@@ -66,13 +64,14 @@ def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup
         from postproc.gcode.recognise import dialect_of_file
 
         rep = compare_programs(original, corrected, setup, progress=progress, keep=keep,
-                               dialect=dialect_of_file(original, dialect.lower()),
-                               subroutine_path=subroutine_path)
+                               dialect=dialect_of_file(original, reading.dialect.lower()),
+                               subroutine_path=reading.subroutine_path, cycles=reading.cycles)
     finally:
         if progress is not None:
             click.echo("", err=True)
     if as_json:
         click.echo(json.dumps(rep.to_dict(), indent=2))
+        _check_largest(rep, correcting["max_correction_mm"])
         return
     stats = rep.axis_stats()
     click.echo(f"{rep.original} -> {rep.corrected}")
@@ -92,3 +91,18 @@ def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup
             dx, dy, dz = (d * 1000 for d in m.delta_mm)
             click.echo(f"    line {m.lineno:>6} -> {m.lineno_corrected:>6}: dX {dx:+8.2f} dY {dy:+8.2f} "
                        f"dZ {dz:+8.2f} um  |d| {m.size_mm * 1000:.2f} um")
+    _check_largest(rep, correcting["max_correction_mm"])
+
+
+def _check_largest(rep, max_correction_mm: float) -> None:
+    """Refuse (exit 5, after the report) a comparison whose largest move exceeds the bound."""
+    from postproc.errors import CorrectionTooLargeError
+
+    largest = rep.largest(1)
+    if largest and largest[0].size_mm > max_correction_mm:
+        m = largest[0]
+        raise CorrectionTooLargeError(
+            f"block moved by {m.size_mm:.4f} mm (line {m.lineno} of {rep.original}), more than --max-correction "
+            f"{max_correction_mm:g} mm", path=rep.corrected, lineno=m.lineno_corrected, col=1,
+            hint="a correction this large suggests wrong units or a wrong calibration; give --max-correction "
+                 "to allow it")

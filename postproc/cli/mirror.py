@@ -7,7 +7,12 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
+from postproc.cli.options import (
+    FINITE_FLOAT,
+    FiniteFloat,
+    correction_options,
+    program_setup_options,
+)
 from postproc.errors import PostprocError
 
 
@@ -152,13 +157,12 @@ def kfb(semi, t_ref, allowance, origin, thinner, smooth, output):
               help="Average each K_fb node with its neighbours along B (odd N nodes per row); 1 = none.")
 @click.option("--clamp", is_flag=True, help="Hold the edge value for program points outside a map "
                                             "(default: refuse).")
-@setup_options
-@click.option("--max-correction", "max_correction", type=FINITE_FLOAT, default=1.0, show_default=True, metavar="MM",
-              help="Refuse a program whose total correction (geometric + maps + allowance) exceeds this.")
+@program_setup_options
+@correction_options
 @click.option("-o", "--output-dir", "outdir", required=True, type=click.Path(file_okay=False),
               help="Directory for the programs and maps of the next pocket.")
-def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, smooth, clamp, setup,
-            max_correction, outdir):
+def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thinner, smooth, clamp, reading, setup,
+            correcting, outdir):
     """Pocket-to-pocket self-tuning: which correction each pocket gets (formulas 7-11).
 
     PLAN is a CSV '# postproc mirror plan v1' with columns pocket,B0,Z0,semi,finish
@@ -212,7 +216,7 @@ def pockets(plan, calibration, template, t_ref, band, allowance, kdist_path, thi
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     try:
-        summary = _correct_program(template, calibration, setup, corr, target, max_correction)
+        summary = _correct_program(template, calibration, setup, corr, target, reading, correcting)
     except BaseException:
         if created and not any(out.iterdir()):
             out.rmdir()  # leave nothing behind: the directory was made for this job
@@ -233,7 +237,7 @@ def _save_parts(corr, out: Path, name: str) -> None:
             click.echo(f"wrote {target}")
 
 
-def _correct_program(template, calibration, setup, corr, target: Path, max_correction: float) -> str:
+def _correct_program(template, calibration, setup, corr, target: Path, reading, correcting: dict) -> str:
     """Correct the template with the calibration, ``corr`` added; write ``target`` atomically."""
     from postproc.calfile import load_calibration
     from postproc.gcode.path import program_path
@@ -242,12 +246,12 @@ def _correct_program(template, calibration, setup, corr, target: Path, max_corre
     cal = load_calibration(calibration)
     # Evaluate the maps on the program's points first, so that a point outside a map
     # is refused naming its line in the template.
-    pp = program_path(template, setup)
+    pp = program_path(template, setup, dialect=reading.dialect, subroutine_path=reading.subroutine_path)
     try:
         corr.delta(pp.points_mm, {**pp.context, "lineno": pp.lineno})
     except PostprocError as exc:
         raise exc.at(path=str(template)) from None
-    options = CorrectOptions(added=[corr], max_correction_mm=max_correction)
+    options = CorrectOptions(added=[corr], **correcting, **reading.correct_options())
     report = correct_file(template, target, cal.engine, setup, options, calibration_name=cal.name,
                           calibration_sha256=cal.sha256)
     return (f"{report.moves} moves, {report.words_changed} words changed, "

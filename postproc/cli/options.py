@@ -1,5 +1,7 @@
 """Parsers for option values shared by several commands (they raise click.BadParameter),
-and the options declared once for every command that runs a program (:func:`setup_options`)."""
+and the options declared once for every command that runs a program: how the machine is
+set up (:func:`setup_options`) and how the program is read (:func:`program_options`);
+:func:`program_setup_options` declares both, for correct, verify and diff."""
 
 from __future__ import annotations
 
@@ -7,10 +9,12 @@ import contextlib
 import functools
 import math
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
 
+from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
 from postproc.errors import PostprocError
 from postproc.gcode.dialect import DIALECT_NAMES
 
@@ -22,13 +26,22 @@ _AXES = "XYZ"
 
 class FiniteFloat(click.FloatRange):
     """A float option that refuses nan and inf (click's float accepts them, and a
-    range check lets nan through); ``min``/``max`` as in :class:`click.FloatRange`."""
+    range check lets nan through); ``min``/``max`` as in :class:`click.FloatRange`.
+    Every float option of every command has this type (tests/test_cli_options.py walks them)."""
+
+    name = "number"
 
     def convert(self, value, param, ctx):
-        number = super().convert(value, param, ctx)
+        number = click.FLOAT.convert(value, param, ctx)
         if not math.isfinite(number):
             self.fail(f"{value!r} is not a finite number", param, ctx)
-        return number
+        return super().convert(number, param, ctx)
+
+    def _describe_range(self) -> str:
+        """The range in --help; none when unbounded (click would show ``x<=None``)."""
+        if self.min is None and self.max is None:
+            return ""
+        return super()._describe_range()
 
 
 #: use as ``type=FINITE_FLOAT`` for every float option
@@ -149,21 +162,33 @@ def read_tool_table(path: str, column: str = "Z") -> dict[int, float]:
     except OSError as exc:
         raise PostprocError(f"cannot read tool table: {exc.strerror}", path=path) from None
     for lineno, raw in enumerate(text.splitlines(), start=1):
-        body = raw.split(";", 1)[0].strip()
-        if not body:
+        body = raw.split(";", 1)[0]
+        if not body.strip():
             continue
         fields = {}
-        for item in body.split():
+        for m in re.finditer(r"\S+", body):
+            item = m.group()
             letter, value = item[:1].upper(), item[1:]
             try:
-                fields[letter] = float(value)
+                number = float(value)
             except ValueError:
+                number = None
+            if number is None or not letter.isalpha():
                 raise PostprocError(f"tool table field {item!r} is not a letter and a number",
-                                    path=path, lineno=lineno) from None
+                                    path=path, lineno=lineno, col=m.start() + 1)
+            if not math.isfinite(number):
+                raise PostprocError(f"tool table field {item!r} is not a finite number",
+                                    path=path, lineno=lineno, col=m.start() + 1)
+            fields[letter] = number
         if "T" not in fields:
-            raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
+            raise PostprocError("tool table line without a T word", path=path, lineno=lineno,
+                                col=len(body) - len(body.lstrip()) + 1)
+        tool = fields["T"]
+        if tool != int(tool) or tool < 0:
+            raise PostprocError(f"tool number T{tool:g} is not a whole number of 0 or more", path=path,
+                                lineno=lineno, col=body.upper().index("T") + 1)
         if column == "Z" or column in fields:
-            lengths[int(fields["T"])] = fields.get(column, 0.0)
+            lengths[int(tool)] = fields.get(column, 0.0)
     return lengths
 
 
@@ -320,3 +345,116 @@ def context_option(help: str | None = None):
     attrs = {**attrs, "help": help or attrs["help"]}
     return click.option("--context", name, callback=lambda ctx, param, value: dict(parse_context(c) for c in value),
                         **attrs)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """How a program is read, as :data:`PROGRAM_OPTIONS` give it: the controller's dialect,
+    canned cycles kept or expanded, the folders searched for subprogram files."""
+
+    dialect: str = "generic"
+    cycles: str = "keep"
+    subroutine_path: tuple[str, ...] = ()
+
+    def correct_options(self) -> dict:
+        """The :class:`postproc.gcode.pipeline.CorrectOptions` fields these set."""
+        return {"dialect": self.dialect, "cycles": self.cycles, "subroutine_path": self.subroutine_path}
+
+
+#: How the program is read, in the order listed: flag -> (field of :class:`Reading`, click.option arguments).
+#: A new option of how programs are read (e.g. --var) is one entry here and one field of
+#: :class:`Reading`; correct, verify, diff and mirror pockets then all take it.
+PROGRAM_OPTIONS: dict[str, tuple[str, dict]] = {
+    "--dialect": ("dialect", dict(
+        default="generic", show_default=True, type=DIALECT_CHOICE,
+        help="Controller the program is for: how it is read (comments, G53 in G91, macros, "
+             "program numbers) and written (line length, case, arc rule). generic is what all of them accept.")),
+    "--cycles": ("cycles", dict(
+        type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
+        help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
+             "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")),
+    "--subroutine-path": ("subroutine_path", dict(
+        multiple=True, type=click.Path(file_okay=False),
+        help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "
+             "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")),
+}
+
+
+def _declare(table: dict[str, tuple[str, dict]], argument: str, make, leave_out: tuple[str, ...]):
+    """A decorator declaring the options of ``table`` (less ``leave_out``) on a command and
+    passing it ``argument=make(**their values by field name)`` in their place."""
+    unknown = set(leave_out) - set(table)
+    if unknown:
+        raise ValueError(f"not among these options: {sorted(unknown)}")
+    chosen = [flag for flag in table if flag not in leave_out]
+
+    def decorate(fn):
+        @functools.wraps(fn)
+        def command(*args, **kwargs):
+            given = {table[flag][0]: kwargs.pop(table[flag][0]) for flag in chosen}
+            return fn(*args, **{argument: make(**given)}, **kwargs)
+
+        for flag in reversed(chosen):
+            name, attrs = table[flag]
+            command = click.option(flag, name, **attrs)(command)
+        return command
+
+    return decorate
+
+
+def _reading(**given) -> Reading:
+    if "dialect" in given:
+        given["dialect"] = given["dialect"].lower()
+    if "subroutine_path" in given:
+        given["subroutine_path"] = tuple(given["subroutine_path"])
+    return Reading(**given)
+
+
+def program_options(fn=None, *, leave_out: tuple[str, ...] = ()):
+    """Declare how the program is read (:data:`PROGRAM_OPTIONS`: dialect, canned cycles,
+    subroutine path) on a command, and pass the command one ``reading`` argument in their
+    place: a :class:`Reading`. ``leave_out``: flags that do not apply to the command."""
+    decorate = _declare(PROGRAM_OPTIONS, "reading", _reading, leave_out)
+    return decorate(fn) if fn is not None else decorate
+
+
+def program_setup_options(fn=None, *, leave_out: tuple[str, ...] = ()):
+    """:func:`program_options` and :func:`setup_options` together: the one declaration of
+    what correct, verify and diff are told about the program and the machine (they pass
+    the command ``reading`` and ``setup``). ``leave_out``: flags of either that do not apply."""
+    def decorate(fn):
+        fn = setup_options(leave_out=tuple(f for f in leave_out if f in SETUP_OPTIONS))(fn)
+        return program_options(leave_out=tuple(f for f in leave_out if f in PROGRAM_OPTIONS))(fn)
+
+    return decorate(fn) if fn is not None else decorate
+
+
+#: How a program is corrected (correct, and verify's in-process correction): flag -> (field of
+#: :class:`postproc.gcode.pipeline.CorrectOptions`, click.option arguments).
+CORRECTION_OPTIONS: dict[str, tuple[str, dict]] = {
+    "--no-expand": ("expand", dict(
+        is_flag=True, flag_value=False, default=True,
+        help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")),
+    "--tolerance": ("tolerance_mm", dict(
+        default=DEFAULT_TOLERANCE_MM, show_default=True, type=FiniteFloat(min=1e-5), metavar="MM",
+        help="Largest distance (mm) between the emitted and the corrected ideal path.")),
+    "--decimals": ("decimals", dict(
+        default=None, type=click.IntRange(1, 8),
+        help="Decimals of rewritten coordinates [default: 4 in mm, 5 in inch].")),
+    "--max-correction": ("max_correction_mm", dict(
+        default=DEFAULT_MAX_CORRECTION_MM, show_default=True, type=FiniteFloat(min=0.0), metavar="MM",
+        help="Refuse any correction larger than this (mm).")),
+    "--extrapolate": ("extrapolate", dict(
+        type=click.Choice(["refuse", "clamp", "linear"]), default="refuse", show_default=True,
+        help="Targets outside the calibrated volume: refuse, or correct them with the correction at the "
+             "nearest point inside (clamp) or the model as is (linear).")),
+    "--force": ("force", dict(is_flag=True, help="Correct a program that already carries a postproc header.")),
+}
+
+
+def correction_options(fn=None, *, leave_out: tuple[str, ...] = ()):
+    """Declare how a program is corrected (:data:`CORRECTION_OPTIONS`) on a command, and pass
+    the command one ``correcting`` argument in their place: the dict of the
+    :class:`postproc.gcode.pipeline.CorrectOptions` fields they give."""
+    decorate = _declare(CORRECTION_OPTIONS, "correcting", dict, leave_out)
+    return decorate(fn) if fn is not None else decorate

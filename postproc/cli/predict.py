@@ -7,7 +7,7 @@ import json
 import click
 import numpy as np
 
-from postproc.cli.options import FINITE_FLOAT, parse_context, parse_vector
+from postproc.cli.options import FINITE_FLOAT, FiniteFloat, parse_context, parse_vector
 
 
 def _use_agg() -> None:
@@ -38,6 +38,10 @@ def _fmt_um(mm: float) -> str:
     return f"{mm * 1e3:8.3f} um"
 
 
+#: most edge heights x cutting windows predict trace samples: 3x the default of the sample
+#: operation (161 x 40, about 10 s); time grows in proportion (161 x 620 ran over 200 s, 1 GB)
+TRACE_MAX_SAMPLES = 20_000
+
 @click.group()
 def predict() -> None:
     """Predict machined surfaces and feature errors from a machine chain.
@@ -56,10 +60,12 @@ def predict() -> None:
 
 @predict.command()
 @click.argument("operation", type=click.Path(exists=True, dir_okay=False))
-@click.option("--runout", "runout", type=FINITE_FLOAT, default=None, metavar="RAD",
+@click.option("--runout", "runout", type=FiniteFloat(min=0), default=None, metavar="RAD",
               help="Spindle runout: angular amplitude A (rad). Default: the operation's value.")
-@click.option("--heights", type=int, default=None, help="Number of edge heights sampled (default: the operation's).")
-@click.option("--windows", type=int, default=40, show_default=True, help="Cutting windows (edge passes) sampled.")
+@click.option("--heights", type=click.IntRange(2, TRACE_MAX_SAMPLES // 5), default=None,
+              help="Number of edge heights sampled (default: the operation's).")
+@click.option("--windows", type=click.IntRange(5, TRACE_MAX_SAMPLES // 2), default=40, show_default=True,
+              help=f"Cutting windows (edge passes) sampled; heights x windows at most {TRACE_MAX_SAMPLES:,}.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write colour maps of the wall without and with runout to this PNG.")
 @click.option("--plot-trace", "plot_trace", type=click.Path(dir_okay=False), default=None,
@@ -94,6 +100,10 @@ def trace(operation, runout, heights, windows, plot, plot_trace, as_json):
     n_h = heights or prm["heights"]
     if n_h < 2 or windows < 5:
         raise click.BadParameter("need at least 2 heights and 5 windows")
+    if n_h * windows > TRACE_MAX_SAMPLES:
+        raise click.BadParameter(f"{n_h} heights x {windows} windows = {n_h * windows:,} is more than "
+                                 f"{TRACE_MAX_SAMPLES:,} (the time grows with it); give fewer",
+                                 param_hint="--heights/--windows")
     top = cutter.length_mm if cutter.kind != "ball" else cutter.d_mm / 2
     p = np.linspace(0.0, top, n_h)
     kw = {"rpm": prm["rpm"], "feed_mm_min": prm["feed_mm_min"], "heights_mm": p, "windows": windows,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, FiniteFloat, context_option, parse_vector
+from postproc.cli.options import FiniteFloat, context_option, parse_vector
 
 
 def _parse_volume(text: str) -> list[list[float]]:
@@ -35,7 +35,7 @@ def _parse_floats(text: str, what: str) -> list[float]:
               help="The static method's six points: two per axis (low corner and each axis end).")
 @click.option("--tables", "tables", is_flag=True,
               help="Interferometer axis error tables; the squareness goes to OUTPUT_squareness.csv.")
-@click.option("--step", "step", type=FINITE_FLOAT, default=5.0, show_default=True, metavar="MM",
+@click.option("--step", "step", type=FiniteFloat(min=0, min_open=True), default=5.0, show_default=True, metavar="MM",
               help="Position step of the interferometer tables.")
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
               help="File to write (formats.md CSV), written atomically.")

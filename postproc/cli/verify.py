@@ -6,7 +6,7 @@ import json
 
 import click
 
-from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
+from postproc.cli.options import FiniteFloat, correction_options, program_setup_options
 
 
 @click.command()
@@ -20,10 +20,9 @@ from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
               help="Control points CSV (X,Y,Z targets): print a Table-1 style report instead.")
 @click.option("--corrected", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Already corrected program to run instead of correcting PROGRAM in-process.")
-@setup_options
-@click.option("--tolerance", type=FiniteFloat(min=0, min_open=True), default=None, metavar="MM",
-              help="Path tolerance of the in-process correction (default: the correct command's).")
-@click.option("--max-step", "max_step", type=FINITE_FLOAT, default=0.5, show_default=True, metavar="MM",
+@program_setup_options
+@correction_options
+@click.option("--max-step", "max_step", type=FiniteFloat(min=0, min_open=True), default=0.5, show_default=True, metavar="MM",
               help="Sampling step along the program's moves.")
 @click.option("--shots", type=click.IntRange(min=1), default=12, show_default=True,
               help="With --points: tracker shots averaged per point.")
@@ -32,7 +31,7 @@ from postproc.cli.options import FINITE_FLOAT, FiniteFloat, setup_options
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="PNG of the deviation along the program (needs matplotlib).")
-def verify(program, calibrations, machine_path, points, corrected, setup, tolerance, max_step, shots, seed,
+def verify(program, calibrations, machine_path, points, corrected, reading, setup, correcting, max_step, shots, seed,
            no_noise, as_json, plot):
     """Run a program, or control points, on a virtual machine and report the errors.
 
@@ -72,6 +71,7 @@ def verify(program, calibrations, machine_path, points, corrected, setup, tolera
     if points is not None:
         if program is not None or corrected is not None:
             raise click.UsageError("give either PROGRAM or --points, not both")
+        _refuse_program_options_with_points(click.get_current_context())
         _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json)
         return
 
@@ -81,14 +81,11 @@ def verify(program, calibrations, machine_path, points, corrected, setup, tolera
         raise click.UsageError("--corrected takes one program: give at most one -c with it")
     if corrected is None and not calibrations:
         raise click.UsageError("give -c CALIBRATION to correct PROGRAM with, or --corrected FILE")
+    from postproc.gcode.pipeline import CorrectOptions
     from postproc.simulate.program import verify_program
 
     cals = [load_calibration(c) for c in calibrations]
-    options = None
-    if tolerance is not None:
-        from postproc.gcode.pipeline import CorrectOptions
-
-        options = CorrectOptions(tolerance_mm=tolerance)
+    options = CorrectOptions(**correcting, **reading.correct_options())
     report = verify_program(program, machine, cals, setup, corrected=corrected, max_step_mm=max_step,
                             options=options)
     if plot:
@@ -130,7 +127,7 @@ def _load_machine(path: str):
 
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, ValueError, RecursionError):  # UnicodeDecodeError, JSONDecodeError, 4300 digits
         return load_machine(path)  # which names what is wrong with the file
     if not isinstance(data, dict) or data.get("format") != "postproc calibration":
         return load_machine(path)
@@ -146,6 +143,16 @@ def _load_machine(path: str):
 
 def _label(cal) -> str:
     return f"{cal.method} ({cal.name})" if cal.name and cal.name != cal.method else cal.method
+
+
+def _refuse_program_options_with_points(ctx) -> None:
+    """--points runs no program: the options of how a program is read and corrected would not be used."""
+    from postproc.cli.options import CORRECTION_OPTIONS, PROGRAM_OPTIONS
+
+    given = [flag for flag, (name, _attrs) in {**PROGRAM_OPTIONS, **CORRECTION_OPTIONS}.items()
+             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE]
+    if given:
+        raise click.UsageError(f"--points runs no program: {', '.join(given)} would not be used; drop it")
 
 
 def _verify_points(machine, points, calibrations, setup, seed, shots, no_noise, as_json) -> None:

@@ -1443,7 +1443,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
                      keep: int | None = None, dialect: str = "generic",
-                     subroutine_path: Sequence[Path] = ()) -> DiffReport:
+                     subroutine_path: Sequence[Path] = (), cycles: str | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1458,20 +1458,22 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     loops, macros written out), the original is read expanded the same way (its external
     subroutines looked up on ``subroutine_path``, as ``correct`` was given it); its
     blocks are then numbered by their source lines, a subprogram's line once per call.
+    ``cycles``: "expand" reads each canned cycle of the original as the moves ``correct
+    --cycles expand`` wrote for it, as the header's ``CYCLES EXPANDED`` does.
     """
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path)
+        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path, cycles)
     finally:
         if was_enabled:
             gc.enable()
 
 
 def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str,
-             subroutine_path: Sequence[Path]) -> DiffReport:
+             subroutine_path: Sequence[Path], cycles: str | None = None) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     hs = header_setup(corrected)
@@ -1479,7 +1481,8 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     expanded = hs.expanded
     keys = _Keys()
     readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=hs.cycles_expanded),
+                       subroutine_path=[Path(p) for p in subroutine_path],
+                       expand_cycles=hs.cycles_expanded or cycles == "expand"),
                _Reader(corrected, setup, keys, drop_header=True, dialect=dialect))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()

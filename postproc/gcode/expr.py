@@ -194,11 +194,11 @@ class ExprParser:
         if self.peek(j) in "+-":
             j += 1
         k = j
-        while k < len(s) and s[k].isdigit():
+        while k < len(s) and "0" <= s[k] <= "9":  # ASCII digits: str.isdigit() takes '١' too
             k += 1
         if self.peek(k) == ".":
             k += 1
-            while k < len(s) and s[k].isdigit():
+            while k < len(s) and "0" <= s[k] <= "9":
                 k += 1
         digits = s[j:k].replace(".", "")
         if not digits:
@@ -215,7 +215,7 @@ class ExprParser:
             return self.param(i)
         if c in "+-":
             c1 = self.peek(i + 1)
-            if c1 and not c1.isdigit() and c1 != ".":
+            if c1 and not "0" <= c1 <= "9" and c1 != ".":
                 node, j = self.value(i + 1)
                 return (("neg", node) if c == "-" else ("pos", node)), j
             return self.number(i)

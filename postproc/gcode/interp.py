@@ -605,7 +605,11 @@ class Interpreter:
                         or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
-                vals[letter] = (float(num), i)
+                value = float(num)
+                if value in (math.inf, -math.inf):  # 309 digits and more: no controller reads it
+                    raise self._err(GcodeSyntaxError, f"word {letter}{num[:12]}... ({len(num)} characters): "
+                                    "the number is too large", lineno, _lpos + 1)
+                vals[letter] = (value, i)
         def col_of(i: int) -> int:
             return words[i].letter_pos + 1  # 1-based column of the word's letter
 

@@ -36,16 +36,18 @@ SLASH = "slash"  # block delete (or division inside an expression)
 SYMBOL = "symbol"  # # [ ] = * < > @ ^ and other printable ASCII
 NEWLINE = "newline"
 
-NUMBER_RE = r"[+-]?(?:\d+\.?\d*|\.\d+)"
+# ASCII digits only: Python's \d also matches other scripts' digits ('X١٢'), which no
+# controller reads (rs274: "bad number format") and float() would quietly take as 12.
+NUMBER_RE = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
 # NUMBER_RE matched possessively (nothing after a number can start with a digit or a dot)
-NUMBER_POSSESSIVE_RE = r"[+-]?+(?:\d++\.?+\d*+|\.\d++)"
+NUMBER_POSSESSIVE_RE = r"[+-]?+(?:[0-9]++\.?+[0-9]*+|\.[0-9]++)"
 # Comments at the end of a line: in parentheses (no '(' inside), then one after ';'.
 _END_COMMENTS = r"(?:\([^()\r\n]*\)[ \t]*+)*(?:;[^\r\n]*+)?"
 # A line that moves nothing and sets nothing a correction reads (without its ending):
 # blank, or an N word, an S word, program stop, spindle and coolant M words (M0 M1 M3-M5
 # M7-M9) and comments. Read as such by the bulk writer and by diff's reader (the
 # interpreter reads no geometry from it either).
-QUIET_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?(?:[Ss][ \t]*+" + NUMBER_POSSESSIVE_RE + r"[ \t]*+)?"
+QUIET_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+[0-9]++[ \t]*+)?(?:[Ss][ \t]*+" + NUMBER_POSSESSIVE_RE + r"[ \t]*+)?"
                  r"(?:[Mm][ \t]*+0?[013-57-9](?![0-9.])[ \t]*+)*" + _END_COMMENTS)
 # The words that set the tool length from a table entry, G43 H (the H number follows;
 # G43.1 and G43.2 are not this): the bulk writer and diff's reader take a straight move
@@ -54,9 +56,9 @@ TOOL_LENGTH_RE = r"[Gg][ \t]*+43(?![0-9.])[ \t]*+[Hh][ \t]*+"
 # A tool change alone on its line (without its ending): [N..] T<n> M6 or M6 T<n> (M06,
 # T02 too) and comments; the T number in group 1 or 2 (of the pattern). It changes only
 # the tool the interpreter holds (for a later G43 without H).
-TOOL_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+\d++[ \t]*+)?"
-                r"(?:[Tt][ \t]*+(\d++)[ \t]*+[Mm][ \t]*+0?6(?![0-9.])"
-                r"|[Mm][ \t]*+0?6(?![0-9.])[ \t]*+[Tt][ \t]*+(\d++)(?![0-9.]))[ \t]*+" + _END_COMMENTS)
+TOOL_LINE_RE = (r"[ \t]*+(?:[Nn][ \t]*+[0-9]++[ \t]*+)?"
+                r"(?:[Tt][ \t]*+([0-9]++)[ \t]*+[Mm][ \t]*+0?6(?![0-9.])"
+                r"|[Mm][ \t]*+0?6(?![0-9.])[ \t]*+[Tt][ \t]*+([0-9]++)(?![0-9.]))[ \t]*+" + _END_COMMENTS)
 
 _MASTER = re.compile(
     r"(?P<newline>\r\n|\n|\r)"

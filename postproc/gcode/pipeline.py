@@ -1544,7 +1544,7 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
     On any error nothing is left at ``output`` (an existing file there is untouched); a
     symbolic link is written through, a device or pipe written directly.
     """
-    from postproc.errors import OutputError
+    from postproc.errors import DiskFullError, OutputError
     from postproc.fileio import output_path
 
     # an empty program (no bytes, or blanks and line ends only) is refused: nothing to
@@ -1577,6 +1577,8 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
 
             report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
                                     options, path, calibration_name, calibration_sha256, progress, count)
+    except DiskFullError:  # disk full keeps its own exit code
+        raise
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
         raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None
     return report

@@ -41,6 +41,10 @@ def read_json(path) -> Any:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise PostprocError(f"not valid JSON: {exc.msg}", path=str(p), lineno=exc.lineno, col=exc.colno) from None
+    except (ValueError, RecursionError) as exc:  # a number of over 4300 digits; nesting too deep
+        from postproc.calfile import _json_limit
+
+        raise PostprocError(f"not JSON postproc can read: {_json_limit(exc)}", path=str(p)) from None
 
 
 def load_chain(path) -> Chain:

@@ -290,6 +290,11 @@ def load_machine(path) -> Machine:
     except json.JSONDecodeError as exc:
         raise MachineError(f"machine definition is not valid JSON: {exc.msg}", path=path,
                            lineno=exc.lineno, col=exc.colno) from None
+    except (ValueError, RecursionError) as exc:  # a number of over 4300 digits; nesting too deep
+        from postproc.calfile import _json_limit
+
+        raise MachineError(f"machine definition is not JSON postproc can read: {_json_limit(exc)}",
+                           path=path) from None
     return machine_from_dict(data, path=path)
 
 

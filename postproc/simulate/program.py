@@ -56,17 +56,20 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
         raise PostprocError(f"sampling step must be positive, got {max_step_mm}")
     setup = make_setup(setup_args)
     program = str(program)
-    nominal = nominal_path(program, setup)
+    # read as the correction reads it: the controller's dialect, subprogram files
+    reading = {"dialect": getattr(options, "dialect", "generic"),
+               "subroutine_path": tuple(getattr(options, "subroutine_path", ()))}
+    nominal = nominal_path(program, setup, **reading)
     if len(nominal) < 2:
         raise PostprocError("the program has no moves to verify", path=program)
     poly = nominal_polyline(nominal)
     text = Path(program).read_text(encoding="utf-8", errors="surrogateescape")
     report = VerifyReport(source_lines=text.splitlines())
-    original = program_path(program, setup, max_step_mm=max_step_mm)
+    original = program_path(program, setup, max_step_mm=max_step_mm, **reading)
 
     def run(label: str, source):
-        path = original if source is program else program_path(source, setup, max_step_mm=max_step_mm)
-        fine = actual_path_samples(source, setup, max_step_mm)
+        path = original if source is program else program_path(source, setup, max_step_mm=max_step_mm, **reading)
+        fine = actual_path_samples(source, setup, max_step_mm, **reading)
         report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno, original, fine))
         return report.runs[-1]
 

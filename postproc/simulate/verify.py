@@ -271,7 +271,8 @@ class NominalPath:
         return len(self.points_mm)
 
 
-def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPath:
+def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM, *, dialect: str = "generic",
+                 subroutine_path=()) -> NominalPath:
     """Nominal path of a program (path or text) for measuring deviations against.
 
     Straight moves contribute their end points only (a straight segment is exact);
@@ -280,12 +281,13 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM) -> NominalPa
     """
     from postproc.gcode.path import sample_program
 
-    pp = sample_program(source, setup, chord_mm=chord_mm)
+    pp = sample_program(source, setup, chord_mm=chord_mm, dialect=dialect, subroutine_path=subroutine_path)
     return NominalPath(pp.points_mm, pp.lineno, pp.rapid)
 
 
 def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
-                        chord_mm: float = NOMINAL_CHORD_MM) -> ProgramPath:
+                        chord_mm: float = NOMINAL_CHORD_MM, *, dialect: str = "generic",
+                        subroutine_path=()) -> ProgramPath:
     """A program (path or text) sampled to draw its actual path as a polyline.
 
     Straight moves every ``max_step_mm``; arcs also cut into chords within ``chord_mm``
@@ -295,7 +297,8 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     """
     from postproc.gcode.path import sample_program
 
-    return sample_program(source, setup, step_mm=max_step_mm, chord_mm=chord_mm)
+    return sample_program(source, setup, step_mm=max_step_mm, chord_mm=chord_mm, dialect=dialect,
+                          subroutine_path=subroutine_path)
 
 
 def machine_directions(q, initial) -> np.ndarray:
