@@ -43,6 +43,7 @@ from postproc.gcode.state import (
     IO_M,
     LINE,
     LOOKAHEAD_G,
+    M_PARAMS,
     MOTION_CODES,
     NAN,
     NEUTRAL_G,
@@ -166,6 +167,9 @@ class Move:
     planned: bool = False
     # a move to a position the program stored (G28.1/G30.1): its name, and the axes it sets
     stored: tuple | None = None
+    # word indices of the modal G, S, T and before-motion M words (with their parameters):
+    # written on the first line of a split move (prefix_words) and removed from its own
+    event_idx: tuple[int, ...] = ()
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -489,7 +493,8 @@ class Interpreter:
 
         # M codes
         tool_change = False
-        before_m: list[str] = []
+        # words acting before the motion, moved onto the first line when the block is split
+        event_idx: list[int] = [vals[k][1] for k in "ST" if k in vals]
         for key, i in mcodes:
             if key % 10:
                 raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
@@ -513,7 +518,8 @@ class Interpreter:
             if m > 199:
                 raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
             if m in BEFORE_MOTION_M:
-                before_m.append(f"M{words[i].number}")
+                event_idx.append(i)
+                event_idx.extend(vals[k][1] for k in M_PARAMS.get(m, "") if k in vals)
             if m == 6:
                 tool_change = True
             if m in (2, 30):
@@ -529,14 +535,20 @@ class Interpreter:
             st.spindle_tool = st.tool
 
         blk = _Block(lineno, words, vals)
+        modal_idx: list[int] = []
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
             if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
+            n_prefix = len(blk.prefix)
             handler(self, blk, key, i)
+            if len(blk.prefix) > n_prefix:  # a modal word copied onto a split's first line: moved there
+                modal_idx.extend([i] + [vals[k][1] for k in {430: "H", 541: "P"}.get(key, "") if k in vals])
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
+        event_idx = sorted(set(event_idx))
+        before_m = [words[j].letter + words[j].number for j in event_idx]
 
         if work_name is not None:
             st.work = work_name
@@ -677,8 +689,8 @@ class Interpreter:
             axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
-            prefix_words=prefix + (["S" + words[vals["S"][1]][1]] if "S" in vals else []) + before_m,
-            stays=tool_change or "T" in vals or g53,
+            prefix_words=prefix + before_m, event_idx=tuple(sorted(set(event_idx + modal_idx))),
+            stays=tool_change or g53,
             motion_idx=motion_idx,
             aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
         )
