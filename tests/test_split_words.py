@@ -149,7 +149,7 @@ def test_an_expanded_cycle_carries_its_words_on_its_first_line(engine):
     feed = after.calls.index("SET_FEED_RATE(300.0000)")
     assert feed < next(i for i, c in enumerate(after.calls) if c.startswith("STRAIGHT_FEED"))
     def no_feed(calls):
-        # an expansion has no retract or path mode of the cycle to set: its moves are written out
+        # an expansion has no path mode of the cycle to set: its moves are written out
         return events([c for c in calls if not c.startswith((
-            "SET_FEED_RATE", 'COMMENT("interpreter: retract', "SET_MOTION_CONTROL_MODE", "SET_NAIVECAM"))])
+            "SET_FEED_RATE", "SET_MOTION_CONTROL_MODE", "SET_NAIVECAM"))])
     assert no_feed(after.calls) == no_feed(before.calls)

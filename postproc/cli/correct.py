@@ -139,9 +139,11 @@ def _progress_printer(total_hint: str):
               help="Controller the output is for: its line length, comments, case and arc rule. "
                    "generic is what all of them accept.")
 @setup_options
-@click.option("--cycles", type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
-              help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
-                   "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")
+@click.option("--cycles", type=click.Choice(["auto", "keep", "expand"]), default="auto", show_default=True,
+              help="Canned cycles (G73, G81-G89): auto keeps each one whose correction tilts the hole by no more "
+                   "than --tolerance (corrected at the hole) and expands the others, with the rest of their "
+                   "series up to G80, into G0/G1 moves, each corrected; keep keeps them all (refusing a tilted "
+                   "one); expand expands them all.")
 @click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
               help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "
                    "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")

@@ -500,7 +500,9 @@ class _Reader:
         self.expand = expand
         self.dialect = dialect
         self.subroutine_path = tuple(subroutine_path)
-        # read each canned cycle block as the lines correct writes it as (--cycles expand)
+        # read each canned cycle block as the lines correct writes it as (--cycles expand);
+        # both programs are read so, as correct may keep some cycles and expand others
+        # (--cycles auto)
         self.expand_cycles = expand_cycles
         self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
@@ -603,13 +605,15 @@ class _Reader:
             move += rows.move[last:i].tolist()
             end += rows.end[last:i].tolist()
             keys += rows.keys[last:i].tolist()
-            for step in cycles[i]:
+            for k, step in enumerate(cycles[i]):
                 if isinstance(step, str):
                     lines.append(step)
                     move.append(False)
                     end.append(nan3)
                 else:
-                    lines.append("")  # (never a corrected line's text)
+                    # never a written line's text; the same for the same block on both
+                    # sides (a cycle kept unchanged), and differs from its corrected version
+                    lines.append(f"\0{rows.lines[i]}\0{k}")
                     move.append(True)
                     end.append(tuple(step[2]))
                 lineno.append(int(rows.lineno[i]))
@@ -1471,8 +1475,8 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     expanded = hs.expanded
     keys = _Keys()
     readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=hs.cycles_expanded),
-               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect))
+                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True),
+               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:

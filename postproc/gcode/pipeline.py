@@ -52,7 +52,7 @@ from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion,
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import LINE, PLANES, RAPID
+from postproc.gcode.state import CANNED_CYCLES, LINE, PLANES, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
@@ -90,6 +90,11 @@ HINT_PREPLAN_SHARE = 0.7
 TAKEUP_MIN_MM = 1e-7
 # Output growth (lines out / lines in) above which the summary warns.
 GROWTH_WARN = 5.0
+# --cycles auto keeps a cycle block when its tilt (the correction's change between R
+# plane and bottom) is within this share of the tolerance left after rounding: the share
+# left covers the approach directions the block is written with, which differ from those
+# the choice is made with (the machine's last known ones) on a backlash calibration.
+CYCLE_KEEP_SHARE = 0.9
 
 Write: TypeAlias = bulk.Write
 #: a line queued for its chunk: (its text, "" for a move it makes without a line of its
@@ -110,7 +115,10 @@ class CorrectOptions:
     dialect: str = "generic"  # the controller the program is for: how it is read and written
     expand: bool = True  # flatten parameters, O-words, subprograms and macros (False: refuse them)
     subroutine_path: tuple = ()  # folders searched for o<name> call and M98 subprogram files
-    cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
+    # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand: its
+    # moves written out as G0/G1, each corrected; auto: kept where its tilt is within the
+    # tolerance, else expanded with the rest of its series (to the next G80 or other motion)
+    cycles: str = "auto"
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
     processes: int = 1  # more: a large program file is cut into parts corrected in that many (postproc.gcode.split)
@@ -176,6 +184,7 @@ class Corrector(EmitterMixin):
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
+        self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
         self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
@@ -342,6 +351,8 @@ class Corrector(EmitterMixin):
                 entries.append(("", mv.then, False, interp.state.motion))
             else:
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
+            if self._series_expanded and interp.state.motion not in CANNED_CYCLES:
+                self._series_expanded = False  # G80 or another motion: the series has ended
             lineno += 1
             run_ok = use_bulk and bulk.state_allows(interp)
 
@@ -374,6 +385,7 @@ class Corrector(EmitterMixin):
                             run = bulk.read_run(interp, block, i, b, lineno, dec)
                             if run is not None:
                                 entries.append(run)
+                                self._series_expanded = False  # moves: no cycle series goes on
                                 lineno += run.b - i
                                 i = run.b
                                 run_ok = bulk.state_allows(interp)
@@ -1147,8 +1159,15 @@ class Corrector(EmitterMixin):
     # -- canned cycles -------------------------------------------------------------------
     def _feed_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move, c: Cycle, motion: int | None) -> None:
         """Queue the cycle block ``c`` of ``mv``: kept (its bottom and R point corrected) or
-        expanded into the controller's own G0/G1 moves, each corrected like any other move."""
-        if self.opt.cycles != "expand":
+        expanded into the controller's own G0/G1 moves, each corrected like any other move.
+        With ``--cycles auto`` a block is kept when :meth:`_cycle_keeps` says so and no block
+        of its series was expanded (a kept block needs the cycle, R and Z the controller
+        holds, and an expansion leaves it in G0/G1)."""
+        mode = self.opt.cycles
+        if mode == "auto":
+            mode = "keep" if not self._series_expanded and self._cycle_keeps(mv, c) else "expand"
+            self._series_expanded = mode == "expand"
+        if mode != "expand":
             if c.repeats == 1 and not mv.incremental:
                 entries.append((line, mv, True, motion))
                 bottom, rpoint = c.holes[0]
@@ -1175,6 +1194,23 @@ class Corrector(EmitterMixin):
                 kind, prev, q, moved, first_feed = step
                 entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
         self.report.cycles_expanded += 1
+
+    def _cycle_keeps(self, mv: Move, c: Cycle) -> bool:
+        """Whether a cycle block can stay a cycle: one hole whose correction's tilt between
+        its R plane and its bottom is within :data:`CYCLE_KEEP_SHARE` of the tolerance, or
+        several holes (or increments) whose corrections all round to nothing."""
+        if not c.holes:
+            return True
+        pts = np.array([q for hole in c.holes for q in hole], dtype=float)
+        n = len(pts)
+        dirs = np.broadcast_to(self.dirs, pts.shape)
+        t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
+                           [mv.rotary] * n, np.full(n, mv.lineno))
+        if c.repeats == 1 and not mv.incremental:
+            drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
+            return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self._round_err(mv.unit))
+        d = _unit_decimals(self.opt, mv.unit)
+        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
         """A cycle block that stays as it is, with several holes or increments: refuse it
