@@ -949,7 +949,8 @@ class Corrector(EmitterMixin):
             else:
                 bulge = _no_bulge
             seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
-                              TAKEUP_MIN_MM, bulge)
+                              TAKEUP_MIN_MM, bulge, self.opt.tolerance_mm - self._round_err(m.unit),
+                              lineno=m.lineno, path=self.path)
             if arc is not None:
                 (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
                 carried = np.array(start_dirs, dtype=float)
