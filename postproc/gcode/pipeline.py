@@ -184,6 +184,7 @@ class Corrector(EmitterMixin):
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
+        self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
         self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
         self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
@@ -577,6 +578,10 @@ class Corrector(EmitterMixin):
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
+        # where each entry's text starts in out: (index, its line, 1: every line is that
+        # line's, 2: a run's lines one by one from it, 0: a line passed as it is)
+        marks: list[tuple[int, int, int]] = []
+        mark = marks.append
         emit_move = self._emit_move
         get_plan = plans.get
         get_hint = hints.get
@@ -586,6 +591,7 @@ class Corrector(EmitterMixin):
         blocks: list[bulk.Block] = []
         for e in entries:
             if type(e) is bulk.Run:
+                mark((len(out), e.lineno, 2))
                 em = prepared.get(id(e.block))
                 if em is None:
                     em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
@@ -596,9 +602,11 @@ class Corrector(EmitterMixin):
                 else:  # arcs and lines that must be split: written by the general emitter
                     for part in bulk.split_run(e, sorted(set(cut))):
                         if type(part) is bulk.Run:
+                            mark((len(out), part.lineno, 2))
                             bulk.emit_run(self, part, em, T, write, hints)
                             continue
                         j, fm = part
+                        mark((len(out), e.lineno + j, 1))
                         line = e.block.lines[e.a + j]
                         hint = get_hint(k + j)
                         if hint is not None:
@@ -608,6 +616,7 @@ class Corrector(EmitterMixin):
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
+            mark((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is _Store else 1))
             if type(mv) is _Rebase:
                 self._emit_rebase(line, mv, write)
                 continue
@@ -653,7 +662,37 @@ class Corrector(EmitterMixin):
         for blk in blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += passed
-        write_out("".join(out))
+        text = "".join(out)
+        if self._long_line.search(text):
+            text = self._fit_lines(out, marks)
+        write_out(text)
+
+    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
+        """A chunk's text (``out``, its entries' ``marks``) with every line it writes
+        within the dialect's limits: a line that passes them gets its comments on a line
+        of their own before it (:func:`emit.fit_line`), or is refused naming its line and
+        column. Lines passed as they are stay (the input has them so)."""
+        pieces: list[str] = []
+        ends = [m[0] for m in marks[1:]] + [len(out)]
+        pieces.extend(out[:marks[0][0]] if marks else out)
+        for (a, lineno, kind), b in zip(marks, ends, strict=True):
+            text = "".join(out[a:b])
+            if kind == 0 or not self._long_line.search(text):
+                pieces.append(text)
+                continue
+            for n, line in enumerate(text.splitlines(keepends=True)):
+                fitted, over = emit.fit_line(self.opt.dialect, line)
+                if over is not None:
+                    col, what = over
+                    raise SafetyError(
+                        f"{what}, once corrected", path=self.path, lineno=lineno + n if kind == 2 else lineno,
+                        col=col, hint="shorten the line (a comment moved onto a line of its own would not "
+                                      "do) or give the --dialect it is for")
+                if len(fitted) > 1:
+                    self.report.lines_out += 1
+                    self.report.lines_inserted += 1
+                pieces.extend(fitted)
+        return "".join(pieces)
 
     def _plan(self, Q1: FloatArray, linenos: IntArray, R: FloatArray, rot: list[dict[str, float]],
               general: list[tuple[int, PlanMove]], runs: Sequence[bulk.Run] = ()
