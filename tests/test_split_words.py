@@ -140,7 +140,8 @@ def test_an_arc_keeps_its_turn_word_when_an_output_shares_it(engine):
 def test_an_expanded_cycle_carries_its_words_on_its_first_line(engine):
     prog = ("G21 G90 G17\nG0 X100 Y100 Z60\n(B1)\nG98 G81 X120 Y120 Z15 R40 F300 S5000 M3 M62 P1\n"
             "(B2)\nG80\nM2\n")
-    out = _corrected(prog, engine, cycles="expand")
+    out = _corrected(prog, engine)  # --cycles auto: the parametric calibration tilts the hole
+    assert "G81" not in out
     before, after = run_rs274(prog), run_rs274(out)
     assert before.ok, before.error
     assert after.ok, after.error + "\n" + out

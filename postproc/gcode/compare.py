@@ -490,7 +490,7 @@ class _Reader:
 
     def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
                  dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = (),
-                 expand_cycles: bool = False) -> None:
+                 expand_cycles: bool = False, cycle_retract: bool = True) -> None:
         self.path, self._lines = iter_source_lines(source)
         self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
         self.keys = keys
@@ -504,6 +504,7 @@ class _Reader:
         # both programs are read so, as correct may keep some cycles and expand others
         # (--cycles auto)
         self.expand_cycles = expand_cycles
+        self.cycle_retract = cycle_retract  # their G98/G99 kept (not with --cycles expand)
         self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
@@ -579,7 +580,7 @@ class _Reader:
                 rows.end[i] = mv.q1
                 rows.keys[i] = self.keys.of_line(lines[i])
                 if mv.cycle is not None and self.expand_cycles:
-                    self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle)
+                    self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle, self.cycle_retract)
         return b, None
 
     def _with_cycles(self, rows: _Rows) -> _Rows:
@@ -1475,8 +1476,10 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     expanded = hs.expanded
     keys = _Keys()
     readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True),
-               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True))
+                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True,
+                       cycle_retract=not hs.cycles_expanded),
+               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True,
+                       cycle_retract=not hs.cycles_expanded))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:

@@ -340,10 +340,10 @@ def split_header(text: str) -> tuple[list[str], str]:
     return header, "".join(kept + ([] if after is None else [after]) + list(it))
 
 
-def cycle_lines(line: str, mv: Move, c: Cycle) -> list[str | CycleStep]:
+def cycle_lines(line: str, mv: Move, c: Cycle, retract: bool = True) -> list[str | CycleStep]:
     """The lines a canned cycle block (``line``, its Move ``mv`` and Cycle ``c``) is written
     as when expanded (``--cycles expand``), in order: the text of a line that moves nothing
-    (the block's modal words, G98/G99 and before-motion words, a G4 dwell), or ``(kind, prev, q, axes,
+    (the block's modal words, G98/G99 unless not ``retract``, and before-motion words, a G4 dwell), or ``(kind, prev, q, axes,
     first_feed)`` for a G0/G1 step from ``prev`` to ``q`` (machine mm) naming ``axes``
     (those that change), with the block's F word when ``first_feed``. ``diff`` reads an
     original's cycle blocks so when the corrected program says CYCLES EXPANDED."""
@@ -351,10 +351,11 @@ def cycle_lines(line: str, mv: Move, c: Cycle) -> list[str | CycleStep]:
     sep, lower = style_of(line)
     sep = sep or " "
     out: list[str | CycleStep] = []
-    # the block's modal words, its G98/G99 (a cycle kept later in the program uses the
-    # retract mode) and the words acting before its motion, on a line of their own
-    retract = [f"G{w.number}" for w in mv.words if w.letter == "G" and w.number.lstrip("0") in ("98", "99")]
-    prefix = mv.prefix_words + retract
+    # the block's modal words, its G98/G99 when ``retract`` (a cycle kept later in the
+    # program uses the retract mode; with every cycle expanded, none does) and the words
+    # acting before its motion, on a line of their own
+    modes = [f"G{w.number}" for w in mv.words if w.letter == "G" and w.number.lstrip("0") in ("98", "99")]
+    prefix = mv.prefix_words + (modes if retract else [])
     if prefix:
         text = sep.join(prefix)
         out.append((text.lower() if lower else text) + ending)

@@ -1227,7 +1227,7 @@ class Corrector(EmitterMixin):
         sep, lower = emit.style_of(line)
         sep = sep or " "
         d = _unit_decimals(self.opt, mv.unit)
-        for step in emit.cycle_lines(line, mv, c):
+        for step in emit.cycle_lines(line, mv, c, retract=self.opt.cycles != "expand"):
             if isinstance(step, str):
                 entries.append((step, None, False, None))
             else:
