@@ -6,6 +6,8 @@ reverses an axis when its commanded position moves back by an amount it resolves
 Hand-made programs; expected words and positions are computed by hand from the
 machine model ``p = q + (s * q_z, 0, 0) + (b / 2 * dir_x, 0, 0)``."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -178,3 +180,34 @@ def test_a_run_ahead_reversal_across_the_path_is_refused_before_any_output(tmp_p
     assert exc.value.lineno == 4
     assert "b > 0" in exc.value.hint
     assert not out.exists()
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_the_readme_calibration_corrects_x_slots_at_every_line(tmp_path, monkeypatch, mirror):
+    # the README's metrologist walkthrough: fit makes a run-ahead X (b = +8.9 um) from
+    # samples/iso230_runs_x.csv; mirrored, the same runs give lost motion. Either way
+    # the corrected slots run within the tolerance of the path at every line, on the
+    # machine the calibration describes (model error 0)
+    import json
+
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    root = Path(__file__).parents[1]
+    monkeypatch.chdir(tmp_path)
+    runner = CliRunner()
+    res = runner.invoke(main, ["fit", str(root / "samples" / "iso230_runs_x.csv"), "-o", "x_runs.json"])
+    assert res.exit_code == 0, res.output
+    cal = json.loads(Path("x_runs.json").read_text())
+    b = cal["effects"][0]["params"]["b_mm"]
+    assert b > 0.008
+    if mirror:
+        cal["effects"][0]["params"]["b_mm"] = -b
+        Path("x_runs.json").write_text(json.dumps(cal))
+    res = runner.invoke(main, ["verify", str(root / "samples" / "x_slots.nc"), "-c", "x_runs.json",
+                               "--machine", "x_runs.json", "--json"])
+    assert res.exit_code == 0, res.output
+    runs = json.loads(res.output)["runs"]
+    assert runs[0]["max_mm"] > 0.006  # uncorrected: the reversal and the positioning error
+    assert runs[1]["max_mm"] <= TOL
