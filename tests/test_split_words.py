@@ -154,3 +154,12 @@ def test_an_expanded_cycle_carries_its_words_on_its_first_line(engine):
         return events([c for c in calls if not c.startswith((
             "SET_FEED_RATE", "SET_MOTION_CONTROL_MODE", "SET_NAIVECAM"))])
     assert no_feed(after.calls) == no_feed(before.calls)
+
+
+def test_diff_pairs_a_split_move_whose_words_went_to_its_first_piece(engine):
+    from postproc.gcode.compare import compare_programs
+
+    out = _corrected(EVERY_WORD, engine)
+    d = compare_programs(EVERY_WORD, out)
+    assert d.moves == 11  # every block but the first (G21 G90 G17) and M2
+    assert d.lines_inserted > 8

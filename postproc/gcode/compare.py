@@ -85,8 +85,12 @@ FORK_MIN_BYTES = 2_000_000
 _COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
 # (a spline, G5 or G5.1 with its I J P Q words, is written as straight chords: its last
 # chord has the skeleton of the original line)
-_SKELETON_DROP = re.compile(r"[XYZIJKRPQFxyzijkrpqf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)"
-                            r"|[Gg][ \t]*0*(?:[0-3]|5(?:\.1)?)(?![0-9.])|\s+")
+# (the S, T, H, modal G and before-motion M words of a split move, with their E/L/P/Q
+# parameters, go on its first piece: postproc.gcode.interp Move.event_idx)
+_SKELETON_DROP = re.compile(r"[XYZIJKRPQFSTHELxyzijkrpqfsthel][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)"
+                            r"|[Gg][ \t]*0*(?:[0-3]|5(?:\.1)?|1[7-9]|2[01]|9[0-4](?:\.1)?|5[4-9](?:\.\d)?|4[39])"
+                            r"(?![0-9.])"
+                            r"|[Mm][ \t]*+0*+(?!(?:0|1|2|6|30|60)(?![0-9.]))\d+(?![0-9.])|\s+")
 
 
 def skeleton(line: str) -> str:
@@ -1539,10 +1543,15 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
 _G92 = re.compile(r"[Gg][ \t]*0*92(?![.0-9])")
 
 
+# axis words and blanks: what correct rewrites on a G92 line
+_AXIS_WORDS = re.compile(r"[XYZABCxyzabc][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|\s+")
+
+
 def _rewritten_g92(o_line: str, c_line: str) -> bool:
     """A G92 line whose axis words ``correct`` rewrote: it sets the current position, which
     the correction has moved, so that the program's coordinates after it stay nominal."""
-    return bool(_G92.search(o_line.split("(")[0].split(";")[0])) and skeleton(o_line) == skeleton(c_line)
+    return bool(_G92.search(o_line.split("(")[0].split(";")[0])) and (
+        _AXIS_WORDS.sub("", o_line) == _AXIS_WORDS.sub("", c_line))
 
 
 def _compatible(o_line: str, c_line: str) -> bool:
