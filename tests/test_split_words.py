@@ -30,23 +30,26 @@ _MODES = {"SET_FEED_MODE", "SELECT_PLANE", "USE_LENGTH_UNITS", "SET_G5X_OFFSET",
 
 
 def events(calls: list[str]) -> list[str]:
-    """The canonical calls with each run of motions as one ``MOVE``, without a feed rate
-    set again to the value it has (a split move's last line keeps its F word); in inverse
+    """The canonical calls with each run of motions as one ``MOVE``, without a mode or a
+    feed rate set again to the value it has (a split move's first piece carries copies of
+    its modal G words, and its last line keeps its F word); in inverse
     time (G93) each piece has its own feed: the feeds between pieces are left out and
     the others read ``SET_FEED_RATE(inverse)``."""
     out: list[str] = []
     feed = None
     inverse = False
     modes: dict[str, str] = {}
-    for c in calls:
+    for k, c in enumerate(calls):
         if _HEADER.match(c):
             continue
         name = c.split("(", 1)[0]
         if name in _MODES or c.startswith("COMMENT(\"interpreter:"):
-            key = c.split(" set to")[0]
+            key = name if name in _MODES else c.split(" set to")[0]
             if modes.get(key) == c:  # a modal word copied onto the first piece, again on its own line
                 continue
             modes[key] = c
+        if c == "SET_FEED_RATE(0.0000)" and k + 1 < len(calls) and calls[k + 1].startswith("SET_FEED_RATE("):
+            continue  # G94 again (copied onto the first piece) resets the feed its F word sets
         if c.startswith("COMMENT(\"interpreter: feed mode set to"):
             inverse = "inverse time" in c
         if c.startswith(MOTIONS):

@@ -172,7 +172,6 @@ class RunMove:
         centre_idx = [-1, -1]
         feed_idx = motion_idx = -1
         prefix: list[str] = []
-        moved: list[int] = []
         for i, w in enumerate(words):
             letter = w.letter
             if letter in "XYZ":
@@ -183,7 +182,6 @@ class RunMove:
                 if w.number.lstrip("0") == "43":  # G43 H..: the words the interpreter keeps for a split
                     h = next(x for x in words if x.letter == "H")
                     prefix.append(f"G{w.number} H{h.number}")
-                    moved += [i, words.index(h)]
                 else:
                     motion_idx = i
             elif letter in "IJ":
@@ -195,7 +193,7 @@ class RunMove:
             aux = tuple(i for i in centre_idx if i >= 0)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
                     self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, prefix,
-                    False, motion_idx, aux, event_idx=tuple(sorted(moved)))
+                    False, motion_idx, aux)
 
 
 def tlo_col(line: str) -> int:

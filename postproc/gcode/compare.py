@@ -85,8 +85,9 @@ FORK_MIN_BYTES = 2_000_000
 _COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
 # (a spline, G5 or G5.1 with its I J P Q words, is written as straight chords: its last
 # chord has the skeleton of the original line)
-# (the S, T, H, modal G and before-motion M words of a split move, with their E/L/P/Q
-# parameters, go on its first piece: postproc.gcode.interp Move.event_idx)
+# (the S, T and before-motion M words of a split move, with their E/L/P/Q parameters, go
+# on its first piece: postproc.gcode.interp Move.event_idx; its modal G words and G43 H
+# are copied there)
 _SKELETON_DROP = re.compile(r"[XYZIJKRPQFSTHELxyzijkrpqfsthel][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)"
                             r"|[Gg][ \t]*0*(?:[0-3]|5(?:\.1)?|1[7-9]|2[01]|9[0-4](?:\.1)?|5[4-9](?:\.\d)?|4[39])"
                             r"(?![0-9.])"

@@ -167,8 +167,9 @@ class Move:
     planned: bool = False
     # a move to a position the program stored (G28.1/G30.1): its name, and the axes it sets
     stored: tuple | None = None
-    # word indices of the modal G, S, T and before-motion M words (with their parameters):
-    # written on the first line of a split move (prefix_words) and removed from its own
+    # word indices of the S, T and before-motion M words (with their parameters): written on
+    # the first line of a split move (prefix_words) and removed from its own (its modal G
+    # words are copied there: set again to the same value, they change nothing)
     event_idx: tuple[int, ...] = ()
 
 
@@ -535,15 +536,11 @@ class Interpreter:
             st.spindle_tool = st.tool
 
         blk = _Block(lineno, words, vals)
-        modal_idx: list[int] = []
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
             if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
-            n_prefix = len(blk.prefix)
             handler(self, blk, key, i)
-            if len(blk.prefix) > n_prefix:  # a modal word copied onto a split's first line: moved there
-                modal_idx.extend([i] + [vals[k][1] for k in {430: "H", 541: "P"}.get(key, "") if k in vals])
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
@@ -689,7 +686,7 @@ class Interpreter:
             axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
-            prefix_words=prefix + before_m, event_idx=tuple(sorted(set(event_idx + modal_idx))),
+            prefix_words=prefix + before_m, event_idx=tuple(event_idx),
             stays=tool_change or g53,
             motion_idx=motion_idx,
             aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
