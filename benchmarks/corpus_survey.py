@@ -6,7 +6,11 @@ length, the stored G28/G30 positions), in the dialect of its source, and checks 
 output is byte-identical to the input apart from the header. Prints a table by source
 and the refusals grouped by the construct their message names.
 
-Usage: python benchmarks/corpus_survey.py [--corpus DIR] [--json]
+With ``--calibration FILE`` (e.g. calibrations/s500_static.json) each program is
+corrected with that calibration instead, and a program is counted corrected when the
+correction runs to its end (its bytes are expected to change).
+
+Usage: python benchmarks/corpus_survey.py [--corpus DIR] [--calibration FILE] [--json]
 """
 
 from __future__ import annotations
@@ -59,7 +63,12 @@ def construct_of(message: str) -> str:
     return text[:90]
 
 
-def survey(corpus: Path):
+def survey(corpus: Path, calibration: str | None = None):
+    engine = None
+    if calibration:
+        from postproc.calfile import load_calibration
+
+        engine = load_calibration(calibration).engine
     sources = {}
     real = corpus / "real"
     if (real / "SOURCES.csv").exists():
@@ -73,10 +82,12 @@ def survey(corpus: Path):
         text = path.read_bytes().decode("utf-8", errors="surrogateescape")
         t0 = time.perf_counter()
         try:
-            out, rep = correct_text(text, IdentityEngine(BIG), setup_for(path), options_for(dialect),
+            out, rep = correct_text(text, engine or IdentityEngine(BIG), setup_for(path), options_for(dialect),
                                     path=str(path))
             body = "".join(ln for ln in out.splitlines(keepends=True) if not emit.is_header(ln))
-            if getattr(rep, "expanded", False):
+            if engine is not None:
+                status = "expanded" if getattr(rep, "expanded", False) else "identical"  # corrected
+            elif getattr(rep, "expanded", False):
                 status = "expanded"  # flat: subprograms, loops and parameters written out
             else:
                 status = "identical" if body.lstrip("\ufeff") == text.lstrip("\ufeff") else "changed"
@@ -93,9 +104,10 @@ def survey(corpus: Path):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--corpus", default=str(ROOT.parent / "shared" / "corpus"))
+    ap.add_argument("--calibration", default=None, help="correct with this calibration (default: identity)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    rows = survey(Path(args.corpus))
+    rows = survey(Path(args.corpus), args.calibration)
     if args.json:
         print(json.dumps(rows, indent=1))
         return

@@ -1,8 +1,9 @@
 """Pin today's outputs of `correct`, and check that they stay as pinned (issue 29, "Output").
 
 Every program of ../shared/corpus (real/, linuxcnc/, pygcode-linuxcnc/; the suffixes
-tests/conftest.py lists), every program of samples/ and every golden case of tests/cases
-is corrected in this process (two worker processes at most) with each of these
+tests/conftest.py lists), every program of samples/, every golden case of tests/cases and
+the gencam benchmark program of 100,000 lines, seed 42 (../shared/bench/gencam.py, made
+afresh in a temporary folder), is corrected in this process (two worker processes at most) with each of these
 calibrations, with the options the tests and benchmarks that use them use:
 
 - ``identity``: IdentityEngine over +-1e5 mm, conftest.corpus_setup(path), default
@@ -14,19 +15,21 @@ calibrations, with the options the tests and benchmarks that use them use:
   the calibrated volume as benchmarks/corpus_speed.py's setup() places it, in the dialect
   of its source, --extrapolate linear; a program refused for a canned cycle the
   correction tilts is corrected again with cycles expand, as benchmarks/corpus_diff.py
-  does (recorded as ``"cycles": "expand"``);
+  does (recorded as ``"cycles": "expand"``); the gencam program with the setup of
+  benchmarks/throughput.py (G54 at Z100, G28 at Z200, tools 1..20 of length 0), without
+  extrapolation, as the throughput runs correct it;
 - ``own`` (golden cases only): the case's own flags and calibration, through the CLI
   in-process, as tests/test_correct_cases.py runs it.
 
-Per case (key ``<where>/<program>|<calibration>``, where is ``corpus/...``, ``samples/``
-or ``cases/``) the manifest holds the sha256 and line count of the output bytes, or for
+Per case (key ``<where>/<program>|<calibration>``, where is ``corpus/...``, ``samples/``,
+``cases/`` or ``bench/``) the manifest holds the sha256 and line count of the output bytes, or for
 a refusal the exit code and the first line of the message (without its place, which
 names a path); and, for every output, LinuxCNC's rs274 on it (tools 1..99 of zero
 length): whether it accepted the program, its motion count, and the sha256 of its
 canonical calls (or the first line of its error). The header's version word is written
 as ``VERSION`` before hashing, so that a version bump alone changes no pin.
 
-``--write DIR`` records DIR/manifest.json; ``--check`` (against tests/data/pinned/ unless
+``--write DIR`` records DIR/manifest.json (with ``--only``, updates those keys of it); ``--check`` (against tests/data/pinned/ unless
 given DIR) prints every key whose outcome changed, old -> new, and exits 1 if any did,
 3 if an output under the identity or scale calibration did (those must never change;
 they are listed apart). Keys in one manifest only are listed too (a program added or
@@ -47,6 +50,7 @@ import os
 import re
 import shlex
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -78,14 +82,32 @@ RS274_TOOLS = "".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100))
 
 
 # -- what is run -------------------------------------------------------------------------
-def programs(corpus: bool = True) -> list[tuple[str, Path]]:
-    """(key prefix, path) of every program pinned: golden cases, samples, then the corpus."""
+GENCAM = ROOT.parent / "shared" / "bench" / "gencam.py"
+GENCAM_LINES, GENCAM_SEED = 100_000, 42
+GENCAM_KEY = f"bench/gencam-{GENCAM_LINES}-seed{GENCAM_SEED}.nc"
+
+
+def make_gencam(folder: Path) -> Path | None:
+    """The gencam program written into ``folder`` (None without ../shared/bench)."""
+    if not GENCAM.is_file():
+        return None
+    out = folder / Path(GENCAM_KEY).name
+    subprocess.run([sys.executable, str(GENCAM), str(GENCAM_LINES), str(out), str(GENCAM_SEED)], check=True,
+                   stdout=subprocess.DEVNULL)
+    return out
+
+
+def programs(corpus: bool = True, gencam: Path | None = None) -> list[tuple[str, Path]]:
+    """(key prefix, path) of every program pinned: golden cases, samples, the corpus, then
+    the gencam program when ``gencam`` (its path) is given."""
     out = [(f"cases/{p.name}", p) for p in sorted(CASES.glob("*.nc"))]
     out += [(f"samples/{p.relative_to(SAMPLES)}", p) for p in sorted(SAMPLES.rglob("*"))
             if p.is_file() and p.suffix.lower() in CORPUS_EXTS]
     if corpus and CORPUS.is_dir():
         out += [(f"corpus/{p.relative_to(CORPUS)}", p) for p in sorted(CORPUS.rglob("*"))
                 if p.is_file() and p.suffix.lower() in CORPUS_EXTS]
+    if gencam is not None:
+        out.append((GENCAM_KEY, gencam))
     return out
 
 
@@ -126,6 +148,13 @@ def _scale_setup():
                  home={"G28": {"X": 0.0, "Y": 0.0, "Z": 0.0}, "G30": {"X": 0.0, "Y": 0.0, "Z": 0.0}})
 
 
+def _gencam_setup():
+    """benchmarks/throughput.py's SETUP: every move inside the S500 volume."""
+    from postproc.gcode.path import Setup
+    return Setup(offsets={"G54": (0.0, 0.0, 100.0)}, tool_lengths={t: 0.0 for t in range(1, 21)},
+                 home={"G28": {"X": 0.0, "Y": 0.0, "Z": 200.0}})
+
+
 def _correct(path: Path, cal: str, out: Path) -> dict:
     """Correct ``path`` into ``out`` as the calibration's tests do; the record's extras."""
     from postproc.gcode.pipeline import CorrectOptions, correct_file
@@ -138,6 +167,9 @@ def _correct(path: Path, cal: str, out: Path) -> dict:
         return {}
     if cal == "scale":
         correct_file(path, out, engine, _scale_setup(), CorrectOptions(dialect="linuxcnc", cycles="expand"), **kw)
+        return {}
+    if path.name == Path(GENCAM_KEY).name:
+        correct_file(path, out, engine, _gencam_setup(), CorrectOptions(), **kw)
         return {}
     from corpus_speed import setup as volume_setup
     dialect = _dialect(path)
@@ -222,11 +254,23 @@ def run_case(job: tuple[str, str, str], rs274: bool = True) -> tuple[str, dict, 
     return key, rec, time.perf_counter() - t0
 
 
+#: runs of rs274 on an output it refuses before the refusal is pinned: a refusal that does
+#: not repeat is not the program's (rs274 keeps its tool table in memory shared by every
+#: rs274 on the machine: another one running at the same time, outside tests/oracle.py's
+#: lock, once made it refuse gencam's "T18" as "not found in the tool table")
+RS274_REFUSAL_RUNS = 3
+
+
 def _rs274(raw: bytes) -> dict:
     from oracle import RS274, run_rs274
     if RS274 is None:
         return {"absent": True}
-    res = run_rs274(raw.decode("utf-8", errors="surrogateescape"), tools=RS274_TOOLS)
+    for attempt in range(RS274_REFUSAL_RUNS):
+        if attempt:
+            time.sleep(0.2 * attempt)
+        res = run_rs274(raw.decode("utf-8", errors="surrogateescape"), tools=RS274_TOOLS)
+        if res.ok:
+            break
     if not res.ok:
         return {"ok": False, "error": (res.error.splitlines() or [""])[0][:160]}
     return {"ok": True, "motions": len(res.motions),
@@ -330,7 +374,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not CORPUS.is_dir():
         print(f"warning: no corpus at {CORPUS}: golden cases and samples only", file=sys.stderr)
-    jobs = [j for j in jobs_for(programs()) if args.only in j[0]]
+    tmp = tempfile.TemporaryDirectory(prefix="pin-gencam-")
+    gencam = make_gencam(Path(tmp.name)) \
+        if any(args.only in f"{GENCAM_KEY}|{c}" for c in CALIBRATIONS) else None
+    jobs = [j for j in jobs_for(programs(gencam=gencam)) if args.only in j[0]]
     rs274 = not args.no_rs274 and shutil.which("rs274") is not None
     if not rs274 and not args.no_rs274:
         print("warning: rs274 not found: the oracle is not run", file=sys.stderr)
@@ -349,7 +396,10 @@ def main(argv=None) -> int:
     accepted = sum(r.get("rs274", {}).get("ok", False) for r in records.values())
     summary = (f"{len(records)} cases ({len(records) - refused} corrected, {refused} refused; rs274 ran "
                f"{checked}, accepted {accepted}) in {wall:.1f} s")
+    tmp.cleanup()
     if args.write:
+        if args.only and (Path(args.write) / MANIFEST).exists():
+            records = {**read_manifest(Path(args.write)), **records}
         path = write_manifest(Path(args.write), records)
         print(f"{summary}; written to {path}")
         return 0
@@ -358,6 +408,8 @@ def main(argv=None) -> int:
         old = {k: v for k, v in old.items() if args.only in k}
     if not CORPUS.is_dir():
         old = {k: v for k, v in old.items() if not k.startswith("corpus/")}
+    if gencam is None:
+        old = {k: v for k, v in old.items() if not k.startswith("bench/")}
     changes = compare(old, records, rs274)
     report(changes)
     print(f"{summary}; {len(changes)} changed against {Path(args.check) / MANIFEST}")

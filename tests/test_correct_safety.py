@@ -116,12 +116,12 @@ def test_solver_that_does_not_converge_is_refused():
     ("G0 X1 Y1 Z1\nG1 X[1+2]\n", "expression"),
     ("O100 sub\n", "O-word"),
     ("G0 X1 Y1 Z1\nM98 P100\n", "M98"),
-    ("G0 X1 Y1 Z1\nG41 D1\n", "cutter radius compensation"),
+    ("G0 X1 Y1 Z1\nG19 G41 D1\n", "Cutter radius compensation allowed only in XY, XZ planes"),
     ("G0 X1 Y1 Z1\nG68 X0 Y0 R30\n", "G68"),
     ("G0 X1 Y1 Z1\nG51 X0 Y0 P2\n", "G51"),
     ("G0 X1 Y1 Z1\nG76 P0.05 Z-1 I-0.075 J0.008 K0.045\n", "G76 threading cycle"),
     ("G0 X1 Y1 Z1\nG12.3 X1\n", "unknown G code"),
-    ("G0 X1 Y1 Z1\nG1 U5\n", "U axis"),
+    ("G0 X1 Y1 Z1\nG1 V5\n", "V axis"),  # U/W: a lathe program (tests/test_dialect_programs.py)
 ])
 def test_unsupported_constructs_are_refused_with_line_and_column(program, construct):
     # macros, expressions, O-words and subprograms are expanded by default: --no-expand

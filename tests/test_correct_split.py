@@ -198,7 +198,7 @@ def test_the_cut_balances_the_two_parts():
 
 def test_every_report_field_merges():
     fields = {f.name: f for f in dataclasses.fields(CorrectReport)}
-    named = split._TAKE_TAIL | split._LARGEST | split._SAME
+    named = split._TAKE_TAIL | split._LARGEST | split._SAME | split._COMBINED
     assert named <= set(fields)
     for name in set(fields) - named:  # the rest are counts
         assert fields[name].type in ("int", int), name

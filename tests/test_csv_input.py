@@ -64,7 +64,8 @@ def test_bom_is_accepted_everywhere(tmp_path):
     cal = tmp_path / "c.json"
     assert CliRunner().invoke(main, ["fit", str(path), "-o", str(cal)]).exit_code == 0
     cal.write_bytes("\ufeff".encode() + cal.read_bytes())
-    res = CliRunner().invoke(main, ["export", str(cal), "-f", "siemens", "--step", "45", "-o", str(tmp_path / "e.spf")])
+    res = CliRunner().invoke(main, ["export", str(cal), "-f", "siemens", "--step", "45", "-o", str(tmp_path / "e.spf"),
+                                    *(f"--reference={a}=0" for a in "XYZ")])
     assert res.exit_code == 0, res.output
 
 

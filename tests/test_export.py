@@ -76,38 +76,40 @@ def test_fanuc_round_trip(tmp_path):
     cal, up, down = runs_calibration(tmp_path, 22)
     out = tmp_path / "pitch.txt"
     res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25", "--reference", "X=0",
-                                    "-o", str(out)])
+                                    "--return", "X=-", "-o", str(out)])
     assert res.exit_code == 0, res.output
     params, data = read_fanuc(out.read_text())
     assert params[3624]["1"] == 25000  # 25 mm in 1 um detection units
-    x, c_up, c_down = fanuc_compensation(params, data, "1")
+    x, c_up, c_down = fanuc_compensation(params, data, "1", return_direction=-1)
     assert_allclose(x, TARGETS)
     # the control's absolute compensation, summed from the increments as the control does,
-    # is minus the measured error relative to the reference (approached in +), to 1 unit
+    # is minus the measured error relative to the reference (approached in -), to 1 unit
     unit = 0.001 * params[3623]["1"]
-    assert_allclose(c_up, -(up - up[0]), atol=0.5 * unit + 1e-9)
-    assert_allclose(c_down, -(down - up[0]), atol=0.5 * unit + 1e-9)
-    assert params[3627]["1"] == round((up[0] - down[0]) / unit)
+    assert_allclose(c_down, -(down - down[0]), atol=0.5 * unit + 1e-9)
+    assert_allclose(c_up, -(up - down[0]), atol=0.5 * unit + 1e-9)
+    assert params[3627]["1"] == round((down[0] - up[0]) / unit)
+    assert "reference return X in - (1006#5 ZMI = 1)" in res.stderr
 
 
-def test_fanuc_reference_at_the_upper_end_and_minus_return(tmp_path):
+def test_fanuc_reference_at_the_upper_end_and_plus_return(tmp_path):
     cal, up, down = runs_calibration(tmp_path, 23)
     out = tmp_path / "pitch.txt"
     res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25", "--reference", "X=225",
-                                    "--return-direction", "-", "-o", str(out)])
+                                    "--return", "X=+", "-o", str(out)])
     assert res.exit_code == 0, res.output
     params, data = read_fanuc(out.read_text())
-    x, c_up, c_down = fanuc_compensation(params, data, "1", return_direction=-1)
+    x, c_up, c_down = fanuc_compensation(params, data, "1", return_direction=1)
     assert_allclose(x + 225, TARGETS)
     unit = 0.001 * params[3623]["1"]
-    assert_allclose(c_down, -(down - down[-1]), atol=0.5 * unit + 1e-9)
-    assert_allclose(c_up, -(up - down[-1]), atol=0.5 * unit + 1e-9)
+    assert_allclose(c_up, -(up - up[-1]), atol=0.5 * unit + 1e-9)
+    assert_allclose(c_down, -(down - up[-1]), atol=0.5 * unit + 1e-9)
 
 
 def test_siemens_round_trip_and_remainder(tmp_path):
     out = tmp_path / "enc.spf"
     rest = tmp_path / "rest.json"
     res = CliRunner().invoke(main, ["export", S500, "-f", "siemens", "--step", "4", "-o", str(out),
+                                    "--reference", "X=0", "--reference", "Y=0", "--reference", "Z=0",
                                     "--remainder", str(rest)])
     assert res.exit_code == 0, res.output
     text = out.read_text()
@@ -119,14 +121,19 @@ def test_siemens_round_trip_and_remainder(tmp_path):
         x, v = tables[f"{axis}1"]
         assert x[0] == pytest.approx(0.0)
         assert x[-1] == pytest.approx(315.0)
-        # values are the positioning column, read at the table's positions by the model
-        assert_allclose(v, full.engine.axis_errors(axis, x)[:, "XYZ".index(axis)], atol=1e-6)
+        # values are the positioning column, read at the table's positions by the model, zero
+        # at the reference point (X=0: the first point)
+        pos = full.engine.axis_errors(axis, x)[:, "XYZ".index(axis)]
+        assert v[0] == 0.0
+        assert_allclose(v, pos - pos[0], atol=1e-6)
     # remainder + the three positioning columns = the full model
     remainder = load_calibration(rest)
     rng = np.random.default_rng(4)
     q = rng.uniform(0, 315, (50, 3))
     r = np.tile([0.0, 0.0, -100.0], (50, 1))
-    pos = np.column_stack([full.engine.axis_errors(a, q[:, k])[:, k] for k, a in enumerate("XYZ")])
+    # (the table holds the positioning minus its value at the reference, which stays in the remainder)
+    at_ref = [full.engine.axis_errors(a, [0.0])[0, k] for k, a in enumerate("XYZ")]
+    pos = np.column_stack([full.engine.axis_errors(a, q[:, k])[:, k] - at_ref[k] for k, a in enumerate("XYZ")])
     assert_allclose(remainder.engine.forward(q, r) + pos, full.engine.forward(q, r), atol=1e-12)
 
 
@@ -180,14 +187,15 @@ def test_fanuc_magnification_and_detection_unit(tmp_path):
     cal, up, down = runs_calibration(tmp_path, 25)
     out = tmp_path / "pitch.txt"
     res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25", "--detection-unit", "0.01",
-                                    "-o", str(out)])
+                                    "--reference", "X=225", "--return", "X=+", "-o", str(out)])
     assert res.exit_code == 0, res.output
     params, data = read_fanuc(out.read_text())
     assert params[3623]["1"] > 1
     assert max(abs(v) for v in data.values()) <= 127
     x, c_up, c_down = fanuc_compensation(params, data, "1", detection_unit_mm=0.00001)
     unit = 0.00001 * params[3623]["1"]
-    assert_allclose(c_up, -(up - up[0]), atol=0.5 * unit + 1e-9)
-    res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25.00005", "-o", str(out)])
+    assert_allclose(c_up, -(up - up[-1]), atol=0.5 * unit + 1e-9)
+    res = CliRunner().invoke(main, ["export", str(cal), "-f", "fanuc", "--step", "25.00005", "--reference", "X=225",
+                                    "--return", "X=+", "-o", str(out)])
     assert res.exit_code == 4
     assert "not a whole number of detection units" in res.stderr

@@ -185,7 +185,6 @@ def test_refusals_name_what_the_line_really_is(line, what):
 
 
 @pytest.mark.parametrize(("line", "what"), [
-    ("G41 D1 X5\n", "cutter radius compensation"),
     ("G38.2 Z-10 F50\n", "probing"),
 ])
 def test_refused_codes_say_why(line, what):

@@ -2,6 +2,7 @@
 errors, the runs reader's errors and the iso230 command."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -135,13 +136,25 @@ def test_generated_runs_recover_known_errors():
 
 def test_warnings_for_even_spacing_and_order(tmp_path):
     lines = hand_lines(targets={0.0: HAND[0.0], 60.0: HAND[50.0], 120.0: HAND[120.0]})
-    # run 2's up stroke visits 120 before 60
-    i = lines.index("X,60.000,2,+,4")
-    lines[i], lines[i + 1] = lines[i + 1], lines[i]
-    res = evaluate(read_runs(write(tmp_path, lines)))["X"]
+    # with times t: run 2's up stroke visits 120 before 60
+    timed = [lines[0], lines[1], lines[2] + ",t"] + [f"{ln},{k * 10}" for k, ln in enumerate(lines[3:])]
+    i = timed.index("X,60.000,2,+,4,70")
+    timed[i], timed[i + 1] = "X,60.000,2,+,4,80", "X,120.000,2,+,7,70"
+    res = evaluate(read_runs(write(tmp_path, timed)))["X"]
     text = "\n".join(res.warnings)
     assert "evenly spaced (60 mm)" in text
-    assert "run 2 (+) does not visit its targets in increasing order" in text
+    assert "run 2 (+) does not visit its targets in increasing order by its times t" in text
+
+
+def test_row_order_is_not_taken_as_visiting_order(tmp_path):
+    """Exporters sort rows by target, run or direction: without t no order warning (issue 30)."""
+    lines = hand_lines()
+    body = sorted(lines[3:], key=lambda ln: (ln.split(",")[3], float(ln.split(",")[1]), ln.split(",")[2]))
+    res = evaluate(read_runs(write(tmp_path, lines[:3] + body)))["X"]
+    assert not any("order" in w for w in res.warnings)
+    rev = lines[:3] + list(reversed(lines[3:]))
+    res = evaluate(read_runs(write(tmp_path, rev)))["X"]
+    assert not any("order" in w for w in res.warnings)
 
 
 @pytest.mark.parametrize(("old", "new", "line", "col", "words"), [
@@ -200,3 +213,104 @@ def test_format_runs_reads_back(tmp_path):
     again = read_runs(path)
     assert_allclose(again.deviation_mm, runs.deviation_mm, atol=1e-9)
     assert_allclose(again.target_mm, runs.target_mm)
+
+
+# --- issue 30: completeness of the report (virtual-machine runs) ---------------------
+
+def _vm_runs(tmp_path, name="vm.csv", directions=(1, -1), temps=None, **kw):
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from metrology_machines import TARGETS, x_machine
+
+    from postproc.simulate.runs import simulate_runs
+
+    runs = simulate_runs(x_machine(), "X", TARGETS, rng=np.random.default_rng(4), directions=directions, **kw)
+    text = format_runs(runs)
+    if temps is not None:
+        head, *rows = text.splitlines()[2:]
+        extra = ",".join(temps)
+        lines = text.splitlines()[:2] + [head + "," + ",".join(n for n in ("temp", "material_temp")[:len(temps)])]
+        lines += [r + "," + extra for r in rows]
+        text = "\n".join(lines) + "\n"
+    path = tmp_path / name
+    path.write_text(text)
+    return path, runs
+
+
+def test_expanded_uncertainty_is_stated_with_k2(tmp_path):
+    path, _ = _vm_runs(tmp_path)
+    res = CliRunner().invoke(main, ["iso230", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "expanded uncertainty (ISO/TR 230-9, k = 2): U(A)" in res.stdout
+    assert "not included: environmental variation error" in res.stdout
+    js = json.loads(CliRunner().invoke(main, ["iso230", str(path), "--json"]).stdout)["axes"]["X"]
+    u = js["uncertainty_k2"]
+    assert u["k"] == 2.0
+    # device: 1 um/m (k=2) over 315 mm -> u = 0.1575 um; B compares two means at one target
+    assert u["u_device_mm"] == pytest.approx(0.5e-3 * 0.315)
+    assert 0 < u["B"] < u["E"]
+    # a better laser and a known temperature shrink U(E); B does not depend on them
+    path2, _ = _vm_runs(tmp_path, "vm_t.csv", temps=["20.3", "20.1"])
+    u2 = json.loads(CliRunner().invoke(main, ["iso230", str(path2), "--json", "--laser-u", "0.2"])
+                    .stdout)["axes"]["X"]["uncertainty_k2"]
+    assert u2["E"] < u["E"]
+    assert u2["B"] == pytest.approx(u["B"])
+
+
+def test_temperature_is_reported_and_corrected_to_20C(tmp_path):
+    plain, _ = _vm_runs(tmp_path)
+    out = CliRunner().invoke(main, ["iso230", str(plain)]).stdout
+    assert "temperature (ISO 230-2 §4.2): not in the runs file" in out
+    warm, _ = _vm_runs(tmp_path, "warm.csv", temps=["21.0", "22.0"])
+    out = CliRunner().invoke(main, ["iso230", str(warm)]).stdout
+    assert "temp 21.00 °C" in out
+    assert "material_temp 22.00 °C" in out
+    assert "normal-temperature correction applied" in out
+    a = json.loads(CliRunner().invoke(main, ["iso230", str(plain), "--json"]).stdout)["axes"]["X"]
+    b = json.loads(CliRunner().invoke(main, ["iso230", str(warm), "--json"]).stdout)["axes"]["X"]
+    assert b["temperature_corrected"] is True
+    # -alpha (T - 20) P with alpha 11.5 um/(m K), T = 22: -23 um per metre
+    for ta, tb in zip(a["targets"], b["targets"], strict=True):
+        assert tb["mean_up"] - ta["mean_up"] == pytest.approx(-11.5e-6 * 2.0 * ta["target"], abs=1e-9)
+    c = json.loads(CliRunner().invoke(main, ["iso230", str(warm), "--json", "--no-temperature-correction"])
+                   .stdout)["axes"]["X"]
+    assert c["temperature_corrected"] is False
+    assert c["targets"][5]["mean_up"] == pytest.approx(a["targets"][5]["mean_up"])
+
+
+def test_unidirectional_runs_get_the_one_direction_figures(tmp_path):
+    path, runs = _vm_runs(tmp_path, "up.csv", directions=(1,))
+    res = evaluate(read_runs(path))["X"]
+    assert res.directions == (1,)
+    dev = {p: runs.deviation_mm[runs.target_mm == p] for p in np.unique(runs.target_mm)}
+    means = np.array([v.mean() for v in dev.values()])
+    s = np.array([v.std(ddof=1) for v in dev.values()])
+    # (the file holds the deviations to 0.1 nm)
+    assert res.figures["E_up"] == pytest.approx(np.ptp(means), abs=2e-7)
+    assert res.figures["R_up"] == pytest.approx(4 * s.max(), abs=2e-7)
+    assert res.figures["A_up"] == pytest.approx((means + 2 * s).max() - (means - 2 * s).min(), abs=2e-7)
+    assert "B" not in res.figures
+    assert "M" not in res.figures
+    js = json.loads(CliRunner().invoke(main, ["iso230", str(path), "--json", "--plot", str(tmp_path / "u.png")])
+                    .stdout)["axes"]["X"]
+    assert js["B"] is None
+    assert js["E"] is None
+    assert js["E_up"] == pytest.approx(np.ptp(means), abs=2e-7)
+    assert (tmp_path / "u.png").stat().st_size > 1000
+    out = CliRunner().invoke(main, ["iso230", str(path)]).stdout
+    assert "unidirectional (+)" in out
+    assert "A+ " in out
+    # fit takes them: the positioning of that direction, no backlash effect
+    res = CliRunner().invoke(main, ["fit", str(path), "-o", str(tmp_path / "u.json")])
+    assert res.exit_code == 0, res.output
+    assert "approached in + only" in res.stderr
+
+
+def test_plot_module_imports_matplotlib_lazily():
+    import subprocess
+    import sys
+
+    code = "import sys, postproc.metrology.iso230, postproc.cli.iso230; print('matplotlib' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -60,6 +60,18 @@ class Measurements:
             return np.zeros(len(self), dtype=bool)
         return np.any(carried_directions(self.direction) == 0, axis=1)
 
+    def without_rows(self, drop) -> Measurements:
+        """The measurements without the rows ``drop`` (indices). Approach directions are
+        carried first (a 0 takes the last move's direction, :func:`carried_directions`),
+        so leaving a row out does not change what the others' 0 means."""
+        keep = np.ones(len(self), dtype=bool)
+        keep[np.asarray(list(drop), dtype=int)] = False
+        direction = None if self.direction is None else carried_directions(self.direction)[keep]
+        return Measurements(q=self.q[keep], m=self.m[keep], r=self.r[keep], direction=direction,
+                            context={k: np.asarray(v)[keep] for k, v in self.context.items()}, path=self.path,
+                            meta=dict(self.meta), linenos=None if self.linenos is None else self.linenos[keep],
+                            has_tool_columns=self.has_tool_columns)
+
     @staticmethod
     def concat(items: list[Measurements]) -> Measurements:
         """Several files at once: context columns present in only some files are dropped."""

@@ -46,6 +46,10 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
     if rep.expanded:
         lines.append("  note: subprograms, loops, parameters and expressions were expanded: the corrected "
                      "program is flat (recorded in the header)")
+    if rep.cutter is not None:
+        lines.append(f"  cutter radius compensation kept: {rep.cutter.moves} moves offset by the controller; the "
+                     f"correction changes by at most {rep.cutter.bound_mm * 1000:.2f} um across the tool radius "
+                     f"(line {rep.cutter.lineno}, {rep.cutter.source} radius {rep.cutter.radius_mm:g} mm)")
     if rep.cycles_kept or rep.cycles_expanded:
         lines.append(f"  canned cycles: {rep.cycles_kept} kept, {rep.cycles_expanded} expanded")
     if rep.g54_assumed_zero:
@@ -66,10 +70,12 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
     """Correct one file (runs in a worker process with -j); returns (summary, error, exit code)."""
     from postproc.calfile import load_calibration
     from postproc.gcode.pipeline import CorrectOptions, correct_file
+    from postproc.gcode.recognise import dialect_of_file
 
     try:
         cal = load_calibration(job["calibration"])
         opts = CorrectOptions(**job["options"], added=load_maps(job["maps"]))
+        opts.dialect = dialect_of_file(job["src"], opts.dialect)  # generic: Sinumerik by its header
         rep = correct_file(job["src"], job["dst"], cal.engine, job["setup"], opts,
                            calibration_name=cal.name, calibration_sha256=cal.sha256)
         return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
@@ -290,6 +296,7 @@ def _check_not_same(src: str, dst: str) -> None:
 def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) -> None:
     from postproc.calfile import load_calibration
     from postproc.gcode.pipeline import CorrectOptions, correct_file
+    from postproc.gcode.recognise import dialect_of_file
 
     _check_not_same(src, dst)
     cal = load_calibration(calibration)
@@ -306,6 +313,7 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
                 shutil.copyfileobj(sys.stdin.buffer, fh)
         else:
             src_path = src
+        opts.dialect = dialect_of_file(src_path, opts.dialect)  # generic: Sinumerik by its header
         if dst == "-":
             tmpdir = tmpdir or tempfile.mkdtemp(prefix="postproc-")
             out_path = os.path.join(tmpdir, "out.nc")

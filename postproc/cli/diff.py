@@ -63,7 +63,10 @@ def diff(original, corrected, as_json, show_all, dialect, subroutine_path, setup
         # the text report lists the largest moved blocks only: keep just those (memory
         # then does not grow with the program); --all and --json list every one
         keep = None if (as_json or show_all) else LIST_MOVED
-        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, dialect=dialect.lower(),
+        from postproc.gcode.recognise import dialect_of_file
+
+        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep,
+                               dialect=dialect_of_file(original, dialect.lower()),
                                subroutine_path=subroutine_path)
     finally:
         if progress is not None:

@@ -2,9 +2,73 @@
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
 import click
 
 from postproc.cli.options import FiniteFloat
+
+
+def _check_outliers(cal, cal_path: str, keep: bool) -> None:
+    """Refuse a calibration fitted from runs that used a reading beyond the outlier rule
+    (postproc.metrology.outliers) unless ``keep``; say which readings fit left out."""
+    from postproc.metrology.outliers import runs_outliers_used
+
+    used, excluded, notes = runs_outliers_used(cal, cal_path)
+    for line in notes:
+        click.echo(line, err=True)
+    for o in excluded:
+        click.echo(f"excluded by fit (not in the calibration): {o}", err=True)
+    if used and not keep:
+        from postproc.errors import CalibrationError
+
+        raise CalibrationError(
+            f"the calibration was fitted from a reading beyond the outlier rule: {used[0]}"
+            + (f" (and {len(used) - 1} more)" if len(used) > 1 else ""),
+            path=cal_path,
+            hint="refit without it ('postproc fit RUNS -o CAL' leaves such readings out), or give --keep-outliers "
+                 "to put it in the controller table all the same")
+    for o in used:
+        click.echo(f"warning: kept (--keep-outliers): {o}", err=True)
+
+
+def _reference_settings(fmt: str, reference, return_direction, parameters) -> tuple[dict, dict]:
+    """--reference (mm) and --return (+1 / -1) by axis, checked against the format."""
+    refs_mm = {}
+    for a, v in _axis_map(reference, "--reference").items():
+        try:
+            refs_mm[a] = float(v)
+        except ValueError:
+            refs_mm[a] = math.nan
+        if not math.isfinite(refs_mm[a]):
+            raise click.BadParameter(f"{a}={v}: the reference must be a finite number of mm, e.g. X=300",
+                                     param_hint="--reference")
+    returns = {}
+    for a, v in _axis_map(return_direction, "--return").items():
+        if v not in ("+", "-"):
+            raise click.BadParameter(f"{a}={v}: the return direction is + or -", param_hint="--return")
+        returns[a] = 1 if v == "+" else -1
+    if (return_direction or parameters) and fmt != "fanuc":
+        raise click.UsageError("--return and --parameters are Fanuc settings; drop them for --format " + fmt)
+    if reference and fmt not in ("fanuc", "siemens"):
+        raise click.UsageError(f"--reference applies to fanuc and siemens tables; drop it for --format {fmt}")
+    return refs_mm, returns
+
+
+def _read_parameter_tape(path, du: float, chosen, names, refs_mm: dict, returns: dict) -> None:
+    """Fill the reference and return direction of the axes the options left open from
+    the control's parameter tape (1240, 1006#5)."""
+    from postproc.metrology.controllers.fanuc import DEFAULT_AXIS_NUMBERS, read_reference_parameters
+
+    tape_refs, tape_dirs = read_reference_parameters(Path(path).read_text(encoding="utf-8-sig"), du, path=path)
+    numbers = {**DEFAULT_AXIS_NUMBERS, **names}
+    for e in chosen:
+        n = numbers[e.axis]
+        if e.axis not in refs_mm and n in tape_refs:
+            refs_mm[e.axis] = tape_refs[n]
+        if e.axis not in returns and n in tape_dirs:
+            returns[e.axis] = tape_dirs[n]
 
 
 def _axis_map(values, what: str) -> dict[str, str]:
@@ -31,9 +95,15 @@ def _axis_map(values, what: str) -> dict[str, str]:
               help="Table spacing (fanuc, siemens; linuxcnc: resample instead of the calibration's own "
                    "positions). Default: the smallest spacing of the calibration's positions.")
 @click.option("--reference", "reference", multiple=True, metavar="AXIS=MM",
-              help="Fanuc: machine position of the reference point (default: the axis's lower end).")
-@click.option("--return-direction", "return_direction", type=click.Choice(["+", "-"]), default="+",
-              show_default=True, help="Fanuc: direction of the reference position return.")
+              help="Fanuc, siemens (required for each axis): machine position of the reference point; the "
+                   "table is zero there.")
+@click.option("--return", "return_direction", multiple=True, metavar="AXIS=+|-",
+              help="Fanuc (required for each axis): direction of the reference position return (1006#5 ZMI: "
+                   "0 is +, 1 is -). A reference the return cannot reach (the lower end with +) is refused.")
+@click.option("--parameters", "parameters", type=click.Path(exists=True, dir_okay=False), default=None,
+              metavar="TAPE", help="Fanuc: the control's parameter tape; 1240 (reference position, detection "
+                                   "units) and 1006#5 (return direction) of each axis, unless --reference/--return "
+                                   "give them.")
 @click.option("--detection-unit", "detection_unit", type=FiniteFloat(min=0), default=1.0, show_default=True,
               metavar="UM", help="Fanuc: detection unit in um (pitch data and interval are counted in it).")
 @click.option("--axis-name", "axis_names", multiple=True, metavar="AXIS=NAME",
@@ -42,8 +112,11 @@ def _axis_map(values, what: str) -> dict[str, str]:
 @click.option("--remainder", type=click.Path(dir_okay=False), default=None, metavar="CAL_OUT",
               help="Also write the calibration without what the table compensates, for 'postproc correct' "
                    "while the controller holds the table (each error compensated once).")
-def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direction, detection_unit,
-           axis_names, remainder):
+@click.option("--keep-outliers", "keep_outliers", is_flag=True,
+              help="Export a calibration fitted from runs that hold a reading beyond the outlier rule "
+                   "(refused otherwise; the reading is named).")
+def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direction, parameters, detection_unit,
+           axis_names, remainder, keep_outliers):
     """Write a controller's compensation table from a parametric calibration.
 
     A pitch or axis table holds the positioning of an axis along its own travel only
@@ -58,21 +131,30 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
     fanuc     bidirectional pitch error compensation as a parameter tape (3620-3627 and
               the pitch data N10000+n), equidistant points from the reference point,
               values in detection units; set 3605#0 = 1 and the backlash 1851 to 0.
+              Needs --reference and --return (or --parameters): no sign is assumed.
     siemens   $AA_ENC_COMP part program (LEC): one table for both directions, the mean
-              positioning error; the reversal stays in the program correction.
+              positioning error, zero at --reference; the reversal stays in the program
+              correction.
     beckhoff  TF5280 ISG CSV: all six component errors of each axis (read back by 'fit');
-              squareness and backlash stay in the program correction.
+              squareness and backlash stay in the program correction; the comment lines
+              say how to set negate and alternative_model.
+
+    Every table is read back by a model of its controller (LinuxCNC's loader, Fanuc's
+    pitch summation, Siemens' interpolation, the ISG CSV reader) and must give the
+    calibration's correction at every table point, both directions, within the
+    table's resolution; otherwise nothing is written. A calibration fitted from runs
+    with a reading beyond the outlier rule is refused unless --keep-outliers.
 
     Example:
 
     \b
         postproc fit samples/iso230_runs_x.csv -o x_runs.json
         postproc export x_runs.json --format linuxcnc -o comp/ --remainder x_rest.json
-        postproc export x_runs.json --format fanuc --step 25 --reference X=0 -o pitch.txt
-        postproc export calibrations/s500_parametric.json --format siemens --step 5 -o enc_comp.spf
+        postproc export x_runs.json --format fanuc --step 25 --reference X=0 --return X=- -o pitch.txt
+        postproc export calibrations/s500_parametric.json --format siemens --step 5 \\
+            --reference X=0 --reference Y=0 --reference Z=0 -o enc_comp.spf
     """
     import json
-    from pathlib import Path
 
     from postproc.calfile import calibration_from_dict, load_calibration
     from postproc.fileio import atomic_write_text, atomic_write_texts
@@ -80,12 +162,9 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
     from postproc.metrology.controllers.base import axis_order, remainder_dict
 
     cal = load_calibration(cal_path)
+    _check_outliers(cal, cal_path, keep_outliers)
     names = _axis_map(axis_names, "--axis-name")
-    refs = {a: v for a, v in _axis_map(reference, "--reference").items()}
-    try:
-        refs_mm = {a: float(v) for a, v in refs.items()}
-    except ValueError:
-        raise click.BadParameter("the reference must be a number of mm, e.g. X=300", param_hint="--reference") from None
+    refs_mm, returns = _reference_settings(fmt, reference, return_direction, parameters)
     chosen = [AxisErrors(cal, a) for a in axis_order(axes or "XYZ")]
     if not axes:
         chosen = [e for e in chosen if e.measured]
@@ -100,12 +179,15 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
 
         du = detection_unit / 1000.0
         interval = step if step is not None else max(du, round(min(default_step(e) for e in chosen) / du) * du)
+        if parameters:
+            _read_parameter_tape(parameters, du, chosen, names, refs_mm, returns)
         result = export_fanuc(chosen, interval_mm=interval, detection_unit_mm=du, reference_mm=refs_mm,
-                              return_direction=1 if return_direction == "+" else -1, axis_numbers=names)
+                              return_direction=returns, axis_numbers=names)
     elif fmt == "siemens":
         from postproc.metrology.controllers.siemens import export_siemens
 
-        result = export_siemens(chosen, step=step or min(default_step(e) for e in chosen), axis_names=names)
+        result = export_siemens(chosen, step=step or min(default_step(e) for e in chosen), reference_mm=refs_mm,
+                                axis_names=names)
     else:
         from postproc.metrology.controllers.beckhoff import export_beckhoff
 

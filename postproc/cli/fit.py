@@ -76,8 +76,11 @@ class MethodOptionsCommand(click.Command):
 @click.option("--max-correction", "max_correction", type=FiniteFloat(min=0), default=1.0, show_default=True,
               metavar="MM", help="Refuse to write a calibration whose correction anywhere in its volume "
                                  "exceeds this (an undetermined fit).")
+@click.option("--keep-outliers", "keep_outliers", is_flag=True,
+              help="Fit every reading, also those beyond the outlier rule that 'check' excludes (listed, and "
+                   "recorded in the calibration: 'export' then refuses it without --keep-outliers).")
 def fit(files, method, output, name, squareness, tool_vector, effects, base_path, register, max_correction,
-        **method_options):
+        keep_outliers, **method_options):
     """Fit a calibration from point measurements or axis error tables.
 
     FILES are formats.md CSV files: point measurements (several files are fitted
@@ -108,7 +111,8 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
     if base_path is not None:
         if given:
             raise click.UsageError(f"--base keeps the calibration as it is; drop {', '.join(given)}")
-        _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction)
+        _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction,
+                  keep_outliers)
         return
     options = {opt.keyword: value for flag, (opt, value) in given.items()}
     if ("tables" in kinds or "runs" in kinds) and kinds.count("squareness") == 1 and squareness is None:
@@ -138,19 +142,15 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
 
         result = tables_fitter(method)(
             [f for f, k in zip(files, kinds, strict=True) if k == "tables"], squareness=squareness,
-            runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], **options)
+            runs=[f for f, k in zip(files, kinds, strict=True) if k == "runs"], keep_outliers=keep_outliers,
+            **options)
     else:
         method = method or registry.DEFAULT_POINTS_METHOD
         _check_method_options(method, given)
         r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
         data = read_measurement_files(files, r)
         try:
-            if effects or register:
-                from postproc.diagnose.refit import fit_with_effects
-
-                result = fit_with_effects(method, data, list(effects), register=bool(register), **options)
-            else:
-                result = registry.fitter(method)(data, **options)
+            result, data = _fit_points(method, data, effects, register, options, keep_outliers)
         except CalibrationError as exc:
             for flag, (opt, value) in given.items():
                 if opt.error_phrase and opt.error_phrase in exc.message:
@@ -174,7 +174,8 @@ def fit(files, method, output, name, squareness, tool_vector, effects, base_path
     click.echo(f"wrote {output}", err=True)
 
 
-def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction):
+def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effects, register, max_correction,
+              keep_outliers=False):
     """``fit --base CAL POINTS... --effect NAME``: effects added to a calibration kept as it is."""
     from postproc.calfile import load_calibration, save_calibration
     from postproc.calibration.measurements import read_measurement_files
@@ -193,7 +194,13 @@ def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effect
     cal = load_calibration(base_path)
     r = parse_vector(tool_vector, "--tool-vector") if tool_vector is not None else None
     data = read_measurement_files(files, r)
-    result = extend_calibration(cal, data, list(effects), register=True if register is None else register)
+    register = True if register is None else register
+    # as 'check --fixed' screens: against the calibration as it is, the frame registered
+    found = _points_outliers(data, cal.engine, register=register)
+    if found and not keep_outliers:
+        data = _without(data, found)
+    result = extend_calibration(cal, data, list(effects), register=register)
+    _record_outliers(result, found, keep_outliers)
     for line in result.report:
         click.echo(line, err=True)
     click.echo(f"fit residual: RMS {result.rms_mm * 1000:.2f} um, max {result.max_mm * 1000:.2f} um "
@@ -201,6 +208,84 @@ def _fit_base(base_path, files, kinds, method, output, name, tool_vector, effect
     refuse_large_correction(result.engine, data, max_correction, output)
     save_calibration(output, result.engine, name=name, effects=result.effects, fit=result.info)
     click.echo(f"wrote {output}", err=True)
+
+
+def _fit_points(method, data, effects, register, options, keep_outliers):
+    """Fit the point files ``data``; points beyond the outlier rule (screened as 'check'
+    screens, on the first fit's residual) are left out and the fit made again, unless
+    ``keep_outliers``. Returns the result and the data it was fitted to."""
+    from postproc.engine import registry
+
+    def run_fit(data):
+        if effects or register:
+            from postproc.diagnose.refit import fit_with_effects
+
+            return fit_with_effects(method, data, list(effects), register=bool(register), **options)
+        return registry.fitter(method)(data, **options)
+
+    result = run_fit(data)
+    found = _points_outliers(data, result.engine, resid=result.residuals_mm)
+    if found and not keep_outliers:
+        data = _without(data, found)
+        result = run_fit(data)
+    _record_outliers(result, found, keep_outliers)
+    return result, data
+
+
+def _points_outliers(data, engine, *, register: bool = False, resid=None) -> list[dict]:
+    """Points of measurement files ``data`` beyond the rule, screened as ``check`` screens
+    them (:func:`postproc.diagnose.robust.screen`: repeat groups against their other
+    shots, single shots by their residual against ``engine``, or ``resid`` (N, 3) when
+    given, e.g. a fit's own residual), with the measurement frame registered first when
+    ``register``. Each: ``row`` (over the files in order), ``place`` (file:line),
+    ``residual_mm`` and ``why``."""
+    import numpy as np
+
+    from postproc.diagnose.check import measured_residual
+    from postproc.diagnose.data import Dataset
+    from postproc.diagnose.robust import screen
+    from postproc.errors import PostprocError
+
+    ds = Dataset.from_measurements(data)
+    if resid is None or len(resid) != len(ds):
+        resid = measured_residual(engine, ds)
+        if register and len(ds) >= 6:  # a 6-DOF registration needs six points, as in check
+            from postproc.diagnose.models import Fixed
+
+            try:
+                frame = Fixed(engine, "registration", True).fit(ds, []).frame
+                resid = resid - frame.displacement(ds.q, ds.r)
+            except PostprocError:
+                pass
+    sc = screen(ds, np.asarray(resid, dtype=float))
+    return [{"row": int(o["row"]), "place": o["place"], "residual_mm": o["residual_mm"], "why": o["reason"]}
+            for o in sc.outliers]
+
+
+def _without(data, found):
+    """The measurement files without the rows of ``found`` (points_outliers entries)."""
+    out = []
+    start = 0
+    for meas in data:
+        rows = [o["row"] - start for o in found if start <= o["row"] < start + len(meas)]
+        out.append(meas.without_rows(rows) if rows else meas)
+        start += len(meas)
+    return out
+
+
+def _record_outliers(result, found, kept: bool) -> None:
+    """List the points beyond the outlier rule in the report and the calibration's fit
+    information (left out, or kept with --keep-outliers)."""
+    from postproc.metrology.outliers import RULE
+
+    if found:
+        what = "kept (--keep-outliers)" if kept else "excluded from the fit (as 'check' excludes them)"
+        result.report.append(f"{len(found)} point(s) beyond the outlier rule {what}:")
+        result.report += [f"  {o['place']}: residual ({', '.join(f'{v * 1000:+.1f}' for v in o['residual_mm'])}) um: "
+                          f"{o['why']}" for o in found]
+    result.info = dict(result.info or {})
+    rows = [{k: v for k, v in o.items() if k != "row"} for o in found]
+    result.info["outliers"] = {"rule": RULE, "excluded": [] if kept else rows, "kept": rows if kept else []}
 
 
 def _given(method_options: dict) -> dict:

@@ -12,10 +12,10 @@ from pathlib import Path
 import click
 
 from postproc.errors import PostprocError
+from postproc.gcode.dialect import DIALECT_NAMES
 
-# The controllers --dialect names (postproc.gcode.dialect.DIALECTS; a test keeps them equal,
-# and this module stays light for --help).
-DIALECT_CHOICE = click.Choice(["generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3"], case_sensitive=False)
+# The controllers --dialect names: one entry each in postproc.gcode.dialect (a light module)
+DIALECT_CHOICE = click.Choice(list(DIALECT_NAMES), case_sensitive=False)
 
 _AXES = "XYZ"
 
@@ -47,7 +47,8 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+)$", re.IGNORECASE)
+# G500 and G505..G599: Sinumerik; E<n>: Fadal fixture offsets; G15H<n>: Okuma work coordinates
+_OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+|G5\d\d|E\d+|G15H\d+)$", re.IGNORECASE)
 
 
 def axis_values(text: str, rest: str, letters: str, *, param_hint: str | None = None,
@@ -83,6 +84,7 @@ def parse_offset(text: str) -> tuple[str, dict[str, float]]:
     if not sep or not _OFFSET_NAME.match(name):
         raise click.BadParameter(
             f"{text!r}: expected NAME=X..,Y..,Z.. with NAME one of G54..G59, G59.1..G59.3, G54.1P<n>"
+            " (G500..G599 Sinumerik, E<n> Fadal, G15H<n> Okuma)"
         )
     values = axis_values(text, rest, "XYZABC")
     return name, values
@@ -138,8 +140,9 @@ def parse_start(text: str) -> dict[str, float]:
     return values
 
 
-def read_tool_table(path: str) -> dict[int, float]:
-    """Tool lengths (mm) from a LinuxCNC tool table: lines like ``T1 P1 Z100.5 D6 ;comment``."""
+def read_tool_table(path: str, column: str = "Z") -> dict[int, float]:
+    """Tool lengths (mm) from a LinuxCNC tool table: lines like ``T1 P1 Z100.5 D6 ;comment``
+    (``column="D"``: the diameters of the tools that have one)."""
     lengths: dict[int, float] = {}
     try:
         text = Path(path).read_text(encoding="utf-8", errors="replace")
@@ -159,8 +162,22 @@ def read_tool_table(path: str) -> dict[int, float]:
                                     path=path, lineno=lineno) from None
         if "T" not in fields:
             raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
-        lengths[int(fields["T"])] = fields.get("Z", 0.0)
+        if column == "Z" or column in fields:
+            lengths[int(fields["T"])] = fields.get(column, 0.0)
     return lengths
+
+
+def parse_tool_radius(text: str, flag: str, half: bool) -> tuple[int | None, float]:
+    """``"1=3"`` or ``"D1=3"`` -> (1, 3.0); ``"3"`` -> (None, 3.0), for every tool (mm; halved
+    when ``half``: a diameter)."""
+    key, sep, value = text.rpartition("=")
+    try:
+        size = float(value)
+        if not math.isfinite(size) or size < 0 or (sep and not key.strip().upper().lstrip("DT").isdigit()):
+            raise ValueError
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: expected N=SIZE or SIZE (mm), e.g. 1=3", param_hint=flag) from None
+    return (int(key.strip().upper().lstrip("DT")) if sep else None), size / 2 if half else size
 
 
 @contextlib.contextmanager
@@ -174,7 +191,8 @@ def _option(flag: str):
         raise
 
 
-def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=()):
+def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, context=(), start=None, home=(),
+                var=(), vars_file=None, tool_radius=(), tool_diameter=()):
     """The :class:`postproc.gcode.path.Setup` the options of :func:`setup_options` give (their
     texts as typed); a partial work offset, a home or an axis given twice is refused."""
     from postproc.gcode.path import Setup
@@ -202,8 +220,23 @@ def build_setup(offset=(), tool_length=(), tool_table=None, tool_vector=None, co
         if name in homes:
             raise click.BadParameter(f"{name} is given twice", param_hint="--home")
         homes[name] = values
+    from postproc.gcode.variables import parse_var, read_vars
+
+    variables = read_vars(vars_file) if vars_file else {}
+    for text in var:
+        try:
+            index, value = parse_var(text)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--var") from None
+        variables[index] = value
+    # cutter radii (postproc.gcode.cutter): the table's diameters, then the options
+    radii: dict[int | None, float] = {t: d / 2 for t, d in read_tool_table(tool_table, "D").items()} \
+        if tool_table else {}
+    radii.update(parse_tool_radius(t, "--tool-diameter", True) for t in tool_diameter)
+    radii.update(parse_tool_radius(t, "--tool-radius", False) for t in tool_radius)
     return Setup(offsets=offsets, tool_lengths=tools, tool_vector=vec, context=ctx,
-                 start=parse_start(start) if start is not None else {}, home=homes)
+                 start=parse_start(start) if start is not None else {}, home=homes, variables=variables,
+                 tool_radii=radii)
 
 
 #: The setup options, in the order they are listed: flag -> (parameter name, click.option arguments).
@@ -217,8 +250,14 @@ SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
         multiple=True, metavar="H=L", help="Tool length (mm) for G43 H<n>, e.g. 1=100.5. Repeatable.")),
     "--tool-table": ("tool_table", dict(
         default=None, type=click.Path(dir_okay=False),
-        help="LinuxCNC tool table (.tbl) giving tool lengths (Z column, mm); --tool-length overrides "
-             "its entries.")),
+        help="LinuxCNC tool table (.tbl) giving tool lengths (Z column, mm) and cutter diameters (D column, "
+             "mm, for G41/G42); --tool-length, --tool-radius and --tool-diameter override its entries.")),
+    "--tool-radius": ("tool_radius", dict(
+        multiple=True, metavar="N=R",
+        help="Cutter radius (mm) of tool N (LinuxCNC, G41/G42 D<N>) or D register N (Fanuc, Haas); R alone: "
+             "every tool. Repeatable.")),
+    "--tool-diameter": ("tool_diameter", dict(
+        multiple=True, metavar="N=D", help="As --tool-radius, giving the diameter (mm). Repeatable.")),
     "--tool-vector": ("tool_vector", dict(
         default=None, metavar="X,Y,Z",
         help="Tool vector r (mm) from gauge point to tool tip, overriding (0,0,-length).")),
@@ -230,6 +269,15 @@ SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
         multiple=True, metavar="G28=X..,Y..,Z..",
         help="Stored position G28 or G30 goes to, in machine mm (end with 'in' for inches), any of X, Y, Z. "
              "Without it an axis sent there is unknown until the program positions it again. Repeatable.")),
+    "--var": ("var", dict(
+        multiple=True, metavar="N=VALUE",
+        help="Value of a machine-state variable the program reads (Haas/Fanuc #5405, retained #500, "
+             "LinuxCNC #5221), e.g. 5405=12.5; recorded in the header. Probe results are never taken. "
+             "Repeatable.")),
+    "--vars": ("vars_file", dict(
+        default=None, type=click.Path(dir_okay=False),
+        help="Machine-state variables from a LinuxCNC .var file or a Fanuc/Haas macro-variable listing; "
+             "--var overrides its entries.")),
     "--context": ("context", dict(
         multiple=True, metavar="NAME=VALUE",
         help="Constant context value during the run, read by the calibration's model, e.g. temp=21.5. "

@@ -432,11 +432,14 @@ def init(layout, calibration, output):
 
     centre = (0.0, 0.0, 0.0)
     rel = None
+    needs: tuple[str, ...] = ()
     if calibration is not None:
-        centre = tuple(load_calibration(calibration).engine.volume_mm.mean(axis=0))
+        engine = load_calibration(calibration).engine
+        centre = tuple(engine.volume_mm.mean(axis=0))
+        needs = tuple(engine.needs)
         out_dir = Path(output).resolve().parent
         rel = Path(os.path.relpath(Path(calibration).resolve(), out_dir)).as_posix()
-    data = layout_chain(layout, rel, centre)
+    data = layout_chain(layout, rel, centre, needs)
     chain = chain_from_dict(data, base_dir=Path(output).resolve().parent)  # what predict will read
     atomic_write_text(output, json.dumps(data, indent=2) + "\n")
     click.echo(f"wrote {output}: {layout}, {len(chain.modules)} modules, variables "

@@ -26,15 +26,13 @@ import numpy as np
 
 from postproc.diagnose.data import Dataset
 
-# Chance of flagging one clean row anywhere in the campaign (Bonferroni over rows).
-FAMILY_ALPHA = 1e-3
-# Consistency factor of the median absolute deviation for a Gaussian (MAD * 1.4826 = sigma).
-MAD_TO_SIGMA = 1.4826
+# The rule and its constants are postproc.metrology.outliers' (one rule for check, fit and iso230).
+from postproc.metrology.outliers import FAMILY_ALPHA, MAD_TO_SIGMA, MIN_READINGS, MIN_SIGMA_MM  # noqa: F401
+from postproc.metrology.outliers import robust_sigma as _robust_sigma
+from postproc.metrology.outliers import threshold as _threshold
+
 # Fewer rows than this give no robust spread.
-MIN_ROWS = 8
-# Spreads below this (mm, a nanometre: below any instrument) are rounding, not noise:
-# noise-free simulated data must not make outliers of rounding differences.
-MIN_SIGMA_MM = 1e-6
+MIN_ROWS = MIN_READINGS
 
 
 @dataclass
@@ -48,14 +46,9 @@ class Screening:
 
 
 def threshold(n: int) -> float:
-    from scipy.stats import chi2
-
-    return float(chi2.isf(FAMILY_ALPHA / max(n, 1), 3))
-
-
-def _robust_sigma(dev: np.ndarray) -> np.ndarray:
-    s = MAD_TO_SIGMA * np.median(np.abs(dev - np.median(dev, axis=0)), axis=0)
-    return np.maximum(s, MIN_SIGMA_MM)
+    """The rule's limit for a campaign of ``n`` points in space (3 components), the
+    spread estimated from those ``n``."""
+    return _threshold(n, 3, n)
 
 
 def duplicate_rows(ds: Dataset) -> np.ndarray:
@@ -83,27 +76,35 @@ def screen(ds: Dataset, resid: np.ndarray) -> Screening:
     limit = threshold(len(live))
     flagged = np.zeros(len(live), dtype=bool)
     reason: dict[int, str] = {}
-    # repeat groups: each shot against the mean of the others in its group
-    multi = counts[groups] >= 2
-    if np.count_nonzero(multi) >= MIN_ROWS:
+    # repeat groups: each shot against the mean of the others in its group. A glitch pulls
+    # the others' mean too, so one shot per group is taken at a time (the farthest; in a
+    # pair, the one farther from the model) and the group looked at again without it.
+    rnorm = np.linalg.norm(resid[live], axis=1)
+    while True:
+        active = ~flagged
+        counts_a = np.bincount(groups[active], minlength=len(counts))
+        multi = active & (counts_a[groups] >= 2)
+        if np.count_nonzero(multi) < MIN_ROWS:
+            break
         sums = np.zeros((len(counts), 3))
-        np.add.at(sums, groups, sub.m)
-        k = counts[groups][:, None].astype(float)
+        np.add.at(sums, groups[active], sub.m[active])
+        k = counts_a[groups][:, None].astype(float)
         loo = (sums[groups] - sub.m) / np.maximum(k - 1, 1)
         d = sub.m - loo  # variance sigma^2 * k / (k - 1)
-        dstd = d * np.sqrt((k - 1) / k)
+        dstd = d * np.sqrt((k - 1) / np.maximum(k, 1))
         sigma = _robust_sigma(dstd[multi])
-        z2 = np.sum((dstd / sigma) ** 2, axis=1)
-        rnorm = np.linalg.norm(resid[live], axis=1)
+        z2 = np.where(multi, np.sum((dstd / sigma) ** 2, axis=1), 0.0)
+        new = []
         for g in np.unique(groups[multi & (z2 > limit)]):
-            rows = np.nonzero(groups == g)[0]
+            rows = np.nonzero(multi & (groups == g))[0]
             bad = rows[z2[rows] > limit]
-            if counts[g] == 2:
-                bad = bad[np.argsort(-rnorm[bad])][:1]  # a pair: the shot farther from the model
-            for i in bad:
-                flagged[i] = True
-                reason[int(i)] = (f"departs from the other shots at this point by {np.sqrt(z2[i]):.1f} "
-                                  f"within-group sigma")
+            key = -rnorm[bad] if counts_a[g] == 2 else -z2[bad]
+            new.append(int(bad[np.argsort(key)][0]))
+        if not new:
+            break
+        for i in new:
+            flagged[i] = True
+            reason[i] = f"departs from the other shots at this point by {np.sqrt(z2[i]):.1f} within-group sigma"
     # single shots (and the rest): the residual against its robust spread
     sigma = _robust_sigma(resid[live][~flagged])
     z2 = np.sum(((resid[live] - np.median(resid[live][~flagged], axis=0)) / sigma) ** 2, axis=1)

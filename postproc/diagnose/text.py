@@ -102,7 +102,8 @@ def _screening(res: CheckResult) -> list[str]:
         out.append(f"duplicated rows (one shot written twice; kept once): {len(sc.duplicates)}: "
                    + ", ".join(d["place"] for d in sc.duplicates[:8]) + (" ..." if len(sc.duplicates) > 8 else ""))
     if sc.outliers:
-        out.append(f"outliers excluded from the analysis: {len(sc.outliers)}")
+        out.append(f"outliers excluded from the analysis: {len(sc.outliers)} (the outlier rule of "
+                   "postproc.metrology.outliers, family-wise 0.1 %; the suggested 'fit' leaves them out too)")
         for o in sc.outliers[:10]:
             out.append(f"  {o['place']}  residual {vec_um(o['residual_mm'])} um: {o['reason']}")
         if len(sc.outliers) > 10:

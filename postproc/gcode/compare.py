@@ -264,6 +264,7 @@ class HeaderSetup:
     start: dict = field(default_factory=dict)  # axis -> machine mm
     tool_vector: tuple | None = None
     home: dict = field(default_factory=dict)  # "G28"/"G30" -> {axis: machine mm}
+    variables: dict = field(default_factory=dict)  # machine-state variables given with --var
     expanded: bool = False  # the program was corrected expanded (subprograms, loops, macros written out)
     cycles_expanded: bool = False  # its canned cycles were written as their moves (--cycles expand)
 
@@ -292,7 +293,7 @@ def header_setup(source) -> HeaderSetup:
             _old_header_row(hs, row)
             continue
         words = row[len(emit.HEADER_PREFIX):].rstrip(")").strip().upper()
-        m = re.fullmatch(r"OFFSET (G5\S+) (.*)", words)
+        m = re.fullmatch(r"OFFSET (\S+) (.*)", words)
         if m:
             v = _axis_values(m.group(2))
             hs.offsets[m.group(1)] = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
@@ -306,6 +307,9 @@ def header_setup(source) -> HeaderSetup:
         elif words.startswith("TOOL VECTOR "):
             v = _axis_values(words[12:])
             hs.tool_vector = (v.get("X", 0.0), v.get("Y", 0.0), v.get("Z", 0.0))
+        elif words.startswith("VARIABLES "):
+            for n, v in re.findall(rf"(\d+) ({_NUMBER})", words[10:]):
+                hs.variables[int(n)] = float(v)
         elif words.startswith("EXPANDED"):
             hs.expanded = True
         elif words == "CYCLES EXPANDED":
@@ -355,6 +359,8 @@ def setup_from_header(hs: HeaderSetup, setup: Setup | None) -> Setup:
         changes["tool_vector"] = hs.tool_vector
     if hs.home and hasattr(setup, "home") and not setup.home:
         changes["home"] = {k: dict(v) for k, v in hs.home.items()}
+    if hs.variables and not setup.variables:
+        changes["variables"] = dict(hs.variables)
     return dataclasses.replace(setup, **changes) if changes else setup
 
 
@@ -505,6 +511,7 @@ class _Reader:
         self.expand = expand
         self.dialect = dialect
         self.subroutine_path = tuple(subroutine_path)
+        self.variables = getattr(setup, "variables", None)  # --var: machine state the program reads
         # read each canned cycle block as the lines correct writes it as (--cycles expand);
         # both programs are read so, as correct may keep some cycles and expand others
         # (--cycles auto)
@@ -556,7 +563,8 @@ class _Reader:
         """:meth:`chunks` of the program as executed (:func:`postproc.gcode.expand.expand`)."""
         from postproc.gcode.expand import expand
 
-        flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path)
+        flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path,
+                      variables=self.variables)
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
             rows = _Rows.blank([sl.text for sl in part], 0)
             rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TypedDict
 
 from postproc.constants import MM_PER_INCH
@@ -88,6 +88,11 @@ HAAS_ARC_ABS_INCH = 0.0008
 # milling programs; DNC links and older memory formats break long blocks. 128 characters
 # is kept as the limit here (the header and every edited line stay far below it).
 FANUC_MAX_LINE = 128
+# Fanuc lathe (G code system A): G70 finishing, G71 stock removal in turning, G72 in facing,
+# G73 pattern repeating, G74 end face peck drilling, G75 outer/inner diameter grooving, G76
+# multiple threading. G73 and G76 are milling cycles on a mill (peck drilling, fine boring),
+# and G74 is left-hand tapping: only the others are read as a lathe's, and only after G96.
+FANUC_TURNING_CYCLES = frozenset({700, 710, 720, 750})
 
 
 @dataclass(frozen=True)
@@ -111,6 +116,41 @@ class Dialect:
     arc_cap_mm: float  # largest tolerance whatever the radius, mm (G21); inf: none
     arc_mismatch: str  # what the controller does with an arc inside the tolerance, and beyond it
     source: str  # where the values come from
+    # -- how programs are read (the interpreter and the expansion ask for these) --------
+    machine: str = "mill"  # mill | lathe: postproc corrects milling machines only
+    reads_arcs_as: str | None = None  # the dialect whose input-arc rule applies (None: its own)
+    comments_nest: bool = False  # "(a (b) c)" is one comment (else LinuxCNC/Grbl: an error or ')' closes)
+    nested_comment_error: bool = False  # a "(" inside a comment is an error (NCE_NESTED_COMMENT_FOUND)
+    text_after_percent: str = "ignored"  # "%" followed by text: ignored | error
+    g80_clears_motion: bool = False  # G80 leaves no motion mode (else the one before the cycle comes back)
+    cycle_keeps_rz: bool = False  # a new canned cycle keeps the last R and Z (else they must be given again)
+    cycle_r_default_initial: bool = False  # a cycle without R retracts to the initial level
+    cycle_repeat_words: str = "L"  # the words counting a cycle's repeats, first given wins ("KL": K, else L)
+    full_circle_without_end: bool = True  # G2/G3 with centre words and no end point is a full circle
+    g53_absolute_in_g91: bool = False  # G53 words are machine positions in G91 too (else an error)
+    off_plane_arc_offset: str = "error"  # an I/J/K word off the arc's plane: error | ignored | zero-ignored
+    # parameters and control: o-word (LinuxCNC) | macro-b (Fanuc custom macro B, M98/M99) | detect
+    macro_syntax: str = "o-word"
+    m98_count_in_p: bool = False  # M98 P(count)(4-digit number) when no program has the whole number
+    numbered_program_line: bool = False  # "N1 O2 (NAME)": a program number after a sequence number (Fadal)
+    header_forms: tuple[str, ...] = ()  # regexes of header lines read as no geometry ("$NAME.MIN%", Okuma)
+    uvw_axes: bool = False  # U, V, W are axes (LinuxCNC); else U/W mark a lathe program (incremental X/Z)
+    turning_cycles: frozenset[int] = frozenset()  # G keys (10 x number) that are lathe turning cycles here
+    call_words: str = ""  # letters that call a subroutine in a block without G codes ("L": Fadal format 1)
+    fixture_offset_word: str = ""  # a letter selecting a fixture offset by number ("E": Fadal E1..E48)
+    g15_work_select: bool = False  # "G15 H<n>" selects work coordinate system n (Okuma)
+    g_aliases: tuple[tuple[int, int], ...] = ()  # (this dialect's G key, the ISO G key it means)
+    radius_word: str = "R"  # how an arc's radius is written ("CR=" on Sinumerik)
+    block_syntax: str = "iso"  # iso: letter-number words | sinumerik: also NAME=value, keywords, calls
+    program_end_m: tuple[int, ...] = (2, 30)  # M codes that end the program
+    work_codes: tuple[tuple[int, str], ...] = ()  # further work-offset G codes (G key, the offset's name)
+    refused_g: tuple[tuple[int, str, str], ...] = ()  # (G key, construct in the dialect's words, what instead)
+    dwell_f_is_time: bool = False  # "G4 F2": F is the dwell time, the feed stays (Sinumerik)
+    tool_length_word: str = ""  # a word applying a tool length register by number ("D": Sinumerik flat D)
+    chosen_by: tuple[str, ...] = ()  # regexes of opening lines that choose this dialect over generic
+    yields_to_headers: bool = False  # a program opening with another dialect's chosen_by lines is read in it
+    marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
+    refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
 
     def arc_end_radius_tolerance(self, r_start_mm: float, units: str | float = "mm") -> float:
         """Largest |r_end - r_start| (mm) this controller accepts on a centre-format arc.
@@ -130,6 +170,8 @@ class Dialect:
         a = self.arc_abs_inch * MM_PER_INCH if inch else self.arc_abs_mm
         if self.arc_rule == "linuxcnc":
             return min(LINUXCNC_ARC_CAP_FACTOR * a, max(a, self.arc_rel * r))
+        if self.arc_rule == "relative":
+            return max(a, self.arc_rel * r)
         return a
 
     def arc_end_radius_ok(self, r_start_mm: float, r_end_mm: float, units: str | float = "mm") -> bool:
@@ -171,7 +213,12 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="cut as a spiral from the start radius to the end radius; beyond the tolerance the "
                      "block is an error ('Radius to end of arc differs from radius to start')",
         source="linuxcnc.h LINELEN; interp_read.cc read_text; interp_internal.hh CENTER_ARC_RADIUS_TOLERANCE_*, "
-               "SPIRAL_RELATIVE_TOLERANCE; interp_arc.cc arc_data_ijk"),
+               "SPIRAL_RELATIVE_TOLERANCE; interp_arc.cc arc_data_ijk",
+        # interp_read.cc read_comment: NCE_NESTED_COMMENT_FOUND; read_text: "Bad character '%' used";
+        # interp_convert.cc convert_motion(G_80): motion mode G_80 (none)
+        nested_comment_error=True, text_after_percent="error", g80_clears_motion=True,
+        # LinuxCNC machines may have U/V/W axes; G70/G71/G72 are its lathe finishing and roughing cycles
+        uvw_axes=True, turning_cycles=frozenset({700, 710, 720})),
     "grbl": Dialect(
         name="grbl", title="Grbl 1.1",
         max_line_chars=GRBL_RX_BUFFER_SIZE - 1, max_word_chars=GRBL_LINE_BUFFER_SIZE - 1,
@@ -183,7 +230,9 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="cut on the start radius (mc_arc), the last segment going straight to the end point; "
                      "beyond the tolerance error 33 (STATUS_GCODE_INVALID_TARGET)",
         source="gcode.c (arc radius check), protocol.c/protocol.h LINE_BUFFER_SIZE, serial.h RX_BUFFER_SIZE; "
-               "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals"),
+               "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals",
+        # gcode.c: an arc with no axis words is STATUS_GCODE_NO_AXIS_WORDS
+        full_circle_without_end=False),
     "fanuc": Dialect(
         name="fanuc", title="Fanuc 0i/30i (ISO code)",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -195,7 +244,10 @@ DIALECTS: dict[str, Dialect] = {
         arc_mismatch="cut as a spiral (radius changing linearly); beyond parameter 3410 alarm PS0020 "
                      "OVER TOLERANCE OF RADIUS",
         source="Fanuc operator's manual (control-out/control-in comments, ';' is the end of block in ISO "
-               "code); parameter manual No. 3410"),
+               "code); parameter manual No. 3410",
+        comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
+        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True,
+        turning_cycles=FANUC_TURNING_CYCLES),
     "haas": Dialect(
         name="haas", title="Haas NGC",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,
@@ -205,7 +257,9 @@ DIALECTS: dict[str, Dialect] = {
         arc_rule="absolute", arc_abs_mm=HAAS_ARC_ABS_MM, arc_abs_inch=HAAS_ARC_ABS_INCH, arc_rel=0.0,
         arc_cap_mm=HAAS_ARC_ABS_MM,
         arc_mismatch="alarm 'Invalid I, J, K, or R in G02 or G03' beyond the tolerance",
-        source="Haas mill operator's manual (comments, program format); tolerance assumed as Fanuc's"),
+        source="Haas mill operator's manual (comments, program format); tolerance assumed as Fanuc's",
+        comments_nest=True, cycle_keeps_rz=True, cycle_r_default_initial=True, cycle_repeat_words="KL",
+        g53_absolute_in_g91=True, off_plane_arc_offset="ignored", macro_syntax="macro-b", m98_count_in_p=True),
     "mach3": Dialect(
         name="mach3", title="Mach3",
         max_line_chars=LINUXCNC_LINELEN - 3, max_word_chars=None,
@@ -215,25 +269,140 @@ DIALECTS: dict[str, Dialect] = {
         arc_rule="absolute", arc_abs_mm=NIST_ARC_ABS_MM, arc_abs_inch=NIST_ARC_ABS_INCH, arc_rel=0.0,
         arc_cap_mm=NIST_ARC_ABS_MM,
         arc_mismatch="beyond the tolerance the block is an error (NIST RS274NGC arc_data_ijk)",
-        source="NIST RS274NGC 3 rs274ngc.hh TOLERANCE_MM/TOLERANCE_INCH, RS274NGC_TEXT_SIZE"),
+        source="NIST RS274NGC 3 rs274ngc.hh TOLERANCE_MM/TOLERANCE_INCH, RS274NGC_TEXT_SIZE",
+        comments_nest=True, off_plane_arc_offset="ignored"),
 }
+# generic is the subset these controllers all accept (later entries are not part of it)
 _ALL_BUT_GENERIC = tuple(DIALECTS)
+_GENERIC_OF = [DIALECTS[n] for n in _ALL_BUT_GENERIC]
 
 DIALECTS["generic"] = Dialect(
     name="generic", title="every dialect above",
-    max_line_chars=min(d.max_line_chars for d in DIALECTS.values()),
-    max_word_chars=min(d.max_word_chars for d in DIALECTS.values() if d.max_word_chars),
+    max_line_chars=min(d.max_line_chars for d in _GENERIC_OF),
+    max_word_chars=min(d.max_word_chars for d in _GENERIC_OF if d.max_word_chars),
     uppercase_only=True, paren_comments=True, semicolon_comments=False,
-    comment_forbidden="".join(sorted(set("".join(d.comment_forbidden for d in DIALECTS.values())))),
+    comment_forbidden="".join(sorted(set("".join(d.comment_forbidden for d in _GENERIC_OF)))),
     nested_comments="refused", ascii_only=True,
     decimals_mm=4, decimals_inch=5,
-    arc_rule="strictest", arc_abs_mm=min(d.arc_abs_mm for d in DIALECTS.values()),
-    arc_abs_inch=min(d.arc_abs_inch for d in DIALECTS.values()), arc_rel=0.0,
-    arc_cap_mm=min(d.arc_cap_mm for d in DIALECTS.values()),
+    arc_rule="strictest", arc_abs_mm=min(d.arc_abs_mm for d in _GENERIC_OF),
+    arc_abs_inch=min(d.arc_abs_inch for d in _GENERIC_OF), arc_rel=0.0,
+    arc_cap_mm=min(d.arc_cap_mm for d in _GENERIC_OF),
     arc_mismatch="the strictest of the dialects: an arc is accepted only where every controller accepts it",
-    source="the intersection of the others")
+    source="the intersection of the others",
+    # input is read as LinuxCNC (the reference interpreter) reads it, macro programs in the
+    # syntax they are written in
+    reads_arcs_as="linuxcnc", off_plane_arc_offset="zero-ignored", macro_syntax="detect", m98_count_in_p=True,
+    yields_to_headers=True,
+    turning_cycles=FANUC_TURNING_CYCLES)
 
-DIALECT_NAMES = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
+# --- controllers whose programs generic does not read (each one entry) ---------------------
+_FANUC = DIALECTS["fanuc"]
+DIALECTS["fanuc-lathe"] = replace(
+    _FANUC, name="fanuc-lathe", title="Fanuc 0i-T/30i lathe", machine="lathe",
+    source="Fanuc lathe operator's manual (G code system A): postproc corrects milling machines only")
+
+# Fadal (CNC 88HS, "Fadal format 1" native and "format 2" Fanuc-like codes, setting FO): the
+# program starts "N1 O2 (NAME)", E1..E48 select fixture offsets (E0 cancels them). Comments,
+# line length and arc tolerance as Fanuc's (assumed, the manual gives no figure).
+DIALECTS["fadal"] = replace(
+    _FANUC, name="fadal", title="Fadal CNC 88HS", numbered_program_line=True, fixture_offset_word="E", call_words="L",
+    cycle_repeat_words="L", turning_cycles=frozenset(),
+    marks=((r"^\s*N\s*\d+\s*O\s*\d+\b", "N1 O.. program header (Fadal)"),),
+    refused=((r"^\s*(?:N\d+\s*)?#", "# macro statement (Fadal macro language)",
+              "post the program with numbers in place of the macro"),
+             (r"(?i)^\s*(?:N\d+\s*)?L\d{2,4}\b", "L subroutine call (format 1)",
+              "write the subroutine's moves in the main program")),
+    source="Fadal VMC programming manual: program header N1 O.., fixture offsets E1-E48 (E0 cancel); "
+           "format 2 reads Fanuc's G codes")
+
+# Okuma OSP-P (mill, OSP-P200M/P300M): a program file starts "$NAME.MIN%"; G15 H<n> selects
+# work coordinate system n, G56 H<n> applies tool length offset n and G53 cancels it, CALL O<n>
+# calls a subprogram. Comments in parentheses; the other limits as Fanuc's (assumed).
+DIALECTS["okuma"] = replace(
+    _FANUC, name="okuma", title="Okuma OSP", header_forms=(r"^\s*\$[^%\r\n]*%\s*$",),
+    g15_work_select=True, g_aliases=((560, 430), (530, 490)), cycle_repeat_words="L",
+    turning_cycles=frozenset(), macro_syntax="o-word", m98_count_in_p=False,
+    marks=((r"^\s*\$[\w.\-]*\.(?:MIN|SDF|SSB|SUB|LIB)%?", "$NAME.MIN% program header (Okuma)"),
+           (r"(?i)^\s*(?:N\d+\s*)?CALL\s+O", "CALL O.. subprogram call (Okuma)"),
+           (r"^\s*(?:N\d+\s*)?G\s*15\s*H\s*\d", "G15 H.. work coordinate system (Okuma)")),
+    refused=((r"(?i)\bCALL\s+O\w*", "CALL O.. subprogram call",
+              "write the subprogram's moves in the main program (expand it in CAM)"),
+             (r"(?i)\bMODIN\b", "MODIN modal subprogram call", "write the subprogram's moves in the main program"),
+             (r"(?i)\bV[CS]\d+\s*=", "VC/VS common variable", "post the program with numbers in place of variables"),
+             (r"(?i)\bIF\s*\[|\bGOTO\b", "IF/GOTO program control", "post the program flat (loops written out)")),
+    source="Okuma OSP-P programming manual (Mill): $ file header, G15/G16 work coordinates, "
+           "G56/G53 tool length offset, CALL O subprograms")
+
+# Siemens Sinumerik 840D sl (SINUMERIK 840D sl Programming Manual, Fundamentals and Job
+# planning): ";" comments; a block of at most 512 characters; circle end point monitoring by
+# machine data MD21000 CIRCLE_ERROR_CONST (0.01 mm) and MD21010 CIRCLE_ERROR_FACTOR (0.001):
+# the radii may differ by the larger of the two (Fundamentals, "Circular interpolation").
+SINUMERIK_MAX_LINE = 511
+SINUMERIK_ARC_ABS_MM = 0.01
+SINUMERIK_ARC_REL = 0.001
+_SINU_WHAT_INSTEAD = "post the machining as its moves (G1/G2/G3) instead of the cycle call"
+DIALECTS["sinumerik"] = Dialect(
+    name="sinumerik", title="Sinumerik 840D (Siemens)",
+    max_line_chars=SINUMERIK_MAX_LINE, max_word_chars=None,
+    uppercase_only=False, paren_comments=False, semicolon_comments=True,
+    comment_forbidden="", nested_comments="not a comment: '(' belongs to expressions", ascii_only=True,
+    decimals_mm=3, decimals_inch=4,
+    arc_rule="relative", arc_abs_mm=SINUMERIK_ARC_ABS_MM, arc_abs_inch=SINUMERIK_ARC_ABS_MM / MM_PER_INCH,
+    arc_rel=SINUMERIK_ARC_REL, arc_cap_mm=math.inf,
+    arc_mismatch="alarm 14040 'Error in end point of circle' beyond the tolerance",
+    source="SINUMERIK 840D sl Programming Manual Fundamentals (comments, block length, circular "
+           "interpolation, CR=, AC/IC, frames) and Job planning (DEF, R parameters, control "
+           "structures); Programming Manual Cycles (CYCLE81-89, POCKET1-4, SLOT1-2, CYCLE61-72, CYCLE800); "
+           "MD21000/MD21010",
+    text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
+    chosen_by=(r"\s*%_N_\w+_(?:MPF|SPF)\b", r"\s*;\s*\$PATH\s*="),
+    block_syntax="sinumerik", radius_word="CR=", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
+    # G500 (settable frames off) and G505-G599 are work offsets; G64x continuous path, G60/G60x/G9
+    # exact stop, G70/G71 and G700/G710 inch/metric (Fundamentals: "Inch/metric dimensions")
+    work_codes=((5000, "G500"), *((k * 10, f"G{k}") for k in range(505, 600))),
+    g_aliases=((6410, 640), (6420, 640), (6430, 640), (6440, 640), (6450, 640), (600, 610), (6010, 610),
+               (6020, 610), (6030, 610), (90, 610), (700, 200), (710, 210), (7000, 200), (7100, 210)),
+    refused_g=((530, "G53 (frames suppressed for the block: the tool length stays)",
+                "write the move in the work coordinates"),
+               (1530, "G153 (frames suppressed for the block)", "write the move in the work coordinates"),
+               (330, "G33 thread cutting", "post the thread as its moves"),
+               (3310, "G331 rigid tapping", "post the tapping as ISO G84 with --dialect generic, or as moves"),
+               (3320, "G332 tapping retraction", "post the tapping as its moves"),
+               (1100, "G110 polar pole", "post the program in Cartesian coordinates"),
+               (1110, "G111 polar pole", "post the program in Cartesian coordinates"),
+               (1120, "G112 polar pole", "post the program in Cartesian coordinates"),
+               (580, "G58 axial programmable offset", "post the program without programmable frames"),
+               (590, "G59 axial programmable offset", "post the program without programmable frames")),
+    marks=((r"^\s*%_N_\w+_(?:MPF|SPF)\b", "%_N_..._MPF program header (Sinumerik)"),
+           (r"^\s*;\s*\$PATH\s*=", ";$PATH= program header (Sinumerik)"),
+           (r"(?i)^\s*(?:N\d+\s*)?DEF\s+(?:REAL|INT|BOOL|CHAR|STRING|AXIS|FRAME)\b",
+            "DEF variable definition (Sinumerik)"),
+           (r"(?i)^\s*(?:N\d+\s*)?.*\b(?:MSG\s*\(|T\s*=\s*\"|CR\s*=|=\s*(?:AC|IC)\s*\(|"
+            r"(?:A?TRANS|A?ROT|MCALL|CYCLE\d+|POCKET\d|SLOT\d|TRAORI|G64\d|SOFT|BRISK|FFWON)\b)",
+            "Sinumerik 840D syntax")),
+    refused=(
+        (r"(?i)\bPOCKET([1-4])\b", "POCKET{0} (pocket milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bSLOT([12])\b", "SLOT{0} (slot milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bLONGHOLE\b", "LONGHOLE (elongated holes cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bCYCLE(6[1-9]|7[0-2])\b", "CYCLE{0} (contour/face milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bCYCLE(7[6-9]|899|90)\b", "CYCLE{0} (milling cycle)", _SINU_WHAT_INSTEAD),
+        (r"(?i)\bTRAORI\b", "TRAORI (5-axis transformation)",
+         "post the program for 3 axes (X, Y, Z with fixed rotary positions): postproc corrects X, Y, Z"),
+        (r"(?i)\bCYCLE800\b", "CYCLE800 (swivel plane)",
+         "post the swivelled-plane moves in the machine's X, Y, Z (without CYCLE800)"),
+        (r"(?i)\bMCALL\b", "MCALL (modal cycle call)",
+         "post the drilling cycles as their moves (or as ISO G81-G89 with --dialect generic)"),
+        (r"(?i)\b(?:A?ROT|A?SCALE|A?MIRROR|AROTS|ROTS)\b(?=\s*[A-Z])", "programmable frame (ROT/SCALE/MIRROR)",
+         "post the program in the work coordinates the frame gives (TRANS is read, rotations are not)"),
+        (r"(?i)\b(?:IF|WHILE|LOOP|FOR|REPEAT|GOTOF|GOTOB|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR|UNTIL)\b",
+         "program control (IF/WHILE/LOOP/FOR/REPEAT/GOTO)", "post the program flat (loops written out)"),
+        (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL)\b|^\s*(?:N\d+\s*)?L\d+\b", "subprogram call or PROC",
+         "write the subprogram's moves in the main program"),
+        (r"(?i)\bTURN\s*=", "TURN= helix turns", "post the helix as its arcs"),
+    ))
+
+DIALECT_NAMES = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3", "fadal", "okuma", "sinumerik",
+                 "fanuc-lathe")
 
 
 def get(name: str | Dialect) -> Dialect:

@@ -57,6 +57,8 @@ def edit_line(line: str, edits: list[tuple[int, int, str]]) -> str:
     if len(edits) > 1:
         edits = sorted(edits)
     for start, end, text in edits:
+        if start == end and line[start:start + 1] == ")":  # a word added after X=AC(10) (Sinumerik), not in it
+            start = end = start + 1
         out.append(line[pos:start])
         out.append(text)
         pos = end
@@ -122,9 +124,14 @@ def header_line(name: str, sha256: str, tolerance_mm: float, setup_note: str, en
 # version and CORRECTED: it marks the program as corrected.
 HEADER_PREFIX = "(POSTPROC "
 HEADER_LINE_CHARS = 96  # inside every dialect's line (generic: 127); the sha256 line needs 82
-_HEADER_OPEN = re.compile(r"\s*\(POSTPROC \S+ CORRECTED\)\s*$", re.IGNORECASE)
-_HEADER_ANY = re.compile(r"\s*\(POSTPROC [A-Z0-9 .+\-]*\)\s*$", re.IGNORECASE)
-_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$")
+# a dialect without parenthesis comments (Sinumerik) reads the same lines as ";POSTPROC ..."
+_HEADER_OPEN = re.compile(r"\s*(?:\(POSTPROC \S+ CORRECTED\)|;POSTPROC \S+ CORRECTED)\s*$", re.IGNORECASE)
+_HEADER_ANY = re.compile(r"\s*(?:\(POSTPROC [A-Z0-9 .+\-]*\)|;POSTPROC [A-Z0-9 .+\-]*)\s*$", re.IGNORECASE)
+# O1234, :1234, N1 O2 (Fadal), or Sinumerik's ;$PATH= line after its %_N_..._MPF
+_PROGRAM_NUMBER = re.compile(r"[ \t]*(?:(?:[Nn][ \t]*\d+[ \t]*)?[Oo][ \t]*\d+|:[ \t]*\d+)[ \t]*(?:\([^)]*\)[ \t]*)*"
+                             r"(?:;[^\r\n]*)?(?:\r\n|\n|\r)?$|[ \t]*;[ \t]*\$PATH[ \t]*=")
+# the tape mark, or Okuma's file header $NAME.MIN% that stands in its place
+_TAPE_MARK = re.compile(r"%|\$[^\r\n%]*%[ \t]*(?:\r\n|\n|\r)?$")
 _HEADER_SAFE = re.compile(r"[^A-Z0-9 .+\-]")
 
 
@@ -159,7 +166,7 @@ def _note_parts(setup_note: str, exact: bool, home: bool) -> list[str]:
     tools, start, tool vector; G28/G30 when it has ``home``) are left out."""
     parts: list[str] = []
     for raw in (p.strip() for p in setup_note.split(";") if p.strip()) if setup_note else ():
-        m = re.fullmatch(r"(G5[0-9.]+)=([-+0-9.eE]+),([-+0-9.eE]+),([-+0-9.eE]+)", raw)
+        m = re.fullmatch(r"(G5[0-9.]+|G15H\d+|E\d+)=([-+0-9.eE]+),([-+0-9.eE]+),([-+0-9.eE]+)", raw)
         if m:
             if not exact:
                 parts.append(f"OFFSET {m.group(1)} X{_num(float(m.group(2)))} Y{_num(float(m.group(3)))} "
@@ -201,12 +208,14 @@ def _exact_parts(setup: Setup) -> list[str]:
     for name, v in sorted((getattr(setup, "home", None) or {}).items()):
         v = v if isinstance(v, dict) else dict(zip("XYZ", v, strict=True))
         parts.append(f"{_safe(name)} " + " ".join(f"{a}{_num(x)}" for a, x in sorted(v.items())))
+    if getattr(setup, "variables", None):
+        parts.append("VARIABLES " + " ".join(f"{int(k)} {_num(v)}" for k, v in sorted(setup.variables.items())))
     if setup.tool_vector is not None:
         parts.append("TOOL VECTOR " + " ".join(f"{a}{_num(x)}" for a, x in zip("XYZ", setup.tool_vector, strict=True)))
     return parts
 
 
-_KEYWORDS = {"TOOL LENGTHS": 2, "TOOL VECTOR": 2, "OFFSET": 2, "START": 1, "CALIBRATION": 1, "SHA256": 1,
+_KEYWORDS = {"TOOL LENGTHS": 2, "VARIABLES": 1, "TOOL VECTOR": 2, "OFFSET": 2, "START": 1, "CALIBRATION": 1, "SHA256": 1,
              "MAP": 1}
 
 
@@ -223,7 +232,7 @@ def _wrap(words: str, width: int) -> list[str]:
     lines: list[str] = []
     cur = ""
     body = items[keep:] if keep else items
-    if words.startswith("TOOL LENGTHS "):  # "H1 100.5": a pair stays on one line
+    if words.startswith(("TOOL LENGTHS ", "VARIABLES ")):  # "H1 100.5", "5405 12.5": a pair stays on one line
         body = [" ".join(body[i:i + 2]) for i in range(0, len(body), 2)]
     for w in body:
         base = lead if keep else ""
@@ -276,6 +285,8 @@ def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float,
         body += _wrap("EXPANDED SUBPROGRAMS LOOPS AND MACROS", width)
     if cycles_expanded:
         body += _wrap("CYCLES EXPANDED", width)
+    if not d.paren_comments:
+        body = [";" + line[1:-1] for line in body]
     for k, line in enumerate(body, start=1):
         dialects.check_output_line(d, line, path="<header>", lineno=k)
     return [line + end for line in body]
@@ -287,7 +298,7 @@ def is_header(line: str) -> bool:
     s = line.lstrip("\ufeff \t")
     if s.startswith(HEADER_TAG) and HEADER_MARK in s:
         return True
-    return s[:10].upper() == HEADER_PREFIX and bool(_HEADER_ANY.match(s))
+    return s[:10].upper() in (HEADER_PREFIX, ";POSTPROC ") and bool(_HEADER_ANY.match(s))
 
 
 def is_header_start(line: str) -> bool:
@@ -307,7 +318,7 @@ def start_lines(it: Iterator[str]) -> tuple[list[str], int]:
     while len(head) > keep and not head[keep].lstrip("\ufeff").strip() and keep < 20:
         keep += 1
         head.extend(islice(it, 1))
-    if len(head) > keep and head[keep].lstrip("\ufeff").strip().startswith("%"):
+    if len(head) > keep and _TAPE_MARK.match(head[keep].lstrip("\ufeff").strip()):
         keep += 1
         head.extend(islice(it, 1))
     elif keep:

@@ -15,6 +15,7 @@ import numpy as np
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError
 from postproc.gcode import emit
+from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.segment import (
@@ -47,6 +48,8 @@ class _Options(Protocol):
     def tolerance_mm(self) -> float: ...
     @property
     def decimals(self) -> int | None: ...
+    @property
+    def dialect(self) -> str: ...
 
 
 class _Report(Protocol):
@@ -305,6 +308,7 @@ class EmitterMixin(Generic[_O, _R]):
                 qn = list(qe)
                 _e, added = self._axis_words_free(mv, st[1], qn, d)
                 if added:
+                    cutter_take_up(self, mv)
                     segs.append(_Piece("line", qn, [], added, 0.0, takeup=True))
                     qe = qn
                 continue
@@ -317,8 +321,10 @@ class EmitterMixin(Generic[_O, _R]):
         if inserted and mv.stays:
             raise PostprocError(
                 "this move must be split to stay within tolerance, but its line also changes the tool "
-                "or uses G53", path=self.path, lineno=mv.lineno,
-                hint="put the tool change or G53 on a line of its own")
+                "or uses G53, or it is the entry or exit move of cutter radius compensation (which the "
+                "controller draws from where the tool is to the offset point)", path=self.path, lineno=mv.lineno,
+                hint="put the tool change or G53 on a line of its own; make a lead-in or lead-out move shorter, "
+                     "or raise --tolerance")
         sep, lower = emit.style_of(line)
         ending = emit.line_ending(line) or "\n"
         arc = mv.arc
@@ -744,12 +750,18 @@ class EmitterMixin(Generic[_O, _R]):
             out.append(base + val * unit)
         return np.array(out)
 
-    @staticmethod
-    def _arc_words(spec: ArcSpec) -> list[str]:
-        words = [letter + text for letter, text in spec["vals"]]
+    def _arc_words(self, spec: ArcSpec) -> list[str]:
+        radius = self._radius_word()
+        words = [(radius if letter == "R" else letter) + text for letter, text in spec["vals"]]
         if spec["turns"] > 1:
             words.append(f"P{spec['turns']}")
         return words
+
+    def _radius_word(self) -> str:
+        """How the dialect writes an arc's radius: ``R`` (``CR=`` for Sinumerik)."""
+        from postproc.gcode.dialect import get
+
+        return get(self.opt.dialect).radius_word
 
     def _arc_edits(self, line: str, mv: Move, spec: ArcSpec) -> tuple[list[Edit], list[str]]:
         """Edits of the move's own arc words for the arc ``spec`` and the words to add."""
@@ -776,7 +788,7 @@ class EmitterMixin(Generic[_O, _R]):
                 if float(num) != float(text):
                     edits.append((start, end, text))
             elif float(text) != 0.0 or mv.arc_absolute:
-                added.append(letter + text)
+                added.append((self._radius_word() if letter == "R" else letter) + text)
         del p_idx
         return edits, added
 

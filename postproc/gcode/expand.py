@@ -31,6 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.gcode.dialect import DIALECTS
+from postproc.gcode.dialect import get as get_dialect
 from postproc.gcode.expand_syntax import (
     CANDIDATE,
     Assign,
@@ -54,8 +56,7 @@ from postproc.gcode.expr import (
     to_index,
 )
 from postproc.gcode.lexer import scan_words, split_lines
-
-DIALECTS = ("generic", "linuxcnc", "fanuc", "haas", "grbl", "mach3")
+from postproc.gcode.variables import PROBE_HINT, PROBE_MESSAGE, PROBE_RESULTS
 
 # rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
 LINUXCNC_SUB_PARAMS = 30
@@ -133,7 +134,8 @@ def needs_expansion(lines: Sequence[str], dialect: str = "generic") -> bool:
         if not CANDIDATE.search(code):
             continue
         try:
-            b = parse_block(line, fanuc=fanuc, path=None, lineno=k + 1, nested_comments=dialect != "linuxcnc")
+            b = parse_block(line, fanuc=fanuc, path=None, lineno=k + 1,
+                            nested_comments=not get_dialect(dialect).nested_comment_error)
         except PostprocError:
             if "#" in code or "[" in code:
                 return True  # a broken expression: let expand() report it with its place
@@ -191,9 +193,9 @@ class _Expander(Env):
         if dialect not in DIALECTS:
             raise ValueError(f"unknown dialect {dialect!r}")
         self.dialect = dialect
+        self.d = get_dialect(dialect)
         self.fanuc = is_fanuc(lines, dialect)
-        self.linuxcnc_strict = dialect == "linuxcnc"
-        self.nested = dialect != "linuxcnc"
+        self.nested = not self.d.nested_comment_error
         # M97 (Haas local subprogram: call to a sequence number) in the Fanuc-family dialects
         self.call_m_codes = (97.0, 98.0, 99.0) if self.fanuc else (98.0, 99.0)
         self.main = Unit(lines, path, self.fanuc, self.nested)
@@ -238,6 +240,12 @@ class _Expander(Env):
         return ExpansionError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
 
     # -- parameters ---------------------------------------------------------
+    def seed(self, variables: dict[int, float]) -> None:
+        """Start with the machine-state values the user gave (locals #1-#33 are not the machine's)."""
+        for index, value in variables.items():
+            if index not in PROBE_RESULTS and (index > FANUC_LOCALS or not self.fanuc):
+                self.params[index] = float(value)
+
     def _fanuc_locals(self) -> list:
         for fr in reversed(self.frames):
             if fr.call_type in ("", "g65"):
@@ -259,20 +267,27 @@ class _Expander(Env):
                     return self.params[index]
                 raise self.refuse(col, f"#{index} is a retained common variable: its value is kept by the "
                                   "controller and unknown before the program runs",
-                                  hint=f"set #{index} in the program before reading it")
+                                  hint=f"give its value with --var {index}=VALUE, or set #{index} in the program "
+                                       "before reading it")
+            if index in PROBE_RESULTS:
+                raise self.refuse(col, PROBE_MESSAGE.format(index), hint=PROBE_HINT)
             if index >= 1000:
+                if index in self.params:
+                    return self.params[index]
                 raise self.refuse(col, f"#{index} is a system variable (machine state, positions, offsets or "
                                   "signals): its value is unknown before the program runs",
-                                  hint="replace it with the value it holds on your machine")
+                                  hint=f"give the value it holds on your machine with --var {index}=VALUE")
             raise self.error(col, f"#{index} is not a macro variable number")
         if not 1 <= index <= LINUXCNC_MAX_PARAMETER:
             raise self.error(col, f"parameter number #{index} is out of range (1..{LINUXCNC_MAX_PARAMETER})")
+        if index in PROBE_RESULTS and index not in self.params:
+            raise self.refuse(col, PROBE_MESSAGE.format(index), hint=PROBE_HINT)
         if index in self.params:
             return self.params[index]
         for lo, hi, what in _LINUXCNC_MACHINE_RANGES:
             if lo <= index <= hi:
                 raise self.refuse(col, f"#{index} reads a {what}: its value is unknown before the program runs",
-                                  hint="replace it with the value it holds on your machine")
+                                  hint=f"give the value it holds on your machine with --var {index}=VALUE")
         return 0.0
 
     def write_numbered(self, index: int, value, col: int) -> None:
@@ -692,7 +707,7 @@ class _Expander(Env):
         target = self._program_target(number, col)
         repeat = 1 if count is None else count
         if target is None and count is None and number >= 10000 and (
-                self.fanuc or self.dialect == "generic"):
+                self.fanuc or self.d.m98_count_in_p):
             # Fanuc: P(count)(4-digit program number)
             target = self._program_target(number % 10000, col)
             repeat = number // 10000
@@ -1122,15 +1137,18 @@ def _last_code_line(lines: list[str]) -> int | None:
 
 
 def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "generic",
-           subroutine_path: Sequence[Path] = (), max_lines: int = 50_000_000) -> Iterator[SourceLine]:
+           subroutine_path: Sequence[Path] = (), max_lines: int = 50_000_000,
+           variables: dict[int, float] | None = None) -> Iterator[SourceLine]:
     """Execute the program's control flow and yield the flat program line by line.
 
     ``lines`` are the source lines with their endings (e.g. from
     :func:`postproc.gcode.lexer.split_lines`). Raises :class:`GcodeSyntaxError` for
     malformed constructs and :class:`ExpansionError` for refused ones, both with
-    ``path:line:col``.
+    ``path:line:col``. ``variables``: machine-state values given by the user (``--var``),
+    read where the program reads the controller's state (probe results never).
     """
     ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
+    ex.seed(variables or {})
     return ex.run()
 
 

@@ -17,7 +17,6 @@ from itertools import accumulate
 from postproc.errors import PostprocError, UnsupportedGcodeError
 from postproc.gcode.expr import ExprParser, Packed, pack
 
-FANUC_DIALECTS = ("fanuc", "haas")
 # Fanuc/Haas WHILE..DO loop identifiers.
 FANUC_DO_IDS = (1, 2, 3)
 
@@ -348,10 +347,13 @@ def candidate_lines(lines: Sequence[str]) -> list[int]:
 
 
 def is_fanuc(lines: Sequence[str], dialect: str, candidates: list[int] | None = None) -> bool:
-    if dialect in FANUC_DIALECTS:
-        return True
-    if dialect != "generic":
-        return False
+    """Are the program's parameters and control Fanuc macro B (else LinuxCNC o-words)?
+    The dialect's ``macro_syntax`` says, or, for ``detect``, the program's own marks."""
+    from postproc.gcode.dialect import get
+
+    syntax = get(dialect).macro_syntax
+    if syntax != "detect":
+        return syntax == "macro-b"
     fanuc = False
     for k in candidate_lines(lines) if candidates is None else candidates:
         code = strip_comments(lines[k])

@@ -31,12 +31,20 @@ from postproc.errors import (
     PostprocError,
     UnsupportedGcodeError,
 )
-from postproc.gcode import lexer
+from postproc.gcode import cutter, lexer
+from postproc.gcode.recognise import (
+    LATHE_HINT,
+    LatheMarks,
+    LatheProgramError,
+    foreign_dialect,
+    lathe_message,
+)
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
     BEFORE_MOTION_M,
     CANNED_CYCLES,
+    CUTTER_COMP,
     DWELL,
     HOME_CODES,
     HOME_STORE,
@@ -215,10 +223,6 @@ def classify_construct(line: str) -> tuple[str, str]:
     return "", ""
 
 
-# controllers that read "(a (b) c)" as one comment (LinuxCNC and Grbl reject it)
-NESTING_COMMENTS = {"fanuc", "haas", "mach3"}
-
-
 def blank_nested_comments(line: str) -> str:
     """The line with the inside of each outermost balanced ( ... ) blanked, so that a
     nested comment lexes as one comment at the same columns."""
@@ -238,10 +242,13 @@ def blank_nested_comments(line: str) -> str:
     return "".join(out)
 
 
-def _is_program_number(tokens: list[lexer.Token]) -> bool:
-    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else."""
+def _is_program_number(tokens: list[lexer.Token], after_n: bool = False) -> bool:
+    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else;
+    with ``after_n`` also ``N1 O2 (NAME)`` (Fadal)."""
     content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
                                                        lexer.NEWLINE)]
+    if after_n and len(content) == 2 and content[0].kind == lexer.WORD and content[0].letter == "N":
+        content = content[1:]
     if len(content) == 1:
         t = content[0]
         return t.kind == lexer.WORD and t.letter == "O" and "." not in t.text and "-" not in t.text
@@ -283,6 +290,22 @@ class Interpreter:
         self.program_stored: set[str] = set()  # stored positions the program set itself
         self.ended = False  # an M2/M30 was read: later lines are not executed
         self.dialect = dialect
+        from postproc.gcode.dialect import get as _dialect
+
+        self.d: Dialect = _dialect(dialect)  # the facts of the controller the program is for
+        if self.d.machine != "mill":
+            raise LatheProgramError(lathe_message([f"--dialect {self.d.name} ({self.d.title})"]), path=path,
+                                    hint=LATHE_HINT)
+        self.lathe = LatheMarks()
+        self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
+        self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
+        self._arc_absolute_once = False  # the next block's centre words are absolute (Sinumerik I=AC())
+        self._g_alias = dict(self.d.g_aliases)
+        # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
+        self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
+        self._dialect_g.update({k: _refused_g(what, instead) for k, what, instead in self.d.refused_g})
+        if self.d.fixture_offset_word:  # E0: fixture offsets cancelled (machine coordinates)
+            self.offsets.setdefault(f"{self.d.fixture_offset_word}0", (0.0, 0.0, 0.0))
         self.may_expand = False  # set by the corrector when it can start over on the expanded program
         self.repeats = False  # the program ended with M99 (repeated by the controller)
         # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
@@ -293,6 +316,7 @@ class Interpreter:
         self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
         self._run_shift: tuple[float, float, float] | None = None
         self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.comp_moves: list = []  # moves the controller offsets (cutter.CompMove), taken by the corrector
 
     # -- helpers -----------------------------------------------------------------------
     def _arc_rule(self) -> Dialect:
@@ -300,7 +324,22 @@ class Interpreter:
         arcs as LinuxCNC, the reference interpreter, does)."""
         from postproc.gcode import dialect
 
-        return dialect.get("linuxcnc" if self.dialect == "generic" else self.dialect)
+        return dialect.get(self.d.reads_arcs_as or self.d)
+
+    def _foreign(self, line: str, lineno: int) -> None:
+        """Refuse a line of another dialect naming the dialect to choose, and a construct
+        the chosen dialect's controller reads but postproc does not, in that dialect's words."""
+        for pattern, construct, instead in self.d.refused:
+            m = re.search(pattern, line)
+            if m:
+                what = construct.format(*m.groups())
+                raise self._err(UnsupportedGcodeError, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1,
+                                hint=instead)
+        other = foreign_dialect(line, self.d.name)
+        if other is not None:
+            name, title, construct = other
+            raise self._err(UnsupportedGcodeError, f"{construct}: a program for {title}", lineno, 1,
+                            hint=f"choose --dialect {name} for this program")
 
     def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
         """The error class for a refused construct: NeedsExpansion when expanding is allowed
@@ -374,48 +413,121 @@ class Interpreter:
         bom = line.startswith("\ufeff")
         if bom:  # a UTF-8 byte-order mark before the first line: not part of the block
             line = line[1:]
-        words = lexer.scan_words(line)
+        words = lexer.scan_words(line) if self._iso_blocks else None
         block_delete = False
         if words is None:
             words, block_delete = self._slow_words(lineno, line)
         elif words and words[0].letter == "O" and len(words) == 1 and words[0].number.isdigit():
             return None  # O1234: a program number (or label): no geometry
+        elif (self.d.numbered_program_line and len(words) == 2 and words[0].letter == "N"
+              and words[1].letter == "O"):
+            return None  # N1 O2: a program number after a sequence number (Fadal)
         if bom:
             words = [lexer.Word(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
         if not words:
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
+        if self._arc_absolute_once:  # Sinumerik I=AC() J=AC(): G90.1 for this block only
+            st, saved = self.state, self.state.arc_absolute
+            st.arc_absolute, self._arc_absolute_once = True, False
+            try:
+                return self._block(lineno, words, block_delete)
+            finally:
+                st.arc_absolute = saved
         return self._block(lineno, words, block_delete)
 
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
-        if self.dialect in NESTING_COMMENTS and line.count("(") > 1:
+        if not self._iso_blocks:
+            return self._sinumerik_words(lineno, line)
+        if self.d.comments_nest and line.count("(") > 1:
             line = blank_nested_comments(line)
+        if self.d.header_forms and any(re.match(p, line) for p in self.d.header_forms):
+            return [], False  # the dialect's own header line ("$NAME.MIN%")
+        if "$" in line or "%" in line:
+            self._foreign(line, lineno)  # ";$PATH=", "%_N_..._MPF", "$NAME.MIN%" of another dialect
         try:
             tokens = lexer.lex(line, self.path, lineno)
         except GcodeSyntaxError:
+            self._foreign(line, lineno)
             what, hint = classify_construct(line)
             if what:
                 raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
             raise
         first = next((t for t in tokens if t.kind != lexer.SPACE), None)
         if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
-            if self.dialect != "linuxcnc":
+            if self.d.text_after_percent == "ignored":
                 return [], False  # '%' tape mark: the controller ignores the rest of the line
             raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
                             hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
-        if _is_program_number(tokens):
+        if _is_program_number(tokens, self.d.numbered_program_line):
             return [], False
         for tok in tokens:
             if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
+                if self.d.refused:
+                    self._foreign(line, lineno)  # the dialect's own constructs first (Fadal's # macros)
                 what, hint = classify_construct(line)
                 if what:
                     raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
             if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
+                self._foreign(line, lineno)
                 raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
                                 tok.col,
                                 hint="O words other than a program number are expanded only when their "
                                      "subroutine is in the program or on --subroutine-path")
         return self._plain_words(tokens, line, lineno)
+
+    def _sinumerik_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
+        """A Sinumerik block's words (:mod:`postproc.gcode.sinumerik`); its constructs that
+        postproc does not read are refused by their names first."""
+        from postproc.gcode import sinumerik
+
+        code = sinumerik.code_of(line)
+        if code.strip():
+            self._foreign(code, lineno)
+        blk = sinumerik.read_block(line, self.path, lineno, self.variables)
+        g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
+        incremental = True if 910 in g else False if 900 in g else self.state.incremental
+        centre_ac = [letter for letter, _ in blk.absolute if letter in "IJK"]
+        if centre_ac:
+            given = [w.letter for w in blk.words if w.letter in "IJK"]
+            if len(centre_ac) != len(given):
+                col = next(c for letter, c in blk.absolute if letter in "IJK")
+                raise self._err(UnsupportedGcodeError, "Sinumerik centre words partly =AC() (absolute) and partly "
+                                "incremental", lineno, col, hint="give every centre word of the arc as =AC(), or none")
+            self._arc_absolute_once = True  # I=AC() J=AC(): the centre in work coordinates, this block
+        for letter, col in blk.absolute:
+            if incremental and letter not in "IJK":
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in G91",
+                                lineno, col,
+                                hint="post the coordinate in the program's distance mode (G90/G91)")
+        for letter, col in blk.incremental:
+            if not incremental and letter in "XYZABC":
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
+                                lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
+        if blk.ends:
+            self.ended = True  # RET: the end of the program (the block's own words still run)
+        if blk.frame:
+            self._sinumerik_frame(blk.frame, blk.words, lineno)
+            return [], blk.block_delete
+        return blk.words, blk.block_delete
+
+    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int) -> None:
+        """TRANS replaces the programmable frame by a translation, ATRANS adds one, a bare
+        ROT/SCALE/MIRROR deletes it: kept with the G52/G92 shift (program units, work frame)."""
+        st = self.state
+        given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
+        bad = [k for k in given if k not in AXES]
+        if bad or (kind == "RESET" and given):
+            col = given[bad[0]][1] if bad else min(c for _, c in given.values())
+            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {(bad or list(given))[0]} "
+                            "(only a translation in X, Y, Z is read)", lineno, col,
+                            hint="post the program in the coordinates the frame gives")
+        if kind in ("TRANS", "RESET"):
+            st.g92 = [0.0, 0.0, 0.0]
+        for k, a in enumerate(AXES):
+            if a in given:
+                st.g92[k] += given[a][0] * st.unit_mm
+        self._run_shift = None
 
     def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
         """The words of a lexed line and whether it starts with '/' (block delete);
@@ -451,6 +563,7 @@ class Interpreter:
             raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
                             hint="add the closing ')'")
         elif kind == lexer.LETTER:
+            self._foreign(line, lineno)
             what, hint = classify_construct(line)
             if what:
                 raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
@@ -458,6 +571,7 @@ class Interpreter:
                             f"word {tok.letter} without a plain number (macro, expression or parameter)",
                             lineno, tok.col, hint="expand macros and expressions before correcting")
         elif kind == lexer.SYMBOL:
+            self._foreign(line, lineno)
             what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
             if what:
                 raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
@@ -473,7 +587,8 @@ class Interpreter:
         vals: dict[str, tuple[float, int]] = {}
         for i, (letter, num, _start, _end, _lpos) in enumerate(words):
             if letter == "G":
-                gcodes.append((_gkey(num), i))
+                key = _gkey(num)
+                gcodes.append((self._g_alias.get(key, key) if self._g_alias else key, i))
             elif letter == "M":
                 mcodes.append((_gkey(num), i))
             else:
@@ -481,8 +596,15 @@ class Interpreter:
                     raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
                                     lineno, _lpos + 1)
                 if letter == "O":
+                    self._foreign(" ".join(w.letter + w.number for w in words), lineno)
                     raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
                                     hint="expand subroutines and loops in the CAM system before correcting")
+                if letter == "E" and self.d.fixture_offset_word == "E":
+                    vals[letter] = (float(num), i)  # Fadal E1..E48: a fixture offset
+                    continue
+                if letter in "UW" and not self.d.uvw_axes:
+                    raise self.lathe.refusal(f"{letter} word (incremental {'X' if letter == 'U' else 'Z'} of a "
+                                             f"lathe) at line {lineno}", self.path, lineno, _lpos + 1)
                 if letter in "UVW" or (letter == "E" and not any(
                         (w.letter == "M" and _gkey(w.number) // 10 in IO_M and _gkey(w.number) % 10 == 0)
                         or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
@@ -491,6 +613,9 @@ class Interpreter:
                 vals[letter] = (float(num), i)
         def col_of(i: int) -> int:
             return words[i].letter_pos + 1  # 1-based column of the word's letter
+
+        if self.d.call_words and not gcodes and any(k in vals for k in self.d.call_words):
+            self._foreign(" ".join(w.letter + w.number for w in words), lineno)  # Fadal L0102: a call
 
         # M codes
         tool_change = False
@@ -523,7 +648,7 @@ class Interpreter:
                 event_idx.extend(vals[k][1] for k in M_PARAMS.get(m, "") if k in vals)
             if m == 6:
                 tool_change = True
-            if m in (2, 30):
+            if m in self.d.program_end_m:
                 self.ended = True
             if m == 61:
                 if "Q" not in vals:
@@ -536,17 +661,30 @@ class Interpreter:
             st.spindle_tool = st.tool
 
         blk = _Block(lineno, words, vals)
+        if st.comp != 400:
+            cutter.check_block(self, blk, gcodes, tool_change)
         for key, i in gcodes:
             handler = _G_HANDLERS.get(key)
+            if self._dialect_g and key in self._dialect_g:
+                handler = self._dialect_g[key]
+            if handler is None and key in self.d.turning_cycles and self.lathe.weak:
+                raise self.lathe.refusal(f"G{words[i].number} turning cycle at line {lineno}", self.path, lineno,
+                                         col_of(i))
             if handler is None:
                 raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
             handler(self, blk, key, i)
+        if blk.comp is not None:
+            cutter.switch(self, blk, gcodes)
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
         event_idx = sorted(set(event_idx))
         before_m = [words[j].letter + words[j].number for j in event_idx]
 
+        if self.d.tool_length_word and self.d.tool_length_word in vals:  # Sinumerik D: the length register
+            self._g43({"H": vals[self.d.tool_length_word]}, lineno, col_of(vals[self.d.tool_length_word][1]))
+        if self.d.fixture_offset_word and self.d.fixture_offset_word in vals:
+            work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
         if work_name is not None:
             st.work = work_name
             st.work_explicit = True
@@ -569,7 +707,7 @@ class Interpreter:
             if g92 == 920 and any(a in vals for a in AXES):
                 self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in AXES if a in vals], before)
             return None
-        if "F" in vals:
+        if "F" in vals and not (self.d.dwell_f_is_time and any(k == 40 for k, _ in gcodes)):
             st.feed = vals["F"][0]
         if home_code is not None:
             return self._home(home_code, words, vals, lineno, col_of(home_code[1]))
@@ -590,15 +728,15 @@ class Interpreter:
         has_axes = any(a in vals for a in AXES)
         if cancel_cycle:
             if st.motion in CANNED_CYCLES:
-                st.motion = None if self.dialect == "linuxcnc" else st.before_cycle
-            elif self.dialect == "linuxcnc":
+                st.motion = None if self.d.g80_clears_motion else st.before_cycle
+            elif self.d.g80_clears_motion:
                 st.motion = None
             st.cycle_r = st.cycle_z = st.cycle_q = st.cycle_p = None
         if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
             if motion_key is not None and st.motion not in CANNED_CYCLES:
                 st.before_cycle = st.motion
             if motion_key is not None and motion_key != st.motion and (
-                    self.dialect not in ("fanuc", "haas") or st.motion not in CANNED_CYCLES):
+                    not self.d.cycle_keeps_rz or st.motion not in CANNED_CYCLES):
                 # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
                 # keep them from one cycle to the next (until G80 or another motion)
                 st.cycle_r = st.cycle_z = None
@@ -618,10 +756,11 @@ class Interpreter:
             if motion_key in (ARC_CW, ARC_CCW) or (arc_words and st.motion in (ARC_CW, ARC_CCW)):
                 i = arc_words[0] if arc_words else next(i for k, i in gcodes if k == motion_key)
                 _, (l1, l2) = PLANES[st.plane]
-                if self.dialect == "grbl" or "R" in vals or not (l1 in vals or l2 in vals):
+                if not self.d.full_circle_without_end or "R" in vals or not (l1 in vals or l2 in vals):
                     raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i),
                                     hint="a full circle needs its centre offsets (I/J/K)"
-                                    + (" and Grbl needs an end point" if self.dialect == "grbl" else ""))
+                                    + ("" if self.d.full_circle_without_end else
+                                       f" and {self.d.title.split()[0]} needs an end point"))
                 full_circle = True  # a full circle back to the start (LinuxCNC, Fanuc)
             elif not rotary_changed:
                 return None
@@ -636,7 +775,7 @@ class Interpreter:
             raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
         incremental = st.incremental
         if g53 and incremental:
-            if self.dialect not in ("fanuc", "haas"):
+            if not self.d.g53_absolute_in_g91:
                 raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
                                 first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
                                                      "machine positions in G91 too (--dialect fanuc|haas)")
@@ -691,6 +830,8 @@ class Interpreter:
             motion_idx=motion_idx,
             aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
         )
+        if st.comp != 400 or st.comp_edge:
+            cutter.on_move(self, move)
         return move
 
     @staticmethod
@@ -850,7 +991,7 @@ class Interpreter:
         unit = st.unit_mm
         if "R" in vals:
             st.cycle_r = vals["R"][0]
-        if st.cycle_r is None and self.dialect in ("fanuc", "haas") and not math.isnan(st.pos[2]):
+        if st.cycle_r is None and self.d.cycle_r_default_initial and not math.isnan(st.pos[2]):
             # Fanuc and Haas: R is optional; without it the R plane is the initial level
             if st.incremental:
                 st.cycle_r = 0.0
@@ -874,7 +1015,7 @@ class Interpreter:
             st.cycle_p = vals["P"][0]
         if "F" in vals:
             st.feed = vals["F"][0]
-        repeat_letter = "K" if self.dialect in ("fanuc", "haas") and "K" in vals else "L"
+        repeat_letter = next((c for c in self.d.cycle_repeat_words if c in vals), "L")
         repeats = 1
         if repeat_letter in vals:
             given = vals[repeat_letter][0]
@@ -1071,11 +1212,19 @@ class Interpreter:
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
             self.tool_lengths[tool] = st.pos[2] - g593[2] - z
 
+    def _lathe_arc(self, vals: Vals, q0: tuple[float, float, float], lineno: int, col: int) -> None:
+        """Refuse a lathe's arc: X and Z with I/K in G17, in a program that never positions Y."""
+        if self.state.plane == 170 and "K" in vals and "J" not in vals and "Y" not in vals and math.isnan(q0[1]):
+            raise self.lathe.refusal(f"an arc in X and Z with I/K centre words at line {lineno} in a program "
+                                     "that never positions Y (a lathe reads G18 by default, X as a diameter)",
+                                     self.path, lineno, col)
+
     def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
              q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
         st = self.state
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
         col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
+        self._lathe_arc(vals, q0, lineno, col)
         if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc, or give their "
@@ -1091,9 +1240,9 @@ class Interpreter:
         e1, e2 = q1[a1], q1[a2]
         plane_letters = {"I": 0, "J": 1, "K": 2}
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
-        if wrong and self.dialect in ("fanuc", "haas", "mach3"):
+        if wrong and self.d.off_plane_arc_offset == "ignored":
             wrong = []  # these controllers ignore an offset word off the arc's plane
-        elif wrong and self.dialect == "generic" and all(vals[k][0] == 0 for k in wrong):
+        elif wrong and self.d.off_plane_arc_offset == "zero-ignored" and all(vals[k][0] == 0 for k in wrong):
             wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
@@ -1173,6 +1322,7 @@ class _Block:
     lookahead: int | None = None
     work_name: str | None = None
     prefix: list = field(default_factory=list)
+    comp: tuple[int, int] | None = None  # G40/G41/G42/G41.1/G42.1: (key, word index)
 
     def col(self, i: int) -> int:
         return self.words[i].letter_pos + 1
@@ -1296,21 +1446,67 @@ def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
     b.g10 = True
 
 
+def _g_cutter(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G40/G41/G42/G41.1/G42.1: read by :func:`postproc.gcode.cutter.check_block`."""
+    b.comp = (key, i)
+
+
 def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
+
+
+def _work_code(name: str):
+    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
+        b.work_name = name
+        b.prefix.append(b.gtext(i))
+    return handler
+
+
+def _refused_g(what: str, instead: str):
+    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
+        raise it._err(UnsupportedGcodeError, f"{it.d.title.split(' ')[0]} {what}", b.lineno, b.col(i), hint=instead)
+    return handler
+
+
+def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G50: scaling cancel on a mill (no words of its own); a lathe's spindle speed clamp
+    (G50 S) or coordinate setting (G50 X.. Z..)."""
+    lathe = [k for k in "SXZUW" if k in b.vals]
+    if lathe:
+        raise it.lathe.refusal(f"G50 {lathe[0]}{b.words[b.vals[lathe[0]][1]].number} at line {b.lineno} "
+                               "(a lathe's spindle speed clamp or coordinate setting)", it.path, b.lineno, b.col(i))
+
+
+def _g_css(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G96: constant surface speed, a lathe's (noted as a mark; neutral on its own)."""
+    it.lathe.note(f"G96 (constant surface speed) at line {b.lineno}")
+
+
+def _g_diameter_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    raise it.lathe.refusal(f"G7 (diameter mode) at line {b.lineno}", it.path, b.lineno, b.col(i))
+
+
+def _g_g15(it: Interpreter, b: _Block, key: int, i: int) -> None:
+    """G15: polar coordinates off (Fanuc, neutral); G15 H<n> selects work coordinate
+    system n where the dialect says so (Okuma)."""
+    if it.d.g15_work_select:
+        if "H" not in b.vals:
+            raise it._err(GcodeSyntaxError, "G15 needs H (the work coordinate system number)", b.lineno, b.col(i))
+        b.work_name = f"G15H{int(b.vals['H'][0])}"
+        b.prefix.append(f"{b.gtext(i)} H{b.words[b.vals['H'][1]].number}")
 
 
 #: G code key (10 x number) -> handler(interpreter, block, key, word index)
 _G_HANDLERS: dict = {}
 for _keys, _handler in (
-    (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused),
+    (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused), (CUTTER_COMP, _g_cutter),
     (MOTION_CODES, _g_motion), (CANNED_CYCLES, _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
     (LOOKAHEAD_G, _g_lookahead), ({50, 51, 80}, _g_lookahead_spline_or_refused),
     (HOME_CODES, _g_home), (HOME_STORE, _g_home_store), ({520}, _g_local_offset),
     (PLANES, _g_plane), ({200, 210}, _g_units), ({900, 910}, _g_distance), ({901, 911}, _g_arc_distance),
     ({930, 940, 950}, _g_feed_mode), (WORK_SYSTEMS, _g_work), ({541}, _g_work_extended),
     ({430}, _g_tool_length), ({490}, _g_tool_length_cancel), ({530}, _g_machine), ({920, 921, 922}, _g_g92),
-    ({100}, _g_g10),
+    ({100}, _g_g10), ({500}, _g_g50), ({960}, _g_css), ({70}, _g_diameter_mode), ({150}, _g_g15),
 ):
     for _key in _keys:
         _G_HANDLERS[_key] = _handler

@@ -44,7 +44,8 @@ class Setup:
     axis letter (``{"Z": 150.0}``, any subset), used for the axes the program has not
     positioned yet; the functional point there is ``start + r``; ``home``: the stored
     positions G28 and G30 go to (``{"G28": {"X":.., "Y":.., "Z":..}}``, machine mm as
-    ``offsets``, any subset of axes; an axis not given is unknown after the move).
+    ``offsets``, any subset of axes; an axis not given is unknown after the move);
+    ``variables``: values of machine-state variables the program reads (number -> value).
     """
 
     offsets: dict = field(default_factory=dict)
@@ -53,6 +54,8 @@ class Setup:
     context: dict = field(default_factory=dict)
     start: dict = field(default_factory=dict)
     home: dict = field(default_factory=dict)
+    variables: dict = field(default_factory=dict)  # machine-state variables by number (--var, --vars)
+    tool_radii: dict = field(default_factory=dict)  # cutter radius (mm) by tool or D register (None: any)
 
 
 @dataclass
@@ -124,7 +127,8 @@ def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", sub
 
     _path, lines = iter_source_lines(source)
     interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
-    for sl in expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path]):
+    for sl in expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path],
+                     variables=getattr(setup, "variables", None)):
         interp.path = sl.path or path
         block = interp.feed_line(sl.lineno, sl.text)
         if block is not None:

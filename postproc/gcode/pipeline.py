@@ -37,7 +37,7 @@ from postproc.errors import (
     SafetyError,
     SolverError,
 )
-from postproc.gcode import bulk, emit, vplan
+from postproc.gcode import bulk, cutter, emit, vplan
 from postproc.gcode.directions import (
     MACHINE_STEP_MM,
     direction_axes,
@@ -147,6 +147,7 @@ class CorrectReport:
     arcs_split: int = 0  # arcs emitted as several exact arcs
     takeups: int = 0  # lines inserted to take up a reversal (backlash)
     header_lines: int = 0  # the postproc header's lines (counted in lines_out)
+    cutter: cutter.Bound | None = None  # moves under cutter radius compensation and their bound
 
     @property
     def growth(self) -> float:
@@ -197,6 +198,8 @@ class Corrector(EmitterMixin):
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
         self.report.solver = engine.solver
+        self.cutter = cutter.Bound()  # compensated moves corrected so far and their bound
+        self.cutter_known: cutter.Bound | None = None  # the whole program's, for the header (a second run)
 
     # -- safety-checked engine calls ----------------------------------------------------
     def _context(self, dirs: FloatArray, rotary: Sequence[dict[str, float]]) -> dict[str, FloatArray]:
@@ -291,7 +294,11 @@ class Corrector(EmitterMixin):
         was_enabled = gc.isenabled()
         gc.disable()
         try:
-            return self._run(lines, write, progress, source, skip_until, boundary)
+            report = self._run(lines, write, progress, source, skip_until, boundary)
+            if self.cutter.moves and self.cutter_known is None:
+                raise cutter.Rerun(self.cutter)  # the header must carry the bound
+            report.cutter = self.cutter if self.cutter.moves else None
+            return report
         finally:
             if was_enabled:
                 gc.enable()
@@ -489,6 +496,8 @@ class Corrector(EmitterMixin):
             parts.append("tool vector " + ",".join(f"{x:g}" for x in self.setup.tool_vector))
         for a in self.opt.added:
             parts.append(f"map {a.name}")
+        if self.cutter_known is not None:
+            parts.append(self.cutter_known.note())
         if self.accept_residual_mm > SOLVER_ACCEPT_MM:
             parts.append(f"{self.engine.method} solver {self.report.solver or '?'} "
                          f"accepting residuals up to {self.accept_residual_mm:g} mm")
@@ -554,6 +563,7 @@ class Corrector(EmitterMixin):
         approach directions are the nominal moves' own (no direction-dependent engine or
         added map), the last nominal target and the direction each axis last moved in."""
         self._check_units(entries)
+        self.interp.comp_moves = []  # another process bounds them
         if not (self.engine.direction_dependent or self.opt.added):
             M, Q1, lns, _R, _rot, general, _runs = self._gather(entries, arcs=False)
             if M:
@@ -567,6 +577,7 @@ class Corrector(EmitterMixin):
     # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
     def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
         self._check_units(entries)
+        cutter.check_chunk(self)
         M, Q1, lns, Rt, rot, general, runs = self._gather(entries)
         T: FloatArray = np.zeros((0, 3))
         plans: dict[int, Plan] = {}
@@ -1546,14 +1557,29 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
     expansion, ``restart()`` drops what was written and the expanded program is corrected.
     ``count``: the number of lines, when the program may be cut into parts corrected in
     several processes (:mod:`postproc.gcode.split`)."""
-    from postproc.gcode.interp import NeedsExpansion
-
     setup = setup or Setup()
     options = options or CorrectOptions()
+    known: list[cutter.Bound] = []  # the cutter compensation bound, once a first run found it
 
     def corrector() -> Corrector:
-        return Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
-                         calibration_sha256=calibration_sha256)
+        c = Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
+                      calibration_sha256=calibration_sha256)
+        c.cutter_known = known[0] if known else None
+        return c
+
+    try:
+        return _correct_once(get_lines, write, restart, corrector, options, path, progress, count)
+    except cutter.Rerun as again:
+        restart()
+        known.append(again.bound)
+        return _correct_once(get_lines, write, restart, corrector, options, path, progress, count)
+
+
+def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None],
+                  corrector: Callable[[], Corrector], options: CorrectOptions, path: str | None,
+                  progress: Callable[[int], None] | None, count: int | None) -> CorrectReport:
+    """One run of :func:`_correct_lines`."""
+    from postproc.gcode.interp import NeedsExpansion
 
     try:
         if count is not None:
@@ -1575,7 +1601,7 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
 
     def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
-                         subroutine_path=[Path(p) for p in options.subroutine_path]):
+                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=setup.variables):
             source.append((sl.lineno, sl.path))
             yield sl.text
 

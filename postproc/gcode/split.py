@@ -40,6 +40,7 @@ import numpy as np
 
 from postproc.errors import PostprocError
 from postproc.gcode import forking
+from postproc.gcode.cutter import merge_bounds
 
 #: a run's report (:class:`postproc.gcode.pipeline.CorrectReport`, a dataclass)
 CorrectReport = Any
@@ -86,7 +87,7 @@ Write = Callable[[str], object]
 _CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "report", "interp", "_decimals",
                      "_long_line",
                      "linear_exact", "bulk_plan", "accept_residual_mm", "expanded"})
-_INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup"})
+_INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup", "d", "_g_alias", "_dialect_g", "_iso_blocks"})
 
 
 def count_lines(path: str) -> int:
@@ -185,6 +186,8 @@ def merge(head: CorrectReport, tail: CorrectReport) -> CorrectReport:
             setattr(out, name, max(a, b))
         elif name in _SAME:
             pass
+        elif name in _COMBINED:  # moves under cutter compensation and their bound
+            setattr(out, name, merge_bounds(a, b))
         else:  # a count
             setattr(out, name, a + b)
     return out
@@ -195,6 +198,7 @@ def merge(head: CorrectReport, tail: CorrectReport) -> CorrectReport:
 _TAKE_TAIL = frozenset({"lines_in", "g54_assumed_zero"})  # as at the program's end
 _LARGEST = frozenset({"max_correction_mm", "max_residual_mm"})
 _SAME = frozenset({"solver", "accept_residual_mm", "expanded", "header_lines"})
+_COMBINED = frozenset({"cutter"})
 
 
 def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], write: Write,

@@ -36,8 +36,8 @@ P_SYSTEMS = {1: "G54", 2: "G55", 3: "G56", 4: "G57", 5: "G58", 6: "G59",
              7: "G59.1", 8: "G59.2", 9: "G59.3"}
 
 # Codes accepted without effect on geometry (pass through): path control, spindle
-# speed modes, retract modes, dwell, cutter-comp cancel, stored positions, rotation cancel.
-NEUTRAL_G = {400, 610, 611, 640, 960, 970, 690, 150, 500}
+# speed modes, retract modes, dwell, stored positions, rotation cancel.
+NEUTRAL_G = {610, 611, 640, 960, 970, 690, 150, 500}
 # Fanuc/Haas look-ahead and smoothing modes (no geometry): G5.1 Q1/Q0 (AI contour
 # control), G5 P10000/P0 (high-speed machining), G187 (Haas smoothness), G103 (Haas
 # block look-ahead). Accepted only without axis or spline words (G5/G5.1 are splines
@@ -58,8 +58,6 @@ REFUSED_G = {
     70: "G7 lathe diameter mode", 80: "G8 lathe radius mode",
     330: "G33 spindle-synchronised motion", 331: "G33.1 rigid tapping",
     382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing", 385: "G38.5 probing",
-    410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
-    411: "G41.1 dynamic cutter compensation", 421: "G42.1 dynamic cutter compensation",
     431: "G43.1 dynamic tool length offset", 432: "G43.2 additional tool length offset",
     160: "G16 polar coordinates", 511: "G51 scaling", 510: "G51 scaling",
     680: "G68 coordinate rotation", 923: "G92.3 restore offsets",
@@ -72,15 +70,15 @@ REFUSED_G = {
 
 # Why some refused codes cannot be corrected (the hint shown with the refusal).
 REFUSED_HINT = {
-    410: "the offset path depends on the cutter radius held at the control, which the program does not "
-         "know; post the program with the tool-centre path (cutter compensation done in CAM)",
-    420: "the offset path depends on the cutter radius held at the control, which the program does not "
-         "know; post the program with the tool-centre path (cutter compensation done in CAM)",
     382: "a probing move stops where the probe trips, so the positions after it are not known in advance",
     383: "a probing move stops where the probe trips, so the positions after it are not known in advance",
     384: "a probing move stops where the probe trips, so the positions after it are not known in advance",
     385: "a probing move stops where the probe trips, so the positions after it are not known in advance",
 }
+
+# Cutter radius compensation (postproc.gcode.cutter): G40 off, G41/G42 on (left/right),
+# G41.1/G42.1 with the diameter on the line (LinuxCNC)
+CUTTER_COMP = {400: "G40", 410: "G41", 420: "G42", 411: "G41.1", 421: "G42.1"}
 
 # M codes refused: subprograms and modal-state restore change what follows.
 REFUSED_M = {97: "M97 local subprogram call (Haas)",
@@ -136,6 +134,14 @@ class ModalState:
     cycle_q: float | None = None
     cycle_p: float | None = None
     before_cycle: int | None = None  # the motion mode before the cycle (restored by G80 outside LinuxCNC)
+    # cutter radius compensation: the CUTTER_COMP key in force (400: off), its radius (mm),
+    # the D register Fanuc/Haas keep modal, and the move the controller takes as the
+    # entry ("entry") or exit ("exit") move, still to come ("")
+    comp: int = 400
+    comp_radius: float = 0.0
+    comp_source: str = ""  # what gave the radius ("tool 1", "D2", "G41.1 D6")
+    comp_d: int | None = None
+    comp_edge: str = ""
 
     @property
     def unit_mm(self) -> float:

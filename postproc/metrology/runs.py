@@ -4,12 +4,15 @@ One row per measurement: ``axis,target,run,direction,deviation``; ``target`` is 
 commanded target position P_i, ``direction`` ``+`` or ``-`` (the direction in which
 the axis approached the target), ``deviation`` x_ij = measured - target. Positions are
 in the ``length`` unit, deviations in the ``error`` unit (default: ``length``).
-Optional ``t`` (s) orders the measurements in time.
+Optional ``t`` (s) orders the measurements in time; without it the file's row order
+is *not* taken as the visiting order (exporters sort rows by target or by run).
+Optional ``temp`` (any name starting ``temp``: the air) and ``material_temp`` (the
+machine or its scale), in °C, are kept for the ISO 230-2 §4.2 report.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,7 +36,9 @@ class Runs:
     """Measurements of one file: arrays of equal length, lengths in mm.
 
     ``direction`` is +1 (approached moving in +) or -1; ``order`` is the time order of
-    the rows (``t`` when given, else the file's row order); ``linenos`` the file lines.
+    the rows (``t`` when given, else the file's row order); ``timed``: whether ``order``
+    comes from a ``t`` column; ``linenos`` the file lines; ``env``: the temperature
+    columns (°C) by name (``temp...``, ``material_temp``).
     """
 
     axis: np.ndarray  # (N,) str
@@ -44,6 +49,8 @@ class Runs:
     order: np.ndarray
     linenos: np.ndarray
     path: str = ""
+    timed: bool = False
+    env: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.target_mm)
@@ -58,9 +65,13 @@ class Runs:
         return seen
 
     def select(self, axis: str) -> Runs:
-        m = self.axis == axis
+        return self.subset(self.axis == axis)
+
+    def subset(self, mask) -> Runs:
+        """The rows where ``mask`` is True (a boolean array over the rows)."""
+        m = np.asarray(mask, dtype=bool)
         return Runs(self.axis[m], self.target_mm[m], self.run[m], self.direction[m], self.deviation_mm[m],
-                    self.order[m], self.linenos[m], self.path)
+                    self.order[m], self.linenos[m], self.path, self.timed, {k: v[m] for k, v in self.env.items()})
 
 
 def runs_from_table(table: CsvTable) -> Runs:
@@ -97,8 +108,9 @@ def runs_from_table(table: CsvTable) -> Runs:
     for a in dict.fromkeys(axes):
         check_position_span(table, target[np.array(axes) == a], f"axis {a}: targets")
     order = table.numeric("t") if table.has("t") else np.arange(len(table.rows), dtype=float)
+    env = {name: table.numeric(name) for name in table.header if name.startswith("temp") or name == "material_temp"}
     runs = Runs(np.array(axes), target, run_f.astype(int), np.array(dirs), deviation, order,
-                np.asarray(table.linenos), table.path)
+                np.asarray(table.linenos), table.path, table.has("t"), env)
     _refuse_repeats(runs)
     return runs
 

@@ -30,6 +30,7 @@ from postproc.engine.parametric import ParametricEngine
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.beckhoff import read_isg_parts
 from postproc.metrology.iso230 import evaluate
+from postproc.metrology.outliers import RULE, runs_outliers, runs_without
 from postproc.metrology.runs import read_runs
 
 #: options of ``fit_tables`` that go to the engine
@@ -49,7 +50,7 @@ def tables_fitter(method: str):
     return fitters[method]
 
 
-def fit_tables(paths, squareness=None, runs=None, **options) -> FitResult:
+def fit_tables(paths, squareness=None, runs=None, keep_outliers: bool = False, **options) -> FitResult:
     """Calibration from axis error tables (+ squareness): a ParametricEngine FitResult.
 
     ``paths``: one tables file or several; a file may give only the components that
@@ -62,7 +63,9 @@ def fit_tables(paths, squareness=None, runs=None, **options) -> FitResult:
     exists, otherwise squareness is taken as zero and the report says so. Options
     ``order``, ``solver``, ``interpolation``, ``extrapolate``, ``astatic`` go to the
     engine; options meant for point fits (e.g. ``knot_spacing``) are reported as
-    ignored.
+    ignored. Readings of the runs beyond the outlier rule (:mod:`postproc.metrology.outliers`)
+    are left out and listed, unless ``keep_outliers``; the calibration's fit information
+    records both lists (``export`` reads them).
     """
     if isinstance(paths, str | Path):
         paths = [paths]
@@ -71,11 +74,14 @@ def fit_tables(paths, squareness=None, runs=None, **options) -> FitResult:
     parts = [_table_parts(p) for p in paths]
     report = [f"parametric model from axis error tables: {', '.join(paths)}"] if paths else []
     effects: list[dict] = []
+    excluded: list[dict] = []
+    kept: list[dict] = []
     for p in runs:
-        part, effect_dicts, lines = _parts_from_runs(p)
+        part, effect_dicts, lines, found = _parts_from_runs(p, keep_outliers)
         parts.append(part)
         effects += effect_dicts
         report += lines
+        (kept if keep_outliers else excluded).extend(o.to_json() for o in found)
     tables, merge_report = merge_parts(parts)
     report += merge_report
     if squareness is None and paths and squareness_path_for(paths[0]).exists():
@@ -107,6 +113,7 @@ def fit_tables(paths, squareness=None, runs=None, **options) -> FitResult:
             "ignored_options": ignored}
     if runs:
         info["runs_sources"] = runs
+        info["outliers"] = {"rule": RULE, "excluded": excluded, "kept": kept}
     return FitResult(engine=engine, residuals_mm=np.zeros((0, 3)), report=report, info=info, effects=effects)
 
 
@@ -117,12 +124,22 @@ def _table_parts(path: str) -> dict[str, TablePart]:
     return partial_parts(read_csv(path))
 
 
-def _parts_from_runs(path: str) -> tuple[dict[str, TablePart], list[dict], list[str]]:
+def _parts_from_runs(path: str, keep_outliers: bool = False) -> tuple[dict[str, TablePart], list[dict], list[str],
+                                                                      list]:
     """ISO 230-2 runs -> the positioning column (bidirectional mean deviation) of each
-    axis and a backlash effect with the reversal values B_i along the axis."""
+    axis and a backlash effect with the reversal values B_i along the axis; readings
+    beyond the outlier rule are left out (listed in the report) unless ``keep_outliers``."""
     runs = read_runs(path)
+    found = runs_outliers(runs)
+    report = []
+    if found:
+        what = "kept (--keep-outliers)" if keep_outliers else "excluded"
+        report.append(f"{path}: {len(found)} reading(s) beyond the outlier rule {what}:")
+        report += [f"  {o.describe()}" for o in found]
+        if not keep_outliers:
+            runs = runs_without(runs, found)
     results = evaluate(runs)
-    parts, effects, report = {}, [], []
+    parts, effects = {}, []
     for ax, res in results.items():
         if ax not in AXES:
             line = int(runs.linenos[runs.axis == ax][0])
@@ -141,15 +158,25 @@ def _parts_from_runs(path: str) -> tuple[dict[str, TablePart], list[dict], list[
         b = res.reversal
         ref = float(b[np.argmax(np.abs(b))])
         f = res.figures
-        report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}..{res.target_mm[-1]:.3f} mm; "
-                      f"E{COLUMNS[k][1]} (positioning) = mean bidirectional deviation, M {f['M'] * 1000:.2f} um")
-        if ref == 0.0:
-            report.append(f"{ax}: no reversal in the runs (every B_i is 0): no backlash effect")
+        if not res.bidirectional:
+            side = "+" if res.directions == (1,) else "-"
+            tag = "up" if side == "+" else "down"
+            report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}.."
+                          f"{res.target_mm[-1]:.3f} mm, approached in {side} only; E{COLUMNS[k][1]} (positioning) "
+                          f"= mean deviation in {side}, E{side} {f['E_' + tag] * 1000:.2f} um; no reversal measured: "
+                          "no backlash effect (programs that approach in the other direction are not corrected "
+                          "for it)")
         else:
+            report.append(f"{ax}: ISO 230-2 runs {path}: {len(b)} targets over {res.target_mm[0]:.3f}.."
+                          f"{res.target_mm[-1]:.3f} mm; E{COLUMNS[k][1]} (positioning) = mean bidirectional "
+                          f"deviation, M {f['M'] * 1000:.2f} um")
+        if res.bidirectional and ref == 0.0:
+            report.append(f"{ax}: no reversal in the runs (every B_i is 0): no backlash effect")
+        elif res.bidirectional:
             effect = get_effect(f"backlash:{ax}", config={"position_mm": res.target_mm.tolist(),
                                                           "shape": (b / ref).tolist()}, params={"b_mm": ref})
             effects.append(effect.to_dict())
             report.append(f"{ax}: backlash:{ax} from the reversal values B_i: {effect.describe()}; "
                           f"mean reversal {f['B_mean'] * 1000:+.2f} um")
         report += [f"warning: {w}" for w in res.warnings]
-    return parts, effects, report
+    return parts, effects, report, found

@@ -38,15 +38,30 @@ def _axis(name: str, axis: str, var: str, with_errors: bool) -> dict:
             "elements": elements}
 
 
-def _calibration_module(calibration: str) -> dict:
+#: Value a context variable of the calibration's effects starts at in the chain's
+#: defaults: an approach direction (dirx, diry, dirz) of +1, anything else 0.
+DIRECTION_CONTEXT = ("dirx", "diry", "dirz")
+
+
+def context_defaults(needs) -> dict[str, float]:
+    """Defaults of the context variables a calibration's effects read (backlash: dirx ...)."""
+    return {c: 1.0 if c in DIRECTION_CONTEXT else 0.0 for c in needs}
+
+
+def _calibration_module(calibration: str, needs=()) -> dict:
+    block: dict = {"file": calibration, "at": ["X", "Y", "Z"]}
+    comment = ("path relative to this chain file; the calibration's forward model "
+               "(with its effects) gives the error and the tilt of the tool at (X, Y, Z)")
+    if needs:
+        block["context"] = {c: c for c in needs}
+        comment += (f"; its effects read {', '.join(needs)} (the approach direction, +1 or -1, for "
+                    "dirx/diry/dirz): variables of that name, set in the defaults or an operation's context")
     return {"name": "measured machine",
             "_comment": "the volumetric error measured by postproc fit, at the commanded X, Y, Z",
-            "elements": [{"calibration": {"file": calibration, "at": ["X", "Y", "Z"]},
-                          "comment": "path relative to this chain file; the calibration's forward model "
-                                     "(with its effects) gives the error and the tilt of the tool at (X, Y, Z)"}]}
+            "elements": [{"calibration": block, "comment": comment}]}
 
 
-def vertical_mill(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0)) -> dict:
+def vertical_mill(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0), needs=()) -> dict:
     """A 3-axis vertical mill; with ``calibration`` its measured error in place of the axis errors."""
     modules = [
         {"name": "table and fixture", "_comment": "the workpiece frame",
@@ -57,7 +72,7 @@ def vertical_mill(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0)) -> 
         _axis("Z axis", "z", "Z", calibration is None),
     ]
     if calibration is not None:
-        modules.append(_calibration_module(calibration))
+        modules.append(_calibration_module(calibration, needs))
     modules.append({"name": "spindle", "_comment": "the tool turns about z",
                     "elements": [{"spindle": {"axis": "z", "rpm": "rpm", "var": "t", "direction": "cw"},
                                   "comment": "M03 at rpm (variable), time t in s; a bore turns it by its "
@@ -72,12 +87,12 @@ def vertical_mill(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0)) -> 
         "_comment": "Edit the error elements (or give a calibration with predict init --calibration); "
                     "variables X, Y, Z, rpm and t come from an operation's context or these defaults.",
         "defaults": {"X": float(centre_mm[0]), "Y": float(centre_mm[1]), "Z": float(centre_mm[2]),
-                     "rpm": 0.0, "t": 0.0},
+                     "rpm": 0.0, "t": 0.0, **context_defaults(needs)},
         "modules": modules,
     }
 
 
-def horizontal_boring(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0)) -> dict:
+def horizontal_boring(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0), needs=()) -> dict:
     """A horizontal boring machine after seed 004 (sizes are examples to replace)."""
     modules = [
         {"name": "table and fixture", "_comment": "the workpiece frame: x along the spindle, z up",
@@ -94,7 +109,7 @@ def horizontal_boring(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0))
         _axis("head travel", "x", "X", calibration is None),
     ]
     if calibration is not None:
-        modules.append(_calibration_module(calibration))
+        modules.append(_calibration_module(calibration, needs))
     modules.append({"name": "spindle", "_comment": "the nose on the spindle axis; the tool turns about x",
                     "elements": [
                         {"fixed": {"translation": [500, 200, 260]},
@@ -113,12 +128,16 @@ def horizontal_boring(calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0))
         "_comment": "random: the guide corners' heights g1..g4 anywhere in the 0.05 mm field; set a "
                     "field to [0, 0] (or remove the plane) for a machine of known errors.",
         "defaults": {"X": float(centre_mm[0]), "rpm": 0.0, "t": 0.0,
-                     **({"Y": float(centre_mm[1]), "Z": float(centre_mm[2])} if calibration else {})},
+                     **({"Y": float(centre_mm[1]), "Z": float(centre_mm[2])} if calibration else {}),
+                     **context_defaults(needs)},
         "random": {name: {"uniform": [0, 0.05]} for name in ("g1", "g2", "g3", "g4")},
         "modules": modules,
     }
 
 
-def layout_chain(layout: str, calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0)) -> dict:
-    """The starting chain of ``layout`` (one of :data:`LAYOUTS`) as JSON data."""
-    return {"vertical-mill": vertical_mill, "horizontal-boring": horizontal_boring}[layout](calibration, centre_mm)
+def layout_chain(layout: str, calibration: str | None = None, centre_mm=(0.0, 0.0, 0.0), needs=()) -> dict:
+    """The starting chain of ``layout`` (one of :data:`LAYOUTS`) as JSON data; ``needs``: the
+    context variables the calibration's effects read (a calibration from runs has
+    backlash effects reading dirx ...), mapped to chain variables of the same name."""
+    makers = {"vertical-mill": vertical_mill, "horizontal-boring": horizontal_boring}
+    return makers[layout](calibration, centre_mm, tuple(needs))

@@ -63,15 +63,27 @@ class AxisErrors:
         wide = x[0] <= -UNMEASURED_HALF_RANGE_MM and x[-1] >= UNMEASURED_HALF_RANGE_MM
         return not ((zero or wide) and not self.backlash)
 
-    def nodes(self) -> np.ndarray:
-        """The calibration's own positions along the axis (table rows, reversal profile)."""
+    def nodes(self, merge_mm: float = 0.0) -> np.ndarray:
+        """The calibration's own positions along the axis (table rows, reversal profile);
+        positions closer than ``merge_mm`` are one (the first kept): a table read in um
+        and runs in mm give 31.4 and 31.400000000000002, which a table printed to a
+        nanometre would write twice."""
         xs = [self.base.tables.position_mm[self.axis]]
         for e in self.backlash:
             if "position_mm" in e.config:
                 xs.append(np.asarray(e.config["position_mm"], dtype=float))
         x = np.unique(np.concatenate(xs))
         x = x[(x >= self.lo) & (x <= self.hi)]
-        return np.unique(np.concatenate([[self.lo], x, [self.hi]]))
+        x = np.unique(np.concatenate([[self.lo], x, [self.hi]]))
+        if merge_mm > 0 and len(x) > 1:
+            keep = [0]
+            for i in range(1, len(x)):
+                if x[i] - x[keep[-1]] >= merge_mm:
+                    keep.append(i)
+            if x[-1] - x[keep[-1]] > 0 and keep[-1] != len(x) - 1:
+                keep[-1] = len(x) - 1  # the range's end stays
+            x = x[keep]
+        return x
 
     def positioning(self, t) -> np.ndarray:
         return self.base.axis_errors(self.axis, t)[:, self.k]

@@ -16,6 +16,18 @@ program correction) and the backlash effects (the axis backlash parameters of th
 CNC, or the program correction). The component errors are postproc's effective
 ones (tool point relative to the workpiece, all axes counted on the tool side):
 set the kinematic chain and ``workpiece_axes`` of the compensation list to match.
+
+Signs: every value is an error, actual minus nominal (formats.md), the quantity an
+interferometer reads and ISO 230-1 names, which TF5280's compensation takes away. So
+the compensation list leaves ``negate`` unset (``negate XYZ`` would add every error
+instead of removing it) and ``alternative_model`` at 0 (FALSE): the standard ISO 230
+model, all error motions of an axis counted on the tool side, is the one postproc
+fitted. The TF5280 manual does not print the sign of the compensation value against
+the file's errors; the comment lines say how to check it once on the control (the
+compensation value at a position has the opposite sign of EXX there). Both settings are written in the file's comment lines and in
+the notes. The round trip reads the file back as TF5280's ISG CSV reader does (comment
+lines, file breaks, blank-separated records) and requires every value back to the
+digits written.
 """
 
 from __future__ import annotations
@@ -30,19 +42,30 @@ from postproc.calibration.tables import TablePart
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import AxisErrors
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.roundtrip import check_round_trip
+
+#: Significant digits of the values written; a value read back agrees to this.
+DIGITS = 9
+#: Comment lines naming the compensation list's sign settings for these values.
+SIGN_SETTINGS = ("negate: leave unset (no axis): the values are errors, actual - nominal (ISO 230-1), which the "
+                 "compensation takes away; check once on the control: the compensation value at a position must "
+                 "have the opposite sign of EXX there, else set negate XYZ",
+                 "alternative_model: 0 (FALSE): the standard ISO 230 model, every axis's error motions counted "
+                 "on the tool side")
 
 _COMPONENT = re.compile(r"^E([XYZABC])([XYZ])$")
 
 
 def _num(v: float) -> str:
-    s = f"{v:.9g}"
+    s = f"{v:.{DIGITS}g}"
     return "0" if float(s) == 0 else s
 
 
 def export_beckhoff(axis_errors: list[AxisErrors], *, name: str = "calibration") -> Export:
     exp = Export({})
     lines = [f"// postproc calibration {name}: TF5280 component errors (ISO 230-1 names), mm and rad",
-             "// effective errors of the tool point relative to the workpiece, all axes on the tool side"]
+             "// effective errors of the tool point relative to the workpiece, all axes on the tool side",
+             *(f"// compensation list: {line}" for line in SIGN_SETTINGS)]
     blocks = []
     for e in axis_errors:
         x = e.nodes()
@@ -58,9 +81,24 @@ def export_beckhoff(axis_errors: list[AxisErrors], *, name: str = "calibration")
     sq = axis_errors[0].base.squareness.as_dict() if axis_errors else {}
     lines.append("// squareness (rad, formats.md names), not written as TF5280 position errors: "
                  + " ".join(f"{k}={v:.6g}" for k, v in sq.items()))
-    exp.files["volcomp.csv"] = "\n".join(lines) + "\n" + "\n#\n".join(blocks) + "\n"
+    text = "\n".join(lines) + "\n" + "\n#\n".join(blocks) + "\n"
+    # round trip: the file read back as an ISG CSV reader does, every record, every column
+    back: dict[str, TablePart] = {}
+    for read_block in _isg_blocks(text):
+        axis, part = _isg_part(read_block, "volcomp.csv")
+        back[axis] = part
+    for e in axis_errors:
+        part = back[e.axis]
+        want = e.base.axis_errors(e.axis, part.x)
+        for k, c in enumerate(COLUMNS):
+            # DIGITS significant digits of the largest value of the column
+            resolution = float(np.abs(want[:, k]).max()) * 10.0 ** (1 - DIGITS)
+            check_round_trip(e.axis, f"beckhoff {c}{e.axis}", part.x, {"both": part.values[:, k]},
+                             {"both": want[:, k]}, resolution)
+    exp.files["volcomp.csv"] = text
     exp.notes.append("compensation list: file[0] volcomp.csv, file_format[0] ISG_CSV; "
                      "the squareness stays in the program correction")
+    exp.notes += [f"compensation list: {line}" for line in SIGN_SETTINGS]
     return exp
 
 

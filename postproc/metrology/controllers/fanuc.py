@@ -29,6 +29,7 @@ import numpy as np
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import WHOLE_STEPS_SLACK, AxisErrors
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.roundtrip import check_round_trip
 
 #: Pitch error data numbers on the parameter tape start here (N10000 = point 0).
 PITCH_DATA_BASE = 10000
@@ -40,6 +41,9 @@ MAX_POINTS_PER_AXIS = 128
 #: Highest pitch error compensation point number of a typical 0i/16i memory.
 MAX_POINT_NUMBER = 1023
 DEFAULT_AXIS_NUMBERS = {"X": "1", "Y": "2", "Z": "3"}
+#: A reference closer than this (mm) to the end of the axis the return cannot reach
+#: from is taken as that end (a micrometre: below any reference setting).
+REACH_SLACK_MM = 1e-3
 
 
 def _grid(e: AxisErrors, reference: float, interval: float) -> np.ndarray:
@@ -49,9 +53,40 @@ def _grid(e: AxisErrors, reference: float, interval: float) -> np.ndarray:
     return np.arange(min(kmin, 0), max(kmax, 0) + 1)
 
 
-def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection_unit_mm: float = 0.001,
-                 reference_mm: dict[str, float] | None = None, return_direction: int = 1,
+def check_reference(e: AxisErrors, reference: float, direction: int) -> None:
+    """Refuse a reference position the reference return cannot reach: a return in +
+    arrives from below, so there must be travel below the reference (it cannot be the
+    axis's lower end), a return in - from above (not the upper end)."""
+    if direction > 0 and reference <= e.lo + REACH_SLACK_MM:
+        raise CalibrationError(
+            f"axis {e.axis}: a reference return in + cannot reach the reference {reference:g} mm: it is at or "
+            f"below the lower end of the axis ({e.lo:g} mm), and an axis reaches its lower end moving -",
+            hint=f"give the reference and the return direction the control uses (parameters 1240 and 1006#5): "
+                 f"e.g. --reference {e.axis}={e.hi:g} --return {e.axis}=+ or --reference {e.axis}={e.lo:g} "
+                 f"--return {e.axis}=-")
+    if direction < 0 and reference >= e.hi - REACH_SLACK_MM:
+        raise CalibrationError(
+            f"axis {e.axis}: a reference return in - cannot reach the reference {reference:g} mm: it is at or "
+            f"above the upper end of the axis ({e.hi:g} mm), and an axis reaches its upper end moving +",
+            hint=f"give the reference and the return direction the control uses (parameters 1240 and 1006#5): "
+                 f"e.g. --reference {e.axis}={e.lo:g} --return {e.axis}=- or --reference {e.axis}={e.hi:g} "
+                 f"--return {e.axis}=+")
+
+
+def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, reference_mm: dict[str, float],
+                 return_direction: dict[str, int], detection_unit_mm: float = 0.001,
                  axis_numbers: dict[str, str] | None = None, first_point: int = 0) -> Export:
+    """The tape for ``axis_errors``; ``reference_mm`` and ``return_direction`` (+1 / -1)
+    are required for every axis: no sign of the table comes from a default."""
+    for e in axis_errors:
+        missing = [w for w, d in (("--reference", reference_mm), ("--return", return_direction)) if e.axis not in d]
+        if missing:
+            raise CalibrationError(
+                f"axis {e.axis}: a Fanuc table needs the reference position and the direction of the reference "
+                f"return; missing {' and '.join(missing)}",
+                hint=f"give --reference {e.axis}=MM --return {e.axis}=+|- as the control has them (parameters "
+                     "1240 and 1006#5 ZMI), or --parameters with the control's parameter tape")
+        check_reference(e, reference_mm[e.axis], return_direction[e.axis])
     numbers = {**DEFAULT_AXIS_NUMBERS, **(axis_numbers or {})}
     interval_du = round(interval_mm / detection_unit_mm)
     if interval_du <= 0 or abs(interval_du - interval_mm / detection_unit_mm) > WHOLE_STEPS_SLACK * max(1, interval_du):
@@ -61,13 +96,15 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
     data: list[tuple[int, int]] = []
     exp = Export({})
     point = first_point
+    checks = []
     for e in axis_errors:
-        ref = (reference_mm or {}).get(e.axis, e.lo)
+        ref = reference_mm[e.axis]
+        ret = return_direction[e.axis]
         ks = _grid(e, ref, interval_mm)
         x = ref + ks * interval_mm
         xc = np.clip(x, e.lo, e.hi)  # beyond the calibrated range the error is held at its end value
         up, down = e.up(xc), e.down(xc)
-        zero = up if return_direction > 0 else down  # error at the reference, approached in the return direction
+        zero = up if ret > 0 else down  # error at the reference, approached in the return direction
         e_ref = float(np.interp(ref, x, zero))
         # absolute compensations (detection units), then the magnification that fits the increments
         c_up, c_down = -(up - e_ref) / detection_unit_mm, -(down - e_ref) / detection_unit_mm
@@ -79,8 +116,8 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
                                    f"{interval_mm:g} mm", hint="give a smaller --step")
         a_up, a_down = np.round(c_up / mag).astype(int), np.round(c_down / mag).astype(int)
         i_ref = int(np.flatnonzero(ks == 0)[0])
-        a_up -= a_up[i_ref] if return_direction > 0 else 0
-        a_down -= a_down[i_ref] if return_direction < 0 else 0
+        a_up -= a_up[i_ref] if ret > 0 else 0
+        a_down -= a_down[i_ref] if ret < 0 else 0
         n_sections = len(ks) - 1
         if n_sections > MAX_POINTS_PER_AXIS:
             raise CalibrationError(f"axis {e.axis}: {n_sections} compensation points; a Fanuc axis takes at most "
@@ -93,7 +130,7 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
         for j in range(1, len(ks)):
             data.append((plus_first + j - 1, int(a_up[j] - a_up[j - 1])))
             data.append((minus_first + j - 1, int(a_down[j] - a_down[j - 1])))
-        against = int(a_down[i_ref] if return_direction > 0 else a_up[i_ref])
+        against = int(a_down[i_ref] if ret > 0 else a_up[i_ref])
         ax = numbers[e.axis]
         for num, value in ((3620, n_ref), (3621, plus_first), (3622, plus_first + n_sections - 1), (3623, mag),
                            (3624, interval_du), (3626, minus_first), (3627, against)):
@@ -111,7 +148,8 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
             f"- table {minus_first}..{minus_first + n_sections - 1}, interval {interval_du} detection units "
             f"({interval_mm:g} mm), magnification {mag}; rounding to detection units leaves "
             f"{worst * 1000:.3f} um at most; the error at the reference ({e_ref * 1000:+.3f} um) is the table's zero "
-            "(a shift of the whole axis: it stays in --remainder)")
+            f"(a shift of the whole axis: it stays in --remainder); reference return in {'+' if ret > 0 else '-'}")
+        checks.append((e, ax, ref, ret, ks * interval_mm, up - e_ref, down - e_ref, mag * detection_unit_mm))
     if point - 1 > MAX_POINT_NUMBER:
         exp.notes.append(f"warning: the tables use point numbers up to {point - 1}; check the control's pitch "
                          f"memory (often 0..{MAX_POINT_NUMBER})")
@@ -121,15 +159,64 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
     for n, v in sorted(data):
         lines.append(f"N{PITCH_DATA_BASE + n}P{v}")
     lines.append("%")
-    exp.files["pitch.txt"] = "\n".join(lines) + "\n"
-    direction = "+" if return_direction > 0 else "-"
-    exp.notes.append(f"set 3605#0 (BDP) = 1 on each axis by hand (the tape leaves bit parameter 3605 alone), "
-                     f"reference return in the {direction} direction; set the backlash 1851/1852 to 0: the - "
-                     "table already holds the reversal. Power off and on, then return to the reference position.")
+    text = "\n".join(lines) + "\n"
+    # round trip: the tape as the control sums it, every point, both directions
+    tape_params, tape_data = read_fanuc(text)
+    for e, ax, ref, ret, x_rel, err_up, err_down, unit in checks:
+        x, c_up, c_down = fanuc_compensation(tape_params, tape_data, ax, detection_unit_mm, ret)
+        if not np.allclose(x, x_rel, rtol=0, atol=detection_unit_mm):
+            raise CalibrationError(f"round trip of the fanuc table of {e.axis}: the tape's points are not the "
+                                   "table's; nothing written", hint="report it with the calibration file")
+        # the compensation is minus the error relative to the reference (approached in the return direction)
+        check_round_trip(e.axis, "fanuc", ref + x, {"+": c_up, "-": c_down}, {"+": -err_up, "-": -err_down},
+                         0.5 * unit)
+    exp.files["pitch.txt"] = text
+    sides = ", ".join(f"{e.axis} in {'+' if ret > 0 else '-'} (1006#5 ZMI = {0 if ret > 0 else 1})"
+                      for e, _, _, ret, *_ in checks)
+    exp.notes.append(f"set 3605#0 (BDP) = 1 on each axis by hand (the tape leaves bit parameter 3605 alone); "
+                     f"the table assumes the reference return {sides}: if the control returns otherwise, the "
+                     "reversal is compensated with the wrong sign; set the backlash 1851/1852 to 0: the - table "
+                     "already holds the reversal. Power off and on, then return to the reference position.")
     return exp
 
 
 _WORD = re.compile(r"([NAP])(-?\d+)")
+#: Reference position of the machine coordinate system, per axis (least input increment).
+PARAM_REFERENCE = 1240
+#: Bit parameter of the reference return direction: 1006#5 ZMI, 1 = return in -.
+PARAM_RETURN, ZMI_BIT = 1006, 5
+_PARAM_WORD = re.compile(r"([NAP])(-?[0-9]+)")
+
+
+def read_reference_parameters(text: str, detection_unit_mm: float, path: str = ""
+                              ) -> tuple[dict[str, float], dict[str, int]]:
+    """The reference position (1240, mm) and reference return direction (1006#5 ZMI: 0
+    in +, 1 in -) per axis number, from a control's parameter tape. Bit parameters are
+    written as eight binary digits, bit 7 first (``N1006A1P00100000``); 1240 in detection
+    units. Other parameters are skipped."""
+    refs: dict[str, float] = {}
+    dirs: dict[str, int] = {}
+    for lineno, line in enumerate(text.splitlines(), 1):
+        body = line.strip()
+        if not body.startswith("N"):
+            continue
+        words = _PARAM_WORD.findall(body)
+        if not words or "".join(a + b for a, b in words) != body:
+            raise MeasurementError(f"not a parameter tape line: {body!r}", path=path, lineno=lineno, col=1)
+        n = int(words[0][1])
+        if n not in (PARAM_REFERENCE, PARAM_RETURN):
+            continue
+        axis = None
+        for w, v in words[1:]:
+            if w == "A":
+                axis = str(int(v))
+            elif w == "P" and axis is not None:
+                if n == PARAM_REFERENCE:
+                    refs[axis] = int(v) * detection_unit_mm
+                else:
+                    bits = v if len(v) == 8 and set(v) <= {"0", "1"} else format(int(v) & 0xFF, "08b")
+                    dirs[axis] = -1 if bits[7 - ZMI_BIT] == "1" else 1
+    return refs, dirs
 
 
 def read_fanuc(text: str, path: str = "") -> tuple[dict[int, dict[str, int]], dict[int, int]]:

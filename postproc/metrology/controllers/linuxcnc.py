@@ -11,6 +11,12 @@ the file carries no comment. Its meaning, from that loader:
   -; the loader stores ``nominal - forward`` and ``nominal - reverse``;
 - type 1: forward and reverse are those trims themselves, ``nominal - actual``.
 
+Each triplet goes to motion as ``EMCMOT_SET_JOINT_COMP`` (src/emc/motion/command.c),
+which drops an entry whose nominal is not above the previous one ("joint %d:
+compensation values must increase"): the nominals must be strictly increasing, so
+positions that print alike (31.4 from a runs file in mm and 31.400000000000002 from a
+table converted from um) are one node.
+
 With a COMP_FILE, LinuxCNC ignores ``BACKLASH``; set it to 0 all the same, so that
 removing the file later does not bring back a second backlash compensation.
 """
@@ -22,10 +28,16 @@ import numpy as np
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import AxisErrors, equidistant, mm
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.roundtrip import check_round_trip
 
 #: LinuxCNC's limit: 256 triplets per joint (ini-config, COMP_FILE).
 MAX_TRIPLETS = 256
 DEFAULT_JOINTS = {"X": "0", "Y": "1", "Z": "2"}
+#: Decimals of every number in the file (mm): a nanometre, finer than any scale.
+DECIMALS = 6
+#: Resolution of a value read back: forward and reverse are each rounded to DECIMALS,
+#: and type 0 takes a difference of two rounded numbers.
+RESOLUTION_MM = 10.0 ** -DECIMALS
 
 
 def export_linuxcnc(axis_errors: list[AxisErrors], *, comp_type: int = 0, step: float | None = None,
@@ -35,7 +47,7 @@ def export_linuxcnc(axis_errors: list[AxisErrors], *, comp_type: int = 0, step: 
     exp = Export(files)
     notes = exp.notes
     for e in axis_errors:
-        nodes = e.nodes() if step is None else equidistant(e.lo, e.hi, step)[0]
+        nodes = e.nodes(merge_mm=RESOLUTION_MM) if step is None else equidistant(e.lo, e.hi, step)[0]
         if len(nodes) > MAX_TRIPLETS:
             raise CalibrationError(
                 f"axis {e.axis}: {len(nodes)} table positions; LinuxCNC takes at most {MAX_TRIPLETS} per joint",
@@ -47,7 +59,16 @@ def export_linuxcnc(axis_errors: list[AxisErrors], *, comp_type: int = 0, step: 
         else:
             fwd, rev = -up, -down
         name = f"joint{joints[e.axis]}_{e.axis}.comp"
-        files[name] = "".join(f"{mm(n)} {mm(f)} {mm(r)}\n" for n, f, r in zip(nodes, fwd, rev, strict=True))
+        text = "".join(f"{mm(n, DECIMALS)} {mm(f, DECIMALS)} {mm(r, DECIMALS)}\n"
+                       for n, f, r in zip(nodes, fwd, rev, strict=True))
+        # round trip: LinuxCNC's loader reads the text back; every node, both directions
+        nom, got_up, got_down, errors = linuxcnc_loader(text, comp_type)
+        if errors:
+            raise CalibrationError(f"round trip of the linuxcnc table of {e.axis}: LinuxCNC would say "
+                                   f"{errors[0]}; nothing written", hint="report it with the calibration file")
+        check_round_trip(e.axis, "linuxcnc", nom, {"+": got_up, "-": got_down}, {"+": e.up(nom), "-": e.down(nom)},
+                         RESOLUTION_MM)
+        files[name] = text
         exp.columns.add((e.axis, e.column[:2]))
         if e.backlash:
             exp.backlash.add(e.axis)
@@ -63,8 +84,21 @@ def export_linuxcnc(axis_errors: list[AxisErrors], *, comp_type: int = 0, step: 
 
 def read_linuxcnc(text: str, comp_type: int, path: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(nominal, error moving +, error moving -) in mm, read as LinuxCNC's loader does:
-    triplets until the first line that is not three numbers."""
-    rows = []
+    triplets until the first line that is not three numbers; an entry LinuxCNC would
+    drop (nominal not increasing) is an error."""
+    nom, up, down, errors = linuxcnc_loader(text, comp_type, path)
+    if errors:
+        raise MeasurementError(errors[0], path=path)
+    return nom, up, down
+
+
+def linuxcnc_loader(text: str, comp_type: int, path: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    """What LinuxCNC keeps of a comp file: (nominal, error moving +, error moving -, the
+    loader's complaints). usrmotLoadComp reads triplets until the first line that is not
+    three numbers; motion's SET_JOINT_COMP drops an entry whose nominal is not above the
+    last one kept, with "compensation values must increase"."""
+    rows: list[tuple[float, float, float]] = []
+    errors: list[str] = []
     for line in text.splitlines():
         parts = line.split()
         try:
@@ -73,9 +107,13 @@ def read_linuxcnc(text: str, comp_type: int, path: str = "") -> tuple[np.ndarray
             break
         if nom is None:
             break
+        if rows and nom <= rows[-1][0]:
+            errors.append(f"line {len(rows) + len(errors) + 1}: nominal {nom:g} is not above {rows[-1][0]:g}: "
+                          "compensation values must increase")
+            continue
         rows.append((nom, fwd, rev))
     if len(rows) < 2:
         raise MeasurementError("fewer than 2 compensation triplets", path=path)
     a = np.array(rows)
     trim_f, trim_r = (a[:, 0] - a[:, 1], a[:, 0] - a[:, 2]) if comp_type == 0 else (a[:, 1], a[:, 2])
-    return a[:, 0], -trim_f, -trim_r
+    return a[:, 0], -trim_f, -trim_r, errors

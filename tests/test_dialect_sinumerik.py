@@ -1,0 +1,279 @@
+"""The Sinumerik 840D dialect (issue 31 item 2): what it reads, each construct with its
+motion worked out by hand, what it keeps byte for byte, and what it refuses by name.
+
+There is no open Sinumerik interpreter to compare with: the expected machine positions
+below come from the Programming Manual's rules (Fundamentals: work offsets G54-G57,
+G505-G599 and G500; G70 inch; CR= the radius, negative for more than 180 degrees; D the
+tool offset, here flat D numbers; AC()/IC() absolute/incremental for one word)."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from postproc.cli import main
+from postproc.engine.identity import IdentityEngine
+from postproc.engine.static import StaticEngine
+from postproc.errors import GcodeSyntaxError, UnsupportedGcodeError
+from postproc.gcode import emit
+from postproc.gcode.interp import Interpreter
+from postproc.gcode.path import Setup
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+from postproc.gcode.recognise import dialect_of_file
+
+ROOT = Path(__file__).parents[1]
+DATA = ROOT / "tests" / "data" / "sinumerik"
+CAL = str(ROOT / "calibrations" / "s500_static.json")
+BIG = [[-1e5] * 3, [1e5] * 3]
+SETUP = Setup(offsets={"G54": (100.0, 100.0, 100.0), "G505": (10.0, 20.0, 30.0)},
+              tool_lengths={1: 100.0, 2: 50.0})
+
+
+def run(text, setup=SETUP):
+    it = Interpreter(setup, "p.mpf", dialect="sinumerik")
+    moves = []
+    for n, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = it.feed_line(n, line)
+        while mv is not None:
+            moves.append(mv)
+            mv = mv.then
+    return it, moves
+
+
+def ends(moves):
+    return [tuple(round(v, 9) for v in mv.q1) for mv in moves]
+
+
+def correct(text, setup=SETUP, engine=None):
+    return correct_text(text, engine or IdentityEngine(BIG), setup, CorrectOptions(dialect="sinumerik"),
+                        path="p.mpf")
+
+
+def body(out):
+    return "".join(ln for ln in out.splitlines(keepends=True) if not emit.is_header(ln))
+
+
+def test_bracket_motions_by_hand():
+    it, moves = run((DATA / "bracket_contour.mpf").read_text())
+    # G54 (100, 100, 100) + D1 tool length 100 along Z
+    got = ends(moves)
+    assert got[0] == (95.0, 100.0, 220.0)  # N80 G0 X-5 Y0 Z20
+    assert got[2] == (95.0, 100.0, 197.0)  # N100 G1 Z-3
+    assert got[3] == (180.0, 100.0, 197.0)  # N110 X80
+    # N120 G3 X100 Y20 CR=20: a quarter circle about (80, 20), counter-clockwise
+    arc = moves[4].arc
+    assert got[4] == (200.0, 120.0, 197.0)
+    assert arc.center[:2] == pytest.approx((180.0, 120.0))
+    assert not arc.clockwise
+    # N140 G3 X80 Y80 I-20 J0: centre (80, 60) from (100, 60)
+    assert moves[6].arc.center[:2] == pytest.approx((180.0, 160.0))
+    assert got[7] == (95.0, 180.0, 197.0)  # N150 X=AC(-5) in G90 is X-5
+    assert moves[3].feed == 1200.0
+    assert it.ended  # M30
+
+
+def test_bracket_kept_lines_byte_identical_and_header_in_semicolon_comments():
+    text = (DATA / "bracket_contour.mpf").read_text()
+    out, _ = correct(text)
+    lines = out.splitlines(keepends=True)
+    assert lines[:2] == text.splitlines(keepends=True)[:2]  # %_N_ and ;$PATH= stay first
+    assert lines[2].startswith(";POSTPROC ")
+    assert emit.is_header_start(lines[2])
+    assert body(out) == text  # identity: every byte kept
+    eng = StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG)
+    out, _ = correct(text, Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0}), eng)
+    kept = [ln for ln in text.splitlines(keepends=True)
+            if any(k in ln for k in ("T=", "MSG", "CYCLE832", "SOFT", "BRISK", "G4 F2", "D1\n", "M30", ";"))]
+    for ln in kept:
+        assert ln in out.splitlines(keepends=True), ln
+    assert "N120 G3 X99.9001 Y19.9800 CR=19.9800" in out  # 100/1.001, 20/1.001, 20/1.001
+    assert "N150 G1 X=AC(-4.9950)" in out
+
+
+def test_absolute_centre_words_by_hand():
+    """G2 X20 Y0 I=AC(10) J=AC(0) from (0, 0): the centre (10, 0) in work coordinates, the
+    same arc as I10 J0; the block after it reads I/J incremental again."""
+    it, moves = run("G54 D1\nG0 X0 Y0 Z0\nG2 X20 Y0 I=AC(10) J=AC(0) F100\nG2 X0 Y0 I-10 J0\n")
+    assert moves[1].arc.center[:2] == pytest.approx((110.0, 100.0))
+    assert moves[1].arc_absolute
+    assert moves[2].arc.center[:2] == pytest.approx((110.0, 100.0))
+    assert not it.state.arc_absolute
+    with pytest.raises(UnsupportedGcodeError, match="partly =AC"):
+        run("G54 D1\nG0 X0 Y0 Z0\nG2 X20 Y0 I=AC(10) J0 F100\n")
+    out, _ = correct("G54 D1\nG0 X0 Y0 Z0\nG2 X20 Y0 I=AC(10) J=AC(0) F100\nM30\n",
+                     Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0}),
+                     StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "I=AC(9.9900) J=AC(0)" in out  # 10 / 1.001; J stays 0
+
+
+def test_kept_settings_and_compressor():
+    _, moves = run("G54 D1\nG642 ADIS=0.05 ADISPOS=0.1\nCOMPCAD\nG0 X0 Y0 Z0\nCOMPOF\n")
+    assert len(moves) == 1
+
+
+def test_g4_f_is_a_dwell_time_not_a_feed():
+    _, moves = run("G54 D1\nG1 X1 Y1 Z1 F500\nG4 F2\nG1 X2\n")
+    assert moves[-1].feed == 500.0
+
+
+def test_inch_g505_d_registers_long_arc_and_ret():
+    _, moves = run((DATA / "inch_g505_ret.spf").read_text())
+    got = ends(moves)
+    # G505 (10, 20, 30) mm, G70 inch, D2 tool length 50
+    assert got[0] == pytest.approx((10 + 25.4, 20 + 25.4, 30 + 25.4 + 50))
+    assert got[1][2] == pytest.approx(30 - 2.54 + 50)
+    arc = moves[2].arc
+    assert arc.clockwise
+    # CR=-1 (inch): the arc of more than 180 degrees, centre (1, 2) in
+    assert arc.center[:2] == pytest.approx((10 + 25.4, 20 + 50.8))
+    assert got[3][2] == pytest.approx(30 + 25.4 + 50)
+    assert len(moves) == 4  # D0 moves nothing; RET ends the program: N90 is not run
+
+
+def test_d0_cancels_the_tool_length():
+    _, moves = run("G54 D1\nG0 X0 Y0 Z0\nD0\nG0 Z0\n")
+    assert ends(moves) == [(100.0, 100.0, 200.0), (100.0, 100.0, 100.0)]
+
+
+def test_ac_ic_against_the_mode():
+    _, moves = run("G54 D1\nG0 X0 Y0 Z0\nG91 G1 X=IC(5) F100\n")
+    assert ends(moves)[-1] == (105.0, 100.0, 200.0)
+    with pytest.raises(UnsupportedGcodeError, match=r"Sinumerik X=IC\(\) \(incremental for one word\) in G90"):
+        run("G54 D1\nG0 X0 Y0 Z0\nG1 X=IC(5) F100\n")
+    with pytest.raises(UnsupportedGcodeError, match=r"Sinumerik Y=AC\(\)"):
+        run("G54 D1\nG0 X0 Y0 Z0\nG91 G1 Y=AC(5) F100\n")
+
+
+@pytest.mark.parametrize(("name", "lineno", "construct"), [
+    ("drill_plate.mpf", 8, "Sinumerik MCALL (modal cycle call)"),
+    ("pocket_cycle.mpf", 8, "Sinumerik POCKET4 (pocket milling cycle)"),
+])
+def test_sample_programs_refused_by_name(name, lineno, construct):
+    with pytest.raises(UnsupportedGcodeError) as err:
+        correct((DATA / name).read_text())
+    assert err.value.lineno == lineno
+    assert construct in str(err.value)
+    assert err.value.hint
+
+
+@pytest.mark.parametrize(("line", "construct"), [
+    ("N10 ROT Z30", "programmable frame"),
+    ("N10 TRANS X10 A5", "frame with A"),
+    ("N10 TRANS X10 G1 X5", "frame with G"),
+    ("N10 G1 TRANS X10", "TRANS not alone in its block"),
+    ("N10 AROT Z30", "programmable frame"),
+    ("N10 R1=R2+5", "R parameter R2 read before the program sets it"),
+    ("N10 DEF FRAME F1", "DEF FRAME (only REAL, INT and BOOL"),
+    ("N10 G1 X=DEPTH", "DEPTH in an expression (not a variable the program defines)"),
+    ("N10 IF R1>5 GOTOF END1", "program control"),
+    ("N10 REPEAT LABEL1 P=3", "program control"),
+    ("N10 L100", "subprogram call"),
+    ("N10 G2 X10 Y10 I5 TURN=2", "TURN= helix"),
+    ("N10 G53 X0", "G53"),
+    ("N10 G331 Z-10 K1.5", "G331 rigid tapping"),
+    ("N10 CYCLE800(1,\"TC1\",0,57,0,0,0,0,30,0,0,0,0,1)", "CYCLE800 (swivel plane)"),
+    ("N10 X=R1", "R parameter R1 read before"),
+    ("N10 FOO", "FOO (not read by postproc)"),
+    ("N10 H5", "address H"),
+])
+def test_refusals_name_the_sinumerik_construct(line, construct):
+    with pytest.raises(UnsupportedGcodeError) as err:
+        run(f"G54 D1\nG0 X0 Y0 Z0\n{line}\n")
+    assert construct in str(err.value)
+    assert str(err.value).split(": ", 1)[1].startswith("Sinumerik ")
+    assert err.value.lineno == 3
+
+
+def test_frames_and_r_parameters_sample_by_hand():
+    """DEF SIDE=40, R1=SIDE/2, R2=-3, TRANS X100 Y50: a 40 mm square about (100, 50) in
+    G54 (100, 100, 100) with D1 100 along Z."""
+    _, moves = run((DATA / "frames_rparam.mpf").read_text())
+    assert ends(moves) == [(180.0, 130.0, 205.0), (180.0, 130.0, 197.0), (220.0, 130.0, 197.0),
+                           (220.0, 170.0, 197.0), (180.0, 170.0, 197.0), (180.0, 130.0, 197.0),
+                           (180.0, 130.0, 220.0)]
+
+
+def test_r_parameter_arithmetic_by_hand():
+    it, moves = run("G54 D1\nDEF REAL A=3, B\nDEF INT N=7\nR1=(A+1)*2.5 R2=N DIV 2 R3=N MOD 4\n"
+                    "R4=SIN(30)+SQRT(16)-POT(2) B=ATAN2(1,1)\nG0 X=R1 Y=R2 Z=R3\nG0 X=R4*10 Y=B\n")
+    assert it.variables["R1"] == 10.0
+    assert ends(moves)[0] == (110.0, 103.0, 203.0)  # 7 DIV 2 = 3, 7 MOD 4 = 3
+    assert ends(moves)[1] == pytest.approx((105.0, 145.0, 203.0))  # (0.5 + 4 - 4) * 10, atan2 = 45 deg
+
+
+def test_expression_words_written_as_numbers_where_moved():
+    text = "%_N_E_MPF\nG54 D1\nR1=10\nG0 X=R1 Y=R1*2 Z0\nG0 X=R1\nM30\n"
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0})
+    out, _ = correct(text, setup)
+    assert body(out) == text  # identity: expressions kept
+    out, _ = correct(text, setup, StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "R1=10\n" in out
+    assert "G0 X=9.9900 Y=19.9800 Z0" in out
+
+
+def test_trans_atrans_and_frame_reset_by_hand():
+    """TRANS replaces the programmable translation, ATRANS adds to it, ROT alone deletes
+    the frame; a move's words are in the frame's coordinates (G54 100, 100, 100; D1 100)."""
+    _, moves = run("G54 D1\nTRANS X10 Y20\nG0 X1 Y1 Z0\nATRANS X5\nG0 X1\nTRANS Z-3\nG0 X0 Y0 Z0\n"
+                   "ROT\nG0 X0 Y0 Z0\nG70\nTRANS X1\nG0 X0\n")
+    assert ends(moves) == [(111.0, 121.0, 200.0), (116.0, 121.0, 200.0), (100.0, 100.0, 197.0),
+                           (100.0, 100.0, 200.0), (125.4, 100.0, 200.0)]
+
+
+def test_trans_output_keeps_frame_words():
+    text = "%_N_T_MPF\n;$PATH=/_N_MPF_DIR\nG54 D1\nTRANS X10 Y20\nG0 X1 Y1 Z0\nTRANS\nG0 X1 Y1\nM30\n"
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0})
+    out, _ = correct(text, setup, StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "TRANS X10 Y20\n" in out
+    # machine (11, 21, 0) / 1.001 less the translation (10, 20)
+    assert "G0 X0.9890 Y0.9790 Z0.0000" in out or "G0 X0.9890 Y0.9790 Z0\n" in out
+
+
+def test_refusals_ignore_strings_and_comments():
+    _, moves = run('G54 D1\nMSG("IF THE CALL FAILS: TRANS ROT")\nG0 X0 Y0 Z0 ; TRANS and R1= in a comment\n')
+    assert len(moves) == 1
+
+
+def test_paren_text_is_not_a_comment():
+    with pytest.raises(GcodeSyntaxError, match="unexpected character"):
+        run("G54 D1\nG0 X0 Y0 Z0 (NOT A COMMENT)\n")
+
+
+def test_chosen_by_its_header(tmp_path):
+    assert dialect_of_file(str(DATA / "bracket_contour.mpf"), "generic") == "sinumerik"
+    assert dialect_of_file(str(DATA / "bracket_contour.mpf"), "fanuc") == "fanuc"
+    plain = tmp_path / "p.nc"
+    plain.write_text("%\nO1000\nG0 X0\n")
+    assert dialect_of_file(str(plain), "generic") == "generic"
+    out = tmp_path / "out.mpf"
+    res = CliRunner().invoke(main, ["correct", str(DATA / "bracket_contour.mpf"), "-c", CAL, "-o", str(out),
+                                    "--offset", "G54=X100,Y100,Z100", "--tool-length", "1=100"])
+    assert res.exit_code == 0, res.output
+    assert out.read_text().splitlines()[2].startswith(";POSTPROC ")
+    res = CliRunner().invoke(main, ["diff", str(DATA / "bracket_contour.mpf"), str(out)])
+    assert res.exit_code == 0, res.output
+
+
+def test_arc_end_point_rule():
+    from postproc.gcode import dialect as D
+
+    d = D.DIALECTS["sinumerik"]
+    assert d.arc_end_radius_tolerance(5.0) == pytest.approx(0.01)  # CIRCLE_ERROR_CONST
+    assert d.arc_end_radius_tolerance(100.0) == pytest.approx(0.1)  # CIRCLE_ERROR_FACTOR * r
+    assert math.isinf(d.arc_cap_mm)
+
+
+def test_split_arc_written_with_cr():
+    """An arc the correction cuts into several exact arcs keeps Sinumerik's radius word."""
+    from postproc.calfile import load_calibration
+
+    text = (DATA / "inch_g505_ret.spf").read_text()
+    setup = Setup(offsets={"G505": (100.0, 100.0, 100.0)}, tool_lengths={2: 100.0})
+    out, rep = correct_text(text, load_calibration(CAL).engine, setup, CorrectOptions(dialect="sinumerik"),
+                            path="p.spf")
+    arcs = [ln for ln in out.splitlines() if ln.lstrip().startswith(("G2", "N50"))]
+    assert rep.arcs_split >= 1
+    assert len(arcs) >= 2
+    assert all("CR=" in ln and " R" not in ln for ln in arcs)
