@@ -6,6 +6,8 @@ reverses an axis when its commanded position moves back by an amount it resolves
 Hand-made programs; expected words and positions are computed by hand from the
 machine model ``p = q + (s * q_z, 0, 0) + (b / 2 * dir_x, 0, 0)``."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ from postproc.engine.identity import IdentityEngine
 from postproc.engine.static import StaticEngine
 from postproc.errors import SafetyError
 from postproc.gcode.path import Setup, program_path
-from postproc.gcode.pipeline import CorrectOptions, correct_text
+from postproc.gcode.pipeline import CorrectOptions, correct_file, correct_text
 from postproc.simulate.program import verify_program
 from postproc.simulate.verify import machine_run
 
@@ -133,3 +135,79 @@ def test_the_virtual_machine_reverses_on_commanded_motion_it_resolves(tmp_path):
     np.testing.assert_allclose(lag[line == 6], -0.006, atol=1e-12)  # ... and X does not reverse
     np.testing.assert_allclose(lag[line == 7], -0.006, atol=1e-12)
     assert verify_program(prog, _Model(eng), []).runs[0].max_mm == pytest.approx(0.006, abs=1e-6)
+
+
+# Reversal of either sign on an arc program (issue 30): X reverses only where a move
+# along X starts back (at X150 after the quarter arc and the Y move, at X60, at X30).
+ARCS_ALONG = ("G21 G90 G17\nG0 X20 Y50 Z60\nG1 Z50 F300\nG1 X150 F800\nG3 X180 Y80 I0 J30\nG1 Y120\n"
+              "G1 X60\nG3 X30 Y90 I0 J-30\nG1 Y60\nG1 X100\nG0 Z60\nM2\n")
+# X reverses inside the arc, at its quadrant point (70, 80), where the path runs along Y
+ARC_QUADRANT = "G21 G90 G17\nG0 X100 Y50 Z60\nG1 Z50 F300\nG2 X100 Y110 I0 J30 F800\nG0 Z60\nM2\n"
+
+
+def _arcs_with_backlash(b_mm: float):
+    G = np.eye(3)
+    G[0, 1] = -20e-6  # X shrinks with Y: the corrections of X grow along the X direction of each move
+    base = StaticEngine(G, [0.0, 0.0, 0.0], VOLUME)
+    return compose(base, [get_effect("backlash:X", params={"b_mm": b_mm}).to_dict()])
+
+
+@pytest.mark.parametrize("b_mm", [-0.012, 0.012])  # lost motion, and an axis that runs ahead
+def test_a_reversal_of_either_sign_lands_where_the_program_asked(tmp_path, b_mm):
+    eng = _arcs_with_backlash(b_mm)
+    out, rep = correct_text(ARCS_ALONG, eng, Setup(), CorrectOptions())
+    prog, fixed = tmp_path / "arcs.nc", tmp_path / "arcs_corrected.nc"
+    prog.write_text(ARCS_ALONG)
+    fixed.write_text(out)
+    report = verify_program(prog, _Model(eng), [], corrected=fixed)
+    uncorrected, corrected = report.runs
+    assert uncorrected.max_mm > 0.005  # half the reversal and the squareness
+    assert corrected.max_mm <= TOL
+    # lost motion is taken up in the new direction at each reversal; an axis that runs
+    # ahead is not (a take-up in its old direction would overshoot by b)
+    assert (rep.takeups > 0) == (b_mm < 0)
+
+
+def test_a_run_ahead_reversal_across_the_path_is_refused_before_any_output(tmp_path):
+    prog, out = tmp_path / "quadrant.nc", tmp_path / "quadrant_corrected.nc"
+    prog.write_text(ARC_QUADRANT)
+    fixed = correct_file(prog, out, _arcs_with_backlash(-0.012))
+    assert fixed.takeups >= 1
+    assert verify_program(prog, _Model(_arcs_with_backlash(-0.012)), [], corrected=out).runs[1].max_mm <= TOL
+    out.unlink()
+    with pytest.raises(SafetyError, match="runs ahead") as exc:
+        correct_file(prog, out, _arcs_with_backlash(0.012))
+    assert exc.value.lineno == 4
+    assert "b > 0" in exc.value.hint
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_the_readme_calibration_corrects_x_slots_at_every_line(tmp_path, monkeypatch, mirror):
+    # the README's metrologist walkthrough: fit makes a run-ahead X (b = +8.9 um) from
+    # samples/iso230_runs_x.csv; mirrored, the same runs give lost motion. Either way
+    # the corrected slots run within the tolerance of the path at every line, on the
+    # machine the calibration describes (model error 0)
+    import json
+
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    root = Path(__file__).parents[1]
+    monkeypatch.chdir(tmp_path)
+    runner = CliRunner()
+    res = runner.invoke(main, ["fit", str(root / "samples" / "iso230_runs_x.csv"), "-o", "x_runs.json"])
+    assert res.exit_code == 0, res.output
+    cal = json.loads(Path("x_runs.json").read_text())
+    b = cal["effects"][0]["params"]["b_mm"]
+    assert b > 0.008
+    if mirror:
+        cal["effects"][0]["params"]["b_mm"] = -b
+        Path("x_runs.json").write_text(json.dumps(cal))
+    res = runner.invoke(main, ["verify", str(root / "samples" / "x_slots.nc"), "-c", "x_runs.json",
+                               "--machine", "x_runs.json", "--json"])
+    assert res.exit_code == 0, res.output
+    runs = json.loads(res.output)["runs"]
+    assert runs[0]["max_mm"] > 0.006  # uncorrected: the reversal and the positioning error
+    assert runs[1]["max_mm"] <= TOL

@@ -23,14 +23,24 @@ def xs(text: str) -> list[float]:
 
 
 def test_backlash_is_compensated_from_move_directions():
-    eng = compose(IdentityEngine(VOLUME), [get_effect("backlash:X", params={"b_mm": B_MM}).to_dict()])
+    # lost motion (b < 0): each target is commanded b/2 against its approach direction,
+    # and each reversal (the first feed move from the unknown direction too) is taken up
+    # where it happens, before the move, in the new direction, as a controller's backlash
+    # compensation does
+    eng = compose(IdentityEngine(VOLUME), [get_effect("backlash:X", params={"b_mm": -B_MM}).to_dict()])
     out, _ = correct_text(PROGRAM, eng, Setup(offsets={"G54": (0, 0, 0)}))
-    x = xs(out)
-    # each target is commanded b/2 against its approach direction, and each reversal (the
-    # first feed move from the unknown direction too) is taken up where it happens, before
-    # the move, as a controller's backlash compensation does
-    assert x == pytest.approx([-B_MM / 2, 200 - B_MM / 2, 200 + B_MM / 2, 100 + B_MM / 2,
-                               100 - B_MM / 2, 150 - B_MM / 2], abs=1e-4)
+    assert xs(out) == pytest.approx([B_MM / 2, 200 + B_MM / 2, 200 - B_MM / 2, 100 - B_MM / 2,
+                                     100 + B_MM / 2, 150 + B_MM / 2], abs=1e-4)
+
+
+def test_an_axis_that_runs_ahead_reverses_without_a_take_up():
+    # b > 0: a take-up would move on in the old direction and overshoot by b; none is
+    # written, the first move back reverses X and its target is commanded for the new
+    # direction (the table jumps back by b along the move)
+    eng = compose(IdentityEngine(VOLUME), [get_effect("backlash:X", params={"b_mm": B_MM}).to_dict()])
+    out, rep = correct_text(PROGRAM, eng, Setup(offsets={"G54": (0, 0, 0)}))
+    assert xs(out) == pytest.approx([200 - B_MM / 2, 100 + B_MM / 2, 150 - B_MM / 2], abs=1e-4)
+    assert rep.takeups == 0
 
 
 def test_thermal_needs_context_at_correction_time():

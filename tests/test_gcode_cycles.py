@@ -124,7 +124,7 @@ def test_a_hole_whose_axis_the_correction_tilts_is_refused_naming_expand():
     G[0, 2] = 1e-3
     eng = StaticEngine(G, np.zeros(3), BIG)
     with pytest.raises(SafetyError) as err:
-        correct_text(PROGRAMS["g81_g98"], eng, ZERO, CorrectOptions(), path="p.ngc")
+        correct_text(PROGRAMS["g81_g98"], eng, ZERO, CorrectOptions(cycles="keep"), path="p.ngc")
     assert err.value.lineno == 3
     assert "--cycles expand" in err.value.hint
     out, rep = correct_text(PROGRAMS["g81_g98"], eng, ZERO, CorrectOptions(cycles="expand"))
@@ -142,5 +142,50 @@ def test_repeats_and_increments_stay_only_when_nothing_is_corrected():
     out, rep = correct_text(text, IdentityEngine(BIG), ZERO, CorrectOptions())
     assert emit.split_header(out)[1].splitlines() == text.splitlines()
     with pytest.raises(SafetyError, match="G81") as err:
-        correct_text(text, scale_engine(1.001), ZERO, CorrectOptions(), path="p.ngc")
+        correct_text(text, scale_engine(1.001), ZERO, CorrectOptions(cycles="keep"), path="p.ngc")
     assert "--cycles expand" in err.value.hint
+    # the default (auto) expands it
+    out, rep = correct_text(text, scale_engine(1.001), ZERO, CorrectOptions())
+    assert (rep.cycles_kept, rep.cycles_expanded) == (0, 1)
+
+
+# A squareness of 0.1 mrad (X grows with Z) tilts a 5 mm deep hole by 0.5 um (kept at the
+# 1 um tolerance) and a 20 mm deep one by 2 um (expanded); the block after an expanded one
+# in the same series is expanded too (the controller is in G0/G1 after the expansion),
+# and the next series, after G80, is kept again (with the G99 the expanded block set).
+MIXED = ("G21 G90 G17\nG0 X0 Y0 Z30\nG98 G81 X5 Y6 Z-3 R2 F100\nX7\nG99 G81 X10 Y6 Z-18 R2\nX12 Z-3 R2\n"
+         "G80\nG0 Z30\nG81 X20 Y6 Z-3 R2 F100\nY9\nG80\nM2\n")
+
+
+def squareness_engine(s_xz):
+    G = np.eye(3)
+    G[0, 2] = s_xz
+    return StaticEngine(G, np.zeros(3), BIG)
+
+
+def test_auto_keeps_the_holes_within_tolerance_and_expands_the_others():
+    out, rep = correct_text(MIXED, squareness_engine(1e-4), ZERO, CorrectOptions())
+    assert (rep.cycles_kept, rep.cycles_expanded) == (4, 2)
+    body = emit.split_header(out)[1].splitlines()
+    assert body[2].startswith("G98 G81 X")
+    assert body[3].startswith("X")
+    assert body[4] == "G99"  # the expansion keeps the retract mode on a line of its own
+    assert sum(ln.startswith("G81") or " G81 " in ln for ln in body) == 2
+    assert "CYCLES EXPANDED" not in out
+
+
+@needs_rs274
+def test_auto_lands_every_point_through_the_machine(tmp_path):
+    eng = squareness_engine(1e-4)
+    out, _rep = correct_text(MIXED, eng, ZERO, CorrectOptions())
+    ref, log0 = rs274_motions(MIXED, tmp_path)
+    got, log = rs274_motions(out, tmp_path)
+    assert got, log
+    assert [k for k, _ in got] == [k for k, _ in ref]
+    machine = eng.forward(np.array([p for _, p in got]))
+    nominal = np.array([p for _, p in ref])
+    # from the R plane down (a kept hole's rapid above it is at the bottom's X/Y): the
+    # kept holes' points at the R plane lean by up to their tilt (0.5 um)
+    low = nominal[:, 2] <= 2.0
+    np.testing.assert_allclose(machine[low], nominal[low], atol=0.001)
+    np.testing.assert_allclose(machine[:, 2], nominal[:, 2], atol=0.001)  # retract levels too

@@ -353,7 +353,7 @@ class Reading:
     canned cycles kept or expanded, the folders searched for subprogram files."""
 
     dialect: str = "generic"
-    cycles: str = "keep"
+    cycles: str = "auto"
     subroutine_path: tuple[str, ...] = ()
 
     def correct_options(self) -> dict:
@@ -370,9 +370,11 @@ PROGRAM_OPTIONS: dict[str, tuple[str, dict]] = {
         help="Controller the program is for: how it is read (comments, G53 in G91, macros, "
              "program numbers) and written (line length, case, arc rule). generic is what all of them accept.")),
     "--cycles": ("cycles", dict(
-        type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
-        help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
-             "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")),
+        type=click.Choice(["auto", "keep", "expand"]), default="auto", show_default=True,
+        help="Canned cycles (G73, G81-G89): auto keeps each one whose correction tilts the hole by no more "
+             "than --tolerance (corrected at the hole) and expands the others, with the rest of their "
+             "series up to G80, into G0/G1 moves, each corrected; keep keeps them all (refusing a tilted "
+             "one); expand expands them all.")),
     "--subroutine-path": ("subroutine_path", dict(
         multiple=True, type=click.Path(file_okay=False),
         help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "

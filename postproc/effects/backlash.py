@@ -15,8 +15,9 @@ axis lag: it falls short moving +, so ``b < 0`` (a gap of 12 um is ``b = -0.012`
 compensates more backlash than there is. Needs ``dirx`` / ``diry`` / ``dirz``.
 Compensable: the correction pipeline commands each point with the direction the
 corrected program moves the axis in, and at a reversal takes the difference up in
-the new direction (:mod:`postproc.gcode.directions`); for an axis that runs ahead the
-take-up moves on in the old direction, so the point overshoots by ``b`` there.
+the new direction (:mod:`postproc.gcode.directions`); an axis that runs ahead gets no
+take-up (one would move on in the old direction and overshoot by ``b``): it jumps back
+by ``b`` where it reverses, accepted along the path that follows and refused across it.
 
 A reversal that varies along the axis (the B_i of an ISO 230-2 evaluation, one per
 target) is a profile in ``config``: ``position_mm`` (increasing) and ``shape``

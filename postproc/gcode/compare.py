@@ -85,8 +85,13 @@ FORK_MIN_BYTES = 2_000_000
 _COMMENT_SPLIT = re.compile(r"(\([^)]*\)?|;.*)")
 # (a spline, G5 or G5.1 with its I J P Q words, is written as straight chords: its last
 # chord has the skeleton of the original line)
-_SKELETON_DROP = re.compile(r"[XYZIJKRPQFxyzijkrpqf][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)"
-                            r"|[Gg][ \t]*0*(?:[0-3]|5(?:\.1)?)(?![0-9.])|\s+")
+# (the S, T and before-motion M words of a split move, with their E/L/P/Q parameters, go
+# on its first piece: postproc.gcode.interp Move.event_idx; its modal G words and G43 H
+# are copied there)
+_SKELETON_DROP = re.compile(r"[XYZIJKRPQFSTHELxyzijkrpqfsthel][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)"
+                            r"|[Gg][ \t]*0*(?:[0-3]|5(?:\.1)?|1[7-9]|2[01]|9[0-4](?:\.1)?|5[4-9](?:\.\d)?|4[39])"
+                            r"(?![0-9.])"
+                            r"|[Mm][ \t]*+0*+(?!(?:0|1|2|6|30|60)(?![0-9.]))\d+(?![0-9.])|\s+")
 
 
 def skeleton(line: str) -> str:
@@ -496,7 +501,7 @@ class _Reader:
 
     def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
                  dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = (),
-                 expand_cycles: bool = False) -> None:
+                 expand_cycles: bool = False, cycle_retract: bool = True) -> None:
         self.path, self._lines = iter_source_lines(source)
         self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
         self.keys = keys
@@ -507,8 +512,11 @@ class _Reader:
         self.dialect = dialect
         self.subroutine_path = tuple(subroutine_path)
         self.variables = getattr(setup, "variables", None)  # --var: machine state the program reads
-        # read each canned cycle block as the lines correct writes it as (--cycles expand)
+        # read each canned cycle block as the lines correct writes it as (--cycles expand);
+        # both programs are read so, as correct may keep some cycles and expand others
+        # (--cycles auto)
         self.expand_cycles = expand_cycles
+        self.cycle_retract = cycle_retract  # their G98/G99 kept (not with --cycles expand)
         self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
@@ -585,7 +593,7 @@ class _Reader:
                 rows.end[i] = mv.q1
                 rows.keys[i] = self.keys.of_line(lines[i])
                 if mv.cycle is not None and self.expand_cycles:
-                    self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle)
+                    self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle, self.cycle_retract)
         return b, None
 
     def _with_cycles(self, rows: _Rows) -> _Rows:
@@ -611,13 +619,15 @@ class _Reader:
             move += rows.move[last:i].tolist()
             end += rows.end[last:i].tolist()
             keys += rows.keys[last:i].tolist()
-            for step in cycles[i]:
+            for k, step in enumerate(cycles[i]):
                 if isinstance(step, str):
                     lines.append(step)
                     move.append(False)
                     end.append(nan3)
                 else:
-                    lines.append("")  # (never a corrected line's text)
+                    # never a written line's text; the same for the same block on both
+                    # sides (a cycle kept unchanged), and differs from its corrected version
+                    lines.append(f"\0{rows.lines[i]}\0{k}")
                     move.append(True)
                     end.append(tuple(step[2]))
                 lineno.append(int(rows.lineno[i]))
@@ -1481,9 +1491,10 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     expanded = hs.expanded
     keys = _Keys()
     readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
-                       subroutine_path=[Path(p) for p in subroutine_path],
-                       expand_cycles=hs.cycles_expanded or cycles == "expand"),
-               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect))
+                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True,
+                       cycle_retract=not hs.cycles_expanded),
+               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True,
+                       cycle_retract=not hs.cycles_expanded))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:
@@ -1543,10 +1554,15 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
 _G92 = re.compile(r"[Gg][ \t]*0*92(?![.0-9])")
 
 
+# axis words and blanks: what correct rewrites on a G92 line
+_AXIS_WORDS = re.compile(r"[XYZABCxyzabc][ \t]*[+-]?(?:\d+\.?\d*|\.\d+)|\s+")
+
+
 def _rewritten_g92(o_line: str, c_line: str) -> bool:
     """A G92 line whose axis words ``correct`` rewrote: it sets the current position, which
     the correction has moved, so that the program's coordinates after it stay nominal."""
-    return bool(_G92.search(o_line.split("(")[0].split(";")[0])) and skeleton(o_line) == skeleton(c_line)
+    return bool(_G92.search(o_line.split("(")[0].split(";")[0])) and (
+        _AXIS_WORDS.sub("", o_line) == _AXIS_WORDS.sub("", c_line))
 
 
 def _compatible(o_line: str, c_line: str) -> bool:

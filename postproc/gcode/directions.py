@@ -32,7 +32,8 @@ For a lagging axis (lost motion, ``b < 0``) the directions settle: a reversal mo
 the corrected target further in the new direction, by the lost motion. For an axis that
 runs ahead (``b > 0``, an over-compensated backlash) a small correction against the
 direction has no consistent answer (reversing moves the target back by ``b``); the
-correction refuses it after :data:`MAX_ITERATIONS` rounds, naming the line.
+correction refuses it after :data:`MAX_ITERATIONS` rounds, naming the line. Its
+reversals into moves along it settle, and are not taken up (:func:`plan_pieces`).
 
 The points are every sample of a move that is fitted by arcs or split (the samples
 the fits follow), with an arc's quadrant points among them, and the target of any
@@ -183,9 +184,20 @@ def reversals(D: np.ndarray, dirs0, axes, rows: np.ndarray) -> np.ndarray:
     return (D[rows][:, cols] != before[rows][:, cols]).any(axis=1)
 
 
+def _distance_to_polyline(x: np.ndarray, pts: np.ndarray) -> float:
+    """The distance from the point ``x`` (3,) to the polyline through ``pts`` (N, 3)."""
+    if len(pts) == 1:
+        return float(np.linalg.norm(x - pts[0]))
+    a, b = pts[:-1], pts[1:]
+    ab = b - a
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", x - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    return float(np.linalg.norm(a + t[:, None] * ab - x, axis=1).min())
+
+
 def plan_pieces(first: int, last: int, E: np.ndarray, D: np.ndarray, s: np.ndarray, nominal: np.ndarray,
                 start, start_dirs, start_nominal, takeups: dict, keys: np.ndarray, axes, takeup_min_mm: float,
-                bulge):
+                bulge, jump_budget_mm: float = np.inf, lineno: int | None = None, path=None):
     """The plan sequence of one move, whose points are ``first .. last`` of the
     sequence (``E``: commanded, ``D``: directions, ``s``: move parameter, ``nominal``):
     pieces of samples, and a take-up before each point a direction-dependent axis
@@ -194,6 +206,17 @@ def plan_pieces(first: int, last: int, E: np.ndarray, D: np.ndarray, s: np.ndarr
     directions and nominal point the move starts from; ``bulge(s, nominal)``: how the
     nominal path bulges from its chords between samples. Returns
     ``[("takeup", point) | ("piece", s, Q, nominal, bulge), ...]``.
+
+    A take-up moves a lagging axis (lost motion) in its new direction, through the
+    gap, while the table stands. An axis that runs ahead (``b > 0``) would have to be
+    taken up in its old direction, where the machine does not reverse but overshoots
+    by ``b``; it is not taken up: the first motion in the new direction reverses it and
+    the table jumps back by ``b`` at once (the commanded point stays where the old
+    direction left it, the next points are corrected with the new one). That jump is
+    harmless where it runs along the path that follows (a slot cut back along the axis)
+    and is refused (:class:`SafetyError` naming ``lineno`` of ``path``) where it leaves
+    that path by more than ``jump_budget_mm`` (a reversal at an arc's quadrant point,
+    or inside a move across the axis).
     """
     cols = list(axes)
     seq: list = []
@@ -212,6 +235,25 @@ def plan_pieces(first: int, last: int, E: np.ndarray, D: np.ndarray, s: np.ndarr
         tk = np.array(takeups[j], dtype=float)
         same = [k for k in cols if D[j, k] == prev_dirs[k]]
         tk[same] = prev_end[same]  # an axis that does not reverse here stays where it is
+        # an axis whose take-up goes against its new direction runs ahead: the reversal
+        # makes the table jump back by that much, along the path or refused
+        ahead = [k for k in cols if k not in same and (tk[k] - prev_end[k]) * D[j, k] < 0]
+        if ahead:
+            jump = np.zeros(3)
+            jump[ahead] = prev_end[ahead] - tk[ahead]
+            tk[ahead] = prev_end[ahead]
+            here = nominal[j - 1] if j > first else np.asarray(start_nominal, dtype=float)
+            off = _distance_to_polyline(here + jump, np.vstack([here[None, :], nominal[j:last + 1]]))
+            if off > jump_budget_mm:
+                ax = AXES[ahead[0]]
+                raise SafetyError(
+                    f"{ax} runs ahead of its approach direction (reversal b > 0): reversing it here makes the "
+                    f"tool jump {np.linalg.norm(jump) * 1000:.3g} um, {off * 1000:.3g} um off the path, more than "
+                    f"the tolerance; no move takes that up (one in the old direction overshoots, one in the new "
+                    f"direction jumps)", path=path, lineno=lineno,
+                    hint=f"check the calibration's backlash:{ax}: b > 0 is an axis that runs ahead, as one does "
+                         "whose controller compensates more backlash than there is: lower that compensation and "
+                         "measure again. Programs that reverse it only into moves along it are corrected")
         if np.abs(tk - prev_end).max() <= takeup_min_mm:
             continue
         close(j)

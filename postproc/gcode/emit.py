@@ -351,10 +351,10 @@ def split_header(text: str) -> tuple[list[str], str]:
     return header, "".join(kept + ([] if after is None else [after]) + list(it))
 
 
-def cycle_lines(line: str, mv: Move, c: Cycle) -> list[str | CycleStep]:
+def cycle_lines(line: str, mv: Move, c: Cycle, retract: bool = True) -> list[str | CycleStep]:
     """The lines a canned cycle block (``line``, its Move ``mv`` and Cycle ``c``) is written
     as when expanded (``--cycles expand``), in order: the text of a line that moves nothing
-    (the block's other modal words but G98/G99, a G4 dwell), or ``(kind, prev, q, axes,
+    (the block's modal words, G98/G99 unless not ``retract``, and before-motion words, a G4 dwell), or ``(kind, prev, q, axes,
     first_feed)`` for a G0/G1 step from ``prev`` to ``q`` (machine mm) naming ``axes``
     (those that change), with the block's F word when ``first_feed``. ``diff`` reads an
     original's cycle blocks so when the corrected program says CYCLES EXPANDED."""
@@ -362,7 +362,11 @@ def cycle_lines(line: str, mv: Move, c: Cycle) -> list[str | CycleStep]:
     sep, lower = style_of(line)
     sep = sep or " "
     out: list[str | CycleStep] = []
-    prefix = [w for w in mv.prefix_words if not w.upper().startswith(("G98", "G99"))]
+    # the block's modal words, its G98/G99 when ``retract`` (a cycle kept later in the
+    # program uses the retract mode; with every cycle expanded, none does) and the words
+    # acting before its motion, on a line of their own
+    modes = [f"G{w.number}" for w in mv.words if w.letter == "G" and w.number.lstrip("0") in ("98", "99")]
+    prefix = mv.prefix_words + (modes if retract else [])
     if prefix:
         text = sep.join(prefix)
         out.append((text.lower() if lower else text) + ending)
@@ -378,3 +382,63 @@ def cycle_lines(line: str, mv: Move, c: Cycle) -> list[str | CycleStep]:
         out.append((kind, prev, q, tuple(k for k in range(3) if q[k] != prev[k]), first_feed))
         prev = q
     return out
+
+
+def limit_pattern(dialect: str) -> re.Pattern[str]:
+    """A pattern that finds, in a text of lines, the first one that may pass ``dialect``'s
+    limits (longer than its characters of words, or of line): :func:`fit_line` decides."""
+    from postproc.gcode import dialect as dialects
+
+    d = dialects.get(dialect)
+    n = min(d.max_line_chars, d.max_word_chars or d.max_line_chars)
+    return re.compile(rf"^[^\n]{{{n + 1},}}", re.M)
+
+
+def _over_limit(d, body: str) -> tuple[int, str] | None:
+    """``(column, what)`` where ``body`` (a line without its ending) passes ``d``'s line
+    or word limit, else None."""
+    from postproc.gcode import dialect as dialects
+
+    count = len(body.encode("utf-8", errors="surrogateescape"))
+    if count > d.max_line_chars:
+        return d.max_line_chars + 1, f"line of {count} characters, more than {d.title} reads ({d.max_line_chars})"
+    if d.max_word_chars is not None:
+        spans, pos = [], 0
+        for start, text, kind in dialects._comments(body.rstrip("\r")):
+            spans.append((pos, start))
+            pos = len(body) if kind in (";", "unclosed") else start + len(text) + 2
+        spans.append((pos, len(body)))
+        cols = [k for a, b in spans for k in range(a, b) if body[k] > " "]
+        if len(cols) > d.max_word_chars:
+            return cols[d.max_word_chars] + 1, (f"{len(cols)} characters of words on one line, more than {d.title} "
+                                                f"holds ({d.max_word_chars})")
+    return None
+
+
+def fit_line(dialect: str, line: str) -> tuple[list[str], tuple[int, str] | None]:
+    """The lines a written ``line`` (with its ending) becomes under ``dialect``'s limits:
+    ``[line]`` when it is within them; its comments on a line of their own before its
+    words when that brings both within them (a controller acts on a block's comments
+    before its motion, so they mean the same there); else ``[line]`` and the column and
+    reason of the excess (the caller refuses it)."""
+    from postproc.gcode import dialect as dialects
+
+    d = dialects.get(dialect)
+    ending = line_ending(line)
+    body = line[:len(line) - len(ending)]
+    over = _over_limit(d, body)
+    if over is None:
+        return [line], None
+    comments = [(start, body[start:] if kind in (";", "unclosed") else body[start:start + len(text) + 2])
+                for start, text, kind in dialects._comments(body) if kind != "nested"]
+    if not comments:
+        return [line], over
+    words = body
+    for start, text in reversed(comments):
+        words = words[:start] + words[start + len(text):]
+    words = re.sub(r"[ \t]+", " ", words).strip(" \t")
+    note = " ".join(text for _s, text in comments)
+    end = ending or "\n"
+    if not words or _over_limit(d, words) or _over_limit(d, note):
+        return [line], over
+    return [note + end, words + ending], None

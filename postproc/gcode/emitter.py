@@ -358,6 +358,8 @@ class EmitterMixin(Generic[_O, _R]):
             else:
                 self.report.arcs_linearised += 1
         edits, added = last.edits, last.added
+        if inserted:
+            edits = edits + self._event_removals(line, mv)
         if last.kind == "line" and arc is not None:
             g1 = "g1" if lower else "G1"
             if mv.motion_idx >= 0:
@@ -377,6 +379,16 @@ class EmitterMixin(Generic[_O, _R]):
                                                max(4, emit.decimals_of(num)))))
         self._finish_line(line, mv, edits, added, last.spec if last.kind == "arc" else None, sep, lower,
                           last.qe, write)
+
+    @staticmethod
+    def _event_removals(line: str, mv: Move) -> list[Edit]:
+        """Edits deleting the block's S, T and before-motion M words (with their parameters)
+        from its own line, once they are written on the first line of a split: the
+        controller then acts on each once, before the first piece, as it did before the
+        split. A parameter word the motion also reads (an arc's P turns) stays."""
+        keep = set(mv.aux_idx)
+        spans = [(mv.words[i].letter_pos, mv.words[i].end) for i in mv.event_idx if i not in keep]
+        return [(a, b, "") for a, b in emit.removal_spans(line, spans)]
 
     def _finish_line(self, line: str, mv: Move, edits: list[Edit], added: list[str], spec: ArcSpec | None, sep: str,
                      lower: bool, qe: Sequence[float], write: Write) -> None:

@@ -51,6 +51,7 @@ from postproc.gcode.state import (
     IO_M,
     LINE,
     LOOKAHEAD_G,
+    M_PARAMS,
     MOTION_CODES,
     NAN,
     NEUTRAL_G,
@@ -174,6 +175,10 @@ class Move:
     planned: bool = False
     # a move to a position the program stored (G28.1/G30.1): its name, and the axes it sets
     stored: tuple | None = None
+    # word indices of the S, T and before-motion M words (with their parameters): written on
+    # the first line of a split move (prefix_words) and removed from its own (its modal G
+    # words are copied there: set again to the same value, they change nothing)
+    event_idx: tuple[int, ...] = ()
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -618,7 +623,8 @@ class Interpreter:
 
         # M codes
         tool_change = False
-        before_m: list[str] = []
+        # words acting before the motion, moved onto the first line when the block is split
+        event_idx: list[int] = [vals[k][1] for k in "ST" if k in vals]
         for key, i in mcodes:
             if key % 10:
                 raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
@@ -642,7 +648,8 @@ class Interpreter:
             if m > 199:
                 raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
             if m in BEFORE_MOTION_M:
-                before_m.append(f"M{words[i].number}")
+                event_idx.append(i)
+                event_idx.extend(vals[k][1] for k in M_PARAMS.get(m, "") if k in vals)
             if m == 6:
                 tool_change = True
             if m in self.d.program_end_m:
@@ -675,6 +682,8 @@ class Interpreter:
         motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
         home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
         lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
+        event_idx = sorted(set(event_idx))
+        before_m = [words[j].letter + words[j].number for j in event_idx]
 
         if self.d.tool_length_word and self.d.tool_length_word in vals:  # Sinumerik D: the length register
             self._g43({"H": vals[self.d.tool_length_word]}, lineno, col_of(vals[self.d.tool_length_word][1]))
@@ -820,8 +829,8 @@ class Interpreter:
             axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
-            prefix_words=prefix + (["S" + words[vals["S"][1]][1]] if "S" in vals else []) + before_m,
-            stays=tool_change or "T" in vals or g53,
+            prefix_words=prefix + before_m, event_idx=tuple(event_idx),
+            stays=tool_change or g53,
             motion_idx=motion_idx,
             aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
         )

@@ -52,7 +52,7 @@ from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion,
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import LINE, PLANES, RAPID
+from postproc.gcode.state import CANNED_CYCLES, LINE, PLANES, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
@@ -90,6 +90,11 @@ HINT_PREPLAN_SHARE = 0.7
 TAKEUP_MIN_MM = 1e-7
 # Output growth (lines out / lines in) above which the summary warns.
 GROWTH_WARN = 5.0
+# --cycles auto keeps a cycle block when its tilt (the correction's change between R
+# plane and bottom) is within this share of the tolerance left after rounding: the share
+# left covers the approach directions the block is written with, which differ from those
+# the choice is made with (the machine's last known ones) on a backlash calibration.
+CYCLE_KEEP_SHARE = 0.9
 
 Write: TypeAlias = bulk.Write
 #: a line queued for its chunk: (its text, "" for a move it makes without a line of its
@@ -110,7 +115,10 @@ class CorrectOptions:
     dialect: str = "generic"  # the controller the program is for: how it is read and written
     expand: bool = True  # flatten parameters, O-words, subprograms and macros (False: refuse them)
     subroutine_path: tuple = ()  # folders searched for o<name> call and M98 subprogram files
-    cycles: str = "keep"  # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand
+    # keep: a cycle stays a cycle (X/Y at the bottom, R and Z along the tool axis); expand: its
+    # moves written out as G0/G1, each corrected; auto: kept where its tilt is within the
+    # tolerance, else expanded with the rest of its series (to the next G80 or other motion)
+    cycles: str = "auto"
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
     processes: int = 1  # more: a large program file is cut into parts corrected in that many (postproc.gcode.split)
@@ -177,6 +185,8 @@ class Corrector(EmitterMixin):
         self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
         self._cycle_rz: float | None = None
         self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
+        self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
+        self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
         self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.linear_exact = bool(engine.affine) and not options.added
@@ -349,6 +359,8 @@ class Corrector(EmitterMixin):
                 entries.append(("", mv.then, False, interp.state.motion))
             else:
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
+            if self._series_expanded and interp.state.motion not in CANNED_CYCLES:
+                self._series_expanded = False  # G80 or another motion: the series has ended
             lineno += 1
             run_ok = use_bulk and bulk.state_allows(interp)
 
@@ -381,6 +393,7 @@ class Corrector(EmitterMixin):
                             run = bulk.read_run(interp, block, i, b, lineno, dec)
                             if run is not None:
                                 entries.append(run)
+                                self._series_expanded = False  # moves: no cycle series goes on
                                 lineno += run.b - i
                                 i = run.b
                                 run_ok = bulk.state_allows(interp)
@@ -576,6 +589,10 @@ class Corrector(EmitterMixin):
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
         out: list[str] = []  # the chunk's text, written at once
         write = out.append
+        # where each entry's text starts in out: (index, its line, 1: every line is that
+        # line's, 2: a run's lines one by one from it, 0: a line passed as it is)
+        marks: list[tuple[int, int, int]] = []
+        mark = marks.append
         emit_move = self._emit_move
         get_plan = plans.get
         get_hint = hints.get
@@ -585,6 +602,7 @@ class Corrector(EmitterMixin):
         blocks: list[bulk.Block] = []
         for e in entries:
             if type(e) is bulk.Run:
+                mark((len(out), e.lineno, 2))
                 em = prepared.get(id(e.block))
                 if em is None:
                     em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
@@ -595,9 +613,11 @@ class Corrector(EmitterMixin):
                 else:  # arcs and lines that must be split: written by the general emitter
                     for part in bulk.split_run(e, sorted(set(cut))):
                         if type(part) is bulk.Run:
+                            mark((len(out), part.lineno, 2))
                             bulk.emit_run(self, part, em, T, write, hints)
                             continue
                         j, fm = part
+                        mark((len(out), e.lineno + j, 1))
                         line = e.block.lines[e.a + j]
                         hint = get_hint(k + j)
                         if hint is not None:
@@ -607,6 +627,7 @@ class Corrector(EmitterMixin):
                 k += len(e)
                 continue
             line, mv, motion_word, prog_motion = e
+            mark((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is _Store else 1))
             if type(mv) is _Rebase:
                 self._emit_rebase(line, mv, write)
                 continue
@@ -652,7 +673,37 @@ class Corrector(EmitterMixin):
         for blk in blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += passed
-        write_out("".join(out))
+        text = "".join(out)
+        if self._long_line.search(text):
+            text = self._fit_lines(out, marks)
+        write_out(text)
+
+    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
+        """A chunk's text (``out``, its entries' ``marks``) with every line it writes
+        within the dialect's limits: a line that passes them gets its comments on a line
+        of their own before it (:func:`emit.fit_line`), or is refused naming its line and
+        column. Lines passed as they are stay (the input has them so)."""
+        pieces: list[str] = []
+        ends = [m[0] for m in marks[1:]] + [len(out)]
+        pieces.extend(out[:marks[0][0]] if marks else out)
+        for (a, lineno, kind), b in zip(marks, ends, strict=True):
+            text = "".join(out[a:b])
+            if kind == 0 or not self._long_line.search(text):
+                pieces.append(text)
+                continue
+            for n, line in enumerate(text.splitlines(keepends=True)):
+                fitted, over = emit.fit_line(self.opt.dialect, line)
+                if over is not None:
+                    col, what = over
+                    raise SafetyError(
+                        f"{what}, once corrected", path=self.path, lineno=lineno + n if kind == 2 else lineno,
+                        col=col, hint="shorten the line (a comment moved onto a line of its own would not "
+                                      "do) or give the --dialect it is for")
+                if len(fitted) > 1:
+                    self.report.lines_out += 1
+                    self.report.lines_inserted += 1
+                pieces.extend(fitted)
+        return "".join(pieces)
 
     def _plan(self, Q1: FloatArray, linenos: IntArray, R: FloatArray, rot: list[dict[str, float]],
               general: list[tuple[int, PlanMove]], runs: Sequence[bulk.Run] = ()
@@ -948,7 +999,8 @@ class Corrector(EmitterMixin):
             else:
                 bulge = _no_bulge
             seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
-                              TAKEUP_MIN_MM, bulge)
+                              TAKEUP_MIN_MM, bulge, self.opt.tolerance_mm - self._round_err(m.unit),
+                              lineno=m.lineno, path=self.path)
             if arc is not None:
                 (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
                 carried = np.array(start_dirs, dtype=float)
@@ -1158,8 +1210,15 @@ class Corrector(EmitterMixin):
     # -- canned cycles -------------------------------------------------------------------
     def _feed_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move, c: Cycle, motion: int | None) -> None:
         """Queue the cycle block ``c`` of ``mv``: kept (its bottom and R point corrected) or
-        expanded into the controller's own G0/G1 moves, each corrected like any other move."""
-        if self.opt.cycles != "expand":
+        expanded into the controller's own G0/G1 moves, each corrected like any other move.
+        With ``--cycles auto`` a block is kept when :meth:`_cycle_keeps` says so and no block
+        of its series was expanded (a kept block needs the cycle, R and Z the controller
+        holds, and an expansion leaves it in G0/G1)."""
+        mode = self.opt.cycles
+        if mode == "auto":
+            mode = "keep" if not self._series_expanded and self._cycle_keeps(mv, c) else "expand"
+            self._series_expanded = mode == "expand"
+        if mode != "expand":
             if c.repeats == 1 and not mv.incremental:
                 entries.append((line, mv, True, motion))
                 bottom, rpoint = c.holes[0]
@@ -1179,13 +1238,30 @@ class Corrector(EmitterMixin):
         sep, lower = emit.style_of(line)
         sep = sep or " "
         d = _unit_decimals(self.opt, mv.unit)
-        for step in emit.cycle_lines(line, mv, c):
+        for step in emit.cycle_lines(line, mv, c, retract=self.opt.cycles != "expand"):
             if isinstance(step, str):
                 entries.append((step, None, False, None))
             else:
                 kind, prev, q, moved, first_feed = step
                 entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
         self.report.cycles_expanded += 1
+
+    def _cycle_keeps(self, mv: Move, c: Cycle) -> bool:
+        """Whether a cycle block can stay a cycle: one hole whose correction's tilt between
+        its R plane and its bottom is within :data:`CYCLE_KEEP_SHARE` of the tolerance, or
+        several holes (or increments) whose corrections all round to nothing."""
+        if not c.holes:
+            return True
+        pts = np.array([q for hole in c.holes for q in hole], dtype=float)
+        n = len(pts)
+        dirs = np.broadcast_to(self.dirs, pts.shape)
+        t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
+                           [mv.rotary] * n, np.full(n, mv.lineno))
+        if c.repeats == 1 and not mv.incremental:
+            drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
+            return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self._round_err(mv.unit))
+        d = _unit_decimals(self.opt, mv.unit)
+        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
         """A cycle block that stays as it is, with several holes or increments: refuse it
@@ -1525,7 +1601,7 @@ def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart:
 
     def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
-                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=setup.variables):
+                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables):
             source.append((sl.lineno, sl.path))
             yield sl.text
 

@@ -85,6 +85,7 @@ Write = Callable[[str], object]
 # same in both processes by construction) or caches of pure functions, not state carried
 # from chunk to chunk. Everything else is compared.
 _CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "report", "interp", "_decimals",
+                     "_long_line",
                      "linear_exact", "bulk_plan", "accept_residual_mm", "expanded"})
 _INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup", "d", "_g_alias", "_dialect_g", "_iso_blocks"})
 

@@ -87,9 +87,17 @@ REFUSED_M = {97: "M97 local subprogram call (Haas)",
              71: "M71 modal state restore", 72: "M72 modal state restore",
              73: "M73 modal state save/autorestore"}
 
-# M codes acting before the motion of their block: copied to the first line inserted
-# before a split move so the whole move runs with them (spindle, coolant, synced outputs).
-BEFORE_MOTION_M = {3, 4, 7, 8, 62, 63, 64, 65}
+# M codes acting after the motion of their block (LinuxCNC's order of execution puts
+# stops last); M6 changes the tool, so its line is never split.
+AFTER_MOTION_M = {0, 1, 2, 30, 60}
+# Every other M code acts before the motion of its block (rs274ngc "Order of Execution":
+# I/O, spindle, coolant, overrides, user M codes, then motion): when a move is split or
+# expanded it goes, with its parameter words, on the first line written for the block
+# and leaves the last, so the controller acts on it once, where it did before.
+BEFORE_MOTION_M = set(range(200)) - AFTER_MOTION_M - {6, 70, 71, 72, 73, 97, 98, 99}
+# The parameter words an M code reads (LinuxCNC M-code reference); user M100-M199 read P and Q.
+M_PARAMS = {19: "RQP", 50: "P", 51: "P", 52: "P", 53: "P", 61: "Q", 62: "P", 63: "P", 64: "P", 65: "P",
+            66: "PELQ", 67: "EQ", 68: "EQ", **{m: "PQ" for m in range(100, 200)}}
 # Digital/analog I/O and input waits: their E, L, P, Q words are parameters, not axes.
 IO_M = {62, 63, 64, 65, 66, 67, 68}
 
