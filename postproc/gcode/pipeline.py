@@ -1525,7 +1525,7 @@ def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart:
 
     def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
-                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=setup.variables):
+                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables):
             source.append((sl.lineno, sl.path))
             yield sl.text
 
