@@ -6,7 +6,7 @@ command list is shown), so ``postproc correct`` does not pay for plotting or fit
 
 from __future__ import annotations
 
-import importlib
+import importlib.util
 import os
 import sys
 

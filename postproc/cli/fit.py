@@ -254,7 +254,7 @@ def _points_outliers(data, engine, *, register: bool = False, resid=None) -> lis
 
             try:
                 frame = Fixed(engine, "registration", True).fit(ds, []).frame
-                resid = resid - frame.displacement(ds.q, ds.r)
+                resid = resid - frame.displacement(ds.q, ds.r) if frame is not None else resid
             except PostprocError:
                 pass
     sc = screen(ds, np.asarray(resid, dtype=float))

@@ -309,7 +309,7 @@ def deadband(sensor, gap, tau, correction, learn, plot, output):
     res = simulate(data.v_mm, gap, t_s=t, tau_s=tau, b_deg=data.b_deg, correction_mm=k)
     click.echo(f"{len(data.v_mm)} samples, {len(res.reversals)} reversal(s) of the signal, gap {gap * 1e3:g} um")
     for p in res.plateaus:
-        click.echo(f"  plateau at line {int(data.linenos[p.start])}: B {p.b_start:.3f} -> {p.b_end:.3f} deg, "
+        click.echo(f"  plateau at line {int(table.linenos[p.start])}: B {p.b_start:.3f} -> {p.b_end:.3f} deg, "
                    f"input travel {p.input_travel_mm * 1e3:.2f} um")
     click.echo(f"thickness error E = V - W: {res.error_mm.min() * 1e3:+.2f}..{res.error_mm.max() * 1e3:+.2f} um")
     if k is not None:

@@ -57,7 +57,7 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
         values = ()
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise click.BadParameter(f"{what} must be three numbers X,Y,Z, got {text!r}")
-    return values  # type: ignore[return-value]
+    return values[0], values[1], values[2]
 
 
 # G500 and G505..G599: Sinumerik; E<n>: Fadal fixture offsets; G15H<n>: Okuma work coordinates

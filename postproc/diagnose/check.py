@@ -18,7 +18,7 @@ from postproc.diagnose.campaign import campaign_warnings
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.frame import FrameFit
-from postproc.diagnose.models import Fixed, base_model
+from postproc.diagnose.models import BaseModel, Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
 from postproc.diagnose.rank import (
     MAX_SELECTED,
@@ -200,6 +200,18 @@ def outside_volume(engine, ds: Dataset) -> np.ndarray:
     return np.any((ds.q < vol[0] - OUTSIDE_TOLERANCE_MM) | (ds.q > vol[1] + OUTSIDE_TOLERANCE_MM), axis=1)
 
 
+def _registered(engine, ds_all: Dataset, keep: np.ndarray, resid_all: np.ndarray) -> np.ndarray:
+    """The residual after the measurement frame's registration on the points ``keep``
+    (six at least), or as it is when that registration cannot be fitted."""
+    if keep.sum() < 6:
+        return resid_all
+    try:
+        fr = Fixed(engine, "registration", True).fit(ds_all.subset(keep), []).frame
+    except PostprocError:
+        return resid_all
+    return resid_all if fr is None else resid_all - fr.displacement(ds_all.q, ds_all.r)
+
+
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
               candidates: list[str] | None = None, max_selected: int = MAX_SELECTED,
               fixed: bool | None = None, register: bool | None = None, offer_empirical: bool = True) -> CheckResult:
@@ -228,6 +240,7 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     existing = [effect_from_dict(d) for d in (cal.effects or [])]
     resid_all = measured_residual(engine, ds_all)
     refitted: list = []  # effects 'fit --base' added: refitted on every training fold
+    model: BaseModel
     if record is not None:
         added = set(record.get("fitted_effects") or [])
         held = [e for e in existing if e.name not in added]
@@ -248,14 +261,7 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     outside = outside_volume(engine, ds_all)
     if fixed and outside.any() and not outside.all():
         keep &= ~outside
-    screening_resid = resid_all
-    if fixed and register and keep.sum() >= 6:
-        try:
-            sub = ds_all.subset(keep)
-            fr = Fixed(engine, "registration", True).fit(sub, []).frame
-            screening_resid = resid_all - fr.displacement(ds_all.q, ds_all.r)
-        except PostprocError:
-            pass
+    screening_resid = _registered(engine, ds_all, keep, resid_all) if fixed and register else resid_all
     screening = screen(ds_all.subset(keep), screening_resid[keep])
     idx = np.nonzero(keep)[0][screening.keep]
     ds, resid = ds_all.subset(idx), resid_all[idx]
@@ -272,8 +278,8 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
             kept = [e for e in existing if e not in refitted]
             ranking.in_model[:0] = [Candidate(e.name, "in model", "held as in the base calibration") for e in kept]
         elif fixed:
-            held = {e.name for e in existing}
-            ranking = rank_effects(model, ds, [], [n for n in names if n not in held], fold_masks,
+            held_names = {e.name for e in existing}
+            ranking = rank_effects(model, ds, [], [n for n in names if n not in held_names], fold_masks,
                                    max_selected=max_selected)
             ranking.in_model[:0] = [Candidate(e.name, "in model", "already in the calibration") for e in existing]
         else:

@@ -52,8 +52,9 @@ def screen_columns(ctx: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], l
     """
     out, notes = {}, []
     t = ctx.get("t")
-    has_t = t is not None and bool(np.all(np.isfinite(t)))
-    order = np.argsort(t, kind="stable") if has_t else None
+    if t is not None and not np.all(np.isfinite(t)):
+        t = None  # a time column with gaps orders nothing: as if there were none
+    order = np.argsort(t, kind="stable") if t is not None else None
     for name, v in ctx.items():
         v = np.asarray(v, dtype=float)
         n = len(v)
@@ -67,8 +68,8 @@ def screen_columns(ctx: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], l
         discrete = levels <= DISCRETE_VALUES and levels <= k / 2
         note = {"column": name, "rows": n, "present": k, "used": True}
         if k < n:
-            if not has_t or k < 2:
-                why = "no time column to interpolate it" if not has_t else "fewer than 2 logged values"
+            if t is None or k < 2:
+                why = "no time column to interpolate it" if t is None else "fewer than 2 logged values"
                 notes.append({**note, "kind": "sparse", "used": False,
                               "message": f"{name} is present in {k} of {n} rows: not used ({why})"})
                 continue
@@ -87,7 +88,7 @@ def screen_columns(ctx: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], l
                           "message": f"{name} is present in {k} of {n} rows"
                                      f"{' (fewer than ' + format(MIN_PRESENT_FRACTION, '.0%') + ')' if sparse else ''}: "
                                      f"{how}; an effect fitted on it rests on {k} readings"})
-        elif has_t and not discrete and n >= 2 * HELD_RUN_ROWS:
+        elif t is not None and not discrete and n >= 2 * HELD_RUN_ROWS:
             vs, ts = v[order], t[order]
             first = _runs(vs)
             lengths = np.diff(np.r_[first, n])

@@ -55,8 +55,8 @@ class FrameFit:
         corners = np.array([[vol[i, 0], vol[j, 1], vol[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
         return float(np.max(np.linalg.norm(self.displacement(corners, np.zeros_like(corners)), axis=1)))
 
-    def to_json(self, volume_mm=None) -> dict:
-        out = {
+    def to_json(self, volume_mm=None) -> dict[str, object]:
+        out: dict[str, object] = {
             "translation_mm": [float(v) for v in self.params[:3]],
             "rotation_rad": [float(v) for v in self.params[3:]],
             "about": "the origin of the measurement frame",

@@ -19,6 +19,7 @@ Three ways, chosen by the method:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,7 +87,7 @@ class Fitted:
     report: list[str]
     frame: FrameFit | None = None
     guard: Guard | None = field(default=None, repr=False)
-    base_forward: object = field(default=None, repr=False)  # callable(ds) -> (N, 3), cached
+    base_forward: Callable[[Dataset], np.ndarray] | None = field(default=None, repr=False)  # (N, 3), cached
 
     def predict(self, ds: Dataset) -> np.ndarray:
         if self.base_forward is not None:
@@ -101,16 +102,17 @@ class Fitted:
 
 
 def _guarded_effects(effects: list[Effect], P: np.ndarray, y: np.ndarray, raw: np.ndarray,
-                     dof: int | None, frame_cols: int = 0) -> tuple[list[Effect], FrameFit | None, Guard]:
+                     dof: int | None, frame_cols: int = 0) -> tuple[list[Effect], FrameFit | None, Guard | None]:
     """Solve the visible columns (effects first, then ``frame_cols`` registration columns)."""
     names = param_labels(effects) + list(FRAME_PARAMS[:frame_cols])
     coef, guard = guarded_solve(P, y, raw, names, dof)
     k = len(coef) - frame_cols
-    fitted = split_params(effects, coef[:k], guard.u_k2[:k])
+    u = guard.u_k2
+    fitted = split_params(effects, coef[:k], None if u is None else u[:k])
     frame = None
     if frame_cols:
         absorbed = all(n in guard.undetermined for n in FRAME_PARAMS)
-        frame = FrameFit(coef[k:], guard.u_k2[k:], absorbed=absorbed)
+        frame = FrameFit(coef[k:], None if u is None else u[k:], absorbed=absorbed)
         guard.undetermined = [n for n in guard.undetermined if n not in FRAME_PARAMS]
         if effects:  # conditioning of the effects themselves (a frame the base holds is not theirs)
             own = guarded_solve(P[:, :k], y, raw[:k], names[:k], dof)[1]

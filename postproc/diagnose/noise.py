@@ -47,5 +47,6 @@ def noise_floor(ds: Dataset, sigma_mm: float | None = None) -> NoiseFloor:
     if sigma_mm is not None:
         return NoiseFloor(float(sigma_mm) * np.sqrt(3.0), (sigma_mm,) * 3, "declared", dof, measured)
     if sig is not None:
-        return NoiseFloor(measured, tuple(float(s) for s in sig), "repeats", dof, measured)
+        sx, sy, sz = (float(s) for s in sig)
+        return NoiseFloor(measured, (sx, sy, sz), "repeats", dof, measured)
     return NoiseFloor(None, None, "unknown", dof, None)

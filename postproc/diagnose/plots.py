@@ -185,7 +185,6 @@ def plot_map(ds_q: np.ndarray, resid: np.ndarray, pair: str, cells: dict, figure
              for c in "xyz"}
     lim = limit_um or max((float(np.nanmax(np.abs(g))) for g in grids.values() if np.isfinite(g).any()),
                           default=1.0)
-    im = None
     for c, ax in zip("xyz", axes, strict=True):
         im = ax.pcolormesh(ea, eb, grids[c].T, cmap="coolwarm", vmin=-lim, vmax=lim)
         for i in range(counts.shape[0]):

@@ -36,10 +36,12 @@ import numpy as np
 
 from postproc.diagnose.crossval import FoldCache, JointCV, rms3
 from postproc.diagnose.data import Dataset
+from postproc.diagnose.frame import FrameFit
+from postproc.diagnose.guard import Guard
 from postproc.diagnose.models import BaseModel, Fixed, LinearStatic, stacked
 from postproc.effects import Effect, get_effect
 from postproc.effects.linalg import solve_ls
-from postproc.errors import PostprocError
+from postproc.errors import CalibrationError, PostprocError
 
 # Significance threshold (one-sided p-value) for suggesting an effect. About 30
 # candidates are tried in each round; 0.001 each keeps the chance of one false
@@ -90,8 +92,8 @@ class Ranking:
     final_cv_rms_mm: float
     final_effects: list[Effect]  # all effects of the final model, fitted on all data
     final_cv_resid: np.ndarray | None = field(default=None, repr=False)  # held-out residual after them
-    final_guard: object = None  # conditioning of the final joint fit (postproc.diagnose.guard.Guard)
-    final_frame: object = None  # the frame registration fitted with the final effects (FrameFit)
+    final_guard: Guard | None = None  # conditioning of the final joint fit
+    final_frame: FrameFit | None = None  # the frame registration fitted with the final effects
 
 
 def slope_p_value(y: np.ndarray, delta: np.ndarray, groups: np.ndarray) -> float:
@@ -198,7 +200,7 @@ def rank_effects(model: BaseModel, ds: Dataset, existing: list[Effect], candidat
         selected.append(best)
         selected_effects.append(get_effect(best.name))
         cache = scorer(model, ds, selected_effects, folds)
-        if joint:
+        if joint and best.resid is not None:  # every candidate of a round holds its held-out residuals
             e0 = best.resid
         else:
             # the selected effect refitted jointly with the base: report that model
@@ -224,7 +226,7 @@ def empirical_offer(model: BaseModel, ds: Dataset, ranking: Ranking, existing: l
     """The empirical field (:mod:`postproc.effects.empirical`) added to the final model,
     its degree chosen by the same cross-validation; None when no degree lowers the
     held-out error."""
-    from postproc.effects.empirical import DEGREES
+    from postproc.effects.empirical import DEGREES, Empirical
 
     effects = [get_effect(e.name) for e in existing] + [get_effect(c.name) for c in ranking.selected]
     joint = isinstance(model, LinearStatic | Fixed)
@@ -246,8 +248,11 @@ def empirical_offer(model: BaseModel, ds: Dataset, ranking: Ranking, existing: l
     if best is None:
         return None
     fitted = _fit_all(model, ds, [*effects, get_effect(best[0])])[-1]
+    extent = fitted.extent() if isinstance(fitted, Empirical) else None
+    if extent is None:
+        raise CalibrationError(f"the fitted {best[0]} has no extent (center_x_mm ... half_z_mm) in its config")
     return {"effect": best[0], "cv_rms_before_mm": base, "cv_rms_after_mm": best[1],
-            "extent_mm": fitted.extent().tolist(), "description": fitted.describe(),
+            "extent_mm": extent.tolist(), "description": fitted.describe(),
             "meaning": fitted.meaning}
 
 

@@ -102,9 +102,9 @@ def screen(ds: Dataset, resid: np.ndarray) -> Screening:
             new.append(int(bad[np.argsort(key)][0]))
         if not new:
             break
-        for i in new:
-            flagged[i] = True
-            reason[i] = f"departs from the other shots at this point by {np.sqrt(z2[i]):.1f} within-group sigma"
+        for shot in new:
+            flagged[shot] = True
+            reason[shot] = f"departs from the other shots at this point by {np.sqrt(z2[shot]):.1f} within-group sigma"
     # single shots (and the rest): the residual against its robust spread
     sigma = _robust_sigma(resid[live][~flagged])
     z2 = np.sum(((resid[live] - np.median(resid[live][~flagged], axis=0)) / sigma) ** 2, axis=1)

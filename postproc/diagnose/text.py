@@ -45,9 +45,10 @@ def format_report(res: CheckResult) -> list[str]:
            f"from {', '.join(res.files)}"]
     out.append(f"residual (measured - model): RMS {um(s['rms_mm'])} um, max {um(s['max_mm'])} um")
     out.append(f"  per axis RMS (um): {vec_um(s['rms_xyz_mm'], False)};  mean: {vec_um(s['mean_xyz_mm'])}")
-    if nf.source == "repeats":
+    # a floor from repeats or a declared sigma has its RMS (and a declared one its sigma)
+    if nf.source == "repeats" and nf.rms_mm is not None:
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS from repeated points, {nf.dof} degrees of freedom)")
-    elif nf.source == "declared":
+    elif nf.source == "declared" and nf.rms_mm is not None and nf.sigma_mm is not None:
         meas = f"; repeats say {um(nf.measured_rms_mm)} um" if nf.measured_rms_mm else ""
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")
     else:
@@ -182,8 +183,9 @@ def _ranking(res: CheckResult) -> list[str]:
     elif not sug:
         out.append("  none: no candidate effect explains the residual significantly")
     for i, (c, sgg) in enumerate(zip(rk.selected, sug, strict=True), 1):
+        after = "" if c.rms_after_mm is None else f"RMS after {um(c.rms_after_mm)} um "  # set when selected
         out.append(f"  {i}. {c.name}: explains {c.explained * 100:.1f} % of the residual variance, "
-                   f"RMS after {um(c.rms_after_mm)} um (p = {c.p_value:.1g})")
+                   f"{after}(p = {c.p_value:.1g})")
         out.append(f"     {sgg['description']}")
         out.append(f"     {sgg['meaning']}; {sgg['compensable']}")
         if sgg["parameters_u_k2"]:

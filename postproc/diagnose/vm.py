@@ -159,9 +159,9 @@ def plan(shape: str, rng: np.random.Generator, n: int | None = None):
         q, d = _both(np.vstack(pts) + rng.uniform(-2, 2, (len(s) * 4, 3)), 2)
     elif shape == "tools":
         tools = np.array([[0, 0, -60.0], [0, 0, -160.0], [60, 0, -110.0]])
-        pts = rng.uniform(lo, hi, (n or 40, 3))
-        q = np.repeat(np.repeat(pts, 3, axis=0), 2, axis=0)
-        r = np.repeat(np.tile(tools, (len(pts), 1)), 2, axis=0)
+        centres = rng.uniform(lo, hi, (n or 40, 3))
+        q = np.repeat(np.repeat(centres, 3, axis=0), 2, axis=0)
+        r = np.repeat(np.tile(tools, (len(centres), 1)), 2, axis=0)
         return q, r, np.ones_like(q)
     elif shape == "sparse":
         q = np.repeat(rng.uniform(lo, hi, (n or 25, 3)), 3, axis=0)

@@ -113,6 +113,9 @@ class Effect:
     target_meaning: ClassVar[str] = ""
     #: whether ``check`` tries it as a candidate at all
     candidate: ClassVar[bool] = True
+    #: parameter name -> k=2 expanded uncertainty; set on a fitted effect only
+    #: (:func:`postproc.diagnose.models.split_params`), so read with ``getattr``
+    uncertainty: dict[str, float]
 
     def __init__(self, target: str, config: Mapping | None = None, params: Mapping | None = None):
         self.target = target

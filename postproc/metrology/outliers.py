@@ -126,11 +126,11 @@ def runs_outliers(runs) -> list[Outlier]:
         centre = float(np.median(dev[live]))
         limit = float(np.sqrt(threshold(len(k), 1, int(live.sum()))))
         z = np.abs(dev - centre) / sigma
-        for j in np.flatnonzero(live & (z > limit)):
-            i = int(k[j])
-            out.append(Outlier(runs.path, int(runs.linenos[i]), str(axis), float(runs.target_mm[i]), int(runs.run[i]),
-                               int(runs.direction[i]), float(runs.deviation_mm[i]), float(z[j]), limit,
-                               float(others[j])))
+        for hit in np.flatnonzero(live & (z > limit)):
+            row = int(k[hit])
+            out.append(Outlier(runs.path, int(runs.linenos[row]), str(axis), float(runs.target_mm[row]),
+                               int(runs.run[row]), int(runs.direction[row]), float(runs.deviation_mm[row]),
+                               float(z[hit]), limit, float(others[hit])))
     return out
 
 

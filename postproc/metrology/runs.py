@@ -91,18 +91,18 @@ def runs_from_table(table: CsvTable) -> Runs:
     jrun, jdir, jaxis = (table.header.index(c) for c in ("run", "direction", "axis"))
     axes, dirs = [], []
     for i, row in enumerate(table.rows):
-        place = {"path": table.path, "lineno": table.linenos[i]}
+        lineno = table.linenos[i]
         if run_f[i] != int(run_f[i]) or run_f[i] < 1:
             raise MeasurementError(f"run {row[jrun].strip()!r} is not a run number (1, 2, 3 ...)",
-                                   col=table.col_starts[i][jrun], **place)
+                                   col=table.col_starts[i][jrun], path=table.path, lineno=lineno)
         d = row[jdir].strip()
         if d not in DIRECTIONS:
             raise MeasurementError(f"direction {d!r} is not '+' or '-'", col=table.col_starts[i][jdir],
                                    hint="'+': the axis approached the target moving in +; '-': moving in -",
-                                   **place)
+                                   path=table.path, lineno=lineno)
         a = row[jaxis].strip()
         if not a:
-            raise MeasurementError("empty axis name", col=table.col_starts[i][jaxis], **place)
+            raise MeasurementError("empty axis name", col=table.col_starts[i][jaxis], path=table.path, lineno=lineno)
         axes.append(a)
         dirs.append(DIRECTIONS[d])
     for a in dict.fromkeys(axes):

@@ -201,7 +201,7 @@ def read_plan(path) -> list[Pocket]:
             raise MeasurementError(f"pocket name {name!r} is empty or repeats line {seen.get(name)}",
                                    path=str(p), lineno=table.linenos[i], col=1)
         seen[name] = table.linenos[i]
-        files = []
+        files: list[str | None] = []
         for cell, col in ((semi[i], "semi"), (fin[i], "finish")):
             cell = cell.strip()
             if not cell:
@@ -244,7 +244,7 @@ def _replay(pockets: list[Pocket], band: Band, allowance: float, plan_path: str)
     relearn_reason = "first pocket: learn K_fb"
     for pk in pockets:
         needed = source is None or relearn_reason != ""
-        if needed or pk.semi is not None:
+        if source is None or needed or pk.semi is not None:
             reason = relearn_reason if needed else "a semi-finish map was measured: learn K_fb again"
             if pk.semi is None:
                 if pk.finish is not None:

@@ -27,7 +27,7 @@ added to the commanded position after the geometric engine's inverse.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -109,7 +109,7 @@ class CorrectionMap:
         """(2, k) lowest and highest node coordinate."""
         return np.vstack([self.nodes.min(axis=0), self.nodes.max(axis=0)])
 
-    def values_at(self, coords, linenos: Sequence[int] | None = None) -> np.ndarray:
+    def values_at(self, coords, linenos: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """Map value (mm, before ``sign``) at (N, k) coordinates; refuse or clamp outside."""
         x = np.asarray(coords, dtype=float).reshape(-1, len(self.coords))
         return self._interp(x, linenos)
@@ -187,7 +187,8 @@ class _Interpolant:
     def __init__(self, m: CorrectionMap) -> None:
         self.m = m
         self.k = len(m.coords)
-        self.grid = None
+        self.grid: Callable[[np.ndarray], np.ndarray] | None = None  # the regular grid's interpolant
+        self.on_grid = False  # nodes on a regular grid (in 1-D always)
         self.period = [360.0 if c in ROTARY_AXES else None for c in m.coords]
         nodes, values = m.nodes, m.values_mm
         self.lo = nodes.min(axis=0)
@@ -198,7 +199,7 @@ class _Interpolant:
             self.axes = [nodes[order, 0]]
             self.vals = values[order]
             self.axes, self.vals, self.closed[0] = self._close(0, self.axes, self.vals)
-            self.grid = True
+            self.on_grid = True
             return
         axes = [_unique(nodes[:, j]) for j in range(self.k)]
         if np.prod([len(a) for a in axes]) == len(values) and all(len(a) >= 2 for a in axes):
@@ -216,6 +217,7 @@ class _Interpolant:
                 self.axes = axes
                 self.grid = RegularGridInterpolator(tuple(axes), grid, method="linear", bounds_error=False,
                                                     fill_value=None)
+                self.on_grid = True
                 return
         from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
         from scipy.spatial import QhullError
@@ -284,7 +286,7 @@ class _Interpolant:
         span = ", ".join(f"{c} {self.lo[j]:.4f}..{self.hi[j]:.4f}" for j, c in enumerate(m.coords))
         more = f" (and {count - 1} more point(s))" if count > 1 else ""
         lineno = int(linenos[i]) if linenos is not None else None
-        shape = "" if self.grid is not None else " (or outside the hull of its scattered nodes)"
+        shape = "" if self.on_grid else " (or outside the hull of its scattered nodes)"
         err = OutOfVolumeError(
             f"program point {where} is outside the correction map {m.name} ({span}){shape}{more}",
             lineno=lineno,

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from postproc.errors import PostprocError
 from postproc.mirror.feedback import PLAN_MAGIC, ThicknessMap
 from postproc.mirror.kdist import SensorData
 
@@ -108,7 +109,8 @@ class Shell:
         drift ``drift (i - j)``; without it the change of E_dist between the pockets adds.
         """
         b, z = self.local_grid()
-        out, j = [], None
+        out: list[int] = []
+        j = 0  # the pocket K_fb was learnt on (the first pocket learns it)
         relearn = True
         for i in range(self.n_pockets):
             if relearn:
@@ -229,7 +231,10 @@ def write_sample_set(directory, *, seed: int = 3, finished: int = 4) -> list:
         semi, fin = pocket_corrections(last, {pk.name: pk for pk in pockets}, band=band,
                                        allowance=shell.allowance_mm, apply_axis="Y", sign=1.0, kdist=res.kmap)
         kind = "semi" if fin is None else "finish"
-        thk = shell.machine(i, b, z, (semi if fin is None else fin).delta(p, {"B": b})[:, 1])
+        corr = semi if fin is None else fin
+        if corr is None:
+            raise PostprocError(f"pocket {last.pocket.name}: the self-tuning gave no {kind} correction")
+        thk = shell.machine(i, b, z, corr.delta(p, {"B": b})[:, 1])
         name = f"{last.pocket.name}_{kind}.csv"
         put(name, thickness_csv(thk, f"pocket {last.pocket.name} after the {kind} pass"))
         rows[i] = (name, rows[i][1]) if fin is None else (rows[i][0], name)

@@ -74,15 +74,15 @@ def bore_chain(op: Operation) -> Chain:
     return chain.spindle_turned_by(op.params["spindle_var"]) if chain.has_spindle() else chain
 
 
-def section_points(op: Operation, env: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+def section_points(op: Operation, env: Mapping[str, float | np.ndarray] | None = None) -> np.ndarray:
     """Workpiece-frame points (n, 9, 3) of the section for variables ``env`` (arrays (n,)).
 
     With no variables in ``env`` (or none the chain depends on) the result is one
     section per draw, (1, 9, 3) for an empty ``env``.
     """
-    env = {k: np.asarray(v, dtype=float) for k, v in (env or {}).items()}
-    n = max((v.size for v in env.values()), default=1)
-    full = {**op.context, **{k: v.reshape(-1)[:, None] for k, v in env.items()}}
+    arrays = {k: np.asarray(v, dtype=float) for k, v in (env or {}).items()}
+    n = max((v.size for v in arrays.values()), default=1)
+    full = {**op.context, **{k: v.reshape(-1)[:, None] for k, v in arrays.items()}}
     full[op.params["spindle_var"]] = TABLE4_ANGLES_DEG
     pts = bore_chain(op).transform(tool_points(op), full)
     # whatever the chain depends on, one section per draw
@@ -149,7 +149,7 @@ class Section:
     roundness_mm: float = float("nan")  # max - min distance of the eight points from its centre
 
 
-def fit_sections(op: Operation, env: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fit_sections(op: Operation, env: Mapping[str, float | np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centre error (n, 2), diameter (n,) and roundness (n,) of the sections for n sets of variables."""
     a, b = section_axes(op.params["axis"])
     plane = section_points(op, env)[..., :8, [a, b]]
@@ -239,13 +239,12 @@ def _nominal_angles(offsets: np.ndarray) -> np.ndarray:
     sense (the spindle may turn either way) and phase that best fit where they are."""
     s = np.radians(TABLE4_ANGLES_DEG[:8])
     seen = np.arctan2(offsets[:, 1], offsets[:, 0])
-    best = None
+    fits = []
     for sense in (1.0, -1.0):
         phase = np.angle(np.mean(np.exp(1j * (seen - sense * s))))
-        miss = np.sum(1.0 - np.cos(seen - sense * s - phase))
-        if best is None or miss < best[0]:
-            best = (miss, sense * s + phase)
-    return best[1]
+        miss = float(np.sum(1.0 - np.cos(seen - sense * s - phase)))
+        fits.append((miss, sense * s + phase))
+    return min(fits, key=lambda f: f[0])[1]  # the first of equals, as before
 
 
 def plot_bore(op: Operation, nominal: Section, worst: Section, dist, magnify: float = 100.0, ax=None):

@@ -162,8 +162,8 @@ class WorstCase:
     max_abs_mm: np.ndarray  # (d,)
     corner: list[dict[str, float]]  # per component, the variable values
     tolerance_mm: np.ndarray
-    min_mm: np.ndarray | None = None  # (d,) smallest and largest signed error over the corners
-    max_mm: np.ndarray | None = None
+    min_mm: np.ndarray  # (d,) smallest and largest signed error over the corners
+    max_mm: np.ndarray
 
     @property
     def within(self) -> bool:
@@ -173,8 +173,8 @@ class WorstCase:
         return {
             "components": self.names,
             "max_abs_mm": self.max_abs_mm.tolist(),
-            "min_mm": None if self.min_mm is None else self.min_mm.tolist(),
-            "max_mm": None if self.max_mm is None else self.max_mm.tolist(),
+            "min_mm": self.min_mm.tolist(),
+            "max_mm": self.max_mm.tolist(),
             "tolerance_mm": self.tolerance_mm.tolist(),
             "within": self.within,
             "corner": self.corner,
@@ -252,7 +252,7 @@ def plot_histograms(dist: Distribution, worst: WorstCase | None = None, ax=None)
         a.hist(dist.samples_mm[:, i] * 1e3, bins=80, color="tab:blue", alpha=0.8)
         for s in (-1, 1):
             a.axvline(s * dist.tolerance_mm[i] * 1e3, color="k", ls="--", lw=1)
-        if worst is not None and worst.min_mm is not None:
+        if worst is not None:
             for v in (worst.min_mm[i], worst.max_mm[i]):
                 a.axvline(v * 1e3, color="tab:red", ls=":", lw=1.5)
         a.set_xlabel(f"error {dist.names[i]} (µm)")

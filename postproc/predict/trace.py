@@ -236,6 +236,8 @@ def flank_surface(
             uq = np.linspace(u_lo, u_hi, max(200 * (windows - 3), 200))
         for j in range(u.shape[2]):
             rows.append(radius[start + j] - envelope(u[:, :, j], depth[:, :, j], uq))
+    if uq is None:
+        raise PostprocError("no heights to sample: heights_mm is empty")
     excess = np.stack(rows)
     return FlankSurface(uq, p, excess, fz, t_m)
 

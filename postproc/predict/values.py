@@ -75,8 +75,8 @@ def check_value(spec: Any, where: str) -> None:
         check_value(spec["of"], f"{where}.of")
         return
     kinds = [k for k in FUNCTIONS if k in spec]
-    name = spec.get("var")
-    if len(kinds) != 1 or not isinstance(name, str) or not name.strip():
+    var = spec.get("var")
+    if len(kinds) != 1 or not isinstance(var, str) or not var.strip():
         raise _fail(
             where,
             f"a function value needs \"var\" (a variable name) and one of {', '.join(FUNCTIONS)}, "

@@ -20,7 +20,9 @@ import numpy as np
 
 from postproc.calibration.axis_tables import AXES, COLUMNS
 from postproc.calibration.tables import UNMEASURED_HALF_RANGE_MM
+from postproc.effects.backlash import Backlash
 from postproc.effects.composed import ComposedEngine
+from postproc.engine.parametric import ParametricEngine
 from postproc.errors import CalibrationError
 
 #: Points per table interval at which an exported table is compared with the model.
@@ -36,17 +38,18 @@ class AxisErrors:
     def __init__(self, cal, axis: str) -> None:
         engine = cal.engine
         base = engine.base if isinstance(engine, ComposedEngine) else engine
-        if base.method != "parametric":
+        if base.method != "parametric" or not isinstance(base, ParametricEngine):
             raise CalibrationError(
                 f"a {base.method} calibration has no axis error tables to export",
                 path=cal.path,
                 hint="controller tables come from a parametric calibration: fit one from interferometer "
                      "runs or axis error tables ('postproc fit RUNS.csv -o CAL')",
             )
-        self.cal, self.base, self.axis = cal, base, axis
+        self.cal, self.axis = cal, axis
+        self.base: ParametricEngine = base
         self.k = AXES.index(axis)
         effects = engine.effects if isinstance(engine, ComposedEngine) else []
-        self.backlash = [e for e in effects if e.kind == "backlash" and e.target == axis]
+        self.backlash: list[Backlash] = [e for e in effects if isinstance(e, Backlash) and e.target == axis]
         self.other_effects = [e.name for e in effects if e not in self.backlash]
         self.lo, self.hi = (float(v) for v in engine.volume_mm[:, self.k])
 

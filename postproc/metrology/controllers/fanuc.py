@@ -219,9 +219,10 @@ def read_reference_parameters(text: str, detection_unit_mm: float, path: str = "
     return refs, dirs
 
 
-def read_fanuc(text: str, path: str = "") -> tuple[dict[int, dict[str, int]], dict[int, int]]:
-    """(axis parameters {number: {axis: value}}, pitch data {point: value}) from a tape."""
-    params: dict[int, dict[str, int]] = {}
+def read_fanuc(text: str, path: str = "") -> tuple[dict[int, dict[str | None, int]], dict[int, int]]:
+    """(axis parameters {number: {axis: value}}, pitch data {point: value}) from a tape;
+    a value before any A word (a parameter that is not an axis's) is under the axis None."""
+    params: dict[int, dict[str | None, int]] = {}
     data: dict[int, int] = {}
     for lineno, line in enumerate(text.splitlines(), 1):
         line = line.strip()
@@ -234,7 +235,7 @@ def read_fanuc(text: str, path: str = "") -> tuple[dict[int, dict[str, int]], di
         if n >= PITCH_DATA_BASE:
             data[n - PITCH_DATA_BASE] = int(words[1][1])
         else:
-            axis = None
+            axis: str | None = None
             for w, v in words[1:]:
                 if w == "A":
                     axis = v

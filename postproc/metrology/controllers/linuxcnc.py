@@ -105,7 +105,7 @@ def linuxcnc_loader(text: str, comp_type: int, path: str = "") -> tuple[np.ndarr
             nom, fwd, rev = (float(v) for v in parts) if len(parts) == 3 else (None, None, None)
         except ValueError:
             break
-        if nom is None:
+        if nom is None or fwd is None or rev is None:
             break
         if rows and nom <= rows[-1][0]:
             errors.append(f"line {len(rows) + len(errors) + 1}: nominal {nom:g} is not above {rows[-1][0]:g}: "
