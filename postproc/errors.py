@@ -56,8 +56,9 @@ class PostprocError(Exception):
         character of that line that is not blank (a refusal about a whole block or row
         points at its start). ``source``: the file to read the line from, when it is not
         ``path`` (a piped program's copy). Nothing is read when the column is known."""
-        if self.col is None and self.lineno is not None and (source or self.path):
-            self.col = first_column(source or self.path, self.lineno)
+        where = source or self.path
+        if self.col is None and self.lineno is not None and where:
+            self.col = first_column(where, self.lineno)
         return self
 
     def at(self, path: str | None = None, lineno: int | None = None, col: int | None = None):

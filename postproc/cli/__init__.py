@@ -106,6 +106,7 @@ class LazyGroup(click.Group):
             full = disk_full(exc, exc.filename)
             if full is None:
                 _internal(ctx, exc)
+                return
             click.echo(f"postproc: error: {full}", err=True)
             ctx.exit(full.exit_code)
         except Exception as exc:  # a bug: say so plainly, no traceback unless asked

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from postproc.errors import PostprocError
 from postproc.simulate.machine import Machine
@@ -57,7 +58,7 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     setup = make_setup(setup_args)
     program = str(program)
     # read as the correction reads it: the controller's dialect, subprogram files
-    reading = {"dialect": getattr(options, "dialect", "generic"),
+    reading: dict[str, Any] = {"dialect": getattr(options, "dialect", "generic"),
                "subroutine_path": tuple(getattr(options, "subroutine_path", ()))}
     nominal = nominal_path(program, setup, **reading)
     if len(nominal) < 2:
