@@ -279,8 +279,10 @@ def test_a_backlash_take_up_under_compensation_is_refused():
     from postproc.effects import compose, get_effect
     from postproc.engine.identity import IdentityEngine
 
+    # lost motion (b < 0) is taken up by an inserted move, which the controller would offset
+    # as a contour element of its own; an axis that runs ahead (b > 0) needs no take-up
     eng = compose(IdentityEngine([[-1000.0] * 3, [1000.0] * 3]),
-                  [get_effect("backlash:X", params={"b_mm": 0.004}).to_dict()])
+                  [get_effect("backlash:X", params={"b_mm": -0.004}).to_dict()])
     text = "G21 G17 G90 F100\nT1 M6\nG0 X0 Y0 Z0\nG41 G1 X10 Y0\nX20\nY10\nX10\nG40 G1 X0 Y0\nM2\n"
     with pytest.raises(UnsupportedGcodeError, match="take-up"):
         _correct(text, eng, {1: 1.0}, tol=0.01)

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -40,7 +40,22 @@ from postproc.errors import GcodeSyntaxError, MissingSetupError, SafetyError, Un
 from postproc.gcode.state import ARC_CCW, ARC_CW, CANNED_CYCLES, CUTTER_COMP, SPLINES, WORK_SYSTEMS
 
 if TYPE_CHECKING:
-    from postproc.gcode.interp import Interpreter, Move
+    from postproc.gcode.dialect import Dialect
+    from postproc.gcode.moves import Move
+    from postproc.gcode.state import ModalState
+
+
+class Interpreter(Protocol):
+    """What this module reads of :class:`postproc.gcode.interp.Interpreter` (which calls it)."""
+
+    d: Dialect
+    dialect: str
+    state: ModalState
+    setup: Any
+    lenient_setup: bool
+    comp_moves: list
+
+    def _err(self, cls: type, msg: str, lineno: int, col: int, hint: str | None = None) -> Any: ...
 
 # Directions u sampled in the plane around each contour point. For a correction field
 # linear across the radius, +u and -u give the same |e|, so 8 directions sample the

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from postproc.gcode.interp import Arc
+from postproc.gcode.moves import Arc
 from postproc.gcode.state import PLANES
 
 TWO_PI = 2.0 * math.pi
