@@ -147,7 +147,7 @@ def test_ac_ic_against_the_mode():
 
 
 @pytest.mark.parametrize(("name", "lineno", "construct"), [
-    ("drill_plate.mpf", 8, "Sinumerik MCALL (modal cycle call)"),
+    ("drill_plate.mpf", 8, "Sinumerik MCALL CYCLE81 (drilling cycle call): read only when written as its moves"),
     ("pocket_cycle.mpf", 8, "Sinumerik POCKET4 (pocket milling cycle)"),
 ])
 def test_sample_programs_refused_by_name(name, lineno, construct):
@@ -277,3 +277,114 @@ def test_split_arc_written_with_cr():
     assert rep.arcs_split >= 1
     assert len(arcs) >= 2
     assert all("CR=" in ln and " R" not in ln for ln in arcs)
+
+
+# -- drilling cycles (Programming Guide Cycles, chapter 2 "Drilling cycles") ----------------
+def run_cycles(text, setup=SETUP):
+    """The interpreter's moves with each drilling cycle's steps after its block: (kind, end)."""
+    it = Interpreter(setup, "p.mpf", dialect="sinumerik")
+    steps = []
+    for n, line in enumerate(text.splitlines(keepends=True), start=1):
+        mv = it.feed_line(n, line)
+        if mv is not None:
+            steps.append(("move", tuple(round(v, 9) for v in mv.q1)))
+        if it.cycle_move is not None:
+            for kind, q in it.cycle_move.cycle.steps:
+                steps.append((kind, tuple(round(v, 9) for v in q)))
+    return it, steps
+
+
+ZERO = Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0})
+
+
+def correct_expanded(text, setup=ZERO, engine=None):
+    return correct_text(text, engine or IdentityEngine(BIG), setup,
+                        CorrectOptions(dialect="sinumerik", cycles="expand"), path="p.mpf")
+
+
+def test_mcall_cycle81_drills_after_each_position_block_by_hand():
+    """MCALL CYCLE81(RTP=10, RFP=0, SDIS=2, DP=-15, DPR=0): after each block that moves,
+    G0 to RFP+SDIS = 2, G1 to DP = -15, G0 to RTP = 10 (Cycles, "Drilling, centering -
+    CYCLE81"; section 2.2 "Modal call of drilling cycles"); a bare MCALL ends the call.
+    G54 (100, 100, 100) and D1 (100 along Z): work Z z is machine z + 200."""
+    it, steps = run_cycles((DATA / "drill_plate.mpf").read_text())
+    rapid, feed = 0, 10
+    hole = [(rapid, 202.0), (feed, 185.0), (rapid, 210.0)]
+    want = [("move", (120.0, 120.0, 250.0)), ("move", (120.0, 120.0, 250.0))]
+    want += [(k, (120.0, 120.0, z)) for k, z in hole]
+    for x, y in ((180.0, 120.0), (180.0, 160.0), (120.0, 160.0)):
+        want += [("move", (x, y, 210.0))] + [(k, (x, y, z)) for k, z in hole]
+    want += [("move", (120.0, 160.0, 250.0))]  # N110 G0 Z50 after the bare MCALL: no hole
+    assert steps == want
+    assert it.modal_call is None
+
+
+def test_cycle81_expanded_lines_and_kept_lines():
+    text = (DATA / "drill_plate.mpf").read_text()
+    out, rep = correct_expanded(text)
+    assert rep.cycles_expanded == 4
+    assert ";POSTPROC CYCLES EXPANDED\n" in out
+    lines = body(out).splitlines()
+    assert ";N50 MCALL CYCLE81(10,0,2,-15,0)" in lines  # the call stays, as a comment
+    k = lines.index("N60 X20 Y20")
+    assert lines[k:k + 5] == ["N60 X20 Y20", "G0 Z2.0000", "G1 Z-15.0000", "G0 Z10.0000", "N70 X80 Y20"]
+    for ln in text.splitlines():  # every other line byte for byte
+        if "CYCLE81" not in ln:
+            assert ln in lines
+    # corrected: the holes' moves are written in the program's coordinates, each corrected
+    eng = StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG)
+    out, _ = correct_expanded(text, engine=eng)
+    assert "G1 Z-14.9850" in out  # -15 / 1.001
+
+
+def test_one_shot_cycle82_with_dpr_and_dwell_by_hand():
+    """CYCLE82(RTP=15, RFP=1, SDIS=1, DP empty, DPR=4, DTB=0.5) at (5, 5, 20): G0 Z2, G1 to
+    RFP - DPR = -3 at the feed before the call, dwell 0.5 s, G0 Z15; the program's G1 mode
+    comes back after the cycle (the cycle restores the G codes: PROC ... SAVE)."""
+    text = "%_N_C_MPF\nG54 D1\nG0 X5 Y5 Z20\nG1 F100\nN40 CYCLE82(15,1,1,,4,0.5)\nG0 X10\nM30\n"
+    _, steps = run_cycles(text, ZERO)
+    assert steps[1:] == [(0, (5.0, 5.0, 2.0)), (10, (5.0, 5.0, -3.0)), (-1, (0.5, 0.0, 0.0)),
+                         (0, (5.0, 5.0, 15.0)), ("move", (10.0, 5.0, 15.0))]
+    out, _ = correct_expanded(text)
+    assert body(out) == ("%_N_C_MPF\nG54 D1\nG0 X5 Y5 Z20\nG1 F100\n;N40 CYCLE82(15,1,1,,4,0.5)\n"
+                         "G0 Z2.0000\nG1 Z-3.0000\nG4 F0.5\nG0 Z15.0000\nG1\nG0 X10\nM30\n")
+
+
+def test_cycle89_feeds_back_out_and_dpr_wins_over_dp():
+    """CYCLE89(RTP=5, RFP=0, SDIS=1, DP=-20, DPR=8, DTB=1): DPR given, so the depth is
+    RFP - 8 = -8 ("if both DP and DPR are given, the depth is derived from DPR"); G1 back
+    to RFP+SDIS = 1 at the same feed, then G0 to RTP."""
+    _, steps = run_cycles("G54 D1\nG0 X0 Y0 Z10\nG1 F50\nCYCLE89(5,0,1,-20,8,1)\n", ZERO)
+    assert steps[1:] == [(0, (0.0, 0.0, 1.0)), (10, (0.0, 0.0, -8.0)), (-1, (1.0, 0.0, 0.0)),
+                         (10, (0.0, 0.0, 1.0)), (0, (0.0, 0.0, 5.0))]
+
+
+def test_cycle_parameters_from_variables_and_inch():
+    _, steps = run_cycles("G54 D1\nG70\nDEF REAL DEPTH=-0.5\nR1=0.4\nG0 X1 Y1 Z1\nCYCLE81(R1, 0, 0.1, DEPTH)\n",
+                          ZERO)
+    assert steps[1:] == pytest.approx([(0, (25.4, 25.4, 2.54)), (10, (25.4, 25.4, -12.7)),
+                                       (0, (25.4, 25.4, 0.4 * 25.4))])
+
+
+@pytest.mark.parametrize(("line", "construct"), [
+    ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,0,0,1,1)", "Sinumerik CYCLE83 (drilling cycle whose moves postproc does "
+                                                 "not model"),
+    ("N10 MCALL CYCLE84(10,0,2,-15,0,0,3,8,0,0,0,0)", "Sinumerik CYCLE84"),
+    ("N10 CYCLE840(10,0,2,-15,0,0,3,8,0,0,0,0)", "Sinumerik CYCLE840"),
+    ("N10 G0 X5 CYCLE81(10,0,2,-15,0)", "Sinumerik CYCLE81 with other words in its block"),
+    ("N10 MCALL CYCLE81(10,0,2,-15,0) X5", "Sinumerik MCALL CYCLE81 with other words"),
+    ("N10 CYCLE81(10,0,2)", "Sinumerik CYCLE81 without its final depth (DP or DPR)"),
+    ("N10 CYCLE81(,0,2,-15)", "Sinumerik CYCLE81 without its RTP"),
+    ("N10 CYCLE82(10,0,2,-15,0,-2)", "dwell in spindle revolutions"),
+])
+def test_drilling_cycle_refusals(line, construct):
+    with pytest.raises((UnsupportedGcodeError, GcodeSyntaxError)) as err:
+        run_cycles(f"G54 D1\nG0 X0 Y0 Z0\n{line}\n")
+    assert construct in str(err.value)
+    assert err.value.lineno == 3
+
+
+def test_cycles_need_expand():
+    with pytest.raises(UnsupportedGcodeError, match=r"Sinumerik CYCLE81 \(drilling cycle call\)") as err:
+        correct("G54 D1\nG0 X0 Y0 Z20\nCYCLE81(10,0,2,-15)\nM30\n")
+    assert "--cycles expand" in err.value.hint

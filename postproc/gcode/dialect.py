@@ -397,8 +397,9 @@ DIALECTS["sinumerik"] = Dialect(
          "post the program for 3 axes (X, Y, Z with fixed rotary positions): postproc corrects X, Y, Z"),
         (r"(?i)\bCYCLE800\b", "CYCLE800 (swivel plane)",
          "post the swivelled-plane moves in the machine's X, Y, Z (without CYCLE800)"),
-        (r"(?i)\bMCALL\b", "MCALL (modal cycle call)",
-         "post the drilling cycles as their moves (or as ISO G81-G89 with --dialect generic)"),
+        (r"(?i)\bCYCLE(8[3-8]|840)\b", "CYCLE{0} (drilling cycle whose moves postproc does not model: "
+                                        "CYCLE81, CYCLE82 and CYCLE89 are read)",
+         "post the drilling as its moves, or as CYCLE81/CYCLE82/CYCLE89"),
         (r"(?i)\b(?:A?ROT|A?SCALE|A?MIRROR|AROTS|ROTS)\b(?=\s*[A-Z])", "programmable frame (ROT/SCALE/MIRROR)",
          "post the program in the work coordinates the frame gives (TRANS is read, rotations are not)"),
         (r"(?i)\b(?:IF|WHILE|LOOP|FOR|REPEAT|GOTOF|GOTOB|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR|UNTIL)\b",

@@ -69,6 +69,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from postproc.gcode.dialect import Dialect
+    from postproc.gcode.sinumerik import CycleCall
 
 #: a block's words by letter, G and M aside: (value, word index)
 Vals = dict[str, tuple[float, int]]
@@ -295,6 +296,10 @@ class Interpreter:
         self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
         self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
         self._arc_absolute_once = False  # the next block's centre words are absolute (Sinumerik I=AC())
+        self.modal_call: CycleCall | None = None  # Sinumerik MCALL CYCLE8x(): drills after each moving block
+        self._cycle_due: CycleCall | None = None  # the cycle this block calls (run after its move)
+        self.cycle_move: Move | None = None  # the drilling cycle this line made (Sinumerik): its moves
+        self.call_line = ""  # the Sinumerik cycle call this line is ("MCALL CYCLE81"): a comment when expanded
         self._g_alias = dict(self.d.g_aliases)
         # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
         self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
@@ -403,6 +408,7 @@ class Interpreter:
         self.motion_word = False
         self.rebase = None
         self.stored_here = None
+        self.cycle_move, self.call_line = None, ""
         if self.ended:
             return None  # after M2/M30 the controller reads no further
         bom = line.startswith("\ufeff")
@@ -420,16 +426,55 @@ class Interpreter:
         if bom:
             words = [lexer.Word(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
         if not words:
+            self._drill_if_due(lineno)
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
         if self._arc_absolute_once:  # Sinumerik I=AC() J=AC(): G90.1 for this block only
             st, saved = self.state, self.state.arc_absolute
             st.arc_absolute, self._arc_absolute_once = True, False
             try:
-                return self._block(lineno, words, block_delete)
+                mv = self._block(lineno, words, block_delete)
             finally:
                 st.arc_absolute = saved
-        return self._block(lineno, words, block_delete)
+        else:
+            mv = self._block(lineno, words, block_delete)
+        self._drill_if_due(lineno)
+        return mv
+
+    def _drill_if_due(self, lineno: int) -> None:
+        """Run the Sinumerik drilling cycle this block calls (one-shot, or modal after a
+        block that moves): its moves become :attr:`cycle_move`."""
+        call, self._cycle_due = self._cycle_due, None
+        if call is None:
+            return
+        from postproc.gcode.sinumerik_cycles import FEED_STEP, RAPID_STEP, drill_plan
+
+        st = self.state
+        if st.plane != 170:
+            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno,
+                            call.col)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, call.col,
+                            hint="position every axis with a G90 move before the cycle, or give --start")
+        plan = drill_plan(call, self.path, lineno)
+        unit, shift = st.unit_mm, self.shift(False, lineno, call.col)
+        x, y, z0 = st.pos
+
+        def at(z: float) -> tuple[float, float, float]:
+            return (x, y, z * unit + shift[2])
+
+        kinds = {RAPID_STEP: RAPID, FEED_STEP: LINE}
+        steps: list[tuple[int, tuple]] = []
+        for kind, v in plan.steps:
+            steps.append((DWELL, (v, 0.0, 0.0)) if kind not in kinds else (kinds[kind], at(v)))
+        bottom, start = at(plan.bottom_z), at(plan.start_z)
+        st.pos = list(at(plan.clear_z))
+        self.cycle_move = Move(
+            lineno=lineno, kind=plan.code, q0=(x, y, z0), q1=bottom, r=self.tool_r(), shift=shift, unit=unit,
+            incremental=st.incremental, arc_absolute=st.arc_absolute, words=[], axis_idx=(-1, -1, -1),
+            feed_idx=-1, inverse_time=False, feed=st.feed, rotary=dict(st.rotary) if self.used_rotary else {},
+            stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
+                                    False, plan.dwell_s))
 
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
         if not self._iso_blocks:
@@ -499,6 +544,22 @@ class Interpreter:
             if not incremental and letter in "XYZABC":
                 raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
                                 lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
+        if blk.call is not None:
+            name = f"MCALL {blk.call.name}" if blk.mcall else blk.call.name
+            others = [w for w in blk.words if w.letter != "N"]
+            if others or blk.frame:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
+                                blk.call.col, hint="write the cycle call in a block of its own")
+            self.call_line = name
+            if blk.mcall:
+                self.modal_call = blk.call
+            else:
+                self._cycle_due = blk.call
+            return [], blk.block_delete
+        if blk.mcall:
+            self.modal_call = None  # a bare MCALL ends the modal call
+        elif self.modal_call is not None and any(w.letter in AXES for w in blk.words):
+            self._cycle_due = self.modal_call
         if blk.ends:
             self.ended = True  # RET: the end of the program (the block's own words still run)
         if blk.frame:

@@ -36,6 +36,7 @@ from postproc.errors import (
     PostprocError,
     SafetyError,
     SolverError,
+    UnsupportedGcodeError,
 )
 from postproc.gcode import bulk, cutter, emit, vplan
 from postproc.gcode.directions import (
@@ -52,7 +53,7 @@ from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion,
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import LINE, PLANES, RAPID
+from postproc.gcode.state import DWELL, LINE, PLANES, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
@@ -327,8 +328,11 @@ class Corrector(EmitterMixin):
 
         def feed(line: str) -> None:
             nonlocal lineno, run_ok
-            mv = interp.feed_line(where(lineno), line)
-            if interp.stored_here is not None:
+            here = where(lineno)
+            mv = interp.feed_line(here, line)
+            if interp.call_line or interp.cycle_move is not None:
+                self._feed_drill_cycle(entries, line, mv, interp, here)
+            elif interp.stored_here is not None:
                 # G28.1/G30.1: the controller stores where it is, the corrected position
                 entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
             elif interp.rebase is not None:
@@ -1185,6 +1189,45 @@ class Corrector(EmitterMixin):
             else:
                 kind, prev, q, moved, first_feed = step
                 entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
+        self.report.cycles_expanded += 1
+
+    def _feed_drill_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move | None,
+                          interp: Interpreter, lineno: int) -> None:
+        """Queue a Sinumerik block that calls a drilling cycle or runs the modal one: the
+        call written as a comment, a position block as any move, then the cycle's G0/G1
+        moves (each corrected) and G4 F dwells; the motion mode is restored after them, as
+        the cycle (a subprogram with SAVE) restores it. Only with ``--cycles expand``: a
+        CYCLE81 call cannot carry each hole's correction in its parameters."""
+        cyc = interp.cycle_move
+        if self.opt.cycles != "expand":
+            call = interp.call_line or f"MCALL {interp.modal_call.name if interp.modal_call else ''}"
+            raise UnsupportedGcodeError(
+                f"Sinumerik {call} (drilling cycle call): read only when written as its moves", path=self.path, lineno=lineno, col=1,
+                hint="give --cycles expand to write each hole as its G0/G1 moves, each corrected")
+        if interp.call_line:
+            entries.append((";" + line, None, False, None))  # the call, kept as a comment
+        elif mv is not None:
+            entries.append((line, mv, interp.motion_word, interp.state.motion))
+        if cyc is None or cyc.cycle is None:
+            return
+        ending = emit.line_ending(line) or "\n"
+        sep, lower = emit.style_of(line)
+        sep = sep or " "
+        d = _unit_decimals(self.opt, cyc.unit)
+        prev = cyc.q0
+        for kind, q in cyc.cycle.steps:
+            if kind == DWELL:
+                text = f"G4{sep}F{emit.fmt(q[0], 3).rstrip('0').rstrip('.') or '0'}"
+                entries.append(((text.lower() if lower else text) + ending, None, False, None))
+                continue
+            moved = tuple(k for k in range(3) if q[k] != prev[k])
+            if moved:
+                entries.append(self._generated_move(cyc, kind, prev, q, moved, False, d, sep, lower, ending))
+                prev = q
+        motion = interp.state.motion
+        if motion is not None and motion != RAPID:
+            text = f"G{motion // 10}"  # the program's G1/G2/G3 again after the cycle's G0 retract
+            entries.append(((text.lower() if lower else text) + ending, None, False, None))
         self.report.cycles_expanded += 1
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
