@@ -159,11 +159,12 @@ def test_sample_programs_refused_by_name(name, lineno, construct):
 
 
 @pytest.mark.parametrize(("line", "construct"), [
-    ("N10 ROT Z30", "programmable frame"),
+    ("N10 ROT X30", "Sinumerik ROT X (a rotation about X tilts the plane"),
     ("N10 TRANS X10 A5", "frame with A"),
     ("N10 TRANS X10 G1 X5", "frame with G"),
     ("N10 G1 TRANS X10", "TRANS not alone in its block"),
-    ("N10 AROT Z30", "programmable frame"),
+    ("N10 AROT RPL=30 Z10", "Sinumerik AROT with both Z and RPL"),
+    ("N10 AROTS X10 Y20", "Sinumerik AROTS (frame rotation by solid angles)"),
     ("N10 R1=R2+5", "R parameter R2 read before the program sets it"),
     ("N10 DEF FRAME F1", "DEF FRAME (only REAL, INT and BOOL"),
     ("N10 G1 X=DEPTH", "DEPTH in an expression (not a variable the program defines)"),
@@ -388,3 +389,74 @@ def test_cycles_need_expand():
     with pytest.raises(UnsupportedGcodeError, match=r"Sinumerik CYCLE81 \(drilling cycle call\)") as err:
         correct("G54 D1\nG0 X0 Y0 Z20\nCYCLE81(10,0,2,-15)\nM30\n")
     assert "--cycles expand" in err.value.hint
+
+
+# -- rotation, scale and mirror (Fundamentals, "Coordinate transformations (frames)") ------
+def test_rot_and_atrans_compose_by_hand():
+    """TRANS X10 then AROT RPL=90 then ATRANS X5: the programmed point p lands at
+    (10, 0) + R90 (p + (5, 0)) = (10 - y, x + 5) (ATRANS after AROT moves in the rotated
+    axes); G1 Y5 keeps the programmed X (modal in the frame), G0 X0 Y0 after a bare ROT is
+    the work origin."""
+    it, moves = run("G54 D1\nG0 X0 Y0 Z0\nTRANS X10\nAROT RPL=90\nATRANS X5\nG0 X2 Y1\nG1 Y5 F100\n"
+                    "ROT\nG0 X0 Y0\n", ZERO)
+    got = ends(moves)
+    assert got[1] == pytest.approx((10 - 1, 2 + 5, 0.0))
+    assert got[2] == pytest.approx((10 - 5, 2 + 5, 0.0))
+    assert got[3] == (0.0, 0.0, 0.0)
+    assert it.state.frame is None
+
+
+def test_arc_under_rotation_and_mirror_by_hand():
+    """ROT Z90: G2 X0 Y15 I-10 J0 from (10, 5): centre (0, 5) and end (0, 15) in the frame,
+    (-5, 0) and (-15, 0) in work coordinates, still clockwise. MIRROR X0 (replacing the
+    rotation): G2 from (10, 0) about (0, 0) to (0, 10) is at (-10, 0) -> (0, 10) about the
+    origin, counter-clockwise (a mirror of one axis reverses the direction: Fundamentals,
+    "Programmable mirroring (MIRROR, AMIRROR)")."""
+    _, moves = run("G54 D1\nG0 X0 Y0 Z0\nROT Z90\nG0 X10 Y5\nG2 X0 Y15 I-10 J0 F100\nMIRROR X0\n"
+                   "G0 X10 Y0\nG2 X0 Y10 I-10\n", ZERO)
+    assert ends(moves)[1] == pytest.approx((-5.0, 10.0, 0.0))
+    assert moves[2].q1 == pytest.approx((-15.0, 0.0, 0.0))
+    assert moves[2].arc.center == pytest.approx((-5.0, 0.0, 0.0))
+    assert moves[2].arc.clockwise
+    assert moves[3].q1 == pytest.approx((-10.0, 0.0, 0.0))
+    assert moves[4].arc.center == pytest.approx((0.0, 0.0, 0.0))
+    assert moves[4].q1 == pytest.approx((0.0, 10.0, 0.0))
+    assert not moves[4].arc.clockwise
+
+
+def test_scale_ascale_amirror_by_hand():
+    """SCALE X2 Y2 then ATRANS X1: the translation is scaled (2, 0); ASCALE X0.5 Y0.5
+    multiplies to 1; AMIRROR Y0 then negates the frame's Y. Z keeps its scale 1."""
+    _, moves = run("G54 D1\nG0 X0 Y0 Z0\nSCALE X2 Y2\nG0 X3 Y4 Z1\nATRANS X1\nG0 X0 Y0\n"
+                   "ASCALE X0.5 Y0.5\nG0 X3 Y4\nAMIRROR Y0\nG0 X3 Y4\n", ZERO)
+    assert ends(moves)[1:] == pytest.approx([(6.0, 8.0, 1.0), (2.0, 0.0, 1.0), (5.0, 4.0, 1.0),
+                                             (5.0, -4.0, 1.0)])
+
+
+def test_unequal_scale_refuses_arcs():
+    with pytest.raises(UnsupportedGcodeError, match="arc under SCALE with unequal X and Y"):
+        run("G54 D1\nG0 X0 Y0 Z0\nSCALE X2\nG0 X10 Y0\nG2 X0 Y10 I-10 F100\n", ZERO)
+
+
+def test_rotated_lines_written_in_the_frame():
+    """Identity: every byte kept. A 1.001 scale: machine (0, 10) from ROT Z90 G0 X10 Y0 is
+    corrected to (0, 9.99001), which is X9.9900 Y0 in the frame again."""
+    text = "%_N_R_MPF\nG54 D1\nG0 X0 Y0 Z0\nROT Z90\nG0 X10 Y0\nG1 X10 Y5 F100\nROT\nM30\n"
+    out, _ = correct(text, ZERO)
+    assert body(out) == text
+    out, _ = correct(text, ZERO, StaticEngine(1.001 * np.eye(3), np.zeros(3), BIG))
+    assert "G0 X9.9900 Y0" in out
+    assert "G1 X9.9900 Y4.9950 F100" in out
+
+
+def test_drill_cycle_under_rotation():
+    text = "%_N_D_MPF\nG54 D1\nG0 X0 Y0 Z20\nROT Z90\nG1 F100\nMCALL CYCLE81(10,0,2,-5)\nG0 X10 Y0\nMCALL\nM30\n"
+    _, steps = run_cycles(text, ZERO)
+    assert steps[2:] == pytest.approx([(0, (0.0, 10.0, 2.0)), (10, (0.0, 10.0, -5.0)), (0, (0.0, 10.0, 10.0))])
+    out, _ = correct_expanded(text)
+    assert "G0 X10 Y0\nG0 Z2.0000\nG1 Z-5.0000\nG0 Z10.0000\nMCALL\n" in body(out)  # G0 stays
+
+
+def test_rpl_only_in_g17():
+    with pytest.raises(UnsupportedGcodeError, match="Sinumerik ROT RPL= in a plane other than G17"):
+        run("G54 D1\nG18\nROT RPL=30\n", ZERO)

@@ -400,8 +400,8 @@ DIALECTS["sinumerik"] = Dialect(
         (r"(?i)\bCYCLE(8[3-8]|840)\b", "CYCLE{0} (drilling cycle whose moves postproc does not model: "
                                         "CYCLE81, CYCLE82 and CYCLE89 are read)",
          "post the drilling as its moves, or as CYCLE81/CYCLE82/CYCLE89"),
-        (r"(?i)\b(?:A?ROT|A?SCALE|A?MIRROR|AROTS|ROTS)\b(?=\s*[A-Z])", "programmable frame (ROT/SCALE/MIRROR)",
-         "post the program in the work coordinates the frame gives (TRANS is read, rotations are not)"),
+        (r"(?i)\b(A?ROTS|CROTS)\b", "{0} (frame rotation by solid angles)",
+         "post the program in the work coordinates the frame gives (ROT/AROT about Z is read)"),
         (r"(?i)\b(?:IF|WHILE|LOOP|FOR|REPEAT|GOTOF|GOTOB|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR|UNTIL)\b",
          "program control (IF/WHILE/LOOP/FOR/REPEAT/GOTO)", "post the program flat (loops written out)"),
         (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL)\b|^\s*(?:N\d+\s*)?L\d+\b", "subprogram call or PROC",

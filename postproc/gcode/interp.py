@@ -175,6 +175,9 @@ class Move:
     planned: bool = False
     # a move to a position the program stored (G28.1/G30.1): its name, and the axes it sets
     stored: tuple | None = None
+    # the linear part of the programmable frame it was programmed in (Sinumerik ROT, SCALE,
+    # MIRROR; postproc.gcode.frames), or None: its words are in that frame's coordinates
+    frame: tuple | None = None
 
 
 # word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
@@ -429,6 +432,11 @@ class Interpreter:
             self._drill_if_due(lineno)
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
+        if self.state.frame is not None:
+            return self._framed_block(lineno, words, block_delete)
+        return self._block_and_cycle(lineno, words, block_delete)
+
+    def _block_and_cycle(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
         if self._arc_absolute_once:  # Sinumerik I=AC() J=AC(): G90.1 for this block only
             st, saved = self.state, self.state.arc_absolute
             st.arc_absolute, self._arc_absolute_once = True, False
@@ -439,6 +447,49 @@ class Interpreter:
         else:
             mv = self._block(lineno, words, block_delete)
         self._drill_if_due(lineno)
+        return mv
+
+    def _framed_block(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
+        """A block under a rotating, scaling or mirroring frame (Sinumerik): read as if the
+        frame had no linear part, from the position seen in the frame's coordinates, then its
+        points mapped to the machine (:func:`frames.machine_from_program`); a mirror turns
+        G2 into G3 and back (Fundamentals, "MIRROR")."""
+        from postproc.gcode import frames
+
+        st = self.state
+        a = st.frame
+        assert a is not None  # noqa: S101 - the caller checks it
+        try:
+            s0 = self.shift(False, lineno, 1)
+        except MissingSetupError:
+            return self._block_and_cycle(lineno, words, block_delete)  # no move can be made here
+        real = tuple(st.pos)
+        st.pos = list(frames.program_from_machine(a, s0, real))
+        try:
+            mv = self._block_and_cycle(lineno, words, block_delete)
+        finally:
+            s1 = self.shift(False, lineno, 1)
+            st.pos = list(frames.machine_from_program(a, s1, st.pos))
+        mirrored = frames.determinant(a) < 0
+        for m in (mv, self.cycle_move):
+            prev = real if m is mv or m is None else frames.machine_from_program(a, m.shift, m.q0)
+            while m is not None:
+                m.q0 = prev
+                m.q1 = frames.machine_from_program(a, m.shift, m.q1)
+                m.frame = a
+                if m.arc is not None:
+                    if not frames.keeps_circles(a):
+                        raise self._err(UnsupportedGcodeError, "Sinumerik arc under SCALE with unequal X and Y "
+                                        "factors (an ellipse)", lineno, 1,
+                                        hint="post the arc as its moves, or scale X and Y alike")
+                    m.arc.center = frames.machine_from_program(a, m.shift, m.arc.center)
+                    m.arc.clockwise = m.arc.clockwise != mirrored
+                if m.cycle is not None:
+                    c = m.cycle
+                    c.steps = [(k, q if k == DWELL else frames.machine_from_program(a, m.shift, q))
+                               for k, q in c.steps]
+                    c.holes = [tuple(frames.machine_from_program(a, m.shift, q) for q in h) for h in c.holes]
+                prev, m = m.q1, m.then
         return mv
 
     def _drill_if_due(self, lineno: int) -> None:
@@ -563,26 +614,41 @@ class Interpreter:
         if blk.ends:
             self.ended = True  # RET: the end of the program (the block's own words still run)
         if blk.frame:
-            self._sinumerik_frame(blk.frame, blk.words, lineno)
+            self._sinumerik_frame(blk.frame, blk.words, lineno, blk.rpl)
             return [], blk.block_delete
         return blk.words, blk.block_delete
 
-    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int) -> None:
-        """TRANS replaces the programmable frame by a translation, ATRANS adds one, a bare
-        ROT/SCALE/MIRROR deletes it: kept with the G52/G92 shift (program units, work frame)."""
+    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int,
+                         rpl: tuple[float, int] | None) -> None:
+        """The programmable frame (:mod:`postproc.gcode.frames`): TRANS/ROT/SCALE/MIRROR replace
+        it (alone: delete it), their A forms add to it. Its translation is kept with the
+        G52/G92 shift, its rotation, scale and mirror in ``state.frame``."""
+        from postproc.gcode import frames
+
         st = self.state
         given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
         bad = [k for k in given if k not in AXES]
-        if bad or (kind == "RESET" and given):
-            col = given[bad[0]][1] if bad else min(c for _, c in given.values())
-            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {(bad or list(given))[0]} "
-                            "(only a translation in X, Y, Z is read)", lineno, col,
-                            hint="post the program in the coordinates the frame gives")
-        if kind in ("TRANS", "RESET"):
-            st.g92 = [0.0, 0.0, 0.0]
-        for k, a in enumerate(AXES):
-            if a in given:
-                st.g92[k] += given[a][0] * st.unit_mm
+        if bad:
+            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {bad[0]} (the frame's X, Y, Z are read)",
+                            lineno, given[bad[0]][1], hint="post the program in the coordinates the frame gives")
+        angle = None
+        if kind.endswith("ROT"):
+            tilt = next((a for a in "XY" if a in given), None)
+            if tilt is not None:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} {tilt} (a rotation about {tilt} tilts the "
+                                "plane; rotations about Z are read)", lineno, given[tilt][1],
+                                hint="post the program in the coordinates the frame gives")
+            if rpl is not None and "Z" in given:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} with both Z and RPL", lineno, rpl[1])
+            if rpl is not None and st.plane != 170:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} RPL= in a plane other than G17 "
+                                "(a rotation about X or Y)", lineno, rpl[1])
+            angle = rpl[0] if rpl is not None else given["Z"][0] if "Z" in given else None
+        if kind.endswith("SCALE") and any(v == 0.0 for v, _c in given.values()):
+            raise self._err(GcodeSyntaxError, f"Sinumerik {kind} with a factor 0", lineno,
+                            min(c for _v, c in given.values()))
+        st.frame, st.g92 = frames.next_frame(kind, st.frame, st.g92, {a: v for a, (v, _c) in given.items()}, angle,
+                                             st.unit_mm)
         self._run_shift = None
 
     def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:

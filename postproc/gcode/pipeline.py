@@ -1080,6 +1080,12 @@ class Corrector(EmitterMixin):
 
         unit = mv.unit
         words = ["G0" if kind == RAPID else "G1"]
+        if mv.frame is not None:  # words in the frame's coordinates (Sinumerik ROT/SCALE/MIRROR)
+            from postproc.gcode import frames
+
+            q_m, prev_m = q, prev
+            prev, q = (frames.program_from_machine(mv.frame, mv.shift, p) for p in (prev, q))
+            axes = tuple(k for k in range(3) if emit.fmt(q[k] / unit, decimals) != emit.fmt(prev[k] / unit, decimals))
         for k in axes:
             v = (q[k] - prev[k]) / unit if mv.incremental else (q[k] - mv.shift[k]) / unit
             words.append("XYZ"[k] + emit.fmt(v, decimals))
@@ -1090,9 +1096,11 @@ class Corrector(EmitterMixin):
         if ws is None:  # words and blanks only
             raise AssertionError(f"a generated line that is not plain: {text!r}")
         ix, iy, iz = (next((i for i, w in enumerate(ws) if w.letter == a), -1) for a in "XYZ")
+        if mv.frame is not None:
+            prev, q = prev_m, q_m
         step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
                     mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w.letter == "F"), -1), False,
-                    mv.feed, mv.rotary, motion_idx=0, planned=planned)
+                    mv.feed, mv.rotary, motion_idx=0, planned=planned, frame=mv.frame)
         return (text.lower() if lower else text), step, True, kind
 
     # -- splines -------------------------------------------------------------------------

@@ -18,9 +18,9 @@ number (``X10.5``, ``G1``), addresses with ``=`` (``X=10.5``, ``CR=5``, ``T="CUT
 - ``DEF REAL|INT|BOOL NAME=value``, ``R1=...``, ``NAME=...`` and words whose value is an
   expression (``X=R1*2``): evaluated in order, a word's number being the expression's
   value, its span the expression's text (which the correction replaces with a number);
-- ``TRANS X.. Y.. Z..`` (the programmable frame's translation, replaced) and ``ATRANS``
-  (added to it); ``ROT``, ``SCALE``, ``MIRROR`` without values, which delete the
-  programmable frame (Fundamentals, "Frames").
+- the programmable frame (Fundamentals, "Frames"): ``TRANS``, ``ROT Z=``/``ROT RPL=``,
+  ``SCALE``, ``MIRROR`` (replacing it; alone, deleting it) and ``ATRANS``, ``AROT``,
+  ``ASCALE``, ``AMIRROR`` (added to it), with their axis words (and RPL=).
 
 Everything else is refused naming the construct in Sinumerik's words (the dialect's
 ``refused`` list names the cycles, frames, variables and control with what to post instead).
@@ -50,10 +50,10 @@ KEPT_CALLS = frozenset({"MSG", "CYCLE832", "SETMS", "WORKPIECE", "TOOLGEOMETRY"}
 #: (CYCLE83-CYCLE88 are refused by the dialect's list, naming them)
 DRILL_CYCLES = frozenset({"CYCLE81", "CYCLE82", "CYCLE89"})
 END_KEYWORDS = frozenset({"RET"})
-#: frame instructions read: TRANS/ATRANS with X, Y, Z (a translation); ROT, SCALE, MIRROR
-#: (and their A forms) only without values, which delete the programmable frame
-FRAME_KEYWORDS = frozenset({"TRANS", "ATRANS"})
-FRAME_RESETS = frozenset({"ROT", "SCALE", "MIRROR"})
+#: frame instructions read (Fundamentals, "Coordinate transformations (frames)"): TRANS,
+#: ROT, SCALE, MIRROR replace the programmable frame (without values: delete it), their A
+#: forms add to it in the current coordinates
+FRAME_KEYWORDS = frozenset({"TRANS", "ATRANS", "ROT", "AROT", "SCALE", "ASCALE", "MIRROR", "AMIRROR"})
 _NUMBER_CHARS = "0123456789.+-"
 
 
@@ -67,7 +67,8 @@ class SinumerikBlock:
     absolute: list[tuple[str, int]] = field(default_factory=list)  # (letter, col) given as =AC()
     incremental: list[tuple[str, int]] = field(default_factory=list)  # (letter, col) given as =IC()
     tool_name: str | None = None  # T="name"
-    frame: str = ""  # TRANS (replaces the programmable frame), ATRANS (adds to it), RESET (ROT etc. alone)
+    frame: str = ""  # the frame instruction of the block (TRANS, AROT, ...)
+    rpl: tuple[float, int] | None = None  # ROT/AROT RPL=angle: (degrees, column)
     mcall: bool = False  # MCALL: the call that follows is modal (a bare MCALL cancels it)
     call: CycleCall | None = None  # a drilling cycle called in the block
 
@@ -208,10 +209,10 @@ class _Reader:
             return digits
         if ident in KEPT_KEYWORDS:
             return digits
-        if ident in FRAME_KEYWORDS or ident in FRAME_RESETS:
+        if ident in FRAME_KEYWORDS:
             if self.block.frame or any(w.letter != "N" for w in self.block.words):
                 raise self.refuse(k, f"{ident} not alone in its block", "write the frame in a block of its own")
-            self.block.frame = ident if ident in FRAME_KEYWORDS else "RESET"
+            self.block.frame = ident
             return digits
         raise self.refuse(k, f"{ident} (not read by postproc)", "post the program without it")
 
@@ -247,6 +248,10 @@ class _Reader:
                                        col=v + 1)
             self.block.tool_name = code[v + 1:end]
             return end + 1
+        if name == "RPL" and self.block.frame in ("ROT", "AROT"):
+            value, e = self.expression(v)
+            self.block.rpl = (value, k + 1)
+            return e
         if name in KEPT_SETTINGS:
             e = _number(code, v)
             if e == v:
