@@ -460,3 +460,53 @@ def test_drill_cycle_under_rotation():
 def test_rpl_only_in_g17():
     with pytest.raises(UnsupportedGcodeError, match="Sinumerik ROT RPL= in a plane other than G17"):
         run("G54 D1\nG18\nROT RPL=30\n", ZERO)
+
+
+# -- control flow (Job planning, "Program jumps and branches", "Program section repetitions",
+# "Control structures"): expanded into a flat program ---------------------------------------
+def flat(text):
+    from postproc.gcode.expand import expand
+
+    return "".join(sl.text for sl in expand(text.splitlines(keepends=True), path="p.mpf", dialect="sinumerik"))
+
+
+def test_for_while_if_goto_repeat_flattened_by_hand():
+    text = ("G54 D1\nDEF INT I\nG0 X0 Y0 Z5\nFOR I=1 TO 3\nG1 X=I*10 F100\nENDFOR\nR1=0\nWHILE R1<2\n"
+            "R1=R1+1\nG0 Y=R1\nENDWHILE\nIF R1==2 GOTOF SKIP\nG0 X99\nSKIP: G0 Z10\nSTART:\nG0 X1\n"
+            "REPEAT START P=2\nM30\nG0 X77\n")
+    assert flat(text) == ("G54 D1\nDEF INT I\nG0 X0 Y0 Z5\nI=1\nG1 X=I*10 F100\nI=2\nG1 X=I*10 F100\nI=3\n"
+                          "G1 X=I*10 F100\nI=4\nR1=0\nR1=R1+1\nG0 Y=R1\nR1=R1+1\nG0 Y=R1\nG0 Z10\n"
+                          ";START:\nG0 X1\n;START:\nG0 X1\n;START:\nG0 X1\nM30\n")
+    _, moves = run(flat(text), ZERO)
+    assert [m.q1 for m in moves][1:4] == [(10.0, 0.0, 5.0), (20.0, 0.0, 5.0), (30.0, 0.0, 5.0)]
+
+
+def test_if_else_loop_gotob_repeat_two_labels():
+    text = ("R1=5\nIF R1>3 AND NOT R1==4\nG0 X1\nELSE\nG0 X2\nENDIF\nIF (R1<0) OR R1>=6\nG0 X3\nELSE\nG0 X4\n"
+            "ENDIF\nR2=0\nLOOP\nR2=R2+1\nIF R2>=2 GOTOF OUT\nENDLOOP\nOUT:\nR3=0\nBACK: R3=R3+1\n"
+            "IF R3<3 GOTOB BACK\nA1: G0 Y1\nA2: G0 Y2\nREPEAT A1 A2 P=1\nREPEATB A2 P=2\nR4=0\nREPEAT\nR4=R4+1\n"
+            "UNTIL R4==2\nM30\n")
+    assert flat(text) == ("R1=5\nG0 X1\nG0 X4\nR2=0\nR2=R2+1\nR2=R2+1\n;OUT:\nR3=0\nR3=R3+1\nR3=R3+1\nR3=R3+1\n"
+                          "G0 Y1\nG0 Y2\nG0 Y1\nG0 Y2\nG0 Y2\nG0 Y2\nR4=0\nR4=R4+1\nR4=R4+1\nM30\n")
+
+
+def test_control_flow_corrected_flat_with_header():
+    text = "%_N_L_MPF\nG54 D1\nG0 X0 Y0 Z0\nR1=0\nLAB1: G0 X=R1\nR1=R1+1\nIF R1<3 GOTOB LAB1\nM30\n"
+    out, rep = correct(text, ZERO)
+    assert rep.expanded
+    assert ";POSTPROC EXPANDED SUBPROGRAMS LOOPS AND MACROS\n" in out
+    assert body(out) == "%_N_L_MPF\nG54 D1\nG0 X0 Y0 Z0\nR1=0\n" + "G0 X=R1\nR1=R1+1\n" * 3 + "M30\n"
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("GOTOF NOWHERE\n", "GOTOF NOWHERE: jump label not found after"),
+    ("IF R1==0\nG0 X1\n", "IF without its ENDIF"),
+    ("ENDWHILE\n", "ENDWHILE without its WHILE"),
+    ("FOR J=1 TO 2\nENDFOR\n", "FOR variable J is not defined"),
+    ("LAB: G0 X1\nGOTOB LAB\n", "program runs more than 1000 blocks"),
+])
+def test_control_flow_errors(text, message):
+    from postproc.gcode.sinumerik_expand import expand_sinumerik
+
+    with pytest.raises((GcodeSyntaxError, UnsupportedGcodeError), match=message):
+        list(expand_sinumerik(("R1=0\n" + text).splitlines(keepends=True), "p.mpf", 1000))

@@ -336,8 +336,8 @@ class Interpreter:
             m = re.search(pattern, line)
             if m:
                 what = construct.format(*m.groups())
-                raise self._err(UnsupportedGcodeError, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1,
-                                hint=instead)
+                cls = self._construct_error(what) if construct in self.d.expanded_constructs else UnsupportedGcodeError
+                raise self._err(cls, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1, hint=instead)
         other = foreign_dialect(line, self.d.name)
         if other is not None:
             name, title, construct = other

@@ -1573,14 +1573,14 @@ def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart:
     restart()
     lines = list(get_lines())
     source: deque[tuple[int, str | None]] = deque()
+    c = corrector()
 
     def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
-                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=setup.variables):
+                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables):
             source.append((sl.lineno, sl.path))
             yield sl.text
 
-    c = corrector()
     c.expanded = True
     report = c.run(texts(), write, progress=progress, source=source)
     report.expanded = True
