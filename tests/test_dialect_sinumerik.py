@@ -510,3 +510,64 @@ def test_control_flow_errors(text, message):
 
     with pytest.raises((GcodeSyntaxError, UnsupportedGcodeError), match=message):
         list(expand_sinumerik(("R1=0\n" + text).splitlines(keepends=True), "p.mpf", 1000))
+
+
+# -- subprograms (Job planning, "Subprogram technique") ----------------------------------------
+SUBS = DATA / "subprograms"
+
+
+def test_subprogram_calls_by_hand():
+    """HOLE(-4, 10): DEPTH=-4 and XP=10 by value, HALF=-2: G0 X10, G1 Z-2, G1 Z-4, G0 Z5;
+    CALL "HOLE" without arguments: both parameters 0; L12 P2: the L12 subprogram twice
+    (G91 X1 each); after the calls the caller's DEPTH (99) is its own again."""
+    text = (SUBS / "CALLS.MPF").read_text()
+    flat_text = "".join(sl.text for sl in __import__("postproc.gcode.expand", fromlist=["expand"]).expand(
+        text.splitlines(keepends=True), path=str(SUBS / "CALLS.MPF"), dialect="sinumerik"))
+    assert ";HOLE(-4, 10)\nDEF REAL DEPTH=-4\nDEF REAL XP=10\n;%_N_HOLE_SPF\n" in flat_text
+    assert ";RET\nDEPTH=99\n" in flat_text
+    _, moves = run(flat_text, ZERO)
+    assert ends(moves) == [(0.0, 0.0, 5.0), (10.0, 0.0, 5.0), (10.0, 0.0, -2.0), (10.0, 0.0, -4.0),
+                           (10.0, 0.0, 5.0), (0.0, 0.0, 5.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 5.0),
+                           (1.0, 0.0, 5.0), (2.0, 0.0, 5.0), (2.0, 0.0, 99.0)]
+
+
+def test_subprograms_corrected_flat_and_sources(tmp_path):
+    out, rep = correct_text((SUBS / "CALLS.MPF").read_text(), IdentityEngine(BIG), ZERO,
+                            CorrectOptions(dialect="sinumerik"), path=str(SUBS / "CALLS.MPF"))
+    assert rep.expanded
+    assert "G1 Z=DEPTH\n" in out  # identity: the subprogram's lines as they are
+    # elsewhere, the subprograms are found on --subroutine-path; without it the call is named
+    out2, _ = correct_text((SUBS / "CALLS.MPF").read_text(), IdentityEngine(BIG), ZERO,
+                           CorrectOptions(dialect="sinumerik", subroutine_path=[str(SUBS)]),
+                           path=str(tmp_path / "CALLS.MPF"))
+    assert body(out2) == body(out)
+    with pytest.raises(UnsupportedGcodeError, match="Sinumerik HOLE"):
+        correct_text((SUBS / "CALLS.MPF").read_text(), IdentityEngine(BIG), ZERO,
+                     CorrectOptions(dialect="sinumerik"), path=str(tmp_path / "CALLS.MPF"))
+
+
+@pytest.mark.parametrize(("sub", "message"), [
+    ("PROC S1(REAL A) SAVE\nG0 X=A\nRET\n", "PROC S1 SAVE"),
+    ("PROC S1(VAR REAL A)\nG0 X=A\nRET\n", "PROC parameter 'VAR REAL A'"),
+    ("PROC S1(REAL A)\nG0 X=A RET\n", "M17/RET with other words"),
+])
+def test_subprogram_refusals(tmp_path, sub, message):
+    from postproc.gcode.sinumerik_expand import expand_sinumerik
+
+    (tmp_path / "S1.SPF").write_text(sub)
+    with pytest.raises(UnsupportedGcodeError, match=message):
+        list(expand_sinumerik(["S1(1)\n", "M30\n"], str(tmp_path / "M.MPF"), 1000))
+
+
+def test_missing_subprogram_named(tmp_path):
+    from postproc.gcode.sinumerik_expand import expand_sinumerik
+
+    with pytest.raises(UnsupportedGcodeError, match="L99: subprogram call, L99.SPF not found"):
+        list(expand_sinumerik(["L99\n"], str(tmp_path / "M.MPF"), 1000))
+    out = list(expand_sinumerik(["EXTERN S2(REAL)\n", "G0 X1\n"], str(tmp_path / "M.MPF"), 1000))
+    assert [t for _k, _f, t, _o in out] == [";EXTERN S2(REAL)\n", "G0 X1\n"]
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "s2.spf").write_text("PROC S2(REAL A)\nG0 X=A\nM17\n")
+    out = list(expand_sinumerik(["S2(3)\n"], str(tmp_path / "M.MPF"), 1000, [tmp_path / "lib"]))
+    assert [t for _k, _f, t, _o in out][-2:] == ["G0 X=A\n", ";M17\n"]
+    assert out[-2][1] == str(tmp_path / "lib" / "s2.spf")

@@ -350,6 +350,7 @@ DIALECTS["okuma"] = replace(
 SINUMERIK_MAX_LINE = 511
 SINUMERIK_ARC_ABS_MM = 0.01
 SINUMERIK_ARC_REL = 0.001
+_SINU_SUB = "subprogram call, PROC or EXTERN"
 _SINU_CONTROL = "program control (label, IF/WHILE/LOOP/FOR/REPEAT/GOTO)"
 _SINU_WHAT_INSTEAD = "post the machining as its moves (G1/G2/G3) instead of the cycle call"
 DIALECTS["sinumerik"] = Dialect(
@@ -367,7 +368,7 @@ DIALECTS["sinumerik"] = Dialect(
            "MD21000/MD21010",
     text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
     chosen_by=(r"\s*%_N_\w+_(?:MPF|SPF)\b", r"\s*;\s*\$PATH\s*="),
-    expanded_constructs=frozenset({_SINU_CONTROL}),
+    expanded_constructs=frozenset({_SINU_CONTROL, _SINU_SUB}),
     block_syntax="sinumerik", radius_word="CR=", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
     # G500 (settable frames off) and G505-G599 are work offsets; G64x continuous path, G60/G60x/G9
     # exact stop, G70/G71 and G700/G710 inch/metric (Fundamentals: "Inch/metric dimensions")
@@ -409,8 +410,8 @@ DIALECTS["sinumerik"] = Dialect(
          "post the program in the work coordinates the frame gives (ROT/AROT about Z is read)"),
         (r"(?i)\b(?:IF|ELSE|WHILE|LOOP|FOR|REPEATB?|GOTOF|GOTOB|GOTOC|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR|UNTIL)\b"
          r"|^\s*(?:N\d+\s+)?[A-Za-z_]\w*:(?!=)", _SINU_CONTROL, "post the program flat (loops written out)"),
-        (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL)\b|^\s*(?:N\d+\s*)?L\d+\b", "subprogram call or PROC",
-         "write the subprogram's moves in the main program"),
+        (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL|EXTERN)\b|^\s*(?:N\d+\s*)?L\d+\b", _SINU_SUB,
+         "give the subprogram's directory with --subroutine-path, or write its moves in the main program"),
         (r"(?i)\bTURN\s*=", "TURN= helix turns", "post the helix as its arcs"),
     ))
 

@@ -1150,8 +1150,8 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     if get_dialect(dialect).expanded_constructs:  # Sinumerik labels, GOTO, IF/WHILE/FOR/REPEAT
         from postproc.gcode.sinumerik_expand import expand_sinumerik
 
-        return (SourceLine(k + 1, path, text, original)
-                for k, text, original in expand_sinumerik(list(lines), path, max_lines))
+        return (SourceLine(k + 1, file, text, original)
+                for k, file, text, original in expand_sinumerik(list(lines), path, max_lines, subroutine_path))
     ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
     ex.seed(variables or {})
     return ex.run()

@@ -194,6 +194,8 @@ _COMMENTS = re.compile(r"\([^)]*\)?|;.*")
 _BLANK_KINDS = frozenset((lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE))
 _OWORD = re.compile(r"^\s*/?\s*(?:N\s*\d+\s*)?O\s*(?:\d+|<[^>]*>)\s*([A-Z]+)?")
 _MACRO_KEYWORDS = re.compile(r"\b(IF|WHILE|GOTO|END|DO)\s*[\[\d]|\bGOTO")
+# a Sinumerik block that is a name alone, or a name with arguments: perhaps a subprogram call
+_SINUMERIK_NAME_CALL = re.compile(r"(?i)^\s*(?:N\d+\s+)?[A-Z_]\w*\s*(?:\(.*\))?\s*(?:P\s*=?\s*\d+)?\s*$")
 _ASSIGN = re.compile(r"#\s*(?:\d+|<[^>]*>|\[)[^=]*=")
 
 
@@ -575,7 +577,12 @@ class Interpreter:
         code = sinumerik.code_of(line)
         if code.strip():
             self._foreign(code, lineno)
-        blk = sinumerik.read_block(line, self.path, lineno, self.variables)
+        try:
+            blk = sinumerik.read_block(line, self.path, lineno, self.variables)
+        except UnsupportedGcodeError as exc:
+            if self.may_expand and _SINUMERIK_NAME_CALL.match(code):  # NAME or NAME(...): a subprogram call?
+                raise self._err(NeedsExpansion, exc.message, lineno, exc.col or 1, hint=exc.hint) from None
+            raise
         g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
         incremental = True if 910 in g else False if 900 in g else self.state.incremental
         centre_ac = [letter for letter, _ in blk.absolute if letter in "IJK"]

@@ -20,6 +20,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from postproc.errors import GcodeSyntaxError, UnsupportedGcodeError
 from postproc.gcode import sinumerik
@@ -34,6 +35,34 @@ _REPEAT = re.compile(r"(?i)^([A-Za-z_][A-Za-z0-9_]*)(?:\s+([A-Za-z_][A-Za-z0-9_]
 _COMPARE = ("==", "<>", "<=", ">=", "<", ">")
 
 
+#: subprogram nesting (Job planning, "Subprogram technique": up to 16 levels with the main program)
+MAX_CALL_DEPTH = 16
+_L_CALL = re.compile(r"(?i)^\s*(?:N\d+\s+)?L(\d+)(?:\s+P\s*=?\s*(\d+))?\s*$")
+_NAME_CALL = re.compile(r"(?i)^\s*(?:N\d+\s+)?(?:CALL\s+\"([A-Za-z_]\w*)\"|([A-Za-z_]\w*)\s*(?:\((.*)\))?)"
+                        r"(?:\s+P\s*=?\s*(\d+))?\s*$")
+_PROC = re.compile(r"(?i)^\s*(?:N\d+\s+)?PROC\s+([A-Za-z_]\w*)\s*(?:\((.*?)\))?\s*(.*)$")
+_EXTERN = re.compile(r"(?i)^\s*(?:N\d+\s+)?EXTERN\s+([A-Za-z_]\w*)")
+_RETURN = re.compile(r"(?i)\bM0*17\b|\bRET\b")
+_DEF_NAMES = re.compile(r"(?i)^\s*(?:N\d+\s+)?DEF\s+\w+\s+(.*)$")
+
+
+@dataclass
+class _Shared:
+    """What every level of the program shares: the variables, the blocks run, where the
+    subprograms are, the names EXTERN declared."""
+
+    env: dict[str, float]
+    max_lines: int
+    subroutine_path: tuple[Path, ...]
+    executed: int = 0
+    externs: set[str] | None = None
+    depth: int = 0
+
+
+class _End(Exception):
+    """M2/M30 in a subprogram: the end of the whole program."""
+
+
 @dataclass
 class _Repeat:
     start: int  # first line of the section
@@ -43,11 +72,14 @@ class _Repeat:
 
 
 class SinumerikExpander:
-    def __init__(self, lines: Sequence[str], path: str | None, max_lines: int) -> None:
+    def __init__(self, lines: Sequence[str], path: str | None, shared: _Shared, sub: bool = False) -> None:
         self.lines = list(lines)
         self.path = path
-        self.max_lines = max_lines
-        self.env: dict[str, float] = {}
+        self.shared = shared
+        self.max_lines = shared.max_lines
+        self.env = shared.env
+        self.sub = sub  # a subprogram: M17/RET return to the caller
+        self.current_path = path  # the file of the line last yielded (a subprogram's while it runs)
         self.codes = [sinumerik.code_of(ln) for ln in self.lines]
         self.labels: dict[str, int] = {}
         self.statements: list[tuple[str, str, int] | None] = []  # (keyword, rest, col) per line
@@ -144,26 +176,42 @@ class SinumerikExpander:
     # -- execution ---------------------------------------------------------------------------
     def run(self) -> Iterator[tuple[int, str, bool]]:  # noqa: C901 - one statement per branch
         """``(line index, text, original)`` of every line run, in order."""
-        k, executed = 0, 0
+        k = 0
         repeats: list[_Repeat] = []
         fors: dict[int, float] = {}  # FOR line -> end value
         n = len(self.lines)
         while k < n:
-            executed += 1
-            if executed > self.max_lines:
+            self.shared.executed += 1
+            if self.shared.executed > self.max_lines:
                 raise self.error(k, 1, f"program runs more than {self.max_lines} blocks: an endless loop, or "
                                  "raise the bound", UnsupportedGcodeError)
             st = self.statements[k]
             nxt = k + 1
-            if st is None:
+            call = self._call_of(k) if st is None else None
+            if call is not None:
+                yield from self._call(k, *call)
+            elif st is None:
                 line, original = self._text(k)
-                if line is not None:
+                if self.sub and _RETURN.search(self.codes[k]):
+                    rest = _RETURN.sub(lambda m: " " * len(m.group()), self.codes[k])
+                    if rest.strip() and not re.fullmatch(r"(?i)\s*N\d+\s*", rest):
+                        raise self.error(k, 1, "M17/RET with other words in its block (not read)",
+                                         UnsupportedGcodeError)
+                    yield k, ";" + self.lines[k], False  # the return, as a comment
+                    return
+                if _EXTERN.match(self.codes[k]) or (self.sub and _PROC.match(self.codes[k])):
+                    self.shared.externs = (self.shared.externs or set()) | {m.group(1).upper() for m in
+                                                                             [_EXTERN.match(self.codes[k])] if m}
+                    yield k, ";" + self.lines[k], False  # a declaration: kept as a comment
+                elif line is not None:
                     try:
                         sinumerik.read_block(line, self.path, k + 1, self.env)  # the variables it sets
                     except UnsupportedGcodeError:
                         pass  # the interpreter refuses it in its words when it reads the line
                     yield k, line, original
                     if self._ends(line):
+                        if self.sub:
+                            raise _End
                         return
             else:
                 kw, rest, col = st
@@ -183,6 +231,88 @@ class SinumerikExpander:
                 nxt = r.back
             k = nxt
 
+    def _call_of(self, k: int) -> tuple[str, list[str], int, int] | None:
+        """``(name, argument texts, repeats, column)`` when line ``k`` calls a subprogram."""
+        code = self.codes[k]
+        m = _L_CALL.match(code)
+        if m:
+            return f"L{m.group(1)}", [], int(m.group(2) or 1), code.upper().index("L") + 1
+        m = _NAME_CALL.match(self.lines[k][:sinumerik._code_end(self.lines[k])])  # CALL "NAME": the string kept
+        if not m:
+            return None
+        name = (m.group(1) or m.group(2)).upper()
+        known = (name in (self.shared.externs or set()) or m.group(1) is not None
+                 or self._file(name) is not None)
+        if not known or name in sinumerik.KEPT_KEYWORDS or name in sinumerik.FRAME_KEYWORDS or name in self.env:
+            return None
+        return name, _parse_args(m.group(3)) if m.group(3) else [], int(m.group(4) or 1), 1
+
+
+    def _file(self, name: str) -> Path | None:
+        where = ([Path(self.path).parent] if self.path else []) + list(self.shared.subroutine_path)
+        return _find(name, where)
+
+
+    def _call(self, k: int, name: str, args: list[str], repeats: int,
+              col: int) -> Iterator[tuple[int, str, bool]]:
+        """Run the subprogram ``name`` ``repeats`` times: its PROC parameters set by value (written
+        as DEF lines), its local variables given back their caller's values on return."""
+        f = self._file(name)
+        if f is None:
+            raise self.error(k, col, f"{name}: subprogram call, {name}.SPF not found beside the program or on "
+                             "--subroutine-path", UnsupportedGcodeError)
+        if self.shared.depth + 1 >= MAX_CALL_DEPTH:
+            raise self.error(k, col, f"{name}: subprograms nested deeper than {MAX_CALL_DEPTH} levels",
+                             UnsupportedGcodeError)
+        values = [None if not a else self.value(a, k) for a in args]
+        from postproc.gcode.lexer import split_lines
+
+        lines = split_lines(f.read_text(encoding="utf-8", errors="replace"))
+        sub = SinumerikExpander(lines, str(f), self.shared, sub=True)
+        params: list[tuple[str, str]] = []
+        for j, code in enumerate(sub.codes):
+            m = _PROC.match(code)
+            if m:
+                if re.search(r"(?i)\bSAVE\b", m.group(3) or ""):
+                    raise sub.error(j, 1, f"PROC {m.group(1)} SAVE (the caller's G codes restored on return: not read)",
+                                    UnsupportedGcodeError)
+                for p in _parse_args(m.group(2)) if m.group(2) else []:
+                    pm = re.fullmatch(r"(?i)(VAR\s+)?(REAL|INT|BOOL)\s+([A-Za-z_]\w*)(?:\s*=\s*(.+))?", p)
+                    if not pm or pm.group(1):
+                        raise sub.error(j, 1, f"PROC parameter {p!r} (REAL, INT or BOOL by value are read)",
+                                        UnsupportedGcodeError)
+                    params.append((pm.group(2).upper(), pm.group(3).upper()))
+                break
+        if len(values) > len(params):
+            raise self.error(k, col, f"{name}: {len(values)} arguments for {len(params)} parameters")
+        ending = self.lines[k][len(self.lines[k].rstrip("\r\n")):] or "\n"
+        yield k, ";" + self.lines[k], False  # the call, as a comment
+        for _ in range(repeats):
+            before = dict(self.env)
+            self.shared.depth += 1
+            for i, (kind_name, pname) in enumerate(params):
+                v = values[i] if i < len(values) and values[i] is not None else 0.0
+                self.env[pname] = v
+                yield k, f"DEF {kind_name} {pname}={sinumerik.number_text(v)}{ending}", False
+            local = {n for _t, n in params}
+            try:
+                for j, text, original in sub.run():
+                    m = _DEF_NAMES.match(sub.codes[j])
+                    if m:
+                        local |= {re.split(r"[=\s\[]", n.strip())[0].upper() for n in m.group(1).split(",")}
+                    self.current_path = sub.current_path
+                    yield j, text, original
+                    self.current_path = self.path
+            finally:
+                self.shared.depth -= 1
+                self.current_path = self.path
+            for n in sorted(local):
+                if n in before:
+                    self.env[n] = before[n]
+                    yield k, f"{n}={sinumerik.number_text(before[n])}{ending}", False
+                else:
+                    self.env.pop(n, None)
+
     @staticmethod
     def _ends(line: str) -> bool:
         """M2, M17, M30 or RET: the end of the program (what follows is not run)."""
@@ -190,6 +320,8 @@ class SinumerikExpander:
 
     def _text(self, k: int) -> tuple[str | None, bool]:
         line = self.lines[k]
+        if self.sub and line.lstrip().startswith("%"):
+            return ";" + line, False  # a subprogram's %_N_..._SPF file header, inside the flat program
         m = _LABEL.match(self.codes[k])
         if not m or m.group(2).upper() in sinumerik.FRAME_KEYWORDS:
             return line, True
@@ -276,6 +408,42 @@ class SinumerikExpander:
         raise self.error(k, col, f"{kw} (not read by postproc)", UnsupportedGcodeError)
 
 
-def expand_sinumerik(lines: Sequence[str], path: str | None, max_lines: int) -> Iterator[tuple[int, str, bool]]:
-    """The flat program of ``lines``: ``(line index, text, original)`` per line run."""
-    return SinumerikExpander(lines, path, max_lines).run()
+def expand_sinumerik(lines: Sequence[str], path: str | None, max_lines: int,
+                     subroutine_path: Sequence[Path] = ()) -> Iterator[tuple[int, str | None, str, bool]]:
+    """The flat program of ``lines``: ``(line index, file, text, original)`` per line run
+    (the file: ``path`` or a subprogram's)."""
+    shared = _Shared({}, max_lines, tuple(Path(p) for p in subroutine_path))
+    ex = SinumerikExpander(lines, path, shared)
+    try:
+        for k, text, original in ex.run():
+            yield k, ex.current_path, text, original
+    except _End:
+        return
+
+
+# -- subprograms (Job planning, "Subprogram technique": L<n>, a name, CALL, PROC, M17/RET) ------
+def _parse_args(text: str) -> list[str]:
+    """A call's arguments as texts (commas inside parentheses kept)."""
+    out, depth, cur = [], 0, ""
+    for c in text:
+        if c == "," and depth == 0:
+            out.append(cur)
+            cur = ""
+            continue
+        depth += (c == "(") - (c == ")")
+        cur += c
+    out.append(cur)
+    return [a.strip() for a in out]
+
+
+def _find(name: str, where: Sequence[Path]) -> Path | None:
+    for d in where:
+        try:
+            for f in sorted(d.iterdir()):
+                if f.stem.upper() in (name.upper(), f"_N_{name.upper()}_SPF") and f.suffix.upper() in (".SPF", ".MPF"):
+                    return f
+        except OSError:
+            continue
+    return None
+
+
