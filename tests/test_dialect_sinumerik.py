@@ -504,6 +504,7 @@ def test_control_flow_corrected_flat_with_header():
     ("ENDWHILE\n", "ENDWHILE without its WHILE"),
     ("FOR J=1 TO 2\nENDFOR\n", "FOR variable J is not defined"),
     ("LAB: G0 X1\nGOTOB LAB\n", "program runs more than 1000 blocks"),
+    ("N10REPEAT NOLBL P=2\n", "REPEAT NOLBL: jump label not found"),
 ])
 def test_control_flow_errors(text, message):
     from postproc.gcode.sinumerik_expand import expand_sinumerik
@@ -571,3 +572,11 @@ def test_missing_subprogram_named(tmp_path):
     out = list(expand_sinumerik(["S2(3)\n"], str(tmp_path / "M.MPF"), 1000, [tmp_path / "lib"]))
     assert [t for _k, _f, t, _o in out][-2:] == ["G0 X=A\n", ";M17\n"]
     assert out[-2][1] == str(tmp_path / "lib" / "s2.spf")
+
+
+def test_subprogram_file_corrected_on_its_own():
+    """A PROC file without parameters read as the program: PROC kept as a comment, RET its end."""
+    text = "%_N_SUB_SPF\nPROC SUB\nG54 D1\nG0 X1 Y1 Z1\nRET\n"
+    out, rep = correct(text, ZERO)
+    assert rep.expanded
+    assert body(out) == "%_N_SUB_SPF\n;PROC SUB\nG54 D1\nG0 X1 Y1 Z1\nRET\n"

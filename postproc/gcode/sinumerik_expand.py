@@ -199,7 +199,7 @@ class SinumerikExpander:
                                          UnsupportedGcodeError)
                     yield k, ";" + self.lines[k], False  # the return, as a comment
                     return
-                if _EXTERN.match(self.codes[k]) or (self.sub and _PROC.match(self.codes[k])):
+                if _EXTERN.match(self.codes[k]) or _PROC.match(self.codes[k]):
                     self.shared.externs = (self.shared.externs or set()) | {m.group(1).upper() for m in
                                                                              [_EXTERN.match(self.codes[k])] if m}
                     yield k, ";" + self.lines[k], False  # a declaration: kept as a comment
