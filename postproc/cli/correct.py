@@ -147,9 +147,11 @@ def _progress_printer(total_hint: str):
 @setup_options
 @click.option("--cycles", type=click.Choice(["keep", "expand"]), default="keep", show_default=True,
               help="Canned cycles (G73, G81-G89): keep them, corrected at the hole (refused when the correction "
-                   "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected.")
+                   "tilts the hole beyond --tolerance), or expand them into G0/G1 moves, each corrected. "
+                   "Sinumerik's CYCLE81/82/89 (and MCALL) are read only with expand.")
 @click.option("--subroutine-path", "subroutine_path", multiple=True, type=click.Path(file_okay=False),
-              help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "
+              help="Folder searched for o<name> call subroutines (<name>.ngc), M98 subprogram files and "
+                   "Sinumerik subprograms (<name>.SPF/.MPF), "
                    "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")
 @click.option("--no-expand", "no_expand", is_flag=True,
               help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")
