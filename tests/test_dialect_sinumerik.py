@@ -434,8 +434,19 @@ def test_scale_ascale_amirror_by_hand():
 
 
 def test_unequal_scale_refuses_arcs():
-    with pytest.raises(UnsupportedGcodeError, match="arc under SCALE with unequal X and Y"):
+    with pytest.raises(UnsupportedGcodeError, match="arc under a frame that does not keep it a circle"):
         run("G54 D1\nG0 X0 Y0 Z0\nSCALE X2\nG0 X10 Y0\nG2 X0 Y10 I-10 F100\n", ZERO)
+    with pytest.raises(UnsupportedGcodeError, match="arc under a frame that does not keep it a circle"):
+        run("G54 D1\nG0 X0 Y0 Z0\nROT Z30\nG18 G0 X10 Z0\nG2 X0 Z10 I-10 K0 F100\n", ZERO)
+
+
+def test_mirror_of_z_keeps_xy_arcs_and_reverses_xz_arcs():
+    """MIRROR Z0 with G17: the XY arc turns the same way; with G18 (Z, X) it turns the other way."""
+    _, moves = run("G54 D1\nG0 X0 Y0 Z0\nMIRROR Z0\nG0 X10 Y0\nG3 X0 Y10 I-10 F100\nG18 G0 X10 Z0\n"
+                   "G3 X0 Z10 I-10 K0\n", ZERO)
+    assert not moves[2].arc.clockwise
+    assert moves[4].arc.clockwise
+    assert moves[4].q1 == pytest.approx((0.0, 10.0, -10.0))
 
 
 def test_rotated_lines_written_in_the_frame():

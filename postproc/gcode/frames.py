@@ -71,12 +71,25 @@ def program_from_machine(a: Frame, shift: Sequence[float], q: Sequence[float]) -
     return machine_from_program(inverse(a), shift, q)
 
 
-def keeps_circles(a: Frame) -> bool:
-    """Whether ``a`` maps a circle in XY onto a circle (a rotation about Z times a uniform
-    scale in X and Y, possibly mirrored) and does not tilt Z."""
-    x, y = (a[0], a[3]), (a[1], a[4])
-    return (abs(x[0] * y[0] + x[1] * y[1]) <= FRAME_EPS and abs(math.hypot(*x) - math.hypot(*y)) <= FRAME_EPS
-            and a[2] == a[5] == a[6] == a[7] == 0.0)
+def keeps_circles(a: Frame, axes: tuple[int, int, int] = (0, 1, 2)) -> bool:
+    """Whether ``a`` maps a circle in the plane of ``axes`` (its two in-plane axes, then the
+    normal: ``PLANES``) onto a circle in that plane: it keeps the plane and its normal, and
+    scales both in-plane axes alike (a rotation in the plane, possibly mirrored)."""
+    p, q, n = axes
+
+    def at(i: int, j: int) -> float:
+        return a[3 * i + j]
+
+    u, v = (at(p, p), at(q, p)), (at(p, q), at(q, q))
+    return (abs(u[0] * v[0] + u[1] * v[1]) <= FRAME_EPS and abs(math.hypot(*u) - math.hypot(*v)) <= FRAME_EPS
+            and at(n, p) == at(n, q) == at(p, n) == at(q, n) == 0.0)
+
+
+def reverses_arcs(a: Frame, axes: tuple[int, int, int] = (0, 1, 2)) -> bool:
+    """Whether ``a`` turns the arcs of the plane of ``axes`` the other way (a mirror of one of
+    its two axes: G2 becomes G3; a mirror of the normal alone does not)."""
+    p, q, _n = axes
+    return a[3 * p + p] * a[3 * q + q] - a[3 * p + q] * a[3 * q + p] < 0
 
 
 def next_frame(kind: str, frame: Frame | None, translation: Sequence[float], given: dict[str, float],

@@ -472,7 +472,6 @@ class Interpreter:
         finally:
             s1 = self.shift(False, lineno, 1)
             st.pos = list(frames.machine_from_program(a, s1, st.pos))
-        mirrored = frames.determinant(a) < 0
         for m in (mv, self.cycle_move):
             prev = real if m is mv or m is None else frames.machine_from_program(a, m.shift, m.q0)
             while m is not None:
@@ -480,12 +479,14 @@ class Interpreter:
                 m.q1 = frames.machine_from_program(a, m.shift, m.q1)
                 m.frame = a
                 if m.arc is not None:
-                    if not frames.keeps_circles(a):
-                        raise self._err(UnsupportedGcodeError, "Sinumerik arc under SCALE with unequal X and Y "
-                                        "factors (an ellipse)", lineno, 1,
-                                        hint="post the arc as its moves, or scale X and Y alike")
+                    axes = PLANES[m.arc.plane][0]
+                    if not frames.keeps_circles(a, axes):
+                        raise self._err(UnsupportedGcodeError, "Sinumerik arc under a frame that does not keep it a "
+                                        "circle in its plane (SCALE with unequal factors, or ROT about Z with "
+                                        "G18/G19)", lineno, 1,
+                                        hint="post the arc as its moves, or scale the plane's axes alike")
                     m.arc.center = frames.machine_from_program(a, m.shift, m.arc.center)
-                    m.arc.clockwise = m.arc.clockwise != mirrored
+                    m.arc.clockwise = m.arc.clockwise != frames.reverses_arcs(a, axes)
                 if m.cycle is not None:
                     c = m.cycle
                     c.steps = [(k, q if k == DWELL else frames.machine_from_program(a, m.shift, q))
