@@ -591,3 +591,19 @@ def test_subprogram_file_corrected_on_its_own():
     out, rep = correct(text, ZERO)
     assert rep.expanded
     assert body(out) == "%_N_SUB_SPF\n;PROC SUB\nG54 D1\nG0 X1 Y1 Z1\nRET\n"
+
+
+def test_diff_reads_expanded_cycles_and_frames(tmp_path):
+    """diff pairs a corrected program's cycle moves with the original's MCALL holes, and
+    reads plain lines under MCALL or ROT one at a time (not as a plain stretch)."""
+    for name, text in (("drill", (DATA / "drill_plate.mpf").read_text()),
+                       ("rot", "%_N_R_MPF\nG54 D1\nG0 X0 Y0 Z0\nROT Z90\nG0 X10 Y0\nG1 X10 Y5 F100\nX20\nROT\nM30\n")):
+        src = tmp_path / f"{name}.mpf"
+        src.write_text(text)
+        out = tmp_path / f"{name}_out.mpf"
+        res = CliRunner().invoke(main, ["correct", str(src), "-c", CAL, "-o", str(out), "--cycles", "expand",
+                                        "--offset", "G54=X100,Y100,Z100", "--tool-length", "1=100"])
+        assert res.exit_code == 0, res.output
+        res = CliRunner().invoke(main, ["diff", str(src), str(out)])
+        assert res.exit_code == 0, res.output
+        assert "moves: " in res.output

@@ -1212,30 +1212,19 @@ class Corrector(EmitterMixin):
             raise UnsupportedGcodeError(
                 f"Sinumerik {call} (drilling cycle call): read only when written as its moves", path=self.path, lineno=lineno, col=1,
                 hint="give --cycles expand to write each hole as its G0/G1 moves, each corrected")
-        if interp.call_line:
-            entries.append((";" + line, None, False, None))  # the call, kept as a comment
-        elif mv is not None:
-            entries.append((line, mv, interp.motion_word, interp.state.motion))
-        if cyc is None or cyc.cycle is None:
-            return
+        d = _unit_decimals(self.opt, cyc.unit if cyc is not None else 1.0)
         ending = emit.line_ending(line) or "\n"
         sep, lower = emit.style_of(line)
-        sep = sep or " "
-        d = _unit_decimals(self.opt, cyc.unit)
-        prev = cyc.q0
-        for kind, q in cyc.cycle.steps:
-            if kind == DWELL:
-                text = f"G4{sep}F{emit.fmt(q[0], 3).rstrip('0').rstrip('.') or '0'}"
-                entries.append(((text.lower() if lower else text) + ending, None, False, None))
-                continue
-            moved = tuple(k for k in range(3) if q[k] != prev[k])
-            if moved:
-                entries.append(self._generated_move(cyc, kind, prev, q, moved, False, d, sep, lower, ending))
-                prev = q
-        motion = interp.state.motion
-        if motion is not None and motion != RAPID:
-            text = f"G{motion // 10}"  # the program's G1/G2/G3 again after the cycle's G0 retract
-            entries.append(((text.lower() if lower else text) + ending, None, False, None))
+        for step in emit.drill_cycle_lines(line, bool(interp.call_line), mv, cyc, interp.state.motion):
+            if step is None:
+                entries.append((line, mv, interp.motion_word, interp.state.motion))
+            elif isinstance(step, str):
+                entries.append((step, None, False, None))
+            else:
+                kind, prev, q, moved, _first = step
+                entries.append(self._generated_move(cyc, kind, prev, q, moved, False, d, sep or " ", lower, ending))
+        if cyc is None:
+            return
         self.report.cycles_expanded += 1
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
