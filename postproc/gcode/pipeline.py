@@ -53,7 +53,7 @@ from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion,
 from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import DWELL, LINE, PLANES, RAPID
+from postproc.gcode.state import LINE, PLANES, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
