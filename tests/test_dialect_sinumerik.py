@@ -607,3 +607,17 @@ def test_diff_reads_expanded_cycles_and_frames(tmp_path):
         res = CliRunner().invoke(main, ["diff", str(src), str(out)])
         assert res.exit_code == 0, res.output
         assert "moves: " in res.output
+
+
+@pytest.mark.parametrize(("line", "construct"), [
+    ("LAB1: G0 X1", "Sinumerik program control (label, IF/WHILE/LOOP/FOR/REPEAT/GOTO)"),
+    ("WHILE R1<2", "Sinumerik program control"),
+    ("L12", "Sinumerik subprogram call, PROC or EXTERN"),
+    ("HOLE(1, 2)", "Sinumerik HOLE() call"),
+])
+def test_no_expand_refuses_control_and_calls_by_name(line, construct):
+    with pytest.raises(UnsupportedGcodeError) as err:
+        correct_text(f"G54 D1\nR1=0\n{line}\nM30\n", IdentityEngine(BIG), ZERO,
+                     CorrectOptions(dialect="sinumerik", expand=False), path="p.mpf")
+    assert construct in str(err.value)
+    assert err.value.lineno == 3
