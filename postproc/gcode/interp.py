@@ -435,7 +435,7 @@ class Interpreter:
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
         if self.state.frame is not None:
-            return self._framed_block(lineno, words, block_delete)
+            return self._framed_block(lineno, words, block_delete, self.state.frame)
         return self._block_and_cycle(lineno, words, block_delete)
 
     def _block_and_cycle(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
@@ -451,7 +451,8 @@ class Interpreter:
         self._drill_if_due(lineno)
         return mv
 
-    def _framed_block(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
+    def _framed_block(self, lineno: int, words: list[lexer.Word], block_delete: bool,
+                      a: tuple[float, ...]) -> Move | None:
         """A block under a rotating, scaling or mirroring frame (Sinumerik): read as if the
         frame had no linear part, from the position seen in the frame's coordinates, then its
         points mapped to the machine (:func:`frames.machine_from_program`); a mirror turns
@@ -459,8 +460,6 @@ class Interpreter:
         from postproc.gcode import frames
 
         st = self.state
-        a = st.frame
-        assert a is not None  # noqa: S101 - the caller checks it
         try:
             s0 = self.shift(False, lineno, 1)
         except MissingSetupError:
