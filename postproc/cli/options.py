@@ -374,11 +374,12 @@ PROGRAM_OPTIONS: dict[str, tuple[str, dict]] = {
         help="Canned cycles (G73, G81-G89): auto keeps each one whose correction tilts the hole by no more "
              "than --tolerance (corrected at the hole) and expands the others, with the rest of their "
              "series up to G80, into G0/G1 moves, each corrected; keep keeps them all (refusing a tilted "
-             "one); expand expands them all.")),
+             "one); expand expands them all. Sinumerik's CYCLE81/82/89 (and MCALL) are always written as "
+             "their moves (refused with keep).")),
     "--subroutine-path": ("subroutine_path", dict(
         multiple=True, type=click.Path(file_okay=False),
-        help="Folder searched for o<name> call subroutines (<name>.ngc) and M98 subprogram files, "
-             "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")),
+        help="Folder searched for o<name> call subroutines (<name>.ngc), M98 subprogram files and "
+             "Sinumerik subprograms (<name>.SPF/.MPF), as LinuxCNC's SUBROUTINE_PATH. Repeatable.")),
 }
 
 

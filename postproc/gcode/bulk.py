@@ -218,7 +218,8 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
     """Whether the modal state lets a run of plain lines start at the next line (``motion_word``:
     that line names its own G0/G1, so the modal motion does not matter)."""
     st = interp.state
-    return (not interp.ended and not st.incremental and not st.inverse_time and interp._run_shift is not None
+    return (not interp.ended and interp.modal_call is None and st.frame is None
+            and not st.incremental and not st.inverse_time and interp._run_shift is not None
             and st.comp == 400 and not st.comp_edge  # moves under cutter compensation: postproc.gcode.cutter
             and not interp.used_rotary and (motion_word or st.motion in (RAPID, LINE))
             and not (math.isnan(st.pos[0]) or math.isnan(st.pos[1]) or math.isnan(st.pos[2])))

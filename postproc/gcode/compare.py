@@ -594,6 +594,10 @@ class _Reader:
                 rows.keys[i] = self.keys.of_line(lines[i])
                 if mv.cycle is not None and self.expand_cycles:
                     self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle, self.cycle_retract)
+            it = self.interp
+            if self.expand_cycles and (it.call_line or it.cycle_move is not None):  # a Sinumerik drilling cycle
+                self._cycles[i] = emit.drill_cycle_lines(lines[i], bool(it.call_line), mv, it.cycle_move,
+                                                         it.state.motion)
         return b, None
 
     def _with_cycles(self, rows: _Rows) -> _Rows:
@@ -620,6 +624,13 @@ class _Reader:
             end += rows.end[last:i].tolist()
             keys += rows.keys[last:i].tolist()
             for k, step in enumerate(cycles[i]):
+                if step is None:  # the block itself (a Sinumerik position block)
+                    lines.append(rows.lines[i])
+                    move.append(bool(rows.move[i]))
+                    end.append(tuple(rows.end[i]))
+                    keys.append(tuple(rows.keys[i]))
+                    lineno.append(int(rows.lineno[i]))
+                    continue
                 if isinstance(step, str):
                     lines.append(step)
                     move.append(False)
@@ -716,7 +727,8 @@ class _Reader:
             if runnable_l[i]:
                 pos = st.pos
                 if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
-                        or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]):
+                        or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]
+                        or interp.modal_call is not None or st.frame is not None):  # Sinumerik MCALL, ROT..
                     b = int(next_other[i])
                     if next_tlo is not None:  # a stretch ends before a line that sets the tool length
                         b = min(b, int(next_tlo[i + 1]))

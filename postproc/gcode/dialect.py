@@ -151,6 +151,9 @@ class Dialect:
     yields_to_headers: bool = False  # a program opening with another dialect's chosen_by lines is read in it
     marks: tuple[tuple[str, str], ...] = ()  # (regex, construct) that only this dialect's programs hold
     refused: tuple[tuple[str, str, str], ...] = ()  # (regex, construct in its words, what to post instead)
+    # the refused constructs (their names above) the expansion flattens (NeedsExpansion, then
+    # the program is corrected flat): Sinumerik's labels, jumps and control structures
+    expanded_constructs: frozenset[str] = frozenset()
     # cutter radius compensation (G41/G42): "d-tool" (D names a tool; LinuxCNC's entry, exit and
     # plane rules), "d-register" (D names an offset register; no arc as the start-up or exit move,
     # alarm PS0034) or "none" (the controller has none, or postproc does not model its rules)
@@ -347,6 +350,8 @@ DIALECTS["okuma"] = replace(
 SINUMERIK_MAX_LINE = 511
 SINUMERIK_ARC_ABS_MM = 0.01
 SINUMERIK_ARC_REL = 0.001
+_SINU_SUB = "subprogram call, PROC or EXTERN"
+_SINU_CONTROL = "program control (label, IF/WHILE/LOOP/FOR/REPEAT/GOTO)"
 _SINU_WHAT_INSTEAD = "post the machining as its moves (G1/G2/G3) instead of the cycle call"
 DIALECTS["sinumerik"] = Dialect(
     name="sinumerik", title="Sinumerik 840D (Siemens)", cutter_comp="none",
@@ -363,6 +368,7 @@ DIALECTS["sinumerik"] = Dialect(
            "MD21000/MD21010",
     text_after_percent="ignored", g80_clears_motion=True, macro_syntax="sinumerik", m98_count_in_p=False,
     chosen_by=(r"\s*%_N_\w+_(?:MPF|SPF)\b", r"\s*;\s*\$PATH\s*="),
+    expanded_constructs=frozenset({_SINU_CONTROL, _SINU_SUB}),
     block_syntax="sinumerik", radius_word="CR=", program_end_m=(2, 17, 30), dwell_f_is_time=True, tool_length_word="D",
     # G500 (settable frames off) and G505-G599 are work offsets; G64x continuous path, G60/G60x/G9
     # exact stop, G70/G71 and G700/G710 inch/metric (Fundamentals: "Inch/metric dimensions")
@@ -397,14 +403,16 @@ DIALECTS["sinumerik"] = Dialect(
          "post the program for 3 axes (X, Y, Z with fixed rotary positions): postproc corrects X, Y, Z"),
         (r"(?i)\bCYCLE800\b", "CYCLE800 (swivel plane)",
          "post the swivelled-plane moves in the machine's X, Y, Z (without CYCLE800)"),
-        (r"(?i)\bMCALL\b", "MCALL (modal cycle call)",
-         "post the drilling cycles as their moves (or as ISO G81-G89 with --dialect generic)"),
-        (r"(?i)\b(?:A?ROT|A?SCALE|A?MIRROR|AROTS|ROTS)\b(?=\s*[A-Z])", "programmable frame (ROT/SCALE/MIRROR)",
-         "post the program in the work coordinates the frame gives (TRANS is read, rotations are not)"),
-        (r"(?i)\b(?:IF|WHILE|LOOP|FOR|REPEAT|GOTOF|GOTOB|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR|UNTIL)\b",
-         "program control (IF/WHILE/LOOP/FOR/REPEAT/GOTO)", "post the program flat (loops written out)"),
-        (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL)\b|^\s*(?:N\d+\s*)?L\d+\b", "subprogram call or PROC",
-         "write the subprogram's moves in the main program"),
+        (r"(?i)\bCYCLE(8[3-8]|840)\b", "CYCLE{0} (drilling cycle whose moves postproc does not model: "
+                                        "CYCLE81, CYCLE82 and CYCLE89 are read)",
+         "post the drilling as its moves, or as CYCLE81/CYCLE82/CYCLE89"),
+        (r"(?i)\b(A?ROTS|CROTS)\b", "{0} (frame rotation by solid angles)",
+         "post the program in the work coordinates the frame gives (ROT/AROT about Z is read)"),
+        (r"(?i)(?<![A-Z_])(?:IF|ELSE|WHILE|LOOP|FOR|REPEATB?|GOTOF|GOTOB|GOTOC|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR"
+         r"|UNTIL)\b"
+         r"|^\s*(?:N\d+\s+)?[A-Za-z_]\w*:(?!=)", _SINU_CONTROL, "post the program flat (loops written out)"),
+        (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL|EXTERN)\b|^\s*(?:N\d+\s*)?L\d+\b", _SINU_SUB,
+         "give the subprogram's directory with --subroutine-path, or write its moves in the main program"),
         (r"(?i)\bTURN\s*=", "TURN= helix turns", "post the helix as its arcs"),
     ))
 

@@ -442,3 +442,36 @@ def fit_line(dialect: str, line: str) -> tuple[list[str], tuple[int, str] | None
     if not words or _over_limit(d, words) or _over_limit(d, note):
         return [line], over
     return [note + end, words + ending], None
+
+
+def drill_cycle_lines(line: str, call_line: bool, mv: Move | None, cyc: Move | None,
+                      motion: int | None) -> list[str | CycleStep | None]:
+    """The lines a Sinumerik block that calls a drilling cycle, or runs the modal one, is
+    written as (``--cycles expand``): the call as a ``;`` comment, or None for the block
+    itself (a position block, ``mv``), then the cycle ``cyc``'s steps as :func:`cycle_lines`
+    gives them (a dwell as ``G4 F<s>``), then the program's G1/G2/G3 again when ``motion``
+    is not G0 (the cycle restores the G codes). ``diff`` reads an original so."""
+    out: list[str | CycleStep | None] = []
+    if call_line:
+        out.append(";" + line)
+    elif mv is not None:
+        out.append(None)
+    if cyc is None or cyc.cycle is None:
+        return out
+    ending = line_ending(line) or "\n"
+    sep, lower = style_of(line)
+    sep = sep or " "
+    prev = cyc.q0
+    for kind, q in cyc.cycle.steps:
+        if kind == DWELL:
+            text = f"G4{sep}F{fmt(q[0], 3).rstrip('0').rstrip('.') or '0'}"
+            out.append((text.lower() if lower else text) + ending)
+            continue
+        moved = tuple(k for k in range(3) if q[k] != prev[k])
+        if moved:
+            out.append((kind, prev, q, moved, False))
+            prev = q
+    if motion is not None and motion != RAPID:
+        text = f"G{motion // 10}"  # the program's G1/G2/G3 again after the cycle's G0 retract
+        out.append((text.lower() if lower else text) + ending)
+    return out

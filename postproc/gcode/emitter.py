@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
 from postproc.constants import MM_PER_INCH
-from postproc.errors import PostprocError
+from postproc.errors import PostprocError, UnsupportedGcodeError
 from postproc.gcode import emit
 from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.geometry import TWO_PI
@@ -171,7 +172,7 @@ class _Samples:
 def _free_move(mv: Move) -> Move:
     """``mv`` without its words: the move an inserted line writes."""
     return Move(mv.lineno, LINE, mv.q0, mv.q1, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute,
-                [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary)
+                [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary, frame=mv.frame)
 
 
 # Offsets of the rounded centre candidates tried around the ideal one, per number of decimals.
@@ -205,7 +206,16 @@ class EmitterMixin(Generic[_O, _R]):
 
     def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
                     present_only: bool = False) -> tuple[list[Edit], list[str]]:
-        """Edits for the axis words of ``mv``'s line and the words to add; updates qe."""
+        """Edits for the axis words of ``mv``'s line and the words to add; updates qe. Under a
+        rotating, scaling or mirroring frame the words are those of the frame's coordinates."""
+        if mv.frame is not None:
+            from postproc.gcode import frames
+
+            qp = list(frames.program_from_machine(mv.frame, mv.shift, qe))
+            out = self._axis_words(replace(mv, frame=None), frames.program_from_machine(mv.frame, mv.shift, target),
+                                   qp, d, present_only)
+            qe[:] = frames.machine_from_program(mv.frame, mv.shift, qp)
+            return out
         edits: list[Edit] = []
         added: list[str] = []
         unit, shift, inc = mv.unit, mv.shift, mv.incremental
@@ -246,6 +256,18 @@ class EmitterMixin(Generic[_O, _R]):
 
     def _emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
         self.report.moves += 1
+        if mv.frame is not None and mv.arc is not None:
+            d = self._decimals_for(mv.unit)
+            if plan is None and max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit < HALF_UNIT[d]:
+                # the correction rounds to nothing at the arc's end: the line stays as it is
+                self.qe[:] = list(mv.q1)
+                self.emitted_motion = mv.kind
+                self._write_line(line, [], write)
+                return
+            raise UnsupportedGcodeError(
+                "Sinumerik arc under ROT/SCALE/MIRROR: read, but its corrected centre and end words are not "
+                "written yet in the frame's coordinates", path=self.path, lineno=mv.lineno, col=1,
+                hint="post the arc with the frame deleted (ROT/MIRROR alone), or as its moves")
         d = self._decimals_for(mv.unit)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change

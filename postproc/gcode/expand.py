@@ -1147,6 +1147,11 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     ``path:line:col``. ``variables``: machine-state values given by the user (``--var``),
     read where the program reads the controller's state (probe results never).
     """
+    if get_dialect(dialect).expanded_constructs:  # Sinumerik labels, GOTO, IF/WHILE/FOR/REPEAT
+        from postproc.gcode.sinumerik_expand import expand_sinumerik
+
+        return (SourceLine(k + 1, file, text, original)
+                for k, file, text, original in expand_sinumerik(list(lines), path, max_lines, subroutine_path))
     ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
     ex.seed(variables or {})
     return ex.run()

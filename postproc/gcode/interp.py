@@ -71,6 +71,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from postproc.gcode.dialect import Dialect
+    from postproc.gcode.sinumerik import CycleCall
 
 #: a block's words by letter, G and M aside: (value, word index)
 Vals = dict[str, tuple[float, int]]
@@ -117,6 +118,8 @@ _COMMENTS = re.compile(r"\([^)]*\)?|;.*")
 _BLANK_KINDS = frozenset((lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE))
 _OWORD = re.compile(r"^\s*/?\s*(?:N\s*\d+\s*)?O\s*(?:\d+|<[^>]*>)\s*([A-Z]+)?")
 _MACRO_KEYWORDS = re.compile(r"\b(IF|WHILE|GOTO|END|DO)\s*[\[\d]|\bGOTO")
+# a Sinumerik block that is a name alone, or a name with arguments: perhaps a subprogram call
+_SINUMERIK_NAME_CALL = re.compile(r"(?i)^\s*(?:N\d+\s+)?[A-Z_]\w*\s*(?:\(.*\))?\s*(?:P\s*=?\s*\d+)?\s*$")
 _ASSIGN = re.compile(r"#\s*(?:\d+|<[^>]*>|\[)[^=]*=")
 
 
@@ -222,6 +225,10 @@ class Interpreter:
         self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
         self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
         self._arc_absolute_once = False  # the next block's centre words are absolute (Sinumerik I=AC())
+        self.modal_call: CycleCall | None = None  # Sinumerik MCALL CYCLE8x(): drills after each moving block
+        self._cycle_due: CycleCall | None = None  # the cycle this block calls (run after its move)
+        self.cycle_move: Move | None = None  # the drilling cycle this line made (Sinumerik): its moves
+        self.call_line = ""  # the Sinumerik cycle call this line is ("MCALL CYCLE81"): a comment when expanded
         self._g_alias = dict(self.d.g_aliases)
         # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
         self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
@@ -255,8 +262,8 @@ class Interpreter:
             m = re.search(pattern, line)
             if m:
                 what = construct.format(*m.groups())
-                raise self._err(UnsupportedGcodeError, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1,
-                                hint=instead)
+                cls = self._construct_error(what) if construct in self.d.expanded_constructs else UnsupportedGcodeError
+                raise self._err(cls, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1, hint=instead)
         other = foreign_dialect(line, self.d.name)
         if other is not None:
             name, title, construct = other
@@ -330,6 +337,7 @@ class Interpreter:
         self.motion_word = False
         self.rebase = None
         self.stored_here = None
+        self.cycle_move, self.call_line = None, ""
         if self.ended:
             return None  # after M2/M30 the controller reads no further
         bom = line.startswith("\ufeff")
@@ -347,16 +355,103 @@ class Interpreter:
         if bom:
             words = [lexer.Word(a, b, c + 1, d + 1, e + 1) for a, b, c, d, e in words]
         if not words:
+            self._drill_if_due(lineno)
             return None
         self._run_shift = None  # the slow path may change offsets, units or tool length
+        if self.state.frame is not None:
+            return self._framed_block(lineno, words, block_delete, self.state.frame)
+        return self._block_and_cycle(lineno, words, block_delete)
+
+    def _block_and_cycle(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
         if self._arc_absolute_once:  # Sinumerik I=AC() J=AC(): G90.1 for this block only
             st, saved = self.state, self.state.arc_absolute
             st.arc_absolute, self._arc_absolute_once = True, False
             try:
-                return self._block(lineno, words, block_delete)
+                mv = self._block(lineno, words, block_delete)
             finally:
                 st.arc_absolute = saved
-        return self._block(lineno, words, block_delete)
+        else:
+            mv = self._block(lineno, words, block_delete)
+        self._drill_if_due(lineno)
+        return mv
+
+    def _framed_block(self, lineno: int, words: list[lexer.Word], block_delete: bool,
+                      a: tuple[float, ...]) -> Move | None:
+        """A block under a rotating, scaling or mirroring frame (Sinumerik): read as if the
+        frame had no linear part, from the position seen in the frame's coordinates, then its
+        points mapped to the machine (:func:`frames.machine_from_program`); a mirror turns
+        G2 into G3 and back (Fundamentals, "MIRROR")."""
+        from postproc.gcode import frames
+
+        st = self.state
+        try:
+            s0 = self.shift(False, lineno, 1)
+        except MissingSetupError:
+            return self._block_and_cycle(lineno, words, block_delete)  # no move can be made here
+        real = tuple(st.pos)
+        st.pos = list(frames.program_from_machine(a, s0, real))
+        try:
+            mv = self._block_and_cycle(lineno, words, block_delete)
+        finally:
+            s1 = self.shift(False, lineno, 1)
+            st.pos = list(frames.machine_from_program(a, s1, st.pos))
+        for m in (mv, self.cycle_move):
+            prev = real if m is mv or m is None else frames.machine_from_program(a, m.shift, m.q0)
+            while m is not None:
+                m.q0 = prev
+                m.q1 = frames.machine_from_program(a, m.shift, m.q1)
+                m.frame = a
+                if m.arc is not None:
+                    axes = PLANES[m.arc.plane][0]
+                    if not frames.keeps_circles(a, axes):
+                        raise self._err(UnsupportedGcodeError, "Sinumerik arc under a frame that does not keep it a "
+                                        "circle in its plane (SCALE with unequal factors, or ROT about Z with "
+                                        "G18/G19)", lineno, 1,
+                                        hint="post the arc as its moves, or scale the plane's axes alike")
+                    m.arc.center = frames.machine_from_program(a, m.shift, m.arc.center)
+                    m.arc.clockwise = m.arc.clockwise != frames.reverses_arcs(a, axes)
+                if m.cycle is not None:
+                    c = m.cycle
+                    c.steps = [(k, q if k == DWELL else frames.machine_from_program(a, m.shift, q))
+                               for k, q in c.steps]
+                    c.holes = [tuple(frames.machine_from_program(a, m.shift, q) for q in h) for h in c.holes]
+                prev, m = m.q1, m.then
+        return mv
+
+    def _drill_if_due(self, lineno: int) -> None:
+        """Run the Sinumerik drilling cycle this block calls (one-shot, or modal after a
+        block that moves): its moves become :attr:`cycle_move`."""
+        call, self._cycle_due = self._cycle_due, None
+        if call is None:
+            return
+        from postproc.gcode.sinumerik_cycles import FEED_STEP, RAPID_STEP, drill_plan
+
+        st = self.state
+        if st.plane != 170:
+            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno,
+                            call.col)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, call.col,
+                            hint="position every axis with a G90 move before the cycle, or give --start")
+        plan = drill_plan(call, self.path, lineno)
+        unit, shift = st.unit_mm, self.shift(False, lineno, call.col)
+        x, y, z0 = st.pos
+
+        def at(z: float) -> tuple[float, float, float]:
+            return (x, y, z * unit + shift[2])
+
+        kinds = {RAPID_STEP: RAPID, FEED_STEP: LINE}
+        steps: list[tuple[int, tuple]] = []
+        for kind, v in plan.steps:
+            steps.append((DWELL, (v, 0.0, 0.0)) if kind not in kinds else (kinds[kind], at(v)))
+        bottom, start = at(plan.bottom_z), at(plan.start_z)
+        st.pos = list(at(plan.clear_z))
+        self.cycle_move = Move(
+            lineno=lineno, kind=plan.code, q0=(x, y, z0), q1=bottom, r=self.tool_r(), shift=shift, unit=unit,
+            incremental=st.incremental, arc_absolute=st.arc_absolute, words=[], axis_idx=(-1, -1, -1),
+            feed_idx=-1, inverse_time=False, feed=st.feed, rotary=dict(st.rotary) if self.used_rotary else {},
+            stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
+                                    False, plan.dwell_s))
 
     def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
         if not self._iso_blocks:
@@ -406,7 +501,12 @@ class Interpreter:
         code = sinumerik.code_of(line)
         if code.strip():
             self._foreign(code, lineno)
-        blk = sinumerik.read_block(line, self.path, lineno, self.variables)
+        try:
+            blk = sinumerik.read_block(line, self.path, lineno, self.variables)
+        except UnsupportedGcodeError as exc:
+            if self.may_expand and _SINUMERIK_NAME_CALL.match(code):  # NAME or NAME(...): a subprogram call?
+                raise self._err(NeedsExpansion, exc.message, lineno, exc.col or 1, hint=exc.hint) from None
+            raise
         g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
         incremental = True if 910 in g else False if 900 in g else self.state.incremental
         centre_ac = [letter for letter, _ in blk.absolute if letter in "IJK"]
@@ -426,29 +526,60 @@ class Interpreter:
             if not incremental and letter in "XYZABC":
                 raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
                                 lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
+        if blk.call is not None:
+            name = f"MCALL {blk.call.name}" if blk.mcall else blk.call.name
+            others = [w for w in blk.words if w.letter != "N"]
+            if others or blk.frame:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
+                                blk.call.col, hint="write the cycle call in a block of its own")
+            self.call_line = name
+            if blk.mcall:
+                self.modal_call = blk.call
+            else:
+                self._cycle_due = blk.call
+            return [], blk.block_delete
+        if blk.mcall:
+            self.modal_call = None  # a bare MCALL ends the modal call
+        elif self.modal_call is not None and any(w.letter in AXES for w in blk.words):
+            self._cycle_due = self.modal_call
         if blk.ends:
             self.ended = True  # RET: the end of the program (the block's own words still run)
         if blk.frame:
-            self._sinumerik_frame(blk.frame, blk.words, lineno)
+            self._sinumerik_frame(blk.frame, blk.words, lineno, blk.rpl)
             return [], blk.block_delete
         return blk.words, blk.block_delete
 
-    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int) -> None:
-        """TRANS replaces the programmable frame by a translation, ATRANS adds one, a bare
-        ROT/SCALE/MIRROR deletes it: kept with the G52/G92 shift (program units, work frame)."""
+    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int,
+                         rpl: tuple[float, int] | None) -> None:
+        """The programmable frame (:mod:`postproc.gcode.frames`): TRANS/ROT/SCALE/MIRROR replace
+        it (alone: delete it), their A forms add to it. Its translation is kept with the
+        G52/G92 shift, its rotation, scale and mirror in ``state.frame``."""
+        from postproc.gcode import frames
+
         st = self.state
         given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
         bad = [k for k in given if k not in AXES]
-        if bad or (kind == "RESET" and given):
-            col = given[bad[0]][1] if bad else min(c for _, c in given.values())
-            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {(bad or list(given))[0]} "
-                            "(only a translation in X, Y, Z is read)", lineno, col,
-                            hint="post the program in the coordinates the frame gives")
-        if kind in ("TRANS", "RESET"):
-            st.g92 = [0.0, 0.0, 0.0]
-        for k, a in enumerate(AXES):
-            if a in given:
-                st.g92[k] += given[a][0] * st.unit_mm
+        if bad:
+            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {bad[0]} (the frame's X, Y, Z are read)",
+                            lineno, given[bad[0]][1], hint="post the program in the coordinates the frame gives")
+        angle = None
+        if kind.endswith("ROT"):
+            tilt = next((a for a in "XY" if a in given), None)
+            if tilt is not None:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} {tilt} (a rotation about {tilt} tilts the "
+                                "plane; rotations about Z are read)", lineno, given[tilt][1],
+                                hint="post the program in the coordinates the frame gives")
+            if rpl is not None and "Z" in given:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} with both Z and RPL", lineno, rpl[1])
+            if rpl is not None and st.plane != 170:
+                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} RPL= in a plane other than G17 "
+                                "(a rotation about X or Y)", lineno, rpl[1])
+            angle = rpl[0] if rpl is not None else given["Z"][0] if "Z" in given else None
+        if kind.endswith("SCALE") and any(v == 0.0 for v, _c in given.values()):
+            raise self._err(GcodeSyntaxError, f"Sinumerik {kind} with a factor 0", lineno,
+                            min(c for _v, c in given.values()))
+        st.frame, st.g92 = frames.next_frame(kind, st.frame, st.g92, {a: v for a, (v, _c) in given.items()}, angle,
+                                             st.unit_mm)
         self._run_shift = None
 
     def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:

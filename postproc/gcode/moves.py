@@ -87,3 +87,6 @@ class Move:
     # the first line of a split move (prefix_words) and removed from its own (its modal G
     # words are copied there: set again to the same value, they change nothing)
     event_idx: tuple[int, ...] = ()
+    # the linear part of the programmable frame it was programmed in (Sinumerik ROT, SCALE,
+    # MIRROR; postproc.gcode.frames), or None: its words are in that frame's coordinates
+    frame: tuple | None = None

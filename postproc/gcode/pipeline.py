@@ -36,6 +36,7 @@ from postproc.errors import (
     PostprocError,
     SafetyError,
     SolverError,
+    UnsupportedGcodeError,
 )
 from postproc.gcode import bulk, cutter, emit, vplan
 from postproc.gcode.directions import (
@@ -337,8 +338,11 @@ class Corrector(EmitterMixin):
 
         def feed(line: str) -> None:
             nonlocal lineno, run_ok
-            mv = interp.feed_line(where(lineno), line)
-            if interp.stored_here is not None:
+            here = where(lineno)
+            mv = interp.feed_line(here, line)
+            if interp.call_line or interp.cycle_move is not None:
+                self._feed_drill_cycle(entries, line, mv, interp, here)
+            elif interp.stored_here is not None:
                 # G28.1/G30.1: the controller stores where it is, the corrected position
                 entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
             elif interp.rebase is not None:
@@ -1128,6 +1132,12 @@ class Corrector(EmitterMixin):
 
         unit = mv.unit
         words = ["G0" if kind == RAPID else "G1"]
+        if mv.frame is not None:  # words in the frame's coordinates (Sinumerik ROT/SCALE/MIRROR)
+            from postproc.gcode import frames
+
+            q_m, prev_m = q, prev
+            prev, q = (frames.program_from_machine(mv.frame, mv.shift, p) for p in (prev, q))
+            axes = tuple(k for k in range(3) if emit.fmt(q[k] / unit, decimals) != emit.fmt(prev[k] / unit, decimals))
         for k in axes:
             v = (q[k] - prev[k]) / unit if mv.incremental else (q[k] - mv.shift[k]) / unit
             words.append("XYZ"[k] + emit.fmt(v, decimals))
@@ -1138,9 +1148,11 @@ class Corrector(EmitterMixin):
         if ws is None:  # words and blanks only
             raise AssertionError(f"a generated line that is not plain: {text!r}")
         ix, iy, iz = (next((i for i, w in enumerate(ws) if w.letter == a), -1) for a in "XYZ")
+        if mv.frame is not None:
+            prev, q = prev_m, q_m
         step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
                     mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w.letter == "F"), -1), False,
-                    mv.feed, mv.rotary, motion_idx=0, planned=planned)
+                    mv.feed, mv.rotary, motion_idx=0, planned=planned, frame=mv.frame)
         return (text.lower() if lower else text), step, True, kind
 
     # -- splines -------------------------------------------------------------------------
@@ -1262,6 +1274,34 @@ class Corrector(EmitterMixin):
             return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self._round_err(mv.unit))
         d = _unit_decimals(self.opt, mv.unit)
         return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
+
+    def _feed_drill_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move | None,
+                          interp: Interpreter, lineno: int) -> None:
+        """Queue a Sinumerik block that calls a drilling cycle or runs the modal one: the
+        call written as a comment, a position block as any move, then the cycle's G0/G1
+        moves (each corrected) and G4 F dwells; the motion mode is restored after them, as
+        the cycle (a subprogram with SAVE) restores it. Only with ``--cycles expand``: a
+        CYCLE81 call cannot carry each hole's correction in its parameters."""
+        cyc = interp.cycle_move
+        if self.opt.cycles == "keep":
+            call = interp.call_line or f"MCALL {interp.modal_call.name if interp.modal_call else ''}"
+            raise UnsupportedGcodeError(
+                f"Sinumerik {call} (drilling cycle call): read only when written as its moves", path=self.path, lineno=lineno, col=1,
+                hint="give --cycles expand or auto to write each hole as its G0/G1 moves, each corrected")
+        d = _unit_decimals(self.opt, cyc.unit if cyc is not None else 1.0)
+        ending = emit.line_ending(line) or "\n"
+        sep, lower = emit.style_of(line)
+        for step in emit.drill_cycle_lines(line, bool(interp.call_line), mv, cyc, interp.state.motion):
+            if step is None:
+                entries.append((line, mv, interp.motion_word, interp.state.motion))
+            elif isinstance(step, str):
+                entries.append((step, None, False, None))
+            else:
+                kind, prev, q, moved, _first = step
+                entries.append(self._generated_move(cyc, kind, prev, q, moved, False, d, sep or " ", lower, ending))
+        if cyc is None:
+            return
+        self.report.cycles_expanded += 1
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
         """A cycle block that stays as it is, with several holes or increments: refuse it
@@ -1598,6 +1638,7 @@ def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart:
     restart()
     lines = list(get_lines())
     source: deque[tuple[int, str | None]] = deque()
+    c = corrector()
 
     def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
@@ -1605,7 +1646,6 @@ def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart:
             source.append((sl.lineno, sl.path))
             yield sl.text
 
-    c = corrector()
     c.expanded = True
     report = c.run(texts(), write, progress=progress, source=source)
     report.expanded = True

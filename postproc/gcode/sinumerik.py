@@ -18,9 +18,9 @@ number (``X10.5``, ``G1``), addresses with ``=`` (``X=10.5``, ``CR=5``, ``T="CUT
 - ``DEF REAL|INT|BOOL NAME=value``, ``R1=...``, ``NAME=...`` and words whose value is an
   expression (``X=R1*2``): evaluated in order, a word's number being the expression's
   value, its span the expression's text (which the correction replaces with a number);
-- ``TRANS X.. Y.. Z..`` (the programmable frame's translation, replaced) and ``ATRANS``
-  (added to it); ``ROT``, ``SCALE``, ``MIRROR`` without values, which delete the
-  programmable frame (Fundamentals, "Frames").
+- the programmable frame (Fundamentals, "Frames"): ``TRANS``, ``ROT Z=``/``ROT RPL=``,
+  ``SCALE``, ``MIRROR`` (replacing it; alone, deleting it) and ``ATRANS``, ``AROT``,
+  ``ASCALE``, ``AMIRROR`` (added to it), with their axis words (and RPL=).
 
 Everything else is refused naming the construct in Sinumerik's words (the dialect's
 ``refused`` list names the cycles, frames, variables and control with what to post instead).
@@ -46,11 +46,14 @@ KEPT_KEYWORDS = frozenset({
 KEPT_SETTINGS = frozenset({"ADIS", "ADISPOS"})
 #: calls that change no geometry: kept as they are
 KEPT_CALLS = frozenset({"MSG", "CYCLE832", "SETMS", "WORKPIECE", "TOOLGEOMETRY"})
+#: drilling cycles read (Programming Guide Cycles, "Drilling cycles"): their moves are modelled
+#: (CYCLE83-CYCLE88 are refused by the dialect's list, naming them)
+DRILL_CYCLES = frozenset({"CYCLE81", "CYCLE82", "CYCLE89"})
 END_KEYWORDS = frozenset({"RET"})
-#: frame instructions read: TRANS/ATRANS with X, Y, Z (a translation); ROT, SCALE, MIRROR
-#: (and their A forms) only without values, which delete the programmable frame
-FRAME_KEYWORDS = frozenset({"TRANS", "ATRANS"})
-FRAME_RESETS = frozenset({"ROT", "SCALE", "MIRROR"})
+#: frame instructions read (Fundamentals, "Coordinate transformations (frames)"): TRANS,
+#: ROT, SCALE, MIRROR replace the programmable frame (without values: delete it), their A
+#: forms add to it in the current coordinates
+FRAME_KEYWORDS = frozenset({"TRANS", "ATRANS", "ROT", "AROT", "SCALE", "ASCALE", "MIRROR", "AMIRROR"})
 _NUMBER_CHARS = "0123456789.+-"
 
 
@@ -64,7 +67,20 @@ class SinumerikBlock:
     absolute: list[tuple[str, int]] = field(default_factory=list)  # (letter, col) given as =AC()
     incremental: list[tuple[str, int]] = field(default_factory=list)  # (letter, col) given as =IC()
     tool_name: str | None = None  # T="name"
-    frame: str = ""  # TRANS (replaces the programmable frame), ATRANS (adds to it), RESET (ROT etc. alone)
+    frame: str = ""  # the frame instruction of the block (TRANS, AROT, ...)
+    rpl: tuple[float, int] | None = None  # ROT/AROT RPL=angle: (degrees, column)
+    mcall: bool = False  # MCALL: the call that follows is modal (a bare MCALL cancels it)
+    call: CycleCall | None = None  # a drilling cycle called in the block
+
+
+@dataclass(frozen=True)
+class CycleCall:
+    """A drilling cycle's call, ``CYCLE81(RTP, RFP, SDIS, DP, DPR, ...)``: its name, its
+    parameters' values in order (None where left empty) and the column of its name."""
+
+    name: str
+    args: tuple[float | None, ...]
+    col: int
 
 
 def _code_end(line: str) -> int:
@@ -184,24 +200,36 @@ class _Reader:
         if assigns and digits == j:
             return self.assignment(name, k, _skip(code, after + 1))
         if after < len(code) and code[after] == "(":
-            end = _closing(code, after)
-            if end < 0:
-                raise GcodeSyntaxError(f"'(' of {ident} is not closed on its line", path=self.path,
-                                       lineno=self.lineno, col=after + 1)
-            if ident not in KEPT_CALLS:
-                raise self.refuse(k, f"{ident}() call", "post the program without it (its moves written out)")
-            return end
+            return self.call(ident, k, after)
+        if ident == "MCALL":
+            self.block.mcall = True
+            return digits
         if ident in END_KEYWORDS:
             self.block.ends = True
             return digits
         if ident in KEPT_KEYWORDS:
             return digits
-        if ident in FRAME_KEYWORDS or ident in FRAME_RESETS:
+        if ident in FRAME_KEYWORDS:
             if self.block.frame or any(w.letter != "N" for w in self.block.words):
                 raise self.refuse(k, f"{ident} not alone in its block", "write the frame in a block of its own")
-            self.block.frame = ident if ident in FRAME_KEYWORDS else "RESET"
+            self.block.frame = ident
             return digits
         raise self.refuse(k, f"{ident} (not read by postproc)", "post the program without it")
+
+    def call(self, ident: str, k: int, open_at: int) -> int:
+        """``NAME(...)`` at ``k``: a drilling cycle read, a call kept, or refused."""
+        end = _closing(self.code, open_at)
+        if end < 0:
+            raise GcodeSyntaxError(f"'(' of {ident} is not closed on its line", path=self.path,
+                                   lineno=self.lineno, col=open_at + 1)
+        if ident in DRILL_CYCLES:
+            if self.block.call is not None:
+                raise self.refuse(k, f"{ident} after another cycle call in its block", "call one cycle per block")
+            self.block.call = CycleCall(ident, self.arguments(open_at + 1, end - 1), k + 1)
+            return end
+        if ident not in KEPT_CALLS:
+            raise self.refuse(k, f"{ident}() call", "post the program without it (its moves written out)")
+        return end
 
     def word(self, letter: str, start: int, end: int, letter_pos: int) -> int:
         if letter not in WORD_LETTERS and not (letter == "R" and self.code[letter_pos:letter_pos + 2].upper() == "CR"):
@@ -220,6 +248,10 @@ class _Reader:
                                        col=v + 1)
             self.block.tool_name = code[v + 1:end]
             return end + 1
+        if name == "RPL" and self.block.frame in ("ROT", "AROT"):
+            value, e = self.expression(v)
+            self.block.rpl = (value, k + 1)
+            return e
         if name in KEPT_SETTINGS:
             e = _number(code, v)
             if e == v:
@@ -282,6 +314,25 @@ class _Reader:
                 raise GcodeSyntaxError(f"unexpected {code[j]!r} in DEF", path=self.path, lineno=self.lineno,
                                        col=j + 1)
             return j
+
+    def arguments(self, k: int, close: int) -> tuple[float | None, ...]:
+        """The values of a call's parameters from ``k`` to the ')' at ``close`` (an empty
+        parameter, ``CYCLE81(10,0,,-15)``, is None: the cycle's default)."""
+        code, args = self.code, []
+        while True:
+            k = _skip(code, k)
+            if k >= close or code[k] == ",":
+                args.append(None)
+            else:
+                value, k = self._sum(k, True)
+                args.append(value)
+                k = _skip(code, k)
+            if k >= close:
+                return tuple(args)
+            if code[k] != ",":
+                raise GcodeSyntaxError(f"unexpected {code[k]!r} in the call's parameters", path=self.path,
+                                       lineno=self.lineno, col=k + 1)
+            k += 1
 
     def set_variable(self, name: str, k: int, v: int) -> int:
         value, e = self.expression(v)

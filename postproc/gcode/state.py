@@ -120,6 +120,9 @@ class ModalState:
     work: str = "G54"
     work_explicit: bool = False
     g92: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # the linear part of a rotating, scaling or mirroring programmable frame (Sinumerik ROT,
+    # SCALE, MIRROR): 3x3 row-major, program axes to work axes; None: none (the identity)
+    frame: tuple[float, ...] | None = None
     tlo: float = 0.0  # active tool length offset along Z (mm)
     tlo_active: bool = False
     tool: int | None = None  # selected tool (T word)
