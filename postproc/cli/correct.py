@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from postproc.cli.options import DIALECT_CHOICE, setup_options
+from postproc.cli.options import DIALECT_CHOICE, limit_options, setup_options
 
 # build_setup: re-exported for the flags files of tests/cases
 from postproc.cli.options import build_setup as build_setup
@@ -147,6 +147,7 @@ def _progress_printer(total_hint: str):
                    "as LinuxCNC's SUBROUTINE_PATH. Repeatable.")
 @click.option("--no-expand", "no_expand", is_flag=True,
               help="Refuse parameters, O-words, subprograms and macros instead of expanding them.")
+@limit_options
 @click.option("--tolerance", default=DEFAULT_TOLERANCE_MM, show_default=True, type=click.FloatRange(min=1e-5),
               help="Largest distance (mm) between the emitted and the corrected ideal path.")
 @click.option("--decimals", default=None, type=click.IntRange(1, 8),
@@ -160,7 +161,7 @@ def _progress_printer(total_hint: str):
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
 def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subroutine_path, no_expand, tolerance,
-            decimals, max_correction, extrapolate, force, maps, dialect):
+            decimals, max_correction, extrapolate, force, maps, dialect, limits):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -213,7 +214,8 @@ def correct(inputs, calibration, output, output_dir, jobs, setup, cycles, subrou
         raise click.UsageError("'-' (stdin) can only be the only input")
     options = {"tolerance_mm": tolerance, "decimals": decimals, "max_correction_mm": max_correction,
                "extrapolate": extrapolate, "force": force, "cycles": cycles,
-               "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower()}
+               "expand": not no_expand, "subroutine_path": tuple(subroutine_path), "dialect": dialect.lower(),
+               "limits": limits}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         processes = jobs if jobs is not None else _cores()
         _single(inputs[0], output or "-", calibration, setup, {**options, "processes": processes}, maps)

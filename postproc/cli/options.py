@@ -272,3 +272,25 @@ def context_option(help: str | None = None):
     attrs = {**attrs, "help": help or attrs["help"]}
     return click.option("--context", name, callback=lambda ctx, param, value: dict(parse_context(c) for c in value),
                         **attrs)
+
+
+def limit_options(fn):
+    """Declare the bounds on one run's work (:class:`postproc.limits.Limits`) on a command
+    that expands and corrects programs, passed to it as one ``limits`` argument."""
+    from postproc import limits as lim
+
+    @functools.wraps(fn)
+    def command(*args, max_iterations, max_output_lines, max_arc_turns, **kwargs):
+        return fn(*args, limits=lim.Limits(max_iterations, max_output_lines, max_arc_turns), **kwargs)
+
+    command = click.option(
+        "--max-arc-turns", "max_arc_turns", default=lim.DEFAULT_MAX_ARC_TURNS, show_default=True,
+        type=click.IntRange(1), help="Refuse a helix (G2/G3 P) of more turns than this.")(command)
+    command = click.option(
+        "--max-output-lines", "max_output_lines", default=None, type=click.IntRange(1),
+        help=f"Refuse a corrected program longer than this [default: {lim.OUTPUT_GROWTH} times the input's "
+             f"lines plus {lim.OUTPUT_LINES_EXTRA:,}].")(command)
+    return click.option(
+        "--max-iterations", "max_iterations", default=lim.DEFAULT_MAX_ITERATIONS, show_default=True,
+        type=click.IntRange(1), help="Refuse a program whose loop passes and subprogram calls exceed this in all "
+                                     "(an endless loop).")(command)

@@ -32,6 +32,7 @@ from postproc.errors import (
     UnsupportedGcodeError,
 )
 from postproc.gcode import lexer
+from postproc.limits import DEFAULT_MAX_ARC_TURNS, ResourceLimitError
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
@@ -251,6 +252,7 @@ class Interpreter:
 
     def __init__(self, setup: _Setup, path: str | None = None, *, lenient_setup: bool = False,
                  dialect: str = "generic") -> None:
+        self.max_arc_turns = DEFAULT_MAX_ARC_TURNS  # turns of one helix (G2/G3 P), --max-arc-turns
         self.setup = setup
         # lenient: every work offset and tool length is taken as zero (for comparing
         # two versions of one program, where they cancel out)
@@ -1073,10 +1075,15 @@ class Interpreter:
                                  "machine positions at program start with --start")
         turns = 1
         if "P" in vals:
-            turns = int(vals["P"][0])
-            if turns < 1 or turns != vals["P"][0]:
-                raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno,
-                                words[vals["P"][1]][4] + 1)
+            p = vals["P"][0]
+            p_col = words[vals["P"][1]][4] + 1
+            if not (math.isfinite(p) and p >= 1 and p == math.floor(p)):
+                raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
+            if p > self.max_arc_turns:
+                raise self._err(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
+                                "(--max-arc-turns)", lineno, p_col,
+                                hint="raise --max-arc-turns if the helix is meant to turn this often")
+            turns = int(p)
         clockwise = st.motion == ARC_CW
         s1, s2 = q0[a1], q0[a2]
         e1, e2 = q1[a1], q1[a2]

@@ -53,6 +53,7 @@ from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
 from postproc.gcode.state import LINE, PLANES, RAPID
+from postproc.limits import BoundedWriter, Limits
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
@@ -114,6 +115,7 @@ class CorrectOptions:
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
     processes: int = 1  # more: a large program file is cut into parts corrected in that many (postproc.gcode.split)
+    limits: Limits = field(default_factory=Limits)  # iterations, output lines, helix turns (postproc.limits)
 
 
 @dataclass
@@ -162,6 +164,7 @@ class Corrector(EmitterMixin):
         self.cal_name = calibration_name
         self.cal_sha = calibration_sha256
         self.interp = Interpreter(setup, path, dialect=options.dialect)
+        self.interp.max_arc_turns = options.limits.max_arc_turns
         self.interp.require_g54 = bool(setup.start)
         self.report = CorrectReport()
         # where the machine is before the first move: the start position (NaN: unknown);
@@ -1458,22 +1461,38 @@ def correct_text(text: str, engine: Engine, setup: Setup | None = None, options:
     out: list[str] = []
     lines = split_lines(text)
     report = _correct_lines(lambda: lines, out.append, out.clear, engine, setup, options, path,
-                            calibration_name, calibration_sha256)
+                            calibration_name, calibration_sha256, input_lines=len(lines))
     return "".join(out), report
 
 
 def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None], engine: Engine,
                    setup: Setup | None, options: CorrectOptions | None, path: str | None, calibration_name: str,
                    calibration_sha256: str, progress: Callable[[int], None] | None = None,
-                   count: int | None = None) -> CorrectReport:
+                   count: int | None = None, input_lines: int = 0) -> CorrectReport:
     """Correct the lines ``get_lines()`` gives; when the program turns out to need
     expansion, ``restart()`` drops what was written and the expanded program is corrected.
     ``count``: the number of lines, when the program may be cut into parts corrected in
-    several processes (:mod:`postproc.gcode.split`)."""
+    several processes (:mod:`postproc.gcode.split`); ``input_lines``: the program's lines,
+    for the bound on the output's (``options.limits``)."""
     from postproc.gcode.interp import NeedsExpansion
 
     setup = setup or Setup()
     options = options or CorrectOptions()
+    read = 0  # lines read (of the program as written, or as expanded: at[0])
+    at: list[tuple[int, str | None]] = [(0, path)]  # the expanded line read last and its file
+
+    def counted(lines: Iterable[str]) -> Iterator[str]:
+        nonlocal read
+        for read, line in enumerate(lines, start=1):  # noqa: B007 - read is the count so far
+            yield line
+
+    bounded = BoundedWriter(write, options.limits.output_lines(input_lines),
+                            lambda: (at[-1][1], at[-1][0]) if at[-1][0] else (path, read or None))
+    write = bounded
+
+    def dropped() -> None:
+        restart()
+        bounded.restart()
 
     def corrector() -> Corrector:
         return Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
@@ -1486,21 +1505,23 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
             try:
                 return split.run(corrector, get_lines, write, progress, count, options.processes, path)
             except split.Failed:
-                restart()  # a process for a part failed (not the program): once more, in one
-        return corrector().run(get_lines(), write, progress=progress)
+                dropped()  # a process for a part failed (not the program): once more, in one
+        return corrector().run(counted(get_lines()), write, progress=progress)
     except NeedsExpansion:
         if not options.expand:
             raise
     from postproc.gcode.expand import expand
 
-    restart()
+    dropped()
     lines = list(get_lines())
     source: deque[tuple[int, str | None]] = deque()
 
     def texts() -> Iterator[str]:
         for sl in expand(lines, path=path, dialect=options.dialect,
-                         subroutine_path=[Path(p) for p in options.subroutine_path]):
+                         subroutine_path=[Path(p) for p in options.subroutine_path],
+                         max_iterations=options.limits.max_iterations):
             source.append((sl.lineno, sl.path))
+            at[-1] = (sl.lineno, sl.path or path)
             yield sl.text
 
     c = corrector()
@@ -1531,16 +1552,14 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
     if empty:
         raise PostprocError("the program is empty: nothing to correct", path=str(source),
                             hint="check that this is the program you meant (was it written completely?)")
-    path, _lines = iter_source_lines(Path(source))
-    count = None
-    if options is not None and options.processes > 1:
-        from postproc.gcode import forking, split
+    from postproc.gcode import forking, split
 
-        if forking.available():
-            try:
-                count = split.count_lines(str(source))
-            except OSError:
-                count = None  # the reader names the problem
+    path, _lines = iter_source_lines(Path(source))
+    try:
+        lines_in = split.count_lines(str(source))
+    except OSError:
+        lines_in = 0  # the reader names the problem
+    count = lines_in if lines_in and options is not None and options.processes > 1 and forking.available() else None
     # staged: a device or pipe gets the whole program at the end (the run may start over)
     try:
         with output_path(output, stage_special=True) as tmp, \
@@ -1550,7 +1569,8 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
                 out.truncate()
 
             report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
-                                    options, path, calibration_name, calibration_sha256, progress, count)
+                                    options, path, calibration_name, calibration_sha256, progress, count,
+                                    input_lines=lines_in)
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
         raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None
     return report
