@@ -240,3 +240,25 @@ def test_grid_fit_step_is_bounded():
     assert f"{MAX_GRID_NODES:,}" in err.value.message
     with pytest.raises(PostprocError):
         detect_lattice(q, np.array([1e-320] * 3))
+
+
+# -- the sizes of simulate and verify ---------------------------------------------------
+
+@pytest.mark.parametrize("args", [["--grid", "1e-9"], ["--grid", "1e-320"], ["--random", "100000000000"],
+                                  ["--static-set", "--repeats", "1000000000"], ["--tables", "--step", "1e-9"],
+                                  ["--tables", "--step", "1e-320"]])
+def test_simulate_sizes_are_bounded(tmp_path, args):
+    out = tmp_path / "sim.csv"
+    res = _run(["simulate", ROOT / "calibrations" / "s500.machine.json", *args, "-o", out])
+    assert res.exit_code == 3 and "more than 1,000,000" in res.output, res.output
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("step", ["1e-9", "1e-320"])
+def test_verify_sampling_is_bounded_at_the_line_that_passes_it(tmp_path, step):
+    prog = tmp_path / "v.ngc"
+    prog.write_text("G21 G90\nG0 X10 Y10 Z10\nG1 X300 Y300 Z100 F500\nM2\n")
+    res = _run(["verify", prog, "--machine", ROOT / "calibrations" / "s500.machine.json",
+                "-c", ROOT / "calibrations" / "s500_static.json", "--max-step", step])
+    assert res.exit_code == EXIT_SAFETY, res.output
+    assert f"{prog}:3:1:" in res.output and "--max-step" in res.output
