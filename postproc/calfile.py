@@ -21,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +31,9 @@ from postproc.engine.base import Engine
 from postproc.engine.registry import engine_class
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.fileio import atomic_write_text, output_mode  # noqa: F401  (re-exported)
+
+# Integers beyond this do not fit a float (1.8e308) and are refused as corrupt.
+_LARGEST_INT = int(1.7e308)
 
 FORMAT = "postproc calibration"
 VERSION = 1
@@ -50,16 +54,23 @@ class Calibration:
         return self.engine.method
 
 
-def _check_finite(obj, path: str, where: str = "model") -> None:
-    """Every number in the model must be finite: NaN or inf in a calibration is corrupt."""
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            _check_finite(v, path, f"{where}.{k}")
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            _check_finite(v, path, f"{where}[{i}]")
-    elif isinstance(obj, float) and not math.isfinite(obj):
-        raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+def _check_finite(obj, path: str, where: str = "model", floats: bool = True) -> None:
+    """Every number in the model must be finite: NaN or inf in a calibration is corrupt, and
+    so is an integer no float holds (1e400 written out). Walked without recursion: the
+    nesting of a JSON file is bounded by the reader, not by the interpreter's stack.
+    ``floats``: NaN and inf are refused here (else by the reader of that part, in its words)."""
+    todo = [(obj, where)]
+    while todo:
+        obj, where = todo.pop()
+        if isinstance(obj, dict):
+            todo.extend((v, f"{where}.{k}") for k, v in obj.items())
+        elif isinstance(obj, list):
+            todo.extend((v, f"{where}[{i}]") for i, v in enumerate(obj))
+        elif floats and isinstance(obj, float) and not math.isfinite(obj):
+            raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+        elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) > _LARGEST_INT:
+            raise CalibrationError(f"{where} is an integer of {len(str(abs(obj)))} digits: a calibration must hold "
+                                   "numbers a float holds", path=path)
 
 
 def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) -> dict:
@@ -105,7 +116,8 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
     for key in ("method", "volume_mm", "model"):
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
-    _check_finite(data["model"], path or "", "model")
+    for key in ("volume_mm", "model", "effects"):
+        _check_finite(data.get(key), path or "", key, floats=key != "effects")
     if not isinstance(data["method"], str):
         raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
     try:
@@ -116,7 +128,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         engine = cls.model_from_dict(data["model"], data["volume_mm"])
     except CalibrationError as exc:
         raise exc.at(path=path) from None
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         raise CalibrationError(
             f"malformed {data['method']} model: {type(exc).__name__}: {exc}", path=path
         ) from None
@@ -149,6 +161,9 @@ def load_calibration(path) -> Calibration:
         data = json.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise CalibrationError(f"calibration is not UTF-8 text ({exc.reason})", path=path) from None
+    except RecursionError:  # arrays or objects nested thousands deep
+        raise CalibrationError("calibration is not a calibration: its JSON nests too deep to be read",
+                               path=path) from None
     except json.JSONDecodeError as exc:
         kind = _csv_kind(path)
         if kind:
@@ -158,6 +173,10 @@ def load_calibration(path) -> Calibration:
                 hint=f"make a calibration from it first: postproc fit {path} -o CAL.json, then give -c CAL.json",
             ) from None
         raise CalibrationError(f"calibration is not valid JSON: {exc.msg}", path=path, lineno=exc.lineno, col=exc.colno) from None
+    except ValueError as exc:  # an integer of more digits than Python converts (4300)
+        raise CalibrationError("calibration holds a number too long to read (an integer of over "
+                               f"{sys.get_int_max_str_digits()} digits)" if "digits" in str(exc) else
+                               f"calibration is not valid JSON: {exc}", path=path) from None
     return calibration_from_dict(data, path=path, sha256=sha)
 
 

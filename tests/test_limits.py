@@ -262,3 +262,77 @@ def test_verify_sampling_is_bounded_at_the_line_that_passes_it(tmp_path, step):
                 "-c", ROOT / "calibrations" / "s500_static.json", "--max-step", step])
     assert res.exit_code == EXIT_SAFETY, res.output
     assert f"{prog}:3:1:" in res.output and "--max-step" in res.output
+
+
+# -- inputs that ended in an internal error (item 5) ------------------------------------
+
+def _calibration_text(extra: str, where: str = '"volume_mm": [[') -> str:
+    text = json.dumps(json.loads((ROOT / "calibrations" / "s500_static.json").read_text()))
+    assert where in text
+    return text.replace(where, where + extra, 1)
+
+
+@pytest.mark.parametrize(("text", "fragment"), [
+    (_calibration_text('"x": ' + "[" * 100_000 + "]" * 100_000 + ", ", "{"), "nests too deep"),
+    (_calibration_text("9" * 5000 + ", "), "integer of over"),
+    (_calibration_text("9" * 4000 + ", "), "volume_mm[0][0] is an integer of 4000 digits"),
+    (_calibration_text('"zz": ' + "9" * 4000 + ", ", '"model": {'), "model.zz is an integer of 4000 digits"),
+])
+def test_hostile_calibrations_are_refused(tmp_path, text, fragment):
+    cal = tmp_path / "cal.json"
+    cal.write_text(text)
+    prog = tmp_path / "p.ngc"
+    prog.write_text(HEAD + "G0 X10 Y10 Z10\nM2\n")
+    res = _run(["correct", prog, "-c", cal, "-o", tmp_path / "o.ngc"])
+    assert res.exit_code == 4 and fragment in res.output, res.output
+    assert f"{cal}:" in res.output and "internal error" not in res.output
+
+
+def test_hostile_machine_definition_is_refused(tmp_path):
+    text = (ROOT / "calibrations" / "s500.machine.json").read_text().rstrip()
+    machine = tmp_path / "m.json"
+    machine.write_text(text[:-1] + ', "x": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    res = _run(["simulate", machine, "--static-set", "-o", tmp_path / "s.csv"])
+    assert res.exit_code == 4 and "nests too deep" in res.output, res.output
+
+
+@pytest.mark.parametrize(("row", "col"), [("T1 P1 Znan D6", 7), ("T1 P1 Zinf D6", 7), ("T1e400 P1 Z1", 1)])
+def test_tool_tables_with_non_finite_values_are_refused(tmp_path, row, col):
+    table = tmp_path / "t.tbl"
+    table.write_text(row + "\n")
+    prog = tmp_path / "p.ngc"
+    prog.write_text(HEAD + "G0 X0 Y0 Z0\nG43 H1 Z10\nG1 X10\nM2\n")
+    res = _run(["correct", prog, "-c", ROOT / "calibrations" / "s500_static.json", "-o", tmp_path / "o.ngc",
+                "--tool-table", table, "--offset", "G54=X100,Y100,Z100"])
+    assert res.exit_code == 3 and f"{table}:1:{col}:" in res.output, res.output
+
+
+HUGE = "1" * 400
+
+
+@pytest.mark.parametrize("extrapolate", ["refuse", "clamp", "linear"])
+@pytest.mark.parametrize(("body", "lineno", "col"), [
+    (f"G0 X{HUGE} Y0 Z0\n", 2, 4),  # read by the interpreter
+    ("G0 X0 Y0 Z0\n" + "G1 X1 Y1 F100\nG1 X0 Y0\n" * 1500 + f"G1 X{HUGE}\n", 3003, 4),  # in a run of plain lines
+    (f"G0 X{'1' * 300} Y0 Z0\n", 2, 4),  # finite, far beyond any machine
+    (f"G0 X0 Y0 Z0\nG{HUGE} X1\n", 3, 1),
+])
+def test_huge_numbers_are_refused_at_their_word(tmp_path, extrapolate, body, lineno, col):
+    prog = tmp_path / "p.ngc"
+    prog.write_text(HEAD + body + "M2\n")
+    res = _run(["correct", prog, "-c", ROOT / "calibrations" / "s500_static.json", "-o", tmp_path / "o.ngc",
+                "--extrapolate", extrapolate, "-j", "1"])
+    assert res.exit_code == 3, res.output
+    assert f"{prog}:{lineno}:{col}:" in res.output and "Warning" not in res.output
+
+
+def test_export_detection_unit_must_be_positive(tmp_path):
+    from postproc.errors import CalibrationError
+    from postproc.metrology.controllers.fanuc import export_fanuc
+
+    res = _run(["export", ROOT / "calibrations" / "s500_parametric.json", "-f", "fanuc", "--step", "25",
+                "--detection-unit", "0", "-o", tmp_path / "e.txt"])
+    assert res.exit_code == 2 and "--detection-unit" in res.output
+    for unit in (0.0, 1e-320):
+        with pytest.raises(CalibrationError):
+            export_fanuc([], interval_mm=25.0, detection_unit_mm=unit)

@@ -154,11 +154,13 @@ def read_tool_table(path: str) -> dict[int, float]:
             letter, value = item[:1].upper(), item[1:]
             try:
                 fields[letter] = float(value)
+                if not math.isfinite(fields[letter]):
+                    raise ValueError
             except ValueError:
-                raise PostprocError(f"tool table field {item!r} is not a letter and a number",
-                                    path=path, lineno=lineno) from None
+                raise PostprocError(f"tool table field {item!r} is not a letter and a finite number",
+                                    path=path, lineno=lineno, col=raw.find(item) + 1) from None
         if "T" not in fields:
-            raise PostprocError("tool table line without a T word", path=path, lineno=lineno)
+            raise PostprocError("tool table line without a T word", path=path, lineno=lineno, col=1)
         lengths[int(fields["T"])] = fields.get("Z", 0.0)
     return lengths
 

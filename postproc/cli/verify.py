@@ -130,7 +130,7 @@ def _load_machine(path: str):
 
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, ValueError, RecursionError):  # (ValueError: bad JSON, bad UTF-8, an overlong integer)
         return load_machine(path)  # which names what is wrong with the file
     if not isinstance(data, dict) or data.get("format") != "postproc calibration":
         return load_machine(path)

@@ -65,6 +65,9 @@ if TYPE_CHECKING:
 
 #: a block's words by letter, G and M aside: (value, word index)
 Vals = dict[str, tuple[float, int]]
+# Largest value of a word (1000 km, a billion turns): a 400-digit coordinate reads as inf,
+# and one of 300 digits makes the correction's arithmetic overflow.
+MAX_WORD_VALUE = 1e9
 _E = TypeVar("_E", bound=PostprocError)
 
 
@@ -469,6 +472,8 @@ class Interpreter:
         mcodes: list[tuple[int, int]] = []
         vals: dict[str, tuple[float, int]] = {}
         for i, (letter, num, _start, _end, _lpos) in enumerate(words):
+            if letter in "GM" and not abs(float(num)) <= MAX_WORD_VALUE:
+                raise self._err(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
             if letter == "G":
                 gcodes.append((_gkey(num), i))
             elif letter == "M":
@@ -485,7 +490,11 @@ class Interpreter:
                         or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
-                vals[letter] = (float(num), i)
+                value = float(num)
+                if not abs(value) <= MAX_WORD_VALUE:  # (also inf and nan)
+                    raise self._err(GcodeSyntaxError, f"{letter} value {num[:12]}{'...' if len(num) > 12 else ''} is "
+                                    f"beyond {MAX_WORD_VALUE:g}: no machine moves that far", lineno, _lpos + 1)
+                vals[letter] = (value, i)
         def col_of(i: int) -> int:
             return words[i].letter_pos + 1  # 1-based column of the word's letter
 

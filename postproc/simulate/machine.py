@@ -290,6 +290,10 @@ def load_machine(path) -> Machine:
     except json.JSONDecodeError as exc:
         raise MachineError(f"machine definition is not valid JSON: {exc.msg}", path=path,
                            lineno=exc.lineno, col=exc.colno) from None
+    except RecursionError:  # arrays or objects nested thousands deep
+        raise MachineError("machine definition is not valid: its JSON nests too deep to be read", path=path) from None
+    except ValueError:  # an integer of more digits than Python converts
+        raise MachineError("machine definition holds a number too long to read", path=path) from None
     return machine_from_dict(data, path=path)
 
 

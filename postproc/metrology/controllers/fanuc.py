@@ -53,6 +53,9 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, detection
                  reference_mm: dict[str, float] | None = None, return_direction: int = 1,
                  axis_numbers: dict[str, str] | None = None, first_point: int = 0) -> Export:
     numbers = {**DEFAULT_AXIS_NUMBERS, **(axis_numbers or {})}
+    if not (detection_unit_mm > 0 and math.isfinite(interval_mm / detection_unit_mm)):
+        raise CalibrationError(f"detection unit {detection_unit_mm * 1000:g} um: a positive length is needed "
+                               f"that counts the interval {interval_mm:g} mm", hint="give --detection-unit in um, e.g. 1")
     interval_du = round(interval_mm / detection_unit_mm)
     if interval_du <= 0 or abs(interval_du - interval_mm / detection_unit_mm) > WHOLE_STEPS_SLACK * max(1, interval_du):
         raise CalibrationError(f"interval {interval_mm:g} mm is not a whole number of detection units "
