@@ -336,3 +336,12 @@ def test_export_detection_unit_must_be_positive(tmp_path):
     for unit in (0.0, 1e-320):
         with pytest.raises(CalibrationError):
             export_fanuc([], interval_mm=25.0, detection_unit_mm=unit)
+
+
+def test_output_size_is_bounded_for_few_long_lines():
+    """A loop repeating a long comment makes few lines of many bytes: the size bound stops it."""
+    text = HEAD + "G0 X0 Y0 Z0\no1 repeat [200]\nG1 X1 (" + "c" * 10_000 + ")\no1 endrepeat\nM2\n"
+    with pytest.raises(ResourceLimitError) as err:
+        correct_text(text, ENGINE, SETUP, CorrectOptions(limits=Limits(max_output_mb=1.0)), path="p.ngc")
+    assert "--max-output-mb" in str(err.value) and err.value.lineno is not None  # (where reading reached)
+    assert Limits().output_chars(10) == OUTPUT_GROWTH * 10 + 256_000_000

@@ -282,12 +282,16 @@ def limit_options(fn):
     from postproc import limits as lim
 
     @functools.wraps(fn)
-    def command(*args, max_iterations, max_output_lines, max_arc_turns, **kwargs):
-        return fn(*args, limits=lim.Limits(max_iterations, max_output_lines, max_arc_turns), **kwargs)
+    def command(*args, max_iterations, max_output_lines, max_output_mb, max_arc_turns, **kwargs):
+        return fn(*args, limits=lim.Limits(max_iterations, max_output_lines, max_arc_turns, max_output_mb), **kwargs)
 
     command = click.option(
         "--max-arc-turns", "max_arc_turns", default=lim.DEFAULT_MAX_ARC_TURNS, show_default=True,
         type=click.IntRange(1), help="Refuse a helix (G2/G3 P) of more turns than this.")(command)
+    command = click.option(
+        "--max-output-mb", "max_output_mb", default=None, type=FiniteFloat(min=0, min_open=True),
+        help=f"Refuse a corrected program larger than this (MB) [default: {lim.OUTPUT_GROWTH} times the "
+             f"input's size plus {lim.OUTPUT_MB_EXTRA} MB].")(command)
     command = click.option(
         "--max-output-lines", "max_output_lines", default=None, type=click.IntRange(1),
         help=f"Refuse a corrected program longer than this [default: {lim.OUTPUT_GROWTH} times the input's "

@@ -1461,19 +1461,19 @@ def correct_text(text: str, engine: Engine, setup: Setup | None = None, options:
     out: list[str] = []
     lines = split_lines(text)
     report = _correct_lines(lambda: lines, out.append, out.clear, engine, setup, options, path,
-                            calibration_name, calibration_sha256, input_lines=len(lines))
+                            calibration_name, calibration_sha256, input_lines=len(lines), input_chars=len(text))
     return "".join(out), report
 
 
 def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None], engine: Engine,
                    setup: Setup | None, options: CorrectOptions | None, path: str | None, calibration_name: str,
                    calibration_sha256: str, progress: Callable[[int], None] | None = None,
-                   count: int | None = None, input_lines: int = 0) -> CorrectReport:
+                   count: int | None = None, input_lines: int = 0, input_chars: int = 0) -> CorrectReport:
     """Correct the lines ``get_lines()`` gives; when the program turns out to need
     expansion, ``restart()`` drops what was written and the expanded program is corrected.
     ``count``: the number of lines, when the program may be cut into parts corrected in
-    several processes (:mod:`postproc.gcode.split`); ``input_lines``: the program's lines,
-    for the bound on the output's (``options.limits``)."""
+    several processes (:mod:`postproc.gcode.split`); ``input_lines``, ``input_chars``: the
+    program's size, for the bounds on the output's (``options.limits``)."""
     from postproc.gcode.interp import NeedsExpansion
 
     setup = setup or Setup()
@@ -1487,7 +1487,8 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
             yield line
 
     bounded = BoundedWriter(write, options.limits.output_lines(input_lines),
-                            lambda: (at[-1][1], at[-1][0]) if at[-1][0] else (path, read or None))
+                            lambda: (at[-1][1], at[-1][0]) if at[-1][0] else (path, read or None),
+                            options.limits.output_chars(input_chars))
     write = bounded
 
     def dropped() -> None:
@@ -1557,8 +1558,9 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
     path, _lines = iter_source_lines(Path(source))
     try:
         lines_in = split.count_lines(str(source))
+        size = os.path.getsize(source)
     except OSError:
-        lines_in = 0  # the reader names the problem
+        lines_in = size = 0  # the reader names the problem
     count = lines_in if lines_in and options is not None and options.processes > 1 and forking.available() else None
     # staged: a device or pipe gets the whole program at the end (the run may start over)
     try:
@@ -1570,7 +1572,7 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
 
             report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
                                     options, path, calibration_name, calibration_sha256, progress, count,
-                                    input_lines=lines_in)
+                                    input_lines=lines_in, input_chars=size)
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
         raise PostprocError(exc.message, path=exc.path, hint=exc.hint) from None
     return report
