@@ -320,7 +320,7 @@ def detect_lattice(q: np.ndarray, step: np.ndarray | None, path: str = "") -> tu
         with np.errstate(over="ignore"):  # a step of 1e-320 mm: inf nodes, refused just below
             n = np.floor((pos[-1] - origin[j]) / steps[j] + LATTICE_TOL_MM / steps[j]) + 1
         if not n <= MAX_GRID_NODES:  # (also inf) refused before it becomes an integer
-            _check_nodes([n], path)
+            _check_nodes([n], path, f" along {AXES[j]}")
         counts[j] = int(n)
         if counts[j] < 2:
             raise MeasurementError(
@@ -333,12 +333,12 @@ def detect_lattice(q: np.ndarray, step: np.ndarray | None, path: str = "") -> tu
     return origin, steps, counts
 
 
-def _check_nodes(counts, path: str | None = None) -> None:
+def _check_nodes(counts, path: str | None = None, along: str = "") -> None:
     """Refuse a lattice of more than :data:`MAX_GRID_NODES` nodes."""
     total = math.prod(float(c) for c in counts)
     if not total <= MAX_GRID_NODES:
         raise MeasurementError(
-            f"a grid of {' x '.join(f'{c:.6g}' for c in counts)} nodes: more than {MAX_GRID_NODES:,}",
+            f"a grid of {' x '.join(f'{c:.6g}' for c in counts)} nodes{along}: more than {MAX_GRID_NODES:,}",
             path=path or None, hint="choose a larger --step (measured grids have a step of 10-20 mm)")
 
 
