@@ -48,7 +48,8 @@ def test_deep_or_long_expressions_are_refused_with_their_place(line):
     with pytest.raises(GcodeSyntaxError) as err:
         flat(HEAD + line + "M2\n", dialect="linuxcnc")
     e = err.value
-    assert (e.path, e.lineno) == ("p.ngc", 2) and e.col is not None
+    assert (e.path, e.lineno) == ("p.ngc", 2)
+    assert e.col is not None
     assert f"{MAX_EXPRESSION_NESTING} levels" in e.message or f"{MAX_EXPRESSION_DEPTH} operations" in e.message
 
 
@@ -63,7 +64,8 @@ def test_expressions_up_to_the_bounds_still_run():
     """A 250-term sum and brackets nested 60 deep: far beyond real programs, still read."""
     text = (HEAD + "G0 X[" + "+".join(["1"] * 250) + "]\n" + "G0 Y" + "[" * 60 + "2" + "]" * 60 + "\nM2\n")
     out = "".join(sl.text for sl in flat(text, dialect="linuxcnc"))
-    assert "G0 X250.0" in out and "G0 Y2.0" in out
+    assert "G0 X250.0" in out
+    assert "G0 Y2.0" in out
 
 
 # -- loop iterations ------------------------------------------------------------------
@@ -91,8 +93,11 @@ def test_endless_loops_stop_at_the_iteration_bound(text, dialect, lineno):
     with pytest.raises(ResourceLimitError) as err:
         flat(text, dialect=dialect, max_iterations=1000)
     e = err.value
-    assert "--max-iterations" in str(e) and "1,000" in e.message
-    assert e.path == "p.ngc" and e.col is not None and e.exit_code == EXIT_SAFETY
+    assert "--max-iterations" in str(e)
+    assert "1,000" in e.message
+    assert e.path == "p.ngc"
+    assert e.col is not None
+    assert e.exit_code == EXIT_SAFETY
     if lineno is not None:
         assert e.lineno == lineno, str(e)
 
@@ -107,7 +112,8 @@ def test_the_lines_a_loop_runs_are_bounded_too():
     text = HEAD + "o1 repeat [100]\n" + "#1 = 1\n" * 100 + "o1 endrepeat\nM2\n"
     with pytest.raises(ResourceLimitError) as err:
         flat(text, dialect="linuxcnc", max_iterations=1000, max_lines=5000)
-    assert "--max-iterations" in str(err.value) and err.value.col == 1
+    assert "--max-iterations" in str(err.value)
+    assert err.value.col == 1
 
 
 # -- output lines, helix turns --------------------------------------------------------
@@ -117,8 +123,10 @@ def test_output_lines_are_bounded_and_nothing_is_returned():
     opts = CorrectOptions(limits=Limits(max_output_lines=300))
     with pytest.raises(ResourceLimitError) as err:
         correct_text(text, ENGINE, SETUP, opts, path="p.ngc")
-    assert "--max-output-lines" in str(err.value) and "300" in err.value.message
-    assert err.value.path == "p.ngc" and err.value.lineno is not None
+    assert "--max-output-lines" in str(err.value)
+    assert "300" in err.value.message
+    assert err.value.path == "p.ngc"
+    assert err.value.lineno is not None
     out, _ = correct_text(text, ENGINE, SETUP, CorrectOptions(limits=Limits(max_output_lines=2000)), path="p.ngc")
     assert out.count("G1 X1") == 500
 
@@ -142,7 +150,8 @@ def test_helix_turns_are_bounded(p):
         correct_text(text, ENGINE, SETUP, CorrectOptions(), path="p.ngc")
     assert (err.value.lineno, err.value.col) == (3, 23)
     if len(p) < 20:
-        assert isinstance(err.value, ResourceLimitError) and "--max-arc-turns" in str(err.value)
+        assert isinstance(err.value, ResourceLimitError)
+        assert "--max-arc-turns" in str(err.value)
 
 
 def test_helix_turns_within_the_bound_are_corrected():
@@ -172,8 +181,10 @@ def test_cli_names_the_bound_and_writes_nothing(tmp_path):
     res = _run(["correct", src, "-c", ROOT / "calibrations" / "s500_static.json", "-o", out,
                 "--max-iterations", "100", "--offset", "G54=X100,Y100,Z100"])
     assert res.exit_code == EXIT_SAFETY, res.output
-    assert f"{src}:5:1:" in res.output and "--max-iterations" in res.output
-    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["loop.ngc"]
+    assert f"{src}:5:1:" in res.output
+    assert "--max-iterations" in res.output
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["loop.ngc"]
 
 
 def test_cli_limit_options_raise_the_bounds(tmp_path):
@@ -182,9 +193,11 @@ def test_cli_limit_options_raise_the_bounds(tmp_path):
     cal = ROOT / "calibrations" / "s500_static.json"
     base = ["correct", src, "-c", cal, "--offset", "G54=X100,Y100,Z100", "-j", "1"]
     res = _run([*base, "-o", tmp_path / "a.ngc", "--max-iterations", "100"])
-    assert res.exit_code == EXIT_SAFETY and "--max-iterations" in res.output
+    assert res.exit_code == EXIT_SAFETY
+    assert "--max-iterations" in res.output
     res = _run([*base, "-o", tmp_path / "b.ngc", "--max-output-lines", "100"])
-    assert res.exit_code == EXIT_SAFETY and "--max-output-lines" in res.output
+    assert res.exit_code == EXIT_SAFETY
+    assert "--max-output-lines" in res.output
     res = _run([*base, "-o", tmp_path / "c.ngc", "--max-iterations", "200", "--max-output-lines", "1000"])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "c.ngc").read_text().count("G1 X") >= 400
@@ -201,7 +214,8 @@ def test_subroutine_names_that_name_a_path_are_refused(tmp_path, name):
     with pytest.raises(ExpansionError) as err:
         flat(text, dialect="linuxcnc", subroutine_path=[subs])
     e = err.value
-    assert (e.lineno, e.col) == (2, 1) and "--subroutine-path" in e.message
+    assert (e.lineno, e.col) == (2, 1)
+    assert "--subroutine-path" in e.message
 
 
 def test_subroutines_on_the_path_are_still_found(tmp_path):
@@ -224,7 +238,8 @@ def test_astatic_grid_step_is_bounded_at_load(tmp_path):
     cal.write_text(json.dumps(data))
     with pytest.raises(PostprocError) as err:
         load_calibration(cal)
-    assert "cells" in err.value.message and err.value.path == str(cal)
+    assert "cells" in err.value.message
+    assert err.value.path == str(cal)
     data["model"]["astatic"] = {"grid_step_mm": 2.0, "gain": 1.5, "time_step": 0.1, "max_iter": 10**12}
     cal.write_text(json.dumps(data))
     with pytest.raises(PostprocError):
@@ -250,7 +265,8 @@ def test_grid_fit_step_is_bounded():
 def test_simulate_sizes_are_bounded(tmp_path, args):
     out = tmp_path / "sim.csv"
     res = _run(["simulate", ROOT / "calibrations" / "s500.machine.json", *args, "-o", out])
-    assert res.exit_code == 3 and "more than 1,000,000" in res.output, res.output
+    assert res.exit_code == 3, res.output
+    assert "more than 1,000,000" in res.output, res.output
     assert not out.exists()
 
 
@@ -261,7 +277,8 @@ def test_verify_sampling_is_bounded_at_the_line_that_passes_it(tmp_path, step):
     res = _run(["verify", prog, "--machine", ROOT / "calibrations" / "s500.machine.json",
                 "-c", ROOT / "calibrations" / "s500_static.json", "--max-step", step])
     assert res.exit_code == EXIT_SAFETY, res.output
-    assert f"{prog}:3:1:" in res.output and "--max-step" in res.output
+    assert f"{prog}:3:1:" in res.output
+    assert "--max-step" in res.output
 
 
 # -- inputs that ended in an internal error (item 5) ------------------------------------
@@ -284,8 +301,10 @@ def test_hostile_calibrations_are_refused(tmp_path, text, fragment):
     prog = tmp_path / "p.ngc"
     prog.write_text(HEAD + "G0 X10 Y10 Z10\nM2\n")
     res = _run(["correct", prog, "-c", cal, "-o", tmp_path / "o.ngc"])
-    assert res.exit_code == 4 and fragment in res.output, res.output
-    assert f"{cal}:" in res.output and "internal error" not in res.output
+    assert res.exit_code == 4, res.output
+    assert fragment in res.output, res.output
+    assert f"{cal}:" in res.output
+    assert "internal error" not in res.output
 
 
 def test_hostile_machine_definition_is_refused(tmp_path):
@@ -293,7 +312,8 @@ def test_hostile_machine_definition_is_refused(tmp_path):
     machine = tmp_path / "m.json"
     machine.write_text(text[:-1] + ', "x": ' + "[" * 100_000 + "]" * 100_000 + "}")
     res = _run(["simulate", machine, "--static-set", "-o", tmp_path / "s.csv"])
-    assert res.exit_code == 4 and "nests too deep" in res.output, res.output
+    assert res.exit_code == 4, res.output
+    assert "nests too deep" in res.output, res.output
 
 
 @pytest.mark.parametrize(("row", "col"), [("T1 P1 Znan D6", 7), ("T1 P1 Zinf D6", 7), ("T1e400 P1 Z1", 1)])
@@ -304,7 +324,8 @@ def test_tool_tables_with_non_finite_values_are_refused(tmp_path, row, col):
     prog.write_text(HEAD + "G0 X0 Y0 Z0\nG43 H1 Z10\nG1 X10\nM2\n")
     res = _run(["correct", prog, "-c", ROOT / "calibrations" / "s500_static.json", "-o", tmp_path / "o.ngc",
                 "--tool-table", table, "--offset", "G54=X100,Y100,Z100"])
-    assert res.exit_code == 3 and f"{table}:1:{col}:" in res.output, res.output
+    assert res.exit_code == 3, res.output
+    assert f"{table}:1:{col}:" in res.output, res.output
 
 
 HUGE = "1" * 400
@@ -323,7 +344,8 @@ def test_huge_numbers_are_refused_at_their_word(tmp_path, extrapolate, body, lin
     res = _run(["correct", prog, "-c", ROOT / "calibrations" / "s500_static.json", "-o", tmp_path / "o.ngc",
                 "--extrapolate", extrapolate, "-j", "1"])
     assert res.exit_code == 3, res.output
-    assert f"{prog}:{lineno}:{col}:" in res.output and "Warning" not in res.output
+    assert f"{prog}:{lineno}:{col}:" in res.output
+    assert "Warning" not in res.output
 
 
 def test_export_detection_unit_must_be_positive(tmp_path):
@@ -332,7 +354,8 @@ def test_export_detection_unit_must_be_positive(tmp_path):
 
     res = _run(["export", ROOT / "calibrations" / "s500_parametric.json", "-f", "fanuc", "--step", "25",
                 "--detection-unit", "0", "-o", tmp_path / "e.txt"])
-    assert res.exit_code == 2 and "--detection-unit" in res.output
+    assert res.exit_code == 2
+    assert "--detection-unit" in res.output
     for unit in (0.0, 1e-320):
         with pytest.raises(CalibrationError):
             export_fanuc([], interval_mm=25.0, detection_unit_mm=unit)
@@ -343,5 +366,6 @@ def test_output_size_is_bounded_for_few_long_lines():
     text = HEAD + "G0 X0 Y0 Z0\no1 repeat [200]\nG1 X1 (" + "c" * 10_000 + ")\no1 endrepeat\nM2\n"
     with pytest.raises(ResourceLimitError) as err:
         correct_text(text, ENGINE, SETUP, CorrectOptions(limits=Limits(max_output_mb=1.0)), path="p.ngc")
-    assert "--max-output-mb" in str(err.value) and err.value.lineno is not None  # (where reading reached)
+    assert "--max-output-mb" in str(err.value)
+    assert err.value.lineno is not None  # (where reading reached)
     assert Limits().output_chars(10) == OUTPUT_GROWTH * 10 + 256_000_000

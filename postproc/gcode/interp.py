@@ -32,7 +32,6 @@ from postproc.errors import (
     UnsupportedGcodeError,
 )
 from postproc.gcode import lexer
-from postproc.limits import DEFAULT_MAX_ARC_TURNS, ResourceLimitError
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
@@ -57,6 +56,7 @@ from postproc.gcode.state import (
     WORK_SYSTEMS,
     ModalState,
 )
+from postproc.limits import DEFAULT_MAX_ARC_TURNS, ResourceLimitError
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -1073,6 +1073,18 @@ class Interpreter:
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
             self.tool_lengths[tool] = st.pos[2] - g593[2] - z
 
+    def _turns(self, vals: Vals, words: list[lexer.Word], lineno: int) -> int:
+        """The turns of an arc's P word: a positive integer, at most ``max_arc_turns``."""
+        p = vals["P"][0]
+        p_col = words[vals["P"][1]][4] + 1
+        if not (math.isfinite(p) and p >= 1 and p == math.floor(p)):
+            raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
+        if p > self.max_arc_turns:
+            raise self._err(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
+                            "(--max-arc-turns)", lineno, p_col,
+                            hint="raise --max-arc-turns if the helix is meant to turn this often")
+        return int(p)
+
     def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
              q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
         st = self.state
@@ -1082,17 +1094,7 @@ class Interpreter:
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc, or give their "
                                  "machine positions at program start with --start")
-        turns = 1
-        if "P" in vals:
-            p = vals["P"][0]
-            p_col = words[vals["P"][1]][4] + 1
-            if not (math.isfinite(p) and p >= 1 and p == math.floor(p)):
-                raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
-            if p > self.max_arc_turns:
-                raise self._err(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
-                                "(--max-arc-turns)", lineno, p_col,
-                                hint="raise --max-arc-turns if the helix is meant to turn this often")
-            turns = int(p)
+        turns = self._turns(vals, words, lineno) if "P" in vals else 1
         clockwise = st.motion == ARC_CW
         s1, s2 = q0[a1], q0[a2]
         e1, e2 = q1[a1], q1[a2]

@@ -53,7 +53,6 @@ from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
 from postproc.gcode.state import LINE, PLANES, RAPID
-from postproc.limits import BoundedWriter, Limits
 from postproc.gcode.vplan import (
     ArcHint,
     ArcMove,
@@ -65,6 +64,7 @@ from postproc.gcode.vplan import (
     PlanMove,
     Step,
 )
+from postproc.limits import BoundedWriter, Limits
 
 if TYPE_CHECKING:
     from postproc.engine.base import Engine
