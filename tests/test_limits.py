@@ -369,3 +369,16 @@ def test_output_size_is_bounded_for_few_long_lines():
     assert "--max-output-mb" in str(err.value)
     assert err.value.lineno is not None  # (where reading reached)
     assert Limits().output_chars(10) == OUTPUT_GROWTH * 10 + 256_000_000
+
+
+def test_lines_held_for_an_axis_never_positioned_are_bounded(monkeypatch):
+    """Lines wait in memory until every axis is known (a few KB each): a program that
+    never positions Y is refused once too many wait, not at its end (1.5M held: 3.7 GB)."""
+    from postproc.gcode import pipeline
+
+    monkeypatch.setattr(pipeline, "UNKNOWN_AXIS_LINES", 5000)
+    text = "O0001\nG21 G90\nM98 P1000 L99999999\nM30\nO1000\nG1 X1 F100\nG1 X0\nM99\n"
+    with pytest.raises(PostprocError) as err:
+        correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=1000), path="m.nc")
+    assert "axis Y is still not positioned" in err.value.message
+    assert "--start Y" in err.value.hint

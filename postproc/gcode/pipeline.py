@@ -32,6 +32,7 @@ from postproc.constants import (
 from postproc.errors import (
     AlreadyCorrectedError,
     CorrectionTooLargeError,
+    MissingSetupError,
     OutOfVolumeError,
     PostprocError,
     SafetyError,
@@ -65,6 +66,11 @@ from postproc.gcode.vplan import (
     Step,
 )
 from postproc.limits import BoundedWriter, Limits
+
+# Lines held while an axis is not yet positioned (they are corrected once it is, a few KB
+# each: 1.5 million held took 3.7 GB). Real programs position every axis in their first
+# lines; one that never does is refused at its end anyway, this refuses it in bounded memory.
+UNKNOWN_AXIS_LINES = 200_000
 
 if TYPE_CHECKING:
     from postproc.engine.base import Engine
@@ -408,6 +414,8 @@ class Corrector(EmitterMixin):
                     self._chunk(entries, lambda _text: None)
                 raise exc from None
             pending += len(block)
+            if pending > UNKNOWN_AXIS_LINES:  # the lines wait for an axis to be positioned: bounded
+                self._unknown_too_long(lineno - 1, pending)
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 if lineno - 1 > skip_until:
                     self._chunk(entries, write)
@@ -426,6 +434,17 @@ class Corrector(EmitterMixin):
         self.report.lines_in = lineno - 1
         self.report.g54_assumed_zero = self.interp.implicit_g54
         return self.report
+
+    def _unknown_too_long(self, lineno: int, waiting: int) -> None:
+        """Refuse a program that leaves an axis unknown for more than
+        :data:`UNKNOWN_AXIS_LINES` lines (``waiting`` lines read since the last written,
+        up to line ``lineno``): they are held until it is known, a few KB each."""
+        axis = next((a for a, v in zip("XYZ", self.interp.state.pos, strict=True) if math.isnan(v)), "X")
+        raise MissingSetupError(
+            f"axis {axis} is still not positioned after {waiting:,} lines, so the correction cannot be evaluated",
+            path=self.interp.path or self.path, lineno=lineno, col=1,
+            hint=f"give the machine position of {axis} at program start with --start {axis}.. (mm, machine "
+                 f"coordinates), or add an absolute move on {axis} near the start")
 
     def _write_start(self, head: list[str], keep: int, write: Write, where: Callable[[int], int]) -> int:
         """Write the first ``keep`` lines of ``head`` (they stay before the header), then
