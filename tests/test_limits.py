@@ -381,4 +381,5 @@ def test_lines_held_for_an_axis_never_positioned_are_bounded(monkeypatch):
     with pytest.raises(PostprocError) as err:
         correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=1000), path="m.nc")
     assert "axis Y is still not positioned" in err.value.message
+    assert err.value.lineno in (6, 7)  # a line of the subprogram, not of the expanded program
     assert "--start Y" in err.value.hint

@@ -307,12 +307,15 @@ class Corrector(EmitterMixin):
         interp = self.interp
         interp.may_expand = source is None and self.opt.expand
 
+        last = [0]  # the source line where() gave last (an expanded program's)
+
         def where(seq: int) -> int:
             """The line number the interpreter reports for the ``seq``-th line read."""
             if source is None:
                 return seq
             ln, p = source.popleft()
             interp.path = p or self.path
+            last[0] = ln
             return ln
 
         head, keep = emit.start_lines(it)
@@ -415,7 +418,7 @@ class Corrector(EmitterMixin):
                 raise exc from None
             pending += len(block)
             if pending > UNKNOWN_AXIS_LINES:  # the lines wait for an axis to be positioned: bounded
-                self._unknown_too_long(lineno - 1, pending)
+                self._unknown_too_long(lineno - 1 if source is None else last[0], pending)
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 if lineno - 1 > skip_until:
                     self._chunk(entries, write)
