@@ -32,6 +32,9 @@ from postproc.engine.registry import engine_class
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.fileio import atomic_write_text, output_mode  # noqa: F401  (re-exported)
 
+# Integers beyond this do not fit a float (1.8e308) and are refused as corrupt.
+_LARGEST_INT = int(1.7e308)
+
 FORMAT = "postproc calibration"
 VERSION = 1
 UNITS = {"length": "mm", "angle": "rad"}
@@ -56,21 +59,28 @@ class Calibration:
 MAX_MODEL_NUMBER = 1e9
 
 
-def _check_finite(obj, path: str, where: str = "model", *, finite: bool = True) -> None:
-    """Every number in the model must be finite (NaN or inf in a calibration is corrupt;
-    ``finite=False``: left to the caller) and at most :data:`MAX_MODEL_NUMBER` in size."""
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            _check_finite(v, path, f"{where}.{k}", finite=finite)
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            _check_finite(v, path, f"{where}[{i}]", finite=finite)
-    elif isinstance(obj, float) and not math.isfinite(obj):
-        if finite:  # (effects name their own non-finite values, with the effect)
-            raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
-    elif isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
-        raise CalibrationError(f"{where} is {obj:.6g}: beyond any length (mm), angle (rad) or count a "
-                               f"calibration holds (at most {MAX_MODEL_NUMBER:g} in size)", path=path)
+def _check_finite(obj, path: str, where: str = "model", floats: bool = True) -> None:
+    """Every number in the model must be finite: NaN or inf in a calibration is corrupt, and
+    so is a number beyond :data:`MAX_MODEL_NUMBER` in size (an integer no float holds among
+    them). Walked without recursion: the nesting of a JSON file is bounded by the reader,
+    not by the interpreter's stack. ``floats``: NaN and inf are refused here (else by the
+    reader of that part, in its words)."""
+    todo = [(obj, where)]
+    while todo:
+        obj, where = todo.pop()
+        if isinstance(obj, dict):
+            todo.extend((v, f"{where}.{k}") for k, v in obj.items())
+        elif isinstance(obj, list):
+            todo.extend((v, f"{where}[{i}]") for i, v in enumerate(obj))
+        elif isinstance(obj, float) and not math.isfinite(obj):
+            if floats:
+                raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
+        elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) > _LARGEST_INT:
+            raise CalibrationError(f"{where} is an integer of {len(str(abs(obj)))} digits: a calibration must hold "
+                                   "numbers a float holds", path=path)
+        elif isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
+            raise CalibrationError(f"{where} is {obj:.6g}: beyond any length (mm), angle (rad) or count a "
+                                   f"calibration holds (at most {MAX_MODEL_NUMBER:g} in size)", path=path)
 
 
 def calibration_to_dict(engine: Engine, *, name: str, effects=None, fit=None) -> dict:
@@ -116,8 +126,8 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
     for key in ("method", "volume_mm", "model"):
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
-    _check_finite(data["model"], path or "", "model")
-    _check_finite(data.get("effects") or [], path or "", "effects", finite=False)
+    for key in ("volume_mm", "model", "effects"):
+        _check_finite(data.get(key), path or "", key, floats=key != "effects")
     if not isinstance(data["method"], str):
         raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
     try:
@@ -128,7 +138,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         engine = cls.model_from_dict(data["model"], data["volume_mm"])
     except CalibrationError as exc:
         raise exc.at(path=path) from None
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         raise CalibrationError(
             f"malformed {data['method']} model: {type(exc).__name__}: {exc}", path=path
         ) from None
@@ -174,6 +184,9 @@ def load_calibration(path) -> Calibration:
         data = json.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise CalibrationError(f"calibration is not UTF-8 text ({exc.reason})", path=path) from None
+    except RecursionError:  # arrays or objects nested thousands deep
+        raise CalibrationError("calibration is not a calibration: its JSON nests too deep to be read",
+                               path=path) from None
     except json.JSONDecodeError as exc:
         kind = _csv_kind(path)
         if kind:
@@ -183,7 +196,7 @@ def load_calibration(path) -> Calibration:
                 hint=f"make a calibration from it first: postproc fit {path} -o CAL.json, then give -c CAL.json",
             ) from None
         raise CalibrationError(f"calibration is not valid JSON: {exc.msg}", path=path, lineno=exc.lineno, col=exc.colno) from None
-    except (ValueError, RecursionError) as exc:  # a number of over 4300 digits; nesting deeper than Python's stack
+    except ValueError as exc:  # a number of over 4300 digits
         raise CalibrationError(f"calibration is not JSON postproc can read: {_json_limit(exc)}", path=path) from None
     return calibration_from_dict(data, path=path, sha256=sha)
 

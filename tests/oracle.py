@@ -15,13 +15,11 @@ plane's normal axis. :class:`Motion` stores both the raw fields and X/Y/Z.
 
 from __future__ import annotations
 
-import fcntl
 import os
 import re
 import shutil
 import subprocess
 import tempfile
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,9 +35,6 @@ RS274_RESOLUTION = 1e-4
 # Tool table used when a test gives none: tools 1..99, zero length and diameter, so that
 # T/M6/G43 in real programs are accepted and change nothing.
 DEFAULT_TOOLS = "".join(f"T{n} P{n} Z0 D0\n" for n in range(1, 100))
-# Runs killed by a signal (another rs274 outside the lock) are tried again this many times.
-RS274_ATTEMPTS = 5
-_LOCK_PATH = Path(tempfile.gettempdir()) / "postproc-rs274.lock"
 # Wall-clock cap for one rs274 run (s): programs in the tests run in milliseconds.
 RS274_TIMEOUT_S = 60
 
@@ -155,21 +150,15 @@ def run_rs274(text: str, tools: str | None = None, params: dict[int, float] | No
             ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\nPARAMETER_FILE = {var}\n")
             cmd += ["-i", str(ini)]
         cmd += ["-g", str(prog), str(out)]
-        env = dict(os.environ, LC_ALL="C")
-        # rs274 instances running at the same time can die of SIGBUS (they share memory):
-        # one at a time across processes (pytest-xdist workers too), and retry a killed run
-        with open(_LOCK_PATH, "a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            try:
-                for attempt in range(RS274_ATTEMPTS):
-                    out.unlink(missing_ok=True)
-                    proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True,
-                                          text=True, timeout=timeout, env=env)
-                    if proc.returncode >= 0:
-                        break
-                    time.sleep(0.2 * (attempt + 1))  # another rs274 (not under this lock) is running
-            finally:
-                fcntl.flock(lock, fcntl.LOCK_UN)
+        # HOME: rs274 keeps its tool table in a file mapped into memory, $HOME/.tool.mmap,
+        # which it truncates and rewrites at start. Runs sharing one HOME (pytest-xdist
+        # workers, another checkout's tests, rs274 typed in a shell) read each other's tool
+        # lengths: a G43 H1 then took another run's T1 Z51 (inches), a path 1,295.4 mm off,
+        # and a run whose mapping was truncated under it died of SIGBUS. Each run gets its own.
+        env = dict(os.environ, LC_ALL="C", HOME=str(d))
+        out.unlink(missing_ok=True)
+        proc = subprocess.run(cmd, cwd=d, stdin=subprocess.DEVNULL, capture_output=True,
+                              text=True, timeout=timeout, env=env)
         canon = out.read_text() if out.exists() else ""
     motions, calls = parse_canon(canon)
     err_lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip() and ln.strip() != "executing"]

@@ -111,3 +111,25 @@ def test_scaled_program_lands_every_canonical_point_on_the_original_over_k(path,
     assert polyline_distance(ref_ends / K, got_path).max() <= tol
     assert polyline_distance(got_path, target).max() <= tol
     assert polyline_distance(target, got_path).max() <= tol
+
+
+def test_rs274_runs_keep_their_tool_table_to_themselves(tmp_path, monkeypatch):
+    """rs274 maps its tool table from $HOME/.tool.mmap: runs sharing a HOME read each
+    other's tool lengths (this test file's flaky 1,295.4 mm: another run's T1 Z51 in
+    inches). Each run_rs274 has a HOME of its own, and runs at the same time each keep
+    their own tool length."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    text = "G20 G90\nT1 M6\nG43 H1\nG0 X1 Z1\nM2\n"
+
+    def tool_offset(z: int) -> str:
+        res = run_rs274(text, tools=f"T1 P1 Z{z} D0\n")
+        assert res.ok, res.error
+        return next(c for c in res.calls if c.startswith("USE_TOOL_LENGTH_OFFSET"))
+
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(tool_offset, [0, 51] * 12))
+    assert not (tmp_path / ".tool.mmap").exists()
+    assert all(g.split(",")[0].endswith(" 0.0000") for g in got[0::2])
+    assert all(g.split(",")[0].endswith(" 51.0000") for g in got[1::2])

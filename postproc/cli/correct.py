@@ -13,7 +13,7 @@ import click
 
 # build_setup: re-exported for the flags files of tests/cases
 from postproc.cli.options import build_setup as build_setup
-from postproc.cli.options import correction_options, program_setup_options
+from postproc.cli.options import correction_options, limit_options, program_setup_options
 from postproc.errors import PostprocError
 
 # Files larger than this get a progress line on stderr (when stderr is a terminal).
@@ -140,9 +140,10 @@ def _progress_printer(total_hint: str):
                    "[default: one per core], with the output of one process; -j 1 keeps it in one.")
 @program_setup_options
 @correction_options
+@limit_options
 @click.option("--map", "maps", multiple=True, type=click.Path(dir_okay=False),
               help="Measured correction map added after the calibration's correction. Repeatable.")
-def correct(inputs, calibration, output, output_dir, jobs, reading, setup, correcting, maps):
+def correct(inputs, calibration, output, output_dir, jobs, reading, setup, correcting, maps, limits):
     """Correct NC programs for the machine's measured errors.
 
     Each move's target is sent through the calibration's inverse model and the
@@ -193,7 +194,7 @@ def correct(inputs, calibration, output, output_dir, jobs, reading, setup, corre
         raise click.UsageError("give -o or --output-dir, not both")
     if "-" in inputs and len(inputs) > 1:
         raise click.UsageError("'-' (stdin) can only be the only input")
-    options = {**correcting, **reading.correct_options()}
+    options = {**correcting, **reading.correct_options(), "limits": limits}
     if len(inputs) == 1 and not folder and (output is not None or output_dir is None):
         processes = jobs if jobs is not None else _cores()
         _single(inputs[0], output or "-", calibration, setup, {**options, "processes": processes}, maps)

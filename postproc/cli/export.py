@@ -104,7 +104,7 @@ def _axis_map(values, what: str) -> dict[str, str]:
               metavar="TAPE", help="Fanuc: the control's parameter tape; 1240 (reference position, detection "
                                    "units) and 1006#5 (return direction) of each axis, unless --reference/--return "
                                    "give them.")
-@click.option("--detection-unit", "detection_unit", type=FiniteFloat(min=0), default=1.0, show_default=True,
+@click.option("--detection-unit", "detection_unit", type=FiniteFloat(min=0, min_open=True), default=1.0, show_default=True,
               metavar="UM", help="Fanuc: detection unit in um (pitch data and interval are counted in it).")
 @click.option("--axis-name", "axis_names", multiple=True, metavar="AXIS=NAME",
               help="Controller name of an axis: LinuxCNC joint number (default X=0,Y=1,Z=2), Fanuc axis "

@@ -461,3 +461,29 @@ def correction_options(fn=None, *, leave_out: tuple[str, ...] = ()):
     :class:`postproc.gcode.pipeline.CorrectOptions` fields they give."""
     decorate = _declare(CORRECTION_OPTIONS, "correcting", dict, leave_out)
     return decorate(fn) if fn is not None else decorate
+
+
+def limit_options(fn):
+    """Declare the bounds on one run's work (:class:`postproc.limits.Limits`) on a command
+    that expands and corrects programs, passed to it as one ``limits`` argument."""
+    from postproc import limits as lim
+
+    @functools.wraps(fn)
+    def command(*args, max_iterations, max_output_lines, max_output_mb, max_arc_turns, **kwargs):
+        return fn(*args, limits=lim.Limits(max_iterations, max_output_lines, max_arc_turns, max_output_mb), **kwargs)
+
+    command = click.option(
+        "--max-arc-turns", "max_arc_turns", default=lim.DEFAULT_MAX_ARC_TURNS, show_default=True,
+        type=click.IntRange(1), help="Refuse a helix (G2/G3 P) of more turns than this.")(command)
+    command = click.option(
+        "--max-output-mb", "max_output_mb", default=None, type=FiniteFloat(min=0, min_open=True),
+        help=f"Refuse a corrected program larger than this (MB) [default: {lim.OUTPUT_GROWTH} times the "
+             f"input's size plus {lim.OUTPUT_MB_EXTRA} MB].")(command)
+    command = click.option(
+        "--max-output-lines", "max_output_lines", default=None, type=click.IntRange(1),
+        help=f"Refuse a corrected program longer than this [default: {lim.OUTPUT_GROWTH} times the input's "
+             f"lines plus {lim.OUTPUT_LINES_EXTRA:,}].")(command)
+    return click.option(
+        "--max-iterations", "max_iterations", default=lim.DEFAULT_MAX_ITERATIONS, show_default=True,
+        type=click.IntRange(1), help="Refuse a program whose loop passes and subprogram calls exceed this in all "
+                                     "(an endless loop).")(command)

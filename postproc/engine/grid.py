@@ -44,6 +44,8 @@ difference of tool vectors are not corrected.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from postproc.calibration.measurements import Measurements
@@ -77,6 +79,10 @@ STEP_REL_TOL = 1e-4
 
 # Missing nodes named in an error message; the rest are counted.
 MAX_NODES_NAMED = 8
+# Nodes of one grid (a fit's lattice, a calibration's tangents): measured grids have
+# thousands (315 mm at 10 mm: 32^3 = 32,768); each node costs ~300 bytes in the engine's
+# arrays, so this keeps a grid under a few hundred MB, whatever --step or file it comes from.
+MAX_GRID_NODES = 1_000_000
 
 # The interpolation check predicts every other node from a grid of twice the step; it
 # needs at least this many nodes per axis to leave some nodes to predict.
@@ -125,6 +131,8 @@ class GridEngine(Engine):
             raise CalibrationError("grid model: Q1, Q2, Q3 must have shapes (n1-1, 3), (n1, n2-1, 3), (n1, n2, n3-1, 3)")
         n2 = Q2.shape[1] + 1
         n3 = Q3.shape[2] + 1
+        if n1 * n2 * n3 > MAX_GRID_NODES:
+            raise CalibrationError(f"grid model of {n1} x {n2} x {n3} nodes: more than {MAX_GRID_NODES:,}")
         if Q2.shape != (n1, n2 - 1, 3) or Q3.shape != (n1, n2, n3 - 1, 3) or min(n1, n2, n3) < 2:
             raise CalibrationError(
                 f"grid model: inconsistent tangent shapes Q1 {Q1.shape}, Q2 {Q2.shape}, Q3 {Q3.shape}"
@@ -309,7 +317,11 @@ def detect_lattice(q: np.ndarray, step: np.ndarray | None, path: str = "") -> tu
             steps[j] = d.mean()
         else:
             steps[j] = step[j]
-        counts[j] = int(np.floor((pos[-1] - origin[j]) / steps[j] + LATTICE_TOL_MM / steps[j])) + 1
+        with np.errstate(over="ignore"):  # a step of 1e-320 mm: inf nodes, refused just below
+            n = np.floor((pos[-1] - origin[j]) / steps[j] + LATTICE_TOL_MM / steps[j]) + 1
+        if not n <= MAX_GRID_NODES:  # (also inf) refused before it becomes an integer
+            _check_nodes([n], path, f" along {AXES[j]}")
+        counts[j] = int(n)
         if counts[j] < 2:
             raise MeasurementError(
                 f"grid step {steps[j]:g} mm on {AXES[j]} is longer than the measured travel "
@@ -317,7 +329,17 @@ def detect_lattice(q: np.ndarray, step: np.ndarray | None, path: str = "") -> tu
                 path=path or None,
                 hint="choose a smaller --step",
             )
+    _check_nodes(counts, path)
     return origin, steps, counts
+
+
+def _check_nodes(counts, path: str | None = None, along: str = "") -> None:
+    """Refuse a lattice of more than :data:`MAX_GRID_NODES` nodes."""
+    total = math.prod(float(c) for c in counts)
+    if not total <= MAX_GRID_NODES:
+        raise MeasurementError(
+            f"a grid of {' x '.join(f'{c:.6g}' for c in counts)} nodes{along}: more than {MAX_GRID_NODES:,}",
+            path=path or None, hint="choose a larger --step (measured grids have a step of 10-20 mm)")
 
 
 def _shifted(pad: np.ndarray, n: np.ndarray, axis: int, k: int) -> np.ndarray:

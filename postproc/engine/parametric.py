@@ -51,6 +51,13 @@ INTERPOLATIONS = ("pchip", "linear")
 EXTRAPOLATIONS = ("clamp", "linear")
 
 
+# Cells of the astatic grid along the calibrated volume's longest axis: an iteration walks
+# them one by one (the seed's u = 2 mm gives ~160 on a 315 mm machine; 10,000 is 0.03 mm).
+ASTATIC_MAX_CELLS = 10_000
+# Iterations of the astatic law: it approaches its target in tens (seed 000, chapter 4).
+ASTATIC_MAX_ITER = 100_000
+
+
 @dataclass(frozen=True)
 class AstaticSettings:
     """KMTPP astatic control law (seed 000, chapter 4): grid step u, gain K, step l.
@@ -65,11 +72,25 @@ class AstaticSettings:
 
     def __post_init__(self) -> None:
         kl = self.gain * self.time_step
-        if not (self.grid_step_mm > 0 and 0 < kl < 2 and self.max_iter > 0):
+        if not (self.grid_step_mm > 0 and 0 < kl < 2 and 0 < self.max_iter <= ASTATIC_MAX_ITER):
             raise CalibrationError(
                 f"astatic settings u={self.grid_step_mm}, K={self.gain}, l={self.time_step}: "
-                "need u > 0 and 0 < K*l < 2 (otherwise the iteration does not approach the target)"
+                f"need u > 0 and 0 < K*l < 2 (otherwise the iteration does not approach the target), and 1 to "
+                f"{ASTATIC_MAX_ITER:,} iterations (max_iter {self.max_iter})"
             )
+
+    def check_cells(self, volume_mm: np.ndarray) -> None:
+        """Refuse a grid step that cuts the calibrated volume into more than
+        :data:`ASTATIC_MAX_CELLS` cells along an axis: each iteration walks the cells one
+        by one, so the time grows as their number (u = 1e-9 mm ran for hours)."""
+        cells = float(np.max(np.ptp(volume_mm, axis=0))) / self.grid_step_mm
+        if cells > ASTATIC_MAX_CELLS:
+            raise CalibrationError(
+                f"astatic grid step u={self.grid_step_mm:g} mm cuts the calibrated volume into {cells:.3g} cells "
+                f"along an axis: more than {ASTATIC_MAX_CELLS:,}",
+                hint=f"give astatic grid_step_mm of at least "
+                     f"{float(np.max(np.ptp(volume_mm, axis=0))) / ASTATIC_MAX_CELLS:.3g} mm (the method's own "
+                     "value is 2 mm)")
 
     def to_dict(self) -> dict:
         return {"grid_step_mm": self.grid_step_mm, "gain": self.gain, "time_step": self.time_step,
@@ -160,6 +181,7 @@ class ParametricEngine(Engine):
         elif astatic is not None and not isinstance(astatic, AstaticSettings):
             raise CalibrationError(f"astatic settings must be an object (grid_step_mm, gain, time_step), got {astatic!r}")
         self.astatic = astatic or AstaticSettings()
+        self.astatic.check_cells(self.volume_mm)
         # Largest inverse residual the solver stands for. Newton: SOLVER_TOL_MM (it
         # converges or raises). Astatic: one grid step u, the method's own criterion; its
         # measured errors are tens of micrometres (see benchmarks/solvers.py), reported

@@ -57,6 +57,7 @@ from postproc.gcode.expr import (
 )
 from postproc.gcode.lexer import scan_words, split_lines
 from postproc.gcode.variables import PROBE_HINT, PROBE_MESSAGE, PROBE_RESULTS
+from postproc.limits import DEFAULT_MAX_ITERATIONS, LINES_PER_ITERATION, ResourceLimitError
 
 # rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
 LINUXCNC_SUB_PARAMS = 30
@@ -189,7 +190,7 @@ class _Stop(Exception):
 
 class _Expander(Env):
     def __init__(self, lines: list[str], path: str | None, dialect: str,
-                 subroutine_path: Sequence[Path], max_lines: int):
+                 subroutine_path: Sequence[Path], max_lines: int, max_iterations: int):
         if dialect not in DIALECTS:
             raise ValueError(f"unknown dialect {dialect!r}")
         self.dialect = dialect
@@ -201,6 +202,8 @@ class _Expander(Env):
         self.main = Unit(lines, path, self.fanuc, self.nested)
         self.subroutine_path = [Path(p) for p in subroutine_path]
         self.max_lines = max_lines
+        self.max_iterations = max_iterations
+        self.iterations = 0  # loop passes and subprogram calls so far
         self.files: dict[str, Unit] = {}
         # numbered parameters: LinuxCNC: index -> value (unset reads 0);
         # Fanuc: common/retained variables (locals live in the frames)
@@ -238,6 +241,16 @@ class _Expander(Env):
 
     def refuse(self, col: int, message: str, hint: str | None = None) -> ExpansionError:
         return ExpansionError(message, path=self.unit_cur.path, lineno=self.lineno, col=col, hint=hint)
+
+    def count_iteration(self, col: int) -> None:
+        """One more loop pass or subprogram call (the statement at column ``col`` of the line
+        running); refused beyond ``max_iterations`` in all."""
+        self.iterations += 1
+        if self.iterations > self.max_iterations:
+            raise ResourceLimitError(
+                f"the program's loops and subprogram calls run more than {self.max_iterations:,} times in all "
+                "(--max-iterations)", path=self.unit_cur.path, lineno=self.lineno, col=col,
+                hint="check the loop's condition; raise --max-iterations if the program is meant to run this long")
 
     # -- parameters ---------------------------------------------------------
     def seed(self, variables: dict[int, float]) -> None:
@@ -387,8 +400,11 @@ class _Expander(Env):
             self.unit_cur = unit
             self.executed += 1
             if self.executed > self.max_lines:
-                raise self.refuse(1, f"the program runs more than {self.max_lines} lines: an endless loop or "
-                                  "recursion", hint="check the loop conditions and subprogram returns")
+                raise ResourceLimitError(
+                    f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
+                    f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=unit.path,
+                    lineno=idx + 1, col=1,
+                    hint="check the loop conditions and subprogram returns, or raise --max-iterations")
             line = unit.lines[idx]
             if self.skipping_o is not None or self.skipping_to_sub is not None:
                 self._skipped_line(unit, idx)
@@ -744,6 +760,7 @@ class _Expander(Env):
         if len(self.frames) > MAX_CALL_DEPTH:
             raise self.refuse(1, f"subprogram calls nested deeper than {MAX_CALL_DEPTH} levels",
                               hint="check for a subprogram that calls itself")
+        self.count_iteration(1)
         fr = _Frame(call_type=call_type, ret_unit=self.unit_cur, ret_idx=self.cur_idx + 1,
                     saved=saved, repeats_left=repeats, start_unit=unit, start_idx=start, sub_name=name,
                     call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
@@ -758,6 +775,7 @@ class _Expander(Env):
         if fr.call_type not in ("m98", "g65"):
             raise self.error(1, "M99 inside an o-word subroutine", hint="end it with 'o<name> endsub'")
         if fr.repeats_left > 0:
+            self.count_iteration(1)
             fr.repeats_left -= 1
             if fr.call_type == "g65":
                 pass  # locals persist across G65 L repeats
@@ -769,6 +787,8 @@ class _Expander(Env):
         if target is not None:
             number, col = target
             self.idx = self._sequence(self.unit, number, fr.ret_idx, col)
+            if self.idx < fr.ret_idx:  # back to or before the call: one more pass of a loop
+                self.count_iteration(col)
 
     def _leave(self, fr: _Frame) -> None:
         """Return from ``fr``, the innermost subprogram frame, to the line after its call."""
@@ -803,11 +823,10 @@ class _Expander(Env):
         """Run the macro statement ``m`` (``b.macro``) of block ``b``."""
         if b.slash:
             raise self.refuse(1, "a macro statement on a block-delete ('/') line")
-        if m.kind == "goto":
+        if m.kind == "goto" or (m.kind == "if_goto" and self._cond(m)):
             self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
-        elif m.kind == "if_goto":
-            if self._cond(m):
-                self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
+            if self.idx <= self.cur_idx:  # a jump back: one more pass of a loop
+                self.count_iteration(m.col)
         elif m.kind == "if_then":
             if self._cond(m):
                 a = m.assign
@@ -823,6 +842,7 @@ class _Expander(Env):
         elif m.kind == "do":
             pass
         elif m.kind == "end":
+            self.count_iteration(m.col)
             self.idx = self._find_do(m.loop, m.col)
 
     def _cond(self, m: Macro) -> bool:
@@ -886,7 +906,9 @@ class _Expander(Env):
                              f"{op.kind}' at line {op.idx + 1}")
         return op
 
-    def _back_to(self, name: str) -> None:
+    def _back_to(self, name: str, col: int) -> None:
+        """Back to the start of loop ``name`` (from the o-word at column ``col``): one more pass."""
+        self.count_iteration(col)
         op = self.offsets[name]
         self.unit, self.idx = op.unit, op.idx
 
@@ -991,7 +1013,7 @@ class _Expander(Env):
             if test == 0.0:
                 self._skip_block(ow.name)
         elif test != 0.0 and not self.doing_break:  # end of a do loop
-            self._back_to(ow.name)
+            self._back_to(ow.name, ow.col)
         else:
             self.doing_break = False
 
@@ -1040,22 +1062,22 @@ class _Expander(Env):
 
     def _o_endwhile(self, ow: OWord) -> None:
         self._need(ow, ("while",), "loop start")
-        self._loop_end(ow.name)
+        self._loop_end(ow.name, ow.col)
 
     def _o_endrepeat(self, ow: OWord) -> None:
         self._need(ow, ("repeat",), "loop start")
-        self._loop_end(ow.name)
+        self._loop_end(ow.name, ow.col)
 
-    def _loop_end(self, name: str) -> None:
+    def _loop_end(self, name: str, col: int) -> None:
         """``endwhile``/``endrepeat``: back to the loop's start, unless the loop is being
         left (its skip ends here) or a continue skipped to here."""
         if self.skipping_o == name:
             self.skipping_o = None
             if self.doing_continue:
                 self.doing_continue = False
-                self._back_to(name)
+                self._back_to(name, col)
             return
-        self._back_to(name)
+        self._back_to(name, col)
 
     def _ocall(self, ow: OWord) -> None:
         args = [self._num(a, ow.col) for a in ow.args]
@@ -1069,6 +1091,7 @@ class _Expander(Env):
             self.params[k] = args[k - 1] if k <= len(args) else 0.0
         self.globals["_value"] = 0.0
         self.globals["_value_returned"] = 0.0
+        self.count_iteration(ow.col)
         fr = _Frame(call_type="oword", ret_unit=self.unit_cur, ret_idx=self.cur_idx + 1, saved=saved,
                     sub_name=ow.name, call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
         self.frames.append(fr)
@@ -1078,6 +1101,11 @@ class _Expander(Env):
                 raise self.error(ow.col, f"o{_oname(ow.name)} is a '{op.kind}', not a subroutine")
             self.unit, self.idx = op.unit, op.idx + 1
             return
+        if _leaves_folder(ow.name):
+            raise self.refuse(ow.col, f"subroutine name <{ow.name}> names a path: subroutines are looked up by "
+                              "name in the --subroutine-path folders only",
+                              hint="call it by its file name without folders, and put the folder on "
+                              "--subroutine-path")
         f = self.find_sub_file(ow.name)
         if f is not None:
             self.unit, self.idx = self.load_file(f), 0
@@ -1097,6 +1125,12 @@ class _Expander(Env):
 def _opens_program(b: Block) -> bool:
     """A program-number line (Fanuc ``O1234``, ``:1234``) or a bare LinuxCNC ``o100``."""
     return b.program_number is not None or (b.oword is not None and b.oword.kw == "")
+
+
+def _leaves_folder(name: str) -> bool:
+    """A subroutine name that, made a file name, would name another folder (``a/b``,
+    ``..``, an absolute path): refused, so that lookups stay inside the subroutine path."""
+    return "/" in name or "\\" in name or ".." in name or Path(name).is_absolute()
 
 
 def _round_to_int(v: float) -> int:
@@ -1137,22 +1171,28 @@ def _last_code_line(lines: list[str]) -> int | None:
 
 
 def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "generic",
-           subroutine_path: Sequence[Path] = (), max_lines: int = 50_000_000,
+           subroutine_path: Sequence[Path] = (), max_lines: int | None = None,
+           max_iterations: int = DEFAULT_MAX_ITERATIONS,
            variables: dict[int, float] | None = None) -> Iterator[SourceLine]:
     """Execute the program's control flow and yield the flat program line by line.
 
     ``lines`` are the source lines with their endings (e.g. from
     :func:`postproc.gcode.lexer.split_lines`). Raises :class:`GcodeSyntaxError` for
     malformed constructs and :class:`ExpansionError` for refused ones, both with
-    ``path:line:col``. ``variables``: machine-state values given by the user (``--var``),
-    read where the program reads the controller's state (probe results never).
+    ``path:line:col``; :class:`postproc.limits.ResourceLimitError` beyond
+    ``max_iterations`` loop passes and subprogram calls in all, or ``max_lines`` lines
+    run (default :data:`~postproc.limits.LINES_PER_ITERATION` a pass, at least 50 million).
+    ``variables``: machine-state values given by the user (``--var``), read where the
+    program reads the controller's state (probe results never).
     """
+    if max_lines is None:
+        max_lines = max(50_000_000, LINES_PER_ITERATION * max_iterations)
     if get_dialect(dialect).expanded_constructs:  # Sinumerik labels, GOTO, IF/WHILE/FOR/REPEAT
         from postproc.gcode.sinumerik_expand import expand_sinumerik
 
         return (SourceLine(k + 1, file, text, original)
                 for k, file, text, original in expand_sinumerik(list(lines), path, max_lines, subroutine_path))
-    ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines)
+    ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines, max_iterations)
     ex.seed(variables or {})
     return ex.run()
 

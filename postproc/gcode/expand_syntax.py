@@ -196,7 +196,7 @@ def _read_word(p: ExprParser, i: int) -> tuple[Word, int]:
         raise _polar(p.p, j, p.path, p.lineno)
     node, k = p.value(j)
     a, b = p.p.span(j, k)
-    if node[0] == "num":
+    if node[0] == "num" and s[j] != "[":  # a number in brackets ([2]) is written as its value
         return Word(letter, None, s[j:k], (a, b), p.p.cols[i], col), k
     return Word(letter, node, "", (a, b), p.p.cols[i], col), k
 

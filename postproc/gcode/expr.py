@@ -39,6 +39,13 @@ from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeErr
 LINUXCNC_EQUAL_TOLERANCE = 0.0001
 # rs274ngc read_integer_value: a value within this of an integer is taken as that integer.
 INTEGER_TOLERANCE = 0.0001
+# Brackets, functions and signs nested in one expression: parsing takes three Python frames
+# a level, so this keeps a hostile line far from the interpreter's recursion limit. No
+# controller reads more: Fanuc nests brackets 5 deep, LinuxCNC reads 256 characters a line.
+MAX_EXPRESSION_NESTING = 64
+# Height of an expression's tree (nesting plus the operators of a chain, which evaluation
+# walks one frame a level): a 256-character LinuxCNC line holds at most ~128 operators.
+MAX_EXPRESSION_DEPTH = 256
 
 
 class _Null:
@@ -172,6 +179,8 @@ class ExprParser:
         self.lineno = lineno
         self.prec = _FANUC_PREC if fanuc else _LCNC_PREC
         self.funcs = _FANUC_FUNCS if fanuc else _LCNC_FUNCS
+        self.nesting = 0  # values being read, one inside the other
+        self.height = 0  # height of the tree the last value() or expression() returned
 
     # -- errors -------------------------------------------------------------
     def error(self, i: int, message: str, hint: str | None = None) -> GcodeSyntaxError:
@@ -208,6 +217,21 @@ class ExprParser:
 
     def value(self, i: int) -> tuple[tuple, int]:
         """A real value as rs274ngc ``read_real_value`` (or a Fanuc operand)."""
+        if self.nesting >= MAX_EXPRESSION_NESTING:
+            raise self.error(i, f"expression nested more than {MAX_EXPRESSION_NESTING} levels deep (brackets, "
+                             "functions, signs and parameters inside each other)",
+                             hint="no controller reads such an expression (Fanuc nests brackets 5 deep): "
+                             "compute it in steps with parameters")
+        self.nesting += 1
+        self.height = 0
+        try:
+            node, j = self._value(i)
+        finally:
+            self.nesting -= 1
+        self.height = _height(node, self.height)
+        return node, j
+
+    def _value(self, i: int) -> tuple[tuple, int]:
         c = self.peek(i)
         if c == "[":
             return self.bracket(i)
@@ -231,9 +255,11 @@ class ExprParser:
     def expression(self, i: int, closing: str) -> tuple[tuple, int]:
         """``value (op value)*`` up to ``closing`` (not consumed), by precedence."""
         values = []
+        heights = []  # height of each tree in values
         ops: list[tuple[str, int]] = []
         node, i = self.value(i)
         values.append(node)
+        heights.append(self.height)
         while True:
             c = self.peek(i)
             if c == "" or c in closing:
@@ -241,20 +267,26 @@ class ExprParser:
             op, j = self.operator(i)
             prec = self.prec[op]
             while ops and self.prec[ops[-1][0]] >= prec:
-                self._reduce(values, ops)
+                self._reduce(values, heights, ops, i)
             ops.append((op, self.p.col(i)))
             node, i = self.value(j)
             values.append(node)
+            heights.append(self.height)
         while ops:
-            self._reduce(values, ops)
+            self._reduce(values, heights, ops, i)
+        self.height = heights[0]
         return values[0], i
 
-    @staticmethod
-    def _reduce(values: list, ops: list) -> None:
+    def _reduce(self, values: list, heights: list[int], ops: list, i: int) -> None:
         op, col = ops.pop()
         right = values.pop()
         left = values.pop()
         values.append(("bin", op, left, right, col))
+        heights.append(max(heights.pop(), heights.pop()) + 1)
+        if heights[-1] > MAX_EXPRESSION_DEPTH:
+            raise self.error(i, f"expression more than {MAX_EXPRESSION_DEPTH} operations deep",
+                             hint="no controller reads such an expression (LinuxCNC reads 256 characters "
+                             "a line): compute it in steps with parameters")
 
     def operator(self, i: int) -> tuple[str, int]:
         s = self.s
@@ -289,19 +321,24 @@ class ExprParser:
         if name in ("atan", "atn"):
             i = self.expect(i, "[", "after ATAN")
             y, i = self.expression(i, closing="]," if self.fanuc else "]")
+            hy = self.height
             if self.fanuc and self.peek(i) == ",":
                 x, i = self.expression(i + 1, closing="]")
+                self.height = max(hy, self.height)
                 return ("atan", y, x, col), self.expect(i, "]", "to close ATAN")
             i = self.expect(i, "]", "to close ATAN")
             if self.peek(i) != "/":
                 raise self.error(i, "ATAN needs two arguments: ATAN[y]/[x]")
             x, i = self.bracket(i + 1)
+            self.height = max(hy, self.height)
             return ("atan", y, x, col), i
         if name == "pow":
             i = self.expect(i, "[", "after POW")
             a, i = self.expression(i, closing=",")
+            ha = self.height
             i = self.expect(i, ",", "between the arguments of POW")
             b, i = self.expression(i, closing="]")
+            self.height = max(ha, self.height)
             return ("pow", a, b, col), self.expect(i, "]", "to close POW")
         arg, i = self.bracket(i)
         return ("fn", name, arg, col), i
@@ -324,16 +361,18 @@ class ExprParser:
             name, i = self.param_name(i + 1)
             return ("name", name, col), i
         if self.fanuc:
-            c = self.peek(i)
-            if c == "[":
-                idx, i = self.bracket(i)
-            elif c == "#":
-                idx, i = self.param(i)
+            if self.peek(i) in ("[", "#"):
+                idx, i = self.value(i)  # #[expr] or ##n, nested through value()'s bound
             else:
                 idx, i = self.number(i)
             return ("par", idx, col), i
         idx, i = self.value(i)
         return ("par", idx, col), i
+
+
+def _height(node: tuple, inner: int) -> int:
+    """Height of the tree ``node`` whose tallest child is ``inner`` high (a leaf: 1)."""
+    return 1 if node[0] in ("num", "name", "exists") else inner + 1
 
 
 # ---------------------------------------------------------------------------

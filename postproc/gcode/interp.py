@@ -66,6 +66,7 @@ from postproc.gcode.state import (
     WORK_SYSTEMS,
     ModalState,
 )
+from postproc.limits import DEFAULT_MAX_ARC_TURNS, ResourceLimitError
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -75,6 +76,9 @@ if TYPE_CHECKING:
 
 #: a block's words by letter, G and M aside: (value, word index)
 Vals = dict[str, tuple[float, int]]
+# Largest value of a word (1000 km, a billion turns): a 400-digit coordinate reads as inf,
+# and one of 300 digits makes the correction's arithmetic overflow.
+MAX_WORD_VALUE = 1e9
 _E = TypeVar("_E", bound=PostprocError)
 
 
@@ -188,6 +192,7 @@ class Interpreter:
 
     def __init__(self, setup: _Setup, path: str | None = None, *, lenient_setup: bool = False,
                  dialect: str = "generic") -> None:
+        self.max_arc_turns = DEFAULT_MAX_ARC_TURNS  # turns of one helix (G2/G3 P), --max-arc-turns
         self.setup = setup
         # lenient: every work offset and tool length is taken as zero (for comparing
         # two versions of one program, where they cancel out)
@@ -639,6 +644,8 @@ class Interpreter:
         mcodes: list[tuple[int, int]] = []
         vals: dict[str, tuple[float, int]] = {}
         for i, (letter, num, _start, _end, _lpos) in enumerate(words):
+            if letter in "GM" and not abs(float(num)) <= MAX_WORD_VALUE:
+                raise self._err(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
             if letter == "G":
                 key = _gkey(num)
                 gcodes.append((self._g_alias.get(key, key) if self._g_alias else key, i))
@@ -664,9 +671,9 @@ class Interpreter:
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 value = float(num)
-                if value in (math.inf, -math.inf):  # 309 digits and more: no controller reads it
-                    raise self._err(GcodeSyntaxError, f"word {letter}{num[:12]}... ({len(num)} characters): "
-                                    "the number is too large", lineno, _lpos + 1)
+                if not abs(value) <= MAX_WORD_VALUE:  # (also inf and nan)
+                    raise self._err(GcodeSyntaxError, f"{letter} value {num[:12]}{'...' if len(num) > 12 else ''} is "
+                                    f"beyond {MAX_WORD_VALUE:g}: no machine moves that far", lineno, _lpos + 1)
                 vals[letter] = (value, i)
         def col_of(i: int) -> int:
             return words[i].letter_pos + 1  # 1-based column of the word's letter
@@ -1276,6 +1283,18 @@ class Interpreter:
                                      "that never positions Y (a lathe reads G18 by default, X as a diameter)",
                                      self.path, lineno, col)
 
+    def _turns(self, vals: Vals, words: list[lexer.Word], lineno: int) -> int:
+        """The turns of an arc's P word: a positive integer, at most ``max_arc_turns``."""
+        p = vals["P"][0]
+        p_col = words[vals["P"][1]][4] + 1
+        if not (math.isfinite(p) and p >= 1 and p == math.floor(p)):
+            raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
+        if p > self.max_arc_turns:
+            raise self._err(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
+                            "(--max-arc-turns)", lineno, p_col,
+                            hint="raise --max-arc-turns if the helix is meant to turn this often")
+        return int(p)
+
     def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
              q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
         st = self.state
@@ -1286,12 +1305,7 @@ class Interpreter:
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc, or give their "
                                  "machine positions at program start with --start")
-        turns = 1
-        if "P" in vals:
-            turns = int(vals["P"][0])
-            if turns < 1 or turns != vals["P"][0]:
-                raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno,
-                                words[vals["P"][1]][4] + 1)
+        turns = self._turns(vals, words, lineno) if "P" in vals else 1
         clockwise = st.motion == ARC_CW
         s1, s2 = q0[a1], q0[a2]
         e1, e2 = q1[a1], q1[a2]

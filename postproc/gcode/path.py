@@ -27,8 +27,13 @@ from postproc.errors import MissingSetupError, PostprocError
 from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
 from postproc.gcode.interp import Interpreter, plain_moves, start_position
 from postproc.gcode.state import RAPID
+from postproc.limits import ResourceLimitError
 
 DEFAULT_MAX_STEP_MM = 0.5
+# Points one program may be sampled into (verify, the path API): verify peaks near 7.5 KB
+# for each (270,000 points: 2 GB), so this keeps it under 2 GB, and a step of 1e-9 mm
+# (93.6 GiB asked for) is refused at its line. At verify's 0.5 mm: 125 m of path.
+MAX_SAMPLES = 250_000
 
 
 @dataclass
@@ -186,8 +191,16 @@ def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEF
     return sample_program(source, setup, step_mm=max_step_mm, dialect=dialect, subroutine_path=subroutine_path)
 
 
+def _steps(length_mm: float, step_mm: float) -> int:
+    """Pieces of ``step_mm`` in ``length_mm`` (rounded up; huge for a step of 1e-320 mm,
+    never an overflow)."""
+    pieces = length_mm / step_mm
+    return math.ceil(pieces) if pieces < 1e18 else 10**18
+
+
 def sample_program(source, setup: Setup | None = None, *, step_mm: float | None = None,
-                   chord_mm: float | None = None, dialect: str = "generic", subroutine_path=()) -> ProgramPath:
+                   chord_mm: float | None = None, dialect: str = "generic", subroutine_path=(),
+                   max_samples: int = MAX_SAMPLES) -> ProgramPath:
     """The program's moves as points: the one sampler of correct's checks, verify and the
     path API (the program is read by :func:`for_each_block`).
 
@@ -196,7 +209,9 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
     every ``step_mm`` of their length and, with ``chord_mm``, every chord whose
     sagitta stays below it (the finer of the two). Rapid moves give their end point
     only. The context holds each sample's approach directions (from the start position
-    when ``setup.start`` gives it), the rotary axes' positions and ``setup.context``."""
+    when ``setup.start`` gives it), the rotary axes' positions and ``setup.context``.
+    More than ``max_samples`` points in all are refused
+    (:class:`~postproc.limits.ResourceLimitError`, at the line that passes the bound)."""
     setup = setup or Setup()
     path, _lines = iter_source_lines(source)
     # per move: end, start, number of samples, tool vector, line, kind, rotary positions;
@@ -209,6 +224,7 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
     rapid: list[bool] = []
     rot: list[dict] = []
     arcs: dict[int, np.ndarray] = {}
+    total = [0]  # samples so far
 
     def visit(lineno: int, _line: str, block, _state) -> None:
         for mv in plain_moves(block):
@@ -217,11 +233,18 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
                 n = 1
                 q0 = q1
             elif mv.arc is not None:
-                n = max(1, math.ceil(arc_length(mv.arc, q0, q1) / step_mm) if step_mm else 1,
+                n = max(1, _steps(arc_length(mv.arc, q0, q1), step_mm) if step_mm else 1,
                         arc_chord_steps(mv.arc, q0, q1, chord_mm) if chord_mm else 1)
-                arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+                if total[0] + n <= max_samples:  # (else refused below, before the points are made)
+                    arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
             else:
-                n = max(1, math.ceil(math.dist(q0, q1) / step_mm)) if step_mm else 1
+                n = max(1, _steps(math.dist(q0, q1), step_mm)) if step_mm else 1
+            total[0] += n
+            if total[0] > max_samples:
+                every = f" every {step_mm:g} mm" if step_mm else ""
+                raise ResourceLimitError(
+                    f"sampling the program{every} makes more than {max_samples:,} points",
+                    path=path, lineno=lineno, col=1, hint="give a larger --max-step")
             q0s.append(q0)
             q1s.append(q1)
             counts.append(n)
@@ -234,6 +257,7 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
         for acc in (q1s, q0s, counts, rs, lns, rapid, rot):
             acc.clear()
         arcs.clear()
+        total[0] = 0
 
     interp = for_each_block(source, setup, visit, reset, dialect=dialect, subroutine_path=subroutine_path)
     if not counts:

@@ -32,6 +32,7 @@ from postproc.constants import (
 from postproc.errors import (
     AlreadyCorrectedError,
     CorrectionTooLargeError,
+    MissingSetupError,
     OutOfVolumeError,
     PostprocError,
     SafetyError,
@@ -65,6 +66,12 @@ from postproc.gcode.vplan import (
     PlanMove,
     Step,
 )
+from postproc.limits import BoundedWriter, Limits
+
+# Lines held while an axis is not yet positioned (they are corrected once it is, a few KB
+# each: 1.5 million held took 3.7 GB). Real programs position every axis in their first
+# lines; one that never does is refused at its end anyway, this refuses it in bounded memory.
+UNKNOWN_AXIS_LINES = 200_000
 
 if TYPE_CHECKING:
     from postproc.engine.base import Engine
@@ -123,6 +130,7 @@ class CorrectOptions:
     bulk_lane: bool = True  # runs of plain lines read and written per chunk (same output; off for comparison)
     bulk_plan: bool = True  # moves that stay one line or one exact arc settled in bulk (off: sample by sample)
     processes: int = 1  # more: a large program file is cut into parts corrected in that many (postproc.gcode.split)
+    limits: Limits = field(default_factory=Limits)  # iterations, output lines, helix turns (postproc.limits)
 
 
 @dataclass
@@ -172,6 +180,7 @@ class Corrector(EmitterMixin):
         self.cal_name = calibration_name
         self.cal_sha = calibration_sha256
         self.interp = Interpreter(setup, path, dialect=options.dialect)
+        self.interp.max_arc_turns = options.limits.max_arc_turns
         self.interp.require_g54 = bool(setup.start)
         self.report = CorrectReport()
         # where the machine is before the first move: the start position (NaN: unknown);
@@ -316,12 +325,15 @@ class Corrector(EmitterMixin):
         interp = self.interp
         interp.may_expand = source is None and self.opt.expand
 
+        last = [0]  # the source line where() gave last (an expanded program's)
+
         def where(seq: int) -> int:
             """The line number the interpreter reports for the ``seq``-th line read."""
             if source is None:
                 return seq
             ln, p = source.popleft()
             interp.path = p or self.path
+            last[0] = ln
             return ln
 
         head, keep = emit.start_lines(it)
@@ -429,6 +441,8 @@ class Corrector(EmitterMixin):
                     self._chunk(entries, lambda _text: None)
                 raise exc from None
             pending += len(block)
+            if pending > UNKNOWN_AXIS_LINES:  # the lines wait for an axis to be positioned: bounded
+                self._unknown_too_long(lineno - 1 if source is None else last[0], pending)
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
                 if lineno - 1 > skip_until:
                     self._chunk(entries, write)
@@ -447,6 +461,17 @@ class Corrector(EmitterMixin):
         self.report.lines_in = lineno - 1
         self.report.g54_assumed_zero = self.interp.implicit_g54
         return self.report
+
+    def _unknown_too_long(self, lineno: int, waiting: int) -> None:
+        """Refuse a program that leaves an axis unknown for more than
+        :data:`UNKNOWN_AXIS_LINES` lines (``waiting`` lines read since the last written,
+        up to line ``lineno``): they are held until it is known, a few KB each."""
+        axis = next((a for a, v in zip("XYZ", self.interp.state.pos, strict=True) if math.isnan(v)), "X")
+        raise MissingSetupError(
+            f"axis {axis} is still not positioned after {waiting:,} lines, so the correction cannot be evaluated",
+            path=self.interp.path or self.path, lineno=lineno, col=1,
+            hint=f"give the machine position of {axis} at program start with --start {axis}.. (mm, machine "
+                 f"coordinates), or add an absolute move on {axis} near the start")
 
     def _write_start(self, head: list[str], keep: int, write: Write, where: Callable[[int], int]) -> int:
         """Write the first ``keep`` lines of ``head`` (they stay before the header), then
@@ -1585,21 +1610,40 @@ def correct_text(text: str, engine: Engine, setup: Setup | None = None, options:
     out: list[str] = []
     lines = split_lines(text)
     report = _correct_lines(lambda: lines, out.append, out.clear, engine, setup, options, path,
-                            calibration_name, calibration_sha256)
+                            calibration_name, calibration_sha256, input_lines=len(lines), input_chars=len(text))
     return "".join(out), report
 
 
 def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None], engine: Engine,
                    setup: Setup | None, options: CorrectOptions | None, path: str | None, calibration_name: str,
                    calibration_sha256: str, progress: Callable[[int], None] | None = None,
-                   count: int | None = None) -> CorrectReport:
+                   count: int | None = None, input_lines: int = 0, input_chars: int = 0) -> CorrectReport:
     """Correct the lines ``get_lines()`` gives; when the program turns out to need
     expansion, ``restart()`` drops what was written and the expanded program is corrected.
     ``count``: the number of lines, when the program may be cut into parts corrected in
-    several processes (:mod:`postproc.gcode.split`)."""
+    several processes (:mod:`postproc.gcode.split`); ``input_lines``, ``input_chars``: the
+    program's size, for the bounds on the output's (``options.limits``)."""
+    from postproc.gcode.interp import NeedsExpansion
+
     setup = setup or Setup()
     options = options or CorrectOptions()
     known: list[cutter.Bound] = []  # the cutter compensation bound, once a first run found it
+    read = 0  # lines read (of the program as written, or as expanded: at[0])
+    at: list[tuple[int, str | None]] = [(0, path)]  # the expanded line read last and its file
+
+    def counted(lines: Iterable[str]) -> Iterator[str]:
+        nonlocal read
+        for read, line in enumerate(lines, start=1):  # noqa: B007 - read is the count so far
+            yield line
+
+    bounded = BoundedWriter(write, options.limits.output_lines(input_lines),
+                            lambda: (at[-1][1], at[-1][0]) if at[-1][0] else (path, read or None),
+                            options.limits.output_chars(input_chars))
+    write = bounded
+
+    def dropped() -> None:
+        restart()
+        bounded.restart()
 
     def corrector() -> Corrector:
         c = Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
@@ -1607,49 +1651,46 @@ def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart
         c.cutter_known = known[0] if known else None
         return c
 
+    def once() -> CorrectReport:
+        """One run: the program as written, else (it needs expansion) expanded."""
+        try:
+            if count is not None:
+                from postproc.gcode import split
+
+                try:
+                    return split.run(corrector, get_lines, write, progress, count, options.processes, path)
+                except split.Failed:
+                    dropped()  # a process for a part failed (not the program): once more, in one
+            return corrector().run(counted(get_lines()), write, progress=progress)
+        except NeedsExpansion:
+            if not options.expand:
+                raise
+        from postproc.gcode.expand import expand
+
+        dropped()
+        lines = list(get_lines())
+        source: deque[tuple[int, str | None]] = deque()
+        c = corrector()
+
+        def texts() -> Iterator[str]:
+            for sl in expand(lines, path=path, dialect=options.dialect,
+                             subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables,
+                             max_iterations=options.limits.max_iterations):
+                source.append((sl.lineno, sl.path))
+                at[-1] = (sl.lineno, sl.path or path)
+                yield sl.text
+
+        c.expanded = True
+        report = c.run(texts(), write, progress=progress, source=source)
+        report.expanded = True
+        return report
+
     try:
-        return _correct_once(get_lines, write, restart, corrector, options, path, progress, count)
+        return once()
     except cutter.Rerun as again:
-        restart()
+        dropped()
         known.append(again.bound)
-        return _correct_once(get_lines, write, restart, corrector, options, path, progress, count)
-
-
-def _correct_once(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None],
-                  corrector: Callable[[], Corrector], options: CorrectOptions, path: str | None,
-                  progress: Callable[[int], None] | None, count: int | None) -> CorrectReport:
-    """One run of :func:`_correct_lines`."""
-    from postproc.gcode.interp import NeedsExpansion
-
-    try:
-        if count is not None:
-            from postproc.gcode import split
-
-            try:
-                return split.run(corrector, get_lines, write, progress, count, options.processes, path)
-            except split.Failed:
-                restart()  # a process for a part failed (not the program): once more, in one
-        return corrector().run(get_lines(), write, progress=progress)
-    except NeedsExpansion:
-        if not options.expand:
-            raise
-    from postproc.gcode.expand import expand
-
-    restart()
-    lines = list(get_lines())
-    source: deque[tuple[int, str | None]] = deque()
-    c = corrector()
-
-    def texts() -> Iterator[str]:
-        for sl in expand(lines, path=path, dialect=options.dialect,
-                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables):
-            source.append((sl.lineno, sl.path))
-            yield sl.text
-
-    c.expanded = True
-    report = c.run(texts(), write, progress=progress, source=source)
-    report.expanded = True
-    return report
+        return once()
 
 
 def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str], engine: Engine,
@@ -1673,16 +1714,15 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
     if empty:
         raise PostprocError("the program is empty: nothing to correct", path=str(source),
                             hint="check that this is the program you meant (was it written completely?)")
-    path, _lines = iter_source_lines(Path(source))
-    count = None
-    if options is not None and options.processes > 1:
-        from postproc.gcode import forking, split
+    from postproc.gcode import forking, split
 
-        if forking.available():
-            try:
-                count = split.count_lines(str(source))
-            except OSError:
-                count = None  # the reader names the problem
+    path, _lines = iter_source_lines(Path(source))
+    try:
+        lines_in = split.count_lines(str(source))
+        size = os.path.getsize(source)
+    except OSError:
+        lines_in = size = 0  # the reader names the problem
+    count = lines_in if lines_in and options is not None and options.processes > 1 and forking.available() else None
     # staged: a device or pipe gets the whole program at the end (the run may start over)
     try:
         with output_path(output, stage_special=True) as tmp, \
@@ -1692,7 +1732,8 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
                 out.truncate()
 
             report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
-                                    options, path, calibration_name, calibration_sha256, progress, count)
+                                    options, path, calibration_name, calibration_sha256, progress, count,
+                                    input_lines=lines_in, input_chars=size)
     except DiskFullError:  # disk full keeps its own exit code
         raise
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)

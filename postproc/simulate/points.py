@@ -25,6 +25,15 @@ _GRID_END_SLACK_MM = 1e-9
 
 #: Default temperature (deg C) when a temperature column is asked for without a profile.
 REFERENCE_TEMP_C = 20.0
+# Rows of one simulated campaign: a real one has hundreds to tens of thousands; a million
+# rows is ~100 MB of CSV and a few hundred MB while they are made.
+MAX_ROWS = 1_000_000
+
+
+def check_rows(rows: float, what: str, hint: str) -> None:
+    """Refuse a campaign of more than :data:`MAX_ROWS` rows (``rows`` may be inf)."""
+    if not rows <= MAX_ROWS:
+        raise SimulationError(f"{what} makes {rows:.4g} rows: more than {MAX_ROWS:,}", hint=hint)
 
 
 class SimulationError(PostprocError):
@@ -45,10 +54,11 @@ def grid_points(volume_mm, step_mm: float | Sequence[float]) -> np.ndarray:
     if np.any(steps <= 0):
         raise SimulationError(f"grid step must be positive, got {steps.tolist()}",
                               hint="give --grid STEP in mm, e.g. --grid 45")
-    axes = []
-    for j in range(3):
-        n = int(np.floor((vol[1, j] - vol[0, j]) / steps[j] + _GRID_END_SLACK_MM)) + 1
-        axes.append(vol[0, j] + steps[j] * np.arange(n))
+    with np.errstate(over="ignore"):  # a step of 1e-320 mm: inf points, refused below
+        counts = np.floor((vol[1] - vol[0]) / steps + _GRID_END_SLACK_MM) + 1
+    check_rows(float(np.prod(counts)), f"a grid step of {', '.join(f'{v:g}' for v in steps)} mm",
+               "give a larger --grid step")
+    axes = [vol[0, j] + steps[j] * np.arange(int(counts[j])) for j in range(3)]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
     return np.column_stack([x.ravel(), y.ravel(), z.ravel()])
 
@@ -58,6 +68,7 @@ def random_points(volume_mm, n: int, rng: np.random.Generator) -> np.ndarray:
     vol = _volume(volume_mm)
     if n < 1:
         raise SimulationError(f"number of random points must be at least 1, got {n}")
+    check_rows(n, f"--random {n}", "ask for fewer --random points")
     return rng.uniform(vol[0], vol[1], (n, 3))
 
 
@@ -133,6 +144,9 @@ def measurement_plan(
     loads = list(load_values) if load_values else [None]
     signs = [1.0] if approach == "positive" else [1.0, -1.0]
     per_point = len(signs) * repeats
+    check_rows(float(len(q0)) * per_point * len(tools) * len(loads),
+               f"{len(q0)} points x {repeats} repeats x {len(signs)} approaches x {len(tools)} tool vectors x "
+               f"{len(loads)} loads", "give fewer --repeats, tool vectors, loads or points")
     qs, rs, dirs, load_col = [], [], [], []
     for load in loads:
         for tool in tools:

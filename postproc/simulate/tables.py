@@ -15,7 +15,7 @@ import numpy as np
 
 from postproc.calibration.axis_tables import AXES, AxisTables, Squareness
 from postproc.simulate.machine import Machine
-from postproc.simulate.points import SimulationError
+from postproc.simulate.points import SimulationError, check_rows
 
 # The last position of a table run is kept when the step falls short of the end of
 # travel by less than this (text round-off of the volume).
@@ -27,7 +27,10 @@ def table_positions(lo: float, hi: float, step_mm: float) -> np.ndarray:
     if step_mm <= 0:
         raise SimulationError(f"table step must be positive, got {step_mm}",
                               hint="give --step in mm, e.g. --step 5")
-    n = int(np.floor((hi - lo) / step_mm + _END_SLACK_MM))
+    with np.errstate(over="ignore"):  # a step of 1e-320 mm: inf positions, refused below
+        n = np.floor((hi - lo) / step_mm + _END_SLACK_MM)
+    check_rows(float(n) + 1, f"a table step of {step_mm:g} mm", "give a larger --step")
+    n = int(n)
     s = lo + step_mm * np.arange(n + 1)
     if hi - s[-1] > _END_SLACK_MM:
         s = np.append(s, hi)

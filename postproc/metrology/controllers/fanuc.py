@@ -88,6 +88,9 @@ def export_fanuc(axis_errors: list[AxisErrors], *, interval_mm: float, reference
                      "1240 and 1006#5 ZMI), or --parameters with the control's parameter tape")
         check_reference(e, reference_mm[e.axis], return_direction[e.axis])
     numbers = {**DEFAULT_AXIS_NUMBERS, **(axis_numbers or {})}
+    if not (detection_unit_mm > 0 and math.isfinite(interval_mm / detection_unit_mm)):
+        raise CalibrationError(f"detection unit {detection_unit_mm * 1000:g} um: a positive length is needed "
+                               f"that counts the interval {interval_mm:g} mm", hint="give --detection-unit in um, e.g. 1")
     interval_du = round(interval_mm / detection_unit_mm)
     if interval_du <= 0 or abs(interval_du - interval_mm / detection_unit_mm) > WHOLE_STEPS_SLACK * max(1, interval_du):
         raise CalibrationError(f"interval {interval_mm:g} mm is not a whole number of detection units "
