@@ -212,7 +212,7 @@ class EmitterMixin(Generic[_O, _R]):
             from postproc.gcode import frames
 
             qp = list(frames.program_from_machine(mv.frame, mv.shift, qe))
-            out = self._axis_words(replace(mv, frame=None), frames.program_from_machine(mv.frame, mv.shift, target),
+            out = self._axis_words(replace(mv, frame=None), frames.program_from_machine(mv.frame, mv.shift, list(target)),
                                    qp, d, present_only)
             qe[:] = frames.machine_from_program(mv.frame, mv.shift, qp)
             return out

@@ -393,13 +393,13 @@ class Interpreter:
             s0 = self.shift(False, lineno, 1)
         except MissingSetupError:
             return self._block_and_cycle(lineno, words, block_delete)  # no move can be made here
-        real = tuple(st.pos)
+        real = (st.pos[0], st.pos[1], st.pos[2])
         st.pos = list(frames.program_from_machine(a, s0, real))
         try:
             mv = self._block_and_cycle(lineno, words, block_delete)
         finally:
             s1 = self.shift(False, lineno, 1)
-            st.pos = list(frames.machine_from_program(a, s1, st.pos))
+            st.pos = list(frames.machine_from_program(a, s1, st.pos))  # a list of 3
         for m in (mv, self.cycle_move):
             prev = real if m is mv or m is None else frames.machine_from_program(a, m.shift, m.q0)
             while m is not None:

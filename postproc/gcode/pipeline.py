@@ -1321,7 +1321,7 @@ class Corrector(EmitterMixin):
                 entries.append((line, mv, interp.motion_word, interp.state.motion))
             elif isinstance(step, str):
                 entries.append((step, None, False, None))
-            else:
+            elif cyc is not None:  # (a step is made only of a cycle)
                 kind, prev, q, moved, _first = step
                 entries.append(self._generated_move(cyc, kind, prev, q, moved, False, d, sep or " ", lower, ending))
         if cyc is None:

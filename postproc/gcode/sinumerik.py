@@ -318,7 +318,8 @@ class _Reader:
     def arguments(self, k: int, close: int) -> tuple[float | None, ...]:
         """The values of a call's parameters from ``k`` to the ')' at ``close`` (an empty
         parameter, ``CYCLE81(10,0,,-15)``, is None: the cycle's default)."""
-        code, args = self.code, []
+        code = self.code
+        args: list[float | None] = []
         while True:
             k = _skip(code, k)
             if k >= close or code[k] == ",":

@@ -186,7 +186,7 @@ class SinumerikExpander:
                 raise self.error(k, 1, f"program runs more than {self.max_lines} blocks: an endless loop, or "
                                  "raise the bound", UnsupportedGcodeError)
             st = self.statements[k]
-            nxt = k + 1
+            nxt: int | None = k + 1
             call = self._call_of(k) if st is None else None
             if call is not None:
                 yield from self._call(k, *call)
@@ -229,7 +229,7 @@ class SinumerikExpander:
                     break
                 repeats.pop()
                 nxt = r.back
-            k = nxt
+            k = nxt if nxt is not None else k + 1
 
     def _call_of(self, k: int) -> tuple[str, list[str], int, int] | None:
         """``(name, argument texts, repeats, column)`` when line ``k`` calls a subprogram."""
@@ -264,7 +264,7 @@ class SinumerikExpander:
         if self.shared.depth + 1 >= MAX_CALL_DEPTH:
             raise self.error(k, col, f"{name}: subprograms nested deeper than {MAX_CALL_DEPTH} levels",
                              UnsupportedGcodeError)
-        values = [None if not a else self.value(a, k) for a in args]
+        values: list[float | None] = [None if not a else self.value(a, k) for a in args]
         from postproc.gcode.lexer import split_lines
 
         lines = split_lines(f.read_text(encoding="utf-8", errors="replace"))
@@ -291,7 +291,8 @@ class SinumerikExpander:
             before = dict(self.env)
             self.shared.depth += 1
             for i, (kind_name, pname) in enumerate(params):
-                v = values[i] if i < len(values) and values[i] is not None else 0.0
+                given = values[i] if i < len(values) else None
+                v = given if given is not None else 0.0
                 self.env[pname] = v
                 yield k, f"DEF {kind_name} {pname}={sinumerik.number_text(v)}{ending}", False
             local = {n for _t, n in params}
