@@ -59,12 +59,13 @@ class Calibration:
 MAX_MODEL_NUMBER = 1e9
 
 
-def _check_finite(obj, path: str, where: str = "model", floats: bool = True) -> None:
+def _check_finite(obj, path: str, where: str = "model", floats: bool = True, sized: bool = True) -> None:
     """Every number in the model must be finite: NaN or inf in a calibration is corrupt, and
     so is a number beyond :data:`MAX_MODEL_NUMBER` in size (an integer no float holds among
     them). Walked without recursion: the nesting of a JSON file is bounded by the reader,
     not by the interpreter's stack. ``floats``: NaN and inf are refused here (else by the
-    reader of that part, in its words)."""
+    reader of that part, in its words); ``sized``: the size bound applies (the volume has
+    its own, :data:`postproc.constants.MAX_VOLUME_MM`)."""
     todo = [(obj, where)]
     while todo:
         obj, where = todo.pop()
@@ -78,7 +79,7 @@ def _check_finite(obj, path: str, where: str = "model", floats: bool = True) -> 
         elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) > _LARGEST_INT:
             raise CalibrationError(f"{where} is an integer of {len(str(abs(obj)))} digits: a calibration must hold "
                                    "numbers a float holds", path=path)
-        elif isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
+        elif sized and isinstance(obj, (int, float)) and not isinstance(obj, bool) and abs(obj) > MAX_MODEL_NUMBER:
             raise CalibrationError(f"{where} is {obj:.6g}: beyond any length (mm), angle (rad) or count a "
                                    f"calibration holds (at most {MAX_MODEL_NUMBER:g} in size)", path=path)
 
@@ -127,7 +128,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         if key not in data:
             raise CalibrationError(f"calibration has no {key!r}", path=path)
     for key in ("volume_mm", "model", "effects"):
-        _check_finite(data.get(key), path or "", key, floats=key != "effects")
+        _check_finite(data.get(key), path or "", key, floats=key != "effects", sized=key != "volume_mm")
     if not isinstance(data["method"], str):
         raise CalibrationError(f"calibration method {data['method']!r} is not a name", path=path)
     try:

@@ -36,14 +36,15 @@ def refusals(tmp_path):
     csv.write_text("X,Y,Z,dx,dy,dz\n10,20,30,0.001,0,0\n10,20,abc,0,0,0\n")
     return [
         ("cycle tilt", ["correct", FANUC, "-c", STATIC, "--dialect", "fanuc", "--offset", "G54=X100,Y100,Z100",
-                        "--tool-length", "1=100", "--home", "G28=X0,Y0,Z300", "-o", tmp_path / "o.nc"], None),
+                        "--tool-length", "1=100", "--home", "G28=X0,Y0,Z300", "--cycles", "keep",
+                        "-o", tmp_path / "o.nc"], None),
         ("outside the volume", ["correct", offset_program, "-c", STATIC, "-o", tmp_path / "o.nc"], None),
         ("tool table", ["correct", POCKET, "-c", STATIC, "--tool-table", table, "-o", tmp_path / "o.nc"], None),
         ("missing offset, piped", ["correct", "-", "-c", STATIC, "-o", tmp_path / "o.nc"],
          "G21 G90\nG55 G0 X10 Y10 Z10\nM2\n"),
         ("verify cycle tilt", ["verify", FANUC, "-c", STATIC, "--machine", STATIC, "--dialect", "fanuc",
                                "--offset", "G54=X100,Y100,Z100", "--tool-length", "1=100",
-                               "--home", "G28=X0,Y0,Z300"], None),
+                               "--home", "G28=X0,Y0,Z300", "--cycles", "keep"], None),
         ("fit bad cell", ["fit", csv, "-o", tmp_path / "cal.json"], None),
     ]
 
@@ -148,4 +149,4 @@ def test_a_number_too_large_for_a_float_is_refused_at_its_word(tmp_path):
     src.write_text("G21 G90\nG0 X" + "9" * 400 + " Y10 Z10 (a comment: read word by word)\nM2\n")
     result = run("correct", src, "-c", STATIC, "--offset", "G54=X100,Y100,Z100", "-o", tmp_path / "o.nc")
     assert result.exit_code == 3, result.output
-    assert f"{src}:2:4: word X999999999999... (400 characters): the number is too large" in result.output
+    assert f"{src}:2:4: X value 999999999999... is beyond 1e+09: no machine moves that far" in result.output

@@ -109,17 +109,19 @@ def test_the_command_hints_name_their_own_options():
 
 
 def test_verify_runs_the_readme_fanuc_sample(tmp_path):
-    """The Fanuc sample: refused with the hint to give --cycles expand, which verify takes."""
+    """The Fanuc sample: with --cycles keep refused with the hint to give --cycles expand, which
+    verify takes; by default (auto) its tilted cycles are expanded."""
     args = ["verify", str(ROOT / "samples" / "fanuc_drill.nc"), "-c", str(ROOT / "calibrations" / "s500_static.json"),
             "--machine", str(ROOT / "calibrations" / "s500_static.json"), "--dialect", "fanuc",
             "--offset", "G54=X100,Y100,Z100", "--tool-length", "1=100", "--home", "G28=X0,Y0,Z300"]
-    refused = CliRunner().invoke(main, args)
+    refused = CliRunner().invoke(main, [*args, "--cycles", "keep"])
     assert refused.exit_code == 5, refused.output
     assert "give --cycles expand" in refused.output
-    result = CliRunner().invoke(main, [*args, "--cycles", "expand"])
-    assert result.exit_code == 0, result.output
-    corrected = next(line for line in result.output.splitlines() if line.strip().startswith("corrected"))
-    assert float(corrected.split()[3]) < 1.0  # um: the machine is the calibration itself
+    for cycles in (["--cycles", "expand"], []):
+        result = CliRunner().invoke(main, [*args, *cycles])
+        assert result.exit_code == 0, result.output
+        corrected = next(line for line in result.output.splitlines() if line.strip().startswith("corrected"))
+        assert float(corrected.split()[3]) < 1.0  # um: the machine is the calibration itself
 
 
 @pytest.mark.parametrize("name", ["correct", "verify", "diff", "mirror pockets"])

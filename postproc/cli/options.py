@@ -17,6 +17,7 @@ import click
 from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
 from postproc.errors import PostprocError
 from postproc.gcode.dialect import DIALECT_NAMES
+from postproc.limits import DEFAULT_MAX_ARC_TURNS, DEFAULT_MAX_ITERATIONS, Limits
 
 # The controllers --dialect names: one entry each in postproc.gcode.dialect (a light module)
 DIALECT_CHOICE = click.Choice(list(DIALECT_NAMES), case_sensitive=False)
@@ -355,10 +356,17 @@ class Reading:
     dialect: str = "generic"
     cycles: str = "auto"
     subroutine_path: tuple[str, ...] = ()
+    max_iterations: int = DEFAULT_MAX_ITERATIONS
+    max_arc_turns: int = DEFAULT_MAX_ARC_TURNS
+
+    def limits(self, **output) -> Limits:
+        """The bounds on one run's work these set (``output``: the output's, correct only)."""
+        return Limits(max_iterations=self.max_iterations, max_arc_turns=self.max_arc_turns, **output)
 
     def correct_options(self) -> dict:
         """The :class:`postproc.gcode.pipeline.CorrectOptions` fields these set."""
-        return {"dialect": self.dialect, "cycles": self.cycles, "subroutine_path": self.subroutine_path}
+        return {"dialect": self.dialect, "cycles": self.cycles, "subroutine_path": self.subroutine_path,
+                "limits": self.limits()}
 
 
 #: How the program is read, in the order listed: flag -> (field of :class:`Reading`, click.option arguments).
@@ -380,6 +388,12 @@ PROGRAM_OPTIONS: dict[str, tuple[str, dict]] = {
         multiple=True, type=click.Path(file_okay=False),
         help="Folder searched for o<name> call subroutines (<name>.ngc), M98 subprogram files and "
              "Sinumerik subprograms (<name>.SPF/.MPF), as LinuxCNC's SUBROUTINE_PATH. Repeatable.")),
+    "--max-iterations": ("max_iterations", dict(
+        default=DEFAULT_MAX_ITERATIONS, show_default=True, type=click.IntRange(1),
+        help="Refuse a program whose loop passes and subprogram calls exceed this in all (an endless loop).")),
+    "--max-arc-turns": ("max_arc_turns", dict(
+        default=DEFAULT_MAX_ARC_TURNS, show_default=True, type=click.IntRange(1),
+        help="Refuse a helix (G2/G3 P) of more turns than this.")),
 }
 
 
@@ -464,26 +478,22 @@ def correction_options(fn=None, *, leave_out: tuple[str, ...] = ()):
 
 
 def limit_options(fn):
-    """Declare the bounds on one run's work (:class:`postproc.limits.Limits`) on a command
-    that expands and corrects programs, passed to it as one ``limits`` argument."""
+    """Declare the bounds on the corrected program's size on ``correct``; with the reading's
+    bounds (``--max-iterations``, ``--max-arc-turns``) they make the one ``limits``
+    argument (:class:`postproc.limits.Limits`) passed to it."""
     from postproc import limits as lim
 
     @functools.wraps(fn)
-    def command(*args, max_iterations, max_output_lines, max_output_mb, max_arc_turns, **kwargs):
-        return fn(*args, limits=lim.Limits(max_iterations, max_output_lines, max_arc_turns, max_output_mb), **kwargs)
+    def command(*args, max_output_lines, max_output_mb, **kwargs):
+        reading = kwargs["reading"]
+        return fn(*args, limits=reading.limits(max_output_lines=max_output_lines, max_output_mb=max_output_mb),
+                  **kwargs)
 
-    command = click.option(
-        "--max-arc-turns", "max_arc_turns", default=lim.DEFAULT_MAX_ARC_TURNS, show_default=True,
-        type=click.IntRange(1), help="Refuse a helix (G2/G3 P) of more turns than this.")(command)
     command = click.option(
         "--max-output-mb", "max_output_mb", default=None, type=FiniteFloat(min=0, min_open=True),
         help=f"Refuse a corrected program larger than this (MB) [default: {lim.OUTPUT_GROWTH} times the "
              f"input's size plus {lim.OUTPUT_MB_EXTRA} MB].")(command)
-    command = click.option(
+    return click.option(
         "--max-output-lines", "max_output_lines", default=None, type=click.IntRange(1),
         help=f"Refuse a corrected program longer than this [default: {lim.OUTPUT_GROWTH} times the input's "
              f"lines plus {lim.OUTPUT_LINES_EXTRA:,}].")(command)
-    return click.option(
-        "--max-iterations", "max_iterations", default=lim.DEFAULT_MAX_ITERATIONS, show_default=True,
-        type=click.IntRange(1), help="Refuse a program whose loop passes and subprogram calls exceed this in all "
-                                     "(an endless loop).")(command)

@@ -60,6 +60,7 @@ from postproc.gcode.interp import Interpreter
 from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LENGTH_RE, TOOL_LINE_RE
 from postproc.gcode.path import Setup, iter_source_lines, open_source
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
+from postproc.limits import Limits
 
 # Pairing stops after this many candidate lines that are farther than the best one,
 STOP_AFTER_WORSE = 8
@@ -501,9 +502,11 @@ class _Reader:
 
     def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
                  dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = (),
-                 expand_cycles: bool = False, cycle_retract: bool = True) -> None:
+                 expand_cycles: bool = False, cycle_retract: bool = True, limits: Limits | None = None) -> None:
         self.path, self._lines = iter_source_lines(source)
         self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
+        self.limits = limits or Limits()  # loops and helix turns (postproc.limits)
+        self.interp.max_arc_turns = self.limits.max_arc_turns
         self.keys = keys
         self.drop_header = drop_header
         # read the program as executed: subprograms, loops and macros written out, as
@@ -564,7 +567,7 @@ class _Reader:
         from postproc.gcode.expand import expand
 
         flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path,
-                      variables=self.variables)
+                      variables=self.variables, max_iterations=self.limits.max_iterations)
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
             rows = _Rows.blank([sl.text for sl in part], 0)
             rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)
@@ -1465,7 +1468,8 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
                      keep: int | None = None, dialect: str = "generic",
-                     subroutine_path: Sequence[Path] = (), cycles: str | None = None) -> DiffReport:
+                     subroutine_path: Sequence[Path] = (), cycles: str | None = None,
+                     limits: Limits | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1488,24 +1492,25 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path, cycles)
+        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path, cycles, limits)
     finally:
         if was_enabled:
             gc.enable()
 
 
 def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str,
-             subroutine_path: Sequence[Path], cycles: str | None = None) -> DiffReport:
+             subroutine_path: Sequence[Path], cycles: str | None = None,
+             limits: Limits | None = None) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     hs = header_setup(corrected)
     setup = setup_from_header(hs, setup)
     expanded = hs.expanded
     keys = _Keys()
-    readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded,
+    readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded, limits=limits,
                        subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True,
                        cycle_retract=not hs.cycles_expanded),
-               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True,
+               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True, limits=limits,
                        cycle_retract=not hs.cycles_expanded))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()

@@ -414,9 +414,10 @@ def check_chunk(c) -> None:
         raise CutterBoundError(
             f"cutter radius compensation: the correction changes by {bound[k] * 1000:.2f} um across the tool "
             f"radius {cm.radius_mm:g} mm ({cm.source}) near ({at[k][0]:.3f}, {at[k][1]:.3f}, {at[k][2]:.3f}) mm, "
-            f"more than --tolerance {tol:g} mm", path=c.path, lineno=cm.move.lineno,
+            f"more than the tolerance {tol:g} mm", path=c.path, lineno=cm.move.lineno,
             hint="the controller offsets the corrected contour by the radius, so the tool centre is off by that "
-                 f"much; allow it with --tolerance {math.ceil(bound[k] * 1e5) / 1e5:g}, or post the tool-centre "
+                 f"much; allow it with postproc correct --tolerance {math.ceil(bound[k] * 1e5) / 1e5:g}, or post the "
+                 "tool-centre "
                  "path (compensation done in CAM)")
 
 

@@ -27,7 +27,7 @@ from postproc.errors import MissingSetupError, PostprocError
 from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
 from postproc.gcode.interp import Interpreter, plain_moves, start_position
 from postproc.gcode.state import RAPID
-from postproc.limits import ResourceLimitError
+from postproc.limits import Limits, ResourceLimitError
 
 DEFAULT_MAX_STEP_MM = 0.5
 # Points one program may be sampled into (verify, the path API): verify peaks near 7.5 KB
@@ -110,15 +110,19 @@ def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
 
 
 def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", subroutine_path=(),
-                   lenient_setup: bool = False) -> Interpreter:
+                   lenient_setup: bool = False, limits: Limits | None = None) -> Interpreter:
     """Interpret a program (path or text) line by line, calling ``visit(lineno, line,
     block, state)`` for each line that makes a move (``state``: the modal state after it); the same reading as ``correct``: when the
     program needs expanding (parameters, O-words, subprograms, macros), ``reset()`` is
-    called and the expanded program is read instead. Returns the interpreter."""
+    called and the expanded program is read instead. Returns the interpreter. ``limits``:
+    the bounds on loops and helix turns (:class:`postproc.limits.Limits`, default its own)."""
     from postproc.gcode.interp import NeedsExpansion
+
+    limits = limits or Limits()
 
     path, lines = iter_source_lines(source)
     interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
+    interp.max_arc_turns = limits.max_arc_turns
     interp.may_expand = True
     try:
         for lineno, line in enumerate(lines, start=1):
@@ -132,8 +136,9 @@ def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", sub
 
     _path, lines = iter_source_lines(source)
     interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
+    interp.max_arc_turns = limits.max_arc_turns
     for sl in expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path],
-                     variables=getattr(setup, "variables", None)):
+                     variables=getattr(setup, "variables", None), max_iterations=limits.max_iterations):
         interp.path = sl.path or path
         block = interp.feed_line(sl.lineno, sl.text)
         if block is not None:
@@ -186,9 +191,10 @@ MOTION_EPS_MM = 1e-9
 
 
 def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEFAULT_MAX_STEP_MM,
-                 dialect: str = "generic", subroutine_path=()) -> ProgramPath:
+                 dialect: str = "generic", subroutine_path=(), limits: Limits | None = None) -> ProgramPath:
     """Sample the nominal path of a program (path or text); see the module docstring."""
-    return sample_program(source, setup, step_mm=max_step_mm, dialect=dialect, subroutine_path=subroutine_path)
+    return sample_program(source, setup, step_mm=max_step_mm, dialect=dialect, subroutine_path=subroutine_path,
+                          limits=limits)
 
 
 def _steps(length_mm: float, step_mm: float) -> int:
@@ -200,7 +206,7 @@ def _steps(length_mm: float, step_mm: float) -> int:
 
 def sample_program(source, setup: Setup | None = None, *, step_mm: float | None = None,
                    chord_mm: float | None = None, dialect: str = "generic", subroutine_path=(),
-                   max_samples: int = MAX_SAMPLES) -> ProgramPath:
+                   max_samples: int = MAX_SAMPLES, limits: Limits | None = None) -> ProgramPath:
     """The program's moves as points: the one sampler of correct's checks, verify and the
     path API (the program is read by :func:`for_each_block`).
 
@@ -244,7 +250,7 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
                 every = f" every {step_mm:g} mm" if step_mm else ""
                 raise ResourceLimitError(
                     f"sampling the program{every} makes more than {max_samples:,} points",
-                    path=path, lineno=lineno, col=1, hint="give a larger --max-step")
+                    path=path, lineno=lineno, col=1, hint="give postproc verify a larger --max-step")
             q0s.append(q0)
             q1s.append(q1)
             counts.append(n)
@@ -259,7 +265,8 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
         arcs.clear()
         total[0] = 0
 
-    interp = for_each_block(source, setup, visit, reset, dialect=dialect, subroutine_path=subroutine_path)
+    interp = for_each_block(source, setup, visit, reset, dialect=dialect, subroutine_path=subroutine_path,
+                            limits=limits)
     if not counts:
         empty = np.zeros((0, 3))
         return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),

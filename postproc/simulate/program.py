@@ -59,7 +59,8 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     program = str(program)
     # read as the correction reads it: the controller's dialect, subprogram files
     reading: dict[str, Any] = {"dialect": getattr(options, "dialect", "generic"),
-               "subroutine_path": tuple(getattr(options, "subroutine_path", ()))}
+                               "subroutine_path": tuple(getattr(options, "subroutine_path", ())),
+                               "limits": getattr(options, "limits", None)}
     nominal = nominal_path(program, setup, **reading)
     if len(nominal) < 2:
         raise PostprocError("the program has no moves to verify", path=program)

@@ -272,7 +272,7 @@ class NominalPath:
 
 
 def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM, *, dialect: str = "generic",
-                 subroutine_path=()) -> NominalPath:
+                 subroutine_path=(), limits=None) -> NominalPath:
     """Nominal path of a program (path or text) for measuring deviations against.
 
     Straight moves contribute their end points only (a straight segment is exact);
@@ -281,13 +281,14 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM, *, dialect: 
     """
     from postproc.gcode.path import sample_program
 
-    pp = sample_program(source, setup, chord_mm=chord_mm, dialect=dialect, subroutine_path=subroutine_path)
+    pp = sample_program(source, setup, chord_mm=chord_mm, dialect=dialect, subroutine_path=subroutine_path,
+                        limits=limits)
     return NominalPath(pp.points_mm, pp.lineno, pp.rapid)
 
 
 def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
                         chord_mm: float = NOMINAL_CHORD_MM, *, dialect: str = "generic",
-                        subroutine_path=()) -> ProgramPath:
+                        subroutine_path=(), limits=None) -> ProgramPath:
     """A program (path or text) sampled to draw its actual path as a polyline.
 
     Straight moves every ``max_step_mm``; arcs also cut into chords within ``chord_mm``
@@ -298,7 +299,7 @@ def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
     from postproc.gcode.path import sample_program
 
     return sample_program(source, setup, step_mm=max_step_mm, chord_mm=chord_mm, dialect=dialect,
-                          subroutine_path=subroutine_path)
+                          subroutine_path=subroutine_path, limits=limits)
 
 
 def machine_directions(q, initial) -> np.ndarray:
