@@ -50,7 +50,7 @@ from typing import Protocol, TypeAlias, final
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit, lexer
+from postproc.gcode import emit, lexer, numfmt
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.lexer import NUMBER_RE
@@ -530,13 +530,13 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         nums = block.cols[_NUM[k]]
         if len(sel):
             col = np.array(nums, dtype=object)
-            col[idx[sel]] = _format(v[sel], dout[sel])
+            col[idx[sel]] = numfmt.fmt_all(v[sel].tolist(), dout[sel].tolist(), "")
             nums = col.tolist()
             named[idx[sel]] += 1
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
-        em.miss_text.append(_format(vm, dec[miss], "XYZ"[k]) if len(miss) else [])
+        em.miss_text.append(numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [])
         em.miss_v.append(vm.tolist())
         rows = idx[miss]
         em.miss.append(rows.tolist())
@@ -548,30 +548,6 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
     em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
     em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
     return em
-
-
-def _format(values: FloatArray, dout: IntArray, prefix: str = "") -> list[str]:
-    """``prefix + emit.fmt(v, d)`` for every value, in bulk (grouped by number of decimals)."""
-    if not np.isfinite(values).all():
-        raise ValueError("cannot write a non-finite value into a program")
-    out: list[str] = [""] * len(values)
-    groups = [int(dout[0])] if (dout == dout[0]).all() else np.unique(dout).tolist()
-    for d in groups:
-        sel = np.flatnonzero(dout == d) if len(groups) > 1 else None
-        v = values if sel is None else values[sel]
-        texts = ((f"{prefix}%.{d}f\n" * len(v)) % tuple(v.tolist())).split("\n")
-        texts.pop()
-        # "-0.000" is written "0.000" (emit.fmt)
-        cut = len(prefix)
-        for j in np.flatnonzero((v <= 0.0) & (v > -(10.0 ** -d))).tolist():
-            t = texts[j][cut:]
-            if t[0] == "-" and not t.strip("-0."):
-                texts[j] = prefix + t[1:]
-        if sel is None:
-            return texts
-        for i, t in zip(sel.tolist(), texts, strict=True):
-            out[i] = t
-    return out
 
 
 def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None) -> RunMove:

@@ -67,38 +67,38 @@ class Columns:
         return len(self.plain)
 
 
-def number_end(text: str, i: int, n: int) -> int:
+def number_end(text: bytes, i: int, n: int) -> int:
     """The end of the number ``[+-]?(\\d+\\.?\\d*|\\.\\d+)`` starting at ``i``; -1 if none."""
     if i < n:
-        c = ord(text[i])
+        c = text[i]
         if c == 43 or c == 45:  # + -
             i += 1
     if i >= n:
         return -1
-    c = ord(text[i])
+    c = text[i]
     if 48 <= c <= 57:
         i += 1
-        while i < n and 48 <= ord(text[i]) <= 57:
+        while i < n and 48 <= text[i] <= 57:
             i += 1
-        if i < n and ord(text[i]) == 46:  # .
+        if i < n and text[i] == 46:  # .
             i += 1
-            while i < n and 48 <= ord(text[i]) <= 57:
+            while i < n and 48 <= text[i] <= 57:
                 i += 1
         return i
-    if c == 46 and i + 1 < n and 48 <= ord(text[i + 1]) <= 57:
+    if c == 46 and i + 1 < n and 48 <= text[i + 1] <= 57:
         i += 2
-        while i < n and 48 <= ord(text[i]) <= 57:
+        while i < n and 48 <= text[i] <= 57:
             i += 1
         return i
     return -1
 
 
-def number_value(text: str, i: int, j: int) -> float:
+def number_value(text: bytes, i: int, j: int) -> float:
     """``float(text[i:j])`` of a number the scanner found, without making the string
     where its digits fit a double exactly (then one division by an exact power of ten
     is correctly rounded, as ``float`` is)."""
     neg = False
-    c = ord(text[i])
+    c = text[i]
     k = i
     if c == 43 or c == 45:
         neg = c == 45
@@ -107,7 +107,7 @@ def number_value(text: str, i: int, j: int) -> float:
     digits = 0
     frac = -1
     while k < j:
-        c = ord(text[k])
+        c = text[k]
         if c == 46:
             frac = 0
         else:
@@ -123,7 +123,7 @@ def number_value(text: str, i: int, j: int) -> float:
     return -v if neg else v
 
 
-def scan_into(text: str, cols: Columns) -> None:
+def scan_into(text: bytes, cols: Columns) -> None:
     """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
     n = len(text)
     i = 0
@@ -141,12 +141,12 @@ def scan_into(text: str, cols: Columns) -> None:
     first_word.append(len(word_line))
     plain = True
     while i < n:
-        c = ord(text[i])
+        c = text[i]
         if c == 32 or c == 9:  # blank
             i += 1
         elif c == 10 or c == 13:  # line ending (CRLF, LF, CR)
             i += 1
-            if c == 13 and i < n and ord(text[i]) == 10:
+            if c == 13 and i < n and text[i] == 10:
                 i += 1
             plain_col.append(plain)
             plain = True
@@ -156,7 +156,7 @@ def scan_into(text: str, cols: Columns) -> None:
                 first_word.append(len(word_line))
         elif (65 <= c <= 90) or (97 <= c <= 122):  # a letter: a word, or a letter alone
             j = i + 1
-            while j < n and (ord(text[j]) == 32 or ord(text[j]) == 9):
+            while j < n and (text[j] == 32 or text[j] == 9):
                 j += 1
             e = number_end(text, j, n)
             if e < 0:
@@ -174,7 +174,7 @@ def scan_into(text: str, cols: Columns) -> None:
             plain = False
             i += 1
             while i < n:
-                c = ord(text[i])
+                c = text[i]
                 if c == 41:
                     i += 1
                     break
@@ -183,7 +183,7 @@ def scan_into(text: str, cols: Columns) -> None:
                 i += 1
         elif c == 59:  # ; comment to the end of the line
             plain = False
-            while i < n and ord(text[i]) != 10 and ord(text[i]) != 13:
+            while i < n and text[i] != 10 and text[i] != 13:
                 i += 1
         else:  # a number alone, a symbol, other blanks, or not G-code (lex names it)
             plain = False
@@ -192,16 +192,23 @@ def scan_into(text: str, cols: Columns) -> None:
     if n == 0:  # no text, no line
         line_start.pop()
         first_word.pop()
-    elif ord(text[n - 1]) != 10 and ord(text[n - 1]) != 13:
+    elif text[n - 1] != 10 and text[n - 1] != 13:
         plain_col.append(plain)  # a last line without its ending
     line_start.append(n)
     first_word.append(len(word_line))
 
 
+def chars(text: str) -> bytes:
+    """``text`` one byte per character, for the scanner: characters beyond latin-1 (legal
+    only inside comments, where the scanner does not look) become ``?``, so that offsets
+    stay those of the text."""
+    return text.encode("latin-1", "replace")
+
+
 def scan(text: str) -> Columns:
     """The columns of ``text``."""
     cols = Columns()
-    scan_into(text, cols)
+    scan_into(chars(text), cols)
     return cols
 
 
@@ -209,7 +216,7 @@ def scan_line(line: str) -> list[Word] | None:
     """The words of one line, or None when it is not plain (comments, symbols, a letter
     without a number, anything else: :func:`postproc.gcode.lexer.lex` reads it)."""
     cols = Columns()
-    scan_into(line, cols)
+    scan_into(chars(line), cols)
     if len(cols.plain) != 1:
         return [] if not line else None
     if not cols.plain[0]:
