@@ -42,10 +42,13 @@ class OptionalBuildExt(build_ext):
         except Exception as exc:  # noqa: BLE001
             self._skip(exc)
 
-    @staticmethod
-    def _skip(exc: BaseException) -> None:
-        print(f"postproc: the compiled core was not built ({exc}); the same modules run uncompiled",
-              file=sys.stderr)
+    reported = False
+
+    def _skip(self, exc: BaseException) -> None:
+        if not OptionalBuildExt.reported:
+            OptionalBuildExt.reported = True
+            print(f"postproc: the compiled core was not built ({exc}); the same modules run uncompiled",
+                  file=sys.stderr)
 
 
 def ext_modules() -> list:
@@ -57,7 +60,7 @@ def ext_modules() -> list:
         print("postproc: mypyc is not available; the modules run uncompiled", file=sys.stderr)
         return []
     try:
-        return mypycify(COMPILED, opt_level="3")
+        return mypycify(COMPILED, opt_level="3", group_name="postproc")
     except BaseException as exc:  # noqa: BLE001  (mypyc exits on a type error)
         print(f"postproc: mypyc could not compile the core ({exc!r}); the modules run uncompiled",
               file=sys.stderr)
