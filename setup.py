@@ -24,6 +24,7 @@ from setuptools.command.build_ext import build_ext
 COMPILED = [
     "postproc/gcode/scanner.py",
     "postproc/gcode/numfmt.py",
+    "postproc/gcode/plainscan.py",
 ]
 
 

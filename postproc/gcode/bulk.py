@@ -1,10 +1,11 @@
 """The bulk lane: runs of plain absolute moves read and rewritten per chunk.
 
 Most lines of CAM output are ``[N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I..] [J..] [F..]``
-in that order. A chunk of lines is matched by one regular expression (one ``findall``
-over the chunk's text), which splits every such line into its pieces: the text before
-the first axis word, each axis and centre word's letter (with the blanks before it) and
-number, and the rest (feed word, trailing blanks, ``\\r``). The numbers of the whole
+in that order. A chunk of lines is read by the scanner (:mod:`postproc.gcode.scanner`,
+the lexer's grammar, compiled) and every such line cut into its pieces
+(:func:`postproc.gcode.plainscan.pieces`): the text before the first axis word, each
+axis and centre word's letter (with the blanks before it) and number, and the rest
+(feed word, trailing blanks, ``\\r``). The numbers of the whole
 chunk are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
 state is simple (:func:`state_allows`) form a :class:`Run`: reading one only advances
 the modal state to its last line; the nominal targets of all the chunk's runs are then
@@ -50,27 +51,16 @@ from typing import Protocol, TypeAlias, final
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit, lexer, numfmt
+from postproc.gcode import emit, lexer, numfmt, plainscan, scanner
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
-from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
-_N = NUMBER_RE
-# Groups: 1 head (N and G words, and G43 H.. after them: see Block.tlo), 2 G number, 3/5/7 X/Y/Z letter with the blanks
-# before it, 4/6/8 their numbers, 9/11 I/J letter with the blanks before it, 10/12 their
-# numbers, 13 the rest (F word, trailing blanks, \r), 14 the F number; any other line
-# matches with every group empty. Blanks are matched possessively (nothing in the
-# pattern needs one back), which saves the regex engine's backtracking.
-_PLAIN = re.compile(
-    rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[0-3]))?"
-    rf"(?:[ \t]*+{lexer.TOOL_LENGTH_RE}\d++)?)"
-    rf"(?:([ \t]*+[Xx][ \t]*+)({_N}))?(?:([ \t]*+[Yy][ \t]*+)({_N}))?(?:([ \t]*+[Zz][ \t]*+)({_N}))?"
-    rf"(?:([ \t]*+[Ii][ \t]*+)({_N}))?(?:([ \t]*+[Jj][ \t]*+)({_N}))?"
-    rf"((?:[ \t]*+[Ff][ \t]*+({_N}))?[ \t]*+\r?)|[^\n]*)$",
-    re.M,
-)
+# The pieces of a plain line (plainscan.pieces): 0 head (N and G words, and G43 H.. after
+# them: see Block.tlo), 1 G number, 2/4/6 X/Y/Z letter with the blanks before it, 3/5/7
+# their numbers, 8/10 I/J letter with the blanks before it, 9/11 their numbers, 12 the
+# rest (F word, trailing blanks, \r), 13 the F number; any other line has every piece empty.
 _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
@@ -226,11 +216,11 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
 class Block:
     """One chunk of lines split into pieces, with the plain lines' numbers parsed."""
 
-    def __init__(self, lines: list[str], found: list[tuple[str, ...]]) -> None:
+    def __init__(self, lines: list[str], pieces: list[list[str]]) -> None:
         n = len(lines)
         self.lines = lines
-        # the text of each group, by group (a column per group, a row per line)
-        cols: list[Sequence[str]] = list(zip(*found, strict=True)) if n else [()] * 14
+        # the text of each piece, by piece (a column per piece, a row per line)
+        cols: list[Sequence[str]] = list(pieces)
         self.cols = cols
         self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
         self.ov: list[FloatArray] = []  # their values (0 where not named)
@@ -311,12 +301,10 @@ def scan(lines: list[str]) -> Block | None:
     text = "".join(lines)
     if "\r" in text and text.count("\r") != text.count("\r\n"):
         return None
-    found = _PLAIN.findall(text)
-    n = len(lines)
-    # one match per line, plus an empty one after a final line ending
-    if len(found) not in (n, n + 1):
+    cols = scanner.scan(text)
+    if len(cols) != len(lines):  # lines not split as the scanner splits them
         return None
-    return Block(lines, found[:n] if len(found) > n else found)
+    return Block(lines, plainscan.pieces(text, cols))
 
 
 @final
