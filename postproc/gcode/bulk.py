@@ -216,29 +216,23 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
 class Block:
     """One chunk of lines split into pieces, with the plain lines' numbers parsed."""
 
-    def __init__(self, lines: list[str], pieces: list[list[str]]) -> None:
+    def __init__(self, lines: list[str], pieces: plainscan.Pieces) -> None:
         n = len(lines)
         self.lines = lines
         # the text of each piece, by piece (a column per piece, a row per line)
-        cols: list[Sequence[str]] = list(pieces)
+        cols: list[Sequence[str]] = list(pieces.text)
         self.cols = cols
         self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
         self.ov: list[FloatArray] = []  # their values (0 where not named)
-        self.ovl: list[list[float]] = []
+        self.ovl: list[list[float]] = pieces.value
         self.frac: list[IntArray] = []  # digits after the point of X, Y, Z
         self.last: list[IntArray] = []  # the last line at or before each that names X, Y, Z
         for k in range(5):  # X, Y, Z, I, J
-            nums = cols[_NUM[k]]
-            arr = np.array(nums, dtype=str)
-            has = arr != ""
-            ov = np.zeros(n)
-            ov[has] = np.array([x for x in nums if x], dtype=float)
+            has = np.array(pieces.has[k], dtype=bool)
             self.has.append(has)
-            self.ov.append(ov)
-            self.ovl.append(ov.tolist())
+            self.ov.append(np.array(pieces.value[k], dtype=float))
             if k < 3:
-                dot = np.strings.find(arr, ".")
-                self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
+                self.frac.append(np.array(pieces.frac[k], dtype=int))
                 self.last.append(last_index(has))
         g = cols[_G]
         self.gword = g
@@ -249,7 +243,7 @@ class Block:
         # interpreter's: neither is plain
         self.arc = (digit == "2") | (digit == "3")
         self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
-        self.has_l: list[list[bool]] = [h.tolist() for h in self.has]
+        self.has_l: list[list[bool]] = pieces.has
         centre = self.has[3] | self.has[4]
         modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc

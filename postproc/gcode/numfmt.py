@@ -21,8 +21,23 @@ def fmt(value: float, decimals: int) -> str:
 
 
 def fmt_all(values: list[float], decimals: list[int], prefix: str) -> list[str]:
-    """``prefix + fmt(v, d)`` for each value and its number of decimals."""
-    out: list[str] = []
-    for k in range(len(values)):
-        out.append(prefix + fmt(values[k], decimals[k]))
-    return out
+    """``prefix + fmt(v, d)`` for each value and its number of decimals (in one ``%``
+    over all the values where they share their decimals)."""
+    n = len(values)
+    if n == 0:
+        return []
+    d = decimals[0]
+    for k in range(n):
+        if decimals[k] != d:
+            return [prefix + fmt(values[k], decimals[k]) for k in range(n)]
+    for v in values:
+        if not math.isfinite(v):
+            raise ValueError(f"cannot write {v} into a program")
+    texts = ((prefix + "%." + str(d) + "f\n") * n % tuple(values)).split("\n")
+    texts.pop()
+    low = -(10.0 ** -d)  # a value above it and not above 0 may be written -0.000
+    for k in range(n):
+        v = values[k]
+        if v <= 0.0 and v > low:
+            texts[k] = prefix + fmt(v, d)
+    return texts

@@ -22,6 +22,9 @@ from __future__ import annotations
 
 from typing import Final, NamedTuple
 
+# i64: a native 64-bit integer where mypyc compiles the module, a plain int where it does not
+from mypy_extensions import i64
+
 # digits whose integer value is exact in a double (fast path of the number's value)
 _EXACT_DIGITS: Final = 15
 # powers of ten exact in a double: m / 10**d is then correctly rounded, as float(text) is
@@ -67,8 +70,9 @@ class Columns:
         return len(self.plain)
 
 
-def number_end(text: bytes, i: int, n: int) -> int:
+def number_end(text: bytes, i: i64, n: i64) -> i64:
     """The end of the number ``[+-]?(\\d+\\.?\\d*|\\.\\d+)`` starting at ``i``; -1 if none."""
+    c: i64
     if i < n:
         c = text[i]
         if c == 43 or c == 45:  # + -
@@ -93,7 +97,7 @@ def number_end(text: bytes, i: int, n: int) -> int:
     return -1
 
 
-def number_value(text: bytes, i: int, j: int) -> float:
+def number_value(text: bytes, i: i64, j: i64) -> float:
     """``float(text[i:j])`` of a number the scanner found, without making the string
     where its digits fit a double exactly (then one division by an exact power of ten
     is correctly rounded, as ``float`` is)."""
@@ -103,9 +107,9 @@ def number_value(text: bytes, i: int, j: int) -> float:
     if c == 43 or c == 45:
         neg = c == 45
         k += 1
-    m = 0
-    digits = 0
-    frac = -1
+    m: i64 = 0
+    digits: i64 = 0
+    frac: i64 = -1
     while k < j:
         c = text[k]
         if c == 46:
@@ -125,9 +129,9 @@ def number_value(text: bytes, i: int, j: int) -> float:
 
 def scan_into(text: bytes, cols: Columns) -> None:
     """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
-    n = len(text)
-    i = 0
-    line = 0
+    n: i64 = len(text)
+    i: i64 = 0
+    line: i64 = 0
     line_start = cols.line_start
     plain_col = cols.plain
     word_line = cols.word_line
@@ -140,6 +144,9 @@ def scan_into(text: bytes, cols: Columns) -> None:
     line_start.append(0)
     first_word.append(len(word_line))
     plain = True
+    c: i64
+    j: i64
+    e: i64
     while i < n:
         c = text[i]
         if c == 32 or c == 9:  # blank
