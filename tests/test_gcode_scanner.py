@@ -84,5 +84,5 @@ def test_fmt_all_is_fmt(values, d, mixed):
     decimals = [(d + i % 3) if mixed else d for i in range(len(values))]
     values += [-0.0, -1e-12, -(10.0 ** -d) / 2]
     decimals += [d, d, d]
-    assert numfmt.fmt_all(values, decimals, "X") == ["X" + numfmt.fmt(v, k) for v, k in zip(values, decimals)]
+    assert numfmt.fmt_all(values, decimals, "X") == ["X" + numfmt.fmt(v, k) for v, k in zip(values, decimals, strict=True)]
     assert all(not t.startswith("X-") or t.strip("X-0.") for t in numfmt.fmt_all(values, decimals, "X"))
