@@ -24,6 +24,7 @@ all its processes (``diff`` reads large programs in child processes of its own, 
 ``correct`` splits them in two), sampled every half second from /proc. The memory target
 is checked on the larger of the two.
 
+The package's compiled core (setup.py) is used when built; the first lines say whether.
 The children import the package from byte-code compiled once, before the timed runs, into
 the benchmark's temporary folder (as an installed package is), whatever
 PYTHONDONTWRITEBYTECODE says.
@@ -190,6 +191,11 @@ def main() -> None:
     figures: dict = {"machine": machine(), "lines": args.lines, "repeats": args.repeats, "seed": args.seed,
                      "cases": {}}
     print(f"machine: {figures['machine']}")
+    # which of the lane's hot modules run compiled (setup.py); run a copy of the tree
+    # without its *.so files for the uncompiled figures
+    version = subprocess.run([*cli, "--version"], cwd=ROOT, capture_output=True, text=True, env=CHILD_ENV)
+    figures["core"] = version.stdout.strip()
+    print(f"postproc: {figures['core']}")
     with tempfile.TemporaryDirectory(prefix="postproc-bench-") as tmp:
         tmp = Path(tmp)
         log = tmp / "child.log"

@@ -125,8 +125,17 @@ def _internal(ctx, exc: Exception) -> None:
     ctx.exit(EXIT_INTERNAL)
 
 
+def _core() -> str:
+    """Which of the G-code lane's hot modules run compiled (setup.py), for --version."""
+    from importlib.util import find_spec
+
+    names = ("scanner", "plainscan", "numfmt")
+    done = [n for n in names if not (getattr(find_spec(f"postproc.gcode.{n}"), "origin", "") or "").endswith(".py")]
+    return f"compiled core: {', '.join(done)}" if done else "compiled core: none (pure Python)"
+
+
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="postproc")
+@click.version_option(__version__, prog_name="postproc", message=f"%(prog)s, version %(version)s ({_core()})")
 def main() -> None:
     """Correct CNC G-code programs for a machine's measured geometric errors.
 

@@ -1,10 +1,11 @@
 """The bulk lane: runs of plain absolute moves read and rewritten per chunk.
 
 Most lines of CAM output are ``[N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I..] [J..] [F..]``
-in that order. A chunk of lines is matched by one regular expression (one ``findall``
-over the chunk's text), which splits every such line into its pieces: the text before
-the first axis word, each axis and centre word's letter (with the blanks before it) and
-number, and the rest (feed word, trailing blanks, ``\\r``). The numbers of the whole
+in that order. A chunk of lines is read by the scanner (:mod:`postproc.gcode.scanner`,
+the lexer's grammar, compiled) and every such line cut into its pieces
+(:func:`postproc.gcode.plainscan.pieces`): the text before the first axis word, each
+axis and centre word's letter (with the blanks before it) and number, and the rest
+(feed word, trailing blanks, ``\\r``). The numbers of the whole
 chunk are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
 state is simple (:func:`state_allows`) form a :class:`Run`: reading one only advances
 the modal state to its last line; the nominal targets of all the chunk's runs are then
@@ -50,27 +51,16 @@ from typing import Protocol, TypeAlias, final
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit, lexer
+from postproc.gcode import emit, lexer, numfmt, plainscan, scanner
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
-from postproc.gcode.lexer import NUMBER_RE
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
-_N = NUMBER_RE
-# Groups: 1 head (N and G words, and G43 H.. after them: see Block.tlo), 2 G number, 3/5/7 X/Y/Z letter with the blanks
-# before it, 4/6/8 their numbers, 9/11 I/J letter with the blanks before it, 10/12 their
-# numbers, 13 the rest (F word, trailing blanks, \r), 14 the F number; any other line
-# matches with every group empty. Blanks are matched possessively (nothing in the
-# pattern needs one back), which saves the regex engine's backtracking.
-_PLAIN = re.compile(
-    rf"^(?:([ \t]*+(?:[Nn][ \t]*+{_N})?(?:[ \t]*+[Gg][ \t]*+(0?[0-3]))?"
-    rf"(?:[ \t]*+{lexer.TOOL_LENGTH_RE}\d++)?)"
-    rf"(?:([ \t]*+[Xx][ \t]*+)({_N}))?(?:([ \t]*+[Yy][ \t]*+)({_N}))?(?:([ \t]*+[Zz][ \t]*+)({_N}))?"
-    rf"(?:([ \t]*+[Ii][ \t]*+)({_N}))?(?:([ \t]*+[Jj][ \t]*+)({_N}))?"
-    rf"((?:[ \t]*+[Ff][ \t]*+({_N}))?[ \t]*+\r?)|[^\n]*)$",
-    re.M,
-)
+# The pieces of a plain line (plainscan.pieces): 0 head (N and G words, and G43 H.. after
+# them: see Block.tlo), 1 G number, 2/4/6 X/Y/Z letter with the blanks before it, 3/5/7
+# their numbers, 8/10 I/J letter with the blanks before it, 9/11 their numbers, 12 the
+# rest (F word, trailing blanks, \r), 13 the F number; any other line has every piece empty.
 _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 # A number of ten or more digits before its point (1e9 and beyond: a 400-digit one reads as inf).
@@ -230,29 +220,23 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
 class Block:
     """One chunk of lines split into pieces, with the plain lines' numbers parsed."""
 
-    def __init__(self, lines: list[str], found: list[tuple[str, ...]]) -> None:
+    def __init__(self, lines: list[str], pieces: plainscan.Pieces) -> None:
         n = len(lines)
         self.lines = lines
-        # the text of each group, by group (a column per group, a row per line)
-        cols: list[Sequence[str]] = list(zip(*found, strict=True)) if n else [()] * 14
+        # the text of each piece, by piece (a column per piece, a row per line)
+        cols: list[Sequence[str]] = list(pieces.text)
         self.cols = cols
         self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
         self.ov: list[FloatArray] = []  # their values (0 where not named)
-        self.ovl: list[list[float]] = []
+        self.ovl: list[list[float]] = pieces.value
         self.frac: list[IntArray] = []  # digits after the point of X, Y, Z
         self.last: list[IntArray] = []  # the last line at or before each that names X, Y, Z
         for k in range(5):  # X, Y, Z, I, J
-            nums = cols[_NUM[k]]
-            arr = np.array(nums, dtype=str)
-            has = arr != ""
-            ov = np.zeros(n)
-            ov[has] = np.array([x for x in nums if x], dtype=float)
+            has = np.array(pieces.has[k], dtype=bool)
             self.has.append(has)
-            self.ov.append(ov)
-            self.ovl.append(ov.tolist())
+            self.ov.append(np.array(pieces.value[k], dtype=float))
             if k < 3:
-                dot = np.strings.find(arr, ".")
-                self.frac.append(np.where(dot >= 0, np.strings.str_len(arr) - dot - 1, 0))
+                self.frac.append(np.array(pieces.frac[k], dtype=int))
                 self.last.append(last_index(has))
         g = cols[_G]
         self.gword = g
@@ -263,7 +247,7 @@ class Block:
         # interpreter's: neither is plain
         self.arc = (digit == "2") | (digit == "3")
         self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
-        self.has_l: list[list[bool]] = [h.tolist() for h in self.has]
+        self.has_l: list[list[bool]] = pieces.has
         centre = self.has[3] | self.has[4]
         modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
@@ -317,12 +301,10 @@ def scan(lines: list[str]) -> Block | None:
         return None
     if _LONG_NUMBER.search(text):
         return None  # the interpreter refuses a value beyond interp.MAX_WORD_VALUE, at its place
-    found = _PLAIN.findall(text)
-    n = len(lines)
-    # one match per line, plus an empty one after a final line ending
-    if len(found) not in (n, n + 1):
+    cols = scanner.scan(text)
+    if len(cols) != len(lines):  # lines not split as the scanner splits them
         return None
-    return Block(lines, found[:n] if len(found) > n else found)
+    return Block(lines, plainscan.pieces(text, cols))
 
 
 @final
@@ -536,13 +518,13 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         nums = block.cols[_NUM[k]]
         if len(sel):
             col = np.array(nums, dtype=object)
-            col[idx[sel]] = _format(v[sel], dout[sel])
+            col[idx[sel]] = numfmt.fmt_all(v[sel].tolist(), dout[sel].tolist(), "")
             nums = col.tolist()
             named[idx[sel]] += 1
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
-        em.miss_text.append(_format(vm, dec[miss], "XYZ"[k]) if len(miss) else [])
+        em.miss_text.append(numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [])
         em.miss_v.append(vm.tolist())
         rows = idx[miss]
         em.miss.append(rows.tolist())
@@ -554,30 +536,6 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
     em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
     em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
     return em
-
-
-def _format(values: FloatArray, dout: IntArray, prefix: str = "") -> list[str]:
-    """``prefix + emit.fmt(v, d)`` for every value, in bulk (grouped by number of decimals)."""
-    if not np.isfinite(values).all():
-        raise ValueError("cannot write a non-finite value into a program")
-    out: list[str] = [""] * len(values)
-    groups = [int(dout[0])] if (dout == dout[0]).all() else np.unique(dout).tolist()
-    for d in groups:
-        sel = np.flatnonzero(dout == d) if len(groups) > 1 else None
-        v = values if sel is None else values[sel]
-        texts = ((f"{prefix}%.{d}f\n" * len(v)) % tuple(v.tolist())).split("\n")
-        texts.pop()
-        # "-0.000" is written "0.000" (emit.fmt)
-        cut = len(prefix)
-        for j in np.flatnonzero((v <= 0.0) & (v > -(10.0 ** -d))).tolist():
-            t = texts[j][cut:]
-            if t[0] == "-" and not t.strip("-0."):
-                texts[j] = prefix + t[1:]
-        if sel is None:
-            return texts
-        for i, t in zip(sel.tolist(), texts, strict=True):
-            out[i] = t
-    return out
 
 
 def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None) -> RunMove:

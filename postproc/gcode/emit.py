@@ -14,6 +14,7 @@ from itertools import chain, islice
 from typing import TYPE_CHECKING, TypeAlias
 
 from postproc import __version__
+from postproc.gcode.numfmt import fmt as fmt  # the one formatter (compiled), re-exported
 from postproc.gcode.state import DWELL, RAPID
 
 if TYPE_CHECKING:
@@ -30,16 +31,6 @@ HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 330)}
 
 HEADER_TAG = "(postproc "
 HEADER_MARK = " corrected "
-
-
-def fmt(value: float, decimals: int) -> str:
-    """Fixed-point text of ``value`` with ``decimals`` digits; ``-0.000`` becomes ``0.000``."""
-    text = "%.*f" % (decimals, value)  # noqa: UP031  (the fastest fixed-point formatting)
-    if text[0] == "-" and not text.strip("-0."):
-        return text[1:]
-    if not math.isfinite(value):
-        raise ValueError(f"cannot write {value} into a program")
-    return text
 
 
 def decimals_of(number_text: str) -> int:

@@ -6,22 +6,23 @@ any text that lexes. Only characters that cannot appear in G-code outside a comm
 :class:`GcodeSyntaxError` naming ``path:line:col``. Everything else becomes a token;
 the interpreter decides what it supports.
 
-Two scanners share the same grammar:
+The same grammar is read in two forms:
 
-- :func:`lex` (the reference): full token list with kinds and columns;
-- :func:`scan_words` (the fast path): one compiled regex over a line made only of
-  words and blanks, giving ``(letter, number_text, start, end)`` spans. It returns
-  ``None`` for any other line, which then goes through :func:`lex`. Tests check that
-  both agree on every line the fast path accepts.
+- :func:`lex` (the reference): full token list with kinds and columns, and the place
+  of anything that is not G-code;
+- :mod:`postproc.gcode.scanner` (compiled where a compiler is): a chunk of text into
+  columns, and :func:`scan_words`, the words of one line made only of words and blanks
+  (``None`` for any other line, which then goes through :func:`lex`). Tests check that
+  both agree token for token.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import NamedTuple
 
 from postproc.errors import GcodeSyntaxError
+from postproc.gcode import scanner
 
 # Token kinds
 WORD = "word"  # letter + number, e.g. "X 10.5"
@@ -149,39 +150,10 @@ def split_lines(text: str) -> list[str]:
     return _LINE_SPLIT.findall(text)
 
 
-class Word(NamedTuple):
-    """A word of a block. Built only for the lines the interpreter reads one by one (the
-    runs of plain lines are read as columns), so its cost of building (about 0.6 us
-    against 0.1 us for a plain tuple) stays below a hundredth of a correction."""
-
-    letter: str  # upper case
-    number: str  # the number's text as written
-    start: int  # span of the number text in the line
-    end: int
-    letter_pos: int  # index of the letter in the line
-
-# A line made only of words and blanks (the overwhelming majority of CAM output).
-_WORD_RUN = re.compile(rf"([ \t]*)([A-Za-z])([ \t]*)({NUMBER_RE})")
-_FAST_LINE = re.compile(rf"[ \t]*(?:[A-Za-z][ \t]*{NUMBER_RE}[ \t]*)*(?:\r\n|\n|\r)?")
-
-
-def scan_words(line: str) -> list[Word] | None:
-    """Fast path: ``[(LETTER, number_text, start, end, letter_pos), ...]`` or None.
-
-    ``start:end`` is the span of the number text in ``line`` and ``letter_pos`` the
-    index of its letter; None means the line has comments, symbols or anything else
-    and must go through :func:`lex`.
-    """
-    if _FAST_LINE.fullmatch(line) is None:
-        return None
-    out: list[Word] = []
-    pos = 0
-    for ws1, letter, ws2, num in _WORD_RUN.findall(line):
-        lpos = pos + len(ws1)
-        start = lpos + 1 + len(ws2)
-        pos = start + len(num)
-        out.append(Word(letter.upper(), num, start, pos, lpos))
-    return out
+# A word of a block (letter, number text, its span, the letter's index): the scanner's.
+Word = scanner.Word
+# The words of a line made only of words and blanks, or None (the compiled scanner).
+scan_words = scanner.scan_line
 
 
 def words_from_tokens(tokens: list[Token]) -> list[Word]:

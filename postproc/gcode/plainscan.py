@@ -1,0 +1,116 @@
+"""The plain moves of a scanned chunk, cut into the pieces the bulk writer rejoins.
+
+A plain move is a line of words (:attr:`postproc.gcode.scanner.Columns.plain`) in the
+order ``[N..] [G0|G1|G2|G3] [G43 H<digits>] [X..] [Y..] [Z..] [I..] [J..] [F..]`` (any
+case, G00 to G03 too). :func:`pieces` gives, per line, 14 texts that join back to the
+line without its ``\\n``: the head (blanks, N, G and G43 H words), the G number, for X,
+Y, Z, I and J the text from the piece before up to the number and the number, then the
+rest (F word, trailing blanks, ``\\r``) and the F number; and for X, Y, Z, I and J
+whether the line names it, its value (the scanner's) and its digits after the point.
+Every other line has 14 empty texts and names nothing. This reads the scanner's columns:
+no grammar of its own.
+
+Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+from postproc.gcode.scanner import Columns
+
+GROUPS: Final = 14
+_HEAD: Final = 0
+_G: Final = 1
+_REST: Final = 12
+_F: Final = 13
+_AXES: Final = "XYZIJ"
+_MOTIONS: Final = ("0", "1", "2", "3", "00", "01", "02", "03")
+
+
+def _leading_blanks(text: str, i: int, n: int) -> int:
+    while i < n and (text[i] == " " or text[i] == "\t"):
+        i += 1
+    return i
+
+
+class Pieces:
+    """The pieces of a chunk's lines, a list per piece or axis and an entry per line."""
+
+    text: list[list[str]]  # the 14 pieces
+    has: list[list[bool]]  # X, Y, Z, I, J: named on the line
+    value: list[list[float]]  # their values (0.0 where not named)
+    frac: list[list[int]]  # their digits after the point (0 where not named)
+
+    def __init__(self, n: int) -> None:
+        self.text = [[""] * n for _ in range(GROUPS)]
+        self.has = [[False] * n for _ in range(5)]
+        self.value = [[0.0] * n for _ in range(5)]
+        self.frac = [[0] * n for _ in range(5)]
+
+    def clear(self, i: int) -> None:
+        """Line ``i`` is not a plain move: every piece empty, no axis named."""
+        for k in range(GROUPS):
+            self.text[k][i] = ""
+        for k in range(5):
+            self.has[k][i] = False
+            self.value[k][i] = 0.0
+            self.frac[k][i] = 0
+
+
+def _frac(text: str, i: int, j: int) -> int:
+    """Digits after the point of the number ``text[i:j]``."""
+    k = text.find(".", i, j)
+    return j - k - 1 if k >= 0 else 0
+
+
+def pieces(text: str, cols: Columns) -> Pieces:
+    """The pieces of the chunk ``text`` scanned into ``cols``; see the module docstring."""
+    line_start, plain, first_word = cols.line_start, cols.plain, cols.first_word
+    letter, start, end, val = cols.letter, cols.start, cols.end, cols.value
+    res = Pieces(len(plain))
+    out = res.text
+    has, value, frac = res.has, res.value, res.frac
+    for li in range(len(plain)):
+        if not plain[li]:
+            continue
+        s = line_start[li]
+        e = line_start[li + 1]
+        w = first_word[li]
+        we = first_word[li + 1]
+        if e > s and text[e - 1] == "\n":
+            e -= 1
+        head = _leading_blanks(text, s, e)
+        if w < we and letter[w] == "N":
+            head = end[w]
+            w += 1
+        if w < we and letter[w] == "G":
+            g = text[start[w]:end[w]]
+            if g in _MOTIONS:
+                out[_G][li] = g
+                head = end[w]
+                w += 1
+        if (w + 1 < we and letter[w] == "G" and letter[w + 1] == "H" and text[start[w]:end[w]] == "43"
+                and text[start[w + 1]:end[w + 1]].isdigit()):
+            head = end[w + 1]
+            w += 2
+        out[_HEAD][li] = text[s:head]
+        prev = head
+        for k in range(5):
+            if w < we and letter[w] == _AXES[k]:
+                a = start[w]
+                b = end[w]
+                out[2 + 2 * k][li] = text[prev:a]
+                out[3 + 2 * k][li] = text[a:b]
+                has[k][li] = True
+                value[k][li] = val[w]
+                frac[k][li] = _frac(text, a, b)
+                prev = b
+                w += 1
+        if w < we and letter[w] == "F":
+            out[_F][li] = text[start[w]:end[w]]
+            w += 1
+        out[_REST][li] = text[prev:e]
+        if w != we:
+            res.clear(li)
+    return res

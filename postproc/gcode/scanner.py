@@ -1,0 +1,237 @@
+"""The chunk scanner: the lexer's grammar over a chunk of text, into typed columns.
+
+One pass over the text of any number of lines gives, per line, where it starts and
+whether it is *plain* (words and ``[ \\t]`` blanks only, which the interpreter and the
+writers read from the columns), and per word its line, upper-case letter, the index of
+the letter, the span of its number text and the number's value (``float`` of the text:
+correctly rounded). Comments, symbols and letters without a number make a line not
+plain; they are skipped here and read, where needed, by :func:`postproc.gcode.lexer.lex`,
+which also names the place of anything that is not G-code.
+
+The grammar is :mod:`postproc.gcode.lexer`'s (``_MASTER``): blanks ``[ \\t\\f\\v]``,
+comments ``(...)`` (open to the end of the line) and ``;...``, a word ``letter [ \\t]*
+number`` with number ``[+-]?(\\d+\\.?\\d*|\\.\\d+)``, line endings CRLF, LF or a lone CR.
+Tests check the two agree token for token.
+
+This module is the hot loop of reading, compiled at install by mypyc (``setup.py``); it
+runs unchanged, only slower, where it is not. It imports nothing of the package, so that
+it compiles on its own.
+"""
+
+from __future__ import annotations
+
+from typing import Final, NamedTuple
+
+# i64: a native 64-bit integer where mypyc compiles the module, a plain int where it does not
+from mypy_extensions import i64
+
+# digits whose integer value is exact in a double (fast path of the number's value)
+_EXACT_DIGITS: Final = 15
+# powers of ten exact in a double: m / 10**d is then correctly rounded, as float(text) is
+_POW10: Final = [10.0**k for k in range(23)]
+
+
+class Word(NamedTuple):
+    """A word of a line: its upper-case letter, the number's text as written, the span
+    ``start:end`` of that text in the line and the index of the letter."""
+
+    letter: str
+    number: str
+    start: int
+    end: int
+    letter_pos: int
+
+
+class Columns:
+    """The columns of a scanned chunk (offsets are into the chunk's text)."""
+
+    line_start: list[int]  # where each line starts; one more entry: the end of the text
+    plain: list[bool]  # by line: words and [ \t] blanks only
+    word_line: list[int]  # by word: its line (0-based, within the chunk)
+    letter: list[str]  # upper case
+    letter_pos: list[int]
+    start: list[int]  # the span of the number text
+    end: list[int]
+    value: list[float]
+    first_word: list[int]  # by line: its first word's index; one more entry: the word count
+
+    def __init__(self) -> None:
+        self.line_start = []
+        self.plain = []
+        self.word_line = []
+        self.letter = []
+        self.letter_pos = []
+        self.start = []
+        self.end = []
+        self.value = []
+        self.first_word = []
+
+    def __len__(self) -> int:
+        return len(self.plain)
+
+
+def number_end(text: bytes, i: i64, n: i64) -> i64:
+    """The end of the number ``[+-]?(\\d+\\.?\\d*|\\.\\d+)`` starting at ``i``; -1 if none."""
+    c: i64
+    if i < n:
+        c = text[i]
+        if c == 43 or c == 45:  # + -
+            i += 1
+    if i >= n:
+        return -1
+    c = text[i]
+    if 48 <= c <= 57:
+        i += 1
+        while i < n and 48 <= text[i] <= 57:
+            i += 1
+        if i < n and text[i] == 46:  # .
+            i += 1
+            while i < n and 48 <= text[i] <= 57:
+                i += 1
+        return i
+    if c == 46 and i + 1 < n and 48 <= text[i + 1] <= 57:
+        i += 2
+        while i < n and 48 <= text[i] <= 57:
+            i += 1
+        return i
+    return -1
+
+
+def number_value(text: bytes, i: i64, j: i64) -> float:
+    """``float(text[i:j])`` of a number the scanner found, without making the string
+    where its digits fit a double exactly (then one division by an exact power of ten
+    is correctly rounded, as ``float`` is)."""
+    neg = False
+    c = text[i]
+    k = i
+    if c == 43 or c == 45:
+        neg = c == 45
+        k += 1
+    m: i64 = 0
+    digits: i64 = 0
+    frac: i64 = -1
+    while k < j:
+        c = text[k]
+        if c == 46:
+            frac = 0
+        else:
+            if digits or c != 48:
+                digits += 1
+            m = m * 10 + (c - 48)
+            if frac >= 0:
+                frac += 1
+        k += 1
+    if digits > _EXACT_DIGITS or frac > 22:
+        return float(text[i:j])
+    v = float(m) / _POW10[frac] if frac > 0 else float(m)
+    return -v if neg else v
+
+
+def scan_into(text: bytes, cols: Columns) -> None:
+    """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
+    n: i64 = len(text)
+    i: i64 = 0
+    line: i64 = 0
+    line_start = cols.line_start
+    plain_col = cols.plain
+    word_line = cols.word_line
+    letter_col = cols.letter
+    lpos_col = cols.letter_pos
+    start_col = cols.start
+    end_col = cols.end
+    value_col = cols.value
+    first_word = cols.first_word
+    line_start.append(0)
+    first_word.append(len(word_line))
+    plain = True
+    c: i64
+    j: i64
+    e: i64
+    while i < n:
+        c = text[i]
+        if c == 32 or c == 9:  # blank
+            i += 1
+        elif c == 10 or c == 13:  # line ending (CRLF, LF, CR)
+            i += 1
+            if c == 13 and i < n and text[i] == 10:
+                i += 1
+            plain_col.append(plain)
+            plain = True
+            line += 1
+            if i < n:
+                line_start.append(i)
+                first_word.append(len(word_line))
+        elif (65 <= c <= 90) or (97 <= c <= 122):  # a letter: a word, or a letter alone
+            j = i + 1
+            while j < n and (text[j] == 32 or text[j] == 9):
+                j += 1
+            e = number_end(text, j, n)
+            if e < 0:
+                plain = False
+                i += 1
+            else:
+                word_line.append(line)
+                letter_col.append(chr(c - 32) if c >= 97 else chr(c))
+                lpos_col.append(i)
+                start_col.append(j)
+                end_col.append(e)
+                value_col.append(number_value(text, j, e))
+                i = e
+        elif c == 40:  # ( comment ), or open to the end of the line
+            plain = False
+            i += 1
+            while i < n:
+                c = text[i]
+                if c == 41:
+                    i += 1
+                    break
+                if c == 10 or c == 13:
+                    break
+                i += 1
+        elif c == 59:  # ; comment to the end of the line
+            plain = False
+            while i < n and text[i] != 10 and text[i] != 13:
+                i += 1
+        else:  # a number alone, a symbol, other blanks, or not G-code (lex names it)
+            plain = False
+            e = number_end(text, i, n)
+            i = e if e > i else i + 1
+    if n == 0:  # no text, no line
+        line_start.pop()
+        first_word.pop()
+    elif text[n - 1] != 10 and text[n - 1] != 13:
+        plain_col.append(plain)  # a last line without its ending
+    line_start.append(n)
+    first_word.append(len(word_line))
+
+
+def chars(text: str) -> bytes:
+    """``text`` one byte per character, for the scanner: characters beyond latin-1 (legal
+    only inside comments, where the scanner does not look) become ``?``, so that offsets
+    stay those of the text."""
+    return text.encode("latin-1", "replace")
+
+
+def scan(text: str) -> Columns:
+    """The columns of ``text``."""
+    cols = Columns()
+    scan_into(chars(text), cols)
+    return cols
+
+
+def scan_line(line: str) -> list[Word] | None:
+    """The words of one line, or None when it is not plain (comments, symbols, a letter
+    without a number, anything else: :func:`postproc.gcode.lexer.lex` reads it)."""
+    cols = Columns()
+    scan_into(chars(line), cols)
+    if len(cols.plain) != 1:
+        return [] if not line else None
+    if not cols.plain[0]:
+        return None
+    out: list[Word] = []
+    letter, start, end, lpos = cols.letter, cols.start, cols.end, cols.letter_pos
+    for k in range(len(letter)):
+        s = start[k]
+        e = end[k]
+        out.append(Word(letter[k], line[s:e], s, e, lpos[k]))
+    return out

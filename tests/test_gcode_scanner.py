@@ -1,0 +1,88 @@
+"""The chunk scanner reads the lexer's grammar: the same lines, words, spans and values;
+plainscan's pieces join back to their line; numfmt's batch equals its one-value form."""
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from postproc.errors import GcodeSyntaxError
+from postproc.gcode import lexer, numfmt, plainscan, scanner
+
+ALPHABET = "GXYZIJKRFNMHgxyzn0123456789.+- \t\f()%;/#[]=\r\n\u00e9\u20ac"
+
+
+def _check_chunk(text: str) -> None:
+    cols = scanner.scan(text)
+    lines = lexer.split_lines(text)
+    assert len(cols) == len(lines)
+    assert cols.line_start == [sum(map(len, lines[:i])) for i in range(len(lines) + 1)]
+    for li, line in enumerate(lines):
+        s = cols.line_start[li]
+        got = [(cols.letter[k], text[cols.start[k]:cols.end[k]], cols.start[k] - s, cols.letter_pos[k] - s)
+               for k in range(cols.first_word[li], cols.first_word[li + 1])]
+        for k in range(cols.first_word[li], cols.first_word[li + 1]):
+            assert cols.word_line[k] == li
+            num = text[cols.start[k]:cols.end[k]]
+            assert math.copysign(1, cols.value[k]) == math.copysign(1, float(num))
+            assert cols.value[k] == float(num)
+        try:
+            tokens = lexer.lex(line)
+        except GcodeSyntaxError:
+            assert not cols.plain[li]
+            continue
+        ref = [(t.letter, t.number_text, t.col - 1 + t.number_offset, t.col - 1)
+               for t in tokens if t.kind == lexer.WORD]
+        assert got == ref
+        plain = all(t.kind == lexer.WORD or t.kind == lexer.NEWLINE or (t.kind == lexer.SPACE and not t.text.strip(" \t"))
+                    for t in tokens)
+        assert cols.plain[li] == plain
+        assert (lexer.scan_words(line) is not None) == plain
+
+
+@given(st.text(alphabet=ALPHABET, max_size=200))
+@settings(max_examples=300, deadline=None)
+def test_scanner_agrees_with_lexer(text):
+    _check_chunk(text)
+
+
+def test_scanner_on_samples_and_numbers():
+    _check_chunk("N10 G1 X1.5 Y-.25 Z+3. (c) F100\r\nG2X1Y2I-0J0.000000000000000000001\nX12345678901234567.5")
+    cols = scanner.scan("X-0\nY0.1\n")
+    assert math.copysign(1, cols.value[0]) == -1
+    assert cols.value[1] == 0.1
+
+
+@given(st.lists(st.sampled_from(["N10", "G0", "G01", "G2", "G43", "H2", "X1.5", "x-2", "Y.5", "Z3.", "I1", "J-2",
+                                 "F100", "K1", " ", "\t", "(c)", "S1"]), max_size=10),
+       st.sampled_from(["", "\n", "\r\n"]))
+@settings(max_examples=300, deadline=None)
+def test_pieces_join_back_to_the_line(words, ending):
+    line = "".join(words) + ending
+    cols = scanner.scan(line)
+    p = plainscan.pieces(line, cols)
+    texts = [col[0] for col in p.text] if len(cols) else []
+    if texts and any(texts[:13]):
+        body = line[:-1] if line.endswith("\n") else line
+        order = [0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
+        assert "".join(texts[k] for k in order) == body
+        for k in range(5):
+            assert p.has[k][0] == bool(texts[3 + 2 * k])
+            if p.has[k][0]:
+                assert p.value[k][0] == float(texts[3 + 2 * k])
+                assert p.frac[k][0] == lexer_decimals(texts[3 + 2 * k])
+
+
+def lexer_decimals(number: str) -> int:
+    _, dot, frac = number.partition(".")
+    return len(frac) if dot else 0
+
+
+@given(st.lists(st.floats(min_value=-1e6, max_value=1e6), max_size=30), st.integers(0, 8), st.booleans())
+@settings(max_examples=300, deadline=None)
+def test_fmt_all_is_fmt(values, d, mixed):
+    decimals = [(d + i % 3) if mixed else d for i in range(len(values))]
+    values += [-0.0, -1e-12, -(10.0 ** -d) / 2]
+    decimals += [d, d, d]
+    assert numfmt.fmt_all(values, decimals, "X") == ["X" + numfmt.fmt(v, k) for v, k in zip(values, decimals, strict=True)]
+    assert all(not t.startswith("X-") or t.strip("X-0.") for t in numfmt.fmt_all(values, decimals, "X"))
