@@ -68,3 +68,20 @@ def test_help_never_shows_a_none_bound(path, param):
     if record is not None:
         assert "None" not in record[1].replace("\n", " "), record
 
+
+
+@pytest.mark.parametrize("option", ["--start", "--offset"])
+def test_an_axis_value_beyond_any_machine_is_refused_at_its_option(tmp_path, option):
+    """A 400-digit position reads as inf: refused at the option, not an internal error."""
+    from pathlib import Path
+
+    cal = Path(__file__).parents[1] / "calibrations" / "s500_static.json"
+    src = tmp_path / "p.nc"
+    src.write_text("G21 G90\nG0 X1 Y1 Z1\nM2\n")
+    huge = "9" * 400
+    value = f"X{huge}" if option == "--start" else f"G54=X{huge},Y0,Z0"
+    res = CliRunner().invoke(main, ["correct", str(src), "-c", str(cal), option, value,
+                                    "-o", str(tmp_path / "o.nc")])
+    assert res.exit_code == 2, res.output
+    assert "no machine reaches that far" in res.output
+    assert not (tmp_path / "o.nc").exists()

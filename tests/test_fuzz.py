@@ -422,11 +422,9 @@ def test_fuzz_numeric_options(tmp_path_factory, option, value):
     check(run(*args, flag, value))
 
 
-# -- known internal errors, left to the expression and limits work (issue 32, items 3 and 5) --
+# -- internal errors found before the expression and limits bounds (issue 32, items 3 and 5) --
 
 
-@pytest.mark.xfail(reason="expression depth and length are not bounded yet (issue 32 item 3): RecursionError",
-                   strict=False)
 @pytest.mark.parametrize("line", ["G0 X[" + "[" * 3000 + "1" + "]" * 3000 + "] Y10 Z10",
                                   "#1=[" + "+".join(["1"] * 20000) + "]"], ids=["3000-deep", "20000-terms"])
 def test_deep_or_long_expressions_are_refused(tmp_path, line):
@@ -435,8 +433,6 @@ def test_deep_or_long_expressions_are_refused(tmp_path, line):
     check(run("correct", src, "-c", STATIC, "--offset", "G54=X100,Y100,Z100", "-o", tmp_path / "o.nc"), src)
 
 
-@pytest.mark.xfail(reason="a 400-digit coordinate on a plain line read in bulk, with --extrapolate clamp: "
-                          "RuntimeWarning, then 'cannot write inf into a program'", strict=False)
 def test_a_huge_coordinate_with_clamp_is_refused(tmp_path):
     src = tmp_path / "huge.nc"
     src.write_text("G21 G90\nG0 X10 Y10 Z10\nG1 X" + "9" * 400 + " F100\nG1 X20\nM2\n")

@@ -65,6 +65,10 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
 _OFFSET_NAME = re.compile(r"^(G5[4-9](?:\.[1-3])?|G54\.1P\d+|G5\d\d|E\d+|G15H\d+)$", re.IGNORECASE)
 
 
+#: Largest position or offset an axis option takes (mm): a kilometre, far beyond any machine.
+MAX_POSITION_MM = 1e6
+
+
 def axis_values(text: str, rest: str, letters: str, *, param_hint: str | None = None,
                  once: bool = False) -> dict[str, float]:
     """``"X100,Y50,Z-300"`` (``rest``; ending in ``in`` for inches) -> mm by upper-case axis
@@ -83,7 +87,12 @@ def axis_values(text: str, rest: str, letters: str, *, param_hint: str | None = 
         axis = m.group(1).upper()
         if once and axis in values:
             raise click.BadParameter(f"{text!r}: {axis} is given twice", param_hint=param_hint)
-        values[axis] = float(m.group(2)) * scale
+        value = float(m.group(2)) * scale
+        if not abs(value) <= MAX_POSITION_MM:  # (a 400-digit number reads as inf)
+            raise click.BadParameter(f"{text!r}: {axis} {m.group(2)[:12]}{'...' if len(m.group(2)) > 12 else ''} "
+                                     f"is beyond {MAX_POSITION_MM:g} mm: no machine reaches that far",
+                                     param_hint=param_hint)
+        values[axis] = value
     return values
 
 
