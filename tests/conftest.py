@@ -210,7 +210,13 @@ def first_known_line(text: str, setup: Setup) -> int:
 def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:
     """Largest distance between the actual path of ``corrected`` and the nominal path
     of ``original``, both ways (feed moves and rapid end points, from the first point
-    where the machine position is known)."""
+    where the machine position is known). Sampled as finely as asked, beyond the bound
+    ``verify`` puts on its own sampling (a measurement of the tests, not a user's run)."""
+    from postproc.gcode.path import sample_program
+
+    def program_path(source, setup, max_step_mm):
+        return sample_program(source, setup, step_mm=max_step_mm, max_samples=10**8)
+
     nom = program_path(original, setup, max_step_mm=step)
     nominal = nom.points_mm[nom.lineno >= first_known_line(original, setup)]
     pp = program_path(corrected, setup, max_step_mm=step)

@@ -197,7 +197,7 @@ def test_the_bound_is_refused_above_the_tolerance_naming_it(name, s500):
     with pytest.raises(CutterBoundError) as info:
         _correct(text, engine, radii, tol=0.001)
     msg = str(info.value)
-    assert "--tolerance 0.001 mm" in msg
+    assert "more than the tolerance 0.001 mm" in msg
     assert " um across the tool radius" in msg
 
 
@@ -307,7 +307,7 @@ def test_the_command_reads_diameters_from_the_tool_table_and_reports_the_bound(t
     assert "(POSTPROC CUTTER COMP TOOL 1 RADIUS 3 MM BOUND" in out.read_text()
     res = CliRunner().invoke(main, ["correct", str(prog), "-c", cal, "--tool-table", str(table), "-o", str(out)])
     assert res.exit_code == 5
-    assert "more than --tolerance 0.001 mm" in res.output
+    assert "more than the tolerance 0.001 mm" in res.output
 
 
 def test_fanuc_reads_d_as_a_modal_offset_register():

@@ -46,8 +46,8 @@ def ends(moves):
     return [tuple(round(v, 9) for v in mv.q1) for mv in moves]
 
 
-def correct(text, setup=SETUP, engine=None):
-    return correct_text(text, engine or IdentityEngine(BIG), setup, CorrectOptions(dialect="sinumerik"),
+def correct(text, setup=SETUP, engine=None, cycles="auto"):
+    return correct_text(text, engine or IdentityEngine(BIG), setup, CorrectOptions(dialect="sinumerik", cycles=cycles),
                         path="p.mpf")
 
 
@@ -152,7 +152,7 @@ def test_ac_ic_against_the_mode():
 ])
 def test_sample_programs_refused_by_name(name, lineno, construct):
     with pytest.raises(UnsupportedGcodeError) as err:
-        correct((DATA / name).read_text())
+        correct((DATA / name).read_text(), cycles="keep")
     assert err.value.lineno == lineno
     assert construct in str(err.value)
     assert err.value.hint
@@ -386,9 +386,14 @@ def test_drilling_cycle_refusals(line, construct):
 
 
 def test_cycles_need_expand():
+    """A CYCLE81 call cannot carry each hole's correction: with --cycles keep it is refused,
+    by default (auto) and with expand it is written as its moves."""
     with pytest.raises(UnsupportedGcodeError, match=r"Sinumerik CYCLE81 \(drilling cycle call\)") as err:
-        correct("G54 D1\nG0 X0 Y0 Z20\nCYCLE81(10,0,2,-15)\nM30\n")
+        correct("G54 D1\nG0 X0 Y0 Z20\nCYCLE81(10,0,2,-15)\nM30\n", cycles="keep")
     assert "--cycles expand" in err.value.hint
+    out, report = correct("G54 D1\nG0 X0 Y0 Z20\nCYCLE81(10,0,2,-15)\nM30\n")
+    assert ";CYCLE81(10,0,2,-15)" in out
+    assert report.cycles_expanded == 1
 
 
 # -- rotation, scale and mirror (Fundamentals, "Coordinate transformations (frames)") ------

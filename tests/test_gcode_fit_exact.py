@@ -179,7 +179,7 @@ def test_a_changed_word_moves_the_tracked_position_to_the_value_written():
     v = 1.1683000257725
     assert round(np.float64(v), 12) != float(f"{v:.12f}")
     for incremental in (False, True):
-        mv = SimpleNamespace(unit=1.0, shift=(0.0, 0.0, 0.0), incremental=incremental, axis_idx=(0, -1, -1),
+        mv = SimpleNamespace(unit=1.0, shift=(0.0, 0.0, 0.0), incremental=incremental, axis_idx=(0, -1, -1), frame=None,
                              words=[("X", "0.000000000001", 1, 15, 0)])
         qe = [0.0, 5.0, 7.0]
         target = np.array([v, 5.0, 7.0])  # numpy floats, as a fitted piece's sample is

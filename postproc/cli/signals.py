@@ -96,6 +96,10 @@ def worker_init() -> None:
 def _worker_handler(signum, frame) -> None:
     if not _busy:
         os._exit(128 + signum)
+    # the first signal stops the file; a second (the parent ending its workers) must not
+    # interrupt the cleanup that removes the temporary output on the way out
+    for s in SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
     raise SignalExit(signum)
 
 
