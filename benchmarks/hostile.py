@@ -308,7 +308,7 @@ add("loop-fanuc-end-without-do", correct_prog("%\nO1000\nG21 G90\nG0 X10 Y10 Z10
     must_refuse=True)
 add("loop-fanuc-do-99", correct_prog("%\nO1000\nG21 G90\nG0 X10 Y10 Z10\nWHILE [#1 LT 3] DO99\n#1=#1+1\nEND99\nM30\n%\n",
                                      "--dialect", "fanuc"), must_refuse=True)
-FANUC_SUB = "O2000\nG91 G1 X1 F100\nG90\nM99\n"
+FANUC_SUB = "O2000\nG1 X20 F100\nG1 X10\nM99\n"
 add("loop-m98-l99999999", correct_prog(f"%\nO1000\nG21 G90\nG0 X10 Y10 Z10\nM98 P2000 L99999999\nM30\n{FANUC_SUB}%\n",
                                        "--dialect", "fanuc"), must_refuse=True, timeout=HANG_TIMEOUT_S)
 add("loop-m98-nested-repeats", correct_prog(
@@ -450,7 +450,7 @@ def long_line_prog(dialect):
 
 for dia in LIMITS:
     add(f"longline-{dia}", correct_prog(long_line_prog(dia), "--dialect", dia), check=long_line_check(dia))
-add("longline-grbl-71-chars-no-spaces", correct_prog("G21 G90\nG0 X10 Y10 Z10\nN12345G1G17G21G90G94X100.1Y100.1Z20.1F500.000000000000S12000.00000000M3M8T1\nM2\n",
+add("longline-grbl-75-chars-no-spaces", correct_prog("G21 G90\nG0 X10 Y10 Z10\nN12345G1G17G21G90G94X100.1Y100.1Z20.1F500.000000000000S12000.00000000M3M8T1\nM2\n",
                                            "--dialect", "grbl"), check=long_line_check("grbl"))
 add("longline-linuxcnc-input-over-limit", correct_prog("G21 G90\nG0 X10 Y10 Z10 (" + "c" * 300 + ")\nM2\n", "--dialect", "linuxcnc"),
     must_refuse=True)
@@ -834,12 +834,9 @@ add("cal-path-measurement-csv", cal_special(lambda c: c.sample("s500_static_6poi
 
 def fitted_cal(method, mutate, fit_args=()):
     def setup(c: Ctx):
-        c.sample("s500_static_6points.csv")
-        src = "s500_static_6points.csv"
-        if method != "static":
-            c.sample("walkthrough_points.csv")
-            src = "walkthrough_points.csv"
-        c.cli("fit", src, "--method", method, "-o", "good.json", *fit_args)
+        # a lattice of tracker points from the virtual machine, fitted with the method
+        c.cli("simulate", c.machine(), "--grid", "105", "--no-noise", "-o", "lattice.csv")
+        c.cli("fit", "lattice.csv", "--method", method, "-o", "good.json", *fit_args)
         p = c.work / "good.json"
         if p.exists():
             d = json.loads(p.read_text())
@@ -1081,6 +1078,9 @@ def run_case(cs: Case, root: Path) -> dict:
             argv = cs.setup(ctx)
         except Exception as exc:  # noqa: BLE001 - a setup that cannot run is reported, not fatal
             res.update(outcome="setup-failed", stderr=f"{type(exc).__name__}: {exc}")
+            return res
+        if ctx.pre_failed:
+            res.update(outcome="setup-failed", stderr=ctx.pre_failed[0][:160])
             return res
         tmp_before = _snapshot(tmp)
         work_before = _snapshot(work)
