@@ -15,7 +15,8 @@ temporary folder, ``TMPDIR`` another fresh one, a timeout (60 s; 30 s for cases 
 expected to run unbounded) and an address-space limit of 3 GB. Outcomes:
 
   ok              exit 0 and sane output (the case's check passed)
-  refused         documented non-zero exit (2-6) with path:line:col or a clear message
+  refused         documented non-zero exit (the checkout's EXIT_* codes in errors.py other
+                  than 0 and 1; 2-6 on 5b3c58d) with path:line:col or a clear message
   refused-no-col  refusal naming a program line (path:line:) without a column
   internal        traceback, "internal error", or exit 1
   warning-leak    RuntimeWarning or other warning text on stderr
@@ -1146,6 +1147,17 @@ def run_case(cs: Case, root: Path) -> dict:
         shutil.rmtree(base, ignore_errors=True)
 
 
+def refusal_codes(root: Path) -> set:
+    """The documented refusal exit codes of the checkout: its EXIT_* constants in
+    postproc/errors.py other than 0 (done) and 1 (internal error); 2-6 when none are found."""
+    try:
+        text = (root / "postproc" / "errors.py").read_text()
+    except OSError:
+        text = ""
+    codes = {int(v) for v in re.findall(r"^EXIT_\w+\s*=\s*(\d+)", text, re.M)} - {0, 1}
+    return codes or {2, 3, 4, 5, 6}
+
+
 def classify(cs, ctx, rc, err, timed_out, sent, new_tmp, new_work):
     if timed_out:
         return "hang", f"no exit within {cs.timeout} s"
@@ -1182,7 +1194,7 @@ def classify(cs, ctx, rc, err, timed_out, sent, new_tmp, new_work):
             if why:
                 return "silent-wrong", why
         return "ok", ""
-    if rc in (2, 3, 4, 5, 6):
+    if rc in refusal_codes(ctx.root):
         if rc != 2 and [p for p in new_work if p in ("out.nc", "fitted.json", "sim.csv", "table.txt", "t.spf")]:
             return "leftover", f"refused (exit {rc}) but wrote {new_work[:3]}"
         first = next((ln for ln in err.splitlines() if ln.strip()), "")
