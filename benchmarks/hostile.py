@@ -56,7 +56,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 TIMEOUT_S = 60
 HANG_TIMEOUT_S = 30
@@ -909,7 +909,7 @@ MEAS_HEAD = "# postproc measurements v1\n# units: length=mm\nX,Y,Z,mx,my,mz\n"
 def meas_rows(n=30, bad=None):
     rows = []
     r = random.Random(5)
-    for i in range(n):
+    for _ in range(n):
         x, y, z = (r.uniform(0, 300) for _ in range(3))
         rows.append(f"{x:.3f},{y:.3f},{z:.3f},{x + 0.01:.4f},{y - 0.02:.4f},{z + 0.005:.4f}")
     if bad is not None:
@@ -1158,7 +1158,7 @@ def refusal_codes(root: Path) -> set:
     return codes or {2, 3, 4, 5, 6}
 
 
-def classify(cs, ctx, rc, err, timed_out, sent, new_tmp, new_work):
+def classify(cs, ctx, rc, err, timed_out, sent, new_tmp, new_work):  # noqa: C901 - one rule per outcome
     if timed_out:
         return "hang", f"no exit within {cs.timeout} s"
     if "MemoryError" in err or rc in (-signal.SIGKILL, -signal.SIGSEGV, -signal.SIGABRT, 137, 139):
