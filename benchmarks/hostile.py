@@ -54,9 +54,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Callable
 
 TIMEOUT_S = 60
 HANG_TIMEOUT_S = 30
