@@ -385,3 +385,31 @@ def test_lines_held_for_an_axis_never_positioned_are_bounded(monkeypatch):
     assert "axis Y is still not positioned" in err.value.message
     assert err.value.lineno in (6, 7)  # a line of the subprogram, not of the expanded program
     assert "--start Y" in err.value.hint
+
+
+@pytest.mark.parametrize("line", ["G0 X10." + "3" * 400 + " Y10 Z10", "G1 X10." + "3" * 400 + " F100"])
+def test_a_word_of_hundreds_of_decimals_is_refused_at_its_column(tmp_path, line):
+    """The writer keeps a word's decimals: 400 of them was an internal error (read on its
+    own line by the interpreter, or in a plain run)."""
+    src = tmp_path / "d.nc"
+    src.write_text(f"G21 G90\nG0 X10 Y10 Z10\n{line}\nG1 X20\nG1 X30\nM2\n")
+    res = _run(["correct", src, "-c", ROOT / "calibrations" / "s500_static.json", "-o", tmp_path / "o.nc"])
+    assert res.exit_code == 3, res.output
+    assert f"{src}:3:4: X word with 400 digits after the point" in res.output
+    assert not (tmp_path / "o.nc").exists()
+
+
+@pytest.mark.parametrize("volume", ["nan,0,0,10,10,10", "0,0,0,inf,10,10", "10,0,0,0,10,10", "0,0,0,1e9,10,10"])
+def test_simulate_volume_must_be_finite_ordered_and_bounded(tmp_path, volume):
+    res = _run(["simulate", ROOT / "calibrations" / "s500.machine.json", "--random", "10", "--volume", volume,
+                "-o", tmp_path / "s.csv"])
+    assert res.exit_code == 2, res.output
+    assert "--volume" in res.output
+
+
+@pytest.mark.parametrize("spec", ["X=1000000", "X=1000;Y=1000;Z=1000"])
+def test_interval_counts_are_bounded(tmp_path, spec):
+    res = _run(["fit", ROOT / "samples" / "s500_static_6points.csv", "--method", "interval", "--intervals", spec,
+                "-o", tmp_path / "i.json"])
+    assert res.exit_code != 0 and "Traceback" not in res.output, res.output
+    assert "--intervals" in res.output

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from postproc.cli.options import FiniteFloat, context_option, parse_vector
+from postproc.constants import MAX_VOLUME_MM
 
 
 def _parse_volume(text: str) -> list[list[float]]:
@@ -13,16 +16,23 @@ def _parse_volume(text: str) -> list[list[float]]:
         v = [float(p) for p in parts]
     except ValueError:
         v = []
-    if len(v) != 6:
-        raise click.BadParameter(f"--volume must be six numbers xmin,ymin,zmin,xmax,ymax,zmax, got {text!r}")
+    if len(v) != 6 or not all(math.isfinite(x) for x in v):
+        raise click.BadParameter(f"--volume must be six finite numbers xmin,ymin,zmin,xmax,ymax,zmax, got {text!r}")
+    if not all(lo < hi for lo, hi in zip(v[:3], v[3:], strict=True)):
+        raise click.BadParameter(f"--volume must have each min below its max, got {text!r}")
+    if max(abs(x) for x in v) > MAX_VOLUME_MM:
+        raise click.BadParameter(f"--volume reaches beyond {MAX_VOLUME_MM / 1000:g} m, got {text!r}")
     return [v[:3], v[3:]]
 
 
 def _parse_floats(text: str, what: str) -> list[float]:
     try:
-        return [float(p) for p in text.split(",") if p.strip()]
+        values = [float(p) for p in text.split(",") if p.strip()]
     except ValueError:
         raise click.BadParameter(f"{what} must be comma-separated numbers, got {text!r}") from None
+    if not all(math.isfinite(x) for x in values):
+        raise click.BadParameter(f"{what} must be finite numbers, got {text!r}")
+    return values
 
 
 @click.command()

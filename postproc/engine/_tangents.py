@@ -69,6 +69,14 @@ def _axis_index(name: str, text: str, what: str) -> int:
     return AXES.index(key)
 
 
+# Most intervals on one axis: each holds a 3x3 matrix fitted from the points inside it, so
+# more intervals than points measured on an axis fit nothing (a laser tracker campaign
+# has tens to hundreds of points per axis); a million would ask for terabytes.
+MAX_INTERVALS = 1000
+# ... and in all (a 3x3 matrix each: 72 MB at this bound)
+MAX_INTERVAL_CELLS = 1_000_000
+
+
 def parse_intervals(spec: str | None) -> list[list[float] | int | None]:
     """``"X=0,100,200,315;Y=3;Z=2"`` -> ``[[0, 100, 200, 315], 3, 2]``.
 
@@ -94,10 +102,10 @@ def parse_intervals(spec: str | None) -> list[list[float] | int | None]:
             raise PostprocError(f"--intervals {spec!r}: {rest!r} is not a list of numbers", hint=hint) from None
         if len(values) == 1:
             n = values[0]
-            if n != int(n) or n < 1:
+            if not math.isfinite(n) or n != int(n) or n < 1 or n > MAX_INTERVALS:
                 raise PostprocError(
                     f"--intervals {spec!r}: a single value for {AXES[j]} is a count of intervals "
-                    f"and must be a whole number >= 1, got {parts[0]}",
+                    f"and must be a whole number from 1 to {MAX_INTERVALS}, got {parts[0]}",
                     hint=hint,
                 )
             out[j] = int(n)
@@ -106,9 +114,15 @@ def parse_intervals(spec: str | None) -> list[list[float] | int | None]:
                 raise PostprocError(
                     f"--intervals {spec!r}: edges of {AXES[j]} must increase strictly", hint=hint
                 )
+            if len(values) > MAX_INTERVALS + 1:
+                raise PostprocError(f"--intervals {spec!r}: more than {MAX_INTERVALS} intervals on {AXES[j]}",
+                                    hint=hint)
             out[j] = values
         else:
             raise PostprocError(f"--intervals {spec!r}: axis {AXES[j]} has no value", hint=hint)
+    cells = math.prod(v if isinstance(v, int) else len(v) - 1 for v in out if v is not None)
+    if cells > MAX_INTERVAL_CELLS:
+        raise PostprocError(f"--intervals {spec!r}: {cells:,} cells, more than {MAX_INTERVAL_CELLS:,}", hint=hint)
     return out
 
 

@@ -64,7 +64,7 @@ from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 # A number of ten or more digits before its point (1e9 and beyond: a 400-digit one reads as inf).
-_LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}")
+_LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}|\.\d{18,}")  # beyond interp.MAX_WORD_VALUE or its decimals
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
 # A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
