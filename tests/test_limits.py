@@ -388,15 +388,21 @@ def test_lines_held_for_an_axis_never_positioned_are_bounded(monkeypatch):
 
 
 @pytest.mark.parametrize("line", ["G0 X10." + "3" * 400 + " Y10 Z10", "G1 X10." + "3" * 400 + " F100"])
-def test_a_word_of_hundreds_of_decimals_is_refused_at_its_column(tmp_path, line):
+def test_a_word_of_hundreds_of_decimals_is_kept_or_refused_for_its_line(tmp_path, line):
     """The writer keeps a word's decimals: 400 of them was an internal error (read on its
-    own line by the interpreter, or in a plain run)."""
+    own line by the interpreter, or in a plain run). Written where the dialect reads such
+    a line, refused for the line's length where it does not."""
     src = tmp_path / "d.nc"
     src.write_text(f"G21 G90\nG0 X10 Y10 Z10\n{line}\nG1 X20\nG1 X30\nM2\n")
-    res = _run(["correct", src, "-c", ROOT / "calibrations" / "s500_static.json", "-o", tmp_path / "o.nc"])
-    assert res.exit_code == 3, res.output
-    assert f"{src}:3:4: X word with 400 digits after the point" in res.output
+    cal = ROOT / "calibrations" / "s500_static.json"
+    res = _run(["correct", src, "-c", cal, "-o", tmp_path / "o.nc"])
+    assert res.exit_code == EXIT_SAFETY, res.output
+    assert f"{src}:3:" in res.output
+    assert "characters" in res.output
     assert not (tmp_path / "o.nc").exists()
+    res = _run(["correct", src, "-c", cal, "--dialect", "sinumerik", "-o", tmp_path / "o.nc"])
+    assert res.exit_code == 0, res.output
+    assert len((tmp_path / "o.nc").read_text().splitlines()[7]) > 400
 
 
 @pytest.mark.parametrize("volume", ["nan,0,0,10,10,10", "0,0,0,inf,10,10", "10,0,0,0,10,10", "0,0,0,1e9,10,10"])

@@ -64,7 +64,7 @@ from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 # A number of ten or more digits before its point (1e9 and beyond: a 400-digit one reads as inf).
-_LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}|\.\d{18,}")  # beyond interp.MAX_WORD_VALUE or its decimals
+_LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}")
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
 # A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
@@ -81,7 +81,7 @@ _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 # Most lines the run writer takes in one stretch (see _emit_rows): an arc whose hint
 # fails unexpectedly makes the writer read again at most this many lines.
 MAX_STRETCH = 2048
-_HALF = np.array([emit.HALF_UNIT[d] for d in range(len(emit.HALF_UNIT))])
+_HALF = np.array([emit.HALF_UNIT[d] for d in range(331)])  # the last, 0: any more decimals
 
 #: where text is written (what it returns is ignored)
 Write: TypeAlias = Callable[[str], object]
@@ -513,7 +513,7 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         v = (tk - shift[:, k]) / unit
         ov = block.ov[k][idx]
         dout = np.maximum(block.frac[k][idx], dec)
-        changed = has & ~(np.abs(v - ov) < _HALF[dout])
+        changed = has & ~(np.abs(v - ov) < _HALF[np.minimum(dout, len(_HALF) - 1)])  # (0 beyond)
         sel = np.flatnonzero(changed)
         nums = block.cols[_NUM[k]]
         if len(sel):

@@ -27,7 +27,15 @@ CycleStep: TypeAlias = tuple[int, tuple[float, float, float], tuple[float, float
 
 # half of the last written digit, by number of decimals (a program's numbers may carry
 # any number of them; beyond 323 the half unit is below the smallest double, 0.0)
-HALF_UNIT = {d: 0.5 * 10.0 ** (-d) for d in range(0, 330)}
+class _HalfUnits(dict):
+    """Half a unit of the last decimal, by decimals; beyond a double's smallest step (a word
+    written with hundreds of decimals, kept as written) it is 0."""
+
+    def __missing__(self, d: int) -> float:
+        return 0.5 * 10.0 ** (-d) if d < 330 else 0.0
+
+
+HALF_UNIT = _HalfUnits({d: 0.5 * 10.0 ** (-d) for d in range(0, 330)})
 
 HEADER_TAG = "(postproc "
 HEADER_MARK = " corrected "

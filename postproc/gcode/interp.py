@@ -79,9 +79,6 @@ Vals = dict[str, tuple[float, int]]
 # Largest value of a word (1000 km, a billion turns): a 400-digit coordinate reads as inf,
 # and one of 300 digits makes the correction's arithmetic overflow.
 MAX_WORD_VALUE = 1e9
-# Most digits after the point of a word: a double holds 15 to 17 significant digits, no
-# controller reads more (Fanuc 4 to 8, LinuxCNC a double), and the writer keeps a word's decimals.
-MAX_WORD_DECIMALS = 17
 _E = TypeVar("_E", bound=PostprocError)
 
 
@@ -647,10 +644,6 @@ class Interpreter:
         mcodes: list[tuple[int, int]] = []
         vals: dict[str, tuple[float, int]] = {}
         for i, (letter, num, _start, _end, _lpos) in enumerate(words):
-            point = num.find(".")
-            if point >= 0 and len(num) - point - 1 > MAX_WORD_DECIMALS:
-                raise self._err(GcodeSyntaxError, f"{letter} word with {len(num) - point - 1} digits after the point: "
-                                f"no controller reads more than {MAX_WORD_DECIMALS}", lineno, _lpos + 1)
             if letter in "GM" and not abs(float(num)) <= MAX_WORD_VALUE:
                 raise self._err(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
             if letter == "G":
