@@ -166,3 +166,17 @@ def test_diff_pairs_a_split_move_whose_words_went_to_its_first_piece(engine):
     d = compare_programs(EVERY_WORD, out)
     assert d.moves == 11  # every block but the first (G21 G90 G17) and M2
     assert d.lines_inserted > 8
+
+
+def test_lines_ending_in_cr_cr_lf_split_into_blocks_linuxcnc_reads():
+    """A file ending its lines CR CR LF (UGS's ShapeOko pattern) reads here as lines ending
+    in a lone CR: pieces of a split move written with that CR alone were one block to
+    rs274 ("Two g codes used from same modal group"). Written lines end CR LF."""
+    eng = load_calibration(PARAMETRIC).engine
+    text = "G21 G90\r\r\nG0 X50 Y100 Z10\r\r\nG1 X150 Y100 F500\r\r\nG1 X50 Y150\r\r\nM2\r\r\n"
+    out, rep = correct_text(text, eng, Setup(), CorrectOptions(dialect="linuxcnc"))
+    assert rep.lines_inserted > 0
+    assert re.search(r"\r(?![\r\n])", out) is None  # no CR alone between two blocks
+    assert out.endswith("M2\r\r\n")
+    result = run_rs274(out)
+    assert result.ok, result.error

@@ -75,6 +75,15 @@ def line_ending(line: str) -> str:
     return ""
 
 
+def new_line_ending(line: str) -> str:
+    """The ending of a line written beside ``line`` (a split move's pieces, a cycle's steps,
+    a comment moved onto its own line, the header): ``line``'s own, but a lone CR becomes
+    CR LF. A lone CR is how a CR CR LF ending reads here (the CR, then an empty line), and
+    LinuxCNC ends a block only at LF: lines joined by CR alone would be one block to it."""
+    ending = line_ending(line)
+    return "\r\n" if ending == "\r" else ending or "\n"
+
+
 def removal_spans(line: str, words: list[tuple[int, int]]) -> list[tuple[int, int]]:
     """Spans deleting the words ``[(letter_pos, end), ...]`` and one run of blanks each:
     the blanks after a run of removed words, or before it when no word follows."""
@@ -357,7 +366,7 @@ def cycle_lines(line: str, mv: Move, c: Cycle, retract: bool = True) -> list[str
     first_feed)`` for a G0/G1 step from ``prev`` to ``q`` (machine mm) naming ``axes``
     (those that change), with the block's F word when ``first_feed``. ``diff`` reads an
     original's cycle blocks so when the corrected program says CYCLES EXPANDED."""
-    ending = line_ending(line) or "\n"
+    ending = new_line_ending(line)
     sep, lower = style_of(line)
     sep = sep or " "
     out: list[str | CycleStep] = []
@@ -437,7 +446,7 @@ def fit_line(dialect: str, line: str) -> tuple[list[str], tuple[int, str] | None
         words = words[:start] + words[start + len(text):]
     words = re.sub(r"[ \t]+", " ", words).strip(" \t")
     note = " ".join(text for _s, text in comments)
-    end = ending or "\n"
+    end = new_line_ending(line)
     if not words or _over_limit(d, words) or _over_limit(d, note):
         return [line], over
     return [note + end, words + ending], None
@@ -457,7 +466,7 @@ def drill_cycle_lines(line: str, call_line: bool, mv: Move | None, cyc: Move | N
         out.append(None)
     if cyc is None or cyc.cycle is None:
         return out
-    ending = line_ending(line) or "\n"
+    ending = new_line_ending(line)
     sep, lower = style_of(line)
     sep = sep or " "
     prev = cyc.q0

@@ -348,7 +348,7 @@ class EmitterMixin(Generic[_O, _R]):
                 hint="put the tool change or G53 on a line of its own; make a lead-in or lead-out move shorter, "
                      "or raise --tolerance")
         sep, lower = emit.style_of(line)
-        ending = emit.line_ending(line) or "\n"
+        ending = emit.new_line_ending(line)
         arc = mv.arc
         for j, sg in enumerate(inserted):
             words = list(mv.prefix_words) if j == 0 else []

@@ -483,7 +483,7 @@ class Corrector(EmitterMixin):
                     "this program already carries a postproc header: it has been corrected before",
                     path=self.path, lineno=k + 1, col=1,
                     hint="correct the original program instead, or use --force to correct it again")
-        ending = (emit.line_ending(head[0]) if head else "") or "\n"
+        ending = emit.new_line_ending(head[0]) if head else "\n"
         header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
                                         self._setup_note(), ending, expanded=self.expanded, setup=self.setup,
                                         cycles_expanded=self.opt.cycles == "expand")
@@ -1218,7 +1218,7 @@ class Corrector(EmitterMixin):
                 j += 1
             keep.append(j)
             i = j
-        ending = emit.line_ending(line) or "\n"
+        ending = emit.new_line_ending(line)
         sep, lower = emit.style_of(line)
         sep = sep or " "
         unit = mv.unit
@@ -1271,7 +1271,7 @@ class Corrector(EmitterMixin):
             entries.append(("", replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
                                           axis_idx=(-1, -1, -1)), False, None))
             return
-        ending = emit.line_ending(line) or "\n"
+        ending = emit.new_line_ending(line)
         sep, lower = emit.style_of(line)
         sep = sep or " "
         d = _unit_decimals(self.opt, mv.unit)
@@ -1314,7 +1314,7 @@ class Corrector(EmitterMixin):
                 f"Sinumerik {call} (drilling cycle call): read only when written as its moves", path=self.path, lineno=lineno, col=1,
                 hint="give --cycles expand or auto to write each hole as its G0/G1 moves, each corrected")
         d = _unit_decimals(self.opt, cyc.unit if cyc is not None else 1.0)
-        ending = emit.line_ending(line) or "\n"
+        ending = emit.new_line_ending(line)
         sep, lower = emit.style_of(line)
         for step in emit.drill_cycle_lines(line, bool(interp.call_line), mv, cyc, interp.state.motion):
             if step is None:
