@@ -419,3 +419,17 @@ def test_interval_counts_are_bounded(tmp_path, spec):
                 "-o", tmp_path / "i.json"])
     assert res.exit_code == 3, res.output
     assert "--intervals" in res.output
+
+
+@pytest.mark.parametrize("args", [
+    ["verify", "samples/pocket.nc", "-c", "calibrations/s500_static.json", "--machine", "calibrations/s500.machine.json",
+     "--points", "samples/s500_static_6points.csv", "--shots", "1000000000"],
+    ["export", "calibrations/s500_parametric.json", "--format", "linuxcnc", "--step", "1e-9", "-o", "{tmp}/comp"],
+    ["fit", "samples/walkthrough_points.csv", "--method", "parametric", "--knot-spacing", "1e-9", "-o", "{tmp}/p.json"],
+], ids=["verify-shots", "export-step", "fit-knot-spacing"])
+def test_sizes_that_would_take_terabytes_are_refused(tmp_path, args):
+    """Each was a MemoryError (224 GiB, 2.29 TiB): now refused with the option named."""
+    args = [a.replace("{tmp}", str(tmp_path)) if "{tmp}" in a else (str(ROOT / a) if "/" in a else a) for a in args]
+    res = _run(args)
+    assert res.exit_code in (2, 3, 4), res.output
+    assert "internal error" not in res.output

@@ -24,7 +24,7 @@ from postproc.cli.options import FiniteFloat, correction_options, program_setup_
 @correction_options
 @click.option("--max-step", "max_step", type=FiniteFloat(min=0, min_open=True), default=0.5, show_default=True, metavar="MM",
               help="Sampling step along the program's moves.")
-@click.option("--shots", type=click.IntRange(min=1), default=12, show_default=True,
+@click.option("--shots", type=click.IntRange(min=1, max=10_000), default=12, show_default=True,
               help="With --points: tracker shots averaged per point.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="With --points: seed of the tracker noise.")
 @click.option("--no-noise", "no_noise", is_flag=True, help="With --points: exact positions, no tracker noise.")

@@ -92,7 +92,14 @@ def _default_intervals(x: np.ndarray, n_obs: int, spacing: float | None) -> int:
         if not spacing > 0:
             raise MeasurementError(f"knot spacing {spacing} mm: must be positive",
                                    hint="give --knot-spacing in mm, e.g. 20")
-        return max(1, int(np.ceil((hi - lo) / spacing - INTERVAL_COUNT_GUARD)))
+        n = max(1, int(np.ceil(min((hi - lo) / spacing, 1e12) - INTERVAL_COUNT_GUARD)))
+        budget = int(MAX_PARAMS_PER_OBSERVATION * n_obs / 18) - 3
+        if n > max(budget, 1):
+            raise MeasurementError(
+                f"knot spacing {spacing:g} mm makes {n:,} intervals over {hi - lo:g} mm: more coefficients "
+                f"than {n_obs} observations can fit (at most {max(budget, 1)} intervals)",
+                hint=f"give a --knot-spacing of at least {(hi - lo) / max(budget, 1):.3g} mm")
+        return n
     distinct = len(np.unique(np.round(x, 3)))
     n = min(int((hi - lo) // MIN_DEFAULT_KNOT_MM), (distinct - 1) // POSITIONS_PER_INTERVAL)
     # 3 axes x 6 functions x (n + 3) coefficients within the parameter budget.

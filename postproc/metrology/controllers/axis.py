@@ -114,11 +114,20 @@ class AxisErrors:
         return float(max(np.abs(du).max(), np.abs(dd).max()))
 
 
+# Most points of one axis's table: controllers hold hundreds to a few thousand
+# (Fanuc 1024 pitch-error points in all, LinuxCNC's comp file is read whole at start).
+MAX_TABLE_POINTS = 100_000
+
+
 def equidistant(lo: float, hi: float, step: float) -> tuple[np.ndarray, float]:
     """Positions lo, lo + s, ..., hi with s <= step chosen so that the last one is hi."""
     if not step > 0:
         raise CalibrationError(f"table step {step:g} mm: must be positive")
-    n = max(1, int(np.ceil((hi - lo) / step - WHOLE_STEPS_SLACK)))
+    n = max(1, int(np.ceil(min((hi - lo) / step, 1e12) - WHOLE_STEPS_SLACK)))
+    if n > MAX_TABLE_POINTS:
+        raise CalibrationError(f"table step {step:g} mm makes {n:,} points over {hi - lo:g} mm: more than "
+                               f"{MAX_TABLE_POINTS:,}, beyond any controller's table",
+                               hint="give a --step of the spacing the controller's table holds (mm)")
     s = (hi - lo) / n
     return lo + s * np.arange(n + 1), s
 
