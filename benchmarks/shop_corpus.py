@@ -37,7 +37,12 @@ WANTED = {"sinumerik": "sinumerik", "fadal": "fadal", "okuma": "okuma", "g41": N
 SETUP = ([a for w in ("G54", "G55", "G56", "G57", "G58", "G59") for a in ("--offset", f"{w}=X150,Y150,Z50")]
          + [a for t in range(100) for a in ("--tool-length", f"{t}=100")]
          + ["--start", "X150,Y150,Z300", "--home", "G28=X150,Y150,Z300", "--home", "G30=X150,Y150,Z300",
-            "--extrapolate", "clamp"])
+            "--extrapolate", "clamp"]
+         # a 3 mm cutter for the programs with cutter radius compensation (G41/G42), when the
+         # checkout has the option (older checkouts refuse G41/G42 whatever is given)
+         + (["--tool-diameter", "3"] if "--tool-diameter" in subprocess.run(
+             [sys.executable, "-m", "postproc", "correct", "--help"], capture_output=True, text=True,
+             cwd=ROOT).stdout else []))
 _LOCATION = re.compile(r"^(?:postproc: )?(?:error: )?(?:[^\s:]+(?::\d+){1,2}: )?")
 
 
