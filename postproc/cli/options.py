@@ -320,6 +320,28 @@ SETUP_OPTIONS: dict[str, tuple[str, dict]] = {
 }
 
 
+def _declare(table: dict[str, tuple[str, dict]], argument: str, make, leave_out: tuple[str, ...]):
+    """A decorator declaring the options of ``table`` (less ``leave_out``) on a command and
+    passing it ``argument=make(**their values by field name)`` in their place."""
+    unknown = set(leave_out) - set(table)
+    if unknown:
+        raise ValueError(f"not among these options: {sorted(unknown)}")
+    chosen = [flag for flag in table if flag not in leave_out]
+
+    def decorate(fn):
+        @functools.wraps(fn)
+        def command(*args, **kwargs):
+            given = {table[flag][0]: kwargs.pop(table[flag][0]) for flag in chosen}
+            return fn(*args, **{argument: make(**given)}, **kwargs)
+
+        for flag in reversed(chosen):
+            name, attrs = table[flag]
+            command = click.option(flag, name, **attrs)(command)
+        return command
+
+    return decorate
+
+
 def setup_options(fn=None, *, leave_out: tuple[str, ...] = ()):
     """Declare the machine setup options (:data:`SETUP_OPTIONS`: work offsets, tool lengths,
     tool table, tool vector, start position, G28/G30 positions, context) on a command, and
@@ -329,22 +351,7 @@ def setup_options(fn=None, *, leave_out: tuple[str, ...] = ()):
 
     ``leave_out``: flags that do not apply to the command (not declared).
     """
-    unknown = set(leave_out) - set(SETUP_OPTIONS)
-    if unknown:
-        raise ValueError(f"not setup options: {sorted(unknown)}")
-    chosen = [flag for flag in SETUP_OPTIONS if flag not in leave_out]
-
-    def decorate(fn):
-        @functools.wraps(fn)
-        def command(*args, **kwargs):
-            given = {SETUP_OPTIONS[flag][0]: kwargs.pop(SETUP_OPTIONS[flag][0]) for flag in chosen}
-            return fn(*args, setup=build_setup(**given), **kwargs)
-
-        for flag in reversed(chosen):
-            name, attrs = SETUP_OPTIONS[flag]
-            command = click.option(flag, name, **attrs)(command)
-        return command
-
+    decorate = _declare(SETUP_OPTIONS, "setup", build_setup, leave_out)
     return decorate(fn) if fn is not None else decorate
 
 
@@ -404,28 +411,6 @@ PROGRAM_OPTIONS: dict[str, tuple[str, dict]] = {
         default=DEFAULT_MAX_ARC_TURNS, show_default=True, type=click.IntRange(1),
         help="Refuse a helix (G2/G3 P) of more turns than this.")),
 }
-
-
-def _declare(table: dict[str, tuple[str, dict]], argument: str, make, leave_out: tuple[str, ...]):
-    """A decorator declaring the options of ``table`` (less ``leave_out``) on a command and
-    passing it ``argument=make(**their values by field name)`` in their place."""
-    unknown = set(leave_out) - set(table)
-    if unknown:
-        raise ValueError(f"not among these options: {sorted(unknown)}")
-    chosen = [flag for flag in table if flag not in leave_out]
-
-    def decorate(fn):
-        @functools.wraps(fn)
-        def command(*args, **kwargs):
-            given = {table[flag][0]: kwargs.pop(table[flag][0]) for flag in chosen}
-            return fn(*args, **{argument: make(**given)}, **kwargs)
-
-        for flag in reversed(chosen):
-            name, attrs = table[flag]
-            command = click.option(flag, name, **attrs)(command)
-        return command
-
-    return decorate
 
 
 def _reading(**given) -> Reading:
