@@ -61,24 +61,14 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bo
                           hint="give a file name")
     if st is not None and not stat.S_ISREG(st.st_mode):
         if not stage_special:
-            try:
+            with _disk_full_as_such(target):
                 yield str(target)  # a device, pipe or socket: never replaced by a file
-            except OSError as exc:
-                full = disk_full(exc, target)
-                if full is None:
-                    raise
-                raise full from None
             return
         fd, tmp = tempfile.mkstemp(prefix="postproc-", suffix=suffix)
         os.close(fd)
         try:
-            try:
+            with _disk_full_as_such(target):
                 yield tmp
-            except OSError as exc:
-                full = disk_full(exc, target)
-                if full is None:
-                    raise
-                raise full from None
             try:
                 with open(tmp, "rb") as src, open(target, "wb") as dst:
                     shutil.copyfileobj(src, dst)
@@ -93,13 +83,8 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bo
         raise _cannot_write(real, exc) from None
     os.close(fd)
     try:
-        try:
+        with _disk_full_as_such(target):
             yield tmp
-        except OSError as exc:
-            full = disk_full(exc, target)
-            if full is None:
-                raise
-            raise full from None
         os.chmod(tmp, output_mode(real))
         try:
             os.replace(tmp, real)
@@ -112,6 +97,18 @@ def output_path(path: str | os.PathLike, suffix: str = ".tmp", stage_special: bo
 
 #: the earlier name of :func:`output_path`
 atomic_path = output_path
+
+
+@contextmanager
+def _disk_full_as_such(target) -> Iterator[None]:
+    """Raise an ENOSPC met inside the block as the :func:`disk_full` error of ``target``."""
+    try:
+        yield
+    except OSError as exc:
+        full = disk_full(exc, target)
+        if full is None:
+            raise
+        raise full from None
 
 
 def disk_full(exc: OSError, target) -> DiskFullError | None:
