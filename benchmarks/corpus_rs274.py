@@ -32,67 +32,31 @@ EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 MAX_LINES = 20_000
 CAL = "s500_parametric"
 
-_ENGINE = None
-
-
-def engine():
-    global _ENGINE
-    if _ENGINE is None:
-        from postproc.calfile import load_calibration
-        c = load_calibration(ROOT / "calibrations" / f"{CAL}.json")
-        _ENGINE = (c.engine, c.name, c.sha256)
-    return _ENGINE
-
-
 def rs274(text: str) -> tuple[bool, str, int]:
-    from oracle import run_rs274
-    from test_oracle_scale import TOOLS
-    for attempt in range(3):
-        if attempt:
-            time.sleep(0.2 * attempt)
-        res = run_rs274(text, tools=TOOLS)
-        if res.ok:
-            break
-    return res.ok, res.error, len(res.motions)
+    """rs274's verdict, as benchmarks/pin_outputs.py runs it (its tool table, its retries)."""
+    from pin_outputs import _rs274
+
+    res = _rs274(text.encode("utf-8", errors="surrogateescape"))
+    return bool(res.get("ok")), res.get("error", ""), res.get("motions", 0)
 
 
-def correct(path: Path, text: str, start: dict | None = None) -> tuple[str, dict]:
-    from corpus_speed import setup as volume_setup
-    from pin_outputs import _dialect
+def correct(path: Path) -> tuple[str, dict]:
+    """The corrected text, as benchmarks/pin_outputs.py corrects the s500_parametric key."""
+    import tempfile
 
-    from postproc.errors import PostprocError
-    from postproc.gcode.pipeline import CorrectOptions, correct_text
+    from pin_outputs import _correct, _dialect
 
-    eng, name, sha = engine()
-    kw = dict(calibration_name=name, calibration_sha256=sha)
-    dialect = _dialect(path)
-
-    def st():
-        s = volume_setup()
-        if start:
-            import dataclasses
-            s = dataclasses.replace(s, start={**s.start, **start})
-        return s
-
-    try:
-        out, _ = correct_text(text, eng, st(), CorrectOptions(extrapolate="linear", dialect=dialect),
-                              path=str(path), **kw)
-        return out, {"dialect": dialect}
-    except PostprocError as exc:
-        if "--cycles expand" not in str(exc):
-            raise
-    out, _ = correct_text(text, eng, st(), CorrectOptions(extrapolate="linear", dialect=dialect, cycles="expand"),
-                          path=str(path), **kw)
-    return out, {"dialect": dialect, "cycles": "expand"}
+    with tempfile.TemporaryDirectory(prefix="corpus-rs274-") as tmp:
+        out = Path(tmp) / "out.ngc"
+        extra = _correct(path, CAL, out)
+        return out.read_bytes().decode("utf-8", errors="surrogateescape"), {"dialect": _dialect(path), **extra}
 
 
 def run_one(job) -> dict:
-    rel, lines, start = job
+    rel, lines = job
     path = CORPUS / rel
     t0 = time.perf_counter()
     rec: dict = {"program": rel, "lines": lines}
-    if start:
-        rec["start"] = start
     text = path.read_bytes().decode("utf-8", errors="surrogateescape")
     ok, err, nmo = rs274(text)
     rec["input_ok"] = ok
@@ -104,7 +68,7 @@ def run_one(job) -> dict:
         return rec
     from postproc.errors import PostprocError
     try:
-        out, extra = correct(path, text, start)
+        out, extra = correct(path)
         rec.update(extra)
     except PostprocError as exc:
         where = f"line {exc.lineno}: " if exc.lineno is not None else ""
@@ -136,7 +100,7 @@ def programs():
                 continue
             n = p.read_bytes().count(b"\n")
             rel = str(p.relative_to(CORPUS))
-            (skipped if n > MAX_LINES else jobs).append((rel, n, None))
+            (skipped if n > MAX_LINES else jobs).append((rel, n))
     jobs.sort(key=lambda j: (j[1], j[0]))
     return jobs, skipped
 
@@ -151,11 +115,8 @@ def main() -> int:
     globals()["MAX_LINES"] = args.max_lines
     jobs, skipped = programs()
     jobs = [j for j in jobs if j[1] > args.min_lines]
-    # Star_Trek.tap also with conftest.CORPUS_START's --start Z150 (on top of the volume start)
-    extra = [(rel, n, {"Z": 150.0}) for rel, n, _ in jobs if Path(rel).name == "Star_Trek.tap"]
-    jobs = jobs[:1] + extra + jobs[1:] if extra else jobs
     print(f"{len(jobs)} runs, {len(skipped)} programs skipped (> {MAX_LINES:,} lines): "
-          + ", ".join(f"{r} ({n:,})" for r, n, _ in skipped), flush=True)
+          + ", ".join(f"{r} ({n:,})" for r, n in skipped), flush=True)
     t0 = time.perf_counter()
     rows = []
     with open(args.out, "w") as fh, multiprocessing.get_context("fork").Pool(min(args.j, 2), maxtasksperchild=20) as pool:
@@ -163,17 +124,16 @@ def main() -> int:
             rows.append(rec)
             fh.write(json.dumps(rec) + "\n")
             fh.flush()
-            print(f"[{len(rows)}/{len(jobs)}] {rec['seconds']:6.1f}s {rec['status']:17} {rec['program']}"
-                  + (f" start={rec['start']}" if 'start' in rec else ""), flush=True)
+            print(f"[{len(rows)}/{len(jobs)}] {rec['seconds']:6.1f}s {rec['status']:17} {rec['program']}",
+                  flush=True)
     wall = time.perf_counter() - t0
     report(rows, skipped, wall)
     return 0
 
 
 def report(rows, skipped, wall):
-    main_rows = [r for r in rows if "start" not in r]
-    n = len(main_rows)
-    inp = [r for r in main_rows if r["input_ok"]]
+    n = len(rows)
+    inp = [r for r in rows if r["input_ok"]]
     corr = [r for r in inp if r["status"] in ("output accepted", "OUTPUT REFUSED")]
     acc = [r for r in corr if r["output_ok"]]
     bad = [r for r in corr if not r["output_ok"]]
@@ -191,7 +151,7 @@ def report(rows, skipped, wall):
     for r in sorted(refused, key=lambda r: r["program"]):
         print(f"  {r['program']}: {r['refusal']}")
     print("\ninput refused by rs274:")
-    for r in sorted((r for r in main_rows if not r["input_ok"]), key=lambda r: r["program"]):
+    for r in sorted((r for r in rows if not r["input_ok"]), key=lambda r: r["program"]):
         print(f"  {r['program']}: {r['input_error']}")
     print("\nStar_Trek.tap:")
     for r in rows:
