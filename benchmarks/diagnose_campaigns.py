@@ -35,6 +35,7 @@ from postproc.calfile import (
 )
 from postproc.calibration.measurements import Measurements
 from postproc.diagnose.check import run_check
+from postproc.diagnose.vm import serpentine
 from postproc.simulate import Machine, load_machine, measurement_plan, random_points, simulate_plan
 
 ROOT = Path(__file__).parents[1]
@@ -78,15 +79,7 @@ def tracker(rng, n=60, machine=None, tools=((0, 0, -100),), repeats=2):
 
 def raster(machine, rng, step=35.0, repeats=2, zs=(0.0, 157.5, 315.0)):
     """Serpentine raster; the file records dir 0 for axes that did not move."""
-    axis = np.arange(0.0, 315.0 + 1e-9, step)
-    rows = []
-    for k, z in enumerate(zs):
-        ys = axis if k % 2 == 0 else axis[::-1]
-        for i, y in enumerate(ys):
-            xs = axis if i % 2 == 0 else axis[::-1]
-            rows += [(x, y, z) for x in xs]
-    q = np.array(rows)
-    recorded = np.sign(np.diff(np.vstack([q[:1] - 1.0, q]), axis=0))
+    q, recorded = serpentine(step, zs)
     state = recorded.copy()
     for j in range(1, len(state)):
         state[j] = np.where(recorded[j] != 0, recorded[j], state[j - 1])

@@ -111,8 +111,10 @@ def _both(q: np.ndarray, repeats: int) -> tuple[np.ndarray, np.ndarray]:
     return qq, np.repeat(d[:, None], 3, axis=1)
 
 
-def _raster(step: float, zs, travel: float = 315.0) -> tuple[np.ndarray, np.ndarray]:
-    """Serpentine raster; dir 0 for axes that did not move (their state is carried)."""
+def serpentine(step: float, zs, travel: float = 315.0) -> tuple[np.ndarray, np.ndarray]:
+    """A serpentine raster of a cube of ``travel`` (mm) at the heights ``zs``: the points in
+    the order visited, and the approach direction of each axis as a file records it (0 for
+    an axis that did not move)."""
     axis = np.arange(0.0, travel + 1e-9, step)
     rows = []
     for k, z in enumerate(zs):
@@ -121,7 +123,12 @@ def _raster(step: float, zs, travel: float = 315.0) -> tuple[np.ndarray, np.ndar
             xs = axis if i % 2 == 0 else axis[::-1]
             rows += [(x, y, z) for x in xs]
     q = np.array(rows)
-    recorded = np.sign(np.diff(np.vstack([q[:1] - 1.0, q]), axis=0))
+    return q, np.sign(np.diff(np.vstack([q[:1] - 1.0, q]), axis=0))
+
+
+def _raster(step: float, zs, travel: float = 315.0) -> tuple[np.ndarray, np.ndarray]:
+    """Serpentine raster, two shots a point; dir 0 for axes that did not move (their state is carried)."""
+    q, recorded = serpentine(step, zs, travel)
     q, recorded = np.repeat(q, 2, axis=0), np.repeat(recorded, 2, axis=0)
     recorded[1::2] = 0.0  # the second shot: no axis moved
     return q, recorded
