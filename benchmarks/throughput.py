@@ -10,6 +10,9 @@ input lines per second and the child's peak RSS (the largest of the runs):
   (c) ``postproc correct`` with calibrations/s500_static.json; (c1) the same with -j 1;
   (d) ``postproc correct`` with calibrations/s500_parametric.json; (d1) the same with -j 1;
   (e) ``postproc diff ORIGINAL CORRECTED`` (the output of (c));
+  (r) LinuxCNC's ``rs274 -g`` on the same program (interpreting only, no correction): the
+      rate of "as fast as a controller reads", when rs274 is installed;
+  (u) (c) uncompiled: a copy of the tree without the compiled core's *.so files;
   (f) ``postproc --help``;
   (g) a 20-line program corrected with the parametric calibration, end to end;
   (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once);
@@ -40,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import os
 import platform
 import statistics
@@ -59,11 +63,12 @@ PARAMETRIC = ROOT / "calibrations" / "s500_parametric.json"
 SETUP = ["--offset", "G54=X0,Y0,Z100", "--home", "G28=X0,Y0,Z200",
          *[arg for t in range(1, 21) for arg in ("--tool-length", f"{t}=0")]]
 
-# issue 13's targets: (what, test on the figure, text)
+# the targets: (what, test on the figure, text)
 TARGETS = {
-    "static": (lambda r: r >= 150_000, ">= 150,000 lines/s"),
-    "parametric": (lambda r: r >= 50_000, ">= 50,000 lines/s"),
-    "diff": (lambda r: r >= 150_000, ">= 150,000 lines/s"),
+    "static": (lambda r: r >= 250_000, ">= 250,000 lines/s"),
+    "static1": (lambda r: r >= 150_000, ">= 150,000 lines/s"),
+    "parametric": (lambda r: r >= 60_000, ">= 60,000 lines/s"),
+    "diff": (lambda r: r >= 300_000, ">= 300,000 lines/s"),
     "rss": (lambda mb: mb <= 150.0, "<= 150 MB"),
     "help": (lambda s: s <= 0.25, "<= 0.25 s"),
     "job20": (lambda s: s <= 0.8, "<= 0.8 s"),
@@ -173,14 +178,16 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3, help="runs of each case; the median is printed [3]")
     ap.add_argument("--seed", type=int, default=42, help="gencam.py seed [42]")
     ap.add_argument("--json", dest="json_out", default=None, help="also save the figures to this JSON file")
-    ap.add_argument("--cases", default="static,static1,parametric,diff",
-                    help="which of static, static1, parametric, parametric1, diff to time (static1 and "
-                         "parametric1: in one process, -j 1; (a) and (b) always run; diff needs static's "
-                         "output, made untimed when static is left out) [static,static1,parametric,diff]")
+    ap.add_argument("--cases", default="static,static1,parametric,diff,rs274,pure",
+                    help="which of static, static1, parametric, parametric1, diff, rs274, pure to time (static1 "
+                         "and parametric1: in one process, -j 1; pure: static uncompiled; (a) and (b) "
+                         "always run; diff needs static's output, made untimed when static is left out) "
+                         "[static,static1,parametric,diff,rs274,pure]")
     args = ap.parse_args()
     chosen = {c.strip() for c in args.cases.split(",") if c.strip()}
-    if not chosen <= {"static", "static1", "parametric", "parametric1", "diff"}:
-        sys.exit("--cases takes static, static1, parametric, parametric1 and diff")
+    known = {"static", "static1", "parametric", "parametric1", "diff", "rs274", "pure"}
+    if not chosen <= known:
+        sys.exit("--cases takes " + ", ".join(sorted(known)))
     if not GENCAM.is_file():
         sys.exit(f"{GENCAM} is missing: this benchmark needs the shared folder beside the repository "
                  "(../shared/bench/gencam.py makes its program)")
@@ -213,6 +220,16 @@ def main() -> None:
         print(f"program: gencam.py {args.lines} (seed {args.seed}): {n:,} lines, {src.stat().st_size / 1e6:.1f} MB "
               f"(made in {time.perf_counter() - t0:.1f} s); median of {args.repeats} runs per case")
         static_out = tmp / "static.nc"
+        pure = tmp / "pure"  # the same tree without the compiled core
+        if "pure" in chosen:
+            shutil.copytree(ROOT / "postproc", pure / "postproc", ignore=shutil.ignore_patterns("*.so", "__pycache__"))
+        pure_cmd = [py, "-c", f"import sys; sys.path.insert(0, {str(pure)!r}); from postproc.cli import main; "
+                    "sys.argv[0] = 'postproc'; main()"]
+        if "pure" in chosen:  # untimed: compiles the uncompiled tree's byte code
+            run_child([*pure_cmd, "correct", str(small), "-c", str(STATIC), "-o", str(tmp / "warm.nc"), *SETUP], log)
+        tools = tmp / "tools.tbl"
+        tools.write_text("".join(f"T{t} P{t} Z0 D6\n" for t in range(1, 21)))
+        rs274 = shutil.which("rs274")
         cases = [
             ("copy", "(a) read + write unchanged", [py, "-c", CHILD, "copy", str(src), str(tmp / "copy.nc")]),
             ("lex", "(b) tokenizer (lex + tokens_to_src)", [py, "-c", CHILD, "lex", str(src), str(tmp / "lex.nc")]),
@@ -226,9 +243,16 @@ def main() -> None:
              [*cli, "correct", str(src), "-c", str(PARAMETRIC), "-o", str(tmp / "parametric1.nc"), "-j", "1",
               *SETUP]),
             ("diff", "(e) diff original (c)-output", [*cli, "diff", str(src), str(static_out)]),
+            ("rs274", "(r) LinuxCNC rs274 -g (no correction)",
+             [rs274 or "rs274", "-t", str(tools), "-g", str(src), str(tmp / "rs274.txt")]),
+            ("pure", "(u) correct, s500_static, uncompiled", [*pure_cmd, "correct", str(src), "-c", str(STATIC),
+                                                             "-o", str(tmp / "pure.nc"), *SETUP]),
         ]
         rates = {}
         for key, label, cmd in cases:
+            if key == "rs274" and not rs274:
+                print("(r) rs274 is not installed: skipped")
+                continue
             if key not in ("copy", "lex") and key not in chosen:
                 if key == "static" and "diff" in chosen:
                     run_child(cmd, log)  # the corrected program diff compares
@@ -242,10 +266,14 @@ def main() -> None:
                     f"  (all processes: PSS {r['peak_pss_mb']:.1f} MB)")
             if key in ("static1", "parametric1") and key[:-1] in rates:
                 line += f"\n{'':38s} ({'c' if key == 'static1' else 'd'}) is {rates[key[:-1]] / rate:.2f} x this rate"
-            if key in ("static", "parametric", "diff"):
+            if key in ("static", "static1", "parametric", "diff"):
                 mem = max(r["peak_mb"], r["peak_pss_mb"])
                 line += (f"\n{'':38s} = {rate / rates['copy']:.4f} x (a), {rate / rates['lex']:.3f} x (b);  "
                          f"{verdict(key, rate)};  memory {verdict('rss', mem)}")
+            if key == "rs274" and "static" in rates:
+                line += f"\n{'':38s} (c) is {rates['static'] / rate:.2f} x rs274's rate (target: at least 1)"
+            if key == "pure" and "static" in rates:
+                line += f"\n{'':38s} (c) uncompiled is {rate / rates['static']:.2f} x (c) compiled"
             print(line, flush=True)
 
         r = measure([*cli, "--help"], max(args.repeats, 5), log)
