@@ -228,11 +228,11 @@ class EmitterMixin(Generic[_O, _R]):
                 _letter, num, start, end, _lpos = mv.words[idx]
                 ov = float(num)
                 v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
-                dot = num.find(".")
-                dout = d if dot < 0 or len(num) - dot - 1 <= d else len(num) - dot - 1
-                if abs(v - ov) < HALF_UNIT[dout]:
+                if abs(v - ov) < half:  # within half an output step: the word keeps its text
                     val = ov
                 else:
+                    dot = num.find(".")  # written with the output's decimals, or the word's own if more
+                    dout = d if dot < 0 or len(num) - dot - 1 <= d else len(num) - dot - 1
                     text = fmt(v, dout)
                     edits.append((start, end, text))
                     val = float(text)  # what the controller reads (numpy's round of a numpy float can be a step off)

@@ -866,9 +866,8 @@ class Corrector(EmitterMixin):
             if not math.isfinite(delta):
                 continue
             _l, num, start, end, _p = rb.words[idx]
-            dout = max(d, emit.decimals_of(num))
-            if abs(delta) >= emit.HALF_UNIT[dout]:
-                edits.append((start, end, emit.fmt(float(num) + delta, dout)))
+            if abs(delta) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
+                edits.append((start, end, emit.fmt(float(num) + delta, max(d, emit.decimals_of(num)))))
         self._write_line(line, edits, write)
 
     def _hint_plans(self, hints: dict[int, ArcHint], moves: dict[int, PlanMove], arc_prm: dict[int, ArcParams],
@@ -1375,10 +1374,9 @@ class Corrector(EmitterMixin):
                 held[n] = (nominal - shift[2]) / unit
             if idx >= 0:
                 _l, num, start, end, _p = mv.words[idx]
-                dout = max(d, emit.decimals_of(num))
                 val = float(num)
-                if abs(v - val) >= emit.HALF_UNIT[dout]:
-                    text = emit.fmt(v, dout)
+                if abs(v - val) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
+                    text = emit.fmt(v, max(d, emit.decimals_of(num)))
                     edits.append((start, end, text))
                     val = float(text)
             else:
