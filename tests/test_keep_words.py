@@ -48,9 +48,11 @@ def _body(text: str) -> list[str]:
 @pytest.mark.parametrize("bulk_lane", [True, False], ids=["runs", "interpreter"])
 @pytest.mark.parametrize("eps", [1e-14, 1e-12, 1e-9])
 def test_near_identity_keeps_every_word(eps, bulk_lane):
-    out, rep = correct_text(PROGRAM, _engine(eps), SETUP, CorrectOptions(bulk_lane=bulk_lane, cycles="keep", dialect="linuxcnc"))
+    opts = CorrectOptions(bulk_lane=bulk_lane, cycles="keep", dialect="linuxcnc")
+    out, rep = correct_text(PROGRAM, _engine(eps), SETUP, opts)
     assert _body(out) == PROGRAM.splitlines(keepends=True)
-    assert rep.words_changed == 0 and rep.lines_changed == 0
+    assert rep.words_changed == 0
+    assert rep.lines_changed == 0
 
 
 @pytest.mark.parametrize("bulk_lane", [True, False], ids=["runs", "interpreter"])

@@ -16,11 +16,11 @@ import gc
 import math
 import os
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeAlias, final
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 
@@ -33,17 +33,14 @@ from postproc.errors import (
     AlreadyCorrectedError,
     MissingSetupError,
     PostprocError,
-    SafetyError,
     UnsupportedGcodeError,
 )
 from postproc.gcode import bulk, cutter, emit
-from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
 from postproc.gcode.interp import Cycle, Interpreter, Move, NeedsExpansion, start_position
-from postproc.gcode.lexer import Word
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.planner import Planner, Table
-from postproc.gcode.segment import Curve
 from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
@@ -51,6 +48,7 @@ from postproc.gcode.vplan import (
     Plan,
     PlanMove,
 )
+from postproc.gcode.writer import ChunkWriter, Entry, Rebase, Store
 from postproc.limits import BoundedWriter, Limits
 
 # Lines held while an axis is not yet positioned (they are corrected once it is, a few KB
@@ -78,10 +76,6 @@ GROWTH_WARN = 5.0
 CYCLE_KEEP_SHARE = 0.9
 
 Write: TypeAlias = bulk.Write
-#: a line queued for its chunk: (its text, "" for a move it makes without a line of its
-#: own; its Move, the offset or stored position it sets, or None when it moves nothing;
-#: whether it names a motion word; the program's modal motion after it)
-Entry: TypeAlias = "tuple[str, Move | _Rebase | _Store | None, bool, int | None]"
 
 
 @dataclass
@@ -138,8 +132,9 @@ class CorrectReport:
         return (self.lines_out - self.header_lines) / self.lines_in if self.lines_in else 1.0
 
 
-class Corrector(EmitterMixin):
-    """State of one correction run; see the module docstring."""
+class Corrector:
+    """One correction run: the reader, with the planner and the writer it hands each
+    chunk to (see the module docstring)."""
 
     def __init__(self, engine: Engine, setup: Setup, options: CorrectOptions, *, path: str | None = None,
                  calibration_name: str = "", calibration_sha256: str = "") -> None:
@@ -159,17 +154,9 @@ class Corrector(EmitterMixin):
         # where the machine is before the first move: the start position (NaN: unknown);
         # the machine is there uncorrected, so it is also the emitted and the previous target
         start = start_position(setup.start)
-        self.qe = list(start)  # emitted gauge position (what the controller will hold)
-        self.emitted_motion: int | None = None  # the motion the controller holds (None: none yet)
         self.expanded = False  # correcting the expanded program (recorded in the header)
-        self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
-        self._cycle_rz: float | None = None
-        self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
-        self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
         self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
-        self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
-        self._decimals: dict[float, int] = {}
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
         self.report.solver = engine.solver
@@ -180,23 +167,21 @@ class Corrector(EmitterMixin):
         self.linear_exact = self.planner.linear_exact
         self.bulk_plan = self.planner.bulk_plan
         self.cutter = cutter.Bound()  # compensated moves corrected so far and their bound
+        self.writer = ChunkWriter(options, self.report, self.planner, start, path)
+        self.writer.cutter = self.cutter  # a take-up is refused on a compensated move's line
         self.cutter_known: cutter.Bound | None = None  # the whole program's, for the header (a second run)
 
     @property
     def report(self) -> CorrectReport:
         """The run's figures (a process correcting a part of the program starts its own:
-        the planner counts into the same)."""
+        the planner and the writer count into the same)."""
         return self._report
 
     @report.setter
     def report(self, report: CorrectReport) -> None:
         self._report = report
         self.planner.report = report
-
-    def _subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
-                   ) -> list[tuple[FloatArray, FloatArray]]:
-        """The writer's adaptive subdivision, with the planner's engine calls."""
-        return self.planner.subdivide(curves, s_init, unit)
+        self.writer.report = report
 
     # -- the run -----------------------------------------------------------------------
     @property
@@ -269,11 +254,11 @@ class Corrector(EmitterMixin):
                 self._feed_drill_cycle(entries, line, mv, interp, here)
             elif interp.stored_here is not None:
                 # G28.1/G30.1: the controller stores where it is, the corrected position
-                entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
+                entries.append((line, Store(interp.stored_here), False, interp.state.motion))
             elif interp.rebase is not None:
                 # an offset set from where the machine is: its words follow the correction there
                 words, axes, nominal = interp.rebase
-                entries.append((line, _Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
+                entries.append((line, Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
                                 interp.state.motion))
             elif mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, mv.cycle, interp.state.motion)
@@ -509,8 +494,8 @@ class Corrector(EmitterMixin):
             if type(e) is bulk.Run:
                 e.block.runs = []
 
-    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
-    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
+    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:
+        """Plan the chunk read (``entries``) as one table, then write it."""
         self._check_units(entries)
         cutter.check_chunk(self)
         tab = self._gather(entries)
@@ -518,143 +503,10 @@ class Corrector(EmitterMixin):
         hints: dict[int, ArcHint] = {}
         if len(tab):
             plans, hints = self.planner.plan(tab)
-        T = tab.target
         for run in tab.runs:
             # arcs the bulk planner did not settle: written one by one by the general emitter
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
-        out: list[str] = []  # the chunk's text, written at once
-        write = out.append
-        # where each entry's text starts in out: (index, its line, 1: every line is that
-        # line's, 2: a run's lines one by one from it, 0: a line passed as it is)
-        marks: list[tuple[int, int, int]] = []
-        mark = marks.append
-        emit_move = self._emit_move
-        get_plan = plans.get
-        get_hint = hints.get
-        k = 0
-        passed = 0
-        prepared: dict[int, bulk.Emission] = {}
-        blocks: list[bulk.Block] = []
-        for e in entries:
-            if type(e) is bulk.Run:
-                mark((len(out), e.lineno, 2))
-                em = prepared.get(id(e.block))
-                if em is None:
-                    em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
-                    blocks.append(e.block)
-                cut = e.cut
-                if not cut:
-                    bulk.emit_run(self, e, em, T, write, hints)
-                else:  # arcs and lines that must be split: written by the general emitter
-                    for part in bulk.split_run(e, sorted(set(cut))):
-                        if type(part) is bulk.Run:
-                            mark((len(out), part.lineno, 2))
-                            bulk.emit_run(self, part, em, T, write, hints)
-                            continue
-                        j, fm = part
-                        mark((len(out), e.lineno + j, 1))
-                        line = e.block.lines[e.a + j]
-                        hint = get_hint(k + j)
-                        if hint is not None:
-                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, write)
-                        else:
-                            emit_move(line, fm.to_move(line), T[k + j].tolist(), get_plan(k + j), write)
-                k += len(e)
-                continue
-            line, mv, motion_word, prog_motion = e
-            mark((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is _Store else 1))
-            if type(mv) is _Rebase:
-                self._emit_rebase(line, mv, write)
-                continue
-            if type(mv) is _Store:
-                self._stored[mv.name] = list(self.qe)
-                write(line)
-                passed += 1
-                continue
-            if mv is None:
-                write(line)
-                passed += 1
-                if motion_word:
-                    self.emitted_motion = prog_motion
-                continue
-            if mv.probe:  # used by the cycle block before it, or checked here
-                if mv.probe == 2:
-                    self._check_unmoved(mv, T[k])
-                k += 1
-                continue
-            if mv.cycle is not None:
-                self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
-                k += 1
-                continue
-            if mv.fixed:  # the machine is at a stored position, uncorrected
-                self.qe = list(mv.q1)
-                if mv.stored is not None and mv.stored[0] in self._stored:
-                    # a position the program stored: the controller stored its corrected one
-                    for ax in mv.stored[1]:
-                        self.qe[ax] = self._stored[mv.stored[0]][ax]
-                k += 1
-                continue
-            if mv.then is not None:  # G28/G30: only the intermediate point's own words change
-                self._emit_words_only(line, mv, T[k].tolist(), write)
-                k += 1
-                continue
-            target = T[k].tolist()
-            hint = get_hint(k)
-            if hint is not None:
-                self._emit_hinted_arc(line, mv, target, hint, write)
-            else:
-                emit_move(line, mv, target, get_plan(k), write)
-            k += 1
-        for blk in blocks:
-            blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
-        self.report.lines_out += passed
-        text = "".join(out)
-        if self._long_line.search(text):
-            text = self._fit_lines(out, marks)
-        write_out(text)
-
-    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
-        """A chunk's text (``out``, its entries' ``marks``) with every line it writes
-        within the dialect's limits: a line that passes them gets its comments on a line
-        of their own before it (:func:`emit.fit_line`), or is refused naming its line and
-        column. Lines passed as they are stay (the input has them so)."""
-        pieces: list[str] = []
-        ends = [m[0] for m in marks[1:]] + [len(out)]
-        pieces.extend(out[:marks[0][0]] if marks else out)
-        for (a, lineno, kind), b in zip(marks, ends, strict=True):
-            text = "".join(out[a:b])
-            if kind == 0 or not self._long_line.search(text):
-                pieces.append(text)
-                continue
-            for n, line in enumerate(text.splitlines(keepends=True)):
-                fitted, over = emit.fit_line(self.opt.dialect, line)
-                if over is not None:
-                    col, what = over
-                    raise SafetyError(
-                        f"{what}, once corrected", path=self.path, lineno=lineno + n if kind == 2 else lineno,
-                        col=col, hint="shorten the line (a comment moved onto a line of its own would not "
-                                      "do) or give the --dialect it is for")
-                if len(fitted) > 1:
-                    self.report.lines_out += 1
-                    self.report.lines_inserted += 1
-                pieces.extend(fitted)
-        return "".join(pieces)
-
-    def _emit_rebase(self, line: str, rb: _Rebase, write: Write) -> None:
-        """Write a G92 / G10 L20 / G10 L10-L11 line so that the offset the controller sets
-        from where it is (the corrected position) is the nominal one: each value it
-        subtracts moves by the correction there."""
-        unit = rb.unit
-        d = _unit_decimals(self.opt, unit)
-        edits = []
-        for idx, k in rb.axes:
-            delta = (self.qe[k] - rb.nominal[k]) / unit
-            if not math.isfinite(delta):
-                continue
-            _l, num, start, end, _p = rb.words[idx]
-            if abs(delta) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
-                edits.append((start, end, emit.fmt(float(num) + delta, max(d, emit.decimals_of(num)))))
-        self._write_line(line, edits, write)
+        self.writer.write(entries, tab, plans, hints, write_out)
 
     # -- moves written out for a cycle or a spline -------------------------------------
     @staticmethod
@@ -839,109 +691,7 @@ class Corrector(EmitterMixin):
             return
         self.report.cycles_expanded += 1
 
-    def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
-        """A cycle block that stays as it is, with several holes or increments: refuse it
-        when a hole's correction does not round to nothing."""
-        d = _unit_decimals(self.opt, mv.unit)
-        moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
-        if moved >= emit.HALF_UNIT[d]:
-            how = "in G91 (incremental)" if mv.incremental else "with L/K repeats"
-            raise SafetyError(
-                f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
-                f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
-                path=self.path, lineno=mv.lineno,
-                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
-
-    def _emit_cycle(self, line: str, mv: Move, c: Cycle, t_bottom: list[float], t_r: list[float],
-                    write: Write) -> None:
-        """Write a kept cycle block (``mv``, its cycle ``c``): X/Y at the corrected bottom, Z
-        and R along the tool axis."""
-        unit, shift = mv.unit, mv.shift
-        d = _unit_decimals(self.opt, unit)
-        rerr = self.planner.round_err(unit)
-        drift = math.hypot(t_r[0] - t_bottom[0], t_r[1] - t_bottom[1])
-        if drift > self.opt.tolerance_mm - rerr:
-            raise SafetyError(
-                f"canned cycle G{c.code / 10:g}: the correction moves the hole's axis by {drift * 1000:.3g} um "
-                f"between its R plane and its bottom, more than --tolerance {self.opt.tolerance_mm:g} mm",
-                path=self.path, lineno=mv.lineno,
-                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
-        self.report.moves += 1
-        self.report.cycles_kept += 1
-        qe = self.qe
-        z_before = qe[2]
-        flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
-        edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
-        sep, lower = emit.style_of(line)
-        same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
-        self._cycle_nominal = (c.z_mm, c.r_mm)
-        held = [self._cycle_z, self._cycle_rz]  # the Z and R words the controller holds
-        written: list[float] = []  # ... and holds after this block
-        for n, (letter, idx, t, nominal) in enumerate((("Z", mv.axis_idx[2], t_bottom[2], c.z_mm),
-                                                       ("R", c.r_idx, t_r[2], c.r_mm))):
-            v = (t - shift[2]) / unit
-            if idx < 0 and not same_group:
-                # the controller holds the program's own value (given earlier, or R taken as
-                # the initial level)
-                held[n] = (nominal - shift[2]) / unit
-            if idx >= 0:
-                _l, num, start, end, _p = mv.words[idx]
-                val = float(num)
-                if abs(v - val) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
-                    text = emit.fmt(v, max(d, emit.decimals_of(num)))
-                    edits.append((start, end, text))
-                    val = float(text)
-            else:
-                h = held[n]
-                if h is None or abs(v - h) >= emit.HALF_UNIT[d]:
-                    text = emit.fmt(v, d)
-                    added.append(letter + text)
-                    val = float(text)
-                else:
-                    val = h
-            written.append(val)
-        self._cycle_z, self._cycle_rz = written
-        if added:
-            pos = self._insert_pos(mv)
-            text = "".join(sep + w for w in added)
-            edits.append((pos, pos, text.lower() if lower else text))
-        r_machine = written[1] * unit + shift[2]
-        qe[2] = r_machine if c.retract_r else max(z_before, r_machine)
-        self.emitted_motion = c.code
-        self._write_line(line, edits, write)
-
     # -- emission ----------------------------------------------------------------------
-    def _emit_words_only(self, line: str, mv: Move, target: list[float], write: Write) -> None:
-        """Rewrite the axis words a line names, adding none and keeping the modal motion
-        (G28/G30 intermediate points)."""
-        self.report.moves += 1
-        d = _unit_decimals(self.opt, mv.unit)
-        edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
-        self._write_line(line, edits, write)
-
-
-@final
-class _Store:
-    """A G28.1/G30.1 line: the controller stores the position it is at."""
-
-    __slots__ = ("name",)
-
-    def __init__(self, name: str) -> None:
-        self.name = name  # "G28" or "G30"
-
-
-@final
-class _Rebase:
-    """A line that sets an offset from where the machine is (G92, G10 L20, G10 L10/L11)."""
-
-    __slots__ = ("words", "axes", "nominal", "unit")
-
-    def __init__(self, words: list[Word], axes: list[tuple[int, int]], nominal: Sequence[float],
-                 unit: float) -> None:
-        self.words = words  # the line's words
-        self.axes = axes  # [(word index, axis), ...] of the values taken from the position
-        self.nominal = nominal  # the nominal gauge position when the line runs
-        self.unit = unit  # mm per program unit then
 
 
 def _chord_fits(points: FloatArray, budget: float) -> bool:
