@@ -403,9 +403,10 @@ DIALECTS["sinumerik"] = Dialect(
          "post the program for 3 axes (X, Y, Z with fixed rotary positions): postproc corrects X, Y, Z"),
         (r"(?i)\bCYCLE800\b", "CYCLE800 (swivel plane)",
          "post the swivelled-plane moves in the machine's X, Y, Z (without CYCLE800)"),
-        (r"(?i)\bCYCLE(8[3-8]|840)\b", "CYCLE{0} (drilling cycle whose moves postproc does not model: "
-                                        "CYCLE81, CYCLE82 and CYCLE89 are read)",
-         "post the drilling as its moves, or as CYCLE81/CYCLE82/CYCLE89"),
+        (r"(?i)\bCYCLE(84|840)\b", "CYCLE{0} (tapping cycle: its feed along Z is tied to the spindle's turns at "
+                                   "the thread's pitch, so it cannot be written as corrected G1 moves)",
+         "take the tapping out into a program of its own: postproc does not correct spindle-synchronised "
+         "tapping"),
         (r"(?i)\b(A?ROTS|CROTS)\b", "{0} (frame rotation by solid angles)",
          "post the program in the work coordinates the frame gives (ROT/AROT about Z is read)"),
         (r"(?i)(?<![A-Z_])(?:IF|ELSE|WHILE|LOOP|FOR|REPEATB?|GOTOF|GOTOB|GOTOC|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR"
