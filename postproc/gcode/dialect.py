@@ -134,6 +134,7 @@ class Dialect:
     m98_count_in_p: bool = False  # M98 P(count)(4-digit number) when no program has the whole number
     numbered_program_line: bool = False  # "N1 O2 (NAME)": a program number after a sequence number (Fadal)
     header_forms: tuple[str, ...] = ()  # regexes of header lines read as no geometry ("$NAME.MIN%", Okuma)
+    call_o_statement: bool = False  # "CALL O<name> [Q<n>]" runs subprogram O<name> to its RTS (Okuma)
     uvw_axes: bool = False  # U, V, W are axes (LinuxCNC); else U/W mark a lathe program (incremental X/Z)
     turning_cycles: frozenset[int] = frozenset()  # G keys (10 x number) that are lathe turning cycles here
     call_words: str = ""  # letters that call a subroutine in a block without G codes ("L": Fadal format 1)
@@ -335,8 +336,13 @@ DIALECTS["okuma"] = replace(
     marks=((r"^\s*\$[\w.\-]*\.(?:MIN|SDF|SSB|SUB|LIB)%?", "$NAME.MIN% program header (Okuma)"),
            (r"(?i)^\s*(?:N\d+\s*)?CALL\s+O", "CALL O.. subprogram call (Okuma)"),
            (r"^\s*(?:N\d+\s*)?G\s*15\s*H\s*\d", "G15 H.. work coordinate system (Okuma)")),
-    refused=((r"(?i)\bCALL\s+O\w*", "CALL O.. subprogram call",
-              "write the subprogram's moves in the main program (expand it in CAM)"),
+    call_o_statement=True, expanded_constructs=frozenset({"CALL O.. subprogram call"}),
+    refused=((r"(?i)\bCALL\s*O\w*", "CALL O.. subprogram call",
+              "give the folder of its .SSB/.SUB/.LIB file with --subroutine-path, or write its moves in the main "
+              "program"),
+             (r"(?i)^\s*O([A-Z][A-Z0-9]*)\s*(?:\(.*)?$", "O{0} subprogram name line (a subprogram file, not a "
+              "main program)", "correct the main program that calls it, with this file's folder on "
+              "--subroutine-path"),
              (r"(?i)\bMODIN\b", "MODIN modal subprogram call", "write the subprogram's moves in the main program"),
              (r"(?i)\bV[CS]\d+\s*=", "VC/VS common variable", "post the program with numbers in place of variables"),
              (r"(?i)\bIF\s*\[|\bGOTO\b", "IF/GOTO program control", "post the program flat (loops written out)")),
