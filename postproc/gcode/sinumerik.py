@@ -41,6 +41,7 @@ WORD_LETTERS = frozenset("NGMXYZABCIJKFSTD")
 KEPT_KEYWORDS = frozenset({
     "SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "TRAFOOF", "UPATH", "SPATH",
     "WAITM", "COMPOF", "COMPON", "COMPCURV", "COMPCAD", "STOPFIFO", "STARTFIFO", "FIFOCTRL",
+    "FNORM", "FLIN", "FCUB",  # the feed's profile over a block (Fundamentals, "Feedrate"): no geometry
 })
 #: settings given as NAME=value that change no geometry (rounding distances of G641/G642; SPOS,
 #: the oriented spindle stop, which a CYCLE86 written as its moves holds)
