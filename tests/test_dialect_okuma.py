@@ -121,11 +121,13 @@ def test_cli_corrects_a_call_and_writes_nothing_when_refused(tmp_path):
 
 @pytest.mark.parametrize(("name", "construct"), [
     ("gcodeworkshop__examples__OSP5020M.nc", "Okuma OSTRT subprogram name line"),
-    ("gcodeworkshop__examples__FLANGE.nc", "word P without a plain number"),
+    ("gcodeworkshop__examples__FLANGE.nc", "Okuma PRES= local variable setting"),
+    ("gcodeworkshop__examples__OSP7000L.nc", "Okuma VGRIN[..] system variable"),
 ])
 def test_shop_corpus_okuma_files_refused_past_their_header(name, construct):
     """The corpus's Okuma programs are read past their $..% header (an SSB library of
-    subprograms, a macro program with local variables) and refused by what they hold."""
+    subprograms, macro programs with local and system variables) and refused by what they
+    hold, in Okuma's words."""
     text = (SHOP / name).read_text()
     with pytest.raises(PostprocError) as err:
         correct_text(text, IdentityEngine(BIG), Setup(offsets={"G15H1": (0, 0, 0)}), CorrectOptions(dialect="okuma"),

@@ -345,6 +345,10 @@ DIALECTS["okuma"] = replace(
               "--subroutine-path"),
              (r"(?i)\bMODIN\b", "MODIN modal subprogram call", "write the subprogram's moves in the main program"),
              (r"(?i)\bV[CS]\d+\s*=", "VC/VS common variable", "post the program with numbers in place of variables"),
+             (r"(?i)\b(V[A-Z]{2,}\w*)\s*\[", "{0}[..] system variable", "post the program with numbers in place of "
+              "variables"),
+             (r"(?i)^\s*(?:N\w+\s+)?([A-Z]{2}[A-Z0-9]{0,2})\s*=(?!=)", "{0}= local variable setting",
+              "post the program with numbers in place of variables"),
              (r"(?i)\bIF\s*\[|\bGOTO\b", "IF/GOTO program control", "post the program flat (loops written out)")),
     source="Okuma OSP-P programming manual (Mill): $ file header, G15/G16 work coordinates, "
            "G56/G53 tool length offset, CALL O subprograms")

@@ -425,7 +425,7 @@ class _Expander(Env):
                         return
                     percent_open = True
                 continue
-            b = unit.block(idx)
+            b = self._block_of(unit, idx, line)
             if first_code and unit is self.main and _opens_program(b):
                 first_code = False
                 yield SourceLine(idx + 1, unit.path, line, True)
@@ -446,6 +446,20 @@ class _Expander(Env):
             except _Stop:
                 break  # the program's end (M2/M30, M99 ending the main program)
         yield from self._closing_percent()
+
+    def _block_of(self, unit: Unit, idx: int, line: str) -> Block:
+        """The parsed block of line ``idx``; a line the parser cannot read that holds a
+        construct the dialect refuses by name (its ``refused`` list, as the interpreter reads
+        it) is refused in those words."""
+        try:
+            return unit.block(idx)
+        except GcodeSyntaxError:
+            for pattern, construct, instead in self.d.refused:
+                m = re.search(pattern, line)
+                if m:
+                    raise self.refuse(m.start() + 1, f"{self.d.title.split(' ')[0]} {construct.format(*m.groups())}",
+                                      hint=instead) from None
+            raise
 
     def _count_line(self, unit: Unit, idx: int) -> None:
         """One more line run; refused beyond ``max_lines``."""
