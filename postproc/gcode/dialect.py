@@ -420,7 +420,7 @@ DIALECTS["sinumerik"] = Dialect(
         (r"(?i)\b(A?ROTS|CROTS)\b", "{0} (frame rotation by solid angles)",
          "post the program in the work coordinates the frame gives (ROT/AROT about Z is read)"),
         (r"(?i)(?<![A-Z_])(?:IF|ELSE|WHILE|LOOP|FOR|REPEATB?|GOTOF|GOTOB|GOTOC|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR"
-         r"|UNTIL)\b"
+         r"|UNTIL|CASE)\b"
          r"|^\s*(?:N\d+\s+)?[A-Za-z_]\w*:(?!=)", _SINU_CONTROL, "post the program flat (loops written out)"),
         (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL|EXTERN)\b|^\s*(?:N\d+\s*)?L\d+\b", _SINU_SUB,
          "give the subprogram's directory with --subroutine-path, or write its moves in the main program"),
