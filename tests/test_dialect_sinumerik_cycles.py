@@ -97,6 +97,14 @@ def test_cycle83_anticipation_beyond_30mm_and_inch():
     assert got[2] == ("G1", (25.4, 25.4, pytest.approx(-0.2 * 25.4 + 1.0)))
 
 
+def test_cycle83_as_a_cam_post_writes_it():
+    """A CAM post's chip-breaking call: FDEP the first depth, no DAM, _AXN empty, _MDEP equal
+    to the stroke (so it changes nothing), _DTD at the bottom; strokes of 3 mm to -10."""
+    got = steps_of("MCALL CYCLE83(15., 0., 2., -10., , -3., , 0., , , 1., 0., , 3., 0., 0.5, 0)\nX5 Y5")
+    assert got == [z("G0", 2.0), z("G1", -3.0), z("G1", -2.0), z("G1", -6.0), z("G1", -5.0), z("G1", -9.0),
+                   z("G1", -8.0), z("G1", -10.0), ("G4", 0.5), z("G0", 15.0)]
+
+
 # -- boring cycles ------------------------------------------------------------------------
 def test_cycle85_feeds_in_and_out_by_hand():
     """CYCLE85(RTP 10, RFP 0, SDIS 2, DP -20, DTB 1, FFR 50, RFF 200): G0 to 2, G1 to -20 at
@@ -186,6 +194,7 @@ def test_cycles_corrected_with_the_s500_calibration():
     ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,0,0,1,2)", "VARI other than 0"),
     ("N10 CYCLE83(10,0,2,-30,0,-5,0,-0.8,0,0,1,1)", "degression DAM < 0"),
     ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,0,0,1,1,1)", "tool axis _AXN"),
+    ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,0,0,1,1,,4)", "minimum drilling depth _MDEP larger than its strokes"),
     ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,-1,0,1,1)", "dwell in spindle revolutions (DTB < 0)"),
     ("N10 CYCLE83(10,0,2,-30,0,5,0,2,0,0,1,1)", "first drilling depth not below its reference plane"),
     ("N10 CYCLE85(10,0,2,-20,0,1)", "Sinumerik CYCLE85 without its feeds FFR"),

@@ -15,7 +15,8 @@ sign; when both are given the depth comes from DPR: "Drilling, centering - CYCLE
   _VRT, _DTD, _DIS1) ("Deep-hole drilling - CYCLE83"): strokes from the first drilling
   depth FDEP (absolute; FDPR relative to RFP), each next stroke the last one less the
   degression DAM but not less than DAM, the last one ending at the final depth; the first
-  stroke at the feed times FRF. VARI=0 (chip breaking): after each stroke and the dwell
+  stroke at the feed times FRF; _MDEP, the minimum stroke, is read where every stroke but the
+  last is at least as long (it then changes nothing). VARI=0 (chip breaking): after each stroke and the dwell
   DTB, G1 back by _VRT (1 mm when 0) and on to the next depth. VARI=1 (swarf removal):
   after each stroke and the dwell DTB, G0 to RFP + SDIS, the dwell DTS, G0 to the depth
   reached less the anticipation distance (_DIS1, or 0.6 mm up to 30 mm of depth, else
@@ -62,6 +63,8 @@ CHIP_BREAK_MM = 1.0
 ANTICIPATION_MM, ANTICIPATION_DEPTH_MM, ANTICIPATION_MAX_MM = 0.6, 30.0, 7.0
 #: more strokes than this: a first depth or degression too small to be meant (refused)
 MAX_STROKES = 10_000
+#: a stroke this much shorter than _MDEP is still as long (the rounding of program numbers)
+STROKE_EPS = 1e-9
 
 Level = float | tuple[float, float, float]
 Step = tuple[str, "Level | str"]
@@ -208,6 +211,7 @@ class _DeepHole:
     vari: float
     vrt: float
     dis1: float
+    mdep: float  # the minimum stroke (_MDEP): read only where no stroke but the last is shorter
 
 
 def _deep_hole_params(p: _Call, feed: float) -> _DeepHole:
@@ -232,13 +236,15 @@ def _deep_hole_params(p: _Call, feed: float) -> _DeepHole:
         raise p.bad("with a feed factor FRF outside 0.001...1")
     if vari not in (0.0, 1.0):
         raise p.bad("with VARI other than 0 (chip breaking) or 1 (swarf removal)")
-    if axn not in (0.0, 3.0) or mdep:
-        raise p.bad("with a tool axis _AXN other than Z or a minimum depth _MDEP, not read")
+    if axn not in (0.0, 3.0):
+        raise p.bad("with a tool axis _AXN other than Z, not read")
+    if mdep < 0:
+        raise p.bad("with a negative minimum drilling depth _MDEP")
     if vrt < 0 or dis1 < 0:
         raise p.bad("with a negative retraction _VRT or anticipation distance _DIS1")
     if frf != 1.0 and math.isnan(feed):
         raise p.bad("with a feed factor FRF before any feed is programmed")
-    return _DeepHole(first, dam, dtb, p.dwell(9, "DTS"), p.dwell(15, "_DTD") or dtb, frf, vari, vrt, dis1)
+    return _DeepHole(first, dam, dtb, p.dwell(9, "DTS"), p.dwell(15, "_DTD") or dtb, frf, vari, vrt, dis1, mdep)
 
 
 def _deep_hole(p: _Call, start: float, bottom: float, feed: float,
@@ -253,6 +259,10 @@ def _deep_hole(p: _Call, start: float, bottom: float, feed: float,
         depths = strokes(first, bottom, rfp, dam)
     except ValueError:
         raise p.bad(f"with more than {MAX_STROKES} strokes (a first depth or degression too small)") from None
+    levels = [rfp, *depths]
+    if any(levels[i] - levels[i + 1] < c.mdep - STROKE_EPS for i in range(len(levels) - 2)):
+        raise p.bad("with a minimum drilling depth _MDEP larger than its strokes (how the cycle then divides the "
+                    "depth is not read)")
     steps: list[Step] = [(RAPID_STEP, start)]
     if frf != 1.0:
         steps.append((TEXT_STEP, "F" + number_text(feed * frf)))
