@@ -4,6 +4,7 @@
 a calibration, every step landing where the engine says. CYCLE84/CYCLE840 (tapping) are
 refused by name."""
 
+import json
 import math
 import re
 from pathlib import Path
@@ -228,3 +229,27 @@ def test_tapping_refused_by_the_command_line(tmp_path):
     assert res.exit_code == 3
     assert "tap.mpf:4:1: Sinumerik CYCLE84 (tapping cycle" in res.output
     assert not out.exists()
+
+
+def test_diff_pairs_every_cycle_step(tmp_path):
+    """`diff` reads an original's cycle calls as the lines correct writes them (F, SPOS=, M5,
+    M0 and G4 F lines included): every step of CYCLE83, CYCLE85, CYCLE86 and CYCLE88 is a
+    move paired with its corrected line, none inserted."""
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    prog = tmp_path / "t.mpf"
+    prog.write_text("%_N_T_MPF\nG54 D1\nG0 X10 Y20 Z30\nG1 F100\nMCALL CYCLE83(10,0,2,-30,,-8,,2,0.2,0,0.5,1)\n"
+                    "G0 X40 Y20\nX60 Y50\nMCALL\nCYCLE86(15,0,2,-12,,0.5,3,1,-1,0,45)\n"
+                    "CYCLE85(15,0,2,-12,,0.5,30,300)\nCYCLE88(15,0,2,-12,,0.5,3)\nM30\n")
+    out = tmp_path / "o.mpf"
+    cal = str(ROOT / "calibrations" / "s500_parametric.json")
+    res = CliRunner().invoke(main, ["correct", str(prog), "-c", cal, "--offset", "G54=X100,Y100,Z100",
+                                    "--tool-length", "1=50", "--cycles", "expand", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(main, ["diff", str(prog), str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.output)
+    assert report["moves"] == report["moves_moved"] == 70
+    assert report["lines_inserted"] == 0
