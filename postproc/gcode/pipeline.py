@@ -17,7 +17,7 @@ import math
 import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeAlias
@@ -27,28 +27,24 @@ import numpy as np
 from postproc.constants import (
     DEFAULT_MAX_CORRECTION_MM,
     DEFAULT_TOLERANCE_MM,
-    MM_PER_INCH,
 )
 from postproc.errors import (
     AlreadyCorrectedError,
     MissingSetupError,
     PostprocError,
-    UnsupportedGcodeError,
 )
 from postproc.gcode import bulk, cutter, emit
-from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
-from postproc.gcode.interp import Cycle, Interpreter, Move, NeedsExpansion, start_position
+from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.planner import Planner, Table
-from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
+from postproc.gcode.reader import ChunkReader
 from postproc.gcode.vplan import (
     ArcHint,
-    FloatArray,
     Plan,
     PlanMove,
 )
-from postproc.gcode.writer import ChunkWriter, Entry, Rebase, Store
+from postproc.gcode.writer import ChunkWriter, Entry
 from postproc.limits import BoundedWriter, Limits
 
 # Lines held while an axis is not yet positioned (they are corrected once it is, a few KB
@@ -155,8 +151,6 @@ class Corrector:
         # the machine is there uncorrected, so it is also the emitted and the previous target
         start = start_position(setup.start)
         self.expanded = False  # correcting the expanded program (recorded in the header)
-        self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
-        self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
         self.report.solver = engine.solver
@@ -169,6 +163,7 @@ class Corrector:
         self.cutter = cutter.Bound()  # compensated moves corrected so far and their bound
         self.writer = ChunkWriter(options, self.report, self.planner, start, path)
         self.writer.cutter = self.cutter  # a take-up is refused on a compensated move's line
+        self.reader = ChunkReader(self.interp, self.planner, options, self.report, path)
         self.cutter_known: cutter.Bound | None = None  # the whole program's, for the header (a second run)
 
     @property
@@ -182,6 +177,7 @@ class Corrector:
         self._report = report
         self.planner.report = report
         self.writer.report = report
+        self.reader.report = report
 
     # -- the run -----------------------------------------------------------------------
     @property
@@ -211,154 +207,58 @@ class Corrector:
             if was_enabled:
                 gc.enable()
 
-    # C901: the reading loop; its closures (a line, a block of lines) share the loop's
-    # state (line number, whether a run may start) and run for every line read
-    def _run(self, lines: Iterable[str], write: Write,  # noqa: C901
-             progress: Callable[[int], None] | None = None,
+    def _run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
              source: deque[tuple[int, str | None]] | None = None, skip_until: int = 0,
              boundary: Callable[[int], bool] | None = None) -> CorrectReport:
         """``source``: for an expanded program, the (line, file) each of ``lines`` comes
         from, in order (the lines are then read one by one, never in bulk)."""
         it = iter(lines)
-        interp = self.interp
-        interp.may_expand = source is None and self.opt.expand
-
-        last = [0]  # the source line where() gave last (an expanded program's)
-
-        def where(seq: int) -> int:
-            """The line number the interpreter reports for the ``seq``-th line read."""
-            if source is None:
-                return seq
-            ln, p = source.popleft()
-            interp.path = p or self.path
-            last[0] = ln
-            return ln
-
+        rd = self.reader
+        self.interp.may_expand = source is None and self.opt.expand
+        if source is not None:
+            rd.expanded(source)
         head, keep = emit.start_lines(it)
-        entries: list[Entry | bulk.Run] = []
-        lineno = self._write_start(head, keep, write, where)
-        head = head[keep:]
-
-        # runs of plain lines: for every engine whose moves the planner settles in bulk
-        use_bulk = (self.linear_exact or self.bulk_plan) and self.opt.bulk_lane and source is None
-        run_ok = False  # the modal state lets a run of plain lines start here
-        dec_mm = _unit_decimals(self.opt, 1.0)
-        dec_in = _unit_decimals(self.opt, MM_PER_INCH)
-        pending = 0  # lines in entries
-
-        def feed(line: str) -> None:
-            nonlocal lineno, run_ok
-            here = where(lineno)
-            mv = interp.feed_line(here, line)
-            if interp.call_line or interp.cycle_move is not None:
-                self._feed_drill_cycle(entries, line, mv, interp, here)
-            elif interp.stored_here is not None:
-                # G28.1/G30.1: the controller stores where it is, the corrected position
-                entries.append((line, Store(interp.stored_here), False, interp.state.motion))
-            elif interp.rebase is not None:
-                # an offset set from where the machine is: its words follow the correction there
-                words, axes, nominal = interp.rebase
-                entries.append((line, Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
-                                interp.state.motion))
-            elif mv is not None and mv.cycle is not None:
-                self._feed_cycle(entries, line, mv, mv.cycle, interp.state.motion)
-            elif mv is not None and mv.spline is not None:
-                self._feed_spline(entries, line, mv, mv.spline)
-            elif mv is not None and mv.fixed:
-                # the line only sends the machine to a stored position: written as it is
-                entries.append((line, None, False, interp.state.motion))
-                entries.append(("", mv, False, interp.state.motion))
-            elif mv is not None and mv.then is not None:
-                entries.append((line, mv, False, interp.state.motion))
-                entries.append(("", mv.then, False, interp.state.motion))
-            else:
-                entries.append((line, mv, interp.motion_word, interp.state.motion))
-            if self._series_expanded and interp.state.motion not in CANNED_CYCLES:
-                self._series_expanded = False  # G80 or another motion: the series has ended
-            lineno += 1
-            run_ok = use_bulk and bulk.state_allows(interp)
-
-        def feed_block(lines: list[str]) -> None:
-            nonlocal lineno, run_ok
-            block = bulk.scan(lines) if use_bulk else None
-            if block is None:
-                for line in lines:
-                    feed(line)
-                return
-            try:
-                tlo = block.tlo  # a straight move that sets the tool length (G43 H..) starts a run
-                edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
-                i, n = 0, len(lines)
-                gword, neutral = block.gword, block.neutral
-                for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
-                    while i < a:
-                        feed(lines[i])
-                        i += 1
-                    while i < b:
-                        if tlo and i in tlo and not interp.ended:
-                            # the tool length first (again when the interpreter reads the line)
-                            interp.set_tool_length(tlo[i], lineno, bulk.tlo_col(lines[i]))
-                            run_ok = False
-                        # a line naming its own motion word may start a run whatever the modal motion
-                        # (a run starts at a line that moves: one that moves nothing is the interpreter's)
-                        if not neutral[i] and (run_ok or (not interp.ended and bulk.prime_shift(interp)
-                                                          and bulk.state_allows(interp, bool(gword[i])))):
-                            dec = dec_in if interp.state.inch else dec_mm
-                            run = bulk.read_run(interp, block, i, b, lineno, dec)
-                            if run is not None:
-                                entries.append(run)
-                                self._series_expanded = False  # moves: no cycle series goes on
-                                lineno += run.b - i
-                                i = run.b
-                                run_ok = bulk.state_allows(interp)
-                                continue
-                        # the modal state does not allow a run here, or an arc the run does
-                        # not take (the interpreter reads it, and reports it if it must)
-                        feed(lines[i])
-                        i += 1
-                while i < n:
-                    feed(lines[i])
-                    i += 1
-            finally:
-                bulk.finish_block(block)  # the runs read so far stay usable after an error
-
-        for line in head:
-            feed(line)
-            pending += 1
+        self._write_start(head, keep, write)
+        for line in head[keep:]:
+            rd.line(line)
+        pending = len(head) - keep  # lines in the chunk read
         chunk = self.chunk_lines
         for block in iter(lambda: list(islice(it, chunk)), []):
-            try:
-                feed_block(block)
-            except NeedsExpansion:
-                raise
-            except PostprocError as exc:
-                # the lines read before this one are corrected first, so that an error of
-                # an earlier line (found when correcting) is the one reported, whatever
-                # the chunk size
-                if not any(math.isnan(v) for v in self.interp.state.pos):
-                    self._chunk(entries, lambda _text: None)
-                raise exc from None
+            self._read_block(block)
             pending += len(block)
             if pending > UNKNOWN_AXIS_LINES:  # the lines wait for an axis to be positioned: bounded
-                self._unknown_too_long(lineno - 1 if source is None else last[0], pending)
+                self._unknown_too_long(rd.lineno - 1 if source is None else rd.last, pending)
             if pending >= chunk and not any(math.isnan(v) for v in self.interp.state.pos):
-                if lineno - 1 > skip_until:
-                    self._chunk(entries, write)
+                if rd.lineno - 1 > skip_until:
+                    self._chunk(rd.entries, write)
                 else:  # read, not corrected
-                    self._read_only(entries)
-                entries.clear()
+                    self._read_only(rd.entries)
+                rd.entries.clear()
                 pending = 0
                 if progress is not None:
-                    progress(lineno - 1)
-                if boundary is not None and boundary(lineno - 1):
-                    self.report.lines_in = lineno - 1
+                    progress(rd.lineno - 1)
+                if boundary is not None and boundary(rd.lineno - 1):
+                    self.report.lines_in = rd.lineno - 1
                     return self.report
-        self._chunk(entries, write)
+        self._chunk(rd.entries, write)
         if progress is not None:
-            progress(lineno - 1)
-        self.report.lines_in = lineno - 1
+            progress(rd.lineno - 1)
+        self.report.lines_in = rd.lineno - 1
         self.report.g54_assumed_zero = self.interp.implicit_g54
         return self.report
+
+    def _read_block(self, block: list[str]) -> None:
+        """Read a block of lines into the chunk; on an error, the lines read before it are
+        corrected first, so that an error of an earlier line (found when correcting) is
+        the one reported, whatever the chunk size."""
+        try:
+            self.reader.block(block)
+        except NeedsExpansion:
+            raise
+        except PostprocError as exc:
+            if not any(math.isnan(v) for v in self.interp.state.pos):
+                self._chunk(self.reader.entries, lambda _text: None)
+            raise exc from None
 
     def _unknown_too_long(self, lineno: int, waiting: int) -> None:
         """Refuse a program that leaves an axis unknown for more than
@@ -371,10 +271,9 @@ class Corrector:
             hint=f"give the machine position of {axis} at program start with --start {axis}.. (mm, machine "
                  f"coordinates), or add an absolute move on {axis} near the start")
 
-    def _write_start(self, head: list[str], keep: int, write: Write, where: Callable[[int], int]) -> int:
+    def _write_start(self, head: list[str], keep: int, write: Write) -> None:
         """Write the first ``keep`` lines of ``head`` (they stay before the header), then
-        the header; returns the number of the next line. Refuses a program that carries a
-        header already (unless forced)."""
+        the header. Refuses a program that carries a header already (unless forced)."""
         for k, line in enumerate(head):
             if emit.is_header(line) and not self.opt.force:
                 raise AlreadyCorrectedError(
@@ -385,19 +284,18 @@ class Corrector:
         header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
                                         self._setup_note(), ending, expanded=self.expanded, setup=self.setup,
                                         cycles_expanded=self.opt.cycles == "expand")
-        lineno = 1
+        rd = self.reader
         for line in head[:keep]:
-            self.interp.feed_line(where(lineno), line)
+            self.interp.feed_line(rd.where(rd.lineno), line)
             write(line if emit.line_ending(line) else line + ending)
             self.report.lines_out += 1
-            lineno += 1
+            rd.lineno += 1
         if head and not keep and head[0].startswith("\ufeff"):
             write("\ufeff")  # the byte-order mark stays the file's first bytes
             head[0] = head[0][1:]
         write("".join(header_rows))
         self.report.lines_out += len(header_rows)
         self.report.header_lines = len(header_rows)
-        return lineno
 
     def _setup_note(self) -> str:
         parts = []
@@ -508,201 +406,12 @@ class Corrector:
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
         self.writer.write(entries, tab, plans, hints, write_out)
 
-    # -- moves written out for a cycle or a spline -------------------------------------
-    @staticmethod
-    def _generated_move(mv: Move, kind: int, prev: tuple[float, float, float], q: tuple[float, float, float],
-                        axes: Iterable[int], with_feed: bool, decimals: int, sep: str, lower: bool, ending: str,
-                        planned: bool = False) -> Entry:
-        """The entry of a G0/G1 line written in place of ``mv`` (a cycle step, a spline
-        chord): its nominal words on ``axes`` in the program's distance mode, the F word
-        of ``mv`` when ``with_feed``, and the Move the corrector rewrites."""
-        from postproc.gcode.lexer import scan_words
-
-        unit = mv.unit
-        words = ["G0" if kind == RAPID else "G1"]
-        if mv.frame is not None:  # words in the frame's coordinates (Sinumerik ROT/SCALE/MIRROR)
-            from postproc.gcode import frames
-
-            q_m, prev_m = q, prev
-            prev, q = (frames.program_from_machine(mv.frame, mv.shift, p) for p in (prev, q))
-            axes = tuple(k for k in range(3) if emit.fmt(q[k] / unit, decimals) != emit.fmt(prev[k] / unit, decimals))
-        for k in axes:
-            v = (q[k] - prev[k]) / unit if mv.incremental else (q[k] - mv.shift[k]) / unit
-            words.append("XYZ"[k] + emit.fmt(v, decimals))
-        if with_feed and mv.feed_idx >= 0:
-            words.append("F" + mv.words[mv.feed_idx].number)
-        text = sep.join(words) + ending
-        ws = scan_words(text)
-        if ws is None:  # words and blanks only
-            raise AssertionError(f"a generated line that is not plain: {text!r}")
-        ix, iy, iz = (next((i for i, w in enumerate(ws) if w.letter == a), -1) for a in "XYZ")
-        if mv.frame is not None:
-            prev, q = prev_m, q_m
-        step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
-                    mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w.letter == "F"), -1), False,
-                    mv.feed, mv.rotary, motion_idx=0, planned=planned, frame=mv.frame)
-        return (text.lower() if lower else text), step, True, kind
-
-    # -- splines -------------------------------------------------------------------------
-    def _feed_spline(self, entries: list[Entry | bulk.Run], line: str, mv: Move,
-                     spline: list[tuple[float, float]]) -> None:
-        """Queue a G5/G5.1 spline as the fewest G1 chords whose corrected path stays within
-        --tolerance of the corrected spline (checked at samples 1/10 of the tolerance apart
-        in chord error)."""
-        from postproc.gcode.interp import spline_points, spline_samples
-
-        tol = self.opt.tolerance_mm - self.planner.round_err(mv.unit)
-        has_ij = any(w.letter == "I" for w in mv.words)
-        kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv, spline)
-        self._spline_kept = kept
-        if kept:
-            # an affine correction maps the spline onto itself: the line stays as it is
-            entries.append((line, None, True, LINE))
-            entries.append(("", replace(mv, q0=mv.q1, fixed=True, spline=None, words=[],
-                                          axis_idx=(-1, -1, -1)), False, None))
-            return
-        s = spline_samples(spline, tol / 10.0)
-        xy = spline_points(spline, s)
-        nom = np.column_stack([xy, np.full(len(s), mv.q1[2])])
-        d = np.diff(np.vstack([np.asarray(mv.q0)[None, :], nom]), axis=0)
-        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
-        for k in range(1, len(sign)):
-            sign[k] = np.where(sign[k] == 0, sign[k - 1], sign[k])
-        sign = np.where(sign == 0, self.planner.dirs, sign)
-        lineno = np.full(len(s), mv.lineno)
-        corr = self.planner.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
-                              [mv.rotary] * len(s), lineno)
-        keep = [0]
-        i = 0
-        budget = 0.9 * tol
-        while i < len(s) - 1:
-            j = i + 1
-            while j + 1 < len(s) and _chord_fits(corr[i:j + 2], budget):
-                j += 1
-            keep.append(j)
-            i = j
-        ending = emit.new_line_ending(line)
-        sep, lower = emit.style_of(line)
-        sep = sep or " "
-        unit = mv.unit
-        dec = _unit_decimals(self.opt, unit)
-        if mv.prefix_words:
-            text = sep.join(mv.prefix_words)
-            entries.append(((text.lower() if lower else text) + ending, None, False, None))
-        prev = mv.q0
-        for n, k in enumerate(keep[1:]):
-            q = tuple(nom[k].tolist()) if k < len(s) - 1 else mv.q1
-            entries.append(self._generated_move(mv, LINE, prev, q, (0, 1), n == 0, dec, sep, lower, ending,
-                                                planned=True))
-            prev = q
-        self.report.splines_linearised += 1
-
-    def _spline_unmoved(self, mv: Move, spline: list[tuple[float, float]]) -> bool:
-        """Whether the correction at the spline's control points rounds to nothing (for an
-        affine correction the corrected spline is then the spline itself)."""
-        pts = np.array([(x, y, mv.q1[2]) for x, y in spline], dtype=float)
-        n = len(pts)
-        t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
-                           np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
-        d = _unit_decimals(self.opt, mv.unit)
-        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
-
-    # -- canned cycles -------------------------------------------------------------------
-    def _feed_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move, c: Cycle, motion: int | None) -> None:
-        """Queue the cycle block ``c`` of ``mv``: kept (its bottom and R point corrected) or
-        expanded into the controller's own G0/G1 moves, each corrected like any other move.
-        With ``--cycles auto`` a block is kept when :meth:`_cycle_keeps` says so and no block
-        of its series was expanded (a kept block needs the cycle, R and Z the controller
-        holds, and an expansion leaves it in G0/G1)."""
-        mode = self.opt.cycles
-        if mode == "auto":
-            mode = "keep" if not self._series_expanded and self._cycle_keeps(mv, c) else "expand"
-            self._series_expanded = mode == "expand"
-        if mode != "expand":
-            if c.repeats == 1 and not mv.incremental:
-                entries.append((line, mv, True, motion))
-                bottom, rpoint = c.holes[0]
-                entries.append(("", replace(mv, q1=rpoint, cycle=None, probe=1), False, motion))
-                return
-            # several holes from one line, or increments: one word cannot carry each hole's
-            # correction; kept only where nothing is corrected
-            for bottom, rpoint in c.holes:
-                for q in (bottom, rpoint):
-                    entries.append(("", replace(mv, q1=q, cycle=None, probe=2), False, motion))
-            entries.append((line, None, True, None))
-            end = c.steps[-1][1] if c.steps else mv.q0
-            entries.append(("", replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
-                                          axis_idx=(-1, -1, -1)), False, None))
-            return
-        ending = emit.new_line_ending(line)
-        sep, lower = emit.style_of(line)
-        sep = sep or " "
-        d = _unit_decimals(self.opt, mv.unit)
-        for step in emit.cycle_lines(line, mv, c, retract=self.opt.cycles != "expand"):
-            if isinstance(step, str):
-                entries.append((step, None, False, None))
-            else:
-                kind, prev, q, moved, first_feed = step
-                entries.append(self._generated_move(mv, kind, prev, q, moved, first_feed, d, sep, lower, ending))
-        self.report.cycles_expanded += 1
-
-    def _cycle_keeps(self, mv: Move, c: Cycle) -> bool:
-        """Whether a cycle block can stay a cycle: one hole whose correction's tilt between
-        its R plane and its bottom is within :data:`CYCLE_KEEP_SHARE` of the tolerance, or
-        several holes (or increments) whose corrections all round to nothing."""
-        if not c.holes:
-            return True
-        pts = np.array([q for hole in c.holes for q in hole], dtype=float)
-        n = len(pts)
-        dirs = np.broadcast_to(self.planner.dirs, pts.shape)
-        t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
-                           [mv.rotary] * n, np.full(n, mv.lineno))
-        if c.repeats == 1 and not mv.incremental:
-            drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
-            return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self.planner.round_err(mv.unit))
-        d = _unit_decimals(self.opt, mv.unit)
-        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
-
-    def _feed_drill_cycle(self, entries: list[Entry | bulk.Run], line: str, mv: Move | None,
-                          interp: Interpreter, lineno: int) -> None:
-        """Queue a Sinumerik block that calls a drilling cycle or runs the modal one: the
-        call written as a comment, a position block as any move, then the cycle's G0/G1
-        moves (each corrected) and G4 F dwells; the motion mode is restored after them, as
-        the cycle (a subprogram with SAVE) restores it. Only with ``--cycles expand``: a
-        CYCLE81 call cannot carry each hole's correction in its parameters."""
-        cyc = interp.cycle_move
-        if self.opt.cycles == "keep":
-            call = interp.call_line or f"MCALL {interp.modal_call.name if interp.modal_call else ''}"
-            raise UnsupportedGcodeError(
-                f"Sinumerik {call} (drilling cycle call): read only when written as its moves", path=self.path, lineno=lineno, col=1,
-                hint="give --cycles expand or auto to write each hole as its G0/G1 moves, each corrected")
-        d = _unit_decimals(self.opt, cyc.unit if cyc is not None else 1.0)
-        ending = emit.new_line_ending(line)
-        sep, lower = emit.style_of(line)
-        for step in emit.drill_cycle_lines(line, bool(interp.call_line), mv, cyc, interp.state.motion):
-            if step is None:
-                entries.append((line, mv, interp.motion_word, interp.state.motion))
-            elif isinstance(step, str):
-                entries.append((step, None, False, None))
-            elif cyc is not None:  # (a step is made only of a cycle)
-                kind, prev, q, moved, _first = step
-                entries.append(self._generated_move(cyc, kind, prev, q, moved, False, d, sep or " ", lower, ending))
-        if cyc is None:
-            return
-        self.report.cycles_expanded += 1
-
-    # -- emission ----------------------------------------------------------------------
 
 
-def _chord_fits(points: FloatArray, budget: float) -> bool:
-    """Whether every point lies within ``budget`` of the chord from the first to the last."""
-    a, b = points[0], points[-1]
-    ab = b - a
-    L2 = float(ab @ ab)
-    if L2 == 0.0:
-        return bool(np.all(np.linalg.norm(points - a, axis=1) <= budget))
-    t = np.clip((points - a) @ ab / L2, 0.0, 1.0)
-    return bool(np.all(np.linalg.norm(points - (a + t[:, None] * ab), axis=1) <= budget))
+
+
+
+
 
 
 # -- entry points ---------------------------------------------------------------------

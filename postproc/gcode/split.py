@@ -61,6 +61,9 @@ class Corrector(Protocol):
     def writer(self) -> object: ...
 
     @property
+    def reader(self) -> object: ...
+
+    @property
     def linear_exact(self) -> bool: ...
 
     @property
@@ -92,10 +95,11 @@ Write = Callable[[str], object]
 # from chunk to chunk. Everything else is compared.
 _CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "_report", "interp", "_decimals",
                      "_long_line",
-                     "linear_exact", "bulk_plan", "accept_residual_mm", "expanded", "planner", "writer"})
+                     "linear_exact", "bulk_plan", "accept_residual_mm", "expanded", "planner", "writer", "reader"})
 _PLANNER_CONFIG = frozenset({"engine", "opt", "report", "path", "rotary", "setup_context", "accept_residual_mm",
                              "linear_exact", "bulk_plan"})
 _WRITER_CONFIG = frozenset({"opt", "report", "planner", "path", "_long_line", "_decimals", "cutter"})
+_READER_CONFIG = frozenset({"interp", "planner", "opt", "report", "path", "source", "use_bulk", "dec_mm", "dec_in"})
 _INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup", "d", "_g_alias", "_dialect_g", "_iso_blocks"})
 
 
@@ -152,7 +156,8 @@ def state_of(c: Corrector) -> object:
     interp = {k: v for k, v in vars(c.interp).items() if k not in _INTERP_CONFIG}
     planner = {k: v for k, v in vars(c.planner).items() if k not in _PLANNER_CONFIG}
     writer = {k: v for k, v in vars(c.writer).items() if k not in _WRITER_CONFIG}
-    return _canon((mine, interp, planner, writer))
+    reader = {k: v for k, v in vars(c.reader).items() if k not in _READER_CONFIG}
+    return _canon((mine, interp, planner, writer, reader))
 
 
 def _canon(x: object) -> object:
