@@ -423,88 +423,119 @@ def correct_text(text: str, engine: Engine, setup: Setup | None = None, options:
 
     out: list[str] = []
     lines = split_lines(text)
-    report = _correct_lines(lambda: lines, out.append, out.clear, engine, setup, options, path,
-                            calibration_name, calibration_sha256, input_lines=len(lines), input_chars=len(text))
+    job = _Job(engine, setup or Setup(), options or CorrectOptions(), path, calibration_name, calibration_sha256)
+    report = _correct_lines(_Program(lambda: lines, None, len(lines), len(text)), out.append, out.clear, job)
     return "".join(out), report
 
 
-def _correct_lines(get_lines: Callable[[], Iterable[str]], write: Write, restart: Callable[[], None], engine: Engine,
-                   setup: Setup | None, options: CorrectOptions | None, path: str | None, calibration_name: str,
-                   calibration_sha256: str, progress: Callable[[int], None] | None = None,
-                   count: int | None = None, input_lines: int = 0, input_chars: int = 0) -> CorrectReport:
-    """Correct the lines ``get_lines()`` gives; when the program turns out to need
-    expansion, ``restart()`` drops what was written and the expanded program is corrected.
-    ``count``: the number of lines, when the program may be cut into parts corrected in
-    several processes (:mod:`postproc.gcode.split`); ``input_lines``, ``input_chars``: the
-    program's size, for the bounds on the output's (``options.limits``)."""
-    from postproc.gcode.interp import NeedsExpansion
+@dataclass
+class _Job:
+    """What a correction run is given: the engine, the setup and options, and the names the
+    header records; and the cutter compensation bound, once a first run found it."""
 
-    setup = setup or Setup()
-    options = options or CorrectOptions()
-    known: list[cutter.Bound] = []  # the cutter compensation bound, once a first run found it
-    read = 0  # lines read (of the program as written, or as expanded: at[0])
-    at: list[tuple[int, str | None]] = [(0, path)]  # the expanded line read last and its file
+    engine: Engine
+    setup: Setup
+    options: CorrectOptions
+    path: str | None
+    calibration_name: str
+    calibration_sha256: str
+    known: list[cutter.Bound] = field(default_factory=list)
 
-    def counted(lines: Iterable[str]) -> Iterator[str]:
-        nonlocal read
-        for read, line in enumerate(lines, start=1):  # noqa: B007 - read is the count so far
+    def corrector(self) -> Corrector:
+        c = Corrector(self.engine, self.setup, self.options, path=self.path, calibration_name=self.calibration_name,
+                      calibration_sha256=self.calibration_sha256)
+        c.cutter_known = self.known[0] if self.known else None
+        return c
+
+
+@dataclass
+class _Program:
+    """The program a run reads: ``get_lines()`` gives its lines (again on each call);
+    ``count``: their number when it may be cut into parts corrected in several processes
+    (:mod:`postproc.gcode.split`); ``lines``, ``chars``: its size, for the bounds on the
+    output's (``options.limits``); ``read``: the lines read so far; ``at``: the expanded
+    line read last and its file."""
+
+    get_lines: Callable[[], Iterable[str]]
+    count: int | None = None
+    lines: int = 0
+    chars: int = 0
+    read: int = 0
+    at: tuple[int, str | None] = (0, None)
+
+    def counted(self) -> Iterator[str]:
+        """The lines, each counted as it is read."""
+        for n, line in enumerate(self.get_lines(), start=1):
+            self.read = n
             yield line
 
-    bounded = BoundedWriter(write, options.limits.output_lines(input_lines),
-                            lambda: (at[-1][1], at[-1][0]) if at[-1][0] else (path, read or None),
-                            options.limits.output_chars(input_chars))
-    write = bounded
+
+def _correct_lines(prog: _Program, write: Write, restart: Callable[[], None], job: _Job,
+                   progress: Callable[[int], None] | None = None) -> CorrectReport:
+    """Correct the program's lines; when the program turns out to need expansion,
+    ``restart()`` drops what was written and the expanded program is corrected; when it
+    is under cutter compensation, it is corrected again with the bound in its header."""
+    options = job.options
+    bounded = BoundedWriter(write, options.limits.output_lines(prog.lines),
+                            lambda: (prog.at[1], prog.at[0]) if prog.at[0] else (job.path, prog.read or None),
+                            options.limits.output_chars(prog.chars))
 
     def dropped() -> None:
         restart()
         bounded.restart()
 
-    def corrector() -> Corrector:
-        c = Corrector(engine, setup, options, path=path, calibration_name=calibration_name,
-                      calibration_sha256=calibration_sha256)
-        c.cutter_known = known[0] if known else None
-        return c
-
-    def once() -> CorrectReport:
-        """One run: the program as written, else (it needs expansion) expanded."""
-        try:
-            if count is not None:
-                from postproc.gcode import split
-
-                try:
-                    return split.run(corrector, get_lines, write, progress, count, options.processes, path)
-                except split.Failed:
-                    dropped()  # a process for a part failed (not the program): once more, in one
-            return corrector().run(counted(get_lines()), write, progress=progress)
-        except NeedsExpansion:
-            if not options.expand:
-                raise
-        from postproc.gcode.expand import expand
-
-        dropped()
-        lines = list(get_lines())
-        source: deque[tuple[int, str | None]] = deque()
-        c = corrector()
-
-        def texts() -> Iterator[str]:
-            for sl in expand(lines, path=path, dialect=options.dialect,
-                             subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables,
-                             max_iterations=options.limits.max_iterations):
-                source.append((sl.lineno, sl.path))
-                at[-1] = (sl.lineno, sl.path or path)
-                yield sl.text
-
-        c.expanded = True
-        report = c.run(texts(), write, progress=progress, source=source)
-        report.expanded = True
-        return report
-
     try:
-        return once()
+        return _once(prog, job, bounded, dropped, progress)
     except cutter.Rerun as again:
         dropped()
-        known.append(again.bound)
-        return once()
+        job.known.append(again.bound)
+        return _once(prog, job, bounded, dropped, progress)
+
+
+def _once(prog: _Program, job: _Job, write: Write, dropped: Callable[[], None],
+          progress: Callable[[int], None] | None) -> CorrectReport:
+    """One run: the program as written (in parts, where it may be cut), else (it needs
+    expansion) expanded."""
+    options = job.options
+    try:
+        if prog.count is not None:
+            from postproc.gcode import split
+
+            try:
+                return split.run(job.corrector, prog.get_lines, write, progress, prog.count, options.processes,
+                                 job.path)
+            except split.Failed:
+                dropped()  # a process for a part failed (not the program): once more, in one
+        return job.corrector().run(prog.counted(), write, progress=progress)
+    except NeedsExpansion:
+        if not options.expand:
+            raise
+    dropped()
+    return _expanded(prog, job, write, progress)
+
+
+def _expanded(prog: _Program, job: _Job, write: Write, progress: Callable[[int], None] | None) -> CorrectReport:
+    """Correct the program expanded (:func:`postproc.gcode.expand.expand`): subprograms,
+    loops and parameters written out, each line read with its source line and file."""
+    from postproc.gcode.expand import expand
+
+    options = job.options
+    lines = list(prog.get_lines())
+    source: deque[tuple[int, str | None]] = deque()
+    c = job.corrector()
+
+    def texts() -> Iterator[str]:
+        for sl in expand(lines, path=job.path, dialect=options.dialect,
+                         subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables,
+                         max_iterations=options.limits.max_iterations):
+            source.append((sl.lineno, sl.path))
+            prog.at = (sl.lineno, sl.path or job.path)
+            yield sl.text
+
+    c.expanded = True
+    report = c.run(texts(), write, progress=progress, source=source)
+    report.expanded = True
+    return report
 
 
 def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str], engine: Engine,
@@ -545,9 +576,10 @@ def correct_file(source: str | os.PathLike[str], output: str | os.PathLike[str],
                 out.seek(0)
                 out.truncate()
 
-            report = _correct_lines(lambda: iter_source_lines(Path(source))[1], out.write, restart, engine, setup,
-                                    options, path, calibration_name, calibration_sha256, progress, count,
-                                    input_lines=lines_in, input_chars=size)
+            job = _Job(engine, setup or Setup(), options or CorrectOptions(), path, calibration_name,
+                       calibration_sha256)
+            prog = _Program(lambda: iter_source_lines(Path(source))[1], count, lines_in, size)
+            report = _correct_lines(prog, out.write, restart, job, progress)
     except DiskFullError:  # disk full keeps its own exit code
         raise
     except OutputError as exc:  # an output that cannot be written stays an input error for correct (exit 3)
