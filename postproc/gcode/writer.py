@@ -63,6 +63,27 @@ class Rebase:
 Entry: TypeAlias = "tuple[str, Move | Rebase | Store | None, bool, int | None]"
 
 
+@final
+class _Chunk:
+    """A chunk being written: its targets, plans and hints, the text written so far, where
+    each entry's text starts in it (``marks``: (index, its line, 1: every line is that
+    line's, 2: a run's lines one by one from it, 0: a line passed as it is)), the next row
+    of the table, the lines passed as they are, and the runs' prepared emissions."""
+
+    __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks")
+
+    def __init__(self, T: FloatArray, plans: dict[int, Plan], hints: dict[int, ArcHint]) -> None:
+        self.T = T
+        self.plans = plans
+        self.hints = hints
+        self.out: list[str] = []  # the chunk's text, written at once
+        self.marks: list[tuple[int, int, int]] = []
+        self.k = 0
+        self.passed = 0
+        self.prepared: dict[int, bulk.Emission] = {}
+        self.blocks: list[bulk.Block] = []
+
+
 class ChunkWriter(EmitterMixin):
     """Writes a chunk's lines (see the module docstring); carries what the controller
     holds from one chunk to the next."""
@@ -89,102 +110,92 @@ class ChunkWriter(EmitterMixin):
         """The arc fits' adaptive subdivision, with the planner's engine calls."""
         return self.planner.subdivide(curves, s_init, unit)
 
-    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
-    def write(self, entries: list[Entry | bulk.Run], tab: Table, plans: dict[int, Plan],  # noqa: C901
+    def write(self, entries: list[Entry | bulk.Run], tab: Table, plans: dict[int, Plan],
               hints: dict[int, ArcHint], write_out: Write) -> None:
         """Write the chunk's ``entries``, planned in ``tab`` (``plans``, ``hints``: the
         planner's), as one text to ``write_out``."""
-        T = tab.target
-        out: list[str] = []  # the chunk's text, written at once
-        write = out.append
-        # where each entry's text starts in out: (index, its line, 1: every line is that
-        # line's, 2: a run's lines one by one from it, 0: a line passed as it is)
-        marks: list[tuple[int, int, int]] = []
-        mark = marks.append
-        emit_move = self._emit_move
-        get_plan = plans.get
-        get_hint = hints.get
-        k = 0
-        passed = 0
-        prepared: dict[int, bulk.Emission] = {}
-        blocks: list[bulk.Block] = []
+        o = _Chunk(tab.target, plans, hints)
         for e in entries:
             if type(e) is bulk.Run:
-                mark((len(out), e.lineno, 2))
-                em = prepared.get(id(e.block))
-                if em is None:
-                    em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
-                    blocks.append(e.block)
-                cut = e.cut
-                if not cut:
-                    bulk.emit_run(self, e, em, T, write, hints)
-                else:  # arcs and lines that must be split: written by the general emitter
-                    for part in bulk.split_run(e, sorted(set(cut))):
-                        if type(part) is bulk.Run:
-                            mark((len(out), part.lineno, 2))
-                            bulk.emit_run(self, part, em, T, write, hints)
-                            continue
-                        j, fm = part
-                        mark((len(out), e.lineno + j, 1))
-                        line = e.block.lines[e.a + j]
-                        hint = get_hint(k + j)
-                        if hint is not None:
-                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, write)
-                        else:
-                            emit_move(line, fm.to_move(line), T[k + j].tolist(), get_plan(k + j), write)
-                k += len(e)
-                continue
-            line, mv, motion_word, prog_motion = e
-            mark((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1))
-            if type(mv) is Rebase:
-                self._emit_rebase(line, mv, write)
-                continue
-            if type(mv) is Store:
-                self._stored[mv.name] = list(self.qe)
-                write(line)
-                passed += 1
-                continue
-            if mv is None:
-                write(line)
-                passed += 1
-                if motion_word:
-                    self.emitted_motion = prog_motion
-                continue
-            if mv.probe:  # used by the cycle block before it, or checked here
-                if mv.probe == 2:
-                    self._check_unmoved(mv, T[k])
-                k += 1
-                continue
-            if mv.cycle is not None:
-                self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
-                k += 1
-                continue
-            if mv.fixed:  # the machine is at a stored position, uncorrected
-                self.qe = list(mv.q1)
-                if mv.stored is not None and mv.stored[0] in self._stored:
-                    # a position the program stored: the controller stored its corrected one
-                    for ax in mv.stored[1]:
-                        self.qe[ax] = self._stored[mv.stored[0]][ax]
-                k += 1
-                continue
-            if mv.then is not None:  # G28/G30: only the intermediate point's own words change
-                self._emit_words_only(line, mv, T[k].tolist(), write)
-                k += 1
-                continue
-            target = T[k].tolist()
-            hint = get_hint(k)
-            if hint is not None:
-                self._emit_hinted_arc(line, mv, target, hint, write)
+                self._write_run(e, o)
             else:
-                emit_move(line, mv, target, get_plan(k), write)
-            k += 1
-        for blk in blocks:
+                self._write_entry(e, o)
+        for blk in o.blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
-        self.report.lines_out += passed
-        text = "".join(out)
+        self.report.lines_out += o.passed
+        text = "".join(o.out)
         if self._long_line.search(text):
-            text = self._fit_lines(out, marks)
+            text = self._fit_lines(o.out, o.marks)
         write_out(text)
+
+    def _write_run(self, e: bulk.Run, o: _Chunk) -> None:
+        """Write a run of plain lines: in bulk, but for the arcs and lines that must be
+        split, which the general emitter writes."""
+        out, T, k = o.out, o.T, o.k
+        o.marks.append((len(out), e.lineno, 2))
+        em = o.prepared.get(id(e.block))
+        if em is None:
+            em = o.prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
+            o.blocks.append(e.block)
+        if not e.cut:
+            bulk.emit_run(self, e, em, T, out.append, o.hints)
+        else:  # arcs and lines that must be split: written by the general emitter
+            for part in bulk.split_run(e, sorted(set(e.cut))):
+                if type(part) is bulk.Run:
+                    o.marks.append((len(out), part.lineno, 2))
+                    bulk.emit_run(self, part, em, T, out.append, o.hints)
+                    continue
+                j, fm = part
+                o.marks.append((len(out), e.lineno + j, 1))
+                line = e.block.lines[e.a + j]
+                hint = o.hints.get(k + j)
+                if hint is not None:
+                    self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, out.append)
+                else:
+                    self._emit_move(line, fm.to_move(line), T[k + j].tolist(), o.plans.get(k + j), out.append)
+        o.k += len(e)
+
+    def _write_entry(self, e: Entry, o: _Chunk) -> None:
+        """Write a line read by the interpreter: passed as it is where it moves nothing,
+        else its move (row ``o.k`` of the table) corrected."""
+        out, T, k = o.out, o.T, o.k
+        write = out.append
+        line, mv, motion_word, prog_motion = e
+        o.marks.append((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1))
+        if type(mv) is Rebase:
+            self._emit_rebase(line, mv, write)
+            return
+        if type(mv) is Store:
+            self._stored[mv.name] = list(self.qe)
+            write(line)
+            o.passed += 1
+            return
+        if mv is None:
+            write(line)
+            o.passed += 1
+            if motion_word:
+                self.emitted_motion = prog_motion
+            return
+        o.k += 1
+        if mv.probe:  # used by the cycle block before it, or checked here
+            if mv.probe == 2:
+                self._check_unmoved(mv, T[k])
+        elif mv.cycle is not None:
+            self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
+        elif mv.fixed:  # the machine is at a stored position, uncorrected
+            self.qe = list(mv.q1)
+            if mv.stored is not None and mv.stored[0] in self._stored:
+                # a position the program stored: the controller stored its corrected one
+                for ax in mv.stored[1]:
+                    self.qe[ax] = self._stored[mv.stored[0]][ax]
+        elif mv.then is not None:  # G28/G30: only the intermediate point's own words change
+            self._emit_words_only(line, mv, T[k].tolist(), write)
+        else:
+            hint = o.hints.get(k)
+            if hint is not None:
+                self._emit_hinted_arc(line, mv, T[k].tolist(), hint, write)
+            else:
+                self._emit_move(line, mv, T[k].tolist(), o.plans.get(k), write)
 
     def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
         """A chunk's text (``out``, its entries' ``marks``) with every line it writes
