@@ -59,15 +59,6 @@ def roll_xy(k_rad: float):
     return f
 
 
-def sag_load_position(mm_per_unit: float):
-    """Table sag proportional to load times the distance from the column (X)."""
-    def f(q, r, ctx):
-        out = np.zeros_like(q)
-        out[:, 2] = -mm_per_unit * ctx["load"] * (q[:, 0] / TRAVEL)
-        return out
-    return f
-
-
 def two_frames(offset_mm):
     """The tracker moved (a re-set-up) halfway through the campaign."""
     def f(q, r, ctx):
@@ -169,10 +160,11 @@ def cases():
          {"n": 90, "extra": bump(2, 60.0, 20.0, 0.015, along=1)}, {}),
         ("XY-dependent roll", "roll EA = k X Y, 150 urad at the far corner (outside catalogue)", "tools", [],
          {"extra": roll_xy(1.5e-4)}, {}),
-        ("load x position", "sag 20 um x load/500 x X/L (outside catalogue)", "logged", [],
-         {"context": {"load": load_steps}, "extra": sag_load_position(4e-5)}, {}),
-        ("load x position, larger", "sag 50 um x load/500 x X/L (outside catalogue)", "logged", [],
-         {"context": {"load": load_steps}, "extra": sag_load_position(1e-4)}, {}),
+        ("load x position", "ram along Y sagging under its load: 20 um at 500 and full extension (beam)",
+         "logged", [], {"context": {"load": load_steps},
+                        "extra": vm.ram_sag(0.020, 1, load_column="load", load_max=500.0)}, {}),
+        ("load x position, larger", "the same ram, 50 um at 500 and full extension (beam)", "logged", [],
+         {"context": {"load": load_steps}, "extra": vm.ram_sag(0.050, 1, load_column="load", load_max=500.0)}, {}),
         ("machine repeatability 4 um", "per-visit scatter (no model can remove it)", "random", [],
          {"visit_sigma_mm": 0.004}, {}),
         ("tracker moved halfway", "frame jump 15 um (nuisance, not the machine)", "random", [],

@@ -61,17 +61,34 @@ def test_per_visit_scatter_is_campaign_limited():
     assert res.verdict_info.details["cause"] == "repeatability"
 
 
-def test_load_times_position_is_not_passed_as_load_plus_a_fixed_shape():
-    """A sag growing with load and with X: load plus a fixed shape fits the loads it saw and
-    misses the load step held out."""
-    def sag(q, r, ctx):
-        out = np.zeros_like(q)
-        out[:, 2] = -1e-4 * ctx["load"] * q[:, 0] / 315.0
-        return out
+def _load_steps(t, rng):
+    return np.repeat([0.0, 250.0, 500.0], -(-len(t) // 3))[:len(t)][rng.permutation(len(t))]
 
-    def load(t, rng):
-        return np.repeat([0.0, 250.0, 500.0], -(-len(t) // 3))[:len(t)][rng.permutation(len(t))]
-    res = vm.check_campaign(vm.campaign("logged", 24, context={"load": load}, extra=sag), offer_empirical=False)
+
+def test_load_times_position_is_named_and_holds_on_the_load_step_held_out():
+    """A ram along Y sagging under the load it carries (beam theory: the sag grows with the
+    load and the cube of the free length, the end turns and acts through the tool), 20 um
+    at the full load and extension. Load plus a fixed shape passed it (1.09 x on the load
+    steps); the load x position term names it, and holds on each load step left out."""
+    sag = vm.ram_sag(0.020, 1, load_column="load", load_max=500.0)
+    res = vm.check_campaign(vm.campaign("logged", 331, context={"load": _load_steps}, extra=sag),
+                            offer_empirical=False)
+    assert res.verdict == "missing-effect", verdict_line(res)
+    assert "loadpos:Y" in res.verdict_info.details["effects"]
+    assert "load levels" in res.verdict_info.evidence
+    assert res.verdict_info.spatial_ratio <= CONSISTENT_RATIO
+    assert res.ranking.base_cv_rms_mm / res.noise.rms_mm > CONSISTENT_RATIO
+
+
+def test_a_load_step_left_out_fails_load_plus_a_fixed_shape():
+    """Without the load x position term (a catalogue that lacks it), a 50 um sag is fitted as
+    load plus a fixed shape, which misses the load step it did not see."""
+    from postproc.effects import candidate_names
+
+    sag = vm.ram_sag(0.050, 1, load_column="load", load_max=500.0)
+    meas = vm.campaign("logged", 24, context={"load": _load_steps}, extra=sag)
+    names = [n for n in candidate_names(["t", "temp", "load"]) if not n.startswith("loadpos:")]
+    res = vm.check_campaign(meas, candidates=names, offer_empirical=False)
     assert res.verdict not in ("consistent", "missing-effect"), verdict_line(res)
     assert "load levels" in res.verdict_info.evidence
 

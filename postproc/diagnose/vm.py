@@ -240,6 +240,36 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
                         linenos=np.arange(len(q)) + 4, has_tool_columns=True)
 
 
+def ram_sag(tip_sag_mm: float, axis: int = 1, *, overhang_mm: float = 100.0, travel_mm: float = 315.0,
+            load_column: str | None = None, load_max: float = 1.0):
+    """A ram (a cantilever along ``axis``) that sags under a weight at its tip, as a
+    displacement function for :func:`campaign`'s ``extra``.
+
+    The ram's free length is ``e = q[axis] + overhang_mm``; a tip weight ``P`` bends it by
+    ``P e^3 / (3 E I)`` downwards (-Z) and turns its end by ``P e^2 / (2 E I)``, which acts
+    through the tool vector (the ram's end carries the tool). ``tip_sag_mm`` is the sag at
+    the full extension (and, with ``load_column``, at the load ``load_max``): with a load
+    column the weight is the load (a head or a workpiece hung on the ram), without it the
+    ram's own head, the same in every row. Beam theory, not an effect of the catalogue.
+    """
+    from postproc.rotation import rotate
+
+    full = travel_mm + overhang_mm
+    k = tip_sag_mm / full**3  # P / (3 E I) at the full weight
+
+    def f(q, r, ctx):
+        weight = np.ones(len(q)) if load_column is None else np.asarray(ctx[load_column], dtype=float) / load_max
+        e = q[:, axis] + overhang_mm
+        out = np.zeros_like(q)
+        out[:, 2] = -k * weight * e**3
+        slope = -3.0 * k * weight * e**2  # dz/de: the end turns nose down
+        w = np.zeros_like(q)
+        bend = 1 - axis if axis < 2 else 0  # about X for a ram along Y, about Y for one along X
+        w[:, bend] = slope if axis == 1 else -slope
+        return out + rotate(w, r) - r
+    return f
+
+
 def check_campaign(meas: Measurements, cal=None, **options):
     """``check --fixed`` of a campaign against the tables calibration (default)."""
     from postproc.diagnose.check import run_check
