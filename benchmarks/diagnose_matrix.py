@@ -223,7 +223,12 @@ def row(res) -> tuple[str, str, str]:
 
 
 def clean(n_seeds: int, seed0: int) -> None:
+    """False alarms on clean campaigns: a suggestion, and a verdict other than consistent
+    (with the ratio it would have needed at the Gaussian 1.15, for the heavy-tailed ones)."""
+    from postproc.diagnose.verdict import CONSISTENT_RATIO
+
     false, total, t0 = 0, 0, time.perf_counter()
+    not_consistent, gaussian_rule, heavy = 0, 0, 0
     per_shape = {}
     for s in vm.SHAPES:
         for k in range(n_seeds):
@@ -232,12 +237,22 @@ def clean(n_seeds: int, seed0: int) -> None:
             false += hit
             total += 1
             per_shape[s] = per_shape.get(s, 0) + hit
+            v = res.verdict_info
+            heavy += bool(res.noise.heavy_tailed)
+            worst = max(v.random_ratio, v.spatial_ratio or 0.0) if v is not None else float("nan")
+            gaussian_rule += bool(hit or not worst <= CONSISTENT_RATIO)
+            if res.verdict != "consistent":
+                not_consistent += 1
+                print(f"  not consistent: {s} seed {seed0 + 1000 + k}: {res.verdict} ({v.evidence if v else ''})",
+                      flush=True)
             if hit:
                 print(f"  false suggestion: {s} seed {seed0 + 1000 + k}: "
                       + ", ".join(f"{x['effect']} (p = {x['p_value']:.2g})" for x in res.suggestions), flush=True)
     dt = (time.perf_counter() - t0) / max(total, 1)
     print(f"false-alarm rate: {false} of {total} clean campaigns ({false / total:.1%}) got a suggestion "
           f"({', '.join(f'{s} {v}' for s, v in per_shape.items())}); {dt:.1f} s per check")
+    print(f"verdicts: {total - not_consistent} of {total} consistent ({not_consistent} not); "
+          f"{heavy} flagged heavy-tailed; with the Gaussian 1.15 for all, {gaussian_rule} would not be")
 
 
 def main() -> None:

@@ -61,6 +61,23 @@ def test_per_visit_scatter_is_campaign_limited():
     assert res.verdict_info.details["cause"] == "repeatability"
 
 
+def test_tilt_is_named_on_heavy_tailed_noise_and_clean_campaigns_stay_consistent():
+    """Student-t tracker noise (4 degrees of freedom), 120 pairs: on this seed the noise
+    itself sits 8 % above the floor its repeats give, and a true 60 urad tilt, named, was
+    judged 'unexplained' (1.09 random folds, 1.17 on the Y slabs). The verdict now allows for
+    the floor's uncertainty under heavy tails; clean campaigns of the same noise stay
+    consistent (benchmarks/diagnose_matrix.py --clean counts them on 40 more)."""
+    tilt = vm.machine_with([{"name": "abbe:tilt", "params": {"wx_rad": 6e-5, "wy_rad": 0.0, "wz_rad": 0.0}}])
+    res = vm.check_campaign(vm.campaign("tools", 319, machine=tilt), offer_empirical=False)
+    assert res.noise.heavy_tailed
+    assert res.verdict == "missing-effect", verdict_line(res)
+    assert res.verdict_info.details["effects"] == ["abbe:tilt"]
+    assert "widened for heavy-tailed noise" in res.verdict_info.evidence
+    for seed in (319, 320, 321, 322):
+        clean = vm.check_campaign(vm.campaign("tools", seed), max_selected=1, offer_empirical=False)
+        assert clean.verdict == "consistent", (seed, verdict_line(clean))
+
+
 def _load_steps(t, rng):
     return np.repeat([0.0, 250.0, 500.0], -(-len(t) // 3))[:len(t)][rng.permutation(len(t))]
 
