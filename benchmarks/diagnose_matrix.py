@@ -169,6 +169,8 @@ def cases():
          {"visit_sigma_mm": 0.004}, {}),
         ("tracker moved halfway", "frame jump 15 um (nuisance, not the machine)", "random", [],
          {"extra": two_frames([0.0, 0.015, 0.0])}, {}),
+        ("tracker moved at 60 %", "frame jump 10 um + 20 urad, rigid (nuisance, not the machine)", "random", [],
+         {"moved": (0.6, 0.010, 2e-5)}, {}),
         ("static calibration refitted", "s500 bows (static too stiff)", "random", [], {"n": 120},
          {"cal": "static"}),
         ("parametric refitted: lost motion, raster dir=0", "backlash:Y -12 um", "raster",

@@ -121,3 +121,34 @@ def test_stiff_static_model_is_model_too_stiff():
     res = vm.check_campaign(meas, cal, fixed=False, max_selected=1, offer_empirical=False)
     assert res.verdict == "model-too-stiff", verdict_line(res)
     assert "parametric" in res.verdict_info.details["finer_model"]
+
+
+def test_tracker_moved_during_the_campaign_is_a_frame_jump_named_with_its_row():
+    """The tracker knocked after 60 % of the rows (10 um and 20 urad, rigid): it was
+    'unexplained' with thermal:t suggested; now campaign-limited, the jump found at its row."""
+    res = vm.check_campaign(vm.campaign("random", 1, moved=(0.6, 0.010, 2e-5)), offer_empirical=False)
+    assert res.verdict == "campaign-limited", verdict_line(res)
+    assert res.verdict_info.details["cause"] == "frame jump"
+    assert abs(res.verdict_info.details["row"] - 145) <= 2
+    assert "register the two parts separately" in verdict_line(res)
+    assert res.to_json()["frame_jump"]["size_mm"] > 0.008
+
+
+def test_clean_campaigns_and_a_warm_up_give_no_frame_jump():
+    from postproc.diagnose.check import measured_residual
+    from postproc.diagnose.data import Dataset
+    from postproc.diagnose.jump import frame_jump
+
+    engine = vm.tables_calibration().engine
+    warm = vm.machine_with([{"name": "thermal:t", "config": {"tau_s": 2400.0},
+                             "params": {"dx_mm": 0.0, "dy_mm": 0.004, "dz_mm": 0.015}}])
+    measured = [vm.campaign(shape, 900 + i) for i, shape in enumerate(vm.SHAPES)]
+    measured += [vm.campaign("random", 340 + i, machine=warm) for i in range(2)]
+    for meas in measured:
+        ds = Dataset.from_measurements([meas])
+        jump = frame_jump(ds, measured_residual(engine, ds))
+        assert jump is None, (meas.path, jump.describe())
+    moved = Dataset.from_measurements([vm.campaign("planes", 5, moved=(0.5, 0.010, 2e-5))])
+    jump = frame_jump(moved, measured_residual(engine, moved))
+    assert jump is not None
+    assert abs(jump.row - 150) <= 3

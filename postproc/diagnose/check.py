@@ -18,6 +18,7 @@ from postproc.diagnose.campaign import campaign_warnings
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.frame import FrameFit
+from postproc.diagnose.jump import FrameJump, frame_jump
 from postproc.diagnose.models import BaseModel, Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
 from postproc.diagnose.rank import (
@@ -69,6 +70,7 @@ class CheckResult:
     recorded: dict | None = None  # what 'fit --base' held fixed, read from the file (then used)
     refitted_effects: list = field(default_factory=list)  # effects of the file refitted on every fold
     verdict_info: Verdict | None = None  # judged on random and spatial held-out points
+    jump: FrameJump | None = None  # a step of the measurement frame in time (the tracker moved)
 
     @property
     def suggestions(self) -> list[dict]:
@@ -169,6 +171,7 @@ class CheckResult:
             "warnings": list(self.warnings),
             "empirical": self.empirical,
             "fixed_from_file": self.recorded,
+            "frame_jump": self.jump.to_json() if self.jump is not None else None,
         }
 
 
@@ -213,6 +216,17 @@ def _registered(engine, ds_all: Dataset, keep: np.ndarray, resid_all: np.ndarray
     except PostprocError:
         return resid_all
     return resid_all if fr is None else resid_all - fr.displacement(ds_all.q, ds_all.r)
+
+
+def _jump(model: BaseModel, ds: Dataset, effects: list) -> FrameJump | None:
+    """A step of the measurement frame in time (:mod:`postproc.diagnose.jump`), on the
+    residual of the model with the calibration's own effects (before any suggestion: a
+    warm-up fitted to a step would hide it)."""
+    try:
+        fitted = model.fit(ds, model.prepare(ds, [effect_from_dict(e.to_dict()) for e in effects]))
+    except PostprocError:
+        return None
+    return frame_jump(ds, ds.m - fitted.predict(ds))
 
 
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
@@ -311,6 +325,7 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     res.warnings = campaign_warnings(ds, cal, data, res)
     res.refitted_effects = refitted if fixed else existing
     if ranking is not None:
+        res.jump = _jump(model, ds, res.refitted_effects)
         res.verdict_info = judge(res, model, groups, fold_masks)
     if offer_empirical and ranking is not None and res.verdict == "unexplained":
         try:

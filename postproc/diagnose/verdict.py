@@ -13,6 +13,9 @@ the conditions it was fitted on is not the physics.
 
 Verdicts, in the order they are tried:
 
+- ``campaign-limited``, cause "frame jump": the measurement frame steps during the
+  campaign (:mod:`postproc.diagnose.jump`: the tracker moved; one registration cannot hold
+  both parts, whatever is suggested may be its echo; the evidence names the row to split at);
 - ``consistent``: the calibration's cross-validated RMS, random and spatial, is within
   ``CONSISTENT_RATIO`` x the noise floor and nothing is suggested;
 - ``missing-effect``: the suggested effects bring both there (named);
@@ -356,6 +359,14 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
              else f"random folds {r_random:.2f} x the floor (no spatial split)")
     bound = f"{tol:.2f}{widened}" if widened else f"{tol:g}"
     names = ", ".join(c.name for c in rk.selected)
+    jump = getattr(res, "jump", None)
+    if jump is not None:
+        echo = f" ({names} may be its echo)" if names else ""
+        return Verdict("campaign-limited", f"{jump.describe()}: the tracker moved or was set up again during the "
+                       f"campaign, and one registration cannot hold both parts{echo}; register the two parts "
+                       f"separately: split the measurements before {jump.place} and check each part on its own; "
+                       f"held-out RMS {split}", r_random, r_spatial,
+                       {"cause": "frame jump", "row": jump.row + 1, "place": jump.place})
     if worst <= tol:
         if not rk.selected:
             return Verdict("consistent", f"held-out RMS {split} (<= {bound}); nothing suggested",

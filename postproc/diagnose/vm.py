@@ -190,7 +190,7 @@ def carried(recorded: np.ndarray) -> np.ndarray:
 
 def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, context=None, frame: bool = True,
              noise_df: float | None = NOISE_DF, path: str | None = None, extra=None,
-             visit_sigma_mm: float = 0.0) -> Measurements:
+             visit_sigma_mm: float = 0.0, moved: tuple[float, float, float] | None = None) -> Measurements:
     """One campaign of ``shape`` measured on ``machine`` (default: the clean one).
 
     ``context``: extra columns, name -> function(t, rng) -> (N,) values, or a pair (true
@@ -202,6 +202,9 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
     ``extra(q, r, ctx) -> (N, 3)``: a displacement outside the effect catalogue (a local
     bump, a coupling) added to the machine's. ``visit_sigma_mm``: the machine's
     repeatability, a random offset per visit of a point (shared by its shots).
+    ``moved``: (fraction, translation mm, rotation rad): the tracker knocked or set up
+    again after that fraction of the rows: from there on its frame is moved once more by a
+    rigid motion, of the given size along a random direction.
     """
     rng = np.random.default_rng(seed)
     mach = machine if machine is not None else clean_machine()
@@ -236,6 +239,15 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
 
         w = rng.normal(0.0, FRAME_ROTATION_RAD, 3)
         m = rotate(np.tile(w, (len(m), 1)), m) + rng.normal(0.0, FRAME_TRANSLATION_MM, 3)
+    if moved is not None:
+        from postproc.rotation import rotate
+
+        fraction, shift_mm, turn_rad = moved
+        k = int(round(fraction * len(m)))
+        d_t, d_w = rng.normal(size=3), rng.normal(size=3)
+        d_t *= shift_mm / np.linalg.norm(d_t)
+        d_w *= turn_rad / np.linalg.norm(d_w)
+        m[k:] = rotate(np.tile(d_w, (len(m) - k, 1)), m[k:]) + d_t
     return Measurements(q=q, m=m, r=r, direction=recorded, context=ctx, path=path or f"{shape}_{seed}.csv",
                         linenos=np.arange(len(q)) + 4, has_tool_columns=True)
 
