@@ -165,6 +165,8 @@ def cases():
                         "extra": vm.ram_sag(0.020, 1, load_column="load", load_max=500.0)}, {}),
         ("load x position, larger", "the same ram, 50 um at 500 and full extension (beam)", "logged", [],
          {"context": {"load": load_steps}, "extra": vm.ram_sag(0.050, 1, load_column="load", load_max=500.0)}, {}),
+        ("ram sag under its head", "ram along Y sagging 30 um at full extension (beam, outside catalogue)",
+         "random", [], {"extra": vm.ram_sag(0.030, 1)}, {}),
         ("machine repeatability 4 um", "per-visit scatter (no model can remove it)", "random", [],
          {"visit_sigma_mm": 0.004}, {}),
         ("tracker moved halfway", "frame jump 15 um (nuisance, not the machine)", "random", [],
