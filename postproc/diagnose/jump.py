@@ -114,9 +114,10 @@ def frame_jump(ds: Dataset, resid: np.ndarray) -> FrameJump | None:
     min_side = max(MIN_SEGMENT_ROWS, int(np.ceil(MIN_SEGMENT_FRACTION * n)))
     if n < 2 * min_side:
         return None
-    t = ds.ctx.get("t")
-    timed = t is not None and bool(np.all(np.isfinite(t))) and np.ptp(t) > 0
-    order = np.argsort(t, kind="stable") if timed else np.arange(n)
+    logged = ds.ctx.get("t")
+    timed = logged is not None and bool(np.all(np.isfinite(logged))) and np.ptp(logged) > 0
+    t = np.asarray(logged, dtype=float) if timed else np.arange(n, dtype=float)
+    order = np.argsort(t, kind="stable")
     groups = ds.repeat_groups()[order]
     q, r, y3 = ds.q[order], ds.r[order], resid[order]
     B = frame_basis(q, r)  # (n, 3, 6)
@@ -148,7 +149,7 @@ def frame_jump(ds: Dataset, resid: np.ndarray) -> FrameJump | None:
     p = min(1.0, len(cuts) * float(f_dist.sf(f_stat, 6, dof)))
     explained = (sse0 - best_sse) / sse0
     F = B.reshape(3 * n, 6)
-    s = (np.arange(n) - 0.5 * (n - 1)) / n if not timed else (t[order] - t.mean()) / np.ptp(t)
+    s = (t[order] - t.mean()) / np.ptp(t)
     ramp = _sse(np.hstack([F, F * np.repeat(s, 3)[:, None]]), y)
     drift = min(ramp, _warmup_sse(F, t[order], y) if timed else ramp)
     if p >= JUMP_P or explained < MIN_EXPLAINED or best_sse >= drift:

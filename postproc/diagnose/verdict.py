@@ -309,8 +309,8 @@ def _rank_on_finer(res, f_model, f_effects, folds) -> tuple[list[str], str | Non
 
 
 def tolerance(nf) -> tuple[float, str]:
-    """The ratio to the floor that is consistent with noise, and why it differs from
-    CONSISTENT_RATIO ("" when it does not).
+    """The ratio to the floor that is consistent with noise, and its text for the evidence
+    (with why it differs from CONSISTENT_RATIO, when it does).
 
     CONSISTENT_RATIO allows for a floor estimated from Gaussian noise. With heavy-tailed
     noise (:attr:`NoiseFloor.heavy_tailed`) the floor is less certain: the variance of a
@@ -320,12 +320,30 @@ def tolerance(nf) -> tuple[float, str]:
     widened by the floor's upper confidence bound on those degrees of freedom over that
     of Gaussian noise on as many."""
     if not (nf.heavy_tailed and nf.kurtosis and nf.dof > 0):
-        return CONSISTENT_RATIO, ""
+        return CONSISTENT_RATIO, f"{CONSISTENT_RATIO:g}"
     dof_eff = nf.dof * 2.0 / (2.0 + nf.kurtosis)
     widen = floor_upper(1.0, dof_eff) / floor_upper(1.0, nf.dof)
     return (CONSISTENT_RATIO * widen,
-            f": {CONSISTENT_RATIO:g} widened for heavy-tailed noise, excess kurtosis {nf.kurtosis:.1f}, "
+            f"{CONSISTENT_RATIO * widen:.2f}: {CONSISTENT_RATIO:g} widened for heavy-tailed noise, excess kurtosis {nf.kurtosis:.1f}, "
             f"{dof_eff:.0f} effective degrees of freedom of the floor instead of {nf.dof}")
+
+
+def _split_text(r_random: float, r_spatial: float | None, where: str, names: list[str]) -> str:
+    """The held-out ratios of the evidence line: random folds, and the worst held-out split."""
+    if r_spatial is None:
+        return f"random folds {r_random:.2f} x the floor (no spatial split)"
+    return (f"random folds {r_random:.2f}, worst of the held-out {', '.join(names)}: "
+            f"{where} {r_spatial:.2f} x the floor")
+
+
+def _jump_verdict(jump, names: str, split: str, r_random: float, r_spatial: float | None) -> Verdict:
+    """campaign-limited by a step of the measurement frame (:mod:`postproc.diagnose.jump`)."""
+    echo = f" ({names} may be its echo)" if names else ""
+    return Verdict("campaign-limited", f"{jump.describe()}: the tracker moved or was set up again during the "
+                   f"campaign, and one registration cannot hold both parts{echo}; register the two parts "
+                   f"separately: split the measurements before {jump.place} and check each part on its own; "
+                   f"held-out RMS {split}", r_random, r_spatial,
+                   {"cause": "frame jump", "row": jump.row + 1, "place": jump.place})
 
 
 def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | None:
@@ -335,38 +353,27 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
         return None
     ds = res.ds
     nf = res.noise
-    tol, widened = tolerance(nf)
-
-    def ratio(resid: np.ndarray) -> float:
-        return held_rms(resid) / floor
+    tol, bound = tolerance(nf)
 
     final_effects = [*res.refitted_effects, *(get_effect(c.name) for c in rk.selected)]
     splits = spatial_splits(model, ds, groups, len(folds))
     e_final = rk.final_cv_resid if rk.final_cv_resid is not None else rk.base_cv_resid
-    r_random = ratio(e_final)
-    r_without = ratio(rk.base_cv_resid)
+    r_random = held_rms(e_final) / floor
+    r_without = held_rms(rk.base_cv_resid) / floor
     r_spatial, where = None, ""
     for label, sfolds in splits:
         try:
-            r = ratio(held_out(model, ds, final_effects, sfolds))
+            r = held_rms(held_out(model, ds, final_effects, sfolds)) / floor
         except PostprocError:
             continue
         if r_spatial is None or r > r_spatial:
             r_spatial, where = r, label
     worst = max(r_random, r_spatial or 0.0)
-    split = (f"random folds {r_random:.2f}, worst of the held-out {', '.join(n for n, _ in splits)}: "
-             f"{where} {r_spatial:.2f} x the floor" if r_spatial is not None
-             else f"random folds {r_random:.2f} x the floor (no spatial split)")
-    bound = f"{tol:.2f}{widened}" if widened else f"{tol:g}"
+    split = _split_text(r_random, r_spatial, where, [n for n, _ in splits])
     names = ", ".join(c.name for c in rk.selected)
     jump = getattr(res, "jump", None)
     if jump is not None:
-        echo = f" ({names} may be its echo)" if names else ""
-        return Verdict("campaign-limited", f"{jump.describe()}: the tracker moved or was set up again during the "
-                       f"campaign, and one registration cannot hold both parts{echo}; register the two parts "
-                       f"separately: split the measurements before {jump.place} and check each part on its own; "
-                       f"held-out RMS {split}", r_random, r_spatial,
-                       {"cause": "frame jump", "row": jump.row + 1, "place": jump.place})
+        return _jump_verdict(jump, names, split, r_random, r_spatial)
     if worst <= tol:
         if not rk.selected:
             return Verdict("consistent", f"held-out RMS {split} (<= {bound}); nothing suggested",
@@ -385,10 +392,10 @@ def judge(res, model, groups: np.ndarray, folds: list[np.ndarray]) -> Verdict | 
         tries += [(m, d + " with " + names, final_effects) for m, d in finer_models(model, ds)]
     for f_model, f_desc, f_effects in tries:
         try:
-            fr = ratio(held_out(f_model, ds, f_effects, folds))
+            fr = held_rms(held_out(f_model, ds, f_effects, folds)) / floor
             if fr > tol:
                 continue
-            fs = max((ratio(held_out(f_model, ds, f_effects, f))
+            fs = max((held_rms(held_out(f_model, ds, f_effects, f)) / floor
                       for _, f in spatial_splits(f_model, ds, groups, len(folds))), default=fr)
         except PostprocError:
             continue

@@ -226,8 +226,8 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
     if extra is not None:
         m = m + extra(q, r, full)
     if visit_sigma_mm:
-        moved = np.any(q[1:] != q[:-1], axis=1) | np.any((recorded[1:] != 0) & (recorded[1:] != recorded[:-1]), axis=1)
-        visit = np.cumsum(np.r_[True, moved]) - 1
+        new_visit = np.any(q[1:] != q[:-1], axis=1) | np.any((recorded[1:] != 0) & (recorded[1:] != recorded[:-1]), axis=1)
+        visit = np.cumsum(np.r_[True, new_visit]) - 1
         m = m + rng.normal(0.0, visit_sigma_mm, (visit[-1] + 1, 3))[visit]
     sigma = mach.noise.tracker_mm
     if noise_df is None:
