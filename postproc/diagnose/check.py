@@ -32,7 +32,7 @@ from postproc.diagnose.rank import (
 from postproc.diagnose.robust import Screening, screen
 from postproc.diagnose.verdict import Verdict, judge
 from postproc.diagnose.where import components, where_it_fails
-from postproc.effects import candidate_names, effect_from_dict
+from postproc.effects import candidate_names, effect_from_dict, get_effect
 from postproc.effects.composed import ComposedEngine
 from postproc.engine.registry import fit_methods, fold_options, option_flag, refit_options
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
@@ -218,10 +218,19 @@ def _registered(engine, ds_all: Dataset, keep: np.ndarray, resid_all: np.ndarray
     return resid_all if fr is None else resid_all - fr.displacement(ds_all.q, ds_all.r)
 
 
+def _in_time(name: str) -> bool:
+    """An effect that changes with time or temperature only (a warm-up): a step of the frame
+    is tested against such a drift, never on its residual (fitted to a step, it hides it)."""
+    needs = get_effect(name).needs
+    return any(c == "t" or c.startswith("temp") for c in needs)
+
+
 def _jump(model: BaseModel, ds: Dataset, effects: list) -> FrameJump | None:
     """A step of the measurement frame in time (:mod:`postproc.diagnose.jump`), on the
-    residual of the model with the calibration's own effects (before any suggestion: a
-    warm-up fitted to a step would hide it)."""
+    residual of the model with the calibration's own effects and the suggested ones that
+    depend on the position or the approach (a reversal or a lead screw measured along the
+    time order of a raster is a step in time too), not the warm-ups: the test compares the
+    step with a drift itself."""
     try:
         fitted = model.fit(ds, model.prepare(ds, [effect_from_dict(e.to_dict()) for e in effects]))
     except PostprocError:
@@ -325,7 +334,8 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     res.warnings = campaign_warnings(ds, cal, data, res)
     res.refitted_effects = refitted if fixed else existing
     if ranking is not None:
-        res.jump = _jump(model, ds, res.refitted_effects)
+        res.jump = _jump(model, ds, [*res.refitted_effects,
+                                     *(get_effect(c.name) for c in ranking.selected if not _in_time(c.name))])
         res.verdict_info = judge(res, model, groups, fold_masks)
     if offer_empirical and ranking is not None and res.verdict == "unexplained":
         try:
