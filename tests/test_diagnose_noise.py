@@ -36,3 +36,35 @@ def test_noise_floor_from_repeats_and_declared():
     unknown = noise_floor(Dataset(q=q[::4], m=m[::4], r=np.zeros((60, 3))))
     assert unknown.rms_mm is None
     assert unknown.source == "unknown"
+
+
+def test_qn_scale_is_consistent_for_gaussian_noise_and_robust_to_bad_shots():
+    from postproc.diagnose.noise import qn_scale
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(0.0, 2.0, 3000)
+    assert qn_scale(x) == pytest.approx(2.0, rel=0.05)
+    x[:300] = 1000.0  # a tenth of the shots wild
+    assert qn_scale(x) == pytest.approx(2.0, rel=0.2)
+
+
+def test_heavy_tails_are_measured_and_gaussian_noise_keeps_the_plain_verdict():
+    """Student-t noise (4 degrees of freedom) is flagged by the kurtosis of the repeat
+    deviations; Gaussian noise is not, and its verdict keeps CONSISTENT_RATIO exactly."""
+    from postproc.diagnose import vm
+    from postproc.diagnose.verdict import CONSISTENT_RATIO, tolerance
+
+    heavy = gauss = 0
+    for seed in range(6):
+        nt = noise_floor(Dataset.from_measurements([vm.campaign("raster", 600 + seed)]))
+        ng = noise_floor(Dataset.from_measurements([vm.campaign("raster", 600 + seed, noise_df=None)]))
+        heavy += nt.heavy_tailed
+        gauss += ng.heavy_tailed
+        assert tolerance(ng) == (CONSISTENT_RATIO, "1.15")
+        assert ng.robust_rms_mm == pytest.approx(ng.rms_mm, rel=0.08)
+        if nt.heavy_tailed:
+            tol, why = tolerance(nt)
+            assert CONSISTENT_RATIO < tol < 1.4
+            assert "heavy-tailed" in why
+    assert gauss == 0
+    assert heavy >= 4

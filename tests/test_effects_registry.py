@@ -15,7 +15,7 @@ def test_candidates_in_catalogue_order():
     assert names == [
         "backlash:X", "backlash:Y", "backlash:Z", "periodic:X", "periodic:Y", "periodic:Z",
         "thermal:t", "thermal:temp", "thermal:temp2", "expansion:temp", "expansion:temp2", "load:load",
-        "abbe:tilt", "abbe:X", "abbe:Y", "abbe:Z", "squareness:XY", "squareness:XZ", "squareness:YZ",
+        "loadpos:X", "loadpos:Y", "loadpos:Z", "abbe:tilt", "abbe:X", "abbe:Y", "abbe:Z", "squareness:XY", "squareness:XZ", "squareness:YZ",
         "scale:X", "scale:Y", "scale:Z", "straightness:X", "straightness:Y", "straightness:Z",
         "positioning:X", "positioning:Y", "positioning:Z",
         "lever:XY", "lever:XZ", "lever:YX", "lever:YZ", "lever:ZX", "lever:ZY", "linear:humidity",

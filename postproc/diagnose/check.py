@@ -18,6 +18,7 @@ from postproc.diagnose.campaign import campaign_warnings
 from postproc.diagnose.crossval import DEFAULT_FOLDS, make_folds
 from postproc.diagnose.data import Dataset
 from postproc.diagnose.frame import FrameFit
+from postproc.diagnose.jump import FrameJump, frame_jump
 from postproc.diagnose.models import BaseModel, Fixed, base_model
 from postproc.diagnose.noise import NoiseFloor, noise_floor
 from postproc.diagnose.rank import (
@@ -31,7 +32,7 @@ from postproc.diagnose.rank import (
 from postproc.diagnose.robust import Screening, screen
 from postproc.diagnose.verdict import Verdict, judge
 from postproc.diagnose.where import components, where_it_fails
-from postproc.effects import candidate_names, effect_from_dict
+from postproc.effects import candidate_names, effect_from_dict, get_effect
 from postproc.effects.composed import ComposedEngine
 from postproc.engine.registry import fit_methods, fold_options, option_flag, refit_options
 from postproc.errors import MeasurementError, MissingSetupError, PostprocError
@@ -69,6 +70,7 @@ class CheckResult:
     recorded: dict | None = None  # what 'fit --base' held fixed, read from the file (then used)
     refitted_effects: list = field(default_factory=list)  # effects of the file refitted on every fold
     verdict_info: Verdict | None = None  # judged on random and spatial held-out points
+    jump: FrameJump | None = None  # a step of the measurement frame in time (the tracker moved)
 
     @property
     def suggestions(self) -> list[dict]:
@@ -139,6 +141,9 @@ class CheckResult:
             "max_xyz_mm": self.summary["max_xyz_mm"],
             "noise_floor_mm": self.noise.rms_mm,
             "noise_floor_source": self.noise.source,
+            "noise_floor_robust_mm": self.noise.robust_rms_mm,
+            "noise_excess_kurtosis": self.noise.kurtosis,
+            "noise_heavy_tailed": self.noise.heavy_tailed,
             "cv_folds": rk.folds if rk else 0,
             "cv_rms_mm": rk.base_cv_rms_mm if rk else None,
             "cv_rms_after_mm": rk.final_cv_rms_mm if rk else None,
@@ -166,6 +171,7 @@ class CheckResult:
             "warnings": list(self.warnings),
             "empirical": self.empirical,
             "fixed_from_file": self.recorded,
+            "frame_jump": self.jump.to_json() if self.jump is not None else None,
         }
 
 
@@ -210,6 +216,26 @@ def _registered(engine, ds_all: Dataset, keep: np.ndarray, resid_all: np.ndarray
     except PostprocError:
         return resid_all
     return resid_all if fr is None else resid_all - fr.displacement(ds_all.q, ds_all.r)
+
+
+def _in_time(name: str) -> bool:
+    """An effect that changes with time or temperature only (a warm-up): a step of the frame
+    is tested against such a drift, never on its residual (fitted to a step, it hides it)."""
+    needs = get_effect(name).needs
+    return any(c == "t" or c.startswith("temp") for c in needs)
+
+
+def _jump(model: BaseModel, ds: Dataset, effects: list) -> FrameJump | None:
+    """A step of the measurement frame in time (:mod:`postproc.diagnose.jump`), on the
+    residual of the model with the calibration's own effects and the suggested ones that
+    depend on the position or the approach (a reversal or a lead screw measured along the
+    time order of a raster is a step in time too), not the warm-ups: the test compares the
+    step with a drift itself."""
+    try:
+        fitted = model.fit(ds, model.prepare(ds, [effect_from_dict(e.to_dict()) for e in effects]))
+    except PostprocError:
+        return None
+    return frame_jump(ds, ds.m - fitted.predict(ds))
 
 
 def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, folds: int = DEFAULT_FOLDS,
@@ -308,6 +334,8 @@ def run_check(cal, data, files: list[str], *, sigma_mm: float | None = None, fol
     res.warnings = campaign_warnings(ds, cal, data, res)
     res.refitted_effects = refitted if fixed else existing
     if ranking is not None:
+        res.jump = _jump(model, ds, [*res.refitted_effects,
+                                     *(get_effect(c.name) for c in ranking.selected if not _in_time(c.name))])
         res.verdict_info = judge(res, model, groups, fold_masks)
     if offer_empirical and ranking is not None and res.verdict == "unexplained":
         try:

@@ -148,10 +148,44 @@ def extend_calibration(cal, data, effect_names, register: bool = True) -> FitRes
     result.info = _info(ds, resid, fitted)
     result.report += [f"note: {n}" for n in result.info.get("notes", [])]
     result.info["effects"] = [e.name for e in all_effects]
+    _raw_check(result, cal, ds, effects, engine, register, base_engine, existing)
     result.info["base"] = {"path": cal.path, "method": cal.method, "fit": dict(cal.fit or {})}
     result.info["fixed"] = fixed_record(cal, existing, fitted.effects, register)
     result.effects = [e.to_dict() for e in all_effects]
     return result
+
+
+def _raw_rms(engine, ds: Dataset) -> float:
+    return float(np.sqrt(np.mean(np.sum((ds.m - engine.forward(ds.q, ds.r, ds.ctx)) ** 2, axis=1))))
+
+
+def _raw_check(result: FitResult, cal, ds: Dataset, effects, engine, register: bool, base_engine,
+               existing) -> None:
+    """The written calibration against its base on the raw data (no registration), in the
+    report and ``fit.raw_rms_mm``. With a registration, the frame may take what an effect
+    describes: a ram's sag has an offset and a tilt, which look like a tracker set up
+    elsewhere, so the effect is stored without them and the file can be worse than its base
+    on the raw points. Then a warning gives both figures and the one without the
+    registration (``--no-register``: for a frame that is the machine's own, or did not move)."""
+    before, after = _raw_rms(cal.engine, ds), _raw_rms(engine, ds)
+    raw = {"input_mm": before, "written_mm": after}
+    if register and effects and after > before:
+        model = Fixed(cal.engine, "fit --base --no-register", False)
+        alt = model.fit(ds, model.prepare(ds, effects))
+        alt_engine = ComposedEngine(base_engine, [*existing, *alt.effects])
+        raw["without_registration_mm"] = _raw_rms(alt_engine, ds)
+        message = (f"on the raw points (no registration) the written calibration is worse than its base: RMS "
+                   f"{before * 1000:.2f} -> {after * 1000:.2f} um. The registration (not stored) took part of what "
+                   "the effects describe (an offset or a tilt that grows with an axis, as a ram's sag has, looks "
+                   "like a tracker set up elsewhere). If the measurement frame is the machine's own (the tracker "
+                   "registered to the machine, or not moved since the base was measured), fit with --no-register: "
+                   f"{raw['without_registration_mm'] * 1000:.2f} um on the raw points")
+        result.report.append(f"warning: {message}")
+        result.info.setdefault("warnings", []).append(message)
+    else:
+        result.report.append(f"raw points (no registration): RMS {before * 1000:.2f} um with the base, "
+                             f"{after * 1000:.2f} um with the written calibration")
+    result.info["raw_rms_mm"] = raw
 
 
 def fixed_record(cal, held_effects, added_effects, register: bool) -> dict:

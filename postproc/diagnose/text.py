@@ -48,6 +48,10 @@ def format_report(res: CheckResult) -> list[str]:
     # a floor from repeats or a declared sigma has its RMS (and a declared one its sigma)
     if nf.source == "repeats" and nf.rms_mm is not None:
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS from repeated points, {nf.dof} degrees of freedom)")
+        if nf.heavy_tailed and nf.robust_rms_mm is not None:
+            out.append(f"  heavy-tailed noise: excess kurtosis {nf.kurtosis:.1f} of the repeat deviations, robust "
+                       f"floor (Qn) {um(nf.robust_rms_mm)} um; the floor is less certain than its degrees of "
+                       "freedom say, and the verdict allows for it")
     elif nf.source == "declared" and nf.rms_mm is not None and nf.sigma_mm is not None:
         meas = f"; repeats say {um(nf.measured_rms_mm)} um" if nf.measured_rms_mm else ""
         out.append(f"noise floor: {um(nf.rms_mm)} um (3D RMS of the declared sigma {um(nf.sigma_mm[0])} um{meas})")

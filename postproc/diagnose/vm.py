@@ -190,7 +190,7 @@ def carried(recorded: np.ndarray) -> np.ndarray:
 
 def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, context=None, frame: bool = True,
              noise_df: float | None = NOISE_DF, path: str | None = None, extra=None,
-             visit_sigma_mm: float = 0.0) -> Measurements:
+             visit_sigma_mm: float = 0.0, moved: tuple[float, float, float] | None = None) -> Measurements:
     """One campaign of ``shape`` measured on ``machine`` (default: the clean one).
 
     ``context``: extra columns, name -> function(t, rng) -> (N,) values, or a pair (true
@@ -202,6 +202,9 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
     ``extra(q, r, ctx) -> (N, 3)``: a displacement outside the effect catalogue (a local
     bump, a coupling) added to the machine's. ``visit_sigma_mm``: the machine's
     repeatability, a random offset per visit of a point (shared by its shots).
+    ``moved``: (fraction, translation mm, rotation rad): the tracker knocked or set up
+    again after that fraction of the rows: from there on its frame is moved once more by a
+    rigid motion, of the given size along a random direction.
     """
     rng = np.random.default_rng(seed)
     mach = machine if machine is not None else clean_machine()
@@ -223,8 +226,8 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
     if extra is not None:
         m = m + extra(q, r, full)
     if visit_sigma_mm:
-        moved = np.any(q[1:] != q[:-1], axis=1) | np.any((recorded[1:] != 0) & (recorded[1:] != recorded[:-1]), axis=1)
-        visit = np.cumsum(np.r_[True, moved]) - 1
+        new_visit = np.any(q[1:] != q[:-1], axis=1) | np.any((recorded[1:] != 0) & (recorded[1:] != recorded[:-1]), axis=1)
+        visit = np.cumsum(np.r_[True, new_visit]) - 1
         m = m + rng.normal(0.0, visit_sigma_mm, (visit[-1] + 1, 3))[visit]
     sigma = mach.noise.tracker_mm
     if noise_df is None:
@@ -236,8 +239,47 @@ def campaign(shape: str, seed: int, *, machine=None, n: int | None = None, conte
 
         w = rng.normal(0.0, FRAME_ROTATION_RAD, 3)
         m = rotate(np.tile(w, (len(m), 1)), m) + rng.normal(0.0, FRAME_TRANSLATION_MM, 3)
+    if moved is not None:
+        from postproc.rotation import rotate
+
+        fraction, shift_mm, turn_rad = moved
+        k = int(round(fraction * len(m)))
+        d_t, d_w = rng.normal(size=3), rng.normal(size=3)
+        d_t *= shift_mm / np.linalg.norm(d_t)
+        d_w *= turn_rad / np.linalg.norm(d_w)
+        m[k:] = rotate(np.tile(d_w, (len(m) - k, 1)), m[k:]) + d_t
     return Measurements(q=q, m=m, r=r, direction=recorded, context=ctx, path=path or f"{shape}_{seed}.csv",
                         linenos=np.arange(len(q)) + 4, has_tool_columns=True)
+
+
+def ram_sag(tip_sag_mm: float, axis: int = 1, *, overhang_mm: float = 100.0, travel_mm: float = 315.0,
+            load_column: str | None = None, load_max: float = 1.0):
+    """A ram (a cantilever along ``axis``) that sags under a weight at its tip, as a
+    displacement function for :func:`campaign`'s ``extra``.
+
+    The ram's free length is ``e = q[axis] + overhang_mm``; a tip weight ``P`` bends it by
+    ``P e^3 / (3 E I)`` downwards (-Z) and turns its end by ``P e^2 / (2 E I)``, which acts
+    through the tool vector (the ram's end carries the tool). ``tip_sag_mm`` is the sag at
+    the full extension (and, with ``load_column``, at the load ``load_max``): with a load
+    column the weight is the load (a head or a workpiece hung on the ram), without it the
+    ram's own head, the same in every row. Beam theory, not an effect of the catalogue.
+    """
+    from postproc.rotation import rotate
+
+    full = travel_mm + overhang_mm
+    k = tip_sag_mm / full**3  # P / (3 E I) at the full weight
+
+    def f(q, r, ctx):
+        weight = np.ones(len(q)) if load_column is None else np.asarray(ctx[load_column], dtype=float) / load_max
+        e = q[:, axis] + overhang_mm
+        out = np.zeros_like(q)
+        out[:, 2] = -k * weight * e**3
+        slope = -3.0 * k * weight * e**2  # dz/de: the end turns nose down
+        w = np.zeros_like(q)
+        bend = 1 - axis if axis < 2 else 0  # about X for a ram along Y, about Y for one along X
+        w[:, bend] = slope if axis == 1 else -slope
+        return out + rotate(w, r) - r
+    return f
 
 
 def check_campaign(meas: Measurements, cal=None, **options):

@@ -11,6 +11,7 @@ name                        physical meaning                                need
 ``thermal:temp...``         growth linear in temperature (about 20 °C)      ``temp...``
 ``expansion:temp...``       axes expanding with temperature (ppm/°C)         ``temp...``
 ``load:load``               zero-point migration per unit table load        ``load``
+``loadpos:X|Y|Z``           deflection growing with load x axis position    ``load``
 ``abbe:tilt|X|Y|Z``         angular error acting through the tool vector    varied ``r``
 ``squareness:XY|XZ|YZ``     out-of-squareness (if the model lacks it)       positions
 ``scale:X|Y|Z``             linear positioning error (if lacking)           positions

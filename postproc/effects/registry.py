@@ -18,6 +18,7 @@ from postproc.effects.empirical import Empirical
 from postproc.effects.lever import Lever
 from postproc.effects.linear import Linear
 from postproc.effects.load import Load
+from postproc.effects.loadpos import LoadPosition
 from postproc.effects.periodic import Periodic
 from postproc.effects.scale import Scale
 from postproc.effects.squareness import Squareness
@@ -33,6 +34,7 @@ EFFECTS: tuple[type[Effect], ...] = (
     ThermalTemperature,
     ThermalExpansion,
     Load,
+    LoadPosition,
     Abbe,
     Squareness,
     Scale,
