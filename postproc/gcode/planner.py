@@ -669,6 +669,61 @@ class _Sampled:
         self.pieces_of = pieces_of  # per move: (piece, first sample, end) of its pieces
 
 
+@final
+class _Layout:
+    """How the planned moves are cut into pieces and sampled (see :func:`_sample_moves`):
+    per piece its parameter span (``sa``, ``sb``), its number of samples, its move's row
+    and its arc (an index into ``arc_rows``, or -1 for a line); per move its pieces
+    (piece, first sample, end); ``total`` samples in all."""
+
+    __slots__ = ("sa", "sb", "n", "piece_move", "arc_piece", "arc_rows", "pieces_of", "total")
+
+    def __init__(self, planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table) -> None:
+        arc_prm, breaks, Q0, Q1 = tab.arc_prm, tab.breaks, tab.q0, tab.q1
+        sa_l: list[float] = []
+        sb_l: list[float] = []
+        n_l: list[int] = []
+        piece_move: list[int] = []
+        arc_piece: list[int] = []  # per piece: its arc's index in arc_rows, or -1 for a line
+        arc_rows: list[tuple[ArcParams, Sequence[float], Sequence[float], Sequence[float]]] = []  # prm, q0, q1, centre
+        pieces_of: list[list[tuple[int, int, int]]] = []
+        total = 0
+        for i, m in planned:
+            own: list[tuple[int, int, int]] = []
+            if m.arc is not None:
+                prm = arc_prm[i]
+                _axes, t0, sweep, _r0, _r1 = prm
+                length = arc_length(m.arc, m.q0, m.q1, prm)
+                br = breaks.get(i)
+                if br is None:
+                    br = breaks[i] = quadrant_breaks(t0, sweep)
+                cuts = [0.0, *br.tolist(), 1.0]
+                k = len(arc_rows)
+                arc_rows.append((prm, m.q0, m.q1, m.arc.center))
+                for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
+                    n = _arc_piece_samples(sb - sa, length, sweep)
+                    own.append((len(n_l), total, total + n))
+                    sa_l.append(sa)
+                    sb_l.append(sb)
+                    n_l.append(n)
+                    piece_move.append(i)
+                    arc_piece.append(k)
+                    total += n
+            else:
+                length = float(np.linalg.norm(Q1[i] - Q0[i]))
+                n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
+                own.append((len(n_l), total, total + n))
+                sa_l.append(0.0)
+                sb_l.append(1.0)
+                n_l.append(n)
+                piece_move.append(i)
+                arc_piece.append(-1)
+                total += n
+            pieces_of.append(own)
+        self.sa, self.sb, self.n, self.piece_move, self.arc_piece = sa_l, sb_l, n_l, piece_move, arc_piece
+        self.arc_rows, self.pieces_of, self.total = arc_rows, pieces_of, total
+
+
 def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table) -> _Sampled:
     """Samples of the planned moves, every one at once: an arc cut at its quadrant points
     (``breaks`` filled where missing), each piece sampled at least every
@@ -678,47 +733,10 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table
     :func:`~postproc.gcode.geometry.line_points`', element by element the same
     operations. An arc piece's directions are the signs of its chord, carried from the
     piece before (from ``d_in``) where an axis stands; a line's are ``D``."""
-    arc_prm, breaks, Q0, Q1, D, d_in = tab.arc_prm, tab.breaks, tab.q0, tab.q1, tab.dirs, tab.d_in
-    sa_l: list[float] = []
-    sb_l: list[float] = []
-    n_l: list[int] = []
-    piece_move: list[int] = []
-    arc_piece: list[int] = []  # per piece: its arc's index in arc_rows, or -1 for a line
-    arc_rows: list[tuple[ArcParams, Sequence[float], Sequence[float], Sequence[float]]] = []  # prm, q0, q1, centre
-    pieces_of: list[list[tuple[int, int, int]]] = []
-    total = 0
-    for i, m in planned:
-        own: list[tuple[int, int, int]] = []
-        if m.arc is not None:
-            prm = arc_prm[i]
-            _axes, t0, sweep, _r0, _r1 = prm
-            length = arc_length(m.arc, m.q0, m.q1, prm)
-            br = breaks.get(i)
-            if br is None:
-                br = breaks[i] = quadrant_breaks(t0, sweep)
-            cuts = [0.0, *br.tolist(), 1.0]
-            k = len(arc_rows)
-            arc_rows.append((prm, m.q0, m.q1, m.arc.center))
-            for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
-                n = _arc_piece_samples(sb - sa, length, sweep)
-                own.append((len(n_l), total, total + n))
-                sa_l.append(sa)
-                sb_l.append(sb)
-                n_l.append(n)
-                piece_move.append(i)
-                arc_piece.append(k)
-                total += n
-        else:
-            length = float(np.linalg.norm(Q1[i] - Q0[i]))
-            n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
-            own.append((len(n_l), total, total + n))
-            sa_l.append(0.0)
-            sb_l.append(1.0)
-            n_l.append(n)
-            piece_move.append(i)
-            arc_piece.append(-1)
-            total += n
-        pieces_of.append(own)
+    Q0, Q1, D, d_in = tab.q0, tab.q1, tab.dirs, tab.d_in
+    lay = _Layout(planned, tab)
+    sa_l, sb_l, n_l, piece_move, arc_piece = lay.sa, lay.sb, lay.n, lay.piece_move, lay.arc_piece
+    arc_rows, pieces_of, total = lay.arc_rows, lay.pieces_of, lay.total
     counts = np.array(n_l, dtype=int)
     P = len(counts)
     first = np.cumsum(counts) - counts
