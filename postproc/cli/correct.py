@@ -32,6 +32,8 @@ def load_maps(paths) -> list:
 
 
 def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
+    from postproc.gcode.options import GROWTH_WARN
+
     lines = [
         f"{src} -> {dst}: {rep.lines_in} lines, {rep.moves} moves, {rep.lines_changed} lines edited, "
         f"{rep.lines_inserted} lines inserted, arcs kept {rep.arcs_kept} / linearised "
@@ -40,7 +42,8 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
     lines.append(f"  growth {rep.lines_out - rep.header_lines:,} / {rep.lines_in:,} lines = {rep.growth:.2f}x "
                  f"(+{rep.header_lines} header lines); arcs split into exact arcs "
                  f"{rep.arcs_split}, reversal take-ups {rep.takeups}" + (
-                     "  (warning: over 5x; a controller's program memory may not hold it)" if rep.growth > 5.0 else ""))
+                     f"  (warning: over {GROWTH_WARN:g}x; a controller's program memory may not hold it)"
+                     if rep.growth > GROWTH_WARN else ""))
     if rep.expanded:
         lines.append("  note: subprograms, loops, parameters and expressions were expanded: the corrected "
                      "program is flat (recorded in the header)")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, final
+from typing import Protocol, final
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from postproc.gcode.moves import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
     ArcSpec,
+    Point,
     arc_candidates,
     bisector_centre,
     bisector_point,
@@ -32,9 +33,6 @@ from postproc.gcode.segment import (
 )
 from postproc.gcode.state import LINE, PLANES
 from postproc.gcode.vplan import Plan
-
-if TYPE_CHECKING:
-    from postproc.gcode.emitter import EmitterMixin
 
 # A piece that one segment cannot follow is first tried in 2 .. EQUAL_SHARES equal shares
 # (each one try) to bracket the farthest sample one segment reaches, before the search
@@ -118,6 +116,21 @@ def _lattice(d: int) -> np.ndarray:
 _NO_ARC = Arc((0.0, 0.0, 0.0), 170, False, 1, (-1, -1), -1)
 
 
+class _Writer(Protocol):
+    """What a fit uses of the writer (:class:`postproc.gcode.emitter.EmitterMixin`): the
+    words of a move, its input's own arc centre, the engine's subdivision of a curve."""
+
+    def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
+                    present_only: bool = False) -> tuple[list[Edit], list[str]]: ...
+
+    def _axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]: ...
+
+    def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None: ...
+
+    def _subdivide(self, curves: list, s_init: list[np.ndarray], unit: float
+                   ) -> list[tuple[np.ndarray, np.ndarray]]: ...
+
+
 @final
 class MoveFit:
     """The fit of one planned move: the move, its plan, the output's decimals and the
@@ -125,7 +138,7 @@ class MoveFit:
 
     __slots__ = ("w", "mv", "plan", "d", "budget", "arc")
 
-    def __init__(self, writer: EmitterMixin, mv: Move, plan: Plan, d: int, budget: float) -> None:
+    def __init__(self, writer: _Writer, mv: Move, plan: Plan, d: int, budget: float) -> None:
         self.w = writer
         self.mv = mv
         self.plan = plan

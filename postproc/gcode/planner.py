@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, cast, final
+from typing import TYPE_CHECKING, cast, final
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from postproc.gcode.directions import (
 from postproc.gcode.emitter import FIT_BUDGET, _unit_decimals
 from postproc.gcode.geometry import arc_length, arc_params, arc_points, arcs_points, line_points
 from postproc.gcode.moves import Arc
+from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.path import backfill_unknown
 from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
 from postproc.gcode.state import LINE, PLANES
@@ -105,32 +106,11 @@ class Table:
         return len(self.q1)
 
 
-class _Report(Protocol):
-    """The figures of :class:`postproc.gcode.pipeline.CorrectReport` the planner keeps."""
-
-    extrapolated_points: int
-    max_correction_mm: float
-    max_residual_mm: float
-    solver: str
-
-
-class _Options(Protocol):
-    """What the planner reads of :class:`postproc.gcode.pipeline.CorrectOptions`."""
-
-    tolerance_mm: float
-    decimals: int | None
-    max_correction_mm: float
-    extrapolate: str
-    added: list
-    bulk_plan: bool
-    dialect: str
-
-
 class Planner:
     """Engine calls with their safety checks, and the plans of a chunk's moves; carries
     the corrected position and directions from one chunk to the next."""
 
-    def __init__(self, engine: Engine, options: _Options, report: _Report, rotary: set[str],
+    def __init__(self, engine: Engine, options: CorrectOptions, report: CorrectReport, rotary: set[str],
                  context: Mapping[str, float], accept_residual_mm: float, start: Sequence[float],
                  path: str | None = None) -> None:
         self.engine = engine

@@ -15,7 +15,6 @@ import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,13 +24,11 @@ from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.moves import Cycle, Move
+from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.planner import Planner
 from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
 from postproc.gcode.vplan import FloatArray
 from postproc.gcode.writer import Entry, Rebase, Store
-
-if TYPE_CHECKING:
-    from postproc.gcode.pipeline import CorrectOptions, CorrectReport
 
 # --cycles auto keeps a cycle block when its tilt (the correction's change between R
 # plane and bottom) is within this share of the tolerance left after rounding: the share

@@ -16,19 +16,17 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING, TypeAlias, final
+from typing import TypeAlias, final
 
 from postproc.errors import SafetyError
 from postproc.gcode import bulk, cutter, emit
 from postproc.gcode.emitter import EmitterMixin, _unit_decimals
 from postproc.gcode.lexer import Word
 from postproc.gcode.moves import Cycle, Move
+from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.planner import Planner, Table
 from postproc.gcode.segment import Curve
 from postproc.gcode.vplan import ArcHint, FloatArray, Plan
-
-if TYPE_CHECKING:
-    from postproc.gcode.pipeline import CorrectOptions, CorrectReport
 
 Write: TypeAlias = bulk.Write
 
