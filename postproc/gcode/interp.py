@@ -17,10 +17,8 @@ UnsupportedGcodeError naming line, column and construct.
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, TypeVar
+from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,18 +26,25 @@ from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.errors import (
     GcodeSyntaxError,
     MissingSetupError,
-    PostprocError,
     UnsupportedGcodeError,
 )
 from postproc.gcode import cutter, lexer
-from postproc.gcode.moves import Arc, Cycle, Move
-from postproc.gcode.recognise import (
-    LATHE_HINT,
-    LatheMarks,
-    LatheProgramError,
-    foreign_dialect,
-    lathe_message,
+from postproc.gcode.interp_core import (
+    AXES,
+    EXPANDABLE_G,
+    EXPANDABLE_M,
+    MAX_WORD_VALUE,
+    MIN_ARC_RADIUS_MM,
+    ROTARY,
+    Block,
+    NeedsExpansion,
+    Vals,
+    col_of_word,
+    gkey,
+    start_position,
 )
+from postproc.gcode.interp_words import WordsMixin, blank_nested_comments, classify_construct
+from postproc.gcode.moves import Arc, Cycle, Move
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
@@ -64,265 +69,37 @@ from postproc.gcode.state import (
     REFUSED_M,
     SPLINES,
     WORK_SYSTEMS,
-    ModalState,
 )
-from postproc.limits import DEFAULT_MAX_ARC_TURNS, ResourceLimitError
+from postproc.limits import ResourceLimitError
 
 if TYPE_CHECKING:
     import numpy.typing as npt
 
-    from postproc.gcode.dialect import Dialect
-    from postproc.gcode.sinumerik import CycleCall
 
-#: a block's words by letter, G and M aside: (value, word index)
-Vals = dict[str, tuple[float, int]]
-# Largest value of a word (1000 km, a billion turns): a 400-digit coordinate reads as inf,
-# and one of 300 digits makes the correction's arithmetic overflow.
-MAX_WORD_VALUE = 1e9
-_E = TypeVar("_E", bound=PostprocError)
+# the names other modules import from here (some defined in interp_core)
+__all__ = [
+    "MAX_WORD_VALUE", "MIN_ARC_RADIUS_MM", "Arc", "Cycle", "Interpreter", "Move", "NeedsExpansion",
+    "blank_nested_comments", "classify_construct", "col_of_word", "plain_moves", "spline_points",
+    "spline_samples", "start_position",
+]
 
 
-class _Setup(Protocol):
-    """What the interpreter reads of a :class:`postproc.gcode.path.Setup` (which imports
-    this module), besides its optional ``start`` and ``home``."""
-
-    offsets: dict
-    tool_lengths: dict
-    tool_vector: tuple | None
 
 
-class NeedsExpansion(UnsupportedGcodeError):
-    """A construct the expansion stage flattens (parameters, expressions, O-words,
-    subprograms, macros): the corrector starts over on the expanded program."""
 
 
-# constructs the expansion stage (postproc.gcode.expand) flattens
-EXPANDABLE_M = {97, 98, 99}
-EXPANDABLE_G = {650, 660, 661}
 
-AXES = "XYZ"
-ROTARY = "ABC"
-# Letters accepted as plain parameters of other words (checked where used).
-PARAM_LETTERS = set("DFHIJKLNPQRST")
-# A degenerate arc (start, end and centre within this) is not an arc.
-MIN_ARC_RADIUS_MM = 1e-6
-
-
-# word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
-_GKEYS = {"0": 0, "00": 0, "1": 10, "01": 10, "2": 20, "02": 20, "3": 30, "03": 30}
-
-
-def _gkey(text: str) -> int:
-    key = _GKEYS.get(text)
-    return key if key is not None else int(round(float(text) * 10))
-
-
-_COMMENTS = re.compile(r"\([^)]*\)?|;.*")
-# tokens of a line that carry no word
-_BLANK_KINDS = frozenset((lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE))
-_OWORD = re.compile(r"^\s*/?\s*(?:N\s*\d+\s*)?O\s*(?:\d+|<[^>]*>)\s*([A-Z]+)?")
-_MACRO_KEYWORDS = re.compile(r"\b(IF|WHILE|GOTO|END|DO)\s*[\[\d]|\bGOTO")
-# a Sinumerik block that is a name alone, or a name with arguments: perhaps a subprogram call
-_SINUMERIK_NAME_CALL = re.compile(r"(?i)^\s*(?:N\d+\s+)?[A-Z_]\w*\s*(?:\(.*\))?\s*(?:P\s*=?\s*\d+)?\s*$")
-_ASSIGN = re.compile(r"#\s*(?:\d+|<[^>]*>|\[)[^=]*=")
-
-
-def classify_construct(line: str) -> tuple[str, str]:
-    """What an unsupported line really is: ``(construct, hint)`` for the refusal."""
-    text = _COMMENTS.sub(" ", line).upper()
-    expand_hint = ("postproc expands subprograms, loops, parameters and expressions when they are defined "
-                   "in the program (or on --subroutine-path); this one could not be expanded")
-    m = _OWORD.match(text)
-    if m and m.group(1):
-        return f"LinuxCNC O-word '{m.group(1).lower()}' (subroutine or flow control)", expand_hint
-    m = _MACRO_KEYWORDS.search(text)
-    if m:
-        kw = m.group(1) or "GOTO"
-        return f"Fanuc custom macro {kw} statement", expand_hint
-    if _ASSIGN.search(text):
-        return "parameter assignment '#...='", expand_hint
-    if "#" in text:
-        return "parameter reference '#'", expand_hint
-    if "[" in text or "]" in text:
-        return "expression '[ ]'", expand_hint
-    if "@" in text or "^" in text:
-        return "polar coordinate word '@'/'^'", "post the program in Cartesian coordinates"
-    if "<" in text:
-        return "named O-word or parameter '< >'", expand_hint
-    return "", ""
-
-
-def blank_nested_comments(line: str) -> str:
-    """The line with the inside of each outermost balanced ( ... ) blanked, so that a
-    nested comment lexes as one comment at the same columns."""
-    out = list(line)
-    depth = 0
-    for i, ch in enumerate(line):
-        if ch == ";" and depth == 0:
-            break
-        if ch == "(":
-            if depth > 0:
-                out[i] = " "
-            depth += 1
-        elif ch == ")" and depth > 0:
-            depth -= 1
-            if depth > 0:
-                out[i] = " "
-    return "".join(out)
-
-
-def _is_program_number(tokens: list[lexer.Token], after_n: bool = False) -> bool:
-    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else;
-    with ``after_n`` also ``N1 O2 (NAME)`` (Fadal)."""
-    content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
-                                                       lexer.NEWLINE)]
-    if after_n and len(content) == 2 and content[0].kind == lexer.WORD and content[0].letter == "N":
-        content = content[1:]
-    if len(content) == 1:
-        t = content[0]
-        return t.kind == lexer.WORD and t.letter == "O" and "." not in t.text and "-" not in t.text
-    if len(content) == 2:
-        a, b = content
-        return a.kind == lexer.SYMBOL and a.text == ":" and b.kind == lexer.NUMBER and b.text.isdigit()
-    return False
-
-
-class Interpreter:
+class Interpreter(WordsMixin):
     """Advance a :class:`ModalState` line by line; see the module docstring."""
 
-    def __init__(self, setup: _Setup, path: str | None = None, *, lenient_setup: bool = False,
-                 dialect: str = "generic") -> None:
-        self.max_arc_turns = DEFAULT_MAX_ARC_TURNS  # turns of one helix (G2/G3 P), --max-arc-turns
-        self.setup = setup
-        # lenient: every work offset and tool length is taken as zero (for comparing
-        # two versions of one program, where they cancel out)
-        self.lenient_setup = lenient_setup
-        self.path = path
-        self.state = ModalState()
-        # axes the program has not positioned yet start where the machine is (Setup.start)
-        self.state.pos = start_position(getattr(setup, "start", None))
-        # set by the corrector when a start is given: words it adds on an axis known only
-        # from the start are written in the work frame, so G54 must not be taken as zero
-        self.require_g54 = False
-        self.offsets = {k: _offset_tuple(v) for k, v in (setup.offsets or {}).items()}
-        self.tool_lengths = dict(setup.tool_lengths or {})  # G10 L1/L10/L11 write here
-        self.rotary_g92: dict[str, float] = {}
-        self.program_offsets: dict[str, list[float]] = {}  # set by G10 L2/L20
-        self.implicit_g54 = False  # a move ran in G54 that the user did not give
-        self.used_rotary: set[str] = set()
-        self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
-        self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
-        # the last line set an offset from where the machine is (G92, G10 L20, G10 L10/L11):
-        # (words, [(word index, axis), ...], nominal position then), else None
-        self.rebase: tuple | None = None
-        # the last line stored the position for G28 or G30 (G28.1/G30.1): its name, else None
-        self.stored_here: str | None = None
-        self.program_stored: set[str] = set()  # stored positions the program set itself
-        self.ended = False  # an M2/M30 was read: later lines are not executed
-        self.dialect = dialect
-        from postproc.gcode.dialect import get as _dialect
-
-        self.d: Dialect = _dialect(dialect)  # the facts of the controller the program is for
-        if self.d.machine != "mill":
-            raise LatheProgramError(lathe_message([f"--dialect {self.d.name} ({self.d.title})"]), path=path,
-                                    hint=LATHE_HINT)
-        self.lathe = LatheMarks()
-        self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
-        self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
-        self._arc_absolute_once = False  # the next block's centre words are absolute (Sinumerik I=AC())
-        self.modal_call: CycleCall | None = None  # Sinumerik MCALL CYCLE8x(): drills after each moving block
-        self._cycle_due: CycleCall | None = None  # the cycle this block calls (run after its move)
-        self.cycle_move: Move | None = None  # the drilling cycle this line made (Sinumerik): its moves
-        self.call_line = ""  # the Sinumerik cycle call this line is ("MCALL CYCLE81"): a comment when expanded
-        self._g_alias = dict(self.d.g_aliases)
-        # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
-        self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
-        self._dialect_g.update({k: _refused_g(what, instead) for k, what, instead in self.d.refused_g})
-        if self.d.fixture_offset_word:  # E0: fixture offsets cancelled (machine coordinates)
-            self.offsets.setdefault(f"{self.d.fixture_offset_word}0", (0.0, 0.0, 0.0))
-        self.may_expand = False  # set by the corrector when it can start over on the expanded program
-        self.repeats = False  # the program ended with M99 (repeated by the controller)
-        # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
-        self.home = {name: list(_offset_tuple(v, partial=True)) for name, v in
-                     ((getattr(setup, "home", None) or {}).items())}
-        # axes sent to a stored position that was not given: unknown until positioned again
-        self.unknown_after: dict[int, str] = {}
-        self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
-        self._run_shift: tuple[float, float, float] | None = None
-        self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self.comp_moves: list = []  # moves the controller offsets (cutter.CompMove), taken by the corrector
 
     # -- helpers -----------------------------------------------------------------------
-    def _arc_rule(self) -> Dialect:
-        """The controller whose input-arc rule applies: the dialect's own (generic reads
-        arcs as LinuxCNC, the reference interpreter, does)."""
-        from postproc.gcode import dialect
 
-        return dialect.get(self.d.reads_arcs_as or self.d)
 
-    def _foreign(self, line: str, lineno: int) -> None:
-        """Refuse a line of another dialect naming the dialect to choose, and a construct
-        the chosen dialect's controller reads but postproc does not, in that dialect's words."""
-        for pattern, construct, instead in self.d.refused:
-            m = re.search(pattern, line)
-            if m:
-                what = construct.format(*m.groups())
-                cls = self._construct_error(what) if construct in self.d.expanded_constructs else UnsupportedGcodeError
-                raise self._err(cls, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1, hint=instead)
-        other = foreign_dialect(line, self.d.name)
-        if other is not None:
-            name, title, construct = other
-            raise self._err(UnsupportedGcodeError, f"{construct}: a program for {title}", lineno, 1,
-                            hint=f"choose --dialect {name} for this program")
 
-    def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
-        """The error class for a refused construct: NeedsExpansion when expanding is allowed
-        and the construct is one the expansion stage flattens."""
-        if self.may_expand and not what.startswith("polar"):
-            return NeedsExpansion
-        return UnsupportedGcodeError
 
-    def _err(self, cls: type[_E], msg: str, lineno: int, col: int, hint: str | None = None) -> _E:
-        return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
 
-    def _work_offset(self, lineno: int, col: int) -> list[float]:
-        st = self.state
-        name = st.work
-        if name in self.program_offsets:
-            return self.program_offsets[name]
-        if name in self.offsets:
-            return list(self.offsets[name])
-        if self.lenient_setup:
-            return [0.0, 0.0, 0.0]
-        if name == "G54" and not st.work_explicit:
-            if self.require_g54:
-                raise self._err(
-                    MissingSetupError, "--start gives machine positions, so the value of the work offset G54 "
-                    "the program runs in must be given too", lineno, col,
-                    hint="give --offset G54=X..,Y..,Z.. (G54=X0,Y0,Z0 if the program's coordinates are "
-                         "machine coordinates)")
-            # Documented default: a program that never names a work offset runs in
-            # G54 taken as zero (program coordinates = machine coordinates); flagged.
-            self.implicit_g54 = True
-            return [0.0, 0.0, 0.0]
-        raise self._err(
-            MissingSetupError, f"work offset {name} is used but its value was not given",
-            lineno, col, hint=f"give it with --offset {name}=X..,Y..,Z.. (machine-frame mm)")
 
-    def shift(self, g53: bool, lineno: int, col: int) -> tuple[float, float, float]:
-        if g53:
-            return (0.0, 0.0, 0.0)
-        st = self.state
-        w = self._work_offset(lineno, col)
-        return (w[0] + st.g92[0], w[1] + st.g92[1], w[2] + st.g92[2] + st.tlo)
-
-    def load_tool(self, tool: int) -> None:
-        """What a line of a tool change alone (``T<tool> M6``, lexer.TOOL_LINE_RE) does to
-        the state, for the readers that take such lines as columns: T selects the tool,
-        then M6 loads it (as :meth:`_block` reads them)."""
-        st = self.state
-        st.tool = tool
-        st.spindle_tool = st.tool
 
     def set_tool_length(self, h: int, lineno: int, col: int) -> None:
         """What ``G43 H<h>`` does to the state, for the readers that take such a line as
@@ -330,11 +107,6 @@ class Interpreter:
         self._g43({"H": (float(h), -1)}, lineno, col)
         self._run_shift = None
 
-    def tool_r(self) -> tuple[float, float, float]:
-        if self.tool_vector is not None:
-            return self.tool_vector
-        st = self.state
-        return (0.0, 0.0, -st.tlo) if st.tlo_active else (0.0, 0.0, 0.0)
 
     # -- the block ---------------------------------------------------------------------
     def feed_line(self, lineno: int, line: str) -> Move | None:
@@ -458,184 +230,10 @@ class Interpreter:
             stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
                                     False, plan.dwell_s))
 
-    def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
-        if not self._iso_blocks:
-            return self._sinumerik_words(lineno, line)
-        if self.d.comments_nest and line.count("(") > 1:
-            line = blank_nested_comments(line)
-        if self.d.header_forms and any(re.match(p, line) for p in self.d.header_forms):
-            return [], False  # the dialect's own header line ("$NAME.MIN%")
-        if "$" in line or "%" in line:
-            self._foreign(line, lineno)  # ";$PATH=", "%_N_..._MPF", "$NAME.MIN%" of another dialect
-        try:
-            tokens = lexer.lex(line, self.path, lineno)
-        except GcodeSyntaxError:
-            self._foreign(line, lineno)
-            what, hint = classify_construct(line)
-            if what:
-                raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
-            raise
-        first = next((t for t in tokens if t.kind != lexer.SPACE), None)
-        if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
-            if self.d.text_after_percent == "ignored":
-                return [], False  # '%' tape mark: the controller ignores the rest of the line
-            raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
-                            hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
-        if _is_program_number(tokens, self.d.numbered_program_line):
-            return [], False
-        for tok in tokens:
-            if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
-                if self.d.refused:
-                    self._foreign(line, lineno)  # the dialect's own constructs first (Fadal's # macros)
-                what, hint = classify_construct(line)
-                if what:
-                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
-                self._foreign(line, lineno)
-                raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
-                                tok.col,
-                                hint="O words other than a program number are expanded only when their "
-                                     "subroutine is in the program or on --subroutine-path")
-        return self._plain_words(tokens, line, lineno)
 
-    def _sinumerik_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
-        """A Sinumerik block's words (:mod:`postproc.gcode.sinumerik`); its constructs that
-        postproc does not read are refused by their names first."""
-        from postproc.gcode import sinumerik
 
-        code = sinumerik.code_of(line)
-        if code.strip():
-            self._foreign(code, lineno)
-        try:
-            blk = sinumerik.read_block(line, self.path, lineno, self.variables)
-        except UnsupportedGcodeError as exc:
-            if self.may_expand and _SINUMERIK_NAME_CALL.match(code):  # NAME or NAME(...): a subprogram call?
-                raise self._err(NeedsExpansion, exc.message, lineno, exc.col or 1, hint=exc.hint) from None
-            raise
-        g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
-        incremental = True if 910 in g else False if 900 in g else self.state.incremental
-        centre_ac = [letter for letter, _ in blk.absolute if letter in "IJK"]
-        if centre_ac:
-            given = [w.letter for w in blk.words if w.letter in "IJK"]
-            if len(centre_ac) != len(given):
-                col = next(c for letter, c in blk.absolute if letter in "IJK")
-                raise self._err(UnsupportedGcodeError, "Sinumerik centre words partly =AC() (absolute) and partly "
-                                "incremental", lineno, col, hint="give every centre word of the arc as =AC(), or none")
-            self._arc_absolute_once = True  # I=AC() J=AC(): the centre in work coordinates, this block
-        for letter, col in blk.absolute:
-            if incremental and letter not in "IJK":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in G91",
-                                lineno, col,
-                                hint="post the coordinate in the program's distance mode (G90/G91)")
-        for letter, col in blk.incremental:
-            if not incremental and letter in "XYZABC":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
-                                lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
-        if blk.call is not None:
-            name = f"MCALL {blk.call.name}" if blk.mcall else blk.call.name
-            others = [w for w in blk.words if w.letter != "N"]
-            if others or blk.frame:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
-                                blk.call.col, hint="write the cycle call in a block of its own")
-            self.call_line = name
-            if blk.mcall:
-                self.modal_call = blk.call
-            else:
-                self._cycle_due = blk.call
-            return [], blk.block_delete
-        if blk.mcall:
-            self.modal_call = None  # a bare MCALL ends the modal call
-        elif self.modal_call is not None and any(w.letter in AXES for w in blk.words):
-            self._cycle_due = self.modal_call
-        if blk.ends:
-            self.ended = True  # RET: the end of the program (the block's own words still run)
-        if blk.frame:
-            self._sinumerik_frame(blk.frame, blk.words, lineno, blk.rpl)
-            return [], blk.block_delete
-        return blk.words, blk.block_delete
 
-    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int,
-                         rpl: tuple[float, int] | None) -> None:
-        """The programmable frame (:mod:`postproc.gcode.frames`): TRANS/ROT/SCALE/MIRROR replace
-        it (alone: delete it), their A forms add to it. Its translation is kept with the
-        G52/G92 shift, its rotation, scale and mirror in ``state.frame``."""
-        from postproc.gcode import frames
 
-        st = self.state
-        given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
-        bad = [k for k in given if k not in AXES]
-        if bad:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {bad[0]} (the frame's X, Y, Z are read)",
-                            lineno, given[bad[0]][1], hint="post the program in the coordinates the frame gives")
-        angle = None
-        if kind.endswith("ROT"):
-            tilt = next((a for a in "XY" if a in given), None)
-            if tilt is not None:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} {tilt} (a rotation about {tilt} tilts the "
-                                "plane; rotations about Z are read)", lineno, given[tilt][1],
-                                hint="post the program in the coordinates the frame gives")
-            if rpl is not None and "Z" in given:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} with both Z and RPL", lineno, rpl[1])
-            if rpl is not None and st.plane != 170:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} RPL= in a plane other than G17 "
-                                "(a rotation about X or Y)", lineno, rpl[1])
-            angle = rpl[0] if rpl is not None else given["Z"][0] if "Z" in given else None
-        if kind.endswith("SCALE") and any(v == 0.0 for v, _c in given.values()):
-            raise self._err(GcodeSyntaxError, f"Sinumerik {kind} with a factor 0", lineno,
-                            min(c for _v, c in given.values()))
-        st.frame, st.g92 = frames.next_frame(kind, st.frame, st.g92, {a: v for a, (v, _c) in given.items()}, angle,
-                                             st.unit_mm)
-        self._run_shift = None
-
-    def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
-        """The words of a lexed line and whether it starts with '/' (block delete);
-        anything else than words, blanks and comments is refused."""
-        words = []
-        block_delete = False
-        seen_content = False
-        for tok in tokens:
-            kind = tok.kind
-            if kind == lexer.WORD:
-                seen_content = True
-                start = tok.col - 1 + tok.number_offset
-                num = tok.number_text
-                words.append(lexer.Word(tok.letter, num, start, start + len(num), tok.col - 1))
-            elif kind == lexer.SLASH:
-                if seen_content:
-                    raise self._err(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
-                                    lineno, tok.col)
-                block_delete = True
-            elif kind not in _BLANK_KINDS:
-                self._refuse_token(tok, tokens, seen_content, line, lineno)
-        return words, block_delete
-
-    def _refuse_token(self, tok: lexer.Token, tokens: list[lexer.Token], seen_content: bool, line: str,
-                      lineno: int) -> None:
-        """Raise the error for a token that is not a word, blank, comment or '/' (a '%'
-        standing alone on its line passes)."""
-        kind = tok.kind
-        if kind == lexer.PERCENT:
-            if seen_content or any(t.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL, lexer.NUMBER) for t in tokens):
-                raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
-        elif kind == lexer.OPEN_COMMENT:
-            raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
-                            hint="add the closing ')'")
-        elif kind == lexer.LETTER:
-            self._foreign(line, lineno)
-            what, hint = classify_construct(line)
-            if what:
-                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            raise self._err(UnsupportedGcodeError,
-                            f"word {tok.letter} without a plain number (macro, expression or parameter)",
-                            lineno, tok.col, hint="expand macros and expressions before correcting")
-        elif kind == lexer.SYMBOL:
-            self._foreign(line, lineno)
-            what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
-            if what:
-                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
-        elif kind == lexer.NUMBER:
-            raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
 
     def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
                block_delete: bool) -> Move | None:
@@ -647,10 +245,10 @@ class Interpreter:
             if letter in "GM" and not abs(float(num)) <= MAX_WORD_VALUE:
                 raise self._err(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
             if letter == "G":
-                key = _gkey(num)
+                key = gkey(num)
                 gcodes.append((self._g_alias.get(key, key) if self._g_alias else key, i))
             elif letter == "M":
-                mcodes.append((_gkey(num), i))
+                mcodes.append((gkey(num), i))
             else:
                 if letter in vals:
                     raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
@@ -666,8 +264,8 @@ class Interpreter:
                     raise self.lathe.refusal(f"{letter} word (incremental {'X' if letter == 'U' else 'Z'} of a "
                                              f"lathe) at line {lineno}", self.path, lineno, _lpos + 1)
                 if letter in "UVW" or (letter == "E" and not any(
-                        (w.letter == "M" and _gkey(w.number) // 10 in IO_M and _gkey(w.number) % 10 == 0)
-                        or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
+                        (w.letter == "M" and gkey(w.number) // 10 in IO_M and gkey(w.number) % 10 == 0)
+                        or (w.letter == "G" and gkey(w.number) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 value = float(num)
@@ -724,7 +322,7 @@ class Interpreter:
         if tool_change:
             st.spindle_tool = st.tool
 
-        blk = _Block(lineno, words, vals)
+        blk = Block(lineno, words, vals)
         if st.comp != 400:
             cutter.check_block(self, blk, gcodes, tool_change)
         for key, i in gcodes:
@@ -1152,15 +750,6 @@ class Interpreter:
             motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
                                                r_m, z_m, repeats, st.retract_r, st.cycle_p))
 
-    def _check_known(self, q1: Sequence[float], lineno: int, col: int) -> None:
-        """Refuse a move that needs an axis left at a stored position that was not given."""
-        for k, name in self.unknown_after.items():
-            if math.isnan(q1[k]):
-                raise self._err(
-                    MissingSetupError, f"axis {AXES[k]} is at the {name} stored position, which was not given, "
-                    "and this move needs it", lineno, col,
-                    hint=f"give it with --home {name}=X..,Y..,Z.. (machine mm), or position {AXES[k]} with an "
-                         "absolute move first")
 
     def _g52(self, vals: Vals, lineno: int, col: int) -> None:
         """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""
@@ -1375,34 +964,9 @@ class Interpreter:
         return Arc((center[0], center[1], center[2]), st.plane, clockwise, turns, idx, r_idx)
 
 
-@dataclass(slots=True)
-class _Block:
-    """What the G codes of one block set, read by the rest of :meth:`Interpreter._block`."""
-
-    lineno: int
-    words: list
-    vals: dict
-    motion_key: int | None = None
-    motion_idx: int = -1
-    g53: bool = False
-    g92: int | None = None
-    g10: bool = False
-    home_code: tuple[int, int] | None = None
-    cancel_cycle: bool = False
-    g52: bool = False
-    lookahead: int | None = None
-    work_name: str | None = None
-    prefix: list = field(default_factory=list)
-    comp: tuple[int, int] | None = None  # G40/G41/G42/G41.1/G42.1: (key, word index)
-
-    def col(self, i: int) -> int:
-        return self.words[i].letter_pos + 1
-
-    def gtext(self, i: int) -> str:
-        return f"G{self.words[i].number}"
 
 
-def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_motion(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G0-G3, canned cycles, splines: the block's motion code (one per block)."""
     if b.motion_key is not None:
         raise it._err(GcodeSyntaxError, "two motion codes in one block", b.lineno, b.col(i))
@@ -1410,21 +974,21 @@ def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
     it.motion_word = True
 
 
-def _g_retract(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_retract(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.retract_r = key == 990
 
 
-def _g_cancel_cycle(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_cancel_cycle(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.cancel_cycle = True
     it.motion_word = True
 
 
-def _g_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_refused(it: Interpreter, b: Block, key: int, i: int) -> None:
     cls = NeedsExpansion if (key in EXPANDABLE_G and it.may_expand) else UnsupportedGcodeError
     raise it._err(cls, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
 
 
-def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_lookahead_spline_or_refused(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G5, G5.1, G8: Fanuc/Haas look-ahead codes with their P/Q alone, else splines (G5,
     G5.1) or refused (G8 lathe radius mode)."""
     if it._is_lookahead(key, b.vals):
@@ -1435,15 +999,15 @@ def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int)
         _g_refused(it, b, key, i)
 
 
-def _g_lookahead(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_lookahead(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.lookahead = key
 
 
-def _g_home(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_home(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.home_code = (key, i)
 
 
-def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_home_store(it: Interpreter, b: Block, key: int, i: int) -> None:
     if any(a in b.vals for a in AXES):
         raise it._err(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
     it.home[HOME_STORE[key]] = list(it.state.pos)
@@ -1451,41 +1015,41 @@ def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
     it.program_stored.add(HOME_STORE[key])
 
 
-def _g_local_offset(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_local_offset(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g52 = True
 
 
-def _g_plane(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_plane(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.plane = key
     b.prefix.append(b.gtext(i))
 
 
-def _g_units(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_units(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.inch = key == 200
     b.prefix.append(b.gtext(i))
 
 
-def _g_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_distance(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.incremental = key == 910
     b.prefix.append(b.gtext(i))
 
 
-def _g_arc_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_arc_distance(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.arc_absolute = key == 901
     b.prefix.append(b.gtext(i))
 
 
-def _g_feed_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_feed_mode(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.inverse_time = key == 930
     b.prefix.append(b.gtext(i))
 
 
-def _g_work(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_work(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.work_name = WORK_SYSTEMS[key]
     b.prefix.append(b.gtext(i))
 
 
-def _g_work_extended(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_work_extended(it: Interpreter, b: Block, key: int, i: int) -> None:
     vals = b.vals
     if "P" not in vals:
         raise it._err(GcodeSyntaxError, "G54.1 needs a P word", b.lineno, b.col(i))
@@ -1493,53 +1057,44 @@ def _g_work_extended(it: Interpreter, b: _Block, key: int, i: int) -> None:
     b.prefix.append(f"{b.gtext(i)} P{b.words[vals['P'][1]][1]}")
 
 
-def _g_tool_length(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_tool_length(it: Interpreter, b: Block, key: int, i: int) -> None:
     vals = b.vals
     b.prefix.append(b.gtext(i) + (f" H{b.words[vals['H'][1]][1]}" if "H" in vals else ""))
     it._g43(vals, b.lineno, b.col(i))
 
 
-def _g_tool_length_cancel(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_tool_length_cancel(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.tlo, it.state.tlo_active = 0.0, False
     b.prefix.append(b.gtext(i))
 
 
-def _g_machine(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_machine(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g53 = True
     b.prefix.append(b.gtext(i))
 
 
-def _g_g92(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g92(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g92 = key
 
 
-def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g10(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g10 = True
 
 
-def _g_cutter(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_cutter(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G40/G41/G42/G41.1/G42.1: read by :func:`postproc.gcode.cutter.check_block`."""
     b.comp = (key, i)
 
 
-def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_neutral(it: Interpreter, b: Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
 
 
-def _work_code(name: str):
-    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
-        b.work_name = name
-        b.prefix.append(b.gtext(i))
-    return handler
 
 
-def _refused_g(what: str, instead: str):
-    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
-        raise it._err(UnsupportedGcodeError, f"{it.d.title.split(' ')[0]} {what}", b.lineno, b.col(i), hint=instead)
-    return handler
 
 
-def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g50(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G50: scaling cancel on a mill (no words of its own); a lathe's spindle speed clamp
     (G50 S) or coordinate setting (G50 X.. Z..)."""
     lathe = [k for k in "SXZUW" if k in b.vals]
@@ -1548,16 +1103,16 @@ def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
                                "(a lathe's spindle speed clamp or coordinate setting)", it.path, b.lineno, b.col(i))
 
 
-def _g_css(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_css(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G96: constant surface speed, a lathe's (noted as a mark; neutral on its own)."""
     it.lathe.note(f"G96 (constant surface speed) at line {b.lineno}")
 
 
-def _g_diameter_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_diameter_mode(it: Interpreter, b: Block, key: int, i: int) -> None:
     raise it.lathe.refusal(f"G7 (diameter mode) at line {b.lineno}", it.path, b.lineno, b.col(i))
 
 
-def _g_g15(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g15(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G15: polar coordinates off (Fanuc, neutral); G15 H<n> selects work coordinate
     system n where the dialect says so (Okuma)."""
     if it.d.g15_work_select:
@@ -1637,33 +1192,7 @@ def plain_moves(mv: Move) -> Iterator[Move]:
         leg = leg.then
 
 
-def col_of_word(words: list[lexer.Word], i: int) -> int:
-    return words[i].letter_pos + 1
 
 
-def _offset_tuple(v: dict | Iterable[float], partial: bool = False) -> tuple[float, float, float]:
-    if isinstance(v, dict):
-        d = NAN if partial else 0.0
-        up = {str(k).upper(): x for k, x in v.items()}
-        return (float(up.get("X", d)), float(up.get("Y", d)), float(up.get("Z", d)))
-    t = tuple(float(x) for x in v)
-    if len(t) != 3:
-        raise ValueError(f"work offset needs 3 values, got {v!r}")
-    return t
 
 
-def start_position(start: dict | Iterable[float] | None) -> list[float]:
-    """Machine gauge position at program start: ``{"X":.., "Z":..}`` (any subset) or
-    (x, y, z); NaN for an axis not given."""
-    if not start:
-        return [NAN, NAN, NAN]
-    if isinstance(start, dict):
-        bad = [k for k in start if str(k).upper() not in AXES]
-        if bad:
-            raise ValueError(f"start position names unknown axes {bad!r} (X, Y, Z only)")
-        up = {str(k).upper(): float(v) for k, v in start.items()}
-        return [up.get(a, NAN) for a in AXES]
-    t = [float(x) for x in start]
-    if len(t) != 3:
-        raise ValueError(f"start position needs 3 values, got {start!r}")
-    return t
