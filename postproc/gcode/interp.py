@@ -43,6 +43,7 @@ from postproc.gcode.interp_core import (
     gkey,
     start_position,
 )
+from postproc.gcode.interp_cycles import CyclesMixin
 from postproc.gcode.interp_offsets import OffsetsMixin
 from postproc.gcode.interp_words import WordsMixin, blank_nested_comments, classify_construct
 from postproc.gcode.moves import Arc, Cycle, Move
@@ -60,7 +61,6 @@ from postproc.gcode.state import (
     LOOKAHEAD_G,
     M_PARAMS,
     MOTION_CODES,
-    NAN,
     NEUTRAL_G,
     PLANES,
     RAPID,
@@ -89,7 +89,7 @@ __all__ = [
 
 
 
-class Interpreter(WordsMixin, OffsetsMixin):
+class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin):
     """Advance a :class:`ModalState` line by line; see the module docstring."""
 
 
@@ -190,40 +190,6 @@ class Interpreter(WordsMixin, OffsetsMixin):
                 prev, m = m.q1, m.then
         return mv
 
-    def _drill_if_due(self, lineno: int) -> None:
-        """Run the Sinumerik drilling cycle this block calls (one-shot, or modal after a
-        block that moves): its moves become :attr:`cycle_move`."""
-        call, self._cycle_due = self._cycle_due, None
-        if call is None:
-            return
-        from postproc.gcode.sinumerik_cycles import FEED_STEP, RAPID_STEP, drill_plan
-
-        st = self.state
-        if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno,
-                            call.col)
-        if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, call.col,
-                            hint="position every axis with a G90 move before the cycle, or give --start")
-        plan = drill_plan(call, self.path, lineno)
-        unit, shift = st.unit_mm, self.shift(False, lineno, call.col)
-        x, y, z0 = st.pos
-
-        def at(z: float) -> tuple[float, float, float]:
-            return (x, y, z * unit + shift[2])
-
-        kinds = {RAPID_STEP: RAPID, FEED_STEP: LINE}
-        steps: list[tuple[int, tuple]] = []
-        for kind, v in plan.steps:
-            steps.append((DWELL, (v, 0.0, 0.0)) if kind not in kinds else (kinds[kind], at(v)))
-        bottom, start = at(plan.bottom_z), at(plan.start_z)
-        st.pos = list(at(plan.clear_z))
-        self.cycle_move = Move(
-            lineno=lineno, kind=plan.code, q0=(x, y, z0), q1=bottom, r=self.tool_r(), shift=shift, unit=unit,
-            incremental=st.incremental, arc_absolute=st.arc_absolute, words=[], axis_idx=(-1, -1, -1),
-            feed_idx=-1, inverse_time=False, feed=st.feed, rotary=dict(st.rotary) if self.used_rotary else {},
-            stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
-                                    False, plan.dwell_s))
 
 
 
@@ -567,129 +533,6 @@ class Interpreter(WordsMixin, OffsetsMixin):
                     rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
                     motion_idx=motion_idx, spline=ctrl)
 
-    def _cycle(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int,  # noqa: C901
-               gcodes: list[tuple[int, int]], prefix: list[str], stays: bool) -> Move:
-        """A canned-cycle block: the holes it drills and the moves the controller makes.
-
-        Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
-        R when Z is below it; per hole a rapid in X/Y at the current level, a rapid to
-        R, the cycle's own moves, and a retract to R (G99) or to the higher of R and the
-        level at the block's start (G98). In G91, R is relative to the current Z and Z
-        to R; X/Y move by their increments for each of the L repeats. Pecks: G83 rapid
-        back to R and down to 0.254 mm (0.010 in) above the last depth, G73 retract 0.254 mm.
-        """
-        st = self.state
-        key = st.motion
-        if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
-            raise AssertionError("a canned-cycle block without its cycle")
-        col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)].letter_pos + 1
-        name = f"G{key / 10:g}"
-        if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
-        if st.inverse_time:
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in G93 inverse-time mode", lineno, col)
-        if any(a in vals for a in ROTARY) or any(k in vals for k in "IJ"):
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
-                            lineno, col)
-        unit = st.unit_mm
-        if "R" in vals:
-            st.cycle_r = vals["R"][0]
-        if st.cycle_r is None and self.d.cycle_r_default_initial and not math.isnan(st.pos[2]):
-            # Fanuc and Haas: R is optional; without it the R plane is the initial level
-            if st.incremental:
-                st.cycle_r = 0.0
-            else:
-                st.cycle_r = (st.pos[2] - self.shift(False, lineno, col)[2]) / unit
-        if st.cycle_r is None:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
-        if "Z" in vals:
-            st.cycle_z = vals["Z"][0]
-        if st.cycle_z is None:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
-        peck_mm = 0.0  # G73/G83 peck depth
-        if key in (730, 830):
-            if "Q" in vals:
-                st.cycle_q = vals["Q"][0]
-            if st.cycle_q is None or st.cycle_q <= 0:
-                raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
-                                lineno, col)
-            peck_mm = st.cycle_q * unit
-        if "P" in vals:
-            st.cycle_p = vals["P"][0]
-        if "F" in vals:
-            st.feed = vals["F"][0]
-        repeat_letter = next((c for c in self.d.cycle_repeat_words if c in vals), "L")
-        repeats = 1
-        if repeat_letter in vals:
-            given = vals[repeat_letter][0]
-            if given != int(given) or given < 0:
-                raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
-                                lineno, words[vals[repeat_letter][1]][4] + 1)
-            repeats = int(given)
-        if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
-                            hint="position every axis with a G90 move before the cycle, or give --start")
-        if self.unknown_after:
-            self._check_known([NAN, NAN, NAN], lineno, col)
-        shift = self.shift(False, lineno, col)
-        x0, y0, z0 = st.pos
-        if st.incremental:
-            r_m = z0 + st.cycle_r * unit
-            z_m = r_m + st.cycle_z * unit
-            dx = vals["X"][0] * unit if "X" in vals else 0.0
-            dy = vals["Y"][0] * unit if "Y" in vals else 0.0
-        else:
-            r_m = st.cycle_r * unit + shift[2]
-            z_m = st.cycle_z * unit + shift[2]
-            xs = vals["X"][0] * unit + shift[0] if "X" in vals else x0
-            ys = vals["Y"][0] * unit + shift[1] if "Y" in vals else y0
-        if z_m > r_m:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
-                            lineno, col)
-        clear = r_m if st.retract_r else max(z0, r_m)
-        delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
-        steps: list[tuple[int, tuple]] = []
-        cur = [x0, y0, z0]
-
-        def go(kind: int, x: float, y: float, z: float) -> None:
-            if (x, y, z) != tuple(cur):
-                steps.append((kind, (x, y, z)))
-                cur[:] = (x, y, z)
-
-        holes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
-        if z0 < r_m:
-            go(RAPID, x0, y0, r_m)
-        for _ in range(repeats):
-            x, y = (cur[0] + dx, cur[1] + dy) if st.incremental else (xs, ys)
-            go(RAPID, x, y, cur[2])
-            go(RAPID, x, y, r_m)
-            if key in (730, 830):
-                q = peck_mm
-                depth = r_m - q
-                while depth > z_m:
-                    go(LINE, x, y, depth)
-                    if key == 830:
-                        go(RAPID, x, y, r_m)
-                    go(RAPID, x, y, depth + delta)
-                    depth -= q
-            go(LINE, x, y, z_m)
-            if key in (820, 890) and st.cycle_p:
-                steps.append((DWELL, (st.cycle_p, 0.0, 0.0)))
-            if key in (840, 850, 890):
-                go(LINE, x, y, r_m)
-            go(RAPID, x, y, clear)
-            holes.append(((x, y, z_m), (x, y, r_m)))
-        axis_idx = (vals["X"][1] if "X" in vals else -1, vals["Y"][1] if "Y" in vals else -1,
-                    vals["Z"][1] if "Z" in vals else -1)
-        q0 = (x0, y0, z0)
-        st.pos = list(cur)
-        return Move(
-            lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
-            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
-            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
-            motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
-                                               r_m, z_m, repeats, st.retract_r, st.cycle_p))
 
 
 
