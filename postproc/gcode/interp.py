@@ -86,24 +86,8 @@ __all__ = [
 ]
 
 
-
-
-
-
-
 class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
     """Advance a :class:`ModalState` line by line; see the module docstring."""
-
-
-    # -- helpers -----------------------------------------------------------------------
-
-
-
-
-
-
-
-
 
     # -- the block ---------------------------------------------------------------------
     def feed_line(self, lineno: int, line: str) -> Move | None:
@@ -191,12 +175,6 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                     c.holes = [tuple(frames.machine_from_program(a, m.shift, q) for q in h) for h in c.holes]
                 prev, m = m.q1, m.then
         return mv
-
-
-
-
-
-
 
     def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
                block_delete: bool) -> Move | None:
@@ -475,20 +453,6 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         return False
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
 def _g_motion(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G0-G3, canned cycles, splines: the block's motion code (one per block)."""
     if b.motion_key is not None:
@@ -613,10 +577,6 @@ def _g_neutral(it: Interpreter, b: Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
 
 
-
-
-
-
 def _g_g50(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G50: scaling cancel on a mill (no words of its own); a lathe's spindle speed clamp
     (G50 S) or coordinate setting (G50 X.. Z..)."""
@@ -661,12 +621,6 @@ for _keys, _handler in (
         _G_HANDLERS[_key] = _handler
 
 
-
-
-
-
-
-
 def plain_moves(mv: Move) -> Iterator[Move]:
     """The straight and arc moves a Move stands for, in order: a cycle block's rapids
     and feeds, a G28/G30 line's two legs, or the move itself."""
@@ -694,9 +648,5 @@ def plain_moves(mv: Move) -> Iterator[Move]:
         if not (leg.fixed and any(math.isnan(v) for v in leg.q1)):  # an unknown stored position
             yield leg
         leg = leg.then
-
-
-
-
 
 

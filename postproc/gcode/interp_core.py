@@ -78,7 +78,6 @@ def gkey(text: str) -> int:
     return key if key is not None else int(round(float(text) * 10))
 
 
-
 class InterpreterCore:
     """The state of :class:`postproc.gcode.interp.Interpreter` and the helpers its parts share."""
 
