@@ -17,7 +17,7 @@ UnsupportedGcodeError naming line, column and construct.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
 from postproc.errors import (
@@ -63,7 +63,6 @@ from postproc.gcode.state import (
     LINE,
     LOOKAHEAD_G,
     M_PARAMS,
-    MOTION_CODES,
     NEUTRAL_G,
     PLANES,
     RAPID,
@@ -176,9 +175,20 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 prev, m = m.q1, m.then
         return mv
 
-    def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
-               block_delete: bool) -> Move | None:
-        st = self.state
+    def _block(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
+        """One block: its words gathered into a :class:`Block`, its M codes, the handlers of
+        its G codes (:data:`_G_HANDLERS`), the settings that take effect before the motion,
+        then the handler of its motion family (:data:`MOTIONS`)."""
+        b = self._gather(lineno, words, block_delete)
+        self._m_codes(b)
+        self._g_codes(b)
+        if self._settings(b):
+            return None
+        return self._motion(b)
+
+    def _gather(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Block:
+        """The block's G and M codes and its other words by letter; a word the dialect does
+        not read, or a letter given twice, is refused at its place."""
         gcodes: list[tuple[int, int]] = []  # (key, word index)
         mcodes: list[tuple[int, int]] = []
         vals: dict[str, tuple[float, int]] = {}
@@ -214,19 +224,20 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                     raise self._err(GcodeSyntaxError, f"{letter} value {num[:12]}{'...' if len(num) > 12 else ''} is "
                                     f"beyond {MAX_WORD_VALUE:g}: no machine moves that far", lineno, _lpos + 1)
                 vals[letter] = (value, i)
-        def col_of(i: int) -> int:
-            return words[i].letter_pos + 1  # 1-based column of the word's letter
-
         if self.d.call_words and not gcodes and any(k in vals for k in self.d.call_words):
             self._foreign(" ".join(w.letter + w.number for w in words), lineno)  # Fadal L0102: a call
+        return Block(lineno, words, vals, gcodes=gcodes, mcodes=mcodes, block_delete=block_delete)
 
-        # M codes
+    def _m_codes(self, b: Block) -> None:
+        """The block's M codes and T word: program end, tool change, and the words that act
+        before the motion (:attr:`Block.event_idx`)."""
+        st, vals, lineno = self.state, b.vals, b.lineno
         tool_change = False
         # words acting before the motion, moved onto the first line when the block is split
         event_idx: list[int] = [vals[k][1] for k in "ST" if k in vals]
-        for key, i in mcodes:
+        for key, i in b.mcodes:
             if key % 10:
-                raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
+                raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, b.col(i))
             m = key // 10
             if m == 99 and "P" not in vals:
                 # M99 reached in the main program (a call would have started the expansion,
@@ -234,18 +245,18 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 # expansion stage reads it too
                 if st.incremental:
                     raise self._err(UnsupportedGcodeError, "M99 repeats the program from where it ended, in G91 "
-                                    "(incremental): each pass starts elsewhere", lineno, col_of(i),
+                                    "(incremental): each pass starts elsewhere", lineno, b.col(i),
                                     hint="end the program with G90 before M99, or with M30")
                 self.ended = True
                 self.repeats = True
                 continue
             if m in REFUSED_M:
                 raise self._err(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
-                                REFUSED_M[m], lineno, col_of(i),
+                                REFUSED_M[m], lineno, b.col(i),
                                 hint="postproc expands M98/M99 subprograms defined in the same program; "
                                      "put the subprogram in the file")
             if m > 199:
-                raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
+                raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, b.col(i))
             if m in BEFORE_MOTION_M:
                 event_idx.append(i)
                 event_idx.extend(vals[k][1] for k in M_PARAMS.get(m, "") if k in vals)
@@ -255,69 +266,59 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 self.ended = True
             if m == 61:
                 if "Q" not in vals:
-                    raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, col_of(i))
+                    raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, b.col(i))
                 st.spindle_tool = int(vals["Q"][0])
 
         if "T" in vals:
             st.tool = int(vals["T"][0])
         if tool_change:
             st.spindle_tool = st.tool
+        b.tool_change = tool_change
+        b.event_idx = sorted(set(event_idx))
 
-        blk = Block(lineno, words, vals)
-        if st.comp != 400:
-            cutter.check_block(self, blk, gcodes, tool_change)
-        for key, i in gcodes:
+    def _g_codes(self, b: Block) -> None:
+        """Run the handler of each G code of the block (:data:`_G_HANDLERS`, the dialect's
+        own first), with cutter compensation's checks around them."""
+        if self.state.comp != 400:
+            cutter.check_block(self, b, b.gcodes, b.tool_change)
+        for key, i in b.gcodes:
             handler = _G_HANDLERS.get(key)
             if self._dialect_g and key in self._dialect_g:
                 handler = self._dialect_g[key]
             if handler is None and key in self.d.turning_cycles and self.lathe.weak:
-                raise self.lathe.refusal(f"G{words[i].number} turning cycle at line {lineno}", self.path, lineno,
-                                         col_of(i))
+                raise self.lathe.refusal(f"G{b.words[i].number} turning cycle at line {b.lineno}", self.path,
+                                         b.lineno, b.col(i))
             if handler is None:
-                raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
-            handler(self, blk, key, i)
-        if blk.comp is not None:
-            cutter.switch(self, blk, gcodes)
-        motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
-        home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
-        lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
-        event_idx = sorted(set(event_idx))
-        before_m = [words[j].letter + words[j].number for j in event_idx]
+                raise self._err(UnsupportedGcodeError, f"G{b.words[i].number} (unknown G code)", b.lineno, b.col(i))
+            handler(self, b, key, i)
+        if b.comp is not None:
+            cutter.switch(self, b, b.gcodes)
 
+    def _settings(self, b: Block) -> bool:
+        """The tool length and work offset the block selects (the dialect's D and E words
+        too); True when the block ends there: a look-ahead code, G10, G52 or G92."""
+        st, vals = self.state, b.vals
         if self.d.tool_length_word and self.d.tool_length_word in vals:  # Sinumerik D: the length register
-            self._g43({"H": vals[self.d.tool_length_word]}, lineno, col_of(vals[self.d.tool_length_word][1]))
+            self._g43({"H": vals[self.d.tool_length_word]}, b.lineno, b.col(vals[self.d.tool_length_word][1]))
         if self.d.fixture_offset_word and self.d.fixture_offset_word in vals:
-            work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
-        if work_name is not None:
-            st.work = work_name
+            b.work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
+        if b.work_name is not None:
+            st.work = b.work_name
             st.work_explicit = True
-        if lookahead is not None:
-            return None
-        if g10:
-            before = tuple(st.pos)
-            self._g10(vals, lineno, col_of(next(i for k, i in gcodes if k == 100)))
-            L = int(vals["L"][0]) if "L" in vals else None
-            named = [a for a in AXES if a in vals] if L == 20 else ["Z"] if L in (10, 11) and "Z" in vals else []
-            if named:
-                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in named], before)
-            return None
-        if g52:
-            self._g52(vals, lineno, col_of(next(i for k, i in gcodes if k == 520)))
-            return None
-        if g92 is not None:
-            before = tuple(st.pos)
-            self._g92(g92, vals, lineno, col_of(next(i for k, i in gcodes if k in (920, 921, 922))))
-            if g92 == 920 and any(a in vals for a in AXES):
-                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in AXES if a in vals], before)
-            return None
-        if "F" in vals and not (self.d.dwell_f_is_time and any(k == 40 for k, _ in gcodes)):
-            st.feed = vals["F"][0]
-        if home_code is not None:
-            return self._home(home_code, words, vals, lineno, col_of(home_code[1]))
+        if b.lookahead is not None:
+            return True
+        return self._offset_settings(b)
 
-        unit = st.unit_mm
+    def _motion(self, b: Block) -> Move | None:
+        """The block's feed, then its move: the handler of its motion family in
+        :data:`MOTIONS`, by the block's motion code, else by the modal motion mode (a modal
+        cycle or spline only on a block with axis words)."""
+        st, vals = self.state, b.vals
+        if "F" in vals and not (self.d.dwell_f_is_time and any(k == 40 for k, _ in b.gcodes)):
+            st.feed = vals["F"][0]
+        if b.home_code is not None:
+            return MOTIONS[b.home_code[0]](self, b)
         # Rotary axes: passed through, tracked for the engine's context.
-        rotary_changed = False
         for a in ROTARY:
             if a in vals:
                 v = vals[a][0]
@@ -326,116 +327,18 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                     st.rotary[a] = st.rotary.get(a, 0.0) + v
                 else:
                     st.rotary[a] = v + self.rotary_g92.get(a, 0.0)
-                rotary_changed = True
-
-        has_axes = any(a in vals for a in AXES)
-        if cancel_cycle:
+                b.rotary_changed = True
+        b.has_axes = any(a in vals for a in AXES)
+        if b.cancel_cycle:
             if st.motion in CANNED_CYCLES:
                 st.motion = None if self.d.g80_clears_motion else st.before_cycle
             elif self.d.g80_clears_motion:
                 st.motion = None
             st.cycle_r = st.cycle_z = st.cycle_q = st.cycle_p = None
-        if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
-            if motion_key is not None and st.motion not in CANNED_CYCLES:
-                st.before_cycle = st.motion
-            if motion_key is not None and motion_key != st.motion and (
-                    not self.d.cycle_keeps_rz or st.motion not in CANNED_CYCLES):
-                # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
-                # keep them from one cycle to the next (until G80 or another motion)
-                st.cycle_r = st.cycle_z = None
-            if motion_key is not None:
-                st.motion = motion_key
-            return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
-                               tool_change or "T" in vals)
-        if motion_key in SPLINES or (motion_key is None and st.motion in SPLINES and has_axes):
-            if motion_key is not None:
-                st.motion = motion_key
-            return self._spline(lineno, words, vals, motion_idx, prefix + before_m)
-        if motion_key is not None:
-            st.motion = MOTION_CODES[motion_key]
-        full_circle = False
-        if not has_axes:
-            arc_words = [vals[k][1] for k in "IJKR" if k in vals]
-            if motion_key in (ARC_CW, ARC_CCW) or (arc_words and st.motion in (ARC_CW, ARC_CCW)):
-                i = arc_words[0] if arc_words else next(i for k, i in gcodes if k == motion_key)
-                _, (l1, l2) = PLANES[st.plane]
-                if not self.d.full_circle_without_end or "R" in vals or not (l1 in vals or l2 in vals):
-                    raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i),
-                                    hint="a full circle needs its centre offsets (I/J/K)"
-                                    + ("" if self.d.full_circle_without_end else
-                                       f" and {self.d.title.split()[0]} needs an end point"))
-                full_circle = True  # a full circle back to the start (LinuxCNC, Fanuc)
-            elif not rotary_changed:
-                return None
-        if full_circle:
-            first_axis_col = col_of(min(vals[k][1] for k in "IJK" if k in vals))
-        else:
-            first_axis_col = col_of(min(vals[a][1] for a in AXES + ROTARY if a in vals))
-        if st.motion is None:
-            raise self._err(GcodeSyntaxError, "axis words with no motion mode (G0/G1/G2/G3) active",
-                            lineno, first_axis_col)
-        if g53 and st.motion not in (RAPID, LINE):
-            raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
-        incremental = st.incremental
-        if g53 and incremental:
-            if not self.d.g53_absolute_in_g91:
-                raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
-                                first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
-                                                     "machine positions in G91 too (--dialect fanuc|haas)")
-            incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
-
-        shift = self.shift(g53, lineno, first_axis_col)
-        pos = st.pos
-        q0 = (pos[0], pos[1], pos[2])
-        q1 = list(q0)
-        axis_idx = [-1, -1, -1]
-        for k, a in enumerate(AXES):
-            if a in vals:
-                v, i = vals[a]
-                axis_idx[k] = i
-                if incremental:
-                    if math.isnan(q1[k]):
-                        raise self._err(
-                            MissingSetupError,
-                            f"incremental move on {a} from an unknown position (no absolute move on {a} before)",
-                            lineno, col_of(i),
-                            hint="position every axis with a G90 move before the first G91 move, or give its "
-                                 "machine position at program start with --start")
-                    q1[k] = q1[k] + v * unit
-                else:
-                    q1[k] = v * unit + shift[k]
-                    self.unknown_after.pop(k, None)
-        if self.unknown_after:
-            self._check_known(q1, lineno, first_axis_col)
-        if block_delete and st.incremental:
-            raise self._err(UnsupportedGcodeError, "block-delete '/' on an incremental move", lineno, 1,
-                            hint="the result would depend on the block-delete switch")
-
-        arc = None
-        if st.motion in (ARC_CW, ARC_CCW):
-            arc = self._arc(lineno, words, vals, q0, q1, shift, unit, gcodes)
-        elif any(k in vals for k in "IJK") or ("R" in vals and st.motion in (RAPID, 10)):
-            letter = next(k for k in "IJKR" if k in vals)
-            raise self._err(GcodeSyntaxError, f"{letter} word on a straight move", lineno, col_of(vals[letter][1]))
-        if st.inverse_time and st.motion != RAPID and "F" not in vals:
-            raise self._err(GcodeSyntaxError, "G93 inverse-time feed needs an F word on every feed move",
-                            lineno, first_axis_col)
-
-        st.pos = q1
-        move = Move(
-            lineno=lineno, kind=st.motion, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
-            unit=unit, incremental=incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
-            inverse_time=st.inverse_time, feed=st.feed,
-            rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
-            prefix_words=prefix + before_m, event_idx=tuple(event_idx),
-            stays=tool_change or g53,
-            motion_idx=motion_idx,
-            aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
-        )
-        if st.comp != 400 or st.comp_edge:
-            cutter.on_move(self, move)
-        return move
+        key = b.motion_key
+        if key is None and (b.has_axes or st.motion not in _NEEDS_AXES):
+            key = st.motion
+        return MOTIONS.get(key, Interpreter._motion_line)(self, b)
 
     @staticmethod
     def _is_lookahead(key: int, vals: Vals) -> bool:
@@ -605,11 +508,24 @@ def _g_g15(it: Interpreter, b: Block, key: int, i: int) -> None:
         b.prefix.append(f"{b.gtext(i)} H{b.words[b.vals['H'][1]].number}")
 
 
+#: motion mode (G code key), or G28/G30 -> the handler that makes the block's move, one per
+#: motion family. A G code with geometry is its handler and its row here; its row of
+#: _G_HANDLERS follows (G28/G30 set the block's home code, the others its motion code).
+MOTIONS: dict[int | None, Callable[[Interpreter, Block], Move | None]] = {
+    RAPID: Interpreter._motion_line, LINE: Interpreter._motion_line,
+    ARC_CW: Interpreter._motion_arc, ARC_CCW: Interpreter._motion_arc,
+    **dict.fromkeys(CANNED_CYCLES, Interpreter._motion_cycle),
+    **dict.fromkeys(SPLINES, Interpreter._motion_spline),
+    **dict.fromkeys(HOME_CODES, Interpreter._motion_home),
+}
+# motion modes whose modal blocks move only with an axis word (else read as a G0/G1 block's)
+_NEEDS_AXES = CANNED_CYCLES | SPLINES
+
 #: G code key (10 x number) -> handler(interpreter, block, key, word index)
 _G_HANDLERS: dict = {}
 for _keys, _handler in (
     (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused), (CUTTER_COMP, _g_cutter),
-    (MOTION_CODES, _g_motion), (CANNED_CYCLES, _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
+    (MOTIONS.keys() - HOME_CODES.keys(), _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
     (LOOKAHEAD_G, _g_lookahead), ({50, 51, 80}, _g_lookahead_spline_or_refused),
     (HOME_CODES, _g_home), (HOME_STORE, _g_home_store), ({520}, _g_local_offset),
     (PLANES, _g_plane), ({200, 210}, _g_units), ({900, 910}, _g_distance), ({901, 911}, _g_arc_distance),

@@ -234,11 +234,19 @@ class InterpreterCore:
 
 @dataclass(slots=True)
 class Block:
-    """What the G codes of one block set, read by the rest of :meth:`Interpreter._block`."""
+    """One block as :meth:`Interpreter._block` reads it: its words, what its M and G codes
+    set, and what the handler of its motion family reads."""
 
     lineno: int
     words: list
-    vals: dict
+    vals: dict  # the words by letter, G and M aside (:data:`Vals`)
+    gcodes: list = field(default_factory=list)  # (key, word index) of each G code
+    mcodes: list = field(default_factory=list)  # (key, word index) of each M code
+    block_delete: bool = False  # the block starts with '/'
+    tool_change: bool = False  # M6
+    event_idx: list = field(default_factory=list)  # words acting before the motion (S, T, M codes), in order
+    rotary_changed: bool = False  # an A, B or C word moved a rotary axis
+    has_axes: bool = False  # an X, Y or Z word
     motion_key: int | None = None
     motion_idx: int = -1
     g53: bool = False
@@ -257,6 +265,11 @@ class Block:
 
     def gtext(self, i: int) -> str:
         return f"G{self.words[i].number}"
+
+    def prefix_words(self) -> list[str]:
+        """The words written before the motion when the block is split: its modal G codes,
+        then the words acting before the motion."""
+        return self.prefix + [self.words[j].letter + self.words[j].number for j in self.event_idx]
 
 
 def _work_code(name: str):

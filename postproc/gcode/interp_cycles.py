@@ -5,12 +5,12 @@ the moves the controller makes (see :mod:`postproc.gcode.interp`)."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
-from postproc.gcode import lexer
-from postproc.gcode.interp_core import AXES, ROTARY, InterpreterCore, Vals
+from postproc.gcode.interp_core import AXES, ROTARY, Block, InterpreterCore
 from postproc.gcode.moves import Cycle, Move
-from postproc.gcode.state import DWELL, LINE, NAN, RAPID
+from postproc.gcode.state import CANNED_CYCLES, DWELL, LINE, NAN, RAPID
 
 
 class CyclesMixin(InterpreterCore):
@@ -51,8 +51,22 @@ class CyclesMixin(InterpreterCore):
             stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
                                     False, plan.dwell_s))
 
-    def _cycle(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int,  # noqa: C901
-               gcodes: list[tuple[int, int]], prefix: list[str], stays: bool) -> Move:
+    def _motion_cycle(self, b: Block) -> Move:
+        """G73, G81-G89, the canned-cycle family of :data:`~postproc.gcode.interp.MOTIONS`:
+        the cycle's modal words kept or forgotten, then its moves (:meth:`_cycle`)."""
+        st, motion_key = self.state, b.motion_key
+        if motion_key is not None and st.motion not in CANNED_CYCLES:
+            st.before_cycle = st.motion
+        if motion_key is not None and motion_key != st.motion and (
+                not self.d.cycle_keeps_rz or st.motion not in CANNED_CYCLES):
+            # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
+            # keep them from one cycle to the next (until G80 or another motion)
+            st.cycle_r = st.cycle_z = None
+        if motion_key is not None:
+            st.motion = motion_key
+        return self._cycle(b)
+
+    def _cycle(self, b: Block) -> Move:
         """A canned-cycle block: the holes it drills and the moves the controller makes.
 
         Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
@@ -62,7 +76,7 @@ class CyclesMixin(InterpreterCore):
         to R; X/Y move by their increments for each of the L repeats. Pecks: G83 rapid
         back to R and down to 0.254 mm (0.010 in) above the last depth, G73 retract 0.254 mm.
         """
-        st = self.state
+        st, words, vals, lineno, motion_idx = self.state, b.words, b.vals, b.lineno, b.motion_idx
         key = st.motion
         if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
             raise AssertionError("a canned-cycle block without its cycle")
@@ -75,6 +89,47 @@ class CyclesMixin(InterpreterCore):
         if any(a in vals for a in ROTARY) or any(k in vals for k in "IJ"):
             raise self._err(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
                             lineno, col)
+        unit = st.unit_mm
+        r_word, z_word, peck_mm, repeats = self._cycle_words(b, name, col)
+        if any(math.isnan(v) for v in st.pos):
+            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
+                            hint="position every axis with a G90 move before the cycle, or give --start")
+        if self.unknown_after:
+            self._check_known([NAN, NAN, NAN], lineno, col)
+        shift = self.shift(False, lineno, col)
+        x0, y0, z0 = st.pos
+        if st.incremental:
+            r_m = z0 + r_word * unit
+            z_m = r_m + z_word * unit
+            xy = (vals["X"][0] * unit if "X" in vals else 0.0, vals["Y"][0] * unit if "Y" in vals else 0.0)
+        else:
+            r_m = r_word * unit + shift[2]
+            z_m = z_word * unit + shift[2]
+            xy = (vals["X"][0] * unit + shift[0] if "X" in vals else x0, vals["Y"][0] * unit + shift[1] if "Y" in vals else y0)
+        if z_m > r_m:
+            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
+                            lineno, col)
+        clear = r_m if st.retract_r else max(z0, r_m)
+        d = _Drilling(key, (x0, y0, z0), xy, st.incremental, r_m, z_m, clear, peck_mm, repeats, st.cycle_p)
+        steps, holes, cur = _drill(d)
+        axis_idx = (vals["X"][1] if "X" in vals else -1, vals["Y"][1] if "Y" in vals else -1,
+                    vals["Z"][1] if "Z" in vals else -1)
+        q0 = (x0, y0, z0)
+        st.pos = list(cur)
+        return Move(
+            lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
+            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
+            axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
+            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=b.prefix_words(), stays=True,
+            motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
+                                               r_m, z_m, repeats, st.retract_r, st.cycle_p))
+
+    def _cycle_words(self, b: Block, name: str, col: int) -> tuple[float, float, float, int]:
+        """The cycle's modal R, Z, Q, P words and its feed, kept in the state and checked:
+        its R and Z (program units), peck depth (mm, G73/G83) and repeats (L, or the
+        dialect's word)."""
+        st, words, vals, lineno = self.state, b.words, b.vals, b.lineno
+        key = st.motion
         unit = st.unit_mm
         if "R" in vals:
             st.cycle_r = vals["R"][0]
@@ -110,67 +165,61 @@ class CyclesMixin(InterpreterCore):
                 raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
                                 lineno, words[vals[repeat_letter][1]][4] + 1)
             repeats = int(given)
-        if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
-                            hint="position every axis with a G90 move before the cycle, or give --start")
-        if self.unknown_after:
-            self._check_known([NAN, NAN, NAN], lineno, col)
-        shift = self.shift(False, lineno, col)
-        x0, y0, z0 = st.pos
-        if st.incremental:
-            r_m = z0 + st.cycle_r * unit
-            z_m = r_m + st.cycle_z * unit
-            dx = vals["X"][0] * unit if "X" in vals else 0.0
-            dy = vals["Y"][0] * unit if "Y" in vals else 0.0
-        else:
-            r_m = st.cycle_r * unit + shift[2]
-            z_m = st.cycle_z * unit + shift[2]
-            xs = vals["X"][0] * unit + shift[0] if "X" in vals else x0
-            ys = vals["Y"][0] * unit + shift[1] if "Y" in vals else y0
-        if z_m > r_m:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
-                            lineno, col)
-        clear = r_m if st.retract_r else max(z0, r_m)
-        delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
-        steps: list[tuple[int, tuple]] = []
-        cur = [x0, y0, z0]
+        return st.cycle_r, st.cycle_z, peck_mm, repeats
 
-        def go(kind: int, x: float, y: float, z: float) -> None:
-            if (x, y, z) != tuple(cur):
-                steps.append((kind, (x, y, z)))
-                cur[:] = (x, y, z)
 
-        holes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
-        if z0 < r_m:
-            go(RAPID, x0, y0, r_m)
-        for _ in range(repeats):
-            x, y = (cur[0] + dx, cur[1] + dy) if st.incremental else (xs, ys)
-            go(RAPID, x, y, cur[2])
-            go(RAPID, x, y, r_m)
-            if key in (730, 830):
-                q = peck_mm
-                depth = r_m - q
-                while depth > z_m:
-                    go(LINE, x, y, depth)
-                    if key == 830:
-                        go(RAPID, x, y, r_m)
-                    go(RAPID, x, y, depth + delta)
-                    depth -= q
-            go(LINE, x, y, z_m)
-            if key in (820, 890) and st.cycle_p:
-                steps.append((DWELL, (st.cycle_p, 0.0, 0.0)))
-            if key in (840, 850, 890):
-                go(LINE, x, y, r_m)
-            go(RAPID, x, y, clear)
-            holes.append(((x, y, z_m), (x, y, r_m)))
-        axis_idx = (vals["X"][1] if "X" in vals else -1, vals["Y"][1] if "Y" in vals else -1,
-                    vals["Z"][1] if "Z" in vals else -1)
-        q0 = (x0, y0, z0)
-        st.pos = list(cur)
-        return Move(
-            lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
-            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
-            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
-            motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
-                                               r_m, z_m, repeats, st.retract_r, st.cycle_p))
+@dataclass(slots=True)
+class _Drilling:
+    """What a canned-cycle block drills, machine mm: from ``start``, ``repeats`` holes at
+    ``xy`` (in G91: each ``xy`` from the last), from the R plane ``r`` down to ``z``."""
+
+    key: int  # the cycle (G81: 810)
+    start: tuple[float, float, float]
+    xy: tuple[float, float]
+    incremental: bool
+    r: float
+    z: float
+    clear: float  # the level of the retract after each hole
+    peck: float  # G73/G83 peck depth (0: none)
+    repeats: int
+    dwell: float | None  # P (G82, G89)
+
+
+def _drill(d: _Drilling) -> tuple[list[tuple[int, tuple]], list[tuple[tuple[float, float, float],
+                                                                      tuple[float, float, float]]], list[float]]:
+    """The steps of a canned cycle, (bottom, R-plane point) of each hole, and where it ends."""
+    key, r_m, z_m, clear = d.key, d.r, d.z, d.clear
+    x0, y0, z0 = d.start
+    delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
+    steps: list[tuple[int, tuple]] = []
+    cur = [x0, y0, z0]
+
+    def go(kind: int, x: float, y: float, z: float) -> None:
+        if (x, y, z) != tuple(cur):
+            steps.append((kind, (x, y, z)))
+            cur[:] = (x, y, z)
+
+    holes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
+    if z0 < r_m:
+        go(RAPID, x0, y0, r_m)
+    for _ in range(d.repeats):
+        x, y = (cur[0] + d.xy[0], cur[1] + d.xy[1]) if d.incremental else d.xy
+        go(RAPID, x, y, cur[2])
+        go(RAPID, x, y, r_m)
+        if key in (730, 830):
+            q = d.peck
+            depth = r_m - q
+            while depth > z_m:
+                go(LINE, x, y, depth)
+                if key == 830:
+                    go(RAPID, x, y, r_m)
+                go(RAPID, x, y, depth + delta)
+                depth -= q
+        go(LINE, x, y, z_m)
+        if key in (820, 890) and d.dwell:
+            steps.append((DWELL, (d.dwell, 0.0, 0.0)))
+        if key in (840, 850, 890):
+            go(LINE, x, y, r_m)
+        go(RAPID, x, y, clear)
+        holes.append(((x, y, z_m), (x, y, r_m)))
+    return steps, holes, cur

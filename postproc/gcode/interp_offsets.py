@@ -7,7 +7,7 @@ import math
 
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import lexer
-from postproc.gcode.interp_core import AXES, ROTARY, InterpreterCore, Vals, col_of_word
+from postproc.gcode.interp_core import AXES, ROTARY, Block, InterpreterCore, Vals, col_of_word
 from postproc.gcode.moves import Move
 from postproc.gcode.state import HOME_CODES, NAN, P_SYSTEMS, RAPID
 
@@ -20,6 +20,36 @@ class OffsetsMixin(InterpreterCore):
         columns (as :meth:`_block` reads it)."""
         self._g43({"H": (float(h), -1)}, lineno, col)
         self._run_shift = None
+
+    def _offset_settings(self, b: Block) -> bool:
+        """The block's G10, G52 or G92, with the offset each sets from where the machine is
+        (:attr:`rebase`); True when it had one (the block moves nothing then)."""
+        st, vals, words = self.state, b.vals, b.words
+        if b.g10:
+            before = tuple(st.pos)
+            self._g10(vals, b.lineno, b.col(next(i for k, i in b.gcodes if k == 100)))
+            L = int(vals["L"][0]) if "L" in vals else None
+            named = [a for a in AXES if a in vals] if L == 20 else ["Z"] if L in (10, 11) and "Z" in vals else []
+            if named:
+                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in named], before)
+            return True
+        if b.g52:
+            self._g52(vals, b.lineno, b.col(next(i for k, i in b.gcodes if k == 520)))
+            return True
+        if b.g92 is not None:
+            before = tuple(st.pos)
+            self._g92(b.g92, vals, b.lineno, b.col(next(i for k, i in b.gcodes if k in (920, 921, 922))))
+            if b.g92 == 920 and any(a in vals for a in AXES):
+                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in AXES if a in vals], before)
+            return True
+        return False
+
+    def _motion_home(self, b: Block) -> Move | None:
+        """G28/G30, the home family of :data:`~postproc.gcode.interp.MOTIONS`."""
+        home_code = b.home_code
+        if home_code is None:  # pragma: no cover - MOTIONS calls this for a G28/G30 block
+            raise AssertionError("a G28/G30 block without its code")
+        return self._home(home_code, b.words, b.vals, b.lineno, b.col(home_code[1]))
 
     def _home(self, home_code: tuple[int, int], words: list[lexer.Word], vals: Vals, lineno: int,
               col: int) -> Move | None:
