@@ -12,13 +12,20 @@ Semantics follow LinuxCNC (rs274ngc) where they matter to geometry:
 
 Anything that changes geometry in a way not modelled here is refused with
 UnsupportedGcodeError naming line, column and construct.
+
+A block is read in this order (:meth:`Interpreter._block`): its words into a
+:class:`~postproc.gcode.interp_core.Block`, its M codes, the handler of each G code
+(:data:`_G_HANDLERS`), the settings that end a block (G10, G52, G92), then the handler of
+its motion family (:data:`MOTIONS`). The parts live beside this module and are mixed into
+:class:`Interpreter`: the state and shared helpers in ``interp_core``, reading a line into
+words in ``interp_words``, offsets and G28/G30 in ``interp_offsets``, canned cycles in
+``interp_cycles``, straight moves, arcs and splines in ``interp_motion``.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING
 
 from postproc.errors import (
     GcodeSyntaxError,
@@ -72,10 +79,6 @@ from postproc.gcode.state import (
     SPLINES,
     WORK_SYSTEMS,
 )
-
-if TYPE_CHECKING:
-    pass
-
 
 # the names other modules import from here (some defined in interp_core)
 __all__ = [

@@ -78,7 +78,7 @@ class CyclesMixin(InterpreterCore):
         """
         st, words, vals, lineno, motion_idx = self.state, b.words, b.vals, b.lineno, b.motion_idx
         key = st.motion
-        if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
+        if key is None:  # pragma: no cover - _motion_cycle sets a canned-cycle motion mode
             raise AssertionError("a canned-cycle block without its cycle")
         col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)].letter_pos + 1
         name = f"G{key / 10:g}"
