@@ -12,6 +12,10 @@ from postproc.gcode.interp_core import AXES, ROTARY, Block, InterpreterCore
 from postproc.gcode.moves import Cycle, Move
 from postproc.gcode.state import CANNED_CYCLES, DWELL, LINE, NAN, RAPID
 
+# G83's rapid back down to this far above the last depth, and G73's retract: 0.010 inch
+# (LinuxCNC G83_RAPID_DELTA)
+PECK_CLEARANCE_MM = 0.254
+
 
 class CyclesMixin(InterpreterCore):
     """Canned cycles (mixed into :class:`~postproc.gcode.interp.Interpreter`)."""
@@ -190,7 +194,6 @@ def _drill(d: _Drilling) -> tuple[list[tuple[int, tuple]], list[tuple[tuple[floa
     """The steps of a canned cycle, (bottom, R-plane point) of each hole, and where it ends."""
     key, r_m, z_m, clear = d.key, d.r, d.z, d.clear
     x0, y0, z0 = d.start
-    delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
     steps: list[tuple[int, tuple]] = []
     cur = [x0, y0, z0]
 
@@ -213,7 +216,7 @@ def _drill(d: _Drilling) -> tuple[list[tuple[int, tuple]], list[tuple[tuple[floa
                 go(LINE, x, y, depth)
                 if key == 830:
                     go(RAPID, x, y, r_m)
-                go(RAPID, x, y, depth + delta)
+                go(RAPID, x, y, depth + PECK_CLEARANCE_MM)
                 depth -= q
         go(LINE, x, y, z_m)
         if key in (820, 890) and d.dwell:
