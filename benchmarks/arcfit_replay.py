@@ -1,7 +1,7 @@
 """Time the split-arc fitting of the G-code writer alone, on pieces recorded from a run.
 
 ``capture``: run ``postproc correct`` on a program and record every call of the
-emitter's ``_fit_piece`` (its arguments, the engine subdivisions it asks for and the
+writer's ``arcfit.MoveFit.piece`` (its move, plan, arguments, the engine subdivisions it asks for and the
 segments it returns) in a pickle. ``run``: replay the recorded calls with the
 checkout's emitter, check that every call returns the recorded segments and print the
 median wall and CPU time of the replays (``--repeats``). Paired A/B: record once, then replay with
@@ -40,31 +40,33 @@ def capture(program: str, calibration: str, out: str, extra: list[str]) -> None:
     from click.testing import CliRunner
 
     from postproc.cli import main
-    from postproc.gcode import emitter
+    from postproc.gcode import arcfit
 
     calls: list[tuple] = []
-    orig = emitter.EmitterMixin._fit_piece
+    orig = arcfit.MoveFit.piece
 
-    def wrapped(self, mv, plan, s, Q, nom, bulge, qe, final, d, budget):
+    def wrapped(self, s, Q, nom, bulge, qe, final):
         subs: list = []
-        sub0 = self._subdivide
+        writer = self.w
+        sub0 = writer._subdivide
 
         def rec(*a, **k):
             r = sub0(*a, **k)
             subs.append(r)
             return r
 
-        self._subdivide = rec
+        writer._subdivide = rec
         try:
-            res = orig(self, mv, plan, s, Q, nom, bulge, qe, final, d, budget)
+            res = orig(self, s, Q, nom, bulge, qe, final)
         finally:
-            del self._subdivide
+            del writer._subdivide
+        plan = self.plan
         keep = {k: plan[k] for k in ("nsweep", "mismatch", "whole", "curve") if k in plan}
-        calls.append(((mv, keep, s, Q, nom, bulge, list(qe), final, d, budget), subs,
+        calls.append(((self.mv, keep, s, Q, nom, bulge, list(qe), final, self.d, self.budget), subs,
                       [_plain(x) for x in res]))
         return res
 
-    emitter.EmitterMixin._fit_piece = wrapped
+    arcfit.MoveFit.piece = wrapped
     r = CliRunner().invoke(main, ["correct", program, "-c", calibration, "-o", "/dev/null", *extra])
     if r.exit_code != 0:
         raise SystemExit(r.output)
@@ -74,6 +76,7 @@ def capture(program: str, calibration: str, out: str, extra: list[str]) -> None:
 
 
 def run(path: str, repeats: int, limit: int | None = None) -> None:
+    from postproc.gcode.arcfit import MoveFit
     from postproc.gcode.emitter import EmitterMixin
 
     class Replay(EmitterMixin):
@@ -94,7 +97,8 @@ def run(path: str, repeats: int, limit: int | None = None) -> None:
         results = []
         for args, subs, _want in calls:
             obj.subs = list(subs)
-            results.append(obj._fit_piece(*args))
+            mv, plan, s, Q, nom, bulge, qe, final, d, budget = args
+            results.append(MoveFit(obj, mv, plan, d, budget).piece(s, Q, nom, bulge, qe, final))
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
         if rep == 0:

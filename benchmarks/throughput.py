@@ -43,9 +43,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -169,6 +169,25 @@ def machine() -> str:
     return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}; load average {load}"
 
 
+def case_line(key: str, label: str, r: dict, rates: dict) -> str:
+    """The printed figures of a timed case, with its ratios and verdicts."""
+    rate = r["lines_per_s"]
+    line = (f"{label:38s} {rate:11,.0f} lines/s  {r['seconds']:7.2f} s  "
+            f"(min {r['seconds_min']:.2f}, max {r['seconds_max']:.2f})  peak RSS {r['peak_mb']:6.1f} MB"
+            f"  (all processes: PSS {r['peak_pss_mb']:.1f} MB)")
+    if key in ("static1", "parametric1") and key[:-1] in rates:
+        line += f"\n{'':38s} ({'c' if key == 'static1' else 'd'}) is {rates[key[:-1]] / rate:.2f} x this rate"
+    if key in ("static", "static1", "parametric", "diff"):
+        mem = max(r["peak_mb"], r["peak_pss_mb"])
+        line += (f"\n{'':38s} = {rate / rates['copy']:.4f} x (a), {rate / rates['lex']:.3f} x (b);  "
+                 f"{verdict(key, rate)};  memory {verdict('rss', mem)}")
+    if key == "rs274" and "static" in rates:
+        line += f"\n{'':38s} (c) is {rates['static'] / rate:.2f} x rs274's rate (target: at least 1)"
+    if key == "pure" and "static" in rates:
+        line += f"\n{'':38s} (c) uncompiled is {rate / rates['static']:.2f} x (c) compiled"
+    return line
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=1_000_000, help="lines of the speed program [1,000,000]")
@@ -261,19 +280,7 @@ def main() -> None:
             r["lines_per_s"] = rate = n / r["seconds"]
             rates[key] = rate
             figures["cases"][key] = r
-            line = (f"{label:38s} {rate:11,.0f} lines/s  {r['seconds']:7.2f} s  "
-                    f"(min {r['seconds_min']:.2f}, max {r['seconds_max']:.2f})  peak RSS {r['peak_mb']:6.1f} MB"
-                    f"  (all processes: PSS {r['peak_pss_mb']:.1f} MB)")
-            if key in ("static1", "parametric1") and key[:-1] in rates:
-                line += f"\n{'':38s} ({'c' if key == 'static1' else 'd'}) is {rates[key[:-1]] / rate:.2f} x this rate"
-            if key in ("static", "static1", "parametric", "diff"):
-                mem = max(r["peak_mb"], r["peak_pss_mb"])
-                line += (f"\n{'':38s} = {rate / rates['copy']:.4f} x (a), {rate / rates['lex']:.3f} x (b);  "
-                         f"{verdict(key, rate)};  memory {verdict('rss', mem)}")
-            if key == "rs274" and "static" in rates:
-                line += f"\n{'':38s} (c) is {rates['static'] / rate:.2f} x rs274's rate (target: at least 1)"
-            if key == "pure" and "static" in rates:
-                line += f"\n{'':38s} (c) uncompiled is {rate / rates['static']:.2f} x (c) compiled"
+            line = case_line(key, label, r, rates)
             print(line, flush=True)
 
         r = measure([*cli, "--help"], max(args.repeats, 5), log)

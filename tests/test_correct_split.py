@@ -215,7 +215,10 @@ def test_the_state_compared_is_data(engines):
     c = Corrector(engines["parametric"], SETUP, CorrectOptions())
     state = split.state_of(c)
     assert state == split.state_of(Corrector(engines["parametric"], SETUP, CorrectOptions()))
-    c.qe[0] = 1.0
+    c.writer.qe[0] = 1.0  # what the controller holds (the writer's)
+    assert state != split.state_of(c)
+    c.writer.qe[0] = Corrector(engines["parametric"], SETUP, CorrectOptions()).writer.qe[0]
+    c.planner.dirs[1] = -1.0  # the directions carried (the planner's)
     assert state != split.state_of(c)
     nan = split._canon(float("nan"))
     assert nan == split._canon(float("nan"))

@@ -167,7 +167,8 @@ def test_okuma_header_first_and_scaled_words():
 
 
 def test_okuma_call_refused_by_name():
-    with pytest.raises(UnsupportedGcodeError, match=r"Okuma CALL O.. subprogram call") as err:
+    """CALL O1000 is expanded (tests/test_dialect_okuma.py); not found, it is refused by name."""
+    with pytest.raises(PostprocError, match=r"Okuma CALL O1000: subprogram O1000 not found") as err:
         correct("$A.MIN%\nG15 H1\nCALL O1000\nM2\n", Setup(offsets={"G15H1": (0, 0, 0)}), "okuma")
     assert err.value.lineno == 3
 

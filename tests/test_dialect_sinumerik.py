@@ -368,8 +368,7 @@ def test_cycle_parameters_from_variables_and_inch():
 
 
 @pytest.mark.parametrize(("line", "construct"), [
-    ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,0,0,1,1)", "Sinumerik CYCLE83 (drilling cycle whose moves postproc does "
-                                                 "not model"),
+    ("N10 CYCLE83(10,0,2,-30,0,-5,0,2,0,0,1,3)", "Sinumerik CYCLE83 with VARI other than 0"),
     ("N10 MCALL CYCLE84(10,0,2,-15,0,0,3,8,0,0,0,0)", "Sinumerik CYCLE84"),
     ("N10 CYCLE840(10,0,2,-15,0,0,3,8,0,0,0,0)", "Sinumerik CYCLE840"),
     ("N10 G0 X5 CYCLE81(10,0,2,-15,0)", "Sinumerik CYCLE81 with other words in its block"),

@@ -2,7 +2,7 @@
 
 Each case is one piece of corrected samples (the nominal move plus a smooth synthetic
 correction that one arc cannot follow within the budget) handed to the emitter's
-greedy fit (``_fit_piece``): the written words of every fitted piece, its arc form,
+greedy fit (``arcfit.MoveFit.piece``): the written words of every fitted piece, its arc form,
 turns and share of the move are pinned, so that any change of the search or of the
 circle fits that alters the output shows here.
 """
@@ -15,6 +15,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from postproc.gcode.arcfit import MoveFit
 from postproc.gcode.emitter import EmitterMixin
 from postproc.gcode.geometry import arc_params, arc_points
 from postproc.gcode.interp import Arc, Move
@@ -194,7 +195,7 @@ def test_fitted_pieces_are_pinned(name):
     fitter = Fitter()
     fitter.corrected = corrected
     qe = [round(float(v), d) for v in Q[0]]
-    pieces = fitter._fit_piece(mv, plan, s, Q, nom, bulge, qe, True, d, BUDGET)
+    pieces = MoveFit(fitter, mv, plan, d, BUDGET).piece(s, Q, nom, bulge, qe, True)
     assert [describe(p) for p in pieces] == EXPECTED[name]
     # every arc written stays within the budget at the samples it covers
     assert all(p.spec is None or p.spec.get("dev", 0.0) <= BUDGET for p in pieces)

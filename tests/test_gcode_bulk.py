@@ -223,7 +223,7 @@ class ArcModeCorrector(Corrector):
     linearised arc), so a run's first line needs its motion word back."""
 
     def _chunk(self, entries, write_out):
-        self.emitted_motion = ARC_CW
+        self.writer.emitted_motion = ARC_CW
         super()._chunk(entries, write_out)
 
 

@@ -144,29 +144,6 @@ def test_bisector_centre_is_the_old_one_bit_for_bit(seed):
             assert _same(ref.bisector_centre(S2, E2, P, c0), bisector_centre(S2, E2, P, c0))
 
 
-def test_np_round_is_numpys_round_bit_for_bit():
-    from postproc.gcode.emitter import _np_round
-
-    rng = np.random.default_rng(5)
-    n = 8000
-    vals = np.concatenate([
-        rng.uniform(-1, 1, n) * 10.0 ** rng.integers(-8, 8, n),
-        (rng.integers(-10**7, 10**7, n) + 0.5) / 10.0 ** rng.integers(0, 8, n),  # ties, and next to them
-        rng.integers(-10**6, 10**6, n) / 10.0 ** rng.integers(0, 9, n),
-        [0.0, -0.0, 1e-300, -1e-300, 4.5e15, -4.5e15, 2.0**52, -2.0**52, 2.0**53 + 2, 1e300, np.inf, -np.inf, np.nan],
-    ])
-    with np.errstate(over="ignore", invalid="ignore"):
-        for v in vals:
-            for d in (0, 1, 3, 4, 5, 9, 22, 23):
-                # a numpy float's round
-                assert np.float64(_np_round(float(v), d)).tobytes() == np.float64(round(np.float64(v), d)).tobytes()
-            # an array's round, element by element
-            for d in (0, 4, 5, 23):
-                c = _np_round(float(v), d)
-                assert type(c) is float
-                assert np.float64(c).tobytes() == np.array([v, 0.25]).round(d)[:1].tobytes()
-
-
 def test_a_changed_word_moves_the_tracked_position_to_the_value_written():
     # the emitter's tracked position is what the controller reads: the value of the word's
     # text. numpy's round of a numpy float (multiply, rint, divide) is a step off it where the

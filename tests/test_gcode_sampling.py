@@ -1,4 +1,4 @@
-"""The planner's samples of a chunk's moves, made at once (``pipeline._sample_moves``),
+"""The planner's samples of a chunk's moves, made at once (``planner._sample_moves``),
 against the per-piece computation they replace: np.linspace per piece, arc_points and
 line_points, the interval middles' bulge and the carried directions, bit for bit."""
 
@@ -11,10 +11,11 @@ import pytest
 
 from postproc.gcode.geometry import arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc, Move
-from postproc.gcode.pipeline import (
+from postproc.gcode.planner import (
     ARC_CHECK_MIN_SAMPLES,
     ARC_CHECK_STEP_RAD,
     SAMPLE_STEP_MM,
+    Table,
     _sample_moves,
 )
 from postproc.gcode.segment import quadrant_breaks
@@ -79,7 +80,9 @@ def test_samples_made_at_once_are_the_per_piece_ones(seed):
         mv = _move(i, q0, q1, arc)
         planned.append((i, mv))
         arc_prm[i] = arc_params(arc, mv.q0, mv.q1)
-    smp = _sample_moves(planned, arc_prm, {}, Q0, Q1, D, d_in)
+    tab = Table(Q1, np.arange(1, M + 1), np.zeros((M, 3)), [{}] * M, planned)
+    tab.q0, tab.dirs, tab.d_in, tab.arc_prm = Q0, D, d_in, arc_prm
+    smp = _sample_moves(planned, tab)
     ref = _reference(planned, arc_prm, Q0, Q1, D, d_in)
     assert len(smp.counts) == len(ref)
     assert [row for row, *_ in ref] == smp.piece_move

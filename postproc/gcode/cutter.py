@@ -391,7 +391,7 @@ def check_chunk(c) -> None:
         # beyond the calibrated volume the field is taken at its edge: the contour itself
         # is held to the volume by the corrector's own check
         qe = np.clip(q, lo, hi)
-        ctx = c._context(dirs, rotary)
+        ctx = c.planner.context(dirs, rotary)
         delta = np.asarray(eng.correction(qe + r, r, ctx).q, dtype=float)
         for add in c.opt.added:
             delta = delta + np.asarray(add.delta(q + r, ctx), dtype=float)

@@ -134,6 +134,7 @@ class Dialect:
     m98_count_in_p: bool = False  # M98 P(count)(4-digit number) when no program has the whole number
     numbered_program_line: bool = False  # "N1 O2 (NAME)": a program number after a sequence number (Fadal)
     header_forms: tuple[str, ...] = ()  # regexes of header lines read as no geometry ("$NAME.MIN%", Okuma)
+    call_o_statement: bool = False  # "CALL O<name> [Q<n>]" runs subprogram O<name> to its RTS (Okuma)
     uvw_axes: bool = False  # U, V, W are axes (LinuxCNC); else U/W mark a lathe program (incremental X/Z)
     turning_cycles: frozenset[int] = frozenset()  # G keys (10 x number) that are lathe turning cycles here
     call_words: str = ""  # letters that call a subroutine in a block without G codes ("L": Fadal format 1)
@@ -335,10 +336,19 @@ DIALECTS["okuma"] = replace(
     marks=((r"^\s*\$[\w.\-]*\.(?:MIN|SDF|SSB|SUB|LIB)%?", "$NAME.MIN% program header (Okuma)"),
            (r"(?i)^\s*(?:N\d+\s*)?CALL\s+O", "CALL O.. subprogram call (Okuma)"),
            (r"^\s*(?:N\d+\s*)?G\s*15\s*H\s*\d", "G15 H.. work coordinate system (Okuma)")),
-    refused=((r"(?i)\bCALL\s+O\w*", "CALL O.. subprogram call",
-              "write the subprogram's moves in the main program (expand it in CAM)"),
+    call_o_statement=True, expanded_constructs=frozenset({"CALL O.. subprogram call"}),
+    refused=((r"(?i)\bCALL\s*O\w*", "CALL O.. subprogram call",
+              "give the folder of its .SSB/.SUB/.LIB file with --subroutine-path, or write its moves in the main "
+              "program"),
+             (r"(?i)^\s*O([A-Z][A-Z0-9]*)\s*(?:\(.*)?$", "O{0} subprogram name line (a subprogram file, not a "
+              "main program)", "correct the main program that calls it, with this file's folder on "
+              "--subroutine-path"),
              (r"(?i)\bMODIN\b", "MODIN modal subprogram call", "write the subprogram's moves in the main program"),
              (r"(?i)\bV[CS]\d+\s*=", "VC/VS common variable", "post the program with numbers in place of variables"),
+             (r"(?i)\b(V[A-Z]{2,}\w*)\s*\[", "{0}[..] system variable", "post the program with numbers in place of "
+              "variables"),
+             (r"(?i)^\s*(?:N\w+\s+)?([A-Z]{2}[A-Z0-9]{0,2})\s*=(?!=)", "{0}= local variable setting",
+              "post the program with numbers in place of variables"),
              (r"(?i)\bIF\s*\[|\bGOTO\b", "IF/GOTO program control", "post the program flat (loops written out)")),
     source="Okuma OSP-P programming manual (Mill): $ file header, G15/G16 work coordinates, "
            "G56/G53 tool length offset, CALL O subprograms")
@@ -403,13 +413,14 @@ DIALECTS["sinumerik"] = Dialect(
          "post the program for 3 axes (X, Y, Z with fixed rotary positions): postproc corrects X, Y, Z"),
         (r"(?i)\bCYCLE800\b", "CYCLE800 (swivel plane)",
          "post the swivelled-plane moves in the machine's X, Y, Z (without CYCLE800)"),
-        (r"(?i)\bCYCLE(8[3-8]|840)\b", "CYCLE{0} (drilling cycle whose moves postproc does not model: "
-                                        "CYCLE81, CYCLE82 and CYCLE89 are read)",
-         "post the drilling as its moves, or as CYCLE81/CYCLE82/CYCLE89"),
+        (r"(?i)\bCYCLE(84|840)\b", "CYCLE{0} (tapping cycle: its feed along Z is tied to the spindle's turns at "
+                                   "the thread's pitch, so it cannot be written as corrected G1 moves)",
+         "take the tapping out into a program of its own: postproc does not correct spindle-synchronised "
+         "tapping"),
         (r"(?i)\b(A?ROTS|CROTS)\b", "{0} (frame rotation by solid angles)",
          "post the program in the work coordinates the frame gives (ROT/AROT about Z is read)"),
         (r"(?i)(?<![A-Z_])(?:IF|ELSE|WHILE|LOOP|FOR|REPEATB?|GOTOF|GOTOB|GOTOC|GOTO|ENDIF|ENDWHILE|ENDLOOP|ENDFOR"
-         r"|UNTIL)\b"
+         r"|UNTIL|CASE)\b"
          r"|^\s*(?:N\d+\s+)?[A-Za-z_]\w*:(?!=)", _SINU_CONTROL, "post the program flat (loops written out)"),
         (r"(?i)\b(?:PROC|CALL|PCALL|EXTCALL|EXTERN)\b|^\s*(?:N\d+\s*)?L\d+\b", _SINU_SUB,
          "give the subprogram's directory with --subroutine-path, or write its moves in the main program"),

@@ -471,6 +471,9 @@ def drill_cycle_lines(line: str, call_line: bool, mv: Move | None, cyc: Move | N
     sep = sep or " "
     prev = cyc.q0
     for kind, q in cyc.cycle.steps:
+        if kind == DWELL and isinstance(q[0], str):  # a line of the cycle written as it is (F, M5, SPOS=)
+            out.append((q[0].lower() if lower else q[0]) + ending)
+            continue
         if kind == DWELL:
             text = f"G4{sep}F{fmt(q[0], 3).rstrip('0').rstrip('.') or '0'}"
             out.append((text.lower() if lower else text) + ending)

@@ -171,7 +171,7 @@ class _Offset:
 @dataclass
 class _Frame:
     named: dict[str, float] = field(default_factory=dict)
-    call_type: str = ""  # "", "oword", "m98", "g65"
+    call_type: str = ""  # "", "oword", "m98", "g65", "call-o" (Okuma CALL O)
     ret_unit: Unit | None = None  # None only on the main program's frame, which never returns
     ret_idx: int = 0
     saved: list | None = None  # numbered locals of the caller (o-word call / G65)
@@ -230,6 +230,8 @@ class _Expander(Env):
         self.cur_idx = 0
         self.cur_col = 0
         self.executed = 0
+        # the dialect's own header lines ("$NAME.MIN%", Okuma): the interpreter's header forms
+        self.header_forms = [re.compile(p) for p in self.d.header_forms]
 
     # -- places and errors ------------------------------------------------
     @property
@@ -398,16 +400,14 @@ class _Expander(Env):
             self.idx += 1
             self.cur_idx = idx
             self.unit_cur = unit
-            self.executed += 1
-            if self.executed > self.max_lines:
-                raise ResourceLimitError(
-                    f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
-                    f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=unit.path,
-                    lineno=idx + 1, col=1,
-                    hint="check the loop conditions and subprogram returns, or raise --max-iterations")
+            self._count_line(unit, idx)
             line = unit.lines[idx]
             if self.skipping_o is not None or self.skipping_to_sub is not None:
                 self._skipped_line(unit, idx)
+                continue
+            own = self._dialect_line(unit, idx, line, first_code)
+            if own is not None:
+                yield from own
                 continue
             words = scan_words(line)
             if words is not None and not any(
@@ -425,7 +425,7 @@ class _Expander(Env):
                         return
                     percent_open = True
                 continue
-            b = unit.block(idx)
+            b = self._block_of(unit, idx, line)
             if first_code and unit is self.main and _opens_program(b):
                 first_code = False
                 yield SourceLine(idx + 1, unit.path, line, True)
@@ -446,6 +446,87 @@ class _Expander(Env):
             except _Stop:
                 break  # the program's end (M2/M30, M99 ending the main program)
         yield from self._closing_percent()
+
+    def _block_of(self, unit: Unit, idx: int, line: str) -> Block:
+        """The parsed block of line ``idx``; a line the parser cannot read that holds a
+        construct the dialect refuses by name (its ``refused`` list, as the interpreter reads
+        it) is refused in those words."""
+        try:
+            return unit.block(idx)
+        except GcodeSyntaxError:
+            for pattern, construct, instead in self.d.refused:
+                m = re.search(pattern, line)
+                if m:
+                    raise self.refuse(m.start() + 1, f"{self.d.title.split(' ')[0]} {construct.format(*m.groups())}",
+                                      hint=instead) from None
+            raise
+
+    def _count_line(self, unit: Unit, idx: int) -> None:
+        """One more line run; refused beyond ``max_lines``."""
+        self.executed += 1
+        if self.executed > self.max_lines:
+            raise ResourceLimitError(
+                f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
+                f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=unit.path,
+                lineno=idx + 1, col=1,
+                hint="check the loop conditions and subprogram returns, or raise --max-iterations")
+
+    def _dialect_line(self, unit: Unit, idx: int, line: str, first_code: bool) -> tuple[SourceLine, ...] | None:
+        """The lines a line of the dialect's own forms leaves in the flat program, or None for
+        any other line: its header ("$NAME.MIN%", the interpreter's header forms) as it is
+        in the main program (a subprogram file's header stays out), nothing for a CALL O or
+        RTS statement (the flat program holds the subprogram's lines)."""
+        if self.header_forms and any(p.match(line) for p in self.header_forms):
+            return (SourceLine(idx + 1, unit.path, line, True),) if unit is self.main and first_code else ()
+        if self.d.call_o_statement and self._okuma_statement(line):
+            return ()
+        return None
+
+    def _okuma_statement(self, line: str) -> bool:
+        """Run ``CALL O<name> [Q<n>]`` (the subprogram from the program's own file, then from
+        the .SSB/.SUB/.LIB files beside the program and on the subroutine path) or its ``RTS``
+        (:mod:`postproc.gcode.okuma`); whether ``line`` was one of them."""
+        from postproc.gcode import okuma
+
+        if okuma.RTS.match(line):
+            fr = self.frames[-1]
+            if fr.call_type != "call-o":
+                raise self.error(1, "Okuma RTS outside a subprogram called with CALL O..",
+                                 hint="end the main program with M02 or M30")
+            if fr.repeats_left > 0 and fr.start_unit is not None:
+                self.count_iteration(1)
+                fr.repeats_left -= 1
+                self.unit, self.idx = fr.start_unit, fr.start_idx
+            else:
+                self._leave(fr)
+            return True
+        call = okuma.read_call(line)
+        if call is None:
+            bad = okuma.BAD_CALL.match(line)
+            if bad is not None:
+                raise self.refuse(bad.start(1) + 1, f"Okuma CALL {bad.group(1)}: a subprogram name is O and letters "
+                                  "or digits, looked up in the subprogram files by name, never as a path",
+                                  hint="call the subprogram by its name, and give its file's folder with "
+                                  "--subroutine-path")
+            return False
+        if call.arguments:
+            raise self.refuse(call.col, f"Okuma CALL O{call.name} with arguments ({call.arguments}): the "
+                              "subprogram's local variables are not read",
+                              hint="post the subprogram with numbers in place of its variables, called without "
+                              "arguments")
+        k = okuma.name_line(self.main.lines, call.name)
+        unit = self.main
+        if k is None:
+            folders = ([Path(self.main.path).parent] if self.main.path else []) + self.subroutine_path
+            found = okuma.find(call.name, folders)
+            if found is None:
+                raise self.error(call.col, f"Okuma CALL O{call.name}: subprogram O{call.name} not found in the "
+                                 "program or in a .SSB/.SUB/.LIB file beside it or on --subroutine-path",
+                                 hint="give the folder of the file that holds it with --subroutine-path")
+            unit, k = self.load_file(found[0]), found[1]
+        if call.repeats > 0:
+            self._enter("call-o", f"O{call.name}", unit, k + 1, call.repeats - 1)
+        return True
 
     def _skipped_line(self, unit: Unit, idx: int) -> None:
         """A line met while skipping (LinuxCNC): only the o-word line the skip is looking
@@ -1187,7 +1268,7 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     """
     if max_lines is None:
         max_lines = max(50_000_000, LINES_PER_ITERATION * max_iterations)
-    if get_dialect(dialect).expanded_constructs:  # Sinumerik labels, GOTO, IF/WHILE/FOR/REPEAT
+    if get_dialect(dialect).block_syntax != "iso":  # Sinumerik labels, GOTO, IF/WHILE/FOR/REPEAT
         from postproc.gcode.sinumerik_expand import expand_sinumerik
 
         return (SourceLine(k + 1, file, text, original)

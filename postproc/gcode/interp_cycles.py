@@ -35,16 +35,17 @@ class CyclesMixin(InterpreterCore):
         if any(math.isnan(v) for v in st.pos):
             raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, call.col,
                             hint="position every axis with a G90 move before the cycle, or give --start")
-        plan = drill_plan(call, self.path, lineno)
+        plan = drill_plan(call, self.path, lineno, st.feed, st.unit_mm)
         unit, shift = st.unit_mm, self.shift(False, lineno, call.col)
         x, y, z0 = st.pos
 
-        def at(z: float) -> tuple[float, float, float]:
-            return (x, y, z * unit + shift[2])
+        def at(v: object) -> tuple[float, float, float]:
+            dx, dy, z = v if isinstance(v, tuple) else (0.0, 0.0, v)  # a level, or (dx, dy, z) off the hole
+            return (x + dx * unit, y + dy * unit, z * unit + shift[2])
 
         kinds = {RAPID_STEP: RAPID, FEED_STEP: LINE}
         steps: list[tuple[int, tuple]] = []
-        for kind, v in plan.steps:
+        for kind, v in plan.steps:  # a dwell's seconds, or a line written as it is (str), as DWELL
             steps.append((DWELL, (v, 0.0, 0.0)) if kind not in kinds else (kinds[kind], at(v)))
         bottom, start = at(plan.bottom_z), at(plan.start_z)
         st.pos = list(at(plan.clear_z))

@@ -16,11 +16,11 @@ import gc
 import math
 import os
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeAlias, cast, final
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 
@@ -31,41 +31,24 @@ from postproc.constants import (
 )
 from postproc.errors import (
     AlreadyCorrectedError,
-    CorrectionTooLargeError,
     MissingSetupError,
-    OutOfVolumeError,
     PostprocError,
-    SafetyError,
-    SolverError,
     UnsupportedGcodeError,
 )
-from postproc.gcode import bulk, cutter, emit, vplan
-from postproc.gcode.directions import (
-    MACHINE_STEP_MM,
-    direction_axes,
-    plan_pieces,
-    reversals,
-    settle,
-)
-from postproc.gcode.emitter import FIT_BUDGET, EmitterMixin, _unit_decimals
+from postproc.gcode import bulk, cutter, emit
+from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.engine_use import SOLVER_ACCEPT_MM, accept_residual, prepare_engine
-from postproc.gcode.geometry import arc_length, arc_params, arc_points, arcs_points, line_points
-from postproc.gcode.interp import Arc, Cycle, Interpreter, Move, NeedsExpansion, start_position
-from postproc.gcode.lexer import Word
-from postproc.gcode.path import Setup, backfill_unknown, iter_source_lines
-from postproc.gcode.segment import Curve, quadrant_breaks, subdivide
-from postproc.gcode.state import CANNED_CYCLES, LINE, PLANES, RAPID
+from postproc.gcode.interp import Cycle, Interpreter, Move, NeedsExpansion, start_position
+from postproc.gcode.path import Setup, iter_source_lines
+from postproc.gcode.planner import Planner, Table
+from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
 from postproc.gcode.vplan import (
     ArcHint,
-    ArcMove,
-    ArcParams,
     FloatArray,
-    IntArray,
-    Piece,
     Plan,
     PlanMove,
-    Step,
 )
+from postproc.gcode.writer import ChunkWriter, Entry, Rebase, Store
 from postproc.limits import BoundedWriter, Limits
 
 # Lines held while an axis is not yet positioned (they are corrected once it is, a few KB
@@ -84,18 +67,6 @@ DEFAULT_CHUNK_LINES = 5_000
 # With segmentation (non-affine engines, maps) every move's midpoints go through the
 # engine together: smaller chunks keep the peak memory low at the same speed.
 SEGMENTED_CHUNK_LINES = 2_000
-# Samples of the corrected ideal path that every emitted arc and chord is fitted to and
-# checked against: at most this far apart along a move (half verify's run step) ...
-SAMPLE_STEP_MM = 0.25
-# ... and this far apart in angle along an arc, with at least this many on each piece.
-ARC_CHECK_STEP_RAD = math.pi / 32
-ARC_CHECK_MIN_SAMPLES = 5
-# An arc the bulk planner settles with a fit beyond this share of the budget gets its
-# general plan with the chunk's (one engine call) in case its hint fails when written:
-# on a parametric gencam program 70 % of those hints fail, 2 % of the others.
-HINT_PREPLAN_SHARE = 0.7
-# A reversal whose corrections on either side differ by more than this gets a take-up move.
-TAKEUP_MIN_MM = 1e-7
 # Output growth (lines out / lines in) above which the summary warns.
 GROWTH_WARN = 5.0
 # --cycles auto keeps a cycle block when its tilt (the correction's change between R
@@ -105,10 +76,6 @@ GROWTH_WARN = 5.0
 CYCLE_KEEP_SHARE = 0.9
 
 Write: TypeAlias = bulk.Write
-#: a line queued for its chunk: (its text, "" for a move it makes without a line of its
-#: own; its Move, the offset or stored position it sets, or None when it moves nothing;
-#: whether it names a motion word; the program's modal motion after it)
-Entry: TypeAlias = "tuple[str, Move | _Rebase | _Store | None, bool, int | None]"
 
 
 @dataclass
@@ -165,8 +132,9 @@ class CorrectReport:
         return (self.lines_out - self.header_lines) / self.lines_in if self.lines_in else 1.0
 
 
-class Corrector(EmitterMixin):
-    """State of one correction run; see the module docstring."""
+class Corrector:
+    """One correction run: the reader, with the planner and the writer it hands each
+    chunk to (see the module docstring)."""
 
     def __init__(self, engine: Engine, setup: Setup, options: CorrectOptions, *, path: str | None = None,
                  calibration_name: str = "", calibration_sha256: str = "") -> None:
@@ -182,108 +150,38 @@ class Corrector(EmitterMixin):
         self.interp = Interpreter(setup, path, dialect=options.dialect)
         self.interp.max_arc_turns = options.limits.max_arc_turns
         self.interp.require_g54 = bool(setup.start)
-        self.report = CorrectReport()
+        self._report = CorrectReport()
         # where the machine is before the first move: the start position (NaN: unknown);
         # the machine is there uncorrected, so it is also the emitted and the previous target
         start = start_position(setup.start)
-        self.qe = list(start)  # emitted gauge position (what the controller will hold)
-        self.prev_nominal = np.array(start, dtype=float)
-        self.prev_target = np.array(start, dtype=float)
-        self.dirs = np.zeros(3)
-        self.emitted_motion: int | None = None  # the motion the controller holds (None: none yet)
         self.expanded = False  # correcting the expanded program (recorded in the header)
-        self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
-        self._cycle_rz: float | None = None
-        self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
-        self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
         self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
-        self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
-        self.linear_exact = bool(engine.affine) and not options.added
-        # moves settled in bulk (vplan) unless the correction depends on the approach
-        # direction (take-ups at reversals) or on maps the planner cannot sample in bulk
-        self.bulk_plan = options.bulk_plan and not options.added and not engine.direction_dependent
-        self._decimals: dict[float, int] = {}
-        self._units_checked: set[float] = set()
         self.accept_residual_mm = accept_residual(engine)
         self.report.accept_residual_mm = self.accept_residual_mm
         self.report.solver = engine.solver
+        # the engine calls and the plans of each chunk's table; carries the corrected
+        # position and the approach directions from chunk to chunk
+        self.planner = Planner(engine, options, self.report, self.interp.used_rotary, setup.context or {},
+                               self.accept_residual_mm, start, path)
+        self.linear_exact = self.planner.linear_exact
+        self.bulk_plan = self.planner.bulk_plan
         self.cutter = cutter.Bound()  # compensated moves corrected so far and their bound
+        self.writer = ChunkWriter(options, self.report, self.planner, start, path)
+        self.writer.cutter = self.cutter  # a take-up is refused on a compensated move's line
         self.cutter_known: cutter.Bound | None = None  # the whole program's, for the header (a second run)
 
-    # -- safety-checked engine calls ----------------------------------------------------
-    def _context(self, dirs: FloatArray, rotary: Sequence[dict[str, float]]) -> dict[str, FloatArray]:
-        ctx: dict[str, FloatArray] = {"dirx": dirs[:, 0], "diry": dirs[:, 1], "dirz": dirs[:, 2]}
-        for a in sorted(self.interp.used_rotary):
-            ctx[a] = np.array([d.get(a, 0.0) for d in rotary])
-        for k, v in (self.setup.context or {}).items():
-            ctx[k] = np.full(len(dirs), float(v))
-        return ctx
+    @property
+    def report(self) -> CorrectReport:
+        """The run's figures (a process correcting a part of the program starts its own:
+        the planner and the writer count into the same)."""
+        return self._report
 
-    def corrected(self, q_nom: FloatArray, r: FloatArray, dirs: FloatArray, rotary: Sequence[dict[str, float]],
-                  lineno: IntArray) -> FloatArray:
-        """Corrected gauge positions for nominal gauge positions (all safety checks)."""
-        eng = self.engine
-        p = q_nom + r
-        ctx = self._context(dirs, rotary)
-        inside = eng.inside(q_nom)
-        p_eval = p
-        if not inside.all():
-            bad = np.flatnonzero(~inside)
-            if self.opt.extrapolate == "refuse":
-                lines = sorted(set(lineno[bad].tolist()))
-                first = q_nom[bad[0]]
-                raise OutOfVolumeError(
-                    f"target outside the calibrated volume at lines {', '.join(map(str, lines[:8]))}"
-                    f"{' ...' if len(lines) > 8 else ''}: commanded ({first[0]:.3f}, {first[1]:.3f}, "
-                    f"{first[2]:.3f}) mm, volume {eng.volume_mm[0].tolist()} .. {eng.volume_mm[1].tolist()} mm",
-                    path=self.path, lineno=int(lineno[bad[0]]),
-                    hint="check --offset/--tool-length, or allow it with --extrapolate clamp|linear")
-            self.report.extrapolated_points += len(bad)
-            if self.opt.extrapolate == "clamp":
-                q_eval = np.clip(q_nom, eng.volume_mm[0], eng.volume_mm[1])
-                p_eval = q_eval + r
-        try:
-            res = eng.correction(p_eval, r, ctx)
-        except PostprocError as exc:
-            raise exc.at(path=self.path, lineno=int(lineno[0]) if len(lineno) else None) from None
-        delta = np.asarray(res.q, dtype=float)
-        resid = np.asarray(res.residual_mm, dtype=float)
-        bad = ~np.isfinite(delta).all(axis=1) | ~(resid <= self.accept_residual_mm)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            solver = f" {self.report.solver}" if self.report.solver else ""
-            raise SolverError(
-                f"the {eng.method}{solver} inverse did not converge (residual {resid[i]:.3g} mm, "
-                f"accepted up to {self.accept_residual_mm:.3g} mm)",
-                path=self.path, lineno=int(lineno[i]),
-                hint="the calibration may be unusable here; check it with 'postproc check'")
-        if len(resid):
-            self.report.max_residual_mm = max(self.report.max_residual_mm, float(resid.max()))
-        ctx_added = dict(ctx, lineno=lineno) if self.opt.added else ctx
-        for add in self.opt.added:
-            try:
-                d = np.asarray(add.delta(p, ctx_added), dtype=float)
-            except PostprocError as exc:
-                # a map names the point it refused (point_index); name its program line
-                at = getattr(exc, "point_index", None)
-                ln = int(lineno[at]) if at is not None and 0 <= at < len(lineno) else None
-                raise exc.at(path=self.path, lineno=ln) from None
-            if d.shape != delta.shape or not np.isfinite(d).all():
-                raise SolverError(f"correction map {add.name!r} gave no finite correction here",
-                                  path=self.path, lineno=int(lineno[0]))
-            delta = delta + d
-        size = np.linalg.norm(delta, axis=1)
-        if len(size):
-            i = int(np.argmax(size))
-            if size[i] > self.opt.max_correction_mm:
-                raise CorrectionTooLargeError(
-                    f"correction of {size[i]:.4f} mm exceeds --max-correction {self.opt.max_correction_mm:g} mm",
-                    path=self.path, lineno=int(lineno[i]),
-                    hint="a correction this large suggests wrong units or a wrong calibration; "
-                         "raise --max-correction only if it is real")
-            self.report.max_correction_mm = max(self.report.max_correction_mm, float(size[i]))
-        return q_nom + delta
+    @report.setter
+    def report(self, report: CorrectReport) -> None:
+        self._report = report
+        self.planner.report = report
+        self.writer.report = report
 
     # -- the run -----------------------------------------------------------------------
     @property
@@ -356,11 +254,11 @@ class Corrector(EmitterMixin):
                 self._feed_drill_cycle(entries, line, mv, interp, here)
             elif interp.stored_here is not None:
                 # G28.1/G30.1: the controller stores where it is, the corrected position
-                entries.append((line, _Store(interp.stored_here), False, interp.state.motion))
+                entries.append((line, Store(interp.stored_here), False, interp.state.motion))
             elif interp.rebase is not None:
                 # an offset set from where the machine is: its words follow the correction there
                 words, axes, nominal = interp.rebase
-                entries.append((line, _Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
+                entries.append((line, Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
                                 interp.state.motion))
             elif mv is not None and mv.cycle is not None:
                 self._feed_cycle(entries, line, mv, mv.cycle, interp.state.motion)
@@ -536,22 +434,19 @@ class Corrector(EmitterMixin):
     def _check_units(self, entries: list[Entry | bulk.Run]) -> None:
         """Check the output rounding of each unit (mm, inch) the first time a move in it
         comes (:meth:`_check_rounding`)."""
-        checked = self._units_checked
+        checked = self.planner.units_checked
         for e in entries:
             if type(e) is bulk.Run:
                 if e.unit not in checked:
-                    self._check_rounding(e.unit, e.lineno)
+                    self.planner.check_rounding(e.unit, e.lineno)
             elif type(mv := e[1]) is Move and mv.unit not in checked:
-                self._check_rounding(mv.unit, mv.lineno)
+                self.planner.check_rounding(mv.unit, mv.lineno)
 
-    def _gather(self, entries: list[Entry | bulk.Run], arcs: bool = True
-                ) -> tuple[int, FloatArray, IntArray, FloatArray, list[dict[str, float]], list[tuple[int, PlanMove]],
-                           list[bulk.Run]]:
-        """A chunk's moves in order, runs of plain lines as blocks and other moves one by
-        one: ``(M, Q1, linenos, R, rot, general, runs)``, every move's nominal target,
-        line, tool vector and rotary positions, the (row, Move) of the moves not read in
-        bulk (with the runs' arcs unless ``arcs`` is False) and the runs (each given its
-        first row, ``trow``)."""
+    def _gather(self, entries: list[Entry | bulk.Run], arcs: bool = True) -> Table:
+        """A chunk's table: its moves in order, runs of plain lines as blocks and other
+        moves one by one, with every move's nominal target, line, tool vector and rotary
+        positions, the (row, Move) of the moves not read in bulk (with the runs' arcs
+        unless ``arcs`` is False) and the runs (each given its first row, ``trow``)."""
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
         rot: list[dict[str, float]] = []
         general: list[tuple[int, PlanMove]] = []
@@ -583,7 +478,7 @@ class Corrector(EmitterMixin):
             Q1[at] = [m.q1 for _i, m in general]
             lns[at] = [m.lineno for _i, m in general]
             Rt[at] = [m.r for _i, m in general]
-        return M, Q1, lns, Rt, rot, general, runs
+        return Table(Q1, lns, Rt, rot, general, runs)
 
     def _read_only(self, entries: list[Entry | bulk.Run]) -> None:
         """What a chunk read but not corrected carries to the next (a process correcting a
@@ -594,556 +489,24 @@ class Corrector(EmitterMixin):
         self._check_units(entries)
         self.interp.comp_moves = []  # another process bounds them
         if not (self.engine.direction_dependent or self.opt.added):
-            M, Q1, lns, _R, _rot, general, _runs = self._gather(entries, arcs=False)
-            if M:
-                Q1, _Q0, D, *_ = self._approach(Q1, lns, general, arc_ends=False)
-                self.prev_nominal = Q1[-1].copy()
-                self.dirs = D[-1].copy()
+            self.planner.skip(self._gather(entries, arcs=False))
         for e in entries:
             if type(e) is bulk.Run:
                 e.block.runs = []
 
-    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
-    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:  # noqa: C901
+    def _chunk(self, entries: list[Entry | bulk.Run], write_out: Write) -> None:
+        """Plan the chunk read (``entries``) as one table, then write it."""
         self._check_units(entries)
         cutter.check_chunk(self)
-        M, Q1, lns, Rt, rot, general, runs = self._gather(entries)
-        T: FloatArray = np.zeros((0, 3))
+        tab = self._gather(entries)
         plans: dict[int, Plan] = {}
         hints: dict[int, ArcHint] = {}
-        if M:
-            T, plans, hints = self._plan(Q1, lns, Rt, rot, general, runs)
-        for run in runs:
+        if len(tab):
+            plans, hints = self.planner.plan(tab)
+        for run in tab.runs:
             # arcs the bulk planner did not settle: written one by one by the general emitter
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
-        out: list[str] = []  # the chunk's text, written at once
-        write = out.append
-        # where each entry's text starts in out: (index, its line, 1: every line is that
-        # line's, 2: a run's lines one by one from it, 0: a line passed as it is)
-        marks: list[tuple[int, int, int]] = []
-        mark = marks.append
-        emit_move = self._emit_move
-        get_plan = plans.get
-        get_hint = hints.get
-        k = 0
-        passed = 0
-        prepared: dict[int, bulk.Emission] = {}
-        blocks: list[bulk.Block] = []
-        for e in entries:
-            if type(e) is bulk.Run:
-                mark((len(out), e.lineno, 2))
-                em = prepared.get(id(e.block))
-                if em is None:
-                    em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
-                    blocks.append(e.block)
-                cut = e.cut
-                if not cut:
-                    bulk.emit_run(self, e, em, T, write, hints)
-                else:  # arcs and lines that must be split: written by the general emitter
-                    for part in bulk.split_run(e, sorted(set(cut))):
-                        if type(part) is bulk.Run:
-                            mark((len(out), part.lineno, 2))
-                            bulk.emit_run(self, part, em, T, write, hints)
-                            continue
-                        j, fm = part
-                        mark((len(out), e.lineno + j, 1))
-                        line = e.block.lines[e.a + j]
-                        hint = get_hint(k + j)
-                        if hint is not None:
-                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, write)
-                        else:
-                            emit_move(line, fm.to_move(line), T[k + j].tolist(), get_plan(k + j), write)
-                k += len(e)
-                continue
-            line, mv, motion_word, prog_motion = e
-            mark((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is _Store else 1))
-            if type(mv) is _Rebase:
-                self._emit_rebase(line, mv, write)
-                continue
-            if type(mv) is _Store:
-                self._stored[mv.name] = list(self.qe)
-                write(line)
-                passed += 1
-                continue
-            if mv is None:
-                write(line)
-                passed += 1
-                if motion_word:
-                    self.emitted_motion = prog_motion
-                continue
-            if mv.probe:  # used by the cycle block before it, or checked here
-                if mv.probe == 2:
-                    self._check_unmoved(mv, T[k])
-                k += 1
-                continue
-            if mv.cycle is not None:
-                self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
-                k += 1
-                continue
-            if mv.fixed:  # the machine is at a stored position, uncorrected
-                self.qe = list(mv.q1)
-                if mv.stored is not None and mv.stored[0] in self._stored:
-                    # a position the program stored: the controller stored its corrected one
-                    for ax in mv.stored[1]:
-                        self.qe[ax] = self._stored[mv.stored[0]][ax]
-                k += 1
-                continue
-            if mv.then is not None:  # G28/G30: only the intermediate point's own words change
-                self._emit_words_only(line, mv, T[k].tolist(), write)
-                k += 1
-                continue
-            target = T[k].tolist()
-            hint = get_hint(k)
-            if hint is not None:
-                self._emit_hinted_arc(line, mv, target, hint, write)
-            else:
-                emit_move(line, mv, target, get_plan(k), write)
-            k += 1
-        for blk in blocks:
-            blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
-        self.report.lines_out += passed
-        text = "".join(out)
-        if self._long_line.search(text):
-            text = self._fit_lines(out, marks)
-        write_out(text)
-
-    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
-        """A chunk's text (``out``, its entries' ``marks``) with every line it writes
-        within the dialect's limits: a line that passes them gets its comments on a line
-        of their own before it (:func:`emit.fit_line`), or is refused naming its line and
-        column. Lines passed as they are stay (the input has them so)."""
-        pieces: list[str] = []
-        ends = [m[0] for m in marks[1:]] + [len(out)]
-        pieces.extend(out[:marks[0][0]] if marks else out)
-        for (a, lineno, kind), b in zip(marks, ends, strict=True):
-            text = "".join(out[a:b])
-            if kind == 0 or not self._long_line.search(text):
-                pieces.append(text)
-                continue
-            for n, line in enumerate(text.splitlines(keepends=True)):
-                fitted, over = emit.fit_line(self.opt.dialect, line)
-                if over is not None:
-                    col, what = over
-                    raise SafetyError(
-                        f"{what}, once corrected", path=self.path, lineno=lineno + n if kind == 2 else lineno,
-                        col=col, hint="shorten the line (a comment moved onto a line of its own would not "
-                                      "do) or give the --dialect it is for")
-                if len(fitted) > 1:
-                    self.report.lines_out += 1
-                    self.report.lines_inserted += 1
-                pieces.extend(fitted)
-        return "".join(pieces)
-
-    def _plan(self, Q1: FloatArray, linenos: IntArray, R: FloatArray, rot: list[dict[str, float]],
-              general: list[tuple[int, PlanMove]], runs: Sequence[bulk.Run] = ()
-              ) -> tuple[FloatArray, dict[int, Plan], dict[int, ArcHint]]:
-        """Corrected targets of a chunk's moves, the plans of those that need one, and
-        the hints of the arcs the bulk planner settles (:class:`vplan.ArcHint`).
-
-        ``Q1``, ``linenos``, ``R``, ``rot``: every move's nominal target, line, tool
-        vector and rotary positions; ``general``: (index, Move) of the moves not read
-        in bulk (arcs among them; all moves when straight moves may be split).
-        """
-        M = len(Q1)
-        Q1, Q0, D, fixed_rows, fixed_q, arc_prm, breaks = self._approach(Q1, linenos, general)
-        moves = dict(general)
-        inert = [r.trow + j for r in runs for j in r.inert]
-        if fixed_rows or inert:
-            live = np.ones(M, dtype=bool)
-            live[fixed_rows] = False
-            live[inert] = False
-            T = np.empty_like(Q1)
-            T[live] = self.corrected(Q1[live], R[live], D[live], [rot[i] for i in np.flatnonzero(live)],
-                                     linenos[live])
-            if fixed_rows:
-                T[fixed_rows] = fixed_q
-                Q1[fixed_rows] = fixed_q
-            if inert:
-                # a line of a run that moves nothing stays where the line before it went
-                # (a run starts at a line that moves)
-                moved = np.ones(M, dtype=bool)
-                moved[inert] = False
-                T[inert] = T[bulk.last_index(moved)[inert]]
-        else:
-            T = self.corrected(Q1, R, D, rot, linenos)
-        plans: dict[int, Plan] = {}
-        hints: dict[int, ArcHint] = {}
-        # starts: the corrected previous target (unrounded)
-        S = np.vstack([self.prev_target[None, :], T[:-1]])
-        d_in = np.vstack([self.dirs[None, :], D[:-1]])
-        start_unknown: list[bool] = np.isnan(S).any(axis=1).tolist()
-        planned = [(i, m) for i, m in general
-                   if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
-                   and not start_unknown[i] and not any(math.isnan(v) for v in m.q0)]
-        if direction_axes(self.engine):  # the directions the corrected commands take
-            T, D = self._plan_directions(planned, arc_prm, breaks, Q0, Q1, R, T, D, rot, linenos, fixed_rows, plans)
-        else:
-            def corr(rows: IntArray, nom: FloatArray) -> FloatArray:
-                return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
-
-            def curvature(rows: IntArray) -> FloatArray:
-                # the commands the inverse finds lie within the largest allowed correction
-                return self.engine.line_curvature_bound(Q0[rows], Q1[rows], np.linalg.norm(R[rows], axis=1),
-                                                        self.opt.max_correction_mm)
-
-            if runs and not self.linear_exact:
-                # straight moves of the runs of plain lines: those that must be split are
-                # planned when they are written (their Move is made then)
-                rows, owner = bulk.line_rows(runs)
-                ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
-                                        limit=self.opt.tolerance_mm * FIT_BUDGET
-                                        - max(self._round_err(r.unit) for r in runs), curvature=curvature)
-                run_lines: list[tuple[int, PlanMove | _RunLine]] = []
-                for i, o in zip(rows[~ok].tolist(), owner[~ok].tolist(), strict=True):
-                    runs[o].cut.append(i - runs[o].trow)
-                    run_lines.append((i, _RunLine(int(linenos[i]))))
-                if run_lines:
-                    self._plan_moves(run_lines, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
-            if planned and self.bulk_plan:
-                ok_lines, hints, planned = vplan.plan_chunk(
-                    planned, arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
-                    min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
-                    rounding=max(self._round_err(m.unit) for _i, m in general), curvature=curvature)
-                self._hint_plans(hints, moves, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
-            if planned:
-                self._plan_moves(planned, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, plans)
-        self.prev_nominal = Q1[-1].copy()
-        self.prev_target = T[-1].copy()
-        self.dirs = D[-1].copy()
-        return T, plans, hints
-
-    def _approach(self, Q1: FloatArray, linenos: IntArray, general: list[tuple[int, PlanMove]],
-                  arc_ends: bool = True) -> tuple[FloatArray, FloatArray, FloatArray, list[int], FloatArray | None,
-                                                  dict[int, ArcParams], dict[int, FloatArray]]:
-        """A chunk's nominal targets with the unknown filled, its nominal starts and the
-        approach direction of every move on each axis: ``(Q1, Q0, D, fixed rows, their
-        targets as given, arc_params of the arcs, quadrant breaks of the arcs whose end
-        tangent was taken)``. ``arc_ends`` False: the arcs' end tangents are not taken
-        (chord signs serve where no direction-dependent engine or added map reads them)."""
-        M = len(Q1)
-        fixed_rows = [i for i, m in general if m.fixed]
-        fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
-        if fixed_rows:
-            # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it
-            for i in fixed_rows:  # unknown axes: taken as not moving (no approach direction)
-                before = Q1[i - 1] if i > 0 else self.prev_nominal
-                Q1[i] = np.where(np.isnan(Q1[i]), before, Q1[i])
-        Q1 = backfill_unknown(Q1, linenos, self.path)
-        Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
-        Q0 = np.where(np.isnan(Q0), Q1, Q0)
-        # approach directions: chord signs (end tangent for arcs), carried where zero
-        d = Q1 - Q0
-        sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
-        arcs = [(i, m, m.arc) for i, m in general if m.arc is not None] if arc_ends else []
-        arc_prm = {i: arc_params(arc, m.q0, m.q1) for i, m, arc in arcs}
-        breaks: dict[int, FloatArray] = {}  # of the arcs the general planner cuts (made when needed)
-        # the approach directions at arc ends matter only to a correction that reads them
-        for i, m, arc in arcs if self.engine.direction_dependent or self.opt.added else ():
-            prm = arc_prm[i]
-            br = breaks[i] = quadrant_breaks(prm[1], prm[2])
-            # the approach direction at the end: the motion over the arc's last piece
-            # (between quadrant points every axis moves one way)
-            ends = arc_points(arc, m.q0, m.q1, np.array([float(br[-1]) if len(br) else 0.0, 1.0]), prm)
-            dd = ends[1] - ends[0]
-            sign[i] = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
-        D = np.empty_like(sign)
-        for ax in range(3):
-            col = sign[:, ax]
-            idx = np.where(col != 0, np.arange(M), -1)
-            np.maximum.accumulate(idx, out=idx)
-            D[:, ax] = np.where(idx >= 0, col[np.maximum(idx, 0)], self.dirs[ax])
-        return Q1, Q0, D, fixed_rows, fixed_q, arc_prm, breaks
-
-    def _emit_rebase(self, line: str, rb: _Rebase, write: Write) -> None:
-        """Write a G92 / G10 L20 / G10 L10-L11 line so that the offset the controller sets
-        from where it is (the corrected position) is the nominal one: each value it
-        subtracts moves by the correction there."""
-        unit = rb.unit
-        d = _unit_decimals(self.opt, unit)
-        edits = []
-        for idx, k in rb.axes:
-            delta = (self.qe[k] - rb.nominal[k]) / unit
-            if not math.isfinite(delta):
-                continue
-            _l, num, start, end, _p = rb.words[idx]
-            dout = max(d, emit.decimals_of(num))
-            if abs(delta) >= emit.HALF_UNIT[dout]:
-                edits.append((start, end, emit.fmt(float(num) + delta, dout)))
-        self._write_line(line, edits, write)
-
-    def _hint_plans(self, hints: dict[int, ArcHint], moves: dict[int, PlanMove], arc_prm: dict[int, ArcParams],
-                    breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray,
-                    S: FloatArray, T: FloatArray, d_in: FloatArray, rot: list[dict[str, float]],
-                    linenos: IntArray) -> None:
-        """Give every hint its general plan, for when the hint does not do: made now, in
-        one engine call, for the arcs whose fit comes near the budget (their hints often
-        fail when written: rounded centre, written ends) and those whose centre words
-        already fail for their corrected ends rounded as words are
-        (:meth:`_hints_failing_rounded`), else when asked for."""
-        budget = self.opt.tolerance_mm * FIT_BUDGET
-        near = HINT_PREPLAN_SHARE * budget
-        made: dict[int, Plan] = {}
-        # a hint is only ever made for an arc (a Move or a RunMove: an ArcMove)
-        fails = self._hints_failing_rounded([(i, cast("ArcMove", moves[i]), hint) for i, hint in hints.items()
-                                             if not hint.worst > near], budget)
-        marginal = [(i, moves[i]) for i, hint in hints.items() if hint.worst > near or i in fails]
-        if marginal:
-            self._plan_moves(marginal, arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, made)
-        for i, hint in hints.items():
-            plan = made.get(i)
-            hint.edge = plan is not None
-            hint.lazy = (self._lazy_plan(i, moves[i], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos)
-                         if plan is None else _given(plan))
-
-    def _hints_failing_rounded(self, arcs: list[tuple[int, ArcMove, ArcHint]], budget: float) -> set[int]:
-        """The rows of the arcs whose hint gives no centre words for their corrected ends
-        rounded to the output's decimals: the end points as written but for the input's
-        own longer decimals and the words added for unnamed axes, so that such a hint most
-        likely fails when written too (an arc whose centre no rounded words put on the
-        bisector of its ends within half a step, e.g. an end's coordinate one odd step
-        beyond the other's across a short chord). A guess for planning only: what is
-        written is settled by the hint or the plan either way. All the arcs are asked at
-        once (:func:`vplan.words_many`); the writer, asking with the same ends, gets the
-        answers given here."""
-        arcs = [(i, mv, hint) for i, mv, hint in arcs if mv.arc is not None]
-        if not arcs:
-            return set()
-        axes = np.array([PLANES[cast("Arc", mv.arc).plane][0] for _i, mv, _h in arcs], dtype=int)
-        unit = np.array([mv.unit for _i, mv, _h in arcs], dtype=float)
-        d = [self._decimals_for(u) for u in unit.tolist()]
-        shift = np.array([mv.shift for _i, mv, _h in arcs], dtype=float)
-        ends = np.array([hint.ends for _i, _mv, hint in arcs], dtype=float)
-        rows = np.arange(len(arcs))[:, None]
-        sh = shift[rows, axes]  # each arc's shift in its plane's order, as its ends
-        u = unit[:, None]
-        # the corrected ends rounded as words are: round((q - shift) / unit, d) * unit + shift
-        S, E = np.empty_like(sh), np.empty_like(sh)
-        S[rows, axes] = vplan.round_many((ends[:, :3] - sh) / u, d) * u + sh
-        E[rows, axes] = vplan.round_many((ends[:, 3:] - sh) / u, d) * u + sh
-        absolute = np.array([mv.arc_absolute for _i, mv, _h in arcs], dtype=bool)[:, None]
-        base = np.where(absolute, sh[:, :2], S[rows, axes[:, :2]])
-        clockwise = [cast("Arc", mv.arc).clockwise for _i, mv, _h in arcs]
-        got = vplan.words_many([h for _i, _mv, h in arcs], S, E, axes, clockwise, d, unit, base, budget)
-        return {i for (i, _mv, _h), w in zip(arcs, got, strict=True) if w is None}
-
-    def _lazy_plan(self, i: int, mv: PlanMove, arc_prm: dict[int, ArcParams], breaks: dict[int, FloatArray],
-                   Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray, S: FloatArray, T: FloatArray,
-                   d_in: FloatArray, rot: list[dict[str, float]], linenos: IntArray) -> Callable[[], Plan]:
-        """The general plan of move ``i``, made when asked for."""
-
-        def plan() -> Plan:
-            out: dict[int, Plan] = {}
-            self._plan_moves([(i, mv)], arc_prm, breaks, Q0, Q1, R, D, S, T, d_in, rot, linenos, out)
-            return out[i]
-
-        return plan
-
-    def _plan_directions(self, planned: list[tuple[int, PlanMove]], arc_prm: dict[int, ArcParams],
-                         breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, R: FloatArray,
-                         T: FloatArray, D: FloatArray, rot: list[dict[str, float]], linenos: IntArray,
-                         fixed_rows: list[int], plans: dict[int, Plan]) -> tuple[FloatArray, FloatArray]:
-        """Targets, directions and plans of a chunk for a direction-dependent correction
-        (backlash), settled on the directions the corrected commands take
-        (:mod:`postproc.gcode.directions`): the commanded points are every sample of a
-        planned move (sampled as :meth:`_plan_moves` does) and the target of any other
-        move; a point less than one output unit against its axis's direction is held.
-        Fills ``plans``; returns the targets and their directions."""
-        M = len(T)
-        axes = direction_axes(self.engine)
-        counts = np.ones(M, dtype=int)
-        # i -> (s (n,), nominal (n, 3), dirs (n, 3), given axes)
-        samples: dict[int, tuple[FloatArray, FloatArray, FloatArray, list[int]]] = {}
-        planned = [(i, m) for i, m in planned if not m.fixed]  # a stored position is one point
-        for i, m in planned:
-            arc = m.arc
-            if arc is None:
-                length = float(np.linalg.norm(Q1[i] - Q0[i]))
-                s = np.linspace(0.0, 1.0, max(3, math.ceil(length / SAMPLE_STEP_MM) + 1))[1:]
-                samples[i] = (s, line_points(Q0[i], Q1[i], s), D[i], [])
-            else:
-                prm = arc_prm[i]
-                (a1, a2, _an), _t0, sweep, _r0, _r1 = prm
-                length = arc_length(arc, m.q0, m.q1, prm)
-                cuts = [0.0, *breaks[i].tolist(), 1.0]
-                ss = [np.linspace(sa, sb, _arc_piece_samples(sb - sa, length, sweep))[1:]
-                      for sa, sb in zip(cuts[:-1], cuts[1:], strict=True)]
-                ends = arc_points(arc, m.q0, m.q1, np.array(cuts), prm)
-                dd = np.diff(ends, axis=0)
-                dr = np.where(np.abs(dd) > 1e-12, np.sign(dd), D[i])  # each quarter's own direction
-                s = np.concatenate(ss)
-                dirs = np.repeat(dr, [len(x) for x in ss], axis=0)
-                samples[i] = (s, arc_points(arc, m.q0, m.q1, s, prm), dirs, [a1, a2])
-            counts[i] = len(samples[i][0])
-        owner = np.repeat(np.arange(M), counts)
-        last = np.cumsum(counts) - 1
-        first = last - counts + 1
-        nominal, Tx, Dx = Q1[owner], T[owner], D[owner]
-        sx = np.ones(len(owner))
-        given = np.zeros(nominal.shape, dtype=bool)  # an arc's in-plane axes: the direction of its quarter
-        for i, (s, nom, dirs, plane) in samples.items():
-            sl = slice(first[i], last[i] + 1)
-            sx[sl], nominal[sl], Dx[sl] = s, nom, dirs
-            given[sl, plane] = True
-        free = np.ones(M, dtype=bool)
-        free[fixed_rows] = False
-        free = free[owner]
-        hold = max(MACHINE_STEP_MM, *(10.0 ** -_unit_decimals(self.opt, u) * u for u in self._units_checked))
-
-        def solve(rows: IntArray, dirs: FloatArray, at: FloatArray | None = None) -> FloatArray:
-            own = owner[rows]
-            return self.corrected(nominal[rows] if at is None else at, R[own], dirs,
-                                  [rot[j] for j in own.tolist()], linenos[own])
-
-        inner = np.flatnonzero(counts[owner] > 1)
-        if len(inner):
-            Tx[inner] = solve(inner, Dx[inner])
-        Ex, Dx = settle(Tx, Dx, self.prev_target, self.dirs, hold, axes, solve, linenos[owner], free, given,
-                        first[owner], path=self.path)
-        T, D = Ex[last], Dx[last]
-        if not planned:
-            return T, D
-        # take-ups: before a point a direction-dependent axis reverses into, the point
-        # before it corrected with the new directions
-        rows = np.concatenate([np.arange(first[i], last[i] + 1) for i, _m in planned])
-        rows = rows[reversals(Dx, self.dirs, axes, rows)]
-        takeups: dict[int, FloatArray] = {}
-        if len(rows):
-            at = np.array([nominal[j - 1] if j != first[owner[j]] else Q0[owner[j]] for j in rows.tolist()])
-            takeups = dict(zip(rows.tolist(), solve(rows, Dx[rows], at), strict=True))
-        for i, m in planned:
-            j0 = int(first[i])
-            start = Ex[j0 - 1] if j0 > 0 else self.prev_target
-            start_dirs = Dx[j0 - 1] if j0 > 0 else self.dirs
-            arc = m.arc
-            bulge: Callable[[FloatArray, FloatArray], FloatArray]
-            if arc is not None:
-                prm = arc_prm[i]
-
-                def arc_bulge(s: FloatArray, nom: FloatArray, arc: Arc = arc, m: PlanMove = m,
-                              prm: ArcParams = prm) -> FloatArray:
-                    mid = arc_points(arc, m.q0, m.q1, 0.5 * (s[:-1] + s[1:]), prm)
-                    return mid - 0.5 * (nom[:-1] + nom[1:])
-
-                bulge = arc_bulge
-            else:
-                bulge = _no_bulge
-            seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
-                              TAKEUP_MIN_MM, bulge, self.opt.tolerance_mm - self._round_err(m.unit),
-                              lineno=m.lineno, path=self.path)
-            if arc is not None:
-                (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
-                carried = np.array(start_dirs, dtype=float)
-                carried[an] = D[i][an]
-                plans[i] = {"seq": seq, "whole": len(seq) == 1, "nsweep": sweep, "mismatch": abs(r1 - r0),
-                            "curve": Curve(m.q0, m.q1, arc, R[i], carried, m.lineno, m.rotary, arc_prm[i])}
-            else:  # a line's standing axes: the direction its corrected command takes
-                plans[i] = {"seq": seq, "whole": len(seq) == 1,
-                            "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary)}
-        return T, D
-
-    def _plan_moves(self, planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: dict[int, ArcParams],
-                    breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, R: FloatArray, D: FloatArray,
-                    S: FloatArray, T: FloatArray, d_in: FloatArray, rot: list[dict[str, float]], linenos: IntArray,
-                    plans: dict[int, Plan]) -> None:
-        """Sample the corrected ideal path of every planned move in one engine call.
-
-        A move is cut into pieces along which every axis moves one way (arcs at their
-        quadrant points); each piece is evaluated with its own approach directions. Where
-        the correction differs across a reversal (backlash), the plan takes up the
-        difference there, as a controller's backlash compensation does; elsewhere the
-        pieces are joined again."""
-        smp = _sample_moves(planned, arc_prm, breaks, Q0, Q1, D, d_in)
-        owner = np.repeat(np.array(smp.piece_move, dtype=int), smp.counts)
-        corr = self.corrected(smp.nom, R[owner], np.repeat(smp.dirs, smp.counts, axis=0),
-                              [rot[i] for i in owner.tolist()], linenos[owner])
-        layout = [(i, m, [(smp.s[a:b], smp.nom[a:b], smp.dirs[p], smp.bulge[a - p:b - p - 1])
-                          for p, a, b in pieces])
-                  for (i, m), pieces in zip(planned, smp.pieces_of, strict=True)]
-        off = 0
-        for i, m, pieces in layout:
-            seq: list[Step] = []
-            last: Piece | None = None  # the last step, a piece (pieces are joined to it)
-            prev_end = S[i]
-            prev_dirs = d_in[i]
-            for s, nom, dr, bulge in pieces:
-                n = len(s)
-                Q = corr[off:off + n].copy()
-                off += n
-                if (dr != prev_dirs).any() and np.abs(Q[0] - prev_end).max() > TAKEUP_MIN_MM:
-                    seq.append(("takeup", Q[0].copy()))
-                else:
-                    Q[0] = prev_end
-                    if last is not None:
-                        seq.pop()
-                        _t, s0, Qa, na, ba = last
-                        s, Q, nom, bulge = (np.concatenate([s0, s[1:]]), np.vstack([Qa, Q[1:]]),
-                                            np.vstack([na, nom[1:]]), np.vstack([ba, bulge]))
-                piece: Piece = ("piece", s, Q, nom, bulge)
-                seq.append(piece)
-                last = piece
-                prev_end = Q[-1]
-                prev_dirs = dr
-            Q[-1] = T[i]  # the last piece's end: the move's target
-            if m.arc is not None:
-                _axes, _t0, sweep, r0, r1 = arc_prm[i]
-                plans[i] = {"seq": seq, "whole": len(seq) == 1, "nsweep": sweep, "mismatch": abs(r1 - r0),
-                            "curve": Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])}
-            else:
-                plans[i] = {"seq": seq, "whole": len(seq) == 1,
-                            "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary)}
-
-    def _check_rounding(self, unit: float, lineno: int) -> None:
-        """Refuse when rounding the words to their decimals alone exceeds the tolerance."""
-        err = self._round_err(unit)
-        if err >= self.opt.tolerance_mm:
-            d = _unit_decimals(self.opt, unit)
-            raise SafetyError(
-                f"words written with {d} decimals in {'inch' if unit == MM_PER_INCH else 'mm'} are rounded by up "
-                f"to {err:.3g} mm, more than --tolerance {self.opt.tolerance_mm:g} mm",
-                path=self.path, lineno=lineno,
-                hint=f"give more --decimals or a --tolerance above {err:.3g} mm")
-        self._units_checked.add(unit)
-
-    def _round_err(self, unit: float) -> float:
-        d = _unit_decimals(self.opt, unit)
-        return 0.5 * 10.0 ** (-d) * unit * math.sqrt(3.0)
-
-    def _subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
-                   ) -> list[tuple[FloatArray, FloatArray]]:
-        rerr = self._round_err(unit)
-        line_ids = np.array([c.arc is None for c in curves])
-        Q0 = np.array([c.q0 for c in curves], dtype=float)
-        Q1 = np.array([c.q1 for c in curves], dtype=float)
-        Rr = np.array([c.r for c in curves], dtype=float)
-
-        def evaluate(cid: np.ndarray, s: np.ndarray) -> np.ndarray:
-            nom = np.empty((len(s), 3))
-            dirs = np.empty((len(s), 3))
-            is_line = line_ids[cid]
-            if is_line.any():
-                c = cid[is_line]
-                nom[is_line] = Q0[c] + (Q1[c] - Q0[c]) * s[is_line, None]
-                dd = np.sign(Q1[c] - Q0[c])
-                carried = np.array([curves[j].dirs for j in c]).reshape(-1, 3)
-                dirs[is_line] = np.where(dd == 0, carried, dd)
-            if (~is_line).any():
-                for j in np.unique(cid[~is_line]).tolist():
-                    sel = cid == j
-                    nom[sel] = curves[j].nominal(s[sel])
-                    dirs[sel] = curves[j].directions(s[sel])
-            rot = [curves[j].rotary for j in cid.tolist()]
-            ln = np.array([curves[j].lineno for j in cid.tolist()])
-            return self.corrected(nom, Rr[cid], dirs, rot, ln)
-
-        try:
-            return subdivide(curves, s_init, evaluate, self.opt.tolerance_mm - rerr)
-        except SolverError as exc:
-            if self.accept_residual_mm > self.opt.tolerance_mm:
-                exc.hint = (f"the {self.report.solver or self.engine.method} solver's answers scatter by up to "
-                            f"its residual (largest so far {self.report.max_residual_mm * 1000:.3g} um), more than "
-                            f"--tolerance {self.opt.tolerance_mm:g} mm allows: raise --tolerance above that "
-                            "residual, or use a calibration with the newton solver")
-            raise exc.at(path=self.path) from None
+        self.writer.write(entries, tab, plans, hints, write_out)
 
     # -- moves written out for a cycle or a spline -------------------------------------
     @staticmethod
@@ -1188,7 +551,7 @@ class Corrector(EmitterMixin):
         in chord error)."""
         from postproc.gcode.interp import spline_points, spline_samples
 
-        tol = self.opt.tolerance_mm - self._round_err(mv.unit)
+        tol = self.opt.tolerance_mm - self.planner.round_err(mv.unit)
         has_ij = any(w.letter == "I" for w in mv.words)
         kept = self.linear_exact and (has_ij or self._spline_kept) and self._spline_unmoved(mv, spline)
         self._spline_kept = kept
@@ -1205,9 +568,9 @@ class Corrector(EmitterMixin):
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
         for k in range(1, len(sign)):
             sign[k] = np.where(sign[k] == 0, sign[k - 1], sign[k])
-        sign = np.where(sign == 0, self.dirs, sign)
+        sign = np.where(sign == 0, self.planner.dirs, sign)
         lineno = np.full(len(s), mv.lineno)
-        corr = self.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
+        corr = self.planner.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
                               [mv.rotary] * len(s), lineno)
         keep = [0]
         i = 0
@@ -1239,8 +602,8 @@ class Corrector(EmitterMixin):
         affine correction the corrected spline is then the spline itself)."""
         pts = np.array([(x, y, mv.q1[2]) for x, y in spline], dtype=float)
         n = len(pts)
-        t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
-                           np.broadcast_to(self.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
+        t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
+                           np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
         d = _unit_decimals(self.opt, mv.unit)
         return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
@@ -1291,12 +654,12 @@ class Corrector(EmitterMixin):
             return True
         pts = np.array([q for hole in c.holes for q in hole], dtype=float)
         n = len(pts)
-        dirs = np.broadcast_to(self.dirs, pts.shape)
-        t = self.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
+        dirs = np.broadcast_to(self.planner.dirs, pts.shape)
+        t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
                            [mv.rotary] * n, np.full(n, mv.lineno))
         if c.repeats == 1 and not mv.incremental:
             drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
-            return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self._round_err(mv.unit))
+            return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self.planner.round_err(mv.unit))
         d = _unit_decimals(self.opt, mv.unit)
         return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
@@ -1328,265 +691,7 @@ class Corrector(EmitterMixin):
             return
         self.report.cycles_expanded += 1
 
-    def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
-        """A cycle block that stays as it is, with several holes or increments: refuse it
-        when a hole's correction does not round to nothing."""
-        d = _unit_decimals(self.opt, mv.unit)
-        moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
-        if moved >= emit.HALF_UNIT[d]:
-            how = "in G91 (incremental)" if mv.incremental else "with L/K repeats"
-            raise SafetyError(
-                f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
-                f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
-                path=self.path, lineno=mv.lineno,
-                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
-
-    def _emit_cycle(self, line: str, mv: Move, c: Cycle, t_bottom: list[float], t_r: list[float],
-                    write: Write) -> None:
-        """Write a kept cycle block (``mv``, its cycle ``c``): X/Y at the corrected bottom, Z
-        and R along the tool axis."""
-        unit, shift = mv.unit, mv.shift
-        d = _unit_decimals(self.opt, unit)
-        rerr = self._round_err(unit)
-        drift = math.hypot(t_r[0] - t_bottom[0], t_r[1] - t_bottom[1])
-        if drift > self.opt.tolerance_mm - rerr:
-            raise SafetyError(
-                f"canned cycle G{c.code / 10:g}: the correction moves the hole's axis by {drift * 1000:.3g} um "
-                f"between its R plane and its bottom, more than --tolerance {self.opt.tolerance_mm:g} mm",
-                path=self.path, lineno=mv.lineno,
-                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
-        self.report.moves += 1
-        self.report.cycles_kept += 1
-        qe = self.qe
-        z_before = qe[2]
-        flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
-        edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
-        sep, lower = emit.style_of(line)
-        same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
-        self._cycle_nominal = (c.z_mm, c.r_mm)
-        held = [self._cycle_z, self._cycle_rz]  # the Z and R words the controller holds
-        written: list[float] = []  # ... and holds after this block
-        for n, (letter, idx, t, nominal) in enumerate((("Z", mv.axis_idx[2], t_bottom[2], c.z_mm),
-                                                       ("R", c.r_idx, t_r[2], c.r_mm))):
-            v = (t - shift[2]) / unit
-            if idx < 0 and not same_group:
-                # the controller holds the program's own value (given earlier, or R taken as
-                # the initial level)
-                held[n] = (nominal - shift[2]) / unit
-            if idx >= 0:
-                _l, num, start, end, _p = mv.words[idx]
-                dout = max(d, emit.decimals_of(num))
-                val = float(num)
-                if abs(v - val) >= emit.HALF_UNIT[dout]:
-                    text = emit.fmt(v, dout)
-                    edits.append((start, end, text))
-                    val = float(text)
-            else:
-                h = held[n]
-                if h is None or abs(v - h) >= emit.HALF_UNIT[d]:
-                    text = emit.fmt(v, d)
-                    added.append(letter + text)
-                    val = float(text)
-                else:
-                    val = h
-            written.append(val)
-        self._cycle_z, self._cycle_rz = written
-        if added:
-            pos = self._insert_pos(mv)
-            text = "".join(sep + w for w in added)
-            edits.append((pos, pos, text.lower() if lower else text))
-        r_machine = written[1] * unit + shift[2]
-        qe[2] = r_machine if c.retract_r else max(z_before, r_machine)
-        self.emitted_motion = c.code
-        self._write_line(line, edits, write)
-
     # -- emission ----------------------------------------------------------------------
-    def _emit_words_only(self, line: str, mv: Move, target: list[float], write: Write) -> None:
-        """Rewrite the axis words a line names, adding none and keeping the modal motion
-        (G28/G30 intermediate points)."""
-        self.report.moves += 1
-        d = _unit_decimals(self.opt, mv.unit)
-        edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
-        self._write_line(line, edits, write)
-
-
-@final
-class _Store:
-    """A G28.1/G30.1 line: the controller stores the position it is at."""
-
-    __slots__ = ("name",)
-
-    def __init__(self, name: str) -> None:
-        self.name = name  # "G28" or "G30"
-
-
-@final
-class _Rebase:
-    """A line that sets an offset from where the machine is (G92, G10 L20, G10 L10/L11)."""
-
-    __slots__ = ("words", "axes", "nominal", "unit")
-
-    def __init__(self, words: list[Word], axes: list[tuple[int, int]], nominal: Sequence[float],
-                 unit: float) -> None:
-        self.words = words  # the line's words
-        self.axes = axes  # [(word index, axis), ...] of the values taken from the position
-        self.nominal = nominal  # the nominal gauge position when the line runs
-        self.unit = unit  # mm per program unit then
-
-
-@final
-class _RunLine:
-    """What the planner needs of a straight move read in a run of plain lines."""
-
-    __slots__ = ("lineno",)
-    arc: None = None
-    rotary: dict[str, float] = {}
-
-    def __init__(self, lineno: int) -> None:
-        self.lineno = lineno
-
-
-@final
-class _Sampled:
-    """The nominal samples of a chunk's planned moves, cut into pieces along which every
-    axis moves one way (see :func:`_sample_moves`)."""
-
-    __slots__ = ("s", "nom", "bulge", "dirs", "counts", "piece_move", "pieces_of")
-
-    def __init__(self, s: FloatArray, nom: FloatArray, bulge: FloatArray, dirs: FloatArray, counts: IntArray,
-                 piece_move: list[int], pieces_of: list[list[tuple[int, int, int]]]) -> None:
-        self.s = s  # parameters of every sample, piece after piece
-        self.nom = nom  # their nominal points
-        self.bulge = bulge  # how the nominal path bulges from the chord of each sample interval
-        self.dirs = dirs  # (pieces, 3) each piece's approach directions
-        self.counts = counts  # samples per piece
-        self.piece_move = piece_move  # the row of each piece's move
-        self.pieces_of = pieces_of  # per move: (piece, first sample, end) of its pieces
-
-
-def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], arc_prm: dict[int, ArcParams],
-                  breaks: dict[int, FloatArray], Q0: FloatArray, Q1: FloatArray, D: FloatArray,
-                  d_in: FloatArray) -> _Sampled:
-    """Samples of the planned moves, every one at once: an arc cut at its quadrant points
-    (``breaks`` filled where missing), each piece sampled at least every
-    SAMPLE_STEP_MM and ARC_CHECK_STEP_RAD (ARC_CHECK_MIN_SAMPLES at least), a line every
-    SAMPLE_STEP_MM (3 samples at least). The parameters are np.linspace's and the
-    points :func:`~postproc.gcode.geometry.arc_points`' and
-    :func:`~postproc.gcode.geometry.line_points`', element by element the same
-    operations. An arc piece's directions are the signs of its chord, carried from the
-    piece before (from ``d_in``) where an axis stands; a line's are ``D``."""
-    sa_l: list[float] = []
-    sb_l: list[float] = []
-    n_l: list[int] = []
-    piece_move: list[int] = []
-    arc_piece: list[int] = []  # per piece: its arc's index in arc_rows, or -1 for a line
-    arc_rows: list[tuple[ArcParams, Sequence[float], Sequence[float], Sequence[float]]] = []  # prm, q0, q1, centre
-    pieces_of: list[list[tuple[int, int, int]]] = []
-    total = 0
-    for i, m in planned:
-        own: list[tuple[int, int, int]] = []
-        if m.arc is not None:
-            prm = arc_prm[i]
-            _axes, t0, sweep, _r0, _r1 = prm
-            length = arc_length(m.arc, m.q0, m.q1, prm)
-            br = breaks.get(i)
-            if br is None:
-                br = breaks[i] = quadrant_breaks(t0, sweep)
-            cuts = [0.0, *br.tolist(), 1.0]
-            k = len(arc_rows)
-            arc_rows.append((prm, m.q0, m.q1, m.arc.center))
-            for sa, sb in zip(cuts[:-1], cuts[1:], strict=True):
-                n = _arc_piece_samples(sb - sa, length, sweep)
-                own.append((len(n_l), total, total + n))
-                sa_l.append(sa)
-                sb_l.append(sb)
-                n_l.append(n)
-                piece_move.append(i)
-                arc_piece.append(k)
-                total += n
-        else:
-            length = float(np.linalg.norm(Q1[i] - Q0[i]))
-            n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
-            own.append((len(n_l), total, total + n))
-            sa_l.append(0.0)
-            sb_l.append(1.0)
-            n_l.append(n)
-            piece_move.append(i)
-            arc_piece.append(-1)
-            total += n
-        pieces_of.append(own)
-    counts = np.array(n_l, dtype=int)
-    P = len(counts)
-    first = np.cumsum(counts) - counts
-    sa, sb = np.array(sa_l), np.array(sb_l)
-    # np.linspace(sa, sb, n): arange(n) * ((sb - sa) / (n - 1)) + sa, its last value sb
-    k_in = (np.arange(total) - np.repeat(first, counts)).astype(float)
-    s = k_in * np.repeat((sb - sa) / (counts - 1), counts) + np.repeat(sa, counts)
-    s[first + counts - 1] = sb
-    owner_piece = np.repeat(np.arange(P), counts)
-    rows = np.array(piece_move, dtype=int)
-    ap = np.array(arc_piece, dtype=int)
-    nom = np.empty((total, 3))
-    # lines: q0 + (q1 - q0) * s
-    line_smp = np.flatnonzero(ap[owner_piece] < 0)
-    if len(line_smp):
-        r = rows[owner_piece[line_smp]]
-        nom[line_smp] = Q0[r] + (Q1[r] - Q0[r]) * s[line_smp, None]
-    # the middle of every sample interval within a piece
-    inner = np.ones(total, dtype=bool)
-    inner[first + counts - 1] = False
-    j = np.flatnonzero(inner)
-    s_mid = 0.5 * (s[j] + s[j + 1])
-    owner_mid = owner_piece[j]
-    bulge = np.zeros((len(j), 3))
-    arc_smp = np.flatnonzero(ap[owner_piece] >= 0)
-    if len(arc_smp):
-        axes = np.array([prm[0] for prm, _q0, _q1, _c in arc_rows], dtype=int)
-        t0s, sweeps, r0s, r1s = (np.array([prm[f] for prm, _q0, _q1, _c in arc_rows]) for f in (1, 2, 3, 4))
-        q0s, q1s, centres = (np.array([row[f] for row in arc_rows], dtype=float) for f in (1, 2, 3))
-
-        def arc_nominal(which: IntArray, at: FloatArray) -> FloatArray:
-            return arcs_points(which, at, axes, t0s, sweeps, r0s, r1s, centres, q0s, q1s)
-
-        arc_mid = np.flatnonzero(ap[owner_mid] >= 0)
-        mid = arc_nominal(ap[owner_mid[arc_mid]], s_mid[arc_mid])
-        nom[arc_smp] = arc_nominal(ap[owner_piece[arc_smp]], s[arc_smp])
-        jm = j[arc_mid]
-        bulge[arc_mid] = mid - 0.5 * (nom[jm] + nom[jm + 1])
-    # directions: an arc piece's chord signs, an axis that stands carried from the piece
-    # before (the first from d_in); a line's own
-    last = first + counts - 1
-    dd = nom[last] - nom[first]
-    sign = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
-    dirs = np.empty((P, 3))
-    carried = np.zeros(3)
-    for p in range(P):
-        i = piece_move[p]
-        if arc_piece[p] < 0:
-            dirs[p] = D[i]
-            continue
-        if p == 0 or arc_piece[p - 1] != arc_piece[p]:  # an arc's first piece
-            carried = d_in[i]
-        dirs[p] = carried = np.where(sign[p] == 0, carried, sign[p])
-    return _Sampled(s, nom, bulge, dirs, counts, piece_move, pieces_of)
-
-
-def _arc_piece_samples(span: float, length: float, sweep: float) -> int:
-    """Samples of an arc piece spanning ``span`` of the arc's parameter (``length``,
-    ``sweep``: the whole arc's): at least every SAMPLE_STEP_MM and ARC_CHECK_STEP_RAD,
-    and ARC_CHECK_MIN_SAMPLES at least."""
-    return max(ARC_CHECK_MIN_SAMPLES, math.ceil(span * length / SAMPLE_STEP_MM) + 1,
-               math.ceil(span * abs(sweep) / ARC_CHECK_STEP_RAD) + 1)
-
-
-def _given(plan: Plan) -> Callable[[], Plan]:
-    """A plan already made, as a hint's lazy plan."""
-    return lambda: plan
-
-
-def _no_bulge(s: FloatArray, nom: FloatArray) -> FloatArray:
-    """A straight move's nominal path does not bulge from its chords."""
-    return np.zeros((len(s) - 1, 3))
 
 
 def _chord_fits(points: FloatArray, budget: float) -> bool:

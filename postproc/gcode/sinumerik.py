@@ -41,14 +41,17 @@ WORD_LETTERS = frozenset("NGMXYZABCIJKFSTD")
 KEPT_KEYWORDS = frozenset({
     "SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "TRAFOOF", "UPATH", "SPATH",
     "WAITM", "COMPOF", "COMPON", "COMPCURV", "COMPCAD", "STOPFIFO", "STARTFIFO", "FIFOCTRL",
+    "FNORM", "FLIN", "FCUB",  # the feed's profile over a block (Fundamentals, "Feedrate"): no geometry
 })
-#: settings given as NAME=value that change no geometry (rounding distances of G641/G642)
-KEPT_SETTINGS = frozenset({"ADIS", "ADISPOS"})
+#: settings given as NAME=value that change no geometry (rounding distances of G641/G642; SPOS,
+#: the oriented spindle stop, which a CYCLE86 written as its moves holds)
+KEPT_SETTINGS = frozenset({"ADIS", "ADISPOS", "SPOS"})
 #: calls that change no geometry: kept as they are
 KEPT_CALLS = frozenset({"MSG", "CYCLE832", "SETMS", "WORKPIECE", "TOOLGEOMETRY"})
 #: drilling cycles read (Programming Guide Cycles, "Drilling cycles"): their moves are modelled
-#: (CYCLE83-CYCLE88 are refused by the dialect's list, naming them)
-DRILL_CYCLES = frozenset({"CYCLE81", "CYCLE82", "CYCLE89"})
+#: (:mod:`postproc.gcode.sinumerik_cycles`; the tapping cycles CYCLE84 and CYCLE840 are
+#: refused by the dialect's list, naming them)
+DRILL_CYCLES = frozenset({"CYCLE81", "CYCLE82", "CYCLE83", "CYCLE85", "CYCLE86", "CYCLE87", "CYCLE88", "CYCLE89"})
 END_KEYWORDS = frozenset({"RET"})
 #: frame instructions read (Fundamentals, "Coordinate transformations (frames)"): TRANS,
 #: ROT, SCALE, MIRROR replace the programmable frame (without values: delete it), their A

@@ -6,7 +6,8 @@ GOTOF label``), "Program section repetitions" (``REPEAT label P=n``, ``REPEAT la
 P=n``, ``REPEATB label P=n``: the section is repeated n times after it has run once, then
 the program goes on after the REPEAT block) and "Control structures" (``IF``/``ELSE``/
 ``ENDIF``, ``WHILE``/``ENDWHILE``, ``LOOP``/``ENDLOOP``, ``FOR var = a TO b``/``ENDFOR``,
-``REPEAT``/``UNTIL``). Conditions compare expressions with ``== <> < > <= >=`` joined by
+``REPEAT``/``UNTIL``) and the branch ``CASE (expr) OF 1 GOTOF A ... DEFAULT GOTOF B``.
+Conditions compare expressions with ``== <> < > <= >=`` joined by
 ``AND``, ``OR``, ``NOT``.
 
 Every other line is yielded as it is (``original``), in the order the controller runs it;
@@ -28,11 +29,14 @@ from postproc.gcode import sinumerik
 _LABEL = re.compile(r"^(\s*(?:N\d+\s+)?)([A-Za-z_][A-Za-z0-9_]*):(?!=)\s*")
 _BLOCK_NO = re.compile(r"^\s*(?:N\d+\s*)?", re.I)
 _KEYWORD = re.compile(r"(?i)(IF|ELSE|ENDIF|WHILE|ENDWHILE|LOOP|ENDLOOP|FOR|ENDFOR|REPEATB|REPEAT|UNTIL|"
-                      r"GOTOF|GOTOB|GOTOC|GOTO)\b")
+                      r"GOTOF|GOTOB|GOTOC|GOTO|CASE)\b")
 _JUMP = re.compile(r"(?i)\b(GOTOF|GOTOB|GOTOC|GOTO)\s+([A-Za-z_][A-Za-z0-9_]*)\s*$")
 _FOR = re.compile(r"(?i)^([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.+?)\s+TO\s+(.+)$")
 _REPEAT = re.compile(r"(?i)^([A-Za-z_][A-Za-z0-9_]*)(?:\s+([A-Za-z_][A-Za-z0-9_]*))?(?:\s+P\s*=\s*(.+))?$")
 _COMPARE = ("==", "<>", "<=", ">=", "<", ">")
+#: CASE (expression) OF constant GOTOF label ... DEFAULT GOTOF label: the OF, each branch, DEFAULT
+_CASE_OF = re.compile(r"(?i)\bOF\b")
+_CASE_BRANCH = re.compile(r"(?i)\s*(DEFAULT|[+-]?\d+(?:\.\d*)?)\s*(GOTOF|GOTOB|GOTOC|GOTO)\s+([A-Za-z_]\w*)\s*")
 
 
 #: subprogram nesting (Job planning, "Subprogram technique": up to 16 levels with the main program)
@@ -380,6 +384,8 @@ class SinumerikExpander:
             self.env[name] += 1
             self._assigned(k, name)
             return j + 1 if self.env[name] <= fors[j] else None
+        if kw == "CASE":
+            return self._case(k, rest, col)
         if kw == "REPEAT" and not rest:
             return None
         if kw == "UNTIL":
@@ -407,6 +413,31 @@ class SinumerikExpander:
             repeats.append(_Repeat(start, end, k + 1, count))
             return start
         raise self.error(k, col, f"{kw} (not read by postproc)", UnsupportedGcodeError)
+
+
+    def _case(self, k: int, rest: str, col: int) -> int | None:
+        """``CASE (expression) OF 1 GOTOF A 2 GOTOF B DEFAULT GOTOF C`` (Job planning, "Program
+        branch (CASE ... OF ... DEFAULT ...)"): the jump of the first constant equal to the
+        expression's value, else DEFAULT's, else the next block."""
+        of = _CASE_OF.search(rest)
+        if of is None:
+            raise self.error(k, col, "CASE without OF")
+        value = self.value(rest[:of.start()], k)
+        branches, j = [], of.end()
+        while j < len(rest):
+            m = _CASE_BRANCH.match(rest, j)
+            if m is None:
+                raise self.error(k, col, f"CASE branch {rest[j:].strip()!r} (only number constants, each with "
+                                 "GOTOF/GOTOB/GOTO/GOTOC and a label, are read)", UnsupportedGcodeError)
+            branches.append(m.groups())
+            j = m.end()
+        for constant, how, label in branches:
+            if constant.upper() != "DEFAULT" and float(constant) == value:
+                return self.jump(k, how.upper(), label, col)
+        for constant, how, label in branches:
+            if constant.upper() == "DEFAULT":
+                return self.jump(k, how.upper(), label, col)
+        return None
 
 
 def expand_sinumerik(lines: Sequence[str], path: str | None, max_lines: int,

@@ -55,6 +55,12 @@ class Corrector(Protocol):
     def interp(self) -> object: ...
 
     @property
+    def planner(self) -> object: ...
+
+    @property
+    def writer(self) -> object: ...
+
+    @property
     def linear_exact(self) -> bool: ...
 
     @property
@@ -84,9 +90,12 @@ Write = Callable[[str], object]
 # Attributes of a Corrector and its Interpreter that are the run's configuration (the
 # same in both processes by construction) or caches of pure functions, not state carried
 # from chunk to chunk. Everything else is compared.
-_CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "report", "interp", "_decimals",
+_CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "_report", "interp", "_decimals",
                      "_long_line",
-                     "linear_exact", "bulk_plan", "accept_residual_mm", "expanded"})
+                     "linear_exact", "bulk_plan", "accept_residual_mm", "expanded", "planner", "writer"})
+_PLANNER_CONFIG = frozenset({"engine", "opt", "report", "path", "rotary", "setup_context", "accept_residual_mm",
+                             "linear_exact", "bulk_plan"})
+_WRITER_CONFIG = frozenset({"opt", "report", "planner", "path", "_long_line", "_decimals", "cutter"})
 _INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup", "d", "_g_alias", "_dialect_g", "_iso_blocks"})
 
 
@@ -141,7 +150,9 @@ def state_of(c: Corrector) -> object:
     (floats by their bits, dicts and sets in sorted order)."""
     mine = {k: v for k, v in vars(c).items() if k not in _CONFIG}
     interp = {k: v for k, v in vars(c.interp).items() if k not in _INTERP_CONFIG}
-    return _canon((mine, interp))
+    planner = {k: v for k, v in vars(c.planner).items() if k not in _PLANNER_CONFIG}
+    writer = {k: v for k, v in vars(c.writer).items() if k not in _WRITER_CONFIG}
+    return _canon((mine, interp, planner, writer))
 
 
 def _canon(x: object) -> object:

@@ -1,0 +1,309 @@
+"""The writer: a chunk's lines written in order, from its planned table.
+
+:meth:`ChunkWriter.write` walks the chunk's entries (:data:`Entry`, and the runs of plain
+lines of :mod:`postproc.gcode.bulk`) with the table's corrected targets and the plans
+and hints the planner made (:mod:`postproc.gcode.planner`): a line that moves nothing is
+passed as it is; a run is written by :func:`postproc.gcode.bulk.emit_run`; every other
+move by the emitter (:mod:`postproc.gcode.emitter`: only the words that change, lines
+inserted before their line, arcs kept or fitted); kept canned cycles, offsets set from
+the position and stored positions here. The writer holds what the controller will
+hold: the emitted position ``qe``, its modal motion, the cycle's Z and R words, the
+positions it stored.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING, TypeAlias, final
+
+from postproc.errors import SafetyError
+from postproc.gcode import bulk, cutter, emit
+from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode.lexer import Word
+from postproc.gcode.moves import Cycle, Move
+from postproc.gcode.planner import Planner, Table
+from postproc.gcode.segment import Curve
+from postproc.gcode.vplan import ArcHint, FloatArray, Plan
+
+if TYPE_CHECKING:
+    from postproc.gcode.pipeline import CorrectOptions, CorrectReport
+
+Write: TypeAlias = bulk.Write
+
+
+@final
+class Store:
+    """A G28.1/G30.1 line: the controller stores the position it is at."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str) -> None:
+        self.name = name  # "G28" or "G30"
+
+
+@final
+class Rebase:
+    """A line that sets an offset from where the machine is (G92, G10 L20, G10 L10/L11)."""
+
+    __slots__ = ("words", "axes", "nominal", "unit")
+
+    def __init__(self, words: list[Word], axes: list[tuple[int, int]], nominal: Sequence[float],
+                 unit: float) -> None:
+        self.words = words  # the line's words
+        self.axes = axes  # [(word index, axis), ...] of the values taken from the position
+        self.nominal = nominal  # the nominal gauge position when the line runs
+        self.unit = unit  # mm per program unit then
+
+
+#: a line queued for its chunk: (its text, "" for a move it makes without a line of its
+#: own; its Move, the offset or stored position it sets, or None when it moves nothing;
+#: whether it names a motion word; the program's modal motion after it)
+Entry: TypeAlias = "tuple[str, Move | Rebase | Store | None, bool, int | None]"
+
+
+class ChunkWriter(EmitterMixin):
+    """Writes a chunk's lines (see the module docstring); carries what the controller
+    holds from one chunk to the next."""
+
+    def __init__(self, options: CorrectOptions, report: CorrectReport, planner: Planner, start: Sequence[float],
+                 path: str | None = None) -> None:
+        self.opt = options
+        self.report = report
+        self.planner = planner  # the engine calls of the arc fits' subdivision
+        self.path = path
+        # the machine is at the start position uncorrected (NaN: unknown)
+        self.qe = list(start)  # emitted gauge position (what the controller will hold)
+        self.emitted_motion: int | None = None  # the motion the controller holds (None: none yet)
+        self._cycle_z: float | None = None  # Z and R words of the cycle the controller holds
+        self._cycle_rz: float | None = None
+        self._cycle_nominal: tuple | None = None  # nominal (Z, R) of the last kept cycle block
+        self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
+        self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
+        self._decimals: dict[float, int] = {}
+        self.cutter = cutter.Bound()  # the compensated moves (the corrector's, once it gives them)
+
+    def _subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
+                   ) -> list[tuple[FloatArray, FloatArray]]:
+        """The arc fits' adaptive subdivision, with the planner's engine calls."""
+        return self.planner.subdivide(curves, s_init, unit)
+
+    # C901: one pass over a chunk's entries, in order (runs, moves, cycles, stores, rebases)
+    def write(self, entries: list[Entry | bulk.Run], tab: Table, plans: dict[int, Plan],  # noqa: C901
+              hints: dict[int, ArcHint], write_out: Write) -> None:
+        """Write the chunk's ``entries``, planned in ``tab`` (``plans``, ``hints``: the
+        planner's), as one text to ``write_out``."""
+        T = tab.target
+        out: list[str] = []  # the chunk's text, written at once
+        write = out.append
+        # where each entry's text starts in out: (index, its line, 1: every line is that
+        # line's, 2: a run's lines one by one from it, 0: a line passed as it is)
+        marks: list[tuple[int, int, int]] = []
+        mark = marks.append
+        emit_move = self._emit_move
+        get_plan = plans.get
+        get_hint = hints.get
+        k = 0
+        passed = 0
+        prepared: dict[int, bulk.Emission] = {}
+        blocks: list[bulk.Block] = []
+        for e in entries:
+            if type(e) is bulk.Run:
+                mark((len(out), e.lineno, 2))
+                em = prepared.get(id(e.block))
+                if em is None:
+                    em = prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
+                    blocks.append(e.block)
+                cut = e.cut
+                if not cut:
+                    bulk.emit_run(self, e, em, T, write, hints)
+                else:  # arcs and lines that must be split: written by the general emitter
+                    for part in bulk.split_run(e, sorted(set(cut))):
+                        if type(part) is bulk.Run:
+                            mark((len(out), part.lineno, 2))
+                            bulk.emit_run(self, part, em, T, write, hints)
+                            continue
+                        j, fm = part
+                        mark((len(out), e.lineno + j, 1))
+                        line = e.block.lines[e.a + j]
+                        hint = get_hint(k + j)
+                        if hint is not None:
+                            self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, write)
+                        else:
+                            emit_move(line, fm.to_move(line), T[k + j].tolist(), get_plan(k + j), write)
+                k += len(e)
+                continue
+            line, mv, motion_word, prog_motion = e
+            mark((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1))
+            if type(mv) is Rebase:
+                self._emit_rebase(line, mv, write)
+                continue
+            if type(mv) is Store:
+                self._stored[mv.name] = list(self.qe)
+                write(line)
+                passed += 1
+                continue
+            if mv is None:
+                write(line)
+                passed += 1
+                if motion_word:
+                    self.emitted_motion = prog_motion
+                continue
+            if mv.probe:  # used by the cycle block before it, or checked here
+                if mv.probe == 2:
+                    self._check_unmoved(mv, T[k])
+                k += 1
+                continue
+            if mv.cycle is not None:
+                self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
+                k += 1
+                continue
+            if mv.fixed:  # the machine is at a stored position, uncorrected
+                self.qe = list(mv.q1)
+                if mv.stored is not None and mv.stored[0] in self._stored:
+                    # a position the program stored: the controller stored its corrected one
+                    for ax in mv.stored[1]:
+                        self.qe[ax] = self._stored[mv.stored[0]][ax]
+                k += 1
+                continue
+            if mv.then is not None:  # G28/G30: only the intermediate point's own words change
+                self._emit_words_only(line, mv, T[k].tolist(), write)
+                k += 1
+                continue
+            target = T[k].tolist()
+            hint = get_hint(k)
+            if hint is not None:
+                self._emit_hinted_arc(line, mv, target, hint, write)
+            else:
+                emit_move(line, mv, target, get_plan(k), write)
+            k += 1
+        for blk in blocks:
+            blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
+        self.report.lines_out += passed
+        text = "".join(out)
+        if self._long_line.search(text):
+            text = self._fit_lines(out, marks)
+        write_out(text)
+
+    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
+        """A chunk's text (``out``, its entries' ``marks``) with every line it writes
+        within the dialect's limits: a line that passes them gets its comments on a line
+        of their own before it (:func:`emit.fit_line`), or is refused naming its line and
+        column. Lines passed as they are stay (the input has them so)."""
+        pieces: list[str] = []
+        ends = [m[0] for m in marks[1:]] + [len(out)]
+        pieces.extend(out[:marks[0][0]] if marks else out)
+        for (a, lineno, kind), b in zip(marks, ends, strict=True):
+            text = "".join(out[a:b])
+            if kind == 0 or not self._long_line.search(text):
+                pieces.append(text)
+                continue
+            for n, line in enumerate(text.splitlines(keepends=True)):
+                fitted, over = emit.fit_line(self.opt.dialect, line)
+                if over is not None:
+                    col, what = over
+                    raise SafetyError(
+                        f"{what}, once corrected", path=self.path, lineno=lineno + n if kind == 2 else lineno,
+                        col=col, hint="shorten the line (a comment moved onto a line of its own would not "
+                                      "do) or give the --dialect it is for")
+                if len(fitted) > 1:
+                    self.report.lines_out += 1
+                    self.report.lines_inserted += 1
+                pieces.extend(fitted)
+        return "".join(pieces)
+
+    def _emit_rebase(self, line: str, rb: Rebase, write: Write) -> None:
+        """Write a G92 / G10 L20 / G10 L10-L11 line so that the offset the controller sets
+        from where it is (the corrected position) is the nominal one: each value it
+        subtracts moves by the correction there."""
+        unit = rb.unit
+        d = _unit_decimals(self.opt, unit)
+        edits = []
+        for idx, k in rb.axes:
+            delta = (self.qe[k] - rb.nominal[k]) / unit
+            if not math.isfinite(delta):
+                continue
+            _l, num, start, end, _p = rb.words[idx]
+            if abs(delta) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
+                edits.append((start, end, emit.fmt(float(num) + delta, max(d, emit.decimals_of(num)))))
+        self._write_line(line, edits, write)
+
+    def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
+        """A cycle block that stays as it is, with several holes or increments: refuse it
+        when a hole's correction does not round to nothing."""
+        d = _unit_decimals(self.opt, mv.unit)
+        moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
+        if moved >= emit.HALF_UNIT[d]:
+            how = "in G91 (incremental)" if mv.incremental else "with L/K repeats"
+            raise SafetyError(
+                f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
+                f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
+                path=self.path, lineno=mv.lineno,
+                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
+
+    def _emit_cycle(self, line: str, mv: Move, c: Cycle, t_bottom: list[float], t_r: list[float],
+                    write: Write) -> None:
+        """Write a kept cycle block (``mv``, its cycle ``c``): X/Y at the corrected bottom, Z
+        and R along the tool axis."""
+        unit, shift = mv.unit, mv.shift
+        d = _unit_decimals(self.opt, unit)
+        rerr = self.planner.round_err(unit)
+        drift = math.hypot(t_r[0] - t_bottom[0], t_r[1] - t_bottom[1])
+        if drift > self.opt.tolerance_mm - rerr:
+            raise SafetyError(
+                f"canned cycle G{c.code / 10:g}: the correction moves the hole's axis by {drift * 1000:.3g} um "
+                f"between its R plane and its bottom, more than --tolerance {self.opt.tolerance_mm:g} mm",
+                path=self.path, lineno=mv.lineno,
+                hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
+        self.report.moves += 1
+        self.report.cycles_kept += 1
+        qe = self.qe
+        z_before = qe[2]
+        flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
+        edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
+        sep, lower = emit.style_of(line)
+        same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
+        self._cycle_nominal = (c.z_mm, c.r_mm)
+        held = [self._cycle_z, self._cycle_rz]  # the Z and R words the controller holds
+        written: list[float] = []  # ... and holds after this block
+        for n, (letter, idx, t, nominal) in enumerate((("Z", mv.axis_idx[2], t_bottom[2], c.z_mm),
+                                                       ("R", c.r_idx, t_r[2], c.r_mm))):
+            v = (t - shift[2]) / unit
+            if idx < 0 and not same_group:
+                # the controller holds the program's own value (given earlier, or R taken as
+                # the initial level)
+                held[n] = (nominal - shift[2]) / unit
+            if idx >= 0:
+                _l, num, start, end, _p = mv.words[idx]
+                val = float(num)
+                if abs(v - val) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
+                    text = emit.fmt(v, max(d, emit.decimals_of(num)))
+                    edits.append((start, end, text))
+                    val = float(text)
+            else:
+                h = held[n]
+                if h is None or abs(v - h) >= emit.HALF_UNIT[d]:
+                    text = emit.fmt(v, d)
+                    added.append(letter + text)
+                    val = float(text)
+                else:
+                    val = h
+            written.append(val)
+        self._cycle_z, self._cycle_rz = written
+        if added:
+            pos = self._insert_pos(mv)
+            text = "".join(sep + w for w in added)
+            edits.append((pos, pos, text.lower() if lower else text))
+        r_machine = written[1] * unit + shift[2]
+        qe[2] = r_machine if c.retract_r else max(z_before, r_machine)
+        self.emitted_motion = c.code
+        self._write_line(line, edits, write)
+
+    def _emit_words_only(self, line: str, mv: Move, target: list[float], write: Write) -> None:
+        """Rewrite the axis words a line names, adding none and keeping the modal motion
+        (G28/G30 intermediate points)."""
+        self.report.moves += 1
+        d = _unit_decimals(self.opt, mv.unit)
+        edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
+        self._write_line(line, edits, write)
