@@ -12,34 +12,51 @@ Semantics follow LinuxCNC (rs274ngc) where they matter to geometry:
 
 Anything that changes geometry in a way not modelled here is refused with
 UnsupportedGcodeError naming line, column and construct.
+
+A block is read in this order (:meth:`Interpreter._block`): its words into a
+:class:`~postproc.gcode.interp_core.Block`, its M codes, the handler of each G code
+(:data:`_G_HANDLERS`), the settings that end a block (G10, G52, G92), then the handler of
+its motion family (:data:`MOTIONS`). The parts live beside this module and are mixed into
+:class:`Interpreter`: the state and shared helpers in ``interp_core``, reading a line into
+words in ``interp_words``, offsets and G28/G30 in ``interp_offsets``, canned cycles in
+``interp_cycles``, straight moves, arcs and splines in ``interp_motion``.
 """
 
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, TypeVar
+from collections.abc import Callable, Iterator
 
-import numpy as np
-
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.errors import (
     GcodeSyntaxError,
     MissingSetupError,
-    PostprocError,
     UnsupportedGcodeError,
 )
 from postproc.gcode import cutter, lexer
-from postproc.gcode.moves import Arc, Cycle, Move
-from postproc.gcode.recognise import (
-    LATHE_HINT,
-    LatheMarks,
-    LatheProgramError,
-    foreign_dialect,
-    lathe_message,
+from postproc.gcode.interp_core import (
+    AXES,
+    EXPANDABLE_G,
+    EXPANDABLE_M,
+    MAX_WORD_VALUE,
+    MIN_ARC_RADIUS_MM,
+    ROTARY,
+    Block,
+    NeedsExpansion,
+    Vals,
+    col_of_word,
+    gkey,
+    start_position,
 )
+from postproc.gcode.interp_cycles import CyclesMixin
+from postproc.gcode.interp_motion import (
+    SPLINE_SAMPLE_MM,
+    MotionMixin,
+    spline_points,
+    spline_samples,
+)
+from postproc.gcode.interp_offsets import OffsetsMixin
+from postproc.gcode.interp_words import WordsMixin, blank_nested_comments, classify_construct
+from postproc.gcode.moves import Arc, Cycle, Move
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
@@ -53,10 +70,7 @@ from postproc.gcode.state import (
     LINE,
     LOOKAHEAD_G,
     M_PARAMS,
-    MOTION_CODES,
-    NAN,
     NEUTRAL_G,
-    P_SYSTEMS,
     PLANES,
     RAPID,
     REFUSED_G,
@@ -64,277 +78,18 @@ from postproc.gcode.state import (
     REFUSED_M,
     SPLINES,
     WORK_SYSTEMS,
-    ModalState,
 )
-from postproc.limits import DEFAULT_MAX_ARC_TURNS, ResourceLimitError
 
-if TYPE_CHECKING:
-    import numpy.typing as npt
-
-    from postproc.gcode.dialect import Dialect
-    from postproc.gcode.sinumerik import CycleCall
-
-#: a block's words by letter, G and M aside: (value, word index)
-Vals = dict[str, tuple[float, int]]
-# Largest value of a word (1000 km, a billion turns): a 400-digit coordinate reads as inf,
-# and one of 300 digits makes the correction's arithmetic overflow.
-MAX_WORD_VALUE = 1e9
-_E = TypeVar("_E", bound=PostprocError)
+# the names other modules import from here (some defined in interp_core)
+__all__ = [
+    "MAX_WORD_VALUE", "MIN_ARC_RADIUS_MM", "Arc", "Cycle", "Interpreter", "Move", "NeedsExpansion",
+    "blank_nested_comments", "classify_construct", "col_of_word", "plain_moves", "spline_points",
+    "spline_samples", "start_position",
+]
 
 
-class _Setup(Protocol):
-    """What the interpreter reads of a :class:`postproc.gcode.path.Setup` (which imports
-    this module), besides its optional ``start`` and ``home``."""
-
-    offsets: dict
-    tool_lengths: dict
-    tool_vector: tuple | None
-
-
-class NeedsExpansion(UnsupportedGcodeError):
-    """A construct the expansion stage flattens (parameters, expressions, O-words,
-    subprograms, macros): the corrector starts over on the expanded program."""
-
-
-# constructs the expansion stage (postproc.gcode.expand) flattens
-EXPANDABLE_M = {97, 98, 99}
-EXPANDABLE_G = {650, 660, 661}
-
-AXES = "XYZ"
-ROTARY = "ABC"
-# Letters accepted as plain parameters of other words (checked where used).
-PARAM_LETTERS = set("DFHIJKLNPQRST")
-# A degenerate arc (start, end and centre within this) is not an arc.
-MIN_ARC_RADIUS_MM = 1e-6
-
-
-# word letter -> role on the fast path (axes 0-2, feed 3, motion 4, line number 5)
-_GKEYS = {"0": 0, "00": 0, "1": 10, "01": 10, "2": 20, "02": 20, "3": 30, "03": 30}
-
-
-def _gkey(text: str) -> int:
-    key = _GKEYS.get(text)
-    return key if key is not None else int(round(float(text) * 10))
-
-
-_COMMENTS = re.compile(r"\([^)]*\)?|;.*")
-# tokens of a line that carry no word
-_BLANK_KINDS = frozenset((lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT, lexer.NEWLINE))
-_OWORD = re.compile(r"^\s*/?\s*(?:N\s*\d+\s*)?O\s*(?:\d+|<[^>]*>)\s*([A-Z]+)?")
-_MACRO_KEYWORDS = re.compile(r"\b(IF|WHILE|GOTO|END|DO)\s*[\[\d]|\bGOTO")
-# a Sinumerik block that is a name alone, or a name with arguments: perhaps a subprogram call
-_SINUMERIK_NAME_CALL = re.compile(r"(?i)^\s*(?:N\d+\s+)?[A-Z_]\w*\s*(?:\(.*\))?\s*(?:P\s*=?\s*\d+)?\s*$")
-_ASSIGN = re.compile(r"#\s*(?:\d+|<[^>]*>|\[)[^=]*=")
-
-
-def classify_construct(line: str) -> tuple[str, str]:
-    """What an unsupported line really is: ``(construct, hint)`` for the refusal."""
-    text = _COMMENTS.sub(" ", line).upper()
-    expand_hint = ("postproc expands subprograms, loops, parameters and expressions when they are defined "
-                   "in the program (or on --subroutine-path); this one could not be expanded")
-    m = _OWORD.match(text)
-    if m and m.group(1):
-        return f"LinuxCNC O-word '{m.group(1).lower()}' (subroutine or flow control)", expand_hint
-    m = _MACRO_KEYWORDS.search(text)
-    if m:
-        kw = m.group(1) or "GOTO"
-        return f"Fanuc custom macro {kw} statement", expand_hint
-    if _ASSIGN.search(text):
-        return "parameter assignment '#...='", expand_hint
-    if "#" in text:
-        return "parameter reference '#'", expand_hint
-    if "[" in text or "]" in text:
-        return "expression '[ ]'", expand_hint
-    if "@" in text or "^" in text:
-        return "polar coordinate word '@'/'^'", "post the program in Cartesian coordinates"
-    if "<" in text:
-        return "named O-word or parameter '< >'", expand_hint
-    return "", ""
-
-
-def blank_nested_comments(line: str) -> str:
-    """The line with the inside of each outermost balanced ( ... ) blanked, so that a
-    nested comment lexes as one comment at the same columns."""
-    out = list(line)
-    depth = 0
-    for i, ch in enumerate(line):
-        if ch == ";" and depth == 0:
-            break
-        if ch == "(":
-            if depth > 0:
-                out[i] = " "
-            depth += 1
-        elif ch == ")" and depth > 0:
-            depth -= 1
-            if depth > 0:
-                out[i] = " "
-    return "".join(out)
-
-
-def _is_program_number(tokens: list[lexer.Token], after_n: bool = False) -> bool:
-    """``O1234``, ``O0001 (NAME)``, ``:1234``: a program number or label, nothing else;
-    with ``after_n`` also ``N1 O2 (NAME)`` (Fadal)."""
-    content = [t for t in tokens if t.kind not in (lexer.SPACE, lexer.COMMENT, lexer.LINE_COMMENT,
-                                                       lexer.NEWLINE)]
-    if after_n and len(content) == 2 and content[0].kind == lexer.WORD and content[0].letter == "N":
-        content = content[1:]
-    if len(content) == 1:
-        t = content[0]
-        return t.kind == lexer.WORD and t.letter == "O" and "." not in t.text and "-" not in t.text
-    if len(content) == 2:
-        a, b = content
-        return a.kind == lexer.SYMBOL and a.text == ":" and b.kind == lexer.NUMBER and b.text.isdigit()
-    return False
-
-
-class Interpreter:
+class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
     """Advance a :class:`ModalState` line by line; see the module docstring."""
-
-    def __init__(self, setup: _Setup, path: str | None = None, *, lenient_setup: bool = False,
-                 dialect: str = "generic") -> None:
-        self.max_arc_turns = DEFAULT_MAX_ARC_TURNS  # turns of one helix (G2/G3 P), --max-arc-turns
-        self.setup = setup
-        # lenient: every work offset and tool length is taken as zero (for comparing
-        # two versions of one program, where they cancel out)
-        self.lenient_setup = lenient_setup
-        self.path = path
-        self.state = ModalState()
-        # axes the program has not positioned yet start where the machine is (Setup.start)
-        self.state.pos = start_position(getattr(setup, "start", None))
-        # set by the corrector when a start is given: words it adds on an axis known only
-        # from the start are written in the work frame, so G54 must not be taken as zero
-        self.require_g54 = False
-        self.offsets = {k: _offset_tuple(v) for k, v in (setup.offsets or {}).items()}
-        self.tool_lengths = dict(setup.tool_lengths or {})  # G10 L1/L10/L11 write here
-        self.rotary_g92: dict[str, float] = {}
-        self.program_offsets: dict[str, list[float]] = {}  # set by G10 L2/L20
-        self.implicit_g54 = False  # a move ran in G54 that the user did not give
-        self.used_rotary: set[str] = set()
-        self.tool_vector = tuple(setup.tool_vector) if setup.tool_vector is not None else None
-        self.motion_word = False  # did the last line hold a G0/G1/G2/G3 word?
-        # the last line set an offset from where the machine is (G92, G10 L20, G10 L10/L11):
-        # (words, [(word index, axis), ...], nominal position then), else None
-        self.rebase: tuple | None = None
-        # the last line stored the position for G28 or G30 (G28.1/G30.1): its name, else None
-        self.stored_here: str | None = None
-        self.program_stored: set[str] = set()  # stored positions the program set itself
-        self.ended = False  # an M2/M30 was read: later lines are not executed
-        self.dialect = dialect
-        from postproc.gcode.dialect import get as _dialect
-
-        self.d: Dialect = _dialect(dialect)  # the facts of the controller the program is for
-        if self.d.machine != "mill":
-            raise LatheProgramError(lathe_message([f"--dialect {self.d.name} ({self.d.title})"]), path=path,
-                                    hint=LATHE_HINT)
-        self.lathe = LatheMarks()
-        self._iso_blocks = self.d.block_syntax == "iso"  # else every line is read by the dialect's reader
-        self.variables: dict[str, float] = {}  # Sinumerik R parameters and DEF variables set so far
-        self._arc_absolute_once = False  # the next block's centre words are absolute (Sinumerik I=AC())
-        self.modal_call: CycleCall | None = None  # Sinumerik MCALL CYCLE8x(): drills after each moving block
-        self._cycle_due: CycleCall | None = None  # the cycle this block calls (run after its move)
-        self.cycle_move: Move | None = None  # the drilling cycle this line made (Sinumerik): its moves
-        self.call_line = ""  # the Sinumerik cycle call this line is ("MCALL CYCLE81"): a comment when expanded
-        self._g_alias = dict(self.d.g_aliases)
-        # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
-        self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}
-        self._dialect_g.update({k: _refused_g(what, instead) for k, what, instead in self.d.refused_g})
-        if self.d.fixture_offset_word:  # E0: fixture offsets cancelled (machine coordinates)
-            self.offsets.setdefault(f"{self.d.fixture_offset_word}0", (0.0, 0.0, 0.0))
-        self.may_expand = False  # set by the corrector when it can start over on the expanded program
-        self.repeats = False  # the program ended with M99 (repeated by the controller)
-        # stored positions (machine mm, NaN = unknown) of G28 and G30 (--home, G28.1/G30.1)
-        self.home = {name: list(_offset_tuple(v, partial=True)) for name, v in
-                     ((getattr(setup, "home", None) or {}).items())}
-        # axes sent to a stored position that was not given: unknown until positioned again
-        self.unknown_after: dict[int, str] = {}
-        self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
-        self._run_shift: tuple[float, float, float] | None = None
-        self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self.comp_moves: list = []  # moves the controller offsets (cutter.CompMove), taken by the corrector
-
-    # -- helpers -----------------------------------------------------------------------
-    def _arc_rule(self) -> Dialect:
-        """The controller whose input-arc rule applies: the dialect's own (generic reads
-        arcs as LinuxCNC, the reference interpreter, does)."""
-        from postproc.gcode import dialect
-
-        return dialect.get(self.d.reads_arcs_as or self.d)
-
-    def _foreign(self, line: str, lineno: int) -> None:
-        """Refuse a line of another dialect naming the dialect to choose, and a construct
-        the chosen dialect's controller reads but postproc does not, in that dialect's words."""
-        for pattern, construct, instead in self.d.refused:
-            m = re.search(pattern, line)
-            if m:
-                what = construct.format(*m.groups())
-                cls = self._construct_error(what) if construct in self.d.expanded_constructs else UnsupportedGcodeError
-                raise self._err(cls, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1, hint=instead)
-        other = foreign_dialect(line, self.d.name)
-        if other is not None:
-            name, title, construct = other
-            raise self._err(UnsupportedGcodeError, f"{construct}: a program for {title}", lineno, 1,
-                            hint=f"choose --dialect {name} for this program")
-
-    def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
-        """The error class for a refused construct: NeedsExpansion when expanding is allowed
-        and the construct is one the expansion stage flattens."""
-        if self.may_expand and not what.startswith("polar"):
-            return NeedsExpansion
-        return UnsupportedGcodeError
-
-    def _err(self, cls: type[_E], msg: str, lineno: int, col: int, hint: str | None = None) -> _E:
-        return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
-
-    def _work_offset(self, lineno: int, col: int) -> list[float]:
-        st = self.state
-        name = st.work
-        if name in self.program_offsets:
-            return self.program_offsets[name]
-        if name in self.offsets:
-            return list(self.offsets[name])
-        if self.lenient_setup:
-            return [0.0, 0.0, 0.0]
-        if name == "G54" and not st.work_explicit:
-            if self.require_g54:
-                raise self._err(
-                    MissingSetupError, "--start gives machine positions, so the value of the work offset G54 "
-                    "the program runs in must be given too", lineno, col,
-                    hint="give --offset G54=X..,Y..,Z.. (G54=X0,Y0,Z0 if the program's coordinates are "
-                         "machine coordinates)")
-            # Documented default: a program that never names a work offset runs in
-            # G54 taken as zero (program coordinates = machine coordinates); flagged.
-            self.implicit_g54 = True
-            return [0.0, 0.0, 0.0]
-        raise self._err(
-            MissingSetupError, f"work offset {name} is used but its value was not given",
-            lineno, col, hint=f"give it with --offset {name}=X..,Y..,Z.. (machine-frame mm)")
-
-    def shift(self, g53: bool, lineno: int, col: int) -> tuple[float, float, float]:
-        if g53:
-            return (0.0, 0.0, 0.0)
-        st = self.state
-        w = self._work_offset(lineno, col)
-        return (w[0] + st.g92[0], w[1] + st.g92[1], w[2] + st.g92[2] + st.tlo)
-
-    def load_tool(self, tool: int) -> None:
-        """What a line of a tool change alone (``T<tool> M6``, lexer.TOOL_LINE_RE) does to
-        the state, for the readers that take such lines as columns: T selects the tool,
-        then M6 loads it (as :meth:`_block` reads them)."""
-        st = self.state
-        st.tool = tool
-        st.spindle_tool = st.tool
-
-    def set_tool_length(self, h: int, lineno: int, col: int) -> None:
-        """What ``G43 H<h>`` does to the state, for the readers that take such a line as
-        columns (as :meth:`_block` reads it)."""
-        self._g43({"H": (float(h), -1)}, lineno, col)
-        self._run_shift = None
-
-    def tool_r(self) -> tuple[float, float, float]:
-        if self.tool_vector is not None:
-            return self.tool_vector
-        st = self.state
-        return (0.0, 0.0, -st.tlo) if st.tlo_active else (0.0, 0.0, 0.0)
 
     # -- the block ---------------------------------------------------------------------
     def feed_line(self, lineno: int, line: str) -> Move | None:
@@ -423,224 +178,20 @@ class Interpreter:
                 prev, m = m.q1, m.then
         return mv
 
-    def _drill_if_due(self, lineno: int) -> None:
-        """Run the Sinumerik drilling cycle this block calls (one-shot, or modal after a
-        block that moves): its moves become :attr:`cycle_move`."""
-        call, self._cycle_due = self._cycle_due, None
-        if call is None:
-            return
-        from postproc.gcode.sinumerik_cycles import FEED_STEP, RAPID_STEP, drill_plan
+    def _block(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Move | None:
+        """One block: its words gathered into a :class:`Block`, its M codes, the handlers of
+        its G codes (:data:`_G_HANDLERS`), the settings that take effect before the motion,
+        then the handler of its motion family (:data:`MOTIONS`)."""
+        b = self._gather(lineno, words, block_delete)
+        self._m_codes(b)
+        self._g_codes(b)
+        if self._settings(b):
+            return None
+        return self._motion(b)
 
-        st = self.state
-        if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno,
-                            call.col)
-        if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, call.col,
-                            hint="position every axis with a G90 move before the cycle, or give --start")
-        plan = drill_plan(call, self.path, lineno, st.feed, st.unit_mm)
-        unit, shift = st.unit_mm, self.shift(False, lineno, call.col)
-        x, y, z0 = st.pos
-
-        def at(v: object) -> tuple[float, float, float]:
-            dx, dy, z = v if isinstance(v, tuple) else (0.0, 0.0, v)  # a level, or (dx, dy, z) off the hole
-            return (x + dx * unit, y + dy * unit, z * unit + shift[2])
-
-        kinds = {RAPID_STEP: RAPID, FEED_STEP: LINE}
-        steps: list[tuple[int, tuple]] = []
-        for kind, v in plan.steps:  # a dwell's seconds, or a line written as it is (str), as DWELL
-            steps.append((DWELL, (v, 0.0, 0.0)) if kind not in kinds else (kinds[kind], at(v)))
-        bottom, start = at(plan.bottom_z), at(plan.start_z)
-        st.pos = list(at(plan.clear_z))
-        self.cycle_move = Move(
-            lineno=lineno, kind=plan.code, q0=(x, y, z0), q1=bottom, r=self.tool_r(), shift=shift, unit=unit,
-            incremental=st.incremental, arc_absolute=st.arc_absolute, words=[], axis_idx=(-1, -1, -1),
-            feed_idx=-1, inverse_time=False, feed=st.feed, rotary=dict(st.rotary) if self.used_rotary else {},
-            stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
-                                    False, plan.dwell_s))
-
-    def _slow_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
-        if not self._iso_blocks:
-            return self._sinumerik_words(lineno, line)
-        if self.d.comments_nest and line.count("(") > 1:
-            line = blank_nested_comments(line)
-        if self.d.header_forms and any(re.match(p, line) for p in self.d.header_forms):
-            return [], False  # the dialect's own header line ("$NAME.MIN%")
-        if "$" in line or "%" in line:
-            self._foreign(line, lineno)  # ";$PATH=", "%_N_..._MPF", "$NAME.MIN%" of another dialect
-        try:
-            tokens = lexer.lex(line, self.path, lineno)
-        except GcodeSyntaxError:
-            self._foreign(line, lineno)
-            what, hint = classify_construct(line)
-            if what:
-                raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
-            raise
-        first = next((t for t in tokens if t.kind != lexer.SPACE), None)
-        if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
-            if self.d.text_after_percent == "ignored":
-                return [], False  # '%' tape mark: the controller ignores the rest of the line
-            raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
-                            hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
-        if _is_program_number(tokens, self.d.numbered_program_line):
-            return [], False
-        for tok in tokens:
-            if tok.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL) and (tok.letter == "O" or tok.text in "#[<"):
-                if self.d.refused:
-                    self._foreign(line, lineno)  # the dialect's own constructs first (Fadal's # macros)
-                what, hint = classify_construct(line)
-                if what:
-                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
-                self._foreign(line, lineno)
-                raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
-                                tok.col,
-                                hint="O words other than a program number are expanded only when their "
-                                     "subroutine is in the program or on --subroutine-path")
-        return self._plain_words(tokens, line, lineno)
-
-    def _sinumerik_words(self, lineno: int, line: str) -> tuple[list[lexer.Word], bool]:
-        """A Sinumerik block's words (:mod:`postproc.gcode.sinumerik`); its constructs that
-        postproc does not read are refused by their names first."""
-        from postproc.gcode import sinumerik
-
-        code = sinumerik.code_of(line)
-        if code.strip():
-            self._foreign(code, lineno)
-        try:
-            blk = sinumerik.read_block(line, self.path, lineno, self.variables)
-        except UnsupportedGcodeError as exc:
-            if self.may_expand and _SINUMERIK_NAME_CALL.match(code):  # NAME or NAME(...): a subprogram call?
-                raise self._err(NeedsExpansion, exc.message, lineno, exc.col or 1, hint=exc.hint) from None
-            raise
-        g = {_gkey(w.number) for w in blk.words if w.letter == "G"}
-        incremental = True if 910 in g else False if 900 in g else self.state.incremental
-        centre_ac = [letter for letter, _ in blk.absolute if letter in "IJK"]
-        if centre_ac:
-            given = [w.letter for w in blk.words if w.letter in "IJK"]
-            if len(centre_ac) != len(given):
-                col = next(c for letter, c in blk.absolute if letter in "IJK")
-                raise self._err(UnsupportedGcodeError, "Sinumerik centre words partly =AC() (absolute) and partly "
-                                "incremental", lineno, col, hint="give every centre word of the arc as =AC(), or none")
-            self._arc_absolute_once = True  # I=AC() J=AC(): the centre in work coordinates, this block
-        for letter, col in blk.absolute:
-            if incremental and letter not in "IJK":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in G91",
-                                lineno, col,
-                                hint="post the coordinate in the program's distance mode (G90/G91)")
-        for letter, col in blk.incremental:
-            if not incremental and letter in "XYZABC":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
-                                lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
-        if blk.call is not None:
-            name = f"MCALL {blk.call.name}" if blk.mcall else blk.call.name
-            others = [w for w in blk.words if w.letter != "N"]
-            if others or blk.frame:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
-                                blk.call.col, hint="write the cycle call in a block of its own")
-            self.call_line = name
-            if blk.mcall:
-                self.modal_call = blk.call
-            else:
-                self._cycle_due = blk.call
-            return [], blk.block_delete
-        if blk.mcall:
-            self.modal_call = None  # a bare MCALL ends the modal call
-        elif self.modal_call is not None and any(w.letter in AXES for w in blk.words):
-            self._cycle_due = self.modal_call
-        if blk.ends:
-            self.ended = True  # RET: the end of the program (the block's own words still run)
-        if blk.frame:
-            self._sinumerik_frame(blk.frame, blk.words, lineno, blk.rpl)
-            return [], blk.block_delete
-        return blk.words, blk.block_delete
-
-    def _sinumerik_frame(self, kind: str, words: list[lexer.Word], lineno: int,
-                         rpl: tuple[float, int] | None) -> None:
-        """The programmable frame (:mod:`postproc.gcode.frames`): TRANS/ROT/SCALE/MIRROR replace
-        it (alone: delete it), their A forms add to it. Its translation is kept with the
-        G52/G92 shift, its rotation, scale and mirror in ``state.frame``."""
-        from postproc.gcode import frames
-
-        st = self.state
-        given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
-        bad = [k for k in given if k not in AXES]
-        if bad:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {bad[0]} (the frame's X, Y, Z are read)",
-                            lineno, given[bad[0]][1], hint="post the program in the coordinates the frame gives")
-        angle = None
-        if kind.endswith("ROT"):
-            tilt = next((a for a in "XY" if a in given), None)
-            if tilt is not None:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} {tilt} (a rotation about {tilt} tilts the "
-                                "plane; rotations about Z are read)", lineno, given[tilt][1],
-                                hint="post the program in the coordinates the frame gives")
-            if rpl is not None and "Z" in given:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} with both Z and RPL", lineno, rpl[1])
-            if rpl is not None and st.plane != 170:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} RPL= in a plane other than G17 "
-                                "(a rotation about X or Y)", lineno, rpl[1])
-            angle = rpl[0] if rpl is not None else given["Z"][0] if "Z" in given else None
-        if kind.endswith("SCALE") and any(v == 0.0 for v, _c in given.values()):
-            raise self._err(GcodeSyntaxError, f"Sinumerik {kind} with a factor 0", lineno,
-                            min(c for _v, c in given.values()))
-        st.frame, st.g92 = frames.next_frame(kind, st.frame, st.g92, {a: v for a, (v, _c) in given.items()}, angle,
-                                             st.unit_mm)
-        self._run_shift = None
-
-    def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
-        """The words of a lexed line and whether it starts with '/' (block delete);
-        anything else than words, blanks and comments is refused."""
-        words = []
-        block_delete = False
-        seen_content = False
-        for tok in tokens:
-            kind = tok.kind
-            if kind == lexer.WORD:
-                seen_content = True
-                start = tok.col - 1 + tok.number_offset
-                num = tok.number_text
-                words.append(lexer.Word(tok.letter, num, start, start + len(num), tok.col - 1))
-            elif kind == lexer.SLASH:
-                if seen_content:
-                    raise self._err(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
-                                    lineno, tok.col)
-                block_delete = True
-            elif kind not in _BLANK_KINDS:
-                self._refuse_token(tok, tokens, seen_content, line, lineno)
-        return words, block_delete
-
-    def _refuse_token(self, tok: lexer.Token, tokens: list[lexer.Token], seen_content: bool, line: str,
-                      lineno: int) -> None:
-        """Raise the error for a token that is not a word, blank, comment or '/' (a '%'
-        standing alone on its line passes)."""
-        kind = tok.kind
-        if kind == lexer.PERCENT:
-            if seen_content or any(t.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL, lexer.NUMBER) for t in tokens):
-                raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
-        elif kind == lexer.OPEN_COMMENT:
-            raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
-                            hint="add the closing ')'")
-        elif kind == lexer.LETTER:
-            self._foreign(line, lineno)
-            what, hint = classify_construct(line)
-            if what:
-                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            raise self._err(UnsupportedGcodeError,
-                            f"word {tok.letter} without a plain number (macro, expression or parameter)",
-                            lineno, tok.col, hint="expand macros and expressions before correcting")
-        elif kind == lexer.SYMBOL:
-            self._foreign(line, lineno)
-            what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
-            if what:
-                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
-        elif kind == lexer.NUMBER:
-            raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
-
-    def _block(self, lineno: int, words: list[lexer.Word],  # noqa: C901
-               block_delete: bool) -> Move | None:
-        st = self.state
+    def _gather(self, lineno: int, words: list[lexer.Word], block_delete: bool) -> Block:
+        """The block's G and M codes and its other words by letter; a word the dialect does
+        not read, or a letter given twice, is refused at its place."""
         gcodes: list[tuple[int, int]] = []  # (key, word index)
         mcodes: list[tuple[int, int]] = []
         vals: dict[str, tuple[float, int]] = {}
@@ -648,10 +199,10 @@ class Interpreter:
             if letter in "GM" and not abs(float(num)) <= MAX_WORD_VALUE:
                 raise self._err(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
             if letter == "G":
-                key = _gkey(num)
+                key = gkey(num)
                 gcodes.append((self._g_alias.get(key, key) if self._g_alias else key, i))
             elif letter == "M":
-                mcodes.append((_gkey(num), i))
+                mcodes.append((gkey(num), i))
             else:
                 if letter in vals:
                     raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
@@ -667,8 +218,8 @@ class Interpreter:
                     raise self.lathe.refusal(f"{letter} word (incremental {'X' if letter == 'U' else 'Z'} of a "
                                              f"lathe) at line {lineno}", self.path, lineno, _lpos + 1)
                 if letter in "UVW" or (letter == "E" and not any(
-                        (w.letter == "M" and _gkey(w.number) // 10 in IO_M and _gkey(w.number) % 10 == 0)
-                        or (w.letter == "G" and _gkey(w.number) in (1870, 470)) for w in words)):
+                        (w.letter == "M" and gkey(w.number) // 10 in IO_M and gkey(w.number) % 10 == 0)
+                        or (w.letter == "G" and gkey(w.number) in (1870, 470)) for w in words)):
                     raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 value = float(num)
@@ -676,19 +227,20 @@ class Interpreter:
                     raise self._err(GcodeSyntaxError, f"{letter} value {num[:12]}{'...' if len(num) > 12 else ''} is "
                                     f"beyond {MAX_WORD_VALUE:g}: no machine moves that far", lineno, _lpos + 1)
                 vals[letter] = (value, i)
-        def col_of(i: int) -> int:
-            return words[i].letter_pos + 1  # 1-based column of the word's letter
-
         if self.d.call_words and not gcodes and any(k in vals for k in self.d.call_words):
             self._foreign(" ".join(w.letter + w.number for w in words), lineno)  # Fadal L0102: a call
+        return Block(lineno, words, vals, gcodes=gcodes, mcodes=mcodes, block_delete=block_delete)
 
-        # M codes
+    def _m_codes(self, b: Block) -> None:
+        """The block's M codes and T word: program end, tool change, and the words that act
+        before the motion (:attr:`Block.event_idx`)."""
+        st, vals, lineno = self.state, b.vals, b.lineno
         tool_change = False
         # words acting before the motion, moved onto the first line when the block is split
         event_idx: list[int] = [vals[k][1] for k in "ST" if k in vals]
-        for key, i in mcodes:
+        for key, i in b.mcodes:
             if key % 10:
-                raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, col_of(i))
+                raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, b.col(i))
             m = key // 10
             if m == 99 and "P" not in vals:
                 # M99 reached in the main program (a call would have started the expansion,
@@ -696,18 +248,18 @@ class Interpreter:
                 # expansion stage reads it too
                 if st.incremental:
                     raise self._err(UnsupportedGcodeError, "M99 repeats the program from where it ended, in G91 "
-                                    "(incremental): each pass starts elsewhere", lineno, col_of(i),
+                                    "(incremental): each pass starts elsewhere", lineno, b.col(i),
                                     hint="end the program with G90 before M99, or with M30")
                 self.ended = True
                 self.repeats = True
                 continue
             if m in REFUSED_M:
                 raise self._err(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
-                                REFUSED_M[m], lineno, col_of(i),
+                                REFUSED_M[m], lineno, b.col(i),
                                 hint="postproc expands M98/M99 subprograms defined in the same program; "
                                      "put the subprogram in the file")
             if m > 199:
-                raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, col_of(i))
+                raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, b.col(i))
             if m in BEFORE_MOTION_M:
                 event_idx.append(i)
                 event_idx.extend(vals[k][1] for k in M_PARAMS.get(m, "") if k in vals)
@@ -717,69 +269,59 @@ class Interpreter:
                 self.ended = True
             if m == 61:
                 if "Q" not in vals:
-                    raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, col_of(i))
+                    raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, b.col(i))
                 st.spindle_tool = int(vals["Q"][0])
 
         if "T" in vals:
             st.tool = int(vals["T"][0])
         if tool_change:
             st.spindle_tool = st.tool
+        b.tool_change = tool_change
+        b.event_idx = sorted(set(event_idx))
 
-        blk = _Block(lineno, words, vals)
-        if st.comp != 400:
-            cutter.check_block(self, blk, gcodes, tool_change)
-        for key, i in gcodes:
+    def _g_codes(self, b: Block) -> None:
+        """Run the handler of each G code of the block (:data:`_G_HANDLERS`, the dialect's
+        own first), with cutter compensation's checks around them."""
+        if self.state.comp != 400:
+            cutter.check_block(self, b, b.gcodes, b.tool_change)
+        for key, i in b.gcodes:
             handler = _G_HANDLERS.get(key)
             if self._dialect_g and key in self._dialect_g:
                 handler = self._dialect_g[key]
             if handler is None and key in self.d.turning_cycles and self.lathe.weak:
-                raise self.lathe.refusal(f"G{words[i].number} turning cycle at line {lineno}", self.path, lineno,
-                                         col_of(i))
+                raise self.lathe.refusal(f"G{b.words[i].number} turning cycle at line {b.lineno}", self.path,
+                                         b.lineno, b.col(i))
             if handler is None:
-                raise self._err(UnsupportedGcodeError, f"G{words[i].number} (unknown G code)", lineno, col_of(i))
-            handler(self, blk, key, i)
-        if blk.comp is not None:
-            cutter.switch(self, blk, gcodes)
-        motion_key, motion_idx, g53, g92, g10 = blk.motion_key, blk.motion_idx, blk.g53, blk.g92, blk.g10
-        home_code, cancel_cycle, g52 = blk.home_code, blk.cancel_cycle, blk.g52
-        lookahead, work_name, prefix = blk.lookahead, blk.work_name, blk.prefix
-        event_idx = sorted(set(event_idx))
-        before_m = [words[j].letter + words[j].number for j in event_idx]
+                raise self._err(UnsupportedGcodeError, f"G{b.words[i].number} (unknown G code)", b.lineno, b.col(i))
+            handler(self, b, key, i)
+        if b.comp is not None:
+            cutter.switch(self, b, b.gcodes)
 
+    def _settings(self, b: Block) -> bool:
+        """The tool length and work offset the block selects (the dialect's D and E words
+        too); True when the block ends there: a look-ahead code, G10, G52 or G92."""
+        st, vals = self.state, b.vals
         if self.d.tool_length_word and self.d.tool_length_word in vals:  # Sinumerik D: the length register
-            self._g43({"H": vals[self.d.tool_length_word]}, lineno, col_of(vals[self.d.tool_length_word][1]))
+            self._g43({"H": vals[self.d.tool_length_word]}, b.lineno, b.col(vals[self.d.tool_length_word][1]))
         if self.d.fixture_offset_word and self.d.fixture_offset_word in vals:
-            work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
-        if work_name is not None:
-            st.work = work_name
+            b.work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
+        if b.work_name is not None:
+            st.work = b.work_name
             st.work_explicit = True
-        if lookahead is not None:
-            return None
-        if g10:
-            before = tuple(st.pos)
-            self._g10(vals, lineno, col_of(next(i for k, i in gcodes if k == 100)))
-            L = int(vals["L"][0]) if "L" in vals else None
-            named = [a for a in AXES if a in vals] if L == 20 else ["Z"] if L in (10, 11) and "Z" in vals else []
-            if named:
-                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in named], before)
-            return None
-        if g52:
-            self._g52(vals, lineno, col_of(next(i for k, i in gcodes if k == 520)))
-            return None
-        if g92 is not None:
-            before = tuple(st.pos)
-            self._g92(g92, vals, lineno, col_of(next(i for k, i in gcodes if k in (920, 921, 922))))
-            if g92 == 920 and any(a in vals for a in AXES):
-                self.rebase = (words, [(vals[a][1], AXES.index(a)) for a in AXES if a in vals], before)
-            return None
-        if "F" in vals and not (self.d.dwell_f_is_time and any(k == 40 for k, _ in gcodes)):
-            st.feed = vals["F"][0]
-        if home_code is not None:
-            return self._home(home_code, words, vals, lineno, col_of(home_code[1]))
+        if b.lookahead is not None:
+            return True
+        return self._offset_settings(b)
 
-        unit = st.unit_mm
+    def _motion(self, b: Block) -> Move | None:
+        """The block's feed, then its move: the handler of its motion family in
+        :data:`MOTIONS`, by the block's motion code, else by the modal motion mode (a modal
+        cycle or spline only on a block with axis words)."""
+        st, vals = self.state, b.vals
+        if "F" in vals and not (self.d.dwell_f_is_time and any(k == 40 for k, _ in b.gcodes)):
+            st.feed = vals["F"][0]
+        if b.home_code is not None:
+            return MOTIONS[b.home_code[0]](self, b)
         # Rotary axes: passed through, tracked for the engine's context.
-        rotary_changed = False
         for a in ROTARY:
             if a in vals:
                 v = vals[a][0]
@@ -788,116 +330,18 @@ class Interpreter:
                     st.rotary[a] = st.rotary.get(a, 0.0) + v
                 else:
                     st.rotary[a] = v + self.rotary_g92.get(a, 0.0)
-                rotary_changed = True
-
-        has_axes = any(a in vals for a in AXES)
-        if cancel_cycle:
+                b.rotary_changed = True
+        b.has_axes = any(a in vals for a in AXES)
+        if b.cancel_cycle:
             if st.motion in CANNED_CYCLES:
                 st.motion = None if self.d.g80_clears_motion else st.before_cycle
             elif self.d.g80_clears_motion:
                 st.motion = None
             st.cycle_r = st.cycle_z = st.cycle_q = st.cycle_p = None
-        if motion_key in CANNED_CYCLES or (motion_key is None and st.motion in CANNED_CYCLES and has_axes):
-            if motion_key is not None and st.motion not in CANNED_CYCLES:
-                st.before_cycle = st.motion
-            if motion_key is not None and motion_key != st.motion and (
-                    not self.d.cycle_keeps_rz or st.motion not in CANNED_CYCLES):
-                # LinuxCNC wants R and Z again when the motion mode changes; Fanuc and Haas
-                # keep them from one cycle to the next (until G80 or another motion)
-                st.cycle_r = st.cycle_z = None
-            if motion_key is not None:
-                st.motion = motion_key
-            return self._cycle(lineno, words, vals, motion_idx, gcodes, prefix + before_m,
-                               tool_change or "T" in vals)
-        if motion_key in SPLINES or (motion_key is None and st.motion in SPLINES and has_axes):
-            if motion_key is not None:
-                st.motion = motion_key
-            return self._spline(lineno, words, vals, motion_idx, prefix + before_m)
-        if motion_key is not None:
-            st.motion = MOTION_CODES[motion_key]
-        full_circle = False
-        if not has_axes:
-            arc_words = [vals[k][1] for k in "IJKR" if k in vals]
-            if motion_key in (ARC_CW, ARC_CCW) or (arc_words and st.motion in (ARC_CW, ARC_CCW)):
-                i = arc_words[0] if arc_words else next(i for k, i in gcodes if k == motion_key)
-                _, (l1, l2) = PLANES[st.plane]
-                if not self.d.full_circle_without_end or "R" in vals or not (l1 in vals or l2 in vals):
-                    raise self._err(GcodeSyntaxError, "arc without end point words", lineno, col_of(i),
-                                    hint="a full circle needs its centre offsets (I/J/K)"
-                                    + ("" if self.d.full_circle_without_end else
-                                       f" and {self.d.title.split()[0]} needs an end point"))
-                full_circle = True  # a full circle back to the start (LinuxCNC, Fanuc)
-            elif not rotary_changed:
-                return None
-        if full_circle:
-            first_axis_col = col_of(min(vals[k][1] for k in "IJK" if k in vals))
-        else:
-            first_axis_col = col_of(min(vals[a][1] for a in AXES + ROTARY if a in vals))
-        if st.motion is None:
-            raise self._err(GcodeSyntaxError, "axis words with no motion mode (G0/G1/G2/G3) active",
-                            lineno, first_axis_col)
-        if g53 and st.motion not in (RAPID, LINE):
-            raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
-        incremental = st.incremental
-        if g53 and incremental:
-            if not self.d.g53_absolute_in_g91:
-                raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
-                                first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
-                                                     "machine positions in G91 too (--dialect fanuc|haas)")
-            incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
-
-        shift = self.shift(g53, lineno, first_axis_col)
-        pos = st.pos
-        q0 = (pos[0], pos[1], pos[2])
-        q1 = list(q0)
-        axis_idx = [-1, -1, -1]
-        for k, a in enumerate(AXES):
-            if a in vals:
-                v, i = vals[a]
-                axis_idx[k] = i
-                if incremental:
-                    if math.isnan(q1[k]):
-                        raise self._err(
-                            MissingSetupError,
-                            f"incremental move on {a} from an unknown position (no absolute move on {a} before)",
-                            lineno, col_of(i),
-                            hint="position every axis with a G90 move before the first G91 move, or give its "
-                                 "machine position at program start with --start")
-                    q1[k] = q1[k] + v * unit
-                else:
-                    q1[k] = v * unit + shift[k]
-                    self.unknown_after.pop(k, None)
-        if self.unknown_after:
-            self._check_known(q1, lineno, first_axis_col)
-        if block_delete and st.incremental:
-            raise self._err(UnsupportedGcodeError, "block-delete '/' on an incremental move", lineno, 1,
-                            hint="the result would depend on the block-delete switch")
-
-        arc = None
-        if st.motion in (ARC_CW, ARC_CCW):
-            arc = self._arc(lineno, words, vals, q0, q1, shift, unit, gcodes)
-        elif any(k in vals for k in "IJK") or ("R" in vals and st.motion in (RAPID, 10)):
-            letter = next(k for k in "IJKR" if k in vals)
-            raise self._err(GcodeSyntaxError, f"{letter} word on a straight move", lineno, col_of(vals[letter][1]))
-        if st.inverse_time and st.motion != RAPID and "F" not in vals:
-            raise self._err(GcodeSyntaxError, "G93 inverse-time feed needs an F word on every feed move",
-                            lineno, first_axis_col)
-
-        st.pos = q1
-        move = Move(
-            lineno=lineno, kind=st.motion, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
-            unit=unit, incremental=incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]), feed_idx=vals["F"][1] if "F" in vals else -1,
-            inverse_time=st.inverse_time, feed=st.feed,
-            rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
-            prefix_words=prefix + before_m, event_idx=tuple(event_idx),
-            stays=tool_change or g53,
-            motion_idx=motion_idx,
-            aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
-        )
-        if st.comp != 400 or st.comp_edge:
-            cutter.on_move(self, move)
-        return move
+        key = b.motion_key
+        if key is None and (b.has_axes or st.motion not in _NEEDS_AXES):
+            key = st.motion
+        return MOTIONS.get(key, Interpreter._motion_line)(self, b)
 
     @staticmethod
     def _is_lookahead(key: int, vals: Vals) -> bool:
@@ -914,496 +358,8 @@ class Interpreter:
             return "P" in vals
         return False
 
-    def _home(self, home_code: tuple[int, int], words: list[lexer.Word], vals: Vals, lineno: int,
-              col: int) -> Move | None:
-        """G28/G30: through the intermediate point (the axis words) to the stored position."""
-        key, gi = home_code
-        name = HOME_CODES[key]
-        st = self.state
-        if any(a in vals for a in ROTARY):
-            raise self._err(UnsupportedGcodeError, f"{name} with rotary axis words", lineno, col,
-                            hint="the stored rotary positions are not known to postproc; home the rotary "
-                                 "axes on a line of their own before or after correcting")
-        if any(k in vals for k in "IJKR"):
-            raise self._err(GcodeSyntaxError, f"{name} with arc words", lineno, col)
-        unit = st.unit_mm
-        named = [k for k, a in enumerate(AXES) if a in vals]
-        pos = st.pos
-        q0 = (pos[0], pos[1], pos[2])
-        inter = list(q0)
-        axis_idx = [-1, -1, -1]
-        shift = self.shift(False, lineno, col) if named and not st.incremental else (0.0, 0.0, 0.0)
-        for k in named:
-            v, i = vals[AXES[k]]
-            axis_idx[k] = i
-            if st.incremental:
-                if v != 0.0 and math.isnan(inter[k]):
-                    raise self._err(MissingSetupError, f"incremental {name} on {AXES[k]} from an unknown position",
-                                    lineno, col_of_word(words, i),
-                                    hint=f"give the machine position at program start with --start {AXES[k]}..")
-                if v != 0.0:
-                    inter[k] = inter[k] + v * unit
-            else:
-                inter[k] = v * unit + shift[k]
-                self.unknown_after.pop(k, None)
-        stored = self.home.get(name, [NAN, NAN, NAN])
-        after = list(inter)
-        for k in named or range(3):
-            after[k] = stored[k]
-            if math.isnan(stored[k]):
-                self.unknown_after[k] = name
-            else:
-                self.unknown_after.pop(k, None)
-        r = self.tool_r()
-        rot = dict(st.rotary) if self.used_rotary else {}
-        jump = Move(lineno, RAPID, (inter[0], inter[1], inter[2]), (after[0], after[1], after[2]), r,
-                    (0.0, 0.0, 0.0), unit, st.incremental, st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot,
-                    stays=True, motion_idx=gi, fixed=True,
-                    stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
-        st.pos = after
-        moved = [k for k in named if inter[k] != q0[k] and not (math.isnan(inter[k]) and math.isnan(q0[k]))]
-        if not moved:
-            return jump
-        self._check_known(inter, lineno, col)
-        return Move(lineno, RAPID, q0, (inter[0], inter[1], inter[2]), r, shift, unit, st.incremental,
-                    st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot,
-                    stays=True, motion_idx=gi, then=jump)
 
-    def _spline(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int, prefix: list[str]) -> Move:
-        """G5 (cubic) and G5.1 (quadratic) splines in G17, as LinuxCNC reads them: G5's I/J
-        offset the first control point from the start (the previous P/Q mirrored when
-        left out), P/Q the second from the end; G5.1's I/J offset its control point."""
-        st = self.state
-        key = st.motion
-        name = "G5" if key == 50 else "G5.1"
-        col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[0].letter_pos + 1
-        if st.plane != 170:
-            raise self._err(GcodeSyntaxError, f"{name} spline outside the G17 plane", lineno, col)
-        other = [a for a in "ZABCKR" if a in vals]
-        if other:
-            raise self._err(GcodeSyntaxError, f"{name} spline with a {other[0]} word (X and Y only)", lineno,
-                            words[vals[other[0]][1]][4] + 1)
-        if st.inverse_time:
-            raise self._err(UnsupportedGcodeError, f"{name} spline in G93 inverse-time mode", lineno, col)
-        if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"{name} spline from an unknown position", lineno, col,
-                            hint="position every axis with a G90 move before the spline, or give --start")
-        if ("I" in vals) != ("J" in vals):
-            raise self._err(GcodeSyntaxError, f"{name} needs both I and J, or neither", lineno, col)
-        unit = st.unit_mm
-        if "F" in vals:
-            st.feed = vals["F"][0]
-        shift = self.shift(False, lineno, col)
-        pos = st.pos
-        q0 = (pos[0], pos[1], pos[2])
-        q1 = list(q0)
-        axis_idx = [-1, -1, -1]
-        for k, a in enumerate("XY"):
-            if a in vals:
-                v, i = vals[a]
-                axis_idx[k] = i
-                q1[k] = q1[k] + v * unit if st.incremental else v * unit + shift[k]
-        p0 = (q0[0], q0[1])
-        p3 = (q1[0], q1[1])
-        if key == 50:
-            if "P" not in vals or "Q" not in vals:
-                raise self._err(GcodeSyntaxError, "G5 needs both P and Q", lineno, col)
-            if "I" in vals:
-                ij = (vals["I"][0] * unit, vals["J"][0] * unit)
-            elif self._last_pq is not None:
-                ij = (-self._last_pq[0], -self._last_pq[1])
-            else:
-                raise self._err(GcodeSyntaxError, "the first G5 of a series needs I and J", lineno, col)
-            pq = (vals["P"][0] * unit, vals["Q"][0] * unit)
-            self._last_pq = pq
-            ctrl = [p0, (p0[0] + ij[0], p0[1] + ij[1]), (p3[0] + pq[0], p3[1] + pq[1]), p3]
-        else:
-            if "I" not in vals or (vals["I"][0] == 0 and vals["J"][0] == 0):
-                raise self._err(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
-            ctrl = [p0, (p0[0] + vals["I"][0] * unit, p0[1] + vals["J"][0] * unit), p3]
-        st.pos = q1
-        return Move(lineno=lineno, kind=LINE, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
-                    unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
-                    axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]),
-                    feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
-                    rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
-                    motion_idx=motion_idx, spline=ctrl)
-
-    def _cycle(self, lineno: int, words: list[lexer.Word], vals: Vals, motion_idx: int,  # noqa: C901
-               gcodes: list[tuple[int, int]], prefix: list[str], stays: bool) -> Move:
-        """A canned-cycle block: the holes it drills and the moves the controller makes.
-
-        Follows LinuxCNC (interp_cycles.cc, checked against rs274): an initial rapid to
-        R when Z is below it; per hole a rapid in X/Y at the current level, a rapid to
-        R, the cycle's own moves, and a retract to R (G99) or to the higher of R and the
-        level at the block's start (G98). In G91, R is relative to the current Z and Z
-        to R; X/Y move by their increments for each of the L repeats. Pecks: G83 rapid
-        back to R and down to 0.254 mm (0.010 in) above the last depth, G73 retract 0.254 mm.
-        """
-        st = self.state
-        key = st.motion
-        if key is None:  # pragma: no cover - _block calls this in a canned-cycle motion mode
-            raise AssertionError("a canned-cycle block without its cycle")
-        col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)].letter_pos + 1
-        name = f"G{key / 10:g}"
-        if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
-        if st.inverse_time:
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in G93 inverse-time mode", lineno, col)
-        if any(a in vals for a in ROTARY) or any(k in vals for k in "IJ"):
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
-                            lineno, col)
-        unit = st.unit_mm
-        if "R" in vals:
-            st.cycle_r = vals["R"][0]
-        if st.cycle_r is None and self.d.cycle_r_default_initial and not math.isnan(st.pos[2]):
-            # Fanuc and Haas: R is optional; without it the R plane is the initial level
-            if st.incremental:
-                st.cycle_r = 0.0
-            else:
-                st.cycle_r = (st.pos[2] - self.shift(False, lineno, col)[2]) / unit
-        if st.cycle_r is None:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
-        if "Z" in vals:
-            st.cycle_z = vals["Z"][0]
-        if st.cycle_z is None:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
-        peck_mm = 0.0  # G73/G83 peck depth
-        if key in (730, 830):
-            if "Q" in vals:
-                st.cycle_q = vals["Q"][0]
-            if st.cycle_q is None or st.cycle_q <= 0:
-                raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
-                                lineno, col)
-            peck_mm = st.cycle_q * unit
-        if "P" in vals:
-            st.cycle_p = vals["P"][0]
-        if "F" in vals:
-            st.feed = vals["F"][0]
-        repeat_letter = next((c for c in self.d.cycle_repeat_words if c in vals), "L")
-        repeats = 1
-        if repeat_letter in vals:
-            given = vals[repeat_letter][0]
-            if given != int(given) or given < 0:
-                raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
-                                lineno, words[vals[repeat_letter][1]][4] + 1)
-            repeats = int(given)
-        if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
-                            hint="position every axis with a G90 move before the cycle, or give --start")
-        if self.unknown_after:
-            self._check_known([NAN, NAN, NAN], lineno, col)
-        shift = self.shift(False, lineno, col)
-        x0, y0, z0 = st.pos
-        if st.incremental:
-            r_m = z0 + st.cycle_r * unit
-            z_m = r_m + st.cycle_z * unit
-            dx = vals["X"][0] * unit if "X" in vals else 0.0
-            dy = vals["Y"][0] * unit if "Y" in vals else 0.0
-        else:
-            r_m = st.cycle_r * unit + shift[2]
-            z_m = st.cycle_z * unit + shift[2]
-            xs = vals["X"][0] * unit + shift[0] if "X" in vals else x0
-            ys = vals["Y"][0] * unit + shift[1] if "Y" in vals else y0
-        if z_m > r_m:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
-                            lineno, col)
-        clear = r_m if st.retract_r else max(z0, r_m)
-        delta = 0.254  # LinuxCNC G83_RAPID_DELTA / G73 retract: 0.010 inch
-        steps: list[tuple[int, tuple]] = []
-        cur = [x0, y0, z0]
-
-        def go(kind: int, x: float, y: float, z: float) -> None:
-            if (x, y, z) != tuple(cur):
-                steps.append((kind, (x, y, z)))
-                cur[:] = (x, y, z)
-
-        holes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
-        if z0 < r_m:
-            go(RAPID, x0, y0, r_m)
-        for _ in range(repeats):
-            x, y = (cur[0] + dx, cur[1] + dy) if st.incremental else (xs, ys)
-            go(RAPID, x, y, cur[2])
-            go(RAPID, x, y, r_m)
-            if key in (730, 830):
-                q = peck_mm
-                depth = r_m - q
-                while depth > z_m:
-                    go(LINE, x, y, depth)
-                    if key == 830:
-                        go(RAPID, x, y, r_m)
-                    go(RAPID, x, y, depth + delta)
-                    depth -= q
-            go(LINE, x, y, z_m)
-            if key in (820, 890) and st.cycle_p:
-                steps.append((DWELL, (st.cycle_p, 0.0, 0.0)))
-            if key in (840, 850, 890):
-                go(LINE, x, y, r_m)
-            go(RAPID, x, y, clear)
-            holes.append(((x, y, z_m), (x, y, r_m)))
-        axis_idx = (vals["X"][1] if "X" in vals else -1, vals["Y"][1] if "Y" in vals else -1,
-                    vals["Z"][1] if "Z" in vals else -1)
-        q0 = (x0, y0, z0)
-        st.pos = list(cur)
-        return Move(
-            lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
-            unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
-            axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
-            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
-            motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
-                                               r_m, z_m, repeats, st.retract_r, st.cycle_p))
-
-    def _check_known(self, q1: Sequence[float], lineno: int, col: int) -> None:
-        """Refuse a move that needs an axis left at a stored position that was not given."""
-        for k, name in self.unknown_after.items():
-            if math.isnan(q1[k]):
-                raise self._err(
-                    MissingSetupError, f"axis {AXES[k]} is at the {name} stored position, which was not given, "
-                    "and this move needs it", lineno, col,
-                    hint=f"give it with --home {name}=X..,Y..,Z.. (machine mm), or position {AXES[k]} with an "
-                         "absolute move first")
-
-    def _g52(self, vals: Vals, lineno: int, col: int) -> None:
-        """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""
-        st = self.state
-        if any(a in vals for a in ROTARY):
-            raise self._err(UnsupportedGcodeError, "G52 on a rotary axis", lineno, col)
-        for k, a in enumerate(AXES):
-            if a in vals:
-                st.g92[k] = vals[a][0] * st.unit_mm
-
-    def _g43(self, vals: Vals, lineno: int, col: int) -> None:
-        st = self.state
-        h: int | None
-        if "H" in vals:
-            h = int(vals["H"][0])
-        else:
-            h = st.spindle_tool if st.spindle_tool is not None else st.tool
-            if h is None:
-                raise self._err(MissingSetupError, "G43 without H and no tool selected (T word)", lineno, col,
-                                hint="add H<n> to the G43 block or select the tool with T<n> M6")
-        if h == 0:
-            st.tlo, st.tlo_active = 0.0, True
-            return
-        lengths = self.tool_lengths
-        if self.lenient_setup and h not in lengths:
-            st.tlo, st.tlo_active = 0.0, True
-            return
-        if h not in lengths:
-            raise self._err(MissingSetupError, f"tool length of tool {h} is used (G43) but was not given",
-                            lineno, col, hint=f"give it with --tool-length {h}=L (mm) or --tool-table FILE")
-        st.tlo, st.tlo_active = float(lengths[h]), True
-
-    def _g92(self, key: int, vals: Vals, lineno: int, col: int) -> None:
-        st = self.state
-        if key in (921, 922):
-            st.g92 = [0.0, 0.0, 0.0]
-            self.rotary_g92.clear()
-            return
-        for a in ROTARY:
-            if a in vals:
-                self.rotary_g92[a] = st.rotary.get(a, 0.0) - vals[a][0]
-        if not any(a in vals for a in AXES):
-            if any(a in vals for a in ROTARY):
-                return
-            raise self._err(GcodeSyntaxError, "G92 needs at least one axis word", lineno, col)
-        unit = st.unit_mm
-        for k, a in enumerate(AXES):
-            if a in vals:
-                if math.isnan(st.pos[k]):
-                    raise self._err(MissingSetupError, f"G92 on {a} at an unknown position", lineno,
-                                    col, hint="position the axis with a G90 move before G92, or give its machine "
-                                 "position at program start with --start")
-                st.g92[k] = 0.0
-                w = self._work_offset(lineno, col)
-                st.g92[k] = st.pos[k] - (w[k] + (st.tlo if k == 2 else 0.0)) - vals[a][0] * unit
-
-    def _g10(self, vals: Vals, lineno: int, col: int) -> None:
-        st = self.state
-        L = int(vals["L"][0]) if "L" in vals else None
-        if L in (1, 10, 11):
-            self._g10_tool(L, vals, lineno, col)
-            return
-        if L not in (2, 20) or "R" in vals:
-            raise self._err(UnsupportedGcodeError, "G10 other than L2/L20 work offset setting (or with R rotation)",
-                            lineno, col)
-        p = int(vals["P"][0]) if "P" in vals else 0
-        name = st.work if p == 0 else P_SYSTEMS.get(p)
-        if name is None:
-            raise self._err(GcodeSyntaxError, f"G10 P{p}: no such coordinate system", lineno, col)
-        current = None
-        if name in self.program_offsets:
-            current = list(self.program_offsets[name])
-        elif name in self.offsets:
-            current = list(self.offsets[name])
-        unit = st.unit_mm
-        new = list(current) if current else [NAN, NAN, NAN]
-        for k, a in enumerate(AXES):
-            if a in vals:
-                v = vals[a][0] * unit
-                if L == 2:
-                    new[k] = v
-                else:
-                    if math.isnan(st.pos[k]):
-                        raise self._err(MissingSetupError, f"G10 L20 on {a} at an unknown position", lineno, col)
-                    new[k] = st.pos[k] - st.g92[k] - (st.tlo if k == 2 else 0.0) - v
-        if any(math.isnan(v) for v in new):
-            raise self._err(MissingSetupError, f"G10 sets only some axes of {name}, whose other values were not given",
-                            lineno, col, hint=f"give --offset {name}=X..,Y..,Z..")
-        self.program_offsets[name] = new
-
-    def _g10_tool(self, L: int, vals: Vals, lineno: int, col: int) -> None:
-        """G10 L1/L10/L11 P<tool> Z..: write a tool length (used by later G43)."""
-        st = self.state
-        if "P" not in vals:
-            raise self._err(GcodeSyntaxError, f"G10 L{L} needs a P word (tool number)", lineno, col)
-        tool = int(vals["P"][0])
-        if "Z" not in vals:
-            return  # X (lathe), R (radius), Q (orientation): no tool length written
-        z = vals["Z"][0] * st.unit_mm
-        if L == 1:
-            self.tool_lengths[tool] = z
-            return
-        if math.isnan(st.pos[2]):
-            raise self._err(MissingSetupError, f"G10 L{L} at an unknown Z position", lineno, col,
-                            hint="position Z with an absolute move first, or give --start Z..")
-        if L == 10:
-            w = self._work_offset(lineno, col)
-            self.tool_lengths[tool] = st.pos[2] - w[2] - st.g92[2] - z
-        else:
-            g593 = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
-            if g593 is None:
-                raise self._err(MissingSetupError, "G10 L11 uses the work offset G59.3, whose value was not given",
-                                lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
-            self.tool_lengths[tool] = st.pos[2] - g593[2] - z
-
-    def _lathe_arc(self, vals: Vals, q0: tuple[float, float, float], lineno: int, col: int) -> None:
-        """Refuse a lathe's arc: X and Z with I/K in G17, in a program that never positions Y."""
-        if self.state.plane == 170 and "K" in vals and "J" not in vals and "Y" not in vals and math.isnan(q0[1]):
-            raise self.lathe.refusal(f"an arc in X and Z with I/K centre words at line {lineno} in a program "
-                                     "that never positions Y (a lathe reads G18 by default, X as a diameter)",
-                                     self.path, lineno, col)
-
-    def _turns(self, vals: Vals, words: list[lexer.Word], lineno: int) -> int:
-        """The turns of an arc's P word: a positive integer, at most ``max_arc_turns``."""
-        p = vals["P"][0]
-        p_col = words[vals["P"][1]][4] + 1
-        if not (math.isfinite(p) and p >= 1 and p == math.floor(p)):
-            raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
-        if p > self.max_arc_turns:
-            raise self._err(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
-                            "(--max-arc-turns)", lineno, p_col,
-                            hint="raise --max-arc-turns if the helix is meant to turn this often")
-        return int(p)
-
-    def _arc(self, lineno: int, words: list[lexer.Word], vals: Vals, q0: tuple[float, float, float],
-             q1: list[float], shift: tuple[float, float, float], unit: float, gcodes: list[tuple[int, int]]) -> Arc:
-        st = self.state
-        (a1, a2, an), (l1, l2) = PLANES[st.plane]
-        col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
-        self._lathe_arc(vals, q0, lineno, col)
-        if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
-            raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
-                            hint="position all axes with a G90 move before the first arc, or give their "
-                                 "machine positions at program start with --start")
-        turns = self._turns(vals, words, lineno) if "P" in vals else 1
-        clockwise = st.motion == ARC_CW
-        s1, s2 = q0[a1], q0[a2]
-        e1, e2 = q1[a1], q1[a2]
-        plane_letters = {"I": 0, "J": 1, "K": 2}
-        wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
-        if wrong and self.d.off_plane_arc_offset == "ignored":
-            wrong = []  # these controllers ignore an offset word off the arc's plane
-        elif wrong and self.d.off_plane_arc_offset == "zero-ignored" and all(vals[k][0] == 0 for k in wrong):
-            wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
-        if wrong:
-            raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
-                            words[vals[wrong[0]][1]][4] + 1,
-                            hint="LinuxCNC and Grbl reject it (Fanuc, Haas and Mach3 ignore it: "
-                                 "choose that --dialect if the program is for one of them)")
-        del plane_letters
-        if "R" in vals:
-            if l1 in vals or l2 in vals:
-                raise self._err(GcodeSyntaxError, "arc with both R and centre offsets", lineno, col)
-            R = vals["R"][0] * unit
-            dx, dy = e1 - s1, e2 - s2
-            chord = math.hypot(dx, dy)
-            if chord < MIN_ARC_RADIUS_MM:
-                raise self._err(GcodeSyntaxError, "R arc with start = end (a full circle needs I/J/K)", lineno, col)
-            half = chord / 2
-            if abs(R) < half:
-                if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
-                    raise self._err(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
-                                    lineno, words[vals["R"][1]][4] + 1)
-                h = 0.0
-            else:
-                h = math.sqrt(R * R - half * half)
-            # centre to the left of start->end for CCW short arcs
-            sign = 1.0 if (not clockwise) else -1.0
-            if R < 0:
-                sign = -sign
-            mx, my = (s1 + e1) / 2, (s2 + e2) / 2
-            c1 = mx - sign * h * dy / chord
-            c2 = my + sign * h * dx / chord
-            idx = (-1, -1)
-            r_idx = vals["R"][1]
-        else:
-            if l1 not in vals and l2 not in vals:
-                raise self._err(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, col)
-            o1 = vals[l1][0] * unit if l1 in vals else 0.0
-            o2 = vals[l2][0] * unit if l2 in vals else 0.0
-            if st.arc_absolute:
-                c1 = (vals[l1][0] * unit + shift[a1]) if l1 in vals else s1
-                c2 = (vals[l2][0] * unit + shift[a2]) if l2 in vals else s2
-            else:
-                c1, c2 = s1 + o1, s2 + o2
-            rs = math.hypot(s1 - c1, s2 - c2)
-            re_ = math.hypot(e1 - c1, e2 - c2)
-            if rs < MIN_ARC_RADIUS_MM:
-                raise self._err(GcodeSyntaxError, "arc of zero radius", lineno, col)
-            ctrl = self._arc_rule()
-            if not ctrl.arc_end_radius_ok(rs, re_, unit):
-                raise self._err(GcodeSyntaxError,
-                                f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm, more than "
-                                f"{ctrl.title} accepts", lineno, col,
-                                hint="the end point is not on the arc's circle, so the controller refuses the arc; "
-                                     "post the arc with more decimals (or choose the --dialect of the controller "
-                                     "the program is for)")
-            idx = (vals[l1][1] if l1 in vals else -1, vals[l2][1] if l2 in vals else -1)
-            r_idx = -1
-        center = [0.0, 0.0, 0.0]
-        center[a1], center[a2], center[an] = c1, c2, q0[an]
-        return Arc((center[0], center[1], center[2]), st.plane, clockwise, turns, idx, r_idx)
-
-
-@dataclass(slots=True)
-class _Block:
-    """What the G codes of one block set, read by the rest of :meth:`Interpreter._block`."""
-
-    lineno: int
-    words: list
-    vals: dict
-    motion_key: int | None = None
-    motion_idx: int = -1
-    g53: bool = False
-    g92: int | None = None
-    g10: bool = False
-    home_code: tuple[int, int] | None = None
-    cancel_cycle: bool = False
-    g52: bool = False
-    lookahead: int | None = None
-    work_name: str | None = None
-    prefix: list = field(default_factory=list)
-    comp: tuple[int, int] | None = None  # G40/G41/G42/G41.1/G42.1: (key, word index)
-
-    def col(self, i: int) -> int:
-        return self.words[i].letter_pos + 1
-
-    def gtext(self, i: int) -> str:
-        return f"G{self.words[i].number}"
-
-
-def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_motion(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G0-G3, canned cycles, splines: the block's motion code (one per block)."""
     if b.motion_key is not None:
         raise it._err(GcodeSyntaxError, "two motion codes in one block", b.lineno, b.col(i))
@@ -1411,21 +367,21 @@ def _g_motion(it: Interpreter, b: _Block, key: int, i: int) -> None:
     it.motion_word = True
 
 
-def _g_retract(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_retract(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.retract_r = key == 990
 
 
-def _g_cancel_cycle(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_cancel_cycle(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.cancel_cycle = True
     it.motion_word = True
 
 
-def _g_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_refused(it: Interpreter, b: Block, key: int, i: int) -> None:
     cls = NeedsExpansion if (key in EXPANDABLE_G and it.may_expand) else UnsupportedGcodeError
     raise it._err(cls, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
 
 
-def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_lookahead_spline_or_refused(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G5, G5.1, G8: Fanuc/Haas look-ahead codes with their P/Q alone, else splines (G5,
     G5.1) or refused (G8 lathe radius mode)."""
     if it._is_lookahead(key, b.vals):
@@ -1436,15 +392,15 @@ def _g_lookahead_spline_or_refused(it: Interpreter, b: _Block, key: int, i: int)
         _g_refused(it, b, key, i)
 
 
-def _g_lookahead(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_lookahead(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.lookahead = key
 
 
-def _g_home(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_home(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.home_code = (key, i)
 
 
-def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_home_store(it: Interpreter, b: Block, key: int, i: int) -> None:
     if any(a in b.vals for a in AXES):
         raise it._err(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
     it.home[HOME_STORE[key]] = list(it.state.pos)
@@ -1452,41 +408,41 @@ def _g_home_store(it: Interpreter, b: _Block, key: int, i: int) -> None:
     it.program_stored.add(HOME_STORE[key])
 
 
-def _g_local_offset(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_local_offset(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g52 = True
 
 
-def _g_plane(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_plane(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.plane = key
     b.prefix.append(b.gtext(i))
 
 
-def _g_units(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_units(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.inch = key == 200
     b.prefix.append(b.gtext(i))
 
 
-def _g_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_distance(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.incremental = key == 910
     b.prefix.append(b.gtext(i))
 
 
-def _g_arc_distance(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_arc_distance(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.arc_absolute = key == 901
     b.prefix.append(b.gtext(i))
 
 
-def _g_feed_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_feed_mode(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.inverse_time = key == 930
     b.prefix.append(b.gtext(i))
 
 
-def _g_work(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_work(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.work_name = WORK_SYSTEMS[key]
     b.prefix.append(b.gtext(i))
 
 
-def _g_work_extended(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_work_extended(it: Interpreter, b: Block, key: int, i: int) -> None:
     vals = b.vals
     if "P" not in vals:
         raise it._err(GcodeSyntaxError, "G54.1 needs a P word", b.lineno, b.col(i))
@@ -1494,53 +450,40 @@ def _g_work_extended(it: Interpreter, b: _Block, key: int, i: int) -> None:
     b.prefix.append(f"{b.gtext(i)} P{b.words[vals['P'][1]][1]}")
 
 
-def _g_tool_length(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_tool_length(it: Interpreter, b: Block, key: int, i: int) -> None:
     vals = b.vals
     b.prefix.append(b.gtext(i) + (f" H{b.words[vals['H'][1]][1]}" if "H" in vals else ""))
     it._g43(vals, b.lineno, b.col(i))
 
 
-def _g_tool_length_cancel(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_tool_length_cancel(it: Interpreter, b: Block, key: int, i: int) -> None:
     it.state.tlo, it.state.tlo_active = 0.0, False
     b.prefix.append(b.gtext(i))
 
 
-def _g_machine(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_machine(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g53 = True
     b.prefix.append(b.gtext(i))
 
 
-def _g_g92(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g92(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g92 = key
 
 
-def _g_g10(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g10(it: Interpreter, b: Block, key: int, i: int) -> None:
     b.g10 = True
 
 
-def _g_cutter(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_cutter(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G40/G41/G42/G41.1/G42.1: read by :func:`postproc.gcode.cutter.check_block`."""
     b.comp = (key, i)
 
 
-def _g_neutral(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_neutral(it: Interpreter, b: Block, key: int, i: int) -> None:
     """No geometry: dwell G4 (P is seconds), path control, spindle modes, ..."""
 
 
-def _work_code(name: str):
-    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
-        b.work_name = name
-        b.prefix.append(b.gtext(i))
-    return handler
-
-
-def _refused_g(what: str, instead: str):
-    def handler(it: Interpreter, b: _Block, key: int, i: int) -> None:
-        raise it._err(UnsupportedGcodeError, f"{it.d.title.split(' ')[0]} {what}", b.lineno, b.col(i), hint=instead)
-    return handler
-
-
-def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g50(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G50: scaling cancel on a mill (no words of its own); a lathe's spindle speed clamp
     (G50 S) or coordinate setting (G50 X.. Z..)."""
     lathe = [k for k in "SXZUW" if k in b.vals]
@@ -1549,16 +492,16 @@ def _g_g50(it: Interpreter, b: _Block, key: int, i: int) -> None:
                                "(a lathe's spindle speed clamp or coordinate setting)", it.path, b.lineno, b.col(i))
 
 
-def _g_css(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_css(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G96: constant surface speed, a lathe's (noted as a mark; neutral on its own)."""
     it.lathe.note(f"G96 (constant surface speed) at line {b.lineno}")
 
 
-def _g_diameter_mode(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_diameter_mode(it: Interpreter, b: Block, key: int, i: int) -> None:
     raise it.lathe.refusal(f"G7 (diameter mode) at line {b.lineno}", it.path, b.lineno, b.col(i))
 
 
-def _g_g15(it: Interpreter, b: _Block, key: int, i: int) -> None:
+def _g_g15(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G15: polar coordinates off (Fanuc, neutral); G15 H<n> selects work coordinate
     system n where the dialect says so (Okuma)."""
     if it.d.g15_work_select:
@@ -1568,11 +511,24 @@ def _g_g15(it: Interpreter, b: _Block, key: int, i: int) -> None:
         b.prefix.append(f"{b.gtext(i)} H{b.words[b.vals['H'][1]].number}")
 
 
+#: motion mode (G code key), or G28/G30 -> the handler that makes the block's move, one per
+#: motion family. A G code with geometry is its handler and its row here; its row of
+#: _G_HANDLERS follows (G28/G30 set the block's home code, the others its motion code).
+MOTIONS: dict[int | None, Callable[[Interpreter, Block], Move | None]] = {
+    RAPID: Interpreter._motion_line, LINE: Interpreter._motion_line,
+    ARC_CW: Interpreter._motion_arc, ARC_CCW: Interpreter._motion_arc,
+    **dict.fromkeys(CANNED_CYCLES, Interpreter._motion_cycle),
+    **dict.fromkeys(SPLINES, Interpreter._motion_spline),
+    **dict.fromkeys(HOME_CODES, Interpreter._motion_home),
+}
+# motion modes whose modal blocks move only with an axis word (else read as a G0/G1 block's)
+_NEEDS_AXES = CANNED_CYCLES | SPLINES
+
 #: G code key (10 x number) -> handler(interpreter, block, key, word index)
 _G_HANDLERS: dict = {}
 for _keys, _handler in (
     (NEUTRAL_G | {40}, _g_neutral), (REFUSED_G, _g_refused), (CUTTER_COMP, _g_cutter),
-    (MOTION_CODES, _g_motion), (CANNED_CYCLES, _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
+    (MOTIONS.keys() - HOME_CODES.keys(), _g_motion), ({980, 990}, _g_retract), ({800}, _g_cancel_cycle),
     (LOOKAHEAD_G, _g_lookahead), ({50, 51, 80}, _g_lookahead_spline_or_refused),
     (HOME_CODES, _g_home), (HOME_STORE, _g_home_store), ({520}, _g_local_offset),
     (PLANES, _g_plane), ({200, 210}, _g_units), ({900, 910}, _g_distance), ({901, 911}, _g_arc_distance),
@@ -1582,31 +538,6 @@ for _keys, _handler in (
 ):
     for _key in _keys:
         _G_HANDLERS[_key] = _handler
-
-
-def spline_points(ctrl: npt.ArrayLike, s: npt.ArrayLike) -> np.ndarray:
-    """Points (k, 2) of a Bezier curve with control points ``ctrl`` at parameters ``s``."""
-    s = np.asarray(s, dtype=float)[:, None]
-    c = np.asarray(ctrl, dtype=float)
-    if len(c) == 3:
-        return (1 - s) ** 2 * c[0] + 2 * (1 - s) * s * c[1] + s ** 2 * c[2]
-    return (1 - s) ** 3 * c[0] + 3 * (1 - s) ** 2 * s * c[1] + 3 * (1 - s) * s ** 2 * c[2] + s ** 3 * c[3]
-
-
-def spline_samples(ctrl: npt.ArrayLike, chord_mm: float) -> np.ndarray:
-    """Parameters along a spline whose chords stay within ``chord_mm`` of it (from the
-    bound on the second derivative: error <= max|B''| h^2 / 8)."""
-    c = np.asarray(ctrl, dtype=float)
-    if len(c) == 3:
-        bound = 2.0 * np.linalg.norm(c[0] - 2 * c[1] + c[2])
-    else:
-        bound = 6.0 * max(np.linalg.norm(c[0] - 2 * c[1] + c[2]), np.linalg.norm(c[1] - 2 * c[2] + c[3]))
-    n = max(1, math.ceil(math.sqrt(bound / (8.0 * chord_mm)))) if bound > 0 else 1
-    return np.linspace(0.0, 1.0, n + 1)
-
-
-# chord error of the polyline the samplers use for a spline
-SPLINE_SAMPLE_MM = 1e-4
 
 
 def plain_moves(mv: Move) -> Iterator[Move]:
@@ -1638,33 +569,3 @@ def plain_moves(mv: Move) -> Iterator[Move]:
         leg = leg.then
 
 
-def col_of_word(words: list[lexer.Word], i: int) -> int:
-    return words[i].letter_pos + 1
-
-
-def _offset_tuple(v: dict | Iterable[float], partial: bool = False) -> tuple[float, float, float]:
-    if isinstance(v, dict):
-        d = NAN if partial else 0.0
-        up = {str(k).upper(): x for k, x in v.items()}
-        return (float(up.get("X", d)), float(up.get("Y", d)), float(up.get("Z", d)))
-    t = tuple(float(x) for x in v)
-    if len(t) != 3:
-        raise ValueError(f"work offset needs 3 values, got {v!r}")
-    return t
-
-
-def start_position(start: dict | Iterable[float] | None) -> list[float]:
-    """Machine gauge position at program start: ``{"X":.., "Z":..}`` (any subset) or
-    (x, y, z); NaN for an axis not given."""
-    if not start:
-        return [NAN, NAN, NAN]
-    if isinstance(start, dict):
-        bad = [k for k in start if str(k).upper() not in AXES]
-        if bad:
-            raise ValueError(f"start position names unknown axes {bad!r} (X, Y, Z only)")
-        up = {str(k).upper(): float(v) for k, v in start.items()}
-        return [up.get(a, NAN) for a in AXES]
-    t = [float(x) for x in start]
-    if len(t) != 3:
-        raise ValueError(f"start position needs 3 values, got {start!r}")
-    return t
