@@ -110,3 +110,13 @@ def test_errors_name_their_place(text, err):
     with pytest.raises(err) as e:
         ends(text)
     assert e.value.lineno is not None
+
+
+def test_an_arc_mode_block_of_rotary_words_only_is_refused_as_rs274_refuses_it():
+    """G2 modal, then a block naming only A: LinuxCNC says "R, I, J, K words all missing
+    for arc"; the interpreter refuses it at the block's first word (it raised an internal
+    error before)."""
+    text = "G21 G90 G17\nG0 X0 Y0 Z0\nG2 X10 Y0 I5 J0 F100\nA10\nM2\n"
+    with pytest.raises(GcodeSyntaxError, match="arc without centre") as err:
+        ends(text)
+    assert (err.value.lineno, err.value.col) == (4, 1)

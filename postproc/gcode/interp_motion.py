@@ -265,7 +265,12 @@ class MotionMixin(InterpreterCore):
         st, words, vals, lineno = self.state, b.words, b.vals, b.lineno
         q0, q1 = t.q0, t.q1
         (a1, a2, an), (l1, l2) = PLANES[st.plane]
-        col = words[min(vals[a][1] for a in AXES + "IJKR" if a in vals)][4] + 1
+        named = [vals[a][1] for a in AXES + "IJKR" if a in vals]
+        if not named:  # an arc mode block of rotary words only (rs274: "R, I, J, K words all missing for arc")
+            first = next((w for w in words if w.letter != "N"), words[0])
+            raise self._err(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, first.letter_pos + 1,
+                            hint="give the arc's end and centre words, or a G0/G1 before a move of rotary axes only")
+        col = words[min(named)][4] + 1
         self._lathe_arc(vals, q0, lineno, col)
         if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
             raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
