@@ -113,5 +113,6 @@ def test_the_check_sees_what_it_must(tmp_path):
 
 
 if __name__ == "__main__":
-    for key, size in sorted(offenders().items()):
-        print(f"    {key!r}: {size},")
+    import sys
+
+    sys.stdout.writelines(f"    {key!r}: {size},\n" for key, size in sorted(offenders().items()))
