@@ -39,7 +39,14 @@ from postproc.gcode.directions import (
     settle,
 )
 from postproc.gcode.emitter import FIT_BUDGET, _unit_decimals
-from postproc.gcode.geometry import arc_length, arc_params, arc_points, arcs_points, line_points
+from postproc.gcode.geometry import (
+    ArcColumns,
+    arc_length,
+    arc_params,
+    arc_points,
+    arcs_points,
+    line_points,
+)
 from postproc.gcode.moves import Arc
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.path import backfill_unknown
@@ -748,7 +755,7 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table
         q0s, q1s, centres = (np.array([row[f] for row in arc_rows], dtype=float) for f in (1, 2, 3))
 
         def arc_nominal(which: IntArray, at: FloatArray) -> FloatArray:
-            return arcs_points(which, at, axes, t0s, sweeps, r0s, r1s, centres, q0s, q1s)
+            return arcs_points(which, at, ArcColumns(axes, t0s, sweeps, r0s, r1s, centres, q0s, q1s))
 
         arc_mid = np.flatnonzero(ap[owner_mid] >= 0)
         mid = arc_nominal(ap[owner_mid[arc_mid]], s_mid[arc_mid])

@@ -47,7 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from postproc.gcode import emit
-from postproc.gcode.geometry import arcs_points
+from postproc.gcode.geometry import ArcColumns, arcs_points
 from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
@@ -142,6 +142,9 @@ Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
 #: ``curvature(rows)``: the engine's bound on the correction's curvature along each move
 Curvature: TypeAlias = Callable[[IntArray], FloatArray]
 Ends: TypeAlias = tuple[float, float, float, float, float, float]
+#: the arguments of :meth:`ArcHint.words`: (S, E, axes, clockwise, d, unit, base, budget)
+WordsArgs: TypeAlias = tuple[Sequence[float], Sequence[float], tuple[int, int, int], bool, int, float,
+                             tuple[float, float], float]
 
 
 @final
@@ -201,11 +204,10 @@ class ArcHint:
         self._last = (key, result)
         return result
 
-    def remember(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
-                 unit: float, base: tuple[float, float], budget: float,
-                 result: tuple[float, float, float, float] | None) -> None:
-        """Keep ``result`` as the answer of :meth:`words` to these arguments (found by
-        :func:`words_many`)."""
+    def remember(self, args: WordsArgs, result: tuple[float, float, float, float] | None) -> None:
+        """Keep ``result`` as the answer of :meth:`words` to ``args``, its arguments
+        ``(S, E, axes, clockwise, d, unit, base, budget)`` (found by :func:`words_many`)."""
+        S, E, axes, clockwise, d, unit, base, budget = args
         self._last = ((tuple(S), tuple(E), axes, clockwise, d, unit, base, budget), result)
 
     def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
@@ -240,7 +242,7 @@ class ArcHint:
                     break
             else:
                 return None
-        got = self._bound(clockwise, s1, s2, sn, e1, e2, en, C1, C2)
+        got = self._bound(clockwise, (s1, s2, sn, e1, e2, en), C1, C2)
         if got is None:
             return None
         bound, rs, re, turn = got
@@ -273,19 +275,21 @@ class ArcHint:
         mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
         if not mism <= self.mismatch + KEEP_MISMATCH_SLACK_MM:
             return None
-        got = self._bound(arc.clockwise, S[a1], S[a2], S[an], E[a1], E[a2], E[an], C1, C2)
+        got = self._bound(arc.clockwise, (S[a1], S[a2], S[an], E[a1], E[a2], E[an]), C1, C2)
         if got is None or not got[0] <= budget:
             return None
         return {"form": "keep", "turns": 1}
 
-    def _bound(self, clockwise: bool, s1: float, s2: float, sn: float, e1: float, e2: float, en: float,
-               C1: float, C2: float) -> tuple[float, float, float, float] | None:
-        """How far the arc a controller draws from S to E (plane coordinates s1, s2, e1,
-        e2, normal sn, en) around (C1, C2) (radius from the start to the end radius, the
-        normal axis linear) can lie from the corrected samples: the ideal circle's
-        deviation plus how far the drawn arc lies from that circle anywhere. Returned
-        with the start and end radii and the turn from S to E (in the arc's sense,
-        [0, 2 pi)). None when it does not turn as the nominal arc does (one turn)."""
+    def _bound(self, clockwise: bool, written: Ends, C1: float, C2: float
+               ) -> tuple[float, float, float, float] | None:
+        """How far the arc a controller draws from S to E (``written``: (s1, s2, sn, e1,
+        e2, en), the plane coordinates and the normal one of each, as :attr:`ends`) around
+        (C1, C2) (radius from the start to the end radius, the normal axis linear) can lie
+        from the corrected samples: the ideal circle's deviation plus how far the drawn arc
+        lies from that circle anywhere. Returned with the start and end radii and the turn
+        from S to E (in the arc's sense, [0, 2 pi)). None when it does not turn as the
+        nominal arc does (one turn)."""
+        s1, s2, sn, e1, e2, en = written
         hyp = math.hypot
         rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
         th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
@@ -446,7 +450,7 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
         args = (Sl[k], El[k], tuple(axl[k]), cwl[k], d[k], ul[k], tuple(bl[k]), budget)
         if ok:
             got = (wa, wb, mm_k, bd) if p else None
-            hints[k].remember(*args, got)
+            hints[k].remember(args, got)
         else:
             got = hints[k].words(*args)
         out[k] = got
@@ -574,10 +578,10 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     s_m = (mp + 0.5) / (na[mo] - 1)
     centre = np.array([arc.center for _i, _m, arc in arcs_i], dtype=float).reshape(-1, 3)
 
-    q0_a, q1_a = Q0[ai], Q1[ai]
+    cols = ArcColumns(axes, t0, sweep, r0, r1, centre, Q0[ai], Q1[ai])
 
     def arc_nominal(owner: IntArray, s: FloatArray) -> FloatArray:
-        return arcs_points(owner, s, axes, t0, sweep, r0, r1, centre, q0_a, q1_a)
+        return arcs_points(owner, s, cols)
 
     nom_a = arc_nominal(ao, s_a)
     lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm, curvature, budget - rounding)
