@@ -295,7 +295,7 @@ class Planner:
             # straight moves of the runs of plain lines: those that must be split are
             # planned when they are written (their Move is made then)
             rows, owner = bulk.line_rows(runs)
-            ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
+            ok = vplan.lines_within(rows, vplan.MoveEnds(Q0, Q1, S, T), corr, step_mm=SAMPLE_STEP_MM,
                                     limit=self.opt.tolerance_mm * FIT_BUDGET
                                     - max(self.round_err(r.unit) for r in runs), curvature=curvature)
             run_lines: list[tuple[int, PlanMove | _RunLine]] = []
@@ -306,9 +306,10 @@ class Planner:
                 self._plan_moves(run_lines, tab, plans)
         if planned and self.bulk_plan:
             _ok_lines, hints, planned = vplan.plan_chunk(
-                planned, tab.arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
-                min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
-                rounding=max(self.round_err(m.unit) for _i, m in tab.moves), curvature=curvature)
+                planned, tab.arc_prm, vplan.MoveEnds(Q0, Q1, S, T), corr, vplan.Sampling(
+                    step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD, min_arc_samples=ARC_CHECK_MIN_SAMPLES,
+                    budget=self.opt.tolerance_mm * FIT_BUDGET,
+                    rounding=max(self.round_err(m.unit) for _i, m in tab.moves)), curvature=curvature)
             self._hint_plans(hints, tab)
         if planned:
             self._plan_moves(planned, tab, plans)

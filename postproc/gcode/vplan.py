@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import (
     TYPE_CHECKING,
     Literal,
@@ -145,6 +146,32 @@ Ends: TypeAlias = tuple[float, float, float, float, float, float]
 #: the arguments of :meth:`ArcHint.words`: (S, E, axes, clockwise, d, unit, base, budget)
 WordsArgs: TypeAlias = tuple[Sequence[float], Sequence[float], tuple[int, int, int], bool, int, float,
                              tuple[float, float], float]
+
+
+@dataclass(frozen=True, eq=False)
+class MoveEnds:
+    """A chunk's moves as the bulk planner reads them, one row per move (N, 3): nominal
+    starts ``q0`` and ends ``q1``, corrected starts ``start`` and ends ``target``."""
+
+    q0: FloatArray
+    q1: FloatArray
+    start: FloatArray
+    target: FloatArray
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """How :func:`plan_chunk` samples and judges the moves: a sample every ``step_mm``
+    along a move and, on arcs, every ``step_rad`` of sweep, at least ``min_arc_samples``
+    on an arc (its ends included); ``budget`` (mm): how far the written line or arc may
+    lie from the corrected samples, ``rounding`` (mm): what rounding the words may add
+    to a line's ends (taken from the budget of straight moves)."""
+
+    step_mm: float
+    step_rad: float
+    min_arc_samples: int
+    budget: float
+    rounding: float
 
 
 @final
@@ -473,8 +500,7 @@ def _group_max(values: FloatArray, starts: IntArray) -> FloatArray:
     return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(starts))
 
 
-def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray, step_mm: float,
-                  curvature: Curvature | None, limit: float
+def _line_samples(rows: IntArray, ends: MoveEnds, step_mm: float, curvature: Curvature | None, limit: float
                   ) -> tuple[IntArray, FloatArray, Callable[[FloatArray], BoolArray]]:
     """Interior samples of the straight moves ``rows`` (every ``step_mm``, at least one):
     ``(owner rows, nominal points, check)``; ``check(corrected points)`` tells for each
@@ -487,6 +513,7 @@ def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray,
     are sampled at most ``step_mm`` apart, or farther where K allows (between samples h
     apart the path leaves the polyline of its samples by K h^2 / 8 at most, kept to a
     tenth of the limit), and their samples are held to the limit less that."""
+    Q0, Q1, S, T = ends.q0, ends.q1, ends.start, ends.target
     length = np.linalg.norm(Q1[rows] - Q0[rows], axis=1) if len(rows) else np.zeros(0)
     n = np.maximum(3, np.ceil(length / step_mm).astype(int) + 1) if len(rows) else np.zeros(0, dtype=int)
     settled = np.zeros(len(rows), dtype=bool)
@@ -524,28 +551,64 @@ def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray,
     return r, nom, check
 
 
-def lines_within(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray,
-                 corrected: Corrected, *, step_mm: float, limit: float,
+def lines_within(rows: IntArray, ends: MoveEnds, corrected: Corrected, *, step_mm: float, limit: float,
                  curvature: Curvature | None = None) -> BoolArray:
     """Which straight moves ``rows`` stay within ``limit`` of their corrected chord (see
     :func:`_line_samples`; ``corrected`` as in :func:`plan_chunk`)."""
-    r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm, curvature, limit)
+    r, nom, check = _line_samples(rows, ends, step_mm, curvature, limit)
     return check(corrected(r, nom) if len(r) else np.zeros((0, 3)))
 
 
-def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0: FloatArray, Q1: FloatArray,
-               S: FloatArray, T: FloatArray, corrected: Corrected, *, step_mm: float, step_rad: float,
-               min_arc_samples: int, budget: float, rounding: float, curvature: Curvature | None = None
+def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], ends: MoveEnds,
+               corrected: Corrected, sampling: Sampling, curvature: Curvature | None = None
                ) -> tuple[list[int], dict[int, ArcHint], list[tuple[int, _M]]]:
     """Settle in bulk the planned moves of a chunk that stay one line or one exact arc.
 
     ``planned``: (row, Move) pairs; ``arc_prm``: row -> arc_params of the arcs;
-    ``Q0``/``Q1``: nominal starts and ends, ``S``/``T``: corrected starts and ends (per
-    row); ``corrected(rows, nominal points)``: the engine's corrected points (N, 3) for
-    nominal points on those rows' moves. Returns ``(lines, hints, rest)``: the rows of
-    straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left None), and
-    the (row, Move) pairs left to the general path.
+    ``ends``: nominal and corrected starts and ends (per row); ``corrected(rows, nominal
+    points)``: the engine's corrected points (N, 3) for nominal points on those rows'
+    moves; ``curvature``: as :func:`_line_samples`. Returns ``(lines, hints, rest)``: the
+    rows of straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left
+    None), and the (row, Move) pairs left to the general path.
     """
+    lines_i, arcs_i, rest = _sort_moves(planned, arc_prm)
+    li = np.array(lines_i, dtype=int)
+    arcs = _arc_samples(arcs_i, arc_prm, ends, sampling)
+    lrows, nom_l, lcheck = _line_samples(li, ends, sampling.step_mm, curvature, sampling.budget - sampling.rounding)
+    rows_all = np.concatenate([lrows, arcs.rows[arcs.own]])
+    corr = corrected(rows_all, np.vstack([nom_l, arcs.nom])) if len(rows_all) else np.zeros((0, 3))
+    P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
+    # -- straight moves: every sample within budget - rounding of the chord ---------------
+    ok_lines: list[int] = []
+    if len(li):
+        good = lcheck(P_l)
+        ok_lines = li[good].tolist()
+        bad = set(li[~good].tolist())
+        rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
+    hints: dict[int, ArcHint] = {}
+    if not len(arcs.rows):
+        return ok_lines, hints, rest
+    pts = _plane_points(arcs, ends, P_a)
+    circles = _fit_centres(pts)
+    worst, turning = _worst_deviations(pts, circles, arcs)
+    usable = circles.usable & turning & np.isfinite(worst) & np.isfinite(circles.rho) & (worst <= sampling.budget)
+    # the hints made from the arrays' rows as Python floats (tolist), all at once
+    sel = np.flatnonzero(usable)
+    c1, c2, rho, sweep, r0, r1 = circles.c1, circles.c2, circles.rho, arcs.cols.sweep, arcs.cols.r0, arcs.cols.r1
+    rows = zip(*(x[sel].tolist() for x in (c1, c2, rho, worst, sweep, pts.S1, pts.S2, pts.Sn, pts.E1, pts.E2,
+                                           pts.En, np.abs(r1 - r0))), strict=True)
+    for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
+                                                                               rows, strict=True):
+        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
+    if len(sel) < len(arcs.rows):
+        rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
+    return ok_lines, hints, rest
+
+
+def _sort_moves(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams]
+                ) -> tuple[list[int], list[tuple[int, _M, Arc]], list[tuple[int, _M]]]:
+    """The rows of the straight moves, the arcs :func:`plan_chunk` may settle (one turn of
+    I/J/K form in a known plane, not a full circle) and the moves left to the general path."""
     lines_i: list[int] = []
     arcs_i: list[tuple[int, _M, Arc]] = []
     rest: list[tuple[int, _M]] = []
@@ -558,7 +621,34 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
             arcs_i.append((i, m, arc))
         else:
             rest.append((i, m))
-    li = np.array(lines_i, dtype=int)
+    return lines_i, arcs_i, rest
+
+
+@dataclass(frozen=True, eq=False)
+class _ArcSamples:
+    """The arcs :func:`plan_chunk` fits (k): their ``rows``, geometry ``cols``, sense
+    ``clockwise`` and sample counts ``n`` (ends included); the interior samples (owner
+    ``own``, parameter ``s``, nominal points ``nom``) and the middles of all the sample
+    intervals (owner ``mid_own``, interval ``mid_pos``, parameter ``mid_s``)."""
+
+    rows: IntArray
+    cols: ArcColumns
+    clockwise: BoolArray
+    n: IntArray
+    own: IntArray
+    s: FloatArray
+    nom: FloatArray
+    mid_own: IntArray
+    mid_pos: IntArray
+    mid_s: FloatArray
+
+
+def _arc_samples(arcs_i: Sequence[tuple[int, PlanMove, Arc]], arc_prm: dict[int, ArcParams], ends: MoveEnds,
+                 sampling: Sampling) -> _ArcSamples:
+    """The samples of the arcs ``arcs_i``: every ``step_mm`` along and ``step_rad`` of sweep,
+    at least ``min_arc_samples``."""
+    Q0, Q1 = ends.q0, ends.q1
+    step_mm, step_rad = sampling.step_mm, sampling.step_rad
     ai = np.array([i for i, _m, _a in arcs_i], dtype=int)
     prm = [arc_prm[i] for i in ai.tolist()]
     sweep = np.array([p[2] for p in prm])
@@ -568,37 +658,48 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     axes = np.array([p[0] for p in prm], dtype=int).reshape(-1, 3)
     dn = Q1[ai, axes[:, 2]] - Q0[ai, axes[:, 2]] if len(ai) else np.zeros(0)
     length = np.hypot(np.abs(sweep) * 0.5 * (r0 + r1), dn)
-    na = np.maximum.reduce([np.full(len(ai), min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
+    na = np.maximum.reduce([np.full(len(ai), sampling.min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
                             np.ceil(np.abs(sweep) / step_rad).astype(int) + 1]) if len(ai) else np.zeros(0, int)
     # interior samples only: the ends are S and T
-    ao, ap, astart = _ragged(na - 2)
+    ao, ap, _astart = _ragged(na - 2)
     s_a = (ap + 1) / (na[ao] - 1)
     # and the middles of the sample intervals (all of them), for the nominal bulge
-    mo, mp, mstart = _ragged(na - 1)
+    mo, mp, _mstart = _ragged(na - 1)
     s_m = (mp + 0.5) / (na[mo] - 1)
     centre = np.array([arc.center for _i, _m, arc in arcs_i], dtype=float).reshape(-1, 3)
-
     cols = ArcColumns(axes, t0, sweep, r0, r1, centre, Q0[ai], Q1[ai])
+    cw = np.array([arc.clockwise for _i, _m, arc in arcs_i])
+    return _ArcSamples(ai, cols, cw, na, ao, s_a, arcs_points(ao, s_a, cols), mo, mp, s_m)
 
-    def arc_nominal(owner: IntArray, s: FloatArray) -> FloatArray:
-        return arcs_points(owner, s, cols)
 
-    nom_a = arc_nominal(ao, s_a)
-    lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm, curvature, budget - rounding)
-    rows_all = np.concatenate([lrows, ai[ao]])
-    corr = corrected(rows_all, np.vstack([nom_l, nom_a])) if len(rows_all) else np.zeros((0, 3))
-    P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
-    # -- straight moves: every sample within budget - rounding of the chord ---------------
-    ok_lines: list[int] = []
-    if len(li):
-        good = lcheck(P_l)
-        ok_lines = li[good].tolist()
-        bad = set(li[~good].tolist())
-        rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
-    hints: dict[int, ArcHint] = {}
-    if not len(ai):
-        return ok_lines, hints, rest
-    # -- arcs: samples and bulged interval middles, in the plane of each arc -------------
+@dataclass(frozen=True, eq=False)
+class _PlanePoints:
+    """The points each arc is fitted to, in its plane: every sample with its ends and the
+    bulged middle of every interval (``P1``, ``P2`` in the plane, ``Pn`` along the normal;
+    ``owner``: the arc, ``frac``: the point's parameter), the corrected ends of each arc
+    (``S1`` .. ``En``) and the first guess of its centre (``c01``, ``c02``)."""
+
+    P1: FloatArray
+    P2: FloatArray
+    Pn: FloatArray
+    owner: IntArray
+    frac: FloatArray
+    S1: FloatArray
+    S2: FloatArray
+    Sn: FloatArray
+    E1: FloatArray
+    E2: FloatArray
+    En: FloatArray
+    c01: FloatArray
+    c02: FloatArray
+
+
+def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlanePoints:
+    """The arcs' corrected samples ``P_a`` (the interior ones) with their ends and bulged
+    interval middles, in the plane of each arc, and the first guess of each centre."""
+    ai, na, cols = arcs.rows, arcs.n, arcs.cols
+    mo, mp, s_m = arcs.mid_own, arcs.mid_pos, arcs.mid_s
+    S, T = ends.start, ends.target
     # every sample with its ends: [S, interior..., T] per arc
     full_o, full_p, full_start = _ragged(na)
     Pf = np.empty((len(full_o), 3))
@@ -607,11 +708,11 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     Pf[first] = S[ai]
     Pf[last] = T[ai]
     Pf[~first & ~last] = P_a
-    nom_m = arc_nominal(mo, s_m)
+    nom_m = arcs_points(mo, s_m, cols)
     nom_f = np.empty_like(Pf)
-    nom_f[first] = Q0[ai]
-    nom_f[last] = Q1[ai]
-    nom_f[~first & ~last] = nom_a
+    nom_f[first] = ends.q0[ai]
+    nom_f[last] = ends.q1[ai]
+    nom_f[~first & ~last] = arcs.nom
     # interval k of arc j lies between full slots full_start[j] + k and + k + 1
     a_idx = full_start[mo] + mp
     bulge = nom_m - 0.5 * (nom_f[a_idx] + nom_f[a_idx + 1])
@@ -621,6 +722,7 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     frac = np.concatenate([full_p / (na[full_o] - 1), s_m])
     k = len(ai)
     j = np.arange(k)
+    axes = cols.axes
     ax1, ax2, axn = axes[:, 0], axes[:, 1], axes[:, 2]
     S1, S2, Sn = S[ai, ax1], S[ai, ax2], S[ai, axn]
     E1, E2, En = T[ai, ax1], T[ai, ax2], T[ai, axn]
@@ -631,8 +733,27 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     cnt = np.bincount(full_o, minlength=k)
     for c in range(3):
         off[:, c] = np.bincount(full_o, Pf[:, c] - nom_f[:, c], minlength=k) / cnt
-    c01 = centre[j, ax1] + off[j, ax1]
-    c02 = centre[j, ax2] + off[j, ax2]
+    c01 = cols.centre[j, ax1] + off[j, ax1]
+    c02 = cols.centre[j, ax2] + off[j, ax2]
+    return _PlanePoints(P1, P2, Pn, owner, frac, S1, S2, Sn, E1, E2, En, c01, c02)
+
+
+@dataclass(frozen=True, eq=False)
+class _Circles:
+    """The fitted circle of each arc: centre (``c1``, ``c2``) on the bisector of its
+    corrected ends, radius ``rho``; ``usable``: a chord of finite, nonzero length."""
+
+    c1: FloatArray
+    c2: FloatArray
+    rho: FloatArray
+    usable: BoolArray
+
+
+def _fit_centres(p: _PlanePoints) -> _Circles:
+    """The centre on the bisector of each arc's corrected ends whose circle fits its points
+    best: Gauss-Newton on the signed distance along the bisector, for all arcs at once."""
+    S1, S2, E1, E2, P1, P2, owner = p.S1, p.S2, p.E1, p.E2, p.P1, p.P2, p.owner
+    k = len(S1)
     M1, M2 = 0.5 * (S1 + E1), 0.5 * (S2 + E2)
     D1, D2 = E1 - S1, E2 - S2
     L = np.hypot(D1, D2)
@@ -640,7 +761,7 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     Ls = np.where(usable, L, 1.0)
     n1, n2 = -D2 / Ls, D1 / Ls
     h = 0.5 * L
-    t = (c01 - M1) * n1 + (c02 - M2) * n2
+    t = (p.c01 - M1) * n1 + (p.c02 - M2) * n2
     # each arc's fit stops once its step is below CENTRE_SETTLED_MM (the steps after are
     # rounding noise), as segment.bisector_centre's does: what an arc gets does not
     # depend on the arcs fitted with it
@@ -664,33 +785,31 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
             break
     c1, c2 = M1 + t * n1, M2 + t * n2
     rho = np.hypot(h, t)
-    # the deviation of every sample from that circle (a helix along the normal axis)
+    return _Circles(c1, c2, rho, usable)
+
+
+def _worst_deviations(p: _PlanePoints, circles: _Circles, arcs: _ArcSamples) -> tuple[FloatArray, BoolArray]:
+    """The largest deviation of each arc's points from its fitted circle (a helix along
+    the normal axis, turning as the arc does), and whether the circle turns as the
+    nominal arc does (within a quarter turn; not at all: False)."""
+    c1, c2, rho, owner = circles.c1, circles.c2, circles.rho, p.owner
+    S1, S2, Sn, E1, E2, En = p.S1, p.S2, p.Sn, p.E1, p.E2, p.En
     th0 = np.arctan2(S2 - c2, S1 - c1)
     th1 = np.arctan2(E2 - c2, E1 - c1)
-    cw = np.array([arc.clockwise for _i, _m, arc in arcs_i])
+    cw = arcs.clockwise
     base = np.where(cw, -np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
     sgn = np.where(cw, -1.0, 1.0)
     asw = np.abs(base)
-    usable &= (asw > 0) & (np.abs(base - sweep) <= math.pi / 2)
+    turning = (asw > 0) & (np.abs(base - arcs.cols.sweep) <= math.pi / 2)
     asw = np.where(asw > 0, asw, 1.0)
-    v1, v2 = P1 - c1[owner], P2 - c2[owner]
+    v1, v2 = p.P1 - c1[owner], p.P2 - c2[owner]
     phi = np.arctan2(v2, v1)
     alpha = np.mod((phi - th0[owner]) * sgn[owner], TWO_PI)
-    target = frac * asw[owner]
+    target = p.frac * asw[owner]
     alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
     f = alpha / asw[owner]
     nrm = Sn[owner] + (En - Sn)[owner] * f
-    dev = np.hypot(np.hypot(v1, v2) - rho[owner], Pn - nrm)
-    worst = np.full(k, -np.inf)
+    dev = np.hypot(np.hypot(v1, v2) - rho[owner], p.Pn - nrm)
+    worst = np.full(len(S1), -np.inf)
     np.maximum.at(worst, owner, dev)
-    usable &= np.isfinite(worst) & np.isfinite(rho) & (worst <= budget)
-    # the hints made from the arrays' rows as Python floats (tolist), all at once
-    sel = np.flatnonzero(usable)
-    rows = zip(*(x[sel].tolist() for x in (c1, c2, rho, worst, sweep, S1, S2, Sn, E1, E2, En, np.abs(r1 - r0))),
-               strict=True)
-    for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
-                                                                               rows, strict=True):
-        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
-    if len(sel) < k:
-        rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
-    return ok_lines, hints, rest
+    return worst, turning
