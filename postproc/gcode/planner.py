@@ -408,7 +408,8 @@ class Planner:
         absolute = np.array([mv.arc_absolute for _i, mv, _h in arcs], dtype=bool)[:, None]
         base = np.where(absolute, sh[:, :2], S[rows, axes[:, :2]])
         clockwise = [cast("Arc", mv.arc).clockwise for _i, mv, _h in arcs]
-        got = vplan.words_many([h for _i, _mv, h in arcs], S, E, axes, clockwise, d, unit, base, budget)
+        got = vplan.words_many([h for _i, _mv, h in arcs], vplan.WrittenArcs(S, E, axes, clockwise, d, unit, base),
+                               budget)
         return {i for (i, _mv, _h), w in zip(arcs, got, strict=True) if w is None}
 
     def _lazy_plan(self, i: int, mv: PlanMove, tab: Table) -> Callable[[], Plan]:

@@ -379,14 +379,28 @@ def round_many(values: FloatArray, d: Sequence[int] | IntArray) -> FloatArray:
     return out
 
 
-def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: IntArray, clockwise: Sequence[bool],
-               d: Sequence[int], unit: FloatArray, base: FloatArray, budget: float
+@dataclass(frozen=True, eq=False)
+class WrittenArcs:
+    """Arcs as written, one row each, for :func:`words_many`: the ends ``S``, ``E`` (k, 3)
+    machine mm, ``axes`` (k, 3) the plane's two axes and its normal, ``clockwise`` (k,),
+    ``d`` (k,) the decimals of the words, ``unit`` (k,) mm per program unit, ``base``
+    (k, 2) what the centre words are relative to (machine mm)."""
+
+    S: FloatArray
+    E: FloatArray
+    axes: IntArray
+    clockwise: Sequence[bool]
+    d: Sequence[int]
+    unit: FloatArray
+    base: FloatArray
+
+
+def words_many(hints: Sequence[ArcHint], arcs: WrittenArcs, budget: float
                ) -> list[tuple[float, float, float, float] | None]:
     """:meth:`ArcHint.words` of many arcs at once (row k: ``hints[k].words(S[k], E[k],
-    axes[k], clockwise[k], d[k], unit[k], base[k], budget)``; S, E (k, 3) machine
-    axes, ``axes`` (k, 3), ``base`` (k, 2)): the same results, bit for bit, and each
-    hint left with its answer as :meth:`ArcHint.words` leaves it (the writer asking
-    again with the same ends gets this answer).
+    axes[k], clockwise[k], d[k], unit[k], base[k], budget)`` of ``arcs``): the same
+    results, bit for bit, and each hint left with its answer as :meth:`ArcHint.words`
+    leaves it (the writer asking again with the same ends gets this answer).
 
     The arithmetic of :meth:`ArcHint._words` and :meth:`ArcHint._bound` over arrays:
     elementwise ``+ - * /``, ``abs`` and ``%`` (``np.mod`` is Python's floored
@@ -400,80 +414,19 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
     out: list[tuple[float, float, float, float] | None] = [None] * n
     if not n:
         return out
-    hyp, atan2 = math.hypot, math.atan2
-    rows = np.arange(n)
-    s1, s2, sn = S[rows, axes[:, 0]], S[rows, axes[:, 1]], S[rows, axes[:, 2]]
-    e1, e2, en = E[rows, axes[:, 0]], E[rows, axes[:, 1]], E[rows, axes[:, 2]]
-    B1, B2 = base[:, 0], base[:, 1]
-    H1, H2, RHO, WORST, NSW = np.array([(h.c1, h.c2, h.rho, h.worst, h.nsweep) for h in hints], dtype=float).T
-    u1, u2, un, x1, x2, xn = np.array([h.ends for h in hints], dtype=float).T
-    cw = np.asarray(clockwise, dtype=bool)
-    step = np.array([10.0 ** (-k) for k in d])
-    agree = 0.5 * step * unit
+    g = _ArcRows.of(hints, arcs)
     with np.errstate(all="ignore"):
-        dx, dy = e1 - s1, e2 - s2
-        L = _map_floats(hyp, dx, dy)
-        Ls = np.where(L == 0.0, 1.0, L)
-        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
-        n1, n2 = -dy / Ls, dx / Ls
-        t = (H1 - m1) * n1 + (H2 - m2) * n2
-        # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
-        v1 = round_many((m1 + t * n1 - B1) / unit, d) + 0.0
-        v2 = round_many((m2 + t * n2 - B2) / unit, d) + 0.0
-        w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
-        C1, C2 = B1 + w1 * unit, B2 + w2 * unit
-        rs = _map_floats(hyp, s1 - C1, s2 - C2)
-        re_ = _map_floats(hyp, e1 - C1, e2 - C2)
-        mism = np.abs(rs - re_)
-        found = mism <= agree
-        lattice = np.zeros(n, dtype=bool)
-        search = np.flatnonzero(~found & (L != 0.0))
-        # the lattice around (v1, v2), nearest first: the first centre whose radii agree
-        # (asked a few candidates at a time, of the arcs still without one)
-        for lo in range(1, len(_ORDER), LATTICE_BLOCK):
-            if not len(search):
-                break
-            k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
-            st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
-            c1w = round_many(v1[search][:, None] + k1 * st, dk)
-            c2w = round_many(v2[search][:, None] + k2 * st, dk)
-            cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
-            ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
-            rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
-            mm = np.abs(rs_c - re_c)
-            agrees = mm <= agree[search][:, None]
-            hit = agrees.any(axis=1)
-            pick = np.argmax(agrees, axis=1)[hit]
-            sel = search[hit]
-            w1[sel], w2[sel] = c1w[hit, pick], c2w[hit, pick]
-            C1[sel], C2[sel] = cc1[hit, pick], cc2[hit, pick]
-            rs[sel], re_[sel], mism[sel] = rs_c[hit, pick], re_c[hit, pick], mm[hit, pick]
-            found[sel] = True
-            lattice[sel] = True
-            search = search[~hit]
-        # ArcHint._bound about (C1, C2)
-        th0 = _map_floats(atan2, s2 - C2, s1 - C1)
-        th1 = _map_floats(atan2, e2 - C2, e1 - C1)
-        turn = np.where(cw, np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
-        sweep = np.where(cw, -turn, turn)
-        moved = _map_floats(hyp, C1 - H1, C2 - H2)
-        shift = np.maximum(_map_floats(hyp, s1 - u1, s2 - u2), _map_floats(hyp, e1 - x1, e2 - x2))
-        bound = WORST + moved + np.maximum(np.abs(rs - RHO), np.abs(re_ - RHO))
-        r_min = np.minimum(np.minimum(rs, re_), RHO)
-        dfrac = 3.0 * (moved + shift) / (r_min * np.abs(sweep))
-        bound = bound + np.maximum(np.abs(sn - un), np.abs(en - xn)) + np.abs(en - sn) * dfrac
-        finite = np.isfinite(np.stack([s1, s2, sn, e1, e2, en, B1, B2, unit, H1, H2, RHO, WORST, NSW, u1, u2, un,
-                                       x1, x2, xn, bound, mism])).all(axis=0)
-        passes = (found & (sweep != 0.0) & ~(np.abs(sweep - NSW) > math.pi / 2) & (r_min > 0.0)
-                  & (bound + mism <= budget) & ~(np.minimum(rs, re_) < MIN_ARC_RADIUS_MM)
-                  & (turn >= MIN_ARC_SWEEP_RAD))
+        c = _first_centres(g)
+        _search_lattice(g, c)
+        passes, finite, bound = _judge(g, c, budget)
     # answered here: a chord of no length (None), else every value finite and, for a
     # lattice centre, no word of zero (whose sign ArcHint._words settles)
-    here = (L == 0.0) | (finite & ~(lattice & ((w1 == 0.0) | (w2 == 0.0))))
-    passes &= L != 0.0
-    Sl, El, axl, cwl, ul, bl = S.tolist(), E.tolist(), axes.tolist(), cw.tolist(), unit.tolist(), base.tolist()
-    for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), w1.tolist(), w2.tolist(),
-                                                      mism.tolist(), bound.tolist(), strict=True)):
+    here = (c.L == 0.0) | (finite & ~(c.lattice & ((c.w1 == 0.0) | (c.w2 == 0.0))))
+    passes &= c.L != 0.0
+    Sl, El, axl, cwl = arcs.S.tolist(), arcs.E.tolist(), arcs.axes.tolist(), g.cw.tolist()
+    ul, bl, d = arcs.unit.tolist(), arcs.base.tolist(), arcs.d
+    for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), c.w1.tolist(), c.w2.tolist(),
+                                                      c.mism.tolist(), bound.tolist(), strict=True)):
         args = (Sl[k], El[k], tuple(axl[k]), cwl[k], d[k], ul[k], tuple(bl[k]), budget)
         if ok:
             got = (wa, wb, mm_k, bd) if p else None
@@ -482,6 +435,155 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
             got = hints[k].words(*args)
         out[k] = got
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class _ArcRows:
+    """The columns :func:`words_many` computes with, one row per arc: the written ends in
+    the plane's order (``s1``, ``s2``, ``sn``, ``e1``, ``e2``, ``en``), the base of the
+    centre words (``B1``, ``B2``), the hint's circle (``H1``, ``H2``, ``RHO``, ``WORST``,
+    ``NSW``) and the corrected ends it was fitted between (``u1`` .. ``xn``), the sense
+    ``cw``, the decimals ``d``, ``unit``, the ``step`` of the last decimal and the radius
+    agreement ``agree`` (mm)."""
+
+    s1: FloatArray
+    s2: FloatArray
+    sn: FloatArray
+    e1: FloatArray
+    e2: FloatArray
+    en: FloatArray
+    B1: FloatArray
+    B2: FloatArray
+    H1: FloatArray
+    H2: FloatArray
+    RHO: FloatArray
+    WORST: FloatArray
+    NSW: FloatArray
+    u1: FloatArray
+    u2: FloatArray
+    un: FloatArray
+    x1: FloatArray
+    x2: FloatArray
+    xn: FloatArray
+    cw: BoolArray
+    d: Sequence[int]
+    unit: FloatArray
+    step: FloatArray
+    agree: FloatArray
+
+    @classmethod
+    def of(cls, hints: Sequence[ArcHint], arcs: WrittenArcs) -> _ArcRows:
+        S, E, axes, unit, base = arcs.S, arcs.E, arcs.axes, arcs.unit, arcs.base
+        rows = np.arange(len(hints))
+        s1, s2, sn = S[rows, axes[:, 0]], S[rows, axes[:, 1]], S[rows, axes[:, 2]]
+        e1, e2, en = E[rows, axes[:, 0]], E[rows, axes[:, 1]], E[rows, axes[:, 2]]
+        H1, H2, RHO, WORST, NSW = np.array([(h.c1, h.c2, h.rho, h.worst, h.nsweep) for h in hints], dtype=float).T
+        u1, u2, un, x1, x2, xn = np.array([h.ends for h in hints], dtype=float).T
+        cw = np.asarray(arcs.clockwise, dtype=bool)
+        step = np.array([10.0 ** (-k) for k in arcs.d])
+        agree = 0.5 * step * unit
+        return cls(s1, s2, sn, e1, e2, en, base[:, 0], base[:, 1], H1, H2, RHO, WORST, NSW, u1, u2, un, x1, x2, xn,
+                   cw, arcs.d, unit, step, agree)
+
+
+@dataclass(frozen=True, eq=False)
+class _Centres:
+    """The centre words :func:`words_many` takes for each arc, as they are found: the
+    chord's length ``L``, the first candidate (``v1``, ``v2``), the words taken (``w1``,
+    ``w2``; ``lattice``: found in the lattice) and their centre (``C1``, ``C2``), its
+    start and end radii and their mismatch; ``found``: the radii agree. The arrays are
+    filled in place by :func:`_search_lattice`."""
+
+    L: FloatArray
+    v1: FloatArray
+    v2: FloatArray
+    w1: FloatArray
+    w2: FloatArray
+    C1: FloatArray
+    C2: FloatArray
+    rs: FloatArray
+    re_: FloatArray
+    mism: FloatArray
+    found: BoolArray
+    lattice: BoolArray
+
+
+def _first_centres(g: _ArcRows) -> _Centres:
+    """The hint's centre moved onto the bisector of the written ends, its words rounded
+    (:meth:`ArcHint._words`' first candidate), for every arc."""
+    hyp = math.hypot
+    s1, s2, e1, e2, unit, d = g.s1, g.s2, g.e1, g.e2, g.unit, g.d
+    dx, dy = e1 - s1, e2 - s2
+    L = _map_floats(hyp, dx, dy)
+    Ls = np.where(L == 0.0, 1.0, L)
+    m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+    n1, n2 = -dy / Ls, dx / Ls
+    t = (g.H1 - m1) * n1 + (g.H2 - m2) * n2
+    # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
+    v1 = round_many((m1 + t * n1 - g.B1) / unit, d) + 0.0
+    v2 = round_many((m2 + t * n2 - g.B2) / unit, d) + 0.0
+    w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
+    C1, C2 = g.B1 + w1 * unit, g.B2 + w2 * unit
+    rs = _map_floats(hyp, s1 - C1, s2 - C2)
+    re_ = _map_floats(hyp, e1 - C1, e2 - C2)
+    mism = np.abs(rs - re_)
+    found = mism <= g.agree
+    lattice = np.zeros(len(L), dtype=bool)
+    return _Centres(L, v1, v2, w1, w2, C1, C2, rs, re_, mism, found, lattice)
+
+
+def _search_lattice(g: _ArcRows, c: _Centres) -> None:
+    """The lattice around (v1, v2), nearest first: the first centre whose radii agree
+    (asked a few candidates at a time, of the arcs still without one), written into ``c``."""
+    hyp = math.hypot
+    s1, s2, e1, e2, B1, B2, step, d, unit = g.s1, g.s2, g.e1, g.e2, g.B1, g.B2, g.step, g.d, g.unit
+    search = np.flatnonzero(~c.found & (c.L != 0.0))
+    for lo in range(1, len(_ORDER), LATTICE_BLOCK):
+        if not len(search):
+            break
+        k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
+        st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
+        c1w = round_many(c.v1[search][:, None] + k1 * st, dk)
+        c2w = round_many(c.v2[search][:, None] + k2 * st, dk)
+        cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
+        ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
+        rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
+        mm = np.abs(rs_c - re_c)
+        agrees = mm <= g.agree[search][:, None]
+        hit = agrees.any(axis=1)
+        pick = np.argmax(agrees, axis=1)[hit]
+        sel = search[hit]
+        c.w1[sel], c.w2[sel] = c1w[hit, pick], c2w[hit, pick]
+        c.C1[sel], c.C2[sel] = cc1[hit, pick], cc2[hit, pick]
+        c.rs[sel], c.re_[sel], c.mism[sel] = rs_c[hit, pick], re_c[hit, pick], mm[hit, pick]
+        c.found[sel] = True
+        c.lattice[sel] = True
+        search = search[~hit]
+
+
+def _judge(g: _ArcRows, c: _Centres, budget: float) -> tuple[BoolArray, BoolArray, FloatArray]:
+    """:meth:`ArcHint._bound` about each centre of ``c`` and the rest of
+    :meth:`ArcHint._words`' checks: ``(passes, finite, bound)``, whether each arc's words
+    pass, whether all its values are finite, and the bound."""
+    hyp, atan2 = math.hypot, math.atan2
+    s1, s2, sn, e1, e2, en, C1, C2, rs, re_ = g.s1, g.s2, g.sn, g.e1, g.e2, g.en, c.C1, c.C2, c.rs, c.re_
+    RHO, NSW = g.RHO, g.NSW
+    th0 = _map_floats(atan2, s2 - C2, s1 - C1)
+    th1 = _map_floats(atan2, e2 - C2, e1 - C1)
+    turn = np.where(g.cw, np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
+    sweep = np.where(g.cw, -turn, turn)
+    moved = _map_floats(hyp, C1 - g.H1, C2 - g.H2)
+    shift = np.maximum(_map_floats(hyp, s1 - g.u1, s2 - g.u2), _map_floats(hyp, e1 - g.x1, e2 - g.x2))
+    bound = g.WORST + moved + np.maximum(np.abs(rs - RHO), np.abs(re_ - RHO))
+    r_min = np.minimum(np.minimum(rs, re_), RHO)
+    dfrac = 3.0 * (moved + shift) / (r_min * np.abs(sweep))
+    bound = bound + np.maximum(np.abs(sn - g.un), np.abs(en - g.xn)) + np.abs(en - sn) * dfrac
+    finite = np.isfinite(np.stack([s1, s2, sn, e1, e2, en, g.B1, g.B2, g.unit, g.H1, g.H2, RHO, g.WORST, NSW, g.u1,
+                                   g.u2, g.un, g.x1, g.x2, g.xn, bound, c.mism])).all(axis=0)
+    passes = (c.found & (sweep != 0.0) & ~(np.abs(sweep - NSW) > math.pi / 2) & (r_min > 0.0)
+              & (bound + c.mism <= budget) & ~(np.minimum(rs, re_) < MIN_ARC_RADIUS_MM)
+              & (turn >= MIN_ARC_SWEEP_RAD))
+    return passes, finite, bound
 
 
 def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
