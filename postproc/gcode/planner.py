@@ -33,6 +33,9 @@ from postproc.errors import (
 from postproc.gcode import bulk, vplan
 from postproc.gcode.directions import (
     MACHINE_STEP_MM,
+    Commanding,
+    PieceInputs,
+    SettledPoints,
     direction_axes,
     plan_pieces,
     reversals,
@@ -480,8 +483,8 @@ class Planner:
         inner = np.flatnonzero(counts[owner] > 1)
         if len(inner):
             Tx[inner] = solve(inner, Dx[inner])
-        Ex, Dx = settle(Tx, Dx, self.prev_target, self.dirs, hold, axes, solve, linenos[owner], free, given,
-                        first[owner], path=self.path)
+        Ex, Dx = settle(Tx, Dx, Commanding(self.prev_target, self.dirs, hold, axes, free, given, first[owner]), solve,
+                        linenos[owner], path=self.path)
         T, D = tab.target, tab.dirs = Ex[last], Dx[last]
         if not planned:
             return
@@ -510,9 +513,9 @@ class Planner:
                 bulge = arc_bulge
             else:
                 bulge = _no_bulge
-            seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
-                              TAKEUP_MIN_MM, bulge, self.opt.tolerance_mm - self.round_err(m.unit),
-                              lineno=m.lineno, path=self.path)
+            seq = plan_pieces(PieceInputs(j0, int(last[i]), start, start_dirs, Q0[i], bulge,
+                                          self.opt.tolerance_mm - self.round_err(m.unit), m.lineno),
+                              SettledPoints(Ex, Dx, sx, nominal, takeups, rows, axes, TAKEUP_MIN_MM), path=self.path)
             if arc is not None:
                 (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
                 carried = np.array(start_dirs, dtype=float)
