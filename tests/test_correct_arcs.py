@@ -22,7 +22,7 @@ from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
-from postproc.gcode.segment import arc_candidates
+from postproc.gcode.segment import ArcPiece, arc_candidates
 from postproc.simulate.machine import load_machine
 from postproc.simulate.program import verify_program
 
@@ -303,8 +303,8 @@ def test_arc_candidates_with_controller_limits_refuse_zero_radius_and_flat_arcs(
     sweeps = [2 * math.asin(0.0005 / math.hypot(*c)) for c in C]
     assert sweeps[2] < 1e-5 < sweeps[1]
     # clockwise from S over the top of each centre
-    loose, _m, _t = arc_candidates(S, E, C, (0, 1, 2), True, -sweeps[1], Q, frac)
-    strict, _m, _t = arc_candidates(S, E, C, (0, 1, 2), True, -sweeps[1], Q, frac, controller_limits=True)
+    loose, _m, _t = arc_candidates(ArcPiece(S, E, (0, 1, 2), True, -sweeps[1], Q, frac), C)
+    strict, _m, _t = arc_candidates(ArcPiece(S, E, (0, 1, 2), True, -sweeps[1], Q, frac), C, controller_limits=True)
     assert np.isfinite(loose).all()
     assert np.isinf(strict[[0, 2]]).all()
     assert strict[1] == loose[1]

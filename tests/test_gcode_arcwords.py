@@ -205,10 +205,10 @@ def test_words_many_is_words_bit_for_bit_in_every_plane_and_leaves_the_same_answ
     for budget in {c[8] for c in cases}:  # words_many takes one budget for all
         idx = [k for k, c in enumerate(cases) if c[8] == budget]
         mine = [cases[k] for k in idx]
-        answers = vplan.words_many([c[0] for c in mine], np.array([c[1] for c in mine]),
-                                   np.array([c[2] for c in mine]), np.array([c[3] for c in mine]),
-                                   [c[4] for c in mine], [c[5] for c in mine], np.array([c[6] for c in mine]),
-                                   np.array([c[7] for c in mine]), budget)
+        answers = vplan.words_many([c[0] for c in mine], vplan.WrittenArcs(
+            np.array([c[1] for c in mine]), np.array([c[2] for c in mine]), np.array([c[3] for c in mine]),
+            [c[4] for c in mine], [c[5] for c in mine], np.array([c[6] for c in mine]),
+            np.array([c[7] for c in mine])), budget)
         got.update(zip(idx, answers, strict=True))
     lattice = zero = taken = 0
     for k, (c, ref) in enumerate(zip(cases, refs, strict=True)):

@@ -97,17 +97,17 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
 def test_arc_candidates_are_the_old_ones_bit_for_bit(seed):
     import fit_reference as ref  # noqa: PLC0415  (the tests' own reference, a sibling module)
 
-    from postproc.gcode.segment import arc_candidates, limited_candidates
+    from postproc.gcode.segment import ArcPiece, arc_candidates, limited_candidates
 
     measured = 0
     for S, E, C, axes, cw, sweep, Q, frac, agree in _arc_cases(seed):
         for limits in (False, True):
             for limit in (None, agree, 10 * agree, math.inf):
                 old = ref.arc_candidates(S, E, C, axes, cw, sweep, Q, frac, limits, limit)
-                new = arc_candidates(S, E, C, axes, cw, sweep, Q, frac, limits, limit)
+                new = arc_candidates(ArcPiece(S, E, axes, cw, sweep, Q, frac), C, limits, limit)
                 assert all(_same(a, b) for a, b in zip(old, new, strict=True))
                 if limit is not None:
-                    meas = limited_candidates(S, E, C, axes, cw, sweep, Q, frac, limit, limits)
+                    meas = limited_candidates(ArcPiece(S, E, axes, cw, sweep, Q, frac), C, limit, limits)
                     assert all(_same(a, b) for a, b in zip(old, meas.full(), strict=True))
                     assert _same(meas.worst, old[0][meas.idx])
                     assert _same(meas.turns, old[2][meas.idx])

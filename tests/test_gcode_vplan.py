@@ -195,7 +195,7 @@ def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch
     (an odd last step across a short chord) fail when written: their general plans are
     made with the chunk's, in one engine call, not one by one when each fails; the output
     is the same either way."""
-    from postproc.gcode import pipeline
+    from postproc.gcode import planner
 
     static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
     rng = np.random.default_rng(5)
@@ -211,7 +211,7 @@ def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch
     out.append("M2\n")
     text = "".join(out)
     lazy = []
-    made = pipeline.Corrector._lazy_plan
+    made = planner.Planner._lazy_plan
 
     def counted(self, *args):
         plan = made(self, *args)
@@ -222,11 +222,11 @@ def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch
 
         return asked
 
-    monkeypatch.setattr(pipeline.Corrector, "_lazy_plan", counted)
+    monkeypatch.setattr(planner.Planner, "_lazy_plan", counted)
     new, rep = correct_text(text, static, Setup())
     assert rep.arcs_split > 20  # the hints failed: the arcs were fitted from their plans
     assert lazy == []  # every one of those plans made with the chunk's
-    monkeypatch.setattr(pipeline.Corrector, "_hints_failing_rounded", lambda self, arcs, budget: set())
+    monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
     old, _ = correct_text(text, static, Setup())
     assert len(lazy) > 20  # without the guess: one by one
     assert new == old

@@ -20,6 +20,7 @@ from postproc.gcode.geometry import TWO_PI
 from postproc.gcode.moves import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
+    ArcPiece,
     ArcSpec,
     Point,
     arc_candidates,
@@ -321,7 +322,7 @@ class MoveFit:
         if may_keep and span >= 1.0 and plan.get("whole"):
             ctrl = self.w._input_centre(mv, S, E)
             if ctrl is not None:
-                worst, mism, turns = arc_candidates(S, E, ctrl[None, :], (a1, a2, an), arc.clockwise, nsw, Qp, frac)
+                worst, mism, turns = arc_candidates(ArcPiece(S, E, (a1, a2, an), arc.clockwise, nsw, Qp, frac), ctrl[None, :])
                 # the input's own reading: the spiral its controller draws (no penalty for
                 # the input's own radius mismatch)
                 if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
@@ -367,7 +368,7 @@ class MoveFit:
         V = (v0 + _lattice(d)).round(d)  # ndarray.round: np.round without its wrapper
         C = base[None, :] + V * unit
         # candidates whose radii disagree are refused unmeasured (their worst is inf)
-        meas = limited_candidates(S, E, C, axes, arc.clockwise, nsw, Qp, frac, agree, controller_limits=True)
+        meas = limited_candidates(ArcPiece(S, E, axes, arc.clockwise, nsw, Qp, frac), C, agree, controller_limits=True)
         if budget < math.inf:
             # the measured candidates within the budget (those within the mismatch limit,
             # not refused); the first of the order below is the best of them when no other
@@ -398,7 +399,7 @@ class MoveFit:
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
                         "dev": float(worst[j]), "mismatch": float(mism[j])}
             ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
-            w, m, t = arc_candidates(S, E, ctrl[None, :], axes, arc.clockwise, nsw, Qp, frac,
+            w, m, t = arc_candidates(ArcPiece(S, E, axes, arc.clockwise, nsw, Qp, frac), ctrl[None, :],
                                      controller_limits=True)
             if m[0] <= agree and w[0] <= budget:
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
@@ -436,7 +437,7 @@ class MoveFit:
             return None
         # every radius's arc measured at once (each row as on its own), the best in the
         # order of the radii: the first of the smallest deviations among one-turn arcs
-        w, m, t = arc_candidates(S, E, np.array(centres), axes, clockwise, nsw, Qp, frac, controller_limits=True)
+        w, m, t = arc_candidates(ArcPiece(S, E, axes, clockwise, nsw, Qp, frac), np.array(centres), controller_limits=True)
         best = -1
         for j, (wj, tj) in enumerate(zip(w.tolist(), t.tolist(), strict=True)):
             if tj == 1 and (best < 0 or wj < w[best]):

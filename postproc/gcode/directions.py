@@ -50,7 +50,12 @@ and rounds on a finer grid than its neighbours; the points a fit adds between sa
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TypeAlias
+
 import numpy as np
+import numpy.typing as npt
 
 from postproc.effects.base import AXES, DIR_COLUMNS
 from postproc.errors import SafetyError
@@ -73,18 +78,33 @@ def direction_axes(engine) -> tuple[int, ...]:
     return tuple(k for k, c in enumerate(DIR_COLUMNS) if c in needs)
 
 
-def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, given=None, assumed=None,
-              move_first=None) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True, eq=False)
+class Commanding:
+    """How a sequence of M corrected points is commanded (:func:`commanded`, :func:`settle`).
+
+    ``start`` (3,): the point before the first (NaN: unknown, no motion into the first);
+    ``dirs0`` (3,): directions before it; ``hold_mm``: one output unit (at least
+    :data:`MACHINE_STEP_MM`); ``axes``: the direction-dependent axes (the others'
+    directions are 0); ``free`` (M,) bool: points that may be held (False: a stored
+    position the machine goes to as it is; None: all may); ``given`` (M, 3) bool:
+    directions that are the motion's own, not found (an arc's in-plane axes: the
+    direction of their quarter); ``move_first`` (M,) int: the first point of each
+    point's move (the samples of one move; None: each point is its own move)."""
+
+    start: Sequence[float] | np.ndarray
+    dirs0: Sequence[float] | np.ndarray
+    hold_mm: float
+    axes: Sequence[int]
+    free: np.ndarray | None = None
+    given: np.ndarray | None = None
+    move_first: np.ndarray | None = None
+
+
+def commanded(T: np.ndarray, how: Commanding, assumed=None) -> tuple[np.ndarray, np.ndarray]:
     """Targets as commanded and the direction of each axis into each of them.
 
-    ``T`` (M, 3): corrected points in order; ``start`` (3,): the point before the
-    first (NaN: unknown, no motion into the first); ``dirs0`` (3,): directions before
-    it; ``hold_mm``: one output unit (at least :data:`MACHINE_STEP_MM`); ``axes``: the
-    direction-dependent axes (the others' columns of ``D`` are 0); ``free`` (M,) bool:
-    points that may be held (False: a stored position the machine goes to as it is);
-    ``given`` (M, 3) bool: directions that are the motion's own, taken from ``assumed``
-    (M, 3) (an arc's in-plane axes: the direction of their quarter); ``move_first``
-    (M,) int: the first point of each point's move (the samples of one move).
+    ``T`` (M, 3): corrected points in order, commanded as ``how`` says; ``assumed``
+    (M, 3): the directions of the points whose directions ``how.given`` marks.
 
     Where an axis reverses after points of the same move that held it, the reversal is
     put at the first of them: the axis did not move before it in this move, and the
@@ -95,12 +115,13 @@ def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, give
     Returns ``(E, D)``: ``E`` is ``T`` with the held values, ``D`` (M, 3) the sign of
     each axis's commanded motion into each point, carried where it does not move.
     """
+    start, dirs0, hold_mm, given = how.start, how.dirs0, how.hold_mm, how.given
     E = np.array(T, dtype=float, copy=True)
     D = np.zeros_like(E)
     M = len(E)
-    may_hold = [True] * M if free is None else np.asarray(free, dtype=bool).tolist()
-    firsts = list(range(M)) if move_first is None else np.asarray(move_first, dtype=int).tolist()
-    for k in axes:
+    may_hold = [True] * M if how.free is None else np.asarray(how.free, dtype=bool).tolist()
+    firsts = list(range(M)) if how.move_first is None else np.asarray(how.move_first, dtype=int).tolist()
+    for k in how.axes:
         t = E[:, k].tolist()
         fixed = {} if given is None else {int(i): float(assumed[i, k]) for i in np.flatnonzero(given[:, k])}
         e = float(start[k])
@@ -136,30 +157,31 @@ def commanded(T: np.ndarray, start, dirs0, hold_mm: float, axes, free=None, give
     return E, D
 
 
-def settle(T: np.ndarray, D: np.ndarray, start, dirs0, hold_mm: float, axes, solve, lineno,
-           free=None, given=None, move_first=None, *, path: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+def settle(T: np.ndarray, D: np.ndarray, how: Commanding, solve, lineno, *,
+           path: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The fixed point of corrected targets and commanded directions (see the module).
 
-    ``T``: targets corrected with the assumed directions ``D`` (both (M, 3));
-    ``solve(rows, D_rows)``: the targets of ``rows`` corrected with directions
-    ``D_rows``; ``lineno`` (M,): program lines, for the refusal; ``free``, ``given``,
-    ``move_first``: as :func:`commanded`. Returns ``(E, D)``,
-    the targets as commanded (holds applied) and their directions.
+    ``T``: targets corrected with the assumed directions ``D`` (both (M, 3)), commanded
+    as ``how`` says (:func:`commanded`); ``solve(rows, D_rows)``: the targets of ``rows``
+    corrected with directions ``D_rows``; ``lineno`` (M,): program lines, for the
+    refusal. Returns ``(E, D)``, the targets as commanded (holds applied) and their
+    directions.
     """
-    axes = tuple(axes)
+    axes = tuple(how.axes)
     if not axes or not len(T):
         return T, D
     T = np.array(T, dtype=float, copy=True)
     D = np.array(D, dtype=float, copy=True)
-    free_mask = np.ones(len(T), dtype=bool) if free is None else np.asarray(free, dtype=bool)
+    free_mask = np.ones(len(T), dtype=bool) if how.free is None else np.asarray(how.free, dtype=bool)
     cols = list(axes)
     for _round in range(MAX_ITERATIONS):
-        E, Dm = commanded(T, start, dirs0, hold_mm, axes, free_mask, given, D, move_first)
+        E, Dm = commanded(T, how, D)
         diff = Dm[:, cols] != D[:, cols]
         changed = np.flatnonzero(diff.any(axis=1))
         if not len(changed):
             return E, D
-        D[np.ix_(changed, cols)] = Dm[np.ix_(changed, cols)]
+        block = np.ix_(changed, np.asarray(cols, dtype=np.intp))
+        D[block] = Dm[block]
         redo = changed[free_mask[changed]]
         if len(redo):
             T[redo] = solve(redo, D[redo])
@@ -195,16 +217,51 @@ def _distance_to_polyline(x: np.ndarray, pts: np.ndarray) -> float:
     return float(np.linalg.norm(a + t[:, None] * ab - x, axis=1).min())
 
 
-def plan_pieces(first: int, last: int, E: np.ndarray, D: np.ndarray, s: np.ndarray, nominal: np.ndarray,
-                start, start_dirs, start_nominal, takeups: dict, keys: np.ndarray, axes, takeup_min_mm: float,
-                bulge, jump_budget_mm: float = np.inf, lineno: int | None = None, path=None):
-    """The plan sequence of one move, whose points are ``first .. last`` of the
-    sequence (``E``: commanded, ``D``: directions, ``s``: move parameter, ``nominal``):
-    pieces of samples, and a take-up before each point a direction-dependent axis
-    reverses into (``takeups``: point index -> the point before it corrected with the
-    new directions; ``keys``: its indices, increasing). ``start``, ``start_dirs``, ``start_nominal``: the commanded point,
-    directions and nominal point the move starts from; ``bulge(s, nominal)``: how the
-    nominal path bulges from its chords between samples. Returns
+#: ``bulge(s, nominal)`` of a move: how its nominal path bulges from the chords between samples
+Bulge: TypeAlias = Callable[[npt.NDArray[np.float64], npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+
+
+@dataclass(frozen=True, eq=False)
+class SettledPoints:
+    """A chunk's commanded points once settled (:func:`settle`), as :func:`plan_pieces`
+    reads them: ``E`` (M, 3) commanded, ``D`` (M, 3) directions, ``s`` (M,) move
+    parameter, ``nominal`` (M, 3); ``takeups``: point index -> the point before it
+    corrected with the new directions, ``keys``: its indices, increasing; ``axes``: the
+    direction-dependent axes; ``takeup_min_mm``: a take-up that moves no axis by more
+    is left out."""
+
+    E: np.ndarray
+    D: np.ndarray
+    s: np.ndarray
+    nominal: np.ndarray
+    takeups: dict
+    keys: np.ndarray
+    axes: Sequence[int]
+    takeup_min_mm: float
+
+
+@dataclass(frozen=True, eq=False)
+class PieceInputs:
+    """One move for :func:`plan_pieces`: its points ``first`` .. ``last`` of the
+    sequence; ``start``, ``start_dirs``, ``start_nominal``: the commanded point,
+    directions and nominal point it starts from; ``bulge``: how its nominal path bulges
+    from its chords between samples; ``jump_budget_mm``: how far a reversal's jump may
+    leave the path; ``lineno``: its line, for a refusal."""
+
+    first: int
+    last: int
+    start: Sequence[float] | np.ndarray
+    start_dirs: Sequence[float] | np.ndarray
+    start_nominal: Sequence[float] | np.ndarray
+    bulge: Bulge
+    jump_budget_mm: float = np.inf
+    lineno: int | None = None
+
+
+def plan_pieces(move: PieceInputs, pts: SettledPoints, path: str | None = None) -> list:
+    """The plan sequence of one move, whose points are ``move.first .. move.last`` of the
+    settled sequence ``pts``: pieces of samples, and a take-up before each point a
+    direction-dependent axis reverses into (:func:`_takeup`). Returns
     ``[("takeup", point) | ("piece", s, Q, nominal, bulge), ...]``.
 
     A take-up moves a lagging axis (lost motion) in its new direction, through the
@@ -214,53 +271,65 @@ def plan_pieces(first: int, last: int, E: np.ndarray, D: np.ndarray, s: np.ndarr
     the table jumps back by ``b`` at once (the commanded point stays where the old
     direction left it, the next points are corrected with the new one). That jump is
     harmless where it runs along the path that follows (a slot cut back along the axis)
-    and is refused (:class:`SafetyError` naming ``lineno`` of ``path``) where it leaves
-    that path by more than ``jump_budget_mm`` (a reversal at an arc's quadrant point,
-    or inside a move across the axis).
+    and is refused (:class:`SafetyError` naming ``move.lineno`` of ``path``) where it
+    leaves that path by more than ``move.jump_budget_mm`` (a reversal at an arc's
+    quadrant point, or inside a move across the axis).
     """
-    cols = list(axes)
+    E, s, nominal, keys = pts.E, pts.s, pts.nominal, pts.keys
+    first, last = move.first, move.last
     seq: list = []
-    p_s, p_q, p_n = 0.0, np.asarray(start, dtype=float), np.asarray(start_nominal, dtype=float)
+    p_s, p_q, p_n = 0.0, np.asarray(move.start, dtype=float), np.asarray(move.start_nominal, dtype=float)
     a = first
 
     def close(b: int) -> None:
         if b > a:  # the piece's start and points a .. b-1
             ss = np.concatenate(([p_s], s[a:b]))
             nn = np.vstack([p_n[None, :], nominal[a:b]])
-            seq.append(("piece", ss, np.vstack([p_q[None, :], E[a:b]]), nn, bulge(ss, nn)))
+            seq.append(("piece", ss, np.vstack([p_q[None, :], E[a:b]]), nn, move.bulge(ss, nn)))
 
     for j in keys[np.searchsorted(keys, first):np.searchsorted(keys, last, side="right")].tolist():
-        prev_end = E[j - 1] if j > first else np.asarray(start, dtype=float)
-        prev_dirs = D[j - 1] if j > first else np.asarray(start_dirs, dtype=float)
-        tk = np.array(takeups[j], dtype=float)
-        same = [k for k in cols if D[j, k] == prev_dirs[k]]
-        tk[same] = prev_end[same]  # an axis that does not reverse here stays where it is
-        # an axis whose take-up goes against its new direction runs ahead: the reversal
-        # makes the table jump back by that much, along the path or refused
-        ahead = [k for k in cols if k not in same and (tk[k] - prev_end[k]) * D[j, k] < 0]
-        if ahead:
-            jump = np.zeros(3)
-            jump[ahead] = prev_end[ahead] - tk[ahead]
-            tk[ahead] = prev_end[ahead]
-            here = nominal[j - 1] if j > first else np.asarray(start_nominal, dtype=float)
-            off = _distance_to_polyline(here + jump, np.vstack([here[None, :], nominal[j:last + 1]]))
-            if off > jump_budget_mm:
-                ax = AXES[ahead[0]]
-                raise SafetyError(
-                    f"{ax} runs ahead of its approach direction (reversal b > 0): reversing it here makes the "
-                    f"tool jump {np.linalg.norm(jump) * 1000:.3g} um, {off * 1000:.3g} um off the path, more than "
-                    f"the tolerance; no move takes that up (one in the old direction overshoots, one in the new "
-                    f"direction jumps)", path=path, lineno=lineno,
-                    hint=f"check the calibration's backlash:{ax}: b > 0 is an axis that runs ahead, as one does "
-                         "whose controller compensates more backlash than there is: lower that compensation and "
-                         "measure again. Programs that reverse it only into moves along it are corrected")
-        if np.abs(tk - prev_end).max() <= takeup_min_mm:
+        tk, prev_end = _takeup(j, move, pts, path)
+        if np.abs(tk - prev_end).max() <= pts.takeup_min_mm:
             continue
         close(j)
         seq.append(("takeup", tk))
         p_s = float(s[j - 1]) if j > first else 0.0
-        p_n = nominal[j - 1] if j > first else np.asarray(start_nominal, dtype=float)
+        p_n = nominal[j - 1] if j > first else np.asarray(move.start_nominal, dtype=float)
         p_q = tk
         a = j
     close(last + 1)
     return seq
+
+
+def _takeup(j: int, move: PieceInputs, pts: SettledPoints, path: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """The take-up before point ``j`` of ``move`` and the commanded point before it: the
+    point before ``j`` corrected with the new directions, where an axis that does not
+    reverse stays where it is, and so does an axis that runs ahead (its jump back is
+    refused where it leaves the path by more than ``move.jump_budget_mm``)."""
+    E, D, nominal, first = pts.E, pts.D, pts.nominal, move.first
+    cols = list(pts.axes)
+    prev_end = E[j - 1] if j > first else np.asarray(move.start, dtype=float)
+    prev_dirs = D[j - 1] if j > first else np.asarray(move.start_dirs, dtype=float)
+    tk = np.array(pts.takeups[j], dtype=float)
+    same = [k for k in cols if D[j, k] == prev_dirs[k]]
+    tk[same] = prev_end[same]  # an axis that does not reverse here stays where it is
+    # an axis whose take-up goes against its new direction runs ahead: the reversal
+    # makes the table jump back by that much, along the path or refused
+    ahead = [k for k in cols if k not in same and (tk[k] - prev_end[k]) * D[j, k] < 0]
+    if ahead:
+        jump = np.zeros(3)
+        jump[ahead] = prev_end[ahead] - tk[ahead]
+        tk[ahead] = prev_end[ahead]
+        here = nominal[j - 1] if j > first else np.asarray(move.start_nominal, dtype=float)
+        off = _distance_to_polyline(here + jump, np.vstack([here[None, :], nominal[j:move.last + 1]]))
+        if off > move.jump_budget_mm:
+            ax = AXES[ahead[0]]
+            raise SafetyError(
+                f"{ax} runs ahead of its approach direction (reversal b > 0): reversing it here makes the "
+                f"tool jump {np.linalg.norm(jump) * 1000:.3g} um, {off * 1000:.3g} um off the path, more than "
+                f"the tolerance; no move takes that up (one in the old direction overshoots, one in the new "
+                f"direction jumps)", path=path, lineno=move.lineno,
+                hint=f"check the calibration's backlash:{ax}: b > 0 is an axis that runs ahead, as one does "
+                     "whose controller compensates more backlash than there is: lower that compensation and "
+                     "measure again. Programs that reverse it only into moves along it are corrected")
+    return tk, prev_end

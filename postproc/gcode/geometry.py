@@ -8,6 +8,7 @@ draws this spiral when they differ slightly), and the normal axis linear in ``s`
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,19 +60,33 @@ def arc_length(arc: Arc, q0, q1, params=None) -> float:
     return math.hypot(planar, q1[an] - q0[an])
 
 
-def arcs_points(owner: np.ndarray, s: np.ndarray, axes: np.ndarray, t0: np.ndarray, sweep: np.ndarray,
-                r0: np.ndarray, r1: np.ndarray, centre: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True, eq=False)
+class ArcColumns:
+    """Many arcs at once, as columns (k arcs): ``axes`` (k, 3) the plane axes and the
+    normal axis, ``t0``, ``sweep``, ``r0``, ``r1`` (k,) as :func:`arc_params` gives them,
+    ``centre``, ``q0``, ``q1`` (k, 3)."""
+
+    axes: np.ndarray
+    t0: np.ndarray
+    sweep: np.ndarray
+    r0: np.ndarray
+    r1: np.ndarray
+    centre: np.ndarray
+    q0: np.ndarray
+    q1: np.ndarray
+
+
+def arcs_points(owner: np.ndarray, s: np.ndarray, arcs: ArcColumns) -> np.ndarray:
     """Points (len(s), 3) of many arcs at once: sample j on arc ``owner[j]`` at parameter
-    ``s[j]``. Per arc: ``axes`` (k, 3) the plane axes and the normal axis, ``t0``,
-    ``sweep``, ``r0``, ``r1`` (k,) as :func:`arc_params` gives them, ``centre``, ``q0``,
-    ``q1`` (k, 3). Element by element the operations of :func:`arc_points`, so each point
-    is the one it gives."""
-    th = t0[owner] + s * sweep[owner]
-    rad = r0[owner] + (r1 - r0)[owner] * s
+    ``s[j]``. Element by element the operations of :func:`arc_points`, so each point is
+    the one it gives."""
+    th = arcs.t0[owner] + s * arcs.sweep[owner]
+    rad = arcs.r0[owner] + (arcs.r1 - arcs.r0)[owner] * s
     out = np.empty((len(s), 3))
     idx = np.arange(len(s))
-    ax = axes[owner]
+    ax = arcs.axes[owner]
     a1, a2, an = ax[:, 0], ax[:, 1], ax[:, 2]
+    centre, q0, q1 = arcs.centre, arcs.q0, arcs.q1
     out[idx, a1] = centre[owner, a1] + rad * np.cos(th)
     out[idx, a2] = centre[owner, a2] + rad * np.sin(th)
     out[idx, an] = q0[owner, an] + (q1 - q0)[owner, an] * s

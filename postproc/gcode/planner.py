@@ -33,13 +33,23 @@ from postproc.errors import (
 from postproc.gcode import bulk, vplan
 from postproc.gcode.directions import (
     MACHINE_STEP_MM,
+    Commanding,
+    PieceInputs,
+    SettledPoints,
     direction_axes,
     plan_pieces,
     reversals,
     settle,
 )
 from postproc.gcode.emitter import FIT_BUDGET, _unit_decimals
-from postproc.gcode.geometry import arc_length, arc_params, arc_points, arcs_points, line_points
+from postproc.gcode.geometry import (
+    ArcColumns,
+    arc_length,
+    arc_params,
+    arc_points,
+    arcs_points,
+    line_points,
+)
 from postproc.gcode.moves import Arc
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.path import backfill_unknown
@@ -288,7 +298,7 @@ class Planner:
             # straight moves of the runs of plain lines: those that must be split are
             # planned when they are written (their Move is made then)
             rows, owner = bulk.line_rows(runs)
-            ok = vplan.lines_within(rows, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM,
+            ok = vplan.lines_within(rows, vplan.MoveEnds(Q0, Q1, S, T), corr, step_mm=SAMPLE_STEP_MM,
                                     limit=self.opt.tolerance_mm * FIT_BUDGET
                                     - max(self.round_err(r.unit) for r in runs), curvature=curvature)
             run_lines: list[tuple[int, PlanMove | _RunLine]] = []
@@ -299,9 +309,10 @@ class Planner:
                 self._plan_moves(run_lines, tab, plans)
         if planned and self.bulk_plan:
             _ok_lines, hints, planned = vplan.plan_chunk(
-                planned, tab.arc_prm, Q0, Q1, S, T, corr, step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD,
-                min_arc_samples=ARC_CHECK_MIN_SAMPLES, budget=self.opt.tolerance_mm * FIT_BUDGET,
-                rounding=max(self.round_err(m.unit) for _i, m in tab.moves), curvature=curvature)
+                planned, tab.arc_prm, vplan.MoveEnds(Q0, Q1, S, T), corr, vplan.Sampling(
+                    step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD, min_arc_samples=ARC_CHECK_MIN_SAMPLES,
+                    budget=self.opt.tolerance_mm * FIT_BUDGET,
+                    rounding=max(self.round_err(m.unit) for _i, m in tab.moves)), curvature=curvature)
             self._hint_plans(hints, tab)
         if planned:
             self._plan_moves(planned, tab, plans)
@@ -400,7 +411,8 @@ class Planner:
         absolute = np.array([mv.arc_absolute for _i, mv, _h in arcs], dtype=bool)[:, None]
         base = np.where(absolute, sh[:, :2], S[rows, axes[:, :2]])
         clockwise = [cast("Arc", mv.arc).clockwise for _i, mv, _h in arcs]
-        got = vplan.words_many([h for _i, _mv, h in arcs], S, E, axes, clockwise, d, unit, base, budget)
+        got = vplan.words_many([h for _i, _mv, h in arcs], vplan.WrittenArcs(S, E, axes, clockwise, d, unit, base),
+                               budget)
         return {i for (i, _mv, _h), w in zip(arcs, got, strict=True) if w is None}
 
     def _lazy_plan(self, i: int, mv: PlanMove, tab: Table) -> Callable[[], Plan]:
@@ -471,8 +483,8 @@ class Planner:
         inner = np.flatnonzero(counts[owner] > 1)
         if len(inner):
             Tx[inner] = solve(inner, Dx[inner])
-        Ex, Dx = settle(Tx, Dx, self.prev_target, self.dirs, hold, axes, solve, linenos[owner], free, given,
-                        first[owner], path=self.path)
+        Ex, Dx = settle(Tx, Dx, Commanding(self.prev_target, self.dirs, hold, axes, free, given, first[owner]), solve,
+                        linenos[owner], path=self.path)
         T, D = tab.target, tab.dirs = Ex[last], Dx[last]
         if not planned:
             return
@@ -501,9 +513,9 @@ class Planner:
                 bulge = arc_bulge
             else:
                 bulge = _no_bulge
-            seq = plan_pieces(j0, int(last[i]), Ex, Dx, sx, nominal, start, start_dirs, Q0[i], takeups, rows, axes,
-                              TAKEUP_MIN_MM, bulge, self.opt.tolerance_mm - self.round_err(m.unit),
-                              lineno=m.lineno, path=self.path)
+            seq = plan_pieces(PieceInputs(j0, int(last[i]), start, start_dirs, Q0[i], bulge,
+                                          self.opt.tolerance_mm - self.round_err(m.unit), m.lineno),
+                              SettledPoints(Ex, Dx, sx, nominal, takeups, rows, axes, TAKEUP_MIN_MM), path=self.path)
             if arc is not None:
                 (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
                 carried = np.array(start_dirs, dtype=float)
@@ -748,7 +760,7 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table
         q0s, q1s, centres = (np.array([row[f] for row in arc_rows], dtype=float) for f in (1, 2, 3))
 
         def arc_nominal(which: IntArray, at: FloatArray) -> FloatArray:
-            return arcs_points(which, at, axes, t0s, sweeps, r0s, r1s, centres, q0s, q1s)
+            return arcs_points(which, at, ArcColumns(axes, t0s, sweeps, r0s, r1s, centres, q0s, q1s))
 
         arc_mid = np.flatnonzero(ap[owner_mid] >= 0)
         mid = arc_nominal(ap[owner_mid[arc_mid]], s_mid[arc_mid])

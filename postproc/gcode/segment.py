@@ -327,29 +327,43 @@ def circle_fit(P2: np.ndarray) -> np.ndarray | None:
     return m + 0.5 * sol[:2]
 
 
-def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: bool, nominal_sweep: float,
-                   Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool = False,
+@dataclass(frozen=True, eq=False)
+class ArcPiece:
+    """A piece of an arc move to be written as one exact arc: from ``S`` to ``E`` (as
+    written, machine mm) in the plane ``axes`` (its two axes and its normal), turning
+    ``clockwise`` or not by about ``nominal_sweep`` (rad, signed), through the corrected
+    samples ``Q`` (k, 3); ``frac`` (k,): where each sample lies along the piece (0 at S,
+    1 at E), which resolves the angle's turn for multi-turn arcs."""
+
+    S: Point
+    E: Point
+    axes: Axes
+    clockwise: bool
+    nominal_sweep: float
+    Q: np.ndarray
+    frac: np.ndarray
+
+
+def arc_candidates(piece: ArcPiece, C: np.ndarray, controller_limits: bool = False,
                    mismatch_limit: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Deviation of the corrected samples ``Q`` (k, 3) from the arcs that controllers draw
-    from S to E around each candidate centre ``C`` (m, 2, plane coordinates).
+    """Deviation of the corrected samples of ``piece`` from the arcs that controllers draw
+    from its S to its E around each candidate centre ``C`` (m, 2, plane coordinates).
 
     Returns ``(worst (m,), mismatch (m,), turns (m,))``: ``worst`` is the largest
     distance of a sample from the spiral (LinuxCNC's reading: radius from the start
     radius to the end radius) plus the radius mismatch (the most any controller that
     draws on one radius and jumps at the end, Grbl or Fanuc, adds to it); inf where the
-    arc would turn the wrong way or the wrong number of turns. ``frac_nominal`` (k,):
-    where each sample lies along the piece (0 at S, 1 at E), which resolves the
-    angle's turn for multi-turn arcs. ``controller_limits``: ``worst`` is also inf where
-    a controller refuses or misreads the arc: a start or end radius below
-    :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`.
+    arc would turn the wrong way or the wrong number of turns. ``controller_limits``:
+    ``worst`` is also inf where a controller refuses or misreads the arc: a start or end
+    radius below :data:`MIN_ARC_RADIUS_MM`, a sweep below :data:`MIN_ARC_SWEEP_RAD`.
 
     ``mismatch_limit``: the candidates whose radius mismatch exceeds it (which the caller
     refuses anyway) are not measured: their ``worst`` is inf and their ``turns`` 0. The
-    others get the values they get among all (see :func:`_limited_candidates`)."""
+    others get the values they get among all (see :func:`limited_candidates`)."""
     if mismatch_limit is not None:
-        return limited_candidates(S, E, C, axes, clockwise, nominal_sweep, Q, frac_nominal, mismatch_limit,
-                                  controller_limits).full()
-    a1, a2, an = axes
+        return limited_candidates(piece, C, mismatch_limit, controller_limits).full()
+    S, E, clockwise, nominal_sweep = piece.S, piece.E, piece.clockwise, piece.nominal_sweep
+    a1, a2, an = piece.axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
     # start (row 0) and end (row 1) about every candidate, in contiguous arrays
     dx = np.array([[s1], [e1]]) - C[:, 0]
@@ -372,24 +386,8 @@ def arc_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: boo
     bad = np.abs(sweep - nominal_sweep) > math.pi / 2
     if controller_limits:
         bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    dev = _deviation(S, E, np.array([t0, np.abs(sweep), r0, r1 - r0, C[:, 0], C[:, 1]]), axes, clockwise, Q,
-                     frac_nominal)
+    dev = _deviation(piece, np.array([t0, np.abs(sweep), r0, r1 - r0, C[:, 0], C[:, 1]]))
     return np.where(bad, np.inf, dev + mismatch), mismatch, turns
-
-
-def limited_candidates(S: Point, E: Point, C: np.ndarray, axes: Axes, clockwise: bool, nominal_sweep: float,
-                       Q: np.ndarray, frac_nominal: np.ndarray, mismatch_limit: float,
-                       controller_limits: bool = False) -> Measured:
-    """:func:`arc_candidates` with a mismatch limit, its results as they come (see
-    :class:`Measured`)."""
-    a1, a2, _an = axes
-    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
-    dx = np.array([[S[a1]], [E[a1]]]) - C[:, 0]
-    dy = np.array([[S[a2]], [E[a2]]]) - C[:, 1]
-    rad = np.hypot(dx, dy)
-    mismatch = np.abs(rad[1] - rad[0])
-    return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
-                               Q, frac_nominal, controller_limits)
 
 
 _NO_INDEX = np.zeros(0, dtype=int)
@@ -421,20 +419,24 @@ class Measured:
         return worst, self.mismatch, turns
 
 
-def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: np.ndarray, rad: np.ndarray,
-                        mismatch: np.ndarray, limit: float, axes: Axes, clockwise: bool, nominal_sweep: float,
-                        Q: np.ndarray, frac_nominal: np.ndarray, controller_limits: bool) -> Measured:
-    """:func:`arc_candidates` with a mismatch limit: the few candidates within it are
-    taken one by one in plain floats (their mismatch is finite, so are all their values),
-    with the same operations as numpy's element by element (``%`` is np.mod's floored
-    remainder, ``round`` np.rint's half to even, the sign of a nonzero sweep np.sign's);
-    their angles come from numpy's arctan2 as among all, and the samples are measured
-    with numpy."""
+def limited_candidates(piece: ArcPiece, C: np.ndarray, limit: float, controller_limits: bool = False) -> Measured:
+    """:func:`arc_candidates` with a mismatch ``limit``, its results as they come (see
+    :class:`Measured`): the few candidates within it are taken one by one in plain
+    floats (their mismatch is finite, so are all their values), with the same operations
+    as numpy's element by element (``%`` is np.mod's floored remainder, ``round``
+    np.rint's half to even, the sign of a nonzero sweep np.sign's); their angles come
+    from numpy's arctan2 as among all, and the samples are measured with numpy."""
+    S, E, clockwise, nominal_sweep = piece.S, piece.E, piece.clockwise, piece.nominal_sweep
+    a1, a2, _an = piece.axes
+    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
+    dx = np.array([[S[a1]], [E[a1]]]) - C[:, 0]
+    dy = np.array([[S[a2]], [E[a2]]]) - C[:, 1]
+    rad = np.hypot(dx, dy)
+    mismatch = np.abs(rad[1] - rad[0])
     out = Measured(mismatch)
     sel = (mismatch <= limit).nonzero()[0]
     if len(sel) == 0:
         return out
-    a1, a2, _an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
     ang = np.arctan2(dy[:, sel], dx[:, sel])
     rs = rad[:, sel]
@@ -472,23 +474,23 @@ def _limited_candidates(S: Point, E: Point, C: np.ndarray, dx: np.ndarray, dy: n
             return out
         cols = cols[:, kp]
     out.mism = mismatch[out.idx]
-    out.worst = _deviation(S, E, cols, axes, clockwise, Q, frac_nominal) + out.mism
+    out.worst = _deviation(piece, cols) + out.mism
     return out
 
 
-def _deviation(S: Point, E: Point, cols: np.ndarray, axes: Axes, clockwise: bool, Q: np.ndarray,
-               frac_nominal: np.ndarray) -> np.ndarray:
-    """Largest distance (m,) of the samples Q (k, 3) from the spiral a controller draws
+def _deviation(piece: ArcPiece, cols: np.ndarray) -> np.ndarray:
+    """Largest distance (m,) of the samples of ``piece`` from the spiral a controller draws
     around each of m centres, ``cols`` (6, m): its start angle, |sweep|, start radius,
     end minus start radius and the centre's plane coordinates (see :func:`arc_candidates`)."""
-    a1, a2, an = axes
+    S, E, Q, frac_nominal = piece.S, piece.E, piece.Q, piece.frac
+    a1, a2, an = piece.axes
     t0, asw, r0, dr, cx, cy = cols[:, :, None]
     v1 = Q[:, a1] - cx
     v2 = Q[:, a2] - cy
     # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly);
     # the arithmetic in place (the same operations, fewer temporary arrays)
     phi = np.arctan2(v2, v1)
-    if clockwise:
+    if piece.clockwise:
         alpha = np.subtract(t0, phi, out=phi)
     else:
         alpha = np.subtract(phi, t0, out=phi)

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import (
     TYPE_CHECKING,
     Literal,
@@ -47,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 
 from postproc.gcode import emit
-from postproc.gcode.geometry import arcs_points
+from postproc.gcode.geometry import ArcColumns, arcs_points
 from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
@@ -142,6 +143,35 @@ Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
 #: ``curvature(rows)``: the engine's bound on the correction's curvature along each move
 Curvature: TypeAlias = Callable[[IntArray], FloatArray]
 Ends: TypeAlias = tuple[float, float, float, float, float, float]
+#: the arguments of :meth:`ArcHint.words`: (S, E, axes, clockwise, d, unit, base, budget)
+WordsArgs: TypeAlias = tuple[Sequence[float], Sequence[float], tuple[int, int, int], bool, int, float,
+                             tuple[float, float], float]
+
+
+@dataclass(frozen=True, eq=False)
+class MoveEnds:
+    """A chunk's moves as the bulk planner reads them, one row per move (N, 3): nominal
+    starts ``q0`` and ends ``q1``, corrected starts ``start`` and ends ``target``."""
+
+    q0: FloatArray
+    q1: FloatArray
+    start: FloatArray
+    target: FloatArray
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """How :func:`plan_chunk` samples and judges the moves: a sample every ``step_mm``
+    along a move and, on arcs, every ``step_rad`` of sweep, at least ``min_arc_samples``
+    on an arc (its ends included); ``budget`` (mm): how far the written line or arc may
+    lie from the corrected samples, ``rounding`` (mm): what rounding the words may add
+    to a line's ends (taken from the budget of straight moves)."""
+
+    step_mm: float
+    step_rad: float
+    min_arc_samples: int
+    budget: float
+    rounding: float
 
 
 @final
@@ -201,11 +231,10 @@ class ArcHint:
         self._last = (key, result)
         return result
 
-    def remember(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
-                 unit: float, base: tuple[float, float], budget: float,
-                 result: tuple[float, float, float, float] | None) -> None:
-        """Keep ``result`` as the answer of :meth:`words` to these arguments (found by
-        :func:`words_many`)."""
+    def remember(self, args: WordsArgs, result: tuple[float, float, float, float] | None) -> None:
+        """Keep ``result`` as the answer of :meth:`words` to ``args``, its arguments
+        ``(S, E, axes, clockwise, d, unit, base, budget)`` (found by :func:`words_many`)."""
+        S, E, axes, clockwise, d, unit, base, budget = args
         self._last = ((tuple(S), tuple(E), axes, clockwise, d, unit, base, budget), result)
 
     def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
@@ -240,7 +269,7 @@ class ArcHint:
                     break
             else:
                 return None
-        got = self._bound(clockwise, s1, s2, sn, e1, e2, en, C1, C2)
+        got = self._bound(clockwise, (s1, s2, sn, e1, e2, en), C1, C2)
         if got is None:
             return None
         bound, rs, re, turn = got
@@ -273,19 +302,21 @@ class ArcHint:
         mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
         if not mism <= self.mismatch + KEEP_MISMATCH_SLACK_MM:
             return None
-        got = self._bound(arc.clockwise, S[a1], S[a2], S[an], E[a1], E[a2], E[an], C1, C2)
+        got = self._bound(arc.clockwise, (S[a1], S[a2], S[an], E[a1], E[a2], E[an]), C1, C2)
         if got is None or not got[0] <= budget:
             return None
         return {"form": "keep", "turns": 1}
 
-    def _bound(self, clockwise: bool, s1: float, s2: float, sn: float, e1: float, e2: float, en: float,
-               C1: float, C2: float) -> tuple[float, float, float, float] | None:
-        """How far the arc a controller draws from S to E (plane coordinates s1, s2, e1,
-        e2, normal sn, en) around (C1, C2) (radius from the start to the end radius, the
-        normal axis linear) can lie from the corrected samples: the ideal circle's
-        deviation plus how far the drawn arc lies from that circle anywhere. Returned
-        with the start and end radii and the turn from S to E (in the arc's sense,
-        [0, 2 pi)). None when it does not turn as the nominal arc does (one turn)."""
+    def _bound(self, clockwise: bool, written: Ends, C1: float, C2: float
+               ) -> tuple[float, float, float, float] | None:
+        """How far the arc a controller draws from S to E (``written``: (s1, s2, sn, e1,
+        e2, en), the plane coordinates and the normal one of each, as :attr:`ends`) around
+        (C1, C2) (radius from the start to the end radius, the normal axis linear) can lie
+        from the corrected samples: the ideal circle's deviation plus how far the drawn arc
+        lies from that circle anywhere. Returned with the start and end radii and the turn
+        from S to E (in the arc's sense, [0, 2 pi)). None when it does not turn as the
+        nominal arc does (one turn)."""
+        s1, s2, sn, e1, e2, en = written
         hyp = math.hypot
         rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
         th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
@@ -348,14 +379,28 @@ def round_many(values: FloatArray, d: Sequence[int] | IntArray) -> FloatArray:
     return out
 
 
-def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: IntArray, clockwise: Sequence[bool],
-               d: Sequence[int], unit: FloatArray, base: FloatArray, budget: float
+@dataclass(frozen=True, eq=False)
+class WrittenArcs:
+    """Arcs as written, one row each, for :func:`words_many`: the ends ``S``, ``E`` (k, 3)
+    machine mm, ``axes`` (k, 3) the plane's two axes and its normal, ``clockwise`` (k,),
+    ``d`` (k,) the decimals of the words, ``unit`` (k,) mm per program unit, ``base``
+    (k, 2) what the centre words are relative to (machine mm)."""
+
+    S: FloatArray
+    E: FloatArray
+    axes: IntArray
+    clockwise: Sequence[bool]
+    d: Sequence[int]
+    unit: FloatArray
+    base: FloatArray
+
+
+def words_many(hints: Sequence[ArcHint], arcs: WrittenArcs, budget: float
                ) -> list[tuple[float, float, float, float] | None]:
     """:meth:`ArcHint.words` of many arcs at once (row k: ``hints[k].words(S[k], E[k],
-    axes[k], clockwise[k], d[k], unit[k], base[k], budget)``; S, E (k, 3) machine
-    axes, ``axes`` (k, 3), ``base`` (k, 2)): the same results, bit for bit, and each
-    hint left with its answer as :meth:`ArcHint.words` leaves it (the writer asking
-    again with the same ends gets this answer).
+    axes[k], clockwise[k], d[k], unit[k], base[k], budget)`` of ``arcs``): the same
+    results, bit for bit, and each hint left with its answer as :meth:`ArcHint.words`
+    leaves it (the writer asking again with the same ends gets this answer).
 
     The arithmetic of :meth:`ArcHint._words` and :meth:`ArcHint._bound` over arrays:
     elementwise ``+ - * /``, ``abs`` and ``%`` (``np.mod`` is Python's floored
@@ -369,88 +414,176 @@ def words_many(hints: Sequence[ArcHint], S: FloatArray, E: FloatArray, axes: Int
     out: list[tuple[float, float, float, float] | None] = [None] * n
     if not n:
         return out
-    hyp, atan2 = math.hypot, math.atan2
-    rows = np.arange(n)
-    s1, s2, sn = S[rows, axes[:, 0]], S[rows, axes[:, 1]], S[rows, axes[:, 2]]
-    e1, e2, en = E[rows, axes[:, 0]], E[rows, axes[:, 1]], E[rows, axes[:, 2]]
-    B1, B2 = base[:, 0], base[:, 1]
-    H1, H2, RHO, WORST, NSW = np.array([(h.c1, h.c2, h.rho, h.worst, h.nsweep) for h in hints], dtype=float).T
-    u1, u2, un, x1, x2, xn = np.array([h.ends for h in hints], dtype=float).T
-    cw = np.asarray(clockwise, dtype=bool)
-    step = np.array([10.0 ** (-k) for k in d])
-    agree = 0.5 * step * unit
+    g = _ArcRows.of(hints, arcs)
     with np.errstate(all="ignore"):
-        dx, dy = e1 - s1, e2 - s2
-        L = _map_floats(hyp, dx, dy)
-        Ls = np.where(L == 0.0, 1.0, L)
-        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
-        n1, n2 = -dy / Ls, dx / Ls
-        t = (H1 - m1) * n1 + (H2 - m2) * n2
-        # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
-        v1 = round_many((m1 + t * n1 - B1) / unit, d) + 0.0
-        v2 = round_many((m2 + t * n2 - B2) / unit, d) + 0.0
-        w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
-        C1, C2 = B1 + w1 * unit, B2 + w2 * unit
-        rs = _map_floats(hyp, s1 - C1, s2 - C2)
-        re_ = _map_floats(hyp, e1 - C1, e2 - C2)
-        mism = np.abs(rs - re_)
-        found = mism <= agree
-        lattice = np.zeros(n, dtype=bool)
-        search = np.flatnonzero(~found & (L != 0.0))
-        # the lattice around (v1, v2), nearest first: the first centre whose radii agree
-        # (asked a few candidates at a time, of the arcs still without one)
-        for lo in range(1, len(_ORDER), LATTICE_BLOCK):
-            if not len(search):
-                break
-            k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
-            st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
-            c1w = round_many(v1[search][:, None] + k1 * st, dk)
-            c2w = round_many(v2[search][:, None] + k2 * st, dk)
-            cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
-            ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
-            rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
-            mm = np.abs(rs_c - re_c)
-            agrees = mm <= agree[search][:, None]
-            hit = agrees.any(axis=1)
-            pick = np.argmax(agrees, axis=1)[hit]
-            sel = search[hit]
-            w1[sel], w2[sel] = c1w[hit, pick], c2w[hit, pick]
-            C1[sel], C2[sel] = cc1[hit, pick], cc2[hit, pick]
-            rs[sel], re_[sel], mism[sel] = rs_c[hit, pick], re_c[hit, pick], mm[hit, pick]
-            found[sel] = True
-            lattice[sel] = True
-            search = search[~hit]
-        # ArcHint._bound about (C1, C2)
-        th0 = _map_floats(atan2, s2 - C2, s1 - C1)
-        th1 = _map_floats(atan2, e2 - C2, e1 - C1)
-        turn = np.where(cw, np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
-        sweep = np.where(cw, -turn, turn)
-        moved = _map_floats(hyp, C1 - H1, C2 - H2)
-        shift = np.maximum(_map_floats(hyp, s1 - u1, s2 - u2), _map_floats(hyp, e1 - x1, e2 - x2))
-        bound = WORST + moved + np.maximum(np.abs(rs - RHO), np.abs(re_ - RHO))
-        r_min = np.minimum(np.minimum(rs, re_), RHO)
-        dfrac = 3.0 * (moved + shift) / (r_min * np.abs(sweep))
-        bound = bound + np.maximum(np.abs(sn - un), np.abs(en - xn)) + np.abs(en - sn) * dfrac
-        finite = np.isfinite(np.stack([s1, s2, sn, e1, e2, en, B1, B2, unit, H1, H2, RHO, WORST, NSW, u1, u2, un,
-                                       x1, x2, xn, bound, mism])).all(axis=0)
-        passes = (found & (sweep != 0.0) & ~(np.abs(sweep - NSW) > math.pi / 2) & (r_min > 0.0)
-                  & (bound + mism <= budget) & ~(np.minimum(rs, re_) < MIN_ARC_RADIUS_MM)
-                  & (turn >= MIN_ARC_SWEEP_RAD))
+        c = _first_centres(g)
+        _search_lattice(g, c)
+        passes, finite, bound = _judge(g, c, budget)
     # answered here: a chord of no length (None), else every value finite and, for a
     # lattice centre, no word of zero (whose sign ArcHint._words settles)
-    here = (L == 0.0) | (finite & ~(lattice & ((w1 == 0.0) | (w2 == 0.0))))
-    passes &= L != 0.0
-    Sl, El, axl, cwl, ul, bl = S.tolist(), E.tolist(), axes.tolist(), cw.tolist(), unit.tolist(), base.tolist()
-    for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), w1.tolist(), w2.tolist(),
-                                                      mism.tolist(), bound.tolist(), strict=True)):
+    here = (c.L == 0.0) | (finite & ~(c.lattice & ((c.w1 == 0.0) | (c.w2 == 0.0))))
+    passes &= c.L != 0.0
+    Sl, El, axl, cwl = arcs.S.tolist(), arcs.E.tolist(), arcs.axes.tolist(), g.cw.tolist()
+    ul, bl, d = arcs.unit.tolist(), arcs.base.tolist(), arcs.d
+    for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), c.w1.tolist(), c.w2.tolist(),
+                                                      c.mism.tolist(), bound.tolist(), strict=True)):
         args = (Sl[k], El[k], tuple(axl[k]), cwl[k], d[k], ul[k], tuple(bl[k]), budget)
         if ok:
             got = (wa, wb, mm_k, bd) if p else None
-            hints[k].remember(*args, got)
+            hints[k].remember(args, got)
         else:
             got = hints[k].words(*args)
         out[k] = got
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class _ArcRows:
+    """The columns :func:`words_many` computes with, one row per arc: the written ends in
+    the plane's order (``s1``, ``s2``, ``sn``, ``e1``, ``e2``, ``en``), the base of the
+    centre words (``B1``, ``B2``), the hint's circle (``H1``, ``H2``, ``RHO``, ``WORST``,
+    ``NSW``) and the corrected ends it was fitted between (``u1`` .. ``xn``), the sense
+    ``cw``, the decimals ``d``, ``unit``, the ``step`` of the last decimal and the radius
+    agreement ``agree`` (mm)."""
+
+    s1: FloatArray
+    s2: FloatArray
+    sn: FloatArray
+    e1: FloatArray
+    e2: FloatArray
+    en: FloatArray
+    B1: FloatArray
+    B2: FloatArray
+    H1: FloatArray
+    H2: FloatArray
+    RHO: FloatArray
+    WORST: FloatArray
+    NSW: FloatArray
+    u1: FloatArray
+    u2: FloatArray
+    un: FloatArray
+    x1: FloatArray
+    x2: FloatArray
+    xn: FloatArray
+    cw: BoolArray
+    d: Sequence[int]
+    unit: FloatArray
+    step: FloatArray
+    agree: FloatArray
+
+    @classmethod
+    def of(cls, hints: Sequence[ArcHint], arcs: WrittenArcs) -> _ArcRows:
+        S, E, axes, unit, base = arcs.S, arcs.E, arcs.axes, arcs.unit, arcs.base
+        rows = np.arange(len(hints))
+        s1, s2, sn = S[rows, axes[:, 0]], S[rows, axes[:, 1]], S[rows, axes[:, 2]]
+        e1, e2, en = E[rows, axes[:, 0]], E[rows, axes[:, 1]], E[rows, axes[:, 2]]
+        H1, H2, RHO, WORST, NSW = np.array([(h.c1, h.c2, h.rho, h.worst, h.nsweep) for h in hints], dtype=float).T
+        u1, u2, un, x1, x2, xn = np.array([h.ends for h in hints], dtype=float).T
+        cw = np.asarray(arcs.clockwise, dtype=bool)
+        step = np.array([10.0 ** (-k) for k in arcs.d])
+        agree = 0.5 * step * unit
+        return cls(s1, s2, sn, e1, e2, en, base[:, 0], base[:, 1], H1, H2, RHO, WORST, NSW, u1, u2, un, x1, x2, xn,
+                   cw, arcs.d, unit, step, agree)
+
+
+@dataclass(frozen=True, eq=False)
+class _Centres:
+    """The centre words :func:`words_many` takes for each arc, as they are found: the
+    chord's length ``L``, the first candidate (``v1``, ``v2``), the words taken (``w1``,
+    ``w2``; ``lattice``: found in the lattice) and their centre (``C1``, ``C2``), its
+    start and end radii and their mismatch; ``found``: the radii agree. The arrays are
+    filled in place by :func:`_search_lattice`."""
+
+    L: FloatArray
+    v1: FloatArray
+    v2: FloatArray
+    w1: FloatArray
+    w2: FloatArray
+    C1: FloatArray
+    C2: FloatArray
+    rs: FloatArray
+    re_: FloatArray
+    mism: FloatArray
+    found: BoolArray
+    lattice: BoolArray
+
+
+def _first_centres(g: _ArcRows) -> _Centres:
+    """The hint's centre moved onto the bisector of the written ends, its words rounded
+    (:meth:`ArcHint._words`' first candidate), for every arc."""
+    hyp = math.hypot
+    s1, s2, e1, e2, unit, d = g.s1, g.s2, g.e1, g.e2, g.unit, g.d
+    dx, dy = e1 - s1, e2 - s2
+    L = _map_floats(hyp, dx, dy)
+    Ls = np.where(L == 0.0, 1.0, L)
+    m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+    n1, n2 = -dy / Ls, dx / Ls
+    t = (g.H1 - m1) * n1 + (g.H2 - m2) * n2
+    # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
+    v1 = round_many((m1 + t * n1 - g.B1) / unit, d) + 0.0
+    v2 = round_many((m2 + t * n2 - g.B2) / unit, d) + 0.0
+    w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
+    C1, C2 = g.B1 + w1 * unit, g.B2 + w2 * unit
+    rs = _map_floats(hyp, s1 - C1, s2 - C2)
+    re_ = _map_floats(hyp, e1 - C1, e2 - C2)
+    mism = np.abs(rs - re_)
+    found = mism <= g.agree
+    lattice = np.zeros(len(L), dtype=bool)
+    return _Centres(L, v1, v2, w1, w2, C1, C2, rs, re_, mism, found, lattice)
+
+
+def _search_lattice(g: _ArcRows, c: _Centres) -> None:
+    """The lattice around (v1, v2), nearest first: the first centre whose radii agree
+    (asked a few candidates at a time, of the arcs still without one), written into ``c``."""
+    hyp = math.hypot
+    s1, s2, e1, e2, B1, B2, step, d, unit = g.s1, g.s2, g.e1, g.e2, g.B1, g.B2, g.step, g.d, g.unit
+    search = np.flatnonzero(~c.found & (c.L != 0.0))
+    for lo in range(1, len(_ORDER), LATTICE_BLOCK):
+        if not len(search):
+            break
+        k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
+        st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
+        c1w = round_many(c.v1[search][:, None] + k1 * st, dk)
+        c2w = round_many(c.v2[search][:, None] + k2 * st, dk)
+        cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
+        ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
+        rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
+        mm = np.abs(rs_c - re_c)
+        agrees = mm <= g.agree[search][:, None]
+        hit = agrees.any(axis=1)
+        pick = np.argmax(agrees, axis=1)[hit]
+        sel = search[hit]
+        c.w1[sel], c.w2[sel] = c1w[hit, pick], c2w[hit, pick]
+        c.C1[sel], c.C2[sel] = cc1[hit, pick], cc2[hit, pick]
+        c.rs[sel], c.re_[sel], c.mism[sel] = rs_c[hit, pick], re_c[hit, pick], mm[hit, pick]
+        c.found[sel] = True
+        c.lattice[sel] = True
+        search = search[~hit]
+
+
+def _judge(g: _ArcRows, c: _Centres, budget: float) -> tuple[BoolArray, BoolArray, FloatArray]:
+    """:meth:`ArcHint._bound` about each centre of ``c`` and the rest of
+    :meth:`ArcHint._words`' checks: ``(passes, finite, bound)``, whether each arc's words
+    pass, whether all its values are finite, and the bound."""
+    hyp, atan2 = math.hypot, math.atan2
+    s1, s2, sn, e1, e2, en, C1, C2, rs, re_ = g.s1, g.s2, g.sn, g.e1, g.e2, g.en, c.C1, c.C2, c.rs, c.re_
+    RHO, NSW = g.RHO, g.NSW
+    th0 = _map_floats(atan2, s2 - C2, s1 - C1)
+    th1 = _map_floats(atan2, e2 - C2, e1 - C1)
+    turn = np.where(g.cw, np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
+    sweep = np.where(g.cw, -turn, turn)
+    moved = _map_floats(hyp, C1 - g.H1, C2 - g.H2)
+    shift = np.maximum(_map_floats(hyp, s1 - g.u1, s2 - g.u2), _map_floats(hyp, e1 - g.x1, e2 - g.x2))
+    bound = g.WORST + moved + np.maximum(np.abs(rs - RHO), np.abs(re_ - RHO))
+    r_min = np.minimum(np.minimum(rs, re_), RHO)
+    dfrac = 3.0 * (moved + shift) / (r_min * np.abs(sweep))
+    bound = bound + np.maximum(np.abs(sn - g.un), np.abs(en - g.xn)) + np.abs(en - sn) * dfrac
+    finite = np.isfinite(np.stack([s1, s2, sn, e1, e2, en, g.B1, g.B2, g.unit, g.H1, g.H2, RHO, g.WORST, NSW, g.u1,
+                                   g.u2, g.un, g.x1, g.x2, g.xn, bound, c.mism])).all(axis=0)
+    passes = (c.found & (sweep != 0.0) & ~(np.abs(sweep - NSW) > math.pi / 2) & (r_min > 0.0)
+              & (bound + c.mism <= budget) & ~(np.minimum(rs, re_) < MIN_ARC_RADIUS_MM)
+              & (turn >= MIN_ARC_SWEEP_RAD))
+    return passes, finite, bound
 
 
 def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
@@ -469,8 +602,7 @@ def _group_max(values: FloatArray, starts: IntArray) -> FloatArray:
     return np.maximum.reduceat(values, starts) if len(values) else np.zeros(len(starts))
 
 
-def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray, step_mm: float,
-                  curvature: Curvature | None, limit: float
+def _line_samples(rows: IntArray, ends: MoveEnds, step_mm: float, curvature: Curvature | None, limit: float
                   ) -> tuple[IntArray, FloatArray, Callable[[FloatArray], BoolArray]]:
     """Interior samples of the straight moves ``rows`` (every ``step_mm``, at least one):
     ``(owner rows, nominal points, check)``; ``check(corrected points)`` tells for each
@@ -483,6 +615,7 @@ def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray,
     are sampled at most ``step_mm`` apart, or farther where K allows (between samples h
     apart the path leaves the polyline of its samples by K h^2 / 8 at most, kept to a
     tenth of the limit), and their samples are held to the limit less that."""
+    Q0, Q1, S, T = ends.q0, ends.q1, ends.start, ends.target
     length = np.linalg.norm(Q1[rows] - Q0[rows], axis=1) if len(rows) else np.zeros(0)
     n = np.maximum(3, np.ceil(length / step_mm).astype(int) + 1) if len(rows) else np.zeros(0, dtype=int)
     settled = np.zeros(len(rows), dtype=bool)
@@ -520,28 +653,64 @@ def _line_samples(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray,
     return r, nom, check
 
 
-def lines_within(rows: IntArray, Q0: FloatArray, Q1: FloatArray, S: FloatArray, T: FloatArray,
-                 corrected: Corrected, *, step_mm: float, limit: float,
+def lines_within(rows: IntArray, ends: MoveEnds, corrected: Corrected, *, step_mm: float, limit: float,
                  curvature: Curvature | None = None) -> BoolArray:
     """Which straight moves ``rows`` stay within ``limit`` of their corrected chord (see
     :func:`_line_samples`; ``corrected`` as in :func:`plan_chunk`)."""
-    r, nom, check = _line_samples(rows, Q0, Q1, S, T, step_mm, curvature, limit)
+    r, nom, check = _line_samples(rows, ends, step_mm, curvature, limit)
     return check(corrected(r, nom) if len(r) else np.zeros((0, 3)))
 
 
-def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0: FloatArray, Q1: FloatArray,
-               S: FloatArray, T: FloatArray, corrected: Corrected, *, step_mm: float, step_rad: float,
-               min_arc_samples: int, budget: float, rounding: float, curvature: Curvature | None = None
+def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], ends: MoveEnds,
+               corrected: Corrected, sampling: Sampling, curvature: Curvature | None = None
                ) -> tuple[list[int], dict[int, ArcHint], list[tuple[int, _M]]]:
     """Settle in bulk the planned moves of a chunk that stay one line or one exact arc.
 
     ``planned``: (row, Move) pairs; ``arc_prm``: row -> arc_params of the arcs;
-    ``Q0``/``Q1``: nominal starts and ends, ``S``/``T``: corrected starts and ends (per
-    row); ``corrected(rows, nominal points)``: the engine's corrected points (N, 3) for
-    nominal points on those rows' moves. Returns ``(lines, hints, rest)``: the rows of
-    straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left None), and
-    the (row, Move) pairs left to the general path.
+    ``ends``: nominal and corrected starts and ends (per row); ``corrected(rows, nominal
+    points)``: the engine's corrected points (N, 3) for nominal points on those rows'
+    moves; ``curvature``: as :func:`_line_samples`. Returns ``(lines, hints, rest)``: the
+    rows of straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left
+    None), and the (row, Move) pairs left to the general path.
     """
+    lines_i, arcs_i, rest = _sort_moves(planned, arc_prm)
+    li = np.array(lines_i, dtype=int)
+    arcs = _arc_samples(arcs_i, arc_prm, ends, sampling)
+    lrows, nom_l, lcheck = _line_samples(li, ends, sampling.step_mm, curvature, sampling.budget - sampling.rounding)
+    rows_all = np.concatenate([lrows, arcs.rows[arcs.own]])
+    corr = corrected(rows_all, np.vstack([nom_l, arcs.nom])) if len(rows_all) else np.zeros((0, 3))
+    P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
+    # -- straight moves: every sample within budget - rounding of the chord ---------------
+    ok_lines: list[int] = []
+    if len(li):
+        good = lcheck(P_l)
+        ok_lines = li[good].tolist()
+        bad = set(li[~good].tolist())
+        rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
+    hints: dict[int, ArcHint] = {}
+    if not len(arcs.rows):
+        return ok_lines, hints, rest
+    pts = _plane_points(arcs, ends, P_a)
+    circles = _fit_centres(pts)
+    worst, turning = _worst_deviations(pts, circles, arcs)
+    usable = circles.usable & turning & np.isfinite(worst) & np.isfinite(circles.rho) & (worst <= sampling.budget)
+    # the hints made from the arrays' rows as Python floats (tolist), all at once
+    sel = np.flatnonzero(usable)
+    c1, c2, rho, sweep, r0, r1 = circles.c1, circles.c2, circles.rho, arcs.cols.sweep, arcs.cols.r0, arcs.cols.r1
+    rows = zip(*(x[sel].tolist() for x in (c1, c2, rho, worst, sweep, pts.S1, pts.S2, pts.Sn, pts.E1, pts.E2,
+                                           pts.En, np.abs(r1 - r0))), strict=True)
+    for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
+                                                                               rows, strict=True):
+        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
+    if len(sel) < len(arcs.rows):
+        rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
+    return ok_lines, hints, rest
+
+
+def _sort_moves(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams]
+                ) -> tuple[list[int], list[tuple[int, _M, Arc]], list[tuple[int, _M]]]:
+    """The rows of the straight moves, the arcs :func:`plan_chunk` may settle (one turn of
+    I/J/K form in a known plane, not a full circle) and the moves left to the general path."""
     lines_i: list[int] = []
     arcs_i: list[tuple[int, _M, Arc]] = []
     rest: list[tuple[int, _M]] = []
@@ -554,7 +723,34 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
             arcs_i.append((i, m, arc))
         else:
             rest.append((i, m))
-    li = np.array(lines_i, dtype=int)
+    return lines_i, arcs_i, rest
+
+
+@dataclass(frozen=True, eq=False)
+class _ArcSamples:
+    """The arcs :func:`plan_chunk` fits (k): their ``rows``, geometry ``cols``, sense
+    ``clockwise`` and sample counts ``n`` (ends included); the interior samples (owner
+    ``own``, parameter ``s``, nominal points ``nom``) and the middles of all the sample
+    intervals (owner ``mid_own``, interval ``mid_pos``, parameter ``mid_s``)."""
+
+    rows: IntArray
+    cols: ArcColumns
+    clockwise: BoolArray
+    n: IntArray
+    own: IntArray
+    s: FloatArray
+    nom: FloatArray
+    mid_own: IntArray
+    mid_pos: IntArray
+    mid_s: FloatArray
+
+
+def _arc_samples(arcs_i: Sequence[tuple[int, PlanMove, Arc]], arc_prm: dict[int, ArcParams], ends: MoveEnds,
+                 sampling: Sampling) -> _ArcSamples:
+    """The samples of the arcs ``arcs_i``: every ``step_mm`` along and ``step_rad`` of sweep,
+    at least ``min_arc_samples``."""
+    Q0, Q1 = ends.q0, ends.q1
+    step_mm, step_rad = sampling.step_mm, sampling.step_rad
     ai = np.array([i for i, _m, _a in arcs_i], dtype=int)
     prm = [arc_prm[i] for i in ai.tolist()]
     sweep = np.array([p[2] for p in prm])
@@ -564,37 +760,48 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     axes = np.array([p[0] for p in prm], dtype=int).reshape(-1, 3)
     dn = Q1[ai, axes[:, 2]] - Q0[ai, axes[:, 2]] if len(ai) else np.zeros(0)
     length = np.hypot(np.abs(sweep) * 0.5 * (r0 + r1), dn)
-    na = np.maximum.reduce([np.full(len(ai), min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
+    na = np.maximum.reduce([np.full(len(ai), sampling.min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
                             np.ceil(np.abs(sweep) / step_rad).astype(int) + 1]) if len(ai) else np.zeros(0, int)
     # interior samples only: the ends are S and T
-    ao, ap, astart = _ragged(na - 2)
+    ao, ap, _astart = _ragged(na - 2)
     s_a = (ap + 1) / (na[ao] - 1)
     # and the middles of the sample intervals (all of them), for the nominal bulge
-    mo, mp, mstart = _ragged(na - 1)
+    mo, mp, _mstart = _ragged(na - 1)
     s_m = (mp + 0.5) / (na[mo] - 1)
     centre = np.array([arc.center for _i, _m, arc in arcs_i], dtype=float).reshape(-1, 3)
+    cols = ArcColumns(axes, t0, sweep, r0, r1, centre, Q0[ai], Q1[ai])
+    cw = np.array([arc.clockwise for _i, _m, arc in arcs_i])
+    return _ArcSamples(ai, cols, cw, na, ao, s_a, arcs_points(ao, s_a, cols), mo, mp, s_m)
 
-    q0_a, q1_a = Q0[ai], Q1[ai]
 
-    def arc_nominal(owner: IntArray, s: FloatArray) -> FloatArray:
-        return arcs_points(owner, s, axes, t0, sweep, r0, r1, centre, q0_a, q1_a)
+@dataclass(frozen=True, eq=False)
+class _PlanePoints:
+    """The points each arc is fitted to, in its plane: every sample with its ends and the
+    bulged middle of every interval (``P1``, ``P2`` in the plane, ``Pn`` along the normal;
+    ``owner``: the arc, ``frac``: the point's parameter), the corrected ends of each arc
+    (``S1`` .. ``En``) and the first guess of its centre (``c01``, ``c02``)."""
 
-    nom_a = arc_nominal(ao, s_a)
-    lrows, nom_l, lcheck = _line_samples(li, Q0, Q1, S, T, step_mm, curvature, budget - rounding)
-    rows_all = np.concatenate([lrows, ai[ao]])
-    corr = corrected(rows_all, np.vstack([nom_l, nom_a])) if len(rows_all) else np.zeros((0, 3))
-    P_l, P_a = corr[:len(nom_l)], corr[len(nom_l):]
-    # -- straight moves: every sample within budget - rounding of the chord ---------------
-    ok_lines: list[int] = []
-    if len(li):
-        good = lcheck(P_l)
-        ok_lines = li[good].tolist()
-        bad = set(li[~good].tolist())
-        rest.extend((i, m) for i, m in planned if m.arc is None and i in bad)
-    hints: dict[int, ArcHint] = {}
-    if not len(ai):
-        return ok_lines, hints, rest
-    # -- arcs: samples and bulged interval middles, in the plane of each arc -------------
+    P1: FloatArray
+    P2: FloatArray
+    Pn: FloatArray
+    owner: IntArray
+    frac: FloatArray
+    S1: FloatArray
+    S2: FloatArray
+    Sn: FloatArray
+    E1: FloatArray
+    E2: FloatArray
+    En: FloatArray
+    c01: FloatArray
+    c02: FloatArray
+
+
+def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlanePoints:
+    """The arcs' corrected samples ``P_a`` (the interior ones) with their ends and bulged
+    interval middles, in the plane of each arc, and the first guess of each centre."""
+    ai, na, cols = arcs.rows, arcs.n, arcs.cols
+    mo, mp, s_m = arcs.mid_own, arcs.mid_pos, arcs.mid_s
+    S, T = ends.start, ends.target
     # every sample with its ends: [S, interior..., T] per arc
     full_o, full_p, full_start = _ragged(na)
     Pf = np.empty((len(full_o), 3))
@@ -603,11 +810,11 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     Pf[first] = S[ai]
     Pf[last] = T[ai]
     Pf[~first & ~last] = P_a
-    nom_m = arc_nominal(mo, s_m)
+    nom_m = arcs_points(mo, s_m, cols)
     nom_f = np.empty_like(Pf)
-    nom_f[first] = Q0[ai]
-    nom_f[last] = Q1[ai]
-    nom_f[~first & ~last] = nom_a
+    nom_f[first] = ends.q0[ai]
+    nom_f[last] = ends.q1[ai]
+    nom_f[~first & ~last] = arcs.nom
     # interval k of arc j lies between full slots full_start[j] + k and + k + 1
     a_idx = full_start[mo] + mp
     bulge = nom_m - 0.5 * (nom_f[a_idx] + nom_f[a_idx + 1])
@@ -617,6 +824,7 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     frac = np.concatenate([full_p / (na[full_o] - 1), s_m])
     k = len(ai)
     j = np.arange(k)
+    axes = cols.axes
     ax1, ax2, axn = axes[:, 0], axes[:, 1], axes[:, 2]
     S1, S2, Sn = S[ai, ax1], S[ai, ax2], S[ai, axn]
     E1, E2, En = T[ai, ax1], T[ai, ax2], T[ai, axn]
@@ -627,8 +835,27 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     cnt = np.bincount(full_o, minlength=k)
     for c in range(3):
         off[:, c] = np.bincount(full_o, Pf[:, c] - nom_f[:, c], minlength=k) / cnt
-    c01 = centre[j, ax1] + off[j, ax1]
-    c02 = centre[j, ax2] + off[j, ax2]
+    c01 = cols.centre[j, ax1] + off[j, ax1]
+    c02 = cols.centre[j, ax2] + off[j, ax2]
+    return _PlanePoints(P1, P2, Pn, owner, frac, S1, S2, Sn, E1, E2, En, c01, c02)
+
+
+@dataclass(frozen=True, eq=False)
+class _Circles:
+    """The fitted circle of each arc: centre (``c1``, ``c2``) on the bisector of its
+    corrected ends, radius ``rho``; ``usable``: a chord of finite, nonzero length."""
+
+    c1: FloatArray
+    c2: FloatArray
+    rho: FloatArray
+    usable: BoolArray
+
+
+def _fit_centres(p: _PlanePoints) -> _Circles:
+    """The centre on the bisector of each arc's corrected ends whose circle fits its points
+    best: Gauss-Newton on the signed distance along the bisector, for all arcs at once."""
+    S1, S2, E1, E2, P1, P2, owner = p.S1, p.S2, p.E1, p.E2, p.P1, p.P2, p.owner
+    k = len(S1)
     M1, M2 = 0.5 * (S1 + E1), 0.5 * (S2 + E2)
     D1, D2 = E1 - S1, E2 - S2
     L = np.hypot(D1, D2)
@@ -636,7 +863,7 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
     Ls = np.where(usable, L, 1.0)
     n1, n2 = -D2 / Ls, D1 / Ls
     h = 0.5 * L
-    t = (c01 - M1) * n1 + (c02 - M2) * n2
+    t = (p.c01 - M1) * n1 + (p.c02 - M2) * n2
     # each arc's fit stops once its step is below CENTRE_SETTLED_MM (the steps after are
     # rounding noise), as segment.bisector_centre's does: what an arc gets does not
     # depend on the arcs fitted with it
@@ -660,33 +887,31 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], Q0:
             break
     c1, c2 = M1 + t * n1, M2 + t * n2
     rho = np.hypot(h, t)
-    # the deviation of every sample from that circle (a helix along the normal axis)
+    return _Circles(c1, c2, rho, usable)
+
+
+def _worst_deviations(p: _PlanePoints, circles: _Circles, arcs: _ArcSamples) -> tuple[FloatArray, BoolArray]:
+    """The largest deviation of each arc's points from its fitted circle (a helix along
+    the normal axis, turning as the arc does), and whether the circle turns as the
+    nominal arc does (within a quarter turn; not at all: False)."""
+    c1, c2, rho, owner = circles.c1, circles.c2, circles.rho, p.owner
+    S1, S2, Sn, E1, E2, En = p.S1, p.S2, p.Sn, p.E1, p.E2, p.En
     th0 = np.arctan2(S2 - c2, S1 - c1)
     th1 = np.arctan2(E2 - c2, E1 - c1)
-    cw = np.array([arc.clockwise for _i, _m, arc in arcs_i])
+    cw = arcs.clockwise
     base = np.where(cw, -np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
     sgn = np.where(cw, -1.0, 1.0)
     asw = np.abs(base)
-    usable &= (asw > 0) & (np.abs(base - sweep) <= math.pi / 2)
+    turning = (asw > 0) & (np.abs(base - arcs.cols.sweep) <= math.pi / 2)
     asw = np.where(asw > 0, asw, 1.0)
-    v1, v2 = P1 - c1[owner], P2 - c2[owner]
+    v1, v2 = p.P1 - c1[owner], p.P2 - c2[owner]
     phi = np.arctan2(v2, v1)
     alpha = np.mod((phi - th0[owner]) * sgn[owner], TWO_PI)
-    target = frac * asw[owner]
+    target = p.frac * asw[owner]
     alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
     f = alpha / asw[owner]
     nrm = Sn[owner] + (En - Sn)[owner] * f
-    dev = np.hypot(np.hypot(v1, v2) - rho[owner], Pn - nrm)
-    worst = np.full(k, -np.inf)
+    dev = np.hypot(np.hypot(v1, v2) - rho[owner], p.Pn - nrm)
+    worst = np.full(len(S1), -np.inf)
     np.maximum.at(worst, owner, dev)
-    usable &= np.isfinite(worst) & np.isfinite(rho) & (worst <= budget)
-    # the hints made from the arrays' rows as Python floats (tolist), all at once
-    sel = np.flatnonzero(usable)
-    rows = zip(*(x[sel].tolist() for x in (c1, c2, rho, worst, sweep, S1, S2, Sn, E1, E2, En, np.abs(r1 - r0))),
-               strict=True)
-    for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
-                                                                               rows, strict=True):
-        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
-    if len(sel) < k:
-        rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
-    return ok_lines, hints, rest
+    return worst, turning
