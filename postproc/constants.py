@@ -3,6 +3,11 @@
 # Inverse solvers stop when |F(q) - p*| is below this: a hundred times finer than the
 # best machine-tool positioning resolution (0.1 um), so it never shows in a program.
 SOLVER_TOL_MM = 1e-6
+# A solver answer is accepted up to ten times its own stopping tolerance (float noise
+# in the residual itself); still a thousand times below the default path tolerance.
+# An engine whose solver stands for larger residuals says so in ``accept_residual_mm``
+# (the parametric astatic solver: one grid step); the larger of the two applies.
+SOLVER_ACCEPT_MM = 10 * SOLVER_TOL_MM
 
 # Most iterations a converged solver may take before it reports failure. Newton on a
 # smooth error field with corrections << 1 mm converges in 2-4; 50 means something is wrong.

@@ -1,4 +1,4 @@
-"""The planner's samples of a chunk's moves, made at once (``planner._sample_moves``),
+"""The planner's samples of a chunk's moves, made at once (``sampling._sample_moves``),
 against the per-piece computation they replace: np.linspace per piece, arc_points and
 line_points, the interval middles' bulge and the carried directions, bit for bit."""
 
@@ -11,15 +11,15 @@ import pytest
 
 from postproc.gcode.geometry import arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc, Move
-from postproc.gcode.planner import (
+from postproc.gcode.sampling import (
     ARC_CHECK_MIN_SAMPLES,
     ARC_CHECK_STEP_RAD,
     SAMPLE_STEP_MM,
-    Table,
     _sample_moves,
 )
 from postproc.gcode.segment import quadrant_breaks
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE
+from postproc.gcode.table import Table
 
 
 def _move(i, q0, q1, arc=None):

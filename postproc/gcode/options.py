@@ -6,9 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM
+from postproc.constants import DEFAULT_MAX_CORRECTION_MM, DEFAULT_TOLERANCE_MM, SOLVER_ACCEPT_MM
 from postproc.gcode import cutter
-from postproc.gcode.engine_use import SOLVER_ACCEPT_MM
 from postproc.limits import Limits
 
 # Output growth (lines out / lines in) above which the summary warns.

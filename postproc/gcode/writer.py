@@ -24,8 +24,9 @@ from postproc.gcode.emitter import EmitterMixin, _unit_decimals
 from postproc.gcode.lexer import Word
 from postproc.gcode.moves import Cycle, Move
 from postproc.gcode.options import CorrectOptions, CorrectReport
-from postproc.gcode.planner import Planner, Table
+from postproc.gcode.planner import Planner
 from postproc.gcode.segment import Curve
+from postproc.gcode.table import Table
 from postproc.gcode.vplan import ArcHint, FloatArray, Plan
 
 Write: TypeAlias = bulk.Write

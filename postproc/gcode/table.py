@@ -1,0 +1,50 @@
+"""The move table: a chunk's moves, a row each in program order, as columns.
+
+The reader (:mod:`postproc.gcode.reader`) reads a chunk; the corrector gathers its moves
+into a :class:`Table` (runs of plain lines by slices, other moves row by row); the
+planner (:mod:`postproc.gcode.planner`) fills the rest of its columns; the writer
+(:mod:`postproc.gcode.writer`) writes from it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from postproc.gcode.vplan import ArcParams, FloatArray, IntArray, PlanMove
+
+if TYPE_CHECKING:
+    from postproc.gcode import bulk
+
+_NO_POINTS = np.zeros((0, 3))
+
+
+@dataclass(eq=False)
+class Table:
+    """A chunk's moves, a row each in program order, as columns. The reader fills what it
+    read (targets, lines, tool vectors, rotary positions, the moves read line by line and
+    the runs of plain lines); the planner the rest."""
+
+    q1: FloatArray  # (M, 3) nominal targets (machine mm; unknown axes filled by the planner)
+    lineno: IntArray  # (M,) source line of each row
+    r: FloatArray  # (M, 3) tool vectors
+    rot: list[dict[str, float]]  # rotary axis positions of each row ({} without rotary axes)
+    moves: list[tuple[int, PlanMove]]  # (row, move) of the rows read line by line, and the runs' arcs
+    runs: Sequence[bulk.Run] = ()  # runs of plain lines (each knows its first row, trow)
+    # -- filled by Planner.approach
+    q0: FloatArray = field(default_factory=lambda: _NO_POINTS)  # nominal starts
+    dirs: FloatArray = field(default_factory=lambda: _NO_POINTS)  # approach direction of each axis (-1, 0, 1)
+    arc_prm: dict[int, ArcParams] = field(default_factory=dict)  # arc_params of the arcs, by row
+    breaks: dict[int, FloatArray] = field(default_factory=dict)  # quadrant breaks of arcs, by row
+    fixed_rows: list[int] = field(default_factory=list)  # rows that go to a stored position, uncorrected
+    fixed_q: FloatArray | None = None  # their targets as given
+    # -- filled by Planner.plan
+    target: FloatArray = field(default_factory=lambda: _NO_POINTS)  # corrected targets (unrounded)
+    start: FloatArray = field(default_factory=lambda: _NO_POINTS)  # corrected starts: the target before
+    d_in: FloatArray = field(default_factory=lambda: _NO_POINTS)  # directions before each row
+
+    def __len__(self) -> int:
+        return len(self.q1)
