@@ -85,6 +85,28 @@ def test_framed_arcs_follow_the_corrected_path(variant, calibration):
     assert ideal_vs_emitted(text, out, calibration.engine, SETUP, dialect="sinumerik") <= TOL
 
 
+# G91 arcs (I/J and CR=) and an arc with absolute centre words (I=AC() J=AC(): absolute for
+# that block only), under ROT RPL=30 or no frame
+INCREMENTAL = ("%_N_INC_MPF\n;$PATH=/_N_MPF_DIR\nN10 G17 G90 G54 D1\n{rot}G0 X20 Y0 Z5\nG1 Z-2 F400\nG91\n"
+               "G3 X-20 Y20 I-20 J0\nG3 X-20 Y-20 CR=20\nG1 Y-20\nG2 X-20 Y-20 I-10 J-10\nG90\n"
+               "G2 X-20 Y-40 I=AC(-30) J=AC(-40)\n{unrot}G0 Z50\nM30\n")
+
+
+@pytest.mark.parametrize("framed", [True, False], ids=["rot", "no frame"])
+def test_incremental_and_absolute_centre_words(framed, calibration):
+    """An arc cut into several keeps each piece's centre words in its block's form: a
+    piece inserted before an ``I=AC() J=AC()`` block is written ``I=AC(..) J=AC(..)`` too
+    (a plain ``I`` would be read relative to the piece's start)."""
+    text = INCREMENTAL.format(rot="ROT RPL=30\n" if framed else "", unrot="ROT\n" if framed else "")
+    out, rep = correct_text(text, calibration.engine, SETUP, OPTS)
+    assert rep.arcs_linearised == 0
+    assert ideal_vs_emitted(text, out, calibration.engine, SETUP, dialect="sinumerik") <= TOL
+    after = out.split("G90\n")[-1].split("G0 Z")[0].splitlines()
+    arcs = [ln for ln in after if ln.startswith("G2")]
+    assert arcs
+    assert all("I=AC(" in ln and "J=AC(" in ln for ln in arcs), arcs
+
+
 def test_the_arc_words_are_the_frames():
     """ROT RPL=90 (machine x = -y, y = x of the frame): a calibration whose correction is
     +0.1 mm along machine X moves the frame's Y by -0.1. The corrected arc is the same
@@ -139,3 +161,16 @@ def test_an_ellipse_is_refused_at_its_line(tmp_path):
     assert "hint:" in res.output
     with pytest.raises(UnsupportedGcodeError):
         correct_text(prog.read_text(), IdentityEngine([[-1e5] * 3, [1e5] * 3]), SETUP, OPTS)
+
+
+def test_an_absolute_centre_word_is_removed_whole():
+    """A linearised ``I=AC(-10)`` block loses its centre words up to their parenthesis."""
+    from postproc.gcode.emitter import _word_span
+
+    it = Interpreter(Setup(offsets={"G54": (0.0, 0.0, 0.0)}, tool_lengths={1: 0.0}), None, dialect="sinumerik")
+    line = "G2 X-20 Y0 I=AC(-10) J=AC(0)\n"
+    it.feed_line(1, "G54 D1 G0 X0 Y0 Z0\n")
+    mv = it.feed_line(2, line)
+    spans = [_word_span(line, mv.words[i]) for i in mv.arc.offset_idx]
+    assert [line[a:b] for a, b in spans] == ["I=AC(-10)", "J=AC(0)"]
+    assert line[slice(*_word_span(line, mv.words[1]))] == "X-20"

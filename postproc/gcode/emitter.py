@@ -21,6 +21,7 @@ from postproc.gcode.arcfit import Edit, MoveFit, _free_move, _Piece
 from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.framed import FrameView
 from postproc.gcode.interp import Arc, Move
+from postproc.gcode.lexer import Word
 from postproc.gcode.segment import (
     ArcSpec,
     Curve,
@@ -85,6 +86,28 @@ def _unit_decimals(options: _Options, unit: float) -> int:
     if options.decimals is not None:
         return options.decimals
     return 5 if unit == MM_PER_INCH else 4
+
+
+def _centre_absolute_once(line: str, mv: Move) -> bool:
+    """Whether the block's centre words are Sinumerik's ``I=AC(v)``: absolute for this
+    block only (the interpreter reads every centre word of such a block so). The centre
+    words written for it, on its own line or on the lines inserted before it, must then
+    be so too: a plain ``I`` is relative to the arc's start there."""
+    arc = mv.arc
+    if arc is None or not mv.arc_absolute:
+        return False
+    idx = [i for i in arc.offset_idx if i >= 0]
+    return bool(idx) and "(" in line[mv.words[idx[0]].letter_pos:mv.words[idx[0]].start]
+
+
+def _word_span(line: str, w: Word) -> tuple[int, int]:
+    """Where word ``w`` stands on its line, from its letter to its number's end, or to the
+    closing parenthesis of a Sinumerik ``I=AC(v)``."""
+    if "(" in line[w.letter_pos:w.start]:
+        close = line.find(")", w.end)
+        if close >= 0:
+            return w.letter_pos, close + 1
+    return w.letter_pos, w.end
 
 
 def _general_plan(hint: ArcHint) -> Plan:
@@ -290,7 +313,7 @@ class EmitterMixin(Generic[_O, _R]):
                 edits.append((start, end, ("0" if num.startswith("0") else "") + "1"))
             else:
                 edits.append(self._insert_motion(mv, g1 + sep))
-            spans = [(mv.words[ai].letter_pos, mv.words[ai].end) for ai in mv.aux_idx]
+            spans = [_word_span(line, mv.words[ai]) for ai in mv.aux_idx]
             edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
             self.emitted_motion = LINE
         else:
@@ -313,7 +336,7 @@ class EmitterMixin(Generic[_O, _R]):
             if sg.kind == "arc" and sg.spec is not None and arc is not None:
                 words.append("G2" if arc.clockwise else "G3")
                 words.extend(sg.added)
-                words.extend(self._arc_words(sg.spec))
+                words.extend(self._arc_words(sg.spec, _centre_absolute_once(line, mv)))
             else:
                 words.append("G1")
                 words.extend(sg.added)
@@ -421,9 +444,12 @@ class EmitterMixin(Generic[_O, _R]):
             out.append(base + val * unit)
         return np.array(out)
 
-    def _arc_words(self, spec: ArcSpec) -> list[str]:
+    def _arc_words(self, spec: ArcSpec, absolute_once: bool = False) -> list[str]:
+        """The words of the arc ``spec``; ``absolute_once``: its centre words as Sinumerik's
+        ``I=AC(v)`` (:func:`_centre_absolute_once`)."""
         radius = self._radius_word()
-        words = [(radius if letter == "R" else letter) + text for letter, text in spec["vals"]]
+        words = [radius + text if letter == "R" else f"{letter}=AC({text})" if absolute_once else letter + text
+                 for letter, text in spec["vals"]]
         if spec["turns"] > 1:
             words.append(f"P{spec['turns']}")
         return words
@@ -443,10 +469,10 @@ class EmitterMixin(Generic[_O, _R]):
         same_form = (spec["form"] == "r") == (arc.r_idx >= 0)
         if not same_form or spec["turns"] != arc.turns:
             # a different form or number of turns: the old words go, the new ones are added
-            spans = [(mv.words[ai].letter_pos, mv.words[ai].end) for ai in mv.aux_idx]
+            spans = [_word_span(line, mv.words[ai]) for ai in mv.aux_idx]
             spec["replace"] = True
             edits = [(a, b, "") for a, b in emit.removal_spans(line, spans)]
-            return edits, self._arc_words(spec)
+            return edits, self._arc_words(spec, _centre_absolute_once(line, mv))
         edits, added = [], []
         idxs: tuple[int, ...]
         if spec["form"] == "r":
@@ -459,7 +485,8 @@ class EmitterMixin(Generic[_O, _R]):
                 if float(num) != float(text):
                     edits.append((start, end, text))
             elif float(text) != 0.0 or mv.arc_absolute:
-                added.append((self._radius_word() if letter == "R" else letter) + text)
+                added.extend(self._arc_words({"form": spec["form"], "vals": ((letter, text),), "turns": 1},
+                                             _centre_absolute_once(line, mv)))
         del p_idx
         return edits, added
 
