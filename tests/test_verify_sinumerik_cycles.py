@@ -65,3 +65,12 @@ def test_verify_command_on_a_cycle_program(tmp_path):
     assert res.exit_code == 0, res.output
     assert "no feed moves" not in res.output
     assert "corrected, parametric" in res.output
+
+
+def test_the_holes_of_a_cycle_under_a_rotated_frame():
+    """ROT RPL=90: the hole programmed at X10 Y0 is drilled at the machine's G54 X0 Y10."""
+    text = ("%_N_ROTDRILL_MPF\nG17 G90 G54 D1\nG0 X0 Y0 Z20\nG1 F100\nROT RPL=90\n"
+            "MCALL CYCLE81(10,0,2,-5,0)\nG0 X10 Y0\nMCALL\nROT\nM30\n")
+    pp = program_path(text, SETUP, dialect="sinumerik")
+    bottom = pp.points_mm[~pp.rapid][np.argmin(pp.points_mm[~pp.rapid][:, 2])]
+    np.testing.assert_allclose(bottom, (100.0, 90.0, 35.0), atol=1e-9)
