@@ -268,13 +268,13 @@ def emitted_arcs(text: str, setup: Setup):
     return out
 
 
-def ideal_vs_emitted(original: str, corrected: str, engine, setup: Setup) -> float:
+def ideal_vs_emitted(original: str, corrected: str, engine, setup: Setup, dialect: str = "generic") -> float:
     """Largest distance, both ways over feed moves, between the corrected ideal path (the
     engine's correction of the original's dense samples) and the emitted path."""
-    nom = program_path(original, setup, max_step_mm=STEP)
+    nom = program_path(original, setup, max_step_mm=STEP, dialect=dialect)
     q = nom.points_mm - nom.tool_mm
     ideal = q + np.asarray(engine.correction(nom.points_mm, nom.tool_mm, nom.context).q)
-    out = program_path(corrected, setup, max_step_mm=STEP)
+    out = program_path(corrected, setup, max_step_mm=STEP, dialect=dialect)
     emitted = out.points_mm - out.tool_mm
     feed_i, feed_o = ~nom.rapid, ~out.rapid
     there, _ = Polyline(ideal, feed_i[1:]).nearest(emitted[feed_o])

@@ -137,15 +137,20 @@ class MoveFit:
     """The fit of one planned move: the move, its plan, the output's decimals and the
     budget, and the writer whose words and subdivision it uses."""
 
-    __slots__ = ("w", "mv", "plan", "d", "budget", "arc")
+    __slots__ = ("w", "mv", "plan", "d", "budget", "arc", "to_view")
 
-    def __init__(self, writer: _Writer, mv: Move, plan: Plan, d: int, budget: float) -> None:
+    def __init__(self, writer: _Writer, mv: Move, plan: Plan, d: int, budget: float,
+                 to_view: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.w = writer
         self.mv = mv
         self.plan = plan
         self.d = d  # decimals of the words written
         self.budget = budget  # share of --tolerance a segment may use at the samples
         self.arc = mv.arc or _NO_ARC  # the move's arc (a line's is never read)
+        # a framed arc's: machine points (n, 3) into the coordinates the move and its plan
+        # are in (postproc.gcode.framed.FrameView.points), for what the engine's subdivision
+        # of the plan's curve gives
+        self.to_view = to_view
 
     def piece(self, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray, qe: list[float],
               final: bool) -> list[_Piece]:
@@ -284,7 +289,7 @@ class MoveFit:
         engine's own subdivision needs."""
         mv, d = self.mv, self.d
         (ss, qq), = self.w._subdivide([self.plan["curve"]], [np.array([sa, sb])], mv.unit)
-        qq = np.array(qq, dtype=float)
+        qq = np.array(qq, dtype=float) if self.to_view is None else self.to_view(qq)
         qq[-1] = qb
         out = []
         for j in range(1, len(ss)):

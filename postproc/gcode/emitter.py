@@ -7,18 +7,21 @@ emitted position ``qe``, options, report and engine-call helpers.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import replace
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
 from postproc.constants import MM_PER_INCH
-from postproc.errors import PostprocError, UnsupportedGcodeError
+from postproc.errors import PostprocError
 from postproc.gcode import emit
 from postproc.gcode.arcfit import Edit, MoveFit, _free_move, _Piece
 from postproc.gcode.cutter import take_up as cutter_take_up
+from postproc.gcode.framed import FrameView
 from postproc.gcode.interp import Arc, Move
+from postproc.gcode.lexer import Word
 from postproc.gcode.segment import (
     ArcSpec,
     Curve,
@@ -85,6 +88,34 @@ def _unit_decimals(options: _Options, unit: float) -> int:
     return 5 if unit == MM_PER_INCH else 4
 
 
+def _centre_absolute_once(line: str, mv: Move) -> bool:
+    """Whether the block's centre words are Sinumerik's ``I=AC(v)``: absolute for this
+    block only (the interpreter reads every centre word of such a block so). The centre
+    words written for it, on its own line or on the lines inserted before it, must then
+    be so too: a plain ``I`` is relative to the arc's start there."""
+    arc = mv.arc
+    if arc is None or not mv.arc_absolute:
+        return False
+    idx = [i for i in arc.offset_idx if i >= 0]
+    return bool(idx) and "(" in line[mv.words[idx[0]].letter_pos:mv.words[idx[0]].start]
+
+
+def _word_span(line: str, w: Word) -> tuple[int, int]:
+    """Where word ``w`` stands on its line, from its letter to its number's end, or to the
+    closing parenthesis of a Sinumerik ``I=AC(v)``."""
+    if "(" in line[w.letter_pos:w.start]:
+        close = line.find(")", w.end)
+        if close >= 0:
+            return w.letter_pos, close + 1
+    return w.letter_pos, w.end
+
+
+def _general_plan(hint: ArcHint) -> Plan:
+    """The general plan of the move an arc hint does not settle."""
+    lazy = hint.lazy
+    if lazy is None:  # the corrector gives every hint it hands the writer its general plan
+        raise TypeError("an arc hint without its general plan")
+    return lazy()
 
 
 class EmitterMixin(Generic[_O, _R]):
@@ -156,18 +187,6 @@ class EmitterMixin(Generic[_O, _R]):
 
     def _emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
         self.report.moves += 1
-        if mv.frame is not None and mv.arc is not None:
-            d = self._decimals_for(mv.unit)
-            if plan is None and max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit < HALF_UNIT[d]:
-                # the correction rounds to nothing at the arc's end: the line stays as it is
-                self.qe[:] = list(mv.q1)
-                self.emitted_motion = mv.kind
-                self._write_line(line, [], write)
-                return
-            raise UnsupportedGcodeError(
-                "Sinumerik arc under ROT/SCALE/MIRROR: read, but its corrected centre and end words are not "
-                "written yet in the frame's coordinates", path=self.path, lineno=mv.lineno, col=1,
-                hint="post the arc with the frame deleted (ROT/MIRROR alone), or as its moves")
         d = self._decimals_for(mv.unit)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
@@ -182,10 +201,31 @@ class EmitterMixin(Generic[_O, _R]):
             self.emitted_motion = mv.kind
             self._write_line(line, edits, write)
             return
+        if mv.frame is not None and mv.arc is not None:
+            view = FrameView.of(mv)
+            with self._in_view(view):
+                self._emit_planned_or_not(line, view.move(mv), view.point(target), view.plan(plan), d, write, view)
+            return
+        self._emit_planned_or_not(line, mv, target, plan, d, write)
+
+    def _emit_planned_or_not(self, line: str, mv: Move, target: Point, plan: Plan | None, d: int, write: Write,
+                             view: FrameView | None = None) -> None:
+        """An arc or a split line (``view``: the frame a framed arc is written in, whose
+        coordinates ``mv``, ``target`` and ``plan`` are in)."""
         if plan is None or "seq" not in plan:
             self._emit_unplanned_arc(line, mv, target, d, write)
             return
-        self._emit_planned(line, mv, target, plan, d, write)
+        self._emit_planned(line, mv, target, plan, d, write, view)
+
+    @contextmanager
+    def _in_view(self, view: FrameView) -> Iterator[None]:
+        """The emitted position in ``view``'s coordinates while a framed arc is written
+        there, then back in the machine's."""
+        self.qe[:] = view.point(self.qe)
+        try:
+            yield
+        finally:
+            self.qe[:] = view.machine(self.qe)
 
     def _axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]:
         """Words for an inserted line (no original words): every axis that moves."""
@@ -217,12 +257,15 @@ class EmitterMixin(Generic[_O, _R]):
         self.report.lines_out += 1
 
     # -- planned moves: pieces of corrected samples fitted by exact arcs and lines ----------
-    def _emit_planned(self, line: str, mv: Move, target: Point, plan: Plan, d: int, write: Write) -> None:
+    def _emit_planned(self, line: str, mv: Move, target: Point, plan: Plan, d: int, write: Write,
+                      view: FrameView | None = None) -> None:
         """Emit a move from its plan: take-ups and pieces of corrected samples, each piece
         fitted by the fewest exact arcs (arc moves) or chords that stay within the budget;
-        the last segment is written on the move's own line."""
-        budget = self.opt.tolerance_mm * FIT_BUDGET
-        fit = MoveFit(self, mv, plan, d, budget)
+        the last segment is written on the move's own line. ``view``: a framed arc's frame,
+        whose coordinates the move and its plan are in (its share of the budget, and the
+        map of the engine's subdivision into them)."""
+        budget = self.opt.tolerance_mm * FIT_BUDGET * (1.0 if view is None else view.budget_share)
+        fit = MoveFit(self, mv, plan, d, budget, None if view is None else view.points)
         qe = list(self.qe)
         segs: list[_Piece] = []
         seq = plan["seq"]
@@ -270,7 +313,7 @@ class EmitterMixin(Generic[_O, _R]):
                 edits.append((start, end, ("0" if num.startswith("0") else "") + "1"))
             else:
                 edits.append(self._insert_motion(mv, g1 + sep))
-            spans = [(mv.words[ai].letter_pos, mv.words[ai].end) for ai in mv.aux_idx]
+            spans = [_word_span(line, mv.words[ai]) for ai in mv.aux_idx]
             edits.extend((a, b, "") for a, b in emit.removal_spans(line, spans))
             self.emitted_motion = LINE
         else:
@@ -293,7 +336,7 @@ class EmitterMixin(Generic[_O, _R]):
             if sg.kind == "arc" and sg.spec is not None and arc is not None:
                 words.append("G2" if arc.clockwise else "G3")
                 words.extend(sg.added)
-                words.extend(self._arc_words(sg.spec))
+                words.extend(self._arc_words(sg.spec, _centre_absolute_once(line, mv)))
             else:
                 words.append("G1")
                 words.extend(sg.added)
@@ -347,35 +390,43 @@ class EmitterMixin(Generic[_O, _R]):
     def _emit_hinted_arc(self, line: str, mv: Move, target: Point, hint: ArcHint, write: Write) -> None:
         """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
         as one exact arc when the hint's rounded centre passes for the end points as
-        written, else planned and fitted as any other arc."""
+        written, else planned and fitted as any other arc. A framed arc is written in its
+        frame's coordinates (:class:`FrameView`)."""
         d = self._decimals_for(mv.unit)
+        if mv.frame is None or mv.arc is None:
+            self._write_hinted_arc(line, mv, target, hint, d, write)
+            return
+        view = FrameView.of(mv)
+        vhint = view.hint(hint, mv.arc.plane)
+        with self._in_view(view):
+            vmv, vtarget = view.move(mv), view.point(target)
+            if vhint is None:  # the view does not keep lengths along the normal: the general plan
+                self.report.moves += 1
+                self._emit_planned_or_not(line, vmv, vtarget, view.plan(_general_plan(hint)), d, write, view)
+            else:
+                self._write_hinted_arc(line, vmv, vtarget, vhint, d, write, view)
+
+    def _write_hinted_arc(self, line: str, mv: Move, target: Point, hint: ArcHint, d: int, write: Write,
+                          view: FrameView | None = None) -> None:
+        """:meth:`_emit_hinted_arc` of a move without a frame, or of a framed arc in its
+        ``view`` (``mv``, ``target``, ``hint`` and the emitted position in its coordinates)."""
         qn = list(self.qe)
         edits, added = self._axis_words(mv, target, qn, d)
-        budget = self.opt.tolerance_mm * FIT_BUDGET
+        budget = self.opt.tolerance_mm * FIT_BUDGET * (1.0 if view is None else view.budget_share)
         if edits:
             spec = hint.spec(mv, self.qe, qn, d, budget)
         else:  # unchanged end words: the input's own arc words stay if they still pass
             centre = self._input_centre(mv, self.qe, qn)
             spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, budget)
-        if spec is None:
-            lazy = hint.lazy
-            if lazy is None:  # the corrector gives every hint it hands here its general plan
-                raise TypeError("an arc hint without its general plan")
-            self._emit_move(line, mv, target, lazy(), write)
-            return
         self.report.moves += 1
+        if spec is None:
+            self._emit_planned_or_not(line, mv, target, _general_plan(hint), d, write, view)
+            return
         sep, lower = emit.style_of(line)
         self._motion_edit(mv, edits, sep, lower)
         self.emitted_motion = mv.kind
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, qn, write)
-
-
-
-
-
-
-
 
     def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None:
         """Centre (2,) a controller finds from the input line's own arc words, with the
@@ -393,9 +444,12 @@ class EmitterMixin(Generic[_O, _R]):
             out.append(base + val * unit)
         return np.array(out)
 
-    def _arc_words(self, spec: ArcSpec) -> list[str]:
+    def _arc_words(self, spec: ArcSpec, absolute_once: bool = False) -> list[str]:
+        """The words of the arc ``spec``; ``absolute_once``: its centre words as Sinumerik's
+        ``I=AC(v)`` (:func:`_centre_absolute_once`)."""
         radius = self._radius_word()
-        words = [(radius if letter == "R" else letter) + text for letter, text in spec["vals"]]
+        words = [radius + text if letter == "R" else f"{letter}=AC({text})" if absolute_once else letter + text
+                 for letter, text in spec["vals"]]
         if spec["turns"] > 1:
             words.append(f"P{spec['turns']}")
         return words
@@ -415,10 +469,10 @@ class EmitterMixin(Generic[_O, _R]):
         same_form = (spec["form"] == "r") == (arc.r_idx >= 0)
         if not same_form or spec["turns"] != arc.turns:
             # a different form or number of turns: the old words go, the new ones are added
-            spans = [(mv.words[ai].letter_pos, mv.words[ai].end) for ai in mv.aux_idx]
+            spans = [_word_span(line, mv.words[ai]) for ai in mv.aux_idx]
             spec["replace"] = True
             edits = [(a, b, "") for a, b in emit.removal_spans(line, spans)]
-            return edits, self._arc_words(spec)
+            return edits, self._arc_words(spec, _centre_absolute_once(line, mv))
         edits, added = [], []
         idxs: tuple[int, ...]
         if spec["form"] == "r":
@@ -431,7 +485,8 @@ class EmitterMixin(Generic[_O, _R]):
                 if float(num) != float(text):
                     edits.append((start, end, text))
             elif float(text) != 0.0 or mv.arc_absolute:
-                added.append((self._radius_word() if letter == "R" else letter) + text)
+                added.extend(self._arc_words({"form": spec["form"], "vals": ((letter, text),), "turns": 1},
+                                             _centre_absolute_once(line, mv)))
         del p_idx
         return edits, added
 

@@ -112,7 +112,10 @@ def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
 def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", subroutine_path=(),
                    lenient_setup: bool = False, limits: Limits | None = None) -> Interpreter:
     """Interpret a program (path or text) line by line, calling ``visit(lineno, line,
-    block, state)`` for each line that makes a move (``state``: the modal state after it); the same reading as ``correct``: when the
+    block, state)`` for each move a line makes (``state``: the modal state after it): its
+    own block, then the Sinumerik drilling cycle it runs (the interpreter's
+    ``cycle_move``, whose steps :func:`postproc.gcode.interp.plain_moves` gives as the
+    correction writes them); the same reading as ``correct``: when the
     program needs expanding (parameters, O-words, subprograms, macros), ``reset()`` is
     called and the expanded program is read instead. Returns the interpreter. ``limits``:
     the bounds on loops and helix turns (:class:`postproc.limits.Limits`, default its own)."""
@@ -126,9 +129,7 @@ def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", sub
     interp.may_expand = True
     try:
         for lineno, line in enumerate(lines, start=1):
-            block = interp.feed_line(lineno, line)
-            if block is not None:
-                visit(lineno, line, block, interp.state)
+            _visit_line(interp, lineno, line, visit)
         return interp
     except NeedsExpansion:
         reset()
@@ -140,10 +141,18 @@ def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", sub
     for sl in expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path],
                      variables=getattr(setup, "variables", None), max_iterations=limits.max_iterations):
         interp.path = sl.path or path
-        block = interp.feed_line(sl.lineno, sl.text)
-        if block is not None:
-            visit(sl.lineno, sl.text, block, interp.state)
+        _visit_line(interp, sl.lineno, sl.text, visit)
     return interp
+
+
+def _visit_line(interp: Interpreter, lineno: int, line: str, visit) -> None:
+    """Feed one line and visit the moves it makes: its block, then the drilling cycle it
+    runs (a cycle call alone makes no block; a position block under ``MCALL`` makes both)."""
+    block = interp.feed_line(lineno, line)
+    if block is not None:
+        visit(lineno, line, block, interp.state)
+    if interp.cycle_move is not None:
+        visit(lineno, line, interp.cycle_move, interp.state)
 
 
 def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.ndarray:

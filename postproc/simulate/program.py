@@ -57,8 +57,20 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
         raise PostprocError(f"sampling step must be positive, got {max_step_mm}")
     setup = make_setup(setup_args)
     program = str(program)
-    # read as the correction reads it: the controller's dialect, subprogram files
-    reading: dict[str, Any] = {"dialect": getattr(options, "dialect", "generic"),
+    # read as the correction reads it: the controller's dialect (generic: Sinumerik by its
+    # header, as correct and diff choose it), subprogram files
+    from dataclasses import replace
+
+    from postproc.gcode.recognise import dialect_of_file
+
+    dialect = dialect_of_file(program, getattr(options, "dialect", "generic"))
+    if options is None and dialect != "generic":
+        from postproc.gcode.pipeline import CorrectOptions
+
+        options = CorrectOptions(dialect=dialect)
+    elif options is not None and options.dialect != dialect:
+        options = replace(options, dialect=dialect)
+    reading: dict[str, Any] = {"dialect": dialect,
                                "subroutine_path": tuple(getattr(options, "subroutine_path", ())),
                                "limits": getattr(options, "limits", None)}
     nominal = nominal_path(program, setup, **reading)
