@@ -168,7 +168,7 @@ def test_header_lines_fit_every_dialect():
     old = emit.header_line(name, SHA, 0.001, LONG_NOTE, "\n")
     assert len(old) > 700  # the one-line header LinuxCNC refused
     for dname in D.DIALECT_NAMES:
-        rows = emit.header_lines(dname, name, SHA, 0.001, LONG_NOTE, "\r\n", expanded=True)
+        rows = emit.header_lines(dname, (name, SHA), 0.001, LONG_NOTE, "\r\n", expanded=True)
         assert len(rows) > 8
         for k, row in enumerate(rows, start=1):
             assert row.endswith("\r\n")
@@ -187,15 +187,15 @@ def test_header_lines_fit_every_dialect():
 
 
 def test_header_lines_end_lines_for_every_reader():
-    rows = emit.header_lines("generic", "cal", SHA, 0.001, "", "\r")
+    rows = emit.header_lines("generic", ("cal", SHA), 0.001, "", "\r")
     assert all(r.endswith("\r\n") for r in rows)  # "\r" alone ends no line for LinuxCNC or Grbl
-    assert all(r.endswith("\n") and not r.endswith("\r\n") for r in emit.header_lines("generic", "c", SHA, 1, "", ""))
+    assert all(r.endswith("\n") and not r.endswith("\r\n") for r in emit.header_lines("generic", ("c", SHA), 1, "", ""))
 
 
 def test_header_carries_the_setup_exactly():
     setup = Setup(offsets={"G54": (100.123456789, 80.0, -40.5), "G55": {"X": 1.0, "Y": 2.0, "Z": 3.0}},
                   tool_lengths={1: 100.0, 12: 87.65432101}, start={"Z": 150.25}, tool_vector=(0.5, 0.0, -100.0))
-    rows = emit.header_lines("generic", "cal", SHA, 0.002, "G54=100.123,80,-40.5", "\n", setup=setup)
+    rows = emit.header_lines("generic", ("cal", SHA), 0.002, "G54=100.123,80,-40.5", "\n", setup=setup)
     hs = header_setup("".join(rows) + "G0 X1\n")
     assert hs.offsets == {"G54": (100.123456789, 80.0, -40.5), "G55": (1.0, 2.0, 3.0)}
     assert hs.tool_lengths == {1: 100.0, 12: 87.65432101}
@@ -203,11 +203,11 @@ def test_header_carries_the_setup_exactly():
     assert hs.tool_vector == (0.5, 0.0, -100.0)
     # G28/G30 stored positions (--home), exactly
     setup = Setup(home={"G28": {"X": 0.0, "Y": 0.0, "Z": 312.123456789}, "G30": (10.0, 20.0, 30.0)})
-    rows = emit.header_lines("fanuc", "cal", SHA, 0.002, "G28=X0,Y0,Z312.123; G30=X10,Y20,Z30", "\n", setup=setup)
+    rows = emit.header_lines("fanuc", ("cal", SHA), 0.002, "G28=X0,Y0,Z312.123; G30=X10,Y20,Z30", "\n", setup=setup)
     hs = header_setup("".join(rows))
     assert hs.home == {"G28": {"X": 0.0, "Y": 0.0, "Z": 312.123456789}, "G30": {"X": 10.0, "Y": 20.0, "Z": 30.0}}
     # from the note alone (no Setup): what the note says
-    rows = emit.header_lines("fanuc", "cal", SHA, 0.002, LONG_NOTE, "\n")
+    rows = emit.header_lines("fanuc", ("cal", SHA), 0.002, LONG_NOTE, "\n")
     hs = header_setup("%\nO1234 (PART)\n" + "".join(rows) + "G0 X1\n")
     assert hs.offsets["G57"] == (170.125, -27.5, 37.0)
     assert hs.tool_lengths[8] == 101.0

@@ -23,9 +23,7 @@ KNOWN: dict[tuple[str, str, str], int] = {
     ("compare.py", "_compare", "parameters"): 9,
     ("compare.py", "_pair_chunk", "lines"): 217,
     ("compare.py", "compare_programs", "parameters"): 9,
-    ("emit.py", "header_lines", "parameters"): 9,
     ("expand.py", "_Expander", "lines"): 1013,
-    ("path.py", "sample_program", "lines"): 86,
 }
 
 

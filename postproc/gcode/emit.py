@@ -263,13 +263,13 @@ def _wrap(words: str, width: int) -> list[str]:
     return [f"{HEADER_PREFIX}{t})" for t in lines]
 
 
-def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float, setup_note: str, ending: str,
+def header_lines(dialect: str, calibration: tuple[str, str], tolerance_mm: float, setup_note: str, ending: str,
                  expanded: bool = False, setup: Setup | None = None, cycles_expanded: bool = False) -> list[str]:
     """The comment lines that open every corrected program (and mark it as corrected).
 
     Each is a short ``(POSTPROC ...)`` comment that ``dialect`` accepts (length, case,
     characters; checked line by line). They carry the version, the calibration's name and
-    sha256, the tolerance, the setup (``setup_note`` as the pipeline writes it; when
+    sha256 (``calibration``), the tolerance, the setup (``setup_note`` as the pipeline writes it; when
     ``setup`` is given, offsets, tool lengths, start and tool vector are written from it
     exactly), EXPANDED when subprograms or macros were expanded and CYCLES EXPANDED when
     canned cycles are written as their moves (``--cycles expand``).
@@ -283,6 +283,7 @@ def header_lines(dialect: str, cal_name: str, cal_sha: str, tolerance_mm: float,
     # header would join the next line. "\r\n" ends a line for every reader.
     end = "\r\n" if ending == "\r" else (ending or "\n")
     body = [f"{HEADER_PREFIX}{_safe(__version__)} CORRECTED)"]
+    cal_name, cal_sha = calibration
     body += _wrap("CALIBRATION " + (_safe(cal_name) or "UNNAMED"), width)
     body += _wrap("SHA256 " + _safe(cal_sha), width)
     body += _wrap(f"TOLERANCE {_num(tolerance_mm)} MM", width)

@@ -213,6 +213,84 @@ def _steps(length_mm: float, step_mm: float) -> int:
     return math.ceil(pieces) if pieces < 1e18 else 10**18
 
 
+class _Moves:
+    """The moves :func:`sample_program` reads: per move its end, start, number of
+    samples, tool vector, line, whether it is rapid and its rotary positions; an arc's
+    samples are made as it is read, straight moves' all at once at the end."""
+
+    def __init__(self, path: str | None, step_mm: float | None, chord_mm: float | None, max_samples: int) -> None:
+        self.path, self.step_mm, self.chord_mm, self.max_samples = path, step_mm, chord_mm, max_samples
+        self.q1s: list = []
+        self.q0s: list = []
+        self.counts: list[int] = []
+        self.rs: list = []
+        self.lns: list[int] = []
+        self.rapid: list[bool] = []
+        self.rot: list[dict] = []
+        self.arcs: dict[int, np.ndarray] = {}
+        self.total = 0  # samples so far
+
+    def visit(self, lineno: int, _line: str, block, _state) -> None:
+        step_mm, chord_mm = self.step_mm, self.chord_mm
+        for mv in plain_moves(block):
+            q0, q1 = mv.q0, mv.q1
+            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
+                n = 1
+                q0 = q1
+            elif mv.arc is not None:
+                n = max(1, _steps(arc_length(mv.arc, q0, q1), step_mm) if step_mm else 1,
+                        arc_chord_steps(mv.arc, q0, q1, chord_mm) if chord_mm else 1)
+                if self.total + n <= self.max_samples:  # (else refused below, before the points are made)
+                    self.arcs[len(self.counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
+            else:
+                n = max(1, _steps(math.dist(q0, q1), step_mm)) if step_mm else 1
+            self.total += n
+            if self.total > self.max_samples:
+                every = f" every {step_mm:g} mm" if step_mm else ""
+                raise ResourceLimitError(
+                    f"sampling the program{every} makes more than {self.max_samples:,} points",
+                    path=self.path, lineno=lineno, col=1, hint="give postproc verify a larger --max-step")
+            self.q0s.append(q0)
+            self.q1s.append(q1)
+            self.counts.append(n)
+            self.rs.append(mv.r)
+            self.lns.append(lineno)
+            self.rapid.append(mv.kind == RAPID)
+            self.rot.append(mv.rotary)
+
+    def reset(self) -> None:
+        for acc in (self.q1s, self.q0s, self.counts, self.rs, self.lns, self.rapid, self.rot):
+            acc.clear()
+        self.arcs.clear()
+        self.total = 0
+
+    def path_of(self, setup: Setup, rotary: set[str]) -> ProgramPath:
+        """The samples of the moves read, with their context."""
+        if not self.counts:
+            empty = np.zeros((0, 3))
+            return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
+                               {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
+        n = np.asarray(self.counts)
+        move = np.repeat(np.arange(len(n)), n)
+        k = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
+        a, b = np.asarray(self.q0s, dtype=float), np.asarray(self.q1s, dtype=float)
+        q = a[move] + (b[move] - a[move]) * (k / n[move])[:, None]  # as line_points does
+        if self.arcs:
+            first = np.cumsum(n) - n
+            for j, pts in self.arcs.items():
+                q[first[j]:first[j] + n[j]] = pts
+        lineno_arr = np.asarray(self.lns)[move]
+        q = backfill_unknown(q, lineno_arr, self.path)
+        r = np.asarray(self.rs, dtype=float)[move]
+        signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
+        context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
+        for ax in sorted(rotary):
+            context[ax] = np.asarray([d.get(ax, 0.0) for d in self.rot], dtype=float)[move]
+        for key, v in (setup.context or {}).items():
+            context[key] = np.full(len(q), float(v))
+        return ProgramPath(q + r, r, lineno_arr, np.asarray(self.rapid)[move], context)
+
+
 def sample_program(source, setup: Setup | None = None, *, step_mm: float | None = None,
                    chord_mm: float | None = None, dialect: str = "generic", subroutine_path=(),
                    max_samples: int = MAX_SAMPLES, limits: Limits | None = None) -> ProgramPath:
@@ -229,73 +307,7 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
     (:class:`~postproc.limits.ResourceLimitError`, at the line that passes the bound)."""
     setup = setup or Setup()
     path, _lines = iter_source_lines(source)
-    # per move: end, start, number of samples, tool vector, line, kind, rotary positions;
-    # arcs' samples are made per arc, straight moves' all at once at the end
-    q1s: list = []
-    q0s: list = []
-    counts: list[int] = []
-    rs: list = []
-    lns: list[int] = []
-    rapid: list[bool] = []
-    rot: list[dict] = []
-    arcs: dict[int, np.ndarray] = {}
-    total = [0]  # samples so far
-
-    def visit(lineno: int, _line: str, block, _state) -> None:
-        for mv in plain_moves(block):
-            q0, q1 = mv.q0, mv.q1
-            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-                n = 1
-                q0 = q1
-            elif mv.arc is not None:
-                n = max(1, _steps(arc_length(mv.arc, q0, q1), step_mm) if step_mm else 1,
-                        arc_chord_steps(mv.arc, q0, q1, chord_mm) if chord_mm else 1)
-                if total[0] + n <= max_samples:  # (else refused below, before the points are made)
-                    arcs[len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
-            else:
-                n = max(1, _steps(math.dist(q0, q1), step_mm)) if step_mm else 1
-            total[0] += n
-            if total[0] > max_samples:
-                every = f" every {step_mm:g} mm" if step_mm else ""
-                raise ResourceLimitError(
-                    f"sampling the program{every} makes more than {max_samples:,} points",
-                    path=path, lineno=lineno, col=1, hint="give postproc verify a larger --max-step")
-            q0s.append(q0)
-            q1s.append(q1)
-            counts.append(n)
-            rs.append(mv.r)
-            lns.append(lineno)
-            rapid.append(mv.kind == RAPID)
-            rot.append(mv.rotary)
-
-    def reset() -> None:
-        for acc in (q1s, q0s, counts, rs, lns, rapid, rot):
-            acc.clear()
-        arcs.clear()
-        total[0] = 0
-
-    interp = for_each_block(source, setup, visit, reset, dialect=dialect, subroutine_path=subroutine_path,
-                            limits=limits)
-    if not counts:
-        empty = np.zeros((0, 3))
-        return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
-                           {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
-    n = np.asarray(counts)
-    move = np.repeat(np.arange(len(n)), n)
-    k = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
-    a, b = np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float)
-    q = a[move] + (b[move] - a[move]) * (k / n[move])[:, None]  # as line_points does
-    if arcs:
-        first = np.cumsum(n) - n
-        for j, pts in arcs.items():
-            q[first[j]:first[j] + n[j]] = pts
-    lineno_arr = np.asarray(lns)[move]
-    q = backfill_unknown(q, lineno_arr, path)
-    r = np.asarray(rs, dtype=float)[move]
-    signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
-    context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
-    for ax in sorted(interp.used_rotary):
-        context[ax] = np.asarray([d.get(ax, 0.0) for d in rot], dtype=float)[move]
-    for key, v in (setup.context or {}).items():
-        context[key] = np.full(len(q), float(v))
-    return ProgramPath(q + r, r, lineno_arr, np.asarray(rapid)[move], context)
+    moves = _Moves(path, step_mm, chord_mm, max_samples)
+    interp = for_each_block(source, setup, moves.visit, moves.reset, dialect=dialect,
+                            subroutine_path=subroutine_path, limits=limits)
+    return moves.path_of(setup, interp.used_rotary)

@@ -219,7 +219,7 @@ class Corrector:
                     path=self.path, lineno=k + 1, col=1,
                     hint="correct the original program instead, or use --force to correct it again")
         ending = emit.new_line_ending(head[0]) if head else "\n"
-        header_rows = emit.header_lines(self.opt.dialect, self.cal_name, self.cal_sha, self.opt.tolerance_mm,
+        header_rows = emit.header_lines(self.opt.dialect, (self.cal_name, self.cal_sha), self.opt.tolerance_mm,
                                         self._setup_note(), ending, expanded=self.expanded, setup=self.setup,
                                         cycles_expanded=self.opt.cycles == "expand")
         rd = self.reader
