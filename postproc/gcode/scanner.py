@@ -20,15 +20,10 @@ it compiles on its own.
 
 from __future__ import annotations
 
-from typing import Final, NamedTuple
+from typing import NamedTuple
 
 # i64: a native 64-bit integer where mypyc compiles the module, a plain int where it does not
 from mypy_extensions import i64
-
-# digits whose integer value is exact in a double (fast path of the number's value)
-_EXACT_DIGITS: Final = 15
-# powers of ten exact in a double: m / 10**d is then correctly rounded, as float(text) is
-_POW10: Final = [10.0**k for k in range(23)]
 
 
 class Word(NamedTuple):
@@ -97,36 +92,6 @@ def number_end(text: bytes, i: i64, n: i64) -> i64:
     return -1
 
 
-def number_value(text: bytes, i: i64, j: i64) -> float:
-    """``float(text[i:j])`` of a number the scanner found, without making the string
-    where its digits fit a double exactly (then one division by an exact power of ten
-    is correctly rounded, as ``float`` is)."""
-    neg = False
-    c = text[i]
-    k = i
-    if c == 43 or c == 45:
-        neg = c == 45
-        k += 1
-    m: i64 = 0
-    digits: i64 = 0
-    frac: i64 = -1
-    while k < j:
-        c = text[k]
-        if c == 46:
-            frac = 0
-        else:
-            if digits or c != 48:
-                digits += 1
-            m = m * 10 + (c - 48)
-            if frac >= 0:
-                frac += 1
-        k += 1
-    if digits > _EXACT_DIGITS or frac > 22:
-        return float(text[i:j])
-    v = float(m) / _POW10[frac] if frac > 0 else float(m)
-    return -v if neg else v
-
-
 def scan_into(text: bytes, cols: Columns) -> None:
     """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
     n: i64 = len(text)
@@ -175,7 +140,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 lpos_col.append(i)
                 start_col.append(j)
                 end_col.append(e)
-                value_col.append(number_value(text, j, e))
+                value_col.append(float(text[j:e]))  # correctly rounded, in C compiled or not
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
