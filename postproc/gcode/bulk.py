@@ -140,18 +140,17 @@ class RunMove:
     fixed = False  # never a stored-position move
     planned = False  # never a spline's chord
 
-    def __init__(self, lineno: int, kind: int, q0: Point, q1: Point, r: Point, shift: Point, unit: float,
-                 arc_absolute: bool, feed: float) -> None:
+    def __init__(self, run: Run, lineno: int, kind: int, q0: Point, q1: Point, feed: float) -> None:
         self.lineno = lineno
         self.kind = kind
         self.q0 = q0
         self.q1 = q1
-        self.r = r
-        self.shift = shift
-        self.unit = unit
+        self.r = run.r  # the run's tool vector, offsets, unit and arc-centre mode
+        self.shift = run.shift
+        self.unit = run.unit
         self.rotary: dict[str, float] = {}
         self.arc: Arc | None = None
-        self.arc_absolute = arc_absolute
+        self.arc_absolute = run.arc_absolute
         self.feed = feed
 
     def to_move(self, line: str) -> Move:
@@ -554,8 +553,7 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
         q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
-    mv = RunMove(run.lineno + j, motion, q0, q1, run.r, run.shift, run.unit, run.arc_absolute,
-                 float(f) if f else feed)
+    mv = RunMove(run, run.lineno + j, motion, q0, q1, float(f) if f else feed)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
@@ -586,8 +584,7 @@ def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write:
         s = _emit_rows(corrector, run, em, T, write, hints, s)
 
 
-# C901: the run writer's inner loops, kept in one frame for speed (every line of a run)
-def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,  # noqa: C901
+def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
                hints: Mapping[int, ArcHint], s: int) -> int:
     """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
     the end points as written, which the general emitter then writes; returns the
@@ -595,132 +592,164 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
     first arc whose hint the planner expects to fail there (:attr:`ArcHint.edge`), and
     at most :data:`MAX_STRETCH` lines, so that the pass over the words to add, made
     again from the line after such an arc, reads each line of a long run about once."""
-    blk = run.block
-    a, b = run.a, run.b
     arcs = run.arc_rows()
     first = bisect_left(arcs, s)
-    end = min(b, s + MAX_STRETCH)
-    trow = run.trow - a
+    b = _stretch_end(run, arcs, first, s, hints)
+    st = _Stretch(run, em, s, b, arcs[first:bisect_left(arcs, b, first)], list(corrector.qe))
+    final = [_added_words(st, k, corrector.qe[k]) for k in range(3)]
+    stop, arc_edit = _arc_stop(corrector, st, hints)
+    if stop > s:
+        _write_stretch(corrector, st, stop, arc_edit, write)
+        moved = run.block.last_moving
+        p = moved[stop - 1]
+        corrector.qe[:] = final if stop == b else (st.want[p] if p >= s else st.qe0)
+    if stop == b:
+        return b
+    # an arc the hint does not settle here (or whose centre word must be added): the
+    # general emitter's
+    j = stop - run.a
+    line = run.block.lines[stop]
+    corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
+                               hints[run.trow + j], write)
+    return stop + 1
+
+
+def _stretch_end(run: Run, arcs: list[int], first: int, s: int, hints: Mapping[int, ArcHint]) -> int:
+    """Where the stretch from line ``s`` ends: at most :data:`MAX_STRETCH` lines, and
+    after the first arc whose hint the planner expects to fail (``arcs[first]`` is the
+    first arc at or after ``s``)."""
+    end = min(run.b, s + MAX_STRETCH)
+    trow = run.trow - run.a
     for x in range(first, len(arcs)):
         y = arcs[x]
         if y >= end:
             break
         if hints[trow + y].edge:
-            end = y + 1
-            break
-    b = end
-    qe = corrector.qe
-    qe0 = list(qe)
-    unit, shift = run.unit, run.shift
+            return y + 1
+    return end
+
+
+@final
+class _Stretch:
+    """A stretch ``s:b`` of a run being written: its arcs, the words added to each line
+    (``add_col``), the written position wanted at each arc's line and at the last line
+    before it that moves (``want``), and the controller's position before it (``qe0``)."""
+
+    __slots__ = ("run", "em", "s", "b", "arc_rows", "qe0", "add_col", "want")
+
+    def __init__(self, run: Run, em: Emission, s: int, b: int, arc_rows: list[int], qe0: list[float]) -> None:
+        self.run, self.em, self.s, self.b, self.arc_rows, self.qe0 = run, em, s, b, arc_rows, qe0
+        self.add_col = [""] * (b - s)
+        moved = run.block.last_moving
+        self.want: dict[int, list[float]] = {}
+        for y in arc_rows:
+            self.want[y] = [math.nan] * 3
+            p = moved[y - 1] if y > s else -1
+            if p >= s:
+                self.want[p] = [math.nan] * 3
+
+
+def _added_words(st: _Stretch, k: int, qk: float) -> float:
+    """The words added on axis ``k`` to the stretch's lines that do not name it (where
+    the corrected position differs from the written one by half a step or more), the
+    written positions ``want`` asks for, and the position on ``k`` after the stretch
+    (``qk``: before it)."""
+    run, em, s, b, want, add_col = st.run, st.em, st.s, st.b, st.want, st.add_col
+    blk = run.block
+    unit, sk = run.unit, run.shift[k]
     hd = emit.HALF_UNIT[run.decimals]
-    n = b - s
-    add_col = [""] * n
-    lines = blk.lines
-    arc_rows = arcs[first:bisect_left(arcs, b, first)]
-    moved = blk.last_moving
-    # the written position at each arc's line and the last line before it that moves
-    want: dict[int, list[float]] = {}
-    for y in arc_rows:
-        want[y] = [math.nan] * 3
+    miss = em.miss[k]
+    lo, hi = bisect_left(miss, s), bisect_left(miss, b)
+    nums = em.nums[k]
+    has = blk.has[k]
+    for y, w in want.items():
+        if has[y]:
+            w[k] = float(nums[y]) * unit + sk
+    if lo < hi:
+        lines = blk.lines
+        ts, vs, texts, segs, lasts = em.miss_t[k], em.miss_v[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
+        decimals = run.decimals
+        # stretches of missing rows after the same named row
+        g = bisect_left(segs, lo + 1)
+        bounds = [lo, *segs[g:bisect_left(segs, hi)], hi]
+        for x, y in zip(bounds, bounds[1:], strict=False):
+            p = lasts[x]
+            if p >= s:
+                # the position the line's own word reached (float(text) == the
+                # value it was written from, correctly rounded)
+                qk = float(nums[p]) * unit + sk
+            if qk != qk:
+                continue  # never positioned: nothing to compare with, no word
+            for j, t, v in zip(range(x, y), ts[x:y], vs[x:y], strict=True):
+                i = miss[j]
+                if abs(t - qk) / unit >= hd:
+                    qk = round(v, decimals) * unit + sk  # the position the added word reaches
+                    line = lines[i]
+                    sep = " " if (" " in line or "\t" in line) else ""
+                    word = texts[j].lower() if line.islower() else texts[j]
+                    add_col[i - s] += sep + word
+                if want:
+                    wi = want.get(i)
+                    if wi is not None:
+                        wi[k] = qk
+    e = blk.last_moving[b - 1]  # the last line that moves
+    if e >= s and has[e]:
+        qk = float(nums[e]) * unit + sk
+    return qk
+
+
+def _arc_stop(corrector: Corrector, st: _Stretch, hints: Mapping[int, ArcHint]
+              ) -> tuple[int, dict[int, tuple[str, str, int]]]:
+    """The centre words of the stretch's arcs, up to the first whose hint does not hold
+    for its end points as written: (that arc's line, or the stretch's end; the words of
+    the arcs before it by line)."""
+    s, moved = st.s, st.run.block.last_moving
+    arc_edit: dict[int, tuple[str, str, int]] = {}  # row -> (I text, J text, edits)
+    for y in st.arc_rows:
         p = moved[y - 1] if y > s else -1
-        if p >= s:
-            want[p] = [math.nan] * 3
-    final = list(qe)
-    for k in range(3):
-        qk = qe[k]
-        miss = em.miss[k]
-        lo, hi = bisect_left(miss, s), bisect_left(miss, b)
-        nums = em.nums[k]
-        sk = shift[k]
-        has = blk.has[k]
-        for y, w in want.items():
-            if has[y]:
-                w[k] = float(nums[y]) * unit + sk
-        if lo < hi:
-            ts, vs, texts, segs, lasts = em.miss_t[k], em.miss_v[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
-            decimals = run.decimals
-            # stretches of missing rows after the same named row
-            g = bisect_left(segs, lo + 1)
-            bounds = [lo, *segs[g:bisect_left(segs, hi)], hi]
-            for x, y in zip(bounds, bounds[1:], strict=False):
-                p = lasts[x]
-                if p >= s:
-                    # the position the line's own word reached (float(text) == the
-                    # value it was written from, correctly rounded)
-                    qk = float(nums[p]) * unit + sk
-                if qk != qk:
-                    continue  # never positioned: nothing to compare with, no word
-                for j, t, v in zip(range(x, y), ts[x:y], vs[x:y], strict=True):
-                    i = miss[j]
-                    if abs(t - qk) / unit >= hd:
-                        qk = round(v, decimals) * unit + sk  # the position the added word reaches
-                        line = lines[i]
-                        sep = " " if (" " in line or "\t" in line) else ""
-                        word = texts[j].lower() if line.islower() else texts[j]
-                        add_col[i - s] += sep + word
-                    if want:
-                        wi = want.get(i)
-                        if wi is not None:
-                            wi[k] = qk
-        e = moved[b - 1]  # the last line that moves
-        if e >= s and has[e]:
-            qk = float(nums[e]) * unit + sk
-        final[k] = qk
-    cols, num_cols = blk.cols, em.nums
-    stop = b
-    arc_edit = {}  # row -> (I text, J text, edits)
-    for y in arc_rows:
-        p = moved[y - 1] if y > s else -1
-        ok = _arc_words(corrector, run, hints, y, want[p] if p >= s else qe0, want[y], em.named_edits[y])
+        ok = _arc_words(corrector, st.run, hints, y, st.want[p] if p >= s else st.qe0, st.want[y],
+                        st.em.named_edits[y])
         if ok is None:
-            stop = y
-            break
+            return y, arc_edit
         arc_edit[y] = ok
-    # -- write lines s:stop -----------------------------------------------------------
+    return st.b, arc_edit
+
+
+def _write_stretch(corrector: Corrector, st: _Stretch, stop: int, arc_edit: dict[int, tuple[str, str, int]],
+                   write: Write) -> None:
+    """Write lines ``s:stop`` of the stretch, its words as prepared, and count them."""
+    run, em, s, add_col = st.run, st.em, st.s, st.add_col
+    blk, a = run.block, run.a
+    cols, num_cols = blk.cols, em.nums
     rep = corrector.report
-    if stop > s:
-        c = stop - s
-        rows_added = newly_changed = arc_words = 0
-        named = em.named_edits
-        for col_i, txt in enumerate(add_col[:c]):
-            if txt:
-                rows_added += 1
-                newly_changed += named[s + col_i] == 0
-        centre_i, centre_j = cols[9][s:stop], cols[11][s:stop]
-        if arc_edit:
-            centre_i, centre_j = list(centre_i), list(centre_j)
-            for y, (ti, tj, count) in arc_edit.items():
-                centre_i[y - s], centre_j[y - s] = ti, tj
-                arc_words += count
-                newly_changed += count > 0 and named[y] == 0 and not add_col[y - s]
-            rep.arcs_kept += len(arc_edit)
-        rep.words_changed += em.edits_cum[stop] - em.edits_cum[s] + rows_added + arc_words
-        rep.lines_changed += em.changed_cum[stop] - em.changed_cum[s] + newly_changed
-        rep.lines_out += c
-        rep.moves += c
-        if run.inert:
-            rep.moves -= bisect_left(run.inert, stop - a) - bisect_left(run.inert, s - a)
-        i = blk.last_g[stop - 1]
-        corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
-        text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], num_cols[0][s:stop], cols[4][s:stop],
-                                          num_cols[1][s:stop], cols[6][s:stop], num_cols[2][s:stop], add_col[:c],
-                                          cols[8][s:stop], centre_i, cols[10][s:stop], centre_j,
-                                          cols[_REST][s:stop], strict=True)))
-        write(text + "\n" if lines[stop - 1].endswith("\n") else text)
-        if stop == b:
-            qe[:] = final
-        else:
-            p = moved[stop - 1]
-            qe[:] = want[p] if p >= s else qe0
-    if stop == b:
-        return b
-    # an arc the hint does not settle here (or whose centre word must be added): the
-    # general emitter's
-    j = stop - a
-    line = lines[stop]
-    corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
-                               hints[run.trow + j], write)
-    return stop + 1
+    c = stop - s
+    rows_added = newly_changed = arc_words = 0
+    named = em.named_edits
+    for col_i, txt in enumerate(add_col[:c]):
+        if txt:
+            rows_added += 1
+            newly_changed += named[s + col_i] == 0
+    centre_i, centre_j = cols[9][s:stop], cols[11][s:stop]
+    if arc_edit:
+        centre_i, centre_j = list(centre_i), list(centre_j)
+        for y, (ti, tj, count) in arc_edit.items():
+            centre_i[y - s], centre_j[y - s] = ti, tj
+            arc_words += count
+            newly_changed += count > 0 and named[y] == 0 and not add_col[y - s]
+        rep.arcs_kept += len(arc_edit)
+    rep.words_changed += em.edits_cum[stop] - em.edits_cum[s] + rows_added + arc_words
+    rep.lines_changed += em.changed_cum[stop] - em.changed_cum[s] + newly_changed
+    rep.lines_out += c
+    rep.moves += c
+    if run.inert:
+        rep.moves -= bisect_left(run.inert, stop - a) - bisect_left(run.inert, s - a)
+    i = blk.last_g[stop - 1]
+    corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
+    text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], num_cols[0][s:stop], cols[4][s:stop],
+                                      num_cols[1][s:stop], cols[6][s:stop], num_cols[2][s:stop], add_col[:c],
+                                      cols[8][s:stop], centre_i, cols[10][s:stop], centre_j,
+                                      cols[_REST][s:stop], strict=True)))
+    write(text + "\n" if blk.lines[stop - 1].endswith("\n") else text)
 
 
 def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: int, S: list[float],
