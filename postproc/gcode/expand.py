@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.fileio import read_lines
 from postproc.gcode.dialect import DIALECTS
 from postproc.gcode.dialect import get as get_dialect
 from postproc.gcode.expand_syntax import (
@@ -39,6 +40,7 @@ from postproc.gcode.expand_syntax import (
     Block,
     Macro,
     OWord,
+    SourceLine,
     Unit,
     Word,
     candidate_lines,
@@ -55,7 +57,7 @@ from postproc.gcode.expr import (
     format_number,
     to_index,
 )
-from postproc.gcode.lexer import scan_words, split_lines
+from postproc.gcode.lexer import scan_words
 from postproc.gcode.variables import PROBE_HINT, PROBE_MESSAGE, PROBE_RESULTS
 from postproc.limits import DEFAULT_MAX_ITERATIONS, LINES_PER_ITERATION, ResourceLimitError
 
@@ -105,16 +107,6 @@ _LINE_END = re.compile(r"(\r\n|\n|\r)$")
 # ---------------------------------------------------------------------------
 # Public types
 # ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class SourceLine:
-    """One executed line of the flat program."""
-
-    lineno: int  # 1-based line in ``path``
-    path: str | None  # file the line comes from (a subroutine file for o<name> call)
-    text: str  # the line as executed, with its line ending
-    original: bool  # text is byte-identical to the source line
 
 
 class ExpansionError(UnsupportedGcodeError):
@@ -230,6 +222,7 @@ class _Expander(Env):
         self.cur_idx = 0
         self.cur_col = 0
         self.executed = 0
+        self._loop_ends: dict[tuple[int, int], int] = {}  # (unit, line) of a DO -> line of its END
 
     # -- places and errors ------------------------------------------------
     @property
@@ -356,11 +349,11 @@ class _Expander(Env):
         key = str(file)
         unit = self.files.get(key)
         if unit is None:
-            raw = file.read_bytes()
-            text = raw.decode("utf-8", errors="strict") if raw else ""
-            if text.startswith("\ufeff"):
-                text = text[1:]
-            unit = Unit(split_lines(text), key, self.fanuc, self.nested)
+            with open(file, encoding="utf-8", errors="strict", newline="") as fh:
+                lines = list(read_lines(fh, key))  # a line without end is refused, not read whole
+            if lines and lines[0].startswith("\ufeff"):
+                lines[0] = lines[0][1:]
+            unit = Unit(lines, key, self.fanuc, self.nested)
             self.files[key] = unit
         return unit
 
@@ -400,31 +393,25 @@ class _Expander(Env):
             self.unit_cur = unit
             self.executed += 1
             if self.executed > self.max_lines:
-                raise ResourceLimitError(
-                    f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
-                    f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=unit.path,
-                    lineno=idx + 1, col=1,
-                    hint="check the loop conditions and subprogram returns, or raise --max-iterations")
-            line = unit.lines[idx]
+                raise self._too_many_lines()
             if self.skipping_o is not None or self.skipping_to_sub is not None:
                 self._skipped_line(unit, idx)
                 continue
-            words = scan_words(line)
-            if words is not None and not any(
-                    letter == "O" or (letter == "M" and float(num) in _M_SPECIAL)
-                    or (letter == "G" and float(num) in _G_SPECIAL) for letter, num, *_ in words):
-                # fast path: a line of plain words (most CAM output) is yielded as it is
-                if words:
-                    first_code = False
-                yield SourceLine(idx + 1, unit.path, line, True)
-                continue
-            if line.strip().startswith("%"):
+            kind = unit.kinds[idx]
+            if kind is None:
+                kind = unit.kinds[idx] = _line_kind(unit, idx)
+            if kind is _PERCENT:
                 if unit is self.main:  # a subprogram file's own tape marks stay out of the flat program
-                    yield SourceLine(idx + 1, unit.path, line, True)
+                    yield unit.source_line(idx)
                     if percent_open:
                         return
                     percent_open = True
                 continue
+            if kind is not _STATEMENT:  # a line of plain words (most CAM output), or none: as it is
+                first_code = first_code and kind is _NO_WORDS
+                yield unit.source_line(idx)
+                continue
+            line = unit.lines[idx]
             b = unit.block(idx)
             if first_code and unit is self.main and _opens_program(b):
                 first_code = False
@@ -434,8 +421,7 @@ class _Expander(Env):
                 if len(self.frames) == 1:
                     return  # the main program ran into the next program in the file
                 continue
-            if b.items or b.oword or b.macro:
-                first_code = False
+            first_code = first_code and not (b.items or b.oword or b.macro)
             try:
                 if b.oword is not None:
                     self._oword(b, b.oword)
@@ -446,6 +432,13 @@ class _Expander(Env):
             except _Stop:
                 break  # the program's end (M2/M30, M99 ending the main program)
         yield from self._closing_percent()
+
+    def _too_many_lines(self) -> ResourceLimitError:
+        return ResourceLimitError(
+            f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
+            f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=self.unit_cur.path,
+            lineno=self.cur_idx + 1, col=1,
+            hint="check the loop conditions and subprogram returns, or raise --max-iterations")
 
     def _skipped_line(self, unit: Unit, idx: int) -> None:
         """A line met while skipping (LinuxCNC): only the o-word line the skip is looking
@@ -489,12 +482,31 @@ class _Expander(Env):
                 f"'o{_oname(skipping)} {kw}': the file ended before the o{_oname(skipping)} line that closes it",
                 path=unit.path, lineno=idx + 1, col=1,
                 hint="close the block with its matching o-word line (endif, endwhile, endrepeat, while)")
+        self._refuse_open_block()
         if len(self.frames) > 1:
             fr = self.frames[-1]
             raise GcodeSyntaxError(
                 f"subprogram {fr.sub_name} ended without its return (endsub/M99)",
                 path=fr.call_path, lineno=fr.call_lineno, col=1,
                 hint="end the subprogram with 'o<name> endsub' or M99")
+
+    def _refuse_open_block(self) -> None:
+        """The file ran to its end (no M2/M30, no closing '%') inside an o-word loop or if
+        that no line of it closes: refused, as rs274 refuses such a file ("File ended with
+        no percent sign or program end"); a truncated file most often. (A block left
+        open by M2 inside it ends the program as on the controller, and is not refused.)"""
+        unit = self.unit
+        closers = {"while": ("endwhile",), "repeat": ("endrepeat",), "if": ("endif",), "do": ("while",)}
+        for name, op in self.offsets.items():
+            if op.unit is not unit or op.kind not in closers:
+                continue
+            closed = any(unit.maybe_oword(k) and (ow := unit.block(k).oword) is not None and ow.name == name
+                         and ow.kw in closers[op.kind] for k in range(op.idx + 1, len(unit.lines)))
+            if not closed:
+                raise GcodeSyntaxError(
+                    f"'o{_oname(name)} {op.kind}' is never closed: the file ends inside it, with no M2/M30 or "
+                    "closing '%' before", path=unit.path, lineno=op.idx + 1, col=1,
+                    hint=f"close it with its o{_oname(name)} {closers[op.kind][0]} line (is the file complete?)")
 
     # -- ordinary blocks ------------------------------------------------------
     def _block(self, b: Block, line: str) -> Iterator[SourceLine]:
@@ -836,11 +848,10 @@ class _Expander(Env):
                 self.pending = []
                 self._queue_setting(a, v)
                 self._apply_pending()
-        elif m.kind == "while":
-            if not self._cond(m):
-                self.idx = self._find_end(m.loop, m.col) + 1
-        elif m.kind == "do":
-            pass
+        elif m.kind in ("while", "do"):
+            end = self._loop_end_of(m)
+            if m.kind == "while" and not self._cond(m):
+                self.idx = end + 1
         elif m.kind == "end":
             self.count_iteration(m.col)
             self.idx = self._find_do(m.loop, m.col)
@@ -860,6 +871,17 @@ class _Expander(Env):
             raise self.error(m.col, "GOTO to a vacant variable")
         return to_index(self, v, m.col)
 
+    def _loop_end_of(self, m: Macro) -> int:
+        """The line of the END that closes the WHILE/DO ``m`` on the line running, found
+        once: a DO without its END is refused when it first runs, whether or not the loop
+        would reach it (Fanuc alarm PS0126: DO and END are not paired), and not only when
+        its condition fails."""
+        key = (id(self.unit_cur), self.cur_idx)
+        end = self._loop_ends.get(key)
+        if end is None:
+            end = self._loop_ends[key] = self._find_end(m.loop, m.col)
+        return end
+
     def _find_end(self, loop: int, col: int) -> int:
         unit = self.unit_cur
         for k in range(self.cur_idx + 1, len(unit.lines)):
@@ -867,7 +889,8 @@ class _Expander(Env):
                 b = unit.block(k)
                 if b.macro is not None and b.macro.kind == "end" and b.macro.loop == loop:
                     return k
-        raise self.error(col, f"DO {loop} has no END {loop} after it")
+        raise self.error(col, f"DO {loop} has no END {loop} after it: DO and END must be paired (Fanuc alarm "
+                         "PS0126)", hint=f"close the loop with END {loop}")
 
     def _find_do(self, loop: int, col: int) -> int:
         unit = self.unit_cur
@@ -1120,6 +1143,24 @@ class _Expander(Env):
         "endrepeat": _o_endrepeat, "break": _o_break, "continue": _o_continue,
         "if": _o_if, "elseif": _o_elseif, "else": _o_else, "endif": _o_endif,
     }
+
+
+# What a line is to the main loop (Unit.kinds, found once a line): plain words, yielded as
+# they are; blanks and comments only, idem; a '%' line; anything else, parsed as a Block.
+_WORDS, _NO_WORDS, _PERCENT, _STATEMENT = "words", "no words", "percent", "statement"
+
+
+def _line_kind(unit: Unit, idx: int) -> str:
+    """What line ``idx`` of ``unit`` is to :meth:`_Expander.run` (the scanner's fast path)."""
+    line = unit.lines[idx]
+    words = scan_words(line)
+    if words is not None and not any(
+            letter == "O" or (letter == "M" and float(num) in _M_SPECIAL)
+            or (letter == "G" and float(num) in _G_SPECIAL) for letter, num, *_ in words):
+        return _WORDS if words else _NO_WORDS
+    if line.strip().startswith("%"):
+        return _PERCENT
+    return _STATEMENT
 
 
 def _opens_program(b: Block) -> bool:
