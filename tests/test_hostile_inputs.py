@@ -296,3 +296,98 @@ def test_dev_zero_as_the_program_is_refused_at_once(tmp_path, how):
     assert f"{'/dev/zero' if how == 'file' else '<stdin>'}:1:1: line longer than" in err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# -- endless loops: found in two passes, or at the count that passes the bound -----------
+
+ENDLESS = {
+    "while [1]": ("G21 G90\nG0 X10 Y10 Z10\no100 while [1]\nG1 X20 F100\nG1 X10\no100 endwhile\nM2\n", "linuxcnc", 6),
+    "while [1] empty": ("G21 G90\no100 while [1]\no100 endwhile\nM2\n", "linuxcnc", 3),
+    "do while [1]": ("G21 G90\no100 do\nG1 X20 F100\no100 while [1]\nM2\n", "linuxcnc", 4),
+    "while with a setting of the same value": ("G21 G90\no1 while [1]\n#1 = 1\n#<a> = 2\no1 endwhile\nM2\n",
+                                               "linuxcnc", 5),
+    "Fanuc WHILE": ("%\nO1000\n#1=1\nWHILE [#1 EQ 1] DO1\nG1 X20 F100\nEND1\nM30\n%\n", "fanuc", 6),
+    "Fanuc GOTO": ("%\nO1000\nN10 G1 X20 F100\nG1 X10\nGOTO 10\nM30\n%\n", "fanuc", 5),
+    "Fanuc IF GOTO": ("%\nO1000\n#1=0\nN10 G1 X20 F100\nIF [#1 EQ 0] GOTO 10\nM30\n%\n", "fanuc", 5),
+}
+
+
+@pytest.mark.parametrize(("text", "dialect", "lineno"), ENDLESS.values(), ids=ENDLESS.keys())
+def test_a_loop_whose_pass_changes_nothing_is_refused_at_its_second_pass(text, dialect, lineno):
+    from postproc.limits import ResourceLimitError
+
+    with pytest.raises(ResourceLimitError) as err:
+        list(expand(split_lines(text), path="p.nc", dialect=dialect))
+    assert "endless loop" in err.value.message
+    assert (err.value.path, err.value.lineno) == ("p.nc", lineno)
+    assert err.value.col is not None
+
+
+LOOPS_THAT_END = {
+    "counter": ("#1=0\no1 while [#1 LT 5]\nG1 X[#1] F100\n#1=[#1+1]\no1 endwhile\nM2\n", 5),
+    "same value set, count changes": ("#2=0\no1 while [#2 LT 4]\n#1=1\nG1 X1 F100\n#2=[#2+1]\no1 endwhile\nM2\n", 4),
+    "nested, inner reset each pass": ("#1=0\no1 while [#1 LT 3]\n#2=0\no2 while [#2 LT 3]\nG1 X[#2] F100\n"
+                                      "#2=[#2+1]\no2 endwhile\n#1=[#1+1]\no1 endwhile\nM2\n", 9),
+    "break": ("#1=0\no1 while [1]\nG1 X1 F100\n#1=[#1+1]\no2 if [#1 GE 3]\no1 break\no2 endif\no1 endwhile\nM2\n", 3),
+    "repeat": ("o1 repeat [4]\nG1 X1 F100\no1 endrepeat\nM2\n", 4),
+    "call in a loop": ("o9 sub\nG1 X#1 F100\no9 endsub\n#2=0\no1 while [#2 LT 3]\no9 call [#2]\n#2=[#2+1]\no1 endwhile\nM2\n",
+                       3),
+}
+
+
+@pytest.mark.parametrize(("text", "moves"), LOOPS_THAT_END.values(), ids=LOOPS_THAT_END.keys())
+def test_loops_that_end_are_not_taken_for_endless(text, moves):
+    flat = list(expand(split_lines("G21 G90\n" + text), path="p.ngc", dialect="linuxcnc"))
+    assert sum(sl.text.startswith("G1") for sl in flat) == moves
+
+
+def test_fanuc_loops_that_end_are_not_taken_for_endless():
+    text = "%\nO1000\n#1=0\nN10 G1 X#1 F100\n#1=#1+1\nIF [#1 LT 3] GOTO 10\nM98 P2000 L3\nM30\nO2000\nG1 X9\nM99\n%\n"
+    flat = list(expand(split_lines(text), path="p.nc", dialect="fanuc"))
+    assert sum("G1" in sl.text for sl in flat) == 6
+
+
+@pytest.mark.parametrize(("text", "dialect"), [
+    ("%\nO1000\nM98 P2000 L99999999\nM30\nO2000\nG1 X20 F100\nM99\n%\n", "fanuc"),
+    ("%\nO1000\nM98 P2000 L10000001\nM30\nO2000\nG1 X20 F100\nM99\n%\n", "fanuc"),
+    ("G21\no1 repeat [100000000]\nG1 X1 F100\no1 endrepeat\nM2\n", "linuxcnc"),
+])
+def test_a_repeat_count_beyond_the_bound_is_refused_at_its_call(text, dialect):
+    from postproc.limits import ResourceLimitError
+
+    t0 = time.monotonic()
+    with pytest.raises(ResourceLimitError) as err:
+        list(expand(split_lines(text), path="p.nc", dialect=dialect))
+    assert time.monotonic() - t0 < 5
+    assert "--max-iterations" in str(err.value)
+    assert err.value.lineno in (2, 3)
+    assert list(expand(split_lines(text.replace("99999999", "3").replace("10000001", "3").replace("100000000", "3")),
+                       path="p.nc", dialect=dialect))
+
+
+def test_the_dry_run_refuses_a_flat_program_beyond_the_output_bound_before_yielding():
+    from postproc.limits import ResourceLimitError
+
+    text = "G21\no1 repeat [100000]\no2 repeat [100000]\nG1 X20 F100\nG1 X10\no2 endrepeat\no1 endrepeat\nM2\n"
+    t0 = time.monotonic()
+    with pytest.raises(ResourceLimitError) as err:
+        expand(split_lines(text), path="p.ngc", dialect="linuxcnc", max_lines_out=20_000)  # before any line
+    assert time.monotonic() - t0 < 10
+    assert "--max-output-lines" in str(err.value)
+    assert (err.value.path, err.value.col) == ("p.ngc", 1)
+    small = text.replace("100000", "10")
+    assert ([sl.text for sl in expand(split_lines(small), path="p.ngc", dialect="linuxcnc", max_lines_out=20_000)]
+            == [sl.text for sl in expand(split_lines(small), path="p.ngc", dialect="linuxcnc")])
+
+
+@pytest.mark.parametrize("text", [ENDLESS["while [1]"][0], "%\nO1000\nG21 G90\nG0 X10 Y10 Z10\nM98 P2000 L99999999\n"
+                                  "M30\nO2000\nG1 X20 F100\nG1 X10\nM99\n%\n"], ids=["while", "M98 L"])
+def test_the_cli_refuses_the_surveys_endless_loops_in_seconds(tmp_path, text):
+    src = tmp_path / "p.nc"
+    src.write_text(text)
+    t0 = time.monotonic()
+    res = run("correct", str(src), "-c", STATIC, "-o", str(tmp_path / "o.nc"),
+              "--dialect", "fanuc" if "O1000" in text else "linuxcnc")
+    assert time.monotonic() - t0 < 20
+    refused(res, 5, f"{src}:")
+    assert not (tmp_path / "o.nc").exists()

@@ -59,7 +59,12 @@ from postproc.gcode.expr import (
 )
 from postproc.gcode.lexer import scan_words
 from postproc.gcode.variables import PROBE_HINT, PROBE_MESSAGE, PROBE_RESULTS
-from postproc.limits import DEFAULT_MAX_ITERATIONS, LINES_PER_ITERATION, ResourceLimitError
+from postproc.limits import (
+    DEFAULT_MAX_ITERATIONS,
+    LINES_PER_ITERATION,
+    ResourceLimitError,
+    flat_program_too_long,
+)
 
 # rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
 LINUXCNC_SUB_PARAMS = 30
@@ -180,6 +185,9 @@ class _Stop(Exception):
     pass
 
 
+_UNSET = object()  # no value yet (Fanuc's vacant NULL is a value)
+
+
 class _Expander(Env):
     def __init__(self, lines: list[str], path: str | None, dialect: str,
                  subroutine_path: Sequence[Path], max_lines: int, max_iterations: int):
@@ -223,6 +231,12 @@ class _Expander(Env):
         self.cur_col = 0
         self.executed = 0
         self._loop_ends: dict[tuple[int, int], int] = {}  # (unit, line) of a DO -> line of its END
+        # Endless passes: ``version`` counts the changes of the state the expansion reads
+        # (parameters, variables, frames, o-word table and counts); ``_passes`` holds it, with
+        # the flags, at each jump back. A jump back that finds the same as at its last time
+        # ran a whole pass that changed nothing: the program runs that pass for ever.
+        self.version = 0
+        self._passes: dict[tuple[int, int], tuple] = {}
 
     # -- places and errors ------------------------------------------------
     @property
@@ -244,6 +258,33 @@ class _Expander(Env):
                 f"the program's loops and subprogram calls run more than {self.max_iterations:,} times in all "
                 "(--max-iterations)", path=self.unit_cur.path, lineno=self.lineno, col=col,
                 hint="check the loop's condition; raise --max-iterations if the program is meant to run this long")
+
+    def will_repeat(self, count: int, col: int) -> None:
+        """A loop or call (at column ``col`` of the line running) is to run ``count`` passes,
+        each one an iteration: refused at once when they alone pass ``max_iterations``
+        (``M98 P.. L99999999`` is refused at its call, not after ten million passes)."""
+        if count > self.max_iterations - self.iterations:
+            raise ResourceLimitError(
+                f"this loop or call repeats {count:,} times: more than the {self.max_iterations:,} loop passes and "
+                "subprogram calls allowed in all (--max-iterations)", path=self.unit_cur.path, lineno=self.lineno,
+                col=col, hint="check the repeat count; raise --max-iterations if the program is meant to run this long")
+
+    def _another_pass(self, col: int) -> None:
+        """The statement at column ``col`` of the line running jumps back for one more pass
+        of a loop: refused when the pass since its last jump changed nothing the program
+        reads, for then every pass after it is the same, without end (``while [1]``, a GOTO
+        back with no count). Found after two passes, where the bound on iterations takes
+        millions."""
+        here = (id(self.unit_cur), self.cur_idx)
+        state = (self.version, len(self.frames), self.executed_if, self.doing_break, self.doing_continue,
+                 self.skipping_o, self.skipping_to_sub, self.defining_sub)
+        if self._passes.get(here) == state:
+            raise ResourceLimitError(
+                "endless loop: a pass of this loop changes nothing (no parameter, variable or count), so it "
+                "runs the same pass for ever", path=self.unit_cur.path, lineno=self.cur_idx + 1, col=col,
+                hint="check the loop's condition and what the loop changes; a program that is meant to repeat "
+                     "until the operator stops it cannot be corrected as a flat program")
+        self._passes[here] = state
 
     # -- parameters ---------------------------------------------------------
     def seed(self, variables: dict[int, float]) -> None:
@@ -299,10 +340,13 @@ class _Expander(Env):
     def write_numbered(self, index: int, value, col: int) -> None:
         if self.fanuc:
             if 1 <= index <= FANUC_LOCALS:
-                self._fanuc_locals()[index] = value
+                local = self._fanuc_locals()
+                if local[index] is not value and local[index] != value:
+                    self.version += 1
+                local[index] = value
                 return
             if 100 <= index <= 999:
-                self.params[index] = value
+                self._set(self.params, index, value)
                 return
             if index >= 1000:
                 raise self.refuse(col, f"setting system variable #{index} changes controller state "
@@ -314,7 +358,14 @@ class _Expander(Env):
         if 5161 <= index <= 5390:
             raise self.refuse(col, f"setting #{index} changes a stored position or coordinate-system offset "
                               "kept by the controller", hint="use G10 L2/L20 or set it on the controller")
-        self.params[index] = value
+        self._set(self.params, index, value)
+
+    def _set(self, scope: dict, key: Any, value: Any) -> None:
+        """``scope[key] = value``, counted as a change of state when it is one."""
+        old = scope.get(key, _UNSET)
+        if old is not value and old != value:  # (NaN is never equal: always a change)
+            self.version += 1
+        scope[key] = value
 
     def read_named(self, name: str, col: int):
         scope = self.globals if name.startswith("_") else self.frames[-1].named
@@ -511,6 +562,13 @@ class _Expander(Env):
     # -- ordinary blocks ------------------------------------------------------
     def _block(self, b: Block, line: str) -> Iterator[SourceLine]:
         unit, idx = self.unit_cur, self.cur_idx
+        if b.settings_only and not b.slash:  # settings alone (most lines of a loop's body): nothing to write
+            self._item_values(b)
+            return
+        if len(b.items) == 1 and len(self.frames) > 1 and b.plain and b.items[0].letter == "M" and (
+                float(b.items[0].raw) == 99.0):  # M99 alone, ending a subprogram's pass
+            self._m99(None)
+            return
         if b.plain:
             m_codes = [float(w.raw) for w in b.items if w.letter == "M"]
             g_codes = [float(w.raw) for w in b.items if w.letter == "G"]
@@ -610,9 +668,9 @@ class _Expander(Env):
                     bare = name[1:]
                     if bare in _LINUXCNC_PREDEFINED or bare in ("value", "value_returned"):
                         raise self.error(1, f"#<{name}> is a read-only parameter")
-                    self.globals[name] = v
+                    self._set(self.globals, name, v)
                 else:
-                    self.frames[-1].named[name] = v
+                    self._set(self.frames[-1].named, name, v)
             else:
                 self.write_numbered(target[1], v, target[2])
         self.pending = []
@@ -746,12 +804,14 @@ class _Expander(Env):
                              "on --subroutine-path")
         if repeat <= 0:
             return
+        self.will_repeat(repeat, col)
         unit, start, _ = target
         self._enter("m98", f"O{number}", unit, start + 1, repeat - 1)
 
     def _m97(self, number: int, count: int, col: int) -> None:
         if count <= 0:
             return
+        self.will_repeat(count, col)
         start = self._sequence(self.main, number, 0, col)
         self._enter("m98", f"N{number}", self.main, start, count - 1)
 
@@ -761,6 +821,7 @@ class _Expander(Env):
             raise self.error(col, f"macro program O{number} not found in the file or on the subroutine path")
         if count <= 0:
             return
+        self.will_repeat(count, col)
         unit, start, _ = target
         local = [NULL] * (FANUC_LOCALS + 1)
         for letter, v in args.items():
@@ -777,6 +838,7 @@ class _Expander(Env):
                     saved=saved, repeats_left=repeats, start_unit=unit, start_idx=start, sub_name=name,
                     call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
         self.frames.append(fr)
+        self.version += 1
         self.unit, self.idx = unit, start
 
     def _m99(self, target: tuple[int, int] | None) -> None:
@@ -789,6 +851,7 @@ class _Expander(Env):
         if fr.repeats_left > 0:
             self.count_iteration(1)
             fr.repeats_left -= 1
+            self.version += 1
             if fr.call_type == "g65":
                 pass  # locals persist across G65 L repeats
             if fr.start_unit is None:  # pragma: no cover - _enter sets it
@@ -801,10 +864,12 @@ class _Expander(Env):
             self.idx = self._sequence(self.unit, number, fr.ret_idx, col)
             if self.idx < fr.ret_idx:  # back to or before the call: one more pass of a loop
                 self.count_iteration(col)
+                self._another_pass(col)
 
     def _leave(self, fr: _Frame) -> None:
         """Return from ``fr``, the innermost subprogram frame, to the line after its call."""
         self.frames.pop()
+        self.version += 1
         if fr.ret_unit is None:  # pragma: no cover - callers never leave the main program's frame
             raise AssertionError("the main program's frame has no caller to return to")
         self.unit, self.idx = fr.ret_unit, fr.ret_idx
@@ -839,6 +904,7 @@ class _Expander(Env):
             self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
             if self.idx <= self.cur_idx:  # a jump back: one more pass of a loop
                 self.count_iteration(m.col)
+                self._another_pass(m.col)
         elif m.kind == "if_then":
             if self._cond(m):
                 a = m.assign
@@ -854,6 +920,7 @@ class _Expander(Env):
                 self.idx = end + 1
         elif m.kind == "end":
             self.count_iteration(m.col)
+            self._another_pass(m.col)
             self.idx = self._find_do(m.loop, m.col)
 
     def _cond(self, m: Macro) -> bool:
@@ -909,6 +976,7 @@ class _Expander(Env):
                              f"{have.unit.path or '<input>'}:{have.idx + 1}",
                              hint="give each sub, loop and if its own o-number")
         self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+        self.version += 1
 
     def _check_label(self, ow: OWord, allow_do: bool = False) -> _Offset | None:
         op = self.offsets.get(ow.name)
@@ -932,6 +1000,7 @@ class _Expander(Env):
     def _back_to(self, name: str, col: int) -> None:
         """Back to the start of loop ``name`` (from the o-word at column ``col``): one more pass."""
         self.count_iteration(col)
+        self._another_pass(col)
         op = self.offsets[name]
         self.unit, self.idx = op.unit, op.idx
 
@@ -969,6 +1038,7 @@ class _Expander(Env):
         if self.skipping_o is not None:
             if self.offsets.get(ow.name) is None:
                 self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+                self.version += 1
             self.skipping_o = None
         self.skipping_to_sub = None
 
@@ -1009,6 +1079,7 @@ class _Expander(Env):
             self.globals["_value_returned"] = 1.0
         for k, v in enumerate(fr.saved or []):
             self.params[k + 1] = v
+        self.version += 1
         self._leave(fr)
 
     def _o_do(self, ow: OWord) -> None:
@@ -1019,8 +1090,10 @@ class _Expander(Env):
     def _o_repeat(self, ow: OWord) -> None:
         op = self._label(ow)
         self.skipping_o = None
+        self.version += 1
         if op.repeat_count == -1:
             op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
+            self.will_repeat(op.repeat_count, ow.col)
         if op.repeat_count > 0:
             op.repeat_count -= 1
         else:
@@ -1114,6 +1187,7 @@ class _Expander(Env):
             self.params[k] = args[k - 1] if k <= len(args) else 0.0
         self.globals["_value"] = 0.0
         self.globals["_value_returned"] = 0.0
+        self.version += 1
         self.count_iteration(ow.col)
         fr = _Frame(call_type="oword", ret_unit=self.unit_cur, ret_idx=self.cur_idx + 1, saved=saved,
                     sub_name=ow.name, call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
@@ -1214,7 +1288,7 @@ def _last_code_line(lines: list[str]) -> int | None:
 def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "generic",
            subroutine_path: Sequence[Path] = (), max_lines: int | None = None,
            max_iterations: int = DEFAULT_MAX_ITERATIONS,
-           variables: dict[int, float] | None = None) -> Iterator[SourceLine]:
+           variables: dict[int, float] | None = None, max_lines_out: int | None = None) -> Iterator[SourceLine]:
     """Execute the program's control flow and yield the flat program line by line.
 
     ``lines`` are the source lines with their endings (e.g. from
@@ -1225,6 +1299,13 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     run (default :data:`~postproc.limits.LINES_PER_ITERATION` a pass, at least 50 million).
     ``variables``: machine-state values given by the user (``--var``), read where the
     program reads the controller's state (probe results never).
+
+    ``max_lines_out``: the most lines the corrected program may have
+    (:meth:`postproc.limits.Limits.output_lines`); when given, the program is first run
+    through without yielding anything, counting its lines, and refused
+    (:class:`~postproc.limits.ResourceLimitError`, ``--max-output-lines``) when the flat
+    program alone passes that bound, before any line of it is corrected: a loop that
+    writes moves is refused at the expansion's speed, not the correction's.
     """
     if max_lines is None:
         max_lines = max(50_000_000, LINES_PER_ITERATION * max_iterations)
@@ -1233,7 +1314,14 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
 
         return (SourceLine(k + 1, file, text, original)
                 for k, file, text, original in expand_sinumerik(list(lines), path, max_lines, subroutine_path))
-    ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines, max_iterations)
+    lines = list(lines)
+    if max_lines_out is not None:
+        dry = _Expander(lines, path, dialect, subroutine_path, max_lines, max_iterations)
+        dry.seed(variables or {})
+        for n, sl in enumerate(dry.run(), start=1):
+            if n > max_lines_out:
+                raise flat_program_too_long(max_lines_out, sl.path, sl.lineno)
+    ex = _Expander(lines, path, dialect, subroutine_path, max_lines, max_iterations)
     ex.seed(variables or {})
     return ex.run()
 

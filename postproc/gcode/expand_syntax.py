@@ -98,6 +98,8 @@ class Block:
     macro: Macro | None = None
     program_number: int | None = None  # Fanuc "O1234" / ":1234" line
     slash: bool = False
+    settings_only: bool = False  # parameter settings and nothing else (set by parse_block)
+    plain_found: bool | None = None  # what ``plain`` says, once asked
 
     @property
     def words(self) -> list[Word]:
@@ -109,9 +111,11 @@ class Block:
 
     @property
     def plain(self) -> bool:
-        """Nothing to evaluate or execute."""
-        return (self.oword is None and self.macro is None and self.program_number is None
-                and all(isinstance(it, Word) and it.node is None for it in self.items))
+        """Nothing to evaluate or execute (found once: a block is not changed once parsed)."""
+        if self.plain_found is None:
+            self.plain_found = (self.oword is None and self.macro is None and self.program_number is None
+                                and all(isinstance(it, Word) and it.node is None for it in self.items))
+        return self.plain_found
 
 
 def parse_block(line: str, *, fanuc: bool, path: str | None, lineno: int,
@@ -156,6 +160,8 @@ def parse_block(line: str, *, fanuc: bool, path: str | None, lineno: int,
         else:
             raise p.error(i, f"unexpected character {c!r}",
                           hint="a G-code line holds words (letter + value), parameter settings and comments")
+    block.settings_only = (bool(block.items) and block.oword is None and block.macro is None
+                           and all(isinstance(it, Assign) for it in block.items))
     return block
 
 
