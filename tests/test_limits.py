@@ -380,7 +380,7 @@ def test_lines_held_for_an_axis_never_positioned_are_bounded(monkeypatch):
     from postproc.gcode import pipeline
 
     monkeypatch.setattr(pipeline, "UNKNOWN_AXIS_LINES", 5000)
-    text = "O0001\nG21 G90\nM98 P1000 L999999\nM30\nO1000\nG1 X1 F100\nG1 X0\nM99\n"
+    text = "O0001\nG21 G90\nM98 P1000 L9999\nM30\nO1000\nG1 X1 F100\nG1 X0\nM99\n"
     with pytest.raises(PostprocError) as err:
         correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=1000), path="m.nc")
     assert "axis Y is still not positioned" in err.value.message
