@@ -281,10 +281,22 @@ add("loop-oword-repeat-nan", correct_prog("G21 G90\nG0 X10 Y10 Z10\no1 repeat [S
                                           "--dialect", "linuxcnc"), must_refuse=True)
 add("loop-oword-endwhile-alone", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 endwhile\nM2\n", "--dialect", "linuxcnc"),
     must_refuse=True)
+# M2 inside a block never closed ends the program before its end is looked for: rs274 runs
+# these two (exit 0, the same moves), so they are corrected as it runs them. A file that
+# ends inside the open block (no M2, no closing %) is refused, as rs274 refuses it.
 add("loop-oword-while-unclosed", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 while [#1 LT 3]\nG1 X20 F100\nM2\n",
-                                              "--dialect", "linuxcnc"), must_refuse=True)
+                                              "--dialect", "linuxcnc"), check=out_exists,
+    note="rs274 runs it: M2 ends the program inside the loop")
 add("loop-oword-if-unclosed", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 if [1]\nG1 X20 F100\nM2\n",
-                                           "--dialect", "linuxcnc"), must_refuse=True)
+                                           "--dialect", "linuxcnc"), check=out_exists,
+    note="rs274 runs it: M2 ends the program inside the if")
+add("loop-oword-while-unclosed-eof", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 while [#1 LT 3]\nG1 X20 F100\n",
+                                                  "--dialect", "linuxcnc"), must_refuse=True)
+add("loop-oword-if-unclosed-eof", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 if [1]\nG1 X20 F100\n",
+                                               "--dialect", "linuxcnc"), must_refuse=True)
+add("loop-oword-while-counter-endless", correct_prog(
+    "G21 G90\nG0 X10 Y10 Z10\n#1=0\no100 while [#1 GE 0]\n#1=[#1+1]\no100 endwhile\nM2\n", "--dialect", "linuxcnc"),
+    must_refuse=True, timeout=HANG_TIMEOUT_S, note="each pass changes #1: only the iteration bound stops it")
 add("loop-oword-break-outside", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 break\nM2\n", "--dialect", "linuxcnc"),
     must_refuse=True)
 add("loop-oword-mismatched-labels", correct_prog("G21 G90\nG0 X10 Y10 Z10\no100 while [#1 LT 3]\n#1=[#1+1]\no200 endwhile\nM2\n",

@@ -72,7 +72,12 @@ def _check_finite(obj, path: str, where: str = "model", floats: bool = True, siz
         if isinstance(obj, dict):
             todo.extend((v, f"{where}.{k}") for k, v in obj.items())
         elif isinstance(obj, list):
-            todo.extend((v, f"{where}[{i}]") for i, v in enumerate(obj))
+            for i, v in enumerate(obj):
+                if isinstance(v, (str, bool)) or v is None:  # numpy reads ["1", "0"] as numbers, true as 1
+                    raise CalibrationError(f"{where}[{i}] is {json.dumps(v)}: the arrays of a calibration hold "
+                                           "numbers (written without quotes)", path=path,
+                                           hint="write the number itself, e.g. 1.0, not \"1.0\"")
+            todo.extend((v, f"{where}[{i}]") for i, v in reversed(list(enumerate(obj))))  # the first named first
         elif isinstance(obj, float) and not math.isfinite(obj):
             if floats:
                 raise CalibrationError(f"{where} is {obj}: a calibration must hold finite numbers", path=path)
@@ -157,6 +162,7 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
             engine = compose(engine, effects)
         except CalibrationError as exc:
             raise exc.at(path=path) from None
+        _check_effect_params(effects, path)
     return Calibration(
         engine=engine,
         name=str(data.get("name") or (Path(path).stem if path else "calibration")),
@@ -165,6 +171,31 @@ def calibration_from_dict(data, *, path: str | None = None, sha256: str = "") ->
         effects=effects,
         fit=data.get("fit") or {},
     )
+
+
+def _check_effect_params(effects, path: str | None) -> None:
+    """Every effect a calibration lists gives each of its parameters: an effect without
+    them would be read as zero, so the file would say "backlash" and correct none (a file
+    cut short, or written by hand); ``fit`` writes them all."""
+    from postproc.effects.registry import get_effect
+
+    if not isinstance(effects, list):
+        return  # compose names what is wrong with it
+    for k, entry in enumerate(effects):
+        if not isinstance(entry, dict) or "name" not in entry:
+            continue  # idem
+        params = entry.get("params")
+        try:
+            names = get_effect(entry["name"], config=entry.get("config")).param_names
+        except (CalibrationError, TypeError, ValueError, AttributeError):
+            continue  # idem
+        missing = [n for n in names if not isinstance(params, dict) or n not in params]
+        if missing:
+            raise CalibrationError(
+                f"effects[{k}] ({entry['name']}) does not give its parameter(s) {', '.join(missing)}: it would "
+                "correct nothing", path=path,
+                hint="give every parameter in its \"params\" (as 'postproc fit --effect' writes them), or "
+                     "remove the effect")
 
 
 def _json_limit(exc: Exception) -> str:

@@ -35,3 +35,8 @@ VOLUME_EDGE_SLACK_MM = 1e-6
 MAX_VOLUME_MM = 100_000.0
 
 MM_PER_INCH = 25.4
+
+# Closest two positions of an axis error table may be (mm). Interferometer tables are
+# taken millimetres apart; positions a micrometre apart or closer are a typing or unit
+# mistake, and the slope between them (error / spacing) is no machine's.
+MIN_TABLE_SPACING_MM = 1e-3

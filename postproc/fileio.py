@@ -1,4 +1,13 @@
-"""Writing output files safely: a temporary file beside the target, renamed at the end.
+"""Reading program files with bounded lines; writing output files safely (a temporary
+file beside the target, renamed at the end).
+
+Input: :func:`read_lines` yields a file's lines with their endings and refuses a line
+longer than :data:`MAX_INPUT_LINE_CHARS` after reading at most that many characters of it,
+so a file without line ends (``/dev/zero``, a binary) is refused at once instead of
+being read whole into memory; :func:`copy_lines` copies a stream (stdin) with the same
+bound.
+
+Output:
 
 Nothing half-written is ever left under the target's name: on any error the temporary
 file is removed and an existing file of that name stays as it was. Every writer of
@@ -20,8 +29,75 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
+from typing import BinaryIO, TextIO
 
 from postproc.errors import EXIT_USAGE, DiskFullError, OutputError, PostprocError
+
+#: Longest input line read (characters, line ending included). No controller reads a line
+#: of more than 512 characters (Sinumerik; LinuxCNC 255, Fanuc 128), and a corrected line
+#: that long is refused at writing anyway; this bound only keeps a file without line ends
+#: (``/dev/zero``, a binary file, a program whose line ends were lost) from being read whole
+#: into memory, with room to spare for any program a controller runs.
+MAX_INPUT_LINE_CHARS = 65_536
+# Bytes read at a time when copying a stream (stdin) to a file.
+_COPY_BLOCK = 1 << 16
+
+
+def _line_too_long(path: str | None, lineno: int, limit: int) -> PostprocError:
+    return PostprocError(
+        f"line longer than {limit:,} characters (no line end within them): not a G-code "
+        "program (no controller reads a line of more than 512)", path=path, lineno=lineno, col=1,
+        hint="check that this is the program you meant: a binary file, a device such as /dev/zero, or "
+             "a program whose line ends were lost")
+
+
+def read_lines(fh: TextIO, path: str | None = None, limit: int = MAX_INPUT_LINE_CHARS) -> Iterator[str]:
+    """The lines of the text stream ``fh`` (opened with ``newline=''``), each with its
+    ending; a line of more than ``limit`` characters is refused (PostprocError naming
+    ``path`` and the line) after at most ``limit + 1`` characters of it are read."""
+    lineno = 0
+    while True:
+        line = fh.readline(limit + 1)
+        if not line:
+            return
+        lineno += 1
+        if len(line) > limit:
+            raise _line_too_long(path, lineno, limit)
+        yield line
+
+
+def bounded_blocks(src: BinaryIO, path: str | None = None, limit: int = MAX_INPUT_LINE_CHARS) -> Iterator[bytes]:
+    """The bytes of the stream ``src``, a block at a time, refusing (as :func:`read_lines`)
+    a line longer than ``limit`` bytes as soon as it is seen: a stream without line ends
+    is not read without end."""
+    lineno = 1  # of the line the reading is in (counted by line feeds)
+    run = 0  # bytes of that line so far
+    size = min(_COPY_BLOCK, limit)  # a line inside one block is never longer than the limit
+    while block := src.read(size):
+        parts = block.replace(b"\r", b"\n").split(b"\n")
+        if run + len(parts[0]) > limit:
+            raise _line_too_long(path, lineno, limit)
+        run = len(parts[-1]) if len(parts) > 1 else run + len(parts[0])
+        lineno += block.count(b"\n")
+        yield block
+
+
+def copy_lines(src: BinaryIO, dst: BinaryIO, path: str | None = None, limit: int = MAX_INPUT_LINE_CHARS) -> None:
+    """Copy the byte stream ``src`` (stdin) to ``dst`` through :func:`bounded_blocks`."""
+    for block in bounded_blocks(src, path, limit):
+        dst.write(block)
+
+
+def count_lines(path: str, limit: int = MAX_INPUT_LINE_CHARS) -> int:
+    """The number of lines of the file at ``path`` (a last line without an ending counts),
+    read through :func:`bounded_blocks`."""
+    n = 0
+    last = b"\n"
+    with open(path, "rb") as fh:
+        for block in bounded_blocks(fh, path, limit):
+            n += block.count(b"\n")
+            last = block[-1:]
+    return n + (last != b"\n")
 
 
 def output_mode(path: Path) -> int:

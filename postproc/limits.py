@@ -66,6 +66,16 @@ class Limits:
         return OUTPUT_GROWTH * input_chars + OUTPUT_MB_EXTRA * 1_000_000
 
 
+def flat_program_too_long(limit: int, path: str | None, lineno: int) -> ResourceLimitError:
+    """The refusal of a program whose expansion alone runs more than ``limit`` lines, the
+    bound on the corrected program's (found by a dry run of the expansion, before any
+    line is corrected: :func:`postproc.gcode.expand.expand`, ``max_lines_out``)."""
+    return ResourceLimitError(
+        f"the corrected program would have more than {limit:,} lines: the program's loops and subprograms alone "
+        "run that many (--max-output-lines)", path=path, lineno=lineno, col=1,
+        hint="raise --max-output-lines if the program is meant to grow this much; otherwise check its loops")
+
+
 class BoundedWriter:
     """``write`` that refuses to write more than ``limit`` lines in all; ``where()`` gives
     the (path, line) of the input being corrected, for the refusal's place."""

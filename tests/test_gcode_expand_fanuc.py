@@ -182,7 +182,7 @@ def test_generic_dialect_recognises_macro_b():
         ("O1\n#3000 = 1 (ALARM)\n", 2, 1, ["#3000", "controller state"]),
         ("O1\nG0 X#500\n", 2, 5, ["#500", "retained"]),
         ("O1\nG0 X1.\nM99 P1\n", 3, 1, ["M99", "main program"]),
-        ("O1\nWHILE [1 EQ 1] DO 1\nEND 1\n", 3, 1, ["more than 100 lines"]),
+        ("O1\nWHILE [1 EQ 1] DO 1\nEND 1\n", 3, 1, ["endless loop", "changes nothing"]),
         ("O1\nGOTO 50\nM30\n", 2, 1, ["N50", "not found"]),
         ("O1\nM98 P1234\nM30\n", 2, 5, ["O1234", "not found"]),
         ("O1\nWHILE [1 EQ 1] DO 4\n", 2, 19, ["1, 2 or 3"]),

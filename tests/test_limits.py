@@ -73,7 +73,8 @@ def test_expressions_up_to_the_bounds_still_run():
 ENDLESS = {
     "o-word while": (HEAD + "o1 while [1]\n#1 = [#1 + 1]\no1 endwhile\nM2\n", "linuxcnc", 4),
     "o-word do/while": (HEAD + "o1 do\n#1 = [#1 + 1]\no1 while [1]\nM2\n", "linuxcnc", 4),
-    "o-word repeat": (HEAD + "o1 repeat [1000000000]\n#1 = [#1 + 1]\no1 endrepeat\nM2\n", "linuxcnc", 4),
+    # a count beyond the bound is refused where it is given, before the first pass
+    "o-word repeat": (HEAD + "o1 repeat [1000000000]\n#1 = [#1 + 1]\no1 endrepeat\nM2\n", "linuxcnc", 2),
     "nested repeats": (HEAD + "o1 repeat [1000]\no2 repeat [1000]\no3 repeat [1000]\n#1 = 1\no3 endrepeat\n"
                        "o2 endrepeat\no1 endrepeat\nM2\n", "linuxcnc", 7),
     "o-word call in a loop": (HEAD + "o9 sub\n#1 = 1\no9 endsub\no1 while [1]\no9 call\no1 endwhile\nM2\n",
@@ -81,9 +82,9 @@ ENDLESS = {
     "Fanuc WHILE": ("O0001\n#1=0\nWHILE[#1LT1000000000]DO1\n#1=#1+1\nEND1\nM30\n", "fanuc", 5),
     "Fanuc GOTO": ("O0001\nN10 #1=#1+1\nGOTO10\nM30\n", "fanuc", 3),
     "Fanuc IF GOTO": ("O0001\n#1=0\nN10 #1=#1+1\nIF[#1GT0]GOTO10\nM30\n", "fanuc", 4),
-    "M98 L99999999": ("O0001\nM98 P1000 L99999999\nM30\nO1000\n#1=1\nM99\n", "fanuc", 6),
-    "M98 P count in P": ("O0001\nM98 P99991000\nM30\nO1000\n#1=1\nM99\n", "fanuc", 6),
-    "G65 L": ("O0001\nG65 P1000 L99999999\nM30\nO1000\n#100=1\nM99\n", "fanuc", 6),
+    "M98 L99999999": ("O0001\nM98 P1000 L99999999\nM30\nO1000\n#1=1\nM99\n", "fanuc", 2),
+    "M98 P count in P": ("O0001\nM98 P99991000\nM30\nO1000\n#1=1\nM99\n", "fanuc", 2),
+    "G65 L": ("O0001\nG65 P1000 L99999999\nM30\nO1000\n#100=1\nM99\n", "fanuc", 2),
     "M99 P back": ("O0001\nN5 M98 P1000\nM30\nO1000\n#100=1\nM99 P5\n", "fanuc", 2),
 }
 
@@ -379,7 +380,7 @@ def test_lines_held_for_an_axis_never_positioned_are_bounded(monkeypatch):
     from postproc.gcode import pipeline
 
     monkeypatch.setattr(pipeline, "UNKNOWN_AXIS_LINES", 5000)
-    text = "O0001\nG21 G90\nM98 P1000 L99999999\nM30\nO1000\nG1 X1 F100\nG1 X0\nM99\n"
+    text = "O0001\nG21 G90\nM98 P1000 L9999\nM30\nO1000\nG1 X1 F100\nG1 X0\nM99\n"
     with pytest.raises(PostprocError) as err:
         correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=1000), path="m.nc")
     assert "axis Y is still not positioned" in err.value.message

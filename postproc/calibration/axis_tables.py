@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from postproc.constants import MIN_TABLE_SPACING_MM
 from postproc.errors import CalibrationError
 
 AXES = ("X", "Y", "Z")
@@ -63,6 +64,9 @@ class AxisTables:
                 raise CalibrationError(f"{ax} table holds a value that is not finite", path=self.path)
             if np.any(np.diff(x) <= 0):
                 raise CalibrationError(f"{ax} table positions are not strictly increasing", path=self.path)
+            if np.any(np.diff(x) < MIN_TABLE_SPACING_MM):
+                raise CalibrationError(f"{ax} table positions are closer than {MIN_TABLE_SPACING_MM * 1000:g} um: "
+                                       "no table is measured that finely (a typing or unit mistake)", path=self.path)
             pos[ax], err[ax] = x, e
         self.position_mm, self.errors = pos, err
 

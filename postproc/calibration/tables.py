@@ -26,6 +26,7 @@ from postproc.calibration.csvfile import (
     length_scale,
     read_csv,
 )
+from postproc.constants import MIN_TABLE_SPACING_MM
 from postproc.errors import MeasurementError
 from postproc.fileio import atomic_write_texts
 
@@ -124,6 +125,15 @@ def _axis_rows(table: CsvTable, partial: bool = False) -> dict[str, tuple[np.nda
                 path=path, lineno=table.linenos[k], col=table.col_starts[k][jpos],
                 hint="list each axis's rows in strictly increasing position, without repeats",
             )
+        close = np.flatnonzero(np.diff(x) < MIN_TABLE_SPACING_MM)
+        if len(close):
+            k = idx[close[0] + 1]
+            raise MeasurementError(
+                f"axis {ax}: position {x[close[0] + 1] / lscale:g} is {x[close[0] + 1] - x[close[0]]:.3g} mm from the "
+                f"previous row of {ax} ({x[close[0]] / lscale:g}): table positions are at least "
+                f"{MIN_TABLE_SPACING_MM * 1000:g} um apart", path=path, lineno=table.linenos[k],
+                col=table.col_starts[k][jpos],
+                hint="check the position (a typing mistake?) and the '# units:' line")
         out[ax] = (x, values[idx], table)
     return out
 

@@ -76,6 +76,7 @@ def _run_one(job: dict) -> tuple[str, str | None, int]:
     try:
         cal = load_calibration(job["calibration"])
         opts = CorrectOptions(**job["options"], added=load_maps(job["maps"]))
+        _refuse_without_code(job["src"], job["src"])
         opts.dialect = dialect_of_file(job["src"], opts.dialect)  # generic: Sinumerik by its header
         rep = correct_file(job["src"], job["dst"], cal.engine, job["setup"], opts,
                            calibration_name=cal.name, calibration_sha256=cal.sha256)
@@ -276,6 +277,21 @@ def _batch(jobs_list: list[dict], jobs: int) -> None:
         sys.exit(max(code for _src, (_s, _e, code) in refused))
 
 
+def _refuse_without_code(path: str, shown: str) -> None:
+    """Refuse (exit 3, nothing written) a program of comments, ``%`` lines and blanks only:
+    there is nothing to correct, and a batch that gets one was most often handed the wrong
+    file, or a CAM post that failed after writing its header. ``shown``: the name to give."""
+    from postproc.fileio import read_lines
+    from postproc.gcode.expand_syntax import holds_no_code
+    from postproc.gcode.path import open_source
+
+    with open_source(path) as fh:
+        if holds_no_code(read_lines(fh, shown)):
+            raise PostprocError("the program holds only comments and '%' lines, no G-code: nothing to correct",
+                                path=shown, hint="check that this is the program you meant (was it written "
+                                "completely? a CAM post that failed may write only its header comments)")
+
+
 def _check_not_same(src: str, dst: str) -> None:
     if src != "-" and dst != "-" and Path(dst).exists() and Path(src).resolve() == Path(dst).resolve():
         raise click.UsageError(f"output {dst} is the input itself; write the corrected program elsewhere")
@@ -283,6 +299,7 @@ def _check_not_same(src: str, dst: str) -> None:
 
 def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) -> None:
     from postproc.calfile import load_calibration
+    from postproc.fileio import copy_lines
     from postproc.gcode.pipeline import CorrectOptions, correct_file
     from postproc.gcode.recognise import dialect_of_file
 
@@ -297,10 +314,11 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
         if src == "-":
             tmpdir = tempfile.mkdtemp(prefix="postproc-")
             src_path = os.path.join(tmpdir, "stdin.nc")
-            with open(src_path, "wb") as fh:
-                shutil.copyfileobj(sys.stdin.buffer, fh)
+            with open(src_path, "wb") as fh:  # a stream without line ends is refused, not copied forever
+                copy_lines(sys.stdin.buffer, fh, "<stdin>")
         else:
             src_path = src
+        _refuse_without_code(src_path, "<stdin>" if src == "-" else src)
         opts.dialect = dialect_of_file(src_path, opts.dialect)  # generic: Sinumerik by its header
         if dst == "-":
             tmpdir = tmpdir or tempfile.mkdtemp(prefix="postproc-")

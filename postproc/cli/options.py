@@ -50,7 +50,8 @@ FINITE_FLOAT = FiniteFloat()
 
 
 def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
-    """``"0,0,-100"`` -> (0.0, 0.0, -100.0)."""
+    """``"0,0,-100"`` -> (0.0, 0.0, -100.0) (mm: a point or a tool vector, each number
+    within :data:`MAX_POSITION_MM`)."""
     parts = [p.strip() for p in text.split(",")]
     try:
         values = tuple(float(p) for p in parts)
@@ -58,6 +59,9 @@ def parse_vector(text: str, what: str = "vector") -> tuple[float, float, float]:
         values = ()
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise click.BadParameter(f"{what} must be three numbers X,Y,Z, got {text!r}")
+    if not all(abs(v) <= MAX_POSITION_MM for v in values):
+        raise click.BadParameter(f"{what} {text!r} reaches beyond {MAX_POSITION_MM:g} mm: no machine reaches "
+                                 "that far")
     return values[0], values[1], values[2]
 
 

@@ -35,6 +35,19 @@ def _parse_floats(text: str, what: str) -> list[float]:
     return values
 
 
+def _temp_profile(_ctx, _param, text: str | None) -> tuple[float, float, float | None] | None:
+    """``--temp-profile`` read at the option, so a bad one is a usage error (exit 2)."""
+    from postproc.errors import PostprocError
+    from postproc.simulate.points import parse_temp_profile
+
+    if text is None:
+        return None
+    try:
+        return parse_temp_profile(text)
+    except PostprocError as exc:
+        raise click.BadParameter(exc.message) from None
+
+
 @click.command()
 @click.argument("machine", type=click.Path(exists=True, dir_okay=False))
 @click.option("--grid", "grid_step", default=None, metavar="STEP",
@@ -62,7 +75,7 @@ def _parse_floats(text: str, what: str) -> list[float]:
               help="Shots per point (the seed averaged 12); each is its own row.")
 @click.option("--time-span", "time_span", type=FiniteFloat(min=0), default=None, metavar="S",
               help="Spread the rows evenly over S seconds and write a t column.")
-@click.option("--temp-profile", "temp_profile", default=None, metavar="T|T0:T1|T0:T1:TAU",
+@click.option("--temp-profile", "temp_profile", default=None, metavar="T|T0:T1|T0:T1:TAU", callback=_temp_profile,
               help="Write a temp column: constant, linear ramp over the run, or warm-up from T0 "
                    "towards T1 with time constant TAU s.")
 @click.option("--load-values", "load_values", default=None, metavar="L1,L2,...",

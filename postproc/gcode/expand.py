@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.fileio import read_lines
 from postproc.gcode.dialect import DIALECTS
 from postproc.gcode.dialect import get as get_dialect
 from postproc.gcode.expand_syntax import (
@@ -39,6 +40,7 @@ from postproc.gcode.expand_syntax import (
     Block,
     Macro,
     OWord,
+    SourceLine,
     Unit,
     Word,
     candidate_lines,
@@ -55,9 +57,14 @@ from postproc.gcode.expr import (
     format_number,
     to_index,
 )
-from postproc.gcode.lexer import scan_words, split_lines
+from postproc.gcode.lexer import scan_words
 from postproc.gcode.variables import PROBE_HINT, PROBE_MESSAGE, PROBE_RESULTS
-from postproc.limits import DEFAULT_MAX_ITERATIONS, LINES_PER_ITERATION, ResourceLimitError
+from postproc.limits import (
+    DEFAULT_MAX_ITERATIONS,
+    LINES_PER_ITERATION,
+    ResourceLimitError,
+    flat_program_too_long,
+)
 
 # rs274ngc INTERP_SUB_PARAMS: #1..#30 are local to an o-word call.
 LINUXCNC_SUB_PARAMS = 30
@@ -105,16 +112,6 @@ _LINE_END = re.compile(r"(\r\n|\n|\r)$")
 # ---------------------------------------------------------------------------
 # Public types
 # ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class SourceLine:
-    """One executed line of the flat program."""
-
-    lineno: int  # 1-based line in ``path``
-    path: str | None  # file the line comes from (a subroutine file for o<name> call)
-    text: str  # the line as executed, with its line ending
-    original: bool  # text is byte-identical to the source line
 
 
 class ExpansionError(UnsupportedGcodeError):
@@ -188,6 +185,9 @@ class _Stop(Exception):
     pass
 
 
+_UNSET = object()  # no value yet (Fanuc's vacant NULL is a value)
+
+
 class _Expander(Env):
     def __init__(self, lines: list[str], path: str | None, dialect: str,
                  subroutine_path: Sequence[Path], max_lines: int, max_iterations: int):
@@ -232,6 +232,13 @@ class _Expander(Env):
         self.executed = 0
         # the dialect's own header lines ("$NAME.MIN%", Okuma): the interpreter's header forms
         self.header_forms = [re.compile(p) for p in self.d.header_forms]
+        self._loop_ends: dict[tuple[int, int], int] = {}  # (unit, line) of a DO -> line of its END
+        # Endless passes: ``version`` counts the changes of the state the expansion reads
+        # (parameters, variables, frames, o-word table and counts); ``_passes`` holds it, with
+        # the flags, at each jump back. A jump back that finds the same as at its last time
+        # ran a whole pass that changed nothing: the program runs that pass for ever.
+        self.version = 0
+        self._passes: dict[tuple[int, int], tuple] = {}
 
     # -- places and errors ------------------------------------------------
     @property
@@ -253,6 +260,33 @@ class _Expander(Env):
                 f"the program's loops and subprogram calls run more than {self.max_iterations:,} times in all "
                 "(--max-iterations)", path=self.unit_cur.path, lineno=self.lineno, col=col,
                 hint="check the loop's condition; raise --max-iterations if the program is meant to run this long")
+
+    def will_repeat(self, count: int, col: int) -> None:
+        """A loop or call (at column ``col`` of the line running) is to run ``count`` passes,
+        each one an iteration: refused at once when they alone pass ``max_iterations``
+        (``M98 P.. L99999999`` is refused at its call, not after ten million passes)."""
+        if count > self.max_iterations - self.iterations:
+            raise ResourceLimitError(
+                f"this loop or call repeats {count:,} times: more than the {self.max_iterations:,} loop passes and "
+                "subprogram calls allowed in all (--max-iterations)", path=self.unit_cur.path, lineno=self.lineno,
+                col=col, hint="check the repeat count; raise --max-iterations if the program is meant to run this long")
+
+    def _another_pass(self, col: int) -> None:
+        """The statement at column ``col`` of the line running jumps back for one more pass
+        of a loop: refused when the pass since its last jump changed nothing the program
+        reads, for then every pass after it is the same, without end (``while [1]``, a GOTO
+        back with no count). Found after two passes, where the bound on iterations takes
+        millions."""
+        here = (id(self.unit_cur), self.cur_idx)
+        state = (self.version, len(self.frames), self.executed_if, self.doing_break, self.doing_continue,
+                 self.skipping_o, self.skipping_to_sub, self.defining_sub)
+        if self._passes.get(here) == state:
+            raise ResourceLimitError(
+                "endless loop: a pass of this loop changes nothing (no parameter, variable or count), so it "
+                "runs the same pass for ever", path=self.unit_cur.path, lineno=self.cur_idx + 1, col=col,
+                hint="check the loop's condition and what the loop changes; a program that is meant to repeat "
+                     "until the operator stops it cannot be corrected as a flat program")
+        self._passes[here] = state
 
     # -- parameters ---------------------------------------------------------
     def seed(self, variables: dict[int, float]) -> None:
@@ -308,10 +342,13 @@ class _Expander(Env):
     def write_numbered(self, index: int, value, col: int) -> None:
         if self.fanuc:
             if 1 <= index <= FANUC_LOCALS:
-                self._fanuc_locals()[index] = value
+                local = self._fanuc_locals()
+                if local[index] is not value and local[index] != value:
+                    self.version += 1
+                local[index] = value
                 return
             if 100 <= index <= 999:
-                self.params[index] = value
+                self._set(self.params, index, value)
                 return
             if index >= 1000:
                 raise self.refuse(col, f"setting system variable #{index} changes controller state "
@@ -323,7 +360,14 @@ class _Expander(Env):
         if 5161 <= index <= 5390:
             raise self.refuse(col, f"setting #{index} changes a stored position or coordinate-system offset "
                               "kept by the controller", hint="use G10 L2/L20 or set it on the controller")
-        self.params[index] = value
+        self._set(self.params, index, value)
+
+    def _set(self, scope: dict, key: Any, value: Any) -> None:
+        """``scope[key] = value``, counted as a change of state when it is one."""
+        old = scope.get(key, _UNSET)
+        if old is not value and old != value:  # (NaN is never equal: always a change)
+            self.version += 1
+        scope[key] = value
 
     def read_named(self, name: str, col: int):
         scope = self.globals if name.startswith("_") else self.frames[-1].named
@@ -358,11 +402,11 @@ class _Expander(Env):
         key = str(file)
         unit = self.files.get(key)
         if unit is None:
-            raw = file.read_bytes()
-            text = raw.decode("utf-8", errors="strict") if raw else ""
-            if text.startswith("\ufeff"):
-                text = text[1:]
-            unit = Unit(split_lines(text), key, self.fanuc, self.nested)
+            with open(file, encoding="utf-8", errors="strict", newline="") as fh:
+                lines = list(read_lines(fh, key))  # a line without end is refused, not read whole
+            if lines and lines[0].startswith("\ufeff"):
+                lines[0] = lines[0][1:]
+            unit = Unit(lines, key, self.fanuc, self.nested)
             self.files[key] = unit
         return unit
 
@@ -400,31 +444,31 @@ class _Expander(Env):
             self.idx += 1
             self.cur_idx = idx
             self.unit_cur = unit
-            self._count_line(unit, idx)
-            line = unit.lines[idx]
+            self.executed += 1
+            if self.executed > self.max_lines:
+                raise self._too_many_lines()
             if self.skipping_o is not None or self.skipping_to_sub is not None:
                 self._skipped_line(unit, idx)
                 continue
-            own = self._dialect_line(unit, idx, line, first_code)
+            own = self._dialect_line(unit, idx, unit.lines[idx], first_code)
             if own is not None:
                 yield from own
                 continue
-            words = scan_words(line)
-            if words is not None and not any(
-                    letter == "O" or (letter == "M" and float(num) in _M_SPECIAL)
-                    or (letter == "G" and float(num) in _G_SPECIAL) for letter, num, *_ in words):
-                # fast path: a line of plain words (most CAM output) is yielded as it is
-                if words:
-                    first_code = False
-                yield SourceLine(idx + 1, unit.path, line, True)
-                continue
-            if line.strip().startswith("%"):
+            kind = unit.kinds[idx]
+            if kind is None:
+                kind = unit.kinds[idx] = _line_kind(unit, idx)
+            if kind is _PERCENT:
                 if unit is self.main:  # a subprogram file's own tape marks stay out of the flat program
-                    yield SourceLine(idx + 1, unit.path, line, True)
+                    yield unit.source_line(idx)
                     if percent_open:
                         return
                     percent_open = True
                 continue
+            if kind is not _STATEMENT:  # a line of plain words (most CAM output), or none: as it is
+                first_code = first_code and kind is _NO_WORDS
+                yield unit.source_line(idx)
+                continue
+            line = unit.lines[idx]
             b = self._block_of(unit, idx, line)
             if first_code and unit is self.main and _opens_program(b):
                 first_code = False
@@ -434,8 +478,7 @@ class _Expander(Env):
                 if len(self.frames) == 1:
                     return  # the main program ran into the next program in the file
                 continue
-            if b.items or b.oword or b.macro:
-                first_code = False
+            first_code = first_code and not (b.items or b.oword or b.macro)
             try:
                 if b.oword is not None:
                     self._oword(b, b.oword)
@@ -460,16 +503,6 @@ class _Expander(Env):
                     raise self.refuse(m.start() + 1, f"{self.d.title.split(' ')[0]} {construct.format(*m.groups())}",
                                       hint=instead) from None
             raise
-
-    def _count_line(self, unit: Unit, idx: int) -> None:
-        """One more line run; refused beyond ``max_lines``."""
-        self.executed += 1
-        if self.executed > self.max_lines:
-            raise ResourceLimitError(
-                f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
-                f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=unit.path,
-                lineno=idx + 1, col=1,
-                hint="check the loop conditions and subprogram returns, or raise --max-iterations")
 
     def _dialect_line(self, unit: Unit, idx: int, line: str, first_code: bool) -> tuple[SourceLine, ...] | None:
         """The lines a line of the dialect's own forms leaves in the flat program, or None for
@@ -528,6 +561,13 @@ class _Expander(Env):
             self._enter("call-o", f"O{call.name}", unit, k + 1, call.repeats - 1)
         return True
 
+    def _too_many_lines(self) -> ResourceLimitError:
+        return ResourceLimitError(
+            f"the program runs more than {self.max_lines} lines: an endless loop or recursion? (the bound "
+            f"is {LINES_PER_ITERATION} lines for each pass --max-iterations allows)", path=self.unit_cur.path,
+            lineno=self.cur_idx + 1, col=1,
+            hint="check the loop conditions and subprogram returns, or raise --max-iterations")
+
     def _skipped_line(self, unit: Unit, idx: int) -> None:
         """A line met while skipping (LinuxCNC): only the o-word line the skip is looking
         for ends it (``skipping_to_sub``: the sub or label called; ``skipping_o``: the
@@ -570,6 +610,7 @@ class _Expander(Env):
                 f"'o{_oname(skipping)} {kw}': the file ended before the o{_oname(skipping)} line that closes it",
                 path=unit.path, lineno=idx + 1, col=1,
                 hint="close the block with its matching o-word line (endif, endwhile, endrepeat, while)")
+        self._refuse_open_block()
         if len(self.frames) > 1:
             fr = self.frames[-1]
             raise GcodeSyntaxError(
@@ -577,9 +618,34 @@ class _Expander(Env):
                 path=fr.call_path, lineno=fr.call_lineno, col=1,
                 hint="end the subprogram with 'o<name> endsub' or M99")
 
+    def _refuse_open_block(self) -> None:
+        """The file ran to its end (no M2/M30, no closing '%') inside an o-word loop or if
+        that no line of it closes: refused, as rs274 refuses such a file ("File ended with
+        no percent sign or program end"); a truncated file most often. (A block left
+        open by M2 inside it ends the program as on the controller, and is not refused.)"""
+        unit = self.unit
+        closers = {"while": ("endwhile",), "repeat": ("endrepeat",), "if": ("endif",), "do": ("while",)}
+        for name, op in self.offsets.items():
+            if op.unit is not unit or op.kind not in closers:
+                continue
+            closed = any(unit.maybe_oword(k) and (ow := unit.block(k).oword) is not None and ow.name == name
+                         and ow.kw in closers[op.kind] for k in range(op.idx + 1, len(unit.lines)))
+            if not closed:
+                raise GcodeSyntaxError(
+                    f"'o{_oname(name)} {op.kind}' is never closed: the file ends inside it, with no M2/M30 or "
+                    "closing '%' before", path=unit.path, lineno=op.idx + 1, col=1,
+                    hint=f"close it with its o{_oname(name)} {closers[op.kind][0]} line (is the file complete?)")
+
     # -- ordinary blocks ------------------------------------------------------
     def _block(self, b: Block, line: str) -> Iterator[SourceLine]:
         unit, idx = self.unit_cur, self.cur_idx
+        if b.settings_only and not b.slash:  # settings alone (most lines of a loop's body): nothing to write
+            self._item_values(b)
+            return
+        if len(b.items) == 1 and len(self.frames) > 1 and b.plain and b.items[0].letter == "M" and (
+                float(b.items[0].raw) == 99.0):  # M99 alone, ending a subprogram's pass
+            self._m99(None)
+            return
         if b.plain:
             m_codes = [float(w.raw) for w in b.items if w.letter == "M"]
             g_codes = [float(w.raw) for w in b.items if w.letter == "G"]
@@ -679,9 +745,9 @@ class _Expander(Env):
                     bare = name[1:]
                     if bare in _LINUXCNC_PREDEFINED or bare in ("value", "value_returned"):
                         raise self.error(1, f"#<{name}> is a read-only parameter")
-                    self.globals[name] = v
+                    self._set(self.globals, name, v)
                 else:
-                    self.frames[-1].named[name] = v
+                    self._set(self.frames[-1].named, name, v)
             else:
                 self.write_numbered(target[1], v, target[2])
         self.pending = []
@@ -815,12 +881,14 @@ class _Expander(Env):
                              "on --subroutine-path")
         if repeat <= 0:
             return
+        self.will_repeat(repeat, col)
         unit, start, _ = target
         self._enter("m98", f"O{number}", unit, start + 1, repeat - 1)
 
     def _m97(self, number: int, count: int, col: int) -> None:
         if count <= 0:
             return
+        self.will_repeat(count, col)
         start = self._sequence(self.main, number, 0, col)
         self._enter("m98", f"N{number}", self.main, start, count - 1)
 
@@ -830,6 +898,7 @@ class _Expander(Env):
             raise self.error(col, f"macro program O{number} not found in the file or on the subroutine path")
         if count <= 0:
             return
+        self.will_repeat(count, col)
         unit, start, _ = target
         local = [NULL] * (FANUC_LOCALS + 1)
         for letter, v in args.items():
@@ -846,6 +915,7 @@ class _Expander(Env):
                     saved=saved, repeats_left=repeats, start_unit=unit, start_idx=start, sub_name=name,
                     call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
         self.frames.append(fr)
+        self.version += 1
         self.unit, self.idx = unit, start
 
     def _m99(self, target: tuple[int, int] | None) -> None:
@@ -858,6 +928,7 @@ class _Expander(Env):
         if fr.repeats_left > 0:
             self.count_iteration(1)
             fr.repeats_left -= 1
+            self.version += 1
             if fr.call_type == "g65":
                 pass  # locals persist across G65 L repeats
             if fr.start_unit is None:  # pragma: no cover - _enter sets it
@@ -870,10 +941,12 @@ class _Expander(Env):
             self.idx = self._sequence(self.unit, number, fr.ret_idx, col)
             if self.idx < fr.ret_idx:  # back to or before the call: one more pass of a loop
                 self.count_iteration(col)
+                self._another_pass(col)
 
     def _leave(self, fr: _Frame) -> None:
         """Return from ``fr``, the innermost subprogram frame, to the line after its call."""
         self.frames.pop()
+        self.version += 1
         if fr.ret_unit is None:  # pragma: no cover - callers never leave the main program's frame
             raise AssertionError("the main program's frame has no caller to return to")
         self.unit, self.idx = fr.ret_unit, fr.ret_idx
@@ -908,6 +981,7 @@ class _Expander(Env):
             self.idx = self._sequence(self.unit_cur, self._target(m), self.cur_idx + 1, m.col)
             if self.idx <= self.cur_idx:  # a jump back: one more pass of a loop
                 self.count_iteration(m.col)
+                self._another_pass(m.col)
         elif m.kind == "if_then":
             if self._cond(m):
                 a = m.assign
@@ -917,13 +991,13 @@ class _Expander(Env):
                 self.pending = []
                 self._queue_setting(a, v)
                 self._apply_pending()
-        elif m.kind == "while":
-            if not self._cond(m):
-                self.idx = self._find_end(m.loop, m.col) + 1
-        elif m.kind == "do":
-            pass
+        elif m.kind in ("while", "do"):
+            end = self._loop_end_of(m)
+            if m.kind == "while" and not self._cond(m):
+                self.idx = end + 1
         elif m.kind == "end":
             self.count_iteration(m.col)
+            self._another_pass(m.col)
             self.idx = self._find_do(m.loop, m.col)
 
     def _cond(self, m: Macro) -> bool:
@@ -941,6 +1015,17 @@ class _Expander(Env):
             raise self.error(m.col, "GOTO to a vacant variable")
         return to_index(self, v, m.col)
 
+    def _loop_end_of(self, m: Macro) -> int:
+        """The line of the END that closes the WHILE/DO ``m`` on the line running, found
+        once: a DO without its END is refused when it first runs, whether or not the loop
+        would reach it (Fanuc alarm PS0126: DO and END are not paired), and not only when
+        its condition fails."""
+        key = (id(self.unit_cur), self.cur_idx)
+        end = self._loop_ends.get(key)
+        if end is None:
+            end = self._loop_ends[key] = self._find_end(m.loop, m.col)
+        return end
+
     def _find_end(self, loop: int, col: int) -> int:
         unit = self.unit_cur
         for k in range(self.cur_idx + 1, len(unit.lines)):
@@ -948,7 +1033,8 @@ class _Expander(Env):
                 b = unit.block(k)
                 if b.macro is not None and b.macro.kind == "end" and b.macro.loop == loop:
                     return k
-        raise self.error(col, f"DO {loop} has no END {loop} after it")
+        raise self.error(col, f"DO {loop} has no END {loop} after it: DO and END must be paired (Fanuc alarm "
+                         "PS0126)", hint=f"close the loop with END {loop}")
 
     def _find_do(self, loop: int, col: int) -> int:
         unit = self.unit_cur
@@ -967,6 +1053,7 @@ class _Expander(Env):
                              f"{have.unit.path or '<input>'}:{have.idx + 1}",
                              hint="give each sub, loop and if its own o-number")
         self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+        self.version += 1
 
     def _check_label(self, ow: OWord, allow_do: bool = False) -> _Offset | None:
         op = self.offsets.get(ow.name)
@@ -990,6 +1077,7 @@ class _Expander(Env):
     def _back_to(self, name: str, col: int) -> None:
         """Back to the start of loop ``name`` (from the o-word at column ``col``): one more pass."""
         self.count_iteration(col)
+        self._another_pass(col)
         op = self.offsets[name]
         self.unit, self.idx = op.unit, op.idx
 
@@ -1027,6 +1115,7 @@ class _Expander(Env):
         if self.skipping_o is not None:
             if self.offsets.get(ow.name) is None:
                 self.offsets[ow.name] = _Offset(self.unit_cur, self.cur_idx, ow.kw)
+                self.version += 1
             self.skipping_o = None
         self.skipping_to_sub = None
 
@@ -1067,6 +1156,7 @@ class _Expander(Env):
             self.globals["_value_returned"] = 1.0
         for k, v in enumerate(fr.saved or []):
             self.params[k + 1] = v
+        self.version += 1
         self._leave(fr)
 
     def _o_do(self, ow: OWord) -> None:
@@ -1077,8 +1167,10 @@ class _Expander(Env):
     def _o_repeat(self, ow: OWord) -> None:
         op = self._label(ow)
         self.skipping_o = None
+        self.version += 1
         if op.repeat_count == -1:
             op.repeat_count = _round_to_int(self._num(ow.args[0], ow.col))
+            self.will_repeat(op.repeat_count, ow.col)
         if op.repeat_count > 0:
             op.repeat_count -= 1
         else:
@@ -1172,6 +1264,7 @@ class _Expander(Env):
             self.params[k] = args[k - 1] if k <= len(args) else 0.0
         self.globals["_value"] = 0.0
         self.globals["_value_returned"] = 0.0
+        self.version += 1
         self.count_iteration(ow.col)
         fr = _Frame(call_type="oword", ret_unit=self.unit_cur, ret_idx=self.cur_idx + 1, saved=saved,
                     sub_name=ow.name, call_lineno=self.cur_idx + 1, call_path=self.unit_cur.path)
@@ -1201,6 +1294,24 @@ class _Expander(Env):
         "endrepeat": _o_endrepeat, "break": _o_break, "continue": _o_continue,
         "if": _o_if, "elseif": _o_elseif, "else": _o_else, "endif": _o_endif,
     }
+
+
+# What a line is to the main loop (Unit.kinds, found once a line): plain words, yielded as
+# they are; blanks and comments only, idem; a '%' line; anything else, parsed as a Block.
+_WORDS, _NO_WORDS, _PERCENT, _STATEMENT = "words", "no words", "percent", "statement"
+
+
+def _line_kind(unit: Unit, idx: int) -> str:
+    """What line ``idx`` of ``unit`` is to :meth:`_Expander.run` (the scanner's fast path)."""
+    line = unit.lines[idx]
+    words = scan_words(line)
+    if words is not None and not any(
+            letter == "O" or (letter == "M" and float(num) in _M_SPECIAL)
+            or (letter == "G" and float(num) in _G_SPECIAL) for letter, num, *_ in words):
+        return _WORDS if words else _NO_WORDS
+    if line.strip().startswith("%"):
+        return _PERCENT
+    return _STATEMENT
 
 
 def _opens_program(b: Block) -> bool:
@@ -1254,7 +1365,7 @@ def _last_code_line(lines: list[str]) -> int | None:
 def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "generic",
            subroutine_path: Sequence[Path] = (), max_lines: int | None = None,
            max_iterations: int = DEFAULT_MAX_ITERATIONS,
-           variables: dict[int, float] | None = None) -> Iterator[SourceLine]:
+           variables: dict[int, float] | None = None, max_lines_out: int | None = None) -> Iterator[SourceLine]:
     """Execute the program's control flow and yield the flat program line by line.
 
     ``lines`` are the source lines with their endings (e.g. from
@@ -1265,6 +1376,13 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     run (default :data:`~postproc.limits.LINES_PER_ITERATION` a pass, at least 50 million).
     ``variables``: machine-state values given by the user (``--var``), read where the
     program reads the controller's state (probe results never).
+
+    ``max_lines_out``: the most lines the corrected program may have
+    (:meth:`postproc.limits.Limits.output_lines`); when given, the program is first run
+    through without yielding anything, counting its lines, and refused
+    (:class:`~postproc.limits.ResourceLimitError`, ``--max-output-lines``) when the flat
+    program alone passes that bound, before any line of it is corrected: a loop that
+    writes moves is refused at the expansion's speed, not the correction's.
     """
     if max_lines is None:
         max_lines = max(50_000_000, LINES_PER_ITERATION * max_iterations)
@@ -1273,7 +1391,14 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
 
         return (SourceLine(k + 1, file, text, original)
                 for k, file, text, original in expand_sinumerik(list(lines), path, max_lines, subroutine_path))
-    ex = _Expander(list(lines), path, dialect, subroutine_path, max_lines, max_iterations)
+    lines = list(lines)
+    if max_lines_out is not None:
+        dry = _Expander(lines, path, dialect, subroutine_path, max_lines, max_iterations)
+        dry.seed(variables or {})
+        for n, sl in enumerate(dry.run(), start=1):
+            if n > max_lines_out:
+                raise flat_program_too_long(max_lines_out, sl.path, sl.lineno)
+    ex = _Expander(lines, path, dialect, subroutine_path, max_lines, max_iterations)
     ex.seed(variables or {})
     return ex.run()
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import re
 from bisect import bisect_right
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from itertools import accumulate
 
@@ -35,6 +35,16 @@ _LINUXCNC_MARK = re.compile(r"^\s*[oO]\s*(<|\d+\s*(sub|call|if|while|do|repeat)\
 
 _O_KEYWORDS = ("endrepeat", "endwhile", "endsub", "elseif", "endif", "else", "sub", "call",
                "do", "while", "if", "break", "continue", "return", "repeat")
+
+
+@dataclass(frozen=True, slots=True)
+class SourceLine:
+    """One executed line of the flat program."""
+
+    lineno: int  # 1-based line in ``path``
+    path: str | None  # file the line comes from (a subroutine file for o<name> call)
+    text: str  # the line as executed, with its line ending
+    original: bool  # text is byte-identical to the source line
 
 
 # ---------------------------------------------------------------------------
@@ -88,6 +98,8 @@ class Block:
     macro: Macro | None = None
     program_number: int | None = None  # Fanuc "O1234" / ":1234" line
     slash: bool = False
+    settings_only: bool = False  # parameter settings and nothing else (set by parse_block)
+    plain_found: bool | None = None  # what ``plain`` says, once asked
 
     @property
     def words(self) -> list[Word]:
@@ -99,9 +111,11 @@ class Block:
 
     @property
     def plain(self) -> bool:
-        """Nothing to evaluate or execute."""
-        return (self.oword is None and self.macro is None and self.program_number is None
-                and all(isinstance(it, Word) and it.node is None for it in self.items))
+        """Nothing to evaluate or execute (found once: a block is not changed once parsed)."""
+        if self.plain_found is None:
+            self.plain_found = (self.oword is None and self.macro is None and self.program_number is None
+                                and all(isinstance(it, Word) and it.node is None for it in self.items))
+        return self.plain_found
 
 
 def parse_block(line: str, *, fanuc: bool, path: str | None, lineno: int,
@@ -146,6 +160,8 @@ def parse_block(line: str, *, fanuc: bool, path: str | None, lineno: int,
         else:
             raise p.error(i, f"unexpected character {c!r}",
                           hint="a G-code line holds words (letter + value), parameter settings and comments")
+    block.settings_only = (bool(block.items) and block.oword is None and block.macro is None
+                           and all(isinstance(it, Assign) for it in block.items))
     return block
 
 
@@ -297,6 +313,9 @@ class Unit:
         self.fanuc = fanuc
         self.nested_comments = nested_comments
         self._blocks: dict[int, Block] = {}
+        # what each line is to the expander's main loop, found the first time it runs
+        self.kinds: list[str | None] = [None] * len(lines)
+        self._sources: dict[int, SourceLine] = {}
         self._numbers: dict[int, list[int]] | None = None
         self._programs: dict[int, int] | None = None
 
@@ -307,6 +326,14 @@ class Unit:
                             nested_comments=self.nested_comments)
             self._blocks[idx] = b
         return b
+
+    def source_line(self, idx: int) -> SourceLine:
+        """Line ``idx`` as the flat program holds it when it runs unchanged (one object for
+        all the times a loop runs it)."""
+        sl = self._sources.get(idx)
+        if sl is None:
+            sl = self._sources[idx] = SourceLine(idx + 1, self.path, self.lines[idx], True)
+        return sl
 
     def maybe_oword(self, idx: int) -> bool:
         return _O_LINE.match(self.lines[idx]) is not None
@@ -379,6 +406,25 @@ def first_code_line(lines: Sequence[str]) -> int:
         if code and not code.startswith("%"):
             return k
     return -1
+
+
+def holds_no_code(lines: Iterable[str]) -> bool:
+    """True when ``lines`` hold text but not one word or statement: only comments, ``%``
+    lines and blanks. Read up to the first line of code (at once for any real program);
+    False for no text at all (the empty program has its own refusal) and for a line that
+    does not read (its reader names it)."""
+    text = False
+    for k, line in enumerate(lines):
+        if not line.strip():
+            continue
+        text = True
+        try:
+            code = pack(line, path=None, lineno=k + 1).text
+        except PostprocError:
+            return False
+        if code and not code.startswith("%"):
+            return False
+    return text
 
 
 def plain_value(w: Word) -> float | None:

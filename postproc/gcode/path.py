@@ -102,8 +102,10 @@ def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
         path = str(source)
 
         def gen():
+            from postproc.fileio import read_lines
+
             with open_source(path) as fh:
-                yield from fh
+                yield from read_lines(fh, path)  # a line without end is refused, not read whole
 
         return path, gen()
     return None, iter(_LINE_RE.findall(str(source)))

@@ -463,9 +463,12 @@ def _expanded(prog: _Program, job: _Job, write: Write, progress: Callable[[int],
     c = job.corrector()
 
     def texts() -> Iterator[str]:
+        # max_lines_out: the expansion is run dry first, and a flat program beyond the output
+        # bound refused before any line is corrected
         for sl in expand(lines, path=job.path, dialect=options.dialect,
                          subroutine_path=[Path(p) for p in options.subroutine_path], variables=c.setup.variables,
-                         max_iterations=options.limits.max_iterations):
+                         max_iterations=options.limits.max_iterations,
+                         max_lines_out=options.limits.output_lines(prog.lines)):
             source.append((sl.lineno, sl.path))
             prog.at = (sl.lineno, sl.path or job.path)
             yield sl.text

@@ -104,14 +104,12 @@ _INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup", "d", "_
 
 
 def count_lines(path: str) -> int:
-    """The number of lines of the file (a last line without an ending counts)."""
-    n = 0
-    last = b"\n"
-    with open(path, "rb") as fh:
-        while block := fh.read(1 << 20):
-            n += block.count(b"\n")
-            last = block[-1:]
-    return n + (last != b"\n")
+    """The number of lines of the file (a last line without an ending counts); a line
+    longer than :data:`postproc.fileio.MAX_INPUT_LINE_CHARS` is refused once that many
+    bytes of it are read (a file without line ends such as /dev/zero has no end)."""
+    from postproc.fileio import count_lines as bounded_count
+
+    return bounded_count(path)
 
 
 def cuts(lines: int, chunk: int, affine: bool, processes: int) -> list[int] | None:

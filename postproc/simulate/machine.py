@@ -40,7 +40,7 @@ import numpy as np
 
 from postproc.calibration.axis_tables import AXES, COLUMNS, AxisTables, Squareness
 from postproc.calibration.tables import read_squareness, read_tables
-from postproc.constants import SOLVER_MAX_ITER, SOLVER_TOL_MM
+from postproc.constants import MAX_VOLUME_MM, SOLVER_MAX_ITER, SOLVER_TOL_MM
 from postproc.engine.base import Engine, InverseResult, check_points, check_tool_vectors
 from postproc.errors import CalibrationError, PostprocError
 from postproc.fileio import atomic_write_text
@@ -262,6 +262,10 @@ def machine_from_dict(data, *, path: str | None = None) -> Machine:
         if isinstance(sq, str):
             sq = read_squareness(base / sq)
         geometry = MachineGeometry(tables, sq, data["volume_mm"], data.get("rotation", "finite"))
+        if not np.all(np.abs(geometry.volume_mm) <= MAX_VOLUME_MM):
+            raise MachineError(f"machine volume_mm {geometry.volume_mm.tolist()} reaches beyond "
+                               f"{MAX_VOLUME_MM / 1000:g} m: no machine is that large",
+                               hint="volume_mm holds the machine's travel in mm")
         return Machine(
             geometry=geometry,
             effects=list(data.get("effects") or []),

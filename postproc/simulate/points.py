@@ -9,6 +9,7 @@ tracker noise; the result is a :class:`Measurements` exactly as read from a file
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -25,6 +26,10 @@ _GRID_END_SLACK_MM = 1e-9
 
 #: Default temperature (deg C) when a temperature column is asked for without a profile.
 REFERENCE_TEMP_C = 20.0
+# Bounds of a temperature profile: no machine shop is a thousand degrees from freezing, and
+# a warm-up that takes longer than 30 years is no warm-up.
+MAX_TEMP_C = 1000.0
+MAX_TIME_CONSTANT_S = 1e9
 # Rows of one simulated campaign: a real one has hundreds to tens of thousands; a million
 # rows is ~100 MB of CSV and a few hundred MB while they are made.
 MAX_ROWS = 1_000_000
@@ -92,6 +97,11 @@ def parse_temp_profile(text: str) -> tuple[float, float, float | None]:
         values = [float(p) for p in parts]
     except ValueError:
         values = []
+    if not all(math.isfinite(v) for v in values) or any(abs(v) > MAX_TEMP_C for v in values[:2]) or (
+            len(values) == 3 and not 0 < values[2] <= MAX_TIME_CONSTANT_S):
+        raise SimulationError(f"temperature profile {text!r}: temperatures must be finite numbers within "
+                              f"{MAX_TEMP_C:g} deg C and the time constant finite, above 0 s and at most "
+                              f"{MAX_TIME_CONSTANT_S:g} s", hint="e.g. --temp-profile 20:23:1800 (deg C, deg C, seconds)")
     if not 1 <= len(values) <= 3 or (len(values) == 3 and values[2] <= 0):
         raise SimulationError(f"temperature profile {text!r}: expected T, T0:T1 or T0:T1:TAU_S",
                               hint="e.g. --temp-profile 20:23:1800 (deg C, deg C, seconds)")
