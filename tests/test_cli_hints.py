@@ -27,7 +27,8 @@ READERS = ("correct", "verify", "diff", "mirror pockets")
 #: ... and those of them that also correct it (the pipeline, its segmentation and emitter)
 CORRECTORS = ("correct", "verify", "mirror pockets")
 #: modules run only when a program is corrected (the others of postproc/gcode read programs)
-CORRECTING_MODULES = {"pipeline", "segment", "engine_use", "split", "emit", "emitter", "vplan", "bulk", "directions"}
+CORRECTING_MODULES = {"pipeline", "reader", "planner", "table", "sampling", "dirplan", "writer", "arcfit", "framed",
+                      "options", "segment", "engine_use", "split", "emit", "emitter", "vplan", "bulk", "directions"}
 
 
 def commands(cmd=main, path=()):

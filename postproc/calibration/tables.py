@@ -138,6 +138,18 @@ def _axis_rows(table: CsvTable, partial: bool = False) -> dict[str, tuple[np.nda
     return out
 
 
+def _union_positions(xs: list[np.ndarray]) -> np.ndarray:
+    """The union of the sources' positions, one node where two lie closer than
+    MIN_TABLE_SPACING_MM (runs in mm and a table in um give 31.4 and 31.400000000000002):
+    the first of them stays."""
+    x = np.unique(np.concatenate(xs))
+    keep = [0]
+    for k in range(1, len(x)):
+        if x[k] - x[keep[-1]] >= MIN_TABLE_SPACING_MM:
+            keep.append(k)
+    return x[keep]
+
+
 def _merge_tables(parts: list[dict], tables: list[CsvTable]) -> AxisTables:
     """One AxisTables from the axes of one or several files (each axis in exactly one)."""
     found: dict[str, tuple] = {}
@@ -289,7 +301,7 @@ def merge_parts(parts: list[dict[str, TablePart]]) -> tuple[AxisTables, list[str
                         path=part.source, hint=f"give each component of {ax} once (drop {COLUMNS[j]} from one file)",
                     )
                 owner[j] = part
-        x = np.unique(np.concatenate([p.x for p in mine]))
+        x = _union_positions([p.x for p in mine])
         values = np.zeros((len(x), 6))
         for j, part in owner.items():
             values[:, j] = np.interp(x, part.x, part.values[:, j])

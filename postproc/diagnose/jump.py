@@ -46,8 +46,10 @@ MIN_SEGMENT_FRACTION = 0.1
 # campaigns one such reached p = 3e-4).
 JUMP_P = 1e-4
 # A step must remove this fraction of the residual variance at least: a tracker moved by
-# 8 um removes 21 % on 5 um noise, 15 um 42 %; the plane boundary above 4 %.
-MIN_EXPLAINED = 0.08
+# 8 um removes 21 % on 5 um noise, 15 um 42 %; misfits of the calibration that follow the
+# measuring order as steps: a plane boundary 4 %, an axis coupling no effect models (the
+# x*y*z campaign of tests/test_diagnose_campaigns.py) 8.2 %. Between the two groups.
+MIN_EXPLAINED = 0.12
 # Time constants of the warm-up alternative (s): minutes to hours.
 WARMUP_TAUS_S = (300.0, 600.0, 1200.0, 2400.0, 4800.0, 9600.0)
 

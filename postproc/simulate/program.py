@@ -64,11 +64,11 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     from postproc.gcode.recognise import dialect_of_file
 
     dialect = dialect_of_file(program, getattr(options, "dialect", "generic"))
-    if options is None and dialect != "generic":
+    if options is None:
         from postproc.gcode.pipeline import CorrectOptions
 
         options = CorrectOptions(dialect=dialect)
-    elif options is not None and options.dialect != dialect:
+    elif options.dialect != dialect:
         options = replace(options, dialect=dialect)
     reading: dict[str, Any] = {"dialect": dialect,
                                "subroutine_path": tuple(getattr(options, "subroutine_path", ())),
