@@ -76,10 +76,12 @@ def construct_of(stderr: str) -> str:
     return _LOCATION.sub("", first.strip())[:110]
 
 
-def run_one(path: Path, dialect: str | None, calibration: Path, out: Path, timeout: float) -> tuple[str, str]:
+def run_one(path: Path, dialect: str | None, calibration: Path, out: Path, timeout: float,
+            extra: list[str] | None = None) -> tuple[str, str]:
     """('corrected'|'refused'|'crashed'|'usage error'|'timeout', the first line of the refusal).
     Exit 1 is postproc's internal error (a bug), 2 a command line this version does not take."""
-    cmd = postproc_cmd() + ["correct", str(path), "-c", str(calibration), "-o", str(out), "-j", "1", *SETUP]
+    cmd = postproc_cmd() + ["correct", str(path), "-c", str(calibration), "-o", str(out), "-j", "1", *SETUP,
+                            *(extra or [])]
     if dialect:
         cmd += ["--dialect", dialect]
     try:
@@ -98,7 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--corpus", type=Path, default=ROOT / "tests" / "data" / "shop")
     ap.add_argument("--calibration", type=Path, default=ROOT / "calibrations" / "s500_static.json")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per file")
+    ap.add_argument("--tolerance", default=None, help="--tolerance given to every correct (mm) [postproc's default]")
     args = ap.parse_args(argv)
+    extra = ["--tolerance", args.tolerance] if args.tolerance else []
 
     sources = load_sources(args.corpus)
     have = available_dialects()
@@ -124,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
                 row = table.setdefault((source, folder), {"dialect": used, "files": 0,
                                                           "status": collections.Counter(),
                                                           "why": collections.Counter()})
-                status, why = run_one(path, dialect, args.calibration, Path(tmp) / path.name, args.timeout)
+                status, why = run_one(path, dialect, args.calibration, Path(tmp) / path.name, args.timeout, extra)
                 row["files"] += 1
                 per_file.append((rel, status, why))
                 row["status"][status] += 1
