@@ -497,29 +497,42 @@ class _Rows:
                      self.keys[start:])
 
 
+@dataclass(frozen=True)
+class _ReadOptions:
+    """How :class:`_Reader` reads its program."""
+
+    # the header lines (emit.header_run) left out (the corrected program)
+    drop_header: bool = False
+    dialect: str = "generic"
+    # the program read as executed: subprograms, loops and macros written out, as correct
+    # writes them (each line numbered by its source line); its external subprograms
+    # looked up on subroutine_path
+    expand: bool = False
+    subroutine_path: tuple[Path, ...] = ()
+    # each canned cycle block read as the lines correct writes it as (--cycles expand);
+    # both programs are read so, as correct may keep some cycles and expand others
+    # (--cycles auto)
+    expand_cycles: bool = False
+    cycle_retract: bool = True  # their G98/G99 kept (not with --cycles expand)
+    limits: Limits | None = None  # loops and helix turns (postproc.limits)
+
+
 class _Reader:
     """One program read in chunks of :class:`_Rows`; see the module docstring."""
 
-    def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
-                 dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = (),
-                 expand_cycles: bool = False, cycle_retract: bool = True, limits: Limits | None = None) -> None:
+    def __init__(self, source, setup: Setup, keys: _Keys, options: _ReadOptions = _ReadOptions()) -> None:
         self.path, self._lines = iter_source_lines(source)
-        self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
-        self.limits = limits or Limits()  # loops and helix turns (postproc.limits)
+        self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=options.dialect)
+        self.limits = options.limits or Limits()
         self.interp.max_arc_turns = self.limits.max_arc_turns
         self.keys = keys
-        self.drop_header = drop_header
-        # read the program as executed: subprograms, loops and macros written out, as
-        # correct writes them (each line numbered by its source line)
-        self.expand = expand
-        self.dialect = dialect
-        self.subroutine_path = tuple(subroutine_path)
+        self.drop_header = options.drop_header
+        self.expand = options.expand
+        self.dialect = options.dialect
+        self.subroutine_path = options.subroutine_path
         self.variables = getattr(setup, "variables", None)  # --var: machine state the program reads
-        # read each canned cycle block as the lines correct writes it as (--cycles expand);
-        # both programs are read so, as correct may keep some cycles and expand others
-        # (--cycles auto)
-        self.expand_cycles = expand_cycles
-        self.cycle_retract = cycle_retract  # their G98/G99 kept (not with --cycles expand)
+        self.expand_cycles = options.expand_cycles
+        self.cycle_retract = options.cycle_retract
         self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
@@ -1468,8 +1481,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
                      keep: int | None = None, dialect: str = "generic",
-                     subroutine_path: Sequence[Path] = (), cycles: str | None = None,
-                     limits: Limits | None = None) -> DiffReport:
+                     subroutine_path: Sequence[Path] = (), limits: Limits | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1484,79 +1496,42 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     loops, macros written out), the original is read expanded the same way (its external
     subroutines looked up on ``subroutine_path``, as ``correct`` was given it); its
     blocks are then numbered by their source lines, a subprogram's line once per call.
-    ``cycles``: "expand" reads each canned cycle of the original as the moves ``correct
-    --cycles expand`` wrote for it, as the header's ``CYCLES EXPANDED`` does.
+    Each canned cycle block of both programs is read as the moves ``correct`` writes for
+    it when it expands it (whatever ``--cycles`` was: with ``auto`` it keeps some and
+    expands others), their G98/G99 retracts kept unless the header records ``CYCLES
+    EXPANDED``.
     """
+    reading = _ReadOptions(dialect=dialect, subroutine_path=tuple(Path(p) for p in subroutine_path),
+                           expand_cycles=True, limits=limits)
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path, cycles, limits)
+        return _compare(original, corrected, setup, progress, keep, reading)
     finally:
         if was_enabled:
             gc.enable()
 
 
-def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str,
-             subroutine_path: Sequence[Path], cycles: str | None = None,
-             limits: Limits | None = None) -> DiffReport:
+def _compare(original, corrected, setup: Setup | None, progress, keep: int | None,
+             reading: _ReadOptions) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     hs = header_setup(corrected)
     setup = setup_from_header(hs, setup)
-    expanded = hs.expanded
     keys = _Keys()
-    readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded, limits=limits,
-                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True,
-                       cycle_retract=not hs.cycles_expanded),
-               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True, limits=limits,
-                       cycle_retract=not hs.cycles_expanded))
+    reading = dataclasses.replace(reading, cycle_retract=not hs.cycles_expanded)
+    readers = (_Reader(original, setup, keys, dataclasses.replace(reading, expand=hs.expanded)),
+               _Reader(corrected, setup, keys, dataclasses.replace(reading, drop_header=True, subroutine_path=())))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:
         orig, corr = _Tape(o_chunks), _Tape(c_chunks)
         rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep,
-                         expanded=expanded)
-        last_delta = (0.0, 0.0, 0.0)
-        slow = 0
-        window = CHUNK_LINES
-        shown = 0
-        while True:
-            orig.fill(1 if slow else CHUNK_LINES // 2)
-            if not orig.avail():
-                if orig.error is not None:
-                    raise orig.error
-                break
-            if progress is not None and o_reader.count >= shown + CHUNK_LINES:
-                shown = o_reader.count
-                progress(shown)
-            if not slow:
-                w = min(orig.avail(), window)
-                corr.fill(w + w // 2 + SCAN_AHEAD + 1)
-                n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
-                if n and not failed:
-                    # a longer window next; about twice what was paired when that stopped short
-                    # of the window (more insertions in a stretch than MAX_LEVELS), so that the
-                    # levels are not checked over a long window for a few records each time
-                    window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
-                    continue
-                # a record the rule pairs otherwise (a line inserted here): one at a time for a
-                # while, then a window about as long as the stretch that was paired at once
-                window = max(MIN_WINDOW, 2 * n)
-                slow = SLOW_STRETCH
-            last_delta = _pair_one(orig, corr, rep, last_delta)
-            slow -= 1
-        while True:
-            c = corr.peek(0)
-            if c is None:
-                break
-            corr.pos += 1
-            if not corr.rows.move[c]:
-                lineno = int(corr.rows.lineno[c])
-                raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
-                                    path=rep.corrected, lineno=lineno)
-            rep.lines_inserted += 1
+                         expanded=hs.expanded)
+        _pair_all(orig, corr, rep, o_reader, progress)
+        _count_the_rest(corr, rep)
         if progress is not None:
             progress(o_reader.count)
     finally:  # a child reading the corrected program stops here, whatever happened
@@ -1566,6 +1541,55 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     rep.lines_original = o_reader.count
     rep.lines_corrected = c_reader.count
     return rep
+
+
+def _pair_all(orig: _Tape, corr: _Tape, rep: DiffReport, o_reader: _Reader | _ForkedReader, progress) -> None:
+    """Pair every record of orig: windows at once (:func:`_pair_chunk`), a few records
+    one at a time (:func:`_pair_one`) after a window that stopped short."""
+    last_delta = (0.0, 0.0, 0.0)
+    slow = 0
+    window = CHUNK_LINES
+    shown = 0
+    while True:
+        orig.fill(1 if slow else CHUNK_LINES // 2)
+        if not orig.avail():
+            if orig.error is not None:
+                raise orig.error
+            break
+        if progress is not None and o_reader.count >= shown + CHUNK_LINES:
+            shown = o_reader.count
+            progress(shown)
+        if not slow:
+            w = min(orig.avail(), window)
+            corr.fill(w + w // 2 + SCAN_AHEAD + 1)
+            n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
+            if n and not failed:
+                # a longer window next; about twice what was paired when that stopped short
+                # of the window (more insertions in a stretch than MAX_LEVELS), so that the
+                # levels are not checked over a long window for a few records each time
+                window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
+                continue
+            # a record the rule pairs otherwise (a line inserted here): one at a time for a
+            # while, then a window about as long as the stretch that was paired at once
+            window = max(MIN_WINDOW, 2 * n)
+            slow = SLOW_STRETCH
+        last_delta = _pair_one(orig, corr, rep, last_delta)
+        slow -= 1
+
+
+def _count_the_rest(corr: _Tape, rep: DiffReport) -> None:
+    """The lines of corr after the last record of orig: inserted moves (an anchor there
+    has no counterpart)."""
+    while True:
+        c = corr.peek(0)
+        if c is None:
+            break
+        corr.pos += 1
+        if not corr.rows.move[c]:
+            lineno = int(corr.rows.lineno[c])
+            raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
+                                path=rep.corrected, lineno=lineno)
+        rep.lines_inserted += 1
 
 
 _G92 = re.compile(r"[Gg][ \t]*0*92(?![.0-9])")
