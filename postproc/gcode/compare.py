@@ -668,75 +668,51 @@ class _Reader:
         return _Rows(lines, np.array(lineno, dtype=np.int64), np.array(move, dtype=bool),
                      np.array(end, dtype=float).reshape(-1, 3), np.array(keys, dtype=np.int64).reshape(-1, 3))
 
-    def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:  # noqa: C901
+    def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:
         """Read a chunk: stretches of plain moves as columns, the other lines one at a time."""
-        lines = rows.lines
-        n = len(lines)
-        text = "".join(lines)
-        found = None
-        if "\r" not in text or text.count("\r") == text.count("\r\n"):
-            found = _PLAIN.findall(text)
-            # one match per line, plus an empty one after a final line ending
-            found = found[:n] if len(found) in (n, n + 1) else None
+        n = len(rows)
+        found = _plain_matches(rows.lines)
         if not found:
             return self._general(rows, 0, n)
-        cols = np.array(found, dtype=object)
-        present = cols != ""
-        twice = _later_axis_words(cols, present)
-        has = [present[:, 3], present[:, 4], present[:, 5]]
-        gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
-        arc = present[:, 7]
-        tool = present[:, 10] | present[:, 11]  # a tool change: quiet but for the tool it loads
-        quiet = present[:, 9] | tool
-        has_g = gcode >= 0
-        g_arc = gcode >= ARC_CW
-        last_g = _last_index(has_g)
-        # a plain move's arc words agree with its motion (its own G word, or the last one
-        # before it in the chunk; the lines before a stretch's first G word are checked
-        # against the modal motion when the stretch is read)
-        plain = (has[0] | has[1] | has[2]) & ~twice & np.where(
-            has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
-        runnable = plain | quiet
-        if not runnable.any():
+        cc = _Columns(found, n)
+        if not cc.runnable.any():
             return self._general(rows, 0, n)
+        cc.index_stretches()
+        self._column_keys(rows, cc)
+        runs: list = []
+        i, error = self._walk(rows, cc, runs)
+        if runs:
+            self._run_ends(rows, runs, cc)
+        return i, error
+
+    def _column_keys(self, rows: _Rows, cc: _Columns) -> None:
+        """The keys of the lines that have their own from the columns: a plain line's
+        skeleton is its N word (the lines without one keep 0); a move that sets the tool
+        length (G43 H..) keeps G43 H.. in its skeleton."""
         keys = self.keys
-        # N words (the lines without one keep 0): a plain line's skeleton is its N word
-        numbered = np.flatnonzero(present[:, 0])
+        numbered = np.flatnonzero(cc.present[:, 0])
         if len(numbered):
-            ncol = cols[numbered, 0].tolist()
+            ncol = cc.cols[numbered, 0].tolist()
             # a plain N word Nn is n + 1 (as _Keys makes it; here without a call for each),
             # the others through the table
             nk = [int(t[1:]) + 1 if _PLAIN_N(t) else keys(t) for t in ncol]
             rows.keys[numbered, 1] = nk
             rows.keys[numbered, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
                                       for t, k in zip(ncol, nk, strict=True)]
-        # a move that sets the tool length offset (G43 H..) starts a stretch of its own
-        tlo = present[:, 2] & plain
-        tlo_rows = np.flatnonzero(tlo).tolist()
-        for i in tlo_rows:  # (its skeleton: the line's, G43 H.. kept)
+        lines = rows.lines
+        for i in cc.tlo_rows:
             rows.keys[i, 0] = keys(skeleton(lines[i]))
-        next_tlo = np.append(_next_index(tlo), n) if tlo_rows else None
-        values = []
-        for k in range(3):
-            v = np.full(n, np.nan)
-            v[has[k]] = cols[has[k], 3 + k].astype(float)
-            values.append(v)
-        xcol, ycol, zcol, fcol = cols[:, 3], cols[:, 4], cols[:, 5], cols[:, 8]
-        # (numpy arrays indexed a few times per stretch, not made lists of every line)
-        last = [_last_index(h) for h in has]
-        last_f = _last_index(present[:, 8])
-        next_other = _next_index(~runnable)
-        next_g = _next_index(has_g)
-        moves_before = np.concatenate([[0], np.cumsum(plain)])
-        arcs_before = np.concatenate([[0], np.cumsum(plain & arc)])
-        runnable_l, quiet_l = runnable.tolist(), quiet.tolist()
-        # the last tool change at or before each line, and the tool it loads
-        last_tool = _last_index(tool) if tool.any() else None
-        tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
+
+    def _walk(self, rows: _Rows, cc: _Columns, runs: list) -> tuple[int, PostprocError | None]:
+        """Read the chunk's lines in order: a stretch of plain lines as columns where the
+        modal state allows it (:meth:`_stretch`, which adds it to ``runs``), a quiet line
+        passed over, any other line by the interpreter. Returns (lines read, the error
+        that stopped it)."""
+        n = len(rows)
+        runnable_l, quiet_l = cc.runnable.tolist(), cc.quiet.tolist()
+        last_tool = cc.last_tool
         interp = self.interp
         st = interp.state
-        linenos = rows.lineno
-        runs = []
         i = 0
         error = None
         while i < n:
@@ -745,53 +721,68 @@ class _Reader:
                 if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
                         or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]
                         or interp.modal_call is not None or st.frame is not None):  # Sinumerik MCALL, ROT..
-                    b = int(next_other[i])
-                    if next_tlo is not None:  # a stretch ends before a line that sets the tool length
-                        b = min(b, int(next_tlo[i + 1]))
-                    p = min(b, int(next_g[i]))  # lines i:p move in the modal motion
-                    moves = int(moves_before[p] - moves_before[i])
-                    arcs = int(arcs_before[p] - arcs_before[i])
-                    motion = st.motion
-                    if moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
-                            motion in (ARC_CW, ARC_CCW) and arcs == moves):
-                        if next_tlo is not None and int(next_tlo[i]) == i:  # G43 H.. before the move
-                            interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
-                        unit = st.unit_mm
-                        shift = interp.shift(False, int(linenos[i]), 1)
-                        runs.append((i, b, unit, shift, tuple(pos)))
-                        e = b - 1
-                        pos = list(pos)
-                        for k in range(3):
-                            j = int(last[k][e])
-                            if j >= i:
-                                pos[k] = float(xcol[j] if k == 0 else ycol[j] if k == 1 else zcol[j]) * unit + shift[k]
-                        st.pos = pos
-                        j = int(last_g[e])
-                        if j >= i:
-                            st.motion = int(gcode[j])
-                        j = int(last_f[e])
-                        if j >= i:
-                            st.feed = float(fcol[j])
-                        if last_tool is not None and last_tool[e] >= i:
-                            interp.load_tool(tool_no[int(last_tool[e])])  # the stretch's last tool change
+                    b = self._stretch(rows, cc, i, pos, runs)
+                    if b is not None:
                         i = b
                         continue
                 elif quiet_l[i]:
                     if last_tool is not None and int(last_tool[i]) == i and not interp.ended:
-                        interp.load_tool(tool_no[i])
+                        interp.load_tool(cc.tool_no[i])
                     i += 1  # changes nothing else, whatever the state
                     continue
             i, error = self._general(rows, i, i + 1)
             if error is not None:
                 break
-        if runs:
-            self._run_ends(rows, runs, has, values, plain)
         return i, error
 
+    def _stretch(self, rows: _Rows, cc: _Columns, i: int, pos: list, runs: list) -> int | None:
+        """Read the stretch of plain and quiet lines from line i (the position before it:
+        ``pos``) as columns, when its moves before the next G word agree with the modal
+        motion: add it to ``runs``, leave the state as its last line leaves it and return
+        where it ends (None: it does not agree; line i is the interpreter's)."""
+        b = int(cc.next_other[i])
+        next_tlo = cc.next_tlo
+        if next_tlo is not None:  # a stretch ends before a line that sets the tool length
+            b = min(b, int(next_tlo[i + 1]))
+        p = min(b, int(cc.next_g[i]))  # lines i:p move in the modal motion
+        moves = int(cc.moves_before[p] - cc.moves_before[i])
+        arcs = int(cc.arcs_before[p] - cc.arcs_before[i])
+        interp = self.interp
+        st = interp.state
+        motion = st.motion
+        if not (moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
+                motion in (ARC_CW, ARC_CCW) and arcs == moves)):
+            return None
+        cols, linenos = cc.cols, rows.lineno
+        if next_tlo is not None and int(next_tlo[i]) == i:  # G43 H.. before the move
+            interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
+        unit = st.unit_mm
+        shift = interp.shift(False, int(linenos[i]), 1)
+        runs.append((i, b, unit, shift, tuple(pos)))
+        e = b - 1
+        pos = list(pos)
+        for k in range(3):
+            j = int(cc.last[k][e])
+            if j >= i:
+                pos[k] = float(cols[j, 3 + k]) * unit + shift[k]
+        st.pos = pos
+        j = int(cc.last_g[e])
+        if j >= i:
+            st.motion = int(cc.gcode[j])
+        j = int(cc.last_f[e])
+        if j >= i:
+            st.feed = float(cols[j, 8])
+        last_tool = cc.last_tool
+        if last_tool is not None and last_tool[e] >= i:
+            interp.load_tool(cc.tool_no[int(last_tool[e])])  # the stretch's last tool change
+        return b
+
     @staticmethod
-    def _run_ends(rows: _Rows, runs: list, has: list, values: list, plain: np.ndarray) -> None:
+    def _run_ends(rows: _Rows, runs: list, cc: _Columns) -> None:
         """End points of the plain stretches read: machine = program x unit + shift, the
         position before the stretch where a line does not name an axis."""
+        has, plain = cc.has, cc.plain
+        values = cc.values()
         lengths = [b - a for a, b, *_ in runs]
         inside = np.zeros(len(rows), dtype=bool)
         for a, b, *_ in runs:
@@ -811,6 +802,74 @@ class _Reader:
         quiet = idx[~plain[idx]]
         rows.end[quiet] = np.nan
         rows.move[idx] = plain[idx]
+
+
+def _plain_matches(lines: list[str]) -> list | None:
+    """The groups of each line's :data:`_PLAIN` match, or None where the chunk's text is
+    not matched line by line (a lone carriage return)."""
+    n = len(lines)
+    text = "".join(lines)
+    if "\r" in text and text.count("\r") != text.count("\r\n"):
+        return None
+    found = _PLAIN.findall(text)
+    # one match per line, plus an empty one after a final line ending
+    return found[:n] if len(found) in (n, n + 1) else None
+
+
+class _Columns:
+    """A chunk's lines as the columns of their :data:`_PLAIN` matches (the groups, "" where
+    absent): which lines are plain moves and which quiet, and, for the stretches read as
+    columns (:meth:`_Reader._stretch`), where each stops and where each word it carries
+    forward was last given."""
+
+    def __init__(self, found: list, n: int) -> None:
+        cols = self.cols = np.array(found, dtype=object)
+        present = self.present = cols != ""
+        twice = _later_axis_words(cols, present)
+        has = self.has = [present[:, 3], present[:, 4], present[:, 5]]
+        gcode = self.gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
+        arc = self.arc = present[:, 7]
+        tool = self.tool = present[:, 10] | present[:, 11]  # a tool change: quiet but for the tool it loads
+        self.quiet = present[:, 9] | tool
+        has_g = self.has_g = gcode >= 0
+        g_arc = gcode >= ARC_CW
+        last_g = self.last_g = _last_index(has_g)
+        # a plain move's arc words agree with its motion (its own G word, or the last one
+        # before it in the chunk; the lines before a stretch's first G word are checked
+        # against the modal motion when the stretch is read)
+        self.plain = (has[0] | has[1] | has[2]) & ~twice & np.where(
+            has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
+        self.runnable = self.plain | self.quiet
+
+    def index_stretches(self) -> None:
+        """Where the stretches stop and where their words were last given (numpy arrays
+        indexed a few times per stretch, not made lists of every line)."""
+        n = len(self.cols)
+        present, plain = self.present, self.plain
+        # a move that sets the tool length offset (G43 H..) starts a stretch of its own
+        tlo = present[:, 2] & plain
+        self.tlo_rows = np.flatnonzero(tlo).tolist()
+        self.next_tlo = np.append(_next_index(tlo), n) if self.tlo_rows else None
+        self.last = [_last_index(h) for h in self.has]
+        self.last_f = _last_index(present[:, 8])
+        self.next_other = _next_index(~self.runnable)
+        self.next_g = _next_index(self.has_g)
+        self.moves_before = np.concatenate([[0], np.cumsum(plain)])
+        self.arcs_before = np.concatenate([[0], np.cumsum(plain & self.arc)])
+        # the last tool change at or before each line, and the tool it loads
+        tool, cols = self.tool, self.cols
+        self.last_tool = _last_index(tool) if tool.any() else None
+        self.tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
+
+    def values(self) -> list[np.ndarray]:
+        """The X, Y and Z numbers of each line (NaN where it names no such axis)."""
+        n = len(self.cols)
+        values = []
+        for k, h in enumerate(self.has):
+            v = np.full(n, np.nan)
+            v[h] = self.cols[h, 3 + k].astype(float)
+            values.append(v)
+        return values
 
 
 class _ForkedReader:
