@@ -18,7 +18,6 @@ MAX_PARAMETERS = 8
 KNOWN: dict[tuple[str, str, str], int] = {
     ("bulk.py", "RunMove.__init__", "parameters"): 9,
     ("bulk.py", "_emit_rows", "lines"): 134,
-    ("compare.py", "_pair_chunk", "lines"): 217,
     ("expand.py", "_Expander", "lines"): 1013,
 }
 

@@ -50,7 +50,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -1092,7 +1092,7 @@ def _l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return s
 
 
-def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  # noqa: C901
+def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,
                 limit: int) -> tuple[int, bool, tuple]:
     """Pair up to ``limit`` records of orig with the lines of corr (see the module docstring).
 
@@ -1113,67 +1113,100 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
         # no anchor in the window, and moves with N words, skeletons or comments: their
         # scans run to corr's next anchor (or its end), which is read now
         corr.reach_anchor(want)
-    p, q = orig.pos, corr.pos
-    ro, rc = orig.rows, corr.rows
-    avail = corr.avail()
-    span = min(avail, want)
+    span = min(corr.avail(), want)
     if m == 0 or span == 0:
         return 0, True, last_delta
-    real_end = span == avail and corr.done and corr.error is None
-    om = ro.move[p:p + m]
-    cmove = rc.move[q:q + span]
-    # the scans of the nearest-end-point rule look at corr up to its next anchor: past
-    # the window when there is none in it (ext lines from q)
-    ext = span
-    if not real_end and cmove.all():
-        later = np.flatnonzero(~rc.move[q + span:q + avail])
-        ext = span + int(later[0]) + 1 if len(later) else avail
-    real_end_x = ext == avail and corr.done and corr.error is None
-    clines = rc.lines
-    # anchors: the k-th of each, as long as they are identical
-    ao = np.flatnonzero(~om)
-    ac = np.flatnonzero(~cmove)
-    k = min(len(ao), len(ac))
-    if k:
-        equal = np.fromiter(map(operator.eq, map(ro.lines.__getitem__, (ao[:k] + p).tolist()),
-                                map(clines.__getitem__, (ac[:k] + q).tolist())), dtype=bool, count=k)
-        k = k if equal.all() else int(np.argmin(equal))
-    ao, ac = ao[:k], ac[:k]
-    # stretch j ends with the j-th anchor (stretch k: the rest of the window)
-    start_o = np.concatenate([[0], ao + 1])
-    off_start = np.concatenate([[0], ac + 1]) - start_o
-    off_end = ac - ao
-    more = off_end - off_start[:-1]
-    inserted = np.append(more > 0, False)  # stretches with lines inserted
-    seg = np.searchsorted(ao, np.arange(m))
-    split = inserted[seg]
-    oe = ro.end[p:p + m]
-    cend = np.append(rc.end[q:q + ext], np.zeros((1, 3)), axis=0)
-    ckeys = rc.keys[q:q + ext]
-    cmove_x = rc.move[q:q + ext]
-    stop = np.append(_next_index(~cmove_x), ext)
-    prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
+    window = _Window(orig, corr, rep, last_delta, m, span)
+    f, held = window.check()
+    return window.pair(f, held)
 
-    def place(t: np.ndarray, rows=None):
+
+class _Level(NamedTuple):
+    """Records of a window each placed at a line of corr: whether the place is checked
+    (for a level of :meth:`_Window.check`: by the nearest-end-point rule), whether the
+    line is identical to the record's, the place (a line from corr.pos) and the delta."""
+
+    ok: np.ndarray
+    same: np.ndarray
+    t: np.ndarray
+    delta: np.ndarray
+
+
+class _Window:
+    """The records of orig paired at once by :func:`_pair_chunk` (m of them, from orig.pos)
+    and the lines of corr they may pair with (span of them from corr.pos; ext, up to
+    corr's next anchor past the window when it has none in it), as columns the steps
+    share: :meth:`check`, then :meth:`pair`."""
+
+    def __init__(self, orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple, m: int, span: int) -> None:
+        self.orig, self.corr, self.rep = orig, corr, rep
+        self.last_delta = last_delta  # the delta of the move before the window
+        self.m, self.span = m, span
+        p, q = self.p, self.q = orig.pos, corr.pos
+        ro, rc = self.ro, self.rc = orig.rows, corr.rows
+        avail = corr.avail()
+        real_end = self.real_end = span == avail and corr.done and corr.error is None
+        om = self.om = ro.move[p:p + m]
+        cmove = self.cmove = rc.move[q:q + span]
+        # the scans of the nearest-end-point rule look at corr up to its next anchor: past
+        # the window when there is none in it (ext lines from q)
+        ext = span
+        if not real_end and cmove.all():
+            later = np.flatnonzero(~rc.move[q + span:q + avail])
+            ext = span + int(later[0]) + 1 if len(later) else avail
+        self.ext = ext
+        self.real_end_x = ext == avail and corr.done and corr.error is None
+        self._stretches()
+        self.oe = ro.end[p:p + m]
+        self.cend = np.append(rc.end[q:q + ext], np.zeros((1, 3)), axis=0)
+        self.ckeys = rc.keys[q:q + ext]
+        cmove_x = self.cmove_x = rc.move[q:q + ext]
+        self.stop = np.append(_next_index(~cmove_x), ext)
+        self.prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
+
+    def _stretches(self) -> None:
+        """The anchors, the k-th of each as long as they are identical, and the stretches
+        they end (stretch j ends with the j-th anchor; stretch k: the rest of the window)."""
+        ao = np.flatnonzero(~self.om)
+        ac = np.flatnonzero(~self.cmove)
+        k = min(len(ao), len(ac))
+        if k:
+            equal = np.fromiter(map(operator.eq, map(self.ro.lines.__getitem__, (ao[:k] + self.p).tolist()),
+                                    map(self.rc.lines.__getitem__, (ac[:k] + self.q).tolist())),
+                                dtype=bool, count=k)
+            k = k if equal.all() else int(np.argmin(equal))
+        self.k = k
+        ao, ac = self.ao, self.ac = ao[:k], ac[:k]
+        start_o = self.start_o = np.concatenate([[0], ao + 1])
+        off_start = self.off_start = np.concatenate([[0], ac + 1]) - start_o
+        off_end = self.off_end = ac - ao
+        more = self.more = off_end - off_start[:-1]
+        self.inserted = np.append(more > 0, False)  # stretches with lines inserted
+        seg = self.seg = np.searchsorted(ao, np.arange(self.m))
+        self.split = self.inserted[seg]
+
+    def place(self, t: np.ndarray, rows: np.ndarray | None = None) -> tuple:
         """Lines of corr at places t (of records rows): in the window, identical, delta."""
+        span, ro, p = self.span, self.ro, self.p
         inside = t < span
         tc = np.minimum(t, span - 1)
-        olines = ro.lines[p:p + m] if rows is None else map(ro.lines.__getitem__, (rows + p).tolist())
-        same = np.fromiter(map(operator.eq, olines, map(clines.__getitem__, (tc + q).tolist())), dtype=bool,
-                           count=len(t))
-        o = oe if rows is None else oe[rows]
-        ce = cend[tc]
+        olines = ro.lines[p:p + self.m] if rows is None else map(ro.lines.__getitem__, (rows + p).tolist())
+        same = np.fromiter(map(operator.eq, olines, map(self.rc.lines.__getitem__, (tc + self.q).tolist())),
+                           dtype=bool, count=len(t))
+        o = self.oe if rows is None else self.oe[rows]
+        ce = self.cend[tc]
         return inside, tc, same, np.where(np.isnan(ce) | np.isnan(o), 0.0, ce - o)
 
-    def nearest(rows: np.ndarray, t0: np.ndarray, ld: np.ndarray) -> np.ndarray:
+    def nearest(self, rows: np.ndarray, t0: np.ndarray, ld: np.ndarray) -> np.ndarray:
         """Whether the scan of each move (records rows, own line t0, previous delta ld)
         picks its own line: it looks at the lines after it up to the next anchor (or the
         end of the program; not an error not yet reached) and stops after
         STOP_AFTER_WORSE compatible ones that are not nearer than the best."""
-        end_at = stop[t0 + 1]
-        real_stop = (end_at < ext) | real_end_x
-        predicted = oe[rows] + ld
-        okeys = ro.keys[p + rows]
+        ext, cend, ckeys = self.ext, self.cend, self.ckeys
+        end_at = self.stop[t0 + 1]
+        real_stop = (end_at < ext) | self.real_end_x
+        predicted = self.oe[rows] + ld
+        okeys = self.ro.keys[self.p + rows]
         own = ckeys[t0]
         good = np.zeros(len(rows), dtype=bool)
         plain = ~okeys.any(axis=1)
@@ -1182,7 +1215,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             # no N word, skeleton or comment: compatible with the moves of empty skeleton;
             # its own line must be one, and the nearest of the first few after it
             ta, ea, pa = t0[a], end_at[a], predicted[a]
-            z = np.flatnonzero(cmove_x & (ckeys[:, 0] == 0))
+            z = np.flatnonzero(self.cmove_x & (ckeys[:, 0] == 0))
             i = np.searchsorted(z, ta)
             z = np.append(z, [ext] * (STOP_AFTER_WORSE + 1))
             d0 = _l1(cend[ta], pa)
@@ -1199,9 +1232,10 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             # an N word or another skeleton (and no comment): its own line when the later
             # lines before the anchor with its skeleton or N word (one of each at most, a
             # program that numbers its blocks again) are not nearer
+            q = self.q
             tb, eb, ob, cb = t0[b], end_at[b], okeys[b], own[b]
             pb = predicted[b]
-            nxt = rc.index().next_same
+            nxt = self.rc.index().next_same
             ok_b = real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & ((ob[:, 1] == 0) | (ob[:, 1] == cb[:, 1]))
             d_own = _l1(cend[tb], pb)
             for col, named in ((0, ok_b), (1, ok_b & (ob[:, 1] != 0))):
@@ -1213,102 +1247,125 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             good[b] = ok_b & (d_own <= PLAUSIBLE_MM)
         return good
 
-    def previous(rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        pr = prev[rows]
-        return np.where(pr[:, None] >= 0, delta[np.maximum(pr, 0)], np.asarray(last_delta, dtype=float))
+    def previous(self, rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """The delta of each record's previous move (before the window: its last one)."""
+        pr = self.prev[rows]
+        return np.where(pr[:, None] >= 0, delta[np.maximum(pr, 0)], np.asarray(self.last_delta, dtype=float))
 
-    # the line of corr at each record's place: after the previous anchor, or (in a stretch
-    # with inserted lines) before the next one
-    t = np.arange(m) + np.where(split, np.append(off_end, 0)[seg], off_start[seg])
-    inside, tc, same, delta = place(t)
-    tail = seg == k
-    # (a stretch with fewer lines in corr: paired one at a time, which reports it)
-    ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
-    # the rest of the window is a stretch too when both programs end in it
-    ends = real_end and orig.done and orig.error is None and m == orig.avail()
-    last = int(start_o[k])
-    direct = np.append(more == 0, ends and m - last == span - last - int(off_start[k]))[seg]
-    rows = np.flatnonzero(om & ok & direct)
-    if len(rows):
-        # as many moves in both: each pairs with the line at its place, of the same skeleton
-        # (or N word, or comment)
-        o3, c3 = ro.keys[p + rows], rc.keys[q + t[rows]]
-        both_n = (o3[:, 1] != 0) & (c3[:, 1] != 0)
-        ok[rows] = ((o3[:, 0] == c3[:, 0]) | (both_n & (o3[:, 1] == c3[:, 1]))
-                    | (~both_n & (o3[:, 2] != 0) & (o3[:, 2] == c3[:, 2])))
-    held = m
-    if k and not ends:
-        held = last  # the rest of the window: with the next window, where its anchor is
-    else:
-        rows = np.flatnonzero(om & ok & ~direct & ~split)
-        if len(rows):  # no anchor in the window: the nearest-end-point rule, checked
-            ok[rows] = nearest(rows, t[rows], previous(rows, delta))
-    # in a stretch with lines inserted, the moves between the e-th and the next insertion
-    # pair at the place after the previous anchor plus e: checked for every e at once
-    levels = []
-    if split.any():
-        n_ins = np.append(more, 0)
+    def check(self) -> tuple[int, int]:
+        """Place every record and check the places: (the first record whose place does
+        not hold, m if all do; the records before the rest of the window that waits for
+        the next one)."""
+        m, k, seg, split, om, cmove, more = self.m, self.k, self.seg, self.split, self.om, self.cmove, self.more
+        # the line of corr at each record's place: after the previous anchor, or (in a stretch
+        # with inserted lines) before the next one
+        t = np.arange(m) + np.where(split, np.append(self.off_end, 0)[seg], self.off_start[seg])
+        inside, tc, same, delta = self.place(t)
+        tail = seg == k
+        # (a stretch with fewer lines in corr: paired one at a time, which reports it)
+        ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
+        # the rest of the window is a stretch too when both programs end in it
+        orig = self.orig
+        ends = self.real_end and orig.done and orig.error is None and m == orig.avail()
+        last = int(self.start_o[k])
+        direct = np.append(more == 0, ends and m - last == self.span - last - int(self.off_start[k]))[seg]
+        rows = np.flatnonzero(om & ok & direct)
+        if len(rows):
+            # as many moves in both: each pairs with the line at its place, of the same skeleton
+            # (or N word, or comment)
+            o3, c3 = self.ro.keys[self.p + rows], self.rc.keys[self.q + t[rows]]
+            both_n = (o3[:, 1] != 0) & (c3[:, 1] != 0)
+            ok[rows] = ((o3[:, 0] == c3[:, 0]) | (both_n & (o3[:, 1] == c3[:, 1]))
+                        | (~both_n & (o3[:, 2] != 0) & (o3[:, 2] == c3[:, 2])))
+        held = m
+        if k and not ends:
+            held = last  # the rest of the window: with the next window, where its anchor is
+        else:
+            rows = np.flatnonzero(om & ok & ~direct & ~split)
+            if len(rows):  # no anchor in the window: the nearest-end-point rule, checked
+                ok[rows] = self.nearest(rows, t[rows], self.previous(rows, delta))
+        self.placed = _Level(ok, same, t, delta)
+        self.levels = self._levels(delta) if split.any() else []
+        bad = np.flatnonzero(~(ok | split))
+        return min(int(bad[0]) if len(bad) else m, held), held
+
+    def _levels(self, delta: np.ndarray) -> list[_Level]:
+        """In a stretch with lines inserted, the moves between the e-th and the next
+        insertion pair at the place after the previous anchor plus e: the places of level
+        e for every e at once, each checked by the nearest-end-point rule."""
+        m, seg, split, om, off_start, prev = self.m, self.seg, self.split, self.om, self.off_start, self.prev
+        n_ins = np.append(self.more, 0)
+        levels = []
         for e in range(min(int(n_ins.max()), MAX_LEVELS) + 1):
             rows_e = np.flatnonzero(split & om & (n_ins[seg] >= e))
             t_e = rows_e + off_start[seg[rows_e]] + e
-            _in, _tc, same_e, d_e = place(t_e, rows_e)
+            _in, _tc, same_e, d_e = self.place(t_e, rows_e)
             full = np.zeros((m, 3))
             full[rows_e] = d_e
             pr = np.maximum(prev[rows_e], 0)
             within = ((prev[rows_e] >= 0) & (seg[pr] == seg[rows_e]))[:, None]
             ok_e = np.zeros(m, dtype=bool)
-            ok_e[rows_e] = nearest(rows_e, t_e, np.where(within, full[pr], previous(rows_e, delta)))
+            ok_e[rows_e] = self.nearest(rows_e, t_e, np.where(within, full[pr], self.previous(rows_e, delta)))
             same_full = np.zeros(m, dtype=bool)
             same_full[rows_e] = same_e
-            levels.append((ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
-    bad = np.flatnonzero(~(ok | split))
-    f = min(int(bad[0]) if len(bad) else m, held)
+            levels.append(_Level(ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
+        return levels
 
-    def take(r0: int, r1: int, last_delta: tuple, same=same, t=t, delta=delta) -> tuple:
-        """Count the records r0:r1, each paired with the line at its place."""
-        moves = om[r0:r1]
+    def take(self, r0: int, r1: int, last_delta: tuple, at: _Level) -> tuple:
+        """Count the records r0:r1, each paired with the line at its place ``at``; returns
+        the last move's delta."""
+        rep = self.rep
+        moves = self.om[r0:r1]
         n_moves = int(np.count_nonzero(moves))
-        unchanged = int(np.count_nonzero(moves & same[r0:r1]))
+        unchanged = int(np.count_nonzero(moves & at.same[r0:r1]))
         rep.moves += n_moves
         rep.moves_unchanged += unchanged
         rep.lines_unchanged += r1 - r0 - n_moves + unchanged
-        moved = np.flatnonzero(moves & ~same[r0:r1]) + r0
+        moved = np.flatnonzero(moves & ~at.same[r0:r1]) + r0
         if len(moved):
-            rep.add_moved_rows(ro.lineno[p + moved], rc.lineno[q + t[moved]], delta[moved])
+            rep.add_moved_rows(self.ro.lineno[self.p + moved], self.rc.lineno[self.q + at.t[moved]], at.delta[moved])
         if n_moves:
-            last_delta = tuple(delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
+            last_delta = tuple(at.delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
         return last_delta
 
-    done = 0
-    for j in np.flatnonzero(inserted).tolist():
-        s0, a0 = int(start_o[j]), int(ao[j])
-        if s0 >= f:
-            break
-        last_delta = take(done, s0, last_delta)
-        r, e = s0, 0
-        while True:
-            ok_e, same_e, t_e, delta_e = levels[e]
-            # the next insertion: at the first move not paired at this place
-            x = r + int(np.argmin(ok_e[r:a0])) if not ok_e[r:a0].all() else a0
-            last_delta = take(r, x, last_delta, same_e, t_e, delta_e)
-            orig.pos, corr.pos = p + x, q + int(t_e[x])
-            last_delta = _pair_one(orig, corr, rep, last_delta)
-            done = x + 1
-            if not (orig.rows is ro and corr.rows is rc):
-                return done, False, last_delta
-            if x == a0:
+    def pair(self, f: int, held: int) -> tuple[int, bool, tuple]:
+        """Pair the records checked (:meth:`check`: the first f, in a stretch with lines
+        inserted the moves at each insertion one at a time, by :func:`_pair_one`) and move
+        both tapes past them: (records paired, whether a check failed at the next one, the
+        last move's delta)."""
+        orig, corr, p, q, m = self.orig, self.corr, self.p, self.q, self.m
+        placed, levels = self.placed, self.levels
+        last_delta = self.last_delta
+        done = 0
+        for j in np.flatnonzero(self.inserted).tolist():
+            s0, a0 = int(self.start_o[j]), int(self.ao[j])
+            if s0 >= f:
                 break
-            e = corr.pos - q - 1 - x - int(off_start[j])
-            if not (0 <= e < len(levels) and last_delta == tuple(levels[e][3][x].tolist())):
-                return done, False, last_delta  # paired otherwise than assumed: look again from here
-            r = x + 1
-        if corr.pos != q + ac[j] + 1 or (a0 > s0 and last_delta != tuple(delta[a0 - 1].tolist())):
-            return done, False, last_delta  # the next stretch was checked with another delta
-    f = max(f, done)
-    last_delta = take(done, f, last_delta)
-    orig.pos = p + f
-    corr.pos = q + (int(t[f]) if f < m else m + int(off_start[k]))
-    return f, f < held, last_delta
+            last_delta = self.take(done, s0, last_delta, placed)
+            r, e = s0, 0
+            while True:
+                at = levels[e]
+                # the next insertion: at the first move not paired at this place
+                x = r + int(np.argmin(at.ok[r:a0])) if not at.ok[r:a0].all() else a0
+                last_delta = self.take(r, x, last_delta, at)
+                orig.pos, corr.pos = p + x, q + int(at.t[x])
+                last_delta = _pair_one(orig, corr, self.rep, last_delta)
+                done = x + 1
+                if not (orig.rows is self.ro and corr.rows is self.rc):
+                    return done, False, last_delta
+                if x == a0:
+                    break
+                e = corr.pos - q - 1 - x - int(self.off_start[j])
+                if not (0 <= e < len(levels) and last_delta == tuple(levels[e].delta[x].tolist())):
+                    return done, False, last_delta  # paired otherwise than assumed: look again from here
+                r = x + 1
+            if corr.pos != q + self.ac[j] + 1 or (a0 > s0 and last_delta != tuple(placed.delta[a0 - 1].tolist())):
+                return done, False, last_delta  # the next stretch was checked with another delta
+        f = max(f, done)
+        last_delta = self.take(done, f, last_delta, placed)
+        orig.pos = p + f
+        corr.pos = q + (int(placed.t[f]) if f < m else m + int(self.off_start[self.k]))
+        return f, f < held, last_delta
 
 
 # Lines of corr the pairing of one record looks at one by one before it looks up the
