@@ -57,7 +57,13 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit, forking
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LENGTH_RE, TOOL_LINE_RE
+from postproc.gcode.lexer import (
+    NUMBER_POSSESSIVE_RE,
+    QUIET_LINE_RE,
+    TOOL_LENGTH_RE,
+    TOOL_LINE_RE,
+    Word,
+)
 from postproc.gcode.path import Setup, iter_source_lines, open_source
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.limits import Limits
@@ -100,6 +106,28 @@ def skeleton(line: str) -> str:
     kept as they are, also where words follow a comment)."""
     parts = _COMMENT_SPLIT.split(line)
     return "".join(part if k % 2 else _SKELETON_DROP.sub("", part) for k, part in enumerate(parts))
+
+
+_SKELETON_LETTERS = frozenset("XYZIJKRPQFSTHEL")
+
+
+def _without_assigned(line: str, words: Sequence[Word]) -> str:
+    """``line`` without its words of those letters written ``NAME=value`` (Sinumerik:
+    ``X=R1*2``, ``X=AC(10)``, ``CR=5``; ``words``: the interpreter's, with their spans),
+    for :func:`skeleton`. ``correct`` writes a number in place of such a word's value (its
+    expression, or the number inside AC()), which the skeleton's patterns do not know
+    where it ends: it goes whole, in the original and in the corrected line alike."""
+    cut = [(w.letter_pos, w.end) for w in words
+           if w.letter in _SKELETON_LETTERS and 0 <= w.letter_pos < w.start <= w.end <= len(line)
+           and "=" in line[w.letter_pos:w.start]]
+    if not cut:
+        return line
+    parts, last = [], 0
+    for a, b in sorted(cut):
+        parts.append(line[last:a])
+        last = max(last, b)
+    parts.append(line[last:])
+    return "".join(parts)
 
 
 @dataclass
@@ -526,6 +554,8 @@ class _Reader:
         self.limits = options.limits or Limits()
         self.interp.max_arc_turns = self.limits.max_arc_turns
         self.keys = keys
+        # only letter-number words (else also NAME=value ones, Sinumerik's: see _without_assigned)
+        self.iso_words = self.interp.d.block_syntax == "iso"
         self.drop_header = options.drop_header
         self.expand = options.expand
         self.dialect = options.dialect
@@ -598,6 +628,7 @@ class _Reader:
     def _general(self, rows: _Rows, a: int, b: int) -> tuple[int, PostprocError | None]:
         """Interpret lines a:b one at a time: (lines read, the error that stopped it)."""
         feed = self.interp.feed_line
+        iso = self.iso_words
         lines, linenos = rows.lines, rows.lineno
         for i in range(a, b):
             try:
@@ -607,7 +638,8 @@ class _Reader:
             if mv is not None:
                 rows.move[i] = True
                 rows.end[i] = mv.q1
-                rows.keys[i] = self.keys.of_line(lines[i])
+                line = lines[i]
+                rows.keys[i] = self.keys.of_line(line if iso else _without_assigned(line, mv.words))
                 if mv.cycle is not None and self.expand_cycles:
                     self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle, self.cycle_retract)
             it = self.interp
