@@ -874,3 +874,29 @@ def test_diff_raises_a_failure_of_a_reading_child_and_leaves_no_child(monkeypatc
     with pytest.raises(ValueError, match="reader bug"):
         compare_programs(str(src), str(dst))
     assert multiprocessing.active_children() == []
+
+
+def test_diff_pairs_sinumerik_words_written_name_equals_value():
+    # Sinumerik axis words whose value is an expression (X=R1+5, Y=R1 * 2, X=(R1+R2)*2),
+    # AC() and the radius CR=: correct writes a number in place of the value (X=14.8888,
+    # Y=AC(24.9)); diff pairs each with its line, no N word needed, and reads the same
+    # deltas as for the program written with numbers
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (150.0, 150.0, 150.0)})
+    head = "G90 G54 G17 G71\nR1=10\nR2=2\nG0 X0 Y0 Z5\n"
+    tail = "G2 X34 Y35 CR=10\nG1 X40\nM30\n"
+    with_expressions = head + "G1 X=R1 Y5 F500\nG1 X=R1+5 Y10\nG1 X20 Y=R1 * 2\nG1 X=(R1+R2)*2 Y=AC(25)\n" + tail
+    with_numbers = head + "G1 X10 Y5 F500\nG1 X15 Y10\nG1 X20 Y20\nG1 X24 Y25\n" + tail
+    reports, outs = [], []
+    for text in (with_expressions, with_numbers):
+        out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="sinumerik"), path="p.mpf")
+        d = compare_programs(text, out, dialect="sinumerik")
+        assert (d.moves, d.lines_inserted) == (rep.moves, rep.lines_inserted)
+        reports.append(d)
+        outs.append(out)
+    assert re.search(r"\nG1 X=\d+\.\d+ Y=AC\(\d+\.\d+\)", outs[0])  # numbers in place of the values
+    expr, num = reports
+    assert expr.moves == 7
+    assert [(m.lineno, m.lineno_corrected, m.delta_mm) for m in expr.moved] == \
+           [(m.lineno, m.lineno_corrected, m.delta_mm) for m in num.moved]
+    assert expr.n_moved == expr.moves

@@ -16,11 +16,6 @@ MAX_PARAMETERS = 8
 
 #: (file, qualified name, what) -> the size today. ``what``: "lines" or "parameters".
 KNOWN: dict[tuple[str, str, str], int] = {
-    ("compare.py", "_Reader.__init__", "parameters"): 10,
-    ("compare.py", "_Reader._chunk", "lines"): 119,
-    ("compare.py", "_compare", "parameters"): 9,
-    ("compare.py", "_pair_chunk", "lines"): 217,
-    ("compare.py", "compare_programs", "parameters"): 9,
     ("expand.py", "_Expander", "lines"): 1106,
 }
 

@@ -65,8 +65,7 @@ def diff(original, corrected, as_json, show_all, reading, setup, correcting):
 
         rep = compare_programs(original, corrected, setup, progress=progress, keep=keep,
                                dialect=dialect_of_file(original, reading.dialect.lower()),
-                               subroutine_path=reading.subroutine_path, cycles=reading.cycles,
-                               limits=reading.limits())
+                               subroutine_path=reading.subroutine_path, limits=reading.limits())
     finally:
         if progress is not None:
             click.echo("", err=True)

@@ -50,14 +50,21 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from postproc.errors import PostprocError
+from postproc.fileio import read_lines
 from postproc.gcode import emit, forking
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import NUMBER_POSSESSIVE_RE, QUIET_LINE_RE, TOOL_LENGTH_RE, TOOL_LINE_RE
+from postproc.gcode.lexer import (
+    NUMBER_POSSESSIVE_RE,
+    QUIET_LINE_RE,
+    TOOL_LENGTH_RE,
+    TOOL_LINE_RE,
+    Word,
+)
 from postproc.gcode.path import Setup, iter_source_lines, open_source
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.limits import Limits
@@ -100,6 +107,28 @@ def skeleton(line: str) -> str:
     kept as they are, also where words follow a comment)."""
     parts = _COMMENT_SPLIT.split(line)
     return "".join(part if k % 2 else _SKELETON_DROP.sub("", part) for k, part in enumerate(parts))
+
+
+_SKELETON_LETTERS = frozenset("XYZIJKRPQFSTHEL")
+
+
+def _without_assigned(line: str, words: Sequence[Word]) -> str:
+    """``line`` without its words of those letters written ``NAME=value`` (Sinumerik:
+    ``X=R1*2``, ``X=AC(10)``, ``CR=5``; ``words``: the interpreter's, with their spans),
+    for :func:`skeleton`. ``correct`` writes a number in place of such a word's value (its
+    expression, or the number inside AC()), which the skeleton's patterns do not know
+    where it ends: it goes whole, in the original and in the corrected line alike."""
+    cut = [(w.letter_pos, w.end) for w in words
+           if w.letter in _SKELETON_LETTERS and 0 <= w.letter_pos < w.start <= w.end <= len(line)
+           and "=" in line[w.letter_pos:w.start]]
+    if not cut:
+        return line
+    parts, last = [], 0
+    for a, b in sorted(cut):
+        parts.append(line[last:a])
+        last = max(last, b)
+    parts.append(line[last:])
+    return "".join(parts)
 
 
 @dataclass
@@ -497,29 +526,44 @@ class _Rows:
                      self.keys[start:])
 
 
+@dataclass(frozen=True)
+class _ReadOptions:
+    """How :class:`_Reader` reads its program."""
+
+    # the header lines (emit.header_run) left out (the corrected program)
+    drop_header: bool = False
+    dialect: str = "generic"
+    # the program read as executed: subprograms, loops and macros written out, as correct
+    # writes them (each line numbered by its source line); its external subprograms
+    # looked up on subroutine_path
+    expand: bool = False
+    subroutine_path: tuple[Path, ...] = ()
+    # each canned cycle block read as the lines correct writes it as (--cycles expand);
+    # both programs are read so, as correct may keep some cycles and expand others
+    # (--cycles auto)
+    expand_cycles: bool = False
+    cycle_retract: bool = True  # their G98/G99 kept (not with --cycles expand)
+    limits: Limits | None = None  # loops and helix turns (postproc.limits)
+
+
 class _Reader:
     """One program read in chunks of :class:`_Rows`; see the module docstring."""
 
-    def __init__(self, source, setup: Setup, keys: _Keys, drop_header: bool = False,
-                 dialect: str = "generic", expand: bool = False, subroutine_path: Sequence[Path] = (),
-                 expand_cycles: bool = False, cycle_retract: bool = True, limits: Limits | None = None) -> None:
+    def __init__(self, source, setup: Setup, keys: _Keys, options: _ReadOptions = _ReadOptions()) -> None:
         self.path, self._lines = iter_source_lines(source)
-        self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=dialect)
-        self.limits = limits or Limits()  # loops and helix turns (postproc.limits)
+        self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=options.dialect)
+        self.limits = options.limits or Limits()
         self.interp.max_arc_turns = self.limits.max_arc_turns
         self.keys = keys
-        self.drop_header = drop_header
-        # read the program as executed: subprograms, loops and macros written out, as
-        # correct writes them (each line numbered by its source line)
-        self.expand = expand
-        self.dialect = dialect
-        self.subroutine_path = tuple(subroutine_path)
+        # only letter-number words (else also NAME=value ones, Sinumerik's: see _without_assigned)
+        self.iso_words = self.interp.d.block_syntax == "iso"
+        self.drop_header = options.drop_header
+        self.expand = options.expand
+        self.dialect = options.dialect
+        self.subroutine_path = options.subroutine_path
         self.variables = getattr(setup, "variables", None)  # --var: machine state the program reads
-        # read each canned cycle block as the lines correct writes it as (--cycles expand);
-        # both programs are read so, as correct may keep some cycles and expand others
-        # (--cycles auto)
-        self.expand_cycles = expand_cycles
-        self.cycle_retract = cycle_retract  # their G98/G99 kept (not with --cycles expand)
+        self.expand_cycles = options.expand_cycles
+        self.cycle_retract = options.cycle_retract
         self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
@@ -532,8 +576,8 @@ class _Reader:
         close = getattr(self._lines, "close", None)  # (a file's generator, not started)
         if close is not None:
             close()
-        with open_source(self.path) as fh:  # its lines taken straight from the file, a chunk at a time
-            yield from self._chunks(fh)
+        with open_source(self.path) as fh:  # its lines taken from the file, a chunk at a time, each bounded
+            yield from self._chunks(read_lines(fh, self.path))
 
     def _chunks(self, it: Iterator[str]):
         """:meth:`chunks` of the lines of ``it``."""
@@ -585,6 +629,7 @@ class _Reader:
     def _general(self, rows: _Rows, a: int, b: int) -> tuple[int, PostprocError | None]:
         """Interpret lines a:b one at a time: (lines read, the error that stopped it)."""
         feed = self.interp.feed_line
+        iso = self.iso_words
         lines, linenos = rows.lines, rows.lineno
         for i in range(a, b):
             try:
@@ -594,7 +639,8 @@ class _Reader:
             if mv is not None:
                 rows.move[i] = True
                 rows.end[i] = mv.q1
-                rows.keys[i] = self.keys.of_line(lines[i])
+                line = lines[i]
+                rows.keys[i] = self.keys.of_line(line if iso else _without_assigned(line, mv.words))
                 if mv.cycle is not None and self.expand_cycles:
                     self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle, self.cycle_retract)
             it = self.interp
@@ -655,75 +701,51 @@ class _Reader:
         return _Rows(lines, np.array(lineno, dtype=np.int64), np.array(move, dtype=bool),
                      np.array(end, dtype=float).reshape(-1, 3), np.array(keys, dtype=np.int64).reshape(-1, 3))
 
-    def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:  # noqa: C901
+    def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:
         """Read a chunk: stretches of plain moves as columns, the other lines one at a time."""
-        lines = rows.lines
-        n = len(lines)
-        text = "".join(lines)
-        found = None
-        if "\r" not in text or text.count("\r") == text.count("\r\n"):
-            found = _PLAIN.findall(text)
-            # one match per line, plus an empty one after a final line ending
-            found = found[:n] if len(found) in (n, n + 1) else None
+        n = len(rows)
+        found = _plain_matches(rows.lines)
         if not found:
             return self._general(rows, 0, n)
-        cols = np.array(found, dtype=object)
-        present = cols != ""
-        twice = _later_axis_words(cols, present)
-        has = [present[:, 3], present[:, 4], present[:, 5]]
-        gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
-        arc = present[:, 7]
-        tool = present[:, 10] | present[:, 11]  # a tool change: quiet but for the tool it loads
-        quiet = present[:, 9] | tool
-        has_g = gcode >= 0
-        g_arc = gcode >= ARC_CW
-        last_g = _last_index(has_g)
-        # a plain move's arc words agree with its motion (its own G word, or the last one
-        # before it in the chunk; the lines before a stretch's first G word are checked
-        # against the modal motion when the stretch is read)
-        plain = (has[0] | has[1] | has[2]) & ~twice & np.where(
-            has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
-        runnable = plain | quiet
-        if not runnable.any():
+        cc = _Columns(found, n)
+        if not cc.runnable.any():
             return self._general(rows, 0, n)
+        cc.index_stretches()
+        self._column_keys(rows, cc)
+        runs: list = []
+        i, error = self._walk(rows, cc, runs)
+        if runs:
+            self._run_ends(rows, runs, cc)
+        return i, error
+
+    def _column_keys(self, rows: _Rows, cc: _Columns) -> None:
+        """The keys of the lines that have their own from the columns: a plain line's
+        skeleton is its N word (the lines without one keep 0); a move that sets the tool
+        length (G43 H..) keeps G43 H.. in its skeleton."""
         keys = self.keys
-        # N words (the lines without one keep 0): a plain line's skeleton is its N word
-        numbered = np.flatnonzero(present[:, 0])
+        numbered = np.flatnonzero(cc.present[:, 0])
         if len(numbered):
-            ncol = cols[numbered, 0].tolist()
+            ncol = cc.cols[numbered, 0].tolist()
             # a plain N word Nn is n + 1 (as _Keys makes it; here without a call for each),
             # the others through the table
             nk = [int(t[1:]) + 1 if _PLAIN_N(t) else keys(t) for t in ncol]
             rows.keys[numbered, 1] = nk
             rows.keys[numbered, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
                                       for t, k in zip(ncol, nk, strict=True)]
-        # a move that sets the tool length offset (G43 H..) starts a stretch of its own
-        tlo = present[:, 2] & plain
-        tlo_rows = np.flatnonzero(tlo).tolist()
-        for i in tlo_rows:  # (its skeleton: the line's, G43 H.. kept)
+        lines = rows.lines
+        for i in cc.tlo_rows:
             rows.keys[i, 0] = keys(skeleton(lines[i]))
-        next_tlo = np.append(_next_index(tlo), n) if tlo_rows else None
-        values = []
-        for k in range(3):
-            v = np.full(n, np.nan)
-            v[has[k]] = cols[has[k], 3 + k].astype(float)
-            values.append(v)
-        xcol, ycol, zcol, fcol = cols[:, 3], cols[:, 4], cols[:, 5], cols[:, 8]
-        # (numpy arrays indexed a few times per stretch, not made lists of every line)
-        last = [_last_index(h) for h in has]
-        last_f = _last_index(present[:, 8])
-        next_other = _next_index(~runnable)
-        next_g = _next_index(has_g)
-        moves_before = np.concatenate([[0], np.cumsum(plain)])
-        arcs_before = np.concatenate([[0], np.cumsum(plain & arc)])
-        runnable_l, quiet_l = runnable.tolist(), quiet.tolist()
-        # the last tool change at or before each line, and the tool it loads
-        last_tool = _last_index(tool) if tool.any() else None
-        tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
+
+    def _walk(self, rows: _Rows, cc: _Columns, runs: list) -> tuple[int, PostprocError | None]:
+        """Read the chunk's lines in order: a stretch of plain lines as columns where the
+        modal state allows it (:meth:`_stretch`, which adds it to ``runs``), a quiet line
+        passed over, any other line by the interpreter. Returns (lines read, the error
+        that stopped it)."""
+        n = len(rows)
+        runnable_l, quiet_l = cc.runnable.tolist(), cc.quiet.tolist()
+        last_tool = cc.last_tool
         interp = self.interp
         st = interp.state
-        linenos = rows.lineno
-        runs = []
         i = 0
         error = None
         while i < n:
@@ -732,53 +754,68 @@ class _Reader:
                 if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
                         or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]
                         or interp.modal_call is not None or st.frame is not None):  # Sinumerik MCALL, ROT..
-                    b = int(next_other[i])
-                    if next_tlo is not None:  # a stretch ends before a line that sets the tool length
-                        b = min(b, int(next_tlo[i + 1]))
-                    p = min(b, int(next_g[i]))  # lines i:p move in the modal motion
-                    moves = int(moves_before[p] - moves_before[i])
-                    arcs = int(arcs_before[p] - arcs_before[i])
-                    motion = st.motion
-                    if moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
-                            motion in (ARC_CW, ARC_CCW) and arcs == moves):
-                        if next_tlo is not None and int(next_tlo[i]) == i:  # G43 H.. before the move
-                            interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
-                        unit = st.unit_mm
-                        shift = interp.shift(False, int(linenos[i]), 1)
-                        runs.append((i, b, unit, shift, tuple(pos)))
-                        e = b - 1
-                        pos = list(pos)
-                        for k in range(3):
-                            j = int(last[k][e])
-                            if j >= i:
-                                pos[k] = float(xcol[j] if k == 0 else ycol[j] if k == 1 else zcol[j]) * unit + shift[k]
-                        st.pos = pos
-                        j = int(last_g[e])
-                        if j >= i:
-                            st.motion = int(gcode[j])
-                        j = int(last_f[e])
-                        if j >= i:
-                            st.feed = float(fcol[j])
-                        if last_tool is not None and last_tool[e] >= i:
-                            interp.load_tool(tool_no[int(last_tool[e])])  # the stretch's last tool change
+                    b = self._stretch(rows, cc, i, pos, runs)
+                    if b is not None:
                         i = b
                         continue
                 elif quiet_l[i]:
                     if last_tool is not None and int(last_tool[i]) == i and not interp.ended:
-                        interp.load_tool(tool_no[i])
+                        interp.load_tool(cc.tool_no[i])
                     i += 1  # changes nothing else, whatever the state
                     continue
             i, error = self._general(rows, i, i + 1)
             if error is not None:
                 break
-        if runs:
-            self._run_ends(rows, runs, has, values, plain)
         return i, error
 
+    def _stretch(self, rows: _Rows, cc: _Columns, i: int, pos: list, runs: list) -> int | None:
+        """Read the stretch of plain and quiet lines from line i (the position before it:
+        ``pos``) as columns, when its moves before the next G word agree with the modal
+        motion: add it to ``runs``, leave the state as its last line leaves it and return
+        where it ends (None: it does not agree; line i is the interpreter's)."""
+        b = int(cc.next_other[i])
+        next_tlo = cc.next_tlo
+        if next_tlo is not None:  # a stretch ends before a line that sets the tool length
+            b = min(b, int(next_tlo[i + 1]))
+        p = min(b, int(cc.next_g[i]))  # lines i:p move in the modal motion
+        moves = int(cc.moves_before[p] - cc.moves_before[i])
+        arcs = int(cc.arcs_before[p] - cc.arcs_before[i])
+        interp = self.interp
+        st = interp.state
+        motion = st.motion
+        if not (moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
+                motion in (ARC_CW, ARC_CCW) and arcs == moves)):
+            return None
+        cols, linenos = cc.cols, rows.lineno
+        if next_tlo is not None and int(next_tlo[i]) == i:  # G43 H.. before the move
+            interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
+        unit = st.unit_mm
+        shift = interp.shift(False, int(linenos[i]), 1)
+        runs.append((i, b, unit, shift, tuple(pos)))
+        e = b - 1
+        pos = list(pos)
+        for k in range(3):
+            j = int(cc.last[k][e])
+            if j >= i:
+                pos[k] = float(cols[j, 3 + k]) * unit + shift[k]
+        st.pos = pos
+        j = int(cc.last_g[e])
+        if j >= i:
+            st.motion = int(cc.gcode[j])
+        j = int(cc.last_f[e])
+        if j >= i:
+            st.feed = float(cols[j, 8])
+        last_tool = cc.last_tool
+        if last_tool is not None and last_tool[e] >= i:
+            interp.load_tool(cc.tool_no[int(last_tool[e])])  # the stretch's last tool change
+        return b
+
     @staticmethod
-    def _run_ends(rows: _Rows, runs: list, has: list, values: list, plain: np.ndarray) -> None:
+    def _run_ends(rows: _Rows, runs: list, cc: _Columns) -> None:
         """End points of the plain stretches read: machine = program x unit + shift, the
         position before the stretch where a line does not name an axis."""
+        has, plain = cc.has, cc.plain
+        values = cc.values()
         lengths = [b - a for a, b, *_ in runs]
         inside = np.zeros(len(rows), dtype=bool)
         for a, b, *_ in runs:
@@ -798,6 +835,74 @@ class _Reader:
         quiet = idx[~plain[idx]]
         rows.end[quiet] = np.nan
         rows.move[idx] = plain[idx]
+
+
+def _plain_matches(lines: list[str]) -> list | None:
+    """The groups of each line's :data:`_PLAIN` match, or None where the chunk's text is
+    not matched line by line (a lone carriage return)."""
+    n = len(lines)
+    text = "".join(lines)
+    if "\r" in text and text.count("\r") != text.count("\r\n"):
+        return None
+    found = _PLAIN.findall(text)
+    # one match per line, plus an empty one after a final line ending
+    return found[:n] if len(found) in (n, n + 1) else None
+
+
+class _Columns:
+    """A chunk's lines as the columns of their :data:`_PLAIN` matches (the groups, "" where
+    absent): which lines are plain moves and which quiet, and, for the stretches read as
+    columns (:meth:`_Reader._stretch`), where each stops and where each word it carries
+    forward was last given."""
+
+    def __init__(self, found: list, n: int) -> None:
+        cols = self.cols = np.array(found, dtype=object)
+        present = self.present = cols != ""
+        twice = _later_axis_words(cols, present)
+        has = self.has = [present[:, 3], present[:, 4], present[:, 5]]
+        gcode = self.gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
+        arc = self.arc = present[:, 7]
+        tool = self.tool = present[:, 10] | present[:, 11]  # a tool change: quiet but for the tool it loads
+        self.quiet = present[:, 9] | tool
+        has_g = self.has_g = gcode >= 0
+        g_arc = gcode >= ARC_CW
+        last_g = self.last_g = _last_index(has_g)
+        # a plain move's arc words agree with its motion (its own G word, or the last one
+        # before it in the chunk; the lines before a stretch's first G word are checked
+        # against the modal motion when the stretch is read)
+        self.plain = (has[0] | has[1] | has[2]) & ~twice & np.where(
+            has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
+        self.runnable = self.plain | self.quiet
+
+    def index_stretches(self) -> None:
+        """Where the stretches stop and where their words were last given (numpy arrays
+        indexed a few times per stretch, not made lists of every line)."""
+        n = len(self.cols)
+        present, plain = self.present, self.plain
+        # a move that sets the tool length offset (G43 H..) starts a stretch of its own
+        tlo = present[:, 2] & plain
+        self.tlo_rows = np.flatnonzero(tlo).tolist()
+        self.next_tlo = np.append(_next_index(tlo), n) if self.tlo_rows else None
+        self.last = [_last_index(h) for h in self.has]
+        self.last_f = _last_index(present[:, 8])
+        self.next_other = _next_index(~self.runnable)
+        self.next_g = _next_index(self.has_g)
+        self.moves_before = np.concatenate([[0], np.cumsum(plain)])
+        self.arcs_before = np.concatenate([[0], np.cumsum(plain & self.arc)])
+        # the last tool change at or before each line, and the tool it loads
+        tool, cols = self.tool, self.cols
+        self.last_tool = _last_index(tool) if tool.any() else None
+        self.tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
+
+    def values(self) -> list[np.ndarray]:
+        """The X, Y and Z numbers of each line (NaN where it names no such axis)."""
+        n = len(self.cols)
+        values = []
+        for k, h in enumerate(self.has):
+            v = np.full(n, np.nan)
+            v[h] = self.cols[h, 3 + k].astype(float)
+            values.append(v)
+        return values
 
 
 class _ForkedReader:
@@ -1020,7 +1125,7 @@ def _l1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return s
 
 
-def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  # noqa: C901
+def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,
                 limit: int) -> tuple[int, bool, tuple]:
     """Pair up to ``limit`` records of orig with the lines of corr (see the module docstring).
 
@@ -1041,67 +1146,100 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
         # no anchor in the window, and moves with N words, skeletons or comments: their
         # scans run to corr's next anchor (or its end), which is read now
         corr.reach_anchor(want)
-    p, q = orig.pos, corr.pos
-    ro, rc = orig.rows, corr.rows
-    avail = corr.avail()
-    span = min(avail, want)
+    span = min(corr.avail(), want)
     if m == 0 or span == 0:
         return 0, True, last_delta
-    real_end = span == avail and corr.done and corr.error is None
-    om = ro.move[p:p + m]
-    cmove = rc.move[q:q + span]
-    # the scans of the nearest-end-point rule look at corr up to its next anchor: past
-    # the window when there is none in it (ext lines from q)
-    ext = span
-    if not real_end and cmove.all():
-        later = np.flatnonzero(~rc.move[q + span:q + avail])
-        ext = span + int(later[0]) + 1 if len(later) else avail
-    real_end_x = ext == avail and corr.done and corr.error is None
-    clines = rc.lines
-    # anchors: the k-th of each, as long as they are identical
-    ao = np.flatnonzero(~om)
-    ac = np.flatnonzero(~cmove)
-    k = min(len(ao), len(ac))
-    if k:
-        equal = np.fromiter(map(operator.eq, map(ro.lines.__getitem__, (ao[:k] + p).tolist()),
-                                map(clines.__getitem__, (ac[:k] + q).tolist())), dtype=bool, count=k)
-        k = k if equal.all() else int(np.argmin(equal))
-    ao, ac = ao[:k], ac[:k]
-    # stretch j ends with the j-th anchor (stretch k: the rest of the window)
-    start_o = np.concatenate([[0], ao + 1])
-    off_start = np.concatenate([[0], ac + 1]) - start_o
-    off_end = ac - ao
-    more = off_end - off_start[:-1]
-    inserted = np.append(more > 0, False)  # stretches with lines inserted
-    seg = np.searchsorted(ao, np.arange(m))
-    split = inserted[seg]
-    oe = ro.end[p:p + m]
-    cend = np.append(rc.end[q:q + ext], np.zeros((1, 3)), axis=0)
-    ckeys = rc.keys[q:q + ext]
-    cmove_x = rc.move[q:q + ext]
-    stop = np.append(_next_index(~cmove_x), ext)
-    prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
+    window = _Window(orig, corr, rep, last_delta, m, span)
+    f, held = window.check()
+    return window.pair(f, held)
 
-    def place(t: np.ndarray, rows=None):
+
+class _Level(NamedTuple):
+    """Records of a window each placed at a line of corr: whether the place is checked
+    (for a level of :meth:`_Window.check`: by the nearest-end-point rule), whether the
+    line is identical to the record's, the place (a line from corr.pos) and the delta."""
+
+    ok: np.ndarray
+    same: np.ndarray
+    t: np.ndarray
+    delta: np.ndarray
+
+
+class _Window:
+    """The records of orig paired at once by :func:`_pair_chunk` (m of them, from orig.pos)
+    and the lines of corr they may pair with (span of them from corr.pos; ext, up to
+    corr's next anchor past the window when it has none in it), as columns the steps
+    share: :meth:`check`, then :meth:`pair`."""
+
+    def __init__(self, orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple, m: int, span: int) -> None:
+        self.orig, self.corr, self.rep = orig, corr, rep
+        self.last_delta = last_delta  # the delta of the move before the window
+        self.m, self.span = m, span
+        p, q = self.p, self.q = orig.pos, corr.pos
+        ro, rc = self.ro, self.rc = orig.rows, corr.rows
+        avail = corr.avail()
+        real_end = self.real_end = span == avail and corr.done and corr.error is None
+        om = self.om = ro.move[p:p + m]
+        cmove = self.cmove = rc.move[q:q + span]
+        # the scans of the nearest-end-point rule look at corr up to its next anchor: past
+        # the window when there is none in it (ext lines from q)
+        ext = span
+        if not real_end and cmove.all():
+            later = np.flatnonzero(~rc.move[q + span:q + avail])
+            ext = span + int(later[0]) + 1 if len(later) else avail
+        self.ext = ext
+        self.real_end_x = ext == avail and corr.done and corr.error is None
+        self._stretches()
+        self.oe = ro.end[p:p + m]
+        self.cend = np.append(rc.end[q:q + ext], np.zeros((1, 3)), axis=0)
+        self.ckeys = rc.keys[q:q + ext]
+        cmove_x = self.cmove_x = rc.move[q:q + ext]
+        self.stop = np.append(_next_index(~cmove_x), ext)
+        self.prev = np.concatenate([[-1], _last_index(om)[:-1]])  # previous move of each record
+
+    def _stretches(self) -> None:
+        """The anchors, the k-th of each as long as they are identical, and the stretches
+        they end (stretch j ends with the j-th anchor; stretch k: the rest of the window)."""
+        ao = np.flatnonzero(~self.om)
+        ac = np.flatnonzero(~self.cmove)
+        k = min(len(ao), len(ac))
+        if k:
+            equal = np.fromiter(map(operator.eq, map(self.ro.lines.__getitem__, (ao[:k] + self.p).tolist()),
+                                    map(self.rc.lines.__getitem__, (ac[:k] + self.q).tolist())),
+                                dtype=bool, count=k)
+            k = k if equal.all() else int(np.argmin(equal))
+        self.k = k
+        ao, ac = self.ao, self.ac = ao[:k], ac[:k]
+        start_o = self.start_o = np.concatenate([[0], ao + 1])
+        off_start = self.off_start = np.concatenate([[0], ac + 1]) - start_o
+        off_end = self.off_end = ac - ao
+        more = self.more = off_end - off_start[:-1]
+        self.inserted = np.append(more > 0, False)  # stretches with lines inserted
+        seg = self.seg = np.searchsorted(ao, np.arange(self.m))
+        self.split = self.inserted[seg]
+
+    def place(self, t: np.ndarray, rows: np.ndarray | None = None) -> tuple:
         """Lines of corr at places t (of records rows): in the window, identical, delta."""
+        span, ro, p = self.span, self.ro, self.p
         inside = t < span
         tc = np.minimum(t, span - 1)
-        olines = ro.lines[p:p + m] if rows is None else map(ro.lines.__getitem__, (rows + p).tolist())
-        same = np.fromiter(map(operator.eq, olines, map(clines.__getitem__, (tc + q).tolist())), dtype=bool,
-                           count=len(t))
-        o = oe if rows is None else oe[rows]
-        ce = cend[tc]
+        olines = ro.lines[p:p + self.m] if rows is None else map(ro.lines.__getitem__, (rows + p).tolist())
+        same = np.fromiter(map(operator.eq, olines, map(self.rc.lines.__getitem__, (tc + self.q).tolist())),
+                           dtype=bool, count=len(t))
+        o = self.oe if rows is None else self.oe[rows]
+        ce = self.cend[tc]
         return inside, tc, same, np.where(np.isnan(ce) | np.isnan(o), 0.0, ce - o)
 
-    def nearest(rows: np.ndarray, t0: np.ndarray, ld: np.ndarray) -> np.ndarray:
+    def nearest(self, rows: np.ndarray, t0: np.ndarray, ld: np.ndarray) -> np.ndarray:
         """Whether the scan of each move (records rows, own line t0, previous delta ld)
         picks its own line: it looks at the lines after it up to the next anchor (or the
         end of the program; not an error not yet reached) and stops after
         STOP_AFTER_WORSE compatible ones that are not nearer than the best."""
-        end_at = stop[t0 + 1]
-        real_stop = (end_at < ext) | real_end_x
-        predicted = oe[rows] + ld
-        okeys = ro.keys[p + rows]
+        ext, cend, ckeys = self.ext, self.cend, self.ckeys
+        end_at = self.stop[t0 + 1]
+        real_stop = (end_at < ext) | self.real_end_x
+        predicted = self.oe[rows] + ld
+        okeys = self.ro.keys[self.p + rows]
         own = ckeys[t0]
         good = np.zeros(len(rows), dtype=bool)
         plain = ~okeys.any(axis=1)
@@ -1110,7 +1248,7 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             # no N word, skeleton or comment: compatible with the moves of empty skeleton;
             # its own line must be one, and the nearest of the first few after it
             ta, ea, pa = t0[a], end_at[a], predicted[a]
-            z = np.flatnonzero(cmove_x & (ckeys[:, 0] == 0))
+            z = np.flatnonzero(self.cmove_x & (ckeys[:, 0] == 0))
             i = np.searchsorted(z, ta)
             z = np.append(z, [ext] * (STOP_AFTER_WORSE + 1))
             d0 = _l1(cend[ta], pa)
@@ -1127,9 +1265,10 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             # an N word or another skeleton (and no comment): its own line when the later
             # lines before the anchor with its skeleton or N word (one of each at most, a
             # program that numbers its blocks again) are not nearer
+            q = self.q
             tb, eb, ob, cb = t0[b], end_at[b], okeys[b], own[b]
             pb = predicted[b]
-            nxt = rc.index().next_same
+            nxt = self.rc.index().next_same
             ok_b = real_stop[b] & (ob[:, 2] == 0) & (ob[:, 0] == cb[:, 0]) & ((ob[:, 1] == 0) | (ob[:, 1] == cb[:, 1]))
             d_own = _l1(cend[tb], pb)
             for col, named in ((0, ok_b), (1, ok_b & (ob[:, 1] != 0))):
@@ -1141,102 +1280,125 @@ def _pair_chunk(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple,  #
             good[b] = ok_b & (d_own <= PLAUSIBLE_MM)
         return good
 
-    def previous(rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        pr = prev[rows]
-        return np.where(pr[:, None] >= 0, delta[np.maximum(pr, 0)], np.asarray(last_delta, dtype=float))
+    def previous(self, rows: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """The delta of each record's previous move (before the window: its last one)."""
+        pr = self.prev[rows]
+        return np.where(pr[:, None] >= 0, delta[np.maximum(pr, 0)], np.asarray(self.last_delta, dtype=float))
 
-    # the line of corr at each record's place: after the previous anchor, or (in a stretch
-    # with inserted lines) before the next one
-    t = np.arange(m) + np.where(split, np.append(off_end, 0)[seg], off_start[seg])
-    inside, tc, same, delta = place(t)
-    tail = seg == k
-    # (a stretch with fewer lines in corr: paired one at a time, which reports it)
-    ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
-    # the rest of the window is a stretch too when both programs end in it
-    ends = real_end and orig.done and orig.error is None and m == orig.avail()
-    last = int(start_o[k])
-    direct = np.append(more == 0, ends and m - last == span - last - int(off_start[k]))[seg]
-    rows = np.flatnonzero(om & ok & direct)
-    if len(rows):
-        # as many moves in both: each pairs with the line at its place, of the same skeleton
-        # (or N word, or comment)
-        o3, c3 = ro.keys[p + rows], rc.keys[q + t[rows]]
-        both_n = (o3[:, 1] != 0) & (c3[:, 1] != 0)
-        ok[rows] = ((o3[:, 0] == c3[:, 0]) | (both_n & (o3[:, 1] == c3[:, 1]))
-                    | (~both_n & (o3[:, 2] != 0) & (o3[:, 2] == c3[:, 2])))
-    held = m
-    if k and not ends:
-        held = last  # the rest of the window: with the next window, where its anchor is
-    else:
-        rows = np.flatnonzero(om & ok & ~direct & ~split)
-        if len(rows):  # no anchor in the window: the nearest-end-point rule, checked
-            ok[rows] = nearest(rows, t[rows], previous(rows, delta))
-    # in a stretch with lines inserted, the moves between the e-th and the next insertion
-    # pair at the place after the previous anchor plus e: checked for every e at once
-    levels = []
-    if split.any():
-        n_ins = np.append(more, 0)
+    def check(self) -> tuple[int, int]:
+        """Place every record and check the places: (the first record whose place does
+        not hold, m if all do; the records before the rest of the window that waits for
+        the next one)."""
+        m, k, seg, split, om, cmove, more = self.m, self.k, self.seg, self.split, self.om, self.cmove, self.more
+        # the line of corr at each record's place: after the previous anchor, or (in a stretch
+        # with inserted lines) before the next one
+        t = np.arange(m) + np.where(split, np.append(self.off_end, 0)[seg], self.off_start[seg])
+        inside, tc, same, delta = self.place(t)
+        tail = seg == k
+        # (a stretch with fewer lines in corr: paired one at a time, which reports it)
+        ok = np.append(more >= 0, True)[seg] & (~tail | (inside & np.where(om, cmove[tc], ~cmove[tc] & same)))
+        # the rest of the window is a stretch too when both programs end in it
+        orig = self.orig
+        ends = self.real_end and orig.done and orig.error is None and m == orig.avail()
+        last = int(self.start_o[k])
+        direct = np.append(more == 0, ends and m - last == self.span - last - int(self.off_start[k]))[seg]
+        rows = np.flatnonzero(om & ok & direct)
+        if len(rows):
+            # as many moves in both: each pairs with the line at its place, of the same skeleton
+            # (or N word, or comment)
+            o3, c3 = self.ro.keys[self.p + rows], self.rc.keys[self.q + t[rows]]
+            both_n = (o3[:, 1] != 0) & (c3[:, 1] != 0)
+            ok[rows] = ((o3[:, 0] == c3[:, 0]) | (both_n & (o3[:, 1] == c3[:, 1]))
+                        | (~both_n & (o3[:, 2] != 0) & (o3[:, 2] == c3[:, 2])))
+        held = m
+        if k and not ends:
+            held = last  # the rest of the window: with the next window, where its anchor is
+        else:
+            rows = np.flatnonzero(om & ok & ~direct & ~split)
+            if len(rows):  # no anchor in the window: the nearest-end-point rule, checked
+                ok[rows] = self.nearest(rows, t[rows], self.previous(rows, delta))
+        self.placed = _Level(ok, same, t, delta)
+        self.levels = self._levels(delta) if split.any() else []
+        bad = np.flatnonzero(~(ok | split))
+        return min(int(bad[0]) if len(bad) else m, held), held
+
+    def _levels(self, delta: np.ndarray) -> list[_Level]:
+        """In a stretch with lines inserted, the moves between the e-th and the next
+        insertion pair at the place after the previous anchor plus e: the places of level
+        e for every e at once, each checked by the nearest-end-point rule."""
+        m, seg, split, om, off_start, prev = self.m, self.seg, self.split, self.om, self.off_start, self.prev
+        n_ins = np.append(self.more, 0)
+        levels = []
         for e in range(min(int(n_ins.max()), MAX_LEVELS) + 1):
             rows_e = np.flatnonzero(split & om & (n_ins[seg] >= e))
             t_e = rows_e + off_start[seg[rows_e]] + e
-            _in, _tc, same_e, d_e = place(t_e, rows_e)
+            _in, _tc, same_e, d_e = self.place(t_e, rows_e)
             full = np.zeros((m, 3))
             full[rows_e] = d_e
             pr = np.maximum(prev[rows_e], 0)
             within = ((prev[rows_e] >= 0) & (seg[pr] == seg[rows_e]))[:, None]
             ok_e = np.zeros(m, dtype=bool)
-            ok_e[rows_e] = nearest(rows_e, t_e, np.where(within, full[pr], previous(rows_e, delta)))
+            ok_e[rows_e] = self.nearest(rows_e, t_e, np.where(within, full[pr], self.previous(rows_e, delta)))
             same_full = np.zeros(m, dtype=bool)
             same_full[rows_e] = same_e
-            levels.append((ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
-    bad = np.flatnonzero(~(ok | split))
-    f = min(int(bad[0]) if len(bad) else m, held)
+            levels.append(_Level(ok_e, same_full, np.arange(m) + np.append(off_start[:-1], 0)[seg] + e, full))
+        return levels
 
-    def take(r0: int, r1: int, last_delta: tuple, same=same, t=t, delta=delta) -> tuple:
-        """Count the records r0:r1, each paired with the line at its place."""
-        moves = om[r0:r1]
+    def take(self, r0: int, r1: int, last_delta: tuple, at: _Level) -> tuple:
+        """Count the records r0:r1, each paired with the line at its place ``at``; returns
+        the last move's delta."""
+        rep = self.rep
+        moves = self.om[r0:r1]
         n_moves = int(np.count_nonzero(moves))
-        unchanged = int(np.count_nonzero(moves & same[r0:r1]))
+        unchanged = int(np.count_nonzero(moves & at.same[r0:r1]))
         rep.moves += n_moves
         rep.moves_unchanged += unchanged
         rep.lines_unchanged += r1 - r0 - n_moves + unchanged
-        moved = np.flatnonzero(moves & ~same[r0:r1]) + r0
+        moved = np.flatnonzero(moves & ~at.same[r0:r1]) + r0
         if len(moved):
-            rep.add_moved_rows(ro.lineno[p + moved], rc.lineno[q + t[moved]], delta[moved])
+            rep.add_moved_rows(self.ro.lineno[self.p + moved], self.rc.lineno[self.q + at.t[moved]], at.delta[moved])
         if n_moves:
-            last_delta = tuple(delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
+            last_delta = tuple(at.delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
         return last_delta
 
-    done = 0
-    for j in np.flatnonzero(inserted).tolist():
-        s0, a0 = int(start_o[j]), int(ao[j])
-        if s0 >= f:
-            break
-        last_delta = take(done, s0, last_delta)
-        r, e = s0, 0
-        while True:
-            ok_e, same_e, t_e, delta_e = levels[e]
-            # the next insertion: at the first move not paired at this place
-            x = r + int(np.argmin(ok_e[r:a0])) if not ok_e[r:a0].all() else a0
-            last_delta = take(r, x, last_delta, same_e, t_e, delta_e)
-            orig.pos, corr.pos = p + x, q + int(t_e[x])
-            last_delta = _pair_one(orig, corr, rep, last_delta)
-            done = x + 1
-            if not (orig.rows is ro and corr.rows is rc):
-                return done, False, last_delta
-            if x == a0:
+    def pair(self, f: int, held: int) -> tuple[int, bool, tuple]:
+        """Pair the records checked (:meth:`check`: the first f, in a stretch with lines
+        inserted the moves at each insertion one at a time, by :func:`_pair_one`) and move
+        both tapes past them: (records paired, whether a check failed at the next one, the
+        last move's delta)."""
+        orig, corr, p, q, m = self.orig, self.corr, self.p, self.q, self.m
+        placed, levels = self.placed, self.levels
+        last_delta = self.last_delta
+        done = 0
+        for j in np.flatnonzero(self.inserted).tolist():
+            s0, a0 = int(self.start_o[j]), int(self.ao[j])
+            if s0 >= f:
                 break
-            e = corr.pos - q - 1 - x - int(off_start[j])
-            if not (0 <= e < len(levels) and last_delta == tuple(levels[e][3][x].tolist())):
-                return done, False, last_delta  # paired otherwise than assumed: look again from here
-            r = x + 1
-        if corr.pos != q + ac[j] + 1 or (a0 > s0 and last_delta != tuple(delta[a0 - 1].tolist())):
-            return done, False, last_delta  # the next stretch was checked with another delta
-    f = max(f, done)
-    last_delta = take(done, f, last_delta)
-    orig.pos = p + f
-    corr.pos = q + (int(t[f]) if f < m else m + int(off_start[k]))
-    return f, f < held, last_delta
+            last_delta = self.take(done, s0, last_delta, placed)
+            r, e = s0, 0
+            while True:
+                at = levels[e]
+                # the next insertion: at the first move not paired at this place
+                x = r + int(np.argmin(at.ok[r:a0])) if not at.ok[r:a0].all() else a0
+                last_delta = self.take(r, x, last_delta, at)
+                orig.pos, corr.pos = p + x, q + int(at.t[x])
+                last_delta = _pair_one(orig, corr, self.rep, last_delta)
+                done = x + 1
+                if not (orig.rows is self.ro and corr.rows is self.rc):
+                    return done, False, last_delta
+                if x == a0:
+                    break
+                e = corr.pos - q - 1 - x - int(self.off_start[j])
+                if not (0 <= e < len(levels) and last_delta == tuple(levels[e].delta[x].tolist())):
+                    return done, False, last_delta  # paired otherwise than assumed: look again from here
+                r = x + 1
+            if corr.pos != q + self.ac[j] + 1 or (a0 > s0 and last_delta != tuple(placed.delta[a0 - 1].tolist())):
+                return done, False, last_delta  # the next stretch was checked with another delta
+        f = max(f, done)
+        last_delta = self.take(done, f, last_delta, placed)
+        orig.pos = p + f
+        corr.pos = q + (int(placed.t[f]) if f < m else m + int(self.off_start[self.k]))
+        return f, f < held, last_delta
 
 
 # Lines of corr the pairing of one record looks at one by one before it looks up the
@@ -1468,8 +1630,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
                      keep: int | None = None, dialect: str = "generic",
-                     subroutine_path: Sequence[Path] = (), cycles: str | None = None,
-                     limits: Limits | None = None) -> DiffReport:
+                     subroutine_path: Sequence[Path] = (), limits: Limits | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1484,79 +1645,42 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     loops, macros written out), the original is read expanded the same way (its external
     subroutines looked up on ``subroutine_path``, as ``correct`` was given it); its
     blocks are then numbered by their source lines, a subprogram's line once per call.
-    ``cycles``: "expand" reads each canned cycle of the original as the moves ``correct
-    --cycles expand`` wrote for it, as the header's ``CYCLES EXPANDED`` does.
+    Each canned cycle block of both programs is read as the moves ``correct`` writes for
+    it when it expands it (whatever ``--cycles`` was: with ``auto`` it keeps some and
+    expands others), their G98/G99 retracts kept unless the header records ``CYCLES
+    EXPANDED``.
     """
+    reading = _ReadOptions(dialect=dialect, subroutine_path=tuple(Path(p) for p in subroutine_path),
+                           expand_cycles=True, limits=limits)
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
     gc.disable()
     try:
-        return _compare(original, corrected, setup, progress, keep, dialect, subroutine_path, cycles, limits)
+        return _compare(original, corrected, setup, progress, keep, reading)
     finally:
         if was_enabled:
             gc.enable()
 
 
-def _compare(original, corrected, setup: Setup | None, progress, keep: int | None, dialect: str,
-             subroutine_path: Sequence[Path], cycles: str | None = None,
-             limits: Limits | None = None) -> DiffReport:
+def _compare(original, corrected, setup: Setup | None, progress, keep: int | None,
+             reading: _ReadOptions) -> DiffReport:
     # what the program was corrected with, where the caller gives nothing: the start (axes
     # it never names start there), and the offsets and tool lengths that G53 blocks need
     hs = header_setup(corrected)
     setup = setup_from_header(hs, setup)
-    expanded = hs.expanded
     keys = _Keys()
-    readers = (_Reader(original, setup, keys, dialect=dialect, expand=expanded, limits=limits,
-                       subroutine_path=[Path(p) for p in subroutine_path], expand_cycles=True,
-                       cycle_retract=not hs.cycles_expanded),
-               _Reader(corrected, setup, keys, drop_header=True, dialect=dialect, expand_cycles=True, limits=limits,
-                       cycle_retract=not hs.cycles_expanded))
+    reading = dataclasses.replace(reading, cycle_retract=not hs.cycles_expanded)
+    readers = (_Reader(original, setup, keys, dataclasses.replace(reading, expand=hs.expanded)),
+               _Reader(corrected, setup, keys, dataclasses.replace(reading, drop_header=True, subroutine_path=())))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
     o_chunks, c_chunks = o_reader.chunks(), c_reader.chunks()
     try:
         orig, corr = _Tape(o_chunks), _Tape(c_chunks)
         rep = DiffReport(str(o_reader.path or "<text>"), str(c_reader.path or "<text>"), keep=keep,
-                         expanded=expanded)
-        last_delta = (0.0, 0.0, 0.0)
-        slow = 0
-        window = CHUNK_LINES
-        shown = 0
-        while True:
-            orig.fill(1 if slow else CHUNK_LINES // 2)
-            if not orig.avail():
-                if orig.error is not None:
-                    raise orig.error
-                break
-            if progress is not None and o_reader.count >= shown + CHUNK_LINES:
-                shown = o_reader.count
-                progress(shown)
-            if not slow:
-                w = min(orig.avail(), window)
-                corr.fill(w + w // 2 + SCAN_AHEAD + 1)
-                n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
-                if n and not failed:
-                    # a longer window next; about twice what was paired when that stopped short
-                    # of the window (more insertions in a stretch than MAX_LEVELS), so that the
-                    # levels are not checked over a long window for a few records each time
-                    window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
-                    continue
-                # a record the rule pairs otherwise (a line inserted here): one at a time for a
-                # while, then a window about as long as the stretch that was paired at once
-                window = max(MIN_WINDOW, 2 * n)
-                slow = SLOW_STRETCH
-            last_delta = _pair_one(orig, corr, rep, last_delta)
-            slow -= 1
-        while True:
-            c = corr.peek(0)
-            if c is None:
-                break
-            corr.pos += 1
-            if not corr.rows.move[c]:
-                lineno = int(corr.rows.lineno[c])
-                raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
-                                    path=rep.corrected, lineno=lineno)
-            rep.lines_inserted += 1
+                         expanded=hs.expanded)
+        _pair_all(orig, corr, rep, o_reader, progress)
+        _count_the_rest(corr, rep)
         if progress is not None:
             progress(o_reader.count)
     finally:  # a child reading the corrected program stops here, whatever happened
@@ -1566,6 +1690,55 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     rep.lines_original = o_reader.count
     rep.lines_corrected = c_reader.count
     return rep
+
+
+def _pair_all(orig: _Tape, corr: _Tape, rep: DiffReport, o_reader: _Reader | _ForkedReader, progress) -> None:
+    """Pair every record of orig: windows at once (:func:`_pair_chunk`), a few records
+    one at a time (:func:`_pair_one`) after a window that stopped short."""
+    last_delta = (0.0, 0.0, 0.0)
+    slow = 0
+    window = CHUNK_LINES
+    shown = 0
+    while True:
+        orig.fill(1 if slow else CHUNK_LINES // 2)
+        if not orig.avail():
+            if orig.error is not None:
+                raise orig.error
+            break
+        if progress is not None and o_reader.count >= shown + CHUNK_LINES:
+            shown = o_reader.count
+            progress(shown)
+        if not slow:
+            w = min(orig.avail(), window)
+            corr.fill(w + w // 2 + SCAN_AHEAD + 1)
+            n, failed, last_delta = _pair_chunk(orig, corr, rep, last_delta, window)
+            if n and not failed:
+                # a longer window next; about twice what was paired when that stopped short
+                # of the window (more insertions in a stretch than MAX_LEVELS), so that the
+                # levels are not checked over a long window for a few records each time
+                window = min(CHUNK_LINES, 2 * window, max(MIN_WINDOW, 4 * n))
+                continue
+            # a record the rule pairs otherwise (a line inserted here): one at a time for a
+            # while, then a window about as long as the stretch that was paired at once
+            window = max(MIN_WINDOW, 2 * n)
+            slow = SLOW_STRETCH
+        last_delta = _pair_one(orig, corr, rep, last_delta)
+        slow -= 1
+
+
+def _count_the_rest(corr: _Tape, rep: DiffReport) -> None:
+    """The lines of corr after the last record of orig: inserted moves (an anchor there
+    has no counterpart)."""
+    while True:
+        c = corr.peek(0)
+        if c is None:
+            break
+        corr.pos += 1
+        if not corr.rows.move[c]:
+            lineno = int(corr.rows.lineno[c])
+            raise PostprocError(f"line {lineno} of the corrected program has no counterpart in the original",
+                                path=rep.corrected, lineno=lineno)
+        rep.lines_inserted += 1
 
 
 _G92 = re.compile(r"[Gg][ \t]*0*92(?![.0-9])")
