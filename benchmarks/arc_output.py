@@ -1,4 +1,4 @@
-"""Output size and path deviation of corrected programs with arcs (issue 12 figures).
+"""Output size and path deviation of corrected programs with arcs.
 
     python benchmarks/arc_output.py [PROGRAM[@X,Y,Z] ...]
 

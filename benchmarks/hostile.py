@@ -1,4 +1,4 @@
-"""Hostile-input survey (issue 32): run a checkout's CLI on >= 150 hostile or broken inputs
+"""Hostile-input survey: run a checkout's CLI on >= 150 hostile or broken inputs
 and classify each outcome.
 
 Every case is built in code in a fresh working directory (no large files are kept):

@@ -1,4 +1,4 @@
-"""Pin today's outputs of `correct`, and check that they stay as pinned (issue 29, "Output").
+"""Pin today's outputs of `correct`, and check that they stay as pinned.
 
 Every program of ../shared/corpus (real/, linuxcnc/, pygcode-linuxcnc/; the suffixes
 tests/conftest.py lists), every program of samples/, every golden case of tests/cases and
@@ -72,7 +72,7 @@ DEFAULT_DIR = ROOT / "tests" / "data" / "pinned"
 MANIFEST = "manifest.json"
 CORPUS_EXTS = frozenset({".nc", ".ngc", ".tap", ".gcode"})  # conftest.CORPUS_EXTS
 CALIBRATIONS = ("identity", "scale", "s500_static", "s500_parametric")
-#: calibrations whose outputs issue 29 never allows to change
+#: calibrations whose outputs must never change
 FROZEN = frozenset({"identity", "scale"})
 SCALE_K = 1.0002  # tests/test_oracle_scale.py K
 OFFSET_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")
@@ -350,7 +350,7 @@ def report(changes: list[tuple[str, str, str]], out=sys.stdout) -> None:
     frozen = [c for c in changes if calibration_of(c[0]) in FROZEN]
     other = [c for c in changes if calibration_of(c[0]) not in FROZEN]
     if frozen:
-        print(f"{len(frozen)} IDENTITY/SCALE output(s) changed (never allowed, issue 29):", file=out)
+        print(f"{len(frozen)} IDENTITY/SCALE output(s) changed (never allowed):", file=out)
         for key, a, b in frozen:
             print(f"  {key}\n    old {a}\n    new {b}", file=out)
     if other:

@@ -1,4 +1,4 @@
-"""How far `postproc correct` gets with the shop-program corpus of issue 31.
+"""How far `postproc correct` gets with the shop-program corpus (tests/data/shop).
 
 Corrects every program under tests/data/shop/<dialect>/ (sinumerik, g41, fadal, okuma) with
 calibrations/s500_static.json, through the command line as a user would run it, one process

@@ -33,7 +33,7 @@ the benchmark's temporary folder (as an installed package is), whatever
 PYTHONDONTWRITEBYTECODE says.
 
 (c), (d) and (e) are also given as ratios of (a)'s and (b)'s rates, and each figure
-that has a target in issue 13 is printed beside it with PASS or FAIL.
+that has a target is printed beside it with PASS or FAIL.
 
 Usage: python benchmarks/throughput.py [--lines N] [--memory-lines N] [--repeats R]
                                        [--seed S] [--json OUT] [--cases static,static1,parametric,diff]

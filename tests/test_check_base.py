@@ -1,5 +1,5 @@
 """Re-checks know their base: a calibration written by 'fit --base' records what was held
-fixed, and 'check' on it uses that record without flags (issue 30, item 4)."""
+fixed, and 'check' on it uses that record without flags."""
 
 import json
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""The plots of 'check' a metrologist reads at a glance (issue 30, item 8): one colour scale
+"""The plots of 'check' a metrologist reads at a glance: one colour scale
 across the residual map panels, counts per cell, a periodogram threshold that accounts for
 the effects still open, and a 3-D view of exaggerated error vectors with a printed scale."""
 

@@ -1,6 +1,5 @@
 """Every refusal that names a line names its column too (path:line:col); a refusal about
-a whole block or row points at its first character. And the smaller defects of issue 32
-item 9: diff refuses a correction above --max-correction, a calibrated volume beyond
+a whole block or row points at its first character. And: diff refuses a correction above --max-correction, a calibrated volume beyond
 100 m is refused."""
 
 from __future__ import annotations

@@ -137,7 +137,7 @@ def test_the_virtual_machine_reverses_on_commanded_motion_it_resolves(tmp_path):
     assert verify_program(prog, _Model(eng), []).runs[0].max_mm == pytest.approx(0.006, abs=1e-6)
 
 
-# Reversal of either sign on an arc program (issue 30): X reverses only where a move
+# Reversal of either sign on an arc program: X reverses only where a move
 # along X starts back (at X150 after the quarter arc and the Y move, at X60, at X30).
 ARCS_ALONG = ("G21 G90 G17\nG0 X20 Y50 Z60\nG1 Z50 F300\nG1 X150 F800\nG3 X180 Y80 I0 J30\nG1 Y120\n"
               "G1 X60\nG3 X30 Y90 I0 J-30\nG1 Y60\nG1 X100\nG0 Z60\nM2\n")

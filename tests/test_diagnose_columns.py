@@ -1,4 +1,4 @@
-"""Temperature, load and time columns are checked before they are used (issue 30, item 6):
+"""Temperature, load and time columns are checked before they are used:
 a column logged in few rows, or by sample and hold, is warned about with its count and
 interpolated in time where a time column exists; a fit that depends on it says so in the
 calibration's notes."""

@@ -1,5 +1,5 @@
 """False alarms of 'check' on clean campaigns, and the periodic search to a third of the
-travel (issue 30, item 7).
+travel.
 
 40 clean campaigns, 5 of each of the 8 shapes of :mod:`postproc.diagnose.vm` (random
 points, raster with dir=0 rows, planes, lines, diagonals, three tools, sparse, logged

@@ -1,7 +1,6 @@
-"""The measurement frame's registration and what a calibration keeps (issue 30, item 7:
-a ram sag's offset absorbed by the registration made the written file worse on the raw
-points, 7.14 -> 12.45 um, with no word). Campaigns from the virtual machine, the sag built
-by beam theory (postproc.diagnose.vm.ram_sag), never with a candidate's formula."""
+"""The measurement frame's registration and what a calibration keeps: a ram sag's offset
+taken by the registration must not make the written file worse on the raw points
+unannounced. Campaigns from the virtual machine, the sag built by beam theory (postproc.diagnose.vm.ram_sag), never with a candidate's formula."""
 
 from postproc.diagnose import vm
 from postproc.diagnose.refit import extend_calibration

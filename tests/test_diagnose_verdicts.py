@@ -1,5 +1,5 @@
 """Verdicts judged on held-out data, random and spatial splits, each naming its cause with
-its evidence in one line (issue 30, item 5). Campaigns from the virtual machine
+its evidence in one line. Campaigns from the virtual machine
 (postproc.diagnose.vm); errors outside the catalogue are written here, never with a
 candidate effect's own formula."""
 

@@ -1,4 +1,4 @@
-"""Dialects, the header every controller reads, and the output-safety holes of issue 11.
+"""Dialects, the header every controller reads, and the output's safety.
 
 The LinuxCNC limits are checked against LinuxCNC's own interpreter (``rs274`` from
 Debian's linuxcnc-uspace) when it is installed; the values tested without it are the

@@ -1,4 +1,4 @@
-"""Dialects are data (issue 29 item 3, STYLE 20): the code asks a Dialect for a fact and
+"""Dialects are data (STYLE 20): the code asks a Dialect for a fact and
 never tests a dialect's name; a new dialect is one entry of postproc.gcode.dialect."""
 
 import ast

@@ -1,4 +1,4 @@
-"""Okuma OSP programs (issue 31 item 3): the ``$NAME.SSB%`` header read alike by the
+"""Okuma OSP programs: the ``$NAME.SSB%`` header read alike by the
 expansion stage and the interpreter, and ``CALL O<name> [Q<n>]`` subprograms (ended by
 ``RTS``) expanded from the program's own file, the .SSB/.SUB/.LIB files beside it or on
 ``--subroutine-path``. The expected moves are worked out by hand from the Okuma OSP-P

@@ -1,4 +1,4 @@
-"""The Sinumerik 840D dialect (issue 31 item 2): what it reads, each construct with its
+"""The Sinumerik 840D dialect: what it reads, each construct with its
 motion worked out by hand, what it keeps byte for byte, and what it refuses by name.
 
 There is no open Sinumerik interpreter to compare with: the expected machine positions

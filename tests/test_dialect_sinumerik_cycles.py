@@ -1,5 +1,5 @@
-"""Sinumerik drilling and boring cycles CYCLE83, CYCLE85-CYCLE88 written as their moves
-(issue 31 item 2), each against the motion the SINUMERIK 840D Programming Guide Cycles
+"""Sinumerik drilling and boring cycles CYCLE83, CYCLE85-CYCLE88 written as their moves,
+each against the motion the SINUMERIK 840D Programming Guide Cycles
 (PGZ 11.02, chapter 2) defines for its parameters, worked out by hand; and corrected with
 a calibration, every step landing where the engine says. CYCLE84/CYCLE840 (tapping) are
 refused by name."""

@@ -1,5 +1,5 @@
 """No sign of a controller table comes from a default, and every export is read back
-by a model of its controller before anything is written (issue 30, "What must be true" 2).
+by a model of its controller before anything is written.
 Data: runs of the virtual machine (postproc.simulate.runs)."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""No input ends in an internal error (issue 32, item 5).
+"""No input ends in an internal error.
 
 Hypothesis writes programs (words, expressions, parameters, bounded loops of LinuxCNC
 and Fanuc, subprogram calls, canned cycles, junk) in every dialect, breaks calibrations
@@ -416,13 +416,13 @@ def test_fuzz_numeric_options(tmp_path_factory, option, value):
     except ValueError:
         number = None
     if (name, flag) in SLOW and number is not None and (abs(number) > 100 or 0 < abs(number) < 1e-3):
-        return  # a long run by design, bounded by the resource limits (issue 32, item 3)
+        return  # a long run by design, bounded by the resource limits
     tmp = tmp_path_factory.mktemp("o")
     args = base_args(tmp)[name]
     check(run(*args, flag, value))
 
 
-# -- internal errors found before the expression and limits bounds (issue 32, items 3 and 5) --
+# -- internal errors found before the expression and limits bounds --
 
 
 @pytest.mark.parametrize("line", ["G0 X[" + "[" * 3000 + "1" + "]" * 3000 + "] Y10 Z10",

@@ -1,4 +1,4 @@
-"""Hostile inputs that were accepted with exit 0, or hung, in the survey after issue 32
+"""Hostile inputs that were accepted with exit 0, or hung, in the hostile-input survey
 (benchmarks/hostile_after.json): each is refused with a documented exit code, naming its
 file (and line and column where there is one), and nothing is written."""
 

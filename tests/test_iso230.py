@@ -147,7 +147,7 @@ def test_warnings_for_even_spacing_and_order(tmp_path):
 
 
 def test_row_order_is_not_taken_as_visiting_order(tmp_path):
-    """Exporters sort rows by target, run or direction: without t no order warning (issue 30)."""
+    """Exporters sort rows by target, run or direction: without t no order warning."""
     lines = hand_lines()
     body = sorted(lines[3:], key=lambda ln: (ln.split(",")[3], float(ln.split(",")[1]), ln.split(",")[2]))
     res = evaluate(read_runs(write(tmp_path, lines[:3] + body)))["X"]
@@ -215,7 +215,7 @@ def test_format_runs_reads_back(tmp_path):
     assert_allclose(again.target_mm, runs.target_mm)
 
 
-# --- issue 30: completeness of the report (virtual-machine runs) ---------------------
+# --- completeness of the report (virtual-machine runs) ---------------------
 
 def _vm_runs(tmp_path, name="vm.csv", directions=(1, -1), temps=None, **kw):
     import sys

@@ -1,5 +1,5 @@
 """A word whose corrected value is within half an output step of its own keeps its text
-(issue 29, item 4): a calibration that is the identity only to 1e-14 leaves a program of
+: a calibration that is the identity only to 1e-14 leaves a program of
 15-decimal words byte-identical, in the run writer and the general writer alike, while a
 correction of half a step or more still rewrites the word (with the word's own decimals
 when it has more than the output's)."""

@@ -1,4 +1,4 @@
-"""Bounds on the work of one run (postproc.limits, issue 32 item 3): every hostile program
+"""Bounds on the work of one run (postproc.limits): every hostile program
 ends in a clean refusal that names its place, the bound and the option that raises it,
 and nothing is written. Also: subprogram lookups stay inside --subroutine-path (item 6)."""
 

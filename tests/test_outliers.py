@@ -1,4 +1,4 @@
-"""One outlier rule from check to the controller table (issue 30, "What must be true" 1).
+"""One outlier rule from check to the controller table.
 
 The data come from the virtual machine (postproc.simulate: runs of an X axis with a
 lead error and a reversal; the walkthrough's tracker campaign), with one gross reading

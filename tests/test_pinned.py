@@ -1,4 +1,4 @@
-"""Today's outputs stay as pinned (issue 29, "Output"): every golden case and sample, and
+"""Today's outputs stay as pinned: every golden case and sample, and
 the representative subset of the corpus (conftest.corpus_programs; every program with
 POSTPROC_FULL_CORPUS=1), corrected with each calibration of benchmarks/pin_outputs.py
 (identity, uniform scale, s500 static and parametric; a golden case also with its own

@@ -1,4 +1,4 @@
-"""The shape of the G-code lane (issue 29, item 5): in postproc/gcode/ no class over 400
+"""The shape of the G-code lane: in postproc/gcode/ no class over 400
 lines, no function over 80 lines and none with more than 8 parameters (``self`` and
 ``cls`` not counted). What does not meet it yet is listed in KNOWN with its size today:
 a listed size may only shrink, nothing new may join the list, and an entry that meets

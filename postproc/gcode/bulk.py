@@ -512,7 +512,7 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         v = (tk - shift[:, k]) / unit
         ov = block.ov[k][idx]
         dout = np.maximum(block.frac[k][idx], dec)
-        # a word within half an output step of its value keeps its text (issue 29, item 4)
+        # a word within half an output step of its value keeps its text
         changed = has & ~(np.abs(v - ov) < _HALF[np.minimum(dec, len(_HALF) - 1)])
         sel = np.flatnonzero(changed)
         nums = block.cols[_NUM[k]]

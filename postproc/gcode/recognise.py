@@ -1,7 +1,7 @@
 """What kind of program this is: a lathe's, or another controller's than the one chosen.
 
 postproc corrects milling machines. A lathe program is refused by name, with the words
-that marked it (issue 31 item 5), before a line is corrected: U/W words (incremental X/Z
+that marked it, before a line is corrected: U/W words (incremental X/Z
 of a Fanuc-style lathe), ``G50`` with S, X or Z (spindle clamp or coordinate setting),
 ``G7`` (LinuxCNC diameter mode), turning cycles ``G70``-``G76`` after ``G96`` (constant
 surface speed), or an arc in X and Z with centre words I and K in a program that never
