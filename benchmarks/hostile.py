@@ -1046,7 +1046,8 @@ add("io-stdin-dev-zero", lambda c: ["correct", "-", "-c", c.cal(), "-o", "out.nc
 
 # -- signals mid-run --------------------------------------------------------------------------
 
-LONG = ("G21 G90\nG0 X10 Y10 Z10\n#1=0\no100 while [#1 LT 3000000]\nG1 X20 Y20 F100\nG1 X10 Y10\n#1=[#1+1]\n"
+# a program that runs a while and stays within the output bound (800,000 lines of 1,000,450)
+LONG = ("G21 G90\nG0 X10 Y10 Z10\n#1=0\no100 while [#1 LT 400000]\nG1 X20 Y20 F100\nG1 X10 Y10\n#1=[#1+1]\n"
         "o100 endwhile\nM2\n")
 for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
     nm = sig.name[3:].lower()
