@@ -19,19 +19,19 @@ straightness. Parameters are the deflections per unit of load at the end of the 
 
 from __future__ import annotations
 
-from typing import Self
-
 import numpy as np
 
-from postproc.effects.base import AXES, AxisEffect, context_column
-from postproc.effects.straightness import MIN_DISTINCT_POSITIONS, MIN_HALF_TRAVEL_MM
-from postproc.errors import CalibrationError
+from postproc.effects.base import AXES, context_column
+from postproc.effects.straightness import AxisShape
 
 #: the context column of the load
 LOAD_COLUMN = "load"
 
 
-class LoadPosition(AxisEffect):
+class LoadPosition(AxisShape):
+    """A load times the shape of :class:`AxisShape`'s scaled position (its travel
+    and testability are that class's)."""
+
     kind = "loadpos"
     meaning = "deflection growing with the load times the position along an axis (a beam bending under the load)"
 
@@ -58,27 +58,8 @@ class LoadPosition(AxisEffect):
                  for c in "xyz"]
         return f"deflection per unit of load growing with {self.target} (at the end of travel) " + "; ".join(parts)
 
-    def untestable_reason(self, q, r, ctx) -> str | None:
-        why = super().untestable_reason(q, r, ctx)
-        if why:
-            return why
-        n = len(np.unique(np.round(np.asarray(q)[:, self.axis], 6)))
-        if n < MIN_DISTINCT_POSITIONS:
-            return f"only {n} distinct {self.target} positions"
-        return None
-
-    def prepare(self, q, r, ctx, resid) -> Self:
-        x = np.asarray(q)[:, self.axis]
-        lo, hi = float(np.min(x)), float(np.max(x))
-        return self.copy(config={"center_mm": 0.5 * (lo + hi),
-                                 "half_travel_mm": max(0.5 * (hi - lo), MIN_HALF_TRAVEL_MM)})
-
     def basis(self, q, r, ctx) -> np.ndarray:
-        c = float(self.config.get("center_mm", 0.0))
-        h = float(self.config.get("half_travel_mm", 1.0))
-        if h <= 0:
-            raise CalibrationError(f"effect {self.name} has no half_travel_mm > 0 in its config")
-        u = (q[:, self.axis] - c) / h
+        u = self.scaled_position(q)
         load = context_column(ctx, LOAD_COLUMN, len(q), self.name)
         B = np.zeros((len(q), 3, 6))
         for j in range(3):

@@ -33,6 +33,9 @@ class AxisShape(AxisEffect):
     over the travel in ``config``: what straightness and positioning share."""
 
     def untestable_reason(self, q, r, ctx) -> str | None:
+        why = super().untestable_reason(q, r, ctx)  # the context columns it needs, if any
+        if why:
+            return why
         n = len(np.unique(np.round(np.asarray(q)[:, self.axis], 6)))
         if n < MIN_DISTINCT_POSITIONS:
             return f"only {n} distinct {self.target} positions"
