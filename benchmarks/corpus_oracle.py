@@ -61,7 +61,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from conftest import polyline_distance  # noqa: E402
+from conftest import corpus_files, polyline_distance  # noqa: E402
 from corpus_speed import ABOVE, OFFSETS  # noqa: E402
 from corpus_speed import setup as calibrated_setup  # noqa: E402
 from oracle import RS274, machine_path, run_rs274, uses_inches, uses_nurbs  # noqa: E402
@@ -75,7 +75,6 @@ from postproc.gcode.pipeline import CorrectOptions, correct_text  # noqa: E402
 
 CORPUS = ROOT.parent / "shared" / "corpus"
 SOURCES = ("real", "linuxcnc", "pygcode-linuxcnc")
-EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 CASES = ("scale", "static", "parametric")
 CALIBRATIONS = {"static": ROOT / "calibrations" / "s500_static.json",
                 "parametric": ROOT / "calibrations" / "s500_parametric.json"}
@@ -91,13 +90,12 @@ _HOME_PARAM = {"G28": 5161, "G30": 5181}
 
 def programs(only: str) -> list[tuple[Path, int]]:
     out = []
-    for src in SOURCES:
-        for p in sorted((CORPUS / src).rglob("*")):
-            if not p.is_file() or p.suffix.lower() not in EXTS or only not in str(p.relative_to(CORPUS)):
-                continue
-            n = p.read_bytes().count(b"\n")  # as the test counts lines
-            if n > MAX_LINES:
-                out.append((p, n))
+    for p in corpus_files(SOURCES):
+        if only not in str(p.relative_to(CORPUS)):
+            continue
+        n = p.read_bytes().count(b"\n")  # as the test counts lines
+        if n > MAX_LINES:
+            out.append((p, n))
     return out
 
 

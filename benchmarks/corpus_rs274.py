@@ -28,7 +28,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 CORPUS = ROOT.parent / "shared" / "corpus"
 SOURCES = ("real", "linuxcnc", "pygcode-linuxcnc")
-EXTS = {".nc", ".ngc", ".tap", ".gcode"}
 MAX_LINES = 20_000
 CAL = "s500_parametric"
 
@@ -94,13 +93,12 @@ def run_one(job) -> dict:
 
 def programs():
     jobs, skipped = [], []
-    for src in SOURCES:
-        for p in sorted((CORPUS / src).rglob("*")):
-            if not p.is_file() or p.suffix.lower() not in EXTS:
-                continue
-            n = p.read_bytes().count(b"\n")
-            rel = str(p.relative_to(CORPUS))
-            (skipped if n > MAX_LINES else jobs).append((rel, n))
+    from conftest import corpus_files
+
+    for p in corpus_files(SOURCES):
+        n = p.read_bytes().count(b"\n")
+        rel = str(p.relative_to(CORPUS))
+        (skipped if n > MAX_LINES else jobs).append((rel, n))
     jobs.sort(key=lambda j: (j[1], j[0]))
     return jobs, skipped
 

@@ -70,7 +70,6 @@ SAMPLES = ROOT / "samples"
 CASES = ROOT / "tests" / "cases"
 DEFAULT_DIR = ROOT / "tests" / "data" / "pinned"
 MANIFEST = "manifest.json"
-CORPUS_EXTS = frozenset({".nc", ".ngc", ".tap", ".gcode"})  # conftest.CORPUS_EXTS
 CALIBRATIONS = ("identity", "scale", "s500_static", "s500_parametric")
 #: calibrations whose outputs must never change
 FROZEN = frozenset({"identity", "scale"})
@@ -100,12 +99,13 @@ def make_gencam(folder: Path) -> Path | None:
 def programs(corpus: bool = True, gencam: Path | None = None) -> list[tuple[str, Path]]:
     """(key prefix, path) of every program pinned: golden cases, samples, the corpus, then
     the gencam program when ``gencam`` (its path) is given."""
+    from conftest import CORPUS_EXTS, corpus_files
+
     out = [(f"cases/{p.name}", p) for p in sorted(CASES.glob("*.nc"))]
     out += [(f"samples/{p.relative_to(SAMPLES)}", p) for p in sorted(SAMPLES.rglob("*"))
             if p.is_file() and p.suffix.lower() in CORPUS_EXTS]
-    if corpus and CORPUS.is_dir():
-        out += [(f"corpus/{p.relative_to(CORPUS)}", p) for p in sorted(CORPUS.rglob("*"))
-                if p.is_file() and p.suffix.lower() in CORPUS_EXTS]
+    if corpus:
+        out += [(f"corpus/{p.relative_to(CORPUS)}", p) for p in corpus_files()]
     if gencam is not None:
         out.append((GENCAM_KEY, gencam))
     return out

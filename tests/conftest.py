@@ -322,12 +322,19 @@ def program_features(path: Path) -> tuple[frozenset[str], int, int]:
 
 
 @functools.lru_cache(maxsize=1)
+def corpus_files(sources: tuple[str, ...] | None = None) -> list[Path]:
+    """Every program file of the corpus (by suffix; empty without ../shared/corpus),
+    sorted; with ``sources``, those of each of these folders in turn."""
+    if not CORPUS.is_dir():
+        return []
+    roots = [CORPUS] if sources is None else [CORPUS / s for s in sources]
+    return [p for root in roots for p in sorted(root.rglob("*"))
+            if p.suffix.lower() in CORPUS_EXTS and p.is_file()]
+
+
 def _corpus_index() -> dict[Path, tuple[frozenset[str], int, int]]:
     """Every corpus program (by suffix) with its :func:`program_features`."""
-    if not CORPUS.is_dir():
-        return {}
-    paths = sorted(p for p in CORPUS.rglob("*") if p.suffix.lower() in CORPUS_EXTS and p.is_file())
-    return {p: program_features(p) for p in paths}
+    return {p: program_features(p) for p in corpus_files()}
 
 
 def representative(paths: list[Path], every_below: int = 0) -> list[Path]:
