@@ -1,7 +1,7 @@
 """Emitting corrected lines: splicing numbers, inserted lines, kept and linearised arcs.
 
-A mixin of :class:`postproc.gcode.pipeline.Corrector`: it uses the corrector's
-emitted position ``qe``, options, report and engine-call helpers.
+A mixin of :class:`postproc.gcode.writer.ChunkWriter`: it uses the writer's emitted
+position ``qe``, options, report and the planner's subdivision.
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import math
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -22,6 +21,7 @@ from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.framed import FrameView
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.lexer import Word
+from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.segment import (
     ArcSpec,
     Curve,
@@ -32,37 +32,6 @@ from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 from postproc.gcode.vplan import ArcHint, ArcMove, Plan
 
 Write = Callable[[str], object]  # writes one output line
-
-
-class _Options(Protocol):
-    """What the emitter reads of the corrector's options
-    (:class:`postproc.gcode.pipeline.CorrectOptions`, whose module imports this one)."""
-
-    @property
-    def tolerance_mm(self) -> float: ...
-    @property
-    def decimals(self) -> int | None: ...
-    @property
-    def dialect(self) -> str: ...
-
-
-class _Report(Protocol):
-    """The counts of the corrector's report (:class:`postproc.gcode.pipeline.CorrectReport`)
-    that the emitter keeps."""
-
-    moves: int
-    words_changed: int
-    lines_changed: int
-    lines_out: int
-    lines_inserted: int
-    takeups: int
-    arcs_kept: int
-    arcs_split: int
-    arcs_linearised: int
-
-
-_O = TypeVar("_O", bound=_Options)
-_R = TypeVar("_R", bound=_Report)
 
 
 def _arc_of(mv: ArcMove) -> Arc:
@@ -82,7 +51,7 @@ FIT_BUDGET = 0.95
 MIN_FEED_FRACTION = 1e-3
 
 
-def _unit_decimals(options: _Options, unit: float) -> int:
+def _unit_decimals(options: CorrectOptions, unit: float) -> int:
     if options.decimals is not None:
         return options.decimals
     return 5 if unit == MM_PER_INCH else 4
@@ -118,13 +87,12 @@ def _general_plan(hint: ArcHint) -> Plan:
     return lazy()
 
 
-class EmitterMixin(Generic[_O, _R]):
-    """Line emission for the corrector (see the module docstring); generic in the
-    corrector's options and report."""
+class EmitterMixin:
+    """Line emission for the writer (see the module docstring)."""
 
-    # the corrector's state that the emitter reads and updates
-    opt: _O
-    report: _R
+    # the writer's state that the emitter reads and updates
+    opt: CorrectOptions
+    report: CorrectReport
     path: str | None
     qe: list[float]  # emitted gauge position (what the controller will hold)
     emitted_motion: int | None
