@@ -96,11 +96,8 @@ class Corrector:
         # position and the approach directions from chunk to chunk
         self.planner = Planner(engine, options, self.report, self.interp.used_rotary, setup.context or {},
                                self.accept_residual_mm, start, path)
-        self.linear_exact = self.planner.linear_exact
-        self.bulk_plan = self.planner.bulk_plan
         self.cutter = cutter.Bound()  # compensated moves corrected so far and their bound
-        self.writer = ChunkWriter(options, self.report, self.planner, start, path)
-        self.writer.cutter = self.cutter  # a take-up is refused on a compensated move's line
+        self.writer = ChunkWriter(options, self.report, self.planner, start, self.cutter, path)
         self.reader = ChunkReader(self.interp, self.planner, options, self.report, path)
         self.cutter_known: cutter.Bound | None = None  # the whole program's, for the header (a second run)
 
@@ -116,6 +113,11 @@ class Corrector:
         self.planner.report = report
         self.writer.report = report
         self.reader.report = report
+
+    @property
+    def linear_exact(self) -> bool:
+        """An affine engine and no added map: every straight move stays one line."""
+        return self.planner.linear_exact
 
     # -- the run -----------------------------------------------------------------------
     @property

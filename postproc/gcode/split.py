@@ -93,9 +93,8 @@ Write = Callable[[str], object]
 # Attributes of a Corrector and its Interpreter that are the run's configuration (the
 # same in both processes by construction) or caches of pure functions, not state carried
 # from chunk to chunk. Everything else is compared.
-_CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "_report", "interp", "_decimals",
-                     "_long_line",
-                     "linear_exact", "bulk_plan", "accept_residual_mm", "expanded", "planner", "writer", "reader"})
+_CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "_report", "interp",
+                     "accept_residual_mm", "expanded", "planner", "writer", "reader"})
 _PLANNER_CONFIG = frozenset({"engine", "opt", "report", "path", "rotary", "setup_context", "accept_residual_mm",
                              "linear_exact", "bulk_plan"})
 _WRITER_CONFIG = frozenset({"opt", "report", "planner", "path", "_long_line", "_decimals", "cutter"})

@@ -88,7 +88,7 @@ class ChunkWriter(EmitterMixin):
     holds from one chunk to the next."""
 
     def __init__(self, options: CorrectOptions, report: CorrectReport, planner: Planner, start: Sequence[float],
-                 path: str | None = None) -> None:
+                 compensated: cutter.Bound, path: str | None = None) -> None:
         self.opt = options
         self.report = report
         self.planner = planner  # the engine calls of the arc fits' subdivision
@@ -102,7 +102,7 @@ class ChunkWriter(EmitterMixin):
         self._stored: dict[str, list[float]] = {}  # G28.1/G30.1: what the controller stored
         self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
         self._decimals: dict[float, int] = {}
-        self.cutter = cutter.Bound()  # the compensated moves (the corrector's, once it gives them)
+        self.cutter = compensated  # the compensated moves read (a take-up is refused on their lines)
 
     def _subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
                    ) -> list[tuple[FloatArray, FloatArray]]:
