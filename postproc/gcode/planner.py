@@ -114,10 +114,11 @@ class Planner(EngineCalls):
         return plans, hints
 
     def skip(self, tab: Table) -> None:
-        """What a chunk read but not corrected carries to the next, where the approach
-        directions are the nominal moves' own (no direction-dependent engine or added
-        map): the last nominal target and the direction each axis last moved in."""
-        if not (self.engine.direction_dependent or self.opt.added) and len(tab):
+        """What a chunk read but not corrected carries to the next: the last nominal
+        target and the direction each axis last moved in (the caller asks only where the
+        approach directions are the nominal moves' own: no direction-dependent engine or
+        added map)."""
+        if len(tab):
             self.approach(tab, arc_ends=False)
             self.prev_nominal = tab.q1[-1].copy()
             self.dirs = tab.dirs[-1].copy()
