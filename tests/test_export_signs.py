@@ -199,10 +199,67 @@ def test_fanuc_on_a_minus_l_to_zero_axis(tmp_path, reversal_mm):
 @pytest.mark.parametrize(("args", "words"), [
     (["-f", "fanuc", "--reference", "X=nan", "--return", "X=+"], "must be a finite number of mm"),
     (["-f", "fanuc", "--reference", "X=300", "--return", "X=up"], "the return direction is + or -"),
-    (["-f", "siemens", "--reference", "X=0", "--return", "X=+"], "--return and --parameters are Fanuc settings"),
-    (["-f", "linuxcnc", "--reference", "X=0"], "--reference applies to fanuc and siemens"),
+    (["-f", "siemens", "--reference", "X=0", "--return", "X=+"], "--return is a setting of fanuc tables; drop it for --format siemens"),
+    (["-f", "linuxcnc", "--reference", "X=0"], "--reference is a setting of fanuc and siemens tables"),
 ])
 def test_reference_options_are_checked(runs_cal, tmp_path, args, words):
     res = run("export", runs_cal, *args, "-o", tmp_path / "out")
     assert res.exit_code == 2, res.output
     assert words in res.stderr
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["-f", "beckhoff", "--step", "5"], "--step is a setting of linuxcnc and fanuc and siemens tables; drop it for "
+                                        "--format beckhoff"),
+    (["-f", "fanuc", "--reference", "X=0", "--return", "X=-", "--comp-type", "1"],
+     "--comp-type is a setting of linuxcnc tables"),
+    (["-f", "siemens", "--reference", "X=0", "--detection-unit", "0.5"], "--detection-unit is a setting of fanuc"),
+    (["-f", "beckhoff", "--axis-name", "X=X1"], "--axis-name is a setting of linuxcnc and fanuc and siemens"),
+])
+def test_a_setting_the_format_does_not_read_is_refused_not_ignored(runs_cal, tmp_path, args, words):
+    res = run("export", runs_cal, *args, "-o", tmp_path / "out")
+    assert res.exit_code == 2, res.output
+    assert words in res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_registered_format_is_built_with_the_settings(runs_cal, tmp_path, monkeypatch):
+    """A format is one registry entry and its builder: export calls the builder with the
+    settings it was given (the defaults filled by the builder, not by the command)."""
+    from postproc.cli import export as export_cli
+    from postproc.metrology.controllers import formats
+    from postproc.metrology.controllers.base import Export
+
+    seen = {}
+
+    def build(axis_errors, settings):
+        seen["axes"] = [e.axis for e in axis_errors]
+        seen["settings"] = settings
+        return Export({"table.txt": "X 0.0\n"})
+
+    monkeypatch.setattr(export_cli, "FORMATS", dict(formats.FORMATS))
+    module = type(formats)("postproc_test_table_format")
+    module.build = build
+    monkeypatch.setitem(__import__("sys").modules, "postproc_test_table_format", module)
+    export_cli.FORMATS["fanuc"] = formats.TableFormat("fanuc", "postproc_test_table_format:build",
+                                                      frozenset({"step", "reference", "detection_unit"}))
+    out = tmp_path / "t.txt"
+    res = run("export", runs_cal, "-f", "fanuc", "--step", "5", "--reference", "X=12.5", "--detection-unit", "0.1",
+              "-o", out)
+    assert res.exit_code == 0, res.output
+    assert out.read_text() == "X 0.0\n"
+    s = seen["settings"]
+    assert seen["axes"] == ["X"]
+    assert (s.step_mm, s.reference_mm, s.detection_unit_mm, s.return_direction) == (5.0, {"X": 12.5}, 0.0001, {})
+    res = run("export", runs_cal, "-f", "fanuc", "--return", "X=+", "-o", out)
+    assert res.exit_code == 2 and "--return is a setting of" in res.stderr
+
+
+def test_the_choices_are_the_registry():
+    from postproc.cli.export import export
+    from postproc.metrology.controllers.formats import FORMATS, SETTING_OPTIONS
+
+    fmt = next(p for p in export.params if p.name == "fmt")
+    assert list(fmt.type.choices) == list(FORMATS) == ["linuxcnc", "fanuc", "siemens", "beckhoff"]
+    flags = {o for p in export.params for o in p.opts}
+    assert set(SETTING_OPTIONS.values()) <= flags

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from postproc.cli.options import FiniteFloat
+from postproc.metrology.controllers.formats import FORMATS, SETTING_OPTIONS, Settings, TableFormat
 
 
 def _check_outliers(cal, cal_path: str, keep: bool) -> None:
@@ -33,10 +34,18 @@ def _check_outliers(cal, cal_path: str, keep: bool) -> None:
         click.echo(f"warning: kept (--keep-outliers): {o}", err=True)
 
 
-def _reference_settings(fmt: str, reference, return_direction, parameters) -> tuple[dict, dict]:
-    """--reference (mm) and --return (+1 / -1) by axis, checked against the format."""
+def _settings(fmt: TableFormat, given: dict, cal_name: str) -> Settings:
+    """The settings of ``export``'s options, checked: each one given must be read by the
+    format (a setting another format reads is refused, not ignored), --reference a
+    finite number of mm by axis, --return + or - by axis."""
+    refused = fmt.refused_options({k for k, v in given.items() if v not in (None, ())})
+    if refused:
+        setting = next(k for k, flag in SETTING_OPTIONS.items() if flag == refused[0])
+        takers = fmt.takers(setting)
+        raise click.UsageError(f"{refused[0]} is a setting of {' and '.join(takers) or 'no format'} tables; drop it "
+                               f"for --format {fmt.name}")
     refs_mm = {}
-    for a, v in _axis_map(reference, "--reference").items():
+    for a, v in _axis_map(given["reference"], "--reference").items():
         try:
             refs_mm[a] = float(v)
         except ValueError:
@@ -45,30 +54,15 @@ def _reference_settings(fmt: str, reference, return_direction, parameters) -> tu
             raise click.BadParameter(f"{a}={v}: the reference must be a finite number of mm, e.g. X=300",
                                      param_hint="--reference")
     returns = {}
-    for a, v in _axis_map(return_direction, "--return").items():
+    for a, v in _axis_map(given["return"], "--return").items():
         if v not in ("+", "-"):
             raise click.BadParameter(f"{a}={v}: the return direction is + or -", param_hint="--return")
         returns[a] = 1 if v == "+" else -1
-    if (return_direction or parameters) and fmt != "fanuc":
-        raise click.UsageError("--return and --parameters are Fanuc settings; drop them for --format " + fmt)
-    if reference and fmt not in ("fanuc", "siemens"):
-        raise click.UsageError(f"--reference applies to fanuc and siemens tables; drop it for --format {fmt}")
-    return refs_mm, returns
-
-
-def _read_parameter_tape(path, du: float, chosen, names, refs_mm: dict, returns: dict) -> None:
-    """Fill the reference and return direction of the axes the options left open from
-    the control's parameter tape (1240, 1006#5)."""
-    from postproc.metrology.controllers.fanuc import DEFAULT_AXIS_NUMBERS, read_reference_parameters
-
-    tape_refs, tape_dirs = read_reference_parameters(Path(path).read_text(encoding="utf-8-sig"), du, path=path)
-    numbers = {**DEFAULT_AXIS_NUMBERS, **names}
-    for e in chosen:
-        n = numbers[e.axis]
-        if e.axis not in refs_mm and n in tape_refs:
-            refs_mm[e.axis] = tape_refs[n]
-        if e.axis not in returns and n in tape_dirs:
-            returns[e.axis] = tape_dirs[n]
+    du = given["detection_unit"]
+    return Settings(step_mm=given["step"], reference_mm=refs_mm, return_direction=returns,
+                    parameters=given["parameters"], detection_unit_mm=None if du is None else du / 1000.0,
+                    comp_type=int(given["comp_type"] or 0), axis_names=_axis_map(given["axis_names"], "--axis-name"),
+                    name=cal_name)
 
 
 def _axis_map(values, what: str) -> dict[str, str]:
@@ -83,14 +77,14 @@ def _axis_map(values, what: str) -> dict[str, str]:
 
 @click.command()
 @click.argument("cal_path", metavar="CAL", type=click.Path(exists=True, dir_okay=False))
-@click.option("-f", "--format", "fmt", required=True, type=click.Choice(["linuxcnc", "fanuc", "siemens", "beckhoff"]),
+@click.option("-f", "--format", "fmt", required=True, type=click.Choice(list(FORMATS)),
               help="Controller table to write.")
 @click.option("-o", "--output", "output", required=True, type=click.Path(),
               help="Output: a directory for linuxcnc (one file per joint), else the file to write.")
 @click.option("--axis", "axes", multiple=True, type=click.Choice(["X", "Y", "Z"]),
               help="Axis to export (repeatable). Default: every axis the calibration measured.")
-@click.option("--comp-type", "comp_type", type=click.Choice(["0", "1"]), default="0", show_default=True,
-              help="LinuxCNC COMP_FILE_TYPE: 0 actual positions, 1 trims (nominal - actual).")
+@click.option("--comp-type", "comp_type", type=click.Choice(["0", "1"]), default=None,
+              help="LinuxCNC COMP_FILE_TYPE: 0 actual positions (the default), 1 trims (nominal - actual).")
 @click.option("--step", type=FiniteFloat(min=0), default=None, metavar="MM",
               help="Table spacing (fanuc, siemens; linuxcnc: resample instead of the calibration's own "
                    "positions). Default: the smallest spacing of the calibration's positions.")
@@ -104,8 +98,9 @@ def _axis_map(values, what: str) -> dict[str, str]:
               metavar="TAPE", help="Fanuc: the control's parameter tape; 1240 (reference position, detection "
                                    "units) and 1006#5 (return direction) of each axis, unless --reference/--return "
                                    "give them.")
-@click.option("--detection-unit", "detection_unit", type=FiniteFloat(min=0, min_open=True), default=1.0, show_default=True,
-              metavar="UM", help="Fanuc: detection unit in um (pitch data and interval are counted in it).")
+@click.option("--detection-unit", "detection_unit", type=FiniteFloat(min=0, min_open=True), default=None,
+              metavar="UM", help="Fanuc: detection unit in um (pitch data and interval are counted in it); "
+                                 "default 1.")
 @click.option("--axis-name", "axis_names", multiple=True, metavar="AXIS=NAME",
               help="Controller name of an axis: LinuxCNC joint number (default X=0,Y=1,Z=2), Fanuc axis "
                    "number (1,2,3), Siemens machine axis (X1,Y1,Z1).")
@@ -158,41 +153,22 @@ def export(cal_path, fmt, output, axes, comp_type, step, reference, return_direc
 
     from postproc.calfile import calibration_from_dict, load_calibration
     from postproc.fileio import atomic_write_text, atomic_write_texts
-    from postproc.metrology.controllers.axis import AxisErrors, default_step
+    from postproc.metrology.controllers.axis import AxisErrors
     from postproc.metrology.controllers.base import axis_order, remainder_dict
 
     cal = load_calibration(cal_path)
     _check_outliers(cal, cal_path, keep_outliers)
-    names = _axis_map(axis_names, "--axis-name")
-    refs_mm, returns = _reference_settings(fmt, reference, return_direction, parameters)
+    table = FORMATS[fmt]
+    settings = _settings(table, {"step": step, "reference": reference, "return": return_direction,
+                                 "parameters": parameters, "detection_unit": detection_unit, "comp_type": comp_type,
+                                 "axis_names": axis_names}, cal.name)
     chosen = [AxisErrors(cal, a) for a in axis_order(axes or "XYZ")]
     if not axes:
         chosen = [e for e in chosen if e.measured]
     if not chosen:
         raise click.UsageError("the calibration measured no axis: nothing to export (name one with --axis)")
-    if fmt == "linuxcnc":
-        from postproc.metrology.controllers.linuxcnc import export_linuxcnc
-
-        result = export_linuxcnc(chosen, comp_type=int(comp_type), step=step, joints=names)
-    elif fmt == "fanuc":
-        from postproc.metrology.controllers.fanuc import export_fanuc
-
-        du = detection_unit / 1000.0
-        interval = step if step is not None else max(du, round(min(default_step(e) for e in chosen) / du) * du)
-        if parameters:
-            _read_parameter_tape(parameters, du, chosen, names, refs_mm, returns)
-        result = export_fanuc(chosen, interval_mm=interval, detection_unit_mm=du, reference_mm=refs_mm,
-                              return_direction=returns, axis_numbers=names)
-    elif fmt == "siemens":
-        from postproc.metrology.controllers.siemens import export_siemens
-
-        result = export_siemens(chosen, step=step or min(default_step(e) for e in chosen), reference_mm=refs_mm,
-                                axis_names=names)
-    else:
-        from postproc.metrology.controllers.beckhoff import export_beckhoff
-
-        result = export_beckhoff(chosen, name=cal.name)
-    if fmt == "linuxcnc":
+    result = table.build(chosen, settings)
+    if table.folder:
         out_dir = Path(output)
         out_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_texts({out_dir / name: text for name, text in result.files.items()})

@@ -42,6 +42,7 @@ from postproc.calibration.tables import TablePart
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import AxisErrors
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.formats import Settings
 from postproc.metrology.controllers.roundtrip import check_round_trip
 
 #: Significant digits of the values written; a value read back agrees to this.
@@ -188,3 +189,8 @@ def _isg_part(block: list[tuple[int, str]], path: str) -> tuple[str, TablePart]:
         values[:, k] = a[:, j]
         measured[k] = True
     return axis, TablePart(x, values, measured, path)
+
+
+def from_settings(axis_errors: list[AxisErrors], s: Settings) -> Export:
+    """:func:`export_beckhoff` with ``export``'s settings (the registered builder)."""
+    return export_beckhoff(axis_errors, name=s.name)

@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 
 from postproc.errors import CalibrationError, MeasurementError
-from postproc.metrology.controllers.axis import WHOLE_STEPS_SLACK, AxisErrors
+from postproc.metrology.controllers.axis import WHOLE_STEPS_SLACK, AxisErrors, default_step
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.formats import Settings
 from postproc.metrology.controllers.roundtrip import check_round_trip
 
 #: Pitch error data numbers on the parameter tape start here (N10000 = point 0).
@@ -263,3 +265,25 @@ def fanuc_compensation(params, data, axis: str, detection_unit_mm: float = 0.001
     c_down = c_down - c_down[i_ref] + (against if return_direction > 0 else 0)
     unit = mag * detection_unit_mm
     return ks * interval * detection_unit_mm, c_up * unit, c_down * unit
+
+
+def from_settings(axis_errors: list[AxisErrors], s: Settings) -> Export:
+    """:func:`export_fanuc` with ``export``'s settings (the registered builder): the
+    detection unit 1 um unless given; the interval the calibration's smallest spacing in
+    whole detection units unless given; the reference and return direction of each axis
+    the options leave open read from the control's parameter tape (1240, 1006#5)."""
+    du = s.detection_unit_mm if s.detection_unit_mm is not None else 0.001
+    interval = s.step_mm if s.step_mm is not None else max(du, round(min(default_step(e) for e in axis_errors) / du) * du)
+    refs, returns = dict(s.reference_mm), dict(s.return_direction)
+    if s.parameters:
+        tape_refs, tape_dirs = read_reference_parameters(Path(s.parameters).read_text(encoding="utf-8-sig"), du,
+                                                         path=s.parameters)
+        numbers = {**DEFAULT_AXIS_NUMBERS, **s.axis_names}
+        for e in axis_errors:
+            n = numbers[e.axis]
+            if e.axis not in refs and n in tape_refs:
+                refs[e.axis] = tape_refs[n]
+            if e.axis not in returns and n in tape_dirs:
+                returns[e.axis] = tape_dirs[n]
+    return export_fanuc(axis_errors, interval_mm=interval, detection_unit_mm=du, reference_mm=refs,
+                        return_direction=returns, axis_numbers=s.axis_names)

@@ -28,6 +28,7 @@ import numpy as np
 from postproc.errors import CalibrationError, MeasurementError
 from postproc.metrology.controllers.axis import AxisErrors, equidistant, mm
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.formats import Settings
 from postproc.metrology.controllers.roundtrip import check_round_trip
 
 #: LinuxCNC's limit: 256 triplets per joint (ini-config, COMP_FILE).
@@ -117,3 +118,8 @@ def linuxcnc_loader(text: str, comp_type: int, path: str = "") -> tuple[np.ndarr
     a = np.array(rows)
     trim_f, trim_r = (a[:, 0] - a[:, 1], a[:, 0] - a[:, 2]) if comp_type == 0 else (a[:, 1], a[:, 2])
     return a[:, 0], -trim_f, -trim_r, errors
+
+
+def from_settings(axis_errors: list[AxisErrors], s: Settings) -> Export:
+    """:func:`export_linuxcnc` with ``export``'s settings (the registered builder)."""
+    return export_linuxcnc(axis_errors, comp_type=s.comp_type, step=s.step_mm, joints=s.axis_names)

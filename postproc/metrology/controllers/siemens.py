@@ -27,8 +27,9 @@ import re
 import numpy as np
 
 from postproc.errors import CalibrationError, MeasurementError
-from postproc.metrology.controllers.axis import AxisErrors, equidistant, mm
+from postproc.metrology.controllers.axis import AxisErrors, default_step, equidistant, mm
 from postproc.metrology.controllers.base import Export
+from postproc.metrology.controllers.formats import Settings
 from postproc.metrology.controllers.roundtrip import check_round_trip
 
 DEFAULT_AXIS_NAMES = {"X": "X1", "Y": "Y1", "Z": "Z1"}
@@ -114,3 +115,10 @@ def read_siemens(text: str, path: str = "") -> dict[str, tuple[np.ndarray, np.nd
         x = meta[ax]["_MIN"] + meta[ax]["_STEP"] * np.arange(n)
         out[ax] = (x, np.array([v[i] for i in range(n)]))
     return out
+
+
+def from_settings(axis_errors: list[AxisErrors], s: Settings) -> Export:
+    """:func:`export_siemens` with ``export``'s settings (the registered builder): the
+    table spacing defaults to the calibration's smallest."""
+    step = s.step_mm if s.step_mm is not None else min(default_step(e) for e in axis_errors)
+    return export_siemens(axis_errors, step=step, reference_mm=s.reference_mm, axis_names=s.axis_names)
