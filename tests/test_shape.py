@@ -15,9 +15,7 @@ MAX_FUNCTION_LINES = 80
 MAX_PARAMETERS = 8
 
 #: (file, qualified name, what) -> the size today. ``what``: "lines" or "parameters".
-KNOWN: dict[tuple[str, str, str], int] = {
-    ("expand.py", "_Expander", "lines"): 1106,
-}
+KNOWN: dict[tuple[str, str, str], int] = {}
 
 
 def _parameters(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
