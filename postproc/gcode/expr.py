@@ -34,6 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.gcode import numfmt
 
 # rs274ngc TOLERANCE_EQUAL (interp_internal.hh): EQ/NE compare within this.
 LINUXCNC_EQUAL_TOLERANCE = 0.0001
@@ -624,7 +625,8 @@ INTEGER_LETTERS = frozenset("DGHLMNOPT")
 
 
 def format_number(value: float, letter: str = "") -> str:
-    """Fixed point, no exponent, trailing zeros trimmed, at least one decimal digit.
+    """Fixed point, no exponent, trailing zeros trimmed, at least one decimal digit: the
+    writers' one formatter (:func:`postproc.gcode.numfmt.fmt`) at 15 significant digits.
 
     Whole values of :data:`INTEGER_LETTERS` are written as integers.
     """
@@ -632,7 +634,7 @@ def format_number(value: float, letter: str = "") -> str:
         raise ValueError(value)
     int_digits = len(str(int(abs(value)))) if abs(value) >= 1 else 0
     decimals = max(1, min(_MAX_DECIMALS, _SIGNIFICANT - int_digits))
-    text = f"{value:.{decimals}f}".rstrip("0")
+    text = numfmt.fmt(value, decimals).rstrip("0")
     if text.endswith("."):
         text += "0"
     if text.lstrip("-").strip("0.") == "":
