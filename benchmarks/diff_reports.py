@@ -27,9 +27,11 @@ Usage: python benchmarks/diff_reports.py --record DIR [--max-lines N] [--no-test
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import os
 import pickle
+import re
 import subprocess
 import sys
 import traceback
@@ -94,8 +96,21 @@ def _replay(record: dict, tmp: Path) -> str:
             srcs.append(data)
     if record.get("chunk_lines") and hasattr(compare, "CHUNK_LINES"):
         compare.CHUNK_LINES = record["chunk_lines"]  # as small as the test made it
+    kwargs = dict(record["kwargs"])
+    reading = {k: kwargs.pop(k) for k in ("dialect", "subroutine_path", "limits", "cycles") if k in kwargs}
+    if reading and "options" in inspect.signature(compare.compare_programs).parameters:
+        # (how the program is read, given as the options correct was given)
+        from postproc.gcode.options import CorrectOptions
+
+        if "subroutine_path" in reading:
+            reading["subroutine_path"] = tuple(reading["subroutine_path"])
+        if reading.get("limits") is None:
+            reading.pop("limits", None)
+        kwargs["options"] = CorrectOptions(**reading)
+    else:
+        kwargs.update(reading)
     try:
-        rep = compare.compare_programs(srcs[0], srcs[1], record["setup"], None, record["keep"], **record["kwargs"])
+        rep = compare.compare_programs(srcs[0], srcs[1], record["setup"], None, record["keep"], **kwargs)
     except Exception as exc:  # noqa: BLE001 - the error is the report
         return f"error {type(exc).__name__}: {exc}"
     finally:
@@ -188,6 +203,11 @@ def _reports(d: Path) -> dict[str, str]:
     return reports
 
 
+def _same_place(report: str) -> str:
+    """``report`` with the temporary folder its replayed pair was written to left out."""
+    return re.sub(r"/tmp/tmp[\w]+/", "<tmp>/", report)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = ap.add_mutually_exclusive_group(required=True)
@@ -215,7 +235,7 @@ def main() -> int:
     d = args.check
     before = json.loads((d / "reports.json").read_text())
     after = _reports(d)
-    differ = [k for k in before if after.get(k) != before[k]]
+    differ = [k for k in before if k not in after or _same_place(after[k]) != _same_place(before[k])]
     missing = [k for k in after if k not in before]
     for k in differ:
         print(f"DIFFERS: {k}")

@@ -232,7 +232,7 @@ def _interpreter_ends(text: str, setup: Setup) -> tuple[list[bool], list[tuple]]
     return moves, ends
 
 
-def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
+def test_diff_reads_in_bulk_the_end_points_the_interpreter_reads(monkeypatch):
     from postproc.gcode import compare
 
     rng = np.random.default_rng(11)
@@ -248,8 +248,8 @@ def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
-def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch):
-    # a tool change alone on its line stays in a stretch read as columns; the tool it
+def test_diff_reads_tool_changes_in_bulk_as_the_interpreter_does(monkeypatch):
+    # a tool change alone on its line stays in a run read in bulk; the tool it
     # loads is the one a later G43 without H takes
     from postproc.gcode import compare
 
@@ -264,10 +264,10 @@ def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch)
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
-def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_columns_as_the_interpreter_does(monkeypatch):
-    # a move that sets the tool length (G43 H..) starts a stretch of its own; axis words
-    # after the X, Y, Z run (the words correct adds: Z X Y) are read one by one; a line
-    # naming an axis twice is the interpreter's (which refuses it)
+def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_bulk_as_the_interpreter_does(monkeypatch):
+    # a move that sets the tool length (G43 H..) starts a run of its own; a line with axis
+    # words out of X, Y, Z order (the words correct adds: Z X Y) is the interpreter's, and
+    # a line naming an axis twice is refused with the interpreter's error
     from postproc.gcode import compare
 
     text = ("G21 G90 G54\nT1 M6\nG0 G43 H1 Z50 X1 Y2\nX10 Y10\nG1 Z-1 X11 Y12 F500\nY13 X12\n"
@@ -278,19 +278,17 @@ def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_columns_as_the_inte
     # the tool lengths along the program: 50, 60, 70, 0, 60 (G54 Z 30)
     assert [want_end[k][2] for k in (2, 6, 9, 10, 12)] == [130.0, 135.0, 120.0, 40.0, 101.0]
     keys = compare._Keys()
-    general = compare._Reader._general
     results = []
-    for chunk, columns in ((20_000, False), (20_000, True), (4, True), (1, True)):
+    for chunk, in_bulk in ((20_000, False), (20_000, True), (4, True), (1, True)):
         monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
         reader = compare._Reader(text, setup, keys)
-        if not columns:  # every line through the interpreter
-            monkeypatch.setattr(reader, "_chunk", lambda rows, reader=reader: general(reader, rows, 0, len(rows)))
+        reader._rd.use_bulk = in_bulk  # False: every line through the interpreter
         parts = list(reader.chunks())
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
         results.append(np.concatenate([p.keys for p in parts]))
     for got in results[1:]:
         np.testing.assert_array_equal(got, results[0])
-    # an axis named twice: refused with the interpreter's error, stretch or not
+    # an axis named twice: refused with the interpreter's error, in bulk or not
     for bad in ("X1 Z2 X3\n", "G0 G43 H1 Z5 Z6\n"):
         with pytest.raises(PostprocError, match="appears twice") as exc:
             list(compare._Reader("G21 G90 G54\nG0 X0 Y0 Z50\nX1\n" + bad, setup, compare._Keys()).chunks())
@@ -863,14 +861,15 @@ def test_diff_raises_a_failure_of_a_reading_child_and_leaves_no_child(monkeypatc
     src, dst, _text, _out = _written_pair(tmp_path, 5, 1500)
     monkeypatch.setattr(compare, "FORK_MIN_BYTES", 0)
     monkeypatch.setattr(compare, "CHUNK_LINES", 200)
-    chunk = compare._Reader._chunk
+    rows = compare._LineRows.rows
 
-    def failing(self, rows):
-        if rows.lineno[0] > 600:
+    def failing(self):
+        got = rows(self)
+        if len(got) and got.lineno[0] > 600:
             raise ValueError("reader bug")
-        return chunk(self, rows)
+        return got
 
-    monkeypatch.setattr(compare._Reader, "_chunk", failing)
+    monkeypatch.setattr(compare._LineRows, "rows", failing)
     with pytest.raises(ValueError, match="reader bug"):
         compare_programs(str(src), str(dst))
     assert multiprocessing.active_children() == []
