@@ -524,7 +524,7 @@ def test_diff_finds_the_header_after_blank_lines_and_reads_in_the_dialect(tmp_pa
     assert body == "\n%\nO1000\n" + "".join(out.splitlines(keepends=True)[3 + len(head):])
     with pytest.raises(PostprocError, match="G53 is not allowed in G91"):
         compare_programs(text, out)
-    d = compare_programs(text, out, dialect="haas")
+    d = compare_programs(text, out, options=CorrectOptions(dialect="haas"))
     assert d.header == "".join(head).strip()
     assert d.moves == rep.moves == 3
     assert d.lines_unchanged == len(text.splitlines()) - 3
@@ -690,7 +690,7 @@ def test_diff_reads_the_original_expanded_when_the_program_was_corrected_expande
     src, dst = tmp_path / "o1000.nc", tmp_path / "o1000_c.nc"
     src.write_text(text)
     dst.write_text(out)
-    d = compare_programs(str(src), str(dst), dialect="fanuc")
+    d = compare_programs(str(src), str(dst), options=CorrectOptions(dialect="fanuc"))
     assert d.expanded
     assert d.moves == rep.moves == 6
     assert d.lines_inserted == 0
@@ -719,8 +719,8 @@ def test_diff_reads_a_linuxcnc_subroutine_from_the_subroutine_path(tmp_path):
     src.write_text(text)
     dst.write_text(out)
     with pytest.raises(PostprocError):  # the subroutine is not found without its folder
-        compare_programs(str(src), str(dst), dialect="linuxcnc")
-    d = compare_programs(str(src), str(dst), dialect="linuxcnc", subroutine_path=[sub])
+        compare_programs(str(src), str(dst), options=CorrectOptions(dialect="linuxcnc"))
+    d = compare_programs(str(src), str(dst), options=CorrectOptions(dialect="linuxcnc", subroutine_path=(sub,)))
     assert d.moves == rep.moves == 4
     assert sorted(m.lineno for m in d.moved) == [2, 2, 2, 5]  # step.ngc's line 2, twice
     res = CliRunner().invoke(main, ["diff", str(src), str(dst), "--dialect", "linuxcnc",
@@ -784,6 +784,43 @@ def test_diff_reads_canned_cycles_as_correct_wrote_them_expanded(tmp_path):
     assert "CYCLES EXPANDED" in res.output
 
 
+def test_diff_cycles_expand_reads_a_program_without_its_header_as_correct_wrote_it(tmp_path):
+    # correct --cycles expand leaves out the G98/G99 retracts (the header records CYCLES
+    # EXPANDED); with the header removed, diff --cycles expand reads the cycles so, and
+    # the header's record stays the one read when there is a header
+    from postproc.gcode import emit
+
+    text = ("G21 G90 G17 G54\nG0 G43 H1 Z30\nG0 X20 Y20\nG98 G81 X20 Y20 Z-5 R2 F100\nX40\n"
+            "G99 G82 X60 Y20 Z-4 R2 P0.5\nG80\nG0 Z50\nM2\n")
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (50.0, 50.0, 100.0)}, tool_lengths={1: 20.0})
+    out, rep = correct_text(text, cal.engine, setup, CorrectOptions(cycles="expand"))
+    bare = "".join(line for line in out.splitlines(keepends=True) if not emit.is_header(line))
+    assert "POSTPROC" not in bare
+    src, dst, dst_bare = tmp_path / "p.ngc", tmp_path / "q.ngc", tmp_path / "r.ngc"
+    src.write_text(text)
+    dst.write_text(out)
+    dst_bare.write_text(bare)
+    want = compare_programs(str(src), str(dst))
+    assert want.moves == rep.moves
+    assert want.lines_inserted == 0
+    got = compare_programs(str(src), str(dst_bare), setup, options=CorrectOptions(cycles="expand"))
+    assert (got.moves, got.lines_inserted, got.n_moved) == (want.moves, 0, want.n_moved)
+    assert [m.delta_mm for m in got.moved] == [m.delta_mm for m in want.moved]
+    # without it, the retracts are looked for: the programs do not pair
+    with pytest.raises(PostprocError):
+        compare_programs(str(src), str(dst_bare), setup)
+    # the header's record, whatever --cycles says
+    assert compare_programs(str(src), str(dst), options=CorrectOptions(cycles="auto")).to_dict()["moved"] == want.to_dict()["moved"]
+    setup_args = ["--offset", "G54=X50,Y50,Z100", "--tool-length", "1=20"]
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst_bare), *setup_args, "--cycles", "expand", "--json"])
+    assert res.exit_code == 0, res.output
+    assert [(m["line"], m["delta_mm"]) for m in json.loads(res.output)["moved"]] == [
+        (m.lineno, [round(x, 7) for x in m.delta_mm]) for m in want.moved]
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst_bare), *setup_args])
+    assert res.exit_code != 0
+
+
 def test_diff_of_the_fanuc_sample_expanded_with_its_cycles():
     text = (ROOT / "samples" / "fanuc_drill.nc").read_text()
     cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
@@ -792,7 +829,7 @@ def test_diff_of_the_fanuc_sample_expanded_with_its_cycles():
     out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="fanuc", cycles="expand"))
     assert rep.expanded
     assert rep.cycles_expanded == 5
-    d = compare_programs(text, out, dialect="fanuc")
+    d = compare_programs(text, out, options=CorrectOptions(dialect="fanuc"))
     assert d.expanded
     assert d.moves == rep.moves + 2  # and the two G28 lines, written as they are
     assert d.lines_inserted == 0
@@ -889,7 +926,7 @@ def test_diff_pairs_sinumerik_words_written_name_equals_value():
     reports, outs = [], []
     for text in (with_expressions, with_numbers):
         out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="sinumerik"), path="p.mpf")
-        d = compare_programs(text, out, dialect="sinumerik")
+        d = compare_programs(text, out, options=CorrectOptions(dialect="sinumerik"))
         assert (d.moves, d.lines_inserted) == (rep.moves, rep.lines_inserted)
         reports.append(d)
         outs.append(out)

@@ -293,6 +293,9 @@ class HeaderSetup:
     variables: dict = field(default_factory=dict)  # machine-state variables given with --var
     expanded: bool = False  # the program was corrected expanded (subprograms, loops, macros written out)
     cycles_expanded: bool = False  # its canned cycles were written as their moves (--cycles expand)
+    # the header says whether the cycles were expanded (its rows of this form say so: a
+    # header without the CYCLES EXPANDED row is of a program corrected without it)
+    cycles_recorded: bool = False
 
 
 def _header_rows(source) -> list[str]:
@@ -319,6 +322,7 @@ def header_setup(source) -> HeaderSetup:
             _old_header_row(hs, row)
             continue
         words = row[len(emit.HEADER_PREFIX):].rstrip(")").strip().upper()
+        hs.cycles_recorded = True
         m = re.fullmatch(r"OFFSET (\S+) (.*)", words)
         if m:
             v = _axis_values(m.group(2))
@@ -1446,8 +1450,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
-                     keep: int | None = None, dialect: str = "generic",
-                     subroutine_path: Sequence[Path] = (), limits: Limits | None = None) -> DiffReport:
+                     keep: int | None = None, options: CorrectOptions | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1455,19 +1458,24 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     largest are kept and memory is bounded). ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates. ``progress(n)``, if given, is called with the number of
-    lines of the original read so far, after each chunk. ``dialect`` is the controller
-    both are read for, as ``correct`` was given it (G53 in G91, comments, ...).
+    lines of the original read so far, after each chunk. ``options`` are those
+    ``correct`` was given, of which the ones that say how a program is read count: the
+    dialect both are read in (G53 in G91, comments, ...), the subroutine path, the limits
+    and the canned cycles' mode.
 
     When the corrected program's header says it was corrected expanded (subprograms,
     loops, macros written out), the original is read expanded the same way (its external
-    subroutines looked up on ``subroutine_path``, as ``correct`` was given it); its
-    blocks are then numbered by their source lines, a subprogram's line once per call.
-    Each canned cycle block of both programs is read as the moves ``correct`` writes for
-    it when it expands it (whatever ``--cycles`` was: with ``auto`` it keeps some and
-    expands others), their G98/G99 retracts kept unless the header records ``CYCLES
-    EXPANDED``.
+    subroutines looked up on the subroutine path); its blocks are then numbered by their
+    source lines, a subprogram's line once per call. Each canned cycle block of both
+    programs is read as the moves ``correct`` writes for it when it expands it (whatever
+    ``--cycles`` was: with ``auto`` it keeps some and expands others), their G98/G99
+    retracts kept unless the program was corrected with ``--cycles expand``: as its
+    header records (``CYCLES EXPANDED``), or, when it has no header saying so (left out,
+    or of the one-line form of earlier versions), as ``options.cycles`` says.
     """
-    reading = _ReadOptions(dialect=dialect, subroutine_path=tuple(Path(p) for p in subroutine_path), limits=limits)
+    opt = options or CorrectOptions()
+    reading = _ReadOptions(dialect=opt.dialect, subroutine_path=tuple(Path(p) for p in opt.subroutine_path),
+                           limits=opt.limits, cycle_retract=opt.cycles != "expand")
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
@@ -1486,7 +1494,8 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     hs = header_setup(corrected)
     setup = setup_from_header(hs, setup)
     keys = _Keys()
-    reading = dataclasses.replace(reading, cycle_retract=not hs.cycles_expanded)
+    if hs.cycles_recorded:
+        reading = dataclasses.replace(reading, cycle_retract=not hs.cycles_expanded)
     readers = (_Reader(original, setup, keys, dataclasses.replace(reading, expand=hs.expanded)),
                _Reader(corrected, setup, keys, dataclasses.replace(reading, drop_header=True, subroutine_path=())))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)
