@@ -248,6 +248,34 @@ def test_diff_reads_in_bulk_the_end_points_the_interpreter_reads(monkeypatch):
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
+def test_diff_lets_go_of_each_block_it_reads(monkeypatch):
+    # a run refers to its block and the block to its runs; diff reads with the cyclic
+    # garbage collector off, so each block read is let go of by hand (memory stays bounded)
+    import gc
+
+    from postproc.gcode import bulk, compare
+
+    monkeypatch.setattr(compare, "CHUNK_LINES", 400)
+    monkeypatch.setattr(compare, "BLOCK_LINES", 100)
+    text = _cam_program(np.random.default_rng(5), 3000)
+    was = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        reader = compare._Reader(text, Setup(offsets={"G54": (10.0, 20.0, 30.0)}), compare._Keys())
+        chunks = reader.chunks()
+        for k, rows in enumerate(chunks):
+            assert len(rows)
+            if k == 3:
+                break
+        chunks.close()
+        held = [o for o in gc.get_objects() if type(o) is bulk.Block]
+        assert len(held) <= 1, len(held)
+    finally:
+        if was:
+            gc.enable()
+
+
 def test_diff_reads_tool_changes_in_bulk_as_the_interpreter_does(monkeypatch):
     # a tool change alone on its line stays in a run read in bulk; the tool it
     # loads is the one a later G43 without H takes

@@ -75,6 +75,9 @@ PLAUSIBLE_MM = 1.0
 FAR_SCAN = 512
 # Lines read at a time from each program.
 CHUNK_LINES = 20_000
+# Lines the reader scans at a time (a chunk's lines in blocks of this many: the scanner's
+# columns of a smaller block stay in the processor's caches).
+BLOCK_LINES = 5_000
 # Corrected records looked at past the window for the anchor that ends each scan.
 SCAN_AHEAD = 256
 # After a record that had to be paired one at a time, this many are paired so before
@@ -620,6 +623,7 @@ class _LineRows(LineReader[_Record]):
             q[inert] = np.nan
             end[dst] = q
             keys[dst] = self._run_keys(blk, src.tolist())
+            blk.runs = []  # (each run refers to its block: let go of both, the collector is off)
         entries.clear()
         self.interp.comp_moves = []  # (those of cutter compensation: the corrector's to bound)
         return _Rows(lines, lineno, move, end, keys)
@@ -710,7 +714,12 @@ class _Reader:
             yield from self._expanded_chunks(it)
             return
         for lines in iter(lambda: list(islice(it, CHUNK_LINES)), []):
-            yield from self._read(partial(rd.block, lines))
+            yield from self._read(partial(self._blocks, lines))
+
+    def _blocks(self, lines: list[str]) -> None:
+        """Read a chunk's lines, :data:`BLOCK_LINES` at a time."""
+        for k in range(0, len(lines), BLOCK_LINES):
+            self._rd.block(lines[k:k + BLOCK_LINES])
 
     def _expanded_chunks(self, lines: Iterator[str]):
         """:meth:`chunks` of the program as executed (:func:`postproc.gcode.expand.expand`)."""
