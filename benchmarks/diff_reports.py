@@ -7,8 +7,9 @@ and with s500_static.json and ``cycles="expand"`` too (programs correct refuses 
 out). For each pair the three reports of ``postproc diff`` (text, ``--all``, ``--json``),
 or the error it ends with, are kept. The pairs the diff tests build
 (tests/test_diff.py and the other tests calling ``compare_programs``) are captured while
-those tests run (``--tests``: pytest with this module as a plugin), their inputs kept,
-and their reports (``DiffReport.to_dict()``, or the error) kept too.
+those tests run (pytest with this module as a plugin; ``--no-tests`` leaves them out),
+their inputs kept, and their reports (``DiffReport.to_dict()``, or the error) kept too;
+a report is compared with the temporary folder its pair was written to left out.
 
   --record DIR   correct the programs into DIR/pairs, capture the test pairs into
                  DIR/tests, and write every report into DIR/reports.json
