@@ -68,7 +68,7 @@ def run(path: Path, lines: int, cal_name: str, engine, suspect_mm: float, tmp: P
         return row
     t0 = time.perf_counter()
     try:
-        rep = compare_programs(path, out, keep=1, dialect=dialect)
+        rep = compare_programs(path, out, keep=1, options=CorrectOptions(dialect=dialect))
     except PostprocError as exc:
         row.update(verdict="FAIL", reason="diff: " + str(exc).splitlines()[0][-110:])
         return row

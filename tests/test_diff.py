@@ -232,7 +232,7 @@ def _interpreter_ends(text: str, setup: Setup) -> tuple[list[bool], list[tuple]]
     return moves, ends
 
 
-def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
+def test_diff_reads_in_bulk_the_end_points_the_interpreter_reads(monkeypatch):
     from postproc.gcode import compare
 
     rng = np.random.default_rng(11)
@@ -248,8 +248,36 @@ def test_diff_columns_read_the_end_points_the_interpreter_reads(monkeypatch):
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
-def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch):
-    # a tool change alone on its line stays in a stretch read as columns; the tool it
+def test_diff_lets_go_of_each_block_it_reads(monkeypatch):
+    # a run refers to its block and the block to its runs; diff reads with the cyclic
+    # garbage collector off, so each block read is let go of by hand (memory stays bounded)
+    import gc
+
+    from postproc.gcode import bulk, compare
+
+    monkeypatch.setattr(compare, "CHUNK_LINES", 400)
+    monkeypatch.setattr(compare, "BLOCK_LINES", 100)
+    text = _cam_program(np.random.default_rng(5), 3000)
+    was = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        reader = compare._Reader(text, Setup(offsets={"G54": (10.0, 20.0, 30.0)}), compare._Keys())
+        chunks = reader.chunks()
+        for k, rows in enumerate(chunks):
+            assert len(rows)
+            if k == 3:
+                break
+        chunks.close()
+        held = [o for o in gc.get_objects() if type(o) is bulk.Block]
+        assert len(held) <= 1, len(held)
+    finally:
+        if was:
+            gc.enable()
+
+
+def test_diff_reads_tool_changes_in_bulk_as_the_interpreter_does(monkeypatch):
+    # a tool change alone on its line stays in a run read in bulk; the tool it
     # loads is the one a later G43 without H takes
     from postproc.gcode import compare
 
@@ -264,10 +292,10 @@ def test_diff_reads_tool_changes_in_columns_as_the_interpreter_does(monkeypatch)
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
-def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_columns_as_the_interpreter_does(monkeypatch):
-    # a move that sets the tool length (G43 H..) starts a stretch of its own; axis words
-    # after the X, Y, Z run (the words correct adds: Z X Y) are read one by one; a line
-    # naming an axis twice is the interpreter's (which refuses it)
+def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_bulk_as_the_interpreter_does(monkeypatch):
+    # a move that sets the tool length (G43 H..) starts a run of its own; a line with axis
+    # words out of X, Y, Z order (the words correct adds: Z X Y) is the interpreter's, and
+    # a line naming an axis twice is refused with the interpreter's error
     from postproc.gcode import compare
 
     text = ("G21 G90 G54\nT1 M6\nG0 G43 H1 Z50 X1 Y2\nX10 Y10\nG1 Z-1 X11 Y12 F500\nY13 X12\n"
@@ -278,19 +306,17 @@ def test_diff_reads_g43_lines_and_axis_words_in_any_order_in_columns_as_the_inte
     # the tool lengths along the program: 50, 60, 70, 0, 60 (G54 Z 30)
     assert [want_end[k][2] for k in (2, 6, 9, 10, 12)] == [130.0, 135.0, 120.0, 40.0, 101.0]
     keys = compare._Keys()
-    general = compare._Reader._general
     results = []
-    for chunk, columns in ((20_000, False), (20_000, True), (4, True), (1, True)):
+    for chunk, in_bulk in ((20_000, False), (20_000, True), (4, True), (1, True)):
         monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
         reader = compare._Reader(text, setup, keys)
-        if not columns:  # every line through the interpreter
-            monkeypatch.setattr(reader, "_chunk", lambda rows, reader=reader: general(reader, rows, 0, len(rows)))
+        reader._rd.use_bulk = in_bulk  # False: every line through the interpreter
         parts = list(reader.chunks())
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
         results.append(np.concatenate([p.keys for p in parts]))
     for got in results[1:]:
         np.testing.assert_array_equal(got, results[0])
-    # an axis named twice: refused with the interpreter's error, stretch or not
+    # an axis named twice: refused with the interpreter's error, in bulk or not
     for bad in ("X1 Z2 X3\n", "G0 G43 H1 Z5 Z6\n"):
         with pytest.raises(PostprocError, match="appears twice") as exc:
             list(compare._Reader("G21 G90 G54\nG0 X0 Y0 Z50\nX1\n" + bad, setup, compare._Keys()).chunks())
@@ -526,7 +552,7 @@ def test_diff_finds_the_header_after_blank_lines_and_reads_in_the_dialect(tmp_pa
     assert body == "\n%\nO1000\n" + "".join(out.splitlines(keepends=True)[3 + len(head):])
     with pytest.raises(PostprocError, match="G53 is not allowed in G91"):
         compare_programs(text, out)
-    d = compare_programs(text, out, dialect="haas")
+    d = compare_programs(text, out, options=CorrectOptions(dialect="haas"))
     assert d.header == "".join(head).strip()
     assert d.moves == rep.moves == 3
     assert d.lines_unchanged == len(text.splitlines()) - 3
@@ -692,7 +718,7 @@ def test_diff_reads_the_original_expanded_when_the_program_was_corrected_expande
     src, dst = tmp_path / "o1000.nc", tmp_path / "o1000_c.nc"
     src.write_text(text)
     dst.write_text(out)
-    d = compare_programs(str(src), str(dst), dialect="fanuc")
+    d = compare_programs(str(src), str(dst), options=CorrectOptions(dialect="fanuc"))
     assert d.expanded
     assert d.moves == rep.moves == 6
     assert d.lines_inserted == 0
@@ -721,8 +747,8 @@ def test_diff_reads_a_linuxcnc_subroutine_from_the_subroutine_path(tmp_path):
     src.write_text(text)
     dst.write_text(out)
     with pytest.raises(PostprocError):  # the subroutine is not found without its folder
-        compare_programs(str(src), str(dst), dialect="linuxcnc")
-    d = compare_programs(str(src), str(dst), dialect="linuxcnc", subroutine_path=[sub])
+        compare_programs(str(src), str(dst), options=CorrectOptions(dialect="linuxcnc"))
+    d = compare_programs(str(src), str(dst), options=CorrectOptions(dialect="linuxcnc", subroutine_path=(sub,)))
     assert d.moves == rep.moves == 4
     assert sorted(m.lineno for m in d.moved) == [2, 2, 2, 5]  # step.ngc's line 2, twice
     res = CliRunner().invoke(main, ["diff", str(src), str(dst), "--dialect", "linuxcnc",
@@ -786,6 +812,43 @@ def test_diff_reads_canned_cycles_as_correct_wrote_them_expanded(tmp_path):
     assert "CYCLES EXPANDED" in res.output
 
 
+def test_diff_cycles_expand_reads_a_program_without_its_header_as_correct_wrote_it(tmp_path):
+    # correct --cycles expand leaves out the G98/G99 retracts (the header records CYCLES
+    # EXPANDED); with the header removed, diff --cycles expand reads the cycles so, and
+    # the header's record stays the one read when there is a header
+    from postproc.gcode import emit
+
+    text = ("G21 G90 G17 G54\nG0 G43 H1 Z30\nG0 X20 Y20\nG98 G81 X20 Y20 Z-5 R2 F100\nX40\n"
+            "G99 G82 X60 Y20 Z-4 R2 P0.5\nG80\nG0 Z50\nM2\n")
+    cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
+    setup = Setup(offsets={"G54": (50.0, 50.0, 100.0)}, tool_lengths={1: 20.0})
+    out, rep = correct_text(text, cal.engine, setup, CorrectOptions(cycles="expand"))
+    bare = "".join(line for line in out.splitlines(keepends=True) if not emit.is_header(line))
+    assert "POSTPROC" not in bare
+    src, dst, dst_bare = tmp_path / "p.ngc", tmp_path / "q.ngc", tmp_path / "r.ngc"
+    src.write_text(text)
+    dst.write_text(out)
+    dst_bare.write_text(bare)
+    want = compare_programs(str(src), str(dst))
+    assert want.moves == rep.moves
+    assert want.lines_inserted == 0
+    got = compare_programs(str(src), str(dst_bare), setup, options=CorrectOptions(cycles="expand"))
+    assert (got.moves, got.lines_inserted, got.n_moved) == (want.moves, 0, want.n_moved)
+    assert [m.delta_mm for m in got.moved] == [m.delta_mm for m in want.moved]
+    # without it, the retracts are looked for: the programs do not pair
+    with pytest.raises(PostprocError):
+        compare_programs(str(src), str(dst_bare), setup)
+    # the header's record, whatever --cycles says
+    assert compare_programs(str(src), str(dst), options=CorrectOptions(cycles="auto")).to_dict()["moved"] == want.to_dict()["moved"]
+    setup_args = ["--offset", "G54=X50,Y50,Z100", "--tool-length", "1=20"]
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst_bare), *setup_args, "--cycles", "expand", "--json"])
+    assert res.exit_code == 0, res.output
+    assert [(m["line"], m["delta_mm"]) for m in json.loads(res.output)["moved"]] == [
+        (m.lineno, [round(x, 7) for x in m.delta_mm]) for m in want.moved]
+    res = CliRunner().invoke(main, ["diff", str(src), str(dst_bare), *setup_args])
+    assert res.exit_code != 0
+
+
 def test_diff_of_the_fanuc_sample_expanded_with_its_cycles():
     text = (ROOT / "samples" / "fanuc_drill.nc").read_text()
     cal = load_calibration(ROOT / "calibrations" / "s500_static.json")
@@ -794,7 +857,7 @@ def test_diff_of_the_fanuc_sample_expanded_with_its_cycles():
     out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="fanuc", cycles="expand"))
     assert rep.expanded
     assert rep.cycles_expanded == 5
-    d = compare_programs(text, out, dialect="fanuc")
+    d = compare_programs(text, out, options=CorrectOptions(dialect="fanuc"))
     assert d.expanded
     assert d.moves == rep.moves + 2  # and the two G28 lines, written as they are
     assert d.lines_inserted == 0
@@ -863,14 +926,15 @@ def test_diff_raises_a_failure_of_a_reading_child_and_leaves_no_child(monkeypatc
     src, dst, _text, _out = _written_pair(tmp_path, 5, 1500)
     monkeypatch.setattr(compare, "FORK_MIN_BYTES", 0)
     monkeypatch.setattr(compare, "CHUNK_LINES", 200)
-    chunk = compare._Reader._chunk
+    rows = compare._LineRows.rows
 
-    def failing(self, rows):
-        if rows.lineno[0] > 600:
+    def failing(self):
+        got = rows(self)
+        if len(got) and got.lineno[0] > 600:
             raise ValueError("reader bug")
-        return chunk(self, rows)
+        return got
 
-    monkeypatch.setattr(compare._Reader, "_chunk", failing)
+    monkeypatch.setattr(compare._LineRows, "rows", failing)
     with pytest.raises(ValueError, match="reader bug"):
         compare_programs(str(src), str(dst))
     assert multiprocessing.active_children() == []
@@ -890,7 +954,7 @@ def test_diff_pairs_sinumerik_words_written_name_equals_value():
     reports, outs = [], []
     for text in (with_expressions, with_numbers):
         out, rep = correct_text(text, cal.engine, setup, CorrectOptions(dialect="sinumerik"), path="p.mpf")
-        d = compare_programs(text, out, dialect="sinumerik")
+        d = compare_programs(text, out, options=CorrectOptions(dialect="sinumerik"))
         assert (d.moves, d.lines_inserted) == (rep.moves, rep.lines_inserted)
         reports.append(d)
         outs.append(out)

@@ -37,9 +37,11 @@ def diff(original, corrected, as_json, show_all, reading, setup, correcting):
     its header says) is compared with its original read expanded the same way;
     blocks are then numbered by their source lines. A block moved by more than
     --max-correction is named after the report and the exit code is 5, as
-    correct would have refused it. Give --dialect,
-    --subroutine-path and --cycles as given to correct (the header's record of
-    expanded cycles is used when it has one).
+    correct would have refused it. Give --dialect and --subroutine-path as given
+    to correct. Canned cycles are compared as the moves correct writes for them;
+    their G98/G99 retracts are left out when the program was corrected with
+    --cycles expand, as its header says: give --cycles expand only for a
+    corrected program whose header was removed.
 
     Example:
 
@@ -61,11 +63,12 @@ def diff(original, corrected, as_json, show_all, reading, setup, correcting):
         # the text report lists the largest moved blocks only: keep just those (memory
         # then does not grow with the program); --all and --json list every one
         keep = None if (as_json or show_all) else LIST_MOVED
+        from postproc.gcode.options import CorrectOptions
         from postproc.gcode.recognise import dialect_of_file
 
-        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep,
-                               dialect=dialect_of_file(original, reading.dialect.lower()),
-                               subroutine_path=reading.subroutine_path, limits=reading.limits())
+        given = CorrectOptions(**{**reading.correct_options(),
+                                  "dialect": dialect_of_file(original, reading.dialect.lower())})
+        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, options=given)
     finally:
         if progress is not None:
             click.echo("", err=True)

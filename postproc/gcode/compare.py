@@ -14,15 +14,13 @@ G53 blocks, whose words are machine coordinates. Offsets and tool lengths neithe
 nor recorded count as zero.
 
 Both programs are read in chunks of lines, and memory does not grow with their length
-(apart from the compact list of moved blocks, unless only the largest are kept). A large
-program file is read by a forked child process of its own while this one pairs
-(:class:`_ForkedReader`; the same chunks, keys and errors). In a chunk, the stretches of plain
-absolute moves (N, G0 to G3, X/Y/Z, I/J/K/R and F words only, in a simple modal state)
-and of lines that change nothing (S, M3, M8 and the like, comments) are read as columns:
-a move's end point is its words, carried forward where a line does not name an axis.
-Such arcs are not checked again (``correct`` checks every arc it writes; ``verify``
-runs the program). Every other line goes through the interpreter, which carries the
-modal state from one stretch to the next. Pairing takes a chunk at a time: the stretches
+(apart from the compact list of moved blocks, unless only the largest are kept). They are
+read by the reader ``correct`` reads with (:class:`postproc.gcode.reader.LineReader`):
+runs of plain lines in bulk (:mod:`postproc.gcode.bulk`), every other line through the
+interpreter, which carries the modal state from one run to the next; each line is kept
+as its text, line number, end point and pairing keys (:class:`_Rows`). A large program
+file is read by a forked child process of its own while this one pairs
+(:class:`_ForkedReader`; the same chunks, keys and errors). Pairing takes a chunk at a time: the stretches
 with as many moves in both at once; in a stretch with lines inserted, the moves before
 and after each insertion at once (the nearest-end-point rule checked for all of them),
 the move at the insertion one at a time. The rule looks at the corrected lines up to the
@@ -46,27 +44,25 @@ import operator
 import os
 import re
 from array import array
-from collections.abc import Iterator, Sequence
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from itertools import islice
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 
 from postproc.errors import PostprocError
 from postproc.fileio import read_lines
-from postproc.gcode import emit, forking
+from postproc.gcode import bulk, emit, forking
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.lexer import (
-    NUMBER_POSSESSIVE_RE,
-    QUIET_LINE_RE,
-    TOOL_LENGTH_RE,
-    TOOL_LINE_RE,
-    Word,
-)
+from postproc.gcode.lexer import Word
+from postproc.gcode.moves import Move
+from postproc.gcode.options import CorrectOptions
 from postproc.gcode.path import Setup, iter_source_lines, open_source
-from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
+from postproc.gcode.reader import LineReader
 from postproc.limits import Limits
 
 # Pairing stops after this many candidate lines that are farther than the best one,
@@ -79,6 +75,9 @@ PLAUSIBLE_MM = 1.0
 FAR_SCAN = 512
 # Lines read at a time from each program.
 CHUNK_LINES = 20_000
+# Lines the reader scans at a time (a chunk's lines in blocks of this many: the scanner's
+# columns of a smaller block stay in the processor's caches).
+BLOCK_LINES = 5_000
 # Corrected records looked at past the window for the anchor that ends each scan.
 SCAN_AHEAD = 256
 # After a record that had to be paired one at a time, this many are paired so before
@@ -297,6 +296,9 @@ class HeaderSetup:
     variables: dict = field(default_factory=dict)  # machine-state variables given with --var
     expanded: bool = False  # the program was corrected expanded (subprograms, loops, macros written out)
     cycles_expanded: bool = False  # its canned cycles were written as their moves (--cycles expand)
+    # the header says whether the cycles were expanded (its rows of this form say so: a
+    # header without the CYCLES EXPANDED row is of a program corrected without it)
+    cycles_recorded: bool = False
 
 
 def _header_rows(source) -> list[str]:
@@ -323,6 +325,7 @@ def header_setup(source) -> HeaderSetup:
             _old_header_row(hs, row)
             continue
         words = row[len(emit.HEADER_PREFIX):].rstrip(")").strip().upper()
+        hs.cycles_recorded = True
         m = re.fullmatch(r"OFFSET (\S+) (.*)", words)
         if m:
             v = _axis_values(m.group(2))
@@ -396,31 +399,6 @@ def setup_from_header(hs: HeaderSetup, setup: Setup | None) -> Setup:
 
 # -- reading ---------------------------------------------------------------------------
 
-_NUM = NUMBER_POSSESSIVE_RE
-# A plain move: [N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I/J/K/R words] [F..]. A quiet
-# line, which changes nothing the positions depend on (lexer.QUIET_LINE_RE): [N..] [S..]
-# [M0, M1, M3-M5, M7-M9 words] [comments]. A tool change alone: [N..] T.. M6 (or M6 T..) [comments]; it changes
-# only the tool the interpreter holds (for a later G43 without H). A plain move may set the
-# tool length offset first (G43 H.., after its motion word): a stretch starts there.
-# Axis words out of X, Y, Z order (the words correct adds after those a line names: Z X
-# Y) come whole in a group of their own, read one by one. Groups: 1 N word, 2 G number, 3
-# the H number of G43, 4-6 X, Y, Z numbers, 7 the axis words after those, 8 the arc
-# words, 9 the F number of a plain move; 10 a quiet line; 11 or 12 the T number of a tool
-# change; any other line (and a blank one) matches with every group empty (one match per
-# line).
-_PLAIN = re.compile(
-    rf"^(?:[ \t]*+(?:([Nn][ \t]*+\d++)[ \t]*+)?(?:[Gg][ \t]*+(0?[0-3])(?![0-9.])[ \t]*+)?"
-    rf"(?:{TOOL_LENGTH_RE}(\d++)[ \t]*+)?"
-    rf"(?:[Xx][ \t]*+({_NUM})[ \t]*+)?(?:[Yy][ \t]*+({_NUM})[ \t]*+)?(?:[Zz][ \t]*+({_NUM})[ \t]*+)?"
-    rf"((?:[XxYyZz][ \t]*+{_NUM}[ \t]*+)++)?"
-    rf"((?:[IiJjKkRr][ \t]*+{_NUM}[ \t]*+)*)(?:[Ff][ \t]*+({_NUM})[ \t]*+)?\r?"
-    rf"|({QUIET_LINE_RE})\r?"
-    rf"|{TOOL_LINE_RE}\r?"
-    rf"|[^\n]*)$",
-    re.M,
-)
-_MOTION = {"0": RAPID, "00": RAPID, "1": LINE, "01": LINE, "2": ARC_CW, "02": ARC_CW, "3": ARC_CCW,
-           "03": ARC_CCW, "": -1}
 _N_WORD = re.compile(r"\s*[Nn]\s*\d+")
 
 
@@ -538,35 +516,171 @@ class _ReadOptions:
     # looked up on subroutine_path
     expand: bool = False
     subroutine_path: tuple[Path, ...] = ()
-    # each canned cycle block read as the lines correct writes it as (--cycles expand);
-    # both programs are read so, as correct may keep some cycles and expand others
-    # (--cycles auto)
-    expand_cycles: bool = False
-    cycle_retract: bool = True  # their G98/G99 kept (not with --cycles expand)
+    # each canned cycle block is read as the lines correct writes it as when it expands it
+    # (both programs so, as correct may keep some cycles and expand others), their G98/G99
+    # retracts kept unless correct was given --cycles expand
+    cycle_retract: bool = True
     limits: Limits | None = None  # loops and helix turns (postproc.limits)
 
 
+# what a line read that is not in a run is queued as: its text, line number, end point
+# (None: it moves nothing) and pairing keys
+_Record: TypeAlias = tuple[str, int, "tuple[float, float, float] | None", tuple[int, int, int]]
+_NO_KEYS = (0, 0, 0)
+# The head of a plain line (bulk.Block: blanks, N, G and G43 H words) that starts with a
+# plain N word: the N word and what follows it.
+_HEAD_N = re.compile(r"[ \t]*+(N(?:0|[1-9][0-9]{0,14}))(?![0-9.])(.*+)", re.S).fullmatch
+
+
+class _LineRows(LineReader[_Record]):
+    """The lane's reader (:class:`postproc.gcode.reader.LineReader`: the interpreter line
+    by line, runs of plain lines in bulk), queueing each line's end point and keys; a
+    canned cycle block as the lines ``correct`` writes it as when it expands it."""
+
+    def __init__(self, interp: Interpreter, keys: _Keys, retract: bool, path: str | None) -> None:
+        super().__init__(interp, CorrectOptions(), path)
+        self.keys = keys
+        # only letter-number words (else also NAME=value ones, Sinumerik's: see _without_assigned)
+        self.iso_words = interp.d.block_syntax == "iso"
+        self.retract = retract
+        self._head_keys: dict[str, tuple[int, int, int]] = {}  # a plain line's keys by its head (no N word)
+        self._rest_skeletons: dict[str, str] = {}  # the skeleton of a head after its N word
+
+    def queue(self, line: str, mv: Move | None, lineno: int) -> None:
+        """Queue the line's record; a canned cycle block's (or Sinumerik drilling cycle's)
+        as the records of the lines correct writes it as: the lines that move nothing as
+        they are, each G0/G1 step a move to its point (of empty keys, numbered by the
+        block's line)."""
+        it = self.interp
+        steps: Sequence[str | emit.CycleStep | None] | None = None
+        if mv is not None and mv.cycle is not None:
+            steps = emit.cycle_lines(line, mv, mv.cycle, self.retract)
+        if it.call_line or it.cycle_move is not None:
+            steps = emit.drill_cycle_lines(line, bool(it.call_line), mv, it.cycle_move, it.state.motion)
+        if mv is None:
+            rec: _Record = (line, lineno, None, _NO_KEYS)
+        else:
+            rec = (line, lineno, mv.q1, self.keys.of_line(line if self.iso_words else _without_assigned(line, mv.words)))
+        entries = self.entries
+        if steps is None:
+            entries.append(rec)
+            return
+        for k, step in enumerate(steps):
+            if step is None:  # the block itself (a Sinumerik position block)
+                entries.append(rec)
+            elif isinstance(step, str):
+                entries.append((step, lineno, None, _NO_KEYS))
+            else:
+                # never a written line's text; the same for the same block on both sides (a
+                # cycle kept unchanged), and differs from its corrected version
+                entries.append((f"\0{line}\0{k}", lineno, step[2], _NO_KEYS))
+
+    def rows(self) -> _Rows:
+        """The records queued, as rows (then let go of)."""
+        entries = self.entries
+        n = sum(len(e) if type(e) is bulk.Run else 1 for e in entries)
+        lines: list[str] = []
+        lineno = np.empty(n, dtype=np.int64)
+        move = np.zeros(n, dtype=bool)
+        end = np.full((n, 3), np.nan)
+        keys = np.zeros((n, 3), dtype=np.int64)
+        runs: dict[int, list[tuple[bulk.Run, int]]] = {}  # by block: its runs and the row of each
+        at: list[int] = []  # the rows of the records that are not in a run
+        at_lineno: list[int] = []
+        moved: list[int] = []
+        ends: list[tuple[float, float, float]] = []
+        moved_keys: list[tuple[int, int, int]] = []
+        i = 0
+        for e in entries:
+            if type(e) is bulk.Run:
+                lines += e.block.lines[e.a:e.b]
+                runs.setdefault(id(e.block), []).append((e, i))
+                i += e.b - e.a
+                continue
+            line, ln, q1, k = e
+            lines.append(line)
+            at.append(i)
+            at_lineno.append(ln)
+            if q1 is not None:
+                moved.append(i)
+                ends.append(q1)
+                moved_keys.append(k)
+            i += 1
+        if at:
+            lineno[at] = at_lineno
+        if moved:
+            move[moved] = True
+            end[moved] = ends
+            keys[moved] = moved_keys
+        for group in runs.values():
+            blk = group[0][0].block
+            src = np.concatenate([np.arange(r.a, r.b) for r, _i in group])  # the runs' lines in the block
+            dst = np.concatenate([np.arange(i, i + r.b - r.a) for r, i in group])  # their rows
+            lineno[dst] = src + np.repeat([r.lineno - r.a for r, _i in group], [r.b - r.a for r, _i in group])
+            inert = blk.neutral[src]
+            move[dst] = ~inert
+            q = np.concatenate([r.q1 for r, _i in group])
+            q[inert] = np.nan
+            end[dst] = q
+            keys[dst] = self._run_keys(blk, src.tolist())
+            blk.runs = []  # (each run refers to its block: let go of both, the collector is off)
+        entries.clear()
+        self.interp.comp_moves = []  # (those of cutter compensation: the corrector's to bound)
+        return _Rows(lines, lineno, move, end, keys)
+
+    def _run_keys(self, blk: bulk.Block, src: list[int]) -> np.ndarray:
+        """The keys of the block's run lines ``src``: a plain line's skeleton is its N word
+        (or nothing), its N word its own, no comment; a line that moves nothing has none."""
+        out = np.zeros((len(src), 3), dtype=np.int64)
+        keys, cache, rests = self.keys, self._head_keys, self._rest_skeletons
+        heads = blk.cols[0]
+        rows = [k for k, j in enumerate(src) if heads[j]]  # (no head: no N, G or G43 H word, or no move)
+        found = []
+        for k in rows:
+            h = heads[src[k]]
+            got = cache.get(h)
+            if got is None:
+                m = _HEAD_N(h)
+                if m is not None:
+                    n_word, rest = m.groups()
+                    skel = rests.get(rest)
+                    if skel is None:
+                        skel = rests[rest] = skeleton(rest)
+                    nk = int(n_word[1:]) + 1
+                    got = (keys(n_word + skel) if skel else nk, nk, 0)
+                elif "N" in h or "n" in h:
+                    got = keys.of_line(blk.lines[src[k]])
+                else:
+                    got = cache[h] = keys.of_line(h)
+            found.append(got)
+        if rows:
+            out[rows] = found
+        return out
+
+
 class _Reader:
-    """One program read in chunks of :class:`_Rows`; see the module docstring."""
+    """One program read in chunks of :class:`_Rows` by the lane's reader (:class:`_LineRows`);
+    an error of a line comes after the rows of the lines before it."""
 
     def __init__(self, source, setup: Setup, keys: _Keys, options: _ReadOptions = _ReadOptions()) -> None:
         self.path, self._lines = iter_source_lines(source)
         self.interp = Interpreter(setup, self.path, lenient_setup=True, dialect=options.dialect)
         self.limits = options.limits or Limits()
         self.interp.max_arc_turns = self.limits.max_arc_turns
-        self.keys = keys
-        # only letter-number words (else also NAME=value ones, Sinumerik's: see _without_assigned)
-        self.iso_words = self.interp.d.block_syntax == "iso"
-        self.drop_header = options.drop_header
-        self.expand = options.expand
-        self.dialect = options.dialect
-        self.subroutine_path = options.subroutine_path
+        self.options = options
         self.variables = getattr(setup, "variables", None)  # --var: machine state the program reads
-        self.expand_cycles = options.expand_cycles
-        self.cycle_retract = options.cycle_retract
-        self._cycles: dict[int, list] = {}  # row of the chunk -> emit.cycle_lines of its block
         self.header: list[str] = []
         self.count = 0  # lines read, header lines left out
+        self._keys = keys
+        self._rd = _LineRows(self.interp, keys, options.cycle_retract, self.path)
+
+    @property
+    def keys(self) -> _Keys:
+        return self._keys
+
+    @keys.setter
+    def keys(self, keys: _Keys) -> None:  # (a reader in a child process: its own keys)
+        self._keys = self._rd.keys = keys
 
     def chunks(self):
         """Yield :class:`_Rows`; an error of a line comes after the rows before it."""
@@ -581,328 +695,60 @@ class _Reader:
 
     def _chunks(self, it: Iterator[str]):
         """:meth:`chunks` of the lines of ``it``."""
-        lineno = 0
-        if self.drop_header:
+        rd = self._rd
+        if self.options.drop_header:
             # the header lines after the lines kept before them (emit.header_run) are left out
             kept, header, after = emit.header_run(it)
             self.header += [line.strip() for line in header]
-            head, linenos = kept, list(range(1, len(kept) + 1))
-            lineno = len(kept) + len(header)
-            if after is not None:
-                lineno += 1
-                head, linenos = [*kept, after], [*linenos, lineno]
-            rows = _Rows.blank(head, 0)
-            rows.lineno = np.array(linenos, dtype=np.int64)
-            n, error = self._general(rows, 0, len(head))
-            self.count += n
-            yield self._with_cycles(rows.head(n))
-            if error is not None:
-                raise error
-        if self.expand:
+            head = kept if after is None else [*kept, after]
+
+            def read_head() -> None:
+                for k, line in enumerate(head):
+                    if k == len(kept):
+                        rd.lineno += len(header)  # numbered as in the file, not counted
+                        self.count -= len(header)
+                    rd.line(line)
+
+            yield from self._read(read_head)
+        if self.options.expand:
             yield from self._expanded_chunks(it)
             return
         for lines in iter(lambda: list(islice(it, CHUNK_LINES)), []):
-            rows = _Rows.blank(lines, lineno + 1)
-            lineno += len(lines)
-            yield from self._read(rows)
+            yield from self._read(partial(self._blocks, lines))
+
+    def _blocks(self, lines: list[str]) -> None:
+        """Read a chunk's lines, :data:`BLOCK_LINES` at a time."""
+        for k in range(0, len(lines), BLOCK_LINES):
+            self._rd.block(lines[k:k + BLOCK_LINES])
 
     def _expanded_chunks(self, lines: Iterator[str]):
         """:meth:`chunks` of the program as executed (:func:`postproc.gcode.expand.expand`)."""
         from postproc.gcode.expand import expand
 
-        flat = expand(list(lines), path=self.path, dialect=self.dialect, subroutine_path=self.subroutine_path,
+        opt = self.options
+        flat = expand(list(lines), path=self.path, dialect=opt.dialect, subroutine_path=opt.subroutine_path,
                       variables=self.variables, max_iterations=self.limits.max_iterations)
+        rd = self._rd
+        source: deque[tuple[int, str | None]] = deque()
+        rd.expanded(source)
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
-            rows = _Rows.blank([sl.text for sl in part], 0)
-            rows.lineno = np.array([sl.lineno for sl in part], dtype=np.int64)
-            yield from self._read(rows)
+            source.extend((sl.lineno, None) for sl in part)
+            yield from self._read(partial(rd.block, [sl.text for sl in part]))
+            source.clear()
 
-    def _read(self, rows: _Rows):
-        """Read a chunk's rows (:meth:`_chunk`): yield those read, then raise the error
-        that stopped it, if any."""
-        n, error = self._chunk(rows)
-        self.count += n
-        yield self._with_cycles(rows if n == len(rows) else rows.head(n))
+    def _read(self, read: Callable[[], None]):
+        """Read a chunk (``read``): yield its rows, then raise the error that stopped it, if any."""
+        rd = self._rd
+        first = rd.lineno
+        try:
+            read()
+            error = None
+        except PostprocError as exc:
+            error = exc
+        self.count += rd.lineno - first
+        yield rd.rows()
         if error is not None:
             raise error
-
-    def _general(self, rows: _Rows, a: int, b: int) -> tuple[int, PostprocError | None]:
-        """Interpret lines a:b one at a time: (lines read, the error that stopped it)."""
-        feed = self.interp.feed_line
-        iso = self.iso_words
-        lines, linenos = rows.lines, rows.lineno
-        for i in range(a, b):
-            try:
-                mv = feed(int(linenos[i]), lines[i])
-            except PostprocError as exc:
-                return i, exc
-            if mv is not None:
-                rows.move[i] = True
-                rows.end[i] = mv.q1
-                line = lines[i]
-                rows.keys[i] = self.keys.of_line(line if iso else _without_assigned(line, mv.words))
-                if mv.cycle is not None and self.expand_cycles:
-                    self._cycles[i] = emit.cycle_lines(lines[i], mv, mv.cycle, self.cycle_retract)
-            it = self.interp
-            if self.expand_cycles and (it.call_line or it.cycle_move is not None):  # a Sinumerik drilling cycle
-                self._cycles[i] = emit.drill_cycle_lines(lines[i], bool(it.call_line), mv, it.cycle_move,
-                                                         it.state.motion)
-        return b, None
-
-    def _with_cycles(self, rows: _Rows) -> _Rows:
-        """``rows`` with each canned cycle block read (:attr:`expand_cycles`) replaced by
-        the records of the lines correct writes it as: the lines that move nothing as they
-        are, each G0/G1 step a move to its point (of empty skeleton, numbered by the
-        block's line)."""
-        cycles = self._cycles
-        if not cycles:
-            return rows
-        self._cycles = {}
-        n = len(rows)
-        lines: list[str] = []
-        lineno: list[int] = []
-        move: list[bool] = []
-        end: list = []
-        keys: list = []
-        nan3 = (math.nan, math.nan, math.nan)
-        last = 0
-        for i in sorted(c for c in cycles if c < n):
-            lines += rows.lines[last:i]
-            lineno += rows.lineno[last:i].tolist()
-            move += rows.move[last:i].tolist()
-            end += rows.end[last:i].tolist()
-            keys += rows.keys[last:i].tolist()
-            for k, step in enumerate(cycles[i]):
-                if step is None:  # the block itself (a Sinumerik position block)
-                    lines.append(rows.lines[i])
-                    move.append(bool(rows.move[i]))
-                    end.append(tuple(rows.end[i]))
-                    keys.append(tuple(rows.keys[i]))
-                    lineno.append(int(rows.lineno[i]))
-                    continue
-                if isinstance(step, str):
-                    lines.append(step)
-                    move.append(False)
-                    end.append(nan3)
-                else:
-                    # never a written line's text; the same for the same block on both
-                    # sides (a cycle kept unchanged), and differs from its corrected version
-                    lines.append(f"\0{rows.lines[i]}\0{k}")
-                    move.append(True)
-                    end.append(tuple(step[2]))
-                lineno.append(int(rows.lineno[i]))
-                keys.append((0, 0, 0))
-            last = i + 1
-        lines += rows.lines[last:]
-        lineno += rows.lineno[last:].tolist()
-        move += rows.move[last:].tolist()
-        end += rows.end[last:].tolist()
-        keys += rows.keys[last:].tolist()
-        return _Rows(lines, np.array(lineno, dtype=np.int64), np.array(move, dtype=bool),
-                     np.array(end, dtype=float).reshape(-1, 3), np.array(keys, dtype=np.int64).reshape(-1, 3))
-
-    def _chunk(self, rows: _Rows) -> tuple[int, PostprocError | None]:
-        """Read a chunk: stretches of plain moves as columns, the other lines one at a time."""
-        n = len(rows)
-        found = _plain_matches(rows.lines)
-        if not found:
-            return self._general(rows, 0, n)
-        cc = _Columns(found, n)
-        if not cc.runnable.any():
-            return self._general(rows, 0, n)
-        cc.index_stretches()
-        self._column_keys(rows, cc)
-        runs: list = []
-        i, error = self._walk(rows, cc, runs)
-        if runs:
-            self._run_ends(rows, runs, cc)
-        return i, error
-
-    def _column_keys(self, rows: _Rows, cc: _Columns) -> None:
-        """The keys of the lines that have their own from the columns: a plain line's
-        skeleton is its N word (the lines without one keep 0); a move that sets the tool
-        length (G43 H..) keeps G43 H.. in its skeleton."""
-        keys = self.keys
-        numbered = np.flatnonzero(cc.present[:, 0])
-        if len(numbered):
-            ncol = cc.cols[numbered, 0].tolist()
-            # a plain N word Nn is n + 1 (as _Keys makes it; here without a call for each),
-            # the others through the table
-            nk = [int(t[1:]) + 1 if _PLAIN_N(t) else keys(t) for t in ncol]
-            rows.keys[numbered, 1] = nk
-            rows.keys[numbered, 0] = [keys(t.replace(" ", "").replace("\t", "")) if k < 0 else k
-                                      for t, k in zip(ncol, nk, strict=True)]
-        lines = rows.lines
-        for i in cc.tlo_rows:
-            rows.keys[i, 0] = keys(skeleton(lines[i]))
-
-    def _walk(self, rows: _Rows, cc: _Columns, runs: list) -> tuple[int, PostprocError | None]:
-        """Read the chunk's lines in order: a stretch of plain lines as columns where the
-        modal state allows it (:meth:`_stretch`, which adds it to ``runs``), a quiet line
-        passed over, any other line by the interpreter. Returns (lines read, the error
-        that stopped it)."""
-        n = len(rows)
-        runnable_l, quiet_l = cc.runnable.tolist(), cc.quiet.tolist()
-        last_tool = cc.last_tool
-        interp = self.interp
-        st = interp.state
-        i = 0
-        error = None
-        while i < n:
-            if runnable_l[i]:
-                pos = st.pos
-                if not (interp.ended or st.incremental or st.inverse_time or interp.unknown_after
-                        or interp.used_rotary or pos[0] != pos[0] or pos[1] != pos[1] or pos[2] != pos[2]
-                        or interp.modal_call is not None or st.frame is not None):  # Sinumerik MCALL, ROT..
-                    b = self._stretch(rows, cc, i, pos, runs)
-                    if b is not None:
-                        i = b
-                        continue
-                elif quiet_l[i]:
-                    if last_tool is not None and int(last_tool[i]) == i and not interp.ended:
-                        interp.load_tool(cc.tool_no[i])
-                    i += 1  # changes nothing else, whatever the state
-                    continue
-            i, error = self._general(rows, i, i + 1)
-            if error is not None:
-                break
-        return i, error
-
-    def _stretch(self, rows: _Rows, cc: _Columns, i: int, pos: list, runs: list) -> int | None:
-        """Read the stretch of plain and quiet lines from line i (the position before it:
-        ``pos``) as columns, when its moves before the next G word agree with the modal
-        motion: add it to ``runs``, leave the state as its last line leaves it and return
-        where it ends (None: it does not agree; line i is the interpreter's)."""
-        b = int(cc.next_other[i])
-        next_tlo = cc.next_tlo
-        if next_tlo is not None:  # a stretch ends before a line that sets the tool length
-            b = min(b, int(next_tlo[i + 1]))
-        p = min(b, int(cc.next_g[i]))  # lines i:p move in the modal motion
-        moves = int(cc.moves_before[p] - cc.moves_before[i])
-        arcs = int(cc.arcs_before[p] - cc.arcs_before[i])
-        interp = self.interp
-        st = interp.state
-        motion = st.motion
-        if not (moves == 0 or (motion in (RAPID, LINE) and arcs == 0) or (
-                motion in (ARC_CW, ARC_CCW) and arcs == moves)):
-            return None
-        cols, linenos = cc.cols, rows.lineno
-        if next_tlo is not None and int(next_tlo[i]) == i:  # G43 H.. before the move
-            interp.set_tool_length(int(cols[i, 2]), int(linenos[i]), 1)
-        unit = st.unit_mm
-        shift = interp.shift(False, int(linenos[i]), 1)
-        runs.append((i, b, unit, shift, tuple(pos)))
-        e = b - 1
-        pos = list(pos)
-        for k in range(3):
-            j = int(cc.last[k][e])
-            if j >= i:
-                pos[k] = float(cols[j, 3 + k]) * unit + shift[k]
-        st.pos = pos
-        j = int(cc.last_g[e])
-        if j >= i:
-            st.motion = int(cc.gcode[j])
-        j = int(cc.last_f[e])
-        if j >= i:
-            st.feed = float(cols[j, 8])
-        last_tool = cc.last_tool
-        if last_tool is not None and last_tool[e] >= i:
-            interp.load_tool(cc.tool_no[int(last_tool[e])])  # the stretch's last tool change
-        return b
-
-    @staticmethod
-    def _run_ends(rows: _Rows, runs: list, cc: _Columns) -> None:
-        """End points of the plain stretches read: machine = program x unit + shift, the
-        position before the stretch where a line does not name an axis."""
-        has, plain = cc.has, cc.plain
-        values = cc.values()
-        lengths = [b - a for a, b, *_ in runs]
-        inside = np.zeros(len(rows), dtype=bool)
-        for a, b, *_ in runs:
-            inside[a:b] = True
-        idx = np.flatnonzero(inside)
-        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
-        unit = np.repeat([r[2] for r in runs], lengths)
-        shift = np.repeat(np.array([r[3] for r in runs], dtype=float), lengths, axis=0)
-        q0 = np.array([r[4] for r in runs], dtype=float)
-        for k in range(3):
-            h = has[k][idx]
-            v = values[k][idx] * unit + shift[:, k]
-            missing = ~h[starts]
-            v[starts[missing]] = q0[missing, k]
-            h[starts] = True
-            rows.end[idx, k] = v[_last_index(h)]
-        quiet = idx[~plain[idx]]
-        rows.end[quiet] = np.nan
-        rows.move[idx] = plain[idx]
-
-
-def _plain_matches(lines: list[str]) -> list | None:
-    """The groups of each line's :data:`_PLAIN` match, or None where the chunk's text is
-    not matched line by line (a lone carriage return)."""
-    n = len(lines)
-    text = "".join(lines)
-    if "\r" in text and text.count("\r") != text.count("\r\n"):
-        return None
-    found = _PLAIN.findall(text)
-    # one match per line, plus an empty one after a final line ending
-    return found[:n] if len(found) in (n, n + 1) else None
-
-
-class _Columns:
-    """A chunk's lines as the columns of their :data:`_PLAIN` matches (the groups, "" where
-    absent): which lines are plain moves and which quiet, and, for the stretches read as
-    columns (:meth:`_Reader._stretch`), where each stops and where each word it carries
-    forward was last given."""
-
-    def __init__(self, found: list, n: int) -> None:
-        cols = self.cols = np.array(found, dtype=object)
-        present = self.present = cols != ""
-        twice = _later_axis_words(cols, present)
-        has = self.has = [present[:, 3], present[:, 4], present[:, 5]]
-        gcode = self.gcode = np.fromiter(map(_MOTION.__getitem__, cols[:, 1]), dtype=np.int64, count=n)
-        arc = self.arc = present[:, 7]
-        tool = self.tool = present[:, 10] | present[:, 11]  # a tool change: quiet but for the tool it loads
-        self.quiet = present[:, 9] | tool
-        has_g = self.has_g = gcode >= 0
-        g_arc = gcode >= ARC_CW
-        last_g = self.last_g = _last_index(has_g)
-        # a plain move's arc words agree with its motion (its own G word, or the last one
-        # before it in the chunk; the lines before a stretch's first G word are checked
-        # against the modal motion when the stretch is read)
-        self.plain = (has[0] | has[1] | has[2]) & ~twice & np.where(
-            has_g, arc == g_arc, (last_g < 0) | (arc == g_arc[np.maximum(last_g, 0)]))
-        self.runnable = self.plain | self.quiet
-
-    def index_stretches(self) -> None:
-        """Where the stretches stop and where their words were last given (numpy arrays
-        indexed a few times per stretch, not made lists of every line)."""
-        n = len(self.cols)
-        present, plain = self.present, self.plain
-        # a move that sets the tool length offset (G43 H..) starts a stretch of its own
-        tlo = present[:, 2] & plain
-        self.tlo_rows = np.flatnonzero(tlo).tolist()
-        self.next_tlo = np.append(_next_index(tlo), n) if self.tlo_rows else None
-        self.last = [_last_index(h) for h in self.has]
-        self.last_f = _last_index(present[:, 8])
-        self.next_other = _next_index(~self.runnable)
-        self.next_g = _next_index(self.has_g)
-        self.moves_before = np.concatenate([[0], np.cumsum(plain)])
-        self.arcs_before = np.concatenate([[0], np.cumsum(plain & self.arc)])
-        # the last tool change at or before each line, and the tool it loads
-        tool, cols = self.tool, self.cols
-        self.last_tool = _last_index(tool) if tool.any() else None
-        self.tool_no = {i: int(cols[i, 10] or cols[i, 11]) for i in np.flatnonzero(tool).tolist()}
-
-    def values(self) -> list[np.ndarray]:
-        """The X, Y and Z numbers of each line (NaN where it names no such axis)."""
-        n = len(self.cols)
-        values = []
-        for k, h in enumerate(self.has):
-            v = np.full(n, np.nan)
-            v[h] = self.cols[h, 3 + k].astype(float)
-            values.append(v)
-        return values
 
 
 class _ForkedReader:
@@ -1003,22 +849,6 @@ def _read_in_child(reader: _Reader, conn) -> None:
                        reader.count, reader.header))
     finally:
         conn.close()
-
-
-_AXIS_WORD = re.compile(rf"([XxYyZz])[ \t]*+({_NUM})")
-
-
-def _later_axis_words(cols: np.ndarray, present: np.ndarray) -> np.ndarray:
-    """Move the numbers of the axis words after a line's X, Y, Z run (column 6) into the
-    X, Y, Z columns (3 to 5); returns the lines that name an axis twice (not plain)."""
-    twice = np.zeros(len(cols), dtype=bool)
-    for i in np.flatnonzero(present[:, 6]).tolist():
-        for letter, num in _AXIS_WORD.findall(cols[i, 6]):
-            k = 3 + "XYZ".index(letter.upper())
-            if present[i, k]:
-                twice[i] = True
-            cols[i, k], present[i, k] = num, True
-    return twice
 
 
 class _Index:
@@ -1629,8 +1459,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
 
 
 def compare_programs(original, corrected, setup: Setup | None = None, progress=None,
-                     keep: int | None = None, dialect: str = "generic",
-                     subroutine_path: Sequence[Path] = (), limits: Limits | None = None) -> DiffReport:
+                     keep: int | None = None, options: CorrectOptions | None = None) -> DiffReport:
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
@@ -1638,20 +1467,24 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     largest are kept and memory is bounded). ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates. ``progress(n)``, if given, is called with the number of
-    lines of the original read so far, after each chunk. ``dialect`` is the controller
-    both are read for, as ``correct`` was given it (G53 in G91, comments, ...).
+    lines of the original read so far, after each chunk. ``options`` are those
+    ``correct`` was given, of which the ones that say how a program is read count: the
+    dialect both are read in (G53 in G91, comments, ...), the subroutine path, the limits
+    and the canned cycles' mode.
 
     When the corrected program's header says it was corrected expanded (subprograms,
     loops, macros written out), the original is read expanded the same way (its external
-    subroutines looked up on ``subroutine_path``, as ``correct`` was given it); its
-    blocks are then numbered by their source lines, a subprogram's line once per call.
-    Each canned cycle block of both programs is read as the moves ``correct`` writes for
-    it when it expands it (whatever ``--cycles`` was: with ``auto`` it keeps some and
-    expands others), their G98/G99 retracts kept unless the header records ``CYCLES
-    EXPANDED``.
+    subroutines looked up on the subroutine path); its blocks are then numbered by their
+    source lines, a subprogram's line once per call. Each canned cycle block of both
+    programs is read as the moves ``correct`` writes for it when it expands it (whatever
+    ``--cycles`` was: with ``auto`` it keeps some and expands others), their G98/G99
+    retracts kept unless the program was corrected with ``--cycles expand``: as its
+    header records (``CYCLES EXPANDED``), or, when it has no header saying so (left out,
+    or of the one-line form of earlier versions), as ``options.cycles`` says.
     """
-    reading = _ReadOptions(dialect=dialect, subroutine_path=tuple(Path(p) for p in subroutine_path),
-                           expand_cycles=True, limits=limits)
+    opt = options or CorrectOptions()
+    reading = _ReadOptions(dialect=opt.dialect, subroutine_path=tuple(Path(p) for p in opt.subroutine_path),
+                           limits=opt.limits, cycle_retract=opt.cycles != "expand")
     # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
     # only costs time here (the chunks bound the memory).
     was_enabled = gc.isenabled()
@@ -1670,7 +1503,8 @@ def _compare(original, corrected, setup: Setup | None, progress, keep: int | Non
     hs = header_setup(corrected)
     setup = setup_from_header(hs, setup)
     keys = _Keys()
-    reading = dataclasses.replace(reading, cycle_retract=not hs.cycles_expanded)
+    if hs.cycles_recorded:
+        reading = dataclasses.replace(reading, cycle_retract=not hs.cycles_expanded)
     readers = (_Reader(original, setup, keys, dataclasses.replace(reading, expand=hs.expanded)),
                _Reader(corrected, setup, keys, dataclasses.replace(reading, drop_header=True, subroutine_path=())))
     o_reader, c_reader = (_ForkedReader(r, keys) if _ForkedReader.usable(r) else r for r in readers)

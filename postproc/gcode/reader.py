@@ -7,6 +7,10 @@ are read in bulk (:mod:`postproc.gcode.bulk`), from the columns the scanner make
 whole block. A canned cycle written as its moves, or a spline as its chords, is queued
 as the G0/G1 lines written in its place. The corrector then plans the chunk as one table
 and writes it.
+
+The reading itself (the interpreter line by line, runs in bulk) is :class:`LineReader`'s;
+``postproc diff`` reads both programs with it too, queueing each line's end point
+(:mod:`postproc.gcode.compare`).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import replace
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -36,30 +41,29 @@ from postproc.gcode.writer import Entry, Rebase, Store
 # the choice is made with (the machine's last known ones) on a backlash calibration.
 CYCLE_KEEP_SHARE = 0.9
 
+E = TypeVar("E")  # what a line read is queued as
 
-class ChunkReader:
-    """Reads lines into :attr:`entries`, the chunk the corrector plans and writes next;
-    carries the reading state (line number, whether a run of plain lines may start, the
-    cycle series and spline being read) from one chunk to the next."""
 
-    def __init__(self, interp: Interpreter, planner: Planner, options: CorrectOptions, report: CorrectReport,
-                 path: str | None = None) -> None:
+class LineReader(Generic[E]):
+    """Reads lines through the interpreter, runs of plain lines in bulk (:meth:`block`);
+    queues into :attr:`entries` each run read (a :class:`postproc.gcode.bulk.Run`) and,
+    through :meth:`queue`, what each other line makes (:class:`ChunkReader`: the
+    corrector's entries). Carries the reading state (line number, whether a run of plain
+    lines may start) from one chunk to the next."""
+
+    def __init__(self, interp: Interpreter, options: CorrectOptions, path: str | None = None,
+                 use_bulk: bool = True) -> None:
         self.interp = interp
-        self.planner = planner
         self.opt = options
-        self.report = report
         self.path = path
-        self.entries: list[Entry | bulk.Run] = []
+        self.entries: list[E | bulk.Run] = []
         self.lineno = 1  # the number of the next line read (of the program as read)
         self.last = 0  # the source line that where() gave last (an expanded program's)
         self.source: deque[tuple[int, str | None]] | None = None
-        # runs of plain lines: for every engine whose moves the planner settles in bulk
-        self.use_bulk = (planner.linear_exact or planner.bulk_plan) and options.bulk_lane
+        self.use_bulk = use_bulk and options.bulk_lane
         self.run_ok = False  # the modal state lets a run of plain lines start here
         self.dec_mm = _unit_decimals(options, 1.0)
         self.dec_in = _unit_decimals(options, MM_PER_INCH)
-        self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
-        self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
 
     def expanded(self, source: deque[tuple[int, str | None]]) -> None:
         """Read an expanded program: ``source`` gives the (line, file) each line read comes
@@ -78,37 +82,19 @@ class ChunkReader:
 
     def line(self, line: str) -> None:
         """Read one line through the interpreter and queue what it makes."""
-        interp = self.interp
         here = self.where(self.lineno)
-        mv = interp.feed_line(here, line)
-        entries = self.entries
-        if interp.call_line or interp.cycle_move is not None:
-            self._feed_drill_cycle(line, mv, interp, here)
-        elif interp.stored_here is not None:
-            # G28.1/G30.1: the controller stores where it is, the corrected position
-            entries.append((line, Store(interp.stored_here), False, interp.state.motion))
-        elif interp.rebase is not None:
-            # an offset set from where the machine is: its words follow the correction there
-            words, axes, nominal = interp.rebase
-            entries.append((line, Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
-                            interp.state.motion))
-        elif mv is not None and mv.cycle is not None:
-            self._feed_cycle(line, mv, mv.cycle, interp.state.motion)
-        elif mv is not None and mv.spline is not None:
-            self._feed_spline(line, mv, mv.spline)
-        elif mv is not None and mv.fixed:
-            # the line only sends the machine to a stored position: written as it is
-            entries.append((line, None, False, interp.state.motion))
-            entries.append(("", mv, False, interp.state.motion))
-        elif mv is not None and mv.then is not None:
-            entries.append((line, mv, False, interp.state.motion))
-            entries.append(("", mv.then, False, interp.state.motion))
-        else:
-            entries.append((line, mv, interp.motion_word, interp.state.motion))
-        if self._series_expanded and interp.state.motion not in CANNED_CYCLES:
-            self._series_expanded = False  # G80 or another motion: the series has ended
+        mv = self.interp.feed_line(here, line)
+        self.queue(line, mv, here)
         self.lineno += 1
-        self.run_ok = self.use_bulk and bulk.state_allows(interp)
+        self.run_ok = self.use_bulk and bulk.state_allows(self.interp)
+
+    def queue(self, line: str, mv: Move | None, lineno: int) -> None:
+        """Queue what line ``lineno`` (``line``, read by the interpreter: ``mv``) makes."""
+        raise NotImplementedError
+
+    def queue_run(self, run: bulk.Run) -> None:
+        """Queue a run of plain lines read in bulk."""
+        self.entries.append(run)
 
     def block(self, lines: list[str]) -> None:
         """Read a block of lines: its runs of plain lines in bulk where the modal state
@@ -149,8 +135,7 @@ class ChunkReader:
             dec = self.dec_in if interp.state.inch else self.dec_mm
             run = bulk.read_run(interp, block, i, b, self.lineno, dec)
             if run is not None:
-                self.entries.append(run)
-                self._series_expanded = False  # moves: no cycle series goes on
+                self.queue_run(run)
                 self.lineno += run.b - i
                 self.run_ok = bulk.state_allows(interp)
                 return run.b
@@ -158,6 +143,56 @@ class ChunkReader:
         # interpreter reads it, and reports it if it must)
         self.line(lines[i])
         return i + 1
+
+
+class ChunkReader(LineReader[Entry]):
+    """Reads lines into :attr:`entries`, the chunk the corrector plans and writes next
+    (:data:`postproc.gcode.writer.Entry` and runs); carries the cycle series and spline
+    being read from one chunk to the next."""
+
+    def __init__(self, interp: Interpreter, planner: Planner, options: CorrectOptions, report: CorrectReport,
+                 path: str | None = None) -> None:
+        # runs of plain lines: for every engine whose moves the planner settles in bulk
+        super().__init__(interp, options, path, planner.linear_exact or planner.bulk_plan)
+        self.planner = planner
+        self.report = report
+        self._series_expanded = False  # --cycles auto: a block of the cycles the controller runs was expanded
+        self._spline_kept = False  # a G5 without I/J continues the previous G5 only if it was kept
+
+    def queue(self, line: str, mv: Move | None, lineno: int) -> None:
+        """Queue what the line makes: a move, a line that moves nothing, a stored position
+        or an offset set from where the machine is, a cycle or spline as its lines."""
+        interp = self.interp
+        entries = self.entries
+        if interp.call_line or interp.cycle_move is not None:
+            self._feed_drill_cycle(line, mv, interp, lineno)
+        elif interp.stored_here is not None:
+            # G28.1/G30.1: the controller stores where it is, the corrected position
+            entries.append((line, Store(interp.stored_here), False, interp.state.motion))
+        elif interp.rebase is not None:
+            # an offset set from where the machine is: its words follow the correction there
+            words, axes, nominal = interp.rebase
+            entries.append((line, Rebase(words, axes, nominal, MM_PER_INCH if interp.state.inch else 1.0), False,
+                            interp.state.motion))
+        elif mv is not None and mv.cycle is not None:
+            self._feed_cycle(line, mv, mv.cycle, interp.state.motion)
+        elif mv is not None and mv.spline is not None:
+            self._feed_spline(line, mv, mv.spline)
+        elif mv is not None and mv.fixed:
+            # the line only sends the machine to a stored position: written as it is
+            entries.append((line, None, False, interp.state.motion))
+            entries.append(("", mv, False, interp.state.motion))
+        elif mv is not None and mv.then is not None:
+            entries.append((line, mv, False, interp.state.motion))
+            entries.append(("", mv.then, False, interp.state.motion))
+        else:
+            entries.append((line, mv, interp.motion_word, interp.state.motion))
+        if self._series_expanded and interp.state.motion not in CANNED_CYCLES:
+            self._series_expanded = False  # G80 or another motion: the series has ended
+
+    def queue_run(self, run: bulk.Run) -> None:
+        self.entries.append(run)
+        self._series_expanded = False  # moves: no cycle series goes on
 
     def _feed_spline(self, line: str, mv: Move,
                      spline: list[tuple[float, float]]) -> None:
