@@ -252,7 +252,8 @@ def test_a_registered_format_is_built_with_the_settings(runs_cal, tmp_path, monk
     assert seen["axes"] == ["X"]
     assert (s.step_mm, s.reference_mm, s.detection_unit_mm, s.return_direction) == (5.0, {"X": 12.5}, 0.0001, {})
     res = run("export", runs_cal, "-f", "fanuc", "--return", "X=+", "-o", out)
-    assert res.exit_code == 2 and "--return is a setting of" in res.stderr
+    assert res.exit_code == 2
+    assert "--return is a setting of" in res.stderr
 
 
 def test_the_choices_are_the_registry():
