@@ -513,6 +513,59 @@ def _deviation(piece: ArcPiece, cols: np.ndarray) -> np.ndarray:
     return dev
 
 
+_EPS = 2.0 ** -52
+
+
+def off_every_circle(S2: np.ndarray, P2: np.ndarray, bound: float) -> bool:
+    """True when no centre C makes every point of ``P2`` (k, 2) lie within ``bound`` of
+    the circle about C through ``S2`` (2,): for every C some ``| |P - C| - |S2 - C| |``
+    exceeds ``bound``. False where it cannot tell. Cost O(k), whatever C may be.
+
+    With X = C - S2, d = P - S2 and b = |d|^2 / 2, each point within the bound gives
+    ``|b - X.d| <= bound |X| + bound^2 / 2`` (``|P - C|^2 - |S2 - C|^2 = 2 (b - X.d)``). Two
+    points in independent directions then bound |X| (``xmax``), and weights ``lam`` (the
+    residual of b after its least-squares fit by X.d: the points' departure from every
+    circle through S2) give ``|sum lam b| <= xmax |sum lam d| + sum |lam| (bound xmax +
+    bound^2 / 2)``: the points are off every circle where the left side exceeds the
+    right. The rounding of d and b and of the sums is bounded and counted against it."""
+    k = len(P2)
+    if k < 4 or not bound >= 0.0:
+        return False
+    d = P2 - S2
+    b = 0.5 * (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    if not np.isfinite(b).all():
+        return False
+    dmax = math.sqrt(2.0 * float(b.max()))
+    # the rounding of d and b: |d - d_exact| <= eps |d|, |b - b_exact| <= 2 eps |d|^2
+    bnd = bound + _EPS * dmax
+    extra = 0.5 * bnd * bnd + 2.0 * _EPS * dmax * dmax
+    i = int(np.argmax(b))
+    g1 = d[i]
+    j = int(np.argmax(np.abs(d[:, 0] * g1[1] - d[:, 1] * g1[0])))
+    g2 = d[j]
+    det = float(g1[0] * g2[1] - g1[1] * g2[0])
+    if not abs(det) > 1e-4 * (abs(float(g1[0] * g2[1])) + abs(float(g1[1] * g2[0]))):
+        return False
+    # X = G^-1 (b_ij - e), |e_k| <= bnd |X| + extra
+    inv = np.array([[g2[1], -g1[1]], [-g2[0], g1[0]]]) / det
+    x0 = math.hypot(*(inv @ np.array([b[i], b[j]])).tolist())
+    gn = math.sqrt(float((inv * inv).sum())) * math.sqrt(2.0) * (1.0 + 1e-9)
+    q = gn * bnd
+    if not q < 0.5:
+        return False
+    xmax = (x0 + gn * extra) / (1.0 - q) * (1.0 + 1e-9)
+    coef = np.linalg.lstsq(d, b, rcond=None)[0]
+    lam = b - d @ coef
+    alam = np.abs(lam)
+    l1 = float(alam.sum())
+    gam = 2.0 * (k + 2) * _EPS  # the rounding of a sum of k products
+    lhs = abs(float(lam @ b)) - gam * float(alam @ np.abs(b))
+    sd = lam @ d
+    dn = np.hypot(d[:, 0], d[:, 1])
+    rhs = xmax * (math.hypot(float(sd[0]), float(sd[1])) + gam * float(alam @ dn)) + l1 * (bnd * xmax + extra)
+    return bool(lhs > rhs * (1.0 + 1e-9))
+
+
 def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
     """Largest distance of the points Q (k, 3) from the segment S-E."""
     a = np.asarray(S, dtype=float)
