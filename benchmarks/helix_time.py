@@ -36,12 +36,21 @@ def helix_program(turns: int) -> str:
             f"G2 X20 Y0 I-20 J0 Z-{turns} P{turns} F500\nM2\n")
 
 
-def correct_cpu(checkout: Path, src: Path, out: Path) -> float:
-    """CPU seconds (user + system) of one `postproc correct` of ``src`` in a child process."""
+def imported_from(checkout: Path, cwd: Path) -> str:
+    """Where a child process with PYTHONPATH set to ``checkout`` imports postproc from."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    cmd = [sys.executable, "-m", "postproc", "correct", str(src), "-c", str(CALIBRATION),
+    cmd = [sys.executable, "-P", "-c", "import postproc; print(postproc.__file__)"]
+    return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, check=True).stdout.strip()
+
+
+def correct_cpu(checkout: Path, src: Path, out: Path) -> float:
+    """CPU seconds (user + system) of one `postproc correct` of ``src`` in a child process
+    (run in the folder of ``src``, without the current folder on its path: the package
+    imported is the checkout's)."""
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    cmd = [sys.executable, "-P", "-m", "postproc", "correct", str(src), "-c", str(CALIBRATION),
            "--offset", OFFSET, "-j", "1", "-o", str(out)]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, env=env, cwd=src.parent, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _pid, status, usage = os.wait4(proc.pid, 0)
     err = proc.stderr.read().decode() if proc.stderr is not None else ""
     if proc.stderr is not None:
@@ -60,6 +69,8 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
+        for checkout in args.checkouts:
+            print(f"{checkout}: postproc from {imported_from(checkout.resolve(), Path(tmp))}", flush=True)
         for turns in args.turns:
             src = Path(tmp) / f"helix{turns}.ngc"
             src.write_text(helix_program(turns))
