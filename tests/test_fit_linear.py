@@ -19,7 +19,7 @@ from conftest import PARAMETRIC, ROOT
 
 from postproc.cli import main
 from postproc.gcode import arcfit, segment
-from postproc.gcode.segment import off_every_circle
+from postproc.gcode.segment import ArcPiece, off_every_circle, off_every_helix
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from helix_time import OFFSET, helix_program  # noqa: E402
@@ -119,6 +119,43 @@ def test_an_ellipse_is_off_every_circle_by_a_share_of_its_axes_difference():
     assert not off_every_circle(np.zeros(2), line, 0.001)
 
 
+def _helix(rng, k, bound, budget, bulge=0.0):
+    """A piece of a helix (a random centre, radius, start, sweep of half a turn to twenty
+    turns, either way) through k samples strayed by up to ``bound`` from its radius and
+    ``budget`` along its axis, plus ``bulge`` sin(pi frac) along its axis."""
+    r = 10.0 ** rng.uniform(0, 2)
+    c = rng.uniform(-200, 200, 2)
+    t0 = rng.uniform(0, 2 * math.pi)
+    clockwise = bool(rng.integers(0, 2))
+    sweep = rng.uniform(math.pi, 40 * math.pi) * (-1.0 if clockwise else 1.0)
+    z0, dz = rng.uniform(-100, 100), rng.uniform(-50, 50)
+    frac = np.sort(rng.uniform(0, 1, k))
+    frac[0], frac[-1] = 0.0, 1.0
+    t = t0 + sweep * frac
+    rho = r + rng.uniform(-1, 1, k) * bound
+    z = z0 + dz * frac + rng.uniform(-1, 1, k) * budget + bulge * np.sin(math.pi * frac)
+    Q = np.column_stack([c[0] + rho * np.cos(t), c[1] + rho * np.sin(t), z])
+    S = np.array([c[0] + r * math.cos(t0), c[1] + r * math.sin(t0), z0])
+    E = np.array([c[0] + r * math.cos(t[-1]), c[1] + r * math.sin(t[-1]), z0 + dz])
+    return ArcPiece(S, E, (0, 1, 2), clockwise, sweep, Q, frac)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_samples_near_a_helix_from_the_start_to_the_end_are_never_refused(seed):
+    rng = np.random.default_rng(seed)
+    bound, budget = 10.0 ** rng.uniform(-4, -2), 10.0 ** rng.uniform(-4, -2)
+    piece = _helix(rng, int(rng.integers(4, 200)), 0.9 * bound, 0.9 * budget)
+    assert not off_every_helix(piece, bound, budget)
+
+
+def test_a_helix_whose_height_bulges_is_off_every_helix():
+    rng = np.random.default_rng(3)
+    refused = sum(off_every_helix(_helix(rng, 128, 0.0009, 0.0009, bulge=0.01), 0.001, 0.001)
+                  for _ in range(20))
+    assert refused >= 15
+    assert not off_every_helix(_helix(rng, 128, 0.0009, 0.0009, bulge=0.0001), 0.001, 0.001)
+
+
 def test_a_try_refused_unmeasured_is_refused_by_the_full_measure(tmp_path, monkeypatch):
     """Every try that MoveFit._off_every_arc refuses on the helix is refused by the full
     measure as well (the arc's tries, all its centres and forms)."""
@@ -126,8 +163,8 @@ def test_a_try_refused_unmeasured_is_refused_by_the_full_measure(tmp_path, monke
     off = arcfit.MoveFit._off_every_arc
     exact = arcfit.MoveFit._exact_arc
 
-    def _off(self, S, Qp, nsw, keep):
-        verdict = off(self, S, Qp, nsw, keep)
+    def _off(self, S, E, Qp, frac, nsw, keep):
+        verdict = off(self, S, E, Qp, frac, nsw, keep)
         refused.append(verdict)
         return verdict
 

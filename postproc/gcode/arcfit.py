@@ -31,6 +31,7 @@ from postproc.gcode.segment import (
     circle_fit,
     limited_candidates,
     off_every_circle,
+    off_every_helix,
     r_center,
 )
 from postproc.gcode.state import LINE, PLANES
@@ -342,7 +343,7 @@ class MoveFit:
         nsw = span * plan["nsweep"]
         frac = (sp - sp[0]) / span
         keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
-        if len(Qp) > OFF_EVERY_ARC_FROM and self._off_every_arc(S, Qp, nsw, keep):
+        if len(Qp) > OFF_EVERY_ARC_FROM and self._off_every_arc(S, E, Qp, frac, nsw, keep):
             return None
         if keep:
             ctrl = self.w._input_centre(mv, S, E)
@@ -373,7 +374,8 @@ class MoveFit:
                 return spec
         return None
 
-    def _off_every_arc(self, S: np.ndarray, Qp: np.ndarray, nsw: float, keep: bool) -> bool:
+    def _off_every_arc(self, S: np.ndarray, E: np.ndarray, Qp: np.ndarray, frac: np.ndarray, nsw: float,
+                       keep: bool) -> bool:
         """True when no arc from S sweeping about ``nsw`` (half a turn or more), whatever
         its centre, can pass (see :meth:`_exact_arc`): a few of the samples ``Qp``
         (:func:`_spread`) are off every circle through S by more than a passing arc allows
@@ -391,18 +393,22 @@ class MoveFit:
         budget, arc = self.budget, self.arc
         if not (budget < math.inf and abs(nsw) >= math.pi):
             return False
-        (a1, a2, _an), _ = PLANES[arc.plane]
+        (a1, a2, an), _ = PLANES[arc.plane]
         mism = 0.5 * 10.0 ** (-self.d) * self.mv.unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
             mism = max(mism, budget)
         if keep:
             mism = max(mism, self.plan["mismatch"] + 1e-9)
-        P2 = Qp[_spread(len(Qp), nsw)][:, [a1, a2]]
+        few = _spread(len(Qp), nsw)
+        P2 = Qp[few][:, [a1, a2]]
         S2 = np.array([float(S[a1]), float(S[a2])])
         scale = max(float(np.abs(P2).max()), abs(S2[0]), abs(S2[1]))
         radial = mism * (1.0 + math.pi / (abs(nsw) - 0.5 * math.pi))
         bound = (budget + radial) * (1.0 + 1e-9) + 1e-8 * (1.0 + scale)
-        return off_every_circle(S2, P2, bound)
+        if off_every_circle(S2, P2, bound):
+            return True
+        piece = ArcPiece(S, E, (a1, a2, an), arc.clockwise, nsw, Qp[few], frac[few])
+        return off_every_helix(piece, bound, budget)
 
     def _arc_about(self, S: np.ndarray, E: np.ndarray, centre: np.ndarray, nsw: float, Qp: np.ndarray,
                    frac: np.ndarray) -> ArcSpec | None:
