@@ -46,9 +46,10 @@ EQUAL_SHARES = 4
 Edit = tuple[int, int, str]  # replace line[start:end] by the text
 
 # An arc's try over more samples than this (samples and middles) first checks a few of
-# them (SPREAD over the whole and SPREAD over its first turn) against every circle through
-# its start (MoveFit._off_every_arc): a try far beyond the farthest sample one arc reaches
-# is refused at the cost of those few, not of all its samples.
+# them (SPREAD over the whole and SPREAD over its first turn) against every arc from its
+# start to its end, whatever its centre (MoveFit._off_every_arc): a try far beyond the
+# farthest sample one arc reaches is refused at the cost of those few, not of all its
+# samples.
 OFF_EVERY_ARC_FROM = 256
 SPREAD = 64
 
@@ -379,7 +380,9 @@ class MoveFit:
         """True when no arc from S sweeping about ``nsw`` (half a turn or more), whatever
         its centre, can pass (see :meth:`_exact_arc`): a few of the samples ``Qp``
         (:func:`_spread`) are off every circle through S by more than a passing arc allows
-        (:func:`postproc.gcode.segment.off_every_circle`). False where that is not shown.
+        (:func:`postproc.gcode.segment.off_every_circle`), or, near such a circle, one of
+        them is off every arc from S to E along the plane's normal by more than the budget
+        (:func:`postproc.gcode.segment.off_every_helix`). False where neither is shown.
 
         An arc that passes is within the budget of every sample, and its radius goes from
         its start radius r0 to r0 + dr along the sample's angle from S, at most half a

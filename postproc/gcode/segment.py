@@ -11,6 +11,8 @@
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
   (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`).
+- :func:`off_every_circle`, :func:`off_every_helix`: a few samples that no arc from S
+  to E could pass, whatever its centre, refuse a long try without the fit of a centre.
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
 - :func:`subdivide` splits curves adaptively where the samples are too sparse: a chord
   is accepted when the corrected point at the middle of its parameter interval lies
