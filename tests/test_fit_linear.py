@@ -34,10 +34,21 @@ PINNED = {
     40: "92af5a4e9b410698377b9fcb943a2bf5b6eead0438a026b913c55933a646d774",
 }
 
+# a helix of radius 2 mm descending 0.5 mm a turn: its pieces (about two a turn) fail along
+# its axis, not in its plane
+SMALL = {
+    10: "c3537739bf037af5c2c89f5f339867ab53f78e53622a3b598c05403e9c370bcf",
+    80: "e2f951c02e3e1f8ca987ed7ae8df1bd6a652ce92167c73be854049e8e9766734",
+}
 
-def _correct(tmp_path, turns: int) -> str:
+
+def _small_helix(turns: int) -> str:
+    return f"G21 G90 G17\nG0 X2 Y0 Z0\nG2 X2 Y0 I-2 J0 Z-{turns / 2:g} P{turns} F500\nM2\n"
+
+
+def _correct(tmp_path, turns: int, program=helix_program) -> str:
     src = tmp_path / f"helix{turns}.ngc"
-    src.write_text(helix_program(turns))
+    src.write_text(program(turns))
     out = tmp_path / f"helix{turns}_out.ngc"
     res = CliRunner().invoke(main, ["correct", str(src), "-c", str(PARAMETRIC), "--offset", OFFSET,
                                     "-j", "1", "-o", str(out)])
@@ -70,18 +81,28 @@ class _Count:
         monkeypatch.setattr(arcfit, "chord_deviation", _chord)
 
 
-def test_a_helix_costs_in_proportion_to_its_turns_and_is_written_as_pinned(tmp_path, monkeypatch):
+def _per_turn(tmp_path, monkeypatch, pinned, program=helix_program) -> dict[int, float]:
+    """Samples measured per turn, per number of turns; each output checked against its sum."""
     count = _Count(monkeypatch)
-    measured = {}
-    for turns in sorted(PINNED):
+    per_turn = {}
+    for turns in sorted(pinned):
         count.n = 0
-        text = _correct(tmp_path, turns)
-        measured[turns] = count.n
+        text = _correct(tmp_path, turns, program)
+        per_turn[turns] = count.n / turns
         digest = hashlib.sha256(_VERSION_LINE.sub(r"\1VERSION\2", text).encode()).hexdigest()
-        assert digest == PINNED[turns], turns
-    per_turn = {t: n / t for t, n in measured.items()}
+        assert digest == pinned[turns], turns
+    return per_turn
+
+
+def test_a_helix_costs_in_proportion_to_its_turns_and_is_written_as_pinned(tmp_path, monkeypatch):
+    per_turn = _per_turn(tmp_path, monkeypatch, PINNED)
     assert per_turn[40] <= 1.3 * per_turn[5], per_turn
     assert per_turn[20] <= 1.3 * per_turn[5], per_turn
+
+
+def test_a_small_helix_costs_in_proportion_to_its_turns_and_is_written_as_pinned(tmp_path, monkeypatch):
+    per_turn = _per_turn(tmp_path, monkeypatch, SMALL, _small_helix)
+    assert per_turn[80] <= 1.3 * per_turn[10], per_turn
 
 
 def _ellipse(rng, k, a, b, turns=1.0):
