@@ -578,7 +578,10 @@ def off_every_circle(S2: np.ndarray, P2: np.ndarray, bound: float) -> bool:
     if reg is None:
         return False
     d, b, xmax = reg.d, reg.b, reg.xmax
-    coef = np.linalg.lstsq(d, b, rcond=None)[0]
+    try:
+        coef = np.linalg.lstsq(d, b, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return False
     lam = b - d @ coef
     alam = np.abs(lam)
     l1 = float(alam.sum())
