@@ -30,6 +30,8 @@ from postproc.gcode.segment import (
     chord_exceeds,
     circle_fit,
     limited_candidates,
+    off_every_circle,
+    off_every_helix,
     r_center,
 )
 from postproc.gcode.state import LINE, PLANES
@@ -42,6 +44,14 @@ from postproc.gcode.vplan import Plan
 EQUAL_SHARES = 4
 
 Edit = tuple[int, int, str]  # replace line[start:end] by the text
+
+# An arc's try over more samples than this (samples and middles) first checks a few of
+# them (SPREAD over the whole and SPREAD over its first turn) against every arc from its
+# start to its end, whatever its centre (MoveFit._off_every_arc): a try far beyond the
+# farthest sample one arc reaches is refused at the cost of those few, not of all its
+# samples.
+OFF_EVERY_ARC_FROM = 256
+SPREAD = 64
 
 
 class _Piece:
@@ -94,6 +104,15 @@ class _Samples:
         # as ndarray.mean: the sum divided by the count
         mean: np.ndarray = np.add.reduce(self.dq[a:b + 1], axis=0) / (b + 1 - a)
         return mean
+
+
+def _spread(n: int, nsw: float) -> np.ndarray:
+    """Indices of a few of n samples along an arc sweeping ``nsw``: SPREAD evenly over all
+    and SPREAD over its first turn (samples one turn apart may lie at one angle)."""
+    first = min(n, math.ceil(n * TWO_PI / abs(nsw))) if abs(nsw) > TWO_PI else n
+    idx = np.concatenate([np.linspace(0, n - 1, SPREAD), np.linspace(0, first - 1, SPREAD)])
+    out: np.ndarray = np.unique(idx.round().astype(int))
+    return out
 
 
 def _free_move(mv: Move) -> Move:
@@ -324,7 +343,10 @@ class MoveFit:
             return None
         nsw = span * plan["nsweep"]
         frac = (sp - sp[0]) / span
-        if may_keep and span >= 1.0 and plan.get("whole"):
+        keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
+        if len(Qp) > OFF_EVERY_ARC_FROM and self._off_every_arc(S, E, Qp, frac, nsw, keep):
+            return None
+        if keep:
             ctrl = self.w._input_centre(mv, S, E)
             if ctrl is not None:
                 worst, mism, turns = arc_candidates(ArcPiece(S, E, (a1, a2, an), arc.clockwise, nsw, Qp, frac), ctrl[None, :])
@@ -352,6 +374,44 @@ class MoveFit:
             if spec is not None:
                 return spec
         return None
+
+    def _off_every_arc(self, S: np.ndarray, E: np.ndarray, Qp: np.ndarray, frac: np.ndarray, nsw: float,
+                       keep: bool) -> bool:
+        """True when no arc from S sweeping about ``nsw`` (half a turn or more), whatever
+        its centre, can pass (see :meth:`_exact_arc`): a few of the samples ``Qp``
+        (:func:`_spread`) are off every circle through S by more than a passing arc allows
+        (:func:`postproc.gcode.segment.off_every_circle`), or, near such a circle, one of
+        them is off every arc from S to E along the plane's normal by more than the budget
+        (:func:`postproc.gcode.segment.off_every_helix`). False where neither is shown.
+
+        An arc that passes is within the budget of every sample, and its radius goes from
+        its start radius r0 to r0 + dr along the sample's angle from S, at most half a
+        turn from its share of the sweep: each sample lies within ``budget + |dr| (1 +
+        pi / |sweep|)`` of the circle about its centre through S. Its |sweep| is within a
+        quarter turn of |nsw| (else it turns the wrong number of times), and |dr| (its
+        radius mismatch) within what each written form allows: half the output step
+        (centre words), the budget (R, under a turn), the input's own mismatch (kept
+        words). The margin, a hundred-millionth of the coordinates' magnitude, covers
+        the rounding of the measure of any centre within a million times that magnitude."""
+        budget, arc = self.budget, self.arc
+        if not (budget < math.inf and abs(nsw) >= math.pi):
+            return False
+        (a1, a2, an), _ = PLANES[arc.plane]
+        mism = 0.5 * 10.0 ** (-self.d) * self.mv.unit
+        if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
+            mism = max(mism, budget)
+        if keep:
+            mism = max(mism, self.plan["mismatch"] + 1e-9)
+        few = _spread(len(Qp), nsw)
+        P2 = Qp[few][:, [a1, a2]]
+        S2 = np.array([float(S[a1]), float(S[a2])])
+        scale = max(float(np.abs(P2).max()), abs(S2[0]), abs(S2[1]))
+        radial = mism * (1.0 + math.pi / (abs(nsw) - 0.5 * math.pi))
+        bound = (budget + radial) * (1.0 + 1e-9) + 1e-8 * (1.0 + scale)
+        if off_every_circle(S2, P2, bound):
+            return True
+        piece = ArcPiece(S, E, (a1, a2, an), arc.clockwise, nsw, Qp[few], frac[few])
+        return off_every_helix(piece, bound, budget)
 
     def _arc_about(self, S: np.ndarray, E: np.ndarray, centre: np.ndarray, nsw: float, Qp: np.ndarray,
                    frac: np.ndarray) -> ArcSpec | None:

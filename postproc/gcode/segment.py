@@ -11,6 +11,8 @@
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
   (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`).
+- :func:`off_every_circle`, :func:`off_every_helix`: a few samples that no arc from S
+  to E could pass, whatever its centre, refuse a long try without the fit of a centre.
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
 - :func:`subdivide` splits curves adaptively where the samples are too sparse: a chord
   is accepted when the corrected point at the middle of its parameter interval lies
@@ -511,6 +513,149 @@ def _deviation(piece: ArcPiece, cols: np.ndarray) -> np.ndarray:
     np.subtract(radial, rad, out=radial)
     dev: np.ndarray = np.maximum.reduce(np.hypot(radial, nrm, out=radial), axis=1)
     return dev
+
+
+_EPS = 2.0 ** -52
+
+
+class _Region:
+    """What points P2 (k, 2) tell of the centres C whose circle through S2 (2,) passes
+    within a bound of each (see :func:`off_every_circle`): d = P2 - S2, b = |d|^2 / 2,
+    ``bnd`` and ``extra`` (the bound and its square's half, with the rounding of d and b),
+    ``xmax`` (no such C is farther from S2) and ``gn`` (C lies within ``gn (bnd xmax +
+    extra)`` of ``S2 + xc``)."""
+
+    __slots__ = ("d", "b", "bnd", "extra", "xmax", "gn", "xc")
+
+    def __init__(self, d: np.ndarray, b: np.ndarray, bnd: float, extra: float, xmax: float, gn: float,
+                 xc: np.ndarray) -> None:
+        self.d, self.b, self.bnd, self.extra, self.xmax, self.gn, self.xc = d, b, bnd, extra, xmax, gn, xc
+
+
+def _region(S2: np.ndarray, P2: np.ndarray, bound: float) -> _Region | None:
+    """The :class:`_Region` of the centres, or None where it cannot be bounded."""
+    if len(P2) < 4 or not bound >= 0.0:
+        return None
+    d = P2 - S2
+    b = 0.5 * (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    if not np.isfinite(b).all():
+        return None
+    dmax = math.sqrt(2.0 * float(b.max()))
+    # the rounding of d and b: |d - d_exact| <= eps |d|, |b - b_exact| <= 2 eps |d|^2
+    bnd = bound + _EPS * dmax
+    extra = 0.5 * bnd * bnd + 2.0 * _EPS * dmax * dmax
+    i = int(np.argmax(b))
+    g1 = d[i]
+    j = int(np.argmax(np.abs(d[:, 0] * g1[1] - d[:, 1] * g1[0])))
+    g2 = d[j]
+    det = float(g1[0] * g2[1] - g1[1] * g2[0])
+    if not abs(det) > 1e-4 * (abs(float(g1[0] * g2[1])) + abs(float(g1[1] * g2[0]))):
+        return None
+    # X = G^-1 (b_ij - e), |e_k| <= bnd |X| + extra
+    inv = np.array([[g2[1], -g1[1]], [-g2[0], g1[0]]]) / det
+    xc = inv @ np.array([b[i], b[j]])
+    gn = math.sqrt(float((inv * inv).sum())) * math.sqrt(2.0) * (1.0 + 1e-9)
+    q = gn * bnd
+    if not q < 0.5:
+        return None
+    xmax = (math.hypot(float(xc[0]), float(xc[1])) + gn * extra) / (1.0 - q) * (1.0 + 1e-9)
+    return _Region(d, b, bnd, extra, xmax, gn, xc)
+
+
+def off_every_circle(S2: np.ndarray, P2: np.ndarray, bound: float) -> bool:
+    """True when no centre C makes every point of ``P2`` (k, 2) lie within ``bound`` of
+    the circle about C through ``S2`` (2,): for every C some ``| |P - C| - |S2 - C| |``
+    exceeds ``bound``. False where it cannot tell. Cost O(k), whatever C may be.
+
+    With X = C - S2, d = P - S2 and b = |d|^2 / 2, each point within the bound gives
+    ``|b - X.d| <= bound |X| + bound^2 / 2`` (``|P - C|^2 - |S2 - C|^2 = 2 (b - X.d)``). Two
+    points in independent directions then bound |X| (``xmax``), and weights ``lam`` (the
+    residual of b after its least-squares fit by X.d: the points' departure from every
+    circle through S2) give ``|sum lam b| <= xmax |sum lam d| + sum |lam| (bound xmax +
+    bound^2 / 2)``: the points are off every circle where the left side exceeds the
+    right. The rounding of d and b and of the sums is bounded and counted against it."""
+    reg = _region(S2, P2, bound)
+    if reg is None:
+        return False
+    d, b, xmax = reg.d, reg.b, reg.xmax
+    try:
+        coef = np.linalg.lstsq(d, b, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return False
+    lam = b - d @ coef
+    alam = np.abs(lam)
+    l1 = float(alam.sum())
+    gam = 2.0 * (len(b) + 2) * _EPS  # the rounding of a sum of k products
+    lhs = abs(float(lam @ b)) - gam * float(alam @ np.abs(b))
+    sd = lam @ d
+    dn = np.hypot(d[:, 0], d[:, 1])
+    rhs = xmax * (math.hypot(float(sd[0]), float(sd[1])) + gam * float(alam @ dn)) + l1 * (reg.bnd * xmax + reg.extra)
+    return bool(lhs > rhs * (1.0 + 1e-9))
+
+
+def off_every_helix(piece: ArcPiece, bound: float, budget: float) -> bool:
+    """True when no arc a controller draws from S to E of ``piece`` (its samples ``Q``
+    and their ``frac``: any few of the piece's), whatever its centre, passes within
+    ``budget`` of every sample along the plane's normal, given that every sample lies
+    within ``bound`` of the circle about its centre through S (see
+    :func:`off_every_circle`). False where it cannot tell. Cost O(k).
+
+    Those centres lie in a small disc (:class:`_Region`); over it each angle about the
+    centre (of S, E and every sample) moves by at most asin(disc radius / distance). Where
+    no rounding or choice of turns, and no sample's turn, changes across the disc, the
+    angle of each sample from S and the sweep have bounds, so has the height the arc
+    gives each sample (``S + (E - S) alpha / |sweep|`` along the normal): one sample
+    farther than ``budget`` from its bounds shows that no centre of the disc passes."""
+    S, E, Q, clockwise = piece.S, piece.E, piece.Q, piece.clockwise
+    a1, a2, an = piece.axes
+    S2 = np.array([float(S[a1]), float(S[a2])])
+    reg = _region(S2, Q[:, [a1, a2]], bound)
+    if reg is None:
+        return False
+    delta = reg.gn * (reg.bnd * reg.xmax + reg.extra) + 1e-9 * (1.0 + reg.xmax)
+    cx, cy = float(S2[0] + reg.xc[0]), float(S2[1] + reg.xc[1])
+    slop = 1e-9  # rad: the rounding of the angles, far below
+    rS = math.hypot(S2[0] - cx, S2[1] - cy)
+    rE = math.hypot(float(E[a1]) - cx, float(E[a2]) - cy)
+    if not (rS > 2.0 * delta and rE > 2.0 * delta):
+        return False
+    eta_s = delta / (rS - delta) + slop
+    eta_b = eta_s + delta / (rE - delta) + slop  # of the sweep, unless a full circle
+    t0 = math.atan2(S2[1] - cy, S2[0] - cx)
+    t1 = math.atan2(float(E[a2]) - cy, float(E[a1]) - cx)
+    nsw = abs(piece.nominal_sweep)
+    if math.hypot(float(E[a1]) - S2[0], float(E[a2]) - S2[1]) < FULL_CIRCLE_MM:
+        base, eta_b = TWO_PI, 0.0
+    else:
+        base = ((t0 - t1) if clockwise else (t1 - t0)) % TWO_PI
+        if not eta_b < base < TWO_PI - eta_b:
+            return False  # a centre of the disc may make it a full circle
+    x = (nsw - base) / TWO_PI
+    if abs(x - math.floor(x) - 0.5) <= eta_b / TWO_PI + 1e-12:
+        return False  # the number of turns may change across the disc
+    asw = base + (max(1, round(x) + 1) - 1) * TWO_PI
+    if not asw > eta_b:
+        return False
+    v1, v2 = Q[:, a1] - cx, Q[:, a2] - cy
+    rho = np.hypot(v1, v2)
+    near = rho > 2.0 * delta
+    # (a sample within the disc's reach: no bound, never sure)
+    eta = np.where(near, delta / np.where(near, rho - delta, 1.0), 10.0) + eta_s + slop
+    phi = np.arctan2(v2, v1)
+    alpha = np.mod((t0 - phi) if clockwise else (phi - t0), TWO_PI)
+    target = piece.frac * asw
+    alpha += TWO_PI * np.rint((target - alpha) / TWO_PI)
+    # the sample's turn is settled where its angle stays less than half a turn from target
+    sure = np.abs(alpha - target) < math.pi - eta - piece.frac * eta_b - slop
+    lo = np.minimum((alpha - eta) / (asw - eta_b), (alpha - eta) / (asw + eta_b))
+    hi = np.maximum((alpha + eta) / (asw - eta_b), (alpha + eta) / (asw + eta_b))
+    dz = float(E[an]) - float(S[an])
+    z_lo = float(S[an]) + np.minimum(dz * lo, dz * hi)
+    z_hi = float(S[an]) + np.maximum(dz * lo, dz * hi)
+    q = Q[:, an]
+    off = np.maximum(z_lo - q, q - z_hi)
+    scale = max(float(np.abs(Q).max()), abs(float(S[an])), abs(float(E[an])), abs(cx), abs(cy))
+    return bool((sure & (off > budget + 1e-8 * (1.0 + scale))).any())
 
 
 def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
