@@ -51,7 +51,7 @@ from typing import Protocol, TypeAlias, final
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit, lexer, numfmt, plainscan, scanner
+from postproc.gcode import emit, lexer, numfmt, plainscan, runwords, scanner
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
@@ -223,7 +223,7 @@ class Block:
         n = len(lines)
         self.lines = lines
         # the text of each piece, by piece (a column per piece, a row per line)
-        cols: list[Sequence[str]] = list(pieces.text)
+        cols: list[list[str]] = list(pieces.text)
         self.cols = cols
         self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
         self.ov: list[FloatArray] = []  # their values (0 where not named)
@@ -474,15 +474,9 @@ class Emission:
     """What the emitter needs of a block's run lines once their targets are known (per
     axis X, Y, Z: the lists of that axis)."""
 
-    __slots__ = ("nums", "miss", "miss_t", "miss_v", "miss_text", "miss_last", "miss_seg", "edits_cum",
-                 "changed_cum", "named_edits")
-    nums: list[Sequence[str]]  # by line: the number text written for the named word
-    miss: list[list[int]]  # lines that do not name the axis (inert ones aside), increasing
-    miss_t: list[list[float]]  # their corrected targets
-    miss_v: list[list[float]]  # the value a word added for it would carry
-    miss_text: list[list[str]]  # that word's text
-    miss_last: list[list[int]]  # the last line at or before each that names the axis
-    miss_seg: list[list[int]]  # where miss_last changes (indices into miss)
+    __slots__ = ("nums", "unnamed", "edits_cum", "changed_cum", "named_edits")
+    nums: list[list[str]]  # by line: the number text written for the named word
+    unnamed: list[runwords.Unnamed]  # the lines that do not name the axis and the words they may add
     named_edits: list[int]  # by line: named words that change
     edits_cum: list[int]  # cumulative sums of named_edits, from 0
     changed_cum: list[int]  # cumulative count of lines with a named word that changes, from 0
@@ -504,7 +498,7 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
     dec = np.repeat([r.decimals for r in runs], lengths)
     n = len(block.lines)
     em = Emission()
-    em.nums, em.miss, em.miss_t, em.miss_v, em.miss_text, em.miss_last, em.miss_seg = [], [], [], [], [], [], []
+    em.nums, em.unnamed = [], []
     named = np.zeros(n, dtype=int)
     for k in range(3):
         has = block.has[k][idx]
@@ -524,14 +518,11 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
-        em.miss_text.append(numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [])
-        em.miss_v.append(vm.tolist())
         rows = idx[miss]
-        em.miss.append(rows.tolist())
-        em.miss_t.append(tk[miss].tolist())
-        last = block.last[k][rows]
-        em.miss_last.append(last.tolist())
-        em.miss_seg.append((np.flatnonzero(np.diff(last) != 0) + 1).tolist())
+        em.unnamed.append(runwords.Unnamed(
+            rows.tolist(), tk[miss].tolist(), vm.tolist(),
+            numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [],
+            block.last[k][rows].tolist(), nums, block.has_l[k], block.lines))
     em.named_edits = named.tolist()
     em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
     em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
@@ -653,48 +644,14 @@ def _added_words(st: _Stretch, k: int, qk: float) -> float:
     """The words added on axis ``k`` to the stretch's lines that do not name it (where
     the corrected position differs from the written one by half a step or more), the
     written positions ``want`` asks for, and the position on ``k`` after the stretch
-    (``qk``: before it)."""
-    run, em, s, b, want, add_col = st.run, st.em, st.s, st.b, st.want, st.add_col
-    blk = run.block
+    (``qk``: before it); see :mod:`postproc.gcode.runwords`."""
+    run, s, b = st.run, st.s, st.b
     unit, sk = run.unit, run.shift[k]
-    hd = emit.HALF_UNIT[run.decimals]
-    miss = em.miss[k]
-    lo, hi = bisect_left(miss, s), bisect_left(miss, b)
-    nums = em.nums[k]
-    has = blk.has[k]
-    for y, w in want.items():
-        if has[y]:
-            w[k] = float(nums[y]) * unit + sk
-    if lo < hi:
-        lines = blk.lines
-        ts, vs, texts, segs, lasts = em.miss_t[k], em.miss_v[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
-        decimals = run.decimals
-        # stretches of missing rows after the same named row
-        g = bisect_left(segs, lo + 1)
-        bounds = [lo, *segs[g:bisect_left(segs, hi)], hi]
-        for x, y in zip(bounds, bounds[1:], strict=False):
-            p = lasts[x]
-            if p >= s:
-                # the position the line's own word reached (float(text) == the
-                # value it was written from, correctly rounded)
-                qk = float(nums[p]) * unit + sk
-            if qk != qk:
-                continue  # never positioned: nothing to compare with, no word
-            for j, t, v in zip(range(x, y), ts[x:y], vs[x:y], strict=True):
-                i = miss[j]
-                if abs(t - qk) / unit >= hd:
-                    qk = round(v, decimals) * unit + sk  # the position the added word reaches
-                    line = lines[i]
-                    sep = " " if (" " in line or "\t" in line) else ""
-                    word = texts[j].lower() if line.islower() else texts[j]
-                    add_col[i - s] += sep + word
-                if want:
-                    wi = want.get(i)
-                    if wi is not None:
-                        wi[k] = qk
-    e = blk.last_moving[b - 1]  # the last line that moves
-    if e >= s and has[e]:
-        qk = float(nums[e]) * unit + sk
+    unnamed = st.em.unnamed[k]
+    qk = unnamed.add((s, b, k), (unit, sk, emit.HALF_UNIT[run.decimals], run.decimals), qk, st.add_col, st.want)
+    e = run.block.last_moving[b - 1]  # the last line that moves
+    if e >= s and unnamed.has[e]:
+        qk = float(unnamed.nums[e]) * unit + sk
     return qk
 
 
