@@ -65,6 +65,9 @@ _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 # A number of ten or more digits before its point (1e9 and beyond: a 400-digit one reads as inf).
 _LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}")
+# Ten ASCII digits in a row: an ASCII text without them holds no long number (the
+# cheaper search, made first).
+_TEN_DIGITS = re.compile(r"[0-9]{10}")
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
 # A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
@@ -298,7 +301,7 @@ def scan(lines: list[str]) -> Block | None:
     text = "".join(lines)
     if "\r" in text and text.count("\r") != text.count("\r\n"):
         return None
-    if _LONG_NUMBER.search(text):
+    if (not text.isascii() or _TEN_DIGITS.search(text)) and _LONG_NUMBER.search(text):
         return None  # the interpreter refuses a value beyond interp.MAX_WORD_VALUE, at its place
     cols = scanner.scan(text)
     if len(cols) != len(lines):  # lines not split as the scanner splits them
