@@ -240,16 +240,16 @@ def test_words_many_is_words_bit_for_bit_in_every_plane_and_leaves_the_same_answ
         assert _bits(h.words(S, E, tuple(axes), cw, d, unit, tuple(base), budget)) == _bits(ref)
 
 
-def test_round_each_is_pythons_round_near_every_half():
+def test_round_many_is_pythons_round_near_every_half():
     rng = np.random.default_rng(5)
     for d in range(0, 7):
         k = np.round(rng.normal(size=4000) * 10.0 ** rng.integers(0, 7, size=4000))
         ties = (k + 0.5) / 10.0 ** d
         x = np.concatenate([rng.normal(size=4000) * 300, ties, np.nextafter(ties, np.inf), np.nextafter(ties, -np.inf),
                             -ties, [0.0, -0.0, -1e-9, math.inf, -math.inf, math.nan, 1e300, 2.0 ** 60 + 0.5]])
-        got = vplan.round_each(x, [d] * len(x))
+        got = vplan.round_many(x, [d] * len(x))
         ref = [round(v, d) for v in x.tolist()]
         assert [_bits((v,)) for v in got.tolist()] == [_bits((v,)) for v in ref]
     rows = rng.normal(size=(50, 9)) * 40
     dd = rng.integers(0, 6, size=50)
-    assert vplan.round_each(rows, dd).tolist() == [[round(v, int(e)) for v in r] for r, e in zip(rows.tolist(), dd, strict=True)]
+    assert vplan.round_many(rows, dd).tolist() == [[round(v, int(e)) for v in r] for r, e in zip(rows.tolist(), dd, strict=True)]

@@ -280,8 +280,8 @@ class Planner(EngineCalls):
         u = unit[:, None]
         # the corrected ends rounded as words are: round((q - shift) / unit, d) * unit + shift
         S, E = np.empty_like(sh), np.empty_like(sh)
-        S[rows, axes] = vplan.round_each((ends[:, :3] - sh) / u, d) * u + sh
-        E[rows, axes] = vplan.round_each((ends[:, 3:] - sh) / u, d) * u + sh
+        S[rows, axes] = vplan.round_many((ends[:, :3] - sh) / u, d) * u + sh
+        E[rows, axes] = vplan.round_many((ends[:, 3:] - sh) / u, d) * u + sh
         absolute = np.array([mv.arc_absolute for _i, mv, _h in arcs], dtype=bool)[:, None]
         base = np.where(absolute, sh[:, :2], S[rows, axes[:, :2]])
         clockwise = [cast("Arc", mv.arc).clockwise for _i, mv, _h in arcs]

@@ -354,13 +354,29 @@ def _map_floats(f: Callable[..., float], *cols: FloatArray) -> FloatArray:
     return np.array(list(map(f, *(c.ravel().tolist() for c in cols))), dtype=float).reshape(cols[0].shape)
 
 
-def round_each(values: FloatArray, d: Sequence[int] | IntArray) -> FloatArray:
-    """``round(v, d)`` of every element of ``values`` (k,) or (k, m), each row to its own
-    ``d``: Python's round, mapped (:func:`_map_floats`), as :meth:`ArcHint._words` rounds
-    one value; its digits are those the formatter writes (``%.*f``, correctly rounded)."""
+def round_many(values: FloatArray, d: Sequence[int] | IntArray) -> FloatArray:
+    """``round(v, d)`` (Python's, correctly rounded) of every row of ``values`` (k,) or
+    (k, m), each row to its own ``d`` (0 to 15).
+
+    ``rint(v * 10**d) / 10**d``: the quotient of the integer and the exact power of ten
+    is the double nearest the decimal, as Python's is, so the two agree wherever the
+    integer does. The product is rounded once (half a unit in its last place, and the
+    fraction ``y - floor(y)`` is then exact or off by as little), so they agree unless
+    the product lies within a few units of its last place of a half: those values, and
+    any that is not finite or too large to have a fraction, are Python's own."""
     values = np.asarray(values, dtype=float)
     dd = np.broadcast_to(np.asarray(d, dtype=int).reshape(-1, *([1] * (values.ndim - 1))), values.shape)
-    return _map_floats(round, values, dd)
+    p = 10.0 ** dd
+    with np.errstate(all="ignore"):
+        y = values * p
+        out = np.rint(y) / p
+        frac = y - np.floor(y)
+        near = ~(np.abs(frac - 0.5) > 1e-9 + 8.0 * np.spacing(np.abs(y))) | ~(np.abs(y) < 2.0 ** 51)
+    if near.any():
+        idx = np.flatnonzero(near.ravel())
+        flat = out.reshape(-1)
+        flat[idx] = list(map(round, values.ravel()[idx].tolist(), dd.ravel()[idx].tolist()))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -504,8 +520,8 @@ def _first_centres(g: _ArcRows) -> _Centres:
     n1, n2 = -dy / Ls, dx / Ls
     t = (g.H1 - m1) * n1 + (g.H2 - m2) * n2
     # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
-    v1 = round_each((m1 + t * n1 - g.B1) / unit, d) + 0.0
-    v2 = round_each((m2 + t * n2 - g.B2) / unit, d) + 0.0
+    v1 = round_many((m1 + t * n1 - g.B1) / unit, d) + 0.0
+    v2 = round_many((m2 + t * n2 - g.B2) / unit, d) + 0.0
     w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
     C1, C2 = g.B1 + w1 * unit, g.B2 + w2 * unit
     rs = _map_floats(hyp, s1 - C1, s2 - C2)
@@ -527,8 +543,8 @@ def _search_lattice(g: _ArcRows, c: _Centres) -> None:
             break
         k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
         st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
-        c1w = round_each(c.v1[search][:, None] + k1 * st, dk)
-        c2w = round_each(c.v2[search][:, None] + k2 * st, dk)
+        c1w = round_many(c.v1[search][:, None] + k1 * st, dk)
+        c2w = round_many(c.v2[search][:, None] + k2 * st, dk)
         cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
         ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
         rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
