@@ -70,6 +70,8 @@ _LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}")
 _TEN_DIGITS = re.compile(r"[0-9]{10}")
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
+# The G number of a plain line's G piece (plainscan: G0 to G3, G00 to G03, or none: -1)
+_G_MOTION = {"": -1, "0": 0, "00": 0, "1": 1, "01": 1, "2": 2, "02": 2, "3": 3, "03": 3}
 # A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
 # as the interpreter would.
 _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
@@ -234,31 +236,32 @@ class Block:
         self.frac: list[IntArray] = []  # digits after the point of X, Y, Z
         self.last: list[IntArray] = []  # the last line at or before each that names X, Y, Z
         for k in range(5):  # X, Y, Z, I, J
-            has = np.array(pieces.has[k], dtype=bool)
+            has = np.frombuffer(bytes(pieces.has[k]), dtype=bool)  # a byte per bool (read only)
             self.has.append(has)
-            self.ov.append(np.array(pieces.value[k], dtype=float))
+            self.ov.append(np.fromiter(pieces.value[k], dtype=float, count=n))
             if k < 3:
-                self.frac.append(np.array(pieces.frac[k], dtype=int))
+                self.frac.append(np.fromiter(pieces.frac[k], dtype=int, count=n))
                 self.last.append(last_index(has))
         g = cols[_G]
         self.gword = g
-        last_g = last_index(np.fromiter(map(bool, g), dtype=bool, count=n))
-        digit = np.array([x[-1:] for x in g], dtype="<U1")
+        motion = np.fromiter(map(_G_MOTION.__getitem__, g), dtype=np.int8, count=n)  # -1: no G word
+        no_g = motion < 0
+        last_g = last_index(~no_g)
         # G2/G3 lines with centre words (I, J) are arcs; a line without a motion word
         # after one is an arc too (modal), and one without centre words the
         # interpreter's: neither is plain
-        self.arc = (digit == "2") | (digit == "3")
+        self.arc = (motion == 2) | (motion == 3)
         self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
         self.has_l: list[list[bool]] = pieces.has
         centre = self.has[3] | self.has[4]
-        modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
+        modal_arc = no_g & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
         neutral = np.zeros(n, dtype=bool)
         head = cols[_HEAD] = list(cols[_HEAD])
         rest = cols[_REST] = list(cols[_REST])
         match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
         self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
-        for i in np.flatnonzero(~moving & ~self.arc & ~centre & (digit == "")).tolist():
+        for i in np.flatnonzero(~moving & ~self.arc & ~centre & no_g).tolist():
             line = lines[i]
             if not match(line):
                 m = tool(line)
@@ -271,9 +274,9 @@ class Block:
         # straight moves that set the tool length first (G43 H..: line -> H): a run starts at
         # one (set_tool_length before it is read); an arc that does is the interpreter's
         self.tlo: dict[int, int] = {}
-        for i, h in enumerate(head):
-            if ("H" in h or "h" in h) and moving[i]:
-                m = _TLO.search(h)
+        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h]:
+            if moving[i]:
+                m = _TLO.search(head[i])
                 if m is not None:
                     moving[i] = False
                     if not self.arc[i]:
