@@ -654,7 +654,7 @@ def _added_words(st: _Stretch, k: int, qk: float) -> float:
     run, s, b = st.run, st.s, st.b
     unit, sk = run.unit, run.shift[k]
     unnamed = st.em.unnamed[k]
-    qk = unnamed.add((s, b, k), (unit, sk, emit.HALF_UNIT[run.decimals], run.decimals), qk, st.add_col, st.want)
+    qk = unnamed.add((s, b, k), (unit, sk, emit.HALF_UNIT[run.decimals]), qk, st.add_col, st.want)
     e = run.block.last_moving[b - 1]  # the last line that moves
     if e >= s and unnamed.has[e]:
         qk = float(unnamed.nums[e]) * unit + sk

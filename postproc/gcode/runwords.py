@@ -13,6 +13,7 @@ It imports nothing of the package, so that it compiles on its own.
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_left
 
 
@@ -37,15 +38,15 @@ class Unnamed:
         self.rows, self.target, self.value, self.text, self.last = rows, target, value, text, last
         self.nums, self.has, self.lines = nums, has, lines
 
-    def add(self, span: tuple[int, int, int], scale: tuple[float, float, float, int], qk: float,
+    def add(self, span: tuple[int, int, int], scale: tuple[float, float, float], qk: float,
             add_col: list[str], want: dict[int, list[float]]) -> float:
         """Add the words of lines ``s:b`` (``span``: s, b and the axis's index k) to
         ``add_col`` (an entry per line from s), fill in ``want`` (line -> the written
         position wanted there) on axis k, and return the position on the axis after line
         ``b - 1`` (``qk``: before line s). ``scale``: the run's mm per program unit, its
-        shift on the axis, half an output step and the output's decimals."""
+        shift on the axis and half an output step."""
         s, b, k = span
-        unit, sk, hd, decimals = scale
+        unit, sk = scale[0], scale[1]
         nums, has = self.nums, self.has
         for y, w in want.items():
             if has[y]:
@@ -53,13 +54,13 @@ class Unnamed:
         miss = self.rows
         lo, hi = bisect_left(miss, s), bisect_left(miss, b)
         if lo < hi:
-            qk = self._decide(lo, hi, s, (unit, sk, hd, decimals), qk, add_col, want, k)
+            qk = self._decide(lo, hi, s, scale, qk, add_col, want, k)
         return qk
 
-    def _decide(self, lo: int, hi: int, s: int, scale: tuple[float, float, float, int], qk: float,
+    def _decide(self, lo: int, hi: int, s: int, scale: tuple[float, float, float], qk: float,
                 add_col: list[str], want: dict[int, list[float]], k: int) -> float:
         """Rows ``lo:hi`` of :attr:`rows` in order (see :meth:`add`); the position after them."""
-        unit, sk, hd, decimals = scale
+        unit, sk, hd = scale
         miss, ts, vs, texts, lasts, nums, lines = (self.rows, self.target, self.value, self.text, self.last,
                                                    self.nums, self.lines)
         check_want = len(want) > 0
@@ -76,11 +77,16 @@ class Unnamed:
                 continue  # never positioned: nothing to compare with, no word
             i = miss[j]
             if abs(ts[j] - qk) / unit >= hd:
-                qk = round(vs[j], decimals) * unit + sk  # the position the added word reaches
+                word = texts[j]
+                # the position the added word reaches: its value as written, round(v, d) (the
+                # formatter's digits are round's), a zero with v's sign as round keeps it
+                reached = float(word[1:])
+                if reached == 0.0:
+                    reached = math.copysign(0.0, vs[j])
+                qk = reached * unit + sk
                 line = lines[i]
                 sep = " " if (" " in line or "\t" in line) else ""
-                word = texts[j].lower() if line.islower() else texts[j]
-                add_col[i - s] += sep + word
+                add_col[i - s] += sep + (word.lower() if line.islower() else word)
             if check_want:
                 wi = want.get(i)
                 if wi is not None:
