@@ -22,7 +22,7 @@ def _check_chunk(text: str) -> None:
         got = [(cols.letter[k], text[cols.start[k]:cols.end[k]], cols.start[k] - s, cols.letter_pos[k] - s)
                for k in range(cols.first_word[li], cols.first_word[li + 1])]
         for k in range(cols.first_word[li], cols.first_word[li + 1]):
-            assert cols.word_line[k] == li
+            assert s <= cols.letter_pos[k] < cols.end[k] <= cols.line_start[li + 1]  # within its line
             num = text[cols.start[k]:cols.end[k]]
             assert math.copysign(1, cols.value[k]) == math.copysign(1, float(num))
             assert cols.value[k] == float(num)

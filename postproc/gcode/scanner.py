@@ -2,7 +2,7 @@
 
 One pass over the text of any number of lines gives, per line, where it starts and
 whether it is *plain* (words and ``[ \\t]`` blanks only, which the interpreter and the
-writers read from the columns), and per word its line, upper-case letter, the index of
+writers read from the columns), and per word its upper-case letter, the index of
 the letter, the span of its number text and the number's value (``float`` of the text:
 correctly rounded). Comments, symbols and letters without a number make a line not
 plain; they are skipped here and read, where needed, by :func:`postproc.gcode.lexer.lex`,
@@ -42,7 +42,6 @@ class Columns:
 
     line_start: list[int]  # where each line starts; one more entry: the end of the text
     plain: list[bool]  # by line: words and [ \t] blanks only
-    word_line: list[int]  # by word: its line (0-based, within the chunk)
     letter: list[str]  # upper case
     letter_pos: list[int]
     start: list[int]  # the span of the number text
@@ -53,7 +52,6 @@ class Columns:
     def __init__(self) -> None:
         self.line_start = []
         self.plain = []
-        self.word_line = []
         self.letter = []
         self.letter_pos = []
         self.start = []
@@ -96,10 +94,8 @@ def scan_into(text: bytes, cols: Columns) -> None:
     """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
     n: i64 = len(text)
     i: i64 = 0
-    line: i64 = 0
     line_start = cols.line_start
     plain_col = cols.plain
-    word_line = cols.word_line
     letter_col = cols.letter
     lpos_col = cols.letter_pos
     start_col = cols.start
@@ -107,7 +103,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
     value_col = cols.value
     first_word = cols.first_word
     line_start.append(0)
-    first_word.append(len(word_line))
+    first_word.append(len(letter_col))
     plain = True
     c: i64
     j: i64
@@ -122,10 +118,9 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 i += 1
             plain_col.append(plain)
             plain = True
-            line += 1
             if i < n:
                 line_start.append(i)
-                first_word.append(len(word_line))
+                first_word.append(len(letter_col))
         elif (65 <= c <= 90) or (97 <= c <= 122):  # a letter: a word, or a letter alone
             j = i + 1
             while j < n and (text[j] == 32 or text[j] == 9):
@@ -135,7 +130,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 plain = False
                 i += 1
             else:
-                word_line.append(line)
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
                 lpos_col.append(i)
                 start_col.append(j)
@@ -167,7 +161,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
     elif text[n - 1] != 10 and text[n - 1] != 13:
         plain_col.append(plain)  # a last line without its ending
     line_start.append(n)
-    first_word.append(len(word_line))
+    first_word.append(len(letter_col))
 
 
 def chars(text: str) -> bytes:
