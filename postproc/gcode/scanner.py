@@ -2,11 +2,12 @@
 
 One pass over the text of any number of lines gives, per line, where it starts and
 whether it is *plain* (words and ``[ \\t]`` blanks only, which the interpreter and the
-writers read from the columns), and per word its upper-case letter, the index of
-the letter, the span of its number text and the number's value (``float`` of the text:
-correctly rounded). Comments, symbols and letters without a number make a line not
-plain; they are skipped here and read, where needed, by :func:`postproc.gcode.lexer.lex`,
-which also names the place of anything that is not G-code.
+writers read from the columns), and per word its upper-case letter, the span of its
+number text and the number's value (``float`` of the text: correctly rounded); the
+index of the letter is read back from the span (:func:`letter_pos`). Comments, symbols
+and letters without a number make a line not plain; they are skipped here and read,
+where needed, by :func:`postproc.gcode.lexer.lex`, which also names the place of
+anything that is not G-code.
 
 The grammar is :mod:`postproc.gcode.lexer`'s (``_MASTER``): blanks ``[ \\t\\f\\v]``,
 comments ``(...)`` (open to the end of the line) and ``;...``, a word ``letter [ \\t]*
@@ -42,8 +43,7 @@ class Columns:
 
     line_start: list[int]  # where each line starts; one more entry: the end of the text
     plain: list[bool]  # by line: words and [ \t] blanks only
-    letter: list[str]  # upper case
-    letter_pos: list[int]
+    letter: list[str]  # upper case; where it stands: letter_pos(text, start)
     start: list[int]  # the span of the number text
     end: list[int]
     value: list[float]
@@ -53,7 +53,6 @@ class Columns:
         self.line_start = []
         self.plain = []
         self.letter = []
-        self.letter_pos = []
         self.start = []
         self.end = []
         self.value = []
@@ -97,7 +96,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
     line_start = cols.line_start
     plain_col = cols.plain
     letter_col = cols.letter
-    lpos_col = cols.letter_pos
     start_col = cols.start
     end_col = cols.end
     value_col = cols.value
@@ -131,7 +129,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 i += 1
             else:
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
-                lpos_col.append(i)
                 start_col.append(j)
                 end_col.append(e)
                 value_col.append(float(text[j:e]))  # correctly rounded, in C compiled or not
@@ -178,6 +175,15 @@ def scan(text: str) -> Columns:
     return cols
 
 
+def letter_pos(text: str, start: int) -> int:
+    """The index of the letter of the word whose number starts at ``start`` in ``text``:
+    the grammar's ``letter [ \\t]* number``, read back over the blanks."""
+    k = start - 1
+    while text[k] == " " or text[k] == "\t":
+        k -= 1
+    return k
+
+
 def scan_line(line: str) -> list[Word] | None:
     """The words of one line, or None when it is not plain (comments, symbols, a letter
     without a number, anything else: :func:`postproc.gcode.lexer.lex` reads it)."""
@@ -188,9 +194,9 @@ def scan_line(line: str) -> list[Word] | None:
     if not cols.plain[0]:
         return None
     out: list[Word] = []
-    letter, start, end, lpos = cols.letter, cols.start, cols.end, cols.letter_pos
+    letter, start, end = cols.letter, cols.start, cols.end
     for k in range(len(letter)):
         s = start[k]
         e = end[k]
-        out.append(Word(letter[k], line[s:e], s, e, lpos[k]))
+        out.append(Word(letter[k], line[s:e], s, e, letter_pos(line, s)))
     return out
