@@ -25,6 +25,7 @@ COMPILED = [
     "postproc/gcode/scanner.py",
     "postproc/gcode/numfmt.py",
     "postproc/gcode/plainscan.py",
+    "postproc/gcode/runwords.py",
 ]
 
 

@@ -74,10 +74,13 @@ def bounded_blocks(src: BinaryIO, path: str | None = None, limit: int = MAX_INPU
     run = 0  # bytes of that line so far
     size = min(_COPY_BLOCK, limit)  # a line inside one block is never longer than the limit
     while block := src.read(size):
-        parts = block.replace(b"\r", b"\n").split(b"\n")
-        if run + len(parts[0]) > limit:
+        # the length of the block's first line (up to its first \r or \n), and where its last ends
+        ends = [k for k in (block.find(b"\r"), block.find(b"\n")) if k >= 0]
+        first = min(ends) if ends else len(block)
+        if run + first > limit:
             raise _line_too_long(path, lineno, limit)
-        run = len(parts[-1]) if len(parts) > 1 else run + len(parts[0])
+        last = max(block.rfind(b"\r"), block.rfind(b"\n"))
+        run = len(block) - last - 1 if last >= 0 else run + len(block)
         lineno += block.count(b"\n")
         yield block
 

@@ -19,10 +19,10 @@ def _check_chunk(text: str) -> None:
     assert cols.line_start == [sum(map(len, lines[:i])) for i in range(len(lines) + 1)]
     for li, line in enumerate(lines):
         s = cols.line_start[li]
-        got = [(cols.letter[k], text[cols.start[k]:cols.end[k]], cols.start[k] - s, cols.letter_pos[k] - s)
+        got = [(cols.letter[k], text[cols.start[k]:cols.end[k]], cols.start[k] - s, scanner.letter_pos(text, cols.start[k]) - s)
                for k in range(cols.first_word[li], cols.first_word[li + 1])]
         for k in range(cols.first_word[li], cols.first_word[li + 1]):
-            assert cols.word_line[k] == li
+            assert s <= scanner.letter_pos(text, cols.start[k]) < cols.end[k] <= cols.line_start[li + 1]  # within its line
             num = text[cols.start[k]:cols.end[k]]
             assert math.copysign(1, cols.value[k]) == math.copysign(1, float(num))
             assert cols.value[k] == float(num)

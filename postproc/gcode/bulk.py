@@ -51,7 +51,7 @@ from typing import Protocol, TypeAlias, final
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import emit, lexer, numfmt, plainscan, scanner
+from postproc.gcode import emit, lexer, numfmt, plainscan, runwords, scanner
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
@@ -65,8 +65,14 @@ _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 # A number of ten or more digits before its point (1e9 and beyond: a 400-digit one reads as inf).
 _LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}")
+# An ASCII text's digits all made 0: ten ASCII digits in a row are then ten 0s, and a
+# text without them holds no long number (the cheaper search, made first).
+_DIGITS_AS_ZERO = bytes.maketrans(b"123456789", b"000000000")
+_TEN_ZEROS = b"0" * 10
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
+# The G number of a plain line's G piece (plainscan: G0 to G3, G00 to G03, or none: -1)
+_G_MOTION = {"": -1, "0": 0, "00": 0, "1": 1, "01": 1, "2": 2, "02": 2, "3": 3, "03": 3}
 # A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
 # as the interpreter would.
 _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
@@ -223,7 +229,7 @@ class Block:
         n = len(lines)
         self.lines = lines
         # the text of each piece, by piece (a column per piece, a row per line)
-        cols: list[Sequence[str]] = list(pieces.text)
+        cols: list[list[str]] = list(pieces.text)
         self.cols = cols
         self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
         self.ov: list[FloatArray] = []  # their values (0 where not named)
@@ -231,31 +237,32 @@ class Block:
         self.frac: list[IntArray] = []  # digits after the point of X, Y, Z
         self.last: list[IntArray] = []  # the last line at or before each that names X, Y, Z
         for k in range(5):  # X, Y, Z, I, J
-            has = np.array(pieces.has[k], dtype=bool)
+            has = np.frombuffer(bytes(pieces.has[k]), dtype=bool)  # a byte per bool (read only)
             self.has.append(has)
-            self.ov.append(np.array(pieces.value[k], dtype=float))
+            self.ov.append(np.fromiter(pieces.value[k], dtype=float, count=n))
             if k < 3:
-                self.frac.append(np.array(pieces.frac[k], dtype=int))
+                self.frac.append(np.fromiter(pieces.frac[k], dtype=int, count=n))
                 self.last.append(last_index(has))
         g = cols[_G]
         self.gword = g
-        last_g = last_index(np.fromiter(map(bool, g), dtype=bool, count=n))
-        digit = np.array([x[-1:] for x in g], dtype="<U1")
+        motion = np.fromiter(map(_G_MOTION.__getitem__, g), dtype=np.int8, count=n)  # -1: no G word
+        no_g = motion < 0
+        last_g = last_index(~no_g)
         # G2/G3 lines with centre words (I, J) are arcs; a line without a motion word
         # after one is an arc too (modal), and one without centre words the
         # interpreter's: neither is plain
-        self.arc = (digit == "2") | (digit == "3")
+        self.arc = (motion == 2) | (motion == 3)
         self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
         self.has_l: list[list[bool]] = pieces.has
         centre = self.has[3] | self.has[4]
-        modal_arc = (digit == "") & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
+        modal_arc = no_g & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
         neutral = np.zeros(n, dtype=bool)
         head = cols[_HEAD] = list(cols[_HEAD])
         rest = cols[_REST] = list(cols[_REST])
         match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
         self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
-        for i in np.flatnonzero(~moving & ~self.arc & ~centre & (digit == "")).tolist():
+        for i in np.flatnonzero(~moving & ~self.arc & ~centre & no_g).tolist():
             line = lines[i]
             if not match(line):
                 m = tool(line)
@@ -268,9 +275,9 @@ class Block:
         # straight moves that set the tool length first (G43 H..: line -> H): a run starts at
         # one (set_tool_length before it is read); an arc that does is the interpreter's
         self.tlo: dict[int, int] = {}
-        for i, h in enumerate(head):
-            if ("H" in h or "h" in h) and moving[i]:
-                m = _TLO.search(h)
+        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h]:
+            if moving[i]:
+                m = _TLO.search(head[i])
                 if m is not None:
                     moving[i] = False
                     if not self.arc[i]:
@@ -298,7 +305,8 @@ def scan(lines: list[str]) -> Block | None:
     text = "".join(lines)
     if "\r" in text and text.count("\r") != text.count("\r\n"):
         return None
-    if _LONG_NUMBER.search(text):
+    if ((not text.isascii() or _TEN_ZEROS in text.encode("ascii").translate(_DIGITS_AS_ZERO))
+            and _LONG_NUMBER.search(text)):
         return None  # the interpreter refuses a value beyond interp.MAX_WORD_VALUE, at its place
     cols = scanner.scan(text)
     if len(cols) != len(lines):  # lines not split as the scanner splits them
@@ -474,15 +482,9 @@ class Emission:
     """What the emitter needs of a block's run lines once their targets are known (per
     axis X, Y, Z: the lists of that axis)."""
 
-    __slots__ = ("nums", "miss", "miss_t", "miss_v", "miss_text", "miss_last", "miss_seg", "edits_cum",
-                 "changed_cum", "named_edits")
-    nums: list[Sequence[str]]  # by line: the number text written for the named word
-    miss: list[list[int]]  # lines that do not name the axis (inert ones aside), increasing
-    miss_t: list[list[float]]  # their corrected targets
-    miss_v: list[list[float]]  # the value a word added for it would carry
-    miss_text: list[list[str]]  # that word's text
-    miss_last: list[list[int]]  # the last line at or before each that names the axis
-    miss_seg: list[list[int]]  # where miss_last changes (indices into miss)
+    __slots__ = ("nums", "unnamed", "edits_cum", "changed_cum", "named_edits")
+    nums: list[list[str]]  # by line: the number text written for the named word
+    unnamed: list[runwords.Unnamed]  # the lines that do not name the axis and the words they may add
     named_edits: list[int]  # by line: named words that change
     edits_cum: list[int]  # cumulative sums of named_edits, from 0
     changed_cum: list[int]  # cumulative count of lines with a named word that changes, from 0
@@ -504,7 +506,7 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
     dec = np.repeat([r.decimals for r in runs], lengths)
     n = len(block.lines)
     em = Emission()
-    em.nums, em.miss, em.miss_t, em.miss_v, em.miss_text, em.miss_last, em.miss_seg = [], [], [], [], [], [], []
+    em.nums, em.unnamed = [], []
     named = np.zeros(n, dtype=int)
     for k in range(3):
         has = block.has[k][idx]
@@ -524,14 +526,11 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
-        em.miss_text.append(numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [])
-        em.miss_v.append(vm.tolist())
         rows = idx[miss]
-        em.miss.append(rows.tolist())
-        em.miss_t.append(tk[miss].tolist())
-        last = block.last[k][rows]
-        em.miss_last.append(last.tolist())
-        em.miss_seg.append((np.flatnonzero(np.diff(last) != 0) + 1).tolist())
+        em.unnamed.append(runwords.Unnamed(
+            rows.tolist(), tk[miss].tolist(), vm.tolist(),
+            numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [],
+            block.last[k][rows].tolist(), nums, block.has_l[k], block.lines))
     em.named_edits = named.tolist()
     em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
     em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
@@ -653,48 +652,14 @@ def _added_words(st: _Stretch, k: int, qk: float) -> float:
     """The words added on axis ``k`` to the stretch's lines that do not name it (where
     the corrected position differs from the written one by half a step or more), the
     written positions ``want`` asks for, and the position on ``k`` after the stretch
-    (``qk``: before it)."""
-    run, em, s, b, want, add_col = st.run, st.em, st.s, st.b, st.want, st.add_col
-    blk = run.block
+    (``qk``: before it); see :mod:`postproc.gcode.runwords`."""
+    run, s, b = st.run, st.s, st.b
     unit, sk = run.unit, run.shift[k]
-    hd = emit.HALF_UNIT[run.decimals]
-    miss = em.miss[k]
-    lo, hi = bisect_left(miss, s), bisect_left(miss, b)
-    nums = em.nums[k]
-    has = blk.has[k]
-    for y, w in want.items():
-        if has[y]:
-            w[k] = float(nums[y]) * unit + sk
-    if lo < hi:
-        lines = blk.lines
-        ts, vs, texts, segs, lasts = em.miss_t[k], em.miss_v[k], em.miss_text[k], em.miss_seg[k], em.miss_last[k]
-        decimals = run.decimals
-        # stretches of missing rows after the same named row
-        g = bisect_left(segs, lo + 1)
-        bounds = [lo, *segs[g:bisect_left(segs, hi)], hi]
-        for x, y in zip(bounds, bounds[1:], strict=False):
-            p = lasts[x]
-            if p >= s:
-                # the position the line's own word reached (float(text) == the
-                # value it was written from, correctly rounded)
-                qk = float(nums[p]) * unit + sk
-            if qk != qk:
-                continue  # never positioned: nothing to compare with, no word
-            for j, t, v in zip(range(x, y), ts[x:y], vs[x:y], strict=True):
-                i = miss[j]
-                if abs(t - qk) / unit >= hd:
-                    qk = round(v, decimals) * unit + sk  # the position the added word reaches
-                    line = lines[i]
-                    sep = " " if (" " in line or "\t" in line) else ""
-                    word = texts[j].lower() if line.islower() else texts[j]
-                    add_col[i - s] += sep + word
-                if want:
-                    wi = want.get(i)
-                    if wi is not None:
-                        wi[k] = qk
-    e = blk.last_moving[b - 1]  # the last line that moves
-    if e >= s and has[e]:
-        qk = float(nums[e]) * unit + sk
+    unnamed = st.em.unnamed[k]
+    qk = unnamed.add((s, b, k), (unit, sk, emit.HALF_UNIT[run.decimals]), qk, st.add_col, st.want)
+    e = run.block.last_moving[b - 1]  # the last line that moves
+    if e >= s and unnamed.has[e]:
+        qk = float(unnamed.nums[e]) * unit + sk
     return qk
 
 

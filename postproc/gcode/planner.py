@@ -41,6 +41,7 @@ from postproc.gcode.sampling import (
     SAMPLE_STEP_MM,
     _RunLine,
     _sample_moves,
+    _Sampled,
 )
 from postproc.gcode.segment import Curve, quadrant_breaks
 from postproc.gcode.state import LINE, PLANES
@@ -315,7 +316,8 @@ class Planner(EngineCalls):
         owner = np.repeat(np.array(smp.piece_move, dtype=int), smp.counts)
         corr = self.corrected(smp.nom, R[owner], np.repeat(smp.dirs, smp.counts, axis=0),
                               [rot[i] for i in owner.tolist()], linenos[owner])
-        layout = [(i, m, [(smp.s[a:b], smp.nom[a:b], smp.dirs[p], smp.bulge[a - p:b - p - 1])
+        takeup = _takeups(smp, corr, S, d_in)
+        layout = [(i, m, [(smp.s[a:b], smp.nom[a:b], takeup[p], smp.bulge[a - p:b - p - 1])
                           for p, a, b in pieces])
                   for (i, m), pieces in zip(planned, smp.pieces_of, strict=True)]
         off = 0
@@ -323,12 +325,11 @@ class Planner(EngineCalls):
             seq: list[Step] = []
             last: Piece | None = None  # the last step, a piece (pieces are joined to it)
             prev_end = S[i]
-            prev_dirs = d_in[i]
-            for s, nom, dr, bulge in pieces:
+            for s, nom, take, bulge in pieces:
                 n = len(s)
                 Q = corr[off:off + n].copy()
                 off += n
-                if (dr != prev_dirs).any() and np.abs(Q[0] - prev_end).max() > TAKEUP_MIN_MM:
+                if take:
                     seq.append(("takeup", Q[0].copy()))
                 else:
                     Q[0] = prev_end
@@ -341,7 +342,6 @@ class Planner(EngineCalls):
                 seq.append(piece)
                 last = piece
                 prev_end = Q[-1]
-                prev_dirs = dr
             Q[-1] = T[i]  # the last piece's end: the move's target
             if m.arc is not None:
                 _axes, _t0, sweep, r0, r1 = arc_prm[i]
@@ -353,6 +353,25 @@ class Planner(EngineCalls):
 
 
 
+
+
+def _takeups(smp: _Sampled, corr: FloatArray, S: FloatArray, d_in: FloatArray) -> list[bool]:
+    """For every piece of the sampled moves, whether a take-up goes before it: its approach
+    directions differ from the piece's before (a move's first piece: from the move's
+    ``d_in``) and its first corrected sample lies more than TAKEUP_MIN_MM (on an axis)
+    from where the piece before ended (a move's first piece: from its corrected start S)."""
+    first = [k == 0 for pieces in smp.pieces_of for k in range(len(pieces))]
+    if not first:
+        return []
+    rows = np.array(smp.piece_move, dtype=int)
+    begin = np.cumsum(smp.counts) - smp.counts  # each piece's first sample
+    lead = np.array(first, dtype=bool)
+    before = np.maximum(np.arange(len(lead)) - 1, 0)  # the piece before (within the move where not lead)
+    prev_dirs = np.where(lead[:, None], d_in[rows], smp.dirs[before])
+    prev_end = np.where(lead[:, None], S[rows], corr[np.maximum(begin - 1, 0)])
+    differ = (smp.dirs != prev_dirs).any(axis=1)
+    jump = np.abs(corr[begin] - prev_end).max(axis=1) > TAKEUP_MIN_MM
+    return cast("list[bool]", (differ & jump).tolist())
 
 
 def _given(plan: Plan) -> Callable[[], Plan]:

@@ -168,16 +168,18 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table
     last = first + counts - 1
     dd = nom[last] - nom[first]
     sign = np.sign(np.where(np.abs(dd) > 1e-12, dd, 0.0))
-    dirs = np.empty((P, 3))
-    carried = np.zeros(3)
-    for p in range(P):
-        i = piece_move[p]
-        if arc_piece[p] < 0:
-            dirs[p] = D[i]
-            continue
-        if p == 0 or arc_piece[p - 1] != arc_piece[p]:  # an arc's first piece
-            carried = d_in[i]
-        dirs[p] = carried = np.where(sign[p] == 0, carried, sign[p])
+    dirs = D[rows]  # a line's own
+    if len(arc_smp):
+        # per axis, the last piece of the same arc up to each where the axis moves, else d_in
+        at = np.arange(P)
+        is_arc = ap >= 0
+        first_of_arc = is_arc & np.concatenate([[True], ap[1:] != ap[:-1]])
+        arc_start = np.maximum.accumulate(np.where(first_of_arc, at, 0))
+        for ax in range(3):
+            moves = np.maximum.accumulate(np.where(is_arc & (sign[:, ax] != 0), at, -1))
+            known = moves >= arc_start
+            col = np.where(known, sign[np.maximum(moves, 0), ax], d_in[rows, ax])
+            dirs[is_arc, ax] = col[is_arc]
     return _Sampled(s, nom, bulge, dirs, counts, piece_move, pieces_of)
 
 

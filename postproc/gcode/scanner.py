@@ -2,11 +2,12 @@
 
 One pass over the text of any number of lines gives, per line, where it starts and
 whether it is *plain* (words and ``[ \\t]`` blanks only, which the interpreter and the
-writers read from the columns), and per word its line, upper-case letter, the index of
-the letter, the span of its number text and the number's value (``float`` of the text:
-correctly rounded). Comments, symbols and letters without a number make a line not
-plain; they are skipped here and read, where needed, by :func:`postproc.gcode.lexer.lex`,
-which also names the place of anything that is not G-code.
+writers read from the columns), and per word its upper-case letter, the span of its
+number text and the number's value (``float`` of the text: correctly rounded); the
+index of the letter is read back from the span (:func:`letter_pos`). Comments, symbols
+and letters without a number make a line not plain; they are skipped here and read,
+where needed, by :func:`postproc.gcode.lexer.lex`, which also names the place of
+anything that is not G-code.
 
 The grammar is :mod:`postproc.gcode.lexer`'s (``_MASTER``): blanks ``[ \\t\\f\\v]``,
 comments ``(...)`` (open to the end of the line) and ``;...``, a word ``letter [ \\t]*
@@ -42,9 +43,7 @@ class Columns:
 
     line_start: list[int]  # where each line starts; one more entry: the end of the text
     plain: list[bool]  # by line: words and [ \t] blanks only
-    word_line: list[int]  # by word: its line (0-based, within the chunk)
-    letter: list[str]  # upper case
-    letter_pos: list[int]
+    letter: list[str]  # upper case; where it stands: letter_pos(text, start)
     start: list[int]  # the span of the number text
     end: list[int]
     value: list[float]
@@ -53,9 +52,7 @@ class Columns:
     def __init__(self) -> None:
         self.line_start = []
         self.plain = []
-        self.word_line = []
         self.letter = []
-        self.letter_pos = []
         self.start = []
         self.end = []
         self.value = []
@@ -96,18 +93,15 @@ def scan_into(text: bytes, cols: Columns) -> None:
     """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
     n: i64 = len(text)
     i: i64 = 0
-    line: i64 = 0
     line_start = cols.line_start
     plain_col = cols.plain
-    word_line = cols.word_line
     letter_col = cols.letter
-    lpos_col = cols.letter_pos
     start_col = cols.start
     end_col = cols.end
     value_col = cols.value
     first_word = cols.first_word
     line_start.append(0)
-    first_word.append(len(word_line))
+    first_word.append(len(letter_col))
     plain = True
     c: i64
     j: i64
@@ -122,10 +116,9 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 i += 1
             plain_col.append(plain)
             plain = True
-            line += 1
             if i < n:
                 line_start.append(i)
-                first_word.append(len(word_line))
+                first_word.append(len(letter_col))
         elif (65 <= c <= 90) or (97 <= c <= 122):  # a letter: a word, or a letter alone
             j = i + 1
             while j < n and (text[j] == 32 or text[j] == 9):
@@ -135,9 +128,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 plain = False
                 i += 1
             else:
-                word_line.append(line)
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
-                lpos_col.append(i)
                 start_col.append(j)
                 end_col.append(e)
                 value_col.append(float(text[j:e]))  # correctly rounded, in C compiled or not
@@ -167,7 +158,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
     elif text[n - 1] != 10 and text[n - 1] != 13:
         plain_col.append(plain)  # a last line without its ending
     line_start.append(n)
-    first_word.append(len(word_line))
+    first_word.append(len(letter_col))
 
 
 def chars(text: str) -> bytes:
@@ -184,6 +175,15 @@ def scan(text: str) -> Columns:
     return cols
 
 
+def letter_pos(text: str, start: int) -> int:
+    """The index of the letter of the word whose number starts at ``start`` in ``text``:
+    the grammar's ``letter [ \\t]* number``, read back over the blanks."""
+    k = start - 1
+    while text[k] == " " or text[k] == "\t":
+        k -= 1
+    return k
+
+
 def scan_line(line: str) -> list[Word] | None:
     """The words of one line, or None when it is not plain (comments, symbols, a letter
     without a number, anything else: :func:`postproc.gcode.lexer.lex` reads it)."""
@@ -194,9 +194,9 @@ def scan_line(line: str) -> list[Word] | None:
     if not cols.plain[0]:
         return None
     out: list[Word] = []
-    letter, start, end, lpos = cols.letter, cols.start, cols.end, cols.letter_pos
+    letter, start, end = cols.letter, cols.start, cols.end
     for k in range(len(letter)):
         s = start[k]
         e = end[k]
-        out.append(Word(letter[k], line[s:e], s, e, lpos[k]))
+        out.append(Word(letter[k], line[s:e], s, e, letter_pos(line, s)))
     return out
