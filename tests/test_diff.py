@@ -657,7 +657,7 @@ _NO_FORK = pytest.mark.skipif(not __import__("sys").platform.startswith("linux")
 
 
 @_NO_FORK
-def test_diff_reads_the_programs_in_children_as_it_does_itself(monkeypatch, tmp_path):
+def test_diff_reads_the_original_in_a_child_as_it_does_itself(monkeypatch, tmp_path):
     from postproc.gcode import compare
 
     src, dst, _text, _out = _written_pair(tmp_path, 5, 1500)
@@ -667,7 +667,7 @@ def test_diff_reads_the_programs_in_children_as_it_does_itself(monkeypatch, tmp_
     for least in (10**15, 0):  # read here, then in a child
         monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
         reports.append(compare_programs(str(src), str(dst)).to_dict())
-    assert seen["forked"] == 2  # the original and the corrected program
+    assert seen["forked"] == 1  # the original (the corrected program is read here, beside the pairing)
     assert reports[1] == reports[0]
     assert reports[0]["lines_inserted"] > 10
     assert reports[0]["header"]
@@ -691,17 +691,22 @@ def test_diff_reports_an_error_of_a_program_read_in_a_child(monkeypatch, tmp_pat
         with pytest.raises(PostprocError) as exc:
             compare_programs(str(src), str(dst))
         errors.append((type(exc.value), str(exc.value), exc.value.lineno))
-    assert seen["forked"] == 2
+    assert seen["forked"] == 1
     assert errors[1] == errors[0]
     assert errors[0][2] == k + 1
     assert str(dst) in errors[0][1]
-    # an error of the original (read in a child too) stops the child reading the corrected
-    # program
+    # an error of the original, read in a child, is the one read here, and stops the child
     src.write_text("".join(text.splitlines(keepends=True)[:50] + ["G1 X#1\n"]))
-    with pytest.raises(PostprocError, match=":51:"):
-        compare_programs(str(src), str(dst))
+    errors = []
+    for least in (10**15, 0):
+        monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
+        with pytest.raises(PostprocError, match=":51:") as exc:
+            compare_programs(str(src), str(dst))
+        errors.append((type(exc.value), str(exc.value), exc.value.lineno))
+    assert errors[1] == errors[0]
+    assert str(src) in errors[0][1]
     assert multiprocessing.active_children() == []
-    assert seen["forked"] == 4
+    assert seen["forked"] == 2
 
 
 def test_diff_reads_the_original_expanded_when_the_program_was_corrected_expanded(tmp_path):
@@ -886,8 +891,8 @@ def test_diff_pairs_a_full_circle_cut_into_many_arcs_with_its_last_piece(radius)
 @_NO_FORK
 @pytest.mark.parametrize("variant", ["crlf", "form feed", "lone cr"])
 def test_diff_in_children_keeps_every_line_ending_and_character(monkeypatch, tmp_path, variant):
-    # the children send a chunk's lines joined where str.splitlines gives them back
-    # unchanged, else as a list: either way the parent pairs the same lines
+    # the child reading the original sends a chunk's lines joined where str.splitlines
+    # gives them back unchanged, else as a list: either way the parent pairs the same lines
     from postproc.gcode import compare
 
     rng = np.random.default_rng(21)
@@ -912,7 +917,7 @@ def test_diff_in_children_keeps_every_line_ending_and_character(monkeypatch, tmp
     for least in (10**15, 0):
         monkeypatch.setattr(compare, "FORK_MIN_BYTES", least)
         reports.append(compare_programs(str(src), str(dst)).to_dict())
-    assert seen["forked"] == 2
+    assert seen["forked"] == 1
     assert reports[1] == reports[0]
     assert reports[0]["moves"] > 100
 
