@@ -201,14 +201,7 @@ def test_fanuc_on_a_minus_l_to_zero_axis(tmp_path, reversal_mm):
     (["-f", "fanuc", "--reference", "X=300", "--return", "X=up"], "the return direction is + or -"),
     (["-f", "siemens", "--reference", "X=0", "--return", "X=+"], "--return is a setting of fanuc tables; drop it for --format siemens"),
     (["-f", "linuxcnc", "--reference", "X=0"], "--reference is a setting of fanuc and siemens tables"),
-])
-def test_reference_options_are_checked(runs_cal, tmp_path, args, words):
-    res = run("export", runs_cal, *args, "-o", tmp_path / "out")
-    assert res.exit_code == 2, res.output
-    assert words in res.stderr
-
-
-@pytest.mark.parametrize(("args", "words"), [
+    # a setting the format does not read is refused, not ignored
     (["-f", "beckhoff", "--step", "5"], "--step is a setting of linuxcnc and fanuc and siemens tables; drop it for "
                                         "--format beckhoff"),
     (["-f", "fanuc", "--reference", "X=0", "--return", "X=-", "--comp-type", "1"],
@@ -216,7 +209,7 @@ def test_reference_options_are_checked(runs_cal, tmp_path, args, words):
     (["-f", "siemens", "--reference", "X=0", "--detection-unit", "0.5"], "--detection-unit is a setting of fanuc"),
     (["-f", "beckhoff", "--axis-name", "X=X1"], "--axis-name is a setting of linuxcnc and fanuc and siemens"),
 ])
-def test_a_setting_the_format_does_not_read_is_refused_not_ignored(runs_cal, tmp_path, args, words):
+def test_export_settings_are_checked(runs_cal, tmp_path, args, words):
     res = run("export", runs_cal, *args, "-o", tmp_path / "out")
     assert res.exit_code == 2, res.output
     assert words in res.stderr

@@ -8,7 +8,13 @@ from pathlib import Path
 import click
 
 from postproc.cli.options import FiniteFloat
-from postproc.metrology.controllers.formats import FORMATS, SETTING_OPTIONS, Settings, TableFormat
+from postproc.metrology.controllers.formats import (
+    FORMATS,
+    SETTING_OPTIONS,
+    Settings,
+    TableFormat,
+    readers_of,
+)
 
 
 def _check_outliers(cal, cal_path: str, keep: bool) -> None:
@@ -38,12 +44,11 @@ def _settings(fmt: TableFormat, given: dict, cal_name: str) -> Settings:
     """The settings of ``export``'s options, checked: each one given must be read by the
     format (a setting another format reads is refused, not ignored), --reference a
     finite number of mm by axis, --return + or - by axis."""
-    refused = fmt.refused_options({k for k, v in given.items() if v not in (None, ())})
-    if refused:
-        setting = next(k for k, flag in SETTING_OPTIONS.items() if flag == refused[0])
-        takers = fmt.takers(setting)
-        raise click.UsageError(f"{refused[0]} is a setting of {' and '.join(takers) or 'no format'} tables; drop it "
-                               f"for --format {fmt.name}")
+    unread = fmt.unread({k for k, v in given.items() if v not in (None, ())})
+    if unread:
+        readers = readers_of(unread[0])
+        raise click.UsageError(f"{SETTING_OPTIONS[unread[0]]} is a setting of {' and '.join(readers) or 'no format'} "
+                               f"tables; drop it for --format {fmt.name}")
     refs_mm = {}
     for a, v in _axis_map(given["reference"], "--reference").items():
         try:

@@ -67,13 +67,14 @@ class TableFormat:
         fn: Callable[[list[AxisErrors], Settings], Export] = getattr(importlib.import_module(module), attr)
         return fn(axis_errors, settings)
 
-    def refused_options(self, given: set[str]) -> list[str]:
-        """The options of ``given`` (setting names) this format does not read."""
-        return [SETTING_OPTIONS[s] for s in SETTING_OPTIONS if s in given and s not in self.takes]
+    def unread(self, given: set[str]) -> list[str]:
+        """The settings of ``given`` this format does not read, in :data:`SETTING_OPTIONS`' order."""
+        return [s for s in SETTING_OPTIONS if s in given and s not in self.takes]
 
-    def takers(self, setting: str) -> list[str]:
-        """The formats that read ``setting``."""
-        return [f.name for f in FORMATS.values() if setting in f.takes]
+
+def readers_of(setting: str) -> list[str]:
+    """The names of the formats that read ``setting``."""
+    return [f.name for f in FORMATS.values() if setting in f.takes]
 
 
 #: format name -> TableFormat, in the order registered (the order of the choices)
