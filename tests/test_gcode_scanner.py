@@ -2,6 +2,8 @@
 plainscan's pieces join back to their line; numfmt's batch equals its one-value form."""
 
 import math
+import random
+import struct
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -51,6 +53,24 @@ def test_scanner_on_samples_and_numbers():
     cols = scanner.scan("X-0\nY0.1\n")
     assert math.copysign(1, cols.value[0]) == -1
     assert cols.value[1] == 0.1
+
+
+def test_number_values_are_floats_of_their_text():
+    """The scanner's values are bit for bit ``float`` of the number text, sign of zero
+    included: short numbers (at most 15 digits) by one division, longer by ``float``."""
+    rng = random.Random(7)
+    texts = ["0", "-0", "+0.", ".5", "-.5", "5.", "-0.0000", "0.1", "228.47505", "999999999999999.",
+             "123456789012345", "1234567890123456", "0.000000000000001", "0.0000000000000001",
+             "000000000000000000001.5", "9007199254740993"]
+    for _ in range(50_000):
+        digits = "".join(rng.choice("0123456789") for _ in range(rng.randint(1, 18)))
+        p = rng.randint(0, len(digits))
+        texts.append(rng.choice(["", "-", "+"]) + (digits[:p] + "." + digits[p:] if rng.random() < 0.8 else digits))
+    for t in texts:
+        b = t.encode()
+        assert struct.pack("d", scanner.number_value(b, 0, len(b))) == struct.pack("d", float(t)), t
+    cols = scanner.scan(" ".join("X" + t for t in texts))
+    assert [struct.pack("d", v) for v in cols.value] == [struct.pack("d", float(t)) for t in texts]
 
 
 @given(st.lists(st.sampled_from(["N10", "G0", "G01", "G2", "G43", "H2", "X1.5", "x-2", "Y.5", "Z3.", "I1", "J-2",

@@ -21,7 +21,7 @@ it compiles on its own.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Final, NamedTuple
 
 # i64: a native 64-bit integer where mypyc compiles the module, a plain int where it does not
 from mypy_extensions import i64
@@ -89,6 +89,40 @@ def number_end(text: bytes, i: i64, n: i64) -> i64:
     return -1
 
 
+# Exact powers of ten as floats (10**22 is the largest a double holds exactly).
+_POW10: Final = [10.0**k for k in range(23)]
+
+
+def number_value(text: bytes, i: i64, e: i64) -> float:
+    """The value of the number ``text[i:e]`` (the grammar's), correctly rounded: with at
+    most 15 digits its digits are an exact double and so is the power of ten it is divided
+    by, and one IEEE division rounds the quotient correctly; longer numbers go through
+    ``float`` of the text (correctly rounded too)."""
+    neg = False
+    k: i64 = i
+    c: i64 = text[k]
+    if c == 43 or c == 45:  # + -
+        neg = c == 45
+        k += 1
+    m: i64 = 0
+    digits: i64 = 0
+    frac: i64 = -1  # digits after the point; -1: no point yet
+    while k < e:
+        c = text[k]
+        if c == 46:
+            frac = 0
+        else:
+            m = m * 10 + (c - 48)
+            digits += 1
+            if frac >= 0:
+                frac += 1
+        k += 1
+    if digits > 15:
+        return float(text[i:e])
+    v = float(m) / _POW10[frac] if frac > 0 else float(m)
+    return -v if neg else v
+
+
 def scan_into(text: bytes, cols: Columns) -> None:
     """Scan ``text`` (whole lines; the last may lack its ending) into ``cols`` (new)."""
     n: i64 = len(text)
@@ -131,7 +165,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
                 start_col.append(j)
                 end_col.append(e)
-                value_col.append(float(text[j:e]))  # correctly rounded, in C compiled or not
+                value_col.append(number_value(text, j, e))
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
