@@ -10,6 +10,7 @@ from postproc.engine.static import StaticEngine
 from postproc.errors import MissingSetupError, PostprocError, UnsupportedGcodeError
 from postproc.gcode import emit
 from postproc.gcode.interp import Interpreter, classify_construct
+from postproc.gcode.moves import Role
 from postproc.gcode.path import Setup
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -76,7 +77,8 @@ def test_g28_goes_through_the_intermediate_point_to_the_stored_position():
     it, moves = run(text, setup)
     inter, home, nxt = moves[1], moves[2], moves[3]
     assert inter.q1 == (110.0, 70.0, 10.0)  # Z30 in G54
-    assert home.fixed
+    assert home.role is Role.AT
+    assert inter.role is Role.WHOLE
     assert home.q1 == (110.0, 70.0, 0.0)  # only Z goes to the stored position
     assert nxt.q0 == (110.0, 70.0, 0.0)
     assert nxt.q1 == (101.0, 70.0, 0.0)
@@ -114,7 +116,7 @@ def test_g28_in_a_corrected_program_rewrites_only_its_own_words():
 
 def test_g28_1_stores_the_current_position():
     it, moves = run("G21 G90\nG0 X10 Y20 Z5\nG28.1\nG0 X0 Y0 Z0\nG28\nM30\n")
-    assert moves[-1].fixed
+    assert moves[-1].role is Role.AT
     assert moves[-1].q1 == (10.0, 20.0, 5.0)
 
 

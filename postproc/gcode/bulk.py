@@ -54,6 +54,7 @@ from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer, numfmt, plainscan, runwords, scanner
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
+from postproc.gcode.moves import Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
 
@@ -143,8 +144,7 @@ class RunMove:
     one whose motion word the controller needs written)."""
 
     __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "rotary", "arc", "arc_absolute", "feed")
-    fixed = False  # never a stored-position move
-    planned = False  # never a spline's chord
+    role = Role.MOVE  # a motion block written from its words
 
     def __init__(self, run: Run, lineno: int, kind: int, q0: Point, q1: Point, feed: float) -> None:
         self.lineno = lineno
@@ -190,7 +190,7 @@ class RunMove:
             aux = tuple(i for i in centre_idx if i >= 0)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
                     self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, prefix,
-                    False, motion_idx, aux)
+                    Role.MOVE, motion_idx, aux)
 
 
 def tlo_col(line: str) -> int:

@@ -371,11 +371,6 @@ def _old_header_row(hs: HeaderSetup, row: str) -> None:
         hs.start.update({item[0]: float(item[1:]) for item in m.group(1).split(",") if item})
 
 
-def header_start(source) -> dict[str, float]:
-    """The ``--start`` a corrected program's header records (``{}`` when none)."""
-    return header_setup(source).start
-
-
 def setup_from_header(hs: HeaderSetup, setup: Setup | None) -> Setup:
     """``setup`` with what it leaves out (offsets, tool lengths, start, tool vector, G28/G30
     stored positions) taken from the corrected program's header (``hs``,

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from postproc.errors import GcodeSyntaxError, MissingSetupError, SafetyError, UnsupportedGcodeError
+from postproc.gcode.moves import Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, CANNED_CYCLES, CUTTER_COMP, SPLINES, WORK_SYSTEMS
 
 if TYPE_CHECKING:
@@ -246,7 +247,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
         return
     if edge == "entry":
         st.comp_edge = ""
-        mv.stays = True
+        mv.role = Role.WHOLE
         if arc is not None and not _linuxcnc_rules(it):
             raise _err(it, UnsupportedGcodeError, f"arc as the start-up move of cutter compensation on {ctrl}",
                        lineno, col, hint="alarm PS0034 (no circular interpolation in the start-up or exit "
@@ -264,7 +265,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
                        hint="LinuxCNC refuses it")
     elif edge == "exit":
         st.comp_edge = ""
-        mv.stays = True
+        mv.role = Role.WHOLE
         if arc is not None:
             if _linuxcnc_rules(it):
                 raise _err(it, GcodeSyntaxError,

@@ -21,6 +21,7 @@ from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.framed import FrameView
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.lexer import Word
+from postproc.gcode.moves import Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.segment import (
     ArcSpec,
@@ -252,7 +253,7 @@ class EmitterMixin:
             qe = segs[-1].qe
         last = segs[-1]
         inserted = segs[:-1]
-        if inserted and mv.stays:
+        if inserted and mv.role is Role.WHOLE:
             raise PostprocError(
                 "this move must be split to stay within tolerance, but its line also changes the tool "
                 "or uses G53, or it is the entry or exit move of cutter radius compensation (which the "

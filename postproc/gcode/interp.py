@@ -56,7 +56,7 @@ from postproc.gcode.interp_motion import (
 )
 from postproc.gcode.interp_offsets import OffsetsMixin
 from postproc.gcode.interp_words import WordsMixin, blank_nested_comments, classify_construct
-from postproc.gcode.moves import Arc, Cycle, Move
+from postproc.gcode.moves import Arc, Cycle, Move, Role
 from postproc.gcode.state import (
     ARC_CCW,
     ARC_CW,
@@ -564,7 +564,7 @@ def plain_moves(mv: Move) -> Iterator[Move]:
         return
     leg: Move | None = mv
     while leg is not None:
-        if not (leg.fixed and any(math.isnan(v) for v in leg.q1)):  # an unknown stored position
+        if not (leg.role is Role.AT and any(math.isnan(v) for v in leg.q1)):  # an unknown stored position
             yield leg
         leg = leg.then
 

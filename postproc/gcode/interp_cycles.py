@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode.interp_core import AXES, ROTARY, Block, InterpreterCore
-from postproc.gcode.moves import Cycle, Move
+from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.state import CANNED_CYCLES, DWELL, LINE, NAN, RAPID
 
 # G83's rapid back down to this far above the last depth, and G73's retract: 0.010 inch
@@ -53,7 +53,7 @@ class CyclesMixin(InterpreterCore):
             lineno=lineno, kind=plan.code, q0=(x, y, z0), q1=bottom, r=self.tool_r(), shift=shift, unit=unit,
             incremental=st.incremental, arc_absolute=st.arc_absolute, words=[], axis_idx=(-1, -1, -1),
             feed_idx=-1, inverse_time=False, feed=st.feed, rotary=dict(st.rotary) if self.used_rotary else {},
-            stays=True, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
+            role=Role.CYCLE, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
                                     False, plan.dwell_s))
 
     def _motion_cycle(self, b: Block) -> Move:
@@ -125,7 +125,7 @@ class CyclesMixin(InterpreterCore):
             lineno=lineno, kind=key, q0=q0, q1=holes[0][0] if holes else q0, r=self.tool_r(), shift=shift,
             unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
             axis_idx=axis_idx, feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
-            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=b.prefix_words(), stays=True,
+            rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=b.prefix_words(), role=Role.CYCLE,
             motion_idx=motion_idx, cycle=Cycle(key, holes, clear, steps, vals["R"][1] if "R" in vals else -1,
                                                r_m, z_m, repeats, st.retract_r, st.cycle_p))
 

@@ -14,7 +14,7 @@ from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import cutter, lexer
 from postproc.gcode.interp_core import AXES, MIN_ARC_RADIUS_MM, ROTARY, Block, InterpreterCore, Vals
-from postproc.gcode.moves import Arc, Move
+from postproc.gcode.moves import Arc, Move, Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, MOTION_CODES, PLANES, RAPID
 from postproc.limits import ResourceLimitError
 
@@ -172,7 +172,7 @@ class MotionMixin(InterpreterCore):
             inverse_time=st.inverse_time, feed=st.feed,
             rotary=dict(st.rotary) if self.used_rotary else {}, arc=arc,
             prefix_words=b.prefix_words(), event_idx=tuple(b.event_idx),
-            stays=b.tool_change or b.g53,
+            role=Role.WHOLE if b.tool_change or b.g53 else Role.MOVE,
             motion_idx=b.motion_idx,
             aux_idx=tuple(vals[k][1] for k in "IJKRP" if k in vals) if arc is not None else (),
         )
@@ -237,7 +237,7 @@ class MotionMixin(InterpreterCore):
                     unit=unit, incremental=st.incremental, arc_absolute=st.arc_absolute, words=words,
                     axis_idx=(axis_idx[0], axis_idx[1], axis_idx[2]),
                     feed_idx=vals["F"][1] if "F" in vals else -1, inverse_time=False, feed=st.feed,
-                    rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, stays=True,
+                    rotary=dict(st.rotary) if self.used_rotary else {}, prefix_words=prefix, role=Role.SPLINE,
                     motion_idx=motion_idx, spline=ctrl)
 
     def _lathe_arc(self, vals: Vals, q0: tuple[float, float, float], lineno: int, col: int) -> None:

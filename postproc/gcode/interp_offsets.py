@@ -8,7 +8,7 @@ import math
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import lexer
 from postproc.gcode.interp_core import AXES, ROTARY, Block, InterpreterCore, Vals, col_of_word
-from postproc.gcode.moves import Move
+from postproc.gcode.moves import Move, Role
 from postproc.gcode.state import HOME_CODES, NAN, P_SYSTEMS, RAPID
 
 
@@ -95,7 +95,7 @@ class OffsetsMixin(InterpreterCore):
         rot = dict(st.rotary) if self.used_rotary else {}
         jump = Move(lineno, RAPID, (inter[0], inter[1], inter[2]), (after[0], after[1], after[2]), r,
                     (0.0, 0.0, 0.0), unit, st.incremental, st.arc_absolute, [], (-1, -1, -1), -1, False, st.feed, rot,
-                    stays=True, motion_idx=gi, fixed=True,
+                    role=Role.AT, motion_idx=gi,
                     stored=(name, tuple(named or range(3))) if name in self.program_stored else None)
         st.pos = after
         moved = [k for k in named if inter[k] != q0[k] and not (math.isnan(inter[k]) and math.isnan(q0[k]))]
@@ -104,7 +104,7 @@ class OffsetsMixin(InterpreterCore):
         self._check_known(inter, lineno, col)
         return Move(lineno, RAPID, q0, (inter[0], inter[1], inter[2]), r, shift, unit, st.incremental,
                     st.arc_absolute, words, (axis_idx[0], axis_idx[1], axis_idx[2]), -1, False, st.feed, rot,
-                    stays=True, motion_idx=gi, then=jump)
+                    role=Role.WHOLE, motion_idx=gi, then=jump)
 
     def _g52(self, vals: Vals, lineno: int, col: int) -> None:
         """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""

@@ -1,11 +1,14 @@
 """The records the interpreter makes of a program's motion: a :class:`Move` per motion
-block, with its :class:`Arc` or canned :class:`Cycle`. They are read by the planner and
+block, with its :class:`Arc` or canned :class:`Cycle`, and its :class:`Role`: what the
+row is (a motion block, one never split, a cycle, a spline, a chord, a position reached
+uncorrected, a point corrected but not written). They are read by the planner and
 the writer, and by modules the interpreter itself calls (cutter compensation, arc
 geometry), so they live apart from the interpreter."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 from postproc.gcode import lexer
 
@@ -38,6 +41,22 @@ class Cycle:
     dwell: float | None
 
 
+class Role(IntEnum):
+    """What a row of a chunk's moves is, and so how it is planned and written."""
+
+    MOVE = 0  # a motion block, written from its words and split as its plan needs
+    WHOLE = 1  # a motion block never split: a tool change or G53 on its line, the entry or exit
+    # move of cutter radius compensation, the intermediate point of G28/G30
+    CYCLE = 2  # a canned-cycle block (its holes and steps: Move.cycle)
+    SPLINE = 3  # a G5/G5.1 spline (its control points: Move.spline)
+    CHORD = 4  # a chord a spline is written as, already cut within tolerance: not split again
+    AT = 5  # the machine goes there uncorrected and no words are written for it: a stored
+    # position reached by G28/G30 (NaN axes unknown), the end of a block kept as it is
+    R_POINT = 6  # corrected, not written: the R point of the cycle block before it
+    HOLE = 7  # corrected, not written: a hole of a cycle block kept as it is, whose correction
+    # must round to nothing
+
+
 @dataclass(slots=True)
 class Move:
     """A motion block: where the gauge point goes and how to rewrite the line.
@@ -64,24 +83,17 @@ class Move:
     rotary: dict[str, float]
     arc: Arc | None = None
     prefix_words: list[str] = field(default_factory=list)
-    stays: bool = False  # a tool-change or G53 line: must not be split
+    role: Role = Role.MOVE
     motion_idx: int = -1  # word index of the block's G0/G1/G2/G3, or -1 (modal)
     aux_idx: tuple[int, ...] = ()  # word indices of I/J/K/R/P (removed if an arc is linearised)
     # a second move made by the same line (G28/G30: from the intermediate point to the
     # stored position), or None
     then: Move | None = None
-    # the target is where the machine goes uncorrected (a stored position reached by
-    # G28/G30): not corrected, no words written for it; NaN axes are unknown
-    fixed: bool = False
-    cycle: Cycle | None = None  # a canned-cycle block (kind is its code)
-    # corrected but not written: 1 = the R point of the cycle block before it, 2 = a hole
-    # of a cycle block kept as it is, whose correction must round to nothing
-    probe: int = 0
-    # a G5/G5.1 spline: its control points in the XY plane (machine mm), Z constant
+    cycle: Cycle | None = None  # Role.CYCLE: the canned cycle (kind is its code)
+    # Role.SPLINE: the control points in the XY plane (machine mm), Z constant
     spline: list | None = None
-    # already cut within tolerance (a spline's chords): not split again by the planner
-    planned: bool = False
-    # a move to a position the program stored (G28.1/G30.1): its name, and the axes it sets
+    # Role.AT, a move to a position the program stored (G28.1/G30.1): its name, and the
+    # axes it sets
     stored: tuple | None = None
     # word indices of the S, T and before-motion M words (with their parameters): written on
     # the first line of a split move (prefix_words) and removed from its own (its modal G

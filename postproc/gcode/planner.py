@@ -32,7 +32,7 @@ from postproc.gcode.geometry import (
     arc_params,
     arc_points,
 )
-from postproc.gcode.moves import Arc
+from postproc.gcode.moves import Arc, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.path import backfill_unknown
 from postproc.gcode.sampling import (
@@ -101,7 +101,7 @@ class Planner(EngineCalls):
         tab.d_in = np.vstack([self.dirs[None, :], D[:-1]])
         start_unknown = cast("list[bool]", np.isnan(tab.start).any(axis=1).tolist())
         planned = [(i, m) for i, m in tab.moves
-                   if (m.arc is not None or (not self.linear_exact and m.kind == LINE and not m.planned))
+                   if (m.arc is not None or (not self.linear_exact and m.kind == LINE and m.role is not Role.CHORD))
                    and not start_unknown[i] and not any(math.isnan(v) for v in m.q0)]
         plans: dict[int, Plan] = {}
         hints: dict[int, ArcHint] = {}
@@ -202,7 +202,7 @@ class Planner(EngineCalls):
         added map reads them)."""
         Q1, linenos, general = tab.q1, tab.lineno, tab.moves
         M = len(Q1)
-        fixed_rows = [i for i, m in general if m.fixed]
+        fixed_rows = [i for i, m in general if m.role is Role.AT]
         fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
         if fixed_rows:
             # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it

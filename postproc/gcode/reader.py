@@ -28,7 +28,7 @@ from postproc.errors import UnsupportedGcodeError
 from postproc.gcode import bulk, emit
 from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.interp import Interpreter
-from postproc.gcode.moves import Cycle, Move
+from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.planner import Planner
 from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
@@ -178,7 +178,7 @@ class ChunkReader(LineReader[Entry]):
             self._feed_cycle(line, mv, mv.cycle, interp.state.motion)
         elif mv is not None and mv.spline is not None:
             self._feed_spline(line, mv, mv.spline)
-        elif mv is not None and mv.fixed:
+        elif mv is not None and mv.role is Role.AT:
             # the line only sends the machine to a stored position: written as it is
             entries.append((line, None, False, interp.state.motion))
             entries.append(("", mv, False, interp.state.motion))
@@ -208,7 +208,7 @@ class ChunkReader(LineReader[Entry]):
         if kept:
             # an affine correction maps the spline onto itself: the line stays as it is
             self.entries.append((line, None, True, LINE))
-            self.entries.append(("", replace(mv, q0=mv.q1, fixed=True, spline=None, words=[],
+            self.entries.append(("", replace(mv, q0=mv.q1, role=Role.AT, spline=None, words=[],
                                           axis_idx=(-1, -1, -1)), False, None))
             return
         s = spline_samples(spline, tol / 10.0)
@@ -240,7 +240,7 @@ class ChunkReader(LineReader[Entry]):
         prev = mv.q0
         for n, k in enumerate(keep[1:]):
             q = tuple(nom[k].tolist()) if k < len(s) - 1 else mv.q1
-            self.entries.append(self._generated_move(mv, LINE, prev, q, (0, 1), n == 0, line, planned=True))
+            self.entries.append(self._generated_move(mv, LINE, prev, q, (0, 1), n == 0, line, role=Role.CHORD))
             prev = q
         self.report.splines_linearised += 1
 
@@ -268,16 +268,16 @@ class ChunkReader(LineReader[Entry]):
             if c.repeats == 1 and not mv.incremental:
                 self.entries.append((line, mv, True, motion))
                 bottom, rpoint = c.holes[0]
-                self.entries.append(("", replace(mv, q1=rpoint, cycle=None, probe=1), False, motion))
+                self.entries.append(("", replace(mv, q1=rpoint, cycle=None, role=Role.R_POINT), False, motion))
                 return
             # several holes from one line, or increments: one word cannot carry each hole's
             # correction; kept only where nothing is corrected
             for bottom, rpoint in c.holes:
                 for q in (bottom, rpoint):
-                    self.entries.append(("", replace(mv, q1=q, cycle=None, probe=2), False, motion))
+                    self.entries.append(("", replace(mv, q1=q, cycle=None, role=Role.HOLE), False, motion))
             self.entries.append((line, None, True, None))
             end = c.steps[-1][1] if c.steps else mv.q0
-            self.entries.append(("", replace(mv, q0=end, q1=end, cycle=None, fixed=True, words=[],
+            self.entries.append(("", replace(mv, q0=end, q1=end, cycle=None, role=Role.AT, words=[],
                                           axis_idx=(-1, -1, -1)), False, None))
             return
         for step in emit.cycle_lines(line, mv, c, retract=self.opt.cycles != "expand"):
@@ -331,7 +331,7 @@ class ChunkReader(LineReader[Entry]):
         self.report.cycles_expanded += 1
 
     def _generated_move(self, mv: Move, kind: int, prev: tuple[float, float, float], q: tuple[float, float, float],
-                        axes: Iterable[int], with_feed: bool, line: str, planned: bool = False) -> Entry:
+                        axes: Iterable[int], with_feed: bool, line: str, role: Role = Role.MOVE) -> Entry:
         """The entry of a G0/G1 line written in place of ``mv`` (a cycle step, a spline
         chord) in the style of its ``line``: its nominal words on ``axes`` in the
         program's distance mode, the F word of ``mv`` when ``with_feed``, and the Move the
@@ -364,7 +364,7 @@ class ChunkReader(LineReader[Entry]):
             prev, q = prev_m, q_m
         step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
                     mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w.letter == "F"), -1), False,
-                    mv.feed, mv.rotary, motion_idx=0, planned=planned, frame=mv.frame)
+                    mv.feed, mv.rotary, motion_idx=0, role=role, frame=mv.frame)
         return (text.lower() if lower else text), step, True, kind
 
 

@@ -54,6 +54,7 @@ from postproc.gcode.state import PLANES
 
 if TYPE_CHECKING:
     from postproc.gcode.interp import Arc
+    from postproc.gcode.moves import Role
     from postproc.gcode.segment import ArcSpec, Curve
 
 FloatArray: TypeAlias = npt.NDArray[np.float64]
@@ -130,9 +131,7 @@ class PlanMove(Protocol):
     @property
     def rotary(self) -> dict[str, float]: ...
     @property
-    def fixed(self) -> bool: ...
-    @property
-    def planned(self) -> bool: ...
+    def role(self) -> Role: ...
 
 
 _M = TypeVar("_M", bound=PlanMove)

@@ -22,7 +22,7 @@ from postproc.errors import SafetyError
 from postproc.gcode import bulk, cutter, emit
 from postproc.gcode.emitter import EmitterMixin, _unit_decimals
 from postproc.gcode.lexer import Word
-from postproc.gcode.moves import Cycle, Move
+from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.planner import Planner
 from postproc.gcode.segment import Curve
@@ -177,12 +177,14 @@ class ChunkWriter(EmitterMixin):
                 self.emitted_motion = prog_motion
             return
         o.k += 1
-        if mv.probe:  # used by the cycle block before it, or checked here
-            if mv.probe == 2:
-                self._check_unmoved(mv, T[k])
+        role = mv.role
+        if role is Role.R_POINT:  # used by the cycle block before it
+            pass
+        elif role is Role.HOLE:  # of a cycle block kept as it is: checked here
+            self._check_unmoved(mv, T[k])
         elif mv.cycle is not None:
             self._emit_cycle(line, mv, mv.cycle, T[k].tolist(), T[k + 1].tolist(), write)
-        elif mv.fixed:  # the machine is at a stored position, uncorrected
+        elif role is Role.AT:  # the machine is at a stored position, uncorrected
             self.qe = list(mv.q1)
             if mv.stored is not None and mv.stored[0] in self._stored:
                 # a position the program stored: the controller stored its corrected one
