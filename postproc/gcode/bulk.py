@@ -293,6 +293,17 @@ class Block:
         self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l: list[list[int]] = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
+        # the source line of each line, when they are not consecutive (an expanded
+        # program's: :meth:`set_source`); None: a run's lines follow its first
+        self.src: list[int] | None = None
+        self.src_arr: IntArray | None = None
+
+    def set_source(self, src: list[int]) -> None:
+        """Give each of the block's lines its source line (``src``, one per line: an
+        expanded program's, where a loop's body is read once per pass and a subprogram's
+        lines come from another file); the runs read from it then number their lines so."""
+        self.src = src
+        self.src_arr = np.array(src, dtype=int)
 
     def code(self, i: int) -> int:
         """Motion of line i's G word (G0 to G3, G00 to G03)."""
@@ -323,7 +334,7 @@ class Run:
     block: Block
     a: int
     b: int
-    lineno: int  # of line a
+    lineno: int  # of line a (the others: line())
     unit: float  # mm per program unit
     shift: Point  # machine = program x unit + shift
     r: Point  # tool vector
@@ -340,6 +351,22 @@ class Run:
         self.arcs: dict[int, RunArc] = {}  # line (within the run) -> its arc
         self.inert: list[int] = []  # lines (within the run) that move nothing (blank, comment, S/M words)
         self._arc_rows: list[int] | None = None
+
+    def line(self, j: int) -> int:
+        """The source line of the run's line ``j`` (an index within it)."""
+        src = self.block.src
+        return self.lineno + j if src is None else src[self.a + j]
+
+    def text_line(self, n: int) -> int:
+        """The source line of the ``n``-th line of the run's text as written (the lines
+        past its end, of an arc the general emitter splits, numbered on from its last)."""
+        last = len(self) - 1
+        return self.line(n) if n <= last else self.line(last) + n - last
+
+    def linenos(self) -> IntArray:
+        """The source line of each of the run's lines."""
+        arr = self.block.src_arr
+        return np.arange(self.lineno, self.lineno + self.b - self.a) if arr is None else arr[self.a:self.b]
 
     def arc_rows(self) -> list[int]:
         """The block lines of the run's arcs, in order (made once)."""
@@ -546,13 +573,13 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     if blk.gword[y]:
         motion = blk.code(y)
     elif motion is None:  # a run's first line names its motion when none is modal
-        raise AssertionError(f"line {run.lineno + j} of a run without a motion")
+        raise AssertionError(f"line {run.line(j)} of a run without a motion")
     f = blk.cols[_F][y]
     if q0 is None:
         q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
-    mv = RunMove(run, run.lineno + j, motion, q0, q1, float(f) if f else feed)
+    mv = RunMove(run, run.line(j), motion, q0, q1, float(f) if f else feed)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
@@ -805,7 +832,7 @@ def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:
         if y > x:
             sub = Run()
             sub.block, sub.a, sub.b = run.block, x, y
-            sub.lineno = run.lineno + (x - run.a)
+            sub.lineno = run.line(x - run.a)
             sub.unit, sub.shift, sub.r, sub.arc_absolute, sub.decimals = (run.unit, run.shift, run.r,
                                                                           run.arc_absolute, run.decimals)
             sub.q0 = run.q0 if x == run.a else tuple(run.q1[x - run.a - 1].tolist())
