@@ -362,3 +362,17 @@ def test_corpus_programs_that_expand_read_in_bulk_as_line_by_line(path, corpus_s
     for chunk_lines in (7, 20_000):
         both(text, setup=corpus_setup(path), path=str(path), dialect=dialect, cycles="expand",
              subroutine_path=[str(corpus_subroutines)], chunk_lines=chunk_lines)
+
+
+# -- the expansion's dry run ------------------------------------------------------------------
+@pytest.mark.parametrize("kept", [1, 5, 200_000])
+def test_the_lines_held_from_the_dry_run_are_those_the_expansion_yields(monkeypatch, kept):
+    from postproc.gcode import expand as expand_module
+
+    monkeypatch.setattr(expand_module, "KEPT_LINES", kept)
+    lines = split_lines(LOOP)
+    flat = list(expand_module.expand(lines, path="main.ngc"))
+    assert list(expand_module.expand(lines, path="main.ngc", max_lines_out=10_000)) == flat
+    with pytest.raises(PostprocError, match="--max-output-lines") as refused:
+        expand_module.expand(lines, path="main.ngc", max_lines_out=20)
+    assert (refused.value.path, refused.value.lineno) == (flat[20].path, flat[20].lineno)

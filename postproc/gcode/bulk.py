@@ -38,6 +38,11 @@ end points as written. A line the planner splits, and an arc whose hint does not
 there, are written by the general emitter between the run's pieces. The result is byte
 for byte that of the general path (tests run both on the same programs); every line
 that is not plain, and every line of a chunk with lone ``\\r`` line endings, takes it.
+
+A run's lines are numbered from its first (:attr:`Run.lineno`) on, but in a block of an
+expanded program (:meth:`Block.set_source`), where a loop's body is read once per pass
+and a subprogram's lines come from its own file: each line then has its source line
+(:meth:`Run.line`, :meth:`Run.linenos`), which the table and every error name.
 """
 
 from __future__ import annotations

@@ -4,9 +4,10 @@
 and queues what it makes (:data:`postproc.gcode.writer.Entry`): a move, a line that moves
 nothing, an offset or stored position set from where the machine is. Runs of plain lines
 are read in bulk (:mod:`postproc.gcode.bulk`), from the columns the scanner makes of the
-whole block. A canned cycle written as its moves, or a spline as its chords, is queued
-as the G0/G1 lines written in its place. The corrector then plans the chunk as one table
-and writes it.
+whole block; those of an expanded program too, each line numbered by the source line
+it comes from (:meth:`LineReader.expanded`). A canned cycle written as its moves, or a
+spline as its chords, is queued as the G0/G1 lines written in its place. The corrector
+then plans the chunk as one table and writes it.
 
 The reading itself (the interpreter line by line, runs in bulk) is :class:`LineReader`'s;
 ``postproc diff`` reads both programs with it too, queueing each line's end point
