@@ -376,3 +376,50 @@ def test_the_lines_held_from_the_dry_run_are_those_the_expansion_yields(monkeypa
     with pytest.raises(PostprocError, match="--max-output-lines") as refused:
         expand_module.expand(lines, path="main.ngc", max_lines_out=20)
     assert (refused.value.path, refused.value.lineno) == (flat[20].path, flat[20].lineno)
+
+
+# -- lines written by the general emitter inside a run --------------------------------------
+SPLIT_ARCS = """G21 G17 G90 G94
+G54
+T1 M6
+G43 H1
+S12000 M3
+G0 X0 Y0 Z5
+G1 Z-1 F300
+#1 = 1661
+#2 = 5
+o100 while [#1 LT 1701]
+  #3 = [#1 MOD 100 * 0.5]
+  #4 = [FIX[#1 / 100] * 0.5]
+  G1 X[#3] Y[#4] F600
+  G1 X[#3 + #2] Y[#4]
+  G2 X[#3 + #2] Y[#4 + 2] I0 J1
+  G0 X[#3] Y[#4 + 2]PAD
+  #1 = [#1 + 1]
+o100 endwhile
+G0 Z20
+M30
+"""
+
+
+@pytest.mark.parametrize("flat", [False, True])
+def test_a_line_too_long_after_arcs_the_general_emitter_splits_inside_a_run(flat):
+    # s500 static splits some of the arcs into several exact arcs (lines the general
+    # emitter writes between the run's own); the G0 line of the last pass is the first
+    # one too long once corrected (its X and Y words have two digits before the point)
+    from postproc.calfile import load_calibration
+    from postproc.gcode.expand import expand
+
+    cal = load_calibration(Path(__file__).resolve().parents[1] / "calibrations" / "s500_static.json")
+    text = SPLIT_ARCS.replace("PAD", " " * 97)
+    if flat:  # the same lines written out: numbered 1, 2, 3, ... in one run
+        text = "".join(sl.text for sl in expand(split_lines(text), path="main.ngc"))
+    setup = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 100.0})
+    (_o, _r, err), in_runs = both(text, engine=cal.engine, setup=setup)
+    assert in_runs > 0
+    assert err is not None
+    assert err[1:3] == (7 + 40 * 4 if flat else 16, 128), err  # (flat: 7 lines, then 4 a pass)
+    assert "once corrected" in err[3]
+    (out, rep, err), _n = both(SPLIT_ARCS.replace("PAD", ""), engine=cal.engine, setup=setup)
+    assert err is None
+    assert rep["arcs_split"] > 0

@@ -96,6 +96,8 @@ _HALF = np.array([emit.HALF_UNIT[d] for d in range(331)])  # the last, 0: any mo
 
 #: where text is written (what it returns is ignored)
 Write: TypeAlias = Callable[[str], object]
+#: told, while a run is written, where the text written next comes from (emit_run)
+Mark: TypeAlias = Callable[[int, bool], None]
 Point: TypeAlias = tuple[float, float, float]
 #: an arc of a run: its centre (machine mm) and whether it turns clockwise
 RunArc: TypeAlias = tuple[Point, bool]
@@ -363,8 +365,8 @@ class Run:
         return self.lineno + j if src is None else src[self.a + j]
 
     def text_line(self, n: int) -> int:
-        """The source line of the ``n``-th line of the run's text as written (the lines
-        past its end, of an arc the general emitter splits, numbered on from its last)."""
+        """The source line of the run's line ``n`` (lines past its end numbered on from
+        its last)."""
         last = len(self) - 1
         return self.line(n) if n <= last else self.line(last) + n - last
 
@@ -592,10 +594,12 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
 
 
 def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
-             hints: Mapping[int, ArcHint]) -> None:
+             hints: Mapping[int, ArcHint], mark: Mark | None = None) -> None:
     """Write the corrected lines of ``run`` (targets prepared in ``em``; ``hints``: the
     planner's :class:`postproc.gcode.vplan.ArcHint` of each of the run's arcs, by row
-    of T)."""
+    of T). ``mark(j, whole)`` is told where the text written next comes from: line ``j``
+    of the run alone (``whole``: the general emitter's, one or more lines), or its lines
+    one by one from ``j`` on."""
     blk = run.block
     a, b = run.a, run.b
     s = a
@@ -609,14 +613,18 @@ def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write:
             write("".join(blk.lines[a:f]))
             corrector.report.lines_out += f - a
         line = blk.lines[f]
+        if mark is not None:
+            mark(f - a, True)
         corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
         s = f + 1
+        if mark is not None:
+            mark(s - a, False)
     while s < b:
-        s = _emit_rows(corrector, run, em, T, write, hints, s)
+        s = _emit_rows(corrector, run, em, T, write, hints, s, mark)
 
 
 def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
-               hints: Mapping[int, ArcHint], s: int) -> int:
+               hints: Mapping[int, ArcHint], s: int, mark: Mark | None) -> int:
     """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
     the end points as written, which the general emitter then writes; returns the
     line after the last one written. One call takes a stretch of the run: up to the
@@ -640,8 +648,12 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
     # general emitter's
     j = stop - run.a
     line = run.block.lines[stop]
+    if mark is not None:
+        mark(j, True)
     corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
                                hints[run.trow + j], write)
+    if mark is not None:
+        mark(j + 1, False)
     return stop + 1
 
 
