@@ -358,8 +358,8 @@ def corpus_subroutines(tmp_path_factory):
 @pytest.mark.parametrize("path", EXPANDING, ids=[p.name[-40:] for p in EXPANDING])
 def test_corpus_programs_that_expand_read_in_bulk_as_line_by_line(path, corpus_subroutines):
     text = _read(path)
-    dialect = "fanuc" if "fanuc" in path.parent.name or "haas" in path.parent.name else "linuxcnc"
-    for chunk_lines in (7, 20_000):
+    own = "fanuc" if "fanuc" in path.parent.name or "haas" in path.parent.name else "linuxcnc"
+    for chunk_lines, dialect in ((7, own), (20_000, "generic")):  # (generic: the shortest lines)
         both(text, setup=corpus_setup(path), path=str(path), dialect=dialect, cycles="expand",
              subroutine_path=[str(corpus_subroutines)], chunk_lines=chunk_lines)
 
@@ -423,3 +423,17 @@ def test_a_line_too_long_after_arcs_the_general_emitter_splits_inside_a_run(flat
     (out, rep, err), _n = both(SPLIT_ARCS.replace("PAD", ""), engine=cal.engine, setup=setup)
     assert err is None
     assert rep["arcs_split"] > 0
+
+
+@pytest.mark.parametrize("flat", [False, True])
+def test_a_comment_longer_than_the_dialect_reads_inside_a_run_is_passed_as_it_is(flat):
+    # as the interpreter passes a line that moves nothing (the input has it so)
+    text = LOOP.replace("(a comment inside the loop)", "(DEBUG, pass #1 of " + "a" * 130 + ")")
+    if flat:
+        from postproc.gcode.expand import expand
+
+        text = "".join(sl.text for sl in expand(split_lines(text), path="main.ngc"))
+    (out, _rep, err), in_runs = both(text)
+    assert in_runs > 0
+    assert err is None
+    assert out.count("(DEBUG, pass #1 of " + "a" * 130 + ")\n") == 12

@@ -370,6 +370,10 @@ class Run:
         last = len(self) - 1
         return self.line(n) if n <= last else self.line(last) + n - last
 
+    def inert_at(self, j: int) -> bool:
+        """Whether the run's line ``j`` moves nothing (it is written as it is)."""
+        return j < len(self) and bool(self.block.neutral[self.a + j])
+
     def linenos(self) -> IntArray:
         """The source line of each of the run's lines."""
         arr = self.block.src_arr

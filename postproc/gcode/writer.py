@@ -210,7 +210,7 @@ class ChunkWriter(EmitterMixin):
         """A chunk's text (``out``, its entries' ``marks``) with every line it writes
         within the dialect's limits: a line that passes them gets its comments on a line
         of their own before it (:func:`emit.fit_line`), or is refused naming its line and
-        column. Lines passed as they are stay (the input has them so)."""
+        column. Lines passed as they are stay (the input has them so), in a run too."""
         pieces: list[str] = []
         ends = [m[0] for m in marks[1:]] + [len(out)]
         pieces.extend(out[:marks[0][0]] if marks else out)
@@ -220,6 +220,9 @@ class ChunkWriter(EmitterMixin):
                 pieces.append(text)
                 continue
             for n, line in enumerate(text.splitlines(keepends=True)):
+                if run is not None and run.inert_at(at + n):  # a run's line that moves nothing: as it is
+                    pieces.append(line)
+                    continue
                 fitted, over = emit.fit_line(self.opt.dialect, line)
                 if over is not None:
                     col, what = over
