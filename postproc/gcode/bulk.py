@@ -38,6 +38,11 @@ end points as written. A line the planner splits, and an arc whose hint does not
 there, are written by the general emitter between the run's pieces. The result is byte
 for byte that of the general path (tests run both on the same programs); every line
 that is not plain, and every line of a chunk with lone ``\\r`` line endings, takes it.
+
+A run's lines are numbered from its first (:attr:`Run.lineno`) on, but in a block of an
+expanded program (:meth:`Block.set_source`), where a loop's body is read once per pass
+and a subprogram's lines come from its own file: each line then has its source line
+(:meth:`Run.line`, :meth:`Run.linenos`), which the table and every error name.
 """
 
 from __future__ import annotations
@@ -92,6 +97,8 @@ _HALF = np.array([emit.HALF_UNIT[d] for d in range(331)])  # the last, 0: any mo
 
 #: where text is written (what it returns is ignored)
 Write: TypeAlias = Callable[[str], object]
+#: told, while a run is written, where the text written next comes from (emit_run)
+Mark: TypeAlias = Callable[[int, bool], None]
 Point: TypeAlias = tuple[float, float, float]
 #: an arc of a run: its centre (machine mm) and whether it turns clockwise
 RunArc: TypeAlias = tuple[Point, bool]
@@ -293,6 +300,17 @@ class Block:
         self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l: list[list[int]] = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
+        # the source line of each line, when they are not consecutive (an expanded
+        # program's: :meth:`set_source`); None: a run's lines follow its first
+        self.src: list[int] | None = None
+        self.src_arr: IntArray | None = None
+
+    def set_source(self, src: list[int]) -> None:
+        """Give each of the block's lines its source line (``src``, one per line: an
+        expanded program's, where a loop's body is read once per pass and a subprogram's
+        lines come from another file); the runs read from it then number their lines so."""
+        self.src = src
+        self.src_arr = np.array(src, dtype=int)
 
     def code(self, i: int) -> int:
         """Motion of line i's G word (G0 to G3, G00 to G03)."""
@@ -323,7 +341,7 @@ class Run:
     block: Block
     a: int
     b: int
-    lineno: int  # of line a
+    lineno: int  # of line a (the others: line())
     unit: float  # mm per program unit
     shift: Point  # machine = program x unit + shift
     r: Point  # tool vector
@@ -340,6 +358,26 @@ class Run:
         self.arcs: dict[int, RunArc] = {}  # line (within the run) -> its arc
         self.inert: list[int] = []  # lines (within the run) that move nothing (blank, comment, S/M words)
         self._arc_rows: list[int] | None = None
+
+    def line(self, j: int) -> int:
+        """The source line of the run's line ``j`` (an index within it)."""
+        src = self.block.src
+        return self.lineno + j if src is None else src[self.a + j]
+
+    def text_line(self, n: int) -> int:
+        """The source line of the run's line ``n`` (lines past its end numbered on from
+        its last)."""
+        last = len(self) - 1
+        return self.line(n) if n <= last else self.line(last) + n - last
+
+    def inert_at(self, j: int) -> bool:
+        """Whether the run's line ``j`` moves nothing (it is written as it is)."""
+        return j < len(self) and bool(self.block.neutral[self.a + j])
+
+    def linenos(self) -> IntArray:
+        """The source line of each of the run's lines."""
+        arr = self.block.src_arr
+        return np.arange(self.lineno, self.lineno + self.b - self.a) if arr is None else arr[self.a:self.b]
 
     def arc_rows(self) -> list[int]:
         """The block lines of the run's arcs, in order (made once)."""
@@ -546,13 +584,13 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     if blk.gword[y]:
         motion = blk.code(y)
     elif motion is None:  # a run's first line names its motion when none is modal
-        raise AssertionError(f"line {run.lineno + j} of a run without a motion")
+        raise AssertionError(f"line {run.line(j)} of a run without a motion")
     f = blk.cols[_F][y]
     if q0 is None:
         q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
-    mv = RunMove(run, run.lineno + j, motion, q0, q1, float(f) if f else feed)
+    mv = RunMove(run, run.line(j), motion, q0, q1, float(f) if f else feed)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
@@ -560,10 +598,12 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
 
 
 def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
-             hints: Mapping[int, ArcHint]) -> None:
+             hints: Mapping[int, ArcHint], mark: Mark | None = None) -> None:
     """Write the corrected lines of ``run`` (targets prepared in ``em``; ``hints``: the
     planner's :class:`postproc.gcode.vplan.ArcHint` of each of the run's arcs, by row
-    of T)."""
+    of T). ``mark(j, whole)`` is told where the text written next comes from: line ``j``
+    of the run alone (``whole``: the general emitter's, one or more lines), or its lines
+    one by one from ``j`` on."""
     blk = run.block
     a, b = run.a, run.b
     s = a
@@ -577,14 +617,18 @@ def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write:
             write("".join(blk.lines[a:f]))
             corrector.report.lines_out += f - a
         line = blk.lines[f]
+        if mark is not None:
+            mark(f - a, True)
         corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
         s = f + 1
+        if mark is not None:
+            mark(s - a, False)
     while s < b:
-        s = _emit_rows(corrector, run, em, T, write, hints, s)
+        s = _emit_rows(corrector, run, em, T, write, hints, s, mark)
 
 
 def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
-               hints: Mapping[int, ArcHint], s: int) -> int:
+               hints: Mapping[int, ArcHint], s: int, mark: Mark | None) -> int:
     """Write lines ``s:`` of ``run``, up to the first arc whose hint does not hold for
     the end points as written, which the general emitter then writes; returns the
     line after the last one written. One call takes a stretch of the run: up to the
@@ -608,8 +652,12 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
     # general emitter's
     j = stop - run.a
     line = run.block.lines[stop]
+    if mark is not None:
+        mark(j, True)
     corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
                                hints[run.trow + j], write)
+    if mark is not None:
+        mark(j + 1, False)
     return stop + 1
 
 
@@ -805,7 +853,7 @@ def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:
         if y > x:
             sub = Run()
             sub.block, sub.a, sub.b = run.block, x, y
-            sub.lineno = run.lineno + (x - run.a)
+            sub.lineno = run.line(x - run.a)
             sub.unit, sub.shift, sub.r, sub.arc_absolute, sub.decimals = (run.unit, run.shift, run.r,
                                                                           run.arc_absolute, run.decimals)
             sub.q0 = run.q0 if x == run.a else tuple(run.q1[x - run.a - 1].tolist())

@@ -61,6 +61,10 @@ from postproc.limits import (
     flat_program_too_long,
 )
 
+# The flat program of the dry run (max_lines_out) is held, and yielded instead of running
+# the expansion again, up to this many lines (about 150 bytes each: 30 MB); a longer
+# one is run again.
+KEPT_LINES = 200_000
 _M_SPECIAL = (2.0, 30.0, 97.0, 98.0, 99.0)
 _G_SPECIAL = (65.0, 66.0)
 _LINE_END = re.compile(r"(\r\n|\n|\r)$")
@@ -480,7 +484,8 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
 
     ``max_lines_out``: the most lines the corrected program may have
     (:meth:`postproc.limits.Limits.output_lines`); when given, the program is first run
-    through without yielding anything, counting its lines, and refused
+    through without yielding anything, counting its lines (and holding them, up to
+    :data:`KEPT_LINES`: they are then yielded without running it again), and refused
     (:class:`~postproc.limits.ResourceLimitError`, ``--max-output-lines``) when the flat
     program alone passes that bound, before any line of it is corrected: a loop that
     writes moves is refused at the expansion's speed, not the correction's.
@@ -496,9 +501,16 @@ def expand(lines: Iterable[str], *, path: str | None = None, dialect: str = "gen
     if max_lines_out is not None:
         dry = _Expander(lines, path, dialect, subroutine_path, max_lines, max_iterations)
         dry.seed(variables or {})
+        kept: list[SourceLine] | None = []  # the flat program, while it is short enough to hold
         for n, sl in enumerate(dry.run(), start=1):
             if n > max_lines_out:
                 raise flat_program_too_long(max_lines_out, sl.path, sl.lineno)
+            if kept is not None:
+                kept.append(sl)
+                if n >= KEPT_LINES:
+                    kept = None
+        if kept is not None:
+            return iter(kept)  # (the run again would yield the same lines)
     ex = _Expander(lines, path, dialect, subroutine_path, max_lines, max_iterations)
     ex.seed(variables or {})
     return ex.run()

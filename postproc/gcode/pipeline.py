@@ -151,12 +151,13 @@ class Corrector:
              source: deque[tuple[int, str | None]] | None = None, skip_until: int = 0,
              boundary: Callable[[int], bool] | None = None) -> CorrectReport:
         """``source``: for an expanded program, the (line, file) each of ``lines`` comes
-        from, in order (the lines are then read one by one, never in bulk)."""
+        from, in order, given as the lines are (its runs of plain lines are read in bulk
+        too, each line numbered by its source)."""
         it = iter(lines)
         rd = self.reader
         self.interp.may_expand = source is None and self.opt.expand
         if source is not None:
-            rd.expanded(source)
+            rd.expanded(source, in_bulk=True)
         head, keep = emit.start_lines(it)
         self._write_start(head, keep, write)
         for line in head[keep:]:
@@ -309,7 +310,7 @@ class Corrector:
         for e in runs:
             sl = slice(e.trow, e.trow + len(e))
             Q1[sl] = e.q1
-            lns[sl] = np.arange(e.lineno, e.lineno + len(e))
+            lns[sl] = e.linenos()
             Rt[sl] = e.r
         if general:
             at = [i for i, _m in general]

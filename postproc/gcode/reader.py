@@ -4,9 +4,10 @@
 and queues what it makes (:data:`postproc.gcode.writer.Entry`): a move, a line that moves
 nothing, an offset or stored position set from where the machine is. Runs of plain lines
 are read in bulk (:mod:`postproc.gcode.bulk`), from the columns the scanner makes of the
-whole block. A canned cycle written as its moves, or a spline as its chords, is queued
-as the G0/G1 lines written in its place. The corrector then plans the chunk as one table
-and writes it.
+whole block; those of an expanded program too, each line numbered by the source line
+it comes from (:meth:`LineReader.expanded`). A canned cycle written as its moves, or a
+spline as its chords, is queued as the G0/G1 lines written in its place. The corrector
+then plans the chunk as one table and writes it.
 
 The reading itself (the interpreter line by line, runs in bulk) is :class:`LineReader`'s;
 ``postproc diff`` reads both programs with it too, queueing each line's end point
@@ -19,6 +20,7 @@ import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import replace
+from itertools import islice
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -65,11 +67,14 @@ class LineReader(Generic[E]):
         self.dec_mm = _unit_decimals(options, 1.0)
         self.dec_in = _unit_decimals(options, MM_PER_INCH)
 
-    def expanded(self, source: deque[tuple[int, str | None]]) -> None:
+    def expanded(self, source: deque[tuple[int, str | None]], in_bulk: bool = False) -> None:
         """Read an expanded program: ``source`` gives the (line, file) each line read comes
-        from, in order (the lines are then read one by one, never in bulk)."""
+        from, in order, at least as far as the block being read (:meth:`where` takes each
+        line's). With ``in_bulk`` its runs of plain lines are read in bulk too, each of
+        their lines numbered by its source line (:meth:`bulk.Block.set_source`); else
+        every line is read by the interpreter."""
         self.source = source
-        self.use_bulk = False
+        self.use_bulk = self.use_bulk and in_bulk
 
     def where(self, seq: int) -> int:
         """The line number the interpreter reports for the ``seq``-th line read."""
@@ -79,6 +84,20 @@ class LineReader(Generic[E]):
         self.interp.path = p or self.path
         self.last = ln
         return ln
+
+    def _taken(self, n: int) -> None:
+        """The next ``n`` lines of an expanded program read (as a run): their sources
+        taken, the interpreter's file and :attr:`last` those of the last, as :meth:`where`
+        leaves them."""
+        source = self.source
+        if source is None:
+            return
+        pop = source.popleft
+        for _ in range(n - 1):
+            pop()
+        ln, p = pop()
+        self.interp.path = p or self.path
+        self.last = ln
 
     def line(self, line: str) -> None:
         """Read one line through the interpreter and queue what it makes."""
@@ -104,6 +123,14 @@ class LineReader(Generic[E]):
             for line in lines:
                 self.line(line)
             return
+        if self.source is not None:
+            # the source line of each line of the block (where() takes them as they are read)
+            src = [ln for ln, _p in islice(self.source, len(lines))]
+            if len(src) < len(lines):  # (the sources of the block's lines not all given yet)
+                for line in lines:
+                    self.line(line)
+                return
+            block.set_source(src)
         try:
             edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
             i, n = 0, len(lines)
@@ -123,20 +150,26 @@ class LineReader(Generic[E]):
         """Read from line ``i`` of a stretch of plain lines (ending at ``b``): a run in bulk
         where the modal state allows one, else the line alone; the next line to read."""
         interp = self.interp
+        src = block.src
+        here = self.lineno if src is None else src[i]  # the line of line i (a run's first)
         tlo = block.tlo  # a straight move that sets the tool length (G43 H..) starts a run
         if tlo and i in tlo and not interp.ended:
             # the tool length first (again when the interpreter reads the line)
-            interp.set_tool_length(tlo[i], self.lineno, bulk.tlo_col(lines[i]))
+            if self.source is not None:
+                interp.path = self.source[0][1] or self.path  # (line i's file: where() takes it next)
+            interp.set_tool_length(tlo[i], here, bulk.tlo_col(lines[i]))
             self.run_ok = False
         # a line naming its own motion word may start a run whatever the modal motion
         # (a run starts at a line that moves: one that moves nothing is the interpreter's)
         if not block.neutral[i] and (self.run_ok or (not interp.ended and bulk.prime_shift(interp)
                                                      and bulk.state_allows(interp, bool(block.gword[i])))):
             dec = self.dec_in if interp.state.inch else self.dec_mm
-            run = bulk.read_run(interp, block, i, b, self.lineno, dec)
+            run = bulk.read_run(interp, block, i, b, here, dec)
             if run is not None:
                 self.queue_run(run)
-                self.lineno += run.b - i
+                n = run.b - i
+                self.lineno += n
+                self._taken(n)  # (an expanded program's: the run's sources)
                 self.run_ok = bulk.state_allows(interp)
                 return run.b
         # the modal state does not allow a run here, or an arc the run does not take (the

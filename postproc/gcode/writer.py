@@ -66,8 +66,9 @@ Entry: TypeAlias = "tuple[str, Move | Rebase | Store | None, bool, int | None]"
 class _Chunk:
     """A chunk being written: its targets, plans and hints, the text written so far, where
     each entry's text starts in it (``marks``: (index, its line, 1: every line is that
-    line's, 2: a run's lines one by one from it, 0: a line passed as it is)), the next row
-    of the table, the lines passed as they are, and the runs' prepared emissions."""
+    line's, 0: a line passed as it is, None), or (index, j, 2: a run's lines one by one
+    from its line j, the run)), the next row of the table, the lines passed as they are,
+    and the runs' prepared emissions."""
 
     __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks")
 
@@ -76,11 +77,19 @@ class _Chunk:
         self.plans = plans
         self.hints = hints
         self.out: list[str] = []  # the chunk's text, written at once
-        self.marks: list[tuple[int, int, int]] = []
+        self.marks: list[tuple[int, int, int, bulk.Run | None]] = []
         self.k = 0
         self.passed = 0
         self.prepared: dict[int, bulk.Emission] = {}
         self.blocks: list[bulk.Block] = []
+
+
+def _marker(o: _Chunk, run: bulk.Run) -> bulk.Mark:
+    """The marks of where the text written next comes from, while ``run`` is written
+    (:func:`postproc.gcode.bulk.emit_run`)."""
+    def mark(j: int, whole: bool) -> None:
+        o.marks.append((len(o.out), run.line(j), 1, None) if whole else (len(o.out), j, 2, run))
+    return mark
 
 
 class ChunkWriter(EmitterMixin):
@@ -132,21 +141,21 @@ class ChunkWriter(EmitterMixin):
         """Write a run of plain lines: in bulk, but for the arcs and lines that must be
         split, which the general emitter writes."""
         out, T, k = o.out, o.T, o.k
-        o.marks.append((len(out), e.lineno, 2))
+        o.marks.append((len(out), 0, 2, e))
         em = o.prepared.get(id(e.block))
         if em is None:
             em = o.prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
             o.blocks.append(e.block)
         if not e.cut:
-            bulk.emit_run(self, e, em, T, out.append, o.hints)
+            bulk.emit_run(self, e, em, T, out.append, o.hints, _marker(o, e))
         else:  # arcs and lines that must be split: written by the general emitter
             for part in bulk.split_run(e, sorted(set(e.cut))):
                 if type(part) is bulk.Run:
-                    o.marks.append((len(out), part.lineno, 2))
-                    bulk.emit_run(self, part, em, T, out.append, o.hints)
+                    o.marks.append((len(out), 0, 2, part))
+                    bulk.emit_run(self, part, em, T, out.append, o.hints, _marker(o, part))
                     continue
                 j, fm = part
-                o.marks.append((len(out), e.lineno + j, 1))
+                o.marks.append((len(out), e.line(j), 1, None))
                 line = e.block.lines[e.a + j]
                 hint = o.hints.get(k + j)
                 if hint is not None:
@@ -161,7 +170,7 @@ class ChunkWriter(EmitterMixin):
         out, T, k = o.out, o.T, o.k
         write = out.append
         line, mv, motion_word, prog_motion = e
-        o.marks.append((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1))
+        o.marks.append((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1, None))
         if type(mv) is Rebase:
             self._emit_rebase(line, mv, write)
             return
@@ -199,25 +208,28 @@ class ChunkWriter(EmitterMixin):
             else:
                 self._emit_move(line, mv, T[k].tolist(), o.plans.get(k), write)
 
-    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int]]) -> str:
+    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int, bulk.Run | None]]) -> str:
         """A chunk's text (``out``, its entries' ``marks``) with every line it writes
         within the dialect's limits: a line that passes them gets its comments on a line
         of their own before it (:func:`emit.fit_line`), or is refused naming its line and
-        column. Lines passed as they are stay (the input has them so)."""
+        column. Lines passed as they are stay (the input has them so), in a run too."""
         pieces: list[str] = []
         ends = [m[0] for m in marks[1:]] + [len(out)]
         pieces.extend(out[:marks[0][0]] if marks else out)
-        for (a, lineno, kind), b in zip(marks, ends, strict=True):
+        for (a, at, kind, run), b in zip(marks, ends, strict=True):
             text = "".join(out[a:b])
             if kind == 0 or not self._long_line.search(text):
                 pieces.append(text)
                 continue
             for n, line in enumerate(text.splitlines(keepends=True)):
+                if run is not None and run.inert_at(at + n):  # a run's line that moves nothing: as it is
+                    pieces.append(line)
+                    continue
                 fitted, over = emit.fit_line(self.opt.dialect, line)
                 if over is not None:
                     col, what = over
                     raise SafetyError(
-                        f"{what}, once corrected", path=self.path, lineno=lineno + n if kind == 2 else lineno,
+                        f"{what}, once corrected", path=self.path, lineno=run.text_line(at + n) if run is not None else at,
                         col=col, hint="shorten the line (a comment moved onto a line of its own would not "
                                       "do) or give the --dialect it is for")
                 if len(fitted) > 1:
