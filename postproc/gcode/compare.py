@@ -611,7 +611,7 @@ class _LineRows(LineReader[_Record]):
             blk = group[0][0].block
             src = np.concatenate([np.arange(r.a, r.b) for r, _i in group])  # the runs' lines in the block
             dst = np.concatenate([np.arange(i, i + r.b - r.a) for r, i in group])  # their rows
-            lineno[dst] = src + np.repeat([r.lineno - r.a for r, _i in group], [r.b - r.a for r, _i in group])
+            lineno[dst] = np.concatenate([r.linenos() for r, _i in group])
             inert = blk.neutral[src]
             move[dst] = ~inert
             q = np.concatenate([r.q1 for r, _i in group])
@@ -725,7 +725,7 @@ class _Reader:
                       variables=self.variables, max_iterations=self.limits.max_iterations)
         rd = self._rd
         source: deque[tuple[int, str | None]] = deque()
-        rd.expanded(source)
+        rd.expanded(source, in_bulk=True)
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
             source.extend((sl.lineno, None) for sl in part)
             yield from self._read(partial(rd.block, [sl.text for sl in part]))
