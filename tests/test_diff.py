@@ -248,6 +248,39 @@ def test_diff_reads_in_bulk_the_end_points_the_interpreter_reads(monkeypatch):
         np.testing.assert_array_equal(np.concatenate([p.end for p in parts]), np.array(want_end))
 
 
+def test_diff_reads_an_expanded_program_in_bulk_as_line_by_line(monkeypatch):
+    # a LinuxCNC loop whose body is plain once substituted (runs read in bulk), with an arc
+    # and a subroutine: each row numbered by its source line, the same rows as the
+    # interpreter line by line gives
+    from postproc.gcode import compare, reader
+
+    text = ("G21 G90 G17\nG0 X0 Y0 Z10\n#1 = 0\no100 while [#1 LT 40]\nG1 X[#1] Y[#1 * 0.5] F300\n"
+            "G1 X[#1 + 1] Y0\nG2 X[#1 + 3] Y0 I1 J0\nG0 Z[10 + #1 / 100]\n#1 = [#1 + 1]\no100 endwhile\n"
+            "o200 sub\nG1 X[#1] Y[#1]\nG1 X5 Y5\no200 endsub\no200 call [3]\nG0 Z30\nM2\n")
+    setup = Setup(offsets={"G54": (0.0, 0.0, 0.0)})
+    options = compare._ReadOptions(dialect="linuxcnc", expand=True)
+
+    def rows(bulk_lane: bool, chunk: int) -> list:
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        monkeypatch.setattr(compare, "BLOCK_LINES", min(chunk, 5_000))
+        rd = compare._Reader(text, setup, compare._Keys(), options)
+        rd._rd.use_bulk = bulk_lane
+        parts = list(rd.chunks())
+        return [np.concatenate([getattr(p, k) for p in parts]) for k in ("lineno", "move", "end", "keys")]
+
+    want = rows(False, 20_000)
+    assert len(want[0]) == 40 * 4 + 2 + 2 + 2  # the passes, the lines before and after them, the call
+    assert sorted(set(want[0][want[1]].tolist())) == [2, 5, 6, 7, 8, 12, 13, 16]
+    spied = []
+    monkeypatch.setattr(reader.LineReader, "queue_run", lambda self, run: (spied.append(len(run)),
+                                                                            self.entries.append(run)))
+    for chunk in (20_000, 37, 5):
+        got = rows(True, chunk)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g, w)
+    assert max(spied) >= 4  # read in runs, not line by line
+
+
 def test_diff_lets_go_of_each_block_it_reads(monkeypatch):
     # a run refers to its block and the block to its runs; diff reads with the cyclic
     # garbage collector off, so each block read is let go of by hand (memory stays bounded)
