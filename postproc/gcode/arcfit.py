@@ -433,11 +433,13 @@ class MoveFit:
         V1, V2, C1, C2 = fitcore.centre_lattice(centre, base, unit, d, CENTRE_LATTICE)
         # candidates whose radii disagree are refused unmeasured; a measure stops once it
         # shows its candidate beyond the budget
-        meas = tr.measure(C1, C2, agree, controller_limits_of(True), budget)
+        limits = controller_limits_of(True)
         if budget < math.inf:
             # the measured candidates within the budget (those within the mismatch limit,
             # not refused); the first of the order below is the best of them when no other
-            # ties with it, and is taken when its written centre is the one measured
+            # ties with it, and is taken when its written centre is the one measured (the
+            # measures stop also above the best so far: only the best's worst is needed)
+            meas = tr.measure(C1, C2, agree, limits, budget, least=True)
             passing = [w for w in meas.worst if w <= budget]
             if not passing:
                 return None
@@ -449,7 +451,8 @@ class MoveFit:
                 if float(texts[0]) == V1[j] and float(texts[1]) == V2[j]:
                     return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": meas.turns[k],
                             "dev": best, "mismatch": meas.mism[k]}
-        worst, mism, turns = full_of(meas)
+        # the order of all those within the budget
+        worst, mism, turns = full_of(tr.measure(C1, C2, agree, limits, budget))
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None

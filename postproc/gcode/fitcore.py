@@ -26,6 +26,8 @@ from typing import Final
 
 TWO_PI: Final = 2.0 * math.pi
 
+_atan2: Final = math.atan2
+
 # rint: adding and taking away 2**52 rounds a float below it to an integer, half to even
 _TWO52: Final = 4503599627370496.0
 # hypot: glibc's scaling of very large and very small inputs, and the ratio beyond which
@@ -223,7 +225,7 @@ class ArcTry:
         self.us, self.vs, self.ws, self.frac = us, vs, ws, frac
 
     def measure(self, cx: list[float], cy: list[float], limit: float, limits: tuple[float, float],
-                stop: float) -> Measured:
+                stop: float, least: bool = False) -> Measured:
         """The arcs a controller draws from S to E about each candidate centre (``cx``,
         ``cy``): their radius mismatch, and for those within ``limit`` (every one where
         it is inf) their turns and, unless they turn the wrong way or the wrong number of
@@ -233,7 +235,10 @@ class ArcTry:
         controller that draws on one radius and jumps at the end adds to it).
 
         ``stop``: a candidate's measure stops at a sample that makes its worst exceed
-        it (that worst, above ``stop``, is then a lower bound of the full one)."""
+        it (that worst, above ``stop``, is then a lower bound of the full one).
+        ``least``: only the least worst matters, and whether another ties with it: the
+        measures stop also once above the least worst so far (every candidate whose worst
+        is the least is measured in full)."""
         out = Measured()
         s1, s2, e1, e2 = self.s1, self.s2, self.e1, self.e2
         clockwise, nominal = self.clockwise, self.nsw
@@ -242,6 +247,7 @@ class ArcTry:
         half_pi = math.pi / 2
         min_r, min_sweep = limits
         every = limit == math.inf
+        hint = -1  # the sample farthest from the arc measured last, measured first
         for j in range(len(cx)):
             x, y = cx[j], cy[j]
             dx0, dy0, dx1, dy1 = s1 - x, s2 - y, e1 - x, e2 - y
@@ -250,7 +256,7 @@ class ArcTry:
             out.mismatch.append(mism)
             if not (every or mism <= limit):
                 continue
-            t0, t1 = math.atan2(dy0, dx0), math.atan2(dy1, dx1)
+            t0, t1 = _atan2(dy0, dx0), _atan2(dy1, dx1)
             base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
             if self.full or -1e-12 < base < 1e-12:
                 base = full_sweep
@@ -264,41 +270,55 @@ class ArcTry:
             off = sweep - nominal
             if off > half_pi or -off > half_pi or r0 < min_r or r1 < min_r or asw < min_sweep:
                 continue
+            dev, hint = self._deviation((t0, asw, r0, r1 - r0), x, y, mism, stop, hint)
+            worst = dev + mism
             out.idx.append(j)
             out.turns.append(tr)
             out.mism.append(mism)
-            out.worst.append(self._deviation((t0, asw, r0, r1 - r0), x, y, mism, stop) + mism)
+            out.worst.append(worst)
+            if least and worst < stop:
+                stop = worst
         return out
 
     def _deviation(self, arc: tuple[float, float, float, float], cx: float, cy: float, mism: float,
-                   stop: float) -> float:
+                   stop: float, first: int) -> tuple[float, int]:
         """Largest distance of the samples from the spiral about (cx, cy) from its start
-        angle sweeping |sweep|, its radius from r0 to r0 + dr (``arc``); the measure stops
-        where ``that + mism`` exceeds ``stop``."""
+        angle sweeping |sweep|, its radius from r0 to r0 + dr (``arc``), and the sample
+        where it is; sample ``first`` (the middle one if out of range) is measured first.
+        The measure stops where ``that + mism`` exceeds ``stop``. (The largest of the
+        distances does not depend on their order.)"""
         t0, asw, r0, dr = arc
-        us, vs, ws, frac = self.us, self.vs, self.ws, self.frac
-        sn = self.sn
-        dn = self.en - sn
-        clockwise = self.clockwise
+        k = len(self.us)
+        if not 0 <= first < k:
+            first = k // 2
         worst = 0.0
+        at = first
         nan = False
-        for i in range(len(us)):
-            v1 = us[i] - cx
-            v2 = vs[i] - cy
-            phi = math.atan2(v2, v1)
-            # the angle from the start the way the arc turns, then the turns that bring it
-            # nearest the sample's share of the sweep
-            alpha = (t0 - phi) % TWO_PI if clockwise else (phi - t0) % TWO_PI
-            alpha = alpha + rint((frac[i] * asw - alpha) / TWO_PI) * TWO_PI
-            f = alpha / asw
-            dev = hypot(hypot(v1, v2) - (r0 + dr * f), ws[i] - (sn + dn * f))
+        for n in range(-1, k):
+            i = first if n < 0 else n
+            if n == first:
+                continue
+            dev = self._distance(i, t0, asw, r0, dr, cx, cy)
             if dev > worst:
                 worst = dev
+                at = i
                 if dev + mism > stop:
                     break
             elif dev != dev:
                 nan = True
-        return math.nan if nan else worst
+        return (math.nan if nan else worst), at
+
+    def _distance(self, i: int, t0: float, asw: float, r0: float, dr: float, cx: float, cy: float) -> float:
+        """The distance of sample ``i`` from the spiral of :meth:`_deviation`."""
+        v1 = self.us[i] - cx
+        v2 = self.vs[i] - cy
+        phi = _atan2(v2, v1)
+        # the angle from the start the way the arc turns, then the turns that bring it
+        # nearest the sample's share of the sweep
+        alpha = (t0 - phi) % TWO_PI if self.clockwise else (phi - t0) % TWO_PI
+        alpha = alpha + rint((self.frac[i] * asw - alpha) / TWO_PI) * TWO_PI
+        f = alpha / asw
+        return hypot(hypot(v1, v2) - (r0 + dr * f), self.ws[i] - (self.sn + (self.en - self.sn) * f))
 
 
 def fractions(ss: list[float], lo: int, hi: int) -> list[float]:
