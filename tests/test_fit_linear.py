@@ -70,8 +70,8 @@ class _Count:
                 self.tr = arc_try(*args)
                 self.s1, self.s2, self.e1, self.e2 = self.tr.s1, self.tr.s2, self.tr.e1, self.tr.e2
 
-            def measure(self, *args):
-                found = self.tr.measure(*args)
+            def measure(self, *args, **kwargs):
+                found = self.tr.measure(*args, **kwargs)
                 count.n += len(self.tr.us) * len(found.idx)
                 return found
 
