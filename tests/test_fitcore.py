@@ -73,8 +73,10 @@ def test_centre_lattice_is_the_one_numpy_rounded(d):
         C = base[None, :] + V * unit
         w1, w2, c1, c2 = fitcore.centre_lattice((float(centre[0]), float(centre[1])),
                                                 (float(base[0]), float(base[1])), unit, d, 3)
-        assert _bits(w1) == _bits(V[:, 0]) and _bits(w2) == _bits(V[:, 1])
-        assert _bits(c1) == _bits(C[:, 0]) and _bits(c2) == _bits(C[:, 1])
+        assert _bits(w1) == _bits(V[:, 0])
+        assert _bits(w2) == _bits(V[:, 1])
+        assert _bits(c1) == _bits(C[:, 0])
+        assert _bits(c2) == _bits(C[:, 1])
 
 
 def _chord_reference(S, E, Q):
@@ -179,5 +181,6 @@ def test_a_measure_that_stops_keeps_what_the_fit_takes_from_it():
                     cut += w_part < w_full
             if least and passing:
                 kept = [w for w in part.worst if w <= budget]
-                assert min(kept) == best and kept.count(best) == passing.count(best)
+                assert min(kept) == best
+                assert kept.count(best) == passing.count(best)
     assert cut > 100

@@ -335,8 +335,6 @@ class MoveFit:
         every input arc as it is)."""
         mv, arc, plan, budget = self.mv, self.arc, self.plan, self.budget
         (a1, a2, an), _letters = PLANES[arc.plane]
-        S = np.asarray(S_, dtype=float)
-        E = np.asarray(E_, dtype=float)
         span = smp.sl[hi - 1] - smp.sl[lo]
         P2 = smp.P2
         if span <= 0.0 or P2 is None:
@@ -344,14 +342,15 @@ class MoveFit:
         nsw = span * plan["nsweep"]
         frac = fitcore.fractions(smp.sl, lo, hi)
         keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
-        if hi - lo > OFF_EVERY_ARC_FROM and self._off_every_arc(S, E, smp.Qs[lo:hi], np.array(frac), nsw, keep):
+        if hi - lo > OFF_EVERY_ARC_FROM and self._off_every_arc(np.array(S_), np.array(E_), smp.Qs[lo:hi],
+                                                                np.array(frac), nsw, keep):
             return None
         ends = (S_[a1], S_[a2], S_[an], E_[a1], E_[a2], E_[an])
         full = math.hypot(E_[a1] - S_[a1], E_[a2] - S_[a2]) < FULL_CIRCLE_MM
         tr = fitcore.ArcTry(ends, arc.clockwise, nsw, full, smp.column(a1, lo, hi), smp.column(a2, lo, hi),
                             smp.column(an, lo, hi), frac)
         if keep:
-            ctrl = self.w._input_centre(mv, S, E)
+            ctrl = self.w._input_centre(mv, S_, E_)
             if ctrl is not None:
                 worst, mism, turns = _one(tr, float(ctrl[0]), float(ctrl[1]), False)
                 # the input's own reading: the spiral its controller draws (no penalty for

@@ -10,7 +10,9 @@
   from its chord by less than one output step the fitted centre means nothing and the
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
-  (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`).
+  (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`). The measures over the samples
+  (the chord's deviation, each candidate's arc) run sample by sample in plain floats in
+  :mod:`postproc.gcode.fitcore`, compiled with the core.
 - :func:`off_every_circle`, :func:`off_every_helix`: a few samples that no arc from S
   to E could pass, whatever its centre, refuse a long try without the fit of a centre.
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
