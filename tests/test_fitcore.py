@@ -145,6 +145,14 @@ def test_the_compiled_module_gives_the_floats_of_its_source():
         assert _bits([fitcore.chord_deviation(S, E, *Q)]) == _bits([src.chord_deviation(S, E, *Q)])
         q = [row[0] for row in Q]
         assert fitcore.chord_exceeds(S, E, q, 1.0) == src.chord_exceeds(S, E, q, 1.0)
+    for d in range(9):
+        for _ in range(20):
+            centre, base = tuple(rng.uniform(-500, 500, 2).tolist()), tuple(rng.uniform(-500, 500, 2).tolist())
+            for unit in (1.0, 25.4):
+                assert [_bits(a) for a in fitcore.centre_lattice(centre, base, unit, d, 3)] == \
+                    [_bits(b) for b in src.centre_lattice(centre, base, unit, d, 3)]
+    ss = np.sort(rng.uniform(0, 1, 50)).tolist()
+    assert _bits(fitcore.fractions(ss, 3, 40)) == _bits(src.fractions(ss, 3, 40))
     for _ in range(200):
         k = int(rng.integers(2, 80))
         state = rng.bit_generator.state
