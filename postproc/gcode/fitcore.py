@@ -47,6 +47,33 @@ def rint(x: float) -> float:
     return x
 
 
+def hypot(x: float, y: float) -> float:
+    """sqrt(x * x + y * y) as the C library computes it, and numpy's hypot with it: GNU
+    libc's algorithm (2.35 and later, without fused multiply-add: C. F. Borges, "An
+    improved algorithm for hypot(a, b)", its correction of the square root). Python's
+    math.hypot is another algorithm, a last place off it now and then."""
+    ax = abs(x)
+    ay = abs(y)
+    if ax < ay:
+        ax, ay = ay, ax
+    # (false for a nan)
+    if not (ay >= _HYPOT_TINY and ax <= _HYPOT_LARGE):
+        return _hypot_scaled(x, y)
+    if ay <= ax * _HYPOT_EPS:
+        return ax + ay
+    # _hypot_kernel(ax, ay), written out
+    h = math.sqrt(ax * ax + ay * ay)
+    if h <= 2.0 * ay:
+        delta = h - ay
+        t1 = ax * (2.0 * delta - ax)
+        t2 = (delta - 2.0 * (ax - ay)) * delta
+    else:
+        delta = h - ax
+        t1 = 2.0 * delta * (ax - 2.0 * ay)
+        t2 = (4.0 * delta - ay) * ay + delta * delta
+    return h - (t1 + t2) / (2.0 * h)
+
+
 def _hypot_kernel(ax: float, ay: float) -> float:
     h = math.sqrt(ax * ax + ay * ay)
     if h <= 2.0 * ay:
@@ -60,11 +87,8 @@ def _hypot_kernel(ax: float, ay: float) -> float:
     return h - (t1 + t2) / (2.0 * h)
 
 
-def hypot(x: float, y: float) -> float:
-    """sqrt(x * x + y * y) as the C library computes it, and numpy's hypot with it: GNU
-    libc's algorithm (2.35 and later, without fused multiply-add: C. F. Borges, "An
-    improved algorithm for hypot(a, b)", its correction of the square root). Python's
-    math.hypot is another algorithm, a last place off it now and then."""
+def _hypot_scaled(x: float, y: float) -> float:
+    """:func:`hypot` where an input is not finite, very large or very small."""
     if math.isinf(x) or math.isinf(y):
         return math.inf
     if math.isnan(x) or math.isnan(y):
@@ -153,19 +177,20 @@ def centre_lattice(ideal: tuple[float, float], base: tuple[float, float], unit: 
     step = 10.0 ** (-d)
     v1 = rint((ideal[0] - base[0]) / unit * f) / f
     v2 = rint((ideal[1] - base[1]) / unit * f) / f
-    ks = [k * step for k in range(-reach, reach + 1)]
+    # each axis's words and centres (one rounding per step), then every pair of them
+    x1 = [rint((v1 + k * step) * f) / f for k in range(-reach, reach + 1)]
+    x2 = [rint((v2 + k * step) * f) / f for k in range(-reach, reach + 1)]
+    y1 = [base[0] + x * unit for x in x1]
+    y2 = [base[1] + x * unit for x in x2]
     w1: list[float] = []
     w2: list[float] = []
     c1: list[float] = []
     c2: list[float] = []
-    for k1 in ks:
-        x = rint((v1 + k1) * f) / f
-        for k2 in ks:
-            y = rint((v2 + k2) * f) / f
-            w1.append(x)
-            w2.append(y)
-            c1.append(base[0] + x * unit)
-            c2.append(base[1] + y * unit)
+    for i in range(len(x1)):
+        w1.extend([x1[i]] * len(x2))
+        w2.extend(x2)
+        c1.extend([y1[i]] * len(y2))
+        c2.extend(y2)
     return w1, w2, c1, c2
 
 
@@ -238,7 +263,7 @@ class ArcTry:
         it (that worst, above ``stop``, is then a lower bound of the full one).
         ``least``: only the least worst matters, and whether another ties with it: the
         measures stop also once above the least worst so far (every candidate whose worst
-        is the least is measured in full)."""
+        is the least is measured in full; the others, above it, may be lower bounds)."""
         out = Measured()
         s1, s2, e1, e2 = self.s1, self.s2, self.e1, self.e2
         clockwise, nominal = self.clockwise, self.nsw
@@ -247,7 +272,7 @@ class ArcTry:
         half_pi = math.pi / 2
         min_r, min_sweep = limits
         every = limit == math.inf
-        hint = -1  # the sample farthest from the arc measured last, measured first
+        arcs: list[tuple[float, float, float, float]] = []  # of the candidates measured
         for j in range(len(cx)):
             x, y = cx[j], cy[j]
             dx0, dy0, dx1, dy1 = s1 - x, s2 - y, e1 - x, e2 - y
@@ -270,12 +295,27 @@ class ArcTry:
             off = sweep - nominal
             if off > half_pi or -off > half_pi or r0 < min_r or r1 < min_r or asw < min_sweep:
                 continue
-            dev, hint = self._deviation((t0, asw, r0, r1 - r0), x, y, mism, stop, hint)
-            worst = dev + mism
             out.idx.append(j)
             out.turns.append(tr)
             out.mism.append(mism)
-            out.worst.append(worst)
+            arcs.append((t0, asw, r0, r1 - r0))
+        # the deviations: where only the least matters, the middle candidate first (the
+        # one nearest the centre the candidates surround), then the others in order
+        n = len(arcs)
+        first = n // 2 if least else 0
+        out.worst = [0.0] * n
+        hint = -1  # the sample farthest from the arc measured last, measured first
+        for m in range(-1, n):
+            if m == first:
+                continue
+            k = first if m < 0 else m
+            if k >= n:
+                break
+            j = out.idx[k]
+            mism = out.mism[k]
+            dev, hint = self._deviation(arcs[k], cx[j], cy[j], mism, stop, hint)
+            worst = dev + mism
+            out.worst[k] = worst
             if least and worst < stop:
                 stop = worst
         return out
@@ -288,17 +328,35 @@ class ArcTry:
         The measure stops where ``that + mism`` exceeds ``stop``. (The largest of the
         distances does not depend on their order.)"""
         t0, asw, r0, dr = arc
-        k = len(self.us)
+        us, vs, ws, frac = self.us, self.vs, self.ws, self.frac
+        sn = self.sn
+        dn = self.en - sn
+        clockwise = self.clockwise
+        k = len(us)
         if not 0 <= first < k:
             first = k // 2
         worst = 0.0
         at = first
         nan = False
         for n in range(-1, k):
-            i = first if n < 0 else n
             if n == first:
                 continue
-            dev = self._distance(i, t0, asw, r0, dr, cx, cy)
+            i = first if n < 0 else n
+            v1 = us[i] - cx
+            v2 = vs[i] - cy
+            phi = _atan2(v2, v1)
+            # the angle from the start the way the arc turns, then the turns that bring it
+            # nearest the sample's share of the sweep (np.rint inline: alpha is never -0.0,
+            # so the sign of a zero turn does not count)
+            alpha = (t0 - phi) % TWO_PI if clockwise else (phi - t0) % TWO_PI
+            turn = (frac[i] * asw - alpha) / TWO_PI
+            if -_TWO52 < turn < _TWO52:
+                turn = (turn + _TWO52) - _TWO52 if turn >= 0.0 else -((_TWO52 - turn) - _TWO52)
+            else:
+                turn = rint(turn)
+            alpha = alpha + turn * TWO_PI
+            f = alpha / asw
+            dev = hypot(hypot(v1, v2) - (r0 + dr * f), ws[i] - (sn + dn * f))
             if dev > worst:
                 worst = dev
                 at = i
@@ -307,18 +365,6 @@ class ArcTry:
             elif dev != dev:
                 nan = True
         return (math.nan if nan else worst), at
-
-    def _distance(self, i: int, t0: float, asw: float, r0: float, dr: float, cx: float, cy: float) -> float:
-        """The distance of sample ``i`` from the spiral of :meth:`_deviation`."""
-        v1 = self.us[i] - cx
-        v2 = self.vs[i] - cy
-        phi = _atan2(v2, v1)
-        # the angle from the start the way the arc turns, then the turns that bring it
-        # nearest the sample's share of the sweep
-        alpha = (t0 - phi) % TWO_PI if self.clockwise else (phi - t0) % TWO_PI
-        alpha = alpha + rint((self.frac[i] * asw - alpha) / TWO_PI) * TWO_PI
-        f = alpha / asw
-        return hypot(hypot(v1, v2) - (r0 + dr * f), self.ws[i] - (self.sn + (self.en - self.sn) * f))
 
 
 def fractions(ss: list[float], lo: int, hi: int) -> list[float]:
