@@ -2,18 +2,18 @@
 
 The fit (:mod:`postproc.gcode.arcfit`) tries, for each piece of a move, segments over
 ranges of its samples; each try measures every sample: its distance from a chord
-(:func:`chord_deviation`), the centre on the bisector of the written end points whose
-circle fits them best (:func:`bisector_centre`), and its distance from the arc a
-controller draws about each rounded candidate centre (:class:`ArcTry`,
-:meth:`ArcTry.measure`). The samples are columns of floats (lists), one per axis; the
-loops run over them one sample at a time.
+(:func:`chord_deviation`) and from the arc a controller draws about each rounded
+candidate centre (:func:`centre_lattice`, :meth:`ArcTry.measure`). The samples are
+columns of floats (lists), one per axis; the loops run over them one sample at a time.
 
 Each operation is the one numpy did element by element on the samples' arrays, so the
 values are the same: ``%`` is np.mod's floored remainder, :func:`rint` np.rint's round
 half to even, :func:`hypot` numpy's (the C library's) hypot, ``math.atan2`` numpy's
-arctan2. The sums over a sample's coordinates are taken in order (numpy's products
-through BLAS may fuse a multiply and an add: those sums can differ from them in the last
-place).
+arctan2. The chord's products are taken in order: numpy's went through BLAS, which may
+fuse a multiply and an add, so the chord's deviation may differ from numpy's in the last
+place (it is only compared with limits far from it). The centre fit on the bisector
+(:func:`postproc.gcode.segment.bisector_centre`) stays with numpy for that reason: its
+Gauss-Newton steps amplify a last place where the centre is ill-defined.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 It imports nothing of the package, so that it compiles on its own.
