@@ -340,11 +340,14 @@ class MoveFit:
         if span <= 0.0 or P2 is None:
             return None
         nsw = span * plan["nsweep"]
-        frac = fitcore.fractions(smp.sl, lo, hi)
         keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
-        if hi - lo > OFF_EVERY_ARC_FROM and self._off_every_arc(np.array(S_), np.array(E_), smp.Qs[lo:hi],
-                                                                np.array(frac), nsw, keep):
-            return None
+        if hi - lo > OFF_EVERY_ARC_FROM:
+            # a few of the samples checked first (where each lies along the try, for them
+            # as for all: the same division)
+            sp = smp.ss[lo:hi]
+            if self._off_every_arc(np.array(S_), np.array(E_), smp.Qs[lo:hi], (sp - sp[0]) / span, nsw, keep):
+                return None
+        frac = fitcore.fractions(smp.sl, lo, hi)
         ends = (S_[a1], S_[a2], S_[an], E_[a1], E_[a2], E_[an])
         full = math.hypot(E_[a1] - S_[a1], E_[a2] - S_[a2]) < FULL_CIRCLE_MM
         tr = fitcore.ArcTry(ends, arc.clockwise, nsw, full, smp.column(a1, lo, hi), smp.column(a2, lo, hi),
