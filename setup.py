@@ -26,6 +26,7 @@ COMPILED = [
     "postproc/gcode/numfmt.py",
     "postproc/gcode/plainscan.py",
     "postproc/gcode/runwords.py",
+    "postproc/gcode/fitcore.py",
 ]
 
 

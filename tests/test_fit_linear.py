@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from conftest import PARAMETRIC, ROOT
 
 from postproc.cli import main
-from postproc.gcode import arcfit, segment
+from postproc.gcode import arcfit, fitcore
 from postproc.gcode.segment import ArcPiece, off_every_circle, off_every_helix
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -57,28 +57,35 @@ def _correct(tmp_path, turns: int, program=helix_program) -> str:
 
 
 class _Count:
-    """Samples measured by the fit: rows of each deviation measure (per centre), of each
-    centre fit and of each chord measure."""
+    """Samples measured by the fit: rows of each deviation measure (per centre measured),
+    of each centre fit and of each chord measure."""
 
     def __init__(self, monkeypatch) -> None:
         self.n = 0
-        deviation, centre, chord = segment._deviation, arcfit.bisector_centre, arcfit.chord_deviation
+        count = self
+        centre, chord, arc_try = arcfit.bisector_centre, fitcore.chord_deviation, fitcore.ArcTry
 
-        def _deviation(piece, cols):
-            self.n += len(piece.Q) * cols.shape[1]
-            return deviation(piece, cols)
+        class _Try:
+            def __init__(self, *args) -> None:
+                self.tr = arc_try(*args)
+                self.s1, self.s2, self.e1, self.e2 = self.tr.s1, self.tr.s2, self.tr.e1, self.tr.e2
+
+            def measure(self, *args, **kwargs):
+                found = self.tr.measure(*args, **kwargs)
+                count.n += len(self.tr.us) * len(found.idx)
+                return found
 
         def _centre(S2, E2, P2, c0):
             self.n += len(P2)
             return centre(S2, E2, P2, c0)
 
-        def _chord(S, E, Q):
-            self.n += len(Q)
-            return chord(S, E, Q)
+        def _chord(S, E, xs, ys, zs):
+            self.n += len(xs)
+            return chord(S, E, xs, ys, zs)
 
-        monkeypatch.setattr(segment, "_deviation", _deviation)
+        monkeypatch.setattr(fitcore, "ArcTry", _Try)
         monkeypatch.setattr(arcfit, "bisector_centre", _centre)
-        monkeypatch.setattr(arcfit, "chord_deviation", _chord)
+        monkeypatch.setattr(fitcore, "chord_deviation", _chord)
 
 
 def _per_turn(tmp_path, monkeypatch, pinned, program=helix_program) -> dict[int, float]:
@@ -189,16 +196,16 @@ def test_a_try_refused_unmeasured_is_refused_by_the_full_measure(tmp_path, monke
         refused.append(verdict)
         return verdict
 
-    def _exact_arc(self, S_, E_, Qp, P2, offset, sp, flat, may_keep):
-        spec = exact(self, S_, E_, Qp, P2, offset, sp, flat, may_keep)
+    def _exact_arc(self, smp, lo, hi, S_, E_, offset, flat, may_keep):
+        spec = exact(self, smp, lo, hi, S_, E_, offset, flat, may_keep)
         if refused and refused[-1]:
             refused[-1] = False
             monkeypatch.setattr(arcfit.MoveFit, "_off_every_arc", lambda *a: False)
             try:
-                assert exact(self, S_, E_, Qp, P2, offset, sp, flat, may_keep) is None
+                assert exact(self, smp, lo, hi, S_, E_, offset, flat, may_keep) is None
             finally:
                 monkeypatch.setattr(arcfit.MoveFit, "_off_every_arc", _off)
-            checked.append(len(Qp))
+            checked.append(hi - lo)
         return spec
 
     checked: list[int] = []

@@ -10,26 +10,24 @@ among candidates whose radii agree) or one chord reaches within the budget.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Protocol, final
 
 import numpy as np
 
-from postproc.gcode import emit
-from postproc.gcode.geometry import TWO_PI
+from postproc.gcode import emit, fitcore
+from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI
 from postproc.gcode.moves import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
     ArcPiece,
     ArcSpec,
     Point,
-    arc_candidates,
     bisector_centre,
     bisector_point,
-    chord_deviation,
-    chord_exceeds,
     circle_fit,
-    limited_candidates,
+    controller_limits_of,
+    full_of,
     off_every_circle,
     off_every_helix,
     r_center,
@@ -76,9 +74,11 @@ class _Samples:
     """A piece's corrected samples prepared once for all the tries of its fit: the samples
     and the middles of their intervals interleaved (``Qs`` (2n - 1, 3), the chord's middle
     moved by the nominal path's bulge there; ``ss`` their parameters), their plane
-    coordinates (``P2``) and the corrections (``dq``: corrected minus nominal)."""
+    coordinates (``P2``), the corrections (``dq``: corrected minus nominal), and ``cols``
+    and ``sl``: ``Qs`` by axis and ``ss`` as lists of floats, for the measures of
+    :mod:`postproc.gcode.fitcore`."""
 
-    __slots__ = ("s", "Q", "Qs", "ss", "P2", "dq", "free")
+    __slots__ = ("s", "Q", "Qs", "ss", "P2", "dq", "free", "cols", "sl")
 
     def __init__(self, mv: Move, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray) -> None:
         n = len(Q)
@@ -98,12 +98,18 @@ class _Samples:
             (a1, a2, _an), _ = PLANES[mv.arc.plane]
             self.P2 = Qs[:, [a1, a2]]
         self.free = _free_move(mv)
+        self.cols: list[list[float]] = Qs.T.tolist()
+        self.sl: list[float] = ss.tolist()
 
     def offset(self, a: int, b: int) -> np.ndarray:
         """The mean correction over samples a..b: corrected minus nominal."""
         # as ndarray.mean: the sum divided by the count
         mean: np.ndarray = np.add.reduce(self.dq[a:b + 1], axis=0) / (b + 1 - a)
         return mean
+
+    def column(self, axis: int, lo: int, hi: int) -> list[float]:
+        """Coordinate ``axis`` of the interleaved samples lo..hi - 1."""
+        return self.cols[axis][lo:hi]
 
 
 def _spread(n: int, nsw: float) -> np.ndarray:
@@ -119,18 +125,6 @@ def _free_move(mv: Move) -> Move:
     """``mv`` without its words: the move an inserted line writes."""
     return Move(mv.lineno, LINE, mv.q0, mv.q1, mv.r, mv.shift, mv.unit, mv.incremental, mv.arc_absolute,
                 [], (-1, -1, -1), -1, mv.inverse_time, mv.feed, mv.rotary, frame=mv.frame)
-
-
-# Offsets of the rounded centre candidates tried around the ideal one, per number of decimals.
-_LATTICES: dict[int, np.ndarray] = {}
-
-
-def _lattice(d: int) -> np.ndarray:
-    grid = _LATTICES.get(d)
-    if grid is None:
-        ks = np.arange(-CENTRE_LATTICE, CENTRE_LATTICE + 1) * 10.0 ** (-d)
-        grid = _LATTICES[d] = np.stack(np.meshgrid(ks, ks, indexing="ij"), axis=-1).reshape(-1, 2)
-    return grid
 
 
 _NO_ARC = Arc((0.0, 0.0, 0.0), 170, False, 1, (-1, -1), -1)
@@ -278,29 +272,34 @@ class MoveFit:
         else:
             edits, added = self.w._axis_words(smp.free, smp.Q[b], qn, d)
         ds = float(smp.s[b] - smp.s[a])
-        Qs = smp.Qs[2 * a:2 * b + 1]
+        lo, hi = 2 * a, 2 * b + 1  # the try's samples and middles
         # the chord's deviation is measured only where needed: the middle sample alone
         # often shows it above the limit it is compared with
-        mid = Qs[len(Qs) // 2].tolist()
+        m = (lo + hi) // 2
+        mid = [smp.cols[0][m], smp.cols[1][m], smp.cols[2][m]]
         chord: float | None = None
         if mv.arc is not None and smp.P2 is not None:
             step_mm = 10.0 ** (-d) * mv.unit
-            if chord_exceeds(cur, qn, mid, step_mm):
+            if fitcore.chord_exceeds(cur, qn, mid, step_mm):
                 flat = False
             else:
-                chord = chord_deviation(cur, qn, Qs)
+                chord = self._chord(smp, lo, hi, cur, qn)
                 flat = chord <= step_mm
-            spec = self._exact_arc(cur, qn, Qs, smp.P2[2 * a:2 * b + 1], smp.offset(a, b), smp.ss[2 * a:2 * b + 1],
-                                   flat, last and not edits)
+            spec = self._exact_arc(smp, lo, hi, cur, qn, smp.offset(a, b), flat, last and not edits)
             if spec is not None:
                 return _Piece("arc", qn, edits, added, ds, spec)
         if chord is None:
-            if chord_exceeds(cur, qn, mid, budget):
+            if fitcore.chord_exceeds(cur, qn, mid, budget):
                 return None
-            chord = chord_deviation(cur, qn, Qs)
+            chord = self._chord(smp, lo, hi, cur, qn)
         if chord <= budget:
             return _Piece("line", qn, edits, added, ds)
         return None
+
+    @staticmethod
+    def _chord(smp: _Samples, lo: int, hi: int, S: list[float], E: list[float]) -> float:
+        """The largest distance of the samples lo..hi - 1 from the chord S-E."""
+        return fitcore.chord_deviation(S, E, smp.column(0, lo, hi), smp.column(1, lo, hi), smp.column(2, lo, hi))
 
     def _refine(self, sa: float, sb: float, qb: np.ndarray, cur: list[float], last: bool) -> list[_Piece]:
         """Lines following the corrected curve between samples ``sa`` and ``sb`` (the
@@ -321,40 +320,47 @@ class MoveFit:
             cur = qn
         return out
 
-    def _exact_arc(self, S_: Sequence[float], E_: Sequence[float], Qp: np.ndarray, P2: np.ndarray,
-                   offset: np.ndarray, sp: np.ndarray, flat: bool, may_keep: bool) -> ArcSpec | None:
+    def _exact_arc(self, smp: _Samples, lo: int, hi: int, S_: list[float], E_: list[float], offset: np.ndarray,
+                   flat: bool, may_keep: bool) -> ArcSpec | None:
         """The arc from S to E (both as written) that stays within ``budget`` of the
-        corrected samples ``Qp`` (``P2``: their plane coordinates; ``offset``: their mean
-        correction, which moves the nominal centre to the first guess; ``flat``: their
-        largest distance from the chord S-E is at most one output step): its centre on the
-        bisector of S and E, the written centre (I/J/K, or R where the input used R)
-        chosen among rounded candidates so that the start and end radii agree to half the
-        output resolution. None if none passes.
+        corrected samples lo..hi - 1 of ``smp`` (``offset``: their mean correction, which
+        moves the nominal centre to the first guess; ``flat``: their largest distance
+        from the chord S-E is at most one output step): its centre on the bisector of S
+        and E, the written centre (I/J/K, or R where the input used R) chosen among
+        rounded candidates so that the start and end radii agree to half the output
+        resolution. None if none passes.
 
         ``may_keep``: the piece is the whole move and its end words are unchanged: the
         input's own centre words are kept when their arc still passes (identity keeps
         every input arc as it is)."""
         mv, arc, plan, budget = self.mv, self.arc, self.plan, self.budget
         (a1, a2, an), _letters = PLANES[arc.plane]
-        S = np.asarray(S_, dtype=float)
-        E = np.asarray(E_, dtype=float)
-        span = float(sp[-1] - sp[0])
-        if span <= 0.0:
+        span = smp.sl[hi - 1] - smp.sl[lo]
+        P2 = smp.P2
+        if span <= 0.0 or P2 is None:
             return None
         nsw = span * plan["nsweep"]
-        frac = (sp - sp[0]) / span
         keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
-        if len(Qp) > OFF_EVERY_ARC_FROM and self._off_every_arc(S, E, Qp, frac, nsw, keep):
-            return None
+        if hi - lo > OFF_EVERY_ARC_FROM:
+            # a few of the samples checked first (where each lies along the try, for them
+            # as for all: the same division)
+            sp = smp.ss[lo:hi]
+            if self._off_every_arc(np.array(S_), np.array(E_), smp.Qs[lo:hi], (sp - sp[0]) / span, nsw, keep):
+                return None
+        frac = fitcore.fractions(smp.sl, lo, hi)
+        ends = (S_[a1], S_[a2], S_[an], E_[a1], E_[a2], E_[an])
+        full = math.hypot(E_[a1] - S_[a1], E_[a2] - S_[a2]) < FULL_CIRCLE_MM
+        tr = fitcore.ArcTry(ends, arc.clockwise, nsw, full, smp.column(a1, lo, hi), smp.column(a2, lo, hi),
+                            smp.column(an, lo, hi), frac)
         if keep:
-            ctrl = self.w._input_centre(mv, S, E)
+            ctrl = self.w._input_centre(mv, S_, E_)
             if ctrl is not None:
-                worst, mism, turns = arc_candidates(ArcPiece(S, E, (a1, a2, an), arc.clockwise, nsw, Qp, frac), ctrl[None, :])
+                worst, mism, turns = _one(tr, float(ctrl[0]), float(ctrl[1]), False)
                 # the input's own reading: the spiral its controller draws (no penalty for
                 # the input's own radius mismatch)
-                if mism[0] <= plan["mismatch"] + 1e-9 and worst[0] - mism[0] <= budget and turns[0] == arc.turns:
-                    return {"form": "keep", "turns": int(turns[0])}
-        S2, E2 = (float(S[a1]), float(S[a2])), (float(E[a1]), float(E[a2]))
+                if mism <= plan["mismatch"] + 1e-9 and worst - mism <= budget and turns == arc.turns:
+                    return {"form": "keep", "turns": turns}
+        S2, E2 = (S_[a1], S_[a2]), (E_[a1], E_[a2])
         cx, cy = arc.center[a1] + offset[a1], arc.center[a2] + offset[a2]
         centres = []
         if math.hypot(E2[0] - S2[0], E2[1] - S2[1]) > 0.0:
@@ -365,12 +371,12 @@ class MoveFit:
                 # steps long). The nominal circle, moved with the correction and its centre
                 # brought onto the bisector, is tried first.
                 centres.append(bisector_point(np.array(S2), np.array(E2), np.array([cx, cy])))
-            centres.append(bisector_centre(S2, E2, P2, (cx, cy)))
+            centres.append(bisector_centre(S2, E2, P2[lo:hi], (cx, cy)))
         else:
-            centre = circle_fit(P2)
+            centre = circle_fit(P2[lo:hi])
             centres.append(np.array([cx, cy]) if centre is None or not np.isfinite(centre).all() else centre)
         for centre in centres:
-            spec = self._arc_about(S, E, centre, nsw, Qp, frac)
+            spec = self._arc_about(tr, S_, (float(centre[0]), float(centre[1])), nsw)
             if spec is not None:
                 return spec
         return None
@@ -413,44 +419,42 @@ class MoveFit:
         piece = ArcPiece(S, E, (a1, a2, an), arc.clockwise, nsw, Qp[few], frac[few])
         return off_every_helix(piece, bound, budget)
 
-    def _arc_about(self, S: np.ndarray, E: np.ndarray, centre: np.ndarray, nsw: float, Qp: np.ndarray,
-                   frac: np.ndarray) -> ArcSpec | None:
-        """The written arc from S to E whose centre is the rounded candidate nearest
-        ``centre`` (2,) that passes (see :meth:`_exact_arc`), or None."""
+    def _arc_about(self, tr: fitcore.ArcTry, S: list[float], centre: tuple[float, float],
+                   nsw: float) -> ArcSpec | None:
+        """The written arc of the try ``tr`` from S whose centre is the rounded candidate
+        nearest ``centre`` that passes (see :meth:`_exact_arc`), or None."""
         mv, arc, d, budget = self.mv, self.arc, self.d, self.budget
-        (a1, a2, an), (l1, l2) = PLANES[arc.plane]
-        axes = (a1, a2, an)
+        (a1, a2, _an), (l1, l2) = PLANES[arc.plane]
         unit = mv.unit
-        step = 10.0 ** (-d)
-        agree = 0.5 * step * unit
+        agree = 0.5 * 10.0 ** (-d) * unit
         if arc.r_idx >= 0 and abs(nsw) < TWO_PI - 1e-6:
-            spec = self._r_candidates(S, E, centre, nsw, Qp, frac)
+            spec = self._r_candidates(tr, centre, nsw)
             if spec is not None:
                 return spec
-        b1, b2 = (float(mv.shift[a1]), float(mv.shift[a2])) if mv.arc_absolute else (float(S[a1]), float(S[a2]))
-        base = np.array([b1, b2])
-        v0 = np.array([(float(centre[0]) - b1) / unit, (float(centre[1]) - b2) / unit]).round(d)
-        V = (v0 + _lattice(d)).round(d)  # ndarray.round: np.round without its wrapper
-        C = base[None, :] + V * unit
-        # candidates whose radii disagree are refused unmeasured (their worst is inf)
-        meas = limited_candidates(ArcPiece(S, E, axes, arc.clockwise, nsw, Qp, frac), C, agree, controller_limits=True)
+        base = (float(mv.shift[a1]), float(mv.shift[a2])) if mv.arc_absolute else (S[a1], S[a2])
+        V1, V2, C1, C2 = fitcore.centre_lattice(centre, base, unit, d, CENTRE_LATTICE)
+        # candidates whose radii disagree are refused unmeasured; a measure stops once it
+        # shows its candidate beyond the budget
+        limits = controller_limits_of(True)
         if budget < math.inf:
             # the measured candidates within the budget (those within the mismatch limit,
             # not refused); the first of the order below is the best of them when no other
-            # ties with it, and is taken when its written centre is the one measured
-            worst_l = meas.worst.tolist()
-            passing = [w for w in worst_l if w <= budget]
+            # ties with it, and is taken when its written centre is the one measured (the
+            # measures stop also above the best so far: only the best's worst is needed)
+            meas = tr.measure(C1, C2, agree, limits, budget, least=True)
+            passing = [w for w in meas.worst if w <= budget]
             if not passing:
                 return None
             best = min(passing)
             if passing.count(best) == 1:
-                k = worst_l.index(best)
-                j = int(meas.idx[k])
-                texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
-                if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
-                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(meas.turns[k]),
-                            "dev": best, "mismatch": float(meas.mism[k])}
-        worst, mism, turns = meas.full()
+                k = meas.worst.index(best)
+                j = meas.idx[k]
+                texts = (emit.fmt(V1[j], d), emit.fmt(V2[j], d))
+                if float(texts[0]) == V1[j] and float(texts[1]) == V2[j]:
+                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": meas.turns[k],
+                            "dev": best, "mismatch": meas.mism[k]}
+        # the order of all those within the budget
+        worst, mism, turns = full_of(tr.measure(C1, C2, agree, limits, budget))
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
@@ -458,51 +462,48 @@ class MoveFit:
         # the three best candidates that pass (never one that fails: its radii disagree or
         # it leaves the budget)
         for j in order[:min(3, int(ok.sum()))].tolist():
-            texts = (emit.fmt(float(V[j, 0]), d), emit.fmt(float(V[j, 1]), d))
-            if float(texts[0]) == V[j, 0] and float(texts[1]) == V[j, 1]:
+            texts = (emit.fmt(V1[j], d), emit.fmt(V2[j], d))
+            if float(texts[0]) == V1[j] and float(texts[1]) == V2[j]:
                 # the written centre is the candidate measured (numpy's rounding agreed)
                 return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
                         "dev": float(worst[j]), "mismatch": float(mism[j])}
-            ctrl = base + np.array([float(texts[0]), float(texts[1])]) * unit
-            w, m, t = arc_candidates(ArcPiece(S, E, axes, arc.clockwise, nsw, Qp, frac), ctrl[None, :],
-                                     controller_limits=True)
-            if m[0] <= agree and w[0] <= budget:
-                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(t[0]),
-                        "dev": float(w[0]), "mismatch": float(m[0])}
+            w, m, t = _one(tr, base[0] + float(texts[0]) * unit, base[1] + float(texts[1]) * unit, True)
+            if m <= agree and w <= budget:
+                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": t, "dev": w, "mismatch": m}
         return None
 
-    def _r_candidates(self, S: np.ndarray, E: np.ndarray, centre: np.ndarray, nsw: float, Qp: np.ndarray,
-                      frac: np.ndarray) -> ArcSpec | None:
-        """The written R-form arc from S to E nearest ``centre`` that passes (see
+    def _r_candidates(self, tr: fitcore.ArcTry, centre: tuple[float, float], nsw: float) -> ArcSpec | None:
+        """The written R-form arc of the try ``tr`` nearest ``centre`` that passes (see
         :meth:`_exact_arc`), or None."""
         d, unit, budget, clockwise = self.d, self.mv.unit, self.budget, self.arc.clockwise
-        axes = PLANES[self.arc.plane][0]
-        a1, a2, an = axes
+        s1, s2, e1, e2 = tr.s1, tr.s2, tr.e1, tr.e2
         step = 10.0 ** (-d)
-        half = 0.5 * math.hypot(E[a1] - S[a1], E[a2] - S[a2])
+        half = 0.5 * math.hypot(e1 - s1, e2 - s2)
         if half == 0.0:
             return None
-        rho = 0.5 * (math.hypot(S[a1] - centre[0], S[a2] - centre[1])
-                     + math.hypot(E[a1] - centre[0], E[a2] - centre[1]))
+        rho = 0.5 * (math.hypot(s1 - centre[0], s2 - centre[1]) + math.hypot(e1 - centre[0], e2 - centre[1]))
         sign = -1.0 if abs(nsw) > math.pi else 1.0
         r0 = round(rho / unit, d)
         vals = {round(r0 + k * step, d) for k in range(-CENTRE_LATTICE, CENTRE_LATTICE + 1)}
         vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
-        texts, centres = [], []
+        texts, cx, cy = [], [], []
         for val in sorted(vals):
             text = emit.fmt(sign * val, d)
             R = float(text) * unit
             if abs(R) <= half:
                 continue  # every controller must find a centre without its own tolerance
-            c = r_center(S[a1], S[a2], E[a1], E[a2], R, clockwise)
+            c = r_center(s1, s2, e1, e2, R, clockwise)
             if c is not None:
                 texts.append(text)
-                centres.append(c)
-        if not centres:
+                cx.append(c[0])
+                cy.append(c[1])
+        if not texts:
             return None
-        # every radius's arc measured at once (each row as on its own), the best in the
-        # order of the radii: the first of the smallest deviations among one-turn arcs
-        w, m, t = arc_candidates(ArcPiece(S, E, axes, clockwise, nsw, Qp, frac), np.array(centres), controller_limits=True)
+        # every radius's arc measured, the best in the order of the radii: the first of the
+        # smallest deviations among one-turn arcs (a measure stops once it shows its arc
+        # beyond the budget)
+        meas = tr.measure(cx, cy, math.inf, controller_limits_of(True), budget)
+        w, _m, t = full_of(meas)
         best = -1
         for j, (wj, tj) in enumerate(zip(w.tolist(), t.tolist(), strict=True)):
             if tj == 1 and (best < 0 or wj < w[best]):
@@ -510,4 +511,11 @@ class MoveFit:
         if best < 0 or not w[best] <= budget:
             return None
         return {"form": "r", "vals": (("R", texts[best]),), "turns": 1, "dev": float(w[best]),
-                "mismatch": float(m[best])}
+                "mismatch": meas.mismatch[best]}
+
+
+def _one(tr: fitcore.ArcTry, cx: float, cy: float, controller_limits: bool) -> tuple[float, float, int]:
+    """``(worst, mismatch, turns)`` of the arc of the try ``tr`` about one centre, as
+    :func:`postproc.gcode.segment.arc_candidates` gives them."""
+    meas = tr.measure([cx], [cy], math.inf, controller_limits_of(controller_limits), math.inf)
+    return meas.worst[0] if meas.idx else math.inf, meas.mismatch[0], meas.sel_turns[0]

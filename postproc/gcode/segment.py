@@ -10,7 +10,9 @@
   from its chord by less than one output step the fitted centre means nothing and the
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
-  (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`).
+  (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`). The measures over the samples
+  (the chord's deviation, each candidate's arc) run sample by sample in plain floats in
+  :mod:`postproc.gcode.fitcore`, compiled with the core.
 - :func:`off_every_circle`, :func:`off_every_helix`: a few samples that no arc from S
   to E could pass, whatever its centre, refuse a long try without the fit of a centre.
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
@@ -31,6 +33,8 @@ import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
 from postproc.errors import SolverError
+from postproc.gcode import fitcore
+from postproc.gcode.fitcore import chord_exceeds as chord_exceeds  # re-exported
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI, arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc
 
@@ -362,157 +366,71 @@ def arc_candidates(piece: ArcPiece, C: np.ndarray, controller_limits: bool = Fal
     ``mismatch_limit``: the candidates whose radius mismatch exceeds it (which the caller
     refuses anyway) are not measured: their ``worst`` is inf and their ``turns`` 0. The
     others get the values they get among all (see :func:`limited_candidates`)."""
-    if mismatch_limit is not None:
-        return limited_candidates(piece, C, mismatch_limit, controller_limits).full()
-    S, E, clockwise, nominal_sweep = piece.S, piece.E, piece.clockwise, piece.nominal_sweep
+    return _measure(piece, C, math.inf if mismatch_limit is None else mismatch_limit, controller_limits).full()
+
+
+def _try_of(piece: ArcPiece) -> fitcore.ArcTry:
+    """The piece's samples as the columns of floats the measure takes."""
+    S, E, Q = piece.S, piece.E, piece.Q
     a1, a2, an = piece.axes
-    s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
-    dx = np.array([[s1], [e1]]) - C[:, 0]
-    dy = np.array([[s2], [e2]]) - C[:, 1]
-    rad = np.hypot(dx, dy)
-    r0, r1 = rad[0], rad[1]
-    mismatch = np.abs(r1 - r0)
-    ang = np.arctan2(dy, dx)
-    t0, t1 = ang[0], ang[1]
-    if clockwise:
-        base = -np.mod(t0 - t1, TWO_PI)
-    else:
-        base = np.mod(t1 - t0, TWO_PI)
-    chord = math.hypot(e1 - s1, e2 - s2)
-    full = (np.abs(base) < 1e-12) | (chord < FULL_CIRCLE_MM)
-    base = np.where(full, -TWO_PI if clockwise else TWO_PI, base)
-    # np.rint: np.round with no decimals, without its wrapper
-    turns = np.maximum(1, np.rint((abs(nominal_sweep) - np.abs(base)) / TWO_PI) + 1).astype(int)
-    sweep = base + np.sign(base) * (turns - 1) * TWO_PI
-    bad = np.abs(sweep - nominal_sweep) > math.pi / 2
-    if controller_limits:
-        bad |= (np.minimum(r0, r1) < MIN_ARC_RADIUS_MM) | (np.abs(sweep) < MIN_ARC_SWEEP_RAD)
-    dev = _deviation(piece, np.array([t0, np.abs(sweep), r0, r1 - r0, C[:, 0], C[:, 1]]))
-    return np.where(bad, np.inf, dev + mismatch), mismatch, turns
+    ends = (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]), float(E[an]))
+    full = math.hypot(ends[3] - ends[0], ends[4] - ends[1]) < FULL_CIRCLE_MM
+    return fitcore.ArcTry(ends, piece.clockwise, float(piece.nominal_sweep), full, Q[:, a1].tolist(),
+                          Q[:, a2].tolist(), Q[:, an].tolist(), np.asarray(piece.frac, dtype=float).tolist())
 
 
-_NO_INDEX = np.zeros(0, dtype=int)
-_NO_VALUE = np.zeros(0)
-_NO_INDEX.flags.writeable = _NO_VALUE.flags.writeable = False
+def controller_limits_of(on: bool) -> tuple[float, float]:
+    """The smallest radius and |sweep| of an arc the measure accepts: the controllers'
+    limits, or none (0: every radius and sweep passes)."""
+    return (MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD) if on else (0.0, 0.0)
+
+
+def _measure(piece: ArcPiece, C: np.ndarray, limit: float, controller_limits: bool) -> Measured:
+    cx, cy = np.asarray(C, dtype=float).reshape(-1, 2).T.tolist()
+    return Measured(_try_of(piece).measure(cx, cy, limit, controller_limits_of(controller_limits), math.inf))
 
 
 class Measured:
-    """The candidates of :func:`limited_candidates`: ``mismatch`` (m,) of all; ``sel``
-    the candidates within the limit and ``sel_turns`` their turns; ``idx`` those measured
-    (within the limit, turning the right way and, with controller limits, within them),
-    ``worst``, ``turns`` and ``mism``: theirs."""
+    """The candidates of :func:`limited_candidates` (:class:`postproc.gcode.fitcore.Measured`)
+    as arrays: ``mismatch`` (m,) of all; ``sel`` the candidates within the limit and
+    ``sel_turns`` their turns; ``idx`` those measured (within the limit, turning the right
+    way and, with controller limits, within them), ``worst``, ``turns`` and ``mism``:
+    theirs."""
 
-    __slots__ = ("mismatch", "sel", "sel_turns", "idx", "worst", "turns", "mism")
+    __slots__ = ("found", "mismatch", "sel", "sel_turns", "idx", "worst", "turns", "mism")
 
-    def __init__(self, mismatch: np.ndarray) -> None:
-        self.mismatch = mismatch
-        self.sel = self.sel_turns = self.idx = self.turns = _NO_INDEX
-        self.worst = self.mism = _NO_VALUE
+    def __init__(self, found: fitcore.Measured) -> None:
+        self.found = found
+        self.mismatch = np.array(found.mismatch, dtype=float)
+        self.sel = np.array(found.sel, dtype=int)
+        self.sel_turns = np.array(found.sel_turns, dtype=int)
+        self.idx = np.array(found.idx, dtype=int)
+        self.turns = np.array(found.turns, dtype=int)
+        self.worst = np.array(found.worst, dtype=float)
+        self.mism = np.array(found.mism, dtype=float)
 
     def full(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(worst (m,), mismatch (m,), turns (m,))`` as :func:`arc_candidates` gives
-        them: inf and 0 turns for the candidates beyond the limit, inf for those refused."""
-        m = len(self.mismatch)
-        worst = np.full(m, np.inf)
-        turns = np.zeros(m, dtype=int)
-        turns[self.sel] = self.sel_turns
-        worst[self.idx] = self.worst
-        return worst, self.mismatch, turns
+        them (:func:`full_of`)."""
+        return full_of(self.found)
+
+
+def full_of(found: fitcore.Measured) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(worst (m,), mismatch (m,), turns (m,))`` of all m candidates from what the
+    measure found: inf and 0 turns for the candidates beyond the limit, inf for those
+    refused."""
+    m = len(found.mismatch)
+    worst = np.full(m, np.inf)
+    turns = np.zeros(m, dtype=int)
+    turns[found.sel] = found.sel_turns
+    worst[found.idx] = found.worst
+    return worst, np.array(found.mismatch, dtype=float), turns
 
 
 def limited_candidates(piece: ArcPiece, C: np.ndarray, limit: float, controller_limits: bool = False) -> Measured:
     """:func:`arc_candidates` with a mismatch ``limit``, its results as they come (see
-    :class:`Measured`): the few candidates within it are taken one by one in plain
-    floats (their mismatch is finite, so are all their values), with the same operations
-    as numpy's element by element (``%`` is np.mod's floored remainder, ``round``
-    np.rint's half to even, the sign of a nonzero sweep np.sign's); their angles come
-    from numpy's arctan2 as among all, and the samples are measured with numpy."""
-    S, E, clockwise, nominal_sweep = piece.S, piece.E, piece.clockwise, piece.nominal_sweep
-    a1, a2, _an = piece.axes
-    # start (row 0) and end (row 1) about every candidate, in contiguous arrays
-    dx = np.array([[S[a1]], [E[a1]]]) - C[:, 0]
-    dy = np.array([[S[a2]], [E[a2]]]) - C[:, 1]
-    rad = np.hypot(dx, dy)
-    mismatch = np.abs(rad[1] - rad[0])
-    out = Measured(mismatch)
-    sel = (mismatch <= limit).nonzero()[0]
-    if len(sel) == 0:
-        return out
-    s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    ang = np.arctan2(dy[:, sel], dx[:, sel])
-    rs = rad[:, sel]
-    full = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
-    full_sweep = -TWO_PI if clockwise else TWO_PI
-    nsw = abs(nominal_sweep)
-    half_pi = math.pi / 2
-    turns: list[int] = []
-    asw: list[float] = []  # |sweep|
-    keep: list[bool] = []
-    for t0, t1, r0, r1 in zip(*ang.tolist(), *rs.tolist(), strict=True):
-        base = -((t0 - t1) % TWO_PI) if clockwise else (t1 - t0) % TWO_PI
-        if full or -1e-12 < base < 1e-12:
-            base = full_sweep
-        tr = round((nsw - (base if base > 0.0 else -base)) / TWO_PI) + 1
-        if tr < 1:
-            tr = 1
-        sweep = base + (1.0 if base > 0.0 else -1.0) * (tr - 1) * TWO_PI
-        a = sweep if sweep > 0.0 else -sweep
-        turns.append(tr)
-        asw.append(a)
-        off = sweep - nominal_sweep
-        keep.append(not (off > half_pi or -off > half_pi or controller_limits and (
-            r0 < MIN_ARC_RADIUS_MM or r1 < MIN_ARC_RADIUS_MM or a < MIN_ARC_SWEEP_RAD)))
-    out.sel = sel
-    out.sel_turns = np.array(turns)
-    # per candidate: start angle, |sweep|, start radius, end minus start radius, centre
-    cols = np.concatenate([ang[:1], [asw], rs[:1], rs[1:] - rs[:1], C[sel].T])
-    if all(keep):
-        out.idx, out.turns = sel, out.sel_turns
-    else:
-        kp = np.array(keep)
-        out.idx, out.turns = sel[kp], out.sel_turns[kp]
-        if not len(out.idx):
-            return out
-        cols = cols[:, kp]
-    out.mism = mismatch[out.idx]
-    out.worst = _deviation(piece, cols) + out.mism
-    return out
-
-
-def _deviation(piece: ArcPiece, cols: np.ndarray) -> np.ndarray:
-    """Largest distance (m,) of the samples of ``piece`` from the spiral a controller draws
-    around each of m centres, ``cols`` (6, m): its start angle, |sweep|, start radius,
-    end minus start radius and the centre's plane coordinates (see :func:`arc_candidates`)."""
-    S, E, Q, frac_nominal = piece.S, piece.E, piece.Q, piece.frac
-    a1, a2, an = piece.axes
-    t0, asw, r0, dr, cx, cy = cols[:, :, None]
-    v1 = Q[:, a1] - cx
-    v2 = Q[:, a2] - cy
-    # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly);
-    # the arithmetic in place (the same operations, fewer temporary arrays)
-    phi = np.arctan2(v2, v1)
-    if piece.clockwise:
-        alpha = np.subtract(t0, phi, out=phi)
-    else:
-        alpha = np.subtract(phi, t0, out=phi)
-    np.mod(alpha, TWO_PI, out=alpha)
-    turn = frac_nominal * asw  # the target angle, then the turns to add
-    np.subtract(turn, alpha, out=turn)
-    np.divide(turn, TWO_PI, out=turn)
-    np.rint(turn, out=turn)
-    np.multiply(turn, TWO_PI, out=turn)
-    np.add(alpha, turn, out=alpha)
-    frac = np.divide(alpha, asw, out=alpha)
-    rad = dr * frac
-    np.add(r0, rad, out=rad)
-    nrm = (E[an] - S[an]) * frac
-    np.add(S[an], nrm, out=nrm)
-    np.subtract(Q[:, an], nrm, out=nrm)
-    radial = np.hypot(v1, v2, out=v1)
-    np.subtract(radial, rad, out=radial)
-    dev: np.ndarray = np.maximum.reduce(np.hypot(radial, nrm, out=radial), axis=1)
-    return dev
+    :class:`Measured`): only the candidates within it are measured."""
+    return _measure(piece, C, limit, controller_limits)
 
 
 _EPS = 2.0 ** -52
@@ -659,44 +577,10 @@ def off_every_helix(piece: ArcPiece, bound: float, budget: float) -> bool:
 
 
 def chord_deviation(S: Point, E: Point, Q: np.ndarray) -> float:
-    """Largest distance of the points Q (k, 3) from the segment S-E."""
-    a = np.asarray(S, dtype=float)
-    ab = np.asarray(E, dtype=float) - a
-    den = float(ab @ ab)
-    if den == 0.0:
-        d = Q - a
-    else:
-        # the parameter of the nearest point of the segment, clipped to [0, 1] (as np.clip)
-        t = np.minimum(np.maximum(((Q - a) @ ab) / den, 0.0), 1.0)
-        d = Q - (a + t[:, None] * ab)
-    # the largest norm of the rows: numpy's norm sums the squares as add.reduce does, and
-    # the root of the largest sum is the largest root (both correctly rounded)
-    return math.sqrt(float(np.add.reduce(d * d, axis=1).max()))
-
-
-def chord_exceeds(S: Sequence[float], E: Sequence[float], q: Sequence[float], limit: float) -> bool:
-    """True when the point q (3,) lies so far from the segment S-E that
-    :func:`chord_deviation` of any points that include q exceeds ``limit``: a cheap
-    test in plain floats that spares the full measure where its answer is known.
-
-    Both this and :func:`chord_deviation` come within a few units in the last place of
-    the coordinates' magnitude of q's exact distance from the segment; the margin, a
-    billionth of that magnitude, is millions of times more. False also where it cannot
-    tell (within the margin, or a value that is not finite)."""
-    s0, s1, s2 = S
-    q0, q1, q2 = q
-    d0, d1, d2 = E[0] - s0, E[1] - s1, E[2] - s2
-    p0, p1, p2 = q0 - s0, q1 - s1, q2 - s2
-    den = d0 * d0 + d1 * d1 + d2 * d2
-    t = (p0 * d0 + p1 * d1 + p2 * d2) / den if den > 0.0 else 0.0
-    if t < 0.0:
-        t = 0.0
-    elif t > 1.0:
-        t = 1.0
-    r0, r1, r2 = p0 - t * d0, p1 - t * d1, p2 - t * d2
-    # the magnitude: at least the largest coordinate and the segment's length
-    scale = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2 + q0 * q0 + q1 * q1 + q2 * q2 + den)
-    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > limit + 1e-9 * (1.0 + scale)
+    """Largest distance of the points Q (k, 3) from the segment S-E
+    (:func:`postproc.gcode.fitcore.chord_deviation`)."""
+    xs, ys, zs = np.asarray(Q, dtype=float).T.tolist()
+    return fitcore.chord_deviation([float(v) for v in S], [float(v) for v in E], xs, ys, zs)
 
 
 def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:

@@ -1,0 +1,194 @@
+"""postproc.gcode.fitcore, the fit's measures in plain floats: its hypot and rint are
+numpy's bit for bit, its centre lattice is the one numpy rounded, the compiled module
+(where it is compiled) gives the floats its source gives, and a measure that stops early
+keeps the answers the fit takes from it."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+
+import numpy as np
+import pytest
+
+from postproc.gcode import fitcore
+
+_SOURCE = fitcore.__file__ if fitcore.__file__.endswith(".py") else fitcore.__file__.split(".")[0] + ".py"
+
+
+def _source_module():
+    """fitcore loaded from its .py (the same module where it is not compiled)."""
+    spec = importlib.util.spec_from_file_location("fitcore_source", _SOURCE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _bits(values) -> list[int]:
+    return np.asarray(values, dtype=float).view(np.uint64).tolist()
+
+
+def _pairs(seed: int, n: int = 20000):
+    rng = np.random.default_rng(seed)
+    out = []
+    for scale in (1e-300, 1e-160, 1e-3, 1.0, 1e3, 1e160, 1e300):
+        x = rng.normal(size=n) * scale
+        y = rng.normal(size=n) * scale * rng.uniform(0, 2, n) ** 3
+        y[: n // 20] = x[: n // 20] * 10.0 ** rng.uniform(-20, 0, n // 20)  # widely varying
+        out.append((x, np.where(np.isfinite(y), y, 1.0)))
+    special = [0.0, -0.0, 5e-324, -5e-324, 1e-310, math.inf, -math.inf, math.nan, 1.7e308, 1.0, 3.0]
+    sx, sy = np.meshgrid(special, special)
+    out.append((sx.ravel(), sy.ravel()))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_hypot_is_numpys_bit_for_bit(seed):
+    for x, y in _pairs(seed):
+        ours = [fitcore.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)]
+        with np.errstate(over="ignore"):  # the largest overflow to inf (as ours do)
+            assert _bits(ours) == _bits(np.hypot(x, y))
+
+
+def test_rint_is_numpys_bit_for_bit():
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.normal(size=20000) * 10.0 ** rng.uniform(-3, 17, 20000),
+                        np.arange(-10, 10) + 0.5, [0.0, -0.0, 2.0 ** 52, -(2.0 ** 52), 2.0 ** 52 - 0.5,
+                                                    -(2.0 ** 52) + 0.5, 2.0 ** 51 + 0.5, math.inf, -math.inf,
+                                                    math.nan, 0.49999999999999994, -0.49999999999999994]])
+    assert _bits([fitcore.rint(v) for v in x.tolist()]) == _bits(np.rint(x))
+
+
+@pytest.mark.parametrize("d", [0, 3, 4, 5, 6])
+def test_centre_lattice_is_the_one_numpy_rounded(d):
+    rng = np.random.default_rng(d)
+    k = np.arange(-3, 4) * 10.0 ** (-d)
+    lattice = np.stack(np.meshgrid(k, k, indexing="ij"), axis=-1).reshape(-1, 2)
+    for _ in range(300):
+        centre = rng.uniform(-500, 500, 2)
+        base = rng.uniform(-500, 500, 2) * (rng.random() < 0.5)
+        unit = 25.4 if rng.random() < 0.3 else 1.0
+        v0 = np.array([(centre[0] - base[0]) / unit, (centre[1] - base[1]) / unit]).round(d)
+        V = (v0 + lattice).round(d)
+        C = base[None, :] + V * unit
+        w1, w2, c1, c2 = fitcore.centre_lattice((float(centre[0]), float(centre[1])),
+                                                (float(base[0]), float(base[1])), unit, d, 3)
+        assert _bits(w1) == _bits(V[:, 0])
+        assert _bits(w2) == _bits(V[:, 1])
+        assert _bits(c1) == _bits(C[:, 0])
+        assert _bits(c2) == _bits(C[:, 1])
+
+
+def _chord_reference(S, E, Q):
+    """The chord's deviation as numpy measured it (the products through BLAS)."""
+    a = np.asarray(S, dtype=float)
+    ab = np.asarray(E, dtype=float) - a
+    den = float(ab @ ab)
+    if den == 0.0:
+        d = Q - a
+    else:
+        t = np.minimum(np.maximum(((Q - a) @ ab) / den, 0.0), 1.0)
+        d = Q - (a + t[:, None] * ab)
+    return math.sqrt(float(np.add.reduce(d * d, axis=1).max()))
+
+
+def test_chord_deviation_agrees_with_numpys_to_the_rounding():
+    rng = np.random.default_rng(7)
+    for i in range(3000):
+        S = rng.uniform(-500, 500, 3)
+        E = S + rng.normal(0, 10.0 ** rng.uniform(-3, 3), 3) * (i % 7 != 0)
+        k = int(rng.integers(1, 60))
+        Q = S + np.sort(rng.uniform(-0.1, 1.1, k))[:, None] * (E - S) + rng.normal(0, 10.0 ** rng.uniform(-6, 0), (k, 3))
+        ours = fitcore.chord_deviation(S.tolist(), E.tolist(), *Q.T.tolist())
+        scale = float(np.abs(np.vstack([Q, S, E])).max())
+        assert abs(ours - _chord_reference(S, E, Q)) <= 1e-14 * scale
+
+
+def _arc_try(mod, rng, k):
+    """A try of a random arc (some of several turns) through k samples strayed from it,
+    and the rounded candidate centres around its centre."""
+    r = 10.0 ** rng.uniform(-2, 2)
+    c = rng.uniform(-200, 200, 2)
+    t0 = rng.uniform(-math.pi, math.pi)
+    cw = bool(rng.integers(0, 2))
+    sweep = rng.uniform(0.1, 4 * math.pi) * (-1.0 if cw else 1.0)
+    frac = np.linspace(0.0, 1.0, k)
+    th = t0 + sweep * frac
+    z0, dz = rng.uniform(-50, 50), rng.normal(0, 5)
+    noise = 10.0 ** rng.uniform(-5, -2)
+    u = c[0] + r * np.cos(th) + rng.normal(0, noise, k)
+    v = c[1] + r * np.sin(th) + rng.normal(0, noise, k)
+    w = z0 + dz * frac + rng.normal(0, noise, k)
+    ends = (round(u[0], 4), round(v[0], 4), round(w[0], 4), round(u[-1], 4), round(v[-1], 4), round(w[-1], 4))
+    tr = mod.ArcTry(ends, cw, sweep, False, u.tolist(), v.tolist(), w.tolist(), frac.tolist())
+    step = 10.0 ** -int(rng.integers(3, 5))
+    cands = mod.centre_lattice((float(c[0]), float(c[1])), (0.0, 0.0), 1.0, int(round(-math.log10(step))), 3)
+    return tr, cands[2], cands[3], 0.5 * step, noise
+
+
+def _found(m):
+    return (m.mismatch, m.sel, m.sel_turns, m.idx, m.turns, m.mism, m.worst)
+
+
+def test_the_compiled_module_gives_the_floats_of_its_source():
+    src = _source_module()
+    rng = np.random.default_rng(11)
+    for x, y in _pairs(3, 500):
+        xs, ys = x.tolist(), y.tolist()
+        assert _bits([fitcore.hypot(a, b) for a, b in zip(xs, ys, strict=True)]) == \
+            _bits([src.hypot(a, b) for a, b in zip(xs, ys, strict=True)])
+        assert _bits([fitcore.rint(a * 1e3) for a in xs if math.isfinite(a * 1e3)]) == \
+            _bits([src.rint(a * 1e3) for a in xs if math.isfinite(a * 1e3)])
+    for _ in range(200):
+        S, E = rng.uniform(-100, 100, 3).tolist(), rng.uniform(-100, 100, 3).tolist()
+        Q = rng.uniform(-100, 100, (int(rng.integers(1, 30)), 3)).T.tolist()
+        assert _bits([fitcore.chord_deviation(S, E, *Q)]) == _bits([src.chord_deviation(S, E, *Q)])
+        q = [row[0] for row in Q]
+        assert fitcore.chord_exceeds(S, E, q, 1.0) == src.chord_exceeds(S, E, q, 1.0)
+    for d in range(9):
+        for _ in range(20):
+            centre, base = tuple(rng.uniform(-500, 500, 2).tolist()), tuple(rng.uniform(-500, 500, 2).tolist())
+            for unit in (1.0, 25.4):
+                assert [_bits(a) for a in fitcore.centre_lattice(centre, base, unit, d, 3)] == \
+                    [_bits(b) for b in src.centre_lattice(centre, base, unit, d, 3)]
+    ss = np.sort(rng.uniform(0, 1, 50)).tolist()
+    assert _bits(fitcore.fractions(ss, 3, 40)) == _bits(src.fractions(ss, 3, 40))
+    for _ in range(200):
+        k = int(rng.integers(2, 80))
+        state = rng.bit_generator.state
+        tr, cx, cy, agree, noise = _arc_try(fitcore, rng, k)
+        rng.bit_generator.state = state
+        tr_src, *_ = _arc_try(src, rng, k)
+        for limit, stop, least in ((agree, math.inf, False), (math.inf, math.inf, False), (agree, 3 * noise, True)):
+            ours = _found(tr.measure(cx, cy, limit, (1e-6, 1e-5), stop, least))
+            theirs = _found(tr_src.measure(cx, cy, limit, (1e-6, 1e-5), stop, least))
+            assert [_bits(a) for a in ours] == [_bits(b) for b in theirs]
+
+
+def test_a_measure_that_stops_keeps_what_the_fit_takes_from_it():
+    """With a stop (the budget) the candidates within it are measured in full, the others
+    are above it; with ``least`` the least worst and those equal to it are measured in
+    full and the others are above it."""
+    rng = np.random.default_rng(13)
+    cut = 0
+    for _ in range(300):
+        tr, cx, cy, agree, noise = _arc_try(fitcore, rng, int(rng.integers(2, 120)))
+        budget = noise * rng.uniform(0.5, 6)
+        full = tr.measure(cx, cy, agree, (0.0, 0.0), math.inf)
+        for least in (False, True):
+            part = tr.measure(cx, cy, agree, (0.0, 0.0), budget, least)
+            assert (part.idx, part.turns, part.mism) == (full.idx, full.turns, full.mism)
+            passing = [w for w in full.worst if w <= budget]
+            best = min(passing, default=math.inf)
+            bound = min(best, budget) if least else budget
+            for w_full, w_part in zip(full.worst, part.worst, strict=True):
+                if w_full <= bound:
+                    assert w_part == w_full
+                else:
+                    assert bound < w_part <= w_full
+                    cut += w_part < w_full
+            if least and passing:
+                kept = [w for w in part.worst if w <= budget]
+                assert min(kept) == best
+                assert kept.count(best) == passing.count(best)
+    assert cut > 100
