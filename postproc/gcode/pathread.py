@@ -110,7 +110,8 @@ def _steps(length_mm: float, step_mm: float) -> int:
 
 def _steps_all(length_mm: np.ndarray, step_mm: float) -> np.ndarray:
     """:func:`_steps` of each length, at least 1 (int64)."""
-    pieces = length_mm / step_mm
+    with np.errstate(over="ignore"):  # (a step of 1e-320 mm: inf pieces, 10**18 samples)
+        pieces = length_mm / step_mm
     n = np.where(pieces < 1e18, np.ceil(np.where(pieces < 1e18, pieces, 0.0)), 1e18).astype(np.int64)
     return np.maximum(n, 1)
 
