@@ -199,7 +199,7 @@ class Sampler(LineReader[tuple[int, Move]]):
                     blocks[id(e.block)] = e.block
                     self._take_run(e)
                     continue
-                lineno, mv = e  # type: ignore[misc]
+                lineno, mv = e
                 q0, q1 = mv.q0, mv.q1
                 if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
                     n = 1
@@ -262,7 +262,7 @@ class Sampler(LineReader[tuple[int, Move]]):
             if len(sel):
                 d = np.fromiter(map(math.dist, q0[sel].tolist(), q1[sel].tolist()), dtype=float, count=len(sel))
                 n[sel] = _steps_all(d, step_mm)
-        arcs: list[tuple[int, Move | bulk.RunMove, int]] = []
+        arcs: list[tuple[int, bulk.RunMove, int]] = []
         if arc_at:
             for j, mv in bulk.arc_moves(run):
                 k = arc_at[j]
@@ -274,12 +274,12 @@ class Sampler(LineReader[tuple[int, Move]]):
                 arcs.append((k, mv, c))
         cum = self.total + np.cumsum(n)
         over = cum > self.max_samples
-        if over[-1] or over.any():
+        if over.any():
             raise self._refuse(run.lineno + int(js[int(np.argmax(over))]))
         self.total = int(cum[-1])
-        for k, mv, c in arcs:
-            assert mv.arc is not None
-            self.arcs[self.moves + k] = arc_points(mv.arc, mv.q0, mv.q1, np.arange(1, c + 1) / c)
+        for k, am, c in arcs:
+            assert am.arc is not None
+            self.arcs[self.moves + k] = arc_points(am.arc, am.q0, am.q1, np.arange(1, c + 1) / c)
         q0 = np.where(rapid[:, None], q1, q0)
         self.cols.append(_Columns(q0, q1, n, np.broadcast_to(np.asarray(run.r, dtype=float), q1.shape), run.lineno + js,
                                   rapid, None))
