@@ -138,7 +138,9 @@ def main() -> None:
                 counts["cases"] += 1
                 if a != b:
                     counts["differ"] += 1
-                    print(f"DIFFERS {prog} setup={case[1]} dialect={case[2]} {case[3]}:\n  base {a}\n  this {b}")
+                    what = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
+                    print(f"DIFFERS {prog} setup={case[1]} dialect={case[2]} {case[3]}: {', '.join(what)}"
+                          f" (base {a.get('n', a.get('error'))}, this {b.get('n', b.get('error'))})")
                 elif "error" in a:
                     counts["same error"] += 1
                 else:
