@@ -117,6 +117,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", required=True, type=Path, help="the other tree")
     ap.add_argument("--gencam", action="append", default=[], help="N:SEED, a gencam.py program (repeatable)")
+    ap.add_argument("--generator", type=Path, default=GENCAM, help=f"gencam.py (default {GENCAM})")
     ap.add_argument("sources", nargs="*")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -127,7 +128,7 @@ def main() -> None:
         for spec in args.gencam:
             n, seed = spec.split(":")
             out = Path(tmp) / f"gencam_{n}_{seed}.nc"
-            subprocess.run([sys.executable, str(GENCAM), n, str(out), seed], check=True, capture_output=True)
+            subprocess.run([sys.executable, str(args.generator), n, str(out), seed], check=True, capture_output=True)
             jobs.append((out, cases_of(out, ["bench"])))
         counts = {"cases": 0, "identical": 0, "same error": 0, "differ": 0}
         programs_seen = 0

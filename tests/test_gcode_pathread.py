@@ -53,13 +53,13 @@ def assert_same(source, setup=None, *, error: bool | None = False, **kw):
 def runs(monkeypatch):
     """The runs of plain lines the sampler takes from their columns: (first line, lines, arcs)."""
     seen: list[tuple[int, int, int]] = []
-    take = pathread.Sampler._take_run
+    take = pathread.Sampler._block_runs
 
-    def spy(self, run):
-        seen.append((run.lineno, run.b - run.a, len(run.arcs)))
-        return take(self, run)
+    def spy(self, blk, runs):
+        seen.extend((run.lineno, run.b - run.a, len(run.arcs)) for run in runs)
+        return take(self, blk, runs)
 
-    monkeypatch.setattr(pathread.Sampler, "_take_run", spy)
+    monkeypatch.setattr(pathread.Sampler, "_block_runs", spy)
     return seen
 
 

@@ -16,13 +16,14 @@ import math
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, TypeAlias, TypeVar
 
 import numpy as np
 
 from postproc.gcode import bulk
-from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
+from postproc.gcode.geometry import ArcColumns, arc_chord_steps, arc_length, arc_params, arcs_points
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, plain_moves, start_position
+from postproc.gcode.moves import Arc
 from postproc.gcode.options import CorrectOptions
 from postproc.gcode.reader import LineReader
 from postproc.gcode.state import RAPID
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
 BLOCK_LINES = 5_000
 
 R = TypeVar("R", bound=LineReader)
+Point: TypeAlias = tuple[float, float, float]
 
 
 def _blocks(lines: Iterable, n: int) -> Iterator[list]:
@@ -117,14 +119,30 @@ def _steps_all(length_mm: np.ndarray, step_mm: float) -> np.ndarray:
 
 
 class _Columns:
-    """Moves as columns: start, end, samples, tool vector, line, rapid, rotary positions
-    (None: no rotary axis used by any of them)."""
+    """Moves as columns: start, end, samples, tool vector, line, whether rapid."""
 
-    __slots__ = ("q0", "q1", "n", "r", "lineno", "rapid", "rot")
+    __slots__ = ("q0", "q1", "n", "r", "lineno", "rapid")
 
     def __init__(self, q0: np.ndarray, q1: np.ndarray, n: np.ndarray, r: np.ndarray, lineno: np.ndarray,
-                 rapid: np.ndarray, rot: list[dict] | None) -> None:
-        self.q0, self.q1, self.n, self.r, self.lineno, self.rapid, self.rot = q0, q1, n, r, lineno, rapid, rot
+                 rapid: np.ndarray) -> None:
+        self.q0, self.q1, self.n, self.r, self.lineno, self.rapid = q0, q1, n, r, lineno, rapid
+
+    def __len__(self) -> int:
+        return len(self.n)
+
+    def __getitem__(self, k: slice) -> _Columns:
+        return _Columns(self.q0[k], self.q1[k], self.n[k], self.r[k], self.lineno[k], self.rapid[k])
+
+    @staticmethod
+    def join(parts: list[_Columns]) -> _Columns:
+        if len(parts) == 1:
+            return parts[0]
+        return _Columns(*(np.concatenate([getattr(c, f) for c in parts]) for f in _Columns.__slots__))
+
+
+# an arc to sample: its row among the moves taken with it, the arc, its start and end,
+# its samples and its arc_params
+_ArcToSample: TypeAlias = tuple[int, Arc, Point, Point, int, tuple]
 
 
 class Sampler(LineReader[tuple[int, Move]]):
@@ -132,17 +150,19 @@ class Sampler(LineReader[tuple[int, Move]]):
     queues each move of a line the interpreter reads (its block's plain moves, then the
     drilling cycle it runs) and each run of plain lines; after each block, takes what it
     queued in order, counting the samples of each move and refusing the move that
-    passes ``max_samples`` (at its line), before any error of a later line."""
+    passes ``max_samples`` (at its line), before any error of a later line. A run's
+    moves are taken from its columns, all the block's runs at once."""
 
     def __init__(self, interp: Interpreter, path: str | None, step_mm: float | None, chord_mm: float | None,
                  max_samples: int) -> None:
         super().__init__(interp, CorrectOptions(), path)
         self.step_mm, self.chord_mm, self.max_samples = step_mm, chord_mm, max_samples
-        self.cols: list[_Columns] = []  # the moves taken, in order
-        self.arcs: dict[int, np.ndarray] = {}  # an arc's samples by its move's index
+        self.cols: list[_Columns] = []  # the moves taken, a block at a time
         self.moves = 0  # moves taken
         self.total = 0  # samples so far
-        self._g0: dict[int, tuple[bulk.Block, np.ndarray]] = {}  # by block: which lines name G0
+        # the arcs' samples: (their moves' indices, their counts, the points)
+        self.arcs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.rot: list[tuple[int, dict]] = []  # a move's rotary positions by its index (where it has any)
 
     def queue(self, line: str, mv: Move | None, lineno: int) -> None:
         if mv is not None:
@@ -168,122 +188,175 @@ class Sampler(LineReader[tuple[int, Move]]):
         return ResourceLimitError(f"sampling the program{every} makes more than {self.max_samples:,} points",
                                   path=self.path, lineno=lineno, col=1, hint="give postproc verify a larger --max-step")
 
+    def _arc_samples(self, arc: Arc, q0: Point, q1: Point) -> tuple[int, tuple]:
+        """An arc's samples (every ``step_mm`` of its length and, with ``chord_mm``, every
+        chord within it: the finer) and its arc_params."""
+        params = arc_params(arc, q0, q1)
+        step_mm, chord_mm = self.step_mm, self.chord_mm
+        n = max(1, _steps(arc_length(arc, q0, q1, params), step_mm) if step_mm else 1,
+                arc_chord_steps(arc, q0, q1, chord_mm) if chord_mm else 1)
+        return n, params
+
     def _take(self) -> None:
         """Count and keep the moves queued, in order."""
         entries = self.entries
         if not entries:
             return
-        step_mm, chord_mm, max_samples = self.step_mm, self.chord_mm, self.max_samples
+        blocks = {id(e.block): e.block for e in entries if type(e) is bulk.Run}
+        try:
+            self._take_entries(entries)
+        finally:
+            entries.clear()
+            for blk in blocks.values():
+                blk.runs = []  # (each run refers to its block: let go of both)
+            self.interp.comp_moves = []  # (those of cutter compensation: the corrector's to bound)
+
+    def _take_entries(self, entries: list) -> None:
+        step_mm = self.step_mm
         q0s: list = []
         q1s: list = []
         counts: list[int] = []
         rs: list = []
         lns: list[int] = []
         rapid: list[bool] = []
-        rot: list[dict] = []
+        parts: list[_Columns] = []
+        arcs: list[_ArcToSample] = []
+        at = 0  # moves of the parts so far
 
         def flush() -> None:
+            nonlocal at
             if counts:
-                self.cols.append(_Columns(np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float),
-                                          np.asarray(counts, dtype=np.int64), np.asarray(rs, dtype=float),
-                                          np.asarray(lns, dtype=np.int64), np.asarray(rapid, dtype=bool), list(rot)))
-                self.moves += len(counts)
-                for acc in (q0s, q1s, counts, rs, lns, rapid, rot):
+                parts.append(_Columns(np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float),
+                                      np.asarray(counts, dtype=np.int64), np.asarray(rs, dtype=float),
+                                      np.asarray(lns, dtype=np.int64), np.asarray(rapid, dtype=bool)))
+                at += len(counts)
+                for acc in (q0s, q1s, counts, rs, lns, rapid):
                     acc.clear()
 
-        blocks: dict[int, bulk.Block] = {}
-        try:
-            for e in entries:
-                if type(e) is bulk.Run:
-                    flush()
-                    blocks[id(e.block)] = e.block
-                    self._take_run(e)
-                    continue
-                lineno, mv = e
-                q0, q1 = mv.q0, mv.q1
-                if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-                    n = 1
-                    q0 = q1
-                elif mv.arc is not None:
-                    n = max(1, _steps(arc_length(mv.arc, q0, q1), step_mm) if step_mm else 1,
-                            arc_chord_steps(mv.arc, q0, q1, chord_mm) if chord_mm else 1)
-                    if self.total + n <= max_samples:  # (else refused below, before the points are made)
-                        self.arcs[self.moves + len(counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
-                else:
-                    n = max(1, _steps(math.dist(q0, q1), step_mm)) if step_mm else 1
-                self.total += n
-                if self.total > max_samples:
-                    raise self._refuse(lineno)
-                q0s.append(q0)
-                q1s.append(q1)
-                counts.append(n)
-                rs.append(mv.r)
-                lns.append(lineno)
-                rapid.append(mv.kind == RAPID)
-                rot.append(mv.rotary)
-            flush()
-        finally:
-            entries.clear()
-            for blk in blocks.values():
-                blk.runs = []  # (each run refers to its block: let go of both)
-            self._g0.clear()
-            self.interp.comp_moves = []  # (those of cutter compensation: the corrector's to bound)
-
-    def _names_g0(self, blk: bulk.Block) -> np.ndarray:
-        """Whether each line of ``blk`` names G0 (or G00) as its motion word."""
-        got = self._g0.get(id(blk))
-        if got is None:
-            got = self._g0[id(blk)] = (blk, np.fromiter((g[-1:] == "0" for g in blk.gword), dtype=bool,
-                                                        count=len(blk.gword)))
-        return got[1]
-
-    def _take_run(self, run: bulk.Run) -> None:
-        """Count and keep the moves of a run of plain lines, from its columns."""
-        blk, a, b = run.block, run.a, run.b
-        js = np.flatnonzero(~blk.neutral[a:b])  # the lines that move (within the run)
-        if not len(js):
+        runs = self._runs([e for e in entries if type(e) is bulk.Run])
+        k = 0
+        for e in entries:
+            if type(e) is bulk.Run:
+                flush()
+                cols, run_arcs = runs[k]
+                k += 1
+                arcs += [(at + row, *rest) for row, *rest in run_arcs]  # type: ignore[misc]
+                parts.append(cols)
+                at += len(cols)
+                continue
+            lineno, mv = e
+            q0, q1 = mv.q0, mv.q1
+            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
+                n = 1
+                q0 = q1
+            elif mv.arc is not None:
+                n, params = self._arc_samples(mv.arc, q0, q1)
+                arcs.append((at + len(counts), mv.arc, q0, q1, n, params))
+            else:
+                n = max(1, _steps(math.dist(q0, q1), step_mm)) if step_mm else 1
+            if mv.rotary:
+                self.rot.append((self.moves + at + len(counts), mv.rotary))
+            q0s.append(q0)
+            q1s.append(q1)
+            counts.append(n)
+            rs.append(mv.r)
+            lns.append(lineno)
+            rapid.append(mv.kind == RAPID)
+        flush()
+        if not parts:
             return
-        q1_all = run.q1
-        q1 = q1_all[js]
-        q0 = np.vstack([np.asarray(run.q0, dtype=float)[None, :], q1_all[:-1]])[js]
-        last_g = np.asarray(blk.last_g[a:b])[js]  # the line whose G word is modal at each
-        named = last_g >= a
-        rapid = np.where(named, self._names_g0(blk)[np.maximum(last_g, 0)], run.motion0 == RAPID)
-        step_mm, chord_mm = self.step_mm, self.chord_mm
-        n = np.ones(len(js), dtype=np.int64)
-        arc_at: dict[int, int] = {}  # line within the run -> its row among js
-        if run.arcs:
-            arc_at = {j: k for k, j in enumerate(js.tolist()) if j in run.arcs}
-        if step_mm:
-            straight = ~rapid
-            if arc_at:
-                straight[list(arc_at.values())] = False
+        cols = _Columns.join(parts)
+        cum = self.total + np.cumsum(cols.n)
+        over = cum > self.max_samples
+        if over.any():
+            raise self._refuse(int(cols.lineno[int(np.argmax(over))]))
+        self.total = int(cum[-1])
+        if arcs:
+            self._sample_arcs(arcs)
+        self.cols.append(cols)
+        self.moves += len(cols)
+
+    def _sample_arcs(self, arcs: list[_ArcToSample]) -> None:
+        """The samples of the arcs taken, all at once (each point the one
+        :func:`postproc.gcode.geometry.arc_points` gives)."""
+        rows = np.array([a[0] for a in arcs], dtype=np.int64)
+        n = np.array([a[4] for a in arcs], dtype=np.int64)
+        params = [a[5] for a in arcs]
+        owner = np.repeat(np.arange(len(arcs)), n)
+        k = np.arange(len(owner)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each arc
+        cols = ArcColumns(np.array([p[0] for p in params], dtype=np.int64),
+                          np.array([p[1] for p in params], dtype=float), np.array([p[2] for p in params], dtype=float),
+                          np.array([p[3] for p in params], dtype=float), np.array([p[4] for p in params], dtype=float),
+                          np.array([a[1].center for a in arcs], dtype=float),
+                          np.array([a[2] for a in arcs], dtype=float), np.array([a[3] for a in arcs], dtype=float))
+        self.arcs.append((self.moves + rows, n, arcs_points(owner, k / n[owner], cols)))
+
+    def _runs(self, runs: list[bulk.Run]) -> list[tuple[_Columns, list[_ArcToSample]]]:
+        """The moves of each run (its lines that move) and its arcs (rows within the run),
+        from the columns of the runs of each block at once."""
+        out: list[tuple[_Columns, list[_ArcToSample]]] = []
+        i = 0
+        while i < len(runs):
+            blk = runs[i].block
+            j = i + 1
+            while j < len(runs) and runs[j].block is blk:
+                j += 1
+            out += self._block_runs(blk, runs[i:j])
+            i = j
+        return out
+
+    def _block_runs(self, blk: bulk.Block, runs: list[bulk.Run]) -> list[tuple[_Columns, list[_ArcToSample]]]:
+        lengths = [r.b - r.a for r in runs]
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+        idx = np.concatenate([np.arange(r.a, r.b) for r in runs])  # the runs' lines in the block
+        q1 = np.concatenate([r.q1 for r in runs])
+        q0 = np.empty_like(q1)  # each line's start: the line before's end, the run's start for its first
+        q0[1:] = q1[:-1]
+        q0[starts] = np.array([r.q0 for r in runs], dtype=float)
+        moving = ~blk.neutral[idx]
+        # the motion of each line: the G word of the last line naming one in the run, else the run's
+        last_g = np.asarray(blk.last_g)[idx]
+        named = last_g >= np.repeat([r.a for r in runs], lengths)
+        g0 = np.fromiter((g[-1:] == "0" for g in blk.gword), dtype=bool, count=len(blk.gword))
+        rapid = np.where(named, g0[np.maximum(last_g, 0)], np.repeat([r.motion0 == RAPID for r in runs], lengths))
+        lineno = idx + np.repeat([r.lineno - r.a for r in runs], lengths)
+        tool = np.repeat(np.array([r.r for r in runs], dtype=float), lengths, axis=0)
+        n = np.ones(len(idx), dtype=np.int64)
+        arc_rows = [int(s) + j for r, s in zip(runs, starts.tolist(), strict=True) for j in r.arcs]
+        if self.step_mm:
+            straight = moving & ~rapid
+            straight[arc_rows] = False
             sel = np.flatnonzero(straight)
             if len(sel):
                 d = np.fromiter(map(math.dist, q0[sel].tolist(), q1[sel].tolist()), dtype=float, count=len(sel))
-                n[sel] = _steps_all(d, step_mm)
-        arcs: list[tuple[int, bulk.RunMove, int]] = []
-        if arc_at:
-            for j, mv in bulk.arc_moves(run):
-                k = arc_at[j]
-                arc = mv.arc
-                assert arc is not None
-                c = max(1, _steps(arc_length(arc, mv.q0, mv.q1), step_mm) if step_mm else 1,
-                        arc_chord_steps(arc, mv.q0, mv.q1, chord_mm) if chord_mm else 1)
-                n[k] = c
-                arcs.append((k, mv, c))
-        cum = self.total + np.cumsum(n)
-        over = cum > self.max_samples
-        if over.any():
-            raise self._refuse(run.lineno + int(js[int(np.argmax(over))]))
-        self.total = int(cum[-1])
-        for k, am, c in arcs:
-            assert am.arc is not None
-            self.arcs[self.moves + k] = arc_points(am.arc, am.q0, am.q1, np.arange(1, c + 1) / c)
+                n[sel] = _steps_all(d, self.step_mm)
+        arcs: list[_ArcToSample] = []
+        if arc_rows:
+            a0, a1 = q0[arc_rows].tolist(), q1[arc_rows].tolist()
+            centres = [(r.arcs[j], s) for r, s in zip(runs, starts.tolist(), strict=True) for j in r.arcs]
+            for row, (centre, clockwise), p0, p1 in zip(arc_rows, (c for c, _s in centres), a0, a1, strict=True):
+                arc = Arc(centre, 170, clockwise, 1, (-1, -1), -1)
+                p0t, p1t = (p0[0], p0[1], p0[2]), (p1[0], p1[1], p1[2])
+                c, params = self._arc_samples(arc, p0t, p1t)
+                n[row] = c
+                arcs.append((row, arc, p0t, p1t, c, params))
         q0 = np.where(rapid[:, None], q1, q0)
-        self.cols.append(_Columns(q0, q1, n, np.broadcast_to(np.asarray(run.r, dtype=float), q1.shape), run.lineno + js,
-                                  rapid, None))
-        self.moves += len(js)
+        # the moving lines only: a run's rows and an arc's row among them
+        cm = np.concatenate([[0], np.cumsum(moving)])
+        sel = np.flatnonzero(moving)
+        every = _Columns(q0[sel], q1[sel], n[sel], tool[sel], lineno[sel], rapid[sel])
+        bounds = cm[starts].tolist() + [int(cm[-1])]
+        out: list[tuple[_Columns, list[_ArcToSample]]] = []
+        ai = 0
+        for k in range(len(runs)):
+            lo, hi = bounds[k], bounds[k + 1]
+            mine: list[_ArcToSample] = []
+            while ai < len(arcs) and arcs[ai][0] < int(starts[k]) + lengths[k]:
+                row, *rest = arcs[ai]
+                mine.append((int(cm[row]) - lo, *rest))
+                ai += 1
+            out.append((every[lo:hi], mine))
+        return out
 
     def path_of(self, setup: Setup, rotary: set[str]) -> ProgramPath:
         """The samples of the moves read, with their context."""
@@ -293,26 +366,27 @@ class Sampler(LineReader[tuple[int, Move]]):
             empty = np.zeros((0, 3))
             return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
                                {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
-        cols = self.cols
-        n = np.concatenate([c.n for c in cols])
+        cols = _Columns.join(self.cols)
+        n = cols.n
         move = np.repeat(np.arange(len(n)), n)
         k = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
-        a = np.concatenate([c.q0 for c in cols])
-        b = np.concatenate([c.q1 for c in cols])
+        a, b = cols.q0, cols.q1
         q = a[move] + (b[move] - a[move]) * (k / n[move])[:, None]  # as line_points does
         if self.arcs:
             first = np.cumsum(n) - n
-            for j, pts in self.arcs.items():
-                q[first[j]:first[j] + n[j]] = pts
-        lineno_arr = np.concatenate([c.lineno for c in cols])[move]
+            for moves, counts, pts in self.arcs:
+                at = np.repeat(first[moves] - (np.cumsum(counts) - counts), counts) + np.arange(len(pts))
+                q[at] = pts
+        lineno_arr = cols.lineno[move]
         q = backfill_unknown(q, lineno_arr, self.path)
-        r = np.concatenate([c.r for c in cols])[move]
+        r = cols.r[move]
         signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
         context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
         for ax in sorted(rotary):
-            context[ax] = np.concatenate([
-                np.zeros(len(c.n)) if c.rot is None else np.asarray([d.get(ax, 0.0) for d in c.rot], dtype=float)
-                for c in cols])[move]
+            pos = np.zeros(len(n))
+            if self.rot:
+                pos[[i for i, _d in self.rot]] = [d.get(ax, 0.0) for _i, d in self.rot]
+            context[ax] = pos[move]
         for key, v in (setup.context or {}).items():
             context[key] = np.full(len(q), float(v))
-        return ProgramPath(q + r, r, lineno_arr, np.concatenate([c.rapid for c in cols])[move], context)
+        return ProgramPath(q + r, r, lineno_arr, cols.rapid[move], context)
