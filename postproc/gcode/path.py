@@ -14,6 +14,7 @@ position (the first move of most programs is a retract on one axis).
 
 from __future__ import annotations
 
+import gc
 import os
 import re
 from collections.abc import Iterator
@@ -177,6 +178,14 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
     from postproc.gcode.pathread import Sampler, read_program
 
     setup = setup or Setup()
-    rd = read_program(source, setup, lambda interp, path: Sampler(interp, path, step_mm, chord_mm, max_samples),
-                      dialect=dialect, subroutine_path=subroutine_path, limits=limits)
-    return rd.path_of(setup, rd.interp.used_rotary)
+    # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
+    # only costs time here (as in the corrector's run)
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        rd = read_program(source, setup, lambda interp, path: Sampler(interp, path, step_mm, chord_mm, max_samples),
+                          dialect=dialect, subroutine_path=subroutine_path, limits=limits)
+        return rd.path_of(setup, rd.interp.used_rotary)
+    finally:
+        if was_enabled:
+            gc.enable()

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
+from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeAlias, TypeVar
 
@@ -42,23 +43,19 @@ Point: TypeAlias = tuple[float, float, float]
 def _blocks(lines: Iterable, n: int) -> Iterator[list]:
     """``lines`` in lists of ``n``; an error while taking them (a line too long, an
     expansion refused) comes after the list of the lines before it."""
-    it = iter(lines)
-    while True:
-        part: list = []
-        error: Exception | None = None
+    failed: list[Exception] = []
+
+    def guarded() -> Iterator:
         try:
-            for x in it:
-                part.append(x)
-                if len(part) == n:
-                    break
+            yield from lines
         except Exception as exc:  # noqa: BLE001  (raised after the lines before it are read)
-            error = exc
-        if part:
-            yield part
-        if error is not None:
-            raise error
-        if len(part) < n:
-            return
+            failed.append(exc)
+
+    it = guarded()
+    while part := list(islice(it, n)):
+        yield part
+    if failed:
+        raise failed[0]
 
 
 def read_program(source, setup: Setup, reader: Callable[[Interpreter, str | None], R], *, dialect: str = "generic",
@@ -317,8 +314,12 @@ class Sampler(LineReader[tuple[int, Move]]):
         # the motion of each line: the G word of the last line naming one in the run, else the run's
         last_g = np.asarray(blk.last_g)[idx]
         named = last_g >= np.repeat([r.a for r in runs], lengths)
-        g0 = np.fromiter((g[-1:] == "0" for g in blk.gword), dtype=bool, count=len(blk.gword))
-        rapid = np.where(named, g0[np.maximum(last_g, 0)], np.repeat([r.motion0 == RAPID for r in runs], lengths))
+        rapid = np.repeat([r.motion0 == RAPID for r in runs], lengths)
+        if named.any():
+            at = np.flatnonzero(named)
+            lines, which = np.unique(last_g[at], return_inverse=True)
+            gword = blk.gword
+            rapid[at] = np.array([gword[g][-1:] == "0" for g in lines.tolist()], dtype=bool)[which]  # G0, G00
         lineno = idx + np.repeat([r.lineno - r.a for r in runs], lengths)
         tool = np.repeat(np.array([r.r for r in runs], dtype=float), lengths, axis=0)
         n = np.ones(len(idx), dtype=np.int64)
