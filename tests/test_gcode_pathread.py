@@ -265,3 +265,14 @@ def test_gencam_programs(tmp_path, runs, seed):
     for kw in ({"step_mm": 0.5}, {"chord_mm": 1e-5}, {"step_mm": 0.5, "chord_mm": 1e-5}, {"step_mm": 20.0}):
         assert_same(str(prog), BENCH, **kw)
     assert sum(n for _l, n, _a in runs) > 1000
+
+
+def test_an_expanded_loop_numbers_each_pass_as_its_line(runs):
+    text = ("G21 G90\nG0 X0 Y0 Z5\nG1 X1 F100\nX2\n#1 = 0\no101 repeat [3]\n#1 = [#1 + 1]\nG1 X[10 + #1] Y#1\n"
+            "X[20 + #1]\no101 endrepeat\nG1 X0 Y0\nX1\nM30\n")
+    pp = assert_same(text, step_mm=0.5)
+    ends = {ln: int((pp.lineno == ln).sum()) for ln in sorted(set(pp.lineno.tolist()))}
+    assert sorted(ends) == [2, 3, 4, 8, 9, 11, 12]
+    # each pass of the loop's two moves is numbered by its line; the last pass ends at (23, 3)
+    assert pp.points_mm[pp.lineno == 9][-1].tolist() == [23.0, 3.0, 5.0]
+    assert pp.lineno[-1] == 12
