@@ -131,11 +131,15 @@ def main() -> None:
             subprocess.run([sys.executable, str(args.generator), n, str(out), seed], check=True, capture_output=True)
             jobs.append((out, cases_of(out, ["bench"])))
         counts = {"cases": 0, "identical": 0, "same error": 0, "differ": 0}
-        programs_seen = 0
+        programs_seen = all_errors = 0
+        errors: dict[str, int] = {}
         for prog, cases in jobs:
             base, mine = run(args.base, cases), run(REPO, cases)
             programs_seen += 1
+            all_errors += all("error" in a for a in base)
             for case, a, b in zip(cases, base, mine, strict=True):
+                if "error" in a:
+                    errors[a["error"]] = errors.get(a["error"], 0) + 1
                 counts["cases"] += 1
                 if a != b:
                     counts["differ"] += 1
@@ -147,8 +151,10 @@ def main() -> None:
                 else:
                     counts["identical"] += 1
             sys.stdout.flush()
-        print(f"programs: {programs_seen}; cases: {counts['cases']}, identical arrays: {counts['identical']}, "
-              f"same error: {counts['same error']}, differ: {counts['differ']}")
+        print(f"programs: {programs_seen} ({all_errors} refused in every case); cases: {counts['cases']}, "
+              f"identical arrays: {counts['identical']}, same error: {counts['same error']}, "
+              f"differ: {counts['differ']}")
+        print("errors of the base: " + ", ".join(f"{k} {v}" for k, v in sorted(errors.items())))
     sys.exit(1 if counts["differ"] else 0)
 
 
