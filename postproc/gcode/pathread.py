@@ -303,6 +303,10 @@ class Sampler(LineReader[tuple[int, Move]]):
         return out
 
     def _block_runs(self, blk: bulk.Block, runs: list[bulk.Run]) -> list[tuple[_Columns, list[_ArcToSample]]]:
+        """:meth:`_runs` of runs of one block: their lines as rows (each line's start the
+        end of the line before, the run's start for its first), the lines that move
+        nothing left out; an arc (G17, one turn, its centre from the run) as
+        :func:`postproc.gcode.bulk.arc_moves` gives it."""
         lengths = [r.b - r.a for r in runs]
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
         idx = np.concatenate([np.arange(r.a, r.b) for r in runs])  # the runs' lines in the block
@@ -334,8 +338,8 @@ class Sampler(LineReader[tuple[int, Move]]):
         arcs: list[_ArcToSample] = []
         if arc_rows:
             a0, a1 = q0[arc_rows].tolist(), q1[arc_rows].tolist()
-            centres = [(r.arcs[j], s) for r, s in zip(runs, starts.tolist(), strict=True) for j in r.arcs]
-            for row, (centre, clockwise), p0, p1 in zip(arc_rows, (c for c, _s in centres), a0, a1, strict=True):
+            centres = [r.arcs[j] for r in runs for j in r.arcs]  # (centre, clockwise), in the order of arc_rows
+            for row, (centre, clockwise), p0, p1 in zip(arc_rows, centres, a0, a1, strict=True):
                 arc = Arc(centre, 170, clockwise, 1, (-1, -1), -1)
                 p0t, p1t = (p0[0], p0[1], p0[2]), (p1[0], p1[1], p1[2])
                 c, params = self._arc_samples(arc, p0t, p1t)
