@@ -39,6 +39,8 @@ SAMPLINGS = [
     ("ends", {}),  # each move's end alone
     ("step0.5-2M", {"step_mm": 0.5, "max_samples": 2_000_000}),  # past the default bound
 ]
+# and for gencam programs (long): steps and a chord that stay under the default bound
+GENCAM_SAMPLINGS = [("step5", {"step_mm": 5.0}), ("step20", {"step_mm": 20.0}), ("chord1e-3", {"chord_mm": 1e-3})]
 # a dialect for the programs of a corpus folder, besides the generic one
 FOLDER_DIALECT = {"haas_kiely": "haas", "fanuc_sim": "fanuc", "lagun_linuxcnc": "linuxcnc", "linuxcnc": "linuxcnc",
                   "pygcode-linuxcnc": "linuxcnc", "ugs": "grbl", "cncjs": "grbl"}
@@ -95,13 +97,13 @@ def programs(args: list[str]) -> list[Path]:
     return out
 
 
-def cases_of(prog: Path, setups: list[str]) -> list[tuple[str, str, str, dict]]:
+def cases_of(prog: Path, setups: list[str], samplings=SAMPLINGS) -> list[tuple[str, str, str, dict]]:
     dialects = ["generic"]
     for part in prog.parts:
         d = FOLDER_DIALECT.get(part)
         if d and d not in dialects:
             dialects.append(d)
-    return [(str(prog), s, d, kw) for s in setups for d in dialects for _name, kw in SAMPLINGS]
+    return [(str(prog), s, d, kw) for s in setups for d in dialects for _name, kw in samplings]
 
 
 def run(tree: Path, cases: list) -> list[dict]:
@@ -129,7 +131,7 @@ def main() -> None:
             n, seed = spec.split(":")
             out = Path(tmp) / f"gencam_{n}_{seed}.nc"
             subprocess.run([sys.executable, str(args.generator), n, str(out), seed], check=True, capture_output=True)
-            jobs.append((out, cases_of(out, ["bench"])))
+            jobs.append((out, cases_of(out, ["bench"], SAMPLINGS + GENCAM_SAMPLINGS)))
         counts = {"cases": 0, "identical": 0, "same error": 0, "differ": 0}
         programs_seen = all_errors = 0
         errors: dict[str, int] = {}
