@@ -195,16 +195,25 @@ def polyline_distance(points: np.ndarray, poly: np.ndarray, step: float = 0.05) 
 def first_known_line(text: str, setup: Setup) -> int:
     """First line after which every axis has been positioned (before it, the machine's
     position is unknown and so is the path); programs needing expansion read expanded."""
-    from postproc.gcode.path import for_each_block
+    from postproc.gcode.options import CorrectOptions
+    from postproc.gcode.pathread import read_program
+    from postproc.gcode.reader import LineReader
 
-    found: list[int] = []
+    class FirstKnown(LineReader):
+        found: int | None = None
 
-    def visit(lineno, _line, _block, state) -> None:
-        if not found and not any(math.isnan(v) for v in state.pos):
-            found.append(lineno)
+        def queue(self, line, mv, lineno) -> None:
+            it = self.interp
+            if self.found is None and (mv is not None or it.cycle_move is not None) \
+                    and not any(math.isnan(v) for v in it.state.pos):
+                self.found = lineno
 
-    for_each_block(text, setup, visit, found.clear)
-    return found[0] if found else 10**9
+        def queue_run(self, run) -> None:  # a run starts where every axis is known
+            if self.found is None:
+                self.found = run.lineno
+
+    rd = read_program(text, setup, lambda interp, path: FirstKnown(interp, CorrectOptions(), path))
+    return rd.found if rd.found is not None else 10**9
 
 
 def landing_error(original: str, corrected: str, engine, setup: Setup, step: float = 0.05) -> float:

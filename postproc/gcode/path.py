@@ -1,6 +1,7 @@
 """The nominal path of a program: points along every move, in the machine frame.
 
-``program_path(source, setup)`` runs the modal interpreter and samples every move
+``program_path(source, setup)`` reads the program as ``correct`` does (the modal
+interpreter, runs of plain lines in bulk: :mod:`postproc.gcode.pathread`) and samples every move
 (lines and arcs) at most ``max_step_mm`` apart. Points are *functional-point*
 positions ``p = q + r`` (after units, work offsets, G92 and tool length); ``tool_mm``
 is the tool vector ``r``, so ``q = points_mm - tool_mm`` is what the controller
@@ -13,7 +14,7 @@ position (the first move of most programs is a retract on one axis).
 
 from __future__ import annotations
 
-import math
+import gc
 import os
 import re
 from collections.abc import Iterator
@@ -24,10 +25,7 @@ from typing import TextIO
 import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
-from postproc.gcode.geometry import arc_chord_steps, arc_length, arc_points
-from postproc.gcode.interp import Interpreter, plain_moves, start_position
-from postproc.gcode.state import RAPID
-from postproc.limits import Limits, ResourceLimitError
+from postproc.limits import Limits
 
 DEFAULT_MAX_STEP_MM = 0.5
 # Points one program may be sampled into (verify, the path API): verify peaks near 7.5 KB
@@ -111,52 +109,6 @@ def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
     return None, iter(_LINE_RE.findall(str(source)))
 
 
-def for_each_block(source, setup, visit, reset, *, dialect: str = "generic", subroutine_path=(),
-                   lenient_setup: bool = False, limits: Limits | None = None) -> Interpreter:
-    """Interpret a program (path or text) line by line, calling ``visit(lineno, line,
-    block, state)`` for each move a line makes (``state``: the modal state after it): its
-    own block, then the Sinumerik drilling cycle it runs (the interpreter's
-    ``cycle_move``, whose steps :func:`postproc.gcode.interp.plain_moves` gives as the
-    correction writes them); the same reading as ``correct``: when the
-    program needs expanding (parameters, O-words, subprograms, macros), ``reset()`` is
-    called and the expanded program is read instead. Returns the interpreter. ``limits``:
-    the bounds on loops and helix turns (:class:`postproc.limits.Limits`, default its own)."""
-    from postproc.gcode.interp import NeedsExpansion
-
-    limits = limits or Limits()
-
-    path, lines = iter_source_lines(source)
-    interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
-    interp.max_arc_turns = limits.max_arc_turns
-    interp.may_expand = True
-    try:
-        for lineno, line in enumerate(lines, start=1):
-            _visit_line(interp, lineno, line, visit)
-        return interp
-    except NeedsExpansion:
-        reset()
-    from postproc.gcode.expand import expand
-
-    _path, lines = iter_source_lines(source)
-    interp = Interpreter(setup, path, dialect=dialect, lenient_setup=lenient_setup)
-    interp.max_arc_turns = limits.max_arc_turns
-    for sl in expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path],
-                     variables=getattr(setup, "variables", None), max_iterations=limits.max_iterations):
-        interp.path = sl.path or path
-        _visit_line(interp, sl.lineno, sl.text, visit)
-    return interp
-
-
-def _visit_line(interp: Interpreter, lineno: int, line: str, visit) -> None:
-    """Feed one line and visit the moves it makes: its block, then the drilling cycle it
-    runs (a cycle call alone makes no block; a position block under ``MCALL`` makes both)."""
-    block = interp.feed_line(lineno, line)
-    if block is not None:
-        visit(lineno, line, block, interp.state)
-    if interp.cycle_move is not None:
-        visit(lineno, line, interp.cycle_move, interp.state)
-
-
 def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.ndarray:
     """Replace NaN (not yet positioned) by the next known value of the same axis."""
     q = q.copy()
@@ -208,96 +160,12 @@ def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEF
                           limits=limits)
 
 
-def _steps(length_mm: float, step_mm: float) -> int:
-    """Pieces of ``step_mm`` in ``length_mm`` (rounded up; huge for a step of 1e-320 mm,
-    never an overflow)."""
-    pieces = length_mm / step_mm
-    return math.ceil(pieces) if pieces < 1e18 else 10**18
-
-
-class _Moves:
-    """The moves :func:`sample_program` reads: per move its end, start, number of
-    samples, tool vector, line, whether it is rapid and its rotary positions; an arc's
-    samples are made as it is read, straight moves' all at once at the end."""
-
-    def __init__(self, path: str | None, step_mm: float | None, chord_mm: float | None, max_samples: int) -> None:
-        self.path, self.step_mm, self.chord_mm, self.max_samples = path, step_mm, chord_mm, max_samples
-        self.q1s: list = []
-        self.q0s: list = []
-        self.counts: list[int] = []
-        self.rs: list = []
-        self.lns: list[int] = []
-        self.rapid: list[bool] = []
-        self.rot: list[dict] = []
-        self.arcs: dict[int, np.ndarray] = {}
-        self.total = 0  # samples so far
-
-    def visit(self, lineno: int, _line: str, block, _state) -> None:
-        step_mm, chord_mm = self.step_mm, self.chord_mm
-        for mv in plain_moves(block):
-            q0, q1 = mv.q0, mv.q1
-            if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
-                n = 1
-                q0 = q1
-            elif mv.arc is not None:
-                n = max(1, _steps(arc_length(mv.arc, q0, q1), step_mm) if step_mm else 1,
-                        arc_chord_steps(mv.arc, q0, q1, chord_mm) if chord_mm else 1)
-                if self.total + n <= self.max_samples:  # (else refused below, before the points are made)
-                    self.arcs[len(self.counts)] = arc_points(mv.arc, q0, q1, np.arange(1, n + 1) / n)
-            else:
-                n = max(1, _steps(math.dist(q0, q1), step_mm)) if step_mm else 1
-            self.total += n
-            if self.total > self.max_samples:
-                every = f" every {step_mm:g} mm" if step_mm else ""
-                raise ResourceLimitError(
-                    f"sampling the program{every} makes more than {self.max_samples:,} points",
-                    path=self.path, lineno=lineno, col=1, hint="give postproc verify a larger --max-step")
-            self.q0s.append(q0)
-            self.q1s.append(q1)
-            self.counts.append(n)
-            self.rs.append(mv.r)
-            self.lns.append(lineno)
-            self.rapid.append(mv.kind == RAPID)
-            self.rot.append(mv.rotary)
-
-    def reset(self) -> None:
-        for acc in (self.q1s, self.q0s, self.counts, self.rs, self.lns, self.rapid, self.rot):
-            acc.clear()
-        self.arcs.clear()
-        self.total = 0
-
-    def path_of(self, setup: Setup, rotary: set[str]) -> ProgramPath:
-        """The samples of the moves read, with their context."""
-        if not self.counts:
-            empty = np.zeros((0, 3))
-            return ProgramPath(empty, empty.copy(), np.zeros(0, dtype=int), np.zeros(0, dtype=bool),
-                               {"dirx": np.zeros(0), "diry": np.zeros(0), "dirz": np.zeros(0)})
-        n = np.asarray(self.counts)
-        move = np.repeat(np.arange(len(n)), n)
-        k = np.arange(len(move)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each move
-        a, b = np.asarray(self.q0s, dtype=float), np.asarray(self.q1s, dtype=float)
-        q = a[move] + (b[move] - a[move]) * (k / n[move])[:, None]  # as line_points does
-        if self.arcs:
-            first = np.cumsum(n) - n
-            for j, pts in self.arcs.items():
-                q[first[j]:first[j] + n[j]] = pts
-        lineno_arr = np.asarray(self.lns)[move]
-        q = backfill_unknown(q, lineno_arr, self.path)
-        r = np.asarray(self.rs, dtype=float)[move]
-        signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
-        context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
-        for ax in sorted(rotary):
-            context[ax] = np.asarray([d.get(ax, 0.0) for d in self.rot], dtype=float)[move]
-        for key, v in (setup.context or {}).items():
-            context[key] = np.full(len(q), float(v))
-        return ProgramPath(q + r, r, lineno_arr, np.asarray(self.rapid)[move], context)
-
-
 def sample_program(source, setup: Setup | None = None, *, step_mm: float | None = None,
                    chord_mm: float | None = None, dialect: str = "generic", subroutine_path=(),
                    max_samples: int = MAX_SAMPLES, limits: Limits | None = None) -> ProgramPath:
     """The program's moves as points: the one sampler of correct's checks, verify and the
-    path API (the program is read by :func:`for_each_block`).
+    path API (the program is read by :func:`postproc.gcode.pathread.read_program`, as
+    ``correct`` reads it: runs of plain lines in bulk, every other line by the interpreter).
 
     Each move gives its end point, and before it, on feed moves from a known position:
     straight moves a point every ``step_mm`` (None: their end alone); arcs a point
@@ -307,9 +175,17 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
     when ``setup.start`` gives it), the rotary axes' positions and ``setup.context``.
     More than ``max_samples`` points in all are refused
     (:class:`~postproc.limits.ResourceLimitError`, at the line that passes the bound)."""
+    from postproc.gcode.pathread import Sampler, read_program
+
     setup = setup or Setup()
-    path, _lines = iter_source_lines(source)
-    moves = _Moves(path, step_mm, chord_mm, max_samples)
-    interp = for_each_block(source, setup, moves.visit, moves.reset, dialect=dialect,
-                            subroutine_path=subroutine_path, limits=limits)
-    return moves.path_of(setup, interp.used_rotary)
+    # Many small short-lived objects, none of them cyclic: the cyclic garbage collector
+    # only costs time here (as in the corrector's run)
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        rd = read_program(source, setup, lambda interp, path: Sampler(interp, path, step_mm, chord_mm, max_samples),
+                          dialect=dialect, subroutine_path=subroutine_path, limits=limits)
+        return rd.path_of(setup, rd.interp.used_rotary)
+    finally:
+        if was_enabled:
+            gc.enable()
