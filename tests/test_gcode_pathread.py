@@ -167,9 +167,10 @@ M30
 @pytest.mark.parametrize("kw", SAMPLINGS)
 def test_a_run_then_a_program_that_needs_expanding(runs, kw):
     pp = assert_same(EXPAND, **kw)
-    # the run read before the line that needs expanding is dropped; the expanded program is
-    # read line by line, each numbered as the line it comes from
-    assert runs == [(3, 3, 0)]
+    # the run read before the line that needs expanding is dropped; the expanded program's
+    # plain lines (3 to 5, the subroutine's two, 11 and 12) are read as one run, each
+    # numbered as the line it comes from
+    assert runs == [(3, 3, 0), (3, 7, 1)]
     assert sorted(set(pp.lineno.tolist())) == [2, 3, 4, 5, 7, 8, 11, 12]
     assert pp.points_mm[pp.lineno == 7][-1].tolist() == [7.0, 1.0, 5.0]
 

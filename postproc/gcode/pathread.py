@@ -90,7 +90,7 @@ def read_program(source, setup: Setup, reader: Callable[[Interpreter, str | None
     _path, lines = iter_source_lines(source)
     rd = reader(interpreter(), path)
     where: deque[tuple[int, str | None]] = deque()
-    rd.expanded(where)
+    rd.expanded(where, in_bulk=True)
     flat = expand(list(lines), path=path, dialect=dialect, subroutine_path=[Path(p) for p in subroutine_path],
                   variables=getattr(setup, "variables", None), max_iterations=limits.max_iterations)
     for part in _blocks(flat, BLOCK_LINES):
@@ -324,7 +324,7 @@ class Sampler(LineReader[tuple[int, Move]]):
             lines, which = np.unique(last_g[at], return_inverse=True)
             gword = blk.gword
             rapid[at] = np.array([gword[g][-1:] == "0" for g in lines.tolist()], dtype=bool)[which]  # G0, G00
-        lineno = idx + np.repeat([r.lineno - r.a for r in runs], lengths)
+        lineno = np.concatenate([r.linenos() for r in runs])  # (an expanded program's: their source lines)
         tool = np.repeat(np.array([r.r for r in runs], dtype=float), lengths, axis=0)
         n = np.ones(len(idx), dtype=np.int64)
         arc_rows = [int(s) + j for r, s in zip(runs, starts.tolist(), strict=True) for j in r.arcs]
