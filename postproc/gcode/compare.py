@@ -61,8 +61,8 @@ from postproc.gcode.interp import Interpreter
 from postproc.gcode.lexer import Word
 from postproc.gcode.moves import Move
 from postproc.gcode.options import CorrectOptions
-from postproc.gcode.path import Setup, iter_source_lines, open_source
 from postproc.gcode.reader import LineReader
+from postproc.gcode.source import Setup, iter_source_lines, open_source
 from postproc.limits import Limits
 
 # Pairing stops after this many candidate lines that are farther than the best one,

@@ -19,7 +19,7 @@ from postproc.gcode.state import DWELL, RAPID
 
 if TYPE_CHECKING:
     from postproc.gcode.interp import Cycle, Move
-    from postproc.gcode.path import Setup
+    from postproc.gcode.source import Setup
 
 #: a G0/G1 step of an expanded canned cycle (cycle_lines): motion, from, to (machine mm),
 #: the axes it names, whether it carries the block's F word

@@ -10,147 +10,37 @@ commands and ``machine.forward(q, tool_mm, context)`` is where the tool really g
 Axes not yet positioned when a program starts are where the machine is, when
 ``Setup.start`` gives that position; otherwise they take the value of their next known
 position (the first move of most programs is a retract on one axis).
+
+:class:`Setup`, :class:`ProgramPath` and the reading of a program's source are
+:mod:`postproc.gcode.source`'s (the readers import them there, below this module); they
+are given here too, for the path API's users.
 """
 
 from __future__ import annotations
 
 import gc
-import os
-import re
-from collections.abc import Iterator
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TextIO
 
-import numpy as np
-
-from postproc.errors import MissingSetupError, PostprocError
+# what the path API's users read a program with (postproc.gcode.source), given here too
+from postproc.gcode.source import (
+    MOTION_EPS_MM,
+    PROGRAM_SUFFIXES,
+    ProgramPath,
+    Setup,
+    backfill_unknown,
+    iter_source_lines,
+    motion_signs,
+    open_source,
+)
 from postproc.limits import Limits
+
+__all__ = ["DEFAULT_MAX_STEP_MM", "MAX_SAMPLES", "MOTION_EPS_MM", "PROGRAM_SUFFIXES", "ProgramPath", "Setup",
+           "backfill_unknown", "iter_source_lines", "motion_signs", "open_source", "program_path", "sample_program"]
 
 DEFAULT_MAX_STEP_MM = 0.5
 # Points one program may be sampled into (verify, the path API): verify peaks near 7.5 KB
 # for each (270,000 points: 2 GB), so this keeps it under 2 GB, and a step of 1e-9 mm
 # (93.6 GiB asked for) is refused at its line. At verify's 0.5 mm: 125 m of path.
 MAX_SAMPLES = 250_000
-
-
-@dataclass
-class Setup:
-    """What the controller knows that the program does not say.
-
-    ``offsets``: work offsets by name (``"G54"``, ``"G59.1"``, ``"G54.1P3"``) as
-    (x, y, z) mm in the machine frame (or a dict ``{"X":.., "Y":.., "Z":..}``);
-    ``tool_lengths``: tool number -> length (mm) for G43; ``tool_vector``: the tool
-    vector r (mm) overriding ``(0, 0, -length)``; ``context``: constant context
-    values passed to the engine (e.g. ``{"temp": 21.5}``); ``start``: machine axis
-    positions (mm, the gauge point as in G53, like ``offsets``) at program start, by
-    axis letter (``{"Z": 150.0}``, any subset), used for the axes the program has not
-    positioned yet; the functional point there is ``start + r``; ``home``: the stored
-    positions G28 and G30 go to (``{"G28": {"X":.., "Y":.., "Z":..}}``, machine mm as
-    ``offsets``, any subset of axes; an axis not given is unknown after the move);
-    ``variables``: values of machine-state variables the program reads (number -> value).
-    """
-
-    offsets: dict = field(default_factory=dict)
-    tool_lengths: dict = field(default_factory=dict)
-    tool_vector: tuple | None = None
-    context: dict = field(default_factory=dict)
-    start: dict = field(default_factory=dict)
-    home: dict = field(default_factory=dict)
-    variables: dict = field(default_factory=dict)  # machine-state variables by number (--var, --vars)
-    tool_radii: dict = field(default_factory=dict)  # cutter radius (mm) by tool or D register (None: any)
-
-
-@dataclass
-class ProgramPath:
-    points_mm: np.ndarray  # (N, 3) nominal functional-point positions
-    tool_mm: np.ndarray  # (N, 3) tool vector r at each sample
-    lineno: np.ndarray  # (N,) source line of each sample
-    rapid: np.ndarray  # (N,) bool, True on G0 moves
-    context: dict = field(default_factory=dict)  # dirx, diry, dirz, A/B/C when used
-
-    def __len__(self) -> int:
-        return len(self.points_mm)
-
-
-_LINE_RE = re.compile(r"[^\r\n]*(?:\r\n|\n|\r)|[^\r\n]+$")
-
-
-PROGRAM_SUFFIXES = {".nc", ".ngc", ".tap", ".gcode", ".cnc", ".iso", ".mpf", ".txt", ".out"}
-
-
-def _looks_like_path(text: str) -> bool:
-    if any(c in text for c in "\r\n \t"):
-        return False
-    return os.sep in text or Path(text).suffix.lower() in PROGRAM_SUFFIXES or Path(text).is_file()
-
-
-def open_source(path: str) -> TextIO:
-    """A program file opened for reading its lines as they are (line endings kept, bytes
-    that are not UTF-8 carried through); PostprocError when it cannot be read."""
-    try:
-        return open(path, encoding="utf-8", errors="surrogateescape", newline="")
-    except OSError as exc:
-        raise PostprocError(f"cannot read program: {exc.strerror}", path=path) from None
-
-
-def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
-    """``(path_or_None, iterator of lines with endings)`` for a path or G-code text."""
-    if isinstance(source, os.PathLike) or (isinstance(source, str) and _looks_like_path(source)):
-        path = str(source)
-
-        def gen():
-            from postproc.fileio import read_lines
-
-            with open_source(path) as fh:
-                yield from read_lines(fh, path)  # a line without end is refused, not read whole
-
-        return path, gen()
-    return None, iter(_LINE_RE.findall(str(source)))
-
-
-def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.ndarray:
-    """Replace NaN (not yet positioned) by the next known value of the same axis."""
-    q = q.copy()
-    for k in range(3):
-        col = q[:, k]
-        bad = np.isnan(col)
-        if not bad.any():
-            continue
-        good = np.flatnonzero(~bad)
-        if len(good) == 0:
-            raise MissingSetupError(
-                f"axis {'XYZ'[k]} is never positioned by the program, so the correction cannot be evaluated",
-                path=path, lineno=int(lineno[0]) if len(lineno) else None,
-                hint=f"give the machine position of {'XYZ'[k]} at program start with --start {'XYZ'[k]}.. "
-                     f"(mm, machine coordinates), or add an absolute move on {'XYZ'[k]} near the start")
-        idx = np.searchsorted(good, np.flatnonzero(bad))
-        if np.any(idx >= len(good)):
-            raise MissingSetupError(f"axis {'XYZ'[k]} is not positioned before the end of the program",
-                                    path=path, lineno=int(lineno[np.flatnonzero(bad)[-1]]))
-        col[bad] = col[good[idx]]
-    return q
-
-
-def motion_signs(q: np.ndarray, initial=(0.0, 0.0, 0.0), start=None) -> np.ndarray:
-    """Sign of each axis's motion into each point; the previous sign where it does not move.
-
-    ``start``: the position before the first point (NaN or None: no motion into it)."""
-    first = q[:1] if start is None else np.where(np.isnan(start), q[:1], np.asarray(start, dtype=float))
-    d = np.diff(np.vstack([first, q]), axis=0)
-    sign = np.sign(np.where(np.abs(d) > MOTION_EPS_MM, d, 0.0))
-    out = np.empty_like(sign)
-    for k in range(3):
-        col = sign[:, k]
-        nz = col != 0
-        idx = np.where(nz, np.arange(len(col)), -1)
-        np.maximum.accumulate(idx, out=idx)
-        out[:, k] = np.where(idx >= 0, col[np.maximum(idx, 0)], initial[k])
-    return out
-
-
-# Motions smaller than this do not change an axis's approach direction (float noise).
-MOTION_EPS_MM = 1e-9
 
 
 def program_path(source, setup: Setup | None = None, *, max_step_mm: float = DEFAULT_MAX_STEP_MM,

@@ -31,7 +31,7 @@ from postproc.gcode.state import RAPID
 from postproc.limits import Limits, ResourceLimitError
 
 if TYPE_CHECKING:
-    from postproc.gcode.path import ProgramPath, Setup
+    from postproc.gcode.source import ProgramPath, Setup
 
 # Lines read into one block (the scanner's unit, and the sampler's between two takes).
 BLOCK_LINES = 5_000
@@ -66,7 +66,7 @@ def read_program(source, setup: Setup, reader: Callable[[Interpreter, str | None
     program instead, each line numbered (and its file named) as the line it comes from.
     Returns the reader that read it. ``limits``: the bounds on loops and helix turns
     (:class:`postproc.limits.Limits`, default its own)."""
-    from postproc.gcode.path import iter_source_lines
+    from postproc.gcode.source import iter_source_lines
 
     limits = limits or Limits()
 
@@ -365,7 +365,7 @@ class Sampler(LineReader[tuple[int, Move]]):
 
     def path_of(self, setup: Setup, rotary: set[str]) -> ProgramPath:
         """The samples of the moves read, with their context."""
-        from postproc.gcode.path import ProgramPath, backfill_unknown, motion_signs
+        from postproc.gcode.source import ProgramPath, backfill_unknown, motion_signs
 
         if not self.moves:
             empty = np.zeros((0, 3))

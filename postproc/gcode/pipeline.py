@@ -34,9 +34,9 @@ from postproc.gcode import bulk, cutter, emit
 from postproc.gcode.engine_use import accept_residual, prepare_engine
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.options import CorrectOptions, CorrectReport
-from postproc.gcode.path import Setup, iter_source_lines
 from postproc.gcode.planner import Planner
 from postproc.gcode.reader import ChunkReader
+from postproc.gcode.source import Setup, iter_source_lines
 from postproc.gcode.table import Table
 from postproc.gcode.vplan import (
     ArcHint,

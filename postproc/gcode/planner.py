@@ -34,7 +34,6 @@ from postproc.gcode.geometry import (
 )
 from postproc.gcode.moves import Arc, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
-from postproc.gcode.path import backfill_unknown
 from postproc.gcode.sampling import (
     ARC_CHECK_MIN_SAMPLES,
     ARC_CHECK_STEP_RAD,
@@ -44,6 +43,7 @@ from postproc.gcode.sampling import (
     _Sampled,
 )
 from postproc.gcode.segment import Curve, quadrant_breaks
+from postproc.gcode.source import backfill_unknown
 from postproc.gcode.state import LINE, PLANES
 from postproc.gcode.table import Table
 from postproc.gcode.vplan import (
