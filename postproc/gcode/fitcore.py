@@ -61,17 +61,7 @@ def hypot(x: float, y: float) -> float:
         return _hypot_scaled(x, y)
     if ay <= ax * _HYPOT_EPS:
         return ax + ay
-    # _hypot_kernel(ax, ay), written out
-    h = math.sqrt(ax * ax + ay * ay)
-    if h <= 2.0 * ay:
-        delta = h - ay
-        t1 = ax * (2.0 * delta - ax)
-        t2 = (delta - 2.0 * (ax - ay)) * delta
-    else:
-        delta = h - ax
-        t1 = 2.0 * delta * (ax - 2.0 * ay)
-        t2 = (4.0 * delta - ay) * ay + delta * delta
-    return h - (t1 + t2) / (2.0 * h)
+    return _hypot_kernel(ax, ay)
 
 
 def _hypot_kernel(ax: float, ay: float) -> float:
