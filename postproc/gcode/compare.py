@@ -618,9 +618,7 @@ class _LineRows(LineReader[_Record]):
             q[inert] = np.nan
             end[dst] = q
             keys[dst] = self._run_keys(blk, src.tolist())
-            blk.runs = []  # (each run refers to its block: let go of both, the collector is off)
-        entries.clear()
-        self.interp.comp_moves = []  # (those of cutter compensation: the corrector's to bound)
+        self.let_go()
         return _Rows(lines, lineno, move, end, keys)
 
     def _run_keys(self, blk: bulk.Block, src: list[int]) -> np.ndarray:

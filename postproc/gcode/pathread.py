@@ -3,7 +3,7 @@
 :func:`read_program` reads a program (path or text) with a
 :class:`postproc.gcode.reader.LineReader` (the interpreter line by line, runs of plain
 lines in bulk), as ``correct`` and ``diff`` read it; a program that needs expanding
-(parameters, O-words, subprograms, macros) is read again expanded, its lines one by one.
+(parameters, O-words, subprograms, macros) is read again expanded, its runs in bulk too.
 
 :class:`Sampler` is the reader of :func:`postproc.gcode.path.sample_program`: each move
 of a line the interpreter reads is sampled as itself, each run of plain lines from the
@@ -196,17 +196,12 @@ class Sampler(LineReader[tuple[int, Move]]):
 
     def _take(self) -> None:
         """Count and keep the moves queued, in order."""
-        entries = self.entries
-        if not entries:
+        if not self.entries:
             return
-        blocks = {id(e.block): e.block for e in entries if type(e) is bulk.Run}
         try:
-            self._take_entries(entries)
+            self._take_entries(self.entries)
         finally:
-            entries.clear()
-            for blk in blocks.values():
-                blk.runs = []  # (each run refers to its block: let go of both)
-            self.interp.comp_moves = []  # (those of cutter compensation: the corrector's to bound)
+            self.let_go()
 
     def _take_entries(self, entries: list) -> None:
         step_mm = self.step_mm

@@ -115,6 +115,17 @@ class LineReader(Generic[E]):
         """Queue a run of plain lines read in bulk."""
         self.entries.append(run)
 
+    def let_go(self) -> None:
+        """Clear the entries taken (by a reader that keeps what it needs of them): each
+        run's block lets go of its runs (a run refers to its block, a cycle the disabled
+        collector would not free), and the interpreter of the cutter compensation moves it
+        kept for the corrector's bound."""
+        for e in self.entries:
+            if type(e) is bulk.Run:
+                e.block.runs = []
+        self.entries.clear()
+        self.interp.comp_moves = []
+
     def block(self, lines: list[str]) -> None:
         """Read a block of lines: its runs of plain lines in bulk where the modal state
         allows, every other line through the interpreter."""
