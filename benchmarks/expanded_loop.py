@@ -3,7 +3,7 @@
 The program is a LinuxCNC ``o100 while`` loop of ``--passes`` passes, each writing four
 moves (G1, G1, G2, G0) whose words are parameter arithmetic: ``4 x passes`` lines once
 expanded, plain after substitution. Each run is a child process of
-:mod:`paired` (``run_once``: the tree's own code and calibration, ``correct_file``
+:mod:`paired` (``compare_trees``, ``run_once``: the tree's own code and calibration, ``correct_file``
 alone timed, ``-j 1``, G54 at Z100); the outputs of the two trees are compared byte
 for byte.
 
@@ -14,15 +14,13 @@ Usage: python benchmarks/expanded_loop.py BASE_TREE [NEW_TREE] [--passes N] [--r
 from __future__ import annotations
 
 import argparse
-import filecmp
-import statistics
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from paired import ROOT, run_once  # noqa: E402
+from paired import ROOT, compare_trees  # noqa: E402
 
 
 def loop_program(passes: int) -> str:
@@ -66,17 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         program.write_text(loop_program(args.passes))
         print(f"base {base}\nnew  {new}\nloop of {args.passes:,} passes ({lines:,} lines expanded), "
               f"{args.repeats} pairs, -j 1")
-        for name in args.cal.split(","):
-            cal = f"s500_{name}.json"
-            times: dict[str, list[float]] = {"base": [], "new": []}
-            outs = {"base": Path(tmp) / "base.nc", "new": Path(tmp) / "new.nc"}
-            for _ in range(args.repeats):
-                times["base"].append(run_once(base, program, cal, outs["base"]))
-                times["new"].append(run_once(new, program, cal, outs["new"]))
-            same = filecmp.cmp(outs["base"], outs["new"], shallow=False)
-            mb, mn = statistics.median(times["base"]), statistics.median(times["new"])
-            print(f"{name:11s} base {mb:6.2f} s ({lines / mb:8,.0f} lines/s)  new {mn:6.2f} s "
-                  f"({lines / mn:8,.0f} lines/s)  base/new {mb / mn:.3f}  outputs {'identical' if same else 'DIFFER'}")
+        compare_trees(base, new, program, lines, args.cal.split(","), args.repeats)
     return 0
 
 

@@ -73,22 +73,30 @@ def main(argv: list[str] | None = None) -> int:
         subprocess.run([sys.executable, str(GENCAM), str(args.lines), str(program), str(args.seed)], check=True,
                        capture_output=True)
         print(f"base {base}\nnew  {new}\ngencam {args.lines:,} lines, seed {args.seed}, {args.repeats} pairs, -j 1")
-        for name in args.cal.split(","):
-            cal = f"s500_{name}.json"
-            times: dict[str, list[float]] = {"base": [], "new": []}
-            outs = {"base": Path(tmp) / "base.nc", "new": Path(tmp) / "new.nc"}
-            for _ in range(args.repeats):
-                times["base"].append(run_once(base, program, cal, outs["base"]))
-                times["new"].append(run_once(new, program, cal, outs["new"]))
-            same = filecmp.cmp(outs["base"], outs["new"], shallow=False)
-            mb, mn = statistics.median(times["base"]), statistics.median(times["new"])
-            ratio = statistics.median(b / n for b, n in zip(times["base"], times["new"], strict=True))
-            print(f"{name:11s} base {mb:6.2f} s ({args.lines / mb:8,.0f} lines/s)  new {mn:6.2f} s "
-                  f"({args.lines / mn:8,.0f} lines/s)  base/new {mb / mn:.3f} (median of pairs {ratio:.3f})  "
-                  f"outputs {'identical' if same else 'DIFFER'}")
-            print(f"{'':11s} base runs {' '.join(f'{t:.2f}' for t in times['base'])}; "
-                  f"new runs {' '.join(f'{t:.2f}' for t in times['new'])}")
+        compare_trees(base, new, program, args.lines, args.cal.split(","), args.repeats)
     return 0
+
+
+def compare_trees(base: Path, new: Path, program: Path, lines: int, cals: list[str], repeats: int) -> None:
+    """Run ``correct`` on ``program`` (``lines`` lines) with each calibration
+    ``s500_<name>.json``, ``repeats`` pairs of the two trees, and print each tree's median
+    CPU time and rate, their ratio, the median of the pairs' ratios, the runs, and whether
+    the outputs are identical (written beside ``program``)."""
+    for name in cals:
+        cal = f"s500_{name}.json"
+        times: dict[str, list[float]] = {"base": [], "new": []}
+        outs = {"base": program.parent / "base.nc", "new": program.parent / "new.nc"}
+        for _ in range(repeats):
+            times["base"].append(run_once(base, program, cal, outs["base"]))
+            times["new"].append(run_once(new, program, cal, outs["new"]))
+        same = filecmp.cmp(outs["base"], outs["new"], shallow=False)
+        mb, mn = statistics.median(times["base"]), statistics.median(times["new"])
+        ratio = statistics.median(b / n for b, n in zip(times["base"], times["new"], strict=True))
+        print(f"{name:11s} base {mb:6.2f} s ({lines / mb:8,.0f} lines/s)  new {mn:6.2f} s "
+              f"({lines / mn:8,.0f} lines/s)  base/new {mb / mn:.3f} (median of pairs {ratio:.3f})  "
+              f"outputs {'identical' if same else 'DIFFER'}")
+        print(f"{'':11s} base runs {' '.join(f'{t:.2f}' for t in times['base'])}; "
+              f"new runs {' '.join(f'{t:.2f}' for t in times['new'])}")
 
 
 if __name__ == "__main__":
