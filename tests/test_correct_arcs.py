@@ -322,7 +322,7 @@ def test_a_bulk_planned_arc_is_held_to_the_controller_limits():
     interp.feed_line(1, "G21 G90 G17 G0 X10 Y10 Z0\n")
     mv = interp.feed_line(2, "G3 X10.0003 Y10 I0.00015 J0.0005\n")
     S, E = [10.0, 10.0, 0.0], [10.0003, 10.0, 0.0]
-    far = ArcHint(10.00015, 10.0 + 6e6, 6e6, 0.0, 5e-11, (10.0, 10.0, 0.0, 10.0003, 10.0, 0.0), None)
+    far = ArcHint(10.00015, 10.0 + 6e6, 6e6, 0.0, 5e-11, (10.0, 10.0, 0.0, 10.0003, 10.0, 0.0), -1)
     assert spec_without_limits(far, mv, S, E, 4, 0.00095) is not None  # the bound alone passes it
     assert far.spec(mv, S, E, 4, 0.00095) is None
     # limits by hand, on exact circles about the origin (centre words 0, bound 0):
@@ -332,7 +332,7 @@ def test_a_bulk_planned_arc_is_held_to_the_controller_limits():
 
     def words(S, E, sweep, clockwise):
         rho = math.hypot(S[0], S[1])
-        hint = ArcHint(0.0, 0.0, rho, 0.0, -sweep if clockwise else sweep, (*S, *E), None)
+        hint = ArcHint(0.0, 0.0, rho, 0.0, -sweep if clockwise else sweep, (*S, *E), -1)
         return hint.words(S, E, axes, clockwise, 4, 1.0, base, budget)
 
     for r, ok in ((0.0013, True), (0.0012, False)):

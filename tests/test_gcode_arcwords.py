@@ -75,7 +75,7 @@ def _case(rng, kind):
     ends = tuple(float(v + rng.normal(0, step / 3)) for v in (*S, *E))
     nsweep = -sw if cw else sw
     mismatch = float(rng.choice([0.0, 1e-5, step]))
-    hint = vplan.ArcHint(c1, c2, rho, worst, nsweep, ends, None, mismatch)
+    hint = vplan.ArcHint(c1, c2, rho, worst, nsweep, ends, -1, mismatch)
     if kind == "nan":
         S[int(rng.integers(3))] = math.nan
     shift = (float(rng.choice([0.0, -0.0, 12.5])), float(rng.choice([0.0, 7.25])), 100.0)
@@ -196,10 +196,10 @@ def test_words_many_is_words_bit_for_bit_in_every_plane_and_leaves_the_same_answ
                 hint.c1 += float(rng.normal(0, 10.0 ** -d * unit))
             # Python floats, as the planner and the writer ask (round of a numpy float is numpy's)
             hint = vplan.ArcHint(float(hint.c1), float(hint.c2), float(hint.rho), float(hint.worst),
-                                 float(hint.nsweep), tuple(float(v) for v in hint.ends), None, float(hint.mismatch))
+                                 float(hint.nsweep), tuple(float(v) for v in hint.ends), -1, float(hint.mismatch))
             cases.append((hint, [float(v) for v in S], [float(v) for v in E], axes, cw, d, unit,
                           (float(base[0]), float(base[1])), budget))
-    refs = [vplan.ArcHint(h.c1, h.c2, h.rho, h.worst, h.nsweep, h.ends, None, h.mismatch).words(*rest)
+    refs = [vplan.ArcHint(h.c1, h.c2, h.rho, h.worst, h.nsweep, h.ends, -1, h.mismatch).words(*rest)
             for h, *rest in cases]
     got: dict[int, object] = {}
     for budget in {c[8] for c in cases}:  # words_many takes one budget for all

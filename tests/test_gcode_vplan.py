@@ -210,25 +210,23 @@ def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch
         out.append(f"G2 X{x:.3f} Y{y:.3f} I0 J{-r:.3f}\n")
     out.append("M2\n")
     text = "".join(out)
-    lazy = []
-    made = planner.Planner._lazy_plan
+    asked = []  # the general plans the writer asked for (an arc's hint that did not hold)
+    provide = planner.Planner.provide
 
-    def counted(self, *args):
-        plan = made(self, *args)
+    def counted(self, need, *args):
+        if need.curve is None:
+            asked.append(need.row)
+        return provide(self, need, *args)
 
-        def asked():
-            lazy.append(1)
-            return plan()
-
-        return asked
-
-    monkeypatch.setattr(planner.Planner, "_lazy_plan", counted)
+    monkeypatch.setattr(planner.Planner, "provide", counted)
     new, rep = correct_text(text, static, Setup())
     assert rep.arcs_split > 20  # the hints failed: the arcs were fitted from their plans
-    assert lazy == []  # every one of those plans made with the chunk's
+    assert asked == []  # every one of those plans made with the chunk's
     monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
-    old, _ = correct_text(text, static, Setup())
-    assert len(lazy) > 20  # without the guess: one by one
+    old, rep_old = correct_text(text, static, Setup())
+    assert len(asked) > 20  # without the guess: one by one, as the writer finds it needs them
+    assert len(set(asked)) == len(asked)  # each asked once: the writer goes on from where it was
+    assert vars(rep_old) == vars(rep)
     assert new == old
 
 

@@ -1,7 +1,9 @@
 """Emitting corrected lines: splicing numbers, inserted lines, kept and linearised arcs.
 
 A mixin of :class:`postproc.gcode.writer.ChunkWriter`: it uses the writer's emitted
-position ``qe``, options, report and the planner's subdivision.
+position ``qe``, options and report, and the plans and subdivisions the planner made
+for the chunk. It makes no engine call: where it needs a plan or a subdivision the
+planner has not made yet, it raises :class:`PlanNeeded` (see the writer).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from postproc.constants import MM_PER_INCH
-from postproc.errors import PostprocError
+from postproc.errors import PostprocError, SolverError
 from postproc.gcode import emit
 from postproc.gcode.arcfit import Edit, MoveFit, _free_move, _Piece
 from postproc.gcode.cutter import take_up as cutter_take_up
@@ -33,6 +35,9 @@ from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 from postproc.gcode.vplan import ArcHint, ArcMove, Plan
 
 Write = Callable[[str], object]  # writes one output line
+#: the engine's subdivisions the planner made for a chunk's arc fits: (samples' parameters,
+#: corrected points; or the engine's refusal of that span) by :func:`subdivision_key`
+Subdivided = dict[tuple[int, float, float], "tuple[np.ndarray, np.ndarray] | SolverError"]
 
 
 def _arc_of(mv: ArcMove) -> Arc:
@@ -80,12 +85,42 @@ def _word_span(line: str, w: Word) -> tuple[int, int]:
     return w.letter_pos, w.end
 
 
-def _general_plan(hint: ArcHint) -> Plan:
-    """The general plan of the move an arc hint does not settle."""
-    lazy = hint.lazy
-    if lazy is None:  # the corrector gives every hint it hands the writer its general plan
-        raise TypeError("an arc hint without its general plan")
-    return lazy()
+def _radius_word(dialect: str) -> str:
+    """How ``dialect`` writes an arc's radius: ``R`` (``CR=`` for Sinumerik)."""
+    from postproc.gcode.dialect import get
+
+    return get(dialect).radius_word
+
+
+def round_err(options: CorrectOptions, unit: float) -> float:
+    """The largest distance (mm) a point moves when its words are rounded to the output's
+    decimals in ``unit`` (mm per program unit): half a step on each of three axes."""
+    return 0.5 * 10.0 ** (-_unit_decimals(options, unit)) * unit * math.sqrt(3.0)
+
+
+class PlanNeeded(Exception):
+    """What the writer needs of the planner before it can write on: the general plan of
+    table row ``row`` (an arc whose hint does not hold for its ends as written), or the
+    engine's subdivision of ``curve`` over ``span`` (an arc fit that follows the curve
+    more finely than its samples). The planner makes it, and the writer is asked again."""
+
+    def __init__(self, row: int = -1, curve: Curve | None = None, span: np.ndarray | None = None,
+                 unit: float = 1.0) -> None:
+        super().__init__(row if curve is None else "subdivision")
+        self.row, self.curve, self.span, self.unit = row, curve, span, unit
+
+    @property
+    def key(self) -> tuple[int, float, float]:
+        """The subdivision's key: its curve and span."""
+        return subdivision_key(self.curve, self.span)
+
+
+def subdivision_key(curve: object, span: np.ndarray | None) -> tuple[int, float, float]:
+    """Where a subdivision is kept for the writer: its curve (alive while its chunk is
+    written) and its span."""
+    if span is None:
+        raise TypeError("a subdivision without its span")
+    return id(curve), float(span[0]), float(span[-1])
 
 
 class EmitterMixin:
@@ -98,11 +133,28 @@ class EmitterMixin:
     qe: list[float]  # emitted gauge position (what the controller will hold)
     emitted_motion: int | None
     _decimals: dict[float, int]
+    _plans: dict[int, Plan]  # the chunk's plans, by row (the general plans of hints too)
+    _subdivided: Subdivided
 
     def _subdivide(self, curves: list[Curve], s_init: list[np.ndarray],
                    unit: float) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Adaptive subdivision of the curves with the engine (the corrector's)."""
-        raise NotImplementedError
+        """The engine's adaptive subdivision of one curve over one span, as the planner made
+        it (:class:`PlanNeeded` when it has not yet)."""
+        (curve,), (span,) = curves, s_init
+        got = self._subdivided.get(subdivision_key(curve, span))
+        if got is None:
+            raise PlanNeeded(curve=curve, span=span, unit=unit)
+        if isinstance(got, SolverError):
+            raise got  # the engine refused this span (see the planner's subdivisions)
+        return [got]
+
+    def _general_plan(self, hint: ArcHint, view: FrameView | None = None) -> Plan | None:
+        """The general plan of the arc a hint does not settle (in ``view``'s coordinates
+        when given), as the planner made it (:class:`PlanNeeded` when it has not yet)."""
+        plan = self._plans.get(hint.row)
+        if plan is None:
+            raise PlanNeeded(row=hint.row)
+        return plan if view is None else view.plan(plan)
 
     def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
                     present_only: bool = False) -> tuple[list[Edit], list[str]]:
@@ -371,7 +423,7 @@ class EmitterMixin:
             vmv, vtarget = view.move(mv), view.point(target)
             if vhint is None:  # the view does not keep lengths along the normal: the general plan
                 self.report.moves += 1
-                self._emit_planned_or_not(line, vmv, vtarget, view.plan(_general_plan(hint)), d, write, view)
+                self._emit_planned_or_not(line, vmv, vtarget, self._general_plan(hint, view), d, write, view)
             else:
                 self._write_hinted_arc(line, vmv, vtarget, vhint, d, write, view)
 
@@ -389,7 +441,7 @@ class EmitterMixin:
             spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, budget)
         self.report.moves += 1
         if spec is None:
-            self._emit_planned_or_not(line, mv, target, _general_plan(hint), d, write, view)
+            self._emit_planned_or_not(line, mv, target, self._general_plan(hint, view), d, write, view)
             return
         sep, lower = emit.style_of(line)
         self._motion_edit(mv, edits, sep, lower)
@@ -416,18 +468,12 @@ class EmitterMixin:
     def _arc_words(self, spec: ArcSpec, absolute_once: bool = False) -> list[str]:
         """The words of the arc ``spec``; ``absolute_once``: its centre words as Sinumerik's
         ``I=AC(v)`` (:func:`_centre_absolute_once`)."""
-        radius = self._radius_word()
+        radius = _radius_word(self.opt.dialect)
         words = [radius + text if letter == "R" else f"{letter}=AC({text})" if absolute_once else letter + text
                  for letter, text in spec["vals"]]
         if spec["turns"] > 1:
             words.append(f"P{spec['turns']}")
         return words
-
-    def _radius_word(self) -> str:
-        """How the dialect writes an arc's radius: ``R`` (``CR=`` for Sinumerik)."""
-        from postproc.gcode.dialect import get
-
-        return get(self.opt.dialect).radius_word
 
     def _arc_edits(self, line: str, mv: Move, spec: ArcSpec) -> tuple[list[Edit], list[str]]:
         """Edits of the move's own arc words for the arc ``spec`` and the words to add."""

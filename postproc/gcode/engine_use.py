@@ -4,7 +4,6 @@ engine calls of a run with their safety checks (:class:`EngineCalls`)."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -18,7 +17,7 @@ from postproc.errors import (
     SafetyError,
     SolverError,
 )
-from postproc.gcode.emitter import _unit_decimals
+from postproc.gcode.emitter import _unit_decimals, round_err
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.segment import Curve, subdivide
 from postproc.gcode.vplan import FloatArray, IntArray
@@ -153,8 +152,7 @@ class EngineCalls:
         self.units_checked.add(unit)
 
     def round_err(self, unit: float) -> float:
-        d = _unit_decimals(self.opt, unit)
-        return 0.5 * 10.0 ** (-d) * unit * math.sqrt(3.0)
+        return round_err(self.opt, unit)
 
     def subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
                    ) -> list[tuple[FloatArray, FloatArray]]:

@@ -23,7 +23,7 @@ emitted position goes into it before the arc is written and back after.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import cast
 
@@ -125,10 +125,5 @@ class FrameView:
 
         c1, c2, _cn = view(hint.c1, hint.c2, 0.0)
         ends: Ends = view(*hint.ends[:3]) + view(*hint.ends[3:])
-        lazy = hint.lazy
-        vlazy: Callable[[], Plan] | None = None
-        if lazy is not None:
-            def vlazy() -> Plan:
-                return cast("Plan", self.plan(lazy()))
-        return ArcHint(c1, c2, hint.rho, hint.worst, -hint.nsweep if self.reverses else hint.nsweep, ends, vlazy,
+        return ArcHint(c1, c2, hint.rho, hint.worst, -hint.nsweep if self.reverses else hint.nsweep, ends, hint.row,
                        hint.mismatch)

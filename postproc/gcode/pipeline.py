@@ -31,6 +31,7 @@ from postproc.errors import (
     PostprocError,
 )
 from postproc.gcode import bulk, cutter, emit
+from postproc.gcode.emitter import PlanNeeded, Subdivided
 from postproc.gcode.engine_use import accept_residual, prepare_engine
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
 from postproc.gcode.options import CorrectOptions, CorrectReport
@@ -97,7 +98,7 @@ class Corrector:
         self.planner = Planner(engine, options, self.report, self.interp.used_rotary, setup.context or {},
                                self.accept_residual_mm, start, path)
         self.cutter = cutter.Bound()  # compensated moves corrected so far and their bound
-        self.writer = ChunkWriter(options, self.report, self.planner, start, self.cutter, path)
+        self.writer = ChunkWriter(options, self.report, start, self.cutter, path)
         self.reader = ChunkReader(self.interp, self.planner, options, self.report, path)
         self.cutter_known: cutter.Bound | None = None  # the whole program's, for the header (a second run)
 
@@ -345,7 +346,13 @@ class Corrector:
         for run in tab.runs:
             # arcs the bulk planner did not settle: written one by one by the general emitter
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
-        self.writer.write(entries, tab, plans, hints, write_out)
+        subdivided: Subdivided = {}
+        while True:  # every engine call is the planner's, before the chunk is written
+            try:
+                self.writer.write(entries, tab, plans, hints, subdivided, write_out)
+                return
+            except PlanNeeded as need:
+                self.planner.provide(need, tab, plans, subdivided)
 
 
 

@@ -16,17 +16,24 @@ nominal point ``p*``. The safety bound ``max_correction_mm`` applies to the tota
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from postproc.errors import SolverError
 from postproc.gcode import bulk, vplan
 from postproc.gcode.directions import (
     direction_axes,
 )
 from postproc.gcode.dirplan import TAKEUP_MIN_MM, plan_directions
-from postproc.gcode.emitter import FIT_BUDGET, _unit_decimals
+from postproc.gcode.emitter import (
+    FIT_BUDGET,
+    PlanNeeded,
+    Subdivided,
+    _unit_decimals,
+    subdivision_key,
+)
 from postproc.gcode.engine_use import EngineCalls
 from postproc.gcode.geometry import (
     arc_params,
@@ -188,7 +195,7 @@ class Planner(EngineCalls):
                     step_mm=SAMPLE_STEP_MM, step_rad=ARC_CHECK_STEP_RAD, min_arc_samples=ARC_CHECK_MIN_SAMPLES,
                     budget=self.opt.tolerance_mm * FIT_BUDGET,
                     rounding=max(self.round_err(m.unit) for _i, m in tab.moves)), curvature=curvature)
-            self._hint_plans(hints, tab)
+            self._hint_plans(hints, tab, plans)
         if planned:
             self._plan_moves(planned, tab, plans)
         return hints
@@ -236,27 +243,59 @@ class Planner(EngineCalls):
         tab.q1, tab.q0, tab.dirs = Q1, Q0, D
         tab.fixed_rows, tab.fixed_q, tab.arc_prm, tab.breaks = fixed_rows, fixed_q, arc_prm, breaks
 
-    def _hint_plans(self, hints: dict[int, ArcHint], tab: Table) -> None:
-        """Give every hint its general plan, for when the hint does not do: made now, in
-        one engine call, for the arcs whose fit comes near the budget (their hints often
-        fail when written: rounded centre, written ends) and those whose centre words
-        already fail for their corrected ends rounded as words are
-        (:meth:`_hints_failing_rounded`), else when asked for."""
+    def _hint_plans(self, hints: dict[int, ArcHint], tab: Table, plans: dict[int, Plan]) -> None:
+        """Make now, in one engine call, the general plans (into ``plans``) of the arcs whose
+        hint may well not do when written: those whose fit comes near the budget (rounded
+        centre, written ends) and those whose centre words already fail for their
+        corrected ends rounded as words are (:meth:`_hints_failing_rounded`). The writer
+        asks for any other it needs (:meth:`provide`)."""
         moves = dict(tab.moves)
         budget = self.opt.tolerance_mm * FIT_BUDGET
         near = HINT_PREPLAN_SHARE * budget
-        made: dict[int, Plan] = {}
         # a hint is only ever made for an arc (a Move or a RunMove: an ArcMove)
         fails = self._hints_failing_rounded([(i, cast("ArcMove", moves[i]), hint) for i, hint in hints.items()
                                              if not hint.worst > near], budget)
         marginal = [(i, moves[i]) for i, hint in hints.items() if hint.worst > near or i in fails]
         if marginal:
-            self._plan_moves(marginal, tab, made)
+            self._plan_moves(marginal, tab, plans)
         for i, hint in hints.items():
-            plan = made.get(i)
-            hint.edge = plan is not None
-            hint.lazy = (self._lazy_plan(i, moves[i], tab)
-                         if plan is None else _given(plan))
+            hint.edge = i in plans
+
+    def provide(self, need: PlanNeeded, tab: Table, plans: dict[int, Plan],
+                subdivided: Subdivided) -> None:
+        """Make what the writer found it needs (:class:`postproc.gcode.emitter.PlanNeeded`):
+        the general plan of an arc whose hint did not hold for its ends as written (into
+        ``plans``), or the engine's subdivision of a fitted curve (into ``subdivided``)."""
+        if need.curve is None:
+            mv = next(m for i, m in tab.moves if i == need.row)
+            self._plan_moves([(need.row, mv)], tab, plans)
+        else:
+            self._subdivisions(need, plans, subdivided)
+
+    def _subdivisions(self, need: PlanNeeded, plans: dict[int, Plan], subdivided: Subdivided) -> None:
+        """The engine's subdivision of every span between two samples of the plan of the
+        curve the writer asked about (a fit that needs one often needs more), in one call.
+        Where the engine refuses one (a jump, or a solver's scatter beyond the tolerance),
+        each span is subdivided alone and a span's refusal is kept for the writer: it is
+        raised only where a fit needs that span."""
+        curve = cast("Curve", need.curve)
+        spans = [np.array(ab) for plan in plans.values() if plan.get("curve") is curve
+                 for st in plan["seq"] if st[0] == "piece"
+                 for ab in zip(st[1][:-1].tolist(), st[1][1:].tolist(), strict=True)]
+        if need.key not in {subdivision_key(curve, sp) for sp in spans}:
+            spans.append(cast("FloatArray", need.span))
+        got: list[tuple[FloatArray, FloatArray] | SolverError]
+        try:
+            got = list(self.subdivide([curve] * len(spans), spans, need.unit))
+        except SolverError:
+            got = []
+            for sp in spans:
+                try:
+                    got.append(self.subdivide([curve], [sp], need.unit)[0])
+                except SolverError as exc:
+                    got.append(exc)
+        for sp, g in zip(spans, got, strict=True):
+            subdivided[subdivision_key(curve, sp)] = g
 
     def _hints_failing_rounded(self, arcs: list[tuple[int, ArcMove, ArcHint]], budget: float) -> set[int]:
         """The rows of the arcs whose hint gives no centre words for their corrected ends
@@ -289,17 +328,6 @@ class Planner(EngineCalls):
         got = vplan.words_many([h for _i, _mv, h in arcs], vplan.WrittenArcs(S, E, axes, clockwise, d, unit, base),
                                budget)
         return {i for (i, _mv, _h), w in zip(arcs, got, strict=True) if w is None}
-
-    def _lazy_plan(self, i: int, mv: PlanMove, tab: Table) -> Callable[[], Plan]:
-        """The general plan of move ``i``, made when asked for."""
-
-        def plan() -> Plan:
-            out: dict[int, Plan] = {}
-            self._plan_moves([(i, mv)], tab, out)
-            return out[i]
-
-        return plan
-
 
     def _plan_moves(self, planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table,
                     plans: dict[int, Plan]) -> None:
@@ -372,9 +400,3 @@ def _takeups(smp: _Sampled, corr: FloatArray, S: FloatArray, d_in: FloatArray) -
     differ = (smp.dirs != prev_dirs).any(axis=1)
     jump = np.abs(corr[begin] - prev_end).max(axis=1) > TAKEUP_MIN_MM
     return cast("list[bool]", (differ & jump).tolist())
-
-
-def _given(plan: Plan) -> Callable[[], Plan]:
-    """A plan already made, as a hint's lazy plan."""
-    return lambda: plan
-

@@ -97,7 +97,7 @@ _CONFIG = frozenset({"engine", "setup", "opt", "path", "cal_name", "cal_sha", "_
                      "accept_residual_mm", "expanded", "planner", "writer", "reader"})
 _PLANNER_CONFIG = frozenset({"engine", "opt", "report", "path", "rotary", "setup_context", "accept_residual_mm",
                              "linear_exact", "bulk_plan"})
-_WRITER_CONFIG = frozenset({"opt", "report", "planner", "path", "_long_line", "_decimals", "cutter"})
+_WRITER_CONFIG = frozenset({"opt", "report", "path", "_long_line", "_decimals", "cutter"})
 _READER_CONFIG = frozenset({"interp", "planner", "opt", "report", "path", "source", "use_bulk", "dec_mm", "dec_in"})
 _INTERP_CONFIG = frozenset({"setup", "path", "dialect", "lenient_setup", "d", "_g_alias", "_dialect_g", "_iso_blocks"})
 

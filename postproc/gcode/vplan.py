@@ -177,14 +177,14 @@ class Sampling:
 class ArcHint:
     """What the bulk planner found for one arc (see the module docstring)."""
 
-    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "lazy", "edge", "_last")
+    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "row", "edge", "_last")
 
     def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
-                 lazy: Callable[[], Plan] | None, mismatch: float = 0.0) -> None:
+                 row: int, mismatch: float = 0.0) -> None:
         self.c1, self.c2, self.rho, self.worst, self.nsweep = c1, c2, rho, worst, nsweep
         self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
         self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
-        self.lazy = lazy  # () -> the general plan of the move, when the hint does not do
+        self.row = row  # the arc's row of the table (its general plan's, when the hint does not do)
         # the planner expects the hint may fail where written (its general plan is made with
         # the chunk): the run writer ends a stretch at this arc
         self.edge = False
@@ -669,8 +669,7 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], end
     ``ends``: nominal and corrected starts and ends (per row); ``corrected(rows, nominal
     points)``: the engine's corrected points (N, 3) for nominal points on those rows'
     moves; ``curvature``: as :func:`_line_samples`. Returns ``(lines, hints, rest)``: the
-    rows of straight moves that stay one line, ``{row: ArcHint}`` (its ``lazy`` left
-    None), and the (row, Move) pairs left to the general path.
+    rows of straight moves that stay one line, ``{row: ArcHint}``, and the (row, Move) pairs left to the general path.
     """
     lines_i, arcs_i, rest = _sort_moves(planned, arc_prm)
     li = np.array(lines_i, dtype=int)
@@ -700,7 +699,7 @@ def plan_chunk(planned: list[tuple[int, _M]], arc_prm: dict[int, ArcParams], end
                                            pts.En, np.abs(r1 - r0))), strict=True)
     for (i, _m, _arc), (h1, h2, hr, hw, hs, u1, u2, un, w1, w2, wn, mm) in zip([arcs_i[x] for x in sel.tolist()],
                                                                                rows, strict=True):
-        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), None, mm)
+        hints[i] = ArcHint(h1, h2, hr, hw, hs, (u1, u2, un, w1, w2, wn), i, mm)
     if len(sel) < len(arcs.rows):
         rest.extend((i, m) for (i, m, _arc), u in zip(arcs_i, usable.tolist(), strict=True) if not u)
     return ok_lines, hints, rest

@@ -20,12 +20,10 @@ from typing import TypeAlias, final
 
 from postproc.errors import SafetyError
 from postproc.gcode import bulk, cutter, emit
-from postproc.gcode.emitter import EmitterMixin, _unit_decimals
+from postproc.gcode.emitter import EmitterMixin, PlanNeeded, Subdivided, _unit_decimals, round_err
 from postproc.gcode.lexer import Word
 from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
-from postproc.gcode.planner import Planner
-from postproc.gcode.segment import Curve
 from postproc.gcode.table import Table
 from postproc.gcode.vplan import ArcHint, FloatArray, Plan
 
@@ -62,15 +60,20 @@ class Rebase:
 Entry: TypeAlias = "tuple[str, Move | Rebase | Store | None, bool, int | None]"
 
 
+#: entries written between two saves of the writer's state (where it starts again from
+#: when it needs a plan the planner has not made yet)
+SAVE_EVERY = 16
+
+
 @final
 class _Chunk:
     """A chunk being written: its targets, plans and hints, the text written so far, where
     each entry's text starts in it (``marks``: (index, its line, 1: every line is that
     line's, 0: a line passed as it is, None), or (index, j, 2: a run's lines one by one
     from its line j, the run)), the next row of the table, the lines passed as they are,
-    and the runs' prepared emissions."""
+    the runs' prepared emissions, and the last saved state (:meth:`ChunkWriter._save`)."""
 
-    __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks")
+    __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks", "saved", "next_save")
 
     def __init__(self, T: FloatArray, plans: dict[int, Plan], hints: dict[int, ArcHint]) -> None:
         self.T = T
@@ -82,6 +85,8 @@ class _Chunk:
         self.passed = 0
         self.prepared: dict[int, bulk.Emission] = {}
         self.blocks: list[bulk.Block] = []
+        self.saved: tuple = ()
+        self.next_save = 0  # the entry at which the state is saved next
 
 
 def _marker(o: _Chunk, run: bulk.Run) -> bulk.Mark:
@@ -96,11 +101,10 @@ class ChunkWriter(EmitterMixin):
     """Writes a chunk's lines (see the module docstring); carries what the controller
     holds from one chunk to the next."""
 
-    def __init__(self, options: CorrectOptions, report: CorrectReport, planner: Planner, start: Sequence[float],
+    def __init__(self, options: CorrectOptions, report: CorrectReport, start: Sequence[float],
                  compensated: cutter.Bound, path: str | None = None) -> None:
         self.opt = options
         self.report = report
-        self.planner = planner  # the engine calls of the arc fits' subdivision
         self.path = path
         # the machine is at the start position uncorrected (NaN: unknown)
         self.qe = list(start)  # emitted gauge position (what the controller will hold)
@@ -112,22 +116,41 @@ class ChunkWriter(EmitterMixin):
         self._long_line = emit.limit_pattern(options.dialect)  # finds a line that may pass the dialect's limits
         self._decimals: dict[float, int] = {}
         self.cutter = compensated  # the compensated moves read (a take-up is refused on their lines)
-
-    def _subdivide(self, curves: list[Curve], s_init: list[FloatArray], unit: float
-                   ) -> list[tuple[FloatArray, FloatArray]]:
-        """The arc fits' adaptive subdivision, with the planner's engine calls."""
-        return self.planner.subdivide(curves, s_init, unit)
+        self._plans: dict[int, Plan] = {}
+        self._subdivided: Subdivided = {}
+        self._resume: _Chunk | None = None  # the chunk to write on from its saved state
 
     def write(self, entries: list[Entry | bulk.Run], tab: Table, plans: dict[int, Plan],
-              hints: dict[int, ArcHint], write_out: Write) -> None:
-        """Write the chunk's ``entries``, planned in ``tab`` (``plans``, ``hints``: the
-        planner's), as one text to ``write_out``."""
-        o = _Chunk(tab.target, plans, hints)
-        for e in entries:
-            if type(e) is bulk.Run:
-                self._write_run(e, o)
-            else:
-                self._write_entry(e, o)
+              hints: dict[int, ArcHint], subdivided: Subdivided,
+              write_out: Write) -> None:
+        """Write the chunk's ``entries``, planned in ``tab`` (``plans``, ``hints``,
+        ``subdivided``: the planner's), as one text to ``write_out``.
+
+        The writer makes no engine call. Where it needs a plan or a subdivision the
+        planner has not made (an arc whose hint does not hold for its ends as written, a
+        fit that follows the corrected curve more finely than its samples), it raises
+        :class:`postproc.gcode.emitter.PlanNeeded`, its state back where it last saved it
+        (at most :data:`SAVE_EVERY` entries before); the caller has the planner make it
+        and calls again with the same arguments, and the writer goes on from there."""
+        o, self._resume = self._resume, None
+        if o is None:
+            o = _Chunk(tab.target, plans, hints)
+        self._plans, self._subdivided = plans, subdivided
+        first = o.saved[0] if o.saved else 0
+        try:
+            for i in range(first, len(entries)):
+                if i >= o.next_save:
+                    self._save(o, i)
+                e = entries[i]
+                if type(e) is bulk.Run:
+                    self._write_run(e, o)
+                else:
+                    self._write_entry(e, o)
+        except PlanNeeded:
+            self._restore(o)
+            self._resume = o
+            raise
+        self._plans, self._subdivided = {}, {}  # the chunk's own
         for blk in o.blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += o.passed
@@ -136,6 +159,23 @@ class ChunkWriter(EmitterMixin):
         if self._long_line.search(max(text.split("\n"), key=len)):
             text = self._fit_lines(o.out, o.marks)
         write_out(text)
+
+    def _save(self, o: _Chunk, i: int) -> None:
+        """Save the writer's state before entry ``i`` of chunk ``o``: what the controller
+        holds, the report's figures and how much of the chunk is written."""
+        o.saved = (i, list(self.qe), self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal,
+                   dict(self._stored), vars(self.report).copy(), len(o.out), len(o.marks), o.k, o.passed)
+        o.next_save = i + SAVE_EVERY
+
+    def _restore(self, o: _Chunk) -> None:
+        """Put the writer's state back as :meth:`_save` saved it last."""
+        (_i, qe, self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal, stored, report,
+         n_out, n_marks, o.k, o.passed) = o.saved
+        self.qe[:] = qe
+        self._stored = dict(stored)
+        vars(self.report).update(report)
+        del o.out[n_out:], o.marks[n_marks:]
+        o.next_save = o.saved[0]  # saved again there, as it is written again from there
 
     def _write_run(self, e: bulk.Run, o: _Chunk) -> None:
         """Write a run of plain lines: in bulk, but for the arcs and lines that must be
@@ -273,7 +313,7 @@ class ChunkWriter(EmitterMixin):
         and R along the tool axis."""
         unit, shift = mv.unit, mv.shift
         d = _unit_decimals(self.opt, unit)
-        rerr = self.planner.round_err(unit)
+        rerr = round_err(self.opt, unit)
         drift = math.hypot(t_r[0] - t_bottom[0], t_r[1] - t_bottom[1])
         if drift > self.opt.tolerance_mm - rerr:
             raise SafetyError(

@@ -1,0 +1,170 @@
+"""The planner makes every engine call of a chunk before it is written: the writer asks
+for what it finds it needs (the general plan of an arc whose hint does not hold for its
+ends as written, the engine's subdivision of a fitted curve), goes back to where it last
+saved its state, and writes on once the planner has made it; the output and the
+report are those of a writer that never stopped."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from postproc.calfile import load_calibration
+from postproc.effects import compose
+from postproc.engine.static import StaticEngine
+from postproc.errors import SolverError
+from postproc.gcode import emitter, engine_use, planner, writer
+from postproc.gcode.path import Setup
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+
+BOX = [[0] * 3, [315] * 3]
+
+
+def _short_pitch_engine(pitch_mm: float = 0.6, amp_mm: float = 0.01):
+    """A scale error and a lead-screw error on X whose pitch is near the planner's sample
+    step, so that the arc fits follow the corrected curve more finely than its samples."""
+    base = StaticEngine([[1.0002, 0, 0], [0, 1, 0], [0, 0, 1]], [0, 0, 0], BOX)
+    return compose(base, [{"name": "periodic:X", "config": {"pitch_mm": pitch_mm},
+                           "params": {"cos_mm": amp_mm, "sin_mm": 0.0}}])
+
+
+SUBDIVIDED = ("G21 G90 G17\nG0 X100 Y100 Z100\nG1 X105 F500\nG2 X110 Y100 I2.5 J0\nG1 X100.3 Y103\n"
+              "G3 X120 Y110 R15\nG1 Y120\nM2\n")
+
+
+def _odd_step_arcs() -> str:
+    """Half-turns of 0.1-0.3 mm radius whose hints fail when written once the planner's
+    guess of them is taken away (see test_gcode_vplan)."""
+    rng = np.random.default_rng(5)
+    out = ["G21 G90 G17\n", "G0 X150 Y150 Z100\n", "G1 Z90 F500\n"]
+    x, y = 150.0, 150.0
+    for _ in range(40):
+        r = float(rng.uniform(0.1, 0.3))
+        out.append(f"G3 X{x:.3f} Y{y + 2 * r:.3f} I0 J{r:.3f}\n")
+        out.append(f"G1 X{x + 1:.3f} Y{y + 2 * r:.3f}\n")
+        x += 1.0
+        out.append(f"G2 X{x:.3f} Y{y:.3f} I0 J{-r:.3f}\n")
+    out.append("M2\n")
+    return "".join(out)
+
+
+@pytest.fixture
+def requests(monkeypatch):
+    """What the writer asked the planner for, in order: ("plan", row) or ("sub", span)."""
+    asked: list[tuple] = []
+    provide = planner.Planner.provide
+
+    def counted(self, need, *args):
+        asked.append(("plan", need.row) if need.curve is None else ("sub", need.key[1:]))
+        return provide(self, need, *args)
+
+    monkeypatch.setattr(planner.Planner, "provide", counted)
+    return asked
+
+
+@pytest.fixture
+def no_engine_call_while_writing(monkeypatch):
+    """Fails a test in which the engine is called while a chunk is being written."""
+    state = {"writing": False, "calls": 0}
+    corrected = engine_use.EngineCalls.corrected
+    write = writer.ChunkWriter.write
+
+    def guarded(self, *args, **kwargs):
+        assert not state["writing"], "an engine call while writing"
+        state["calls"] += 1
+        return corrected(self, *args, **kwargs)
+
+    def writing(self, *args, **kwargs):
+        state["writing"] = True
+        try:
+            return write(self, *args, **kwargs)
+        finally:
+            state["writing"] = False
+
+    monkeypatch.setattr(engine_use.EngineCalls, "corrected", guarded)
+    monkeypatch.setattr(writer.ChunkWriter, "write", writing)
+    return state
+
+
+def test_hints_that_fail_when_written_are_planned_before_writing(monkeypatch, requests,
+                                                                  no_engine_call_while_writing):
+    static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
+    text = _odd_step_arcs()
+    expected, rep0 = correct_text(text, static, Setup())
+    assert requests == []  # the planner's guess made every plan the writer needed
+    monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
+    got, rep = correct_text(text, static, Setup())
+    rows = [row for what, row in requests if what == "plan"]
+    assert len(rows) > 20
+    assert len(set(rows)) == len(rows)  # each asked for once: the writer goes on from where it was
+    assert no_engine_call_while_writing["calls"] > 0
+    assert got == expected
+    assert vars(rep) == vars(rep0)
+
+
+@pytest.mark.parametrize("save_every", [1, 3, 10**9])
+def test_the_writer_goes_on_from_its_saved_state_as_if_it_never_stopped(monkeypatch, save_every):
+    """However far back the writer last saved its state (1 entry, 3, or the chunk's
+    start), the text and the report's figures are the same."""
+    static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
+    text = _odd_step_arcs()
+    expected, rep0 = correct_text(text, static, Setup())
+    monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
+    monkeypatch.setattr(writer, "SAVE_EVERY", save_every)
+    for chunk in (None, 7, 50):
+        got, rep = correct_text(text, static, Setup(), CorrectOptions(chunk_lines=chunk))
+        assert got == expected
+        assert vars(rep) == vars(rep0)
+
+
+def test_a_fits_subdivisions_are_made_by_the_planner_a_curve_at_a_time(requests, no_engine_call_while_writing):
+    eng = _short_pitch_engine()
+    out, rep = correct_text(SUBDIVIDED, eng, Setup())
+    subs = [r for r in requests if r[0] == "sub"]
+    assert subs  # the fits followed the curve more finely than its samples
+    assert len(subs) <= 4  # one request per curve (three moves are fitted), not one per span
+    assert rep.lines_inserted > 50
+    # the corrected program is the same whether the writer saves often or never
+    writer.SAVE_EVERY, saved = 1, writer.SAVE_EVERY
+    try:
+        again, _ = correct_text(SUBDIVIDED, eng, Setup())
+    finally:
+        writer.SAVE_EVERY = saved
+    assert again == out
+
+
+def _refuse(monkeypatch, spans: set[tuple[float, float]]):
+    """The engine's subdivision refuses ``spans``, and any call of several spans with one of them."""
+    subdivide = engine_use.EngineCalls.subdivide
+
+    def refusing(self, curves, s_init, unit):
+        if any((float(s[0]), float(s[-1])) in spans for s in s_init):
+            raise SolverError("a jump in the corrected path here")
+        return subdivide(self, curves, s_init, unit)
+
+    monkeypatch.setattr(engine_use.EngineCalls, "subdivide", refusing)
+
+
+def test_a_span_the_engine_refuses_is_refused_only_where_a_fit_needs_it(monkeypatch):
+    eng = _short_pitch_engine()
+    used: list[tuple[float, float]] = []
+    all_spans: set[tuple[float, float]] = set()
+    plain = emitter.EmitterMixin._subdivide
+
+    def recording(self, curves, s_init, unit):
+        used.append((float(s_init[0][0]), float(s_init[0][-1])))
+        all_spans.update(k[1:] for k in self._subdivided)
+        return plain(self, curves, s_init, unit)
+
+    monkeypatch.setattr(emitter.EmitterMixin, "_subdivide", recording)
+    expected, _ = correct_text(SUBDIVIDED, eng, Setup())
+    unused = sorted(all_spans - set(used))
+    assert used
+    assert unused
+    with monkeypatch.context() as m:
+        _refuse(m, {unused[len(unused) // 2]})
+        got, _ = correct_text(SUBDIVIDED, eng, Setup())
+    assert got == expected  # the batch was refused, each span subdivided alone, this one not needed
+    with monkeypatch.context() as m:
+        _refuse(m, {used[len(used) // 2]})
+        with pytest.raises(SolverError, match="a jump"):
+            correct_text(SUBDIVIDED, eng, Setup())
