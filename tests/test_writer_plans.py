@@ -168,3 +168,29 @@ def test_a_span_the_engine_refuses_is_refused_only_where_a_fit_needs_it(monkeypa
         _refuse(m, {used[len(used) // 2]})
         with pytest.raises(SolverError, match="a jump"):
             correct_text(SUBDIVIDED, eng, Setup())
+
+
+def test_a_run_is_written_on_from_the_arc_that_needed_its_plan(monkeypatch, requests):
+    """An arc of a long run of plain lines whose hint fails when written: the writer goes
+    back only to that arc, so no line of the run is written twice (going back to the
+    run's start made a run of n such arcs cost n times its length)."""
+    from postproc.gcode import bulk
+
+    static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
+    text = _odd_step_arcs()
+    expected, _ = correct_text(text, static, Setup())
+    written: list[tuple[int, int, int]] = []
+    write_stretch = bulk._write_stretch
+
+    def recorded(corrector, st, stop, *args):
+        written.append((id(st.run.block), st.s, stop))
+        return write_stretch(corrector, st, stop, *args)
+
+    monkeypatch.setattr(bulk, "_write_stretch", recorded)
+    monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
+    got, _ = correct_text(text, static, Setup())
+    assert got == expected
+    assert len(requests) > 20
+    lines = [(blk, y) for blk, s, stop in written for y in range(s, stop)]
+    assert len(lines) > 50
+    assert len(set(lines)) == len(lines)

@@ -97,8 +97,20 @@ _HALF = np.array([emit.HALF_UNIT[d] for d in range(331)])  # the last, 0: any mo
 
 #: where text is written (what it returns is ignored)
 Write: TypeAlias = Callable[[str], object]
-#: told, while a run is written, where the text written next comes from (emit_run)
-Mark: TypeAlias = Callable[[int, bool], None]
+
+
+class Mark(Protocol):
+    """Told, while a run is written, where the text written next comes from (emit_run),
+    and when the writer's state may be saved."""
+
+    def __call__(self, j: int, whole: bool) -> None: ...
+
+    def save(self, y: int) -> None:
+        """Save the writer's state: the run is written on from its block line ``y``
+        (``emit_run``'s ``resume``) if the writer must go back."""
+        ...
+
+
 Point: TypeAlias = tuple[float, float, float]
 #: an arc of a run: its centre (machine mm) and whether it turns clockwise
 RunArc: TypeAlias = tuple[Point, bool]
@@ -598,19 +610,24 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
 
 
 def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,
-             hints: Mapping[int, ArcHint], mark: Mark | None = None) -> None:
+             hints: Mapping[int, ArcHint], mark: Mark | None = None, resume: int = -1) -> None:
     """Write the corrected lines of ``run`` (targets prepared in ``em``; ``hints``: the
     planner's :class:`postproc.gcode.vplan.ArcHint` of each of the run's arcs, by row
     of T). ``mark(j, whole)`` is told where the text written next comes from: line ``j``
     of the run alone (``whole``: the general emitter's, one or more lines), or its lines
-    one by one from ``j`` on."""
+    one by one from ``j`` on; ``mark.save(y)`` before an arc whose hint does not hold is
+    handed to the general emitter (which may need its plan made first). ``resume``: that
+    arc's block line, where ``mark.save`` was told it: the writer's state is as it was
+    then, and the run is written on from that arc."""
     blk = run.block
     a, b = run.a, run.b
     s = a
     f = a  # the first line that moves
     while f < b and blk.neutral[f]:
         f += 1
-    if f < b and not blk.gword[f] and corrector.emitted_motion != _modal_at(run, f)[0]:
+    if resume >= 0:  # saved before its line went to the general emitter: it goes there again
+        s = _general_row(corrector, run, T, write, hints, resume, mark)
+    elif f < b and not blk.gword[f] and corrector.emitted_motion != _modal_at(run, f)[0]:
         # the controller's modal motion differs from the program's here (after a
         # linearised arc): the general emitter adds the motion word
         if f > a:
@@ -648,17 +665,23 @@ def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, writ
         corrector.qe[:] = final if stop == b else (st.want[p] if p >= s else st.qe0)
     if stop == b:
         return b
-    # an arc the hint does not settle here (or whose centre word must be added): the
-    # general emitter's
-    j = stop - run.a
-    line = run.block.lines[stop]
+    return _general_row(corrector, run, T, write, hints, stop, mark)
+
+
+def _general_row(corrector: Corrector, run: Run, T: FloatArray, write: Write, hints: Mapping[int, ArcHint],
+                 y: int, mark: Mark | None) -> int:
+    """Write block line ``y`` of ``run``, an arc the hint does not settle there (or whose
+    centre word must be added), by the general emitter; returns the line after it."""
+    j = y - run.a
+    line = run.block.lines[y]
     if mark is not None:
+        mark.save(y)
         mark(j, True)
     corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
                                hints[run.trow + j], write)
     if mark is not None:
         mark(j + 1, False)
-    return stop + 1
+    return y + 1
 
 
 def _stretch_end(run: Run, arcs: list[int], first: int, s: int, hints: Mapping[int, ArcHint]) -> int:

@@ -89,12 +89,23 @@ class _Chunk:
         self.next_save = 0  # the entry at which the state is saved next
 
 
-def _marker(o: _Chunk, run: bulk.Run) -> bulk.Mark:
-    """The marks of where the text written next comes from, while ``run`` is written
-    (:func:`postproc.gcode.bulk.emit_run`)."""
-    def mark(j: int, whole: bool) -> None:
-        o.marks.append((len(o.out), run.line(j), 1, None) if whole else (len(o.out), j, 2, run))
-    return mark
+@final
+class _RunMarks:
+    """The marks of where the text written next comes from while ``run`` (part ``part``
+    of entry ``i``) is written (:func:`postproc.gcode.bulk.emit_run`), and the writer's
+    saves of its state within the run."""
+
+    __slots__ = ("w", "o", "i", "part", "run")
+
+    def __init__(self, w: ChunkWriter, o: _Chunk, i: int, part: int, run: bulk.Run) -> None:
+        self.w, self.o, self.i, self.part, self.run = w, o, i, part, run
+
+    def __call__(self, j: int, whole: bool) -> None:
+        o = self.o
+        o.marks.append((len(o.out), self.run.line(j), 1, None) if whole else (len(o.out), j, 2, self.run))
+
+    def save(self, y: int) -> None:
+        self.w._save(self.o, self.i, (self.part, y))
 
 
 class ChunkWriter(EmitterMixin):
@@ -133,19 +144,25 @@ class ChunkWriter(EmitterMixin):
         (at most :data:`SAVE_EVERY` entries before); the caller has the planner make it
         and calls again with the same arguments, and the writer goes on from there."""
         o, self._resume = self._resume, None
+        at: tuple[int, int] | None = None  # where in its first entry a resumed chunk goes on
         if o is None:
             o = _Chunk(tab.target, plans, hints)
+            first = 0
+        else:
+            first, at = o.saved[0], o.saved[-1]
         self._plans, self._subdivided = plans, subdivided
-        first = o.saved[0] if o.saved else 0
         try:
             for i in range(first, len(entries)):
-                if i >= o.next_save:
-                    self._save(o, i)
                 e = entries[i]
                 if type(e) is bulk.Run:
-                    self._write_run(e, o)
-                else:
-                    self._write_entry(e, o)
+                    if at is None and i >= o.next_save:
+                        self._save(o, i)
+                    self._write_run(e, o, i, at)
+                    at = None
+                    continue
+                if i >= o.next_save:
+                    self._save(o, i)
+                self._write_entry(e, o)
         except PlanNeeded:
             self._restore(o)
             self._resume = o
@@ -160,44 +177,55 @@ class ChunkWriter(EmitterMixin):
             text = self._fit_lines(o.out, o.marks)
         write_out(text)
 
-    def _save(self, o: _Chunk, i: int) -> None:
-        """Save the writer's state before entry ``i`` of chunk ``o``: what the controller
+    def _save(self, o: _Chunk, i: int, at: tuple[int, int] | None = None) -> None:
+        """Save the writer's state before entry ``i`` of chunk ``o`` (``at``: within it, a
+        run, from its part and block line; see :meth:`_write_run`): what the controller
         holds, the report's figures and how much of the chunk is written."""
         o.saved = (i, list(self.qe), self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal,
-                   dict(self._stored), vars(self.report).copy(), len(o.out), len(o.marks), o.k, o.passed)
-        o.next_save = i + SAVE_EVERY
+                   dict(self._stored), vars(self.report).copy(), len(o.out), len(o.marks), o.k, o.passed, at)
+        o.next_save = i + (SAVE_EVERY if at is None else 1)
 
     def _restore(self, o: _Chunk) -> None:
         """Put the writer's state back as :meth:`_save` saved it last."""
-        (_i, qe, self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal, stored, report,
-         n_out, n_marks, o.k, o.passed) = o.saved
+        (i, qe, self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal, stored, report,
+         n_out, n_marks, o.k, o.passed, at) = o.saved
         self.qe[:] = qe
         self._stored = dict(stored)
         vars(self.report).update(report)
         del o.out[n_out:], o.marks[n_marks:]
-        o.next_save = o.saved[0]  # saved again there, as it is written again from there
+        o.next_save = i if at is None else i + 1  # saved again as it is written again
 
-    def _write_run(self, e: bulk.Run, o: _Chunk) -> None:
-        """Write a run of plain lines: in bulk, but for the arcs and lines that must be
-        split, which the general emitter writes."""
+    def _write_run(self, e: bulk.Run, o: _Chunk, i: int, at: tuple[int, int] | None) -> None:
+        """Write a run of plain lines (entry ``i``): in bulk, but for the arcs and lines that
+        must be split, which the general emitter writes. ``at``: go on from where the
+        writer's state was saved within it, (its part, the block line to write on from, or
+        -1: the part's start); the parts are the run itself, or the pieces
+        :func:`bulk.split_run` cuts it into."""
         out, T, k = o.out, o.T, o.k
-        o.marks.append((len(out), 0, 2, e))
+        part0, y0 = (0, -1) if at is None else at
+        if at is None:
+            o.marks.append((len(out), 0, 2, e))
         em = o.prepared.get(id(e.block))
         if em is None:
             em = o.prepared[id(e.block)] = bulk.prepare_emission(e.block, T)
             o.blocks.append(e.block)
         if not e.cut:
-            bulk.emit_run(self, e, em, T, out.append, o.hints, _marker(o, e))
+            bulk.emit_run(self, e, em, T, out.append, o.hints, _RunMarks(self, o, i, 0, e), y0)
         else:  # arcs and lines that must be split: written by the general emitter
-            for part in bulk.split_run(e, sorted(set(e.cut))):
+            for p, part in enumerate(bulk.split_run(e, sorted(set(e.cut)))):
+                if p < part0:
+                    continue
+                y = y0 if p == part0 else -1
                 if type(part) is bulk.Run:
-                    o.marks.append((len(out), 0, 2, part))
-                    bulk.emit_run(self, part, em, T, out.append, o.hints, _marker(o, part))
+                    if y < 0:
+                        o.marks.append((len(out), 0, 2, part))
+                    bulk.emit_run(self, part, em, T, out.append, o.hints, _RunMarks(self, o, i, p, part), y)
                     continue
                 j, fm = part
-                o.marks.append((len(out), e.line(j), 1, None))
                 line = e.block.lines[e.a + j]
                 hint = o.hints.get(k + j)
+                self._save(o, i, (p, -1))  # its plan or a fit's subdivision may have to be made first
+                o.marks.append((len(out), e.line(j), 1, None))
                 if hint is not None:
                     self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, out.append)
                 else:
