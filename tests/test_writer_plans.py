@@ -194,3 +194,25 @@ def test_a_run_is_written_on_from_the_arc_that_needed_its_plan(monkeypatch, requ
     lines = [(blk, y) for blk, s, stop in written for y in range(s, stop)]
     assert len(lines) > 50
     assert len(set(lines)) == len(lines)
+
+
+def test_a_line_read_by_the_interpreter_is_written_again_only_when_it_needed_its_plan(monkeypatch, requests):
+    """Lines the interpreter reads (a comment makes them so): the writer goes back to the
+    start of the line whose arc needed its plan, not up to SAVE_EVERY entries before."""
+    static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
+    text = _odd_step_arcs().replace(" I0 J", " (arc) I0 J")
+    expected, _ = correct_text(text, static, Setup())
+    calls: list[int] = []
+    hinted = emitter.EmitterMixin._emit_hinted_arc
+
+    def counted(self, line, mv, *args):
+        calls.append(mv.lineno)
+        return hinted(self, line, mv, *args)
+
+    monkeypatch.setattr(emitter.EmitterMixin, "_emit_hinted_arc", counted)
+    monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
+    got, _ = correct_text(text, static, Setup())
+    assert got == expected
+    assert len(requests) > 20
+    arcs = text.count("\nG2 ") + text.count("\nG3 ")
+    assert len(calls) == arcs + len(requests)  # each arc once, and again the ones that needed their plan

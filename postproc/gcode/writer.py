@@ -141,8 +141,10 @@ class ChunkWriter(EmitterMixin):
         planner has not made (an arc whose hint does not hold for its ends as written, a
         fit that follows the corrected curve more finely than its samples), it raises
         :class:`postproc.gcode.emitter.PlanNeeded`, its state back where it last saved it
-        (at most :data:`SAVE_EVERY` entries before); the caller has the planner make it
-        and calls again with the same arguments, and the writer goes on from there."""
+        (before an entry whose move has a hint or a plan, or at most :data:`SAVE_EVERY`
+        entries before; in a run, before the line it hands to the general emitter); the
+        caller has the planner make it and calls again with the same arguments, and the
+        writer goes on from there."""
         o, self._resume = self._resume, None
         at: tuple[int, int] | None = None  # where in its first entry a resumed chunk goes on
         if o is None:
@@ -160,7 +162,7 @@ class ChunkWriter(EmitterMixin):
                     self._write_run(e, o, i, at)
                     at = None
                     continue
-                if i >= o.next_save:
+                if i >= o.next_save or o.k in o.hints or o.k in o.plans:  # (a move that may need a plan)
                     self._save(o, i)
                 self._write_entry(e, o)
         except PlanNeeded:
