@@ -101,34 +101,45 @@ def test_hints_that_fail_when_written_are_planned_before_writing(monkeypatch, re
     assert vars(rep) == vars(rep0)
 
 
-@pytest.mark.parametrize("save_every", [1, 3, 10**9])
-def test_the_writer_goes_on_from_its_saved_state_as_if_it_never_stopped(monkeypatch, save_every):
-    """However far back the writer last saved its state (1 entry, 3, or the chunk's
-    start), the text and the report's figures are the same."""
+def _saves_only_at_chunk_start(monkeypatch):
+    """The writer saves its state only at a chunk's start: whatever it needs, it goes back
+    there and writes the chunk again."""
+    save = writer.ChunkWriter._save
+
+    def coarse(self, o, i, at=None):
+        if not o.saved:
+            save(self, o, i, at)
+
+    monkeypatch.setattr(writer.ChunkWriter, "_save", coarse)
+
+
+@pytest.mark.parametrize("coarse", [False, True])
+def test_the_writer_goes_on_from_its_saved_state_as_if_it_never_stopped(monkeypatch, coarse):
+    """Whether the writer goes back to just before the move that needed its plan or to
+    the chunk's start, the text and the report's figures are the same."""
     static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
     text = _odd_step_arcs()
     expected, rep0 = correct_text(text, static, Setup())
     monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
-    monkeypatch.setattr(writer, "SAVE_EVERY", save_every)
+    if coarse:
+        _saves_only_at_chunk_start(monkeypatch)
     for chunk in (None, 7, 50):
         got, rep = correct_text(text, static, Setup(), CorrectOptions(chunk_lines=chunk))
         assert got == expected
         assert vars(rep) == vars(rep0)
 
 
-def test_a_fits_subdivisions_are_made_by_the_planner_a_curve_at_a_time(requests, no_engine_call_while_writing):
+def test_a_fits_subdivisions_are_made_by_the_planner_a_curve_at_a_time(monkeypatch, requests,
+                                                                     no_engine_call_while_writing):
     eng = _short_pitch_engine()
     out, rep = correct_text(SUBDIVIDED, eng, Setup())
     subs = [r for r in requests if r[0] == "sub"]
     assert subs  # the fits followed the curve more finely than its samples
     assert len(subs) <= 4  # one request per curve (three moves are fitted), not one per span
     assert rep.lines_inserted > 50
-    # the corrected program is the same whether the writer saves often or never
-    writer.SAVE_EVERY, saved = 1, writer.SAVE_EVERY
-    try:
-        again, _ = correct_text(SUBDIVIDED, eng, Setup())
-    finally:
-        writer.SAVE_EVERY = saved
+    # the corrected program is the same when the writer goes back to the chunk's start
+    _saves_only_at_chunk_start(monkeypatch)
+    again, _ = correct_text(SUBDIVIDED, eng, Setup())
     assert again == out
 
 
@@ -198,7 +209,7 @@ def test_a_run_is_written_on_from_the_arc_that_needed_its_plan(monkeypatch, requ
 
 def test_a_line_read_by_the_interpreter_is_written_again_only_when_it_needed_its_plan(monkeypatch, requests):
     """Lines the interpreter reads (a comment makes them so): the writer goes back to the
-    start of the line whose arc needed its plan, not up to SAVE_EVERY entries before."""
+    start of the line whose arc needed its plan, not further."""
     static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
     text = _odd_step_arcs().replace(" I0 J", " (arc) I0 J")
     expected, _ = correct_text(text, static, Setup())

@@ -60,11 +60,6 @@ class Rebase:
 Entry: TypeAlias = "tuple[str, Move | Rebase | Store | None, bool, int | None]"
 
 
-#: entries written between two saves of the writer's state (where it starts again from
-#: when it needs a plan the planner has not made yet)
-SAVE_EVERY = 16
-
-
 @final
 class _Chunk:
     """A chunk being written: its targets, plans and hints, the text written so far, where
@@ -73,7 +68,7 @@ class _Chunk:
     from its line j, the run)), the next row of the table, the lines passed as they are,
     the runs' prepared emissions, and the last saved state (:meth:`ChunkWriter._save`)."""
 
-    __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks", "saved", "next_save")
+    __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks", "saved")
 
     def __init__(self, T: FloatArray, plans: dict[int, Plan], hints: dict[int, ArcHint]) -> None:
         self.T = T
@@ -86,7 +81,6 @@ class _Chunk:
         self.prepared: dict[int, bulk.Emission] = {}
         self.blocks: list[bulk.Block] = []
         self.saved: tuple = ()
-        self.next_save = 0  # the entry at which the state is saved next
 
 
 @final
@@ -140,16 +134,16 @@ class ChunkWriter(EmitterMixin):
         The writer makes no engine call. Where it needs a plan or a subdivision the
         planner has not made (an arc whose hint does not hold for its ends as written, a
         fit that follows the corrected curve more finely than its samples), it raises
-        :class:`postproc.gcode.emitter.PlanNeeded`, its state back where it last saved it
-        (before an entry whose move has a hint or a plan, or at most :data:`SAVE_EVERY`
-        entries before; in a run, before the line it hands to the general emitter); the
-        caller has the planner make it and calls again with the same arguments, and the
-        writer goes on from there."""
+        :class:`postproc.gcode.emitter.PlanNeeded`, its state back where it saved it, just
+        before that move (before an entry whose move has a hint or a plan; in a run,
+        before the line it hands to the general emitter); the caller has the planner make
+        it and calls again with the same arguments, and the writer goes on from there."""
         o, self._resume = self._resume, None
         at: tuple[int, int] | None = None  # where in its first entry a resumed chunk goes on
         if o is None:
             o = _Chunk(tab.target, plans, hints)
             first = 0
+            self._save(o, 0)
         else:
             first, at = o.saved[0], o.saved[-1]
         self._plans, self._subdivided = plans, subdivided
@@ -157,12 +151,10 @@ class ChunkWriter(EmitterMixin):
             for i in range(first, len(entries)):
                 e = entries[i]
                 if type(e) is bulk.Run:
-                    if at is None and i >= o.next_save:
-                        self._save(o, i)
                     self._write_run(e, o, i, at)
                     at = None
                     continue
-                if i >= o.next_save or o.k in o.hints or o.k in o.plans:  # (a move that may need a plan)
+                if o.k in o.hints or o.k in o.plans:  # a move that may need a plan or a subdivision
                     self._save(o, i)
                 self._write_entry(e, o)
         except PlanNeeded:
@@ -185,17 +177,15 @@ class ChunkWriter(EmitterMixin):
         holds, the report's figures and how much of the chunk is written."""
         o.saved = (i, list(self.qe), self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal,
                    dict(self._stored), vars(self.report).copy(), len(o.out), len(o.marks), o.k, o.passed, at)
-        o.next_save = i + (SAVE_EVERY if at is None else 1)
 
     def _restore(self, o: _Chunk) -> None:
         """Put the writer's state back as :meth:`_save` saved it last."""
-        (i, qe, self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal, stored, report,
-         n_out, n_marks, o.k, o.passed, at) = o.saved
+        (_i, qe, self.emitted_motion, self._cycle_z, self._cycle_rz, self._cycle_nominal, stored, report,
+         n_out, n_marks, o.k, o.passed, _at) = o.saved
         self.qe[:] = qe
         self._stored = dict(stored)
         vars(self.report).update(report)
         del o.out[n_out:], o.marks[n_marks:]
-        o.next_save = i if at is None else i + 1  # saved again as it is written again
 
     def _write_run(self, e: bulk.Run, o: _Chunk, i: int, at: tuple[int, int] | None) -> None:
         """Write a run of plain lines (entry ``i``): in bulk, but for the arcs and lines that
