@@ -6,7 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import PARAMETRIC, ROOT, TOL, emitted_arcs, ideal_vs_emitted
+from conftest import PARAMETRIC, TOL, emitted_arcs, ideal_vs_emitted
 
 from postproc.calfile import load_calibration
 from postproc.effects import compose
@@ -188,46 +188,6 @@ def test_arcs_whose_words_do_not_change_keep_their_own_centre_words(seed):
     assert emit.split_header(bulk)[1] == text
     assert bulk == general
     assert rep.arcs_kept == text.count("\nG2 ") + text.count("\nG3 ")
-
-
-def test_hints_whose_rounded_ends_fail_get_their_plan_with_the_chunk(monkeypatch):
-    """Small arcs whose corrected ends, rounded, leave no centre words on their bisector
-    (an odd last step across a short chord) fail when written: their general plans are
-    made with the chunk's, in one engine call, not one by one when each fails; the output
-    is the same either way."""
-    from postproc.gcode import planner
-
-    static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
-    rng = np.random.default_rng(5)
-    out = ["G21 G90 G17\n", "G0 X150 Y150 Z100\n", "G1 Z90 F500\n"]
-    x, y = 150.0, 150.0
-    for _ in range(40):
-        # a half-turn of radius 0.1-0.3 mm and back, as CAM links two passes
-        r = float(rng.uniform(0.1, 0.3))
-        out.append(f"G3 X{x:.3f} Y{y + 2 * r:.3f} I0 J{r:.3f}\n")
-        out.append(f"G1 X{x + 1:.3f} Y{y + 2 * r:.3f}\n")
-        x += 1.0
-        out.append(f"G2 X{x:.3f} Y{y:.3f} I0 J{-r:.3f}\n")
-    out.append("M2\n")
-    text = "".join(out)
-    asked = []  # the general plans the writer asked for (an arc's hint that did not hold)
-    provide = planner.Planner.provide
-
-    def counted(self, need, *args):
-        if need.curve is None:
-            asked.append(need.row)
-        return provide(self, need, *args)
-
-    monkeypatch.setattr(planner.Planner, "provide", counted)
-    new, rep = correct_text(text, static, Setup())
-    assert rep.arcs_split > 20  # the hints failed: the arcs were fitted from their plans
-    assert asked == []  # every one of those plans made with the chunk's
-    monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
-    old, rep_old = correct_text(text, static, Setup())
-    assert len(asked) > 20  # without the guess: one by one, as the writer finds it needs them
-    assert len(set(asked)) == len(asked)  # each asked once: the writer goes on from where it was
-    assert vars(rep_old) == vars(rep)
-    assert new == old
 
 
 @pytest.mark.parametrize("extrapolate", ["clamp", "linear"])

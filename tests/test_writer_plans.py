@@ -32,8 +32,10 @@ SUBDIVIDED = ("G21 G90 G17\nG0 X100 Y100 Z100\nG1 X105 F500\nG2 X110 Y100 I2.5 J
 
 
 def _odd_step_arcs() -> str:
-    """Half-turns of 0.1-0.3 mm radius whose hints fail when written once the planner's
-    guess of them is taken away (see test_gcode_vplan)."""
+    """Half-turns of 0.1-0.3 mm radius (as CAM links two passes) whose corrected ends,
+    rounded, leave no centre words on their bisector (an odd last step across a short
+    chord): their hints fail when written, and the planner guesses so
+    (``Planner._hints_failing_rounded``) unless the tests take the guess away."""
     rng = np.random.default_rng(5)
     out = ["G21 G90 G17\n", "G0 X150 Y150 Z100\n", "G1 Z90 F500\n"]
     x, y = 150.0, 150.0
@@ -90,7 +92,8 @@ def test_hints_that_fail_when_written_are_planned_before_writing(monkeypatch, re
     static = load_calibration(ROOT / "calibrations" / "s500_static.json").engine
     text = _odd_step_arcs()
     expected, rep0 = correct_text(text, static, Setup())
-    assert requests == []  # the planner's guess made every plan the writer needed
+    assert rep0.arcs_split > 20  # the hints failed: the arcs were fitted from their plans
+    assert requests == []  # the planner's guess made them all with the chunk's, in one engine call
     monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
     got, rep = correct_text(text, static, Setup())
     rows = [row for what, row in requests if what == "plan"]
