@@ -16,11 +16,11 @@ import gc
 import math
 import os
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeAlias
+from typing import TYPE_CHECKING, TypeAlias, cast
 
 import numpy as np
 
@@ -325,11 +325,24 @@ class Corrector:
         later part of the program reads up to it so, :mod:`postproc.gcode.split`): its
         units checked, the runs' blocks let go of (as :meth:`_chunk` does), and, where the
         approach directions are the nominal moves' own (no direction-dependent engine or
-        added map), the last nominal target and the direction each axis last moved in."""
+        added map), the last nominal target and the direction each axis last moved in.
+        The machine is then taken to be where the program put it, uncorrected, as at the
+        program's start: the planner's previous target and the writer's emitted position
+        are the last nominal target (the first corrected moves, the warm-up, would
+        otherwise start from the program's start position, or from no position on an
+        axis the chunks read name no more: a fit from a point far off, or unknown,
+        splits every move and asks for the engine's subdivision at every sample)."""
         self._check_units(entries)
         self.interp.comp_moves = []  # another process bounds them
         if not (self.engine.direction_dependent or self.opt.added):
             self.planner.skip(self._gather(entries, arcs=False))
+        last = _last_target(entries)
+        if last is not None:
+            q = np.array(last, dtype=float)
+            known = ~np.isnan(q)
+            for v in (self.planner.prev_nominal, self.planner.prev_target):
+                v[known] = q[known]
+            self.writer.qe[:] = np.where(known, q, self.writer.qe).tolist()
         for e in entries:
             if type(e) is bulk.Run:
                 e.block.runs = []
@@ -355,11 +368,15 @@ class Corrector:
                 self.planner.provide(need, tab, plans, subdivided)
 
 
-
-
-
-
-
+def _last_target(entries: list[Entry | bulk.Run]) -> Sequence[float] | None:
+    """The nominal target of the last move of a chunk's entries (None: it has none)."""
+    for e in reversed(entries):
+        if type(e) is bulk.Run:
+            if len(e):
+                return cast("Sequence[float]", e.q1[-1].tolist())
+        elif type(mv := e[1]) is Move:
+            return mv.q1
+    return None
 
 
 # -- entry points ---------------------------------------------------------------------
