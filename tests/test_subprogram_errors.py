@@ -168,3 +168,11 @@ def test_sinumerik_line_too_long_once_corrected_in_the_subprogram(tmp_path):
                                dialect="sinumerik")
     assert "once corrected" in err.message
     assert place(err)[:2] == (str(subs / "LONG.SPF"), 3)
+
+
+def test_linuxcnc_cycle_hole_outside_volume_in_the_subprogram(tmp_path):
+    # --cycles auto weighs a cycle block's correction as it reads it: its refusal names the file too
+    sub = "o<h> sub\nG0 X10 Y10 Z10\n  G81 X900 Y10 Z-5 R2 F100\nG80\no<h> endsub\nM2\n"
+    err, _prog, subs = refusal(tmp_path, "main.ngc", "G21 G90 G17\nG0 X10 Y10 Z10\no<h> call\nM2\n", {"h.ngc": sub})
+    assert isinstance(err, OutOfVolumeError)
+    assert place(err) == (str(subs / "h.ngc"), 3, 3)

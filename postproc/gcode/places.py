@@ -26,6 +26,12 @@ def pick(files: PathArray | None, rows) -> PathArray | None:
     return None if files is None else files[rows]
 
 
+def repeated(path: str | None, n: int) -> PathArray | None:
+    """The files of ``n`` rows of one line's, whose file is ``path`` (None: the program's
+    own)."""
+    return None if path is None else np.full(n, path, dtype=object)
+
+
 def file_of(files: PathArray | Sequence[str | None] | None, i: int, default: str | None) -> str | None:
     """The file of row ``i`` (``default``, the program's path, where it is its own)."""
     if files is None:

@@ -32,6 +32,7 @@ from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
+from postproc.gcode.places import repeated
 from postproc.gcode.planner import Planner
 from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
 from postproc.gcode.vplan import FloatArray
@@ -275,7 +276,7 @@ class ChunkReader(LineReader[Entry]):
         sign = np.where(sign == 0, self.planner.dirs, sign)
         lineno = np.full(len(s), mv.lineno)
         corr = self.planner.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
-                              [mv.rotary] * len(s), lineno)
+                              [mv.rotary] * len(s), lineno, repeated(mv.path, len(s)))
         keep = [0]
         i = 0
         budget = 0.9 * tol
@@ -304,7 +305,8 @@ class ChunkReader(LineReader[Entry]):
         pts = np.array([(x, y, mv.q1[2]) for x, y in spline], dtype=float)
         n = len(pts)
         t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
-                           np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
+                           np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno),
+                           repeated(mv.path, n))
         d = _unit_decimals(self.opt, mv.unit)
         return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
@@ -352,7 +354,7 @@ class ChunkReader(LineReader[Entry]):
         n = len(pts)
         dirs = np.broadcast_to(self.planner.dirs, pts.shape)
         t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
-                           [mv.rotary] * n, np.full(n, mv.lineno))
+                           [mv.rotary] * n, np.full(n, mv.lineno), repeated(mv.path, n))
         if c.repeats == 1 and not mv.incremental:
             drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
             return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self.planner.round_err(mv.unit))
