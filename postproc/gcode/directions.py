@@ -59,6 +59,7 @@ import numpy.typing as npt
 
 from postproc.effects.base import AXES, DIR_COLUMNS
 from postproc.errors import SafetyError
+from postproc.gcode.places import PathArray
 
 #: Rounds of re-solving before the directions are declared unsettled.
 MAX_ITERATIONS = 16
@@ -158,14 +159,14 @@ def commanded(T: np.ndarray, how: Commanding, assumed=None) -> tuple[np.ndarray,
 
 
 def settle(T: np.ndarray, D: np.ndarray, how: Commanding, solve, lineno, *,
-           path: str | None = None, files=None) -> tuple[np.ndarray, np.ndarray]:
+           path: str | None = None, files: PathArray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The fixed point of corrected targets and commanded directions (see the module).
 
     ``T``: targets corrected with the assumed directions ``D`` (both (M, 3)), commanded
     as ``how`` says (:func:`commanded`); ``solve(rows, D_rows)``: the targets of ``rows``
-    corrected with directions ``D_rows``; ``lineno`` (M,): program lines, for the
-    refusal, and ``files`` (M,) their files where not all are ``path``'s. Returns ``(E, D)``, the targets as commanded (holds applied) and their
-    directions.
+    corrected with directions ``D_rows``; ``lineno`` (M,): program lines, and ``files``
+    (M,) their files where not all are ``path``'s, for the refusal. Returns ``(E, D)``,
+    the targets as commanded (holds applied) and their directions.
     """
     axes = tuple(how.axes)
     if not axes or not len(T):
