@@ -176,3 +176,12 @@ def test_linuxcnc_cycle_hole_outside_volume_in_the_subprogram(tmp_path):
     err, _prog, subs = refusal(tmp_path, "main.ngc", "G21 G90 G17\nG0 X10 Y10 Z10\no<h> call\nM2\n", {"h.ngc": sub})
     assert isinstance(err, OutOfVolumeError)
     assert place(err) == (str(subs / "h.ngc"), 3, 3)
+
+
+def test_sinumerik_drilling_cycle_call_refused_in_the_subprogram(tmp_path):
+    # read, not written: --cycles keep cannot keep a CYCLE81 call
+    sub = "PROC DRL\nG0 X10 Y10 Z10\nCYCLE81(10, 0, 2, -5)\nRET\n"
+    err, _prog, subs = refusal(tmp_path, "main.mpf", "G54 D1\nG0 X10 Y10 Z10\nDRL\nM30\n", {"DRL.SPF": sub},
+                               dialect="sinumerik", cycles="keep")
+    assert "CYCLE81 (drilling cycle call)" in err.message
+    assert place(err) == (str(subs / "DRL.SPF"), 3, 1)
