@@ -162,7 +162,7 @@ class RunMove:
     """A line of a run as a move, for the general emitter (a line the planner splits, or
     one whose motion word the controller needs written)."""
 
-    __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "rotary", "arc", "arc_absolute", "feed")
+    __slots__ = ("lineno", "kind", "q0", "q1", "r", "shift", "unit", "rotary", "arc", "arc_absolute", "feed", "path")
     role = Role.MOVE  # a motion block written from its words
 
     def __init__(self, run: Run, lineno: int, kind: int, q0: Point, q1: Point, feed: float) -> None:
@@ -177,6 +177,7 @@ class RunMove:
         self.arc: Arc | None = None
         self.arc_absolute = run.arc_absolute
         self.feed = feed
+        self.path: str | None = None  # the file of its line (None: the program's own)
 
     def to_move(self, line: str) -> Move:
         """The general Move of the same line (a line written one by one: an arc, a line the
@@ -209,7 +210,7 @@ class RunMove:
             aux = tuple(i for i in centre_idx if i >= 0)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
                     self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, prefix,
-                    Role.MOVE, motion_idx, aux)
+                    Role.MOVE, motion_idx, aux, path=self.path)
 
 
 def tlo_col(line: str) -> int:
@@ -316,13 +317,16 @@ class Block:
         # program's: :meth:`set_source`); None: a run's lines follow its first
         self.src: list[int] | None = None
         self.src_arr: IntArray | None = None
+        self.src_files: list[str | None] | None = None  # ... and its file (set_source)
 
-    def set_source(self, src: list[int]) -> None:
+    def set_source(self, src: list[int], files: list[str | None] | None = None) -> None:
         """Give each of the block's lines its source line (``src``, one per line: an
         expanded program's, where a loop's body is read once per pass and a subprogram's
-        lines come from another file); the runs read from it then number their lines so."""
+        lines come from another file) and its file (``files``); the runs read from it
+        then number their lines so, and name their files."""
         self.src = src
         self.src_arr = np.array(src, dtype=int)
+        self.src_files = files
 
     def code(self, i: int) -> int:
         """Motion of line i's G word (G0 to G3, G00 to G03)."""
@@ -375,6 +379,16 @@ class Run:
         """The source line of the run's line ``j`` (an index within it)."""
         src = self.block.src
         return self.lineno + j if src is None else src[self.a + j]
+
+    def path(self, j: int) -> str | None:
+        """The file of the run's line ``j`` (None: the program's own)."""
+        files = self.block.src_files
+        return None if files is None else files[self.a + min(j, len(self) - 1)]
+
+    def paths(self) -> list[str | None] | None:
+        """The file of each of the run's lines, or None when they are the program's own."""
+        files = self.block.src_files
+        return None if files is None else files[self.a:self.b]
 
     def text_line(self, n: int) -> int:
         """The source line of the run's line ``n`` (lines past its end numbered on from
@@ -603,6 +617,7 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
     mv = RunMove(run, run.line(j), motion, q0, q1, float(f) if f else feed)
+    mv.path = run.path(j)
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)

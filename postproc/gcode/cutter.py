@@ -415,7 +415,7 @@ def check_chunk(c) -> None:
         raise CutterBoundError(
             f"cutter radius compensation: the correction changes by {bound[k] * 1000:.2f} um across the tool "
             f"radius {cm.radius_mm:g} mm ({cm.source}) near ({at[k][0]:.3f}, {at[k][1]:.3f}, {at[k][2]:.3f}) mm, "
-            f"more than the tolerance {tol:g} mm", path=c.path, lineno=cm.move.lineno,
+            f"more than the tolerance {tol:g} mm", path=cm.move.path or c.path, lineno=cm.move.lineno,
             hint="the controller offsets the corrected contour by the radius, so the tool centre is off by that "
                  f"much; allow it with postproc correct --tolerance {math.ceil(bound[k] * 1e5) / 1e5:g}, or post the "
                  "tool-centre "
@@ -428,7 +428,7 @@ def take_up(c, mv: Move) -> None:
     if mv.lineno in c.cutter.lines:
         raise UnsupportedGcodeError(
             "a backlash take-up move would be inserted under cutter radius compensation, where the controller "
-            "would offset it as a move of its own", path=c.path, lineno=mv.lineno,
+            "would offset it as a move of its own", path=mv.path or c.path, lineno=mv.lineno,
             hint="post the tool-centre path (compensation done in CAM) for a calibration with backlash")
 
 

@@ -59,6 +59,7 @@ import numpy.typing as npt
 
 from postproc.effects.base import AXES, DIR_COLUMNS
 from postproc.errors import SafetyError
+from postproc.gcode.places import PathArray
 
 #: Rounds of re-solving before the directions are declared unsettled.
 MAX_ITERATIONS = 16
@@ -158,14 +159,14 @@ def commanded(T: np.ndarray, how: Commanding, assumed=None) -> tuple[np.ndarray,
 
 
 def settle(T: np.ndarray, D: np.ndarray, how: Commanding, solve, lineno, *,
-           path: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+           path: str | None = None, files: PathArray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The fixed point of corrected targets and commanded directions (see the module).
 
     ``T``: targets corrected with the assumed directions ``D`` (both (M, 3)), commanded
     as ``how`` says (:func:`commanded`); ``solve(rows, D_rows)``: the targets of ``rows``
-    corrected with directions ``D_rows``; ``lineno`` (M,): program lines, for the
-    refusal. Returns ``(E, D)``, the targets as commanded (holds applied) and their
-    directions.
+    corrected with directions ``D_rows``; ``lineno`` (M,): program lines, and ``files``
+    (M,) their files where not all are ``path``'s, for the refusal. Returns ``(E, D)``,
+    the targets as commanded (holds applied) and their directions.
     """
     axes = tuple(how.axes)
     if not axes or not len(T):
@@ -191,7 +192,7 @@ def settle(T: np.ndarray, D: np.ndarray, how: Commanding, solve, lineno, *,
         f"the approach direction of {ax} does not settle here: the correction commanded with one direction "
         f"moves {ax} the other way, and the other way back (a reversal value that makes {ax} run ahead, "
         f"backlash b > 0, cannot be taken up by a small move)",
-        path=path, lineno=int(lineno[i]),
+        path=path if files is None else files[i] or path, lineno=int(lineno[i]),
         hint=f"check the calibration's backlash:{ax}: lost motion has b < 0 (ISO 230-2 B = x_up - x_down); "
              "b > 0 is an axis that runs ahead, as one does whose controller compensates more backlash than there "
              "is: lower that compensation and measure again")
@@ -246,7 +247,8 @@ class PieceInputs:
     sequence; ``start``, ``start_dirs``, ``start_nominal``: the commanded point,
     directions and nominal point it starts from; ``bulge``: how its nominal path bulges
     from its chords between samples; ``jump_budget_mm``: how far a reversal's jump may
-    leave the path; ``lineno``: its line, for a refusal."""
+    leave the path; ``lineno``: its line, for a refusal, and ``path`` its file where it
+    is not the program's own."""
 
     first: int
     last: int
@@ -256,6 +258,7 @@ class PieceInputs:
     bulge: Bulge
     jump_budget_mm: float = np.inf
     lineno: int | None = None
+    path: str | None = None
 
 
 def plan_pieces(move: PieceInputs, pts: SettledPoints, path: str | None = None) -> list:
@@ -328,7 +331,7 @@ def _takeup(j: int, move: PieceInputs, pts: SettledPoints, path: str | None) -> 
                 f"{ax} runs ahead of its approach direction (reversal b > 0): reversing it here makes the "
                 f"tool jump {np.linalg.norm(jump) * 1000:.3g} um, {off * 1000:.3g} um off the path, more than "
                 f"the tolerance; no move takes that up (one in the old direction overshoots, one in the new "
-                f"direction jumps)", path=path, lineno=move.lineno,
+                f"direction jumps)", path=move.path or path, lineno=move.lineno,
                 hint=f"check the calibration's backlash:{ax}: b > 0 is an axis that runs ahead, as one does "
                      "whose controller compensates more backlash than there is: lower that compensation and "
                      "measure again. Programs that reverse it only into moves along it are corrected")

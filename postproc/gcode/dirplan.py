@@ -29,6 +29,7 @@ from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.geometry import arc_length, arc_points, line_points
 from postproc.gcode.moves import Arc, Role
 from postproc.gcode.options import CorrectOptions
+from postproc.gcode.places import PathArray, file_of, pick
 from postproc.gcode.sampling import SAMPLE_STEP_MM, _arc_piece_samples, _no_bulge
 from postproc.gcode.segment import Curve
 from postproc.gcode.table import Table
@@ -54,7 +55,7 @@ class _Planner(Protocol):
     units_checked: set[float]
 
     def corrected(self, q_nom: FloatArray, r: FloatArray, dirs: FloatArray, rotary: Sequence[dict[str, float]],
-                  lineno: IntArray) -> FloatArray: ...
+                  lineno: IntArray, files: PathArray | None = None) -> FloatArray: ...
 
     def round_err(self, unit: float) -> float: ...
 
@@ -140,13 +141,13 @@ def _settle(pl: _Planner, planned: list[tuple[int, PlanMove]], tab: Table) -> _S
     def solve(rows: IntArray, dirs: FloatArray, at: FloatArray | None = None) -> FloatArray:
         own = owner[rows]
         return pl.corrected(nominal[rows] if at is None else at, R[own], dirs,
-                            [rot[j] for j in own.tolist()], linenos[own])
+                            [rot[j] for j in own.tolist()], linenos[own], pick(tab.files, own))
 
     inner = np.flatnonzero(counts[owner] > 1)
     if len(inner):
         Tx[inner] = solve(inner, Dx[inner])
     Ex, Dx = settle(Tx, Dx, Commanding(pl.prev_target, pl.dirs, hold, axes, free, given, first[owner]), solve,
-                    linenos[owner], path=pl.path)
+                    linenos[owner], path=pl.path, files=pick(tab.files, owner))
     tab.target, tab.dirs = Ex[last], Dx[last]
     return _Settled(owner, first, last, sx, nominal, Ex, Dx, solve)
 
@@ -185,14 +186,17 @@ def _plan_pieces(pl: _Planner, planned: list[tuple[int, PlanMove]], tab: Table, 
         else:
             bulge = _no_bulge
         seq = plan_pieces(PieceInputs(j0, int(last[i]), start, start_dirs, Q0[i], bulge,
-                                      pl.opt.tolerance_mm - pl.round_err(m.unit), m.lineno),
+                                      pl.opt.tolerance_mm - pl.round_err(m.unit), m.lineno,
+                                      file_of(tab.files, i, None)),
                           SettledPoints(Ex, Dx, sx, nominal, takeups, rows, axes, TAKEUP_MIN_MM), path=pl.path)
         if arc is not None:
             (_a1, _a2, an), _t0, sweep, r0, r1 = arc_prm[i]
             carried = np.array(start_dirs, dtype=float)
             carried[an] = D[i][an]
             plans[i] = {"seq": seq, "whole": len(seq) == 1, "nsweep": sweep, "mismatch": abs(r1 - r0),
-                        "curve": Curve(m.q0, m.q1, arc, R[i], carried, m.lineno, m.rotary, arc_prm[i])}
+                        "curve": Curve(m.q0, m.q1, arc, R[i], carried, m.lineno, m.rotary, arc_prm[i],
+                                       file_of(tab.files, i, None))}
         else:  # a line's standing axes: the direction its corrected command takes
             plans[i] = {"seq": seq, "whole": len(seq) == 1,
-                        "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary)}
+                        "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], D[i], m.lineno, m.rotary,
+                                       path=file_of(tab.files, i, None))}

@@ -309,7 +309,7 @@ class EmitterMixin:
             raise PostprocError(
                 "this move must be split to stay within tolerance, but its line also changes the tool "
                 "or uses G53, or it is the entry or exit move of cutter radius compensation (which the "
-                "controller draws from where the tool is to the offset point)", path=self.path, lineno=mv.lineno,
+                "controller draws from where the tool is to the offset point)", path=mv.path or self.path, lineno=mv.lineno,
                 hint="put the tool change or G53 on a line of its own; make a lead-in or lead-out move shorter, "
                      "or raise --tolerance")
         sep, lower = emit.style_of(line)

@@ -19,6 +19,7 @@ from postproc.errors import (
 )
 from postproc.gcode.emitter import _unit_decimals, round_err
 from postproc.gcode.options import CorrectOptions, CorrectReport
+from postproc.gcode.places import PathArray, file_of, line_list, pick
 from postproc.gcode.segment import Curve, subdivide
 from postproc.gcode.vplan import FloatArray, IntArray
 
@@ -75,9 +76,12 @@ class EngineCalls:
         return ctx
 
     def corrected(self, q_nom: FloatArray, r: FloatArray, dirs: FloatArray, rotary: Sequence[dict[str, float]],
-                  lineno: IntArray) -> FloatArray:
-        """Corrected gauge positions for nominal gauge positions (all safety checks)."""
+                  lineno: IntArray, files: PathArray | None = None) -> FloatArray:
+        """Corrected gauge positions for nominal gauge positions (all safety checks);
+        ``lineno``, ``files``: the line of each and its file (None: the program's own,
+        :mod:`postproc.gcode.places`), for a refusal."""
         eng = self.engine
+        path = self.path
         p = q_nom + r
         ctx = self.context(dirs, rotary)
         inside = eng.inside(q_nom)
@@ -85,13 +89,13 @@ class EngineCalls:
         if not inside.all():
             bad = np.flatnonzero(~inside)
             if self.opt.extrapolate == "refuse":
-                lines = sorted(set(lineno[bad].tolist()))
                 first = q_nom[bad[0]]
+                own = file_of(files, int(bad[0]), path)
                 raise OutOfVolumeError(
-                    f"target outside the calibrated volume at lines {', '.join(map(str, lines[:8]))}"
-                    f"{' ...' if len(lines) > 8 else ''}: commanded ({first[0]:.3f}, {first[1]:.3f}, "
+                    f"target outside the calibrated volume at lines {line_list(lineno, files, bad, own, path)}"
+                    f": commanded ({first[0]:.3f}, {first[1]:.3f}, "
                     f"{first[2]:.3f}) mm, volume {eng.volume_mm[0].tolist()} .. {eng.volume_mm[1].tolist()} mm",
-                    path=self.path, lineno=int(lineno[bad[0]]),
+                    path=own, lineno=int(lineno[bad[0]]),
                     hint="check --offset/--tool-length, or allow it with --extrapolate clamp|linear")
             self.report.extrapolated_points += len(bad)
             if self.opt.extrapolate == "clamp":
@@ -100,7 +104,7 @@ class EngineCalls:
         try:
             res = eng.correction(p_eval, r, ctx)
         except PostprocError as exc:
-            raise exc.at(path=self.path, lineno=int(lineno[0]) if len(lineno) else None) from None
+            raise exc.at(path=file_of(files, 0, path), lineno=int(lineno[0]) if len(lineno) else None) from None
         delta = np.asarray(res.q, dtype=float)
         resid = np.asarray(res.residual_mm, dtype=float)
         bad = ~np.isfinite(delta).all(axis=1) | ~(resid <= self.accept_residual_mm)
@@ -110,7 +114,7 @@ class EngineCalls:
             raise SolverError(
                 f"the {eng.method}{solver} inverse did not converge (residual {resid[i]:.3g} mm, "
                 f"accepted up to {self.accept_residual_mm:.3g} mm)",
-                path=self.path, lineno=int(lineno[i]),
+                path=file_of(files, i, path), lineno=int(lineno[i]),
                 hint="the calibration may be unusable here; check it with 'postproc check'")
         if len(resid):
             self.report.max_residual_mm = max(self.report.max_residual_mm, float(resid.max()))
@@ -121,11 +125,12 @@ class EngineCalls:
             except PostprocError as exc:
                 # a map names the point it refused (point_index); name its program line
                 at = getattr(exc, "point_index", None)
-                ln = int(lineno[at]) if at is not None and 0 <= at < len(lineno) else None
-                raise exc.at(path=self.path, lineno=ln) from None
+                if at is not None and 0 <= at < len(lineno):
+                    raise exc.at(path=file_of(files, at, path), lineno=int(lineno[at])) from None
+                raise exc.at(path=path) from None
             if d.shape != delta.shape or not np.isfinite(d).all():
                 raise SolverError(f"correction map {add.name!r} gave no finite correction here",
-                                  path=self.path, lineno=int(lineno[0]))
+                                  path=file_of(files, 0, path), lineno=int(lineno[0]))
             delta = delta + d
         size = np.linalg.norm(delta, axis=1)
         if len(size):
@@ -133,21 +138,22 @@ class EngineCalls:
             if size[i] > self.opt.max_correction_mm:
                 raise CorrectionTooLargeError(
                     f"correction of {size[i]:.4f} mm exceeds --max-correction {self.opt.max_correction_mm:g} mm",
-                    path=self.path, lineno=int(lineno[i]),
+                    path=file_of(files, i, path), lineno=int(lineno[i]),
                     hint="a correction this large suggests wrong units or a wrong calibration; "
                          "raise --max-correction only if it is real")
             self.report.max_correction_mm = max(self.report.max_correction_mm, float(size[i]))
         return q_nom + delta
 
-    def check_rounding(self, unit: float, lineno: int) -> None:
-        """Refuse when rounding the words to their decimals alone exceeds the tolerance."""
+    def check_rounding(self, unit: float, lineno: int, path: str | None = None) -> None:
+        """Refuse when rounding the words to their decimals alone exceeds the tolerance
+        (naming line ``lineno`` of ``path``, the program's own when None)."""
         err = self.round_err(unit)
         if err >= self.opt.tolerance_mm:
             d = _unit_decimals(self.opt, unit)
             raise SafetyError(
                 f"words written with {d} decimals in {'inch' if unit == MM_PER_INCH else 'mm'} are rounded by up "
                 f"to {err:.3g} mm, more than --tolerance {self.opt.tolerance_mm:g} mm",
-                path=self.path, lineno=lineno,
+                path=path or self.path, lineno=lineno,
                 hint=f"give more --decimals or a --tolerance above {err:.3g} mm")
         self.units_checked.add(unit)
 
@@ -161,6 +167,8 @@ class EngineCalls:
         Q0 = np.array([c.q0 for c in curves], dtype=float)
         Q1 = np.array([c.q1 for c in curves], dtype=float)
         Rr = np.array([c.r for c in curves], dtype=float)
+        # the curves' files, in an expanded program (None: all the program's own)
+        paths = None if all(c.path is None for c in curves) else np.array([c.path for c in curves], dtype=object)
 
         def evaluate(cid: np.ndarray, s: np.ndarray) -> np.ndarray:
             nom = np.empty((len(s), 3))
@@ -179,7 +187,7 @@ class EngineCalls:
                     dirs[sel] = curves[j].directions(s[sel])
             rot = [curves[j].rotary for j in cid.tolist()]
             ln = np.array([curves[j].lineno for j in cid.tolist()])
-            return self.corrected(nom, Rr[cid], dirs, rot, ln)
+            return self.corrected(nom, Rr[cid], dirs, rot, ln, pick(paths, cid))
 
         try:
             return subdivide(curves, s_init, evaluate, self.opt.tolerance_mm - rerr)

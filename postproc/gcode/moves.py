@@ -102,3 +102,6 @@ class Move:
     # the linear part of the programmable frame it was programmed in (Sinumerik ROT, SCALE,
     # MIRROR; postproc.gcode.frames), or None: its words are in that frame's coordinates
     frame: tuple | None = None
+    # the file its line comes from, in an expanded program (a subprogram's file, or the
+    # program's own); None: the program's own (a program read as written)
+    path: str | None = None

@@ -278,9 +278,9 @@ class Corrector:
         for e in entries:
             if type(e) is bulk.Run:
                 if e.unit not in checked:
-                    self.planner.check_rounding(e.unit, e.lineno)
+                    self.planner.check_rounding(e.unit, e.lineno, e.path(0))
             elif type(mv := e[1]) is Move and mv.unit not in checked:
-                self.planner.check_rounding(mv.unit, mv.lineno)
+                self.planner.check_rounding(mv.unit, mv.lineno, mv.path)
 
     def _gather(self, entries: list[Entry | bulk.Run], arcs: bool = True) -> Table:
         """A chunk's table: its moves in order, runs of plain lines as blocks and other
@@ -318,7 +318,16 @@ class Corrector:
             Q1[at] = [m.q1 for _i, m in general]
             lns[at] = [m.lineno for _i, m in general]
             Rt[at] = [m.r for _i, m in general]
-        return Table(Q1, lns, Rt, rot, general, runs)
+        files = None
+        if self.reader.source is not None:  # an expanded program: the file of each row too
+            files = np.full(M, self.path, dtype=object)
+            if general:
+                files[at] = [getattr(m, "path", None) or self.path for _i, m in general]
+            for e in runs:  # (after the moves: a run's arcs are among them)
+                paths = e.paths()
+                if paths is not None:
+                    files[e.trow:e.trow + len(e)] = paths
+        return Table(Q1, lns, Rt, rot, general, runs, files)
 
     def _read_only(self, entries: list[Entry | bulk.Run]) -> None:
         """What a chunk read but not corrected carries to the next (a process correcting a

@@ -41,6 +41,7 @@ from postproc.gcode.geometry import (
 )
 from postproc.gcode.moves import Arc, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
+from postproc.gcode.places import file_of, pick
 from postproc.gcode.sampling import (
     ARC_CHECK_MIN_SAMPLES,
     ARC_CHECK_STEP_RAD,
@@ -145,7 +146,7 @@ class Planner(EngineCalls):
             live[inert] = False
             T = np.empty_like(Q1)
             T[live] = self.corrected(Q1[live], R[live], D[live], [rot[i] for i in np.flatnonzero(live)],
-                                     linenos[live])
+                                     linenos[live], pick(tab.files, live))
             if fixed_rows:
                 T[fixed_rows] = fixed_q
                 Q1[fixed_rows] = fixed_q
@@ -156,7 +157,7 @@ class Planner(EngineCalls):
                 moved[inert] = False
                 T[inert] = T[bulk.last_index(moved)[inert]]
         else:
-            T = self.corrected(Q1, R, D, rot, linenos)
+            T = self.corrected(Q1, R, D, rot, linenos, tab.files)
         tab.target = T
 
     def _plan_fits(self, planned: list[tuple[int, PlanMove]], tab: Table,
@@ -169,7 +170,8 @@ class Planner(EngineCalls):
         hints: dict[int, ArcHint] = {}
 
         def corr(rows: IntArray, nom: FloatArray) -> FloatArray:
-            return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows])
+            return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows],
+                                  pick(tab.files, rows))
 
         def curvature(rows: IntArray) -> FloatArray:
             # the commands the inverse finds lie within the largest allowed correction
@@ -216,7 +218,7 @@ class Planner(EngineCalls):
             for i in fixed_rows:  # unknown axes: taken as not moving (no approach direction)
                 before = Q1[i - 1] if i > 0 else self.prev_nominal
                 Q1[i] = np.where(np.isnan(Q1[i]), before, Q1[i])
-        Q1 = backfill_unknown(Q1, linenos, self.path)
+        Q1 = backfill_unknown(Q1, linenos, self.path, tab.files)
         Q0 = np.vstack([self.prev_nominal[None, :], Q1[:-1]])
         Q0 = np.where(np.isnan(Q0), Q1, Q0)
         # approach directions: chord signs (end tangent for arcs), carried where zero
@@ -343,7 +345,7 @@ class Planner(EngineCalls):
         smp = _sample_moves(planned, tab)
         owner = np.repeat(np.array(smp.piece_move, dtype=int), smp.counts)
         corr = self.corrected(smp.nom, R[owner], np.repeat(smp.dirs, smp.counts, axis=0),
-                              [rot[i] for i in owner.tolist()], linenos[owner])
+                              [rot[i] for i in owner.tolist()], linenos[owner], pick(tab.files, owner))
         takeup = _takeups(smp, corr, S, d_in)
         layout = [(i, m, [(smp.s[a:b], smp.nom[a:b], takeup[p], smp.bulge[a - p:b - p - 1])
                           for p, a, b in pieces])
@@ -374,10 +376,12 @@ class Planner(EngineCalls):
             if m.arc is not None:
                 _axes, _t0, sweep, r0, r1 = arc_prm[i]
                 plans[i] = {"seq": seq, "whole": len(seq) == 1, "nsweep": sweep, "mismatch": abs(r1 - r0),
-                            "curve": Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i])}
+                            "curve": Curve(m.q0, m.q1, m.arc, R[i], d_in[i], m.lineno, m.rotary, arc_prm[i],
+                                           file_of(tab.files, i, None))}
             else:
                 plans[i] = {"seq": seq, "whole": len(seq) == 1,
-                            "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary)}
+                            "curve": Curve(tuple(Q0[i]), tuple(Q1[i]), None, R[i], d_in[i], m.lineno, m.rotary,
+                                           path=file_of(tab.files, i, None))}
 
 
 

@@ -32,6 +32,7 @@ from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
+from postproc.gcode.places import repeated
 from postproc.gcode.planner import Planner
 from postproc.gcode.state import CANNED_CYCLES, LINE, RAPID
 from postproc.gcode.vplan import FloatArray
@@ -103,9 +104,19 @@ class LineReader(Generic[E]):
         """Read one line through the interpreter and queue what it makes."""
         here = self.where(self.lineno)
         mv = self.interp.feed_line(here, line)
+        if self.source is not None:  # an expanded program's: each move names its file
+            self._name_file(mv)
         self.queue(line, mv, here)
         self.lineno += 1
         self.run_ok = self.use_bulk and bulk.state_allows(self.interp)
+
+    def _name_file(self, mv: Move | None) -> None:
+        """Give the moves the line just read made the file it comes from (the
+        interpreter's, as :meth:`where` set it)."""
+        path = self.interp.path
+        for m in (mv, mv.then if mv is not None else None, self.interp.cycle_move):
+            if m is not None:
+                m.path = path
 
     def queue(self, line: str, mv: Move | None, lineno: int) -> None:
         """Queue what line ``lineno`` (``line``, read by the interpreter: ``mv``) makes."""
@@ -136,12 +147,12 @@ class LineReader(Generic[E]):
             return
         if self.source is not None:
             # the source line of each line of the block (where() takes them as they are read)
-            src = [ln for ln, _p in islice(self.source, len(lines))]
-            if len(src) < len(lines):  # (the sources of the block's lines not all given yet)
+            given = list(islice(self.source, len(lines)))
+            if len(given) < len(lines):  # (the sources of the block's lines not all given yet)
                 for line in lines:
                     self.line(line)
                 return
-            block.set_source(src)
+            block.set_source([ln for ln, _p in given], [p or self.path for _ln, p in given])
         try:
             edges = np.diff(np.concatenate([[0], block.plain.view(np.int8), [0]]))
             i, n = 0, len(lines)
@@ -265,7 +276,7 @@ class ChunkReader(LineReader[Entry]):
         sign = np.where(sign == 0, self.planner.dirs, sign)
         lineno = np.full(len(s), mv.lineno)
         corr = self.planner.corrected(nom, np.broadcast_to(np.asarray(mv.r, dtype=float), nom.shape), sign,
-                              [mv.rotary] * len(s), lineno)
+                              [mv.rotary] * len(s), lineno, repeated(mv.path, len(s)))
         keep = [0]
         i = 0
         budget = 0.9 * tol
@@ -294,7 +305,8 @@ class ChunkReader(LineReader[Entry]):
         pts = np.array([(x, y, mv.q1[2]) for x, y in spline], dtype=float)
         n = len(pts)
         t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape),
-                           np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno))
+                           np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno),
+                           repeated(mv.path, n))
         d = _unit_decimals(self.opt, mv.unit)
         return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
 
@@ -342,7 +354,7 @@ class ChunkReader(LineReader[Entry]):
         n = len(pts)
         dirs = np.broadcast_to(self.planner.dirs, pts.shape)
         t = self.planner.corrected(pts, np.broadcast_to(np.asarray(mv.r, dtype=float), pts.shape), dirs,
-                           [mv.rotary] * n, np.full(n, mv.lineno))
+                           [mv.rotary] * n, np.full(n, mv.lineno), repeated(mv.path, n))
         if c.repeats == 1 and not mv.incremental:
             drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
             return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self.planner.round_err(mv.unit))
@@ -360,7 +372,8 @@ class ChunkReader(LineReader[Entry]):
         if self.opt.cycles == "keep":
             call = interp.call_line or f"MCALL {interp.modal_call.name if interp.modal_call else ''}"
             raise UnsupportedGcodeError(
-                f"Sinumerik {call} (drilling cycle call): read only when written as its moves", path=self.path, lineno=lineno, col=1,
+                f"Sinumerik {call} (drilling cycle call): read only when written as its moves",
+                path=self.interp.path or self.path, lineno=lineno, col=1,
                 hint="give --cycles expand or auto to write each hole as its G0/G1 moves, each corrected")
         for step in emit.drill_cycle_lines(line, bool(interp.call_line), mv, cyc, interp.state.motion):
             if step is None:
@@ -408,7 +421,7 @@ class ChunkReader(LineReader[Entry]):
             prev, q = prev_m, q_m
         step = Move(mv.lineno, kind, prev, q, mv.r, mv.shift, unit, mv.incremental,
                     mv.arc_absolute, ws, (ix, iy, iz), next((i for i, w in enumerate(ws) if w.letter == "F"), -1), False,
-                    mv.feed, mv.rotary, motion_idx=0, role=role, frame=mv.frame)
+                    mv.feed, mv.rotary, motion_idx=0, role=role, frame=mv.frame, path=mv.path)
         return (text.lower() if lower else text), step, True, kind
 
 

@@ -77,6 +77,7 @@ class Curve:
     lineno: int
     rotary: dict[str, float]
     params: tuple[Axes, float, float, float, float] | None = None  # arc_params of an arc (computed once)
+    path: str | None = None  # the file of its line, in an expanded program (None: the program's own)
 
     def nominal(self, s: np.ndarray) -> np.ndarray:
         if self.arc is None:
@@ -139,7 +140,7 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate: Evaluate,
             worst = curves[int(pc[0])]
             raise SolverError(
                 f"the correction varies too fast along this move to follow within {threshold_mm:g} mm",
-                lineno=worst.lineno, hint="check the calibration (is it smooth?) or raise --tolerance")
+                path=worst.path, lineno=worst.lineno, hint="check the calibration (is it smooth?) or raise --tolerance")
         sm = 0.5 * (pa + pb)
         qm = evaluate(pc, sm)
         dev = np.linalg.norm(qm - 0.5 * (qa + qb), axis=1)

@@ -20,6 +20,7 @@ from typing import TextIO
 import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
+from postproc.gcode.places import PathArray
 
 
 @dataclass
@@ -97,8 +98,10 @@ def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
     return None, iter(_LINE_RE.findall(str(source)))
 
 
-def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.ndarray:
-    """Replace NaN (not yet positioned) by the next known value of the same axis."""
+def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None,
+                     files: PathArray | None = None) -> np.ndarray:
+    """Replace NaN (not yet positioned) by the next known value of the same axis
+    (``files``: the file of each row where not all are ``path``'s, for a refusal)."""
     q = q.copy()
     for k in range(3):
         col = q[:, k]
@@ -109,13 +112,15 @@ def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None) -> np.
         if len(good) == 0:
             raise MissingSetupError(
                 f"axis {'XYZ'[k]} is never positioned by the program, so the correction cannot be evaluated",
-                path=path, lineno=int(lineno[0]) if len(lineno) else None,
+                path=files[0] or path if files is not None and len(files) else path,
+                lineno=int(lineno[0]) if len(lineno) else None,
                 hint=f"give the machine position of {'XYZ'[k]} at program start with --start {'XYZ'[k]}.. "
                      f"(mm, machine coordinates), or add an absolute move on {'XYZ'[k]} near the start")
         idx = np.searchsorted(good, np.flatnonzero(bad))
         if np.any(idx >= len(good)):
             raise MissingSetupError(f"axis {'XYZ'[k]} is not positioned before the end of the program",
-                                    path=path, lineno=int(lineno[np.flatnonzero(bad)[-1]]))
+                                    path=path if files is None else files[np.flatnonzero(bad)[-1]] or path,
+                                    lineno=int(lineno[np.flatnonzero(bad)[-1]]))
         col[bad] = col[good[idx]]
     return q
 

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from postproc.gcode.places import PathArray
 from postproc.gcode.vplan import ArcParams, FloatArray, IntArray, PlanMove
 
 if TYPE_CHECKING:
@@ -25,8 +26,9 @@ _NO_POINTS = np.zeros((0, 3))
 @dataclass(eq=False)
 class Table:
     """A chunk's moves, a row each in program order, as columns. The reader fills what it
-    read (targets, lines, tool vectors, rotary positions, the moves read line by line and
-    the runs of plain lines); the planner the rest."""
+    read (targets, lines and, in an expanded program, their files, tool vectors, rotary
+    positions, the moves read line by line and the runs of plain lines); the planner the
+    rest."""
 
     q1: FloatArray  # (M, 3) nominal targets (machine mm; unknown axes filled by the planner)
     lineno: IntArray  # (M,) source line of each row
@@ -34,6 +36,9 @@ class Table:
     rot: list[dict[str, float]]  # rotary axis positions of each row ({} without rotary axes)
     moves: list[tuple[int, PlanMove]]  # (row, move) of the rows read line by line, and the runs' arcs
     runs: Sequence[bulk.Run] = ()  # runs of plain lines (each knows its first row, trow)
+    # the file of each row's line, in an expanded program (None: all the program's own;
+    # postproc.gcode.places)
+    files: PathArray | None = None
     # -- filled by Planner.approach
     q0: FloatArray = field(default_factory=lambda: _NO_POINTS)  # nominal starts
     dirs: FloatArray = field(default_factory=lambda: _NO_POINTS)  # approach direction of each axis (-1, 0, 1)

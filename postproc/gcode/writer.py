@@ -64,8 +64,8 @@ Entry: TypeAlias = "tuple[str, Move | Rebase | Store | None, bool, int | None]"
 class _Chunk:
     """A chunk being written: its targets, plans and hints, the text written so far, where
     each entry's text starts in it (``marks``: (index, its line, 1: every line is that
-    line's, 0: a line passed as it is, None), or (index, j, 2: a run's lines one by one
-    from its line j, the run)), the next row of the table, the lines passed as they are,
+    line's, 0: a line passed as it is, the file of that line: None for the program's
+    own), or (index, j, 2: a run's lines one by one from its line j, the run)), the next row of the table, the lines passed as they are,
     the runs' prepared emissions, and the last saved state (:meth:`ChunkWriter._save`)."""
 
     __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks", "saved")
@@ -75,7 +75,7 @@ class _Chunk:
         self.plans = plans
         self.hints = hints
         self.out: list[str] = []  # the chunk's text, written at once
-        self.marks: list[tuple[int, int, int, bulk.Run | None]] = []
+        self.marks: list[tuple[int, int, int, bulk.Run | str | None]] = []
         self.k = 0
         self.passed = 0
         self.prepared: dict[int, bulk.Emission] = {}
@@ -96,7 +96,7 @@ class _RunMarks:
 
     def __call__(self, j: int, whole: bool) -> None:
         o = self.o
-        o.marks.append((len(o.out), self.run.line(j), 1, None) if whole else (len(o.out), j, 2, self.run))
+        o.marks.append((len(o.out), self.run.line(j), 1, self.run.path(j)) if whole else (len(o.out), j, 2, self.run))
 
     def save(self, y: int) -> None:
         self.w._save(self.o, self.i, (self.part, y))
@@ -217,7 +217,7 @@ class ChunkWriter(EmitterMixin):
                 line = e.block.lines[e.a + j]
                 hint = o.hints.get(k + j)
                 self._save(o, i, (p, -1))  # its plan or a fit's subdivision may have to be made first
-                o.marks.append((len(out), e.line(j), 1, None))
+                o.marks.append((len(out), e.line(j), 1, e.path(j)))
                 if hint is not None:
                     self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, out.append)
                 else:
@@ -230,7 +230,8 @@ class ChunkWriter(EmitterMixin):
         out, T, k = o.out, o.T, o.k
         write = out.append
         line, mv, motion_word, prog_motion = e
-        o.marks.append((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1, None))
+        o.marks.append((len(out), getattr(mv, "lineno", 0), 0 if mv is None or type(mv) is Store else 1,
+                        getattr(mv, "path", None)))
         if type(mv) is Rebase:
             self._emit_rebase(line, mv, write)
             return
@@ -268,7 +269,7 @@ class ChunkWriter(EmitterMixin):
             else:
                 self._emit_move(line, mv, T[k].tolist(), o.plans.get(k), write)
 
-    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int, bulk.Run | None]]) -> str:
+    def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int, bulk.Run | str | None]]) -> str:
         """A chunk's text (``out``, its entries' ``marks``) with every line it writes
         within the dialect's limits: a line that passes them gets its comments on a line
         of their own before it (:func:`emit.fit_line`), or is refused naming its line and
@@ -276,7 +277,8 @@ class ChunkWriter(EmitterMixin):
         pieces: list[str] = []
         ends = [m[0] for m in marks[1:]] + [len(out)]
         pieces.extend(out[:marks[0][0]] if marks else out)
-        for (a, at, kind, run), b in zip(marks, ends, strict=True):
+        for (a, at, kind, src), b in zip(marks, ends, strict=True):
+            run, path = (src, None) if type(src) is bulk.Run else (None, src)
             text = "".join(out[a:b])
             if kind == 0 or not self._long_line.search(text):
                 pieces.append(text)
@@ -289,7 +291,9 @@ class ChunkWriter(EmitterMixin):
                 if over is not None:
                     col, what = over
                     raise SafetyError(
-                        f"{what}, once corrected", path=self.path, lineno=run.text_line(at + n) if run is not None else at,
+                        f"{what}, once corrected",
+                        path=(run.path(at + n) if run is not None else path) or self.path,
+                        lineno=run.text_line(at + n) if run is not None else at,
                         col=col, hint="shorten the line (a comment moved onto a line of its own would not "
                                       "do) or give the --dialect it is for")
                 if len(fitted) > 1:
@@ -324,7 +328,7 @@ class ChunkWriter(EmitterMixin):
             raise SafetyError(
                 f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
                 f"so its words cannot carry each hole's correction ({moved * mv.unit * 1000:.3g} um here)",
-                path=self.path, lineno=mv.lineno,
+                path=mv.path or self.path, lineno=mv.lineno,
                 hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
 
     def _emit_cycle(self, line: str, mv: Move, c: Cycle, t_bottom: list[float], t_r: list[float],
@@ -339,7 +343,7 @@ class ChunkWriter(EmitterMixin):
             raise SafetyError(
                 f"canned cycle G{c.code / 10:g}: the correction moves the hole's axis by {drift * 1000:.3g} um "
                 f"between its R plane and its bottom, more than --tolerance {self.opt.tolerance_mm:g} mm",
-                path=self.path, lineno=mv.lineno,
+                path=mv.path or self.path, lineno=mv.lineno,
                 hint="give --cycles expand to write the cycle as G0/G1 moves, each corrected")
         self.report.moves += 1
         self.report.cycles_kept += 1
