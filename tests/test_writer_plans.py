@@ -4,6 +4,8 @@ ends as written, the engine's subdivision of a fitted curve), goes back to where
 saved its state, and writes on once the planner has made it; the output and the
 report are those of a writer that never stopped."""
 
+import math
+
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -132,13 +134,26 @@ def test_the_writer_goes_on_from_its_saved_state_as_if_it_never_stopped(monkeypa
         assert vars(rep) == vars(rep0)
 
 
-def test_a_fits_subdivisions_are_made_by_the_planner_a_curve_at_a_time(monkeypatch, requests,
-                                                                     no_engine_call_while_writing):
+def test_a_fits_subdivisions_are_made_by_the_planner_in_growing_batches(monkeypatch, requests,
+                                                                      no_engine_call_while_writing):
+    """One span at a curve's first request, twice as many at each next: a fit that
+    needs k spans asks about log2(k) times, not k times."""
     eng = _short_pitch_engine()
+    used: list[tuple[float, float]] = []
+    plain = emitter.EmitterMixin._subdivide
+
+    def recording(self, curves, s_init, unit):
+        got = plain(self, curves, s_init, unit)
+        used.append((float(s_init[0][0]), float(s_init[0][-1])))
+        return got
+
+    monkeypatch.setattr(emitter.EmitterMixin, "_subdivide", recording)
     out, rep = correct_text(SUBDIVIDED, eng, Setup())
     subs = [r for r in requests if r[0] == "sub"]
-    assert subs  # the fits followed the curve more finely than its samples
-    assert len(subs) <= 4  # one request per curve (three moves are fitted), not one per span
+    k = len(set(used))  # (a fit written again after a request asks again for the spans it had)
+    assert k > 40  # the fits followed the curves more finely than their samples
+    # three moves are fitted: at most log2(k) + 1 requests for each
+    assert len(subs) <= 3 * (math.log2(k) + 1)
     assert rep.lines_inserted > 50
     # the corrected program is the same when the writer goes back to the chunk's start
     _saves_only_at_chunk_start(monkeypatch)
@@ -163,11 +178,17 @@ def test_a_span_the_engine_refuses_is_refused_only_where_a_fit_needs_it(monkeypa
     used: list[tuple[float, float]] = []
     all_spans: set[tuple[float, float]] = set()
     plain = emitter.EmitterMixin._subdivide
+    subdivide = engine_use.EngineCalls.subdivide
 
     def recording(self, curves, s_init, unit):
         used.append((float(s_init[0][0]), float(s_init[0][-1])))
-        all_spans.update(k[1:] for k in self._subdivided)
         return plain(self, curves, s_init, unit)
+
+    def made(self, curves, s_init, unit):
+        all_spans.update((float(s[0]), float(s[-1])) for s in s_init)
+        return subdivide(self, curves, s_init, unit)
+
+    monkeypatch.setattr(engine_use.EngineCalls, "subdivide", made)
 
     monkeypatch.setattr(emitter.EmitterMixin, "_subdivide", recording)
     expected, _ = correct_text(SUBDIVIDED, eng, Setup())

@@ -37,7 +37,15 @@ from postproc.gcode.vplan import ArcHint, ArcMove, Plan
 Write = Callable[[str], object]  # writes one output line
 #: the engine's subdivisions the planner made for a chunk's arc fits: (samples' parameters,
 #: corrected points; or the engine's refusal of that span) by :func:`subdivision_key`
-Subdivided = dict[tuple[int, float, float], "tuple[np.ndarray, np.ndarray] | SolverError"]
+class Subdivided(dict[tuple[int, float, float], "tuple[np.ndarray, np.ndarray] | SolverError"]):
+    """The engine's subdivisions the planner made for a chunk's arc fits, by
+    :func:`subdivision_key`: (the samples' parameters, the corrected points), or the
+    engine's refusal of that span; and by curve (its id), how many of its spans the
+    planner subdivides when next asked about it (``batch``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.batch: dict[int, int] = {}
 
 
 def _arc_of(mv: ArcMove) -> Arc:

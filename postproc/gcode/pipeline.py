@@ -368,7 +368,7 @@ class Corrector:
         for run in tab.runs:
             # arcs the bulk planner did not settle: written one by one by the general emitter
             run.cut.extend(j for j in run.arcs if run.trow + j not in hints)
-        subdivided: Subdivided = {}
+        subdivided = Subdivided()
         while True:  # every engine call is the planner's, before the chunk is written
             try:
                 self.writer.write(entries, tab, plans, hints, subdivided, write_out)

@@ -275,29 +275,36 @@ class Planner(EngineCalls):
             self._subdivisions(need, plans, subdivided)
 
     def _subdivisions(self, need: PlanNeeded, plans: dict[int, Plan], subdivided: Subdivided) -> None:
-        """The engine's subdivision of every span between two samples of the plan of the
-        curve the writer asked about (a fit that needs one often needs more), in one call.
-        Where the engine refuses one (a jump, or a solver's scatter beyond the tolerance),
-        each span is subdivided alone and a span's refusal is kept for the writer: it is
-        raised only where a fit needs that span."""
+        """The engine's subdivision of the span the writer asked about and, in the same
+        call, of the spans after it in the curve's plan (a fit that needs one often needs
+        more): one span at the curve's first request, twice as many at each next, so that
+        a curve whose fit needs k spans takes about log2(k) requests. Where the engine
+        refuses a call of several spans (a jump, or a solver's scatter beyond the
+        tolerance: a refused span can cost thousands of evaluations), the curve's spans
+        are subdivided one at a time from then on; a span's refusal is kept for the
+        writer, which raises it where a fit needs that span."""
         curve = cast("Curve", need.curve)
-        spans = [np.array(ab) for plan in plans.values() if plan.get("curve") is curve
-                 for st in plan["seq"] if st[0] == "piece"
-                 for ab in zip(st[1][:-1].tolist(), st[1][1:].tolist(), strict=True)]
-        if need.key not in {subdivision_key(curve, sp) for sp in spans}:
-            spans.append(cast("FloatArray", need.span))
-        got: list[tuple[FloatArray, FloatArray] | SolverError]
+        size = subdivided.batch.get(id(curve), 1)
+        spans = [cast("FloatArray", need.span)]
+        if size > 1:
+            ahead = [np.array(ab) for plan in plans.values() if plan.get("curve") is curve
+                     for st in plan["seq"] if st[0] == "piece"
+                     for ab in zip(st[1][:-1].tolist(), st[1][1:].tolist(), strict=True)
+                     if ab[0] > need.key[1] and subdivision_key(curve, np.array(ab)) not in subdivided]
+            spans += ahead[:size - 1]
         try:
-            got = list(self.subdivide([curve] * len(spans), spans, need.unit))
-        except SolverError:
-            got = []
-            for sp in spans:
-                try:
-                    got.append(self.subdivide([curve], [sp], need.unit)[0])
-                except SolverError as exc:
-                    got.append(exc)
+            got = self.subdivide([curve] * len(spans), spans, need.unit)
+        except SolverError as exc:
+            if len(spans) == 1:
+                subdivided[need.key] = exc
+                return
+            subdivided.batch[id(curve)] = 0  # one at a time from now on
+            self._subdivisions(need, plans, subdivided)
+            return
         for sp, g in zip(spans, got, strict=True):
             subdivided[subdivision_key(curve, sp)] = g
+        if size:
+            subdivided.batch[id(curve)] = 2 * size
 
     def _hints_failing_rounded(self, arcs: list[tuple[int, ArcMove, ArcHint]], budget: float) -> set[int]:
         """The rows of the arcs whose hint gives no centre words for their corrected ends

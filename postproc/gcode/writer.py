@@ -122,7 +122,7 @@ class ChunkWriter(EmitterMixin):
         self._decimals: dict[float, int] = {}
         self.cutter = compensated  # the compensated moves read (a take-up is refused on their lines)
         self._plans: dict[int, Plan] = {}
-        self._subdivided: Subdivided = {}
+        self._subdivided = Subdivided()
         self._resume: _Chunk | None = None  # the chunk to write on from its saved state
 
     def write(self, entries: list[Entry | bulk.Run], tab: Table, plans: dict[int, Plan],
@@ -161,7 +161,7 @@ class ChunkWriter(EmitterMixin):
             self._restore(o)
             self._resume = o
             raise
-        self._plans, self._subdivided = {}, {}  # the chunk's own
+        self._plans, self._subdivided = {}, Subdivided()  # the chunk's own
         for blk in o.blocks:
             blk.runs = []  # runs point back to their block: no cycle left for the (disabled) collector
         self.report.lines_out += o.passed
