@@ -323,3 +323,25 @@ def test_fanuc_reads_d_as_a_modal_offset_register():
     assert "(POSTPROC CUTTER COMP D11 RADIUS 2 MM BOUND" in out
     with pytest.raises(MissingSetupError, match="radius of D11"):
         correct_text(text, eng, Setup(tool_radii={1: 2.0}), CorrectOptions(dialect="fanuc"))
+
+
+def test_a_take_up_in_a_subprogram_is_not_taken_for_a_compensated_line_of_the_same_number(tmp_path):
+    # the compensated moves are known by file and line: a subprogram's line 5 is not the
+    # main program's line 5, which the controller offsets (the take-up there goes in)
+    from postproc.effects import compose, get_effect
+    from postproc.engine.identity import IdentityEngine
+    from postproc.gcode.pipeline import correct_file
+
+    eng = compose(IdentityEngine([[-1000.0] * 3, [1000.0] * 3]),
+                  [get_effect("backlash:X", params={"b_mm": -0.004}).to_dict()])
+    main = "G21 G17 G90 F100\nT1 M6\nG0 X0 Y0 Z0\nG1 X5 Y5\nG41 G1 X10 Y6\nX20\nY10\nG40 G1 X40 Y40\n" \
+           "o<back> call\nM2\n"
+    sub = "o<back> sub\nG1 X60 Y40\nG1 X70\nG1 Y50\nG1 X65\no<back> endsub\nM2\n"
+    assert main.splitlines()[4] == "G41 G1 X10 Y6"  # line 5 of each
+    assert sub.splitlines()[4] == "G1 X65"
+    (tmp_path / "subs").mkdir()
+    (tmp_path / "subs" / "back.ngc").write_text(sub)
+    (tmp_path / "main.ngc").write_text(main)
+    rep = correct_file(str(tmp_path / "main.ngc"), str(tmp_path / "out.ngc"), eng, Setup(tool_radii={1: 1.0}),
+                       CorrectOptions(subroutine_path=[str(tmp_path / "subs")], tolerance_mm=0.01))
+    assert rep.takeups >= 1  # the reversal on X at the subprogram's line 5 is taken up

@@ -99,7 +99,7 @@ class Bound:
     source: str = ""
     moves: int = 0
     radii: dict = field(default_factory=dict)  # source -> radius (mm)
-    lines: set = field(default_factory=set)  # the lines of the moves the controller offsets
+    lines: set = field(default_factory=set)  # (file, line) of the moves the controller offsets (None: the program's)
 
     def note(self) -> str:
         """The header's words for it."""
@@ -401,7 +401,7 @@ def check_chunk(c) -> None:
     bound, at = radius_bound(correction, moves)
     b = c.cutter
     b.moves += len(moves)
-    b.lines.update(cm.move.lineno for cm in moves)
+    b.lines.update((cm.move.path, cm.move.lineno) for cm in moves)
     for cm in moves:
         if cm.radius_mm:
             b.radii[cm.source] = cm.radius_mm
@@ -425,7 +425,7 @@ def check_chunk(c) -> None:
 def take_up(c, mv: Move) -> None:
     """Refuse a backlash take-up move inserted before a move the controller offsets: it
     would offset the take-up too, as a move of its own (corners and all)."""
-    if mv.lineno in c.cutter.lines:
+    if (mv.path, mv.lineno) in c.cutter.lines:
         raise UnsupportedGcodeError(
             "a backlash take-up move would be inserted under cutter radius compensation, where the controller "
             "would offset it as a move of its own", path=mv.path or c.path, lineno=mv.lineno,
