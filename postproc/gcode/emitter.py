@@ -35,8 +35,8 @@ from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 from postproc.gcode.vplan import ArcHint, ArcMove, Plan
 
 Write = Callable[[str], object]  # writes one output line
-#: the engine's subdivisions the planner made for a chunk's arc fits: (samples' parameters,
-#: corrected points; or the engine's refusal of that span) by :func:`subdivision_key`
+
+
 class Subdivided(dict[tuple[int, float, float], "tuple[np.ndarray, np.ndarray] | SolverError"]):
     """The engine's subdivisions the planner made for a chunk's arc fits, by
     :func:`subdivision_key`: (the samples' parameters, the corrected points), or the
@@ -317,7 +317,8 @@ class EmitterMixin:
             raise PostprocError(
                 "this move must be split to stay within tolerance, but its line also changes the tool "
                 "or uses G53, or it is the entry or exit move of cutter radius compensation (which the "
-                "controller draws from where the tool is to the offset point)", path=mv.path or self.path, lineno=mv.lineno,
+                "controller draws from where the tool is to the offset point)",
+                path=mv.path or self.path, lineno=mv.lineno,
                 hint="put the tool change or G53 on a line of its own; make a lead-in or lead-out move shorter, "
                      "or raise --tolerance")
         sep, lower = emit.style_of(line)

@@ -65,8 +65,9 @@ class _Chunk:
     """A chunk being written: its targets, plans and hints, the text written so far, where
     each entry's text starts in it (``marks``: (index, its line, 1: every line is that
     line's, 0: a line passed as it is, the file of that line: None for the program's
-    own), or (index, j, 2: a run's lines one by one from its line j, the run)), the next row of the table, the lines passed as they are,
-    the runs' prepared emissions, and the last saved state (:meth:`ChunkWriter._save`)."""
+    own), or (index, j, 2: a run's lines one by one from its line j, the run)), the next
+    row of the table, the lines passed as they are, the runs' prepared emissions, and the
+    last saved state (:meth:`ChunkWriter._save`)."""
 
     __slots__ = ("T", "plans", "hints", "out", "marks", "k", "passed", "prepared", "blocks", "saved")
 
@@ -96,7 +97,8 @@ class _RunMarks:
 
     def __call__(self, j: int, whole: bool) -> None:
         o = self.o
-        o.marks.append((len(o.out), self.run.line(j), 1, self.run.path(j)) if whole else (len(o.out), j, 2, self.run))
+        run = self.run
+        o.marks.append((len(o.out), run.line(j), 1, run.path(j)) if whole else (len(o.out), j, 2, run))
 
     def save(self, y: int) -> None:
         self.w._save(self.o, self.i, (self.part, y))
