@@ -59,7 +59,7 @@ import numpy.typing as npt
 
 from postproc.effects.base import AXES, DIR_COLUMNS
 from postproc.errors import SafetyError
-from postproc.gcode.places import PathArray
+from postproc.gcode.places import PathArray, file_of
 
 #: Rounds of re-solving before the directions are declared unsettled.
 MAX_ITERATIONS = 16
@@ -192,7 +192,7 @@ def settle(T: np.ndarray, D: np.ndarray, how: Commanding, solve, lineno, *,
         f"the approach direction of {ax} does not settle here: the correction commanded with one direction "
         f"moves {ax} the other way, and the other way back (a reversal value that makes {ax} run ahead, "
         f"backlash b > 0, cannot be taken up by a small move)",
-        path=path if files is None else files[i] or path, lineno=int(lineno[i]),
+        path=file_of(files, i, path), lineno=int(lineno[i]),
         hint=f"check the calibration's backlash:{ax}: lost motion has b < 0 (ISO 230-2 B = x_up - x_down); "
              "b > 0 is an axis that runs ahead, as one does whose controller compensates more backlash than there "
              "is: lower that compensation and measure again")

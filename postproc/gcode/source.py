@@ -20,7 +20,7 @@ from typing import TextIO
 import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
-from postproc.gcode.places import PathArray
+from postproc.gcode.places import PathArray, file_of
 
 
 @dataclass
@@ -112,15 +112,15 @@ def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None,
         if len(good) == 0:
             raise MissingSetupError(
                 f"axis {'XYZ'[k]} is never positioned by the program, so the correction cannot be evaluated",
-                path=files[0] or path if files is not None and len(files) else path,
+                path=file_of(files, 0, path),
                 lineno=int(lineno[0]) if len(lineno) else None,
                 hint=f"give the machine position of {'XYZ'[k]} at program start with --start {'XYZ'[k]}.. "
                      f"(mm, machine coordinates), or add an absolute move on {'XYZ'[k]} near the start")
         idx = np.searchsorted(good, np.flatnonzero(bad))
         if np.any(idx >= len(good)):
+            last = int(np.flatnonzero(bad)[-1])
             raise MissingSetupError(f"axis {'XYZ'[k]} is not positioned before the end of the program",
-                                    path=path if files is None else files[np.flatnonzero(bad)[-1]] or path,
-                                    lineno=int(lineno[np.flatnonzero(bad)[-1]]))
+                                    path=file_of(files, last, path), lineno=int(lineno[last]))
         col[bad] = col[good[idx]]
     return q
 
