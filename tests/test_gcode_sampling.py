@@ -11,6 +11,7 @@ import pytest
 
 from postproc.gcode.geometry import arc_params, arc_points, line_points
 from postproc.gcode.interp import Arc, Move
+from postproc.gcode.moves import kind_of
 from postproc.gcode.sampling import (
     ARC_CHECK_MIN_SAMPLES,
     ARC_CHECK_STEP_RAD,
@@ -80,7 +81,8 @@ def test_samples_made_at_once_are_the_per_piece_ones(seed):
         mv = _move(i, q0, q1, arc)
         planned.append((i, mv))
         arc_prm[i] = arc_params(arc, mv.q0, mv.q1)
-    tab = Table(Q1, np.arange(1, M + 1), np.zeros((M, 3)), [{}] * M, planned)
+    kind = np.array([kind_of(m.role, m.kind) for _i, m in planned], dtype=np.int8)
+    tab = Table(Q1, np.arange(1, M + 1), np.zeros((M, 3)), [{}] * M, planned, kind)
     tab.q0, tab.dirs, tab.d_in, tab.arc_prm = Q0, D, d_in, arc_prm
     smp = _sample_moves(planned, tab)
     ref = _reference(planned, arc_prm, Q0, Q1, D, d_in)

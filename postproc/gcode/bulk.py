@@ -50,7 +50,7 @@ from __future__ import annotations
 import math
 import re
 from bisect import bisect_left, bisect_right
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from typing import Protocol, TypeAlias, final
 
 import numpy as np
@@ -59,9 +59,9 @@ from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer, numfmt, plainscan, runwords, scanner
 from postproc.gcode.emitter import FIT_BUDGET
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
-from postproc.gcode.moves import Role
+from postproc.gcode.moves import Kind, Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
-from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, Plan
+from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, KindArray, Plan
 
 # The pieces of a plain line (plainscan.pieces): 0 head (N and G words, and G43 H.. after
 # them: see Block.tlo), 1 G number, 2/4/6 X/Y/Z letter with the blanks before it, 3/5/7
@@ -310,6 +310,8 @@ class Block:
         if self.tlo:
             self.plain[self.tlo_rows] = True
         self.last_g: list[int] = last_g.tolist()
+        self.last_g_arr = last_g
+        self.motion = motion
         self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
         self.last_l: list[list[int]] = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
@@ -404,6 +406,17 @@ class Run:
         """The source line of each of the run's lines."""
         arr = self.block.src_arr
         return np.arange(self.lineno, self.lineno + self.b - self.a) if arr is None else arr[self.a:self.b]
+
+    def kinds(self) -> KindArray:
+        """The table kind of each of the run's lines (:class:`postproc.gcode.moves.Kind`:
+        STILL where it moves nothing, else the motion it moves in, G0 to G3)."""
+        blk, a, b = self.block, self.a, self.b
+        g = blk.last_g_arr[a:b]
+        before = -1 if self.motion0 is None else self.motion0 // 10  # a moving line then names its motion
+        # Kind.RAPID .. Kind.ARC_CCW are the G number plus one
+        kinds = (np.where(g >= a, blk.motion[np.maximum(g, 0)], before) + 1).astype(np.int8)
+        kinds[blk.neutral[a:b]] = Kind.STILL
+        return kinds
 
     def arc_rows(self) -> list[int]:
         """The block lines of the run's arcs, in order (made once)."""
@@ -856,28 +869,6 @@ def _modal_at(run: Run, x: int) -> tuple[int | None, float]:
     g, f = blk.last_g[x - 1], blk.last_f[x - 1]
     return (blk.code(g) if g >= run.a else run.motion0,
             float(blk.cols[_F][f]) if f >= run.a else run.feed0)
-
-
-def line_rows(runs: Sequence[Run]) -> tuple[IntArray, IntArray]:
-    """The straight (G1) moves of ``runs``: their rows of T, and the index of the run of each."""
-    rows, owner = [], []
-    for blk in {id(r.block): r.block for r in runs}.values():
-        mine = [(o, r) for o, r in enumerate(runs) if r.block is blk]
-        lengths = [r.b - r.a for _o, r in mine]
-        idx = np.concatenate([np.arange(r.a, r.b) for _o, r in mine])
-        a = np.repeat([r.a for _o, r in mine], lengths)
-        g = np.asarray(blk.last_g)[idx]
-        code = np.array([_CODE[w[-1]] if w else -1 for w in blk.gword])
-        kind = np.where(g >= a, code[np.maximum(g, 0)], np.repeat([r.motion0 for _o, r in mine], lengths))
-        kind[blk.neutral[idx]] = -1  # moves nothing
-        trow = np.concatenate([np.arange(r.trow, r.trow + r.b - r.a) for _o, r in mine])
-        own = np.repeat([o for o, _r in mine], lengths)
-        rows.append(trow[kind == LINE])
-        owner.append(own[kind == LINE])
-    order = np.argsort(np.concatenate(rows), kind="stable") if rows else np.zeros(0, dtype=int)
-    if not rows:
-        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
-    return np.concatenate(rows)[order], np.concatenate(owner)[order]
 
 
 def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:

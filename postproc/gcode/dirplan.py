@@ -27,7 +27,7 @@ from postproc.gcode.directions import (
 )
 from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.geometry import arc_length, arc_points, line_points
-from postproc.gcode.moves import Arc, Role
+from postproc.gcode.moves import Arc
 from postproc.gcode.options import CorrectOptions
 from postproc.gcode.places import PathArray, file_of, pick
 from postproc.gcode.sampling import SAMPLE_STEP_MM, _arc_piece_samples, _no_bulge
@@ -77,7 +77,6 @@ class _Settled:
 def plan_directions(pl: _Planner, planned: list[tuple[int, PlanMove]], tab: Table, plans: dict[int, Plan]) -> None:
     """Targets, directions and plans of a chunk for a direction-dependent correction (see
     the module docstring): fills ``plans``, and the table's targets and directions."""
-    planned = [(i, m) for i, m in planned if m.role is not Role.AT]  # a stored position is one point
     st = _settle(pl, planned, tab)
     if planned:
         _plan_pieces(pl, planned, tab, st, plans)

@@ -57,6 +57,35 @@ class Role(IntEnum):
     # must round to nothing
 
 
+class Kind(IntEnum):
+    """What a row of a chunk's table is (:attr:`postproc.gcode.table.Table.kind`): the
+    motion of a motion block (:attr:`Role.MOVE` or :attr:`Role.WHOLE`), or its role."""
+
+    STILL = 0  # a line of a run of plain lines that moves nothing (blank, comment, S, M, T words)
+    RAPID = 1  # G0
+    FEED = 2  # G1
+    ARC_CW = 3  # G2
+    ARC_CCW = 4  # G3
+    CYCLE = 5  # the roles that are not a motion block: see Role
+    SPLINE = 6
+    CHORD = 7
+    AT = 8
+    R_POINT = 9
+    HOLE = 10
+
+
+# the kind of a motion block, by its motion code (postproc.gcode.state: G0 -> 0, G1 -> 10, ...)
+MOTION_KIND = {0: Kind.RAPID, 10: Kind.FEED, 20: Kind.ARC_CW, 30: Kind.ARC_CCW}
+_ROLE_KIND = {Role.CYCLE: Kind.CYCLE, Role.SPLINE: Kind.SPLINE, Role.CHORD: Kind.CHORD, Role.AT: Kind.AT,
+              Role.R_POINT: Kind.R_POINT, Role.HOLE: Kind.HOLE}
+
+
+def kind_of(role: Role, motion: int) -> Kind:
+    """The table kind of a move of ``role`` whose motion code is ``motion``."""
+    kind = _ROLE_KIND.get(role)
+    return MOTION_KIND[motion] if kind is None else kind
+
+
 @dataclass(slots=True)
 class Move:
     """A motion block: where the gauge point goes and how to rewrite the line.

@@ -34,6 +34,7 @@ from postproc.gcode import bulk, cutter, emit
 from postproc.gcode.emitter import PlanNeeded, Subdivided
 from postproc.gcode.engine_use import accept_residual, prepare_engine
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, start_position
+from postproc.gcode.moves import kind_of
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.planner import Planner
 from postproc.gcode.reader import ChunkReader
@@ -308,16 +309,19 @@ class Corrector:
         Q1 = np.empty((M, 3))
         lns = np.empty(M, dtype=int)
         Rt = np.empty((M, 3))
+        kind = np.empty(M, dtype=np.int8)
         for e in runs:
             sl = slice(e.trow, e.trow + len(e))
             Q1[sl] = e.q1
             lns[sl] = e.linenos()
             Rt[sl] = e.r
+            kind[sl] = e.kinds()
         if general:
             at = [i for i, _m in general]
             Q1[at] = [m.q1 for _i, m in general]
             lns[at] = [m.lineno for _i, m in general]
             Rt[at] = [m.r for _i, m in general]
+            kind[at] = [kind_of(m.role, m.kind) for _i, m in general]
         files = None
         if self.reader.source is not None:  # an expanded program: the file of each row too
             files = np.full(M, self.path, dtype=object)
@@ -327,7 +331,7 @@ class Corrector:
                 paths = e.paths()
                 if paths is not None:
                     files[e.trow:e.trow + len(e)] = paths
-        return Table(Q1, lns, Rt, rot, general, runs, files)
+        return Table(Q1, lns, Rt, rot, general, kind, runs, files)
 
     def _read_only(self, entries: list[Entry | bulk.Run]) -> None:
         """What a chunk read but not corrected carries to the next (a process correcting a

@@ -39,7 +39,7 @@ from postproc.gcode.geometry import (
     arc_params,
     arc_points,
 )
-from postproc.gcode.moves import Arc, Role
+from postproc.gcode.moves import Arc, Kind
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.places import file_of, pick
 from postproc.gcode.sampling import (
@@ -52,7 +52,7 @@ from postproc.gcode.sampling import (
 )
 from postproc.gcode.segment import Curve, quadrant_breaks
 from postproc.gcode.source import backfill_unknown
-from postproc.gcode.state import LINE, PLANES
+from postproc.gcode.state import PLANES
 from postproc.gcode.table import Table
 from postproc.gcode.vplan import (
     ArcHint,
@@ -108,9 +108,11 @@ class Planner(EngineCalls):
         tab.start = np.vstack([self.prev_target[None, :], T[:-1]])
         tab.d_in = np.vstack([self.dirs[None, :], D[:-1]])
         start_unknown = cast("list[bool]", np.isnan(tab.start).any(axis=1).tolist())
+        # the moves that may have to be split: arcs, and straight ones unless lines stay lines
+        split = {Kind.ARC_CW, Kind.ARC_CCW} if self.linear_exact else {Kind.ARC_CW, Kind.ARC_CCW, Kind.FEED}
+        kinds = tab.kind.tolist()
         planned = [(i, m) for i, m in tab.moves
-                   if (m.arc is not None or (not self.linear_exact and m.kind == LINE and m.role is not Role.CHORD))
-                   and not start_unknown[i] and not any(math.isnan(v) for v in m.q0)]
+                   if kinds[i] in split and not start_unknown[i] and not any(math.isnan(v) for v in m.q0)]
         plans: dict[int, Plan] = {}
         hints: dict[int, ArcHint] = {}
         if direction_axes(self.engine):  # the directions the corrected commands take
@@ -181,7 +183,7 @@ class Planner(EngineCalls):
         if runs and not self.linear_exact:
             # straight moves of the runs of plain lines: those that must be split are
             # planned when they are written (their Move is made then)
-            rows, owner = bulk.line_rows(runs)
+            rows, owner = tab.run_rows(Kind.FEED)
             ok = vplan.lines_within(rows, vplan.MoveEnds(Q0, Q1, S, T), corr, step_mm=SAMPLE_STEP_MM,
                                     limit=self.opt.tolerance_mm * FIT_BUDGET
                                     - max(self.round_err(r.unit) for r in runs), curvature=curvature)
@@ -211,7 +213,7 @@ class Planner(EngineCalls):
         added map reads them)."""
         Q1, linenos, general = tab.q1, tab.lineno, tab.moves
         M = len(Q1)
-        fixed_rows = [i for i, m in general if m.role is Role.AT]
+        fixed_rows: list[int] = np.flatnonzero(tab.kind == Kind.AT).tolist()
         fixed_q = Q1[fixed_rows].copy() if fixed_rows else None
         if fixed_rows:
             # a stored position not given (NaN) stays unknown; the interpreter refuses moves needing it

@@ -14,8 +14,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from postproc.gcode.moves import Kind
 from postproc.gcode.places import PathArray
-from postproc.gcode.vplan import ArcParams, FloatArray, IntArray, PlanMove
+from postproc.gcode.vplan import ArcParams, FloatArray, IntArray, KindArray, PlanMove
 
 if TYPE_CHECKING:
     from postproc.gcode import bulk
@@ -35,6 +36,7 @@ class Table:
     r: FloatArray  # (M, 3) tool vectors
     rot: list[dict[str, float]]  # rotary axis positions of each row ({} without rotary axes)
     moves: list[tuple[int, PlanMove]]  # (row, move) of the rows read line by line, and the runs' arcs
+    kind: KindArray  # (M,) what each row is (Kind): the motion of a motion block, or its role
     runs: Sequence[bulk.Run] = ()  # runs of plain lines (each knows its first row, trow)
     # the file of each row's line, in an expanded program (None: all the program's own;
     # postproc.gcode.places)
@@ -53,3 +55,15 @@ class Table:
 
     def __len__(self) -> int:
         return len(self.q1)
+
+    def run_rows(self, kind: Kind) -> tuple[IntArray, IntArray]:
+        """The rows of ``kind`` in the runs of plain lines, in order, and the index in
+        :attr:`runs` of the run of each."""
+        rows = np.flatnonzero(self.kind == kind)
+        if not self.runs:
+            return rows[:0], rows[:0]
+        first = np.array([r.trow for r in self.runs])
+        owner = np.searchsorted(first, rows, side="right") - 1
+        end = first + np.array([len(r) for r in self.runs])
+        inside = (owner >= 0) & (rows < end[np.maximum(owner, 0)])
+        return rows[inside], owner[inside]

@@ -60,6 +60,7 @@ if TYPE_CHECKING:
 FloatArray: TypeAlias = npt.NDArray[np.float64]
 IntArray: TypeAlias = npt.NDArray[np.intp]
 BoolArray: TypeAlias = npt.NDArray[np.bool_]
+KindArray: TypeAlias = npt.NDArray[np.int8]  # postproc.gcode.moves.Kind, a row each
 
 TWO_PI = 2.0 * math.pi
 # Share of the limit left to the path between the samples of a straight move, where the
