@@ -1548,8 +1548,9 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
-    compact list of moved blocks, 40 bytes each; with ``keep``, only the ``keep``
-    largest are kept and memory is bounded). ``setup`` gives work offsets and tool lengths
+    compact list of moved blocks, 40 bytes each, 48 once one comes from a subprogram's
+    file; with ``keep``, only the ``keep`` largest are kept and memory is bounded).
+    ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates. ``progress(n)``, if given, is called with the number of
     lines of the original read so far, after each chunk. ``options`` are those
@@ -1560,8 +1561,10 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     When the corrected program's header says it was corrected expanded (subprograms,
     loops, macros written out), the original is read expanded the same way (its external
     subroutines looked up on the subroutine path); its blocks are then numbered by their
-    source lines, a subprogram's line once per call. Each canned cycle block of both
-    programs is read as the moves ``correct`` writes for it when it expands it (whatever
+    source lines, a subprogram's line once per call, and a block whose line comes from
+    another file than the original's (a subprogram's) is named with that file
+    (:attr:`MovedBlock.file`). Each canned cycle block of both programs is read as the
+    moves ``correct`` writes for it when it expands it (whatever
     ``--cycles`` was: with ``auto`` it keeps some and expands others), their G98/G99
     retracts kept unless the program was corrected with ``--cycles expand``: as its
     header records (``CYCLES EXPANDED``), or, when it has no header saying so (left out,
