@@ -35,7 +35,8 @@ def diff(original, corrected, as_json, show_all, reading, setup, correcting):
 
     A program corrected expanded (subprograms, loops and macros written out, as
     its header says) is compared with its original read expanded the same way;
-    blocks are then numbered by their source lines. A block moved by more than
+    blocks are then numbered by their source lines, a line of a subprogram's
+    file as file:line (its "file" in --json). A block moved by more than
     --max-correction is named after the report and the exit code is 5, as
     correct would have refused it. Give --dialect and --subroutine-path as given
     to correct. Canned cycles are compared as the moves correct writes for them;
@@ -92,7 +93,7 @@ def diff(original, corrected, as_json, show_all, reading, setup, correcting):
         click.echo("  moved blocks" + ("" if show_all else f" (largest {len(moved)})") + ":")
         for m in moved:
             dx, dy, dz = (d * 1000 for d in m.delta_mm)
-            click.echo(f"    line {m.lineno:>6} -> {m.lineno_corrected:>6}: dX {dx:+8.2f} dY {dy:+8.2f} "
+            click.echo(f"    line {m.place:>6} -> {m.lineno_corrected:>6}: dX {dx:+8.2f} dY {dy:+8.2f} "
                        f"dZ {dz:+8.2f} um  |d| {m.size_mm * 1000:.2f} um")
     _check_largest(rep, correcting["max_correction_mm"])
 
@@ -105,7 +106,7 @@ def _check_largest(rep, max_correction_mm: float) -> None:
     if largest and largest[0].size_mm > max_correction_mm:
         m = largest[0]
         raise CorrectionTooLargeError(
-            f"block moved by {m.size_mm:.4f} mm (line {m.lineno} of {rep.original}), more than --max-correction "
+            f"block moved by {m.size_mm:.4f} mm (line {m.lineno} of {m.file or rep.original}), more than --max-correction "
             f"{max_correction_mm:g} mm", path=rep.corrected, lineno=m.lineno_corrected, col=1,
             hint="a correction this large suggests wrong units or a wrong calibration; give --max-correction "
                  "to allow it")

@@ -61,6 +61,7 @@ from postproc.gcode.interp import Interpreter
 from postproc.gcode.lexer import Word
 from postproc.gcode.moves import Move
 from postproc.gcode.options import CorrectOptions
+from postproc.gcode.places import PathArray, file_of, line_place, pick
 from postproc.gcode.reader import LineReader
 from postproc.gcode.source import Setup, iter_source_lines, open_source
 from postproc.limits import Limits
@@ -132,13 +133,22 @@ def _without_assigned(line: str, words: Sequence[Word]) -> str:
 
 @dataclass
 class MovedBlock:
-    lineno: int  # in the original
+    lineno: int  # in the original (in ``file`` where given)
     lineno_corrected: int
     delta_mm: tuple[float, float, float]
+    # the file of the original line where it is not the original's own (a subprogram's
+    # file, the original read expanded); None: a line of the original
+    file: str | None = None
 
     @property
     def size_mm(self) -> float:
         return math.sqrt(sum(d * d for d in self.delta_mm))
+
+    @property
+    def place(self) -> str:
+        """The original line as the report names it: its number, or ``file:line`` for a
+        line of another file (:func:`postproc.gcode.places.line_place`)."""
+        return line_place(self.lineno, self.file, None)
 
 
 @dataclass
@@ -164,13 +174,19 @@ class DiffReport:
     _lines: array = field(default_factory=lambda: array("q"))
     _clines: array = field(default_factory=lambda: array("q"))
     _deltas: array = field(default_factory=lambda: array("d"))
+    # the file of each moved block's original line, as an index into _paths (-1: the
+    # original's own); None until a block of another file is stored (an expanded program's)
+    _files: array | None = None
+    _paths: list = field(default_factory=list)
     # with ``keep``: every moved block's count, largest and summed |delta| per axis
     _n_moved: int = 0
     _abs_max: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     _abs_sum: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     _counted: int = 0  # stored blocks already in _abs_max and _abs_sum
 
-    def add_moved(self, lineno: int, clineno: int, delta) -> None:
+    def add_moved(self, lineno: int, clineno: int, delta, path: str | None = None) -> None:
+        """A moved block (``path``: the file of its original line, None: the original's own)."""
+        self._add_files(None if path is None else [path], 1)
         self._lines.append(lineno)
         self._clines.append(clineno)
         self._deltas.extend(delta)
@@ -178,8 +194,26 @@ class DiffReport:
         if self.keep is not None and len(self._lines) > self._limit():
             self._prune()
 
-    def add_moved_rows(self, linenos: np.ndarray, clinenos: np.ndarray, deltas: np.ndarray) -> None:
-        """Many moved blocks at once (arrays of line numbers and an (n, 3) array of deltas)."""
+    def _add_files(self, paths: list | None, n: int) -> None:
+        """The files of ``n`` blocks about to be stored (``paths``, None where all are the
+        original's own)."""
+        if paths is not None and any(p is not None for p in paths):
+            if self._files is None:
+                self._files = array("q", [-1]) * len(self._lines)
+            known = {p: k for k, p in enumerate(self._paths)}
+            for p in paths:
+                if p is not None and p not in known:
+                    known[p] = len(self._paths)
+                    self._paths.append(p)
+            self._files.extend(-1 if p is None else known[p] for p in paths)
+        elif self._files is not None:
+            self._files.extend(array("q", [-1]) * n)
+
+    def add_moved_rows(self, linenos: np.ndarray, clinenos: np.ndarray, deltas: np.ndarray,
+                       files: PathArray | None = None) -> None:
+        """Many moved blocks at once (arrays of line numbers and an (n, 3) array of deltas;
+        ``files``: the file of each original line, :mod:`postproc.gcode.places`)."""
+        self._add_files(None if files is None else files.tolist(), len(linenos))
         self._lines.frombytes(np.ascontiguousarray(linenos, dtype=np.int64).tobytes())
         self._clines.frombytes(np.ascontiguousarray(clinenos, dtype=np.int64).tobytes())
         self._deltas.frombytes(np.ascontiguousarray(deltas, dtype=np.float64).tobytes())
@@ -217,6 +251,8 @@ class DiffReport:
         self._lines.frombytes(lines.tobytes())
         self._clines.frombytes(clines.tobytes())
         self._deltas.frombytes(np.ascontiguousarray(deltas).tobytes())
+        if self._files is not None:
+            self._files = array("q", np.frombuffer(self._files, dtype=np.int64)[order].tobytes())
         self._counted = len(self._lines)
 
     @property
@@ -242,8 +278,14 @@ class DiffReport:
         if self.keep is not None and len(self._lines) < self._n_moved:
             raise ValueError(f"only the {self.keep} largest moved blocks were kept (DiffReport.keep)")
         d = self._delta_array()
-        return [MovedBlock(int(a), int(b), (float(x), float(y), float(z)))
-                for a, b, (x, y, z) in zip(self._lines, self._clines, d.tolist(), strict=True)]
+        return [MovedBlock(int(a), int(b), (float(x), float(y), float(z)), self._path(i))
+                for i, (a, b, (x, y, z)) in enumerate(zip(self._lines, self._clines, d.tolist(), strict=True))]
+
+    def _path(self, i: int) -> str | None:
+        """The file of stored block ``i``'s original line (None: the original's own)."""
+        if self._files is None or self._files[i] < 0:
+            return None
+        return self._paths[self._files[i]]
 
     def largest(self, n: int) -> list[MovedBlock]:
         """The ``n`` largest moved blocks, largest first (equal ones in the original's order)."""
@@ -251,7 +293,7 @@ class DiffReport:
             raise ValueError(f"only the {self.keep} largest moved blocks were kept (DiffReport.keep)")
         d = self._delta_array()
         order = self._largest_order(n)
-        return [MovedBlock(self._lines[i], self._clines[i], (x, y, z))
+        return [MovedBlock(self._lines[i], self._clines[i], (x, y, z), self._path(i))
                 for i, (x, y, z) in zip(order.tolist(), d[order].tolist(), strict=True)]
 
     def axis_stats(self) -> dict:
@@ -274,10 +316,19 @@ class DiffReport:
             "lines_rewritten": self.lines_rewritten,
             "moves": self.moves, "moves_unchanged": self.moves_unchanged, "moves_moved": self.n_moved,
             "per_axis": self.axis_stats(),
-            "moved": [{"line": m.lineno, "line_corrected": m.lineno_corrected,
-                       "delta_mm": [round(x, 7) for x in m.delta_mm], "size_mm": round(m.size_mm, 7)}
-                      for m in self.moved],
+            "moved": [_moved_dict(m) for m in self.moved],
         }
+
+
+def _moved_dict(m: MovedBlock) -> dict:
+    """A moved block in the JSON report: ``file`` only for a line of another file than the
+    original (a subprogram's, the original read expanded)."""
+    out: dict[str, Any] = {"line": m.lineno}
+    if m.file is not None:
+        out["file"] = m.file
+    out.update({"line_corrected": m.lineno_corrected, "delta_mm": [round(x, 7) for x in m.delta_mm],
+                "size_mm": round(m.size_mm, 7)})
+    return out
 
 
 _OLD_START = re.compile(r"; start ((?:[XYZ][-+0-9.eE]+,?)+)")
@@ -453,16 +504,18 @@ def _compatible_keys(o: tuple, c: tuple) -> bool:
 
 class _Rows:
     """Consecutive lines of a program: text, line number, whether each makes a move, its
-    end point (machine mm, NaN where unknown or no move) and its pairing keys."""
+    end point (machine mm, NaN where unknown or no move), its pairing keys and, for a
+    program read expanded, the file of its line (:mod:`postproc.gcode.places`)."""
 
-    __slots__ = ("lines", "lineno", "move", "end", "keys", "_index")
+    __slots__ = ("lines", "lineno", "move", "end", "keys", "files", "_index")
 
-    def __init__(self, lines: list[str], lineno, move, end, keys) -> None:
+    def __init__(self, lines: list[str], lineno, move, end, keys, files: PathArray | None = None) -> None:
         self.lines = lines
         self.lineno = lineno
         self.move = move
         self.end = end
         self.keys = keys  # (n, 3) int64: skeleton, N word, comment
+        self.files = files  # the file of each row (None: the program's own), or None for all
         self._index: _Index | None = None
 
     def index(self) -> _Index:
@@ -481,7 +534,8 @@ class _Rows:
         return len(self.lines)
 
     def head(self, n: int) -> _Rows:
-        return _Rows(self.lines[:n], self.lineno[:n], self.move[:n], self.end[:n], self.keys[:n])
+        return _Rows(self.lines[:n], self.lineno[:n], self.move[:n], self.end[:n], self.keys[:n],
+                     pick(self.files, slice(None, n)))
 
     @classmethod
     def join(cls, parts: list[_Rows]) -> _Rows:
@@ -490,13 +544,25 @@ class _Rows:
         lines: list[str] = []
         for p in parts:
             lines += p.lines
+        files = None
+        if any(p.files is not None for p in parts):
+            files = np.concatenate([np.full(len(p), None, dtype=object) if p.files is None else p.files
+                                    for p in parts])
         return cls(lines, np.concatenate([p.lineno for p in parts]),
                    np.concatenate([p.move for p in parts]), np.concatenate([p.end for p in parts]),
-                   np.concatenate([p.keys for p in parts]))
+                   np.concatenate([p.keys for p in parts]), files)
 
     def tail(self, start: int) -> _Rows:
         return _Rows(self.lines[start:], self.lineno[start:], self.move[start:], self.end[start:],
-                     self.keys[start:])
+                     self.keys[start:], pick(self.files, slice(start, None)))
+
+    def place(self, i: int, own: str) -> str:
+        """Row ``i``'s line as a refusal names it: ``line 5 of the original`` (``own``: the
+        program's name), or, for a line of another file (an expanded program's
+        subprogram), ``line 5 of sub.ngc (called by the original)``."""
+        n = int(self.lineno[i])
+        path = file_of(self.files, i, None)
+        return f"line {n} of {own}" if path is None else f"line {n} of {path} (called by {own})"
 
 
 @dataclass(frozen=True)
@@ -519,8 +585,8 @@ class _ReadOptions:
 
 
 # what a line read that is not in a run is queued as: its text, line number, end point
-# (None: it moves nothing) and pairing keys
-_Record: TypeAlias = tuple[str, int, "tuple[float, float, float] | None", tuple[int, int, int]]
+# (None: it moves nothing), pairing keys and file (an expanded program's; else None)
+_Record: TypeAlias = tuple[str, int, "tuple[float, float, float] | None", tuple[int, int, int], "str | None"]
 _NO_KEYS = (0, 0, 0)
 # The head of a plain line (bulk.Block: blanks, N, G and G43 H words) that starts with a
 # plain N word: the N word and what follows it.
@@ -552,23 +618,26 @@ class _LineRows(LineReader[_Record]):
             steps = emit.cycle_lines(line, mv, mv.cycle, self.retract)
         if it.call_line or it.cycle_move is not None:
             steps = emit.drill_cycle_lines(line, bool(it.call_line), mv, it.cycle_move, it.state.motion)
+        path = None if self.source is None else it.path  # (an expanded program's: the line's file)
         if mv is None:
-            rec: _Record = (line, lineno, None, _NO_KEYS)
+            rec: _Record = (line, lineno, None, _NO_KEYS, path)
         else:
-            rec = (line, lineno, mv.q1, self.keys.of_line(line if self.iso_words else _without_assigned(line, mv.words)))
+            rec = (line, lineno, mv.q1, self.keys.of_line(line if self.iso_words else _without_assigned(line, mv.words)),
+                   path)
         entries = self.entries
         if steps is None:
             entries.append(rec)
             return
+        path = rec[4]
         for k, step in enumerate(steps):
             if step is None:  # the block itself (a Sinumerik position block)
                 entries.append(rec)
             elif isinstance(step, str):
-                entries.append((step, lineno, None, _NO_KEYS))
+                entries.append((step, lineno, None, _NO_KEYS, path))
             else:
                 # never a written line's text; the same for the same block on both sides (a
                 # cycle kept unchanged), and differs from its corrected version
-                entries.append((f"\0{line}\0{k}", lineno, step[2], _NO_KEYS))
+                entries.append((f"\0{line}\0{k}", lineno, step[2], _NO_KEYS, path))
 
     def rows(self) -> _Rows:
         """The records queued, as rows (then let go of)."""
@@ -582,6 +651,7 @@ class _LineRows(LineReader[_Record]):
         runs: dict[int, list[tuple[bulk.Run, int]]] = {}  # by block: its runs and the row of each
         at: list[int] = []  # the rows of the records that are not in a run
         at_lineno: list[int] = []
+        at_files: list[str | None] = []
         moved: list[int] = []
         ends: list[tuple[float, float, float]] = []
         moved_keys: list[tuple[int, int, int]] = []
@@ -592,10 +662,11 @@ class _LineRows(LineReader[_Record]):
                 runs.setdefault(id(e.block), []).append((e, i))
                 i += e.b - e.a
                 continue
-            line, ln, q1, k = e
+            line, ln, q1, k, path = e
             lines.append(line)
             at.append(i)
             at_lineno.append(ln)
+            at_files.append(path)
             if q1 is not None:
                 moved.append(i)
                 ends.append(q1)
@@ -618,8 +689,28 @@ class _LineRows(LineReader[_Record]):
             q[inert] = np.nan
             end[dst] = q
             keys[dst] = self._run_keys(blk, src.tolist())
+        files = None if self.source is None else self._files(n, at, at_files, runs)
         self.let_go()
-        return _Rows(lines, lineno, move, end, keys)
+        return _Rows(lines, lineno, move, end, keys, files)
+
+    def _files(self, n: int, at: list[int], at_files: list[str | None],
+               runs: dict[int, list[tuple[bulk.Run, int]]]) -> PathArray | None:
+        """The file of each of an expanded program's ``n`` rows (None: the program's own),
+        or None when every row is the program's own: ``at_files`` those of the rows
+        ``at``, the runs' from their blocks (:meth:`bulk.Run.paths`)."""
+        files = np.full(n, None, dtype=object)
+        if at:
+            files[at] = at_files
+        for group in runs.values():
+            for r, i in group:
+                paths = r.paths()
+                if paths is not None:
+                    files[i:i + len(paths)] = paths
+        own = files == self.path
+        if own.all():
+            return None
+        files[own] = None
+        return files
 
     def _run_keys(self, blk: bulk.Block, src: list[int]) -> np.ndarray:
         """The keys of the block's run lines ``src``: a plain line's skeleton is its N word
@@ -725,7 +816,7 @@ class _Reader:
         source: deque[tuple[int, str | None]] = deque()
         rd.expanded(source, in_bulk=True)
         for part in iter(lambda: list(islice(flat, CHUNK_LINES)), []):
-            source.extend((sl.lineno, None) for sl in part)
+            source.extend((sl.lineno, sl.path) for sl in part)
             yield from self._read(partial(rd.block, [sl.text for sl in part]))
             source.clear()
 
@@ -787,13 +878,13 @@ class _ForkedReader:
                 if new_keys:
                     glob = np.concatenate([glob, np.array([self.keys(t) for t in new_keys], dtype=np.int64)])
                 if kind == "rows":
-                    lines, lineno, move, end, keys = payload
+                    lines, lineno, move, end, keys, files = payload
                     if isinstance(lines, str):  # the lines joined (see _read_in_child)
                         lines = lines.splitlines(keepends=True)
                     neg = keys < 0
                     if neg.any():
                         keys[neg] = glob[-1 - keys[neg]]
-                    yield _Rows(lines, lineno, move, end, keys)
+                    yield _Rows(lines, lineno, move, end, keys, files)
                 elif kind == "end":
                     return
                 else:  # "error": the reader's own error (after its rows), or a failure
@@ -831,7 +922,7 @@ def _read_in_child(reader: _Reader, conn) -> None:
             lines: str | list[str] = text
             if _SPLITS_ELSE.search(text) or ("\r" in text and text.count("\r") != text.count("\r\n")):
                 lines = rows.lines
-            conn.send(("rows", (lines, rows.lineno, rows.move, rows.end, rows.keys), new_keys(),
+            conn.send(("rows", (lines, rows.lineno, rows.move, rows.end, rows.keys, rows.files), new_keys(),
                        reader.count, reader.header))
         conn.send(("end", None, new_keys(), reader.count, reader.header))
     except BaseException as exc:  # noqa: BLE001 - every failure is the parent's to raise
@@ -1179,7 +1270,8 @@ class _Window:
         rep.lines_unchanged += r1 - r0 - n_moves + unchanged
         moved = np.flatnonzero(moves & ~at.same[r0:r1]) + r0
         if len(moved):
-            rep.add_moved_rows(self.ro.lineno[self.p + moved], self.rc.lineno[self.q + at.t[moved]], at.delta[moved])
+            rep.add_moved_rows(self.ro.lineno[self.p + moved], self.rc.lineno[self.q + at.t[moved]], at.delta[moved],
+                               pick(self.ro.files, self.p + moved))
         if n_moves:
             last_delta = tuple(at.delta[r0 + int(np.flatnonzero(moves)[-1])].tolist())
         return last_delta
@@ -1408,7 +1500,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
         while True:
             c = corr.peek(0)
             if c is None:
-                raise PostprocError(f"line {o_lineno} of the original is missing from the corrected program",
+                raise PostprocError(f"{ro.place(o, 'the original')} is missing from the corrected program",
                                     path=rep.corrected, hint="is this the corrected version of that program?")
             rc = corr.rows
             corr.pos += 1
@@ -1419,7 +1511,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
                         return last_delta
                     c_lineno = int(rc.lineno[c])
                     raise PostprocError(
-                        f"line {c_lineno} of the corrected program differs from line {o_lineno} of the original",
+                        f"line {c_lineno} of the corrected program differs from {ro.place(o, 'the original')}",
                         path=rep.corrected, lineno=c_lineno,
                         hint="lines that are not moves must be identical: is this its corrected version?")
                 rep.lines_unchanged += 1
@@ -1434,7 +1526,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
         # lines skipped as inserted, the nearest one not much nearer than an earlier one
         best = _align_ahead(orig, corr, o_end, o_keys, last_delta, best)
     if best is None:
-        raise PostprocError(f"move on line {o_lineno} of the original has no counterpart in the corrected program",
+        raise PostprocError(f"move on {ro.place(o, 'the original')} has no counterpart in the corrected program",
                             path=rep.corrected)
     rc = corr.rows
     rep.lines_inserted += best[1]
@@ -1447,7 +1539,7 @@ def _pair_one(orig: _Tape, corr: _Tape, rep: DiffReport, last_delta: tuple) -> t
         rep.moves_unchanged += 1
         rep.lines_unchanged += 1
     else:
-        rep.add_moved(o_lineno, int(rc.lineno[c]), delta)
+        rep.add_moved(o_lineno, int(rc.lineno[c]), delta, file_of(ro.files, o, None))
     return delta
 
 
@@ -1456,8 +1548,9 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     """Pair the blocks of two programs and measure how far each move's end point moved.
 
     Streams both programs (memory does not grow with their length, apart from the
-    compact list of moved blocks, 40 bytes each; with ``keep``, only the ``keep``
-    largest are kept and memory is bounded). ``setup`` gives work offsets and tool lengths
+    compact list of moved blocks, 40 bytes each, 48 once one comes from a subprogram's
+    file; with ``keep``, only the ``keep`` largest are kept and memory is bounded).
+    ``setup`` gives work offsets and tool lengths
     (those not given count as zero); they matter only for G53 blocks, whose words
     are machine coordinates. ``progress(n)``, if given, is called with the number of
     lines of the original read so far, after each chunk. ``options`` are those
@@ -1468,8 +1561,10 @@ def compare_programs(original, corrected, setup: Setup | None = None, progress=N
     When the corrected program's header says it was corrected expanded (subprograms,
     loops, macros written out), the original is read expanded the same way (its external
     subroutines looked up on the subroutine path); its blocks are then numbered by their
-    source lines, a subprogram's line once per call. Each canned cycle block of both
-    programs is read as the moves ``correct`` writes for it when it expands it (whatever
+    source lines, a subprogram's line once per call, and a block whose line comes from
+    another file than the original's (a subprogram's) is named with that file
+    (:attr:`MovedBlock.file`). Each canned cycle block of both programs is read as the
+    moves ``correct`` writes for it when it expands it (whatever
     ``--cycles`` was: with ``auto`` it keeps some and expands others), their G98/G99
     retracts kept unless the program was corrected with ``--cycles expand``: as its
     header records (``CYCLES EXPANDED``), or, when it has no header saying so (left out,

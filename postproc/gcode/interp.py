@@ -97,7 +97,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         self.motion_word = False
         self.rebase = None
         self.stored_here = None
-        self.cycle_move, self.call_line = None, ""
+        self.cycle_move, self.call_line, self.call_col = None, "", 0
         if self.ended:
             return None  # after M2/M30 the controller reads no further
         bom = line.startswith("\ufeff")
@@ -132,7 +132,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 st.arc_absolute = saved
         else:
             mv = self._block(lineno, words, block_delete)
-        self._drill_if_due(lineno)
+        self._drill_if_due(lineno, max(words[0].letter_pos, 0) + 1)
         return mv
 
     def _framed_block(self, lineno: int, words: list[lexer.Word], block_delete: bool,

@@ -125,6 +125,7 @@ class InterpreterCore:
         self._cycle_due: CycleCall | None = None  # the cycle this block calls (run after its move)
         self.cycle_move: Move | None = None  # the drilling cycle this line made (Sinumerik): its moves
         self.call_line = ""  # the Sinumerik cycle call this line is ("MCALL CYCLE81"): a comment when expanded
+        self.call_col = 0  # the column where that call starts (its MCALL or cycle name; 0: no call)
         self._g_alias = dict(self.d.g_aliases)
         # G codes whose meaning is the dialect's own: further work offsets, refusals in its words
         self._dialect_g: dict = {k: _work_code(name) for k, name in self.d.work_codes}

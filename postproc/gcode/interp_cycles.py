@@ -20,23 +20,25 @@ PECK_CLEARANCE_MM = 0.254
 class CyclesMixin(InterpreterCore):
     """Canned cycles (mixed into :class:`~postproc.gcode.interp.Interpreter`)."""
 
-    def _drill_if_due(self, lineno: int) -> None:
+    def _drill_if_due(self, lineno: int, first_col: int = 1) -> None:
         """Run the Sinumerik drilling cycle this block calls (one-shot, or modal after a
-        block that moves): its moves become :attr:`cycle_move`."""
+        block that moves): its moves become :attr:`cycle_move`. ``first_col``: the column of
+        the block's first word, where the refusals of a modal call run after it point (the
+        call's own column is on another line)."""
         call, self._cycle_due = self._cycle_due, None
         if call is None:
             return
         from postproc.gcode.sinumerik_cycles import FEED_STEP, RAPID_STEP, drill_plan
 
         st = self.state
+        col = call.col if self.call_line else first_col
         if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno,
-                            call.col)
+            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno, col)
         if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, call.col,
+            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, col,
                             hint="position every axis with a G90 move before the cycle, or give --start")
-        plan = drill_plan(call, self.path, lineno, st.feed, st.unit_mm)
-        unit, shift = st.unit_mm, self.shift(False, lineno, call.col)
+        plan = drill_plan(call, self.path, lineno, st.feed, st.unit_mm, col)
+        unit, shift = st.unit_mm, self.shift(False, lineno, col)
         x, y, z0 = st.pos
 
         def at(v: object) -> tuple[float, float, float]:

@@ -162,7 +162,7 @@ class WordsMixin(InterpreterCore):
             if others or blk.frame:
                 raise self._err(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
                                 blk.call.col, hint="write the cycle call in a block of its own")
-            self.call_line = name
+            self.call_line, self.call_col = name, blk.mcall_col if blk.mcall else blk.call.col
             if blk.mcall:
                 self.modal_call = blk.call
             else:

@@ -56,6 +56,8 @@ def sample_program(source, setup: Setup | None = None, *, step_mm: float | None 
     """The program's moves as points: the one sampler of correct's checks, verify and the
     path API (the program is read by :func:`postproc.gcode.pathread.read_program`, as
     ``correct`` reads it: runs of plain lines in bulk, every other line by the interpreter).
+    Each sample carries the line it comes from (``lineno``); for a program read expanded,
+    ``files`` names the file of the lines that come from another file (a subprogram's).
 
     Each move gives its end point, and before it, on feed moves from a known position:
     straight moves a point every ``step_mm`` (None: their end alone); arcs a point

@@ -26,6 +26,7 @@ from postproc.gcode.geometry import ArcColumns, arc_chord_steps, arc_length, arc
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, plain_moves, start_position
 from postproc.gcode.moves import Arc
 from postproc.gcode.options import CorrectOptions
+from postproc.gcode.places import PathArray, file_of
 from postproc.gcode.reader import LineReader
 from postproc.gcode.state import RAPID
 from postproc.limits import Limits, ResourceLimitError
@@ -116,25 +117,34 @@ def _steps_all(length_mm: np.ndarray, step_mm: float) -> np.ndarray:
 
 
 class _Columns:
-    """Moves as columns: start, end, samples, tool vector, line, whether rapid."""
+    """Moves as columns: start, end, samples, tool vector, line, whether rapid, and the
+    file of the line (an expanded program's: :mod:`postproc.gcode.places`; None where all
+    are the program's own)."""
 
-    __slots__ = ("q0", "q1", "n", "r", "lineno", "rapid")
+    __slots__ = ("q0", "q1", "n", "r", "lineno", "rapid", "files")
 
     def __init__(self, q0: np.ndarray, q1: np.ndarray, n: np.ndarray, r: np.ndarray, lineno: np.ndarray,
-                 rapid: np.ndarray) -> None:
+                 rapid: np.ndarray, files: PathArray | None = None) -> None:
         self.q0, self.q1, self.n, self.r, self.lineno, self.rapid = q0, q1, n, r, lineno, rapid
+        self.files = files
 
     def __len__(self) -> int:
         return len(self.n)
 
     def __getitem__(self, k: slice) -> _Columns:
-        return _Columns(self.q0[k], self.q1[k], self.n[k], self.r[k], self.lineno[k], self.rapid[k])
+        return _Columns(self.q0[k], self.q1[k], self.n[k], self.r[k], self.lineno[k], self.rapid[k],
+                        None if self.files is None else self.files[k])
 
     @staticmethod
     def join(parts: list[_Columns]) -> _Columns:
         if len(parts) == 1:
             return parts[0]
-        return _Columns(*(np.concatenate([getattr(c, f) for c in parts]) for f in _Columns.__slots__))
+        files = None
+        if any(c.files is not None for c in parts):
+            files = np.concatenate([np.full(len(c), None, dtype=object) if c.files is None else c.files
+                                    for c in parts])
+        q0, q1, n, r, lineno, rapid = (np.concatenate([getattr(c, f) for c in parts]) for f in _Columns.__slots__[:-1])
+        return _Columns(q0, q1, n, r, lineno, rapid, files)
 
 
 # an arc to sample: its row among the moves taken with it, the arc, its start and end,
@@ -142,13 +152,15 @@ class _Columns:
 _ArcToSample: TypeAlias = tuple[int, Arc, Point, Point, int, tuple]
 
 
-class Sampler(LineReader[tuple[int, Move]]):
+class Sampler(LineReader[tuple[int, Move, "str | None"]]):
     """Reads a program's moves as samples (see :func:`postproc.gcode.path.sample_program`):
     queues each move of a line the interpreter reads (its block's plain moves, then the
     drilling cycle it runs) and each run of plain lines; after each block, takes what it
     queued in order, counting the samples of each move and refusing the move that
     passes ``max_samples`` (at its line), before any error of a later line. A run's
-    moves are taken from its columns, all the block's runs at once."""
+    moves are taken from its columns, all the block's runs at once. An expanded
+    program's moves keep the file of their line too (a subprogram's), for the samples
+    (:attr:`postproc.gcode.source.ProgramPath.files`) and the refusals."""
 
     def __init__(self, interp: Interpreter, path: str | None, step_mm: float | None, chord_mm: float | None,
                  max_samples: int) -> None:
@@ -162,11 +174,12 @@ class Sampler(LineReader[tuple[int, Move]]):
         self.rot: list[tuple[int, dict]] = []  # a move's rotary positions by its index (where it has any)
 
     def queue(self, line: str, mv: Move | None, lineno: int) -> None:
+        path = None if self.source is None else self.interp.path  # (an expanded program's: the line's file)
         if mv is not None:
-            self.entries.extend((lineno, m) for m in plain_moves(mv))
+            self.entries.extend((lineno, m, path) for m in plain_moves(mv))
         cyc = self.interp.cycle_move
         if cyc is not None:
-            self.entries.extend((lineno, m) for m in plain_moves(cyc))
+            self.entries.extend((lineno, m, path) for m in plain_moves(cyc))
 
     def block(self, lines: list[str]) -> None:
         """Read a block of lines, then take its moves (an error of a line comes after
@@ -180,10 +193,22 @@ class Sampler(LineReader[tuple[int, Move]]):
         if error is not None:
             raise error
 
-    def _refuse(self, lineno: int) -> ResourceLimitError:
+    def _refuse(self, cols: _Columns, row: int) -> ResourceLimitError:
+        """The refusal of the move ``row`` of ``cols``, the one whose samples pass the bound."""
         every = f" every {self.step_mm:g} mm" if self.step_mm else ""
         return ResourceLimitError(f"sampling the program{every} makes more than {self.max_samples:,} points",
-                                  path=self.path, lineno=lineno, col=1, hint="give postproc verify a larger --max-step")
+                                  path=file_of(cols.files, row, self.path), lineno=int(cols.lineno[row]), col=1,
+                                  hint="give postproc verify a larger --max-step")
+
+    def _own(self, files: list[str | None]) -> PathArray | None:
+        """An expanded program's files of its moves (None for its own lines), or None when
+        every one is the program's own or the program is read as written."""
+        if self.source is None:
+            return None
+        arr = np.array(files + [None], dtype=object)[:-1]  # (a 1-d array of str, whatever their lengths)
+        own = arr == self.path
+        arr[own] = None
+        return None if own.all() else arr
 
     def _arc_samples(self, arc: Arc, q0: Point, q1: Point) -> tuple[int, tuple]:
         """An arc's samples (every ``step_mm`` of its length and, with ``chord_mm``, every
@@ -211,6 +236,7 @@ class Sampler(LineReader[tuple[int, Move]]):
         rs: list = []
         lns: list[int] = []
         rapid: list[bool] = []
+        fs: list[str | None] = []
         parts: list[_Columns] = []
         arcs: list[_ArcToSample] = []
         at = 0  # moves of the parts so far
@@ -220,9 +246,9 @@ class Sampler(LineReader[tuple[int, Move]]):
             if counts:
                 parts.append(_Columns(np.asarray(q0s, dtype=float), np.asarray(q1s, dtype=float),
                                       np.asarray(counts, dtype=np.int64), np.asarray(rs, dtype=float),
-                                      np.asarray(lns, dtype=np.int64), np.asarray(rapid, dtype=bool)))
+                                      np.asarray(lns, dtype=np.int64), np.asarray(rapid, dtype=bool), self._own(fs)))
                 at += len(counts)
-                for acc in (q0s, q1s, counts, rs, lns, rapid):
+                for acc in (q0s, q1s, counts, rs, lns, rapid, fs):
                     acc.clear()
 
         runs = self._runs([e for e in entries if type(e) is bulk.Run])
@@ -236,7 +262,7 @@ class Sampler(LineReader[tuple[int, Move]]):
                 parts.append(cols)
                 at += len(cols)
                 continue
-            lineno, mv = e
+            lineno, mv, path = e
             q0, q1 = mv.q0, mv.q1
             if any(math.isnan(v) for v in q0) or mv.kind == RAPID:
                 n = 1
@@ -254,6 +280,7 @@ class Sampler(LineReader[tuple[int, Move]]):
             rs.append(mv.r)
             lns.append(lineno)
             rapid.append(mv.kind == RAPID)
+            fs.append(path)
         flush()
         if not parts:
             return
@@ -261,7 +288,7 @@ class Sampler(LineReader[tuple[int, Move]]):
         cum = self.total + np.cumsum(cols.n)
         over = cum > self.max_samples
         if over.any():
-            raise self._refuse(int(cols.lineno[int(np.argmax(over))]))
+            raise self._refuse(cols, int(np.argmax(over)))
         self.total = int(cum[-1])
         if arcs:
             self._sample_arcs(arcs)
@@ -344,7 +371,11 @@ class Sampler(LineReader[tuple[int, Move]]):
         # the moving lines only: a run's rows and an arc's row among them
         cm = np.concatenate([[0], np.cumsum(moving)])
         sel = np.flatnonzero(moving)
-        every = _Columns(q0[sel], q1[sel], n[sel], tool[sel], lineno[sel], rapid[sel])
+        files = None  # (an expanded program's: the file of each line)
+        if self.source is not None:
+            files = self._own([p for r in runs for p in (r.paths() or [None] * len(r))])
+        every = _Columns(q0[sel], q1[sel], n[sel], tool[sel], lineno[sel], rapid[sel],
+                         None if files is None else files[sel])
         bounds = cm[starts].tolist() + [int(cm[-1])]
         out: list[tuple[_Columns, list[_ArcToSample]]] = []
         ai = 0
@@ -378,7 +409,8 @@ class Sampler(LineReader[tuple[int, Move]]):
                 at = np.repeat(first[moves] - (np.cumsum(counts) - counts), counts) + np.arange(len(pts))
                 q[at] = pts
         lineno_arr = cols.lineno[move]
-        q = backfill_unknown(q, lineno_arr, self.path)
+        files = None if cols.files is None else cols.files[move]
+        q = backfill_unknown(q, lineno_arr, self.path, files)
         r = cols.r[move]
         signs = motion_signs(q, start=np.array(start_position(setup.start), dtype=float))
         context: dict = {"dirx": signs[:, 0], "diry": signs[:, 1], "dirz": signs[:, 2]}
@@ -389,4 +421,4 @@ class Sampler(LineReader[tuple[int, Move]]):
             context[ax] = pos[move]
         for key, v in (setup.context or {}).items():
             context[key] = np.full(len(q), float(v))
-        return ProgramPath(q + r, r, lineno_arr, cols.rapid[move], context)
+        return ProgramPath(q + r, r, lineno_arr, cols.rapid[move], context, files)

@@ -39,6 +39,12 @@ def file_of(files: PathArray | Sequence[str | None] | None, i: int, default: str
     return files[i] or default
 
 
+def line_place(lineno: int, path: str | None, own: str | None) -> str:
+    """Line ``lineno`` of file ``path`` as an error or report names it where its own file
+    is ``own``: the bare number in that file, else ``file:line``."""
+    return str(lineno) if path == own else f"{path}:{lineno}"
+
+
 def line_list(lineno, files: PathArray | None, rows, own: str | None, default: str | None,
               most: int = 8) -> str:
     """The lines of ``rows`` (each once, in order of line number), at most ``most`` of
@@ -50,5 +56,5 @@ def line_list(lineno, files: PathArray | None, rows, own: str | None, default: s
     else:
         pairs = sorted({(n, f or default) for n, f in zip(lines, files[rows].tolist(), strict=True)},
                        key=lambda p: (p[0], p[1] or ""))
-        items = [str(n) if f == own else f"{f}:{n}" for n, f in pairs]
+        items = [line_place(n, f, own) for n, f in pairs]
     return ", ".join(items[:most]) + (" ..." if len(items) > most else "")

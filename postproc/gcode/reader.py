@@ -373,7 +373,7 @@ class ChunkReader(LineReader[Entry]):
             call = interp.call_line or f"MCALL {interp.modal_call.name if interp.modal_call else ''}"
             raise UnsupportedGcodeError(
                 f"Sinumerik {call} (drilling cycle call): read only when written as its moves",
-                path=self.interp.path or self.path, lineno=lineno, col=1,
+                path=self.interp.path or self.path, lineno=lineno, col=interp.call_col or 1,
                 hint="give --cycles expand or auto to write each hole as its G0/G1 moves, each corrected")
         for step in emit.drill_cycle_lines(line, bool(interp.call_line), mv, cyc, interp.state.motion):
             if step is None:

@@ -73,6 +73,7 @@ class SinumerikBlock:
     frame: str = ""  # the frame instruction of the block (TRANS, AROT, ...)
     rpl: tuple[float, int] | None = None  # ROT/AROT RPL=angle: (degrees, column)
     mcall: bool = False  # MCALL: the call that follows is modal (a bare MCALL cancels it)
+    mcall_col: int = 0  # the column of MCALL
     call: CycleCall | None = None  # a drilling cycle called in the block
 
 
@@ -205,7 +206,7 @@ class _Reader:
         if after < len(code) and code[after] == "(":
             return self.call(ident, k, after)
         if ident == "MCALL":
-            self.block.mcall = True
+            self.block.mcall, self.block.mcall_col = True, k + 1
             return digits
         if ident in END_KEYWORDS:
             self.block.ends = True

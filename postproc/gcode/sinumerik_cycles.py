@@ -87,15 +87,15 @@ class DrillPlan:
 class _Call:
     """A cycle call's parameters by position, and its refusals naming file, line and column."""
 
-    def __init__(self, call: CycleCall, path: str | None, lineno: int) -> None:
-        self.call, self.path, self.lineno = call, path, lineno
+    def __init__(self, call: CycleCall, path: str | None, lineno: int, col: int) -> None:
+        self.call, self.path, self.lineno, self.col = call, path, lineno, col
 
     def __getitem__(self, i: int) -> float | None:
         return self.call.args[i] if i < len(self.call.args) else None
 
     def bad(self, what: str) -> GcodeSyntaxError:
         return GcodeSyntaxError(f"Sinumerik {self.call.name} {what}", path=self.path, lineno=self.lineno,
-                                col=self.call.col)
+                                col=self.col)
 
     def dwell(self, i: int, name: str) -> float:
         v = self[i] or 0.0
@@ -128,11 +128,13 @@ def _depths(p: _Call) -> tuple[float, float, float]:
 
 
 def drill_plan(call: CycleCall, path: str | None, lineno: int, feed: float = math.nan,
-               unit_mm: float = 1.0) -> DrillPlan:
+               unit_mm: float = 1.0, col: int | None = None) -> DrillPlan:
     """The levels and steps of ``call`` in program units (work coordinates along Z);
     ``feed`` is the feed programmed before the call (NaN: none), ``unit_mm`` the program's
-    unit in mm (for CYCLE83's defaults, given in mm)."""
-    p = _Call(call, path, lineno)
+    unit in mm (for CYCLE83's defaults, given in mm). ``col``: the column of line
+    ``lineno`` its refusals point at (None: the call's own, the line being the call's; a
+    block the modal call runs after gives its own start)."""
+    p = _Call(call, path, lineno, call.col if col is None else col)
     start, bottom, rtp = _depths(p)
     name = call.name
     steps: list[Step] = []

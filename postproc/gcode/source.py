@@ -57,6 +57,10 @@ class ProgramPath:
     lineno: np.ndarray  # (N,) source line of each sample
     rapid: np.ndarray  # (N,) bool, True on G0 moves
     context: dict = field(default_factory=dict)  # dirx, diry, dirz, A/B/C when used
+    # the file of each sample's line where it is not the program's own (a subprogram's, the
+    # program read expanded; None for its own lines), or None when all are its own
+    # (:mod:`postproc.gcode.places`)
+    files: PathArray | None = None
 
     def __len__(self) -> int:
         return len(self.points_mm)
