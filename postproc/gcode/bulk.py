@@ -58,6 +58,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer, numfmt, plainscan, runwords, scanner
 from postproc.gcode.emitter import FIT_BUDGET
+from postproc.gcode.geometry import r_center
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.moves import Kind, Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
@@ -114,6 +115,9 @@ class Mark(Protocol):
 Point: TypeAlias = tuple[float, float, float]
 #: an arc of a run: its centre (machine mm) and whether it turns clockwise
 RunArc: TypeAlias = tuple[Point, bool]
+# the r_idx of a run's R-form arc (RunMove.arc) until its Move is made (RunMove.to_move):
+# not a word index, only >= 0 (the bulk planner leaves an R-form arc to the general one)
+R_FORM = 1 << 30
 
 
 class _Report(Protocol):
@@ -187,7 +191,7 @@ class RunMove:
             raise AssertionError(f"line {self.lineno} of a run is not plain: {line!r}")
         idx = [-1, -1, -1]
         centre_idx = [-1, -1]
-        feed_idx = motion_idx = -1
+        feed_idx = motion_idx = r_idx = -1
         prefix: list[str] = []
         for i, w in enumerate(words):
             letter = w.letter
@@ -203,11 +207,17 @@ class RunMove:
                     motion_idx = i
             elif letter in "IJ":
                 centre_idx["IJ".index(letter)] = i
+            elif letter == "R":
+                r_idx = i
         arc = self.arc
         aux: tuple[int, ...] = ()
         if arc is not None:
-            arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (centre_idx[0], centre_idx[1]), -1)
-            aux = tuple(i for i in centre_idx if i >= 0)
+            if arc.r_idx < 0:
+                arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (centre_idx[0], centre_idx[1]), -1)
+                aux = tuple(i for i in centre_idx if i >= 0)
+            else:
+                arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (-1, -1), r_idx)
+                aux = (r_idx,)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
                     self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, prefix,
                     Role.MOVE, motion_idx, aux, path=self.path)
@@ -263,26 +273,30 @@ class Block:
             if k < 3:
                 self.frac.append(np.fromiter(pieces.frac[k], dtype=int, count=n))
                 self.last.append(last_index(has))
+        # R-form arcs (their R word is in the rest): its value on each line (0 where none)
+        self.has_r = np.frombuffer(bytes(pieces.has[5]), dtype=bool)
+        self.r_value: list[float] = pieces.value[5]
         g = cols[_G]
         self.gword = g
         motion = np.fromiter(map(_G_MOTION.__getitem__, g), dtype=np.int8, count=n)  # -1: no G word
         no_g = motion < 0
         last_g = last_index(~no_g)
-        # G2/G3 lines with centre words (I, J) are arcs; a line without a motion word
-        # after one is an arc too (modal), and one without centre words the
-        # interpreter's: neither is plain
+        # G2/G3 lines with centre words (I, J) or a radius (R) are arcs; a line without a
+        # motion word after one is an arc too (modal), one with neither or both the
+        # interpreter's, and so is an R word on a straight move: none is plain
         self.arc = (motion == 2) | (motion == 3)
         self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
         self.has_l: list[list[bool]] = pieces.has
         centre = self.has[3] | self.has[4]
         modal_arc = no_g & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
-        moving = (self.has[0] | self.has[1] | self.has[2]) & (self.arc == centre) & ~modal_arc
+        moving = ((self.has[0] | self.has[1] | self.has[2]) & (self.arc == (centre ^ self.has_r))
+                  & ~(centre & self.has_r) & ~modal_arc)
         neutral = np.zeros(n, dtype=bool)
         head = cols[_HEAD] = list(cols[_HEAD])
         rest = cols[_REST] = list(cols[_REST])
         match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
         self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
-        for i in np.flatnonzero(~moving & ~self.arc & ~centre & no_g).tolist():
+        for i in np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist():
             line = lines[i]
             if not match(line):
                 m = tool(line)
@@ -432,8 +446,9 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
               q0: Point) -> tuple[int, dict[int, RunArc]]:
     """The arcs among lines ``a:b``: ``(end, {line within the run: (centre, clockwise)})``,
     ``end`` the first line the run cannot take (b when it takes every line): an arc out
-    of the XY plane, of zero radius, or whose end radius its controller refuses (the
-    interpreter reports those)."""
+    of the XY plane, of zero radius, whose end radius its controller refuses, or an R
+    arc whose ends coincide or whose radius is short of half its chord (the interpreter
+    reports those)."""
     arc_rows = block.arc_rows
     lo = bisect_left(arc_rows, a)
     if lo == len(arc_rows) or arc_rows[lo] >= b:
@@ -444,6 +459,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
     absolute = interp.state.arc_absolute
     (lx, ly, lz), (vx, vy, vz) = block.last_l[:3], block.ovl[:3]
     vi, vj, has_i, has_j = block.ovl[3], block.ovl[4], block.has_l[3], block.has_l[4]
+    has_r, vr = block.has_l[5], block.r_value
     gword = block.gword
     sx, sy, sz = shift[0], shift[1], shift[2]
     hyp = math.hypot
@@ -460,6 +476,14 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
         x1 = vx[p] * unit + sx if p >= a else q0[0]
         p = ly[y]
         y1 = vy[p] * unit + sy if p >= a else q0[1]
+        clockwise = gword[y][-1] == "2"
+        if has_r[y]:  # the centre the controller finds for R (the interpreter's arc rule)
+            c = None if hyp(x1 - x0, y1 - y0) < MIN_ARC_RADIUS_MM else r_center(x0, y0, x1, y1, vr[y] * unit,
+                                                                                  clockwise)
+            if c is None:
+                return y, arcs
+            arcs[y - a] = ((c[0], c[1], z0), clockwise)
+            continue
         if absolute:
             c1 = vi[y] * unit + sx if has_i[y] else x0
             c2 = vj[y] * unit + sy if has_j[y] else y0
@@ -468,7 +492,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
         rs, re_ = hyp(x0 - c1, y0 - c2), hyp(x1 - c1, y1 - c2)
         if not (rs >= MIN_ARC_RADIUS_MM and rule.arc_end_radius_ok(rs, re_, unit)):
             return y, arcs
-        arcs[y - a] = ((c1, c2, z0), gword[y][-1] == "2")
+        arcs[y - a] = ((c1, c2, z0), clockwise)
     return b, arcs
 
 
@@ -633,7 +657,7 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     mv.path = run.path(j)
     arc = run.arcs.get(j)
     if arc is not None:
-        mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), -1)
+        mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), R_FORM if blk.has_r[y] else -1)
     return mv
 
 

@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.errors import GcodeSyntaxError, MissingSetupError, UnsupportedGcodeError
 from postproc.gcode import cutter, lexer
+from postproc.gcode.geometry import r_center
 from postproc.gcode.interp_core import AXES, MIN_ARC_RADIUS_MM, ROTARY, Block, InterpreterCore, Vals
 from postproc.gcode.moves import Arc, Move, Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, MOTION_CODES, PLANES, RAPID
@@ -314,24 +314,13 @@ class MotionMixin(InterpreterCore):
         s1, s2 = s
         e1, e2 = e
         R = vals["R"][0] * unit
-        dx, dy = e1 - s1, e2 - s2
-        chord = math.hypot(dx, dy)
-        if chord < MIN_ARC_RADIUS_MM:
+        if math.hypot(e1 - s1, e2 - s2) < MIN_ARC_RADIUS_MM:
             raise self._err(GcodeSyntaxError, "R arc with start = end (a full circle needs I/J/K)", lineno, col)
-        half = chord / 2
-        if abs(R) < half:
-            if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
-                raise self._err(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
-                                lineno, words[vals["R"][1]][4] + 1)
-            h = 0.0
-        else:
-            h = math.sqrt(R * R - half * half)
-        # centre to the left of start->end for CCW short arcs
-        sign = 1.0 if (not clockwise) else -1.0
-        if R < 0:
-            sign = -sign
-        mx, my = (s1 + e1) / 2, (s2 + e2) / 2
-        return mx - sign * h * dy / chord, my + sign * h * dx / chord
+        c = r_center(s1, s2, e1, e2, R, clockwise)
+        if c is None:
+            raise self._err(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
+                            lineno, words[vals["R"][1]][4] + 1)
+        return c
 
     def _offset_centre(self, b: Block, col: int, se: tuple[tuple[float, float], tuple[float, float]],
                        shift: tuple[float, float]) -> tuple[float, float]:

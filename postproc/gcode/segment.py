@@ -36,6 +36,7 @@ from postproc.errors import SolverError
 from postproc.gcode import fitcore
 from postproc.gcode.fitcore import chord_exceeds as chord_exceeds  # re-exported
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI, arc_params, arc_points, line_points
+from postproc.gcode.geometry import r_center as r_center  # re-exported
 from postproc.gcode.interp import Arc
 
 # A point (x, y, z) in machine coordinates; the plane's axes as (first, second, normal).
@@ -155,26 +156,6 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate: Evaluate,
         k.sort(key=lambda t: t[0])
         out.append((np.array([t[0] for t in k]), np.array([t[1] for t in k])))
     return out
-
-
-def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool) -> tuple[float, float] | None:
-    """Centre the controller computes for an R-format arc, or None if R is too small."""
-    dx, dy = e1 - s1, e2 - s2
-    chord = math.hypot(dx, dy)
-    if chord == 0.0:
-        return None
-    half = chord / 2
-    if abs(R) < half:
-        if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
-            return None
-        h = 0.0
-    else:
-        h = math.sqrt(R * R - half * half)
-    sign = -1.0 if clockwise else 1.0
-    if R < 0:
-        sign = -sign
-    mx, my = (s1 + e1) / 2, (s2 + e2) / 2
-    return mx - sign * h * dy / chord, my + sign * h * dx / chord
 
 
 def centre_estimate(arc: Arc, s_nom: np.ndarray, q_nom: np.ndarray, q_corr: np.ndarray) -> np.ndarray:
