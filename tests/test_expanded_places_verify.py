@@ -1,6 +1,6 @@
-"""The worst lines of ``postproc verify`` name the file of a line that comes from a
-subprogram's file (``subs/far.ngc:3``, in ``--json`` a ``"file"`` key on that line
-only), and show that file's line.
+"""The worst lines of ``postproc verify`` and the refusals of ``postproc mirror pockets``
+name the file of a line that comes from a subprogram's file (``subs/far.ngc:3``, in
+``--json`` a ``"file"`` key on that line only), and verify shows that file's line.
 
 A program read as written, or expanded in its own file, keeps its bare line numbers."""
 
@@ -15,6 +15,13 @@ from click.testing import CliRunner
 from postproc.calfile import load_calibration
 from postproc.cli import main
 from postproc.gcode.pipeline import CorrectOptions
+from postproc.mirror.synthetic import (
+    Shell,
+    plan_csv,
+    pocket_program,
+    shell_calibration_text,
+    thickness_csv,
+)
 from postproc.simulate import load_machine
 from postproc.simulate.program import verify_program
 from postproc.simulate.verify import VerifyReport
@@ -133,3 +140,30 @@ def test_a_program_read_as_written_has_no_files_in_its_runs(tmp_path):
         assert "file" not in json.dumps(run.to_dict())
     assert sorted(ln for ln, _d in rep.runs[0].worst_lines()) == [3, 4]
 
+
+# -- postproc mirror pockets ----------------------------------------------------------
+def test_mirror_pockets_names_the_subprogram_line_outside_the_map(tmp_path):
+    shell = Shell()
+    prog = pocket_program(shell, -5.0)
+    # the last pass moves into a subprogram file, one of its points outside the map
+    tail = prog.index("G0 Y-25.0000\nM30")
+    sub = "o<far> sub\n(out of the pocket)\n  G1 B9.0000\nG1 B3.7500\no<far> endsub\nM2\n"
+    src, folder = expanded(tmp_path, prog[:tail] + "o<far> call\n" + prog[tail:], {"far.ngc": sub}, "pocket.ngc")
+    (tmp_path / "cal.json").write_text(shell_calibration_text())
+    b, z = shell.local_grid()
+    (tmp_path / "s.csv").write_text(thickness_csv(shell.machine(0, b, z, -0.3), "semi"))
+    (tmp_path / "plan.csv").write_text(plan_csv(shell, [("s.csv", "")]))
+    args = ["mirror", "pockets", str(tmp_path / "plan.csv"), "-c", str(tmp_path / "cal.json"),
+            "--program", str(src), "--t-ref", "2.0", "--band", "1.98,2.02", "--allowance", "0.3",
+            "--dialect", "linuxcnc", "--subroutine-path", str(folder), "-o", str(tmp_path / "out")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 5, res.output
+    assert f"{folder / 'far.ngc'}:3:3: program point B=9.0000" in res.output
+    assert "outside the correction map" in res.output
+    assert not (tmp_path / "out").exists()
+    # a point outside the map on the program's own line names the program, as before
+    src.write_text(prog.replace("B3.7500", "B9.0000", 1))
+    lineno = next(k for k, ln in enumerate(src.read_text().splitlines(), 1) if "B9.0000" in ln)
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 5, res.output
+    assert f"{src}:{lineno}:1: program point B=9.0000" in res.output
