@@ -242,15 +242,18 @@ def _correct_program(template, calibration, setup, corr, target: Path, reading, 
     from postproc.calfile import load_calibration
     from postproc.gcode.path import program_path
     from postproc.gcode.pipeline import CorrectOptions, correct_file
+    from postproc.gcode.places import file_of
 
     cal = load_calibration(calibration)
     # Evaluate the maps on the program's points first, so that a point outside a map
     # is refused naming its line in the template.
+    # A point of a subprogram's file (the template read expanded) is named in that file.
     pp = program_path(template, setup, dialect=reading.dialect, subroutine_path=reading.subroutine_path)
     try:
         corr.delta(pp.points_mm, {**pp.context, "lineno": pp.lineno})
     except PostprocError as exc:
-        raise exc.at(path=str(template)) from None
+        at = exc.point_index
+        raise exc.at(path=str(template) if at is None else file_of(pp.files, at, str(template))) from None
     options = CorrectOptions(added=[corr], **correcting, **reading.correct_options())
     report = correct_file(template, target, cal.engine, setup, options, calibration_name=cal.name,
                           calibration_sha256=cal.sha256)

@@ -82,6 +82,7 @@ def verify(program, calibrations, machine_path, points, corrected, reading, setu
     if corrected is None and not calibrations:
         raise click.UsageError("give -c CALIBRATION to correct PROGRAM with, or --corrected FILE")
     from postproc.gcode.pipeline import CorrectOptions
+    from postproc.gcode.places import line_place
     from postproc.simulate.program import verify_program
 
     cals = [load_calibration(c) for c in calibrations]
@@ -110,8 +111,8 @@ def verify(program, calibrations, machine_path, points, corrected, reading, setu
                    f"{int(np.count_nonzero(run.feed))}/{len(run.nominal_to_actual_mm)}")
     for run in report.runs:
         click.echo(f"  worst lines, {run.label}:")
-        for ln, d in run.worst_lines():
-            click.echo(f"    {d * 1000:9.2f} um  line {ln}: {report.line_text(ln)}")
+        for ln, file, d in run.worst_places():  # a subprogram file's line as file:line
+            click.echo(f"    {d * 1000:9.2f} um  line {line_place(ln, file, None)}: {report.line_text(ln, file)}")
     for note in report.notes:
         click.echo(f"note: {note}", err=True)
     if plot:

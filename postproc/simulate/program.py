@@ -84,7 +84,8 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
     def run(label: str, source):
         path = original if source is program else program_path(source, setup, max_step_mm=max_step_mm, **reading)
         fine = actual_path_samples(source, setup, max_step_mm, **reading)
-        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno, original, fine))
+        report.runs.append(evaluate_run(label, machine, path, poly, nominal.lineno, original, fine,
+                                        nominal_files=nominal.files))
         return report.runs[-1]
 
     if not run("uncorrected", program).feed.any():

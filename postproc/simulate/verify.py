@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 
 from postproc.effects.base import DIR_COLUMNS
 from postproc.gcode.directions import MACHINE_STEP_MM
+from postproc.gcode.places import PathArray
 from postproc.simulate.machine import Machine
 
 #: Commanded motions smaller than this between two samples are float noise, carried as
@@ -180,6 +181,11 @@ class Run:
     nominal_to_actual_mm: np.ndarray = field(default_factory=_empty_floats)
     nominal_sample_line: np.ndarray = field(default_factory=_empty_ints)  # line of each nominal sample
     nominal_arclength_mm: np.ndarray = field(default_factory=_empty_floats)
+    # the file of each nominal_line and nominal_sample_line where it is not the program's
+    # own (a subprogram's, the program read expanded; None for its own lines), or None
+    # when all are its own (:mod:`postproc.gcode.places`)
+    nominal_file: PathArray | None = None
+    nominal_sample_file: PathArray | None = None
 
     @property
     def feed(self) -> np.ndarray:
@@ -209,21 +215,31 @@ class Run:
         """RMS distance of the actual feed points from the nominal path."""
         return _rms(self.deviation_mm[self.feed])
 
-    def worst_lines(self, n: int = WORST_LINES) -> list[tuple[int, float]]:
-        """The ``n`` original program lines with the largest feed deviation, either direction."""
+    def worst_places(self, n: int = WORST_LINES) -> list[tuple[int, str | None, float]]:
+        """The ``n`` original program lines with the largest feed deviation, either
+        direction: (line, file, deviation), ``file`` the subprogram's file the line is of
+        (None: the program's own)."""
         d = np.concatenate([self.deviation_mm[self.feed], self.nominal_to_actual_mm])
         lines = np.concatenate([self.nominal_line[self.feed], self.nominal_sample_line])
         if not len(d):
             return []
+        files = _files_of([(self.nominal_file, self.feed, int(np.count_nonzero(self.feed))),
+                           (self.nominal_sample_file, slice(None), len(self.nominal_sample_line))])
         order = np.argsort(-d, kind="stable")
-        out: dict[int, float] = {}
+        out: dict[tuple[int, str | None], float] = {}
         for i in order:
-            ln = int(lines[i])
-            if ln not in out:
-                out[ln] = float(d[i])
+            key = (int(lines[i]), None if files is None else files[i])
+            if key not in out:
+                out[key] = float(d[i])
                 if len(out) == n:
                     break
-        return list(out.items())
+        return [(ln, f, dev) for (ln, f), dev in out.items()]
+
+    def worst_lines(self, n: int = WORST_LINES) -> list[tuple[int, float]]:
+        """The ``n`` original program lines with the largest feed deviation, either
+        direction: (line, deviation). The lines of an expanded program can be of its
+        subprograms' files: :meth:`worst_places` gives the file of each."""
+        return [(ln, dev) for ln, _f, dev in self.worst_places(n)]
 
     def to_dict(self) -> dict:
         return {"label": self.label, "samples": int(len(self.deviation_mm)),
@@ -234,7 +250,18 @@ class Run:
                 "nominal_to_actual": {"max_mm": self.nominal_to_actual_max_mm,
                                       "rms_mm": self.nominal_to_actual_rms_mm,
                                       "samples": int(len(self.nominal_to_actual_mm))},
-                "worst_lines": [{"line": ln, "deviation_mm": d} for ln, d in self.worst_lines()]}
+                "worst_lines": [{"line": ln, **({} if f is None else {"file": f}), "deviation_mm": d}
+                                for ln, f, d in self.worst_places()]}
+
+
+def _files_of(parts) -> PathArray | None:
+    """The files of the rows of several parts, each ``(files, rows, count)``: its rows'
+    files (None: all its own) picked by ``rows``, ``count`` of them; None when all are
+    the program's own."""
+    if all(files is None for files, _rows, _n in parts):
+        return None
+    return np.concatenate([np.full(n, None, dtype=object) if files is None else np.asarray(files, dtype=object)[rows]
+                           for files, rows, n in parts])
 
 
 @dataclass
@@ -243,18 +270,40 @@ class VerifyReport:
     notes: list[str] = field(default_factory=list)
     #: text of the original program's lines (index 0 = line 1), to show the worst ones
     source_lines: list[str] = field(default_factory=list)
+    #: text of the lines of the subprograms' files shown so far, by file
+    file_lines: dict[str, list[str]] = field(default_factory=dict, repr=False)
 
-    def line_text(self, lineno: int) -> str:
-        if 1 <= lineno <= len(self.source_lines):
-            return self.source_lines[lineno - 1].strip()
+    def line_text(self, lineno: int, file: str | None = None) -> str:
+        """The text of line ``lineno`` of the original program, or of the subprogram's
+        ``file`` it is a line of (read from that file, as the program was read
+        expanded); empty where there is no such line, or the file cannot be read."""
+        lines = self.source_lines if file is None else self._lines_of(file)
+        if 1 <= lineno <= len(lines):
+            return lines[lineno - 1].strip()
         return ""
+
+    def _lines_of(self, file: str) -> list[str]:
+        if file not in self.file_lines:
+            from postproc.errors import PostprocError
+            from postproc.fileio import read_lines
+            from postproc.gcode.source import open_source
+
+            try:
+                with open_source(file) as fh:  # its lines as the reader numbers them
+                    lines = [ln.rstrip("\r\n") for ln in read_lines(fh, file)]
+            except (PostprocError, OSError):
+                lines = []
+            if lines and lines[0].startswith("\ufeff"):
+                lines[0] = lines[0][1:]
+            self.file_lines[file] = lines
+        return self.file_lines[file]
 
     def to_dict(self) -> dict:
         runs = []
         for r in self.runs:
             d = r.to_dict()
             for w in d["worst_lines"]:
-                w["text"] = self.line_text(w["line"])
+                w["text"] = self.line_text(w["line"], w.get("file"))
             runs.append(d)
         return {"runs": runs, "notes": list(self.notes)}
 
@@ -266,6 +315,7 @@ class NominalPath:
     points_mm: np.ndarray
     lineno: np.ndarray
     rapid: np.ndarray
+    files: PathArray | None = None  # the file of each sample's line, as ProgramPath.files
 
     def __len__(self) -> int:
         return len(self.points_mm)
@@ -283,7 +333,7 @@ def nominal_path(source, setup, chord_mm: float = NOMINAL_CHORD_MM, *, dialect: 
 
     pp = sample_program(source, setup, chord_mm=chord_mm, dialect=dialect, subroutine_path=subroutine_path,
                         limits=limits)
-    return NominalPath(pp.points_mm, pp.lineno, pp.rapid)
+    return NominalPath(pp.points_mm, pp.lineno, pp.rapid, pp.files)
 
 
 def actual_path_samples(source, setup, max_step_mm: float = RUN_STEP_MM,
@@ -387,8 +437,11 @@ def actual_polyline(machine: Machine, fine_path) -> Polyline:
 
 
 def evaluate_run(label: str, machine: Machine, path, nominal, nominal_lines: np.ndarray,
-                 reference=None, fine_path=None) -> Run:
+                 reference=None, fine_path=None, nominal_files: PathArray | None = None) -> Run:
     """Run ``path`` on ``machine`` and measure it against the ``nominal`` path.
+
+    ``nominal_lines``: the line of each point of the nominal path, ``nominal_files`` the
+    file of each (:attr:`NominalPath.files`; None: all the program's own).
 
     With ``reference`` (the original program sampled, a ``ProgramPath``) and
     ``fine_path`` (the run program by :func:`actual_path_samples`), the other
@@ -398,12 +451,15 @@ def evaluate_run(label: str, machine: Machine, path, nominal, nominal_lines: np.
     actual = machine_run(machine, path)
     dist, seg = nominal.nearest(actual)
     run = Run(label, actual, dist, np.asarray(nominal_lines)[seg + 1],
-              np.asarray(path.rapid, dtype=bool), _arclength(path.points_mm))
+              np.asarray(path.rapid, dtype=bool), _arclength(path.points_mm),
+              nominal_file=None if nominal_files is None else np.asarray(nominal_files, dtype=object)[seg + 1])
     if reference is not None and fine_path is not None and len(fine_path):
         ref_feed = ~np.asarray(reference.rapid, dtype=bool)
         ref_pts = np.asarray(reference.points_mm)
         run.nominal_to_actual_mm, _ = actual_polyline(machine, fine_path).nearest(ref_pts[ref_feed])
         run.nominal_sample_line = np.asarray(reference.lineno)[ref_feed]
+        ref_files = getattr(reference, "files", None)
+        run.nominal_sample_file = None if ref_files is None else np.asarray(ref_files, dtype=object)[ref_feed]
         run.nominal_arclength_mm = _arclength(ref_pts)[ref_feed]
     return run
 
