@@ -345,3 +345,27 @@ def test_a_take_up_in_a_subprogram_is_not_taken_for_a_compensated_line_of_the_sa
     rep = correct_file(str(tmp_path / "main.ngc"), str(tmp_path / "out.ngc"), eng, Setup(tool_radii={1: 1.0}),
                        CorrectOptions(subroutine_path=[str(tmp_path / "subs")], tolerance_mm=0.01))
     assert rep.takeups >= 1  # the reversal on X at the subprogram's line 5 is taken up
+
+
+def test_the_summary_names_the_subprogram_file_of_the_largest_change(tmp_path):
+    # the compensated moves are in a subprogram's file: the summary's line is that file's
+    from click.testing import CliRunner
+
+    from postproc.cli import main
+
+    prog = "G21 G17 G90 F100\nT1 M6\nG0 X100 Y100 Z100\no<comp> call\nG0 X150\nM2\n"
+    sub = "o<comp> sub\nG41 G1 X110 Y105\nX160\nY140\nX110\nG40 G1 X100 Y100\no<comp> endsub\nM2\n"
+    (tmp_path / "subs").mkdir()
+    (tmp_path / "subs" / "comp.ngc").write_text(sub)
+    (tmp_path / "main.ngc").write_text(prog)
+    table = tmp_path / "tools.tbl"
+    table.write_text("T1 P1 D6 Z0\n")
+    cal = str(ROOT / "calibrations" / "s500_parametric.json")
+    res = CliRunner().invoke(main, ["correct", str(tmp_path / "main.ngc"), "-c", cal, "--tool-table", str(table),
+                                    "--subroutine-path", str(tmp_path / "subs"), "--tolerance", "0.015",
+                                    "-o", str(tmp_path / "out.ngc")])
+    assert res.exit_code == 0, res.output
+    assert "cutter radius compensation kept: 5 moves" in res.output
+    place = res.output.split("across the tool radius (line ")[1].split(",")[0]
+    assert place.endswith("comp.ngc:" + place.rsplit(":", 1)[1])
+    assert 2 <= int(place.rsplit(":", 1)[1]) <= 6  # a line of the subprogram's file, in that file's numbers

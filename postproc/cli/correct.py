@@ -48,9 +48,13 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
         lines.append("  note: subprograms, loops, parameters and expressions were expanded: the corrected "
                      "program is flat (recorded in the header)")
     if rep.cutter is not None:
-        lines.append(f"  cutter radius compensation kept: {rep.cutter.moves} moves offset by the controller; the "
-                     f"correction changes by at most {rep.cutter.bound_mm * 1000:.2f} um across the tool radius "
-                     f"(line {rep.cutter.lineno}, {rep.cutter.source} radius {rep.cutter.radius_mm:g} mm)")
+        from postproc.gcode.places import line_place
+
+        cut = rep.cutter
+        lines.append(f"  cutter radius compensation kept: {cut.moves} moves offset by the controller; the "
+                     f"correction changes by at most {cut.bound_mm * 1000:.2f} um across the tool radius "
+                     f"(line {line_place(cut.lineno, cut.path or src, src)}, {cut.source} radius "
+                     f"{cut.radius_mm:g} mm)")
     if rep.cycles_kept or rep.cycles_expanded:
         lines.append(f"  canned cycles: {rep.cycles_kept} kept, {rep.cycles_expanded} expanded")
     if rep.g54_assumed_zero:

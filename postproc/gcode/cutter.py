@@ -100,6 +100,7 @@ class Bound:
     moves: int = 0
     radii: dict = field(default_factory=dict)  # source -> radius (mm)
     lines: set = field(default_factory=set)  # (file, line) of the moves the controller offsets (None: the program's)
+    path: str | None = None  # the file of the largest's line, in an expanded program (None: the program's own)
 
     def note(self) -> str:
         """The header's words for it."""
@@ -409,6 +410,7 @@ def check_chunk(c) -> None:
     if bound[k] > b.bound_mm:
         b.bound_mm, b.lineno, b.radius_mm, b.source = float(bound[k]), moves[k].move.lineno, moves[k].radius_mm, \
             moves[k].source
+        b.path = moves[k].move.path
     tol = c.opt.tolerance_mm
     if bound[k] > tol:
         cm = moves[k]
@@ -438,4 +440,4 @@ def merge_bounds(a: Bound | None, b: Bound | None) -> Bound | None:
         return a or b
     worst = a if a.bound_mm >= b.bound_mm else b
     return Bound(worst.bound_mm, worst.lineno, worst.radius_mm, worst.source, a.moves + b.moves,
-                 {**a.radii, **b.radii}, a.lines | b.lines)
+                 {**a.radii, **b.radii}, a.lines | b.lines, worst.path)
