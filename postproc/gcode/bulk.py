@@ -1,7 +1,7 @@
 """The bulk lane: runs of plain absolute moves read and rewritten per chunk.
 
-Most lines of CAM output are ``[N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [I..] [J..] [F..]``
-in that order. A chunk of lines is read by the scanner (:mod:`postproc.gcode.scanner`,
+Most lines of CAM output are ``[N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [A..] [B..] [C..]
+[I..] [J..] [R..] [F..]`` in that order. A chunk of lines is read by the scanner (:mod:`postproc.gcode.scanner`,
 the lexer's grammar, compiled) and every such line cut into its pieces
 (:func:`postproc.gcode.plainscan.pieces`): the text before the first axis word, each
 axis and centre word's letter (with the blanks before it) and number, and the rest
@@ -14,14 +14,19 @@ made at once (positions carried forward where a line does not name an axis).
 A run holds three kinds of lines:
 
 - straight moves (G0/G1, or no motion word under G0/G1);
-- arcs in the XY plane with centre words (G2/G3 with I and/or J): their centre is found
-  from the run's columns, and the controller's checks the interpreter makes (zero
-  radius, end radius) end the run before an arc that fails them, so the interpreter
-  reads and reports it. A line with no motion word after an arc is an arc (modal) and
-  never plain;
+- arcs in the XY plane with centre words (G2/G3 with I and/or J) or a radius (R): their
+  centre is found from the run's columns, and the controller's checks the interpreter
+  makes (zero radius, end radius; for R, ends that coincide or a radius short of half
+  the chord) end the run before an arc that fails them, so the interpreter reads and
+  reports it. An R-form arc is always written by the general emitter, from its plan. A
+  line with no motion word after an arc is an arc (modal) and never plain;
 - lines that move nothing (blank, comments, S words, M0 M1 M3-M5 M7-M9: :data:`_NEUTRAL`;
   a tool change alone: :data:`_TOOL`):
   written whole, no move, no word added; a run never starts with one.
+
+Rotary words (A, B, C after Z) pass through as written, in the piece after Z; each
+run line carries the rotary positions a line read by the interpreter has
+(:attr:`Run.rot`), for the engine's context.
 
 A straight move that sets the tool length first (``G0 G43 H2 Z25``, :attr:`Block.tlo`)
 starts a run of its own: the length is set (``Interpreter.set_tool_length``), then the
@@ -219,7 +224,8 @@ class RunMove:
                 arc = Arc(arc.center, arc.plane, arc.clockwise, 1, (-1, -1), r_idx)
                 aux = (r_idx,)
         return Move(self.lineno, self.kind, self.q0, self.q1, self.r, self.shift, self.unit, False,
-                    self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, {}, arc, prefix,
+                    self.arc_absolute, words, (idx[0], idx[1], idx[2]), feed_idx, False, self.feed, self.rotary, arc,
+                    prefix,
                     Role.MOVE, motion_idx, aux, path=self.path)
 
 
@@ -248,7 +254,7 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
     return (not interp.ended and interp.modal_call is None and st.frame is None
             and not st.incremental and not st.inverse_time and interp._run_shift is not None
             and st.comp == 400 and not st.comp_edge  # moves under cutter compensation: postproc.gcode.cutter
-            and not interp.used_rotary and (motion_word or st.motion in (RAPID, LINE))
+            and (motion_word or st.motion in (RAPID, LINE))
             and not (math.isnan(st.pos[0]) or math.isnan(st.pos[1]) or math.isnan(st.pos[2])))
 
 
@@ -276,6 +282,11 @@ class Block:
         # R-form arcs (their R word is in the rest): its value on each line (0 where none)
         self.has_r = np.frombuffer(bytes(pieces.has[5]), dtype=bool)
         self.r_value: list[float] = pieces.value[5]
+        # rotary words (A, B, C: passed through, in the piece after Z): which lines name
+        # each, its value; None where no line names one
+        self.rotary: list[tuple[str, list[bool], list[float]]] | None = [
+            (letter, pieces.has[6 + r], pieces.value[6 + r]) for r, letter in enumerate("ABC")
+            if any(pieces.has[6 + r])] or None
         g = cols[_G]
         self.gword = g
         motion = np.fromiter(map(_G_MOTION.__getitem__, g), dtype=np.int8, count=n)  # -1: no G word
@@ -369,7 +380,7 @@ class Run:
     """Plain lines ``a:b`` of a block read in one go; see the module docstring."""
 
     __slots__ = ("block", "a", "b", "lineno", "unit", "shift", "r", "arc_absolute", "decimals", "q0", "motion0",
-                 "feed0", "q1", "trow", "cut", "arcs", "inert", "_arc_rows")
+                 "feed0", "q1", "trow", "cut", "arcs", "inert", "_arc_rows", "rot")
     block: Block
     a: int
     b: int
@@ -390,6 +401,9 @@ class Run:
         self.arcs: dict[int, RunArc] = {}  # line (within the run) -> its arc
         self.inert: list[int] = []  # lines (within the run) that move nothing (blank, comment, S/M words)
         self._arc_rows: list[int] | None = None
+        # the rotary axes' positions at each line, as a line read by the interpreter has them
+        # (Move.rotary: {} before the program names one); None: none is named
+        self.rot: list[dict[str, float]] | None = None
 
     def line(self, j: int) -> int:
         """The source line of the run's line ``j`` (an index within it)."""
@@ -534,6 +548,8 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
         changes = [tools[a + j] for j in run.inert if a + j in tools] if tools else None
         if changes:
             interp.load_tool(changes[-1])  # the run's last tool change
+    if block.rotary is not None or interp.used_rotary:
+        run.rot = _rotary_rows(interp, block, a, b)
     pos = list(st.pos)
     e = b - 1
     for k in range(3):
@@ -545,6 +561,26 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
     interp.motion_word = bool(block.gword[e])
     block.runs.append(run)
     return run
+
+
+def _rotary_rows(interp: Interpreter, block: Block, a: int, b: int) -> list[dict[str, float]]:
+    """The rotary positions of lines ``a:b`` (the interpreter's ``Move.rotary``: its
+    positions once the program has named a rotary axis, {} before), the interpreter's
+    state advanced to their end."""
+    st, used, g92 = interp.state, interp.used_rotary, interp.rotary_g92
+    cur = dict(st.rotary)
+    named = [(letter, has, val) for letter, has, val in block.rotary or () if any(has[a:b])]
+    if not named:
+        return [dict(cur) if used else {}] * (b - a)  # (one dict for every line: none changes it)
+    rows: list[dict[str, float]] = []
+    for y in range(a, b):
+        for letter, has, val in named:
+            if has[y]:
+                cur[letter] = val[y] + g92.get(letter, 0.0)
+                used.add(letter)
+        rows.append(dict(cur) if used else {})
+    st.rotary = cur
+    return rows
 
 
 def arc_moves(run: Run) -> list[tuple[int, RunMove]]:
@@ -655,6 +691,8 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
         q1 = tuple(run.q1[j].tolist())
     mv = RunMove(run, run.line(j), motion, q0, q1, float(f) if f else feed)
     mv.path = run.path(j)
+    if run.rot is not None:
+        mv.rotary = run.rot[j]
     arc = run.arcs.get(j)
     if arc is not None:
         mv.arc = Arc(arc[0], 170, arc[1], 1, (-1, -1), R_FORM if blk.has_r[y] else -1)
@@ -916,6 +954,7 @@ def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:
             base = x - run.a
             sub.arcs = {jj - base: run.arcs[jj] for jj in arc_keys[bisect_left(arc_keys, base):bisect_left(arc_keys, j)]}
             sub.inert = [jj - base for jj in inert[bisect_left(inert, base):bisect_left(inert, j)]]
+            sub.rot = None if run.rot is None else run.rot[base:j]
             yield sub
         if j == len(run):
             break

@@ -714,11 +714,17 @@ class _LineRows(LineReader[_Record]):
 
     def _run_keys(self, blk: bulk.Block, src: list[int]) -> np.ndarray:
         """The keys of the block's run lines ``src``: a plain line's skeleton is its N word
-        (or nothing), its N word its own, no comment; a line that moves nothing has none."""
+        (or nothing) and its rotary words, its N word its own, no comment; a line that moves
+        nothing has none."""
         out = np.zeros((len(src), 3), dtype=np.int64)
         keys, cache, rests = self.keys, self._head_keys, self._rest_skeletons
         heads = blk.cols[0]
         rows = [k for k, j in enumerate(src) if heads[j]]  # (no head: no N, G or G43 H word, or no move)
+        if blk.rotary is not None:  # a line naming a rotary axis: its whole skeleton
+            turning = [k for k, j in enumerate(src) if any(has[j] for _letter, has, _val in blk.rotary)]
+            if turning:
+                out[turning] = [keys.of_line(blk.lines[src[k]]) for k in turning]
+                rows = sorted(set(rows) - set(turning))
         found = []
         for k in rows:
             h = heads[src[k]]

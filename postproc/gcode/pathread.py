@@ -259,6 +259,9 @@ class Sampler(LineReader[tuple[int, Move, "str | None"]]):
                 cols, run_arcs = runs[k]
                 k += 1
                 arcs += [(at + row, *rest) for row, *rest in run_arcs]  # type: ignore[misc]
+                if e.rot is not None:  # the rotary positions of its lines that move (its rows)
+                    moving = np.flatnonzero(~e.block.neutral[e.a:e.b]).tolist()
+                    self.rot.extend((self.moves + at + m, e.rot[j]) for m, j in enumerate(moving) if e.rot[j])
                 parts.append(cols)
                 at += len(cols)
                 continue

@@ -297,7 +297,7 @@ class Corrector:
             if type(e) is bulk.Run:
                 runs.append(e)
                 e.trow = M
-                rot.extend([{}] * len(e))
+                rot.extend([{}] * len(e) if e.rot is None else e.rot)
                 if e.arcs and arcs:  # planned as any other arc
                     general.extend((M + j, mv) for j, mv in bulk.arc_moves(e))
                 M += len(e)

@@ -1,13 +1,13 @@
 """The plain moves of a scanned chunk, cut into the pieces the bulk writer rejoins.
 
 A plain move is a line of words (:attr:`postproc.gcode.scanner.Columns.plain`) in the
-order ``[N..] [G0|G1|G2|G3] [G43 H<digits>] [X..] [Y..] [Z..] [I..] [J..] [R..] [F..]``
-(any case, G00 to G03 too). :func:`pieces` gives, per line, 14 texts that join back to
-the line without its ``\\n``: the head (blanks, N, G and G43 H words), the G number, for
-X, Y, Z, I and J the text from the piece before up to the number and the number, then
-the rest (R and F words, trailing blanks, ``\\r``) and the F number; and for X, Y, Z, I,
-J and R whether the line names it, its value (the scanner's) and its digits after the
-point.
+order ``[N..] [G0|G1|G2|G3] [G43 H<digits>] [X..] [Y..] [Z..] [A..] [B..] [C..] [I..]
+[J..] [R..] [F..]`` (any case, G00 to G03 too). :func:`pieces` gives, per line, 14 texts
+that join back to the line without its ``\\n``: the head (blanks, N, G and G43 H words),
+the G number, for X, Y, Z, I and J the text from the piece before up to the number and
+the number (the rotary words are in the piece before I), then the rest (R and F words,
+trailing blanks, ``\\r``) and the F number; and for X, Y, Z, I, J, R, A, B and C whether
+the line names it, its value (the scanner's) and its digits after the point.
 Every other line has 14 empty texts and names nothing. This reads the scanner's columns:
 no grammar of its own.
 
@@ -27,6 +27,8 @@ _REST: Final = 12
 _F: Final = 13
 _AXES: Final = "XYZIJ"
 _R: Final = 5  # R's index among the named words (after X, Y, Z, I, J; its text is in the rest)
+_ROTARY: Final = "ABC"  # named words 6 to 8 (their text in the piece that follows)
+NAMED: Final = 9
 _MOTIONS: Final = ("0", "1", "2", "3", "00", "01", "02", "03")
 
 
@@ -40,21 +42,21 @@ class Pieces:
     """The pieces of a chunk's lines, a list per piece or axis and an entry per line."""
 
     text: list[list[str]]  # the 14 pieces
-    has: list[list[bool]]  # X, Y, Z, I, J, R: named on the line
+    has: list[list[bool]]  # X, Y, Z, I, J, R, A, B, C: named on the line
     value: list[list[float]]  # their values (0.0 where not named)
     frac: list[list[int]]  # their digits after the point (0 where not named)
 
     def __init__(self, n: int) -> None:
         self.text = [[""] * n for _ in range(GROUPS)]
-        self.has = [[False] * n for _ in range(6)]
-        self.value = [[0.0] * n for _ in range(6)]
-        self.frac = [[0] * n for _ in range(6)]
+        self.has = [[False] * n for _ in range(NAMED)]
+        self.value = [[0.0] * n for _ in range(NAMED)]
+        self.frac = [[0] * n for _ in range(NAMED)]
 
     def clear(self, i: int) -> None:
         """Line ``i`` is not a plain move: every piece empty, no word named."""
         for k in range(GROUPS):
             self.text[k][i] = ""
-        for k in range(6):
+        for k in range(NAMED):
             self.has[k][i] = False
             self.value[k][i] = 0.0
             self.frac[k][i] = 0
@@ -99,6 +101,13 @@ def pieces(text: str, cols: Columns) -> Pieces:
         out[_HEAD][li] = text[s:head]
         prev = head
         for k in range(5):
+            if k == 3:  # the rotary words, after Z
+                for r in range(3):
+                    if w < we and letter[w] == _ROTARY[r]:
+                        has[6 + r][li] = True
+                        value[6 + r][li] = val[w]
+                        frac[6 + r][li] = _frac(text, start[w], end[w])
+                        w += 1
             if w < we and letter[w] == _AXES[k]:
                 a = start[w]
                 b = end[w]
