@@ -302,32 +302,9 @@ class Block:
         modal_arc = no_g & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
         moving = ((self.has[0] | self.has[1] | self.has[2]) & (self.arc == (centre ^ self.has_r))
                   & ~(centre & self.has_r) & ~modal_arc)
-        neutral = np.zeros(n, dtype=bool)
-        head = cols[_HEAD] = list(cols[_HEAD])
-        rest = cols[_REST] = list(cols[_REST])
-        match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
-        self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
-        for i in np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist():
-            line = lines[i]
-            if not match(line):
-                m = tool(line)
-                if m is None:
-                    continue
-                self.tools[i] = int(m.group(1) or m.group(2))
-            # written whole from its last piece
-            neutral[i] = True
-            head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
-        # straight moves that set the tool length first (G43 H..: line -> H): a run starts at
-        # one (set_tool_length before it is read); an arc that does is the interpreter's
-        self.tlo: dict[int, int] = {}
-        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h]:
-            if moving[i]:
-                m = _TLO.search(head[i])
-                if m is not None:
-                    moving[i] = False
-                    if not self.arc[i]:
-                        self.tlo[i] = int(m.group(1))
-        self.tlo_rows: list[int] = sorted(self.tlo)
+        cols[_HEAD], cols[_REST] = list(cols[_HEAD]), list(cols[_REST])
+        neutral = self._inert(np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist())
+        self._tool_lengths(moving)
         self.neutral = neutral
         self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
         self.last_moving: list[int] = last_index(~neutral).tolist()
@@ -345,6 +322,40 @@ class Block:
         self.src: list[int] | None = None
         self.src_arr: IntArray | None = None
         self.src_files: list[str | None] | None = None  # ... and its file (set_source)
+
+    def _inert(self, candidates: list[int]) -> BoolArray:
+        """The lines among ``candidates`` (no word of a move) that move nothing (blank,
+        comments, S and some M words, a tool change alone: :attr:`tools`), written whole
+        from their last piece."""
+        lines, head, rest = self.lines, self.cols[_HEAD], self.cols[_REST]
+        neutral = np.zeros(len(lines), dtype=bool)
+        match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
+        self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
+        for i in candidates:
+            line = lines[i]
+            if not match(line):
+                m = tool(line)
+                if m is None:
+                    continue
+                self.tools[i] = int(m.group(1) or m.group(2))
+            neutral[i] = True
+            head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
+        return neutral
+
+    def _tool_lengths(self, moving: BoolArray) -> None:
+        """The straight moves that set the tool length first (G43 H..: :attr:`tlo`, line ->
+        H): a run starts at one (set_tool_length before it is read); an arc that does is
+        the interpreter's (``moving`` loses both)."""
+        head = self.cols[_HEAD]
+        self.tlo: dict[int, int] = {}
+        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h]:
+            if moving[i]:
+                m = _TLO.search(head[i])
+                if m is not None:
+                    moving[i] = False
+                    if not self.arc[i]:
+                        self.tlo[i] = int(m.group(1))
+        self.tlo_rows: list[int] = sorted(self.tlo)
 
     def set_source(self, src: list[int], files: list[str | None] | None = None) -> None:
         """Give each of the block's lines its source line (``src``, one per line: an
