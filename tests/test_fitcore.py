@@ -240,3 +240,20 @@ def test_the_centre_fit_finds_the_circle_through_the_ends():
         c0 = (c + rng.normal(0, 0.02 * R, 2)).tolist()
         found = fitcore.bisector_centre((us[0], vs[0]), (us[-1], vs[-1]), us, vs, (c0[0], c0[1]))
         assert math.hypot(found[0] - c[0], found[1] - c[1]) <= 1e-9 * (R + 300.0)
+
+
+def test_mean_between_is_numpys_mean_of_rows_bit_for_bit():
+    """The mean correction of an arc's samples (arcfit's offset) as numpy took it, the rows
+    of a (k, 3) array summed one after another; the compiled module's the same."""
+    src = _source_module()
+    rng = np.random.default_rng(23)
+    for _ in range(2000):
+        k = int(rng.integers(1, 200))
+        dq = rng.normal(0, 1, (k, 3)) * 10.0 ** rng.uniform(-9, 3, (k, 1))
+        a = int(rng.integers(0, k))
+        b = int(rng.integers(a, k))
+        want = np.add.reduce(dq[a:b + 1], axis=0) / (b + 1 - a)
+        cols = dq.T.tolist()
+        ours = [fitcore.mean_between(col, a, b) for col in cols]
+        assert _bits(ours) == _bits(want)
+        assert _bits(ours) == _bits([src.mean_between(col, a, b) for col in cols])

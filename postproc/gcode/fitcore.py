@@ -423,6 +423,16 @@ class ArcTry:
         return (math.nan if nan else worst), at
 
 
+def mean_between(col: list[float], a: int, b: int) -> float:
+    """The mean of ``col[a:b + 1]``: the sum in order divided by the count (as numpy's
+    sum over the rows of a (k, 3) array, ``np.add.reduce(x[a:b + 1], axis=0)``, adds them,
+    one row after another)."""
+    total = col[a]
+    for i in range(a + 1, b + 1):
+        total += col[i]
+    return total / (b + 1 - a)
+
+
 def fractions(ss: list[float], lo: int, hi: int) -> list[float]:
     """Where each of the parameters ``ss[lo:hi]`` lies between the first and the last (0
     to 1)."""
