@@ -192,3 +192,68 @@ def test_a_measure_that_stops_keeps_what_the_fit_takes_from_it():
                 assert min(kept) == best
                 assert kept.count(best) == passing.count(best)
     assert cut > 100
+
+
+def _bisector_cases(rng, n: int):
+    """Arcs of radius 1 um to 100 m sampled with noise, the ends rounded to 4 decimals:
+    (S2, E2, us, vs, c0); some with S2 == E2, a sample on the chord's middle, a nan."""
+    for i in range(n):
+        R = 10.0 ** rng.uniform(-3, 5)
+        c = rng.uniform(-300, 300, 2)
+        th = np.sort(rng.uniform(0, rng.uniform(1e-4, 6), int(rng.integers(2, 60))))
+        P2 = c + R * np.c_[np.cos(th), np.sin(th)] + rng.normal(0, 10.0 ** rng.uniform(-9, -1), (len(th), 2))
+        S2, E2 = P2[0].round(4), P2[-1].round(4)
+        if i % 13 == 0:
+            E2 = S2.copy()
+        if i % 17 == 0:
+            P2[len(P2) // 2] = 0.5 * (S2 + E2)
+        if i % 19 == 0:
+            P2[0] = np.nan
+        c0 = c + rng.normal(0, 10.0 ** rng.uniform(-6, 0), 2)
+        yield tuple(S2.tolist()), tuple(E2.tolist()), P2[:, 0].tolist(), P2[:, 1].tolist(), tuple(c0.tolist())
+
+
+def test_the_compiled_centre_fit_gives_the_floats_of_its_source():
+    src = _source_module()
+    rng = np.random.default_rng(17)
+    settled = 0
+    for S2, E2, us, vs, c0 in _bisector_cases(rng, 3000):
+        ours = fitcore.bisector_centre(S2, E2, us, vs, c0)
+        theirs = src.bisector_centre(S2, E2, us, vs, c0)
+        assert _bits(ours) == _bits(theirs), (S2, E2, c0)
+        settled += math.isfinite(ours[0]) and S2 != E2
+    assert settled > 2000
+
+
+def test_the_centre_fit_finds_the_circle_through_the_ends():
+    """On the samples of an exact circle through S2 and E2 the centre is the circle's to
+    the rounding, from a first guess near it on its side of the chord (a step across the
+    chord is halved: the guess says which side)."""
+    rng = np.random.default_rng(19)
+    for _ in range(500):
+        R = 10.0 ** rng.uniform(-1, 3)
+        c = rng.uniform(-300, 300, 2)
+        t0 = rng.uniform(-math.pi, math.pi)
+        sweep = rng.uniform(0.2, 2.6) if rng.random() < 0.5 else rng.uniform(3.7, 6.0)
+        th = t0 + sweep * np.linspace(0.0, 1.0, int(rng.integers(3, 60)))
+        us, vs = (c[0] + R * np.cos(th)).tolist(), (c[1] + R * np.sin(th)).tolist()
+        c0 = (c + rng.normal(0, 0.02 * R, 2)).tolist()
+        found = fitcore.bisector_centre((us[0], vs[0]), (us[-1], vs[-1]), us, vs, (c0[0], c0[1]))
+        assert math.hypot(found[0] - c[0], found[1] - c[1]) <= 1e-9 * (R + 300.0)
+
+
+def test_mean_between_is_numpys_mean_of_rows_bit_for_bit():
+    """The mean correction of an arc's samples (arcfit's offset) as numpy took it, the rows
+    of a (k, 3) array summed one after another; the compiled module's the same."""
+    src = _source_module()
+    rng = np.random.default_rng(23)
+    for _ in range(2000):
+        k = int(rng.integers(1, 200))
+        dq = rng.normal(0, 1, (k, 3)) * 10.0 ** rng.uniform(-9, 3, (k, 1))
+        a = int(rng.integers(0, k))
+        b = int(rng.integers(a, k))
+        want = np.add.reduce(dq[a:b + 1], axis=0) / (b + 1 - a)
+        cols = dq.T.tolist()
+        ours = [fitcore.mean_between(col, a, b) for col in cols]
+        assert _bits(ours) == _bits(want)
+        assert _bits(ours) == _bits([src.mean_between(col, a, b) for col in cols])

@@ -118,12 +118,21 @@ def test_arc_candidates_are_the_old_ones_bit_for_bit(seed):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_bisector_centre_is_the_old_one_bit_for_bit(seed):
+def test_bisector_centre_fits_as_the_old_one_did(seed):
+    """The centre fit runs in plain floats (postproc.gcode.fitcore.bisector_centre): its
+    sums are taken in order where numpy's went through BLAS, so a centre may differ from
+    the old one in the last place, which the Gauss-Newton steps amplify where the centre
+    is ill-defined (a circle of kilometres through a few millimetres of path). Most
+    centres are the old ones bit for bit; every one fits the points as closely as the old
+    one (the points' RMS distance from its circle through S2 and E2 within 0.5 %, or
+    within the rounding at the centre's magnitude); the layout of the samples does not
+    count."""
     import fit_reference as ref  # noqa: PLC0415  (the tests' own reference, a sibling module)
 
     from postproc.gcode.segment import bisector_centre
 
     rng = np.random.default_rng(seed)
+    same = 0
     for i in range(2000):
         R = 10.0 ** rng.uniform(-3, 5)
         c = rng.uniform(-300, 300, 2)
@@ -140,8 +149,24 @@ def test_bisector_centre_is_the_old_one_bit_for_bit(seed):
         # the samples as the fit holds them (plane columns taken from (k, 3) rows, which
         # numpy lays out by column), by row, and a strided view
         rows = np.c_[P2, np.zeros(len(P2))]
-        for P in (rows[:, [0, 1]], np.ascontiguousarray(P2), np.asfortranarray(P2), np.c_[P2, P2][:, ::2]):
-            assert _same(ref.bisector_centre(S2, E2, P, c0), bisector_centre(S2, E2, P, c0))
+        strided = np.repeat(P2, 2, axis=1)[:, ::2]
+        found = [bisector_centre(S2, E2, P, c0) for P in (rows[:, [0, 1]], np.ascontiguousarray(P2),
+                                                             np.asfortranarray(P2), strided)]
+        assert all(_same(found[0], f) for f in found[1:])
+        old = ref.bisector_centre(S2, E2, np.ascontiguousarray(P2), c0)
+        if _same(old, found[0]):
+            same += 1
+            continue
+        rms_old, rms_new = _rms_off_circle(S2, P2, old), _rms_off_circle(S2, P2, found[0])
+        rounding = 1e-12 * max(1.0, float(np.abs(old).max()), float(np.abs(found[0]).max()))
+        assert abs(rms_new - rms_old) <= 5e-3 * rms_old + rounding, (i, old, found[0], rms_old, rms_new)
+    assert same > 1700
+
+
+def _rms_off_circle(S2: np.ndarray, P2: np.ndarray, c: np.ndarray) -> float:
+    """RMS distance of the points P2 (k, 2) from the circle about c through S2 (nan: nan)."""
+    rho = math.hypot(S2[0] - c[0], S2[1] - c[1])
+    return float(np.sqrt(np.mean((np.hypot(P2[:, 0] - c[0], P2[:, 1] - c[1]) - rho) ** 2)))
 
 
 def test_a_changed_word_moves_the_tracked_position_to_the_value_written():

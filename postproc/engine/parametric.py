@@ -291,10 +291,12 @@ class ParametricEngine(Engine):
         r = check_tool_vectors(r, len(q))
         return self._forward_located(q, r, order or self.order)[0]
 
-    def _forward_located(self, q: np.ndarray, r: np.ndarray, order: str) -> tuple[np.ndarray, Located]:
+    def _forward_located(self, q: np.ndarray, r: np.ndarray, order: str,
+                         near: Located | None = None) -> tuple[np.ndarray, Located]:
         """F(q, r) (N, 3) of checked arrays, and where q lies in the tables (for the
-        Jacobian at the same points: :meth:`_jacobian_located`)."""
-        loc = self._stacked.locate(q)
+        Jacobian at the same points: :meth:`_jacobian_located`); ``near``: where the same
+        points lay a step earlier (:meth:`StackedErrors.locate`)."""
+        loc = self._stacked.locate(q, near)
         total = self._stacked.values(loc)
         rho, eps = total[:, :3] + q @ self._ST, total[:, 3:]
         if order == "first":

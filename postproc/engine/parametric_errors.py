@@ -146,10 +146,24 @@ class StackedErrors:
         return g
 
     # -- locating ------------------------------------------------------------------------
-    def locate(self, q: np.ndarray) -> Located:
-        """The interval of every point's position on every axis; q (N, 3) float."""
+    def locate(self, q: np.ndarray, near: Located | None = None) -> Located:
+        """The interval of every point's position on every axis; q (N, 3) float.
+
+        ``near``: where the same points lay a moment ago (a Newton step earlier): where
+        every position is still in its interval, the intervals are those (each position
+        lies in one interval only), and so are the rows the values took from them while
+        no other evaluation has taken rows since."""
         t = np.ascontiguousarray(q.T)
         tc = np.clip(t, self._lo, self._hi)
+        if near is not None and near.g.shape == t.shape and self._buckets is not None:
+            g = near.g
+            if ((self._step_left[g] <= tc) & (tc < self._step_right[g])).all():
+                h = near.h
+                s = (tc - self._left[g]) / h
+                loc = Located(t, tc, g, s, s * s if self.pchip else None, h, None)
+                if near.generation == _generation():
+                    loc.rows, loc.generation = near.rows, near.generation
+                return loc
         g = self._bucket_locate(tc) if t.shape[1] >= BUCKET_MIN_POINTS else None
         if g is None:
             g = np.empty(t.shape, dtype=np.intp)
@@ -168,8 +182,11 @@ class StackedErrors:
         """(6, 3, N): each axis's six functions at its clamped positions (a scratch array)."""
         n = loc.g.shape[1]
         if self.pchip:
-            rows = np.take(self._values, loc.g, axis=1, out=scratch("rows", (24, 3, n)), mode="clip")
-            loc.rows, loc.generation = rows, _generation()
+            if loc.rows is not None and loc.generation == _generation():
+                rows = loc.rows  # the rows of these intervals, taken a step earlier
+            else:
+                rows = np.take(self._values, loc.g, axis=1, out=scratch("rows", (24, 3, n)), mode="clip")
+                loc.rows, loc.generation = rows, _generation()
             s, h, s2 = loc.s, loc.h, loc.s2
             s3 = s2 * s  # s * s * s
             # the basis 2 s3 - 3 s2 + 1, (s3 - 2 s2 + s) h, -2 s3 + 3 s2, (s3 - s2) h, the

@@ -157,12 +157,14 @@ def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: floa
     # gathered rows are: the squareness product and the residual's sum see the same layout)
     everyone = q.flags.c_contiguous and p.flags.c_contiguous and r.flags.c_contiguous
     order = engine.order
+    loc = None
     for k in range(max_iter + 1):
         if everyone:
             qa, ra, pa = q, r, p
         else:
             qa, ra, pa = q[active], r[active], p[active]
-        value, loc = engine._forward_located(qa, ra, order)
+        # the same points as in the step before: their intervals, most likely, too
+        value, loc = engine._forward_located(qa, ra, order, loc if everyone else None)
         f = value - pa
         res = np.sqrt(np.add.reduce(f * f, axis=1))  # np.linalg.norm(f, axis=1), without its checks
         resid[active] = res

@@ -74,9 +74,9 @@ class _Samples:
     """A piece's corrected samples prepared once for all the tries of its fit: the samples
     and the middles of their intervals interleaved (``Qs`` (2n - 1, 3), the chord's middle
     moved by the nominal path's bulge there; ``ss`` their parameters), their plane
-    coordinates (``P2``), the corrections (``dq``: corrected minus nominal), and ``cols``
-    and ``sl``: ``Qs`` by axis and ``ss`` as lists of floats, for the measures of
-    :mod:`postproc.gcode.fitcore`."""
+    coordinates (``P2``), the corrections of an arc's samples (``dq``: corrected minus
+    nominal, by axis), and ``cols`` and ``sl``: ``Qs`` by axis and ``ss`` as lists of
+    floats, for the measures of :mod:`postproc.gcode.fitcore`."""
 
     __slots__ = ("s", "Q", "Qs", "ss", "P2", "dq", "free", "cols", "sl")
 
@@ -92,20 +92,19 @@ class _Samples:
         ss[1::2] = 0.5 * (s[:-1] + s[1:])
         self.Qs = Qs
         self.ss = ss
-        self.dq = Q - nom
         self.P2: np.ndarray | None = None
+        self.dq: list[list[float]] = []
         if mv.arc is not None:
             (a1, a2, _an), _ = PLANES[mv.arc.plane]
             self.P2 = Qs[:, [a1, a2]]
+            self.dq = (Q - nom).T.tolist()
         self.free = _free_move(mv)
         self.cols: list[list[float]] = Qs.T.tolist()
         self.sl: list[float] = ss.tolist()
 
-    def offset(self, a: int, b: int) -> np.ndarray:
-        """The mean correction over samples a..b: corrected minus nominal."""
-        # as ndarray.mean: the sum divided by the count
-        mean: np.ndarray = np.add.reduce(self.dq[a:b + 1], axis=0) / (b + 1 - a)
-        return mean
+    def offset(self, a: int, b: int) -> list[float]:
+        """The mean correction over samples a..b of an arc: corrected minus nominal."""
+        return [fitcore.mean_between(col, a, b) for col in self.dq]
 
     def column(self, axis: int, lo: int, hi: int) -> list[float]:
         """Coordinate ``axis`` of the interleaved samples lo..hi - 1."""
@@ -320,7 +319,7 @@ class MoveFit:
             cur = qn
         return out
 
-    def _exact_arc(self, smp: _Samples, lo: int, hi: int, S_: list[float], E_: list[float], offset: np.ndarray,
+    def _exact_arc(self, smp: _Samples, lo: int, hi: int, S_: list[float], E_: list[float], offset: list[float],
                    flat: bool, may_keep: bool) -> ArcSpec | None:
         """The arc from S to E (both as written) that stays within ``budget`` of the
         corrected samples lo..hi - 1 of ``smp`` (``offset``: their mean correction, which

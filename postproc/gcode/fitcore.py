@@ -3,17 +3,20 @@
 The fit (:mod:`postproc.gcode.arcfit`) tries, for each piece of a move, segments over
 ranges of its samples; each try measures every sample: its distance from a chord
 (:func:`chord_deviation`) and from the arc a controller draws about each rounded
-candidate centre (:func:`centre_lattice`, :meth:`ArcTry.measure`). The samples are
+candidate centre (:func:`centre_lattice`, :meth:`ArcTry.measure`), after the fit of the
+centre on the bisector of the try's ends (:func:`bisector_centre`). The samples are
 columns of floats (lists), one per axis; the loops run over them one sample at a time.
 
 Each operation is the one numpy did element by element on the samples' arrays, so the
 values are the same: ``%`` is np.mod's floored remainder, :func:`rint` np.rint's round
 half to even, :func:`hypot` numpy's (the C library's) hypot, ``math.atan2`` numpy's
-arctan2. The chord's products are taken in order: numpy's went through BLAS, which may
-fuse a multiply and an add, so the chord's deviation may differ from numpy's in the last
-place (it is only compared with limits far from it). The centre fit on the bisector
-(:func:`postproc.gcode.segment.bisector_centre`) stays with numpy for that reason: its
-Gauss-Newton steps amplify a last place where the centre is ill-defined.
+arctan2. Sums of products (the chord's, the centre fit's) are taken in order: numpy's
+went through BLAS, which may fuse a multiply and an add or reorder the sum, so they may
+differ from numpy's in the last place. The chord's deviation is only compared with
+limits far from it. The centre fit's Gauss-Newton steps amplify a last place where the
+centre is ill-defined (a circle of kilometres through a few millimetres of path): the
+circle fits the samples as closely, and the rounded candidates about it are measured as
+any others, so the arc written is then another one within the same bounds.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 It imports nothing of the package, so that it compiles on its own.
@@ -182,6 +185,69 @@ def centre_lattice(ideal: tuple[float, float], base: tuple[float, float], unit: 
         c1.extend([y1[i]] * len(y2))
         c2.extend(y2)
     return w1, w2, c1, c2
+
+
+# Gauss-Newton steps of bisector_centre stop below this (mm): far below the finest
+# output step (1e-4 mm, 1e-5 inch).
+CENTRE_SETTLED_MM: Final = 1e-9
+# the most Gauss-Newton steps bisector_centre takes
+_CENTRE_STEPS: Final = 12
+# the distance given a sample on the centre (or one that is not finite): its term of the
+# Jacobian stays finite
+_ON_CENTRE: Final = 1e-300
+
+
+def bisector_centre(S2: tuple[float, float], E2: tuple[float, float], us: list[float], vs: list[float],
+                    c0: tuple[float, float]) -> tuple[float, float]:
+    """Centre on the perpendicular bisector of S2-E2 whose circle through both fits the
+    points (``us``, ``vs``) best (least squares on the radial distance); ``c0``: first
+    guess, returned as it is where S2 and E2 are one point.
+
+    Gauss-Newton on the one free parameter, the signed distance ``t`` of the centre from
+    the chord's midpoint along the bisector; every step one pass over the points. The sums
+    are taken in order (see the module's docstring)."""
+    s0, s1 = S2
+    e0, e1 = E2
+    m0, m1 = 0.5 * (s0 + e0), 0.5 * (s1 + e1)
+    d0, d1 = e0 - s0, e1 - s1
+    L = math.hypot(d0, d1)
+    if L == 0.0:
+        return c0
+    n0, n1 = -d1 / L, d0 / L
+    h = 0.5 * L
+    t = (c0[0] - m0) * n0 + (c0[1] - m1) * n1
+    k = len(us)
+    for _ in range(_CENTRE_STEPS):
+        c_0 = m0 + t * n0
+        c_1 = m1 + t * n1
+        rho = math.hypot(h, t)
+        q = t / rho
+        # minus the Jacobian, -J = (v . n) / dist + t / rho: the step is the same as with J
+        den = 0.0
+        num = 0.0
+        for i in range(k):
+            v0 = us[i] - c_0
+            v1 = vs[i] - c_1
+            dist = hypot(v0, v1)
+            if not dist > 0.0:
+                dist = _ON_CENTRE
+            mj = (v0 * n0 + v1 * n1) / dist + q
+            den += mj * mj
+            num += mj * (dist - rho)
+        if den <= 0.0:
+            break
+        dt = num / den
+        # a step across the chord would flip the arc to the other side: halve it
+        if (t + dt) * t < 0.0 and abs(t) > 0.0:
+            dt = -0.5 * t
+        t += dt
+        # settled far below any output step: the steps after the third or fourth are
+        # rounding noise (about 1e-12 mm on a radius of a few mm), iterating on only makes
+        # t wander within it. (On a radius of kilometres the noise stays above it, and all
+        # the steps are taken.)
+        if abs(dt) <= CENTRE_SETTLED_MM:
+            break
+    return m0 + t * n0, m1 + t * n1
 
 
 # -- arcs about candidate centres -----------------------------------------------------------
@@ -355,6 +421,16 @@ class ArcTry:
             elif dev != dev:
                 nan = True
         return (math.nan if nan else worst), at
+
+
+def mean_between(col: list[float], a: int, b: int) -> float:
+    """The mean of ``col[a:b + 1]``: the sum in order divided by the count (as numpy's
+    sum over the rows of a (k, 3) array, ``np.add.reduce(x[a:b + 1], axis=0)``, adds them,
+    one row after another)."""
+    total = col[a]
+    for i in range(a + 1, b + 1):
+        total += col[i]
+    return total / (b + 1 - a)
 
 
 def fractions(ss: list[float], lo: int, hi: int) -> list[float]:

@@ -11,8 +11,8 @@
   nominal centre brought onto the bisector (:func:`bisector_point`) is tried first. No
   arc is written that a controller refuses or reads as a full circle
   (:data:`MIN_ARC_RADIUS_MM`, :data:`MIN_ARC_SWEEP_RAD`). The measures over the samples
-  (the chord's deviation, each candidate's arc) run sample by sample in plain floats in
-  :mod:`postproc.gcode.fitcore`, compiled with the core.
+  (the centre fit, the chord's deviation, each candidate's arc) run sample by sample in
+  plain floats in :mod:`postproc.gcode.fitcore`, compiled with the core.
 - :func:`off_every_circle`, :func:`off_every_helix`: a few samples that no arc from S
   to E could pass, whatever its centre, refuse a long try without the fit of a centre.
 - :func:`quadrant_breaks`: where an arc reverses an axis (backlash is taken up there).
@@ -229,67 +229,18 @@ MIN_ARC_RADIUS_MM = 0.00005 * MM_PER_INCH * (1.0 + 1e-6)
 MIN_ARC_SWEEP_RAD = 1e-5
 
 
-# Gauss-Newton steps of bisector_centre stop below this (mm): far below the finest
-# output step (1e-4 mm, 1e-5 inch).
-CENTRE_SETTLED_MM = 1e-9
+# Gauss-Newton steps of bisector_centre stop below this (mm)
+CENTRE_SETTLED_MM = fitcore.CENTRE_SETTLED_MM
 
 
 def bisector_centre(S2: Point, E2: Point, P2: np.ndarray, c0: Point) -> np.ndarray:
     """Centre (2,) on the perpendicular bisector of S2-E2 whose circle through both fits
-    the points P2 (k, 2) best (least squares on the radial distance); ``c0``: first guess.
-
-    Gauss-Newton on the one free parameter, the signed distance ``t`` of the centre
-    from the chord's midpoint along the bisector. The two-element vectors are plain
-    floats (element by element the operations numpy does on them); the samples' arrays
-    are written in place."""
-    s0, s1 = float(S2[0]), float(S2[1])
-    e0, e1 = float(E2[0]), float(E2[1])
-    m0, m1 = 0.5 * (s0 + e0), 0.5 * (s1 + e1)
-    d0, d1 = e0 - s0, e1 - s1
-    L = math.hypot(d0, d1)
-    if L == 0.0:
-        return np.asarray(c0, dtype=float)
-    n0, n1 = -d1 / L, d0 / L
-    n = np.array([n0, n1])
-    h = 0.5 * L
-    t = float(np.array([float(c0[0]) - m0, float(c0[1]) - m1]) @ n)
-    c = np.array([m0 + t * n0, m1 + t * n1])
-    # the offsets in an array laid out as P2 - c lays them out (the product with n, by
-    # BLAS, depends on the layout)
-    v = P2 - c
-    vx, vy = v[:, 0], v[:, 1]
-    res = np.empty(len(P2))
-    for it in range(12):
-        if it:
-            # the centre M + t n, element by element as numpy computes it
-            c[0] = m0 + t * n0
-            c[1] = m1 + t * n1
-            np.subtract(P2, c, out=v)
-        dist = np.hypot(vx, vy)
-        if not np.minimum.reduce(dist) > 0.0:  # a sample on the centre (or not finite)
-            dist = np.where(dist > 0, dist, 1e-300)
-        rho = math.hypot(h, t)
-        np.subtract(dist, rho, out=res)
-        # minus the Jacobian, -J = (v . n) / dist + t / rho: negating a rounded result is
-        # exact, so the step is the same as with J itself
-        mJ = v @ n
-        np.divide(mJ, dist, out=mJ)
-        np.add(mJ, t / rho, out=mJ)
-        den = float(mJ @ mJ)
-        if den <= 0.0:
-            break
-        dt = float(mJ @ res) / den
-        # a step across the chord would flip the arc to the other side: halve it
-        if (t + dt) * t < 0 and abs(t) > 0:
-            dt = -0.5 * t
-        t += dt
-        # settled far below any output step: the steps after the third or fourth are
-        # rounding noise (about 1e-12 mm on a radius of a few mm), iterating on only makes
-        # t wander within it. (On a radius of kilometres the noise stays above it, and all
-        # the steps are taken.)
-        if abs(dt) <= CENTRE_SETTLED_MM:
-            break
-    return np.array([m0 + t * n0, m1 + t * n1])
+    the points P2 (k, 2) best (least squares on the radial distance); ``c0``: first guess
+    (:func:`postproc.gcode.fitcore.bisector_centre`, Gauss-Newton along the bisector)."""
+    us, vs = np.asarray(P2, dtype=float).T.tolist()
+    centre = fitcore.bisector_centre((float(S2[0]), float(S2[1])), (float(E2[0]), float(E2[1])), us, vs,
+                                     (float(c0[0]), float(c0[1])))
+    return np.array(centre)
 
 
 def bisector_point(S2: np.ndarray, E2: np.ndarray, c: np.ndarray) -> np.ndarray:
