@@ -11,6 +11,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import strategies as st
 
 from postproc.calibration.measurements import Measurements
@@ -374,3 +375,19 @@ def corpus_programs(*, max_lines: int | None = None, max_bytes: int | None = Non
              if (max_lines is None or lines <= max_lines) and (max_bytes is None or size <= max_bytes)
              and (keep is None or keep(p))]
     return paths if FULL_CORPUS else representative(paths, every_below)
+
+
+@pytest.fixture
+def planned_tables(monkeypatch):
+    """The move tables the planner is given while a test corrects, in order, as given."""
+    from postproc.gcode import planner
+
+    seen = []
+    plan = planner.Planner.plan
+
+    def spy(self, tab):
+        seen.append(tab)
+        return plan(self, tab)
+
+    monkeypatch.setattr(planner.Planner, "plan", spy)
+    return seen

@@ -8,7 +8,7 @@ import pytest
 
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
-from postproc.gcode import bulk, planner
+from postproc.gcode import bulk
 from postproc.gcode.moves import Kind
 from postproc.gcode.path import Setup
 from postproc.gcode.pipeline import CorrectOptions, correct_text
@@ -60,18 +60,10 @@ def test_r_arcs_in_bulk_give_the_general_paths_output(seed):
     assert a.count("R") >= 60  # written as R arcs
 
 
-def test_r_arcs_are_read_in_runs(monkeypatch):
-    seen = []
-    plan = planner.Planner.plan
-
-    def spy(self, tab):
-        seen.append(tab)
-        return plan(self, tab)
-
-    monkeypatch.setattr(planner.Planner, "plan", spy)
+def test_r_arcs_are_read_in_runs(planned_tables):
     text = _cam(np.random.default_rng(1), 40)
     correct_text(text, _engine(), SETUP, CorrectOptions())
-    (tab,) = seen
+    (tab,) = planned_tables
     arcs = np.flatnonzero((tab.kind == Kind.ARC_CW) | (tab.kind == Kind.ARC_CCW))
     assert len(arcs) == 40
     in_runs = {i for r in tab.runs for i in range(r.trow, r.trow + len(r))}

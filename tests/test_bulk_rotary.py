@@ -11,7 +11,7 @@ import pytest
 from postproc.effects import compose, get_effect
 from postproc.engine.static import StaticEngine
 from postproc.errors import PostprocError
-from postproc.gcode import bulk, planner
+from postproc.gcode import bulk
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
@@ -72,18 +72,10 @@ def test_rotary_lines_in_bulk_give_the_general_paths_output(seed, letters):
     assert "Error" not in a
 
 
-def test_rotary_lines_are_read_in_runs_with_their_angles(monkeypatch):
-    seen = []
-    plan = planner.Planner.plan
-
-    def spy(self, tab):
-        seen.append(tab)
-        return plan(self, tab)
-
-    monkeypatch.setattr(planner.Planner, "plan", spy)
+def test_rotary_lines_are_read_in_runs_with_their_angles(planned_tables):
     text = "G21 G90\nG0 X0 Y0 Z5\nG1 X1 F100\nX2 A30\nX3\nX4 A45\nG92 A0\nX5\nX6 A10\nM2\n"
     correct_text(text, StaticEngine(G, [0.0] * 3, [[-1e4] * 3, [1e4] * 3]), SETUP, CorrectOptions())
-    (tab,) = seen
+    (tab,) = planned_tables
     assert sum(len(r) for r in tab.runs) >= 5  # the lines naming A among them
     by_line = dict(zip(tab.lineno.tolist(), tab.rot, strict=True))
     assert by_line[3] == {}  # before the program names A

@@ -6,10 +6,8 @@ spline's chords, a run's line that moves nothing). The planner picks its rows by
 import itertools
 
 import numpy as np
-import pytest
 
 from postproc.engine.static import StaticEngine
-from postproc.gcode import planner
 from postproc.gcode.moves import Kind
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 from postproc.gcode.source import Setup
@@ -47,27 +45,13 @@ EXPECTED = {
 SETUP = Setup(offsets={"G54": (100, 100, 100)}, home={"G28": {"X": 0, "Y": 0, "Z": 200}})
 
 
-@pytest.fixture
-def tables(monkeypatch):
-    """The tables the planner is given, as they are given."""
-    seen = []
-    plan = planner.Planner.plan
-
-    def spy(self, tab):
-        seen.append(tab)
-        return plan(self, tab)
-
-    monkeypatch.setattr(planner.Planner, "plan", spy)
-    return seen
-
-
 def _engine():
     return StaticEngine(np.diag([1.0002, 1.0, 1.0]), [0, 0, 0], [[0] * 3, [315] * 3])
 
 
-def test_each_row_has_the_kind_of_what_its_line_does(tables):
+def test_each_row_has_the_kind_of_what_its_line_does(planned_tables):
     correct_text(PROGRAM, _engine(), SETUP, CorrectOptions())
-    (tab,) = tables
+    (tab,) = planned_tables
     got = {line: [Kind(k) for _line, k in rows]
            for line, rows in itertools.groupby(zip(tab.lineno.tolist(), tab.kind.tolist(), strict=True),
                                                key=lambda r: r[0])}
@@ -78,9 +62,9 @@ def test_each_row_has_the_kind_of_what_its_line_does(tables):
     assert len(tab.runs) >= 2  # lines 2-7 (and 16) are read in bulk, the rest line by line
 
 
-def test_run_rows_are_the_runs_rows_of_that_kind(tables):
+def test_run_rows_are_the_runs_rows_of_that_kind(planned_tables):
     correct_text(PROGRAM, _engine(), SETUP, CorrectOptions())
-    (tab,) = tables
+    (tab,) = planned_tables
     rows, owner = tab.run_rows(Kind.FEED)
     want = [(i, o) for o, r in enumerate(tab.runs) for i in range(r.trow, r.trow + len(r)) if tab.kind[i] == Kind.FEED]
     assert list(zip(rows.tolist(), owner.tolist(), strict=True)) == want
@@ -89,12 +73,12 @@ def test_run_rows_are_the_runs_rows_of_that_kind(tables):
     assert 8 not in lines  # a straight move read line by line is not a run's
 
 
-def test_a_modal_motion_carries_into_a_run_that_names_none(tables):
+def test_a_modal_motion_carries_into_a_run_that_names_none(planned_tables):
     # the second chunk's run starts without a G word: its rows take the motion modal there
     text = "G21 G90 G17\nG0 X1 Y1 Z1\nG1 F100 M8\n" + "".join(f"X{1 + i * 0.5:.1f} Y2\n" for i in range(30)) + "M2\n"
     correct_text(text, _engine(), Setup(offsets={"G54": (100, 100, 100)}), CorrectOptions(chunk_lines=8))
-    kinds = [Kind(k) for tab in tables for k in tab.kind.tolist()]
-    lines = [n for tab in tables for n in tab.lineno.tolist()]
+    kinds = [Kind(k) for tab in planned_tables for k in tab.kind.tolist()]
+    lines = [n for tab in planned_tables for n in tab.lineno.tolist()]
     assert lines == [2, *range(4, 34)]  # (line 3 moves nothing: no row)
     assert kinds == [Kind.RAPID] + [Kind.FEED] * 30
-    assert sum(len(tab.runs) for tab in tables) >= 3
+    assert sum(len(tab.runs) for tab in planned_tables) >= 3
