@@ -487,14 +487,16 @@ class _Keys:
         return key
 
     def of_line(self, line: str) -> tuple[int, int, int]:
-        """Skeleton, N word and comment of any line (see :func:`_compatible`)."""
+        """Skeleton, N word and comment of any line (see :func:`_compatible_keys`)."""
         n = _N_WORD.match(line)
         c = line.find("(")
         return self(skeleton(line)), self(n.group().strip() if n else ""), self(line[c:] if c >= 0 else "")
 
 
 def _compatible_keys(o: tuple, c: tuple) -> bool:
-    """:func:`skeleton` equal or :func:`_compatible`, from the keys of both lines."""
+    """Whether two lines pair, from their keys: :func:`skeleton` equal, or the same N word
+    where both have one, else the same comment (a line whose motion words were
+    rewritten: a linearised arc)."""
     if o[0] == c[0]:
         return True
     if o[1] and c[1]:
@@ -1685,14 +1687,3 @@ def _rewritten_g92(o_line: str, c_line: str) -> bool:
     the correction has moved, so that the program's coordinates after it stay nominal."""
     return bool(_G92.search(o_line.split("(")[0].split(";")[0])) and (
         _AXIS_WORDS.sub("", o_line) == _AXIS_WORDS.sub("", c_line))
-
-
-def _compatible(o_line: str, c_line: str) -> bool:
-    """Same N word and comment: a line whose motion words were rewritten (a linearised arc)."""
-    n_o = re.match(r"\s*[Nn]\s*\d+", o_line)
-    n_c = re.match(r"\s*[Nn]\s*\d+", c_line)
-    if n_o and n_c:
-        return n_o.group().strip() == n_c.group().strip()
-    co = o_line[o_line.find("("):] if "(" in o_line else ""
-    cc = c_line[c_line.find("("):] if "(" in c_line else ""
-    return bool(co) and co == cc

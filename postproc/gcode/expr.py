@@ -33,7 +33,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from postproc.errors import GcodeSyntaxError, PostprocError, UnsupportedGcodeError
+from postproc.errors import GcodeSyntaxError, PostprocError
 from postproc.gcode import numfmt
 
 # rs274ngc TOLERANCE_EQUAL (interp_internal.hh): EQ/NE compare within this.
@@ -642,7 +642,3 @@ def format_number(value: float, letter: str = "") -> str:
     if letter.upper() in INTEGER_LETTERS and text.endswith(".0"):
         text = text[:-2]
     return text
-
-
-def unsupported(message: str, *, path, lineno, col, hint=None) -> UnsupportedGcodeError:
-    return UnsupportedGcodeError(message, path=path, lineno=lineno, col=col, hint=hint)
