@@ -96,7 +96,6 @@ class CallFrame:
     sub_name: str | None = None
     call_lineno: int = 0
     call_path: str | None = None
-    m98_loop_counter: int = -1  # LinuxCNC M98 L loop bookkeeping (on the caller's frame)
 
 
 class Stop(Exception):
@@ -150,7 +149,6 @@ class ExpanderState(Env):
         self.idx = 0
         self.unit_cur = self.main
         self.cur_idx = 0
-        self.cur_col = 0
         self.executed = 0
         # the dialect's own header lines ("$NAME.MIN%", Okuma): the interpreter's header forms
         self.header_forms = [re.compile(p) for p in self.d.header_forms]

@@ -63,8 +63,6 @@ EXPANDABLE_G = {650, 660, 661}
 
 AXES = "XYZ"
 ROTARY = "ABC"
-# Letters accepted as plain parameters of other words (checked where used).
-PARAM_LETTERS = set("DFHIJKLNPQRST")
 # A degenerate arc (start, end and centre within this) is not an arc.
 MIN_ARC_RADIUS_MM = 1e-6
 
