@@ -15,6 +15,7 @@ from typing import Protocol, final
 
 import numpy as np
 
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.gcode import emit, fitcore
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI
 from postproc.gcode.moves import Arc, Move
@@ -30,7 +31,6 @@ from postproc.gcode.segment import (
     full_of,
     off_every_circle,
     off_every_helix,
-    r_center,
 )
 from postproc.gcode.state import LINE, PLANES
 from postproc.gcode.vplan import Plan
@@ -50,6 +50,9 @@ Edit = tuple[int, int, str]  # replace line[start:end] by the text
 # samples.
 OFF_EVERY_ARC_FROM = 256
 SPREAD = 64
+
+# the tolerances of the centre a controller computes for an R word (fitcore.r_center)
+R_TOLERANCE = (ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
 
 
 class _Piece:
@@ -473,44 +476,15 @@ class MoveFit:
 
     def _r_candidates(self, tr: fitcore.ArcTry, centre: tuple[float, float], nsw: float) -> ArcSpec | None:
         """The written R-form arc of the try ``tr`` nearest ``centre`` that passes (see
-        :meth:`_exact_arc`), or None."""
-        d, unit, budget, clockwise = self.d, self.mv.unit, self.budget, self.arc.clockwise
-        s1, s2, e1, e2 = tr.s1, tr.s2, tr.e1, tr.e2
-        step = 10.0 ** (-d)
-        half = 0.5 * math.hypot(e1 - s1, e2 - s2)
-        if half == 0.0:
+        :meth:`_exact_arc`), or None: of the rounded radii about the centre's, every one's
+        arc measured, the first of the smallest deviations among one-turn arcs
+        (:meth:`postproc.gcode.fitcore.ArcTry.r_form`)."""
+        found = tr.r_form(centre, nsw, self.mv.unit, self.d, CENTRE_LATTICE, R_TOLERANCE, self.budget,
+                          controller_limits_of(True))
+        if found is None:
             return None
-        rho = 0.5 * (math.hypot(s1 - centre[0], s2 - centre[1]) + math.hypot(e1 - centre[0], e2 - centre[1]))
-        sign = -1.0 if abs(nsw) > math.pi else 1.0
-        r0 = round(rho / unit, d)
-        vals = {round(r0 + k * step, d) for k in range(-CENTRE_LATTICE, CENTRE_LATTICE + 1)}
-        vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
-        texts, cx, cy = [], [], []
-        for val in sorted(vals):
-            text = emit.fmt(sign * val, d)
-            R = float(text) * unit
-            if abs(R) <= half:
-                continue  # every controller must find a centre without its own tolerance
-            c = r_center(s1, s2, e1, e2, R, clockwise)
-            if c is not None:
-                texts.append(text)
-                cx.append(c[0])
-                cy.append(c[1])
-        if not texts:
-            return None
-        # every radius's arc measured, the best in the order of the radii: the first of the
-        # smallest deviations among one-turn arcs (a measure stops once it shows its arc
-        # beyond the budget)
-        meas = tr.measure(cx, cy, math.inf, controller_limits_of(True), budget)
-        w, _m, t = full_of(meas)
-        best = -1
-        for j, (wj, tj) in enumerate(zip(w.tolist(), t.tolist(), strict=True)):
-            if tj == 1 and (best < 0 or wj < w[best]):
-                best = j
-        if best < 0 or not w[best] <= budget:
-            return None
-        return {"form": "r", "vals": (("R", texts[best]),), "turns": 1, "dev": float(w[best]),
-                "mismatch": meas.mismatch[best]}
+        text, dev, mismatch = found
+        return {"form": "r", "vals": (("R", text),), "turns": 1, "dev": dev, "mismatch": mismatch}
 
 
 def _one(tr: fitcore.ArcTry, cx: float, cy: float, controller_limits: bool) -> tuple[float, float, int]:
