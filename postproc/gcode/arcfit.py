@@ -75,35 +75,35 @@ class _Piece:
 
 class _Samples:
     """A piece's corrected samples prepared once for all the tries of its fit: the samples
-    and the middles of their intervals interleaved (``Qs`` (2n - 1, 3), the chord's middle
-    moved by the nominal path's bulge there; ``ss`` their parameters), their plane
-    coordinates (``P2``), the corrections of an arc's samples (``dq``: corrected minus
-    nominal, by axis), and ``cols`` and ``sl``: ``Qs`` by axis and ``ss`` as lists of
-    floats, for the measures of :mod:`postproc.gcode.fitcore`."""
+    and the middles of their intervals interleaved (the chord's middle moved by the
+    nominal path's bulge there), as lists of floats for the measures of
+    :mod:`postproc.gcode.fitcore` (``cols``: by axis, ``sl``: their parameters), and as
+    arrays where a try needs them (:meth:`points`, :meth:`params`, :meth:`plane_points`:
+    the plane ``plane``'s coordinates, arc moves); the corrections of an arc's samples
+    (``dq``: corrected minus nominal, by axis); ``free``: the move an inserted line
+    writes."""
 
-    __slots__ = ("s", "Q", "Qs", "ss", "P2", "dq", "free", "cols", "sl")
+    __slots__ = ("mv", "s", "Q", "plane", "dq", "cols", "sl", "_free")
 
     def __init__(self, mv: Move, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray) -> None:
-        n = len(Q)
+        self.mv = mv
         self.s = s
         self.Q = Q
-        Qs = np.empty((2 * n - 1, 3))
-        Qs[0::2] = Q
-        Qs[1::2] = 0.5 * (Q[:-1] + Q[1:]) + bulge[:n - 1]
-        ss = np.empty(2 * n - 1)
-        ss[0::2] = s
-        ss[1::2] = 0.5 * (s[:-1] + s[1:])
-        self.Qs = Qs
-        self.ss = ss
-        self.P2: np.ndarray | None = None
+        self.cols, self.sl = fitcore.interleave(Q.T.tolist(), s.tolist(), bulge.T.tolist())
+        self.plane: tuple[int, int] | None = None
         self.dq: list[list[float]] = []
         if mv.arc is not None:
             (a1, a2, _an), _ = PLANES[mv.arc.plane]
-            self.P2 = Qs[:, [a1, a2]]
+            self.plane = (a1, a2)
             self.dq = (Q - nom).T.tolist()
-        self.free = _free_move(mv)
-        self.cols: list[list[float]] = Qs.T.tolist()
-        self.sl: list[float] = ss.tolist()
+        self._free: Move | None = None
+
+    @property
+    def free(self) -> Move:
+        """The move without its words (made at the first inserted line)."""
+        if self._free is None:
+            self._free = _free_move(self.mv)
+        return self._free
 
     def offset(self, a: int, b: int) -> list[float]:
         """The mean correction over samples a..b of an arc: corrected minus nominal."""
@@ -112,6 +112,23 @@ class _Samples:
     def column(self, axis: int, lo: int, hi: int) -> list[float]:
         """Coordinate ``axis`` of the interleaved samples lo..hi - 1."""
         return self.cols[axis][lo:hi]
+
+    def points(self, lo: int, hi: int) -> np.ndarray:
+        """The interleaved samples lo..hi - 1, (hi - lo, 3), one row a sample."""
+        out: np.ndarray = np.array([col[lo:hi] for col in self.cols]).T.copy()
+        return out
+
+    def params(self, lo: int, hi: int) -> np.ndarray:
+        """The parameters of the interleaved samples lo..hi - 1."""
+        return np.array(self.sl[lo:hi])
+
+    def plane_points(self, lo: int, hi: int) -> np.ndarray:
+        """The plane coordinates of the interleaved samples lo..hi - 1 of an arc, (hi - lo,
+        2), one row a sample."""
+        assert self.plane is not None
+        a1, a2 = self.plane
+        out: np.ndarray = np.array([self.cols[a1][lo:hi], self.cols[a2][lo:hi]]).T.copy()
+        return out
 
 
 def _spread(n: int, nsw: float) -> np.ndarray:
@@ -280,7 +297,7 @@ class MoveFit:
         m = (lo + hi) // 2
         mid = [smp.cols[0][m], smp.cols[1][m], smp.cols[2][m]]
         chord: float | None = None
-        if mv.arc is not None and smp.P2 is not None:
+        if mv.arc is not None and smp.plane is not None:
             step_mm = 10.0 ** (-d) * mv.unit
             if fitcore.chord_exceeds(cur, qn, mid, step_mm):
                 flat = False
@@ -338,16 +355,15 @@ class MoveFit:
         mv, arc, plan, budget = self.mv, self.arc, self.plan, self.budget
         (a1, a2, an), _letters = PLANES[arc.plane]
         span = smp.sl[hi - 1] - smp.sl[lo]
-        P2 = smp.P2
-        if span <= 0.0 or P2 is None:
+        if span <= 0.0 or smp.plane is None:
             return None
         nsw = span * plan["nsweep"]
         keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
         if hi - lo > OFF_EVERY_ARC_FROM:
             # a few of the samples checked first (where each lies along the try, for them
             # as for all: the same division)
-            sp = smp.ss[lo:hi]
-            if self._off_every_arc(np.array(S_), np.array(E_), smp.Qs[lo:hi], (sp - sp[0]) / span, nsw, keep):
+            sp = smp.params(lo, hi)
+            if self._off_every_arc(np.array(S_), np.array(E_), smp.points(lo, hi), (sp - sp[0]) / span, nsw, keep):
                 return None
         frac = fitcore.fractions(smp.sl, lo, hi)
         ends = (S_[a1], S_[a2], S_[an], E_[a1], E_[a2], E_[an])
@@ -373,9 +389,9 @@ class MoveFit:
                 # steps long). The nominal circle, moved with the correction and its centre
                 # brought onto the bisector, is tried first.
                 centres.append(bisector_point(np.array(S2), np.array(E2), np.array([cx, cy])))
-            centres.append(bisector_centre(S2, E2, P2[lo:hi], (cx, cy)))
+            centres.append(bisector_centre(S2, E2, smp.plane_points(lo, hi), (cx, cy)))
         else:
-            centre = circle_fit(P2[lo:hi])
+            centre = circle_fit(smp.plane_points(lo, hi))
             centres.append(np.array([cx, cy]) if centre is None or not np.isfinite(centre).all() else centre)
         for centre in centres:
             spec = self._arc_about(tr, S_, (float(centre[0]), float(centre[1])), nsw)

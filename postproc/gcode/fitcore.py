@@ -537,6 +537,29 @@ class ArcTry:
         return texts[best], least, found.mismatch[best]
 
 
+def interleave(cols: list[list[float]], ss: list[float],
+               bulge: list[list[float]]) -> tuple[list[list[float]], list[float]]:
+    """The n samples (``cols``: n coordinates an axis, at the parameters ``ss``) and the
+    middles of their intervals, interleaved (2n - 1 an axis): a middle is the mean of its
+    ends (``0.5 * (a + b)``) moved by its ``bulge`` (its first n - 1 an axis), its
+    parameter the mean of theirs; as numpy took them, element by element."""
+    n = len(ss)
+    out: list[list[float]] = []
+    for axis in range(len(cols)):
+        col = cols[axis]
+        bc = bulge[axis]
+        row = [col[0]] * (2 * n - 1)
+        for i in range(n - 1):
+            row[2 * i + 1] = 0.5 * (col[i] + col[i + 1]) + bc[i]
+            row[2 * i + 2] = col[i + 1]
+        out.append(row)
+    sl = [ss[0]] * (2 * n - 1)
+    for i in range(n - 1):
+        sl[2 * i + 1] = 0.5 * (ss[i] + ss[i + 1])
+        sl[2 * i + 2] = ss[i + 1]
+    return out, sl
+
+
 def mean_between(col: list[float], a: int, b: int) -> float:
     """The mean of ``col[a:b + 1]``: the sum in order divided by the count (as numpy's
     sum over the rows of a (k, 3) array, ``np.add.reduce(x[a:b + 1], axis=0)``, adds them,
