@@ -78,12 +78,12 @@ class _Samples:
     and the middles of their intervals interleaved (the chord's middle moved by the
     nominal path's bulge there), as lists of floats for the measures of
     :mod:`postproc.gcode.fitcore` (``cols``: by axis, ``sl``: their parameters), and as
-    arrays where a try needs them (:meth:`points`, :meth:`params`, :meth:`plane_points`:
-    the plane ``plane``'s coordinates, arc moves); the corrections of an arc's samples
-    (``dq``: corrected minus nominal, by axis); ``free``: the move an inserted line
-    writes."""
+    arrays made at the first try that needs them (:meth:`points`, :meth:`params`,
+    :meth:`plane_points`: the coordinates of the plane ``plane``, arc moves); the
+    corrections of an arc's samples (``dq``: corrected minus nominal, by axis); ``free``:
+    the move an inserted line writes."""
 
-    __slots__ = ("mv", "s", "Q", "plane", "dq", "cols", "sl", "_free")
+    __slots__ = ("mv", "s", "Q", "plane", "dq", "cols", "sl", "_free", "_Qs", "_ss", "_P2")
 
     def __init__(self, mv: Move, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray) -> None:
         self.mv = mv
@@ -97,6 +97,9 @@ class _Samples:
             self.plane = (a1, a2)
             self.dq = (Q - nom).T.tolist()
         self._free: Move | None = None
+        self._Qs: np.ndarray | None = None
+        self._ss: np.ndarray | None = None
+        self._P2: np.ndarray | None = None
 
     @property
     def free(self) -> Move:
@@ -115,20 +118,24 @@ class _Samples:
 
     def points(self, lo: int, hi: int) -> np.ndarray:
         """The interleaved samples lo..hi - 1, (hi - lo, 3), one row a sample."""
-        out: np.ndarray = np.array([col[lo:hi] for col in self.cols]).T.copy()
-        return out
+        if self._Qs is None:
+            self._Qs = np.array(self.cols).T.copy()
+        return self._Qs[lo:hi]
 
     def params(self, lo: int, hi: int) -> np.ndarray:
         """The parameters of the interleaved samples lo..hi - 1."""
-        return np.array(self.sl[lo:hi])
+        if self._ss is None:
+            self._ss = np.array(self.sl)
+        return self._ss[lo:hi]
 
     def plane_points(self, lo: int, hi: int) -> np.ndarray:
         """The plane coordinates of the interleaved samples lo..hi - 1 of an arc, (hi - lo,
         2), one row a sample."""
-        assert self.plane is not None
-        a1, a2 = self.plane
-        out: np.ndarray = np.array([self.cols[a1][lo:hi], self.cols[a2][lo:hi]]).T.copy()
-        return out
+        if self._P2 is None:
+            assert self.plane is not None
+            a1, a2 = self.plane
+            self._P2 = np.array([self.cols[a1], self.cols[a2]]).T.copy()
+        return self._P2[lo:hi]
 
 
 def _spread(n: int, nsw: float) -> np.ndarray:
