@@ -3,7 +3,11 @@
 :func:`~postproc.gcode.segment.arc_candidates` (with its limited form and the samples'
 deviation). Kept here, unchanged, as the reference ``tests/test_gcode_fit_exact.py``
 holds the present ones to: bit for bit, but for the centre fit, which now takes its sums
-in order where numpy's went through BLAS (it fits the points as closely)."""
+in order where numpy's went through BLAS (it fits the points as closely).
+
+Also the R form's candidates as the writer chose them in Python (:func:`r_candidates`,
+with :func:`r_center` as geometry had it), the reference ``tests/test_fitcore.py``
+holds :meth:`postproc.gcode.fitcore.ArcTry.r_form` to, bit for bit."""
 
 from __future__ import annotations
 
@@ -11,8 +15,17 @@ import math
 
 import numpy as np
 
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
+from postproc.gcode import emit
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI
-from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
+from postproc.gcode.segment import (
+    CENTRE_LATTICE,
+    CENTRE_SETTLED_MM,
+    MIN_ARC_RADIUS_MM,
+    MIN_ARC_SWEEP_RAD,
+    controller_limits_of,
+    full_of,
+)
 
 
 def bisector_centre(S2, E2, P2, c0):
@@ -189,3 +202,65 @@ def _deviation(S, E, C, t0, sweep, r0,
     np.subtract(radial, rad, out=radial)
     dev = np.hypot(radial, nrm, out=radial).max(axis=1)
     return dev
+
+
+def r_center(s1, s2, e1, e2, R, clockwise):
+    """Centre the controller computes for an R-format arc from (s1, s2) to (e1, e2) in
+    its plane (a negative R takes the longer way round), or None where the ends coincide
+    or R is short of half the chord by more than the controllers' tolerance."""
+    dx, dy = e1 - s1, e2 - s2
+    chord = math.hypot(dx, dy)
+    if chord == 0.0:
+        return None
+    half = chord / 2
+    if abs(R) < half:
+        if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
+            return None
+        h = 0.0
+    else:
+        h = math.sqrt(R * R - half * half)
+    sign = -1.0 if clockwise else 1.0
+    if R < 0:
+        sign = -sign
+    mx, my = (s1 + e1) / 2, (s2 + e2) / 2
+    return mx - sign * h * dy / chord, my + sign * h * dx / chord
+
+
+def r_candidates(tr, centre, nsw, d, unit, budget):
+    """The R-form arc of the try ``tr`` (a fitcore.ArcTry) nearest ``centre`` that passes,
+    as the writer's fit (MoveFit._r_candidates) chose it: ``(texts, cx, cy, spec)``, the
+    candidates' words and centres and the spec (None where none passes)."""
+    clockwise = tr.clockwise
+    s1, s2, e1, e2 = tr.s1, tr.s2, tr.e1, tr.e2
+    step = 10.0 ** (-d)
+    half = 0.5 * math.hypot(e1 - s1, e2 - s2)
+    if half == 0.0:
+        return [], [], [], None
+    rho = 0.5 * (math.hypot(s1 - centre[0], s2 - centre[1]) + math.hypot(e1 - centre[0], e2 - centre[1]))
+    sign = -1.0 if abs(nsw) > math.pi else 1.0
+    r0 = round(rho / unit, d)
+    vals = {round(r0 + k * step, d) for k in range(-CENTRE_LATTICE, CENTRE_LATTICE + 1)}
+    vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
+    texts, cx, cy = [], [], []
+    for val in sorted(vals):
+        text = emit.fmt(sign * val, d)
+        R = float(text) * unit
+        if abs(R) <= half:
+            continue  # every controller must find a centre without its own tolerance
+        c = r_center(s1, s2, e1, e2, R, clockwise)
+        if c is not None:
+            texts.append(text)
+            cx.append(c[0])
+            cy.append(c[1])
+    if not texts:
+        return texts, cx, cy, None
+    meas = tr.measure(cx, cy, math.inf, controller_limits_of(True), budget)
+    w, _m, t = full_of(meas)
+    best = -1
+    for j, (wj, tj) in enumerate(zip(w.tolist(), t.tolist(), strict=True)):
+        if tj == 1 and (best < 0 or wj < w[best]):
+            best = j
+    if best < 0 or not w[best] <= budget:
+        return texts, cx, cy, None
+    return texts, cx, cy, {"form": "r", "vals": (("R", texts[best]),), "turns": 1, "dev": float(w[best]),
+                           "mismatch": meas.mismatch[best]}

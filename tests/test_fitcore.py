@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import importlib.util
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from postproc.gcode import fitcore
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
+from postproc.gcode import arcfit, fitcore, geometry, segment
+from postproc.gcode.segment import CENTRE_LATTICE, controller_limits_of
 
 _SOURCE = fitcore.__file__ if fitcore.__file__.endswith(".py") else fitcore.__file__.split(".")[0] + ".py"
 
@@ -257,3 +260,201 @@ def test_mean_between_is_numpys_mean_of_rows_bit_for_bit():
         ours = [fitcore.mean_between(col, a, b) for col in cols]
         assert _bits(ours) == _bits(want)
         assert _bits(ours) == _bits([src.mean_between(col, a, b) for col in cols])
+
+
+# -- R-form arcs ----------------------------------------------------------------------------
+
+def _numfmt_source():
+    """numfmt loaded from its .py (the same module where it is not compiled)."""
+    from postproc.gcode import numfmt  # noqa: PLC0415
+
+    path = numfmt.__file__ if numfmt.__file__.endswith(".py") else numfmt.__file__.split(".")[0] + ".py"
+    spec = importlib.util.spec_from_file_location("numfmt_source", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _r_try(mod, rng):
+    """A try of a random arc of under a turn (some near half a turn, some short, a few with
+    one end point for both), its ends rounded as an R arc's words are, through k samples
+    strayed from it: ``(tr, centre, nsw, d, unit, budget)``, ``centre`` near the arc's."""
+    d = int(rng.choice([1, 2, 3, 3, 4, 4, 5]))
+    unit = 25.4 if rng.random() < 0.3 else 1.0
+    r = 10.0 ** rng.uniform(-1.5, 2.5)
+    c = rng.uniform(-300, 300, 2)
+    t0 = rng.uniform(-math.pi, math.pi)
+    cw = bool(rng.integers(0, 2))
+    kind = rng.random()
+    if kind < 0.2:
+        sweep = math.pi + rng.normal(0, 10.0 ** rng.uniform(-6, -1))
+    elif kind < 0.4:
+        sweep = rng.uniform(1e-4, 0.3)
+    else:
+        sweep = rng.uniform(0.01, 2 * math.pi - 0.01)
+    nsw = -sweep if cw else sweep
+    k = int(rng.integers(2, 40))
+    frac = np.linspace(0.0, 1.0, k)
+    th = t0 + nsw * frac
+    noise = 10.0 ** rng.uniform(-6, -2)
+    u = c[0] + r * np.cos(th) + rng.normal(0, noise, k)
+    v = c[1] + r * np.sin(th) + rng.normal(0, noise, k)
+    w = rng.uniform(-50, 50) + rng.normal(0, 1) * frac
+    step = 10.0 ** -d * unit
+    ends = [float(np.round(x / step) * step) for x in (u[0], v[0], w[0], u[-1], v[-1], w[-1])]
+    if rng.random() < 0.03:
+        ends[3], ends[4] = ends[0], ends[1]
+    tr = mod.ArcTry(tuple(ends), cw, nsw, False, u.tolist(), v.tolist(), w.tolist(), frac.tolist())
+    centre = c + rng.normal(0, 10.0 ** rng.uniform(-7, -2) * r, 2)
+    budget = math.inf if rng.random() < 0.05 else (noise + step) * rng.uniform(0.5, 6)
+    return tr, (float(centre[0]), float(centre[1])), nsw, d, unit, budget
+
+
+_R_TOL = (ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
+_LIMITS = controller_limits_of(True)
+
+
+def _r_spec(tr, centre, nsw, d, unit, budget):
+    """The writer's R form of the try (MoveFit._r_candidates) for these values."""
+    fit = SimpleNamespace(d=d, mv=SimpleNamespace(unit=unit), budget=budget)
+    return arcfit.MoveFit._r_candidates(fit, tr, centre, nsw)
+
+
+def test_the_r_form_chooses_the_candidates_and_the_arc_the_writer_chose():
+    """ArcTry.r_candidates and r_form (and MoveFit._r_candidates on them) give the R
+    words, centres and choice of the Python loop they replace (tests/fit_reference.py),
+    bit for bit."""
+    import fit_reference as ref  # noqa: PLC0415  (the tests' own reference, a sibling module)
+
+    rng = np.random.default_rng(29)
+    chosen = negative = none = 0
+    for _ in range(4000):
+        tr, centre, nsw, d, unit, budget = _r_try(fitcore, rng)
+        texts, cx, cy, spec = ref.r_candidates(tr, centre, nsw, d, unit, budget)
+        ours = tr.r_candidates(centre, nsw, unit, d, CENTRE_LATTICE, _R_TOL)
+        assert ours[0] == texts
+        assert _bits(ours[1]) == _bits(cx)
+        assert _bits(ours[2]) == _bits(cy)
+        found = _r_spec(tr, centre, nsw, d, unit, budget)
+        if spec is None:
+            assert found is None
+            none += 1
+            continue
+        assert found == spec
+        assert _bits([found["dev"], found["mismatch"]]) == _bits([spec["dev"], spec["mismatch"]])
+        chosen += 1
+        negative += spec["vals"][0][1].startswith("-")
+    assert min(chosen, none, 2 * negative) > 1000, (chosen, none, negative)
+
+
+def test_the_compiled_r_form_gives_what_its_source_gives():
+    """r_center, r_radii (Python's round), r_candidates (numfmt's %.*f) and r_form: the
+    compiled module's results are its source's, bit for bit."""
+    src = _source_module()
+    rng = np.random.default_rng(31)
+    for _ in range(20000):
+        s1, s2, e1, e2 = (rng.uniform(-500, 500, 4) * 10.0 ** rng.uniform(-4, 0)).tolist()
+        if rng.random() < 0.02:
+            e1, e2 = s1, s2
+        half = 0.5 * math.hypot(e1 - s1, e2 - s2)
+        R = half * (1.0 + float(rng.choice([0.0, -1e-3, -1e-2, 1e-9, 1e-3, 1.0, 50.0]))) * float(rng.choice([1, -1]))
+        cw = bool(rng.integers(0, 2))
+        ours = fitcore.r_center(s1, s2, e1, e2, R, cw, *_R_TOL)
+        theirs = src.r_center(s1, s2, e1, e2, R, cw, *_R_TOL)
+        assert (ours is None) == (theirs is None)
+        if ours is not None:
+            assert _bits(ours) == _bits(theirs)
+    for _ in range(20000):
+        rho, half = (10.0 ** rng.uniform(-4, 4, 2)).tolist()
+        unit = 25.4 if rng.random() < 0.3 else 1.0
+        d = int(rng.integers(0, 7))
+        assert _bits(fitcore.r_radii(rho, half, unit, d, 3)) == _bits(src.r_radii(rho, half, unit, d, 3))
+    for _ in range(3000):
+        state = rng.bit_generator.state
+        tr, centre, nsw, d, unit, budget = _r_try(fitcore, rng)
+        rng.bit_generator.state = state
+        tr_src, *_ = _r_try(src, rng)
+        ours = tr.r_candidates(centre, nsw, unit, d, CENTRE_LATTICE, _R_TOL)
+        theirs = tr_src.r_candidates(centre, nsw, unit, d, CENTRE_LATTICE, _R_TOL)
+        assert ours[0] == theirs[0]
+        assert [_bits(a) for a in ours[1:]] == [_bits(b) for b in theirs[1:]]
+        ours = tr.r_form(centre, nsw, unit, d, CENTRE_LATTICE, _R_TOL, budget, _LIMITS)
+        theirs = tr_src.r_form(centre, nsw, unit, d, CENTRE_LATTICE, _R_TOL, budget, _LIMITS)
+        assert (ours is None) == (theirs is None)
+        if ours is not None:
+            assert ours[0] == theirs[0]
+            assert _bits(ours[1:]) == _bits(theirs[1:])
+
+
+def test_round_and_fixed_point_text_are_pythons_compiled():
+    """The rounding (``round(x, d)``, through r_radii) and the text (numfmt.fmt, ``%.*f``)
+    of the compiled modules are Python's own over many values, halves of the last decimal
+    among them."""
+    src = _numfmt_source()
+    from postproc.gcode import numfmt  # noqa: PLC0415
+
+    rng = np.random.default_rng(37)
+    for d in range(8):
+        x = np.concatenate([rng.normal(0, 1, 3000) * 10.0 ** rng.uniform(-3, 6, 3000),
+                            (rng.integers(-10 ** 6, 10 ** 6, 3000) + 0.5) / 10.0 ** d]).tolist()
+        assert [numfmt.fmt(v, d) for v in x] == [src.fmt(v, d) for v in x] == [_py_fmt(v, d) for v in x]
+        for v in x:
+            # r_radii's first values: rho (here |v|) rounded and the steps below it
+            r0 = round(abs(v), d)
+            want = sorted({round(r0 + k * 10.0 ** -d, d) for k in range(-3, 4)}
+                          | {round(math.ceil(0.5 / 10.0 ** -d) * 10.0 ** -d + k * 10.0 ** -d, d) for k in (0, 1, 2)})
+            assert _bits(fitcore.r_radii(abs(v), 0.5, 1.0, d, 3)) == _bits(want)
+
+
+def _py_fmt(v: float, d: int) -> str:
+    text = "%.*f" % (d, v)  # noqa: UP031
+    return text[1:] if text[0] == "-" and not text.strip("-0.") else text
+
+
+def test_geometrys_r_center_is_the_one_formula():
+    """geometry.r_center (the interpreter's, the readers' and the writer's) is fitcore's
+    with the controllers' tolerances, as it was (numpy scalars and bools taken too)."""
+    import fit_reference as ref  # noqa: PLC0415
+
+    rng = np.random.default_rng(41)
+    for i in range(20000):
+        s1, s2, e1, e2 = rng.uniform(-500, 500, 4).tolist()
+        if i % 50 == 0:
+            e1, e2 = s1, s2
+        half = 0.5 * math.hypot(e1 - s1, e2 - s2)
+        R = half * (1.0 + float(rng.choice([0.0, -1e-3, -1e-5, -1e-7, 1e-3, 3.0]))) * float(rng.choice([1, -1]))
+        cw = bool(rng.integers(0, 2))
+        args = (s1, s2, e1, e2, R, cw)
+        if i % 3 == 0:
+            args = (*np.array(args[:5]), np.bool_(cw))
+        want = ref.r_center(*args)
+        got = geometry.r_center(*args)
+        assert (got is None) == (want is None)
+        if got is not None:
+            assert _bits(got) == _bits(want)
+    assert segment.r_center is geometry.r_center
+
+
+def test_interleave_is_the_samples_numpy_interleaved():
+    """The samples and the middles of their intervals (moved by the bulge) as arcfit built
+    them with numpy, bit for bit; the compiled module's the same."""
+    src = _source_module()
+    rng = np.random.default_rng(43)
+    for _ in range(2000):
+        n = int(rng.integers(1, 40))
+        Q = rng.uniform(-500, 500, (n, 3)) * 10.0 ** rng.uniform(-3, 0)
+        s = np.sort(rng.uniform(0, 1, n))
+        bulge = rng.normal(0, 10.0 ** rng.uniform(-9, -1), (max(n - 1, 0) + int(rng.integers(0, 2)), 3))
+        Qs = np.empty((2 * n - 1, 3))
+        Qs[0::2] = Q
+        Qs[1::2] = 0.5 * (Q[:-1] + Q[1:]) + bulge[:n - 1]
+        ss = np.empty(2 * n - 1)
+        ss[0::2] = s
+        ss[1::2] = 0.5 * (s[:-1] + s[1:])
+        args = (Q.T.tolist(), s.tolist(), bulge.T.tolist() if len(bulge) else [[], [], []])
+        cols, sl = fitcore.interleave(*args)
+        assert [_bits(c) for c in cols] == [_bits(c) for c in Qs.T]
+        assert _bits(sl) == _bits(ss)
+        cols_src, sl_src = src.interleave(*args)
+        assert [_bits(c) for c in cols_src] == [_bits(c) for c in cols]
+        assert _bits(sl_src) == _bits(sl)

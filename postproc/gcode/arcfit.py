@@ -15,6 +15,7 @@ from typing import Protocol, final
 
 import numpy as np
 
+from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.gcode import emit, fitcore
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI
 from postproc.gcode.moves import Arc, Move
@@ -30,7 +31,6 @@ from postproc.gcode.segment import (
     full_of,
     off_every_circle,
     off_every_helix,
-    r_center,
 )
 from postproc.gcode.state import LINE, PLANES
 from postproc.gcode.vplan import Plan
@@ -50,6 +50,9 @@ Edit = tuple[int, int, str]  # replace line[start:end] by the text
 # samples.
 OFF_EVERY_ARC_FROM = 256
 SPREAD = 64
+
+# the tolerances of the centre a controller computes for an R word (fitcore.r_center)
+R_TOLERANCE = (ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
 
 
 class _Piece:
@@ -72,35 +75,38 @@ class _Piece:
 
 class _Samples:
     """A piece's corrected samples prepared once for all the tries of its fit: the samples
-    and the middles of their intervals interleaved (``Qs`` (2n - 1, 3), the chord's middle
-    moved by the nominal path's bulge there; ``ss`` their parameters), their plane
-    coordinates (``P2``), the corrections of an arc's samples (``dq``: corrected minus
-    nominal, by axis), and ``cols`` and ``sl``: ``Qs`` by axis and ``ss`` as lists of
-    floats, for the measures of :mod:`postproc.gcode.fitcore`."""
+    and the middles of their intervals interleaved (the chord's middle moved by the
+    nominal path's bulge there), as lists of floats for the measures of
+    :mod:`postproc.gcode.fitcore` (``cols``: by axis, ``sl``: their parameters), and as
+    arrays made at the first try that needs them (:meth:`points`, :meth:`params`,
+    :meth:`plane_points`: the coordinates of the plane ``plane``, arc moves); the
+    corrections of an arc's samples (``dq``: corrected minus nominal, by axis); ``free``:
+    the move an inserted line writes."""
 
-    __slots__ = ("s", "Q", "Qs", "ss", "P2", "dq", "free", "cols", "sl")
+    __slots__ = ("mv", "s", "Q", "plane", "dq", "cols", "sl", "_free", "_Qs", "_ss", "_P2")
 
     def __init__(self, mv: Move, s: np.ndarray, Q: np.ndarray, nom: np.ndarray, bulge: np.ndarray) -> None:
-        n = len(Q)
+        self.mv = mv
         self.s = s
         self.Q = Q
-        Qs = np.empty((2 * n - 1, 3))
-        Qs[0::2] = Q
-        Qs[1::2] = 0.5 * (Q[:-1] + Q[1:]) + bulge[:n - 1]
-        ss = np.empty(2 * n - 1)
-        ss[0::2] = s
-        ss[1::2] = 0.5 * (s[:-1] + s[1:])
-        self.Qs = Qs
-        self.ss = ss
-        self.P2: np.ndarray | None = None
+        self.cols, self.sl = fitcore.interleave(Q.T.tolist(), s.tolist(), bulge.T.tolist())
+        self.plane: tuple[int, int] | None = None
         self.dq: list[list[float]] = []
         if mv.arc is not None:
             (a1, a2, _an), _ = PLANES[mv.arc.plane]
-            self.P2 = Qs[:, [a1, a2]]
+            self.plane = (a1, a2)
             self.dq = (Q - nom).T.tolist()
-        self.free = _free_move(mv)
-        self.cols: list[list[float]] = Qs.T.tolist()
-        self.sl: list[float] = ss.tolist()
+        self._free: Move | None = None
+        self._Qs: np.ndarray | None = None
+        self._ss: np.ndarray | None = None
+        self._P2: np.ndarray | None = None
+
+    @property
+    def free(self) -> Move:
+        """The move without its words (made at the first inserted line)."""
+        if self._free is None:
+            self._free = _free_move(self.mv)
+        return self._free
 
     def offset(self, a: int, b: int) -> list[float]:
         """The mean correction over samples a..b of an arc: corrected minus nominal."""
@@ -109,6 +115,27 @@ class _Samples:
     def column(self, axis: int, lo: int, hi: int) -> list[float]:
         """Coordinate ``axis`` of the interleaved samples lo..hi - 1."""
         return self.cols[axis][lo:hi]
+
+    def points(self, lo: int, hi: int) -> np.ndarray:
+        """The interleaved samples lo..hi - 1, (hi - lo, 3), one row a sample."""
+        if self._Qs is None:
+            self._Qs = np.array(self.cols).T.copy()
+        return self._Qs[lo:hi]
+
+    def params(self, lo: int, hi: int) -> np.ndarray:
+        """The parameters of the interleaved samples lo..hi - 1."""
+        if self._ss is None:
+            self._ss = np.array(self.sl)
+        return self._ss[lo:hi]
+
+    def plane_points(self, lo: int, hi: int) -> np.ndarray:
+        """The plane coordinates of the interleaved samples lo..hi - 1 of an arc, (hi - lo,
+        2), one row a sample."""
+        if self._P2 is None:
+            assert self.plane is not None
+            a1, a2 = self.plane
+            self._P2 = np.array([self.cols[a1], self.cols[a2]]).T.copy()
+        return self._P2[lo:hi]
 
 
 def _spread(n: int, nsw: float) -> np.ndarray:
@@ -277,7 +304,7 @@ class MoveFit:
         m = (lo + hi) // 2
         mid = [smp.cols[0][m], smp.cols[1][m], smp.cols[2][m]]
         chord: float | None = None
-        if mv.arc is not None and smp.P2 is not None:
+        if mv.arc is not None and smp.plane is not None:
             step_mm = 10.0 ** (-d) * mv.unit
             if fitcore.chord_exceeds(cur, qn, mid, step_mm):
                 flat = False
@@ -335,16 +362,15 @@ class MoveFit:
         mv, arc, plan, budget = self.mv, self.arc, self.plan, self.budget
         (a1, a2, an), _letters = PLANES[arc.plane]
         span = smp.sl[hi - 1] - smp.sl[lo]
-        P2 = smp.P2
-        if span <= 0.0 or P2 is None:
+        if span <= 0.0 or smp.plane is None:
             return None
         nsw = span * plan["nsweep"]
         keep = bool(may_keep and span >= 1.0 and plan.get("whole"))
         if hi - lo > OFF_EVERY_ARC_FROM:
             # a few of the samples checked first (where each lies along the try, for them
             # as for all: the same division)
-            sp = smp.ss[lo:hi]
-            if self._off_every_arc(np.array(S_), np.array(E_), smp.Qs[lo:hi], (sp - sp[0]) / span, nsw, keep):
+            sp = smp.params(lo, hi)
+            if self._off_every_arc(np.array(S_), np.array(E_), smp.points(lo, hi), (sp - sp[0]) / span, nsw, keep):
                 return None
         frac = fitcore.fractions(smp.sl, lo, hi)
         ends = (S_[a1], S_[a2], S_[an], E_[a1], E_[a2], E_[an])
@@ -370,9 +396,9 @@ class MoveFit:
                 # steps long). The nominal circle, moved with the correction and its centre
                 # brought onto the bisector, is tried first.
                 centres.append(bisector_point(np.array(S2), np.array(E2), np.array([cx, cy])))
-            centres.append(bisector_centre(S2, E2, P2[lo:hi], (cx, cy)))
+            centres.append(bisector_centre(S2, E2, smp.plane_points(lo, hi), (cx, cy)))
         else:
-            centre = circle_fit(P2[lo:hi])
+            centre = circle_fit(smp.plane_points(lo, hi))
             centres.append(np.array([cx, cy]) if centre is None or not np.isfinite(centre).all() else centre)
         for centre in centres:
             spec = self._arc_about(tr, S_, (float(centre[0]), float(centre[1])), nsw)
@@ -473,44 +499,15 @@ class MoveFit:
 
     def _r_candidates(self, tr: fitcore.ArcTry, centre: tuple[float, float], nsw: float) -> ArcSpec | None:
         """The written R-form arc of the try ``tr`` nearest ``centre`` that passes (see
-        :meth:`_exact_arc`), or None."""
-        d, unit, budget, clockwise = self.d, self.mv.unit, self.budget, self.arc.clockwise
-        s1, s2, e1, e2 = tr.s1, tr.s2, tr.e1, tr.e2
-        step = 10.0 ** (-d)
-        half = 0.5 * math.hypot(e1 - s1, e2 - s2)
-        if half == 0.0:
+        :meth:`_exact_arc`), or None: of the rounded radii about the centre's, every one's
+        arc measured, the first of the smallest deviations among one-turn arcs
+        (:meth:`postproc.gcode.fitcore.ArcTry.r_form`)."""
+        found = tr.r_form(centre, nsw, self.mv.unit, self.d, CENTRE_LATTICE, R_TOLERANCE, self.budget,
+                          controller_limits_of(True))
+        if found is None:
             return None
-        rho = 0.5 * (math.hypot(s1 - centre[0], s2 - centre[1]) + math.hypot(e1 - centre[0], e2 - centre[1]))
-        sign = -1.0 if abs(nsw) > math.pi else 1.0
-        r0 = round(rho / unit, d)
-        vals = {round(r0 + k * step, d) for k in range(-CENTRE_LATTICE, CENTRE_LATTICE + 1)}
-        vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
-        texts, cx, cy = [], [], []
-        for val in sorted(vals):
-            text = emit.fmt(sign * val, d)
-            R = float(text) * unit
-            if abs(R) <= half:
-                continue  # every controller must find a centre without its own tolerance
-            c = r_center(s1, s2, e1, e2, R, clockwise)
-            if c is not None:
-                texts.append(text)
-                cx.append(c[0])
-                cy.append(c[1])
-        if not texts:
-            return None
-        # every radius's arc measured, the best in the order of the radii: the first of the
-        # smallest deviations among one-turn arcs (a measure stops once it shows its arc
-        # beyond the budget)
-        meas = tr.measure(cx, cy, math.inf, controller_limits_of(True), budget)
-        w, _m, t = full_of(meas)
-        best = -1
-        for j, (wj, tj) in enumerate(zip(w.tolist(), t.tolist(), strict=True)):
-            if tj == 1 and (best < 0 or wj < w[best]):
-                best = j
-        if best < 0 or not w[best] <= budget:
-            return None
-        return {"form": "r", "vals": (("R", texts[best]),), "turns": 1, "dev": float(w[best]),
-                "mismatch": meas.mismatch[best]}
+        text, dev, mismatch = found
+        return {"form": "r", "vals": (("R", text),), "turns": 1, "dev": dev, "mismatch": mismatch}
 
 
 def _one(tr: fitcore.ArcTry, cx: float, cy: float, controller_limits: bool) -> tuple[float, float, int]:

@@ -18,14 +18,22 @@ centre is ill-defined (a circle of kilometres through a few millimetres of path)
 circle fits the samples as closely, and the rounded candidates about it are measured as
 any others, so the arc written is then another one within the same bounds.
 
+The R form (:meth:`ArcTry.r_form`) tries rounded radii about the one a centre gives:
+each is written as a word, read back, and its centre is the one a controller computes
+from it (:func:`r_center`, the package's one formula for it), with Python's own rounding
+(``round``), formatting (:func:`postproc.gcode.numfmt.fmt`) and ``math.hypot``, as the
+readers use them.
+
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
-It imports nothing of the package, so that it compiles on its own.
+It imports nothing of the package but :mod:`postproc.gcode.numfmt`, compiled with it.
 """
 
 from __future__ import annotations
 
 import math
 from typing import Final
+
+from postproc.gcode.numfmt import fmt
 
 TWO_PI: Final = 2.0 * math.pi
 
@@ -250,6 +258,43 @@ def bisector_centre(S2: tuple[float, float], E2: tuple[float, float], us: list[f
     return m0 + t * n0, m1 + t * n1
 
 
+# -- R-form arcs ------------------------------------------------------------------------
+
+def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool, abs_tol: float,
+             rel_tol: float) -> tuple[float, float] | None:
+    """Centre the controller computes for an R-format arc from (s1, s2) to (e1, e2) in
+    its plane (a negative R takes the longer way round), or None where the ends coincide
+    or R is short of half the chord by more than the controllers' tolerance: ``abs_tol``
+    (mm) or ``rel_tol`` of |R|, the larger."""
+    dx, dy = e1 - s1, e2 - s2
+    chord = math.hypot(dx, dy)
+    if chord == 0.0:
+        return None
+    half = chord / 2
+    if abs(R) < half:
+        if half - abs(R) > max(abs_tol, rel_tol * abs(R)):
+            return None
+        h = 0.0
+    else:
+        h = math.sqrt(R * R - half * half)
+    sign = -1.0 if clockwise else 1.0
+    if R < 0:
+        sign = -sign
+    mx, my = (s1 + e1) / 2, (s2 + e2) / 2
+    return mx - sign * h * dy / chord, my + sign * h * dx / chord
+
+
+def r_radii(rho: float, half: float, unit: float, d: int, reach: int) -> list[float]:
+    """The radii (``d`` decimals, program units; ``unit``: mm per program unit) an R-form
+    arc tries, in increasing order: ``rho`` (mm) rounded and ``reach`` steps on each side
+    of it, and the three smallest steps above ``half`` (mm, half the chord)."""
+    step = 10.0 ** (-d)
+    r0 = round(rho / unit, d)
+    vals = {round(r0 + k * step, d) for k in range(-reach, reach + 1)}
+    vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
+    return sorted(vals)
+
+
 # -- arcs about candidate centres -----------------------------------------------------------
 
 class Measured:
@@ -274,6 +319,26 @@ class Measured:
         self.worst = []
         self.turns = []
         self.mism = []
+
+
+def _least_one_turn(found: Measured) -> tuple[int, float]:
+    """The first (in the candidates' order) of those that turn once with the least worst,
+    and that worst (a candidate refused counts as inf, one beyond the limit as no turn):
+    ``(-1, inf)`` where none turns once."""
+    m = len(found.mismatch)
+    turns = [0] * m
+    for k in range(len(found.sel)):
+        turns[found.sel[k]] = found.sel_turns[k]
+    worst = [math.inf] * m
+    for k in range(len(found.idx)):
+        worst[found.idx[k]] = found.worst[k]
+    best = -1
+    least = math.inf
+    for j in range(m):
+        if turns[j] == 1 and (best < 0 or worst[j] < least):
+            best = j
+            least = worst[j]
+    return best, least
 
 
 class ArcTry:
@@ -421,6 +486,78 @@ class ArcTry:
             elif dev != dev:
                 nan = True
         return (math.nan if nan else worst), at
+
+
+    def r_candidates(self, centre: tuple[float, float], nsw: float, unit: float, d: int, reach: int,
+                     tol: tuple[float, float]) -> tuple[list[str], list[float], list[float]]:
+        """The R words (``d`` decimals) of the arc of the try about radii near that of
+        ``centre`` (:func:`r_radii`; ``reach`` steps on each side; negative where |nsw| is
+        over half a turn), each longer than half the chord once read back (every
+        controller finds its centre without its own tolerance), and the centres a
+        controller finds from them (:func:`r_center`, ``tol``: its tolerances):
+        ``(texts, cx, cy)``, empty where S and E are one point."""
+        s1, s2, e1, e2 = self.s1, self.s2, self.e1, self.e2
+        clockwise = self.clockwise
+        texts: list[str] = []
+        cx: list[float] = []
+        cy: list[float] = []
+        half = 0.5 * math.hypot(e1 - s1, e2 - s2)
+        if half == 0.0:
+            return texts, cx, cy
+        c0, c1 = centre
+        rho = 0.5 * (math.hypot(s1 - c0, s2 - c1) + math.hypot(e1 - c0, e2 - c1))
+        sign = -1.0 if abs(nsw) > math.pi else 1.0
+        abs_tol, rel_tol = tol
+        for val in r_radii(rho, half, unit, d, reach):
+            text = fmt(sign * val, d)
+            R = float(text) * unit
+            if abs(R) <= half:
+                continue
+            c = r_center(s1, s2, e1, e2, R, clockwise, abs_tol, rel_tol)
+            if c is not None:
+                texts.append(text)
+                cx.append(c[0])
+                cy.append(c[1])
+        return texts, cx, cy
+
+    def r_form(self, centre: tuple[float, float], nsw: float, unit: float, d: int, reach: int,
+               tol: tuple[float, float], budget: float, limits: tuple[float, float]) -> tuple[str, float, float] | None:
+        """The R word of the try's arc nearest ``centre`` that passes (see
+        :meth:`r_candidates`): every candidate's arc measured (``limits``: the
+        controllers', see :meth:`measure`; a measure stops once beyond ``budget``), the
+        first in the order of the radii of those turning once with the least worst, if
+        within ``budget``: ``(text, worst, mismatch)``, or None."""
+        texts, cx, cy = self.r_candidates(centre, nsw, unit, d, reach, tol)
+        if not texts:
+            return None
+        found = self.measure(cx, cy, math.inf, limits, budget)
+        best, least = _least_one_turn(found)
+        if best < 0 or not least <= budget:
+            return None
+        return texts[best], least, found.mismatch[best]
+
+
+def interleave(cols: list[list[float]], ss: list[float],
+               bulge: list[list[float]]) -> tuple[list[list[float]], list[float]]:
+    """The n samples (``cols``: n coordinates an axis, at the parameters ``ss``) and the
+    middles of their intervals, interleaved (2n - 1 an axis): a middle is the mean of its
+    ends (``0.5 * (a + b)``) moved by its ``bulge`` (its first n - 1 an axis), its
+    parameter the mean of theirs; as numpy took them, element by element."""
+    n = len(ss)
+    out: list[list[float]] = []
+    for axis in range(len(cols)):
+        col = cols[axis]
+        bc = bulge[axis]
+        row = [col[0]] * (2 * n - 1)
+        for i in range(n - 1):
+            row[2 * i + 1] = 0.5 * (col[i] + col[i + 1]) + bc[i]
+            row[2 * i + 2] = col[i + 1]
+        out.append(row)
+    sl = [ss[0]] * (2 * n - 1)
+    for i in range(n - 1):
+        sl[2 * i + 1] = 0.5 * (ss[i] + ss[i + 1])
+        sl[2 * i + 2] = ss[i + 1]
+    return out, sl
 
 
 def mean_between(col: list[float], a: int, b: int) -> float:

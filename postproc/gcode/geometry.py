@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
+from postproc.gcode import fitcore
 from postproc.gcode.moves import Arc
 from postproc.gcode.state import PLANES
 
@@ -114,20 +115,6 @@ def arc_chord_steps(arc: Arc, q0, q1, tol_mm: float) -> int:
 def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool) -> tuple[float, float] | None:
     """Centre the controller computes for an R-format arc from (s1, s2) to (e1, e2) in
     its plane (a negative R takes the longer way round), or None where the ends coincide
-    or R is short of half the chord by more than the controllers' tolerance."""
-    dx, dy = e1 - s1, e2 - s2
-    chord = math.hypot(dx, dy)
-    if chord == 0.0:
-        return None
-    half = chord / 2
-    if abs(R) < half:
-        if half - abs(R) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * abs(R)):
-            return None
-        h = 0.0
-    else:
-        h = math.sqrt(R * R - half * half)
-    sign = -1.0 if clockwise else 1.0
-    if R < 0:
-        sign = -sign
-    mx, my = (s1 + e1) / 2, (s2 + e2) / 2
-    return mx - sign * h * dy / chord, my + sign * h * dx / chord
+    or R is short of half the chord by more than the controllers' tolerance
+    (:func:`postproc.gcode.fitcore.r_center` with ARC_RADIUS_ABS_MM and ARC_RADIUS_REL)."""
+    return fitcore.r_center(s1, s2, e1, e2, R, bool(clockwise), ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
