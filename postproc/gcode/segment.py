@@ -31,7 +31,7 @@ from typing import Literal, NotRequired, TypedDict
 
 import numpy as np
 
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL, MM_PER_INCH
+from postproc.constants import MM_PER_INCH
 from postproc.errors import SolverError
 from postproc.gcode import fitcore
 from postproc.gcode.fitcore import chord_exceeds as chord_exceeds  # re-exported
@@ -156,55 +156,6 @@ def subdivide(curves: list[Curve], s_init: list[np.ndarray], evaluate: Evaluate,
         k.sort(key=lambda t: t[0])
         out.append((np.array([t[0] for t in k]), np.array([t[1] for t in k])))
     return out
-
-
-def centre_estimate(arc: Arc, s_nom: np.ndarray, q_nom: np.ndarray, q_corr: np.ndarray) -> np.ndarray:
-    """Corrected centre: the correction fitted as affine in the plane, evaluated at the centre."""
-    (a1, a2, _an), _ = _plane(arc)
-    d = q_corr - q_nom
-    c = np.asarray(arc.center, dtype=float)
-    # coordinates about the centre keep the 3x3 normal equations well conditioned;
-    # the fitted constant term is then the correction at the centre
-    A = np.column_stack([np.ones(len(q_nom)), q_nom[:, a1] - c[a1], q_nom[:, a2] - c[a2]])
-    try:
-        coef = np.linalg.solve(A.T @ A, A.T @ d)
-    except np.linalg.LinAlgError:
-        # an arc so short that its samples do not span the plane: the correction
-        # does not vary along it; the centre gets the mean
-        return c + d.mean(axis=0)
-    return c + coef[0]
-
-
-def _plane(arc: Arc) -> tuple[Axes, tuple[str, str]]:
-    from postproc.gcode.state import PLANES
-
-    return PLANES[arc.plane]
-
-
-def arc_deviation(arc: Arc, S: Point, E: Point, s_samples: np.ndarray, q_samples: np.ndarray, nominal_sweep: float,
-                  input_mismatch_mm: float = 0.0) -> float:
-    """Largest distance from the corrected samples to the arc a controller draws from
-    S to E around ``arc.center`` (spiral radius, linear normal axis); inf if the
-    arc fails the controller's radius check (or is worse than the input arc, which
-    the user's controller accepts) or turns the wrong way."""
-    (a1, a2, an), t0, sweep, r0, r1 = arc_params(arc, S, E)
-    if abs(r0 - r1) > max(ARC_RADIUS_ABS_MM, ARC_RADIUS_REL * r0, input_mismatch_mm):
-        return math.inf
-    if abs(sweep - nominal_sweep) > math.pi / 2:
-        return math.inf
-    c1, c2 = arc.center[a1], arc.center[a2]
-    v1 = q_samples[:, a1] - c1
-    v2 = q_samples[:, a2] - c2
-    phi = np.arctan2(v2, v1)
-    sgn = -1.0 if arc.clockwise else 1.0
-    alpha = ((phi - t0) * sgn) % TWO_PI
-    target = s_samples * abs(sweep)
-    alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
-    frac = alpha / abs(sweep)
-    rad = r0 + (r1 - r0) * frac
-    nrm = S[an] + (E[an] - S[an]) * frac
-    dev = np.hypot(np.hypot(v1, v2) - rad, q_samples[:, an] - nrm)
-    return float(dev.max())
 
 
 # -- exact circles --------------------------------------------------------------------
