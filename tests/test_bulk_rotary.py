@@ -128,3 +128,26 @@ def test_diff_pairs_rotary_lines_as_the_general_path_does(monkeypatch, tmp_path)
         reports.append(compare_programs(str(orig), str(corr), SETUP).to_dict())
     assert reports[0] == reports[1]
     assert reports[0]["moves_moved"] > 50
+
+
+def test_x_and_y_after_z_as_correct_adds_them_are_read_in_bulk(planned_tables):
+    # correct adds the words of an axis a line does not name after its last axis word
+    # (G0 G43 H2 Z25 -> ... Z24.8732 X182.6499 Y151.8130): reading its output back (diff,
+    # a second correction) takes such lines in runs, each written by the general emitter
+    text = ("G21 G90 G17\nG0 X10 Y10 Z5\nG1 Z-1 F100\nX20\nG0 Z5\nG1 X30 Y30 Z-1\nG0 Z5 A10\nX40 Y40\n"
+            "G43 H1 Z6\nM2\n")
+    once = correct_text(text, _engine(), Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 0.0}),
+                        CorrectOptions())[0]
+    body = [line for line in once.splitlines(True) if not line.startswith("(")]
+    late = [line for line in body if "Z" in line and "X" in line and line.index("X") > line.index("Z")]
+    assert len(late) >= 3  # G1 Z-1, G0 Z5 and G0 Z5 A10 got X and Y words after Z
+    again = "".join(body)
+    a, b = _both(again, Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 0.0}))
+    assert a == b
+    blk = bulk.scan(body)
+    assert blk is not None
+    rows = [i for i, line in enumerate(body) if line in late]
+    assert all(blk.plain[i] for i in rows)
+    assert set(rows) <= set(blk.late)
+    # named once only: X before Z and X again after it is not plain
+    assert bulk.scan(["G0 X1 Y1 Z1\n", "X1 Z2 X3\n"]).plain.tolist() == [True, False]

@@ -82,7 +82,9 @@ def test_pieces_join_back_to_the_line(words, ending):
     cols = scanner.scan(line)
     p = plainscan.pieces(line, cols)
     texts = [col[0] for col in p.text] if len(cols) else []
-    if texts and any(texts[:13]):
+    if texts and any(texts[:13]) and p.late[0]:  # X or Y after Z: never rejoined (the general emitter writes it)
+        assert p.has[0][0] or p.has[1][0]
+    elif texts and any(texts[:13]):
         body = line[:-1] if line.endswith("\n") else line
         order = [0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
         assert "".join(texts[k] for k in order) == body

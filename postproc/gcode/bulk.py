@@ -279,6 +279,9 @@ class Block:
             if k < 3:
                 self.frac.append(np.fromiter(pieces.frac[k], dtype=int, count=n))
                 self.last.append(last_index(has))
+        # lines naming X or Y after Z (plainscan.Pieces.late): cut from their runs, written
+        # by the general emitter
+        self.late: list[int] = [i for i, v in enumerate(pieces.late) if v] if any(pieces.late) else []
         # R-form arcs (their R word is in the rest): its value on each line (0 where none)
         self.has_r = np.frombuffer(bytes(pieces.has[5]), dtype=bool)
         self.r_value: list[float] = pieces.value[5]
@@ -552,6 +555,9 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
     run.motion0 = st.motion
     run.feed0 = st.feed
     run.arcs = arcs
+    if block.late:
+        late = block.late
+        run.cut = [y - a for y in late[bisect_left(late, a):bisect_left(late, b)]]
     nr = block.neutral_rows
     if nr:
         run.inert = [y - a for y in nr[bisect_left(nr, a):bisect_left(nr, b)]]

@@ -2,7 +2,10 @@
 
 A plain move is a line of words (:attr:`postproc.gcode.scanner.Columns.plain`) in the
 order ``[N..] [G0|G1|G2|G3] [G43 H<digits>] [X..] [Y..] [Z..] [A..] [B..] [C..] [I..]
-[J..] [R..] [F..]`` (any case, G00 to G03 too). :func:`pieces` gives, per line, 14 texts
+[J..] [R..] [F..]`` (any case, G00 to G03 too), or with X and Y after the last axis word (before the
+rotary words) where they are not before it: a line ``correct`` added them to (:attr:`Pieces.late`:
+its X and Y numbers are given, their text stays in the next piece; the bulk writer never
+rejoins such a line, the general emitter writes it). :func:`pieces` gives, per line, 14 texts
 that join back to the line without its ``\\n``: the head (blanks, N, G and G43 H words),
 the G number, for X, Y, Z, I and J the text from the piece before up to the number and
 the number (the rotary words are in the piece before I), then the rest (R and F words,
@@ -42,12 +45,14 @@ class Pieces:
     """The pieces of a chunk's lines, a list per piece or axis and an entry per line."""
 
     text: list[list[str]]  # the 14 pieces
+    late: list[bool]  # X or Y named after Z (as correct adds them): their text is in the next piece
     has: list[list[bool]]  # X, Y, Z, I, J, R, A, B, C: named on the line
     value: list[list[float]]  # their values (0.0 where not named)
     frac: list[list[int]]  # their digits after the point (0 where not named)
 
     def __init__(self, n: int) -> None:
         self.text = [[""] * n for _ in range(GROUPS)]
+        self.late = [False] * n
         self.has = [[False] * n for _ in range(NAMED)]
         self.value = [[0.0] * n for _ in range(NAMED)]
         self.frac = [[0] * n for _ in range(NAMED)]
@@ -56,6 +61,7 @@ class Pieces:
         """Line ``i`` is not a plain move: every piece empty, no word named."""
         for k in range(GROUPS):
             self.text[k][i] = ""
+        self.late[i] = False
         for k in range(NAMED):
             self.has[k][i] = False
             self.value[k][i] = 0.0
@@ -66,6 +72,30 @@ def _frac(text: str, i: int, j: int) -> int:
     """Digits after the point of the number ``text[i:j]``."""
     k = text.find(".", i, j)
     return j - k - 1 if k >= 0 else 0
+
+
+def _after_z(text: str, cols: Columns, res: Pieces, li: int, w: int, we: int) -> int:
+    """The words of line ``li`` from word ``w`` (``we``: its end) that may stand after Z:
+    X and Y where the line named neither before (their text left in the next piece; where
+    ``correct`` adds them, before the rotary words), then the rotary words; the word after
+    them."""
+    letter, start, end, val = cols.letter, cols.start, cols.end, cols.value
+    has, value, frac = res.has, res.value, res.frac
+    for a in range(2):
+        if w < we and letter[w] == _AXES[a] and not has[a][li]:
+            res.text[3 + 2 * a][li] = text[start[w]:end[w]]  # its number (the line is never rejoined)
+            has[a][li] = True
+            value[a][li] = val[w]
+            frac[a][li] = _frac(text, start[w], end[w])
+            res.late[li] = True
+            w += 1
+    for r in range(3):
+        if w < we and letter[w] == _ROTARY[r]:
+            has[6 + r][li] = True
+            value[6 + r][li] = val[w]
+            frac[6 + r][li] = _frac(text, start[w], end[w])
+            w += 1
+    return w
 
 
 def pieces(text: str, cols: Columns) -> Pieces:
@@ -101,13 +131,8 @@ def pieces(text: str, cols: Columns) -> Pieces:
         out[_HEAD][li] = text[s:head]
         prev = head
         for k in range(5):
-            if k == 3:  # the rotary words, after Z
-                for r in range(3):
-                    if w < we and letter[w] == _ROTARY[r]:
-                        has[6 + r][li] = True
-                        value[6 + r][li] = val[w]
-                        frac[6 + r][li] = _frac(text, start[w], end[w])
-                        w += 1
+            if k == 3:
+                w = _after_z(text, cols, res, li, w, we)
             if w < we and letter[w] == _AXES[k]:
                 a = start[w]
                 b = end[w]
