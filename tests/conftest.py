@@ -391,3 +391,24 @@ def planned_tables(monkeypatch):
 
     monkeypatch.setattr(planner.Planner, "plan", spy)
     return seen
+
+
+def bisector_cases(rng, n: int):
+    """Arcs of radius 1 um to 100 m sampled with noise, the ends rounded to 4 decimals, for
+    the centre fit on the bisector: ``(S2, E2, P2, c0)`` arrays (P2 (k, 2) the samples,
+    c0 a first guess near the centre); some with S2 == E2 (no bisector), a sample on the
+    chord's middle, a nan."""
+    for i in range(n):
+        R = 10.0 ** rng.uniform(-3, 5)
+        c = rng.uniform(-300, 300, 2)
+        th = np.sort(rng.uniform(0, rng.uniform(1e-4, 6), int(rng.integers(2, 60))))
+        P2 = c + R * np.c_[np.cos(th), np.sin(th)] + rng.normal(0, 10.0 ** rng.uniform(-9, -1), (len(th), 2))
+        S2, E2 = P2[0].round(4), P2[-1].round(4)
+        if i % 13 == 0:
+            E2 = S2.copy()
+        if i % 17 == 0:
+            P2[len(P2) // 2] = 0.5 * (S2 + E2)
+        if i % 19 == 0:
+            P2[0] = np.nan
+        c0 = c + rng.normal(0, 10.0 ** rng.uniform(-6, 0), 2)
+        yield S2, E2, P2, c0

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import bisector_cases
 
 from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.gcode import arcfit, fitcore, geometry, segment
@@ -198,21 +199,8 @@ def test_a_measure_that_stops_keeps_what_the_fit_takes_from_it():
 
 
 def _bisector_cases(rng, n: int):
-    """Arcs of radius 1 um to 100 m sampled with noise, the ends rounded to 4 decimals:
-    (S2, E2, us, vs, c0); some with S2 == E2, a sample on the chord's middle, a nan."""
-    for i in range(n):
-        R = 10.0 ** rng.uniform(-3, 5)
-        c = rng.uniform(-300, 300, 2)
-        th = np.sort(rng.uniform(0, rng.uniform(1e-4, 6), int(rng.integers(2, 60))))
-        P2 = c + R * np.c_[np.cos(th), np.sin(th)] + rng.normal(0, 10.0 ** rng.uniform(-9, -1), (len(th), 2))
-        S2, E2 = P2[0].round(4), P2[-1].round(4)
-        if i % 13 == 0:
-            E2 = S2.copy()
-        if i % 17 == 0:
-            P2[len(P2) // 2] = 0.5 * (S2 + E2)
-        if i % 19 == 0:
-            P2[0] = np.nan
-        c0 = c + rng.normal(0, 10.0 ** rng.uniform(-6, 0), 2)
+    """conftest.bisector_cases as fitcore takes them: (S2, E2, us, vs, c0) in floats."""
+    for S2, E2, P2, c0 in bisector_cases(rng, n):
         yield tuple(S2.tolist()), tuple(E2.tolist()), P2[:, 0].tolist(), P2[:, 1].tolist(), tuple(c0.tolist())
 
 

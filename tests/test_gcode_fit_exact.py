@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import bisector_cases
 
 from postproc.gcode.segment import chord_deviation, chord_exceeds
 
@@ -133,19 +134,7 @@ def test_bisector_centre_fits_as_the_old_one_did(seed):
 
     rng = np.random.default_rng(seed)
     same = 0
-    for i in range(2000):
-        R = 10.0 ** rng.uniform(-3, 5)
-        c = rng.uniform(-300, 300, 2)
-        th = np.sort(rng.uniform(0, rng.uniform(1e-4, 6), int(rng.integers(2, 60))))
-        P2 = c + R * np.c_[np.cos(th), np.sin(th)] + rng.normal(0, 10.0 ** rng.uniform(-9, -1), (len(th), 2))
-        S2, E2 = P2[0].round(4), P2[-1].round(4)
-        if i % 13 == 0:
-            E2 = S2.copy()  # no bisector: the first guess
-        if i % 17 == 0:
-            P2[len(P2) // 2] = 0.5 * (S2 + E2)  # a sample on the chord's middle
-        if i % 19 == 0:
-            P2[0] = np.nan
-        c0 = c + rng.normal(0, 10.0 ** rng.uniform(-6, 0), 2)
+    for i, (S2, E2, P2, c0) in enumerate(bisector_cases(rng, 2000)):
         # the samples as the fit holds them (plane columns taken from (k, 3) rows, which
         # numpy lays out by column), by row, and a strided view
         rows = np.c_[P2, np.zeros(len(P2))]
