@@ -15,9 +15,8 @@ from typing import Protocol, final
 
 import numpy as np
 
-from postproc.constants import ARC_RADIUS_ABS_MM, ARC_RADIUS_REL
 from postproc.gcode import emit, fitcore
-from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI
+from postproc.gcode.geometry import FULL_CIRCLE_MM, R_TOLERANCE, TWO_PI
 from postproc.gcode.moves import Arc, Move
 from postproc.gcode.segment import (
     CENTRE_LATTICE,
@@ -50,9 +49,6 @@ Edit = tuple[int, int, str]  # replace line[start:end] by the text
 # samples.
 OFF_EVERY_ARC_FROM = 256
 SPREAD = 64
-
-# the tolerances of the centre a controller computes for an R word (fitcore.r_center)
-R_TOLERANCE = (ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
 
 
 class _Piece:

@@ -21,16 +21,12 @@ from postproc.gcode import emit
 from postproc.gcode.arcfit import Edit, MoveFit, _free_move, _Piece
 from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.framed import FrameView
+from postproc.gcode.geometry import r_center
 from postproc.gcode.interp import Arc, Move
 from postproc.gcode.lexer import Word
 from postproc.gcode.moves import Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
-from postproc.gcode.segment import (
-    ArcSpec,
-    Curve,
-    Point,
-    r_center,
-)
+from postproc.gcode.segment import ArcSpec, Curve, Point
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, PLANES, RAPID
 from postproc.gcode.vplan import ArcHint, ArcMove, Plan
 

@@ -112,9 +112,14 @@ def arc_chord_steps(arc: Arc, q0, q1, tol_mm: float) -> int:
     return max(1, math.ceil(abs(sweep) / dtheta))
 
 
+# how far R may fall short of half the chord (mm, and a share of |R|, the larger) before
+# a controller refuses an R-format arc; within it the centre is on the chord
+R_TOLERANCE = (ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
+
+
 def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool) -> tuple[float, float] | None:
     """Centre the controller computes for an R-format arc from (s1, s2) to (e1, e2) in
     its plane (a negative R takes the longer way round), or None where the ends coincide
-    or R is short of half the chord by more than the controllers' tolerance
-    (:func:`postproc.gcode.fitcore.r_center` with ARC_RADIUS_ABS_MM and ARC_RADIUS_REL)."""
-    return fitcore.r_center(s1, s2, e1, e2, R, bool(clockwise), ARC_RADIUS_ABS_MM, ARC_RADIUS_REL)
+    or R is short of half the chord by more than :data:`R_TOLERANCE`
+    (:func:`postproc.gcode.fitcore.r_center`)."""
+    return fitcore.r_center(s1, s2, e1, e2, R, bool(clockwise), *R_TOLERANCE)

@@ -36,7 +36,6 @@ from postproc.errors import SolverError
 from postproc.gcode import fitcore
 from postproc.gcode.fitcore import chord_exceeds as chord_exceeds  # re-exported
 from postproc.gcode.geometry import FULL_CIRCLE_MM, TWO_PI, arc_params, arc_points, line_points
-from postproc.gcode.geometry import r_center as r_center  # re-exported
 from postproc.gcode.interp import Arc
 
 # A point (x, y, z) in machine coordinates; the plane's axes as (first, second, normal).
