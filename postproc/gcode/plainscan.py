@@ -2,15 +2,16 @@
 
 A plain move is a line of words (:attr:`postproc.gcode.scanner.Columns.plain`) in the
 order ``[N..] [G0|G1|G2|G3] [G43 H<digits>] [X..] [Y..] [Z..] [A..] [B..] [C..] [I..]
-[J..] [R..] [F..]`` (any case, G00 to G03 too), or with X and Y after the last axis word (before the
-rotary words) where they are not before it: a line ``correct`` added them to (:attr:`Pieces.late`:
-its X and Y numbers are given, their text stays in the next piece; the bulk writer never
-rejoins such a line, the general emitter writes it). :func:`pieces` gives, per line, 14 texts
-that join back to the line without its ``\\n``: the head (blanks, N, G and G43 H words),
-the G number, for X, Y, Z, I and J the text from the piece before up to the number and
-the number (the rotary words are in the piece before I), then the rest (R and F words,
-trailing blanks, ``\\r``) and the F number; and for X, Y, Z, I, J, R, A, B and C whether
-the line names it, its value (the scanner's) and its digits after the point.
+[J..] [R..] [F..]`` (any case, G00 to G03 too), or with X and Y after the last axis word
+(before the rotary words) where they are not before it: a line ``correct`` added them
+to (:attr:`Pieces.late`: its X and Y numbers are given, their text stays in the next
+piece; the bulk writer never rejoins such a line, the general emitter writes it).
+:func:`pieces` gives, per line, 14 texts that join back to the line without its
+``\\n``: the head (blanks, N, G and G43 H words), the G number, for X, Y, Z, I and J the
+text from the piece before up to the number and the number (the rotary words are in the
+piece before I), then the rest (R and F words, trailing blanks, ``\\r``) and the F
+number; and for X, Y, Z, I, J, R, A, B and C whether the line names it, its value (the
+scanner's) and its digits after the point.
 Every other line has 14 empty texts and names nothing. This reads the scanner's columns:
 no grammar of its own.
 
@@ -74,26 +75,28 @@ def _frac(text: str, i: int, j: int) -> int:
     return j - k - 1 if k >= 0 else 0
 
 
+def _name(text: str, cols: Columns, res: Pieces, k: int, li: int, w: int) -> None:
+    """Line ``li`` names word ``k`` of :attr:`Pieces.has`: the scanner's word ``w``."""
+    res.has[k][li] = True
+    res.value[k][li] = cols.value[w]
+    res.frac[k][li] = _frac(text, cols.start[w], cols.end[w])
+
+
 def _after_z(text: str, cols: Columns, res: Pieces, li: int, w: int, we: int) -> int:
     """The words of line ``li`` from word ``w`` (``we``: its end) that may stand after Z:
     X and Y where the line named neither before (their text left in the next piece; where
     ``correct`` adds them, before the rotary words), then the rotary words; the word after
     them."""
-    letter, start, end, val = cols.letter, cols.start, cols.end, cols.value
-    has, value, frac = res.has, res.value, res.frac
+    letter = cols.letter
     for a in range(2):
-        if w < we and letter[w] == _AXES[a] and not has[a][li]:
-            res.text[3 + 2 * a][li] = text[start[w]:end[w]]  # its number (the line is never rejoined)
-            has[a][li] = True
-            value[a][li] = val[w]
-            frac[a][li] = _frac(text, start[w], end[w])
+        if w < we and letter[w] == _AXES[a] and not res.has[a][li]:
+            res.text[3 + 2 * a][li] = text[cols.start[w]:cols.end[w]]  # its number (the line is never rejoined)
+            _name(text, cols, res, a, li, w)
             res.late[li] = True
             w += 1
     for r in range(3):
         if w < we and letter[w] == _ROTARY[r]:
-            has[6 + r][li] = True
-            value[6 + r][li] = val[w]
-            frac[6 + r][li] = _frac(text, start[w], end[w])
+            _name(text, cols, res, 6 + r, li, w)
             w += 1
     return w
 
@@ -144,9 +147,7 @@ def pieces(text: str, cols: Columns) -> Pieces:
                 prev = b
                 w += 1
         if w < we and letter[w] == "R":  # its text stays in the rest
-            has[_R][li] = True
-            value[_R][li] = val[w]
-            frac[_R][li] = _frac(text, start[w], end[w])
+            _name(text, cols, res, _R, li, w)
             w += 1
         if w < we and letter[w] == "F":
             out[_F][li] = text[start[w]:end[w]]
