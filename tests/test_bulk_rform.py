@@ -100,17 +100,22 @@ def test_r_arc_refusals_are_the_interpreters(arc, message):
     assert message in a
 
 
-def test_r_arc_in_inch_and_a_modal_r_arc_line():
-    # a line without its motion word after an R arc is the interpreter's (as after an I/J arc)
+def test_r_arc_in_inch_and_a_modal_r_arc_line(planned_tables):
+    # a line without its motion word after an R arc is an R arc too, read in the same run
     text = "G20 G90 G17\nG0 X1 Y1 Z0.5\nG1 X1.1 F20\nG2 X1.5 Y1.2 R0.3\nX1.9 Y1.0 R0.3\nG1 X2\nM2\n"
     a, b = _both(text)
     assert a == b
     blk = bulk.scan(text.splitlines(True))
     assert blk is not None
-    assert blk.plain.tolist() == [False, True, True, True, False, True, False]
+    assert blk.plain.tolist() == [False, True, True, True, True, True, False]
+    correct_text(text, _engine(), SETUP, CorrectOptions())
+    tab = planned_tables[-1]
+    assert tab.kind.tolist()[-3:] == [Kind.ARC_CW, Kind.ARC_CW, Kind.FEED]
+    (run,) = tab.runs
+    assert len(run) == 4 and sorted(run.arcs) == [1, 2]  # from G1 X1.1 to G1 X2
 
 
-@pytest.mark.parametrize("line", ["G1 X1 Y2 R3\n", "X1 Y2 R3\n", "G2 X1 Y1 I1 R1\n", "G2 X1 Y1 R1 I1\n",
+@pytest.mark.parametrize("line", ["G1 X1 Y2 R3\n", "G2 X1 Y1 I1 R1\n", "G2 X1 Y1 R1 I1\n",
                                   "G2 X1 Y1 F100 R1\n", "R1\n"])
 def test_an_r_word_that_is_no_arcs_radius_is_not_plain(line):
     blk = bulk.scan(["G0 X1 Y1 Z1\n", line, "N10 G1 X 1 Y-.5 F100\n"])

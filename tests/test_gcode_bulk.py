@@ -59,7 +59,8 @@ def arc_program(draw):
         if draw(st.integers(0, 5)) == 0:
             ex += draw(st.sampled_from([0.5, 0.002, 0.0]))  # an end point off the circle
         i, j = cx - x, cy - y
-        words = [draw(st.sampled_from(["G2", "G3", "G02", "N7 G03"])), f"X{ex:.4f}", f"Y{ey:.4f}"]
+        # no motion word: an arc under a modal G2/G3, else the interpreter's to read (or refuse)
+        words = [draw(st.sampled_from(["G2", "G3", "G02", "N7 G03", "", "N8"])), f"X{ex:.4f}", f"Y{ey:.4f}"]
         if draw(st.booleans()):
             z = draw(st.integers(-50, 50)) / 10
             words.append(f"Z{z:.3f}")
@@ -70,7 +71,7 @@ def arc_program(draw):
             words.append(f"J{j:.4f}")
         if draw(st.integers(0, 3)) == 0:
             words.append("F800")
-        body.append(" ".join(words))
+        body.append(" ".join(w for w in words if w))
         x, y = float(f"{ex:.4f}"), float(f"{ey:.4f}")
     return "\n".join(body) + "\n"
 

@@ -19,7 +19,8 @@ A run holds three kinds of lines:
   makes (zero radius, end radius; for R, ends that coincide or a radius short of half
   the chord) end the run before an arc that fails them, so the interpreter reads and
   reports it. An R-form arc is always written by the general emitter, from its plan. A
-  line with no motion word after an arc is an arc (modal) and never plain;
+  line with no motion word is an arc or a straight move by the modal motion, and a run
+  ends before one whose words do not fit it (:meth:`Block.motion_end`);
 - lines that move nothing (blank, comments, S words, M0 M1 M3-M5 M7-M9: :data:`_NEUTRAL`;
   a tool change alone: :data:`_TOOL`):
   written whole, no move, no word added; a run never starts with one.
@@ -249,12 +250,13 @@ def prime_shift(interp: Interpreter) -> bool:
 
 def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
     """Whether the modal state lets a run of plain lines start at the next line (``motion_word``:
-    that line names its own G0/G1, so the modal motion does not matter)."""
+    that line names its own motion, so the modal motion does not matter; the run then
+    takes only the lines that fit the modal motion: :meth:`Block.motion_end`)."""
     st = interp.state
     return (not interp.ended and interp.modal_call is None and st.frame is None
             and not st.incremental and not st.inverse_time and interp._run_shift is not None
             and st.comp == 400 and not st.comp_edge  # moves under cutter compensation: postproc.gcode.cutter
-            and (motion_word or st.motion in (RAPID, LINE))
+            and (motion_word or st.motion in (RAPID, LINE, ARC_CW, ARC_CCW))
             and not (math.isnan(st.pos[0]) or math.isnan(st.pos[1]) or math.isnan(st.pos[2])))
 
 
@@ -295,16 +297,16 @@ class Block:
         motion = np.fromiter(map(_G_MOTION.__getitem__, g), dtype=np.int8, count=n)  # -1: no G word
         no_g = motion < 0
         last_g = last_index(~no_g)
-        # G2/G3 lines with centre words (I, J) or a radius (R) are arcs; a line without a
-        # motion word after one is an arc too (modal), one with neither or both the
-        # interpreter's, and so is an R word on a straight move: none is plain
+        # G2/G3 lines with centre words (I, J) or a radius (R) are arcs, G0/G1 lines with
+        # neither straight moves; a line without a motion word is shaped as one or the
+        # other by its words, and a run takes it only under the motion it needs
+        # (read_run: :meth:`motion_end`); a line with both is the interpreter's
         self.arc = (motion == 2) | (motion == 3)
-        self.arc_rows: list[int] = np.flatnonzero(self.arc).tolist()
         self.has_l: list[list[bool]] = pieces.has
         centre = self.has[3] | self.has[4]
-        modal_arc = no_g & (last_g >= 0) & self.arc[np.maximum(last_g, 0)]
-        moving = ((self.has[0] | self.has[1] | self.has[2]) & (self.arc == (centre ^ self.has_r))
-                  & ~(centre & self.has_r) & ~modal_arc)
+        arc_shape = centre ^ self.has_r
+        moving = (self.has[0] | self.has[1] | self.has[2]) & ~(centre & self.has_r) & (no_g | (self.arc == arc_shape))
+        self._modal_shapes(moving, no_g, arc_shape, last_g)
         cols[_HEAD], cols[_REST] = list(cols[_HEAD]), list(cols[_REST])
         neutral = self._inert(np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist())
         self._tool_lengths(moving)
@@ -325,6 +327,48 @@ class Block:
         self.src: list[int] | None = None
         self.src_arr: IntArray | None = None
         self.src_files: list[str | None] | None = None  # ... and its file (set_source)
+
+    def _modal_shapes(self, moving: BoolArray, no_g: BoolArray, arc_shape: BoolArray, last_g: IntArray) -> None:
+        """The lines a run may take only under some modal motion (see
+        :meth:`motion_end`): :attr:`arc_rows` (G2/G3 lines, and the moving lines without
+        a motion word shaped as arcs), the moving lines without a motion word by shape,
+        the lines naming a motion word, and those without one whose shape is not the
+        motion of the last line before them naming one."""
+        modal = moving & no_g
+        self.arc_rows: list[int] = np.flatnonzero(self.arc | (modal & arc_shape)).tolist()
+        self._modal_arcs: list[int] = np.flatnonzero(modal & arc_shape).tolist()
+        self._arc_set = set(self._modal_arcs)
+        self._modal_lines: list[int] = np.flatnonzero(modal & ~arc_shape).tolist()
+        self._g_rows: list[int] = np.flatnonzero(~no_g).tolist()
+        named = last_g >= 0
+        self._wrong_shape: list[int] = np.flatnonzero(
+            modal & named & (self.arc[np.maximum(last_g, 0)] != arc_shape)).tolist()
+
+    def motion_end(self, a: int, b: int, motion0: int | None) -> int:
+        """The first of lines ``a:b`` (a stretch of plain lines) that a run starting
+        under the modal ``motion0`` cannot take, or ``b``: a line without a motion word
+        shaped as an arc (centre words or R) where the modal motion is straight, or as
+        a straight move where it is an arc; the interpreter reads (or refuses) it."""
+        g = self._g_rows
+        k = bisect_left(g, a)
+        first_g = g[k] if k < len(g) and g[k] < b else b  # before it, the modal motion is motion0
+        end = b
+        if first_g > a:
+            if motion0 in (RAPID, LINE):
+                wrong = [self._modal_arcs]
+            elif motion0 in (ARC_CW, ARC_CCW):
+                wrong = [self._modal_lines]
+            else:  # no motion the line could move in
+                wrong = [self._modal_arcs, self._modal_lines]
+            for rows in wrong:
+                k = bisect_left(rows, a)
+                if k < len(rows) and rows[k] < min(end, first_g):
+                    end = rows[k]
+        rows = self._wrong_shape
+        k = bisect_left(rows, first_g)
+        if k < len(rows) and rows[k] < end:
+            end = rows[k]
+        return end
 
     def _inert(self, candidates: list[int]) -> BoolArray:
         """The lines among ``candidates`` (no word of a move) that move nothing (blank,
@@ -356,7 +400,7 @@ class Block:
                 m = _TLO.search(head[i])
                 if m is not None:
                     moving[i] = False
-                    if not self.arc[i]:
+                    if not self.arc[i] and i not in self._arc_set:
                         self.tlo[i] = int(m.group(1))
         self.tlo_rows: list[int] = sorted(self.tlo)
 
@@ -488,7 +532,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
     (lx, ly, lz), (vx, vy, vz) = block.last_l[:3], block.ovl[:3]
     vi, vj, has_i, has_j = block.ovl[3], block.ovl[4], block.has_l[3], block.has_l[4]
     has_r, vr = block.has_l[5], block.r_value
-    gword = block.gword
+    gword, last_g, motion0 = block.gword, block.last_g, interp.state.motion
     sx, sy, sz = shift[0], shift[1], shift[2]
     hyp = math.hypot
     arcs: dict[int, RunArc] = {}
@@ -504,7 +548,8 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
         x1 = vx[p] * unit + sx if p >= a else q0[0]
         p = ly[y]
         y1 = vy[p] * unit + sy if p >= a else q0[1]
-        clockwise = gword[y][-1] == "2"
+        g = last_g[y]  # (a line without a motion word: the modal arc's)
+        clockwise = gword[g][-1] == "2" if g >= a else motion0 == ARC_CW
         if has_r[y]:  # the centre the controller finds for R (the interpreter's arc rule)
             c = None if hyp(x1 - x0, y1 - y0) < MIN_ARC_RADIUS_MM else r_center(x0, y0, x1, y1, vr[y] * unit,
                                                                                   clockwise)
@@ -541,6 +586,7 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
         k = bisect_right(tr, a)
         if k < len(tr) and tr[k] < b:
             b = tr[k]
+    b = block.motion_end(a, b, st.motion)
     b, arcs = _arc_rows(interp, block, a, b, unit, shift, q0)
     if b == a:
         return None
@@ -726,29 +772,40 @@ def emit_run(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write:
     handed to the general emitter (which may need its plan made first). ``resume``: that
     arc's block line, where ``mark.save`` was told it: the writer's state is as it was
     then, and the run is written on from that arc."""
-    blk = run.block
-    a, b = run.a, run.b
-    s = a
-    f = a  # the first line that moves
-    while f < b and blk.neutral[f]:
-        f += 1
+    s = run.a
     if resume >= 0:  # saved before its line went to the general emitter: it goes there again
         s = _general_row(corrector, run, T, write, hints, resume, mark)
-    elif f < b and not blk.gword[f] and corrector.emitted_motion != _modal_at(run, f)[0]:
-        # the controller's modal motion differs from the program's here (after a
-        # linearised arc): the general emitter adds the motion word
-        if f > a:
-            write("".join(blk.lines[a:f]))
-            corrector.report.lines_out += f - a
-        line = blk.lines[f]
-        if mark is not None:
-            mark(f - a, True)
-        corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
-        s = f + 1
-        if mark is not None:
-            mark(s - a, False)
-    while s < b:
-        s = _emit_rows(corrector, run, em, T, write, hints, s, mark)
+    while s < run.b:
+        s = _motion_row(corrector, run, T, write, hints, s, mark)
+        if s < run.b:
+            s = _emit_rows(corrector, run, em, T, write, hints, s, mark)
+
+
+def _motion_row(corrector: Corrector, run: Run, T: FloatArray, write: Write, hints: Mapping[int, ArcHint],
+                s: int, mark: Mark | None) -> int:
+    """Where the controller's modal motion differs from the program's at the first line
+    from block line ``s`` that moves (after an arc written as lines or split), and that
+    line names no motion word: write the lines before it as they are and it by the
+    general emitter, which adds the motion word; returns the line to write on from."""
+    blk = run.block
+    a, b = run.a, run.b
+    f = s
+    while f < b and blk.neutral[f]:
+        f += 1
+    if f == b or blk.gword[f] or corrector.emitted_motion == _modal_at(run, f)[0]:
+        return s
+    if f > s:
+        write("".join(blk.lines[s:f]))
+        corrector.report.lines_out += f - s
+    if f - a in run.arcs:
+        return _general_row(corrector, run, T, write, hints, f, mark)
+    line = blk.lines[f]
+    if mark is not None:
+        mark(f - a, True)
+    corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
+    if mark is not None:
+        mark(f + 1 - a, False)
+    return f + 1
 
 
 def _emit_rows(corrector: Corrector, run: Run, em: Emission, T: FloatArray, write: Write,

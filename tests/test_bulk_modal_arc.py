@@ -1,0 +1,218 @@
+"""Arc lines without their motion word (``X.. Y.. I.. J..`` or ``X.. Y.. R..`` under a
+modal G2/G3, as FreeCAD, Fusion 360 and CAMotics write them) are read in bulk with the
+plain lines around them: the output, the refusals, the path and diff's report are the
+general path's, byte for byte. A line whose words do not fit the modal motion (centre
+words under G1, none under G2) ends the run, and the interpreter reads or refuses it."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from postproc.calfile import load_calibration
+from postproc.engine.static import StaticEngine
+from postproc.errors import PostprocError
+from postproc.gcode import bulk, emit
+from postproc.gcode.moves import Kind
+from postproc.gcode.path import Setup, program_path
+from postproc.gcode.pipeline import CorrectOptions, correct_text
+from postproc.gcode.state import ARC_CW, LINE
+
+ROOT = Path(__file__).parents[1]
+REAL = ROOT.parent / "shared" / "corpus" / "real"
+G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
+SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)})
+INSIDE = Setup(offsets={"G54": (150.0, 150.0, 150.0)}, tool_lengths={t: 0.0 for t in range(100)})
+
+
+def _static():
+    return StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
+
+
+def _curved():
+    return load_calibration(ROOT / "calibrations" / "s500_parametric.json").engine
+
+
+def _both(text, engine=None, setup=SETUP, **options):
+    """The output (or the refusal) of the bulk lane and of the general path."""
+    outs = []
+    for bulk_lane in (True, False):
+        try:
+            outs.append(correct_text(text, engine or _static(), setup, CorrectOptions(bulk_lane=bulk_lane,
+                                                                                      **options))[0])
+        except PostprocError as exc:
+            outs.append(f"{type(exc).__name__}: {exc}")
+    return outs
+
+
+def _modal_program(rng, n, r_form=False, scale=1.0, big=0.0):
+    """Passes of arcs both ways, each direction named once and then modal, with straight
+    moves between (named G1, then modal too), some helical, some with a feed; every
+    other arc ``big`` times larger where ``big`` is given."""
+    out = ["G21 G90 G17\n", "G0 X10 Y10 Z5\n", "G1 Z-1 F300\n"]
+    x, y, z = 10.0, 10.0, -1.0
+    for k in range(n):
+        if k % 6 == 0:
+            x, y = round(x + rng.uniform(-2, 2) * scale, 3), round(y + rng.uniform(-2, 2) * scale, 3)
+            out.append(f"G1 X{x:.3f} Y{y:.3f}\n")
+            x, y = round(x + rng.uniform(-2, 2) * scale, 3), round(y + rng.uniform(-2, 2) * scale, 3)
+            out.append(f"X{x:.3f} Y{y:.3f}\n")
+        r = rng.uniform(1.0, 6.0) * scale * (big if big and k % 2 else 1.0)
+        a0 = rng.uniform(0, 2 * np.pi)
+        cx, cy = x - r * np.cos(a0), y - r * np.sin(a0)
+        a1 = a0 + rng.uniform(-2.5, 2.5)
+        ex, ey = round(cx + r * np.cos(a1), 4), round(cy + r * np.sin(a1), 4)
+        head = f"G{2 + (k // 3) % 2} " if k % 3 == 0 else ""  # a direction named, then modal
+        dz = f" Z{z - 0.01:.3f}" if k % 5 == 2 else ""
+        f = " F250." if k % 4 == 1 else ""
+        if r_form:
+            rr = float(np.hypot(ex - cx, ey - cy))
+            rad = f" R{rr:.4f}" if abs(a1 - a0) < np.pi else f" R-{rr:.4f}"
+            out.append(f"{head}X{ex:.4f} Y{ey:.4f}{dz}{rad}{f}\n")
+        else:
+            out.append(f"{head}X{ex:.4f} Y{ey:.4f}{dz} I{cx - x:.4f} J{cy - y:.4f}{f}\n")
+        x, y = ex, ey
+        z = z - 0.01 if dz else z
+        if k % 6 == 5:
+            out.append("G1 F300\n")  # the modal motion back to G1 with nothing else
+    out.append("M2\n")
+    return "".join(out)
+
+
+@pytest.mark.parametrize("r_form", [False, True])
+@pytest.mark.parametrize("seed", range(3))
+def test_modal_arcs_in_bulk_give_the_general_paths_output(seed, r_form):
+    text = _modal_program(np.random.default_rng(seed), 60, r_form)
+    a, b = _both(text)
+    assert a == b
+    assert "Error" not in a
+
+
+@pytest.mark.parametrize("r_form", [False, True])
+def test_modal_arcs_split_by_a_curved_calibration_get_their_motion_word_back(r_form):
+    # every other arc too large for one exact arc to follow: it is written as several
+    # pieces (or lines), and the small modal arc line after it, kept in its run, needs its
+    # G2/G3 again
+    text = _modal_program(np.random.default_rng(5), 24, r_form, scale=0.2, big=100.0)
+    a, b = _both(text, _curved(), INSIDE, extrapolate="linear")
+    assert a == b
+    assert "Error" not in a
+    assert a.count("G2") + a.count("G3") > text.count("G2") + text.count("G3")
+
+
+def test_modal_arc_lines_are_read_in_runs(planned_tables):
+    text = _modal_program(np.random.default_rng(1), 30)
+    correct_text(text, _static(), SETUP, CorrectOptions())
+    (tab,) = planned_tables
+    arcs = np.flatnonzero((tab.kind == Kind.ARC_CW) | (tab.kind == Kind.ARC_CCW))
+    assert len(arcs) == 30
+    in_runs = {i for r in tab.runs for i in range(r.trow, r.trow + len(r))}
+    assert set(arcs.tolist()) <= in_runs  # none read line by line
+    # the direction of a modal arc is the last named one's
+    lines = text.splitlines()
+    named = [ln[:2] for ln in lines if ln[:2] in ("G2", "G3")]
+    assert named and all(ln.startswith(("G2", "G3", "X", "G1", "G0", "M2", "G21")) for ln in lines)
+    want, cur = [], None
+    for ln in lines:
+        if ln.startswith(("G2", "G3")):
+            cur = Kind.ARC_CW if ln.startswith("G2") else Kind.ARC_CCW
+        elif ln.startswith("G1"):
+            cur = Kind.FEED
+        if " I" in ln:
+            want.append(cur)
+    assert tab.kind[arcs].tolist() == want
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("X20 Y10 I5 J0", "4:9: I word on a straight move"),  # centre words under G1: the interpreter's
+    ("X20 Y10 R5", "4:9: R word on a straight move"),
+])
+def test_arc_shaped_lines_under_a_straight_motion_are_the_interpreters(line, message):
+    text = f"G21 G90 G17\nG0 X10 Y10 Z5\nG1 X10 F200\n{line}\nG1 X25\nM2\n"
+    a, b = _both(text)
+    assert a == b
+    assert message in a
+    blk = bulk.scan(text.splitlines(True))
+    assert blk is not None
+    assert blk.motion_end(2, 5, None) == 3  # after G1 a run ends before it
+    assert blk.motion_end(3, 5, LINE) == 3  # and cannot start there under G1
+    assert blk.motion_end(3, 5, ARC_CW) == 5  # under G2 it would take it
+
+
+@pytest.mark.parametrize("line", ["X25 Y12", "Z4", "X25 Y12 F100"])
+def test_straight_shaped_lines_under_a_modal_arc_end_the_run(line):
+    # under G2 a line without centre words is an arc with none: the interpreter refuses it
+    text = f"G21 G90 G17\nG0 X10 Y10 Z5\nG1 X10 F200\nG2 X20 Y10 I5 J0\n{line}\nG1 X25\nM2\n"
+    a, b = _both(text)
+    assert a == b
+    assert "5:1: arc without centre (I/J/K) or radius (R)" in a
+
+
+def test_a_run_starting_under_a_modal_arc_takes_its_arc_lines(planned_tables):
+    # chunks of 4 lines after the first: the second chunk's run starts under the modal G2
+    text = "G21 G90 G17\nG0 X10 Y10 Z5\nG1 X10 F200\nG2 X20 Y10 I5 J0\nX10 Y10 I-5 J0\nX20 Y10 R5\nG1 X25\nM2\n"
+    outs = []
+    for chunk in (4, 20_000):
+        outs.append(correct_text(text, _static(), SETUP, CorrectOptions(chunk_lines=chunk))[0])
+    assert outs[0] == outs[1] == _both(text)[1]
+    first, second = planned_tables[:2]
+    assert [(r.lineno, len(r)) for r in first.runs] == [(3, 3)]  # G1, G2 and the modal I/J arc
+    assert first.kind.tolist() == [Kind.RAPID, Kind.FEED, Kind.ARC_CW, Kind.ARC_CW]
+    assert [(r.lineno, len(r)) for r in second.runs] == [(6, 2)]  # the modal R arc, then G1
+    assert second.kind.tolist() == [Kind.ARC_CW, Kind.FEED]
+
+
+def test_modal_arc_path_and_diff_are_the_general_paths(monkeypatch, tmp_path):
+    from postproc.gcode.compare import compare_programs
+
+    text = _modal_program(np.random.default_rng(3), 50)
+    orig, corr = tmp_path / "o.ngc", tmp_path / "c.ngc"
+    orig.write_text(text)
+    corr.write_text(correct_text(text, _static(), SETUP, CorrectOptions())[0])
+    allows = bulk.state_allows
+    paths, reports = [], []
+    for use in (True, False):
+        monkeypatch.setattr(bulk, "state_allows", allows if use else (lambda *a, **k: False))
+        paths.append(program_path(text, SETUP, max_step_mm=0.2))
+        reports.append(compare_programs(str(orig), str(corr), SETUP).to_dict())
+    assert np.array_equal(paths[0].points_mm, paths[1].points_mm)
+    assert np.array_equal(paths[0].lineno, paths[1].lineno)
+    assert reports[0] == reports[1]
+    assert reports[0]["moves_moved"] > 50
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="needs ../shared/corpus")
+@pytest.mark.parametrize("name", [
+    "freecad_sergey/MyCNCTable________________Y_2(_).tap",  # modal R arcs
+    "fusion_ledfloor/cad__nc__1108_wall_better_m4_m6_holes.nc",  # modal I/J arcs, helical
+    "camotics/examples__botomata_bottom__botomata_bottom.nc",
+])
+def test_real_programs_with_modal_arcs_agree(name):
+    lines = (REAL / name).read_text(errors="surrogateescape").splitlines(True)[:1500]
+    a, b = _both("".join(lines), setup=INSIDE, extrapolate="linear")
+    assert a == b
+
+
+def test_a_modal_arc_after_one_written_as_lines_gets_its_motion_word(monkeypatch):
+    # Pretend the general emitter writes every R arc as straight lines (the controller is
+    # then in G1), in both lanes alike: the modal I/J arc after one, which the bulk lane
+    # keeps in its run, must get its G2/G3 back, as the general path gives it.
+    from postproc.gcode.emitter import EmitterMixin
+
+    for name in ("_emit_move", "_emit_hinted_arc"):
+        orig = getattr(EmitterMixin, name)
+
+        def as_lines(self, line, mv, *args, _orig=orig):
+            _orig(self, line, mv, *args)
+            if mv.arc is not None and mv.arc.r_idx >= 0:
+                self.emitted_motion = LINE
+
+        monkeypatch.setattr(EmitterMixin, name, as_lines)
+    # quarter circles about (15, 10), which one exact arc follows: the I/J arcs stay in runs
+    text = ("G21 G90 G17\nG0 X10 Y10 Z5\nG1 X10 F200\nG2 X15 Y15 R5\nX20 Y10 I0 J-5\nX15 Y5 I-5 J0\n"
+            "X10 Y10 R5\n(note)\nX15 Y15 I5 J0\nG3 X10 Y10 R5\nX15 Y5 I5 J0\nG1 X25\nM2\n")
+    a, b = _both(text)
+    assert a == b
+    lines = emit.split_header(a)[1].splitlines()
+    # each I/J arc right after an R arc names its motion again; the one after another does not
+    assert [ln.split(" ")[0][:2] for ln in lines if " I" in ln] == ["G2", "X1", "G2", "G3"]
