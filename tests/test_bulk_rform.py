@@ -112,7 +112,8 @@ def test_r_arc_in_inch_and_a_modal_r_arc_line(planned_tables):
     tab = planned_tables[-1]
     assert tab.kind.tolist()[-3:] == [Kind.ARC_CW, Kind.ARC_CW, Kind.FEED]
     (run,) = tab.runs
-    assert len(run) == 4 and sorted(run.arcs) == [1, 2]  # from G1 X1.1 to G1 X2
+    assert len(run) == 4  # from G1 X1.1 to G1 X2
+    assert sorted(run.arcs) == [1, 2]
 
 
 @pytest.mark.parametrize("line", ["G1 X1 Y2 R3\n", "G2 X1 Y1 I1 R1\n", "G2 X1 Y1 R1 I1\n",
