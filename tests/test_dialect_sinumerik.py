@@ -248,6 +248,10 @@ def test_chosen_by_its_header(tmp_path):
     plain = tmp_path / "p.nc"
     plain.write_text("%\nO1000\nG0 X0\n")
     assert dialect_of_file(str(plain), "generic") == "generic"
+    # a form feed is a blank inside a line, not a line end: the $PATH line is still the second
+    paged = tmp_path / "paged.mpf"
+    paged.write_bytes(b"; PART 12\f\f\n;$PATH=/_N_WKS_DIR/_N_PART_WPD\nG0 X0\n")
+    assert dialect_of_file(str(paged), "generic") == "sinumerik"
     out = tmp_path / "out.mpf"
     res = CliRunner().invoke(main, ["correct", str(DATA / "bracket_contour.mpf"), "-c", CAL, "-o", str(out),
                                     "--offset", "G54=X100,Y100,Z100", "--tool-length", "1=100"])

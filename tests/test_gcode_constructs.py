@@ -301,3 +301,14 @@ def test_blank_lines_before_the_tape_mark_stay_before_it_and_the_header_follows_
     lines = out.splitlines()
     assert lines[:3] == ["", "%", "O78240"]
     assert lines[3].startswith("(POSTPROC ")
+
+
+def test_the_header_after_a_program_number_with_a_form_feed_is_found():
+    # a form feed is a blank inside the program number's comment, not a line end: the
+    # header still follows that line
+    text = "O1000 (PART\fA)\nG21 G90\nG0 X1 Y2 Z3\nM30\n"
+    out, _ = correct_text(text, scale_engine(), ZERO, CorrectOptions(), path="p.nc")
+    header, rest = emit.split_header(out)
+    assert header
+    assert all(line.startswith("(POSTPROC ") for line in header)
+    assert rest.startswith("O1000 (PART\fA)\nG21 G90\n")

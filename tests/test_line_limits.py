@@ -77,3 +77,21 @@ def test_linuxcnc_reads_the_rewritten_line():
     out, _rep = correct_text(prog, engine(), Setup(), CorrectOptions(dialect="linuxcnc"))
     res = run_rs274(out)
     assert res.ok, res.error
+
+
+@pytest.mark.parametrize("name", ["grbl", "fanuc", "linuxcnc"])
+def test_a_form_feed_inside_a_line_is_no_line_end_to_the_limits(name):
+    # A form feed is a blank of a G-code line: the line is measured and fitted whole (its
+    # comment moved before it), not as the two pieces str.splitlines makes of it, each of
+    # which would pass the limit while the line the controller reads does not.
+    d = dialects.get(name)
+    head = "G1 X150 Y100\fF500 "
+    fill = "C" * (d.max_line_chars - len(head) - 4)  # the line: 2 characters short of it
+    comment = f"({fill})" if d.paren_comments else f";{fill}C"
+    prog = f"G21 G90 G17\nG0 X50\fY100 Z10\n{head}{comment}\nM2\n"
+    out, rep = correct_text(prog, engine(), Setup(), CorrectOptions(dialect=name))
+    body = emit.split_header(out)[1].split("\n")
+    assert body[2] == comment
+    assert body[3] == "G1 X149.9970 Y99.9980 Z9.9848\fF500"
+    assert max(len(line) for line in body) <= d.max_line_chars
+    assert rep.lines_inserted == 1

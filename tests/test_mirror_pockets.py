@@ -111,3 +111,44 @@ def test_out_of_map_names_the_template_line(tmp_path):
         "--allowance", "0.3", "--clamp", "-o", str(tmp_path / "out")])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "out" / "P01_finish.nc").is_file()
+
+
+def _finish_job(tmp_path, template_text: str) -> list[str]:
+    """The files of a plan whose next job is pocket P01's finish pass, from the template
+    ``template_text``; the arguments of ``mirror pockets`` for it."""
+    shell = Shell()
+    (tmp_path / "pocket.nc").write_bytes(template_text.encode())
+    (tmp_path / "cal.json").write_text(shell_calibration_text())
+    b, z = shell.local_grid()
+    (tmp_path / "s.csv").write_text(thickness_csv(shell.machine(0, b, z, -0.3), "semi"))
+    (tmp_path / "plan.csv").write_text(plan_csv(shell, [("s.csv", "")]))
+    return ["mirror", "pockets", str(tmp_path / "plan.csv"), "-c", str(tmp_path / "cal.json"),
+            "--program", str(tmp_path / "pocket.nc"), "--t-ref", "2.0", "--band", "1.98,2.02",
+            "--allowance", "0.3", "-o", str(tmp_path / "out")]
+
+
+def test_a_sinumerik_template_is_checked_and_corrected_as_sinumerik(tmp_path):
+    # generic chooses Sinumerik by the program's header, for the check of the template
+    # against the maps as for its correction: read as generic, the header is refused
+    lines = pocket_program(Shell(), Y_BOTTOM).splitlines()
+    assert lines[0] == "%"
+    assert lines[-1] == "%"
+    body = [";" + ln[1:-1] if ln.startswith("(") else ln for ln in lines[1:-1]]
+    text = "\n".join(["%_N_POCKET_MPF", ";$PATH=/_N_WKS_DIR/_N_POCKET_WPD", *body]) + "\n"
+    res = CliRunner().invoke(main, _finish_job(tmp_path, text))
+    assert res.exit_code == 0, res.output
+    out = (tmp_path / "out" / "P01_finish.nc").read_text().splitlines()
+    assert out[0] == "%_N_POCKET_MPF"
+    assert any(ln.startswith(";POSTPROC ") for ln in out[:6])
+
+
+def test_the_check_of_the_template_is_bounded_as_its_correction(tmp_path):
+    # a loop whose later passes leave the maps: with --max-iterations 100 the check stops
+    # at that bound, as the correction would, instead of running every pass
+    prog = pocket_program(Shell(), Y_BOTTOM).replace(
+        "M30\n", "#1 = 3.75\no1 repeat [400]\n#1 = [#1 + 0.25]\nG1 B#1\no1 endrepeat\nM30\n", 1)
+    res = CliRunner().invoke(main, [*_finish_job(tmp_path, prog), "--max-iterations", "100"])
+    assert res.exit_code != 0
+    assert "--max-iterations" in res.output
+    assert "outside the correction map" not in res.output
+    assert not (tmp_path / "out").exists()

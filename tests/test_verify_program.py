@@ -222,3 +222,21 @@ def test_actual_path_samples_match_program_path_but_follow_arcs_closely():
     sag = 8.0 - np.hypot(mid[:, 0] - 172.0, mid[:, 1] - 118.0)
     assert sag.max() <= CHORD_MM
     assert sag.max() > CHORD_MM / 4  # no more points than the tolerance needs
+
+
+def test_worst_lines_show_their_own_text_after_a_form_feed(tmp_path):
+    # A form feed is a blank inside a G-code line (in a comment or between words), not a
+    # line end: the text shown for each worst line is that line of the file.
+    text = POCKET.read_text()
+    text = text.replace("(pocket.nc: rectangular", "(pocket.nc:\frectangular", 1)
+    text = text.replace("N10 G21 G90", "N10 G21\fG90", 1)
+    assert text.count("\f") == 2
+    prog = tmp_path / "ff.nc"
+    prog.write_bytes(text.encode())
+    lines = text.split("\n")
+    rep = verify_program(prog, offset_machine([0, 0, 0.010]), [], corrected=prog)
+    worst = rep.to_dict()["runs"][0]["worst_lines"]
+    assert worst
+    for w in worst:
+        assert w["text"] == lines[w["line"] - 1].strip()
+        assert w["text"].startswith("N")  # a move's line, never a comment

@@ -243,18 +243,25 @@ def _correct_program(template, calibration, setup, corr, target: Path, reading, 
     from postproc.gcode.path import program_path
     from postproc.gcode.pipeline import CorrectOptions, correct_file
     from postproc.gcode.places import file_of
+    from postproc.gcode.recognise import dialect_of_file
 
     cal = load_calibration(calibration)
+    # How the template is read, once for the check and the correction both: the dialect
+    # (generic: Sinumerik by its header, as correct, diff and verify choose it), the
+    # subprogram folders and the bounds on the work, so that the check cannot read the
+    # template otherwise than the correction does, nor run unbounded where it is bounded.
+    given = {**reading.correct_options(), "dialect": dialect_of_file(str(template), reading.dialect)}
     # Evaluate the maps on the program's points first, so that a point outside a map
     # is refused naming its line in the template.
     # A point of a subprogram's file (the template read expanded) is named in that file.
-    pp = program_path(template, setup, dialect=reading.dialect, subroutine_path=reading.subroutine_path)
+    pp = program_path(template, setup, dialect=given["dialect"], subroutine_path=given["subroutine_path"],
+                      limits=given["limits"])
     try:
         corr.delta(pp.points_mm, {**pp.context, "lineno": pp.lineno})
     except PostprocError as exc:
         at = exc.point_index
         raise exc.at(path=str(template) if at is None else file_of(pp.files, at, str(template))) from None
-    options = CorrectOptions(added=[corr], **correcting, **reading.correct_options())
+    options = CorrectOptions(added=[corr], **correcting, **given)
     report = correct_file(template, target, cal.engine, setup, options, calibration_name=cal.name,
                           calibration_sha256=cal.sha256)
     return (f"{report.moves} moves, {report.words_changed} words changed, "

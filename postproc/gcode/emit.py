@@ -355,7 +355,9 @@ def header_run(it: Iterator[str]) -> tuple[list[str], list[str], str | None]:
 def split_header(text: str) -> tuple[list[str], str]:
     """``(header lines, the rest)`` of a corrected program's text (:func:`header_run`;
     the lines kept before the header stay in the rest)."""
-    it = iter(text.splitlines(keepends=True))
+    from postproc.gcode.lexer import split_lines
+
+    it = iter(split_lines(text))  # as the reader numbers them: a form feed is a blank inside a line
     kept, header, after = header_run(it)
     return header, "".join(kept + ([] if after is None else [after]) + list(it))
 

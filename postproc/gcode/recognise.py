@@ -82,6 +82,7 @@ def dialect_of_file(path: str, chosen: str) -> str:
     """The dialect to read ``path`` in: ``chosen``, or, for ``generic``, the dialect whose
     header lines (:attr:`Dialect.chosen_by`, e.g. Sinumerik's ``%_N_..._MPF``) open it."""
     from postproc.gcode.dialect import DIALECTS, get
+    from postproc.gcode.lexer import split_lines
 
     if not get(chosen).yields_to_headers:
         return chosen
@@ -90,7 +91,8 @@ def dialect_of_file(path: str, chosen: str) -> str:
             head = fh.read(HEAD_BYTES).decode("utf-8", errors="replace")
     except OSError:
         return chosen  # the reader names the problem
-    lines = head.lstrip("\ufeff").splitlines()[:3]
+    # its opening lines as the reader numbers them (a form feed is a blank inside a line)
+    lines = split_lines(head.lstrip("\ufeff"))[:3]
     for d in DIALECTS.values():
         if d.chosen_by and any(_compiled(p).match(line) for p in d.chosen_by for line in lines):
             return d.name

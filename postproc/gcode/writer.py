@@ -21,7 +21,7 @@ from typing import TypeAlias, final
 from postproc.errors import SafetyError
 from postproc.gcode import bulk, cutter, emit
 from postproc.gcode.emitter import EmitterMixin, PlanNeeded, Subdivided, _unit_decimals, round_err
-from postproc.gcode.lexer import Word
+from postproc.gcode.lexer import Word, split_lines
 from postproc.gcode.moves import Cycle, Move, Role
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.table import Table
@@ -285,7 +285,9 @@ class ChunkWriter(EmitterMixin):
             if kind == 0 or not self._long_line.search(text):
                 pieces.append(text)
                 continue
-            for n, line in enumerate(text.splitlines(keepends=True)):
+            # the lines as the reader numbers them: a form feed or vertical tab is a blank
+            # inside a line, where str.splitlines would end the line there
+            for n, line in enumerate(split_lines(text)):
                 if run is not None and run.inert_at(at + n):  # a run's line that moves nothing: as it is
                     pieces.append(line)
                     continue

@@ -14,6 +14,7 @@ from postproc.simulate.verify import (
     evaluate_run,
     nominal_path,
     nominal_polyline,
+    program_lines,
 )
 
 
@@ -78,7 +79,7 @@ def verify_program(program, machine: Machine, calibrations: list, setup_args: di
         raise PostprocError("the program has no moves to verify", path=program)
     poly = nominal_polyline(nominal)
     text = Path(program).read_text(encoding="utf-8", errors="surrogateescape")
-    report = VerifyReport(source_lines=text.splitlines())
+    report = VerifyReport(source_lines=program_lines(program))
     original = program_path(program, setup, max_step_mm=max_step_mm, **reading)
 
     def run(label: str, source):

@@ -264,6 +264,21 @@ def _files_of(parts) -> PathArray | None:
                            for files, rows, n in parts])
 
 
+def program_lines(path: str) -> list[str]:
+    """The text of the lines of the program file at ``path`` (index 0 = line 1), without
+    their endings or a byte order mark, numbered as the reader numbers them: a line ends
+    only at LF, CRLF or a lone CR (``str.splitlines`` also splits at a form feed, which is
+    a blank inside a G-code line, and so would shift every line after it)."""
+    from postproc.fileio import read_lines
+    from postproc.gcode.source import open_source
+
+    with open_source(path) as fh:
+        lines = [ln.rstrip("\r\n") for ln in read_lines(fh, path)]
+    if lines and lines[0].startswith("\ufeff"):
+        lines[0] = lines[0][1:]
+    return lines
+
+
 @dataclass
 class VerifyReport:
     runs: list[Run] = field(default_factory=list)
@@ -285,17 +300,11 @@ class VerifyReport:
     def _lines_of(self, file: str) -> list[str]:
         if file not in self.file_lines:
             from postproc.errors import PostprocError
-            from postproc.fileio import read_lines
-            from postproc.gcode.source import open_source
 
             try:
-                with open_source(file) as fh:  # its lines as the reader numbers them
-                    lines = [ln.rstrip("\r\n") for ln in read_lines(fh, file)]
+                self.file_lines[file] = program_lines(file)
             except (PostprocError, OSError):
-                lines = []
-            if lines and lines[0].startswith("\ufeff"):
-                lines[0] = lines[0][1:]
-            self.file_lines[file] = lines
+                self.file_lines[file] = []
         return self.file_lines[file]
 
     def to_dict(self) -> dict:
