@@ -164,12 +164,16 @@ def plain_line(draw):
         words.append(f"N{draw(st.integers(0, 99999))}")
     if draw(st.integers(0, 2)):
         words.append("G" + draw(st.sampled_from(["0", "1", "00", "01", "1", "1"])))
+    feed = f"F{draw(st.sampled_from(['500', '1200.5', '80']))}" if draw(st.integers(0, 4)) == 0 else ""
+    if feed and draw(st.booleans()):  # the feed before the axis words (G1 F500 X..)
+        words.append(feed)
+        feed = ""
     axes = draw(st.lists(st.sampled_from("XYZ"), min_size=1, max_size=3, unique=True))
     for a in "XYZ":
         if a in axes:
             words.append(a + draw(st.sampled_from(["", "", " "])) + number(draw))
-    if draw(st.integers(0, 4)) == 0:
-        words.append(f"F{draw(st.sampled_from(['500', '1200.5', '80']))}")
+    if feed:
+        words.append(feed)
     if draw(st.integers(0, 9)) == 0 and len(words) > 1:  # a non-canonical order
         words[-1], words[-2] = words[-2], words[-1]
     line = draw(st.sampled_from(["", " ", "\t"])) + sp.join(words) + draw(st.sampled_from(["", "", " "]))
@@ -182,7 +186,8 @@ def other_line(draw):
         "G2 X{a} Y{b} I5 J0", "G3 X{a} Y{b} R40", "(comment X1 Y2)", "", "G91", "G90", "G20", "G21",
         "G1 X{a} (tail comment)", "G0 Z{b} ; note", "G54", "G43 H1", "G0 G43 H1 Z{b}", "G1 G43 H0 X{a} Y{b}", "G49", "M3 S1000", "/G1 X{a}",
         "G92 X{a}", "G92.1", "G17", "G18 G2 X{a} Z{b} I3 K3", "G1 F300", "N5", "%", "M30",
-        "S1200 M3", "M9", "N20 (note)", "  ", "(MSG, hello)", "M8 (coolant)",
+        "S1200 M3", "M9", "N20 (note)", "  ", "(MSG, hello)", "M8 (coolant)", "F250", "N30 F1200.5", " f80 ",
+        "A5 F300", "G43 H1 F300", "F300 G1 X{a}", "G1 F300 X{a} F200", "F-5",
     ])).format(a=draw(st.integers(-150, 150)), b=draw(st.integers(-150, 150)))
 
 

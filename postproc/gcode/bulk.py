@@ -22,7 +22,7 @@ A run holds three kinds of lines:
   line with no motion word is an arc or a straight move by the modal motion, and a run
   ends before one whose words do not fit it (:meth:`Block.motion_end`);
 - lines that move nothing (blank, comments, S words, M0 M1 M3-M5 M7-M9: :data:`_NEUTRAL`;
-  a tool change alone: :data:`_TOOL`):
+  a tool change alone: :data:`_TOOL`; a feed alone, which sets the modal feed):
   written whole, no move, no word added; a run never starts with one.
 
 Rotary words (A, B, C after Z) pass through as written, in the piece after Z; each
@@ -94,6 +94,8 @@ _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
 # only the tool the interpreter holds (group 1 or 2: the T number), which the run sets
 # when it is read (:func:`read_run`).
 _TOOL = re.compile(lexer.TOOL_LINE_RE + r"\r?\n?")
+# A plain line's head that holds at most its N word (a feed alone is then inert)
+_N_HEAD = re.compile(r"[ \t]*(?:[Nn][ \t]*\d+[ \t]*)?").fullmatch
 # The G43 H.. of a line's head (a straight move that sets the tool length first).
 _TLO = re.compile(lexer.TOOL_LENGTH_RE + r"(\d++)")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
@@ -374,17 +376,20 @@ class Block:
         """The lines among ``candidates`` (no word of a move) that move nothing (blank,
         comments, S and some M words, a tool change alone: :attr:`tools`), written whole
         from their last piece."""
-        lines, head, rest = self.lines, self.cols[_HEAD], self.cols[_REST]
+        lines, head, rest, feed = self.lines, self.cols[_HEAD], self.cols[_REST], self.cols[_F]
         neutral = np.zeros(len(lines), dtype=bool)
         match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
         self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
+        rotary = self.rotary or ()
         for i in candidates:
             line = lines[i]
             if not match(line):
                 m = tool(line)
-                if m is None:
+                if m is not None:
+                    self.tools[i] = int(m.group(1) or m.group(2))
+                # a feed alone (``F300``, ``N20 F300``): the modal feed (Block.last_f), no move
+                elif not (feed[i] and _N_HEAD(head[i]) and not any(has[i] for _r, has, _v in rotary)):
                     continue
-                self.tools[i] = int(m.group(1) or m.group(2))
             neutral[i] = True
             head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
         return neutral

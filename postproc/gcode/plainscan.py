@@ -2,12 +2,13 @@
 
 A plain move is a line of words (:attr:`postproc.gcode.scanner.Columns.plain`) in the
 order ``[N..] [G0|G1|G2|G3] [G43 H<digits>] [X..] [Y..] [Z..] [A..] [B..] [C..] [I..]
-[J..] [R..] [F..]`` (any case, G00 to G03 too), or with X and Y after the last axis word
+[J..] [R..] [F..]`` (any case, G00 to G03 too; the F word also before the axis words,
+in the head), or with X and Y after the last axis word
 (before the rotary words) where they are not before it: a line ``correct`` added them
 to (:attr:`Pieces.late`: its X and Y numbers are given, their text stays in the next
 piece; the bulk writer never rejoins such a line, the general emitter writes it).
 :func:`pieces` gives, per line, 14 texts that join back to the line without its
-``\\n``: the head (blanks, N, G and G43 H words), the G number, for X, Y, Z, I and J the
+``\\n``: the head (blanks, N, G and G43 H words, an F word before the axes), the G number, for X, Y, Z, I and J the
 text from the piece before up to the number and the number (the rotary words are in the
 piece before I), then the rest (R and F words, trailing blanks, ``\\r``) and the F
 number; and for X, Y, Z, I, J, R, A, B and C whether the line names it, its value (the
@@ -131,6 +132,11 @@ def pieces(text: str, cols: Columns) -> Pieces:
                 and text[start[w + 1]:end[w + 1]].isdigit()):
             head = end[w + 1]
             w += 2
+        f_first = w + 1 < we and letter[w] == "F" and letter[w + 1] in "XYZ"
+        if f_first:  # a feed before the axis words (G1 F300 X..): its text stays in the head
+            out[_F][li] = text[start[w]:end[w]]
+            head = end[w]
+            w += 1
         out[_HEAD][li] = text[s:head]
         prev = head
         for k in range(5):
@@ -149,7 +155,7 @@ def pieces(text: str, cols: Columns) -> Pieces:
         if w < we and letter[w] == "R":  # its text stays in the rest
             _name(text, cols, res, _R, li, w)
             w += 1
-        if w < we and letter[w] == "F":
+        if w < we and letter[w] == "F" and not f_first:
             out[_F][li] = text[start[w]:end[w]]
             w += 1
         out[_REST][li] = text[prev:e]
