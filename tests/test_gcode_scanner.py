@@ -5,6 +5,7 @@ import math
 import random
 import struct
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -108,3 +109,22 @@ def test_fmt_all_is_fmt(values, d, mixed):
     decimals += [d, d, d]
     assert numfmt.fmt_all(values, decimals, "X") == ["X" + numfmt.fmt(v, k) for v, k in zip(values, decimals, strict=True)]
     assert all(not t.startswith("X-") or t.strip("X-0.") for t in numfmt.fmt_all(values, decimals, "X"))
+
+
+@pytest.mark.parametrize(("text", "longest"), [
+    ("G1 X1.5 Y-22.25\n", 2), ("X123456789.123456\n", 9), ("X-0000000001\n", 10), ("Y+.1234567890123\n", 0),
+    ("(X12345678901)\nX1\n", 1), ("G1 X1e9\n", 1), ("N12 X" + "9" * 400 + "\n", 400), ("", 0),
+])
+def test_the_longest_integer_part_of_the_words(text, longest):
+    # the bulk lane leaves a chunk with a number of ten or more digits before its point to
+    # the interpreter, which refuses a value beyond its bound at its place
+    assert scanner.scan(text).longest == longest
+
+
+def test_a_chunk_with_a_long_number_in_a_word_is_the_interpreters():
+    from postproc.gcode import bulk
+
+    assert bulk.scan(["G0 X1 Y1 Z1\n", "G1 X1234567890\n"]) is None
+    assert bulk.scan(["G0 X1 Y1 Z1\n", "G1 X-0123456789\n"]) is None
+    assert bulk.scan(["G0 X1 Y1 Z1\n", "G1 X123456789.0123456789\n"]) is not None
+    assert bulk.scan(["G0 X1 Y1 Z1\n", "(part 12345678901)\n", "G1 X2\n"]) is not None  # in a comment: no word

@@ -76,12 +76,9 @@ from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, KindA
 # rest (F word, trailing blanks, \r), 13 the F number; any other line has every piece empty.
 _HEAD, _G, _REST, _F = 0, 1, 12, 13
 _LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
-# A number of ten or more digits before its point (1e9 and beyond: a 400-digit one reads as inf).
-_LONG_NUMBER = re.compile(r"(?<![\d.])\d{10,}")
-# An ASCII text's digits all made 0: ten ASCII digits in a row are then ten 0s, and a
-# text without them holds no long number (the cheaper search, made first).
-_DIGITS_AS_ZERO = bytes.maketrans(b"123456789", b"000000000")
-_TEN_ZEROS = b"0" * 10
+# Digits before the point of a word's number from which the chunk is the interpreter's
+# (ten: 1e9, interp_core.MAX_WORD_VALUE, and beyond; a 400-digit one reads as inf)
+_LONG_DIGITS = 10
 _NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
 _CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
 # The G number of a plain line's G piece (plainscan: G0 to G3, G00 to G03, or none: -1)
@@ -429,12 +426,11 @@ def scan(lines: list[str]) -> Block | None:
     text = "".join(lines)
     if "\r" in text and text.count("\r") != text.count("\r\n"):
         return None
-    if ((not text.isascii() or _TEN_ZEROS in text.encode("ascii").translate(_DIGITS_AS_ZERO))
-            and _LONG_NUMBER.search(text)):
-        return None  # the interpreter refuses a value beyond interp.MAX_WORD_VALUE, at its place
     cols = scanner.scan(text)
     if len(cols) != len(lines):  # lines not split as the scanner splits them
         return None
+    if cols.longest >= _LONG_DIGITS:
+        return None  # the interpreter refuses a value beyond interp.MAX_WORD_VALUE, at its place
     return Block(lines, plainscan.pieces(text, cols))
 
 

@@ -48,8 +48,10 @@ class Columns:
     end: list[int]
     value: list[float]
     first_word: list[int]  # by line: its first word's index; one more entry: the word count
+    longest: int  # the most digits before the point of any word's number (leading zeros too)
 
     def __init__(self) -> None:
+        self.longest = 0
         self.line_start = []
         self.plain = []
         self.letter = []
@@ -87,6 +89,15 @@ def number_end(text: bytes, i: i64, n: i64) -> i64:
             i += 1
         return i
     return -1
+
+
+def int_digits(text: bytes, i: i64, e: i64) -> i64:
+    """The digits before the point of the number ``text[i:e]`` (leading zeros too)."""
+    k: i64 = i + 1 if text[i] == 43 or text[i] == 45 else i  # + -
+    d: i64 = k
+    while d < e and text[d] != 46:
+        d += 1
+    return d - k
 
 
 # Exact powers of ten as floats (10**22 is the largest a double holds exactly).
@@ -137,9 +148,11 @@ def scan_into(text: bytes, cols: Columns) -> None:
     line_start.append(0)
     first_word.append(len(letter_col))
     plain = True
+    longest: i64 = 0
     c: i64
     j: i64
     e: i64
+    k: i64
     while i < n:
         c = text[i]
         if c == 32 or c == 9:  # blank
@@ -166,6 +179,9 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 start_col.append(j)
                 end_col.append(e)
                 value_col.append(number_value(text, j, e))
+                k = int_digits(text, j, e)
+                if k > longest:
+                    longest = k
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
@@ -193,6 +209,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
         plain_col.append(plain)  # a last line without its ending
     line_start.append(n)
     first_word.append(len(letter_col))
+    cols.longest = longest
 
 
 def chars(text: str) -> bytes:
