@@ -152,7 +152,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
     c: i64
     j: i64
     e: i64
-    k: i64
     while i < n:
         c = text[i]
         if c == 32 or c == 9:  # blank
@@ -179,9 +178,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 start_col.append(j)
                 end_col.append(e)
                 value_col.append(number_value(text, j, e))
-                k = int_digits(text, j, e)
-                if k > longest:
-                    longest = k
+                longest = max(longest, int_digits(text, j, e))
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
