@@ -13,6 +13,9 @@ input lines per second and the child's peak RSS (the largest of the runs):
   (r) LinuxCNC's ``rs274 -g`` on the same program (interpreting only, no correction): the
       rate of "as fast as a controller reads", when rs274 is installed;
   (u) (c) uncompiled: a copy of the tree without the compiled core's *.so files;
+  (v) with ``--release TREE`` (a checkout of the last release, e.g. ``git worktree add
+      /tmp/release 5b3c58d``): (c) with that tree's package, the baseline of the
+      uncompiled target (at least 2/3 of the release's rate on the same run);
   (f) ``postproc --help``;
   (g) a 20-line program corrected with the parametric calibration, end to end;
   (m) ``postproc correct`` static on a --memory-lines program: peak RSS (once);
@@ -37,6 +40,7 @@ that has a target is printed beside it with PASS or FAIL.
 
 Usage: python benchmarks/throughput.py [--lines N] [--memory-lines N] [--repeats R]
                                        [--seed S] [--json OUT] [--cases static,static1,parametric,diff]
+                                       [--release TREE]
 """
 
 from __future__ import annotations
@@ -185,6 +189,10 @@ def case_line(key: str, label: str, r: dict, rates: dict) -> str:
         line += f"\n{'':38s} (c) is {rates['static'] / rate:.2f} x rs274's rate (target: at least 1)"
     if key == "pure" and "static" in rates:
         line += f"\n{'':38s} (c) uncompiled is {rate / rates['static']:.2f} x (c) compiled"
+    if key == "release" and "pure" in rates:
+        ratio = rates["pure"] / rate
+        line += (f"\n{'':38s} (u) is {ratio:.2f} x the release's rate (target: at least 0.67): "
+                 + ("PASS" if ratio >= 2 / 3 else "FAIL"))
     return line
 
 
@@ -202,9 +210,13 @@ def main() -> None:
                          "and parametric1: in one process, -j 1; pure: static uncompiled; (a) and (b) "
                          "always run; diff needs static's output, made untimed when static is left out) "
                          "[static,static1,parametric,diff,rs274,pure]")
+    ap.add_argument("--release", default=None, metavar="TREE",
+                    help="a checkout of the last release: (v) times its static correction, after (u)")
     args = ap.parse_args()
     chosen = {c.strip() for c in args.cases.split(",") if c.strip()}
-    known = {"static", "static1", "parametric", "parametric1", "diff", "rs274", "pure"}
+    if args.release:
+        chosen.add("release")
+    known = {"static", "static1", "parametric", "parametric1", "diff", "rs274", "pure", "release"}
     if not chosen <= known:
         sys.exit("--cases takes " + ", ".join(sorted(known)))
     if not GENCAM.is_file():
@@ -246,6 +258,12 @@ def main() -> None:
                     "sys.argv[0] = 'postproc'; main()"]
         if "pure" in chosen:  # untimed: compiles the uncompiled tree's byte code
             run_child([*pure_cmd, "correct", str(small), "-c", str(STATIC), "-o", str(tmp / "warm.nc"), *SETUP], log)
+        release = str(Path(args.release or ".").resolve())
+        release_cmd = [py, "-c", f"import sys; sys.path.insert(0, {release!r}); from postproc.cli import main; "
+                       "sys.argv[0] = 'postproc'; main()"]
+        if args.release:  # untimed: compiles the release's byte code
+            run_child([*release_cmd, "correct", str(small), "-c", str(STATIC), "-o", str(tmp / "warm.nc"), *SETUP],
+                      log)
         tools = tmp / "tools.tbl"
         tools.write_text("".join(f"T{t} P{t} Z0 D6\n" for t in range(1, 21)))
         rs274 = shutil.which("rs274")
@@ -266,6 +284,8 @@ def main() -> None:
              [rs274 or "rs274", "-t", str(tools), "-g", str(src), str(tmp / "rs274.txt")]),
             ("pure", "(u) correct, s500_static, uncompiled", [*pure_cmd, "correct", str(src), "-c", str(STATIC),
                                                              "-o", str(tmp / "pure.nc"), *SETUP]),
+            ("release", "(v) correct, s500_static, release", [*release_cmd, "correct", str(src), "-c", str(STATIC),
+                                                             "-o", str(tmp / "release.nc"), *SETUP]),
         ]
         rates = {}
         for key, label, cmd in cases:

@@ -91,24 +91,16 @@ def number_end(text: bytes, i: i64, n: i64) -> i64:
     return -1
 
 
-def int_digits(text: bytes, i: i64, e: i64) -> i64:
-    """The digits before the point of the number ``text[i:e]`` (leading zeros too)."""
-    k: i64 = i + 1 if text[i] == 43 or text[i] == 45 else i  # + -
-    d: i64 = k
-    while d < e and text[d] != 46:
-        d += 1
-    return d - k
-
-
 # Exact powers of ten as floats (10**22 is the largest a double holds exactly).
 _POW10: Final = [10.0**k for k in range(23)]
 
 
-def number_value(text: bytes, i: i64, e: i64) -> float:
+def number_value(text: bytes, i: i64, e: i64, cols: Columns | None = None) -> float:
     """The value of the number ``text[i:e]`` (the grammar's), correctly rounded: with at
     most 15 digits its digits are an exact double and so is the power of ten it is divided
     by, and one IEEE division rounds the quotient correctly; longer numbers go through
-    ``float`` of the text (correctly rounded too)."""
+    ``float`` of the text (correctly rounded too). ``cols``: its :attr:`Columns.longest`
+    takes the number's digits before the point where they are more."""
     neg = False
     k: i64 = i
     c: i64 = text[k]
@@ -128,6 +120,8 @@ def number_value(text: bytes, i: i64, e: i64) -> float:
             if frac >= 0:
                 frac += 1
         k += 1
+    if cols is not None and digits - max(frac, 0) > cols.longest:
+        cols.longest = digits - max(frac, 0)
     if digits > 15:
         return float(text[i:e])
     v = float(m) / _POW10[frac] if frac > 0 else float(m)
@@ -148,7 +142,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
     line_start.append(0)
     first_word.append(len(letter_col))
     plain = True
-    longest: i64 = 0
     c: i64
     j: i64
     e: i64
@@ -177,8 +170,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
                 start_col.append(j)
                 end_col.append(e)
-                value_col.append(number_value(text, j, e))
-                longest = max(longest, int_digits(text, j, e))
+                value_col.append(number_value(text, j, e, cols))
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
@@ -206,7 +198,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
         plain_col.append(plain)  # a last line without its ending
     line_start.append(n)
     first_word.append(len(letter_col))
-    cols.longest = longest
 
 
 def chars(text: str) -> bytes:
