@@ -70,17 +70,11 @@ class Pieces:
             self.frac[k][i] = 0
 
 
-def _frac(text: str, i: int, j: int) -> int:
-    """Digits after the point of the number ``text[i:j]``."""
-    k = text.find(".", i, j)
-    return j - k - 1 if k >= 0 else 0
-
-
 def _name(text: str, cols: Columns, res: Pieces, k: int, li: int, w: int) -> None:
     """Line ``li`` names word ``k`` of :attr:`Pieces.has`: the scanner's word ``w``."""
     res.has[k][li] = True
     res.value[k][li] = cols.value[w]
-    res.frac[k][li] = _frac(text, cols.start[w], cols.end[w])
+    res.frac[k][li] = cols.frac[w]
 
 
 def _after_z(text: str, cols: Columns, res: Pieces, li: int, w: int, we: int) -> int:
@@ -105,7 +99,7 @@ def _after_z(text: str, cols: Columns, res: Pieces, li: int, w: int, we: int) ->
 def pieces(text: str, cols: Columns) -> Pieces:
     """The pieces of the chunk ``text`` scanned into ``cols``; see the module docstring."""
     line_start, plain, first_word = cols.line_start, cols.plain, cols.first_word
-    letter, start, end, val = cols.letter, cols.start, cols.end, cols.value
+    letter, start, end, val, wfrac = cols.letter, cols.start, cols.end, cols.value, cols.frac
     res = Pieces(len(plain))
     out = res.text
     has, value, frac = res.has, res.value, res.frac
@@ -149,7 +143,7 @@ def pieces(text: str, cols: Columns) -> Pieces:
                 out[3 + 2 * k][li] = text[a:b]
                 has[k][li] = True
                 value[k][li] = val[w]
-                frac[k][li] = _frac(text, a, b)
+                frac[k][li] = wfrac[w]
                 prev = b
                 w += 1
         if w < we and letter[w] == "R":  # its text stays in the rest

@@ -48,9 +48,11 @@ class Columns:
     end: list[int]
     value: list[float]
     first_word: list[int]  # by line: its first word's index; one more entry: the word count
+    frac: list[int]  # by word: the digits after the number's point (0: none)
     longest: int  # the most digits before the point of any word's number (leading zeros too)
 
     def __init__(self) -> None:
+        self.frac = []
         self.longest = 0
         self.line_start = []
         self.plain = []
@@ -99,8 +101,9 @@ def number_value(text: bytes, i: i64, e: i64, cols: Columns | None = None) -> fl
     """The value of the number ``text[i:e]`` (the grammar's), correctly rounded: with at
     most 15 digits its digits are an exact double and so is the power of ten it is divided
     by, and one IEEE division rounds the quotient correctly; longer numbers go through
-    ``float`` of the text (correctly rounded too). ``cols``: its :attr:`Columns.longest`
-    takes the number's digits before the point where they are more."""
+    ``float`` of the text (correctly rounded too). ``cols``: the number is a word's of
+    those columns: its digits after the point go to :attr:`Columns.frac`, and
+    :attr:`Columns.longest` takes its digits before the point where they are more."""
     neg = False
     k: i64 = i
     c: i64 = text[k]
@@ -120,8 +123,11 @@ def number_value(text: bytes, i: i64, e: i64, cols: Columns | None = None) -> fl
             if frac >= 0:
                 frac += 1
         k += 1
-    if cols is not None and digits - max(frac, 0) > cols.longest:
-        cols.longest = digits - max(frac, 0)
+    if cols is not None:
+        after: i64 = max(frac, 0)
+        cols.frac.append(after)
+        if digits - after > cols.longest:
+            cols.longest = digits - after
     if digits > 15:
         return float(text[i:e])
     v = float(m) / _POW10[frac] if frac > 0 else float(m)
