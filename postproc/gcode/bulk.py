@@ -729,9 +729,8 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         vm = v[miss]
         rows = idx[miss]
         em.unnamed.append(runwords.Unnamed(
-            rows.tolist(), tk[miss].tolist(), vm.tolist(),
-            numfmt.fmt_all(vm.tolist(), dec[miss].tolist(), "XYZ"[k]) if len(miss) else [],
-            block.last[k][rows].tolist(), nums, block.has_l[k], block.lines))
+            "XYZ"[k], rows.tolist(), tk[miss].tolist(), vm.tolist(), dec[miss].tolist(),
+            block.last[k][rows].tolist(), (nums, block.has_l[k], block.lines)))
     em.named_edits = named.tolist()
     em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
     em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
