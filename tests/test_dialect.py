@@ -426,3 +426,25 @@ def test_batch_all_corrected_exits_zero(tmp_path):
     r = invoke(["correct", folder, "-c", CAL, "--output-dir", tmp_path / "out"])
     assert r.exit_code == 0, r.output
     assert "3 files: 3 corrected, 0 refused" in r.output
+
+
+def test_the_end_radius_tolerance_at_radius_zero_is_the_least_for_every_rule():
+    # the bulk reader lets an arc whose end radius differs by no more than this pass
+    # without asking the rule: every rule must accept it, at any radius, in either unit
+    import random
+
+    from postproc.gcode import dialect
+
+    rng = random.Random(7)
+    for name in dialect.DIALECTS:
+        d = dialect.get(name)
+        for units in ("mm", "inch"):
+            sure = d.arc_end_radius_tolerance(0.0, units)
+            assert sure > 0.0
+            for _ in range(300):
+                r0 = 10 ** rng.uniform(-3, 4)
+                err = sure * rng.choice([1.0, rng.random(), 1 - 1e-12])
+                for r1 in (r0 + err, max(r0 - err, 0.0)):
+                    if abs(r0 - r1) <= sure:  # (as the reader tests it: r0 + err may round past it)
+                        assert d.arc_end_radius_ok(r0, r1, units), (name, units, r0, r1)
+            assert d.arc_end_radius_tolerance(1e4, units) >= sure

@@ -529,6 +529,9 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
     if interp.state.plane != 170:
         return arc_rows[lo], {}
     rule = interp._arc_rule()
+    # an end radius within the rule's tolerance at radius 0 (the least it has: every
+    # tolerance grows with the radius) passes without asking the rule
+    sure = rule.arc_end_radius_tolerance(0.0, unit)
     absolute = interp.state.arc_absolute
     (lx, ly, lz), (vx, vy, vz) = block.last_l[:3], block.ovl[:3]
     vi, vj, has_i, has_j = block.ovl[3], block.ovl[4], block.has_l[3], block.has_l[4]
@@ -564,7 +567,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
         else:
             c1, c2 = x0 + vi[y] * unit, y0 + vj[y] * unit
         rs, re_ = hyp(x0 - c1, y0 - c2), hyp(x1 - c1, y1 - c2)
-        if not (rs >= MIN_ARC_RADIUS_MM and rule.arc_end_radius_ok(rs, re_, unit)):
+        if not (rs >= MIN_ARC_RADIUS_MM and (abs(rs - re_) <= sure or rule.arc_end_radius_ok(rs, re_, unit))):
             return y, arcs
         arcs[y - a] = ((c1, c2, z0), clockwise)
     return b, arcs
