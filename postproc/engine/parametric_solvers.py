@@ -166,7 +166,11 @@ def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: floa
         # the same points as in the step before: their intervals, most likely, too
         value, loc = engine._forward_located(qa, ra, order, loc if everyone else None)
         f = value - pa
-        res = np.sqrt(np.add.reduce(f * f, axis=1))  # np.linalg.norm(f, axis=1), without its checks
+        # np.linalg.norm(f, axis=1) without its checks, and its sum of the three squares
+        # taken as (x2 + y2) + z2 by whole columns (a reduction along rows of three runs
+        # ten times slower; the same sums)
+        f2 = f * f
+        res = np.sqrt((f2[:, 0] + f2[:, 1]) + f2[:, 2])
         resid[active] = res
         keep = ~(res <= NEWTON_STOP_MM)
         if everyone and keep.all():
