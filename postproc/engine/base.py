@@ -149,7 +149,8 @@ class Engine(ABC):
         q = check_points(q)
         lo = self.volume_mm[0] - VOLUME_EDGE_SLACK_MM
         hi = self.volume_mm[1] + VOLUME_EDGE_SLACK_MM
-        return np.all((q >= lo) & (q <= hi), axis=1)
+        within = (q >= lo) & (q <= hi)
+        return within[:, 0] & within[:, 1] & within[:, 2]  # np.all(.., axis=1), by whole columns
 
     def correction(self, p, r=None, context: Context | None = None) -> InverseResult:
         """Inverse expressed as the change of the nominal command ``p - r``.

@@ -345,7 +345,7 @@ class ParametricEngine(Engine):
         JT += self._eye3
         # column i += (d eps / d q_i) x r, the three columns at once
         e0, e1, e2 = d[3], d[4], d[5]
-        r0, r1, r2 = r[:, 0], r[:, 1], r[:, 2]
+        r0, r1, r2 = r.T.copy()  # contiguous rows, each read twice
         JT[0] += e1 * r2 - e2 * r1
         JT[1] += e2 * r0 - e0 * r2
         JT[2] += e0 * r1 - e1 * r0

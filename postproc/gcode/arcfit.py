@@ -289,12 +289,15 @@ class MoveFit:
         mv, d, budget = self.mv, self.d, self.budget
         last = final and b == len(smp.Q) - 1
         qn = list(cur)
-        if last:
-            edits, added = self.w._axis_words(mv, smp.Q[b], qn, d)
-        else:
-            edits, added = self.w._axis_words(smp.free, smp.Q[b], qn, d)
-        ds = float(smp.s[b] - smp.s[a])
         lo, hi = 2 * a, 2 * b + 1  # the try's samples and middles
+        cols = smp.cols
+        # sample b as floats (its row of Q): the words' arithmetic on floats, not numpy scalars
+        target = [cols[0][hi - 1], cols[1][hi - 1], cols[2][hi - 1]]
+        if last:
+            edits, added = self.w._axis_words(mv, target, qn, d)
+        else:
+            edits, added = self.w._axis_words(smp.free, target, qn, d)
+        ds = smp.sl[hi - 1] - smp.sl[lo]
         # the chord's deviation is measured only where needed: the middle sample alone
         # often shows it above the limit it is compared with
         m = (lo + hi) // 2

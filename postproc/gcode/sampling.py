@@ -76,6 +76,7 @@ class _Layout:
         arc_rows: list[tuple[ArcParams, Sequence[float], Sequence[float], Sequence[float]]] = []  # prm, q0, q1, centre
         pieces_of: list[list[tuple[int, int, int]]] = []
         total = 0
+        lengths = iter(_line_lengths([i for i, m in planned if m.arc is None], Q0, Q1))
         for i, m in planned:
             own: list[tuple[int, int, int]] = []
             if m.arc is not None:
@@ -98,7 +99,7 @@ class _Layout:
                     arc_piece.append(k)
                     total += n
             else:
-                length = float(np.linalg.norm(Q1[i] - Q0[i]))
+                length = next(lengths)
                 n = max(3, math.ceil(length / SAMPLE_STEP_MM) + 1)
                 own.append((len(n_l), total, total + n))
                 sa_l.append(0.0)
@@ -181,6 +182,15 @@ def _sample_moves(planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table
             col = np.where(known, sign[np.maximum(moves, 0), ax], d_in[rows, ax])
             dirs[is_arc, ax] = col[is_arc]
     return _Sampled(s, nom, bulge, dirs, counts, piece_move, pieces_of)
+
+
+def _line_lengths(rows: list[int], Q0: FloatArray, Q1: FloatArray) -> list[float]:
+    """The lengths of the lines ``rows`` (Q0 to Q1), as np.linalg.norm gives each: the
+    square root of the squares summed in order, by whole columns."""
+    d = Q1[rows] - Q0[rows]
+    d2 = d * d
+    out: list[float] = np.sqrt((d2[:, 0] + d2[:, 1]) + d2[:, 2]).tolist()
+    return out
 
 
 def _arc_piece_samples(span: float, length: float, sweep: float) -> int:

@@ -473,7 +473,6 @@ def quadrant_breaks(t0: float, sweep: float) -> np.ndarray:
         return np.zeros(0)
     lo, hi = sorted((t0, t0 + sweep))
     k0, k1 = math.ceil(lo / (math.pi / 2)), math.floor(hi / (math.pi / 2))
-    ang = np.arange(k0, k1 + 1) * (math.pi / 2)
-    s = (ang - t0) / sweep
-    s = np.sort(s[(s > 1e-9) & (s < 1.0 - 1e-9)])
-    return s
+    # the few quadrant angles in floats (each k * (pi / 2), as np.arange(k0, k1 + 1) * (pi / 2))
+    s = [(k * (math.pi / 2) - t0) / sweep for k in range(k0, k1 + 1)]
+    return np.array(sorted(v for v in s if 1e-9 < v < 1.0 - 1e-9), dtype=float)
