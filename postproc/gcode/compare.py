@@ -592,7 +592,10 @@ _Record: TypeAlias = tuple[str, int, "tuple[float, float, float] | None", tuple[
 _NO_KEYS = (0, 0, 0)
 # The head of a plain line (bulk.Block: blanks, N, G and G43 H words) that starts with a
 # plain N word: the N word and what follows it.
-_HEAD_N = re.compile(r"[ \t]*+(N(?:0|[1-9][0-9]{0,14}))(?![0-9.])(.*+)", re.S).fullmatch
+_HEAD_N = r"[ \t]*+(N(?:0|[1-9][0-9]{0,14}))(?![0-9.])(.*+)"
+# The N word and the rest of each of heads joined by line feeds (two empty strings for a
+# head that does not start with one).
+_HEADS_N = re.compile(rf"^{_HEAD_N}$|^.*+$", re.M).findall
 
 
 class _LineRows(LineReader[_Record]):
@@ -736,14 +739,9 @@ class _LineRows(LineReader[_Record]):
                 named |= np.array(has, dtype=bool)
             for k in np.flatnonzero(named[src]).tolist():
                 own[k] = self.keys.of_line(blk.lines[int(src[k])])
-        for k in np.flatnonzero(found < 0).tolist():
-            if k not in own:
-                h = hs[k]
-                got = self._head_row(h, blk.lines, src, k)
-                if got is None:
-                    found[k] = ids[h]
-                else:
-                    own[k] = got
+        miss = [k for k in np.flatnonzero(found < 0).tolist() if k not in own]
+        if miss:
+            self._head_rows_of(blk.lines, src, [hs[k] for k in miss], miss, found, own)
         if len(self._head_table) != len(self._head_rows):
             self._head_table = np.array(self._head_rows, dtype=np.int64)
         out = self._head_table[found]
@@ -752,24 +750,30 @@ class _LineRows(LineReader[_Record]):
                 chain.from_iterable(own.values()), dtype=np.int64, count=3 * len(own)).reshape(-1, 3)
         return out
 
-    def _head_row(self, h: str, lines: list[str], src: np.ndarray, k: int) -> tuple[int, int, int] | None:
-        """The keys of the plain line ``lines[src[k]]`` whose head ``h`` was not met before:
-        those of its N word (and what follows it) or of the line itself, or None when the
-        head has no N word (its keys then added to those looked up by head, :meth:`_run_keys`)."""
-        keys = self.keys
-        m = _HEAD_N(h)
-        if m is not None:
-            n_word, rest = m.groups()
-            skel = self._rest_skeletons.get(rest)
-            if skel is None:
-                skel = self._rest_skeletons[rest] = skeleton(rest)
-            nk = int(n_word[1:]) + 1
-            return (keys(n_word + skel) if skel else nk, nk, 0)
-        if "N" in h or "n" in h:
-            return keys.of_line(lines[int(src[k])])
-        self._head_ids[h] = len(self._head_rows)
-        self._head_rows.append(keys.of_line(h))
-        return None
+    def _head_rows_of(self, lines: list[str], src: np.ndarray, heads: list[str], rows: list[int],
+                      found: np.ndarray, own: dict[int, tuple[int, int, int]]) -> None:
+        """The keys of the run lines ``rows`` (of the heads ``heads``) whose heads were
+        not met before, found line by line (their N words all parsed at once): into ``own``
+        those of an N word (and what follows it) or of the line itself; a head without an
+        N word added to those looked up by head (:meth:`_run_keys`), its row into ``found``."""
+        keys, ids, rests = self.keys, self._head_ids, self._rest_skeletons
+        # (a match a head: no head holds a line feed)
+        for k, (n_word, rest), h in zip(rows, _HEADS_N("\n".join(heads)), heads, strict=True):
+            if n_word:
+                skel = rests.get(rest)
+                if skel is None:
+                    skel = rests[rest] = skeleton(rest)
+                nk = int(n_word[1:]) + 1
+                own[k] = (keys(n_word + skel) if skel else nk, nk, 0)
+                continue
+            if "N" in h or "n" in h:
+                own[k] = keys.of_line(lines[int(src[k])])
+                continue
+            got = ids.get(h)
+            if got is None:
+                got = ids[h] = len(self._head_rows)
+                self._head_rows.append(keys.of_line(h))
+            found[k] = got
 
 
 class _Reader:
