@@ -1002,3 +1002,32 @@ def test_diff_pairs_sinumerik_words_written_name_equals_value():
     assert [(m.lineno, m.lineno_corrected, m.delta_mm) for m in expr.moved] == \
            [(m.lineno, m.lineno_corrected, m.delta_mm) for m in num.moved]
     assert expr.n_moved == expr.moves
+
+
+def test_diff_reads_the_keys_of_numbered_lines_in_bulk_as_the_interpreter_does(monkeypatch):
+    # heads with N words of every form (lower case, blanks before, leading zeros, N0, too
+    # nine digits, followed by a point), repeated and new heads across blocks, rotary words:
+    # the pairing keys of lines read in runs are those of the lines read one by one
+    from postproc.gcode import compare
+
+    rows = ["G21 G90 G54", "G0 X0 Y0 Z50", "G1 Z1 F500"]
+    forms = ["N{k} G1 X{x} Y{y}", "n{k} X{x} Y{y}", "  N{k} G1 X{x} Y{y}", "N00{k} X{x} Y{y}", "N0 X{x} Y{y}",
+             "N999999999 X{x} Y{y}", "N{k}.5 X{x} Y{y}", "N{k} G1 M8 X{x} Y{y}", "G1 X{x} Y{y}",
+             "X{x} Y{y} Z1", "N{k} G0 X{x} Y{y} A{k}", "X{x} Y{y} B2", "G0 G90 X{x} Y{y}", "N{k}G1X{x}Y{y}",
+             "(PASS {k})"]
+    for k in range(1, 400):
+        rows.append(forms[k % len(forms)].format(k=k, x=k % 37, y=k % 23))
+    text = "\n".join([*rows, "M30"]) + "\n"
+    setup = Setup(offsets={"G54": (10.0, 20.0, 30.0)})
+    keys = compare._Keys()
+    results = []
+    for chunk, in_bulk in ((20_000, False), (20_000, True), (7, True)):
+        monkeypatch.setattr(compare, "CHUNK_LINES", chunk)
+        monkeypatch.setattr(compare, "BLOCK_LINES", min(chunk, 5_000))
+        reader = compare._Reader(text, setup, keys)
+        reader._rd.use_bulk = in_bulk  # False: every line through the interpreter
+        results.append(np.concatenate([p.keys for p in reader.chunks()]))
+    assert results[0][:, 0].any()
+    assert results[0][:, 1].any()
+    for got in results[1:]:
+        np.testing.assert_array_equal(got, results[0])

@@ -48,7 +48,7 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import partial
-from itertools import islice
+from itertools import chain, islice, repeat
 from pathlib import Path
 from typing import Any, NamedTuple, TypeAlias
 
@@ -592,7 +592,10 @@ _Record: TypeAlias = tuple[str, int, "tuple[float, float, float] | None", tuple[
 _NO_KEYS = (0, 0, 0)
 # The head of a plain line (bulk.Block: blanks, N, G and G43 H words) that starts with a
 # plain N word: the N word and what follows it.
-_HEAD_N = re.compile(r"[ \t]*+(N(?:0|[1-9][0-9]{0,14}))(?![0-9.])(.*+)", re.S).fullmatch
+_HEAD_N = r"[ \t]*+(N(?:0|[1-9][0-9]{0,14}))(?![0-9.])(.*+)"
+# The N word and the rest of each of heads joined by line feeds (two empty strings for a
+# head that does not start with one).
+_HEADS_N = re.compile(rf"^{_HEAD_N}$|^.*+$", re.M).findall
 
 
 class _LineRows(LineReader[_Record]):
@@ -606,7 +609,10 @@ class _LineRows(LineReader[_Record]):
         # only letter-number words (else also NAME=value ones, Sinumerik's: see _without_assigned)
         self.iso_words = interp.d.block_syntax == "iso"
         self.retract = retract
-        self._head_keys: dict[str, tuple[int, int, int]] = {}  # a plain line's keys by its head (no N word)
+        # the keys of a plain line's head without an N word, as a row of _head_table (0: no head)
+        self._head_ids: dict[str, int] = {"": 0}
+        self._head_rows: list[tuple[int, int, int]] = [_NO_KEYS]
+        self._head_table = np.zeros((1, 3), dtype=np.int64)
         self._rest_skeletons: dict[str, str] = {}  # the skeleton of a head after its N word
 
     def queue(self, line: str, mv: Move | None, lineno: int) -> None:
@@ -690,7 +696,7 @@ class _LineRows(LineReader[_Record]):
             q = np.concatenate([r.q1 for r, _i in group])
             q[inert] = np.nan
             end[dst] = q
-            keys[dst] = self._run_keys(blk, src.tolist())
+            keys[dst] = self._run_keys(blk, [(r.a, r.b) for r, _i in group], src)
         files = None if self.source is None else self._files(n, at, at_files, runs)
         self.let_go()
         return _Rows(lines, lineno, move, end, keys, files)
@@ -714,40 +720,60 @@ class _LineRows(LineReader[_Record]):
         files[own] = None
         return files
 
-    def _run_keys(self, blk: bulk.Block, src: list[int]) -> np.ndarray:
-        """The keys of the block's run lines ``src``: a plain line's skeleton is its N word
-        (or nothing) and its rotary words, its N word its own, no comment; a line that moves
-        nothing has none."""
-        out = np.zeros((len(src), 3), dtype=np.int64)
-        keys, cache, rests = self.keys, self._head_keys, self._rest_skeletons
+    def _run_keys(self, blk: bulk.Block, spans: list[tuple[int, int]], src: np.ndarray) -> np.ndarray:
+        """The keys of the block's run lines (``spans``: each run's lines a:b; ``src``: all
+        of them, in order): a plain line's skeleton is its N word (or nothing) and its
+        rotary words, its N word its own, no comment; a line that moves nothing has none.
+        A head without an N word is looked up among those met before (its keys' row of
+        :attr:`_head_table`), the others' keys found line by line."""
         heads = blk.cols[0]
-        rows = [k for k, j in enumerate(src) if heads[j]]  # (no head: no N, G or G43 H word, or no move)
+        hs: list[str] = []
+        for a, b in spans:
+            hs += heads[a:b]
+        ids = self._head_ids
+        found = np.fromiter(map(ids.get, hs, repeat(-1)), dtype=np.int64, count=len(hs))
+        own: dict[int, tuple[int, int, int]] = {}  # rows whose keys are their line's own
         if blk.rotary is not None:  # a line naming a rotary axis: its whole skeleton
-            turning = [k for k, j in enumerate(src) if any(has[j] for _letter, has, _val in blk.rotary)]
-            if turning:
-                out[turning] = [keys.of_line(blk.lines[src[k]]) for k in turning]
-                rows = sorted(set(rows) - set(turning))
-        found = []
-        for k in rows:
-            h = heads[src[k]]
-            got = cache.get(h)
-            if got is None:
-                m = _HEAD_N(h)
-                if m is not None:
-                    n_word, rest = m.groups()
-                    skel = rests.get(rest)
-                    if skel is None:
-                        skel = rests[rest] = skeleton(rest)
-                    nk = int(n_word[1:]) + 1
-                    got = (keys(n_word + skel) if skel else nk, nk, 0)
-                elif "N" in h or "n" in h:
-                    got = keys.of_line(blk.lines[src[k]])
-                else:
-                    got = cache[h] = keys.of_line(h)
-            found.append(got)
-        if rows:
-            out[rows] = found
+            named = np.zeros(len(heads), dtype=bool)
+            for _letter, has, _val in blk.rotary:
+                named |= np.array(has, dtype=bool)
+            for k in np.flatnonzero(named[src]).tolist():
+                own[k] = self.keys.of_line(blk.lines[int(src[k])])
+        miss = [k for k in np.flatnonzero(found < 0).tolist() if k not in own]
+        if miss:
+            self._head_rows_of(blk.lines, src, [hs[k] for k in miss], miss, found, own)
+        if len(self._head_table) != len(self._head_rows):
+            self._head_table = np.array(self._head_rows, dtype=np.int64)
+        out = self._head_table[found]
+        if own:
+            out[np.fromiter(own, dtype=np.int64, count=len(own))] = np.fromiter(
+                chain.from_iterable(own.values()), dtype=np.int64, count=3 * len(own)).reshape(-1, 3)
         return out
+
+    def _head_rows_of(self, lines: list[str], src: np.ndarray, heads: list[str], rows: list[int],
+                      found: np.ndarray, own: dict[int, tuple[int, int, int]]) -> None:
+        """The keys of the run lines ``rows`` (of the heads ``heads``) whose heads were
+        not met before, found line by line (their N words all parsed at once): into ``own``
+        those of an N word (and what follows it) or of the line itself; a head without an
+        N word added to those looked up by head (:meth:`_run_keys`), its row into ``found``."""
+        keys, ids, rests = self.keys, self._head_ids, self._rest_skeletons
+        # (a match a head: no head holds a line feed)
+        for k, (n_word, rest), h in zip(rows, _HEADS_N("\n".join(heads)), heads, strict=True):
+            if n_word:
+                skel = rests.get(rest)
+                if skel is None:
+                    skel = rests[rest] = skeleton(rest)
+                nk = int(n_word[1:]) + 1
+                own[k] = (keys(n_word + skel) if skel else nk, nk, 0)
+                continue
+            if "N" in h or "n" in h:
+                own[k] = keys.of_line(lines[int(src[k])])
+                continue
+            got = ids.get(h)
+            if got is None:
+                got = ids[h] = len(self._head_rows)
+                self._head_rows.append(keys.of_line(h))
+            found[k] = got
 
 
 class _Reader:
