@@ -115,10 +115,50 @@ def six_point_measurements(machine, side=SIDE_MM, tool=(0.0, 0.0, 0.0), sigma=0.
 G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
 ENGINE = StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
 SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)}, tool_lengths={1: 50.0})
+# a real program placed in the S500's calibrated volume (as benchmarks/corpus_speed.py does)
+INSIDE = Setup(offsets={"G54": (150.0, 150.0, 150.0)}, tool_lengths={t: 0.0 for t in range(100)})
 MODES = {
     "bulk": {},
     "general": {"bulk_lane": False},
 }
+
+
+def both_lanes(text, engine, setup, **options):
+    """The output (or the refusal, as ``"Type: message"``) of the bulk lane and of the
+    general path, in that order."""
+    outs = []
+    for bulk_lane in (True, False):
+        try:
+            outs.append(correct_text(text, engine, setup, CorrectOptions(bulk_lane=bulk_lane, **options))[0])
+        except PostprocError as exc:
+            outs.append(f"{type(exc).__name__}: {exc}")
+    return outs
+
+
+def path_and_diff_both_ways(monkeypatch, tmp_path, text, engine, setup, step_mm=0.5):
+    """The path (``program_path``) of ``text`` and diff's report of it against its
+    correction, read with runs in bulk and with every line by the interpreter: asserts
+    the two ways agree and returns the report."""
+    from postproc.gcode import bulk
+    from postproc.gcode.compare import compare_programs
+
+    orig, corr = tmp_path / "o.ngc", tmp_path / "c.ngc"
+    orig.write_text(text)
+    corr.write_text(correct_text(text, engine, setup, CorrectOptions())[0])
+    allows = bulk.state_allows
+    paths, reports = [], []
+    for use in (True, False):
+        monkeypatch.setattr(bulk, "state_allows", allows if use else (lambda *a, **k: False))
+        paths.append(program_path(text, setup, max_step_mm=step_mm))
+        reports.append(compare_programs(str(orig), str(corr), setup).to_dict())
+    a, b = paths
+    assert np.array_equal(a.points_mm, b.points_mm)
+    assert np.array_equal(a.lineno, b.lineno)
+    assert sorted(a.context) == sorted(b.context)
+    for key in a.context:
+        assert np.array_equal(a.context[key], b.context[key]), key
+    assert reports[0] == reports[1]
+    return reports[0]
 
 
 def run_all(text, *, chunk_lines=20_000, setup=SETUP, engine=ENGINE, **options):

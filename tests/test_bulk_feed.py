@@ -7,35 +7,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ENGINE, INSIDE, SETUP, both_lanes, path_and_diff_both_ways
 
 from postproc.calfile import load_calibration
-from postproc.engine.static import StaticEngine
-from postproc.errors import PostprocError
 from postproc.gcode import bulk
 from postproc.gcode.moves import Kind
-from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 
 ROOT = Path(__file__).parents[1]
 REAL = ROOT.parent / "shared" / "corpus" / "real"
-G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
-SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)})
-INSIDE = Setup(offsets={"G54": (150.0, 150.0, 150.0)}, tool_lengths={t: 0.0 for t in range(100)})
-
-
-def _static():
-    return StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
 
 
 def _both(text, engine=None, setup=SETUP, **options):
-    outs = []
-    for bulk_lane in (True, False):
-        try:
-            outs.append(correct_text(text, engine or _static(), setup,
-                                     CorrectOptions(bulk_lane=bulk_lane, **options))[0])
-        except PostprocError as exc:
-            outs.append(f"{type(exc).__name__}: {exc}")
-    return outs
+    return both_lanes(text, engine or ENGINE, setup, **options)
 
 
 def _program(rng, n):
@@ -71,7 +55,7 @@ def test_feed_first_and_feed_alone_give_the_general_paths_output(seed):
 
 def test_feed_lines_are_read_in_runs(planned_tables):
     text = _program(np.random.default_rng(1), 40)
-    correct_text(text, _static(), SETUP, CorrectOptions())
+    correct_text(text, ENGINE, SETUP, CorrectOptions())
     (tab,) = planned_tables
     in_runs = sum(len(r) for r in tab.runs)
     lines = text.count("\n")
@@ -85,7 +69,7 @@ def test_the_feed_a_split_move_carries_is_the_interpreters(planned_tables):
     # a split move's pieces are written by the general emitter from its RunMove: its feed
     # is the modal one, whichever form set it
     text = "G21 G90 G17\nG0 X10 Y10 Z5\nG1 F300 X20\nF450\nX30\nN5 F600\nY20\n"
-    correct_text(text, _static(), SETUP, CorrectOptions())
+    correct_text(text, ENGINE, SETUP, CorrectOptions())
     (tab,) = planned_tables
     (run,) = tab.runs
     feeds = [bulk._row_move(run, j).feed for j in range(len(run)) if not run.inert_at(j)]
@@ -112,24 +96,9 @@ def test_a_feed_alone_is_inert_and_kept_byte_for_byte(line):
 
 
 def test_feed_lines_path_and_diff_are_the_general_paths(monkeypatch, tmp_path):
-    from postproc.gcode.compare import compare_programs
-
     text = _program(np.random.default_rng(3), 60)
-    orig, corr = tmp_path / "o.ngc", tmp_path / "c.ngc"
-    orig.write_text(text)
-    corr.write_text(correct_text(text, _static(), SETUP, CorrectOptions())[0])
-    allows = bulk.state_allows
-    paths, reports = [], []
-    for use in (True, False):
-        monkeypatch.setattr(bulk, "state_allows", allows if use else (lambda *a, **k: False))
-        paths.append(program_path(text, SETUP, max_step_mm=0.5))
-        reports.append(compare_programs(str(orig), str(corr), SETUP).to_dict())
-    assert np.array_equal(paths[0].points_mm, paths[1].points_mm)
-    assert sorted(paths[0].context) == sorted(paths[1].context)
-    for key in paths[0].context:
-        assert np.array_equal(paths[0].context[key], paths[1].context[key]), key
-    assert reports[0] == reports[1]
-    assert reports[0]["moves_moved"] > 40
+    report = path_and_diff_both_ways(monkeypatch, tmp_path, text, ENGINE, SETUP)
+    assert report["moves_moved"] > 40
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="needs ../shared/corpus")

@@ -8,25 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ENGINE, INSIDE, SETUP, both_lanes, path_and_diff_both_ways
 
 from postproc.calfile import load_calibration
-from postproc.engine.static import StaticEngine
-from postproc.errors import PostprocError
 from postproc.gcode import bulk, emit
 from postproc.gcode.moves import Kind
-from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
 from postproc.gcode.state import ARC_CW, LINE
 
 ROOT = Path(__file__).parents[1]
 REAL = ROOT.parent / "shared" / "corpus" / "real"
-G = np.array([[1 + 300e-6, 900e-6, -600e-6], [0.0, 1 - 200e-6, 1000e-6], [0.0, 0.0, 1 + 150e-6]])
-SETUP = Setup(offsets={"G54": (100.0, 80.0, 40.0)})
-INSIDE = Setup(offsets={"G54": (150.0, 150.0, 150.0)}, tool_lengths={t: 0.0 for t in range(100)})
-
-
-def _static():
-    return StaticEngine(G, [0.03, -0.02, 0.01], [[-1e4] * 3, [1e4] * 3])
 
 
 def _curved():
@@ -35,14 +26,7 @@ def _curved():
 
 def _both(text, engine=None, setup=SETUP, **options):
     """The output (or the refusal) of the bulk lane and of the general path."""
-    outs = []
-    for bulk_lane in (True, False):
-        try:
-            outs.append(correct_text(text, engine or _static(), setup, CorrectOptions(bulk_lane=bulk_lane,
-                                                                                      **options))[0])
-        except PostprocError as exc:
-            outs.append(f"{type(exc).__name__}: {exc}")
-    return outs
+    return both_lanes(text, engine or ENGINE, setup, **options)
 
 
 def _modal_program(rng, n, r_form=False, scale=1.0, big=0.0):
@@ -102,7 +86,7 @@ def test_modal_arcs_split_by_a_curved_calibration_get_their_motion_word_back(r_f
 
 def test_modal_arc_lines_are_read_in_runs(planned_tables):
     text = _modal_program(np.random.default_rng(1), 30)
-    correct_text(text, _static(), SETUP, CorrectOptions())
+    correct_text(text, ENGINE, SETUP, CorrectOptions())
     (tab,) = planned_tables
     arcs = np.flatnonzero((tab.kind == Kind.ARC_CW) | (tab.kind == Kind.ARC_CCW))
     assert len(arcs) == 30
@@ -152,7 +136,7 @@ def test_a_run_starting_under_a_modal_arc_takes_its_arc_lines(planned_tables):
     text = "G21 G90 G17\nG0 X10 Y10 Z5\nG1 X10 F200\nG2 X20 Y10 I5 J0\nX10 Y10 I-5 J0\nX20 Y10 R5\nG1 X25\nM2\n"
     outs = []
     for chunk in (4, 20_000):
-        outs.append(correct_text(text, _static(), SETUP, CorrectOptions(chunk_lines=chunk))[0])
+        outs.append(correct_text(text, ENGINE, SETUP, CorrectOptions(chunk_lines=chunk))[0])
     assert outs[0] == outs[1] == _both(text)[1]
     first, second = planned_tables[:2]
     assert [(r.lineno, len(r)) for r in first.runs] == [(3, 3)]  # G1, G2 and the modal I/J arc
@@ -162,22 +146,9 @@ def test_a_run_starting_under_a_modal_arc_takes_its_arc_lines(planned_tables):
 
 
 def test_modal_arc_path_and_diff_are_the_general_paths(monkeypatch, tmp_path):
-    from postproc.gcode.compare import compare_programs
-
     text = _modal_program(np.random.default_rng(3), 50)
-    orig, corr = tmp_path / "o.ngc", tmp_path / "c.ngc"
-    orig.write_text(text)
-    corr.write_text(correct_text(text, _static(), SETUP, CorrectOptions())[0])
-    allows = bulk.state_allows
-    paths, reports = [], []
-    for use in (True, False):
-        monkeypatch.setattr(bulk, "state_allows", allows if use else (lambda *a, **k: False))
-        paths.append(program_path(text, SETUP, max_step_mm=0.2))
-        reports.append(compare_programs(str(orig), str(corr), SETUP).to_dict())
-    assert np.array_equal(paths[0].points_mm, paths[1].points_mm)
-    assert np.array_equal(paths[0].lineno, paths[1].lineno)
-    assert reports[0] == reports[1]
-    assert reports[0]["moves_moved"] > 50
+    report = path_and_diff_both_ways(monkeypatch, tmp_path, text, ENGINE, SETUP, step_mm=0.2)
+    assert report["moves_moved"] > 50
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="needs ../shared/corpus")

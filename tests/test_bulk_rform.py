@@ -5,9 +5,9 @@ path's, byte for byte."""
 
 import numpy as np
 import pytest
+from conftest import both_lanes
 
 from postproc.engine.static import StaticEngine
-from postproc.errors import PostprocError
 from postproc.gcode import bulk
 from postproc.gcode.moves import Kind
 from postproc.gcode.path import Setup
@@ -23,13 +23,7 @@ def _engine():
 
 def _both(text, **options):
     """The output (or the refusal) of the bulk lane and of the general path."""
-    outs = []
-    for bulk_lane in (True, False):
-        try:
-            outs.append(correct_text(text, _engine(), SETUP, CorrectOptions(bulk_lane=bulk_lane, **options))[0])
-        except PostprocError as exc:
-            outs.append(f"{type(exc).__name__}: {exc}")
-    return outs
+    return both_lanes(text, _engine(), SETUP, **options)
 
 
 def _cam(rng, n):

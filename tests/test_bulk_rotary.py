@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import both_lanes
 
 from postproc.effects import compose, get_effect
 from postproc.engine.static import StaticEngine
-from postproc.errors import PostprocError
 from postproc.gcode import bulk
 from postproc.gcode.path import Setup, program_path
 from postproc.gcode.pipeline import CorrectOptions, correct_text
@@ -30,13 +30,7 @@ def _engine(letter="A"):
 
 
 def _both(text, setup=SETUP, letter="A"):
-    outs = []
-    for bulk_lane in (True, False):
-        try:
-            outs.append(correct_text(text, _engine(letter), setup, CorrectOptions(bulk_lane=bulk_lane))[0])
-        except PostprocError as exc:
-            outs.append(f"{type(exc).__name__}: {exc}")
-    return outs
+    return both_lanes(text, _engine(letter), setup)
 
 
 def _rotary_program(rng, n, letters="A"):
