@@ -397,7 +397,8 @@ class Block:
         the interpreter's (``moving`` loses both)."""
         head = self.cols[_HEAD]
         self.tlo: dict[int, int] = {}
-        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h]:
+        joined = "".join(head)  # (most blocks have no H word: one search of their heads)
+        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h] if "H" in joined or "h" in joined else ():
             if moving[i]:
                 m = _TLO.search(head[i])
                 if m is not None:
