@@ -66,72 +66,69 @@ class Columns:
         return len(self.plain)
 
 
-def number_end(text: bytes, i: i64, n: i64) -> i64:
-    """The end of the number ``[+-]?(\\d+\\.?\\d*|\\.\\d+)`` starting at ``i``; -1 if none."""
-    c: i64
-    if i < n:
-        c = text[i]
-        if c == 43 or c == 45:  # + -
-            i += 1
-    if i >= n:
-        return -1
-    c = text[i]
-    if 48 <= c <= 57:
-        i += 1
-        while i < n and 48 <= text[i] <= 57:
-            i += 1
-        if i < n and text[i] == 46:  # .
-            i += 1
-            while i < n and 48 <= text[i] <= 57:
-                i += 1
-        return i
-    if c == 46 and i + 1 < n and 48 <= text[i + 1] <= 57:
-        i += 2
-        while i < n and 48 <= text[i] <= 57:
-            i += 1
-        return i
-    return -1
-
-
 # Exact powers of ten as floats (10**22 is the largest a double holds exactly).
 _POW10: Final = [10.0**k for k in range(23)]
 
 
-def number_value(text: bytes, i: i64, e: i64, cols: Columns | None = None) -> float:
-    """The value of the number ``text[i:e]`` (the grammar's), correctly rounded: with at
-    most 15 digits its digits are an exact double and so is the power of ten it is divided
-    by, and one IEEE division rounds the quotient correctly; longer numbers go through
-    ``float`` of the text (correctly rounded too). ``cols``: the number is a word's of
-    those columns: its digits after the point go to :attr:`Columns.frac`, and
+def read_number(text: bytes, i: i64, n: i64, cols: Columns | None) -> i64:
+    """The end of the number ``[+-]?(\\d+\\.?\\d*|\\.\\d+)`` starting at ``i`` (-1 if
+    none), read in one pass. ``cols``: the number is a word's of those columns: its value
+    goes to :attr:`Columns.value`, correctly rounded (with at most 15 digits its digits
+    are an exact double and so is the power of ten it is divided by, and one IEEE
+    division rounds the quotient correctly; longer numbers go through ``float`` of the
+    text, correctly rounded too), its digits after the point to :attr:`Columns.frac`, and
     :attr:`Columns.longest` takes its digits before the point where they are more."""
-    neg = False
     k: i64 = i
-    c: i64 = text[k]
-    if c == 43 or c == 45:  # + -
-        neg = c == 45
-        k += 1
+    neg = False
+    c: i64
+    if k < n:
+        c = text[k]
+        if c == 43 or c == 45:  # + -
+            neg = c == 45
+            k += 1
     m: i64 = 0
     digits: i64 = 0
     frac: i64 = -1  # digits after the point; -1: no point yet
-    while k < e:
+    while k < n:
         c = text[k]
-        if c == 46:
-            frac = 0
-        else:
-            m = m * 10 + (c - 48)
+        if 48 <= c <= 57:
+            if digits < 16:  # (more: the value is float's of the text)
+                m = m * 10 + (c - 48)
             digits += 1
             if frac >= 0:
                 frac += 1
+        elif c == 46 and frac < 0:  # .
+            frac = 0
+        else:
+            break
         k += 1
+    if digits == 0:
+        return -1
     if cols is not None:
+        if digits > 15:
+            v = float(text[i:k])
+        else:
+            v = float(m) / _POW10[frac] if frac > 0 else float(m)
+            if neg:
+                v = -v
+        cols.value.append(v)
         after: i64 = max(frac, 0)
         cols.frac.append(after)
         if digits - after > cols.longest:
             cols.longest = digits - after
-    if digits > 15:
-        return float(text[i:e])
-    v = float(m) / _POW10[frac] if frac > 0 else float(m)
-    return -v if neg else v
+    return k
+
+
+def number_end(text: bytes, i: i64, n: i64) -> i64:
+    """The end of the number starting at ``i`` (:func:`read_number`); -1 if none."""
+    return read_number(text, i, n, None)
+
+
+def number_value(text: bytes, i: i64, e: i64) -> float:
+    """The value of the number ``text[i:e]`` as :func:`read_number` reads it."""
+    cols = Columns()
+    read_number(text, i, e, cols)
+    return cols.value[0]
 
 
 def scan_into(text: bytes, cols: Columns) -> None:
@@ -143,7 +140,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
     letter_col = cols.letter
     start_col = cols.start
     end_col = cols.end
-    value_col = cols.value
     first_word = cols.first_word
     line_start.append(0)
     first_word.append(len(letter_col))
@@ -168,7 +164,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
             j = i + 1
             while j < n and (text[j] == 32 or text[j] == 9):
                 j += 1
-            e = number_end(text, j, n)
+            e = read_number(text, j, n, cols)  # (its value and digits on cols)
             if e < 0:
                 plain = False
                 i += 1
@@ -176,7 +172,6 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
                 start_col.append(j)
                 end_col.append(e)
-                value_col.append(number_value(text, j, e, cols))
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
