@@ -308,7 +308,7 @@ class Block:
         self._modal_shapes(moving, no_g, arc_shape, last_g)
         cols[_HEAD], cols[_REST] = list(cols[_HEAD]), list(cols[_REST])
         neutral = self._inert(np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist())
-        self._tool_lengths(moving)
+        self._tool_lengths(moving, arc_shape)
         self.neutral = neutral
         self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
         self.last_moving: list[int] = last_index(~neutral).tolist()
@@ -334,9 +334,9 @@ class Block:
         the lines naming a motion word, and those without one whose shape is not the
         motion of the last line before them naming one."""
         modal = moving & no_g
-        self.arc_rows: list[int] = np.flatnonzero(self.arc | (modal & arc_shape)).tolist()
-        self._modal_arcs: list[int] = np.flatnonzero(modal & arc_shape).tolist()
-        self._arc_set = set(self._modal_arcs)
+        modal_arc = modal & arc_shape
+        self.arc_rows: list[int] = np.flatnonzero(self.arc | modal_arc).tolist()
+        self._modal_arcs: list[int] = np.flatnonzero(modal_arc).tolist()
         self._modal_lines: list[int] = np.flatnonzero(modal & ~arc_shape).tolist()
         self._g_rows: list[int] = np.flatnonzero(~no_g).tolist()
         named = last_g >= 0
@@ -391,10 +391,11 @@ class Block:
             head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
         return neutral
 
-    def _tool_lengths(self, moving: BoolArray) -> None:
+    def _tool_lengths(self, moving: BoolArray, arc_shape: BoolArray) -> None:
         """The straight moves that set the tool length first (G43 H..: :attr:`tlo`, line ->
         H): a run starts at one (set_tool_length before it is read); an arc that does is
-        the interpreter's (``moving`` loses both)."""
+        the interpreter's (``moving`` loses both; ``arc_shape``: the lines whose words are
+        an arc's, which a moving line's motion word, where it has one, agrees with)."""
         head = self.cols[_HEAD]
         self.tlo: dict[int, int] = {}
         joined = "".join(head)  # (most blocks have no H word: one search of their heads)
@@ -403,7 +404,7 @@ class Block:
                 m = _TLO.search(head[i])
                 if m is not None:
                     moving[i] = False
-                    if not self.arc[i] and i not in self._arc_set:
+                    if not arc_shape[i]:
                         self.tlo[i] = int(m.group(1))
         self.tlo_rows: list[int] = sorted(self.tlo)
 

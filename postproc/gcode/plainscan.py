@@ -70,7 +70,7 @@ class Pieces:
             self.frac[k][i] = 0
 
 
-def _name(text: str, cols: Columns, res: Pieces, k: int, li: int, w: int) -> None:
+def _name(cols: Columns, res: Pieces, k: int, li: int, w: int) -> None:
     """Line ``li`` names word ``k`` of :attr:`Pieces.has`: the scanner's word ``w``."""
     res.has[k][li] = True
     res.value[k][li] = cols.value[w]
@@ -86,12 +86,12 @@ def _after_z(text: str, cols: Columns, res: Pieces, li: int, w: int, we: int) ->
     for a in range(2):
         if w < we and letter[w] == _AXES[a] and not res.has[a][li]:
             res.text[3 + 2 * a][li] = text[cols.start[w]:cols.end[w]]  # its number (the line is never rejoined)
-            _name(text, cols, res, a, li, w)
+            _name(cols, res, a, li, w)
             res.late[li] = True
             w += 1
     for r in range(3):
         if w < we and letter[w] == _ROTARY[r]:
-            _name(text, cols, res, 6 + r, li, w)
+            _name(cols, res, 6 + r, li, w)
             w += 1
     return w
 
@@ -147,7 +147,7 @@ def pieces(text: str, cols: Columns) -> Pieces:
                 prev = b
                 w += 1
         if w < we and letter[w] == "R":  # its text stays in the rest
-            _name(text, cols, res, _R, li, w)
+            _name(cols, res, _R, li, w)
             w += 1
         if w < we and letter[w] == "F" and not f_first:
             out[_F][li] = text[start[w]:end[w]]
