@@ -232,6 +232,47 @@ def other_line(draw):
 
 
 # -- how far a corrected program lands from the nominal path -----------------------
+def assert_offsets_cut_the_line(line: str, at: list[int], has: list[bool], values: list[float], late: bool) -> None:
+    """A plain line's offsets (plainscan.Pieces.at, one line's: head end, then each of X,
+    Y, Z, I, J's number's start and end) against the lexer's words: in order within the
+    line; a named word's number where the lexer has it (its text, its value), the
+    head's words before the first axis word; and the run writer (runwords.join_rows)
+    putting new numbers in at them gives the line with those numbers, every other byte
+    as it was."""
+    from postproc.gcode import lexer, runwords
+
+    body = line.rstrip("\n")
+    words = [t for t in lexer.lex(body) if t.kind == lexer.WORD]
+    span = {t.letter.upper(): (t.col - 1 + t.number_offset, t.col - 1 + t.number_offset + len(t.number_text))
+            for t in words}
+    assert all(a <= b for a, b in zip(at, at[1:], strict=False))
+    assert at[-1] <= len(body)
+    for k, letter in enumerate("XYZIJ"):
+        if late and letter in "XY":
+            continue  # after Z: cut from its run, never rewritten by the run writer
+        a, b = at[1 + 2 * k], at[2 + 2 * k]
+        assert has[k] == (letter in span) == (b > a)
+        if has[k]:
+            assert (a, b) == span[letter]
+            assert values[k] == float(body[a:b])
+    head = body[:at[0]]
+    assert all(t.letter.upper() in "NGHF" for t in lexer.lex(head) if t.kind == lexer.WORD)
+    if late:
+        return
+    # new numbers put in at the offsets: the line with those numbers, nothing else changed
+    new = {letter: f"<{letter}>" for k, letter in enumerate("XYZIJ") if has[k]}
+    expected, p = [], 0
+    for a, b, letter in sorted((*span[letter], letter) for letter in new):
+        expected += [line[p:a], new[letter]]
+        p = b
+    expected.append(line[p:])
+    cols = [[x] for x in at]
+    got = runwords.join_rows([line], (0, 1), cols, [[new.get(c, "")] for c in "XYZ"], [""],
+                             ([new.get("I", "")], [new.get("J", "")]))
+    assert got == "".join(expected)
+    assert runwords.join_rows([line], (0, 1), cols, [[""], [""], [""]], [""], ([""], [""])) == line
+
+
 def polyline_distance(points: np.ndarray, poly: np.ndarray, step: float = 0.05) -> np.ndarray:
     """Distance from each point to the polyline through ``poly`` (exact; the package's
     own, indexed by pieces of at most ``step``)."""

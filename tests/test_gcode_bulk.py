@@ -3,12 +3,18 @@ programs and at every chunk boundary."""
 
 import dataclasses
 import math
-import re
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ENGINE, assert_same, other_line, plain_line, run_all
+from conftest import (
+    ENGINE,
+    assert_offsets_cut_the_line,
+    assert_same,
+    other_line,
+    plain_line,
+    run_all,
+)
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -105,24 +111,17 @@ def test_bulk_lane_equals_the_general_path_with_other_decimals(text, decimals):
 # -- the scanner ---------------------------------------------------------------------------
 @settings(max_examples=300, deadline=None)
 @given(st.lists(plain_line(), min_size=1, max_size=20), st.sampled_from(["\n", "\r\n"]))
-def test_scan_splits_every_line_into_pieces_that_join_back(lines, ending):
+def test_scan_gives_every_line_the_offsets_of_its_words(lines, ending):
     lines = [ln + ending for ln in lines]
     block = bulk.scan(lines)
     assert block is not None
-    cols = block.cols
     for i, line in enumerate(lines):
-        pieces = [c[i] for c in cols]
-        if block.plain[i] and i in block.late:  # X or Y after a later axis: cut from its run, never rejoined
-            assert re.search(r"[YyZz].*[Xx]|[Zz].*[Yy]", line)
-        elif block.plain[i]:
-            joined = "".join(pieces[j] for j in (0, *range(2, 13))) + "\n"
-            assert joined == line
-            for k, j in enumerate((3, 5, 7, 9, 11)):
-                assert block.has[k][i] == bool(pieces[j])
-                if pieces[j]:
-                    assert block.ov[k][i] == float(pieces[j])
-        else:
-            assert not any(pieces)
+        at = [col[i] for col in block.at]
+        if block.plain[i] and not block.neutral[i]:
+            assert_offsets_cut_the_line(line, at, [h[i] for h in block.has_l], [v[i] for v in block.ovl],
+                                        i in block.late)
+        elif not block.plain[i]:
+            assert not any(at)
 
 
 def test_scan_refuses_lone_carriage_returns_and_keeps_the_other_lines_apart():
@@ -131,8 +130,9 @@ def test_scan_refuses_lone_carriage_returns_and_keeps_the_other_lines_apart():
     # a comment and a blank line move nothing: they stay in a run, written whole from one piece
     assert block.plain.tolist() == [True, True, True, True, False, True, True]
     assert block.neutral.tolist() == [False, True, True, False, False, True, False]
-    assert [c[1] for c in block.cols if c[1]] == ["(c)"]
-    assert not any(c[2] for c in block.cols)
+    # (a comment names no word: nothing of it is cut)
+    assert [col[1] for col in block.at] == [0] * 11
+    assert not any(h[1] for h in block.has_l)
 
 
 

@@ -6,6 +6,7 @@ import random
 import struct
 
 import pytest
+from conftest import assert_offsets_cut_the_line
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -78,22 +79,25 @@ def test_number_values_are_floats_of_their_text():
                                  "F100", "K1", " ", "\t", "(c)", "S1"]), max_size=10),
        st.sampled_from(["", "\n", "\r\n"]))
 @settings(max_examples=300, deadline=None)
-def test_pieces_join_back_to_the_line(words, ending):
+def test_pieces_give_the_offsets_of_the_words(words, ending):
     line = "".join(words) + ending
     cols = scanner.scan(line)
     p = plainscan.pieces(line, cols)
-    texts = [col[0] for col in p.text] if len(cols) else []
-    if texts and any(texts[:13]) and p.late[0]:  # X or Y after Z: never rejoined (the general emitter writes it)
-        assert p.has[0][0] or p.has[1][0]
-    elif texts and any(texts[:13]):
-        body = line[:-1] if line.endswith("\n") else line
-        order = [0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
-        assert "".join(texts[k] for k in order) == body
-        for k in range(5):
-            assert p.has[k][0] == bool(texts[3 + 2 * k])
-            if p.has[k][0]:
-                assert p.value[k][0] == float(texts[3 + 2 * k])
-                assert p.frac[k][0] == lexer_decimals(texts[3 + 2 * k])
+    if not len(cols) or not (any(col[0] for col in p.at) or any(h[0] for h in p.has) or p.motion[0] >= 0
+                             or p.tlo[0] >= 0):
+        return  # not a plain move (or a blank line): nothing named
+    assert_offsets_cut_the_line(line, [col[0] for col in p.at], [h[0] for h in p.has], [v[0] for v in p.value],
+                                p.late[0])
+    toks = {t.letter.upper(): t.number_text for t in lexer.lex(line) if t.kind == lexer.WORD}
+    for k in range(5):
+        if p.has[k][0]:
+            assert p.frac[k][0] == lexer_decimals(toks["XYZIJ"[k]])
+    head = [t for t in lexer.lex(line[:p.at[0][0]]) if t.kind == lexer.WORD]
+    motions = [t for t in head if t.letter.upper() == "G" and t.number_text != "43"]
+    assert p.motion[0] == (int(motions[0].number_text) if motions else -1)
+    lengths = [t for t in head if t.letter.upper() == "H"]
+    assert p.tlo[0] == (int(lengths[0].number_text) if lengths else -1)
+    assert p.has[plainscan.F][0] == ("F" in toks)
 
 
 def lexer_decimals(number: str) -> int:

@@ -2,11 +2,10 @@
 
 Most lines of CAM output are ``[N..] [G0|G1|G2|G3] [X..] [Y..] [Z..] [A..] [B..] [C..]
 [I..] [J..] [R..] [F..]`` in that order. A chunk of lines is read by the scanner (:mod:`postproc.gcode.scanner`,
-the lexer's grammar, compiled) and every such line cut into its pieces
-(:func:`postproc.gcode.plainscan.pieces`): the text before the first axis word, each
-axis and centre word's letter (with the blanks before it) and number, and the rest
-(feed word, trailing blanks, ``\\r``). The numbers of the whole
-chunk are parsed in bulk (:class:`Block`). Consecutive plain lines read while the modal
+the lexer's grammar, compiled), which gives for every such line where its head ends and
+where each axis and centre word's number stands, and what its words say
+(:func:`postproc.gcode.plainscan.pieces`); the numbers of the whole chunk are then
+columns (:class:`Block`). Consecutive plain lines read while the modal
 state is simple (:func:`state_allows`) form a :class:`Run`: reading one only advances
 the modal state to its last line; the nominal targets of all the chunk's runs are then
 made at once (positions carried forward where a line does not name an axis).
@@ -25,23 +24,24 @@ A run holds three kinds of lines:
   a tool change alone: :data:`_TOOL`; a feed alone, which sets the modal feed):
   written whole, no move, no word added; a run never starts with one.
 
-Rotary words (A, B, C after Z) pass through as written, in the piece after Z; each
+Rotary words (A, B, C after Z) pass through as written; each
 run line carries the rotary positions a line read by the interpreter has
 (:attr:`Run.rot`), for the engine's context.
 
 A straight move that sets the tool length first (``G0 G43 H2 Z25``, :attr:`Block.tlo`)
 starts a run of its own: the length is set (``Interpreter.set_tool_length``), then the
-run read (split, it is written with the G43 H.. words on its first piece, as the
+run read (split, it is written with the G43 H.. words on its first line, as the
 interpreter's move is).
 
 After the chunk's targets are corrected, the comparisons of old and new values of every
 run line are vectorised and the new numbers formatted in one operation; each run is then
-written in program order by joining its lines' pieces. The words an axis does not name
+written in program order, each line its own text with the new numbers put in at their
+places (:func:`postproc.gcode.runwords.join_rows`). The words an axis does not name
 but whose corrected position moves (squareness) need a sequential pass, because whether
 one is written depends on the position the words before it reached; so do an arc's
 centre words, which the planner's :class:`postproc.gcode.vplan.ArcHint` gives for the
 end points as written. A line the planner splits, and an arc whose hint does not hold
-there, are written by the general emitter between the run's pieces. The result is byte
+there, are written by the general emitter between the run's other lines. The result is byte
 for byte that of the general path (tests run both on the same programs); every line
 that is not plain, and every line of a chunk with lone ``\\r`` line endings, takes it.
 
@@ -70,19 +70,10 @@ from postproc.gcode.moves import Kind, Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
 from postproc.gcode.vplan import ArcHint, BoolArray, FloatArray, IntArray, KindArray, Plan
 
-# The pieces of a plain line (plainscan.pieces): 0 head (N and G words, and G43 H.. after
-# them: see Block.tlo), 1 G number, 2/4/6 X/Y/Z letter with the blanks before it, 3/5/7
-# their numbers, 8/10 I/J letter with the blanks before it, 9/11 their numbers, 12 the
-# rest (F word, trailing blanks, \r), 13 the F number; any other line has every piece empty.
-_HEAD, _G, _REST, _F = 0, 1, 12, 13
-_LETTER = (2, 4, 6, 8, 10)  # tuple index of each axis or centre letter (with the blanks before it)
 # Digits before the point of a word's number from which the chunk is the interpreter's
 # (ten: 1e9, interp_core.MAX_WORD_VALUE, and beyond; a 400-digit one reads as inf)
 _LONG_DIGITS = 10
-_NUM = (3, 5, 7, 9, 11)  # tuple index of each X, Y, Z, I, J number
-_CODE = {"0": RAPID, "1": LINE, "2": ARC_CW, "3": ARC_CCW}  # by the G number's last digit
-# The G number of a plain line's G piece (plainscan: G0 to G3, G00 to G03, or none: -1)
-_G_MOTION = {"": -1, "0": 0, "00": 0, "1": 1, "01": 1, "2": 2, "02": 2, "3": 3, "03": 3}
+_CODE = (RAPID, LINE, ARC_CW, ARC_CCW)  # by the G number (plainscan.Pieces.motion)
 # A line that moves nothing (lexer.QUIET_LINE_RE): inside a run it is written as it is,
 # as the interpreter would.
 _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
@@ -91,8 +82,6 @@ _NEUTRAL = re.compile(lexer.QUIET_LINE_RE + r"\r?\n?")
 # only the tool the interpreter holds (group 1 or 2: the T number), which the run sets
 # when it is read (:func:`read_run`).
 _TOOL = re.compile(lexer.TOOL_LINE_RE + r"\r?\n?")
-# A plain line's head that holds at most its N word (a feed alone is then inert)
-_N_HEAD = re.compile(r"[ \t]*(?:[Nn][ \t]*\d+[ \t]*)?").fullmatch
 # The G43 H.. of a line's head (a straight move that sets the tool length first).
 _TLO = re.compile(lexer.TOOL_LENGTH_RE + r"(\d++)")
 _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
@@ -260,14 +249,14 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
 
 
 class Block:
-    """One chunk of lines split into pieces, with the plain lines' numbers parsed."""
+    """One chunk of lines, with the plain lines' words in columns."""
 
     def __init__(self, lines: list[str], pieces: plainscan.Pieces) -> None:
         n = len(lines)
         self.lines = lines
-        # the text of each piece, by piece (a column per piece, a row per line)
-        cols: list[list[str]] = list(pieces.text)
-        self.cols = cols
+        # where the head ends and each X, Y, Z, I, J number stands on each line (offsets
+        # from its start: plainscan.Pieces.at)
+        self.at = pieces.at
         self.has: list[BoolArray] = []  # X, Y, Z, I, J named on each line
         self.ov: list[FloatArray] = []  # their values (0 where not named)
         self.ovl: list[list[float]] = pieces.value
@@ -291,9 +280,8 @@ class Block:
         self.rotary: list[tuple[str, list[bool], list[float]]] | None = [
             (letter, pieces.has[6 + r], pieces.value[6 + r]) for r, letter in enumerate("ABC")
             if any(pieces.has[6 + r])] or None
-        g = cols[_G]
-        self.gword = g
-        motion = np.fromiter(map(_G_MOTION.__getitem__, g), dtype=np.int8, count=n)  # -1: no G word
+        self.motion_l: list[int] = pieces.motion  # the G word's number, 0 to 3 (-1: none)
+        motion = np.fromiter(pieces.motion, dtype=np.int8, count=n)
         no_g = motion < 0
         last_g = last_index(~no_g)
         # G2/G3 lines with centre words (I, J) or a radius (R) are arcs, G0/G1 lines with
@@ -306,9 +294,11 @@ class Block:
         arc_shape = centre ^ self.has_r
         moving = (self.has[0] | self.has[1] | self.has[2]) & ~(centre & self.has_r) & (no_g | (self.arc == arc_shape))
         self._modal_shapes(moving, no_g, arc_shape, last_g)
-        cols[_HEAD], cols[_REST] = list(cols[_HEAD]), list(cols[_REST])
-        neutral = self._inert(np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist())
-        self._tool_lengths(moving, arc_shape)
+        # the feed word of each line: whether it names one and its value
+        self.f_has: list[bool] = pieces.has[plainscan.F]
+        self.f_value: list[float] = pieces.value[plainscan.F]
+        neutral = self._inert(np.flatnonzero(~moving & ~self.arc & ~centre & ~self.has_r & no_g).tolist(), pieces.tlo)
+        self._tool_lengths(moving, arc_shape, pieces.tlo)
         self.neutral = neutral
         self.neutral_rows: list[int] = np.flatnonzero(neutral).tolist()
         self.last_moving: list[int] = last_index(~neutral).tolist()
@@ -318,7 +308,7 @@ class Block:
         self.last_g: list[int] = last_g.tolist()
         self.last_g_arr = last_g
         self.motion = motion
-        self.last_f: list[int] = last_index(np.fromiter(map(bool, cols[_F]), dtype=bool, count=n)).tolist()
+        self.last_f: list[int] = last_index(np.frombuffer(bytes(self.f_has), dtype=bool)).tolist()
         self.last_l: list[list[int]] = [a.tolist() for a in self.last]
         self.runs: list[Run] = []
         # the source line of each line, when they are not consecutive (an expanded
@@ -369,11 +359,11 @@ class Block:
             end = rows[k]
         return end
 
-    def _inert(self, candidates: list[int]) -> BoolArray:
+    def _inert(self, candidates: list[int], tlo: list[int]) -> BoolArray:
         """The lines among ``candidates`` (no word of a move) that move nothing (blank,
-        comments, S and some M words, a tool change alone: :attr:`tools`), written whole
-        from their last piece."""
-        lines, head, rest, feed = self.lines, self.cols[_HEAD], self.cols[_REST], self.cols[_F]
+        comments, S and some M words, a tool change alone: :attr:`tools`; ``tlo``: the
+        H number of each line's G43 H, -1 where none), written as they are."""
+        lines, feed = self.lines, self.f_has
         neutral = np.zeros(len(lines), dtype=bool)
         match, tool = _NEUTRAL.fullmatch, _TOOL.fullmatch
         self.tools: dict[int, int] = {}  # line -> the tool a tool-change line loads
@@ -384,28 +374,26 @@ class Block:
                 m = tool(line)
                 if m is not None:
                     self.tools[i] = int(m.group(1) or m.group(2))
-                # a feed alone (``F300``, ``N20 F300``): the modal feed (Block.last_f), no move
-                elif not (feed[i] and _N_HEAD(head[i]) and not any(has[i] for _r, has, _v in rotary)):
+                # a feed alone (``F300``, ``N20 F300``; a plain line without a motion word
+                # here): the modal feed (Block.last_f), no move
+                elif not (feed[i] and tlo[i] < 0 and not any(has[i] for _r, has, _v in rotary)):
                     continue
             neutral[i] = True
-            head[i], rest[i] = "", line[:-1] if line.endswith("\n") else line
         return neutral
 
-    def _tool_lengths(self, moving: BoolArray, arc_shape: BoolArray) -> None:
+    def _tool_lengths(self, moving: BoolArray, arc_shape: BoolArray, tlo: list[int]) -> None:
         """The straight moves that set the tool length first (G43 H..: :attr:`tlo`, line ->
-        H): a run starts at one (set_tool_length before it is read); an arc that does is
-        the interpreter's (``moving`` loses both; ``arc_shape``: the lines whose words are
-        an arc's, which a moving line's motion word, where it has one, agrees with)."""
-        head = self.cols[_HEAD]
+        H; ``tlo``: the H number of each line's, -1 where none): a run starts at one
+        (set_tool_length before it is read); an arc that does is the interpreter's
+        (``moving`` loses both; ``arc_shape``: the lines whose words are an arc's, which a
+        moving line's motion word, where it has one, agrees with)."""
         self.tlo: dict[int, int] = {}
-        joined = "".join(head)  # (most blocks have no H word: one search of their heads)
-        for i in [i for i, h in enumerate(head) if "H" in h or "h" in h] if "H" in joined or "h" in joined else ():
-            if moving[i]:
-                m = _TLO.search(head[i])
-                if m is not None:
+        if max(tlo, default=-1) >= 0:  # (most blocks have none)
+            for i in np.flatnonzero(np.fromiter(tlo, dtype=np.int64, count=len(tlo)) >= 0).tolist():
+                if moving[i]:
                     moving[i] = False
                     if not arc_shape[i]:
-                        self.tlo[i] = int(m.group(1))
+                        self.tlo[i] = tlo[i]
         self.tlo_rows: list[int] = sorted(self.tlo)
 
     def set_source(self, src: list[int], files: list[str | None] | None = None) -> None:
@@ -419,7 +407,7 @@ class Block:
 
     def code(self, i: int) -> int:
         """Motion of line i's G word (G0 to G3, G00 to G03)."""
-        return _CODE[self.gword[i][-1]]
+        return _CODE[self.motion_l[i]]
 
 
 def scan(lines: list[str]) -> Block | None:
@@ -538,7 +526,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
     (lx, ly, lz), (vx, vy, vz) = block.last_l[:3], block.ovl[:3]
     vi, vj, has_i, has_j = block.ovl[3], block.ovl[4], block.has_l[3], block.has_l[4]
     has_r, vr = block.has_l[5], block.r_value
-    gword, last_g, motion0 = block.gword, block.last_g, interp.state.motion
+    gnum, last_g, motion0 = block.motion_l, block.last_g, interp.state.motion
     sx, sy, sz = shift[0], shift[1], shift[2]
     hyp = math.hypot
     arcs: dict[int, RunArc] = {}
@@ -555,7 +543,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
         p = ly[y]
         y1 = vy[p] * unit + sy if p >= a else q0[1]
         g = last_g[y]  # (a line without a motion word: the modal arc's)
-        clockwise = gword[g][-1] == "2" if g >= a else motion0 == ARC_CW
+        clockwise = gnum[g] == 2 if g >= a else motion0 == ARC_CW
         if has_r[y]:  # the centre the controller finds for R (the interpreter's arc rule)
             c = None if hyp(x1 - x0, y1 - y0) < MIN_ARC_RADIUS_MM else r_center(x0, y0, x1, y1, vr[y] * unit,
                                                                                   clockwise)
@@ -627,7 +615,7 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
             pos[k] = block.ovl[k][i] * unit + shift[k]
     st.pos = pos
     st.motion, st.feed = _modal_at(run, b)
-    interp.motion_word = bool(block.gword[e])
+    interp.motion_word = block.motion_l[e] >= 0
     block.runs.append(run)
     return run
 
@@ -689,7 +677,7 @@ class Emission:
     axis X, Y, Z: the lists of that axis)."""
 
     __slots__ = ("nums", "unnamed", "edits_cum", "changed_cum", "named_edits")
-    nums: list[list[str]]  # by line: the number text written for the named word
+    nums: list[list[str]]  # by line: the new number text of the named word ("": its own stays)
     unnamed: list[runwords.Unnamed]  # the lines that do not name the axis and the words they may add
     named_edits: list[int]  # by line: named words that change
     edits_cum: list[int]  # cumulative sums of named_edits, from 0
@@ -723,19 +711,20 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         # a word within half an output step of its value keeps its text
         changed = has & ~(np.abs(v - ov) < _HALF[np.minimum(dec, len(_HALF) - 1)])
         sel = np.flatnonzero(changed)
-        nums = block.cols[_NUM[k]]
-        if len(sel):
-            col = np.array(nums, dtype=object)
+        if len(sel):  # the new number texts; "" where the line's own stays
+            col = np.full(n, "", dtype=object)
             col[idx[sel]] = numfmt.fmt_all(v[sel].tolist(), dout[sel].tolist(), "")
             nums = col.tolist()
             named[idx[sel]] += 1
+        else:
+            nums = [""] * n
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
         rows = idx[miss]
         em.unnamed.append(runwords.Unnamed(
             "XYZ"[k], rows.tolist(), tk[miss].tolist(), vm.tolist(), dec[miss].tolist(),
-            block.last[k][rows].tolist(), (nums, block.has_l[k], block.lines)))
+            block.last[k][rows].tolist(), (nums, block.ovl[k], block.has_l[k], block.lines)))
     em.named_edits = named.tolist()
     em.edits_cum = np.concatenate([[0], np.cumsum(named)]).tolist()
     em.changed_cum = np.concatenate([[0], np.cumsum(named > 0)]).tolist()
@@ -748,16 +737,15 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     blk = run.block
     y = run.a + j
     motion, feed = _modal_at(run, y)
-    if blk.gword[y]:
+    if blk.motion_l[y] >= 0:
         motion = blk.code(y)
     elif motion is None:  # a run's first line names its motion when none is modal
         raise AssertionError(f"line {run.line(j)} of a run without a motion")
-    f = blk.cols[_F][y]
     if q0 is None:
         q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
-    mv = RunMove(run, run.line(j), motion, q0, q1, float(f) if f else feed)
+    mv = RunMove(run, run.line(j), motion, q0, q1, blk.f_value[y] if blk.f_has[y] else feed)
     mv.path = run.path(j)
     if run.rot is not None:
         mv.rotary = run.rot[j]
@@ -797,7 +785,7 @@ def _motion_row(corrector: Corrector, run: Run, T: FloatArray, write: Write, hin
     f = s
     while f < b and blk.neutral[f]:
         f += 1
-    if f == b or blk.gword[f] or corrector.emitted_motion == _modal_at(run, f)[0]:
+    if f == b or blk.motion_l[f] >= 0 or corrector.emitted_motion == _modal_at(run, f)[0]:
         return s
     if f > s:
         write("".join(blk.lines[s:f]))
@@ -899,7 +887,7 @@ def _added_words(st: _Stretch, k: int, qk: float) -> float:
     qk = unnamed.add((s, b, k), (unit, sk, emit.HALF_UNIT[run.decimals]), qk, st.add_col, st.want)
     e = run.block.last_moving[b - 1]  # the last line that moves
     if e >= s and unnamed.has[e]:
-        qk = float(unnamed.nums[e]) * unit + sk
+        qk = unnamed.written(e) * unit + sk
     return qk
 
 
@@ -925,7 +913,6 @@ def _write_stretch(corrector: Corrector, st: _Stretch, stop: int, arc_edit: dict
     """Write lines ``s:stop`` of the stretch, its words as prepared, and count them."""
     run, em, s, add_col = st.run, st.em, st.s, st.add_col
     blk, a = run.block, run.a
-    cols, num_cols = blk.cols, em.nums
     rep = corrector.report
     c = stop - s
     rows_added = newly_changed = arc_words = 0
@@ -934,9 +921,9 @@ def _write_stretch(corrector: Corrector, st: _Stretch, stop: int, arc_edit: dict
         if txt:
             rows_added += 1
             newly_changed += named[s + col_i] == 0
-    centre_i, centre_j = cols[9][s:stop], cols[11][s:stop]
+    centre_i = centre_j = [""] * c  # the new I and J number texts ("": the line's own stays)
     if arc_edit:
-        centre_i, centre_j = list(centre_i), list(centre_j)
+        centre_i, centre_j = [""] * c, [""] * c
         for y, (ti, tj, count) in arc_edit.items():
             centre_i[y - s], centre_j[y - s] = ti, tj
             arc_words += count
@@ -950,23 +937,19 @@ def _write_stretch(corrector: Corrector, st: _Stretch, stop: int, arc_edit: dict
         rep.moves -= bisect_left(run.inert, stop - a) - bisect_left(run.inert, s - a)
     i = blk.last_g[stop - 1]
     corrector.emitted_motion = blk.code(i) if i >= a else run.motion0
-    text = "\n".join(map("".join, zip(cols[_HEAD][s:stop], cols[2][s:stop], num_cols[0][s:stop], cols[4][s:stop],
-                                      num_cols[1][s:stop], cols[6][s:stop], num_cols[2][s:stop], add_col[:c],
-                                      cols[8][s:stop], centre_i, cols[10][s:stop], centre_j,
-                                      cols[_REST][s:stop], strict=True)))
-    write(text + "\n" if blk.lines[stop - 1].endswith("\n") else text)
+    write(runwords.join_rows(blk.lines, (s, stop), blk.at, em.nums, add_col, (centre_i, centre_j)))
 
 
 def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: int, S: list[float],
                E: list[float], named_edits: int) -> tuple[str, str, int] | None:
     """The centre words of the run's arc on block line ``y`` from S to E (as written):
-    ``(I text, J text, words changed)``, or None when its hint does not hold there."""
+    ``(new I number, new J number, words changed)`` ("": the line's own stays), or None
+    when its hint does not hold there."""
     blk = run.block
     j = y - run.a
     hint = hints[run.trow + j]
     centre, cw = run.arcs[j]
     budget = corrector.opt.tolerance_mm * FIT_BUDGET
-    ti, tj = blk.cols[9][y], blk.cols[11][y]
     unit = run.unit
     base = (run.shift[0], run.shift[1]) if run.arc_absolute else (S[0], S[1])
     if not named_edits:  # unchanged end words: the input's own arc words stay if they still pass
@@ -974,18 +957,19 @@ def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: 
         c = (base[0] + blk.ov[3][y] * unit, base[1] + blk.ov[4][y] * unit)
         if hint.keep(view, S, E, c, budget) is None:
             return None
-        return ti, tj, 0
+        return "", "", 0
     w = hint.words(S, E, _XY, cw, run.decimals, unit, base, budget)
     if w is None:
         return None
     w1, w2 = w[0], w[1]
     count = 0
-    if ti:
+    ti = tj = ""
+    if blk.has_l[3][y]:
         if blk.ovl[3][y] != w1:
             ti, count = emit.fmt(w1, run.decimals), count + 1
     elif w1 != 0.0 or run.arc_absolute:
         return None  # a centre word to add: the general emitter places it
-    if tj:
+    if blk.has_l[4][y]:
         if blk.ovl[4][y] != w2:
             tj, count = emit.fmt(w2, run.decimals), count + 1
     elif w2 != 0.0 or run.arc_absolute:
@@ -1009,7 +993,7 @@ def _modal_at(run: Run, x: int) -> tuple[int | None, float]:
         return run.motion0, run.feed0
     g, f = blk.last_g[x - 1], blk.last_f[x - 1]
     return (blk.code(g) if g >= run.a else run.motion0,
-            float(blk.cols[_F][f]) if f >= run.a else run.feed0)
+            blk.f_value[f] if f >= run.a else run.feed0)
 
 
 def split_run(run: Run, rows: list[int]) -> Iterator[Run | tuple[int, RunMove]]:

@@ -726,15 +726,17 @@ class _LineRows(LineReader[_Record]):
         rotary words, its N word its own, no comment; a line that moves nothing has none.
         A head without an N word is looked up among those met before (its keys' row of
         :attr:`_head_table`), the others' keys found line by line."""
-        heads = blk.cols[0]
-        hs: list[str] = []
+        lines, head_end = blk.lines, blk.at[0]
+        hs: list[str] = []  # each line's head (N, G and G43 H words); "" where it moves nothing
         for a, b in spans:
-            hs += heads[a:b]
+            hs += map(str.__getitem__, lines[a:b], map(slice, repeat(0), head_end[a:b]))
+        for k in np.flatnonzero(blk.neutral[src]).tolist():
+            hs[k] = ""
         ids = self._head_ids
         found = np.fromiter(map(ids.get, hs, repeat(-1)), dtype=np.int64, count=len(hs))
         own: dict[int, tuple[int, int, int]] = {}  # rows whose keys are their line's own
         if blk.rotary is not None:  # a line naming a rotary axis: its whole skeleton
-            named = np.zeros(len(heads), dtype=bool)
+            named = np.zeros(len(lines), dtype=bool)
             for _letter, has, _val in blk.rotary:
                 named |= np.array(has, dtype=bool)
             for k in np.flatnonzero(named[src]).tolist():

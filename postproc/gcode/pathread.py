@@ -345,10 +345,7 @@ class Sampler(LineReader[tuple[int, Move, "str | None"]]):
         named = last_g >= np.repeat([r.a for r in runs], lengths)
         rapid = np.repeat([r.motion0 == RAPID for r in runs], lengths)
         if named.any():
-            at = np.flatnonzero(named)
-            lines, which = np.unique(last_g[at], return_inverse=True)
-            gword = blk.gword
-            rapid[at] = np.array([gword[g][-1:] == "0" for g in lines.tolist()], dtype=bool)[which]  # G0, G00
+            rapid[named] = blk.motion[last_g[named]] == 0  # G0, G00
         lineno = np.concatenate([r.linenos() for r in runs])  # (an expanded program's: their source lines)
         tool = np.repeat(np.array([r.r for r in runs], dtype=float), lengths, axis=0)
         n = np.ones(len(idx), dtype=np.int64)

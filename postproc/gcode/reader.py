@@ -184,7 +184,7 @@ class LineReader(Generic[E]):
         # a line naming its own motion word may start a run whatever the modal motion
         # (a run starts at a line that moves: one that moves nothing is the interpreter's)
         if not block.neutral[i] and (self.run_ok or (not interp.ended and bulk.prime_shift(interp)
-                                                     and bulk.state_allows(interp, bool(block.gword[i])))):
+                                                     and bulk.state_allows(interp, block.motion_l[i] >= 0))):
             dec = self.dec_in if interp.state.inch else self.dec_mm
             run = bulk.read_run(interp, block, i, b, here, dec)
             if run is not None:

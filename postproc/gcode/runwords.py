@@ -1,4 +1,5 @@
-"""The words the bulk writer adds to run lines for an axis they do not name.
+"""The run writer's loops: the words it adds to run lines for an axis they do not name,
+and the lines rewritten.
 
 A line that does not name an axis keeps the position the line before reached; where the
 corrected position differs from it by half an output step or more, a word is added, and
@@ -6,7 +7,9 @@ the position is then the one that word reaches. Whether a word is added depends 
 position reached before it, so the lines are decided in order, one axis at a time
 (:meth:`Unnamed.add`); the values of the words that may be added are made for the whole
 block beforehand (:func:`postproc.gcode.bulk.prepare_emission`), the text of each only
-where it is added.
+where it is added. :func:`join_rows` then writes the lines: each line's own text with
+the numbers that change and the words added put in at their offsets
+(:mod:`postproc.gcode.plainscan`), every other byte as it was.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 It imports nothing of the package but :mod:`postproc.gcode.numfmt`, compiled with it.
@@ -24,8 +27,9 @@ class Unnamed:
     """One axis of a block (``letter``): its lines that do not name it (inert ones aside),
     each with the corrected target, the value and decimals of the word that would be
     added, and the last line at or before it that names the axis; and by line of the
-    block, the number text of the axis's word as written (``nums``), whether the line
-    names it (``has``) and the line itself (``lines``)."""
+    block, the number text of the axis's word where it is written anew (``nums``; ""
+    where the line keeps its own), the value of the line's own word (``own``), whether
+    the line names it (``has``) and the line itself (``lines``)."""
 
     letter: str
     rows: list[int]  # the lines that do not name the axis, increasing
@@ -34,14 +38,22 @@ class Unnamed:
     decimals: list[int]  # the decimals it would be written with
     last: list[int]  # the last line at or before each that names the axis (-1: none)
     nums: list[str]
+    own: list[float]
     has: list[bool]
     lines: list[str]
 
     def __init__(self, letter: str, rows: list[int], target: list[float], value: list[float], decimals: list[int],
-                 last: list[int], named: tuple[list[str], list[bool], list[str]]) -> None:
+                 last: list[int], named: tuple[list[str], list[float], list[bool], list[str]]) -> None:
         self.letter, self.rows, self.target, self.value, self.decimals, self.last = (letter, rows, target, value,
                                                                                       decimals, last)
-        self.nums, self.has, self.lines = named
+        self.nums, self.own, self.has, self.lines = named
+
+    def written(self, y: int) -> float:
+        """The value of line ``y``'s word on the axis as written (program units):
+        ``float`` of its new text, or its own value (the scanner's, ``float`` of its
+        text: either is the value the controller reads, correctly rounded)."""
+        t = self.nums[y]
+        return float(t) if t else self.own[y]
 
     def add(self, span: tuple[int, int, int], scale: tuple[float, float, float], qk: float,
             add_col: list[str], want: dict[int, list[float]]) -> float:
@@ -52,10 +64,10 @@ class Unnamed:
         shift on the axis and half an output step."""
         s, b, k = span
         unit, sk = scale[0], scale[1]
-        nums, has = self.nums, self.has
+        has = self.has
         for y, w in want.items():
             if has[y]:
-                w[k] = float(nums[y]) * unit + sk
+                w[k] = self.written(y) * unit + sk
         miss = self.rows
         lo, hi = bisect_left(miss, s), bisect_left(miss, b)
         if lo < hi:
@@ -66,8 +78,8 @@ class Unnamed:
                 add_col: list[str], want: dict[int, list[float]], k: int) -> float:
         """Rows ``lo:hi`` of :attr:`rows` in order (see :meth:`add`); the position after them."""
         unit, sk, hd = scale
-        miss, ts, vs, decs, lasts, nums, lines = (self.rows, self.target, self.value, self.decimals, self.last,
-                                                  self.nums, self.lines)
+        miss, ts, vs, decs, lasts, lines = (self.rows, self.target, self.value, self.decimals, self.last,
+                                            self.lines)
         letter = self.letter
         check_want = len(want) > 0
         named = -2  # the last line that names the axis, of the row before (none yet)
@@ -78,7 +90,7 @@ class Unnamed:
                 if p >= s:
                     # the position the line's own word reached (float(text) == the value
                     # it was written from, correctly rounded)
-                    qk = float(nums[p]) * unit + sk
+                    qk = self.written(p) * unit + sk
             if qk != qk:
                 continue  # never positioned: nothing to compare with, no word
             i = miss[j]
@@ -98,3 +110,52 @@ class Unnamed:
                 if wi is not None:
                     wi[k] = qk
         return qk
+
+
+def join_rows(lines: list[str], span: tuple[int, int], at: list[list[int]], nums: list[list[str]],
+              added: list[str], centres: tuple[list[str], list[str]]) -> str:
+    """Lines ``s:stop`` (``span``) of ``lines`` as written: each line's own text, line
+    ending included, with the number of X, Y and Z replaced where ``nums[k][y]`` is a
+    text ("": the line's own stays), the words ``added[y - s]`` put in after Z's place,
+    and the number of I and J replaced where ``centres[0 or 1][y - s]`` is a text;
+    ``at``: the offsets of :class:`postproc.gcode.plainscan.Pieces`."""
+    s, stop = span
+    out: list[str] = []
+    nx, ny, nz = nums[0], nums[1], nums[2]
+    ci, cj = centres
+    xs, xe, ys, ye, zs, ze = at[1], at[2], at[3], at[4], at[5], at[6]
+    i_s, i_e, js, je = at[7], at[8], at[9], at[10]
+    for y in range(s, stop):
+        line = lines[y]
+        i = y - s
+        tx, ty, tz, add, ti, tj = nx[y], ny[y], nz[y], added[i], ci[i], cj[i]
+        if not (tx or ty or tz or add or ti or tj):
+            out.append(line)
+            continue
+        p = 0
+        if tx:
+            out.append(line[p:xs[y]])
+            out.append(tx)
+            p = xe[y]
+        if ty:
+            out.append(line[p:ys[y]])
+            out.append(ty)
+            p = ye[y]
+        if tz:
+            out.append(line[p:zs[y]])
+            out.append(tz)
+            p = ze[y]
+        if add:
+            out.append(line[p:ze[y]])
+            out.append(add)
+            p = ze[y]
+        if ti:
+            out.append(line[p:i_s[y]])
+            out.append(ti)
+            p = i_e[y]
+        if tj:
+            out.append(line[p:js[y]])
+            out.append(tj)
+            p = je[y]
+        out.append(line[p:])
+    return "".join(out)
