@@ -27,6 +27,7 @@ COMPILED = [
     "postproc/gcode/plainscan.py",
     "postproc/gcode/runwords.py",
     "postproc/gcode/fitcore.py",
+    "postproc/gcode/hintcore.py",
 ]
 
 

@@ -9,7 +9,8 @@ import math
 from postproc.gcode import emit
 from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
-from postproc.gcode.vplan import _ORDER, TWO_PI
+from postproc.gcode.hintcore import ORDER as _ORDER
+from postproc.gcode.vplan import TWO_PI
 
 
 def within_controller_limits(S, E, centre, axes, clockwise):

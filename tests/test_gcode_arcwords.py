@@ -38,7 +38,8 @@ def _case(rng, kind):
     r = float(rng.choice([0.002, 0.05, 0.5, 4.0, 40.0, 700.0]))
     if kind == "small":  # about the controllers' smallest radius
         r = vplan.MIN_ARC_RADIUS_MM * float(rng.uniform(0.9, 1.6))
-    cx, cy = rng.uniform(-300, 300, 2)
+    # Python floats throughout, as the planner and the writers ask (a numpy float rounds as numpy does)
+    cx, cy = (float(v) for v in rng.uniform(-300, 300, 2))
     a0 = float(rng.uniform(-math.pi, math.pi))
     sw = float(rng.choice([1e-4, 0.02, 0.3, 1.5, 3.0, 6.0]))
     if r > 100:
@@ -67,7 +68,7 @@ def _case(rng, kind):
         t = (cx - m1) * n1 + (cy - m2) * n2
         cx, cy = m1 + t * n1, m2 + t * n2
     noise = float(rng.choice([0.0, 1e-6, 1e-4, step]))
-    c1, c2 = cx + rng.normal(0, noise + 1e-12), cy + rng.normal(0, noise + 1e-12)
+    c1, c2 = cx + float(rng.normal(0, noise + 1e-12)), cy + float(rng.normal(0, noise + 1e-12))
     rho = math.hypot(S[0] - c1, S[1] - c2)
     worst = float(rng.uniform(0, budget))
     if kind == "budget":  # the bound about the budget
@@ -183,73 +184,51 @@ def _bits(v):
 
 
 @pytest.mark.parametrize("seed", [31, 32])
-def test_words_many_is_words_bit_for_bit_in_every_plane_and_leaves_the_same_answer_for_the_writer(seed, monkeypatch):
-    # the planner's guess asks every arc of a chunk at once (vplan.words_many); each answer
-    # must be the per-arc ArcHint.words bit for bit, and the writer asking again with the
-    # same ends must get it from the hint without computing it
+def test_the_planners_guess_is_the_writers_answer_in_every_plane(seed, monkeypatch):
+    # the planner asks every arc's hint for words at its corrected ends rounded as words
+    # are (Planner._hints_failing_rounded); the arcs it finds failing are those whose
+    # words are None there, and the writer asking again with the same ends gets the
+    # hint's answer without computing it
+    from types import SimpleNamespace
+
+    from postproc.gcode.planner import Planner
+
     rng = np.random.default_rng(seed)
-    cases = []
+    groups: dict[tuple[int, float], list] = {}
     for plane in (170, 180, 190):
         for case in _cases(seed * 7 + plane, 700):
-            hint, S, E, cw, d, unit, _absolute, _shift, base, budget, _keep, _g, axes = _in_plane(case, plane)
+            hint, _S, _E, cw, d, unit, absolute, shift, _base, budget, _keep, _g, axes = _in_plane(case, plane)
             if rng.integers(8) == 0:  # the fitted centre a step off: the lattice around another candidate
                 hint.c1 += float(rng.normal(0, 10.0 ** -d * unit))
-            # Python floats, as the planner and the writer ask (round of a numpy float is numpy's)
+            if not all(map(math.isfinite, hint.ends)):
+                continue
             hint = vplan.ArcHint(float(hint.c1), float(hint.c2), float(hint.rho), float(hint.worst),
                                  float(hint.nsweep), tuple(float(v) for v in hint.ends), -1, float(hint.mismatch))
-            cases.append((hint, [float(v) for v in S], [float(v) for v in E], axes, cw, d, unit,
-                          (float(base[0]), float(base[1])), budget))
-    refs = [vplan.ArcHint(h.c1, h.c2, h.rho, h.worst, h.nsweep, h.ends, -1, h.mismatch).words(*rest)
-            for h, *rest in cases]
-    got: dict[int, object] = {}
-    for budget in {c[8] for c in cases}:  # words_many takes one budget for all
-        idx = [k for k, c in enumerate(cases) if c[8] == budget]
-        mine = [cases[k] for k in idx]
-        answers = vplan.words_many([c[0] for c in mine], vplan.WrittenArcs(
-            np.array([c[1] for c in mine]), np.array([c[2] for c in mine]), np.array([c[3] for c in mine]),
-            [c[4] for c in mine], [c[5] for c in mine], np.array([c[6] for c in mine]),
-            np.array([c[7] for c in mine])), budget)
-        got.update(zip(idx, answers, strict=True))
-    lattice = zero = taken = 0
-    for k, (c, ref) in enumerate(zip(cases, refs, strict=True)):
-        g = got[k]
-        assert _bits(g) == _bits(ref), (c, g, ref)
-        taken += g is not None
-        if g is not None:
-            h, S, E, (a1, a2, _an), _cw, d, unit, base, _b = c
-            L = math.hypot(E[a1] - S[a1], E[a2] - S[a2])
-            m1, m2 = 0.5 * (S[a1] + E[a1]), 0.5 * (S[a2] + E[a2])
-            n1, n2 = -(E[a2] - S[a2]) / L, (E[a1] - S[a1]) / L
-            t = (h.c1 - m1) * n1 + (h.c2 - m2) * n2
-            lattice += g[0] != round((m1 + t * n1 - base[0]) / unit, d) + 0.0
-            zero += g[0] == 0.0 or g[1] == 0.0
-    assert taken > 300
-    assert lattice > 20  # centres found in the lattice, not at the first candidate
-    assert zero > 5
-
-    # the writer's question, same ends: the hint's stored answer, nothing computed again
-    # (a NaN end is never the same key: not equal to itself)
-    def computed(*_a):
-        raise AssertionError("asked again")
-
-    monkeypatch.setattr(vplan.ArcHint, "_words", computed)
-    for c, ref in zip(cases, refs, strict=True):
-        if not all(map(math.isfinite, c[1] + c[2])):
-            continue
-        h, S, E, axes, cw, d, unit, base, budget = c
-        assert _bits(h.words(S, E, tuple(axes), cw, d, unit, tuple(base), budget)) == _bits(ref)
-
-
-def test_round_many_is_pythons_round_near_every_half():
-    rng = np.random.default_rng(5)
-    for d in range(0, 7):
-        k = np.round(rng.normal(size=4000) * 10.0 ** rng.integers(0, 7, size=4000))
-        ties = (k + 0.5) / 10.0 ** d
-        x = np.concatenate([rng.normal(size=4000) * 300, ties, np.nextafter(ties, np.inf), np.nextafter(ties, -np.inf),
-                            -ties, [0.0, -0.0, -1e-9, math.inf, -math.inf, math.nan, 1e300, 2.0 ** 60 + 0.5]])
-        got = vplan.round_many(x, [d] * len(x))
-        ref = [round(v, d) for v in x.tolist()]
-        assert [_bits((v,)) for v in got.tolist()] == [_bits((v,)) for v in ref]
-    rows = rng.normal(size=(50, 9)) * 40
-    dd = rng.integers(0, 6, size=50)
-    assert vplan.round_many(rows, dd).tolist() == [[round(v, int(e)) for v in r] for r, e in zip(rows.tolist(), dd, strict=True)]
+            view = _View(Arc((0.0, 0.0, 0.0), plane, cw, 1, (-1, -1), -1), unit, absolute, tuple(shift))
+            groups.setdefault((d, budget), []).append((view, hint))
+    failing = answered = 0
+    for (d, budget), arcs in groups.items():
+        # the writer's question: the corrected ends rounded to d decimals, machine axes
+        asked = []
+        for view, hint in arcs:
+            axes = PLANES[view.arc.plane][0]
+            S, E = [0.0] * 3, [0.0] * 3
+            for k, a in enumerate(axes):
+                S[a] = round((hint.ends[k] - view.shift[a]) / view.unit, d) * view.unit + view.shift[a]
+                E[a] = round((hint.ends[3 + k] - view.shift[a]) / view.unit, d) * view.unit + view.shift[a]
+            base = (view.shift[axes[0]], view.shift[axes[1]]) if view.arc_absolute else (S[axes[0]], S[axes[1]])
+            fresh = vplan.ArcHint(hint.c1, hint.c2, hint.rho, hint.worst, hint.nsweep, hint.ends, -1, hint.mismatch)
+            asked.append((S, E, axes, view.arc.clockwise, d, view.unit, base, budget,
+                          fresh.words(S, E, axes, view.arc.clockwise, d, view.unit, base, budget)))
+        planner = SimpleNamespace(opt=SimpleNamespace(decimals=d))
+        got = Planner._hints_failing_rounded(planner, [(k, view, hint) for k, (view, hint) in enumerate(arcs)],
+                                             budget)
+        assert got == {k for k, q in enumerate(asked) if q[-1] is None}
+        failing += len(got)
+        answered += len(arcs) - len(got)
+        with monkeypatch.context() as m:
+            m.setattr(vplan.ArcHint, "_words", lambda *_a: pytest.fail("asked again"))
+            for (_view, hint), (*args, ref) in zip(arcs, asked, strict=True):
+                assert _bits(hint.words(*args)) == _bits(ref)
+    assert failing > 100
+    assert answered > 300

@@ -129,7 +129,7 @@ def _core() -> str:
     """Which of the G-code lane's hot modules run compiled (setup.py), for --version."""
     from importlib.util import find_spec
 
-    names = ("scanner", "plainscan", "numfmt", "runwords", "fitcore")
+    names = ("scanner", "plainscan", "numfmt", "runwords", "fitcore", "hintcore")
     done = [n for n in names if not (getattr(find_spec(f"postproc.gcode.{n}"), "origin", "") or "").endswith(".py")]
     return f"compiled core: {', '.join(done)}" if done else "compiled core: none (pure Python)"
 

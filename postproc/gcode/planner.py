@@ -39,7 +39,7 @@ from postproc.gcode.geometry import (
     arc_params,
     arc_points,
 )
-from postproc.gcode.moves import Arc, Kind
+from postproc.gcode.moves import Kind
 from postproc.gcode.options import CorrectOptions, CorrectReport
 from postproc.gcode.places import file_of, pick
 from postproc.gcode.sampling import (
@@ -315,30 +315,27 @@ class Planner(EngineCalls):
         likely fails when written too (an arc whose centre no rounded words put on the
         bisector of its ends within half a step, e.g. an end's coordinate one odd step
         beyond the other's across a short chord). A guess for planning only: what is
-        written is settled by the hint or the plan either way. All the arcs are asked at
-        once (:func:`vplan.words_many`); the writer, asking with the same ends, gets the
-        answers given here."""
-        arcs = [(i, mv, hint) for i, mv, hint in arcs if mv.arc is not None]
-        if not arcs:
-            return set()
-        axes = np.array([PLANES[cast("Arc", mv.arc).plane][0] for _i, mv, _h in arcs], dtype=int)
-        unit = np.array([mv.unit for _i, mv, _h in arcs], dtype=float)
-        d = [_unit_decimals(self.opt, u) for u in unit.tolist()]
-        shift = np.array([mv.shift for _i, mv, _h in arcs], dtype=float)
-        ends = np.array([hint.ends for _i, _mv, hint in arcs], dtype=float)
-        rows = np.arange(len(arcs))[:, None]
-        sh = shift[rows, axes]  # each arc's shift in its plane's order, as its ends
-        u = unit[:, None]
-        # the corrected ends rounded as words are: round((q - shift) / unit, d) * unit + shift
-        S, E = np.empty_like(sh), np.empty_like(sh)
-        S[rows, axes] = vplan.round_many((ends[:, :3] - sh) / u, d) * u + sh
-        E[rows, axes] = vplan.round_many((ends[:, 3:] - sh) / u, d) * u + sh
-        absolute = np.array([mv.arc_absolute for _i, mv, _h in arcs], dtype=bool)[:, None]
-        base = np.where(absolute, sh[:, :2], S[rows, axes[:, :2]])
-        clockwise = [cast("Arc", mv.arc).clockwise for _i, mv, _h in arcs]
-        got = vplan.words_many([h for _i, _mv, h in arcs], vplan.WrittenArcs(S, E, axes, clockwise, d, unit, base),
-                               budget)
-        return {i for (i, _mv, _h), w in zip(arcs, got, strict=True) if w is None}
+        written is settled by the hint or the plan either way. The writer, asking with
+        the same ends, gets the answer given here (:meth:`ArcHint.words`)."""
+        failing: set[int] = set()
+        for i, mv, hint in arcs:
+            arc = mv.arc
+            if arc is None:
+                continue
+            axes = PLANES[arc.plane][0]
+            unit, shift, ends = mv.unit, mv.shift, hint.ends
+            d = _unit_decimals(self.opt, unit)
+            # the corrected ends rounded as words are: round((q - shift) / unit, d) * unit + shift
+            S, E = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+            for k in range(3):
+                a, sh = axes[k], shift[axes[k]]
+                S[a] = round((ends[k] - sh) / unit, d) * unit + sh
+                E[a] = round((ends[3 + k] - sh) / unit, d) * unit + sh
+            a1, a2 = axes[0], axes[1]
+            base = (shift[a1], shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+            if hint.words(S, E, axes, arc.clockwise, d, unit, base, budget) is None:
+                failing.add(i)
+        return failing
 
     def _plan_moves(self, planned: Sequence[tuple[int, PlanMove | _RunLine]], tab: Table,
                     plans: dict[int, Plan]) -> None:

@@ -47,7 +47,7 @@ from typing import (
 import numpy as np
 import numpy.typing as npt
 
-from postproc.gcode import emit
+from postproc.gcode import emit, hintcore
 from postproc.gcode.geometry import ArcColumns, arcs_points
 from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
@@ -72,9 +72,6 @@ CENTRE_ITERATIONS = 8
 # The input's own arc words are kept when their radius mismatch is at most the input's
 # own (which its controller accepts) plus this (float noise of the two readings).
 KEEP_MISMATCH_SLACK_MM = 1e-9
-# Rounded centre candidates tried on each side of the centre moved onto the bisector of
-# the written end points (per axis), as the general path does.
-LATTICE = 3
 
 # -- what the planner hands the emitter ------------------------------------------------
 #: A step of a general plan: a take-up to a point (the corrected point before a reversal,
@@ -144,9 +141,6 @@ Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
 Curvature: TypeAlias = Callable[[IntArray], FloatArray]
 Ends: TypeAlias = tuple[float, float, float, float, float, float]
 #: the arguments of :meth:`ArcHint.words`: (S, E, axes, clockwise, d, unit, base, budget)
-WordsArgs: TypeAlias = tuple[Sequence[float], Sequence[float], tuple[int, int, int], bool, int, float,
-                             tuple[float, float], float]
-
 
 @dataclass(frozen=True, eq=False)
 class MoveEnds:
@@ -182,9 +176,12 @@ class ArcHint:
 
     def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
                  row: int, mismatch: float = 0.0) -> None:
-        self.c1, self.c2, self.rho, self.worst, self.nsweep = c1, c2, rho, worst, nsweep
+        # Python floats (a numpy float would round as numpy does: hintcore's arithmetic is Python's)
+        self.c1, self.c2, self.rho, self.worst, self.nsweep = float(c1), float(c2), float(rho), float(worst), float(nsweep)
         self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
-        self.ends = ends  # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
+        # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
+        self.ends: Ends = (float(ends[0]), float(ends[1]), float(ends[2]), float(ends[3]), float(ends[4]),
+                           float(ends[5]))
         self.row = row  # the arc's row of the table (its general plan's, when the hint does not do)
         # the planner expects the hint may fail where written (its general plan is made with
         # the chunk): the run writer ends a stretch at this arc
@@ -221,7 +218,7 @@ class ArcHint:
         arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
         :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
         limits decide)."""
-        # the planner's guess (Corrector._hints_failing_rounded, by words_many) and the writer usually ask
+        # the planner's guess (Planner._hints_failing_rounded) and the writer usually ask
         # with the same ends: the second time is the first one's answer
         key = (tuple(S), tuple(E), axes, clockwise, d, unit, base, budget)
         last = self._last
@@ -231,62 +228,14 @@ class ArcHint:
         self._last = (key, result)
         return result
 
-    def remember(self, args: WordsArgs, result: tuple[float, float, float, float] | None) -> None:
-        """Keep ``result`` as the answer of :meth:`words` to ``args``, its arguments
-        ``(S, E, axes, clockwise, d, unit, base, budget)`` (found by :func:`words_many`)."""
-        S, E, axes, clockwise, d, unit, base, budget = args
-        self._last = ((tuple(S), tuple(E), axes, clockwise, d, unit, base, budget), result)
-
     def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
                unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
-        """:meth:`words`, computed."""
+        """:meth:`words`, computed (:func:`postproc.gcode.hintcore.centre_words`)."""
         a1, a2, an = axes
-        s1, s2, sn = S[a1], S[a2], S[an]
-        e1, e2, en = E[a1], E[a2], E[an]
-        dx, dy = e1 - s1, e2 - s2
-        hyp = math.hypot
-        L = hyp(dx, dy)
-        if L == 0.0:
-            return None
-        m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
-        n1, n2 = -dy / L, dx / L
-        t = (self.c1 - m1) * n1 + (self.c2 - m2) * n2
-        b1, b2 = base
-        step = 10.0 ** (-d)
-        agree = 0.5 * step * unit
-        v1 = round((m1 + t * n1 - b1) / unit, d)
-        v2 = round((m2 + t * n2 - b2) / unit, d)
-        # the first candidate, round(v + 0 * step, d), is v + 0.0 (v is rounded already)
-        w1, w2 = v1 + 0.0, v2 + 0.0
-        C1, C2 = b1 + w1 * unit, b2 + w2 * unit
-        mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
-        if not mism <= agree:
-            for k1, k2 in _ORDER[1:]:
-                w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
-                C1, C2 = b1 + w1 * unit, b2 + w2 * unit
-                mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
-                if mism <= agree:
-                    break
-            else:
-                return None
-        got = self._bound(clockwise, (s1, s2, sn, e1, e2, en), C1, C2)
-        if got is None:
-            return None
-        bound, rs, re, turn = got
-        if not bound + mism <= budget:
-            return None
-        # the controller limits around the centre of the words as written (float of the
-        # text: -0.0 reads back 0.0, else the same centre, radii and sweep); S and E
-        # differ in the plane (L > 0)
-        if w1 == 0.0 or w2 == 0.0:
-            w1, w2 = w1 + 0.0, w2 + 0.0
-            c1, c2 = b1 + w1 * unit, b2 + w2 * unit
-            rs, re = hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)
-            t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
-            turn = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
-        if min(rs, re) < MIN_ARC_RADIUS_MM or not turn >= MIN_ARC_SWEEP_RAD:
-            return None
-        return w1, w2, mism, bound
+        return hintcore.centre_words((self.c1, self.c2, self.rho, self.worst, self.nsweep), self.ends, clockwise,
+                                     (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]),
+                                      float(E[an])), (d, float(unit), float(base[0]), float(base[1])),
+                                     (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
 
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
              budget: float) -> ArcSpec | None:
@@ -302,7 +251,8 @@ class ArcHint:
         mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
         if not mism <= self.mismatch + KEEP_MISMATCH_SLACK_MM:
             return None
-        got = self._bound(arc.clockwise, (S[a1], S[a2], S[an], E[a1], E[a2], E[an]), C1, C2)
+        got = self._bound(arc.clockwise, (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]),
+                                          float(E[an])), C1, C2)
         if got is None or not got[0] <= budget:
             return None
         return {"form": "keep", "turns": 1}
@@ -311,279 +261,11 @@ class ArcHint:
                ) -> tuple[float, float, float, float] | None:
         """How far the arc a controller draws from S to E (``written``: (s1, s2, sn, e1,
         e2, en), the plane coordinates and the normal one of each, as :attr:`ends`) around
-        (C1, C2) (radius from the start to the end radius, the normal axis linear) can lie
-        from the corrected samples: the ideal circle's deviation plus how far the drawn arc
-        lies from that circle anywhere. Returned with the start and end radii and the turn
-        from S to E (in the arc's sense, [0, 2 pi)). None when it does not turn as the
-        nominal arc does (one turn)."""
-        s1, s2, sn, e1, e2, en = written
-        hyp = math.hypot
-        rs, re = hyp(s1 - C1, s2 - C2), hyp(e1 - C1, e2 - C2)
-        th0, th1 = math.atan2(s2 - C2, s1 - C1), math.atan2(e2 - C2, e1 - C1)
-        turn = (th0 - th1) % TWO_PI if clockwise else (th1 - th0) % TWO_PI
-        sweep = -turn if clockwise else turn
-        if sweep == 0.0 or abs(sweep - self.nsweep) > math.pi / 2:
-            return None
-        moved = hyp(C1 - self.c1, C2 - self.c2)
-        u1, u2, un, x1, x2, xn = self.ends
-        shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - x1, e2 - x2))
-        # in the plane: the samples' distance from the ideal circle, plus how far the
-        # written circle (centre C, radius from rs to re) lies from it anywhere
-        rho = self.rho
-        bound = self.worst + moved + max(abs(rs - rho), abs(re - rho))
-        # along the normal axis: the written ends, and the shift of each sample's angle
-        # (centre and ends moved) along the helix
-        r_min = min(rs, re, rho)
-        if not r_min > 0.0:
-            return None
-        dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
-        return bound + max(abs(sn - un), abs(en - xn)) + abs(en - sn) * dfrac, rs, re, turn
-
-
-# lattice offsets (per axis, in units of the last decimal), nearest first
-_ORDER = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in range(-LATTICE, LATTICE + 1)),
-                      key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
-_ORDER_ARRAY = np.array(_ORDER, dtype=float)
-# lattice candidates :func:`words_many` tries at a time (most arcs that need the lattice
-# find their centre among the first few)
-LATTICE_BLOCK = 8
-
-
-def _map_floats(f: Callable[..., float], *cols: FloatArray) -> FloatArray:
-    """``f`` (a function of Python floats: math.hypot, math.atan2) on every element of ``cols``."""
-    return np.array(list(map(f, *(c.ravel().tolist() for c in cols))), dtype=float).reshape(cols[0].shape)
-
-
-def round_many(values: FloatArray, d: Sequence[int] | IntArray) -> FloatArray:
-    """``round(v, d)`` (Python's, correctly rounded) of every row of ``values`` (k,) or
-    (k, m), each row to its own ``d`` (0 to 15).
-
-    ``rint(v * 10**d) / 10**d``: the quotient of the integer and the exact power of ten
-    is the double nearest the decimal, as Python's is, so the two agree wherever the
-    integer does. The product is rounded once (half a unit in its last place, and the
-    fraction ``y - floor(y)`` is then exact or off by as little), so they agree unless
-    the product lies within a few units of its last place of a half: those values, and
-    any that is not finite or too large to have a fraction, are Python's own."""
-    values = np.asarray(values, dtype=float)
-    dd = np.broadcast_to(np.asarray(d, dtype=int).reshape(-1, *([1] * (values.ndim - 1))), values.shape)
-    p = 10.0 ** dd
-    with np.errstate(all="ignore"):
-        y = values * p
-        out = np.rint(y) / p
-        frac = y - np.floor(y)
-        near = ~(np.abs(frac - 0.5) > 1e-9 + 8.0 * np.spacing(np.abs(y))) | ~(np.abs(y) < 2.0 ** 51)
-    if near.any():
-        idx = np.flatnonzero(near.ravel())
-        flat = out.reshape(-1)
-        flat[idx] = list(map(round, values.ravel()[idx].tolist(), dd.ravel()[idx].tolist()))
-    return out
-
-
-@dataclass(frozen=True, eq=False)
-class WrittenArcs:
-    """Arcs as written, one row each, for :func:`words_many`: the ends ``S``, ``E`` (k, 3)
-    machine mm, ``axes`` (k, 3) the plane's two axes and its normal, ``clockwise`` (k,),
-    ``d`` (k,) the decimals of the words, ``unit`` (k,) mm per program unit, ``base``
-    (k, 2) what the centre words are relative to (machine mm)."""
-
-    S: FloatArray
-    E: FloatArray
-    axes: IntArray
-    clockwise: Sequence[bool]
-    d: Sequence[int]
-    unit: FloatArray
-    base: FloatArray
-
-
-def words_many(hints: Sequence[ArcHint], arcs: WrittenArcs, budget: float
-               ) -> list[tuple[float, float, float, float] | None]:
-    """:meth:`ArcHint.words` of many arcs at once (row k: ``hints[k].words(S[k], E[k],
-    axes[k], clockwise[k], d[k], unit[k], base[k], budget)`` of ``arcs``): the same
-    results, bit for bit, and each hint left with its answer as :meth:`ArcHint.words`
-    leaves it (the writer asking again with the same ends gets this answer).
-
-    The arithmetic of :meth:`ArcHint._words` and :meth:`ArcHint._bound` over arrays:
-    elementwise ``+ - * /``, ``abs`` and ``%`` (``np.mod`` is Python's floored
-    remainder) round as Python's floats do; ``math.hypot``, ``math.atan2`` and
-    ``round(x, d)`` (which numpy's own functions do not always match in the last bit)
-    are Python's, mapped over the rows. The lattice of rounded centres is searched for
-    all the arcs whose first centre misses the radius agreement at once, in the same
-    order. An arc with a value that is not finite, or whose lattice centre has a word
-    rounded to zero, is answered by :meth:`ArcHint.words` itself."""
-    n = len(hints)
-    out: list[tuple[float, float, float, float] | None] = [None] * n
-    if not n:
-        return out
-    g = _ArcRows.of(hints, arcs)
-    with np.errstate(all="ignore"):
-        c = _first_centres(g)
-        _search_lattice(g, c)
-        passes, finite, bound = _judge(g, c, budget)
-    # answered here: a chord of no length (None), else every value finite and, for a
-    # lattice centre, no word of zero (whose sign ArcHint._words settles)
-    here = (c.L == 0.0) | (finite & ~(c.lattice & ((c.w1 == 0.0) | (c.w2 == 0.0))))
-    passes &= c.L != 0.0
-    Sl, El, axl, cwl = arcs.S.tolist(), arcs.E.tolist(), arcs.axes.tolist(), g.cw.tolist()
-    ul, bl, d = arcs.unit.tolist(), arcs.base.tolist(), arcs.d
-    for k, (ok, p, wa, wb, mm_k, bd) in enumerate(zip(here.tolist(), passes.tolist(), c.w1.tolist(), c.w2.tolist(),
-                                                      c.mism.tolist(), bound.tolist(), strict=True)):
-        args = (Sl[k], El[k], tuple(axl[k]), cwl[k], d[k], ul[k], tuple(bl[k]), budget)
-        if ok:
-            got = (wa, wb, mm_k, bd) if p else None
-            hints[k].remember(args, got)
-        else:
-            got = hints[k].words(*args)
-        out[k] = got
-    return out
-
-
-@dataclass(frozen=True, eq=False)
-class _ArcRows:
-    """The columns :func:`words_many` computes with, one row per arc: the written ends in
-    the plane's order (``s1``, ``s2``, ``sn``, ``e1``, ``e2``, ``en``), the base of the
-    centre words (``B1``, ``B2``), the hint's circle (``H1``, ``H2``, ``RHO``, ``WORST``,
-    ``NSW``) and the corrected ends it was fitted between (``u1`` .. ``xn``), the sense
-    ``cw``, the decimals ``d``, ``unit``, the ``step`` of the last decimal and the radius
-    agreement ``agree`` (mm)."""
-
-    s1: FloatArray
-    s2: FloatArray
-    sn: FloatArray
-    e1: FloatArray
-    e2: FloatArray
-    en: FloatArray
-    B1: FloatArray
-    B2: FloatArray
-    H1: FloatArray
-    H2: FloatArray
-    RHO: FloatArray
-    WORST: FloatArray
-    NSW: FloatArray
-    u1: FloatArray
-    u2: FloatArray
-    un: FloatArray
-    x1: FloatArray
-    x2: FloatArray
-    xn: FloatArray
-    cw: BoolArray
-    d: Sequence[int]
-    unit: FloatArray
-    step: FloatArray
-    agree: FloatArray
-
-    @classmethod
-    def of(cls, hints: Sequence[ArcHint], arcs: WrittenArcs) -> _ArcRows:
-        S, E, axes, unit, base = arcs.S, arcs.E, arcs.axes, arcs.unit, arcs.base
-        rows = np.arange(len(hints))
-        s1, s2, sn = S[rows, axes[:, 0]], S[rows, axes[:, 1]], S[rows, axes[:, 2]]
-        e1, e2, en = E[rows, axes[:, 0]], E[rows, axes[:, 1]], E[rows, axes[:, 2]]
-        H1, H2, RHO, WORST, NSW = np.array([(h.c1, h.c2, h.rho, h.worst, h.nsweep) for h in hints], dtype=float).T
-        u1, u2, un, x1, x2, xn = np.array([h.ends for h in hints], dtype=float).T
-        cw = np.asarray(arcs.clockwise, dtype=bool)
-        step = np.array([10.0 ** (-k) for k in arcs.d])
-        agree = 0.5 * step * unit
-        return cls(s1, s2, sn, e1, e2, en, base[:, 0], base[:, 1], H1, H2, RHO, WORST, NSW, u1, u2, un, x1, x2, xn,
-                   cw, arcs.d, unit, step, agree)
-
-
-@dataclass(frozen=True, eq=False)
-class _Centres:
-    """The centre words :func:`words_many` takes for each arc, as they are found: the
-    chord's length ``L``, the first candidate (``v1``, ``v2``), the words taken (``w1``,
-    ``w2``; ``lattice``: found in the lattice) and their centre (``C1``, ``C2``), its
-    start and end radii and their mismatch; ``found``: the radii agree. The arrays are
-    filled in place by :func:`_search_lattice`."""
-
-    L: FloatArray
-    v1: FloatArray
-    v2: FloatArray
-    w1: FloatArray
-    w2: FloatArray
-    C1: FloatArray
-    C2: FloatArray
-    rs: FloatArray
-    re_: FloatArray
-    mism: FloatArray
-    found: BoolArray
-    lattice: BoolArray
-
-
-def _first_centres(g: _ArcRows) -> _Centres:
-    """The hint's centre moved onto the bisector of the written ends, its words rounded
-    (:meth:`ArcHint._words`' first candidate), for every arc."""
-    hyp = math.hypot
-    s1, s2, e1, e2, unit, d = g.s1, g.s2, g.e1, g.e2, g.unit, g.d
-    dx, dy = e1 - s1, e2 - s2
-    L = _map_floats(hyp, dx, dy)
-    Ls = np.where(L == 0.0, 1.0, L)
-    m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
-    n1, n2 = -dy / Ls, dx / Ls
-    t = (g.H1 - m1) * n1 + (g.H2 - m2) * n2
-    # v + 0.0: the first candidate of the lattice (v is rounded already; -0.0 is 0.0)
-    v1 = round_many((m1 + t * n1 - g.B1) / unit, d) + 0.0
-    v2 = round_many((m2 + t * n2 - g.B2) / unit, d) + 0.0
-    w1, w2 = v1.copy(), v2.copy()  # the centre words taken (the lattice's where it is searched)
-    C1, C2 = g.B1 + w1 * unit, g.B2 + w2 * unit
-    rs = _map_floats(hyp, s1 - C1, s2 - C2)
-    re_ = _map_floats(hyp, e1 - C1, e2 - C2)
-    mism = np.abs(rs - re_)
-    found = mism <= g.agree
-    lattice = np.zeros(len(L), dtype=bool)
-    return _Centres(L, v1, v2, w1, w2, C1, C2, rs, re_, mism, found, lattice)
-
-
-def _search_lattice(g: _ArcRows, c: _Centres) -> None:
-    """The lattice around (v1, v2), nearest first: the first centre whose radii agree
-    (asked a few candidates at a time, of the arcs still without one), written into ``c``."""
-    hyp = math.hypot
-    s1, s2, e1, e2, B1, B2, step, d, unit = g.s1, g.s2, g.e1, g.e2, g.B1, g.B2, g.step, g.d, g.unit
-    search = np.flatnonzero(~c.found & (c.L != 0.0))
-    for lo in range(1, len(_ORDER), LATTICE_BLOCK):
-        if not len(search):
-            break
-        k1, k2 = _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 0], _ORDER_ARRAY[lo:lo + LATTICE_BLOCK, 1]
-        st, dk, un_s = step[search][:, None], [d[i] for i in search.tolist()], unit[search][:, None]
-        c1w = round_many(c.v1[search][:, None] + k1 * st, dk)
-        c2w = round_many(c.v2[search][:, None] + k2 * st, dk)
-        cc1, cc2 = B1[search][:, None] + c1w * un_s, B2[search][:, None] + c2w * un_s
-        ss1, ss2, ee1, ee2 = s1[search][:, None], s2[search][:, None], e1[search][:, None], e2[search][:, None]
-        rs_c, re_c = _map_floats(hyp, ss1 - cc1, ss2 - cc2), _map_floats(hyp, ee1 - cc1, ee2 - cc2)
-        mm = np.abs(rs_c - re_c)
-        agrees = mm <= g.agree[search][:, None]
-        hit = agrees.any(axis=1)
-        pick = np.argmax(agrees, axis=1)[hit]
-        sel = search[hit]
-        c.w1[sel], c.w2[sel] = c1w[hit, pick], c2w[hit, pick]
-        c.C1[sel], c.C2[sel] = cc1[hit, pick], cc2[hit, pick]
-        c.rs[sel], c.re_[sel], c.mism[sel] = rs_c[hit, pick], re_c[hit, pick], mm[hit, pick]
-        c.found[sel] = True
-        c.lattice[sel] = True
-        search = search[~hit]
-
-
-def _judge(g: _ArcRows, c: _Centres, budget: float) -> tuple[BoolArray, BoolArray, FloatArray]:
-    """:meth:`ArcHint._bound` about each centre of ``c`` and the rest of
-    :meth:`ArcHint._words`' checks: ``(passes, finite, bound)``, whether each arc's words
-    pass, whether all its values are finite, and the bound."""
-    hyp, atan2 = math.hypot, math.atan2
-    s1, s2, sn, e1, e2, en, C1, C2, rs, re_ = g.s1, g.s2, g.sn, g.e1, g.e2, g.en, c.C1, c.C2, c.rs, c.re_
-    RHO, NSW = g.RHO, g.NSW
-    th0 = _map_floats(atan2, s2 - C2, s1 - C1)
-    th1 = _map_floats(atan2, e2 - C2, e1 - C1)
-    turn = np.where(g.cw, np.mod(th0 - th1, TWO_PI), np.mod(th1 - th0, TWO_PI))
-    sweep = np.where(g.cw, -turn, turn)
-    moved = _map_floats(hyp, C1 - g.H1, C2 - g.H2)
-    shift = np.maximum(_map_floats(hyp, s1 - g.u1, s2 - g.u2), _map_floats(hyp, e1 - g.x1, e2 - g.x2))
-    bound = g.WORST + moved + np.maximum(np.abs(rs - RHO), np.abs(re_ - RHO))
-    r_min = np.minimum(np.minimum(rs, re_), RHO)
-    dfrac = 3.0 * (moved + shift) / (r_min * np.abs(sweep))
-    bound = bound + np.maximum(np.abs(sn - g.un), np.abs(en - g.xn)) + np.abs(en - sn) * dfrac
-    finite = np.isfinite(np.stack([s1, s2, sn, e1, e2, en, g.B1, g.B2, g.unit, g.H1, g.H2, RHO, g.WORST, NSW, g.u1,
-                                   g.u2, g.un, g.x1, g.x2, g.xn, bound, c.mism])).all(axis=0)
-    passes = (c.found & (sweep != 0.0) & ~(np.abs(sweep - NSW) > math.pi / 2) & (r_min > 0.0)
-              & (bound + c.mism <= budget) & ~(np.minimum(rs, re_) < MIN_ARC_RADIUS_MM)
-              & (turn >= MIN_ARC_SWEEP_RAD))
-    return passes, finite, bound
+        (C1, C2) can lie from the corrected samples, with its start and end radii and
+        turn (:func:`postproc.gcode.hintcore.arc_bound`); None when it does not turn as
+        the nominal arc does."""
+        return hintcore.arc_bound((self.c1, self.c2, self.rho, self.worst, self.nsweep), self.ends, clockwise,
+                                  written, C1, C2)
 
 
 def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:

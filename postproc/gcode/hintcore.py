@@ -1,0 +1,131 @@
+"""The bulk planner's arc hint in plain floats: the centre words of an arc as written,
+and how far the arc they give can lie from the corrected samples.
+
+The planner fits one circle to each arc's corrected samples
+(:class:`postproc.gcode.vplan.ArcHint`: its centre, radius, deviation and nominal sweep,
+and the corrected ends it was fitted between). Where the arc's end points are written,
+:func:`centre_words` moves that centre onto the bisector of the written ends, rounds it
+to the words' decimals (or takes the nearest rounded centre around it whose start and end
+radii agree within half a step) and bounds the arc a controller then draws
+(:func:`arc_bound`). The planner asks it for every arc of a chunk with the corrected ends
+rounded as words are (:func:`rounded_centre_words`, its guess of which arcs need a plan of
+their own) and the run writer with the ends as written; both get the same answer for the
+same ends, as there is one computation.
+
+The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round``, the
+floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
+(``setup.py``); runs unchanged uncompiled. It imports nothing of the package.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+TWO_PI: Final = 2.0 * math.pi
+# Rounded centre candidates tried on each side of the centre moved onto the bisector of
+# the written end points (per axis), as the general path does.
+LATTICE: Final = 3
+# the lattice offsets (per axis, in units of the last decimal), nearest first
+ORDER: Final = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for k2 in range(-LATTICE, LATTICE + 1)),
+                            key=lambda k: (k[0] ** 2 + k[1] ** 2, k)))
+
+#: the hint's circle: centre (c1, c2) in the plane's order, radius, deviation of the
+#: samples from it, nominal sweep (rad, negative clockwise)
+Circle = tuple[float, float, float, float, float]
+#: an arc's ends in the plane's order: (s1, s2, sn, e1, e2, en)
+Ends = tuple[float, float, float, float, float, float]
+
+
+def arc_bound(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, c1: float, c2: float
+              ) -> tuple[float, float, float, float] | None:
+    """How far the arc a controller draws through the ``written`` ends around (c1, c2)
+    (radius from the start to the end radius, the normal axis linear) can lie from the
+    corrected samples the ``circle`` was fitted to between the ``fitted`` ends: the
+    circle's deviation plus how far the drawn arc lies from it anywhere. Returned with the
+    start and end radii and the turn from start to end (in the arc's sense, [0, 2 pi)).
+    None when it does not turn as the nominal arc does (one turn)."""
+    s1, s2, sn, e1, e2, en = written
+    hyp = math.hypot
+    rs, re = hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)
+    th0, th1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
+    turn = (th0 - th1) % TWO_PI if clockwise else (th1 - th0) % TWO_PI
+    sweep = -turn if clockwise else turn
+    h1, h2, rho, worst, nsweep = circle
+    if sweep == 0.0 or abs(sweep - nsweep) > math.pi / 2:
+        return None
+    moved = hyp(c1 - h1, c2 - h2)
+    u1, u2, un, x1, x2, xn = fitted
+    shift = max(hyp(s1 - u1, s2 - u2), hyp(e1 - x1, e2 - x2))
+    # in the plane: the samples' distance from the ideal circle, plus how far the
+    # written circle (centre c, radius from rs to re) lies from it anywhere
+    bound = worst + moved + max(abs(rs - rho), abs(re - rho))
+    # along the normal axis: the written ends, and the shift of each sample's angle
+    # (centre and ends moved) along the helix
+    r_min = min(rs, re, rho)
+    if not r_min > 0.0:
+        return None
+    dfrac = 3.0 * (moved + shift) / (r_min * abs(sweep))
+    return bound + max(abs(sn - un), abs(en - xn)) + abs(en - sn) * dfrac, rs, re, turn
+
+
+def centre_words(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, words: tuple[int, float, float, float],
+                 limits: tuple[float, float, float]) -> tuple[float, float, float, float] | None:
+    """The centre words of the arc written through the ``written`` ends: ``(w1, w2,
+    mismatch, bound)``, the words' values (``float`` of their text), the radius mismatch
+    of the centre they give and the bound on the arc's distance from the corrected
+    samples (:func:`arc_bound`). ``words``: their decimals, mm per program unit and what
+    they are relative to (b1, b2: machine mm); ``limits``: the budget (mm), and the
+    least radius and sweep a controller cuts as meant. The centre is the circle's moved
+    onto the written ends' bisector and rounded, or the nearest lattice point around it
+    whose radii agree within half a step. None when no such centre stays within the
+    budget or the arc is below the least radius or sweep."""
+    s1, s2, sn, e1, e2, en = written
+    d, unit, b1, b2 = words
+    budget, min_radius, min_sweep = limits
+    dx, dy = e1 - s1, e2 - s2
+    hyp = math.hypot
+    L = hyp(dx, dy)
+    if L == 0.0:
+        return None
+    m1, m2 = 0.5 * (s1 + e1), 0.5 * (s2 + e2)
+    n1, n2 = -dy / L, dx / L
+    t = (circle[0] - m1) * n1 + (circle[1] - m2) * n2
+    step = 10.0 ** (-d)
+    agree = 0.5 * step * unit
+    v1 = round((m1 + t * n1 - b1) / unit, d)
+    v2 = round((m2 + t * n2 - b2) / unit, d)
+    # the first candidate, round(v + 0 * step, d), is v + 0.0 (v is rounded already)
+    w1, w2 = v1 + 0.0, v2 + 0.0
+    C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+    mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
+    if not mism <= agree:
+        found = False
+        for k in range(1, len(ORDER)):
+            k1, k2 = ORDER[k]
+            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+            C1, C2 = b1 + w1 * unit, b2 + w2 * unit
+            mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
+            if mism <= agree:
+                found = True
+                break
+        if not found:
+            return None
+    got = arc_bound(circle, fitted, clockwise, written, C1, C2)
+    if got is None:
+        return None
+    bound, rs, re, turn = got
+    if not bound + mism <= budget:
+        return None
+    # the controller limits around the centre of the words as written (float of the
+    # text: -0.0 reads back 0.0, else the same centre, radii and sweep); the ends differ
+    # in the plane (L > 0)
+    if w1 == 0.0 or w2 == 0.0:
+        w1, w2 = w1 + 0.0, w2 + 0.0
+        c1, c2 = b1 + w1 * unit, b2 + w2 * unit
+        rs, re = hyp(s1 - c1, s2 - c2), hyp(e1 - c1, e2 - c2)
+        t0, t1 = math.atan2(s2 - c2, s1 - c1), math.atan2(e2 - c2, e1 - c1)
+        turn = (t0 - t1) % TWO_PI if clockwise else (t1 - t0) % TWO_PI
+    if min(rs, re) < min_radius or not turn >= min_sweep:
+        return None
+    return w1, w2, mism, bound
