@@ -419,10 +419,12 @@ def test_geometrys_r_center_is_the_one_formula():
         assert (got is None) == (want is None)
         if got is not None:
             assert _bits(got) == _bits(want)
-    # every reader and the writer call this one (segment has none of its own)
-    from postproc.gcode import bulk, emitter, interp_motion
+    # every reader and the writer call this one (segment has none of its own); the bulk
+    # reader's arcs (plainscan.run_arcs) call fitcore's with geometry's tolerances
+    from postproc.gcode import emitter, fitcore, interp_motion, plainscan
 
-    assert bulk.r_center is emitter.r_center is interp_motion.r_center is geometry.r_center
+    assert emitter.r_center is interp_motion.r_center is geometry.r_center
+    assert plainscan.r_center is fitcore.r_center
     assert not hasattr(segment, "r_center")
 
 

@@ -64,7 +64,7 @@ import numpy as np
 from postproc.errors import PostprocError
 from postproc.gcode import emit, lexer, numfmt, plainscan, runwords, scanner
 from postproc.gcode.emitter import FIT_BUDGET
-from postproc.gcode.geometry import r_center
+from postproc.gcode.geometry import R_TOLERANCE
 from postproc.gcode.interp import MIN_ARC_RADIUS_MM, Arc, Interpreter, Move
 from postproc.gcode.moves import Kind, Role
 from postproc.gcode.state import ARC_CCW, ARC_CW, LINE, RAPID
@@ -522,45 +522,14 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
     # an end radius within the rule's tolerance at radius 0 (the least it has: every
     # tolerance grows with the radius) passes without asking the rule
     sure = rule.arc_end_radius_tolerance(0.0, unit)
-    absolute = interp.state.arc_absolute
-    (lx, ly, lz), (vx, vy, vz) = block.last_l[:3], block.ovl[:3]
-    vi, vj, has_i, has_j = block.ovl[3], block.ovl[4], block.has_l[3], block.has_l[4]
-    has_r, vr = block.has_l[5], block.r_value
-    gnum, last_g, motion0 = block.motion_l, block.last_g, interp.state.motion
-    sx, sy, sz = shift[0], shift[1], shift[2]
-    hyp = math.hypot
-    arcs: dict[int, RunArc] = {}
-    for y in arc_rows[lo:bisect_left(arc_rows, b, lo)]:
-        # the start: where the line before left each axis (the run's start before its first word)
-        p = lx[y - 1] if y > a else -1
-        x0 = vx[p] * unit + sx if p >= a else q0[0]
-        p = ly[y - 1] if y > a else -1
-        y0 = vy[p] * unit + sy if p >= a else q0[1]
-        p = lz[y - 1] if y > a else -1
-        z0 = vz[p] * unit + sz if p >= a else q0[2]
-        p = lx[y]
-        x1 = vx[p] * unit + sx if p >= a else q0[0]
-        p = ly[y]
-        y1 = vy[p] * unit + sy if p >= a else q0[1]
-        g = last_g[y]  # (a line without a motion word: the modal arc's)
-        clockwise = gnum[g] == 2 if g >= a else motion0 == ARC_CW
-        if has_r[y]:  # the centre the controller finds for R (the interpreter's arc rule)
-            c = None if hyp(x1 - x0, y1 - y0) < MIN_ARC_RADIUS_MM else r_center(x0, y0, x1, y1, vr[y] * unit,
-                                                                                  clockwise)
-            if c is None:
-                return y, arcs
-            arcs[y - a] = ((c[0], c[1], z0), clockwise)
-            continue
-        if absolute:
-            c1 = vi[y] * unit + sx if has_i[y] else x0
-            c2 = vj[y] * unit + sy if has_j[y] else y0
-        else:
-            c1, c2 = x0 + vi[y] * unit, y0 + vj[y] * unit
-        rs, re_ = hyp(x0 - c1, y0 - c2), hyp(x1 - c1, y1 - c2)
-        if not (rs >= MIN_ARC_RADIUS_MM and (abs(rs - re_) <= sure or rule.arc_end_radius_ok(rs, re_, unit))):
-            return y, arcs
-        arcs[y - a] = ((c1, c2, z0), clockwise)
-    return b, arcs
+    lx, ly, lz = block.last_l[:3]
+    vx, vy, vz, vi, vj = block.ovl[:5]
+    stop, arcs = plainscan.run_arcs(
+        arc_rows[lo:bisect_left(arc_rows, b, lo)], (lx, ly, lz, vx, vy, vz),
+        (vi, vj, block.has_l[3], block.has_l[4], block.has_l[5], block.r_value),
+        (block.motion_l, block.last_g, interp.state.motion == ARC_CW),
+        (a, unit, shift, q0, interp.state.arc_absolute), (MIN_ARC_RADIUS_MM, sure, *R_TOLERANCE), rule.arc_end_radius_ok)
+    return (b if stop < 0 else stop), arcs
 
 
 def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, decimals: int) -> Run | None:

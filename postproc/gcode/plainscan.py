@@ -15,15 +15,19 @@ number (-1: none) and the H number of a G43 H in the head (-1: none); and for X,
 I, J, R, A, B, C and F whether the line names it, its value (the scanner's) and its
 digits after the point. The text is cut only where a line is written
 (:func:`postproc.gcode.runwords.join_rows`). Every other line names nothing. This reads
-the scanner's columns: no grammar of its own.
+the scanner's columns: no grammar of its own. :func:`run_arcs` then finds, from those
+columns, the centre of each arc a run of them takes, as a controller does.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from typing import Final
 
+from postproc.gcode.fitcore import r_center
 from postproc.gcode.scanner import Columns
 
 SPANS: Final = 11  # head end, then the start and end of X, Y, Z, I and J's numbers
@@ -176,3 +180,65 @@ def pieces(text: str, cols: Columns) -> Pieces:
         if w != we:
             res.clear(li)
     return res
+
+
+Point = tuple[float, float, float]
+#: per line of a block: the last line at or before it naming X, Y, Z, and their values
+Axes = tuple[list[int], list[int], list[int], list[float], list[float], list[float]]
+#: per line: the I and J values, whether it names I, J and R, and R's value
+Centres = tuple[list[float], list[float], list[bool], list[bool], list[bool], list[float]]
+
+
+def run_arcs(rows: list[int], axes: Axes, centres: Centres, motion: tuple[list[int], list[int], bool],
+             frame: tuple[int, float, Point, Point, bool], limits: tuple[float, float, float, float],
+             radius_ok: Callable[[float, float, float], bool]) -> tuple[int, dict[int, tuple[Point, bool]]]:
+    """The XY arcs on the block lines ``rows`` of a run starting at block line ``a``:
+    ``(the first of them the run cannot take, or -1; {line within the run: (centre,
+    clockwise)})`` for those before it. ``motion``: each line's G number, the last line
+    at or before it naming one, and whether the run starts under G2; ``frame``: ``a``,
+    mm per program unit, the shift of absolute words (machine mm), the position before
+    the run and whether centre words are absolute (G90.1); ``limits``: the least radius,
+    the end-radius difference every controller rule accepts, and the R form's tolerances
+    (:func:`postproc.gcode.fitcore.r_center`); ``radius_ok(rs, re, unit)``: the
+    controller rule's own answer beyond that difference. The run cannot take an arc of
+    zero radius, one whose end radius the rule refuses, or an R arc whose ends coincide
+    or whose radius is short of half its chord (the interpreter reports those)."""
+    lx, ly, lz, vx, vy, vz = axes
+    vi, vj, has_i, has_j, has_r, vr = centres
+    gnum, last_g, cw0 = motion
+    a, unit, shift, q0, absolute = frame
+    min_radius, sure, abs_tol, rel_tol = limits
+    sx, sy, sz = shift
+    hyp = math.hypot
+    arcs: dict[int, tuple[Point, bool]] = {}
+    for y in rows:
+        # the start: where the line before left each axis (the run's start before its first word)
+        p = lx[y - 1] if y > a else -1
+        x0 = vx[p] * unit + sx if p >= a else q0[0]
+        p = ly[y - 1] if y > a else -1
+        y0 = vy[p] * unit + sy if p >= a else q0[1]
+        p = lz[y - 1] if y > a else -1
+        z0 = vz[p] * unit + sz if p >= a else q0[2]
+        p = lx[y]
+        x1 = vx[p] * unit + sx if p >= a else q0[0]
+        p = ly[y]
+        y1 = vy[p] * unit + sy if p >= a else q0[1]
+        g = last_g[y]  # (a line without a motion word: the modal arc's)
+        clockwise = gnum[g] == 2 if g >= a else cw0
+        if has_r[y]:  # the centre the controller finds for R (the interpreter's arc rule)
+            c = None if hyp(x1 - x0, y1 - y0) < min_radius else r_center(x0, y0, x1, y1, vr[y] * unit, clockwise,
+                                                                            abs_tol, rel_tol)
+            if c is None:
+                return y, arcs
+            arcs[y - a] = ((c[0], c[1], z0), clockwise)
+            continue
+        if absolute:
+            c1 = vi[y] * unit + sx if has_i[y] else x0
+            c2 = vj[y] * unit + sy if has_j[y] else y0
+        else:
+            c1, c2 = x0 + vi[y] * unit, y0 + vj[y] * unit
+        rs, re = hyp(x0 - c1, y0 - c2), hyp(x1 - c1, y1 - c2)
+        if not (rs >= min_radius and (abs(rs - re) <= sure or radius_ok(rs, re, unit))):
+            return y, arcs
+        arcs[y - a] = ((c1, c2, z0), clockwise)
+    return -1, arcs
