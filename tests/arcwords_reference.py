@@ -7,9 +7,9 @@ followed by the emitter's controller-limit check. Kept here, unchanged, as the r
 import math
 
 from postproc.gcode import emit
+from postproc.gcode.hintcore import ORDER as _ORDER
 from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
-from postproc.gcode.hintcore import ORDER as _ORDER
 from postproc.gcode.vplan import TWO_PI
 
 

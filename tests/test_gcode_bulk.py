@@ -3,25 +3,33 @@ programs and at every chunk boundary."""
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import (
+    CORPUS,
     ENGINE,
+    INSIDE,
+    ROOT,
+    SETUP,
     assert_offsets_cut_the_line,
     assert_same,
+    both_lanes,
     other_line,
+    path_and_diff_both_ways,
     plain_line,
     run_all,
 )
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from postproc.calfile import load_calibration
 from postproc.engine.static import StaticEngine
 from postproc.gcode import bulk, emit
 from postproc.gcode.path import Setup
-from postproc.gcode.pipeline import CorrectOptions, Corrector
+from postproc.gcode.pipeline import CorrectOptions, Corrector, correct_text
 from postproc.gcode.state import ARC_CW
 
 
@@ -110,7 +118,7 @@ def test_bulk_lane_equals_the_general_path_with_other_decimals(text, decimals):
 
 # -- the scanner ---------------------------------------------------------------------------
 @settings(max_examples=300, deadline=None)
-@given(st.lists(plain_line(), min_size=1, max_size=20), st.sampled_from(["\n", "\r\n"]))
+@given(st.lists(plain_line(), min_size=1, max_size=20), st.sampled_from(["\n", "\r\n", "\r"]))
 def test_scan_gives_every_line_the_offsets_of_its_words(lines, ending):
     lines = [ln + ending for ln in lines]
     block = bulk.scan(lines)
@@ -124,8 +132,11 @@ def test_scan_gives_every_line_the_offsets_of_its_words(lines, ending):
             assert not any(at)
 
 
-def test_scan_refuses_lone_carriage_returns_and_keeps_the_other_lines_apart():
-    assert bulk.scan(["X1\r", "X2\r"]) is None
+def test_scan_reads_lone_carriage_returns_and_keeps_the_other_lines_apart():
+    lone = bulk.scan(["X1\r", "X2\r", "(c)\r", "X3"])  # lone CR endings: read in bulk, each line its own
+    assert lone is not None
+    assert lone.plain.tolist() == [True, True, True, True]
+    assert lone.neutral.tolist() == [False, False, True, False]
     block = bulk.scan(["X1 Y2\n", "(c)\n", "\n", "G1 X3\r\n", "M3 S100\n", "S100 M3\n", "X4"])
     # a comment and a blank line move nothing: they stay in a run, written whole from one piece
     assert block.plain.tolist() == [True, True, True, True, False, True, True]
@@ -253,3 +264,55 @@ def test_an_arc_too_short_to_span_the_plane_is_corrected():
     assert_same(outs)
     assert outs["general"][1] is not None, outs["general"][0]
     assert outs["general"][1]["moves"] == 3
+
+
+# -- lone carriage returns -------------------------------------------------------------
+_LONE_CR = ["%", "G21 G90 G17 G94", "G0 X10 Y10 Z10", "G1 X20 Y10 Z5 F300", "(pass)", "G2 X30 Y20 I0 J10",
+            "X40 Y30 I10 J0", "G1 X35", "Y25 Z4", "M3 S1000", "G3 X30 Y30 R5", "G1 X20 Y30", "G0 Z10", "M30", "%"]
+
+
+def _lines_in_runs(monkeypatch, text, engine, setup, **options):
+    """The output of the bulk lane and how many lines its runs took."""
+    taken = []
+    read_run = bulk.read_run
+
+    def spy(*args, **kwargs):
+        run = read_run(*args, **kwargs)
+        taken.append(0 if run is None else len(run))
+        return run
+
+    monkeypatch.setattr(bulk, "read_run", spy)
+    out = correct_text(text, engine, setup, CorrectOptions(**options))[0]
+    monkeypatch.setattr(bulk, "read_run", read_run)
+    return out, sum(taken)
+
+
+@pytest.mark.parametrize("chunk_lines", [3, 20_000])
+def test_lone_carriage_return_lines_are_read_in_bulk_as_the_interpreter_reads_them(monkeypatch, tmp_path, chunk_lines):
+    text = "\r".join(_LONE_CR) + "\r"
+    out, taken = _lines_in_runs(monkeypatch, text, ENGINE, SETUP)
+    assert taken >= 9  # the moves, the comment and the M3 line among them
+    a, b = both_lanes(text, ENGINE, SETUP, chunk_lines=chunk_lines)
+    assert a == b == out
+    # every line of the program keeps its own ending (the lines postproc adds, the header
+    # and the pieces of the split arc, end CR LF, as every controller ends a block)
+    ends = re.findall(r"[^\r\n]*(\r\n|\r|\n)", out)
+    assert ends.count("\r") == len(_LONE_CR)  # (the split arc's last piece ends as its line did)
+    assert "F300\r(pass)\rG2 " in out
+    assert "\rG1 X34.8575\rY24.9970 Z3.9834 X34.8614\rM3 S1000\r" in out
+    assert_same(run_all(text, chunk_lines=chunk_lines))
+    report = path_and_diff_both_ways(monkeypatch, tmp_path, text, ENGINE, SETUP)
+    assert report["moves_moved"] >= 9
+
+
+@pytest.mark.skipif(not (CORPUS / "real").is_dir(), reason="needs ../shared/corpus")
+@pytest.mark.parametrize("calibration", ["s500_static", "s500_parametric"])
+def test_a_real_program_with_lone_carriage_returns_reads_in_bulk_as_the_interpreter_reads_it(monkeypatch, calibration):
+    raw = (CORPUS / "real" / "ugs" / "test_files__ShapeOko_Calibration_Pattern_01b.ngc").read_bytes()
+    text = raw.decode("utf-8", "surrogateescape")
+    assert "\r\r\n" in text  # CR CR LF: a line ending at a lone CR, then an empty one
+    engine = load_calibration(ROOT / "calibrations" / f"{calibration}.json").engine
+    out, taken = _lines_in_runs(monkeypatch, text, engine, INSIDE, extrapolate="linear")
+    assert taken > text.count("\r\r\n") // 2
+    a, b = both_lanes(text, engine, INSIDE, extrapolate="linear")
+    assert a == b == out

@@ -43,7 +43,8 @@ centre words, which the planner's :class:`postproc.gcode.vplan.ArcHint` gives fo
 end points as written. A line the planner splits, and an arc whose hint does not hold
 there, are written by the general emitter between the run's other lines. The result is byte
 for byte that of the general path (tests run both on the same programs); every line
-that is not plain, and every line of a chunk with lone ``\\r`` line endings, takes it.
+that is not plain takes it. Lines end as they do in the program (LF, CRLF or a lone CR):
+a run's line is written with its own ending.
 
 A run's lines are numbered from its first (:attr:`Run.lineno`) on, but in a block of an
 expanded program (:meth:`Block.set_source`), where a loop's body is read once per pass
@@ -412,10 +413,8 @@ class Block:
 
 def scan(lines: list[str]) -> Block | None:
     """The chunk ``lines`` as a :class:`Block`, or None when it cannot be scanned as a
-    whole (a lone ``\\r`` line ending)."""
+    whole (lines not split as the scanner splits them, a number too long)."""
     text = "".join(lines)
-    if "\r" in text and text.count("\r") != text.count("\r\n"):
-        return None
     cols = scanner.scan(text)
     if len(cols) != len(lines):  # lines not split as the scanner splits them
         return None
