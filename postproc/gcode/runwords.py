@@ -134,28 +134,23 @@ def join_rows(lines: list[str], span: tuple[int, int], at: list[list[int]], nums
             continue
         p = 0
         if tx:
-            out.append(line[p:xs[y]])
-            out.append(tx)
-            p = xe[y]
+            p = _put(out, line, p, xs[y], xe[y], tx)
         if ty:
-            out.append(line[p:ys[y]])
-            out.append(ty)
-            p = ye[y]
+            p = _put(out, line, p, ys[y], ye[y], ty)
         if tz:
-            out.append(line[p:zs[y]])
-            out.append(tz)
-            p = ze[y]
+            p = _put(out, line, p, zs[y], ze[y], tz)
         if add:
-            out.append(line[p:ze[y]])
-            out.append(add)
-            p = ze[y]
+            p = _put(out, line, p, ze[y], ze[y], add)
         if ti:
-            out.append(line[p:i_s[y]])
-            out.append(ti)
-            p = i_e[y]
+            p = _put(out, line, p, i_s[y], i_e[y], ti)
         if tj:
-            out.append(line[p:js[y]])
-            out.append(tj)
-            p = je[y]
+            p = _put(out, line, p, js[y], je[y], tj)
         out.append(line[p:])
     return "".join(out)
+
+
+def _put(out: list[str], line: str, p: int, a: int, b: int, text: str) -> int:
+    """Append ``line[p:a]``, then ``text`` in the place of ``line[a:b]``; returns ``b``."""
+    out.append(line[p:a])
+    out.append(text)
+    return b
