@@ -4,6 +4,7 @@ plain lines around them: the output, the refusals, the path and diff's report ar
 general path's, byte for byte. A line whose words do not fit the modal motion (centre
 words under G1, none under G2) ends the run, and the interpreter reads or refuses it."""
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -186,3 +187,74 @@ def test_a_modal_arc_after_one_written_as_lines_gets_its_motion_word(monkeypatch
     lines = emit.split_header(a)[1].splitlines()
     # each I/J arc right after an R arc names its motion again; the one after another does not
     assert [ln.split(" ")[0][:2] for ln in lines if " I" in ln] == ["G2", "X1", "G2", "G3"]
+
+
+# -- an arc handed to the general emitter in the middle of a stretch ---------------------
+def _arc_chain(n: int = 10) -> tuple[str, int]:
+    """A run of clockwise arcs around (0, 0), radius 20, 30 degrees each: the first names
+    G2, the others are modal; and the line of the fifth."""
+    lines = ["G21 G90 G17 G94", "G0 X20 Y0 Z5", "G1 Z0 F200"]
+    x, y = 20.0, 0.0
+    for k in range(1, n + 1):
+        a = -math.radians(30 * k)
+        nx, ny = round(20 * math.cos(a), 4), round(20 * math.sin(a), 4)
+        lines.append(f"{'G2 ' if k == 1 else ''}X{nx:.4f} Y{ny:.4f} I{-x:.4f} J{-y:.4f}")
+        x, y = nx, ny
+    lines += ["G0 Z5", "M30"]
+    return "\n".join(lines) + "\n", 3 + 5
+
+
+def test_an_arc_whose_hint_fails_where_written_mid_stretch_and_the_modal_arc_after_it(monkeypatch):
+    # the planner expected the arc's hint to hold (no edge: the stretch runs on past it),
+    # but it fails for the ends as written; the run writer hands it to the general
+    # emitter (bulk._general_row), whose fit here writes it as lines (G1); the modal arc
+    # line after it then needs its G2 again (bulk._motion_row hands it over too). The
+    # general path, told the same, writes the same bytes.
+    from postproc.gcode import arcfit, vplan
+
+    text, chosen = _arc_chain()
+    arc_words, spec, exact_arc = bulk._arc_words, vplan.ArcHint.spec, arcfit.MoveFit._exact_arc
+
+    def failing_words(corrector, run, hints, y, *rest):
+        return None if run.line(y - run.a) == chosen else arc_words(corrector, run, hints, y, *rest)
+
+    def failing_spec(self, mv, *rest):
+        return None if mv.lineno == chosen else spec(self, mv, *rest)
+
+    def no_arc(self, *args):
+        return None if self.mv.lineno == chosen else exact_arc(self, *args)
+
+    monkeypatch.setattr(bulk, "_arc_words", failing_words)
+    monkeypatch.setattr(vplan.ArcHint, "spec", failing_spec)
+    monkeypatch.setattr(arcfit.MoveFit, "_exact_arc", no_arc)
+    handed: list[str] = []
+    general_row, motion_row = bulk._general_row, bulk._motion_row
+
+    def spy_general(corrector, run, T, write, hints, y, mark):
+        handed.append(f"general {run.line(y - run.a)}")
+        return general_row(corrector, run, T, write, hints, y, mark)
+
+    def spy_motion(corrector, run, T, write, hints, s, mark):
+        before = corrector.emitted_motion
+        got = motion_row(corrector, run, T, write, hints, s, mark)
+        if got != s:
+            handed.append(f"motion {run.line(s - run.a)} after {before}")
+        return got
+
+    monkeypatch.setattr(bulk, "_general_row", spy_general)
+    monkeypatch.setattr(bulk, "_motion_row", spy_motion)
+    a, b = both_lanes(text, ENGINE, SETUP)
+    assert a == b
+    # the chosen arc by the general emitter mid-stretch, then the modal arc after it,
+    # which the controller would read as G1, handed over to be written with its G2
+    # (the chosen arc is handed over again each time the writer goes back for the plan
+    # or the subdivisions its fit asks for; the motion row hands its arc to the general
+    # row, which is told first)
+    steps = [h for k, h in enumerate(handed) if not k or h != handed[k - 1]]
+    assert steps == [f"general {chosen}", f"general {chosen + 1}", f"motion {chosen + 1} after {LINE}"]
+    out = a.splitlines()
+    first = next(i for i, ln in enumerate(out) if ln.startswith("G2 "))
+    assert out[first + 4].startswith("G1 ")  # the chosen arc, written as lines
+    after = next(ln for ln in out[first + 4:] if not ln.startswith(("G1 ", "X", "Y")))
+    assert after.startswith("G2 ")  # the next arc names its motion again
+    assert sum(ln.startswith("G2 ") for ln in out) == 2
