@@ -39,7 +39,7 @@ from typing import IO, Any, Protocol
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import forking
+from postproc.gcode import forking, scanner
 from postproc.gcode.cutter import merge_bounds
 
 #: a run's report (:class:`postproc.gcode.pipeline.CorrectReport`, a dataclass)
@@ -78,10 +78,13 @@ class Corrector(Protocol):
 MIN_CHUNKS = 8
 #: the chunks a child corrects before its cut (output thrown away) to settle its state
 WARMUP_CHUNKS = 2
-#: the cost of reading a line without correcting it, as a share of correcting it
-#: (measured on the gencam program: 0.36 to 0.4 with an affine engine, about 0.1 with a
-#: model whose moves are sampled); sets where the program is cut so that all parts end together
-READ_SHARE_AFFINE = 0.4
+#: the cost of reading a line without correcting it, as a share of correcting it; sets
+#: where the program is cut so that all parts end together. Measured on the gencam
+#: program: with an affine engine about 0.3 where the reader is compiled (gencam 1M lines,
+#: two processes: 0.3 corrects it in 9.35 s against 9.9 s at 0.4, median of 8 alternated
+#: runs) and about half uncompiled, where 0.4 did as well as 0.5; about 0.1 with a model
+#: whose moves are sampled
+READ_SHARE_AFFINE = 0.4 if scanner.__file__.endswith(".py") else 0.3
 READ_SHARE_SAMPLED = 0.1
 #: a further process is used only where it shortens the first part by this share
 MIN_GAIN = 0.1
