@@ -140,7 +140,7 @@ Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
 #: ``curvature(rows)``: the engine's bound on the correction's curvature along each move
 Curvature: TypeAlias = Callable[[IntArray], FloatArray]
 Ends: TypeAlias = tuple[float, float, float, float, float, float]
-#: the arguments of :meth:`ArcHint.words`: (S, E, axes, clockwise, d, unit, base, budget)
+
 
 @dataclass(frozen=True, eq=False)
 class MoveEnds:
