@@ -139,7 +139,8 @@ ArcParams: TypeAlias = tuple[tuple[int, int, int], float, float, float, float]
 Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
 #: ``curvature(rows)``: the engine's bound on the correction's curvature along each move
 Curvature: TypeAlias = Callable[[IntArray], FloatArray]
-Ends: TypeAlias = tuple[float, float, float, float, float, float]
+#: an arc's ends in the plane's order: (s1, s2, sn, e1, e2, en)
+Ends: TypeAlias = hintcore.Ends
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,11 +229,15 @@ class ArcHint:
         self._last = (key, result)
         return result
 
+    def _circle(self) -> hintcore.Circle:
+        """The fitted circle as :mod:`postproc.gcode.hintcore` takes it."""
+        return self.c1, self.c2, self.rho, self.worst, self.nsweep
+
     def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
                unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
         """:meth:`words`, computed (:func:`postproc.gcode.hintcore.centre_words`)."""
         a1, a2, an = axes
-        return hintcore.centre_words((self.c1, self.c2, self.rho, self.worst, self.nsweep), self.ends, clockwise,
+        return hintcore.centre_words(self._circle(), self.ends, clockwise,
                                      (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]),
                                       float(E[an])), (d, float(unit), float(base[0]), float(base[1])),
                                      (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
@@ -264,7 +269,7 @@ class ArcHint:
         (C1, C2) can lie from the corrected samples, with its start and end radii and
         turn (:func:`postproc.gcode.hintcore.arc_bound`); None when it does not turn as
         the nominal arc does."""
-        return hintcore.arc_bound((self.c1, self.c2, self.rho, self.worst, self.nsweep), self.ends, clockwise,
+        return hintcore.arc_bound(self._circle(), self.ends, clockwise,
                                   written, C1, C2)
 
 
