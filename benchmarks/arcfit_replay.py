@@ -48,18 +48,18 @@ def capture(program: str, calibration: str, out: str, extra: list[str]) -> None:
     def wrapped(self, s, Q, nom, bulge, qe, final):
         subs: list = []
         writer = self.w
-        sub0 = writer._subdivide
+        sub0 = writer.subdivision
 
         def rec(*a, **k):
             r = sub0(*a, **k)
             subs.append(r)
             return r
 
-        writer._subdivide = rec
+        writer.subdivision = rec
         try:
             res = orig(self, s, Q, nom, bulge, qe, final)
         finally:
-            del writer._subdivide
+            del writer.subdivision
         plan = self.plan
         keep = {k: plan[k] for k in ("nsweep", "mismatch", "whole", "curve") if k in plan}
         calls.append(((self.mv, keep, s, Q, nom, bulge, list(qe), final, self.d, self.budget), subs,

@@ -1,5 +1,6 @@
 """The chunk scanner reads the lexer's grammar: the same lines, words, spans and values;
-plainscan's pieces join back to their line; numfmt's batch equals its one-value form."""
+plainscan's pieces join back to their line; numfmt's batch equals its one-value form, and
+its word rules are what they say."""
 
 import math
 import random
@@ -113,6 +114,43 @@ def test_fmt_all_is_fmt(values, d, mixed):
     decimals += [d, d, d]
     assert numfmt.fmt_all(values, decimals, "X") == ["X" + numfmt.fmt(v, k) for v, k in zip(values, decimals, strict=True)]
     assert all(not t.startswith("X-") or t.strip("X-0.") for t in numfmt.fmt_all(values, decimals, "X"))
+
+
+def test_a_word_within_half_a_step_keeps_its_text():
+    half = numfmt.half_unit(3)
+    assert half == 0.0005
+    assert numfmt.half_unit(400) == 0.0
+    assert numfmt.word_text(1.0 + 0.9 * half, 1.0, 1, 3) == ""  # within half a step: kept
+    assert numfmt.word_text(half, 0.0, 1, 3) == "0.001"  # half a step: written anew
+    assert numfmt.word_text(1.25, 1.2, 1, 3) == "1.250"  # the output's decimals...
+    assert numfmt.word_text(1.25, 1.23456, 5, 3) == "1.25000"  # ...or the word's own, if more
+    assert numfmt.word_text(-1e-9, 1.0, 0, 3) == "0.000"  # never -0
+    with pytest.raises(ValueError, match="cannot write nan"):
+        numfmt.word_text(math.nan, 1.0, 0, 3)  # a NaN target is refused, never kept
+
+
+def test_a_word_is_added_half_a_step_away_and_reaches_its_text():
+    assert numfmt.added_text(0.0004, 0.0, 1.0, 7.0004, 3) == ""
+    assert numfmt.added_text(0.0005, 0.0, 1.0, 7.0006, 3) == "7.001"  # half a step away: added
+    assert numfmt.added_text(25.4 * 1.0004, 25.4, 25.4, 1.0004, 3) == ""  # 10 um, but in program units (inch)
+    assert numfmt.added_text(5.0, math.nan, 1.0, 5.0, 3) == ""  # an axis never positioned: no word
+    with pytest.raises(ValueError, match="cannot write nan"):
+        numfmt.added_text(math.nan, 1.0, 1.0, math.nan, 3)  # a NaN target is refused, never skipped
+    assert numfmt.reached("7.001", 7.0005) == 7.001
+    assert math.copysign(1.0, numfmt.reached("0.000", -0.0001)) == -1.0  # a zero keeps the value's sign
+
+
+@given(st.lists(st.tuples(st.floats(-1e4, 1e4), st.floats(-1e-3, 1e-3), st.integers(0, 6), st.integers(0, 6)),
+                max_size=40))
+@settings(max_examples=200, deadline=None)
+def test_word_texts_is_word_text(words):
+    values = [own + dv for own, dv, _, _ in words]
+    own = [w[0] for w in words]
+    own_dec, dec = [w[2] for w in words], [w[3] for w in words]
+    changed, texts = numfmt.word_texts(values, own, own_dec, dec)
+    one = [numfmt.word_text(*w) for w in zip(values, own, own_dec, dec, strict=True)]
+    assert changed == [k for k, t in enumerate(one) if t]
+    assert texts == [one[k] for k in changed]
 
 
 @pytest.mark.parametrize(("text", "longest"), [

@@ -89,7 +89,6 @@ _XY = (0, 1, 2)  # the plane of a run's arcs (G17) and its normal
 # Most lines the run writer takes in one stretch (see _emit_rows): an arc whose hint
 # fails unexpectedly makes the writer read again at most this many lines.
 MAX_STRETCH = 2048
-_HALF = np.array([emit.HALF_UNIT[d] for d in range(331)])  # the last, 0: any more decimals
 
 #: where text is written (what it returns is ignored)
 Write: TypeAlias = Callable[[str], object]
@@ -674,18 +673,18 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         has = block.has[k][idx]
         tk = T[trow, k]
         v = (tk - shift[:, k]) / unit
-        ov = block.ov[k][idx]
-        dout = np.maximum(block.frac[k][idx], dec)
-        # a word within half an output step of its value keeps its text
-        changed = has & ~(np.abs(v - ov) < _HALF[np.minimum(dec, len(_HALF) - 1)])
-        sel = np.flatnonzero(changed)
-        if len(sel):  # the new number texts; "" where the line's own stays
-            col = np.full(n, "", dtype=object)
-            col[idx[sel]] = numfmt.fmt_all(v[sel].tolist(), dout[sel].tolist(), "")
-            nums = col.tolist()
-            named[idx[sel]] += 1
-        else:
-            nums = [""] * n
+        # the new number texts (a word within half an output step of its value keeps its
+        # text); "" where the line's own stays
+        on = np.flatnonzero(has)
+        rows_on = idx[on]
+        changed, texts = numfmt.word_texts(v[on].tolist(), block.ov[k][rows_on].tolist(),
+                                           block.frac[k][rows_on].tolist(), dec[on].tolist())
+        nums = [""] * n
+        if changed:
+            sel = rows_on[changed]
+            for y, t in zip(sel.tolist(), texts, strict=True):
+                nums[y] = t
+            named[sel] += 1
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
@@ -852,7 +851,7 @@ def _added_words(st: _Stretch, k: int, qk: float) -> float:
     run, s, b = st.run, st.s, st.b
     unit, sk = run.unit, run.shift[k]
     unnamed = st.em.unnamed[k]
-    qk = unnamed.add((s, b, k), (unit, sk, emit.HALF_UNIT[run.decimals]), qk, st.add_col, st.want)
+    qk = unnamed.add((s, b, k), (unit, sk), qk, st.add_col, st.want)
     e = run.block.last_moving[b - 1]  # the last line that moves
     if e >= s and unnamed.has[e]:
         qk = unnamed.written(e) * unit + sk

@@ -14,6 +14,7 @@ from itertools import chain, islice
 from typing import TYPE_CHECKING, TypeAlias
 
 from postproc import __version__
+from postproc.gcode import numfmt
 from postproc.gcode.numfmt import fmt as fmt  # the one formatter (compiled), re-exported
 from postproc.gcode.state import DWELL, RAPID
 
@@ -25,17 +26,15 @@ if TYPE_CHECKING:
 #: the axes it names, whether it carries the block's F word
 CycleStep: TypeAlias = tuple[int, tuple[float, float, float], tuple[float, float, float], tuple[int, ...], bool]
 
-# half of the last written digit, by number of decimals (a program's numbers may carry
-# any number of them; beyond 323 the half unit is below the smallest double, 0.0)
 class _HalfUnits(dict):
-    """Half a unit of the last decimal, by decimals; beyond a double's smallest step (a word
-    written with hundreds of decimals, kept as written) it is 0."""
+    """Half a unit of the last decimal, by decimals (:func:`postproc.gcode.numfmt.half_unit`,
+    looked up)."""
 
     def __missing__(self, d: int) -> float:
-        return 0.5 * 10.0 ** (-d) if d < 330 else 0.0
+        return numfmt.half_unit(d)
 
 
-HALF_UNIT = _HalfUnits({d: 0.5 * 10.0 ** (-d) for d in range(0, 330)})
+HALF_UNIT = _HalfUnits({d: numfmt.half_unit(d) for d in range(0, 330)})
 
 HEADER_TAG = "(postproc "
 HEADER_MARK = " corrected "

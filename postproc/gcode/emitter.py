@@ -17,7 +17,7 @@ import numpy as np
 
 from postproc.constants import MM_PER_INCH
 from postproc.errors import PostprocError, SolverError
-from postproc.gcode import emit
+from postproc.gcode import emit, numfmt
 from postproc.gcode.arcfit import Edit, MoveFit, _free_move, _Piece
 from postproc.gcode.cutter import take_up as cutter_take_up
 from postproc.gcode.framed import FrameView
@@ -53,7 +53,6 @@ def _arc_of(mv: ArcMove) -> Arc:
 
 
 MOTION_TEXT = {RAPID: "0", LINE: "1", ARC_CW: "2", ARC_CCW: "3"}
-HALF_UNIT = emit.HALF_UNIT
 # Share of --tolerance that a fitted arc or chord may use at the samples of the corrected
 # ideal path; the rest covers the path between samples.
 FIT_BUDGET = 0.95
@@ -175,8 +174,6 @@ class EmitterMixin:
         edits: list[Edit] = []
         added: list[str] = []
         unit, shift, inc = mv.unit, mv.shift, mv.incremental
-        half = HALF_UNIT[d]
-        fmt = emit.fmt
         for k in range(3):
             t = target[k]
             idx = mv.axis_idx[k]
@@ -184,22 +181,20 @@ class EmitterMixin:
                 _letter, num, start, end, _lpos = mv.words[idx]
                 ov = float(num)
                 v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
-                if abs(v - ov) < half:  # within half an output step: the word keeps its text
-                    val = ov
-                else:
-                    dot = num.find(".")  # written with the output's decimals, or the word's own if more
-                    dout = d if dot < 0 or len(num) - dot - 1 <= d else len(num) - dot - 1
-                    text = fmt(v, dout)
+                text = numfmt.word_text(v, ov, emit.decimals_of(num), d)
+                if text:
                     edits.append((start, end, text))
-                    val = float(text)  # what the controller reads (numpy's round of a numpy float can be a step off)
+                    val = float(text)  # what the controller reads
+                else:  # within half an output step: the word keeps its text
+                    val = ov
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
             elif not present_only:
-                if math.isnan(qe[k]) or abs(t - qe[k]) / unit < half:
-                    continue
                 v = (t - qe[k]) / unit if inc else (t - shift[k]) / unit
-                text = fmt(v, d)
+                text = numfmt.added_text(t, qe[k], unit, v, d)
+                if not text:
+                    continue
                 added.append("XYZ"[k] + text)
-                val = float(text)
+                val = numfmt.reached(text, v)
                 qe[k] = qe[k] + val * unit if inc else val * unit + shift[k]
         return edits, added
 

@@ -1,4 +1,6 @@
-"""The one number formatter of the writers: fixed point, explicit decimals, never ``-0``.
+"""The one number formatter of the writers: fixed point, explicit decimals, never ``-0``;
+and the writers' rules for a word's number (:func:`word_text`, :func:`added_text`,
+:func:`reached`), one for every line, whichever writer writes it.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 It imports nothing of the package, so that it compiles on its own.
@@ -41,3 +43,50 @@ def fmt_all(values: list[float], decimals: list[int], prefix: str) -> list[str]:
         if v <= 0.0 and v > low:
             texts[k] = prefix + fmt(v, d)
     return texts
+
+
+def half_unit(decimals: int) -> float:
+    """Half a unit of the last of ``decimals`` digits; 0 beyond a double's smallest step
+    (a word written with hundreds of decimals, kept as written)."""
+    return 0.5 * 10.0 ** (-decimals) if decimals < 330 else 0.0
+
+
+def word_text(value: float, own: float, own_decimals: int, decimals: int) -> str:
+    """The new number text of a word that is to carry ``value`` (program units) where
+    it carries ``own`` (the value of its text, with ``own_decimals`` digits after the
+    point): "" when ``value`` is within half an output step (``decimals``) of ``own``,
+    so that the word keeps its text; else ``value`` with the output's decimals, or the
+    word's own where it has more."""
+    if abs(value - own) < half_unit(decimals):
+        return ""
+    return fmt(value, own_decimals if own_decimals > decimals else decimals)
+
+
+def added_text(target: float, at: float, unit: float, value: float, decimals: int) -> str:
+    """The number text of a word added for an axis a line does not name, whose
+    corrected ``target`` (mm) differs from where the axis is (``at``, mm; NaN: never
+    positioned) by half an output step (``decimals``, of ``unit`` mm) or more: ``value``
+    (the word's, program units) with ``decimals`` digits; else "" (no word)."""
+    if at != at or abs(target - at) / unit < half_unit(decimals):
+        return ""
+    return fmt(value, decimals)
+
+
+def reached(text: str, value: float) -> float:
+    """The value a word written as ``text`` (from ``value``) carries, as the controller
+    reads it: ``float`` of the text (the formatter's digits are correctly rounded), a
+    zero with ``value``'s sign."""
+    r = float(text)
+    return math.copysign(0.0, value) if r == 0.0 else r
+
+
+def word_texts(values: list[float], own: list[float], own_decimals: list[int], decimals: list[int]
+               ) -> tuple[list[int], list[str]]:
+    """:func:`word_text` of each word: the indices of those whose text changes and their
+    new texts (one :func:`fmt_all` over them)."""
+    changed: list[int] = []
+    for k in range(len(values)):
+        if not abs(values[k] - own[k]) < half_unit(decimals[k]):
+            changed.append(k)
+    dout = [own_decimals[k] if own_decimals[k] > decimals[k] else decimals[k] for k in changed]
+    return changed, fmt_all([values[k] for k in changed], dout, "")

@@ -17,10 +17,9 @@ It imports nothing of the package but :mod:`postproc.gcode.numfmt`, compiled wit
 
 from __future__ import annotations
 
-import math
 from bisect import bisect_left
 
-from postproc.gcode.numfmt import fmt
+from postproc.gcode.numfmt import added_text, reached
 
 
 class Unnamed:
@@ -55,13 +54,13 @@ class Unnamed:
         t = self.nums[y]
         return float(t) if t else self.own[y]
 
-    def add(self, span: tuple[int, int, int], scale: tuple[float, float, float], qk: float,
+    def add(self, span: tuple[int, int, int], scale: tuple[float, float], qk: float,
             add_col: list[str], want: dict[int, list[float]]) -> float:
         """Add the words of lines ``s:b`` (``span``: s, b and the axis's index k) to
         ``add_col`` (an entry per line from s), fill in ``want`` (line -> the written
         position wanted there) on axis k, and return the position on the axis after line
-        ``b - 1`` (``qk``: before line s). ``scale``: the run's mm per program unit, its
-        shift on the axis and half an output step."""
+        ``b - 1`` (``qk``: before line s). ``scale``: the run's mm per program unit and its
+        shift on the axis."""
         s, b, k = span
         unit, sk = scale[0], scale[1]
         has = self.has
@@ -74,10 +73,10 @@ class Unnamed:
             qk = self._decide(lo, hi, s, scale, qk, add_col, want, k)
         return qk
 
-    def _decide(self, lo: int, hi: int, s: int, scale: tuple[float, float, float], qk: float,
+    def _decide(self, lo: int, hi: int, s: int, scale: tuple[float, float], qk: float,
                 add_col: list[str], want: dict[int, list[float]], k: int) -> float:
         """Rows ``lo:hi`` of :attr:`rows` in order (see :meth:`add`); the position after them."""
-        unit, sk, hd = scale
+        unit, sk = scale
         miss, ts, vs, decs, lasts, lines = (self.rows, self.target, self.value, self.decimals, self.last,
                                             self.lines)
         letter = self.letter
@@ -91,17 +90,11 @@ class Unnamed:
                     # the position the line's own word reached (float(text) == the value
                     # it was written from, correctly rounded)
                     qk = self.written(p) * unit + sk
-            if qk != qk:
-                continue  # never positioned: nothing to compare with, no word
             i = miss[j]
-            if abs(ts[j] - qk) / unit >= hd:
-                word = letter + fmt(vs[j], decs[j])
-                # the position the added word reaches: its value as written, round(v, d) (the
-                # formatter's digits are round's), a zero with v's sign as round keeps it
-                reached = float(word[1:])
-                if reached == 0.0:
-                    reached = math.copysign(0.0, vs[j])
-                qk = reached * unit + sk
+            text = added_text(ts[j], qk, unit, vs[j], decs[j])  # "": none (qk NaN: never positioned)
+            if text:
+                word = letter + text
+                qk = reached(text, vs[j]) * unit + sk  # the position the added word reaches
                 line = lines[i]
                 sep = " " if (" " in line or "\t" in line) else ""
                 add_col[i - s] += sep + (word.lower() if line.islower() else word)

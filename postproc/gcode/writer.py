@@ -19,7 +19,7 @@ from dataclasses import replace
 from typing import TypeAlias, final
 
 from postproc.errors import SafetyError
-from postproc.gcode import bulk, cutter, emit
+from postproc.gcode import bulk, cutter, emit, numfmt
 from postproc.gcode.emitter import EmitterMixin, PlanNeeded, Subdivided, _unit_decimals, round_err
 from postproc.gcode.lexer import Word, split_lines
 from postproc.gcode.moves import Cycle, Move, Role
@@ -318,8 +318,10 @@ class ChunkWriter(EmitterMixin):
             if not math.isfinite(delta):
                 continue
             _l, num, start, end, _p = rb.words[idx]
-            if abs(delta) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
-                edits.append((start, end, emit.fmt(float(num) + delta, max(d, emit.decimals_of(num)))))
+            own = float(num)
+            text = numfmt.word_text(own + delta, own, emit.decimals_of(num), d)
+            if text:  # else within half an output step: kept as written
+                edits.append((start, end, text))
         self._write_line(line, edits, write)
 
     def _check_unmoved(self, mv: Move, target: FloatArray) -> None:
@@ -370,17 +372,18 @@ class ChunkWriter(EmitterMixin):
             if idx >= 0:
                 _l, num, start, end, _p = mv.words[idx]
                 val = float(num)
-                if abs(v - val) >= emit.HALF_UNIT[d]:  # within half an output step: kept as written
-                    text = emit.fmt(v, max(d, emit.decimals_of(num)))
+                text = numfmt.word_text(v, val, emit.decimals_of(num), d)
+                if text:  # else within half an output step: kept as written
                     edits.append((start, end, text))
                     val = float(text)
             else:
                 h = held[n]
-                if h is None or abs(v - h) >= emit.HALF_UNIT[d]:
-                    text = emit.fmt(v, d)
+                # a word where the controller holds none, or one half an output step or more away
+                text = emit.fmt(v, d) if h is None else numfmt.added_text(v, h, 1.0, v, d)
+                if text:
                     added.append(letter + text)
                     val = float(text)
-                else:
+                elif h is not None:  # within half an output step of the word it holds
                     val = h
             written.append(val)
         self._cycle_z, self._cycle_rz = written
