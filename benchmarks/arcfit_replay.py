@@ -83,7 +83,7 @@ def run(path: str, repeats: int, limit: int | None = None) -> None:
         def __init__(self) -> None:
             self.subs: list = []
 
-        def _subdivide(self, *a, **k):
+        def subdivision(self, *a, **k):
             return self.subs.pop(0)
 
     with open(path, "rb") as f:

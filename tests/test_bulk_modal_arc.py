@@ -170,7 +170,7 @@ def test_a_modal_arc_after_one_written_as_lines_gets_its_motion_word(monkeypatch
     # keeps in its run, must get its G2/G3 back, as the general path gives it.
     from postproc.gcode.emitter import EmitterMixin
 
-    for name in ("_emit_move", "_emit_hinted_arc"):
+    for name in ("emit_move", "emit_hinted_arc"):
         orig = getattr(EmitterMixin, name)
 
         def as_lines(self, line, mv, *args, _orig=orig):

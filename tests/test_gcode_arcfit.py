@@ -30,7 +30,7 @@ class Fitter(EmitterMixin):
 
     corrected: Callable[[np.ndarray], np.ndarray]
 
-    def _subdivide(self, curves, s_init, unit):
+    def subdivision(self, curves, s_init, unit):
         (sa, sb), = s_init
         ss = np.array([sa, 0.5 * (sa + sb), sb])
         return [(ss, self.corrected(ss))]

@@ -174,7 +174,7 @@ def test_a_changed_word_moves_the_tracked_position_to_the_value_written():
                              words=[("X", "0.000000000001", 1, 15, 0)])
         qe = [0.0, 5.0, 7.0]
         target = np.array([v, 5.0, 7.0])  # numpy floats, as a fitted piece's sample is
-        edits, added = EmitterMixin._axis_words(None, mv, target, qe, 12, present_only=True)
+        edits, added = EmitterMixin.axis_words(None, mv, target, qe, 12, present_only=True)
         assert edits == [(1, 15, "1.168300025773")]
         assert added == []
         assert qe[0] == 1.168300025773

@@ -140,14 +140,14 @@ def test_a_fits_subdivisions_are_made_by_the_planner_in_growing_batches(monkeypa
     needs k spans asks about log2(k) times, not k times."""
     eng = _short_pitch_engine()
     used: list[tuple[float, float]] = []
-    plain = emitter.EmitterMixin._subdivide
+    plain = emitter.EmitterMixin.subdivision
 
     def recording(self, curves, s_init, unit):
         got = plain(self, curves, s_init, unit)
         used.append((float(s_init[0][0]), float(s_init[0][-1])))
         return got
 
-    monkeypatch.setattr(emitter.EmitterMixin, "_subdivide", recording)
+    monkeypatch.setattr(emitter.EmitterMixin, "subdivision", recording)
     out, rep = correct_text(SUBDIVIDED, eng, Setup())
     subs = [r for r in requests if r[0] == "sub"]
     k = len(set(used))  # (a fit written again after a request asks again for the spans it had)
@@ -177,7 +177,7 @@ def test_a_span_the_engine_refuses_is_refused_only_where_a_fit_needs_it(monkeypa
     eng = _short_pitch_engine()
     used: list[tuple[float, float]] = []
     all_spans: set[tuple[float, float]] = set()
-    plain = emitter.EmitterMixin._subdivide
+    plain = emitter.EmitterMixin.subdivision
     subdivide = engine_use.EngineCalls.subdivide
 
     def recording(self, curves, s_init, unit):
@@ -190,7 +190,7 @@ def test_a_span_the_engine_refuses_is_refused_only_where_a_fit_needs_it(monkeypa
 
     monkeypatch.setattr(engine_use.EngineCalls, "subdivide", made)
 
-    monkeypatch.setattr(emitter.EmitterMixin, "_subdivide", recording)
+    monkeypatch.setattr(emitter.EmitterMixin, "subdivision", recording)
     expected, _ = correct_text(SUBDIVIDED, eng, Setup())
     unused = sorted(all_spans - set(used))
     assert used
@@ -238,13 +238,13 @@ def test_a_line_read_by_the_interpreter_is_written_again_only_when_it_needed_its
     text = _odd_step_arcs().replace(" I0 J", " (arc) I0 J")
     expected, _ = correct_text(text, static, Setup())
     calls: list[int] = []
-    hinted = emitter.EmitterMixin._emit_hinted_arc
+    hinted = emitter.EmitterMixin.emit_hinted_arc
 
     def counted(self, line, mv, *args):
         calls.append(mv.lineno)
         return hinted(self, line, mv, *args)
 
-    monkeypatch.setattr(emitter.EmitterMixin, "_emit_hinted_arc", counted)
+    monkeypatch.setattr(emitter.EmitterMixin, "emit_hinted_arc", counted)
     monkeypatch.setattr(planner.Planner, "_hints_failing_rounded", lambda self, arcs, budget: set())
     got, _ = correct_text(text, static, Setup())
     assert got == expected

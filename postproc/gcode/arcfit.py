@@ -156,14 +156,14 @@ class _Writer(Protocol):
     """What a fit uses of the writer (:class:`postproc.gcode.emitter.EmitterMixin`): the
     words of a move, its input's own arc centre, the engine's subdivision of a curve."""
 
-    def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
+    def axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
                     present_only: bool = False) -> tuple[list[Edit], list[str]]: ...
 
-    def _axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]: ...
+    def axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]: ...
 
-    def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None: ...
+    def input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None: ...
 
-    def _subdivide(self, curves: list, s_init: list[np.ndarray], unit: float
+    def subdivision(self, curves: list, s_init: list[np.ndarray], unit: float
                    ) -> list[tuple[np.ndarray, np.ndarray]]: ...
 
 
@@ -294,9 +294,9 @@ class MoveFit:
         # sample b as floats (its row of Q): the words' arithmetic on floats, not numpy scalars
         target = [cols[0][hi - 1], cols[1][hi - 1], cols[2][hi - 1]]
         if last:
-            edits, added = self.w._axis_words(mv, target, qn, d)
+            edits, added = self.w.axis_words(mv, target, qn, d)
         else:
-            edits, added = self.w._axis_words(smp.free, target, qn, d)
+            edits, added = self.w.axis_words(smp.free, target, qn, d)
         ds = smp.sl[hi - 1] - smp.sl[lo]
         # the chord's deviation is measured only where needed: the middle sample alone
         # often shows it above the limit it is compared with
@@ -331,16 +331,16 @@ class MoveFit:
         controller at ``cur``; ``qb``: the corrected point at ``sb``), as fine as the
         engine's own subdivision needs."""
         mv, d = self.mv, self.d
-        (ss, qq), = self.w._subdivide([self.plan["curve"]], [np.array([sa, sb])], mv.unit)
+        (ss, qq), = self.w.subdivision([self.plan["curve"]], [np.array([sa, sb])], mv.unit)
         qq = np.array(qq, dtype=float) if self.to_view is None else self.to_view(qq)
         qq[-1] = qb
         out = []
         for j in range(1, len(ss)):
             qn = list(cur)
             if last and j == len(ss) - 1:
-                edits, added = self.w._axis_words(mv, qq[j], qn, d)
+                edits, added = self.w.axis_words(mv, qq[j], qn, d)
             else:
-                edits, added = self.w._axis_words_free(mv, qq[j], qn, d)
+                edits, added = self.w.axis_words_free(mv, qq[j], qn, d)
             out.append(_Piece("line", qn, edits, added, float(ss[j] - ss[j - 1])))
             cur = qn
         return out
@@ -377,7 +377,7 @@ class MoveFit:
         tr = fitcore.ArcTry(ends, arc.clockwise, nsw, full, smp.column(a1, lo, hi), smp.column(a2, lo, hi),
                             smp.column(an, lo, hi), frac)
         if keep:
-            ctrl = self.w._input_centre(mv, S_, E_)
+            ctrl = self.w.input_centre(mv, S_, E_)
             if ctrl is not None:
                 worst, mism, turns = _one(tr, float(ctrl[0]), float(ctrl[1]), False)
                 # the input's own reading: the spiral its controller draws (no penalty for

@@ -144,9 +144,9 @@ class Corrector(Protocol):
     @property
     def opt(self) -> _Options: ...
 
-    def _emit_move(self, line: str, mv: Move, target: list[float], plan: Plan | None, write: Write) -> None: ...
+    def emit_move(self, line: str, mv: Move, target: list[float], plan: Plan | None, write: Write) -> None: ...
 
-    def _emit_hinted_arc(self, line: str, mv: Move, target: list[float], hint: ArcHint, write: Write) -> None: ...
+    def emit_hinted_arc(self, line: str, mv: Move, target: list[float], hint: ArcHint, write: Write) -> None: ...
 
 
 def last_index(present: BoolArray) -> IntArray:
@@ -226,13 +226,13 @@ def tlo_col(line: str) -> int:
 
 def prime_shift(interp: Interpreter) -> bool:
     """Compute the offsets of absolute words in the current state ; False if they cannot be (the general path then reports why)."""
-    if interp._run_shift is None:
+    if interp.run_shift is None:
         try:
             shift = interp.shift(False, 0, 0)  # no line: its error is dropped here
         except PostprocError:
             return False
-        interp._run_shift = shift
-        interp._run_r = interp.tool_r()
+        interp.run_shift = shift
+        interp.run_r = interp.tool_r()
     return True
 
 
@@ -242,7 +242,7 @@ def state_allows(interp: Interpreter, motion_word: bool = False) -> bool:
     takes only the lines that fit the modal motion: :meth:`Block.motion_end`)."""
     st = interp.state
     return (not interp.ended and interp.modal_call is None and st.frame is None
-            and not st.incremental and not st.inverse_time and interp._run_shift is not None
+            and not st.incremental and not st.inverse_time and interp.run_shift is not None
             and st.comp == 400 and not st.comp_edge  # moves under cutter compensation: postproc.gcode.cutter
             and (motion_word or st.motion in (RAPID, LINE, ARC_CW, ARC_CCW))
             and not (math.isnan(st.pos[0]) or math.isnan(st.pos[1]) or math.isnan(st.pos[2])))
@@ -516,7 +516,7 @@ def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, sh
         return b, {}
     if interp.state.plane != 170:
         return arc_rows[lo], {}
-    rule = interp._arc_rule()
+    rule = interp.arc_dialect()
     # an end radius within the rule's tolerance at radius 0 (the least it has: every
     # tolerance grows with the radius) passes without asking the rule
     sure = rule.arc_end_radius_tolerance(0.0, unit)
@@ -537,7 +537,7 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
     :func:`state_allows`."""
     st = interp.state
     unit = 25.4 if st.inch else 1.0
-    shift = interp._run_shift
+    shift = interp.run_shift
     if shift is None:
         raise AssertionError("a run read before the offsets of its words are known (prime_shift)")
     pos = st.pos
@@ -555,7 +555,7 @@ def read_run(interp: Interpreter, block: Block, a: int, b: int, lineno: int, dec
     run.block, run.a, run.b, run.lineno = block, a, b, lineno
     run.unit = unit
     run.shift = shift
-    run.r = interp._run_r
+    run.r = interp.run_r
     run.arc_absolute = st.arc_absolute
     run.decimals = decimals
     run.q0 = q0
@@ -762,7 +762,7 @@ def _motion_row(corrector: Corrector, run: Run, T: FloatArray, write: Write, hin
     line = blk.lines[f]
     if mark is not None:
         mark(f - a, True)
-    corrector._emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
+    corrector.emit_move(line, _row_move(run, f - a).to_move(line), T[run.trow + f - a].tolist(), None, write)
     if mark is not None:
         mark(f + 1 - a, False)
     return f + 1
@@ -801,7 +801,7 @@ def _general_row(corrector: Corrector, run: Run, T: FloatArray, write: Write, hi
     if mark is not None:
         mark.save(y)
         mark(j, True)
-    corrector._emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
+    corrector.emit_hinted_arc(line, _row_move(run, j).to_move(line), T[run.trow + j].tolist(),
                                hints[run.trow + j], write)
     if mark is not None:
         mark(j + 1, False)

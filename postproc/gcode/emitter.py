@@ -139,7 +139,7 @@ class EmitterMixin:
     _plans: dict[int, Plan]  # the chunk's plans, by row (the general plans of hints too)
     _subdivided: Subdivided
 
-    def _subdivide(self, curves: list[Curve], s_init: list[np.ndarray],
+    def subdivision(self, curves: list[Curve], s_init: list[np.ndarray],
                    unit: float) -> list[tuple[np.ndarray, np.ndarray]]:
         """The engine's adaptive subdivision of one curve over one span, as the planner made
         it (:class:`PlanNeeded` when it has not yet)."""
@@ -159,7 +159,7 @@ class EmitterMixin:
             raise PlanNeeded(row=hint.row)
         return plan if view is None else view.plan(plan)
 
-    def _axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
+    def axis_words(self, mv: Move, target: Point, qe: list[float], d: int,
                     present_only: bool = False) -> tuple[list[Edit], list[str]]:
         """Edits for the axis words of ``mv``'s line and the words to add; updates qe. Under a
         rotating, scaling or mirroring frame the words are those of the frame's coordinates."""
@@ -167,7 +167,7 @@ class EmitterMixin:
             from postproc.gcode import frames
 
             qp = list(frames.program_from_machine(mv.frame, mv.shift, qe))
-            out = self._axis_words(replace(mv, frame=None), frames.program_from_machine(mv.frame, mv.shift, list(target)),
+            out = self.axis_words(replace(mv, frame=None), frames.program_from_machine(mv.frame, mv.shift, list(target)),
                                    qp, d, present_only)
             qe[:] = frames.machine_from_program(mv.frame, mv.shift, qp)
             return out
@@ -205,12 +205,12 @@ class EmitterMixin:
             d = self._decimals[unit] = _unit_decimals(self.opt, unit)
         return d
 
-    def _emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
+    def emit_move(self, line: str, mv: Move, target: Point, plan: Plan | None, write: Write) -> None:
         self.report.moves += 1
         d = self._decimals_for(mv.unit)
         if plan is None and mv.arc is None:
             # the common case: a move that is not split; only its words change
-            edits, added = self._axis_words(mv, target, self.qe, d)
+            edits, added = self.axis_words(mv, target, self.qe, d)
             if added or (mv.motion_idx < 0 and self.emitted_motion != mv.kind):
                 sep, lower = emit.style_of(line)
                 self._motion_edit(mv, edits, sep, lower)
@@ -247,9 +247,9 @@ class EmitterMixin:
         finally:
             self.qe[:] = view.machine(self.qe)
 
-    def _axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]:
+    def axis_words_free(self, mv: Move, q: Point, qe: list[float], d: int) -> tuple[list[Edit], list[str]]:
         """Words for an inserted line (no original words): every axis that moves."""
-        return self._axis_words(_free_move(mv), q, qe, d)
+        return self.axis_words(_free_move(mv), q, qe, d)
 
     def _insert_pos(self, mv: Move) -> int:
         idx = [i for i in mv.axis_idx if i >= 0]
@@ -292,7 +292,7 @@ class EmitterMixin:
         for k, st in enumerate(seq):
             if st[0] == "takeup":
                 qn = list(qe)
-                _e, added = self._axis_words_free(mv, st[1], qn, d)
+                _e, added = self.axis_words_free(mv, st[1], qn, d)
                 if added:
                     cutter_take_up(self, mv)
                     segs.append(_Piece("line", qn, [], added, 0.0, takeup=True))
@@ -408,7 +408,7 @@ class EmitterMixin:
         self.qe[:] = qe
         self._write_line(line, edits, write)
 
-    def _emit_hinted_arc(self, line: str, mv: Move, target: Point, hint: ArcHint, write: Write) -> None:
+    def emit_hinted_arc(self, line: str, mv: Move, target: Point, hint: ArcHint, write: Write) -> None:
         """An arc the bulk planner settled (:class:`postproc.gcode.vplan.ArcHint`): written
         as one exact arc when the hint's rounded centre passes for the end points as
         written, else planned and fitted as any other arc. A framed arc is written in its
@@ -429,15 +429,15 @@ class EmitterMixin:
 
     def _write_hinted_arc(self, line: str, mv: Move, target: Point, hint: ArcHint, d: int, write: Write,
                           view: FrameView | None = None) -> None:
-        """:meth:`_emit_hinted_arc` of a move without a frame, or of a framed arc in its
+        """:meth:`emit_hinted_arc` of a move without a frame, or of a framed arc in its
         ``view`` (``mv``, ``target``, ``hint`` and the emitted position in its coordinates)."""
         qn = list(self.qe)
-        edits, added = self._axis_words(mv, target, qn, d)
+        edits, added = self.axis_words(mv, target, qn, d)
         budget = self.opt.tolerance_mm * FIT_BUDGET * (1.0 if view is None else view.budget_share)
         if edits:
             spec = hint.spec(mv, self.qe, qn, d, budget)
         else:  # unchanged end words: the input's own arc words stay if they still pass
-            centre = self._input_centre(mv, self.qe, qn)
+            centre = self.input_centre(mv, self.qe, qn)
             spec = None if centre is None else hint.keep(mv, self.qe, qn, centre, budget)
         self.report.moves += 1
         if spec is None:
@@ -449,7 +449,7 @@ class EmitterMixin:
         self.report.arcs_kept += 1
         self._finish_line(line, mv, edits, added, spec, qn, write)
 
-    def _input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None:
+    def input_centre(self, mv: Move, S: Point, E: Point) -> np.ndarray | None:
         """Centre (2,) a controller finds from the input line's own arc words, with the
         emitted start and end."""
         arc = _arc_of(mv)
@@ -508,7 +508,7 @@ class EmitterMixin:
     def _emit_unplanned_arc(self, line: str, mv: Move, target: Point, d: int, write: Write) -> None:
         """An arc whose start is not known (the program's first move): its end words follow
         the target and its centre words keep their offset from the start."""
-        edits, added = self._axis_words(mv, target, self.qe, d)
+        edits, added = self.axis_words(mv, target, self.qe, d)
         sep, lower = emit.style_of(line)
         self._motion_edit(mv, edits, sep, lower)
         self.emitted_motion = mv.kind

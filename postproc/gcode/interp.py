@@ -117,7 +117,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         if not words:
             self._drill_if_due(lineno)
             return None
-        self._run_shift = None  # the slow path may change offsets, units or tool length
+        self.run_shift = None  # the slow path may change offsets, units or tool length
         if self.state.frame is not None:
             return self._framed_block(lineno, words, block_delete, self.state.frame)
         return self._block_and_cycle(lineno, words, block_delete)

@@ -138,12 +138,15 @@ class InterpreterCore:
         # axes sent to a stored position that was not given: unknown until positioned again
         self.unknown_after: dict[int, str] = {}
         self._last_pq: tuple[float, float] | None = None  # the previous G5's P/Q (mm)
-        self._run_shift: tuple[float, float, float] | None = None
-        self._run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        # for lines read in bulk (postproc.gcode.bulk): the offsets of absolute words (mm)
+        # and the tool vector in the current state, found once (bulk.prime_shift) and
+        # forgotten (None) wherever a line read here may change them
+        self.run_shift: tuple[float, float, float] | None = None
+        self.run_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.comp_moves: list = []  # moves the controller offsets (cutter.CompMove), taken by the corrector
 
     # -- helpers -----------------------------------------------------------------------
-    def _arc_rule(self) -> Dialect:
+    def arc_dialect(self) -> Dialect:
         """The controller whose input-arc rule applies: the dialect's own (generic reads
         arcs as LinuxCNC, the reference interpreter, does)."""
         from postproc.gcode import dialect

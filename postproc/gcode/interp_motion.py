@@ -342,7 +342,7 @@ class MotionMixin(InterpreterCore):
         re_ = math.hypot(e1 - c1, e2 - c2)
         if rs < MIN_ARC_RADIUS_MM:
             raise self._err(GcodeSyntaxError, "arc of zero radius", lineno, col)
-        ctrl = self._arc_rule()
+        ctrl = self.arc_dialect()
         if not ctrl.arc_end_radius_ok(rs, re_, unit):
             raise self._err(GcodeSyntaxError,
                             f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm, more than "

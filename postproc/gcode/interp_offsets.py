@@ -19,7 +19,7 @@ class OffsetsMixin(InterpreterCore):
         """What ``G43 H<h>`` does to the state, for the readers that take such a line as
         columns (as :meth:`_block` reads it)."""
         self._g43({"H": (float(h), -1)}, lineno, col)
-        self._run_shift = None
+        self.run_shift = None
 
     def _offset_settings(self, b: Block) -> bool:
         """The block's G10, G52 or G92, with the offset each sets from where the machine is

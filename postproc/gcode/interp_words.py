@@ -210,7 +210,7 @@ class WordsMixin(InterpreterCore):
                             min(c for _v, c in given.values()))
         st.frame, st.g92 = frames.next_frame(kind, st.frame, st.g92, {a: v for a, (v, _c) in given.items()}, angle,
                                              st.unit_mm)
-        self._run_shift = None
+        self.run_shift = None
 
     def _plain_words(self, tokens: list[lexer.Token], line: str, lineno: int) -> tuple[list[lexer.Word], bool]:
         """The words of a lexed line and whether it starts with '/' (block delete);

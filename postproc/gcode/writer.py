@@ -221,9 +221,9 @@ class ChunkWriter(EmitterMixin):
                 self._save(o, i, (p, -1))  # its plan or a fit's subdivision may have to be made first
                 o.marks.append((len(out), e.line(j), 1, e.path(j)))
                 if hint is not None:
-                    self._emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, out.append)
+                    self.emit_hinted_arc(line, fm.to_move(line), T[k + j].tolist(), hint, out.append)
                 else:
-                    self._emit_move(line, fm.to_move(line), T[k + j].tolist(), o.plans.get(k + j), out.append)
+                    self.emit_move(line, fm.to_move(line), T[k + j].tolist(), o.plans.get(k + j), out.append)
         o.k += len(e)
 
     def _write_entry(self, e: Entry, o: _Chunk) -> None:
@@ -267,9 +267,9 @@ class ChunkWriter(EmitterMixin):
         else:
             hint = o.hints.get(k)
             if hint is not None:
-                self._emit_hinted_arc(line, mv, T[k].tolist(), hint, write)
+                self.emit_hinted_arc(line, mv, T[k].tolist(), hint, write)
             else:
-                self._emit_move(line, mv, T[k].tolist(), o.plans.get(k), write)
+                self.emit_move(line, mv, T[k].tolist(), o.plans.get(k), write)
 
     def _fit_lines(self, out: list[str], marks: list[tuple[int, int, int, bulk.Run | str | None]]) -> str:
         """A chunk's text (``out``, its entries' ``marks``) with every line it writes
@@ -356,7 +356,7 @@ class ChunkWriter(EmitterMixin):
         qe = self.qe
         z_before = qe[2]
         flat = replace(mv, axis_idx=(mv.axis_idx[0], mv.axis_idx[1], -1))
-        edits, added = self._axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
+        edits, added = self.axis_words(flat, (t_bottom[0], t_bottom[1], qe[2]), qe, d)
         sep, lower = emit.style_of(line)
         same_group = self._cycle_nominal == (c.z_mm, c.r_mm)
         self._cycle_nominal = (c.z_mm, c.r_mm)
@@ -401,5 +401,5 @@ class ChunkWriter(EmitterMixin):
         (G28/G30 intermediate points)."""
         self.report.moves += 1
         d = _unit_decimals(self.opt, mv.unit)
-        edits, _added = self._axis_words(mv, target, self.qe, d, present_only=True)
+        edits, _added = self.axis_words(mv, target, self.qe, d, present_only=True)
         self._write_line(line, edits, write)
