@@ -50,7 +50,7 @@ def test_a_new_dialect_is_one_entry():
     for d in D.DIALECTS.values():
         assert d.machine in ("mill", "lathe")
         assert d.text_after_percent in ("ignored", "error")
-        assert d.off_plane_arc_offset in ("error", "ignored", "zero-ignored")
+        assert d.off_plane_arc_offset in ("error", "ignored", "ignored-beside-centre", "zero-ignored")
         assert d.macro_syntax in ("o-word", "macro-b", "detect", "sinumerik")
         assert d.reads_arcs_as is None or d.reads_arcs_as in D.DIALECTS
 

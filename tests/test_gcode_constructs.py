@@ -4,6 +4,7 @@ name what the line really is."""
 
 import numpy as np
 import pytest
+from conftest import CORPUS
 
 from postproc.engine.identity import IdentityEngine
 from postproc.engine.static import StaticEngine
@@ -151,6 +152,37 @@ def test_off_plane_offset_ignored_where_the_controller_ignores_it():
     with pytest.raises(PostprocError, match="K word is not an arc offset") as err:
         run(text, dialect="linuxcnc")  # "K word given for arc in xy plane" in LinuxCNC
     assert "--dialect" in err.value.hint
+
+
+@pytest.mark.parametrize(("dialect", "k", "r_form_too"), [
+    ("grbl", "K0", False), ("grbl", "K5", False),  # gcode.c: the offset form clears I, J and K
+    ("fanuc", "K5", True), ("generic", "K0", False)])
+def test_off_plane_offset_beside_centre_words(dialect, k, r_form_too):
+    _, moves = run(f"G21 G90 G17\nG0 X1 Y2 Z3\nG2 X3 Y2 I1 J0 {k} F100\nM30\n", dialect=dialect)
+    assert moves[-1].arc.center[:2] == (2.0, 2.0)
+    r_form = f"G21 G90 G17\nG0 X1 Y2 Z3\nG2 X3 Y2 R1 {k} F100\nM30\n"
+    if r_form_too:
+        assert run(r_form, dialect=dialect)[1][-1].arc is not None
+    else:  # Grbl: I/J/K beside R are unused words (STATUS_GCODE_UNUSED_WORDS)
+        with pytest.raises(PostprocError, match="K word is not an arc offset"):
+            run(r_form, dialect=dialect)
+    with pytest.raises(PostprocError, match="K word is not an arc offset"):
+        run(f"G21 G90 G17\nG0 X1 Y2 Z3\nG2 X3 Y2 I1 J0 {k} F100\nM30\n", dialect="linuxcnc")
+
+
+def test_a_freecad_grbl_post_program_is_corrected_as_grbl():
+    """FreeCAD's grbl_post writes K0.000 on every G17 arc; Grbl runs it."""
+    path = CORPUS / "real" / "freecad_sergey" / "Cicloid_Gear__External_gear_pin.nc"
+    if not path.exists():
+        pytest.skip("needs ../shared/corpus")
+    text = path.read_text()
+    setup = Setup(offsets={"G54": (0.0, 0.0, 100.0)})
+    out, rep = correct_text(text, scale_engine(), setup, CorrectOptions(dialect="grbl"), path=str(path))
+    assert rep.arcs_kept > 0
+    body = [ln for ln in out.splitlines() if not emit.is_header(ln)]
+    k_lines = [ln for ln in text.splitlines() if "K0.000" in ln]
+    assert k_lines
+    assert sum("K0.000" in ln for ln in body) == len(k_lines)  # the ignored words stay as written
 
 
 def test_io_m_codes_take_e_words_and_g92_takes_rotary_axes():

@@ -128,7 +128,9 @@ class Dialect:
     cycle_repeat_words: str = "L"  # the words counting a cycle's repeats, first given wins ("KL": K, else L)
     full_circle_without_end: bool = True  # G2/G3 with centre words and no end point is a full circle
     g53_absolute_in_g91: bool = False  # G53 words are machine positions in G91 too (else an error)
-    off_plane_arc_offset: str = "error"  # an I/J/K word off the arc's plane: error | ignored | zero-ignored
+    # an I/J/K word off the arc's plane: error | ignored | ignored-beside-centre (ignored where
+    # the arc has centre words, an error beside R) | zero-ignored (a zero one beside centre words)
+    off_plane_arc_offset: str = "error"
     # parameters and control: o-word (LinuxCNC) | macro-b (Fanuc custom macro B, M98/M99) | detect
     macro_syntax: str = "o-word"
     m98_count_in_p: bool = False  # M98 P(count)(4-digit number) when no program has the whole number
@@ -241,7 +243,10 @@ DIALECTS: dict[str, Dialect] = {
         source="gcode.c (arc radius check), protocol.c/protocol.h LINE_BUFFER_SIZE, serial.h RX_BUFFER_SIZE; "
                "N_DECIMAL_COORDVALUE_MM/INCH (config.h) for the decimals",
         # gcode.c: an arc with no axis words is STATUS_GCODE_NO_AXIS_WORDS
-        full_circle_without_end=False, cutter_comp="none"),
+        full_circle_without_end=False, cutter_comp="none",
+        # gcode.c: the centre-offset form clears I, J and K whatever the plane; beside R they
+        # are unused words (STATUS_GCODE_UNUSED_WORDS)
+        off_plane_arc_offset="ignored-beside-centre"),
     "fanuc": Dialect(
         name="fanuc", title="Fanuc 0i/30i (ISO code)",
         max_line_chars=FANUC_MAX_LINE, max_word_chars=None,

@@ -280,15 +280,18 @@ class MotionMixin(InterpreterCore):
         clockwise = st.motion == ARC_CW
         s, e = (q0[a1], q0[a2]), (q1[a1], q1[a2])
         wrong = [k for k in "IJK" if k in vals and k not in (l1, l2)]
-        if wrong and self.d.off_plane_arc_offset == "ignored":
+        off_plane, centre_form = self.d.off_plane_arc_offset, "R" not in vals
+        if wrong and (off_plane == "ignored" or (off_plane == "ignored-beside-centre" and centre_form)):
             wrong = []  # these controllers ignore an offset word off the arc's plane
-        elif wrong and self.d.off_plane_arc_offset == "zero-ignored" and all(vals[k][0] == 0 for k in wrong):
+        elif (wrong and off_plane == "zero-ignored" and centre_form
+              and all(vals[k][0] == 0 for k in wrong)):
             wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
         if wrong:
             raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
                             words[vals[wrong[0]][1]][4] + 1,
-                            hint="LinuxCNC and Grbl reject it (Fanuc, Haas and Mach3 ignore it: "
-                                 "choose that --dialect if the program is for one of them)")
+                            hint="LinuxCNC rejects it, and Grbl beside R (Grbl ignores it beside I/J/K "
+                                 "centre words; Fanuc, Haas and Mach3 ignore it: choose that --dialect if "
+                                 "the program is for one of them)")
         if "R" in vals:
             if l1 in vals or l2 in vals:
                 raise self._err(GcodeSyntaxError, "arc with both R and centre offsets", lineno, col)
