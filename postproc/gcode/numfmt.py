@@ -9,6 +9,7 @@ It imports nothing of the package, so that it compiles on its own.
 from __future__ import annotations
 
 import math
+from typing import Final
 
 
 def fmt(value: float, decimals: int) -> str:
@@ -45,10 +46,14 @@ def fmt_all(values: list[float], decimals: list[int], prefix: str) -> list[str]:
     return texts
 
 
+#: half a unit of the last of d decimals, by d (beyond these, 0: below a double's smallest step)
+_HALVES: Final = tuple(0.5 * 10.0 ** (-d) for d in range(330))
+
+
 def half_unit(decimals: int) -> float:
     """Half a unit of the last of ``decimals`` digits; 0 beyond a double's smallest step
     (a word written with hundreds of decimals, kept as written)."""
-    return 0.5 * 10.0 ** (-decimals) if decimals < 330 else 0.0
+    return _HALVES[decimals] if decimals < 330 else 0.0
 
 
 def word_text(value: float, own: float, own_decimals: int, decimals: int) -> str:
@@ -85,8 +90,17 @@ def word_texts(values: list[float], own: list[float], own_decimals: list[int], d
     """:func:`word_text` of each word: the indices of those whose text changes and their
     new texts (one :func:`fmt_all` over them)."""
     changed: list[int] = []
-    for k in range(len(values)):
-        if not abs(values[k] - own[k]) < half_unit(decimals[k]):
+    new: list[float] = []
+    dout: list[int] = []
+    d, half = -1, 0.0
+    k = 0
+    for v, o, dk in zip(values, own, decimals):
+        if dk != d:
+            d, half = dk, half_unit(dk)
+        if not abs(v - o) < half:
             changed.append(k)
-    dout = [own_decimals[k] if own_decimals[k] > decimals[k] else decimals[k] for k in changed]
-    return changed, fmt_all([values[k] for k in changed], dout, "")
+            new.append(v)
+            od = own_decimals[k]
+            dout.append(od if od > dk else dk)
+        k += 1
+    return changed, fmt_all(new, dout, "")
