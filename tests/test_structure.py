@@ -203,3 +203,65 @@ def main() -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+# the private names of the standard library a module may call (documented there)
+STDLIB_PRIVATE = frozenset({"os._exit"})
+
+
+def private_names(tree: ast.Module) -> set[str]:
+    """The private names (one leading underscore) a module defines: functions, classes,
+    their methods and class attributes, attributes assigned on any object, and names
+    bound at any level."""
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            names.add(node.attr)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            names.add(node.id)
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            names.add(node.target.id)
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names.update(a.asname or a.name for a in node.names)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            names.update(s for s in re.findall(r"\b_\w+", node.value))  # __slots__ entries
+    return {n for n in names if n.startswith("_") and not n.startswith("__")}
+
+
+def foreign_private_uses(root: Path = ROOT) -> list[str]:
+    """``module:line X._name`` for each read of a private name (one leading underscore)
+    on anything but ``self`` or ``cls`` that the module itself does not define: a module
+    reaching into another's internals."""
+    found = []
+    for name, path in module_names(root).items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        own = private_names(tree)
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Attribute) and node.attr.startswith("_")
+                    and not node.attr.startswith("__")):
+                continue
+            if isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"):
+                continue
+            text = f"{ast.unparse(node.value)}.{node.attr}"
+            if node.attr not in own and text not in STDLIB_PRIVATE:
+                found.append(f"{name}:{node.lineno} {text}")
+    return sorted(found)
+
+
+def test_no_module_reaches_into_another_modules_private_names():
+    """What a module uses of another is that module's public API: the run writer, the
+    fit, the expansion and the solvers call the interpreter, the writer, the Sinumerik
+    reader and the engine through public names."""
+    assert foreign_private_uses() == []
+
+
+def test_foreign_private_uses_are_found(tmp_path):
+    pkg = tmp_path / PACKAGE
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("class A:\n    def _own(self):\n        return self._x\n")
+    (pkg / "b.py").write_text("from postproc import a\n\ndef f(o):\n    return o._own() + a.A()._x\n")
+    (pkg / "c.py").write_text("class C:\n    _y = 1\n\ndef g(o):\n    return o._y\n")
+    assert foreign_private_uses(tmp_path) == ["postproc.b:4 a.A()._x", "postproc.b:4 o._own"]

@@ -289,12 +289,12 @@ class ParametricEngine(Engine):
         """Forward model with an explicit order ("first", "second", "exact")."""
         q = check_points(q, "q")
         r = check_tool_vectors(r, len(q))
-        return self._forward_located(q, r, order or self.order)[0]
+        return self.forward_located(q, r, order or self.order)[0]
 
-    def _forward_located(self, q: np.ndarray, r: np.ndarray, order: str,
+    def forward_located(self, q: np.ndarray, r: np.ndarray, order: str,
                          near: Located | None = None) -> tuple[np.ndarray, Located]:
         """F(q, r) (N, 3) of checked arrays, and where q lies in the tables (for the
-        Jacobian at the same points: :meth:`_jacobian_located`); ``near``: where the same
+        Jacobian at the same points: :meth:`jacobian_located`); ``near``: where the same
         points lay a step earlier (:meth:`StackedErrors.locate`)."""
         loc = self._stacked.locate(q, near)
         total = self._stacked.values(loc)
@@ -333,9 +333,9 @@ class ParametricEngine(Engine):
         """dF/dq (N, 3, 3) of the first-order model (the other orders differ by O(|eps|^2))."""
         q = check_points(q, "q")
         r = check_tool_vectors(r, len(q))
-        return self._jacobian_located(self._stacked.locate(q), None, r).copy()  # scratch: a copy
+        return self.jacobian_located(self._stacked.locate(q), None, r).copy()  # scratch: a copy
 
-    def _jacobian_located(self, loc: Located, rows, r: np.ndarray) -> np.ndarray:
+    def jacobian_located(self, loc: Located, rows, r: np.ndarray) -> np.ndarray:
         """:meth:`jacobian` at located points (``rows``: which of them, None: all), r (M, 3).
         The (M, 3, 3) answer is a view of a (3, 3, M) scratch array (row, column, point),
         valid until the next evaluation in this thread."""

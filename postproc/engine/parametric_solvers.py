@@ -176,7 +176,7 @@ def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: floa
         else:
             qa, ra, pa = q[active], r[active], p[active]
         # the same points as in the step before: their intervals, most likely, too
-        value, loc = engine._forward_located(qa, ra, order, loc if everyone else None)
+        value, loc = engine.forward_located(qa, ra, order, loc if everyone else None)
         f = value - pa
         # np.linalg.norm(f, axis=1) without its checks, and its sum of the three squares
         # taken as (x2 + y2) + z2 by whole columns (a reduction along rows of three runs
@@ -193,7 +193,7 @@ def newton_inverse_located(engine, p: np.ndarray, r: np.ndarray, *, tol_mm: floa
             active, f, ra = active[keep], f[keep], ra[keep]
         if not len(active) or k == max_iter:
             break
-        J = engine._jacobian_located(loc, rows, ra)
+        J = engine.jacobian_located(loc, rows, ra)
         if everyone:
             q -= _solve(J, f, "Newton inverse", active, p)
             iterations += 1

@@ -56,7 +56,7 @@ class Interpreter(Protocol):
     lenient_setup: bool
     comp_moves: list
 
-    def _err(self, cls: type, msg: str, lineno: int, col: int, hint: str | None = None) -> Any: ...
+    def error(self, cls: type, msg: str, lineno: int, col: int, hint: str | None = None) -> Any: ...
 
 # Directions u sampled in the plane around each contour point. For a correction field
 # linear across the radius, +u and -u give the same |e|, so 8 directions sample the
@@ -108,8 +108,8 @@ class Bound:
         return f"cutter comp {radii} bound {self.bound_mm * 1000:.2f} um over {self.moves} moves"
 
 
-def _err(it: Interpreter, cls: type, msg: str, lineno: int, col: int, hint: str | None = None) -> Exception:
-    return it._err(cls, msg, lineno, col, hint=hint)
+def error(it: Interpreter, cls: type, msg: str, lineno: int, col: int, hint: str | None = None) -> Exception:
+    return it.error(cls, msg, lineno, col, hint=hint)
 
 
 def _controller(it: Interpreter) -> str:
@@ -122,18 +122,18 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
     radii = getattr(it.setup, "tool_radii", None) or {}
     if key in (411, 421):
         if not _linuxcnc_rules(it):
-            raise _err(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} (LinuxCNC's dynamic cutter compensation) "
+            raise error(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} (LinuxCNC's dynamic cutter compensation) "
                        f"in the {it.dialect} dialect", lineno, col)
         if "D" not in vals:
-            raise _err(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} with no D word", lineno, col,
+            raise error(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} with no D word", lineno, col,
                        hint="LinuxCNC refuses it: G41.1/G42.1 take the tool diameter on the line")
         d = vals["D"][0]
         if d < 0:
-            raise _err(it, GcodeSyntaxError, f"negative D word tool radius index used with {CUTTER_COMP[key]}",
+            raise error(it, GcodeSyntaxError, f"negative D word tool radius index used with {CUTTER_COMP[key]}",
                        lineno, col)
         return d * st.unit_mm / 2.0, f"{CUTTER_COMP[key]} D{d:g}"
     if "D" in vals and vals["D"][0] != int(vals["D"][0]):
-        raise _err(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} requires D word to be a whole number", lineno, col,
+        raise error(it, GcodeSyntaxError, f"{CUTTER_COMP[key]} requires D word to be a whole number", lineno, col,
                    hint=f"{_controller(it)} refuses it: D names a tool (LinuxCNC) or an offset register")
     tool: int | None
     if _linuxcnc_rules(it):
@@ -153,7 +153,7 @@ def radius_of(it: Interpreter, key: int, vals: dict, lineno: int, col: int) -> t
     if r is None and it.lenient_setup:
         return 0.0, name  # two versions of one program compared: the radius is the same in both
     if r is None:
-        raise _err(it, MissingSetupError, f"{CUTTER_COMP[key]} offsets by the radius of {name}, which was not given",
+        raise error(it, MissingSetupError, f"{CUTTER_COMP[key]} offsets by the radius of {name}, which was not given",
                    lineno, col, hint=f"give --tool-radius {tool}=R, --tool-diameter {tool}=D (mm) or a --tool-table "
                                      "with a D (diameter) column")
     return float(r), name
@@ -183,14 +183,14 @@ def check_block(it: Interpreter, b, gcodes: list, tool_change: bool) -> None:
                 k, i = hits[0]
                 if k in SPLINES:
                     msg = f"G{k / 10:g} spline with cutter radius compensation on"
-                raise _err(it, UnsupportedGcodeError, msg, lineno, b.col(i),
+                raise error(it, UnsupportedGcodeError, msg, lineno, b.col(i),
                            hint=f"{ctrl} refuses it; turn compensation off (G40) first")
         if tool_change:
-            raise _err(it, UnsupportedGcodeError, "Cannot change tools with cutter radius compensation on",
+            raise error(it, UnsupportedGcodeError, "Cannot change tools with cutter radius compensation on",
                        lineno, b.words[0].letter_pos + 1, hint=f"{ctrl} refuses it; G40 first")
         modal = not any(k in (0, 10, 20, 30) or k in CANNED_CYCLES or k in SPLINES for k, _i in gcodes)
         if modal and st.motion in CANNED_CYCLES and any(a in b.vals for a in "XYZ"):
-            raise _err(it, UnsupportedGcodeError, "Cannot use canned cycles with cutter compensation on",
+            raise error(it, UnsupportedGcodeError, "Cannot use canned cycles with cutter compensation on",
                        lineno, b.words[0].letter_pos + 1)
 
 
@@ -209,17 +209,17 @@ def switch(it: Interpreter, b, gcodes: list) -> None:
             st.comp, st.comp_edge = 400, "exit"
         return
     if it.d.cutter_comp == "none":
-        raise _err(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} cutter radius compensation ({it.d.title}: "
+        raise error(it, UnsupportedGcodeError, f"{CUTTER_COMP[key]} cutter radius compensation ({it.d.title}: "
                    "none, or its rules are not modelled)", lineno, col,
                    hint="post the tool-centre path (compensation done in CAM) for this controller")
     if on and _linuxcnc_rules(it):
-        raise _err(it, GcodeSyntaxError, "Cannot turn cutter radius comp on when on", lineno, col,
+        raise error(it, GcodeSyntaxError, "Cannot turn cutter radius comp on when on", lineno, col,
                    hint="LinuxCNC refuses it: G40 before turning it on again")
     if st.plane == 190 or 190 in keys:
-        raise _err(it, UnsupportedGcodeError, "Cutter radius compensation allowed only in XY, XZ planes",
+        raise error(it, UnsupportedGcodeError, "Cutter radius compensation allowed only in XY, XZ planes",
                    lineno, col)
     if st.plane == 180 and not _linuxcnc_rules(it):
-        raise _err(it, UnsupportedGcodeError, f"cutter radius compensation in the XZ plane (G18) on {ctrl}",
+        raise error(it, UnsupportedGcodeError, f"cutter radius compensation in the XZ plane (G18) on {ctrl}",
                    lineno, col, hint="postproc reads G18 compensation as LinuxCNC does only")
     radius, source = radius_of(it, key, b.vals, lineno, col)
     st.comp, st.comp_radius, st.comp_source = key, radius, source
@@ -250,18 +250,18 @@ def on_move(it: Interpreter, mv: Move) -> None:
         st.comp_edge = ""
         mv.role = Role.WHOLE
         if arc is not None and not _linuxcnc_rules(it):
-            raise _err(it, UnsupportedGcodeError, f"arc as the start-up move of cutter compensation on {ctrl}",
+            raise error(it, UnsupportedGcodeError, f"arc as the start-up move of cutter compensation on {ctrl}",
                        lineno, col, hint="alarm PS0034 (no circular interpolation in the start-up or exit "
                                          "block): the lead-in must be G0 or G1")
         if arc is not None:
             # rs274 (interp_arc.cc, convert_arc_comp1) compares the chord from where the tool
             # is to the arc's end, not the arc's radius, whatever its message says
             if in_plane <= rho:
-                raise _err(it, GcodeSyntaxError,
+                raise error(it, GcodeSyntaxError,
                            "Radius of cutter compensation entry arc is not greater than the tool radius", lineno, col,
                            hint="LinuxCNC refuses it")
         elif in_plane <= rho:
-            raise _err(it, GcodeSyntaxError,
+            raise error(it, GcodeSyntaxError,
                        "Length of cutter compensation entry move is not greater than the tool radius", lineno, col,
                        hint="LinuxCNC refuses it")
     elif edge == "exit":
@@ -269,10 +269,10 @@ def on_move(it: Interpreter, mv: Move) -> None:
         mv.role = Role.WHOLE
         if arc is not None:
             if _linuxcnc_rules(it):
-                raise _err(it, GcodeSyntaxError,
+                raise error(it, GcodeSyntaxError,
                            "The move just after exiting cutter compensation mode must be straight, not an arc",
                            lineno, col, hint="LinuxCNC refuses it")
-            raise _err(it, UnsupportedGcodeError, f"arc as the exit move of cutter compensation on {ctrl}",
+            raise error(it, UnsupportedGcodeError, f"arc as the exit move of cutter compensation on {ctrl}",
                        lineno, col, hint="alarm PS0034 (no circular interpolation in the start-up or exit block): "
                                          "the lead-out must be G0 or G1")
         it.comp_moves.append(CompMove(mv, rho, st.comp_source, st.plane))
@@ -284,7 +284,7 @@ def on_move(it: Interpreter, mv: Move) -> None:
         left = st.comp in (410, 411)
         inside = (left and st.motion == ARC_CCW) or (not left and st.motion == ARC_CW)
         if inside and r_arc <= rho:
-            raise _err(it, GcodeSyntaxError, "Tool radius not less than arc radius with comp", lineno, col,
+            raise error(it, GcodeSyntaxError, "Tool radius not less than arc radius with comp", lineno, col,
                        hint=f"{ctrl} refuses it: the tool does not fit inside the arc")
     if st.comp != 400:
         it.comp_moves.append(CompMove(mv, rho, st.comp_source, st.plane))

@@ -446,7 +446,7 @@ def get(name: str | Dialect) -> Dialect:
     return d
 
 
-def _comments(body: str) -> Iterator[tuple[int, str, str]]:
+def comments_of(body: str) -> Iterator[tuple[int, str, str]]:
     """Yield ``(start, text, kind)`` for each comment of a line without its ending; kind is
     ``"("``, ``";"``, ``"nested"`` (a "(" inside a comment) or ``"unclosed"``."""
     i, n = 0, len(body)
@@ -518,7 +518,7 @@ def _check_comments(d: Dialect, body: str, where: _Where) -> list[tuple[int, int
     ``(start, end)`` spans of the text outside the comments."""
     words: list[tuple[int, int]] = []
     pos = 0
-    for start, text, kind in _comments(body):
+    for start, text, kind in comments_of(body):
         if kind in ("(", "unclosed", ";"):
             words.append((pos, start))
         if kind == "unclosed":

@@ -414,7 +414,7 @@ def _over_limit(d, body: str) -> tuple[int, str] | None:
         return d.max_line_chars + 1, f"line of {count} characters, more than {d.title} reads ({d.max_line_chars})"
     if d.max_word_chars is not None:
         spans, pos = [], 0
-        for start, text, kind in dialects._comments(body.rstrip("\r")):
+        for start, text, kind in dialects.comments_of(body.rstrip("\r")):
             spans.append((pos, start))
             pos = len(body) if kind in (";", "unclosed") else start + len(text) + 2
         spans.append((pos, len(body)))
@@ -440,7 +440,7 @@ def fit_line(dialect: str, line: str) -> tuple[list[str], tuple[int, str] | None
     if over is None:
         return [line], None
     comments = [(start, body[start:] if kind in (";", "unclosed") else body[start:start + len(text) + 2])
-                for start, text, kind in dialects._comments(body) if kind != "nested"]
+                for start, text, kind in dialects.comments_of(body) if kind != "nested"]
     if not comments:
         return [line], over
     words = body

@@ -164,7 +164,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 if m.arc is not None:
                     axes = PLANES[m.arc.plane][0]
                     if not frames.keeps_circles(a, axes):
-                        raise self._err(UnsupportedGcodeError, "Sinumerik arc under a frame that does not keep it a "
+                        raise self.error(UnsupportedGcodeError, "Sinumerik arc under a frame that does not keep it a "
                                         "circle in its plane (SCALE with unequal factors, or ROT about Z with "
                                         "G18/G19)", lineno, 1,
                                         hint="post the arc as its moves, or scale the plane's axes alike")
@@ -197,7 +197,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         vals: dict[str, tuple[float, int]] = {}
         for i, (letter, num, _start, _end, _lpos) in enumerate(words):
             if letter in "GM" and not abs(float(num)) <= MAX_WORD_VALUE:
-                raise self._err(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
+                raise self.error(UnsupportedGcodeError, f"unknown code {letter}{num[:12]}...", lineno, _lpos + 1)
             if letter == "G":
                 key = gkey(num)
                 gcodes.append((self._g_alias.get(key, key) if self._g_alias else key, i))
@@ -205,11 +205,11 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 mcodes.append((gkey(num), i))
             else:
                 if letter in vals:
-                    raise self._err(GcodeSyntaxError, f"word {letter} appears twice in one block",
+                    raise self.error(GcodeSyntaxError, f"word {letter} appears twice in one block",
                                     lineno, _lpos + 1)
                 if letter == "O":
                     self._foreign(" ".join(w.letter + w.number for w in words), lineno)
-                    raise self._err(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
+                    raise self.error(UnsupportedGcodeError, "O-word (subroutine or flow control)", lineno, _lpos + 1,
                                     hint="expand subroutines and loops in the CAM system before correcting")
                 if letter == "E" and self.d.fixture_offset_word == "E":
                     vals[letter] = (float(num), i)  # Fadal E1..E48: a fixture offset
@@ -220,11 +220,11 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 if letter in "UVW" or (letter == "E" and not any(
                         (w.letter == "M" and gkey(w.number) // 10 in IO_M and gkey(w.number) % 10 == 0)
                         or (w.letter == "G" and gkey(w.number) in (1870, 470)) for w in words)):
-                    raise self._err(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
+                    raise self.error(UnsupportedGcodeError, f"{letter} axis word (axes other than XYZABC)",
                                     lineno, _lpos + 1)
                 value = float(num)
                 if not abs(value) <= MAX_WORD_VALUE:  # (also inf and nan)
-                    raise self._err(GcodeSyntaxError, f"{letter} value {num[:12]}{'...' if len(num) > 12 else ''} is "
+                    raise self.error(GcodeSyntaxError, f"{letter} value {num[:12]}{'...' if len(num) > 12 else ''} is "
                                     f"beyond {MAX_WORD_VALUE:g}: no machine moves that far", lineno, _lpos + 1)
                 vals[letter] = (value, i)
         if self.d.call_words and not gcodes and any(k in vals for k in self.d.call_words):
@@ -240,26 +240,26 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         event_idx: list[int] = [vals[k][1] for k in "ST" if k in vals]
         for key, i in b.mcodes:
             if key % 10:
-                raise self._err(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, b.col(i))
+                raise self.error(UnsupportedGcodeError, f"M{key / 10:g} (unknown M code)", lineno, b.col(i))
             m = key // 10
             if m == 99 and "P" not in vals:
                 # M99 reached in the main program (a call would have started the expansion,
                 # which consumes the subprograms' own M99): the end of a pass, as the
                 # expansion stage reads it too
                 if st.incremental:
-                    raise self._err(UnsupportedGcodeError, "M99 repeats the program from where it ended, in G91 "
+                    raise self.error(UnsupportedGcodeError, "M99 repeats the program from where it ended, in G91 "
                                     "(incremental): each pass starts elsewhere", lineno, b.col(i),
                                     hint="end the program with G90 before M99, or with M30")
                 self.ended = True
                 self.repeats = True
                 continue
             if m in REFUSED_M:
-                raise self._err(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
+                raise self.error(NeedsExpansion if (m in EXPANDABLE_M and self.may_expand) else UnsupportedGcodeError,
                                 REFUSED_M[m], lineno, b.col(i),
                                 hint="postproc expands M98/M99 subprograms defined in the same program; "
                                      "put the subprogram in the file")
             if m > 199:
-                raise self._err(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, b.col(i))
+                raise self.error(UnsupportedGcodeError, f"M{m} (unknown M code)", lineno, b.col(i))
             if m in BEFORE_MOTION_M:
                 event_idx.append(i)
                 event_idx.extend(vals[k][1] for k in M_PARAMS.get(m, "") if k in vals)
@@ -269,7 +269,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 self.ended = True
             if m == 61:
                 if "Q" not in vals:
-                    raise self._err(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, b.col(i))
+                    raise self.error(GcodeSyntaxError, "M61 needs a Q word (tool number)", lineno, b.col(i))
                 st.spindle_tool = int(vals["Q"][0])
 
         if "T" in vals:
@@ -292,7 +292,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
                 raise self.lathe.refusal(f"G{b.words[i].number} turning cycle at line {b.lineno}", self.path,
                                          b.lineno, b.col(i))
             if handler is None:
-                raise self._err(UnsupportedGcodeError, f"G{b.words[i].number} (unknown G code)", b.lineno, b.col(i))
+                raise self.error(UnsupportedGcodeError, f"G{b.words[i].number} (unknown G code)", b.lineno, b.col(i))
             handler(self, b, key, i)
         if b.comp is not None:
             cutter.switch(self, b, b.gcodes)
@@ -302,7 +302,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         too); True when the block ends there: a look-ahead code, G10, G52 or G92."""
         st, vals = self.state, b.vals
         if self.d.tool_length_word and self.d.tool_length_word in vals:  # Sinumerik D: the length register
-            self._g43({"H": vals[self.d.tool_length_word]}, b.lineno, b.col(vals[self.d.tool_length_word][1]))
+            self.apply_g43({"H": vals[self.d.tool_length_word]}, b.lineno, b.col(vals[self.d.tool_length_word][1]))
         if self.d.fixture_offset_word and self.d.fixture_offset_word in vals:
             b.work_name = f"{self.d.fixture_offset_word}{int(vals[self.d.fixture_offset_word][0])}"
         if b.work_name is not None:
@@ -341,7 +341,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
         key = b.motion_key
         if key is None and (b.has_axes or st.motion not in _NEEDS_AXES):
             key = st.motion
-        return MOTIONS.get(key, Interpreter._motion_line)(self, b)
+        return MOTIONS.get(key, Interpreter.motion_line)(self, b)
 
     @staticmethod
     def _is_lookahead(key: int, vals: Vals) -> bool:
@@ -362,7 +362,7 @@ class Interpreter(WordsMixin, OffsetsMixin, CyclesMixin, MotionMixin):
 def _g_motion(it: Interpreter, b: Block, key: int, i: int) -> None:
     """G0-G3, canned cycles, splines: the block's motion code (one per block)."""
     if b.motion_key is not None:
-        raise it._err(GcodeSyntaxError, "two motion codes in one block", b.lineno, b.col(i))
+        raise it.error(GcodeSyntaxError, "two motion codes in one block", b.lineno, b.col(i))
     b.motion_key, b.motion_idx = key, i
     it.motion_word = True
 
@@ -378,7 +378,7 @@ def _g_cancel_cycle(it: Interpreter, b: Block, key: int, i: int) -> None:
 
 def _g_refused(it: Interpreter, b: Block, key: int, i: int) -> None:
     cls = NeedsExpansion if (key in EXPANDABLE_G and it.may_expand) else UnsupportedGcodeError
-    raise it._err(cls, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
+    raise it.error(cls, REFUSED_G[key], b.lineno, b.col(i), hint=REFUSED_HINT.get(key))
 
 
 def _g_lookahead_spline_or_refused(it: Interpreter, b: Block, key: int, i: int) -> None:
@@ -402,7 +402,7 @@ def _g_home(it: Interpreter, b: Block, key: int, i: int) -> None:
 
 def _g_home_store(it: Interpreter, b: Block, key: int, i: int) -> None:
     if any(a in b.vals for a in AXES):
-        raise it._err(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
+        raise it.error(UnsupportedGcodeError, f"{b.gtext(i)} with axis words", b.lineno, b.col(i))
     it.home[HOME_STORE[key]] = list(it.state.pos)
     it.stored_here = HOME_STORE[key]
     it.program_stored.add(HOME_STORE[key])
@@ -445,7 +445,7 @@ def _g_work(it: Interpreter, b: Block, key: int, i: int) -> None:
 def _g_work_extended(it: Interpreter, b: Block, key: int, i: int) -> None:
     vals = b.vals
     if "P" not in vals:
-        raise it._err(GcodeSyntaxError, "G54.1 needs a P word", b.lineno, b.col(i))
+        raise it.error(GcodeSyntaxError, "G54.1 needs a P word", b.lineno, b.col(i))
     b.work_name = f"G54.1P{int(vals['P'][0])}"
     b.prefix.append(f"{b.gtext(i)} P{b.words[vals['P'][1]][1]}")
 
@@ -453,7 +453,7 @@ def _g_work_extended(it: Interpreter, b: Block, key: int, i: int) -> None:
 def _g_tool_length(it: Interpreter, b: Block, key: int, i: int) -> None:
     vals = b.vals
     b.prefix.append(b.gtext(i) + (f" H{b.words[vals['H'][1]][1]}" if "H" in vals else ""))
-    it._g43(vals, b.lineno, b.col(i))
+    it.apply_g43(vals, b.lineno, b.col(i))
 
 
 def _g_tool_length_cancel(it: Interpreter, b: Block, key: int, i: int) -> None:
@@ -506,7 +506,7 @@ def _g_g15(it: Interpreter, b: Block, key: int, i: int) -> None:
     system n where the dialect says so (Okuma)."""
     if it.d.g15_work_select:
         if "H" not in b.vals:
-            raise it._err(GcodeSyntaxError, "G15 needs H (the work coordinate system number)", b.lineno, b.col(i))
+            raise it.error(GcodeSyntaxError, "G15 needs H (the work coordinate system number)", b.lineno, b.col(i))
         b.work_name = f"G15H{int(b.vals['H'][0])}"
         b.prefix.append(f"{b.gtext(i)} H{b.words[b.vals['H'][1]].number}")
 
@@ -515,11 +515,11 @@ def _g_g15(it: Interpreter, b: Block, key: int, i: int) -> None:
 #: motion family. A G code with geometry is its handler and its row here; its row of
 #: _G_HANDLERS follows (G28/G30 set the block's home code, the others its motion code).
 MOTIONS: dict[int | None, Callable[[Interpreter, Block], Move | None]] = {
-    RAPID: Interpreter._motion_line, LINE: Interpreter._motion_line,
-    ARC_CW: Interpreter._motion_arc, ARC_CCW: Interpreter._motion_arc,
-    **dict.fromkeys(CANNED_CYCLES, Interpreter._motion_cycle),
-    **dict.fromkeys(SPLINES, Interpreter._motion_spline),
-    **dict.fromkeys(HOME_CODES, Interpreter._motion_home),
+    RAPID: Interpreter.motion_line, LINE: Interpreter.motion_line,
+    ARC_CW: Interpreter.motion_arc, ARC_CCW: Interpreter.motion_arc,
+    **dict.fromkeys(CANNED_CYCLES, Interpreter.motion_cycle),
+    **dict.fromkeys(SPLINES, Interpreter.motion_spline),
+    **dict.fromkeys(HOME_CODES, Interpreter.motion_home),
 }
 # motion modes whose modal blocks move only with an axis word (else read as a G0/G1 block's)
 _NEEDS_AXES = CANNED_CYCLES | SPLINES

@@ -161,11 +161,11 @@ class InterpreterCore:
             if m:
                 what = construct.format(*m.groups())
                 cls = self._construct_error(what) if construct in self.d.expanded_constructs else UnsupportedGcodeError
-                raise self._err(cls, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1, hint=instead)
+                raise self.error(cls, f"{self.d.title.split(' ')[0]} {what}", lineno, m.start() + 1, hint=instead)
         other = foreign_dialect(line, self.d.name)
         if other is not None:
             name, title, construct = other
-            raise self._err(UnsupportedGcodeError, f"{construct}: a program for {title}", lineno, 1,
+            raise self.error(UnsupportedGcodeError, f"{construct}: a program for {title}", lineno, 1,
                             hint=f"choose --dialect {name} for this program")
 
     def _construct_error(self, what: str) -> type[UnsupportedGcodeError]:
@@ -175,7 +175,7 @@ class InterpreterCore:
             return NeedsExpansion
         return UnsupportedGcodeError
 
-    def _err(self, cls: type[_E], msg: str, lineno: int, col: int, hint: str | None = None) -> _E:
+    def error(self, cls: type[_E], msg: str, lineno: int, col: int, hint: str | None = None) -> _E:
         return cls(msg, path=self.path, lineno=lineno, col=col, hint=hint)
 
     def _work_offset(self, lineno: int, col: int) -> list[float]:
@@ -189,7 +189,7 @@ class InterpreterCore:
             return [0.0, 0.0, 0.0]
         if name == "G54" and not st.work_explicit:
             if self.require_g54:
-                raise self._err(
+                raise self.error(
                     MissingSetupError, "--start gives machine positions, so the value of the work offset G54 "
                     "the program runs in must be given too", lineno, col,
                     hint="give --offset G54=X..,Y..,Z.. (G54=X0,Y0,Z0 if the program's coordinates are "
@@ -198,7 +198,7 @@ class InterpreterCore:
             # G54 taken as zero (program coordinates = machine coordinates); flagged.
             self.implicit_g54 = True
             return [0.0, 0.0, 0.0]
-        raise self._err(
+        raise self.error(
             MissingSetupError, f"work offset {name} is used but its value was not given",
             lineno, col, hint=f"give it with --offset {name}=X..,Y..,Z.. (machine-frame mm)")
 
@@ -227,7 +227,7 @@ class InterpreterCore:
         """Refuse a move that needs an axis left at a stored position that was not given."""
         for k, name in self.unknown_after.items():
             if math.isnan(q1[k]):
-                raise self._err(
+                raise self.error(
                     MissingSetupError, f"axis {AXES[k]} is at the {name} stored position, which was not given, "
                     "and this move needs it", lineno, col,
                     hint=f"give it with --home {name}=X..,Y..,Z.. (machine mm), or position {AXES[k]} with an "
@@ -283,7 +283,7 @@ def _work_code(name: str):
 
 def _refused_g(what: str, instead: str):
     def handler(it: InterpreterCore, b: Block, key: int, i: int) -> None:
-        raise it._err(UnsupportedGcodeError, f"{it.d.title.split(' ')[0]} {what}", b.lineno, b.col(i), hint=instead)
+        raise it.error(UnsupportedGcodeError, f"{it.d.title.split(' ')[0]} {what}", b.lineno, b.col(i), hint=instead)
     return handler
 
 

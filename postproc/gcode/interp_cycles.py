@@ -33,9 +33,9 @@ class CyclesMixin(InterpreterCore):
         st = self.state
         col = call.col if self.call_line else first_col
         if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno, col)
+            raise self.error(UnsupportedGcodeError, f"Sinumerik {call.name} in a plane other than G17", lineno, col)
         if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, col,
+            raise self.error(MissingSetupError, f"Sinumerik {call.name} from an unknown position", lineno, col,
                             hint="position every axis with a G90 move before the cycle, or give --start")
         plan = drill_plan(call, self.path, lineno, st.feed, st.unit_mm, col)
         unit, shift = st.unit_mm, self.shift(False, lineno, col)
@@ -58,7 +58,7 @@ class CyclesMixin(InterpreterCore):
             role=Role.CYCLE, cycle=Cycle(plan.code, [(bottom, start)], st.pos[2], steps, -1, start[2], bottom[2], 1,
                                     False, plan.dwell_s))
 
-    def _motion_cycle(self, b: Block) -> Move:
+    def motion_cycle(self, b: Block) -> Move:
         """G73, G81-G89, the canned-cycle family of :data:`~postproc.gcode.interp.MOTIONS`:
         the cycle's modal words kept or forgotten, then its moves (:meth:`_cycle`)."""
         st, motion_key = self.state, b.motion_key
@@ -85,21 +85,21 @@ class CyclesMixin(InterpreterCore):
         """
         st, words, vals, lineno, motion_idx = self.state, b.words, b.vals, b.lineno, b.motion_idx
         key = st.motion
-        if key is None:  # pragma: no cover - _motion_cycle sets a canned-cycle motion mode
+        if key is None:  # pragma: no cover - motion_cycle sets a canned-cycle motion mode
             raise AssertionError("a canned-cycle block without its cycle")
         col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[min(vals[a][1] for a in AXES if a in vals)].letter_pos + 1
         name = f"G{key / 10:g}"
         if st.plane != 170:
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
+            raise self.error(UnsupportedGcodeError, f"canned cycle {name} in a plane other than G17", lineno, col)
         if st.inverse_time:
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} in G93 inverse-time mode", lineno, col)
+            raise self.error(UnsupportedGcodeError, f"canned cycle {name} in G93 inverse-time mode", lineno, col)
         if any(a in vals for a in ROTARY) or any(k in vals for k in "IJ"):
-            raise self._err(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
+            raise self.error(UnsupportedGcodeError, f"canned cycle {name} with rotary axis or I/J words",
                             lineno, col)
         unit = st.unit_mm
         r_word, z_word, peck_mm, repeats = self._cycle_words(b, name, col)
         if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
+            raise self.error(MissingSetupError, f"canned cycle {name} from an unknown position", lineno, col,
                             hint="position every axis with a G90 move before the cycle, or give --start")
         if self.unknown_after:
             self._check_known([NAN, NAN, NAN], lineno, col)
@@ -114,7 +114,7 @@ class CyclesMixin(InterpreterCore):
             z_m = z_word * unit + shift[2]
             xy = (vals["X"][0] * unit + shift[0] if "X" in vals else x0, vals["Y"][0] * unit + shift[1] if "Y" in vals else y0)
         if z_m > r_m:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
+            raise self.error(GcodeSyntaxError, f"canned cycle {name} with its Z depth above its R plane",
                             lineno, col)
         clear = r_m if st.retract_r else max(z0, r_m)
         d = _Drilling(key, (x0, y0, z0), xy, st.incremental, r_m, z_m, clear, peck_mm, repeats, st.cycle_p)
@@ -147,17 +147,17 @@ class CyclesMixin(InterpreterCore):
             else:
                 st.cycle_r = (st.pos[2] - self.shift(False, lineno, col)[2]) / unit
         if st.cycle_r is None:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
+            raise self.error(GcodeSyntaxError, f"canned cycle {name} without its R plane", lineno, col)
         if "Z" in vals:
             st.cycle_z = vals["Z"][0]
         if st.cycle_z is None:
-            raise self._err(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
+            raise self.error(GcodeSyntaxError, f"canned cycle {name} without its Z depth", lineno, col)
         peck_mm = 0.0  # G73/G83 peck depth
         if key in (730, 830):
             if "Q" in vals:
                 st.cycle_q = vals["Q"][0]
             if st.cycle_q is None or st.cycle_q <= 0:
-                raise self._err(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
+                raise self.error(GcodeSyntaxError, f"canned cycle {name} needs a positive Q (peck depth)",
                                 lineno, col)
             peck_mm = st.cycle_q * unit
         if "P" in vals:
@@ -169,7 +169,7 @@ class CyclesMixin(InterpreterCore):
         if repeat_letter in vals:
             given = vals[repeat_letter][0]
             if given != int(given) or given < 0:
-                raise self._err(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
+                raise self.error(GcodeSyntaxError, f"{repeat_letter} (repeats) must be a whole number",
                                 lineno, words[vals[repeat_letter][1]][4] + 1)
             repeats = int(given)
         return st.cycle_r, st.cycle_z, peck_mm, repeats

@@ -63,7 +63,7 @@ class MotionMixin(InterpreterCore):
     """Straight moves, arcs and splines: three motion families of
     :data:`~postproc.gcode.interp.MOTIONS` (mixed into :class:`~postproc.gcode.interp.Interpreter`)."""
 
-    def _motion_line(self, b: Block) -> Move | None:
+    def motion_line(self, b: Block) -> Move | None:
         """G0 and G1, the straight family of :data:`~postproc.gcode.interp.MOTIONS` (also a
         block of rotary words alone in another mode, or of axis words in none)."""
         st, vals = self.state, b.vals
@@ -74,10 +74,10 @@ class MotionMixin(InterpreterCore):
         t = self._target(b, full_circle=False)
         if any(k in vals for k in "IJK") or ("R" in vals and st.motion in (RAPID, 10)):
             letter = next(k for k in "IJKR" if k in vals)
-            raise self._err(GcodeSyntaxError, f"{letter} word on a straight move", b.lineno, b.col(vals[letter][1]))
+            raise self.error(GcodeSyntaxError, f"{letter} word on a straight move", b.lineno, b.col(vals[letter][1]))
         return self._move(b, t, None)
 
-    def _motion_arc(self, b: Block) -> Move | None:
+    def motion_arc(self, b: Block) -> Move | None:
         """G2 and G3, the arc family of :data:`~postproc.gcode.interp.MOTIONS`; a block with
         centre words alone is a full circle where the dialect reads one."""
         st, vals = self.state, b.vals
@@ -91,7 +91,7 @@ class MotionMixin(InterpreterCore):
                 i = arc_words[0] if arc_words else next(i for k, i in b.gcodes if k == motion_key)
                 _, (l1, l2) = PLANES[st.plane]
                 if not self.d.full_circle_without_end or "R" in vals or not (l1 in vals or l2 in vals):
-                    raise self._err(GcodeSyntaxError, "arc without end point words", b.lineno, b.col(i),
+                    raise self.error(GcodeSyntaxError, "arc without end point words", b.lineno, b.col(i),
                                     hint="a full circle needs its centre offsets (I/J/K)"
                                     + ("" if self.d.full_circle_without_end else
                                        f" and {self.d.title.split()[0]} needs an end point"))
@@ -101,7 +101,7 @@ class MotionMixin(InterpreterCore):
         t = self._target(b, full_circle)
         return self._move(b, t, self._arc(b, t))
 
-    def _motion_spline(self, b: Block) -> Move:
+    def motion_spline(self, b: Block) -> Move:
         """G5 and G5.1, the spline family of :data:`~postproc.gcode.interp.MOTIONS`."""
         if b.motion_key is not None:
             self.state.motion = b.motion_key
@@ -116,14 +116,14 @@ class MotionMixin(InterpreterCore):
             first_axis_col = b.col(min(vals[a][1] for a in AXES + ROTARY if a in vals))
         kind = st.motion
         if kind is None:
-            raise self._err(GcodeSyntaxError, "axis words with no motion mode (G0/G1/G2/G3) active",
+            raise self.error(GcodeSyntaxError, "axis words with no motion mode (G0/G1/G2/G3) active",
                             lineno, first_axis_col)
         if b.g53 and kind not in (RAPID, LINE):
-            raise self._err(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
+            raise self.error(GcodeSyntaxError, "G53 needs G0 or G1", lineno, first_axis_col)
         incremental = st.incremental
         if b.g53 and incremental:
             if not self.d.g53_absolute_in_g91:
-                raise self._err(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
+                raise self.error(GcodeSyntaxError, "G53 is not allowed in G91 (incremental) mode", lineno,
                                 first_axis_col, hint="LinuxCNC rejects it; Fanuc and Haas take G53 words as "
                                                      "machine positions in G91 too (--dialect fanuc|haas)")
             incremental = False  # Fanuc, Haas: G53 positions are absolute whatever the mode
@@ -140,7 +140,7 @@ class MotionMixin(InterpreterCore):
                 axis_idx[k] = i
                 if incremental:
                     if math.isnan(q1[k]):
-                        raise self._err(
+                        raise self.error(
                             MissingSetupError,
                             f"incremental move on {a} from an unknown position (no absolute move on {a} before)",
                             lineno, b.col(i),
@@ -153,7 +153,7 @@ class MotionMixin(InterpreterCore):
         if self.unknown_after:
             self._check_known(q1, lineno, first_axis_col)
         if b.block_delete and st.incremental:
-            raise self._err(UnsupportedGcodeError, "block-delete '/' on an incremental move", lineno, 1,
+            raise self.error(UnsupportedGcodeError, "block-delete '/' on an incremental move", lineno, 1,
                             hint="the result would depend on the block-delete switch")
         return _Target(kind, q0, q1, shift, (axis_idx[0], axis_idx[1], axis_idx[2]), incremental, first_axis_col)
 
@@ -161,7 +161,7 @@ class MotionMixin(InterpreterCore):
         """The Move of a straight or arc block; the state moved to its end."""
         st, vals = self.state, b.vals
         if st.inverse_time and st.motion != RAPID and "F" not in vals:
-            raise self._err(GcodeSyntaxError, "G93 inverse-time feed needs an F word on every feed move",
+            raise self.error(GcodeSyntaxError, "G93 inverse-time feed needs an F word on every feed move",
                             b.lineno, t.col)
         q1 = t.q1
         st.pos = q1
@@ -189,18 +189,18 @@ class MotionMixin(InterpreterCore):
         name = "G5" if key == 50 else "G5.1"
         col = words[motion_idx].letter_pos + 1 if motion_idx >= 0 else words[0].letter_pos + 1
         if st.plane != 170:
-            raise self._err(GcodeSyntaxError, f"{name} spline outside the G17 plane", lineno, col)
+            raise self.error(GcodeSyntaxError, f"{name} spline outside the G17 plane", lineno, col)
         other = [a for a in "ZABCKR" if a in vals]
         if other:
-            raise self._err(GcodeSyntaxError, f"{name} spline with a {other[0]} word (X and Y only)", lineno,
+            raise self.error(GcodeSyntaxError, f"{name} spline with a {other[0]} word (X and Y only)", lineno,
                             words[vals[other[0]][1]][4] + 1)
         if st.inverse_time:
-            raise self._err(UnsupportedGcodeError, f"{name} spline in G93 inverse-time mode", lineno, col)
+            raise self.error(UnsupportedGcodeError, f"{name} spline in G93 inverse-time mode", lineno, col)
         if any(math.isnan(v) for v in st.pos):
-            raise self._err(MissingSetupError, f"{name} spline from an unknown position", lineno, col,
+            raise self.error(MissingSetupError, f"{name} spline from an unknown position", lineno, col,
                             hint="position every axis with a G90 move before the spline, or give --start")
         if ("I" in vals) != ("J" in vals):
-            raise self._err(GcodeSyntaxError, f"{name} needs both I and J, or neither", lineno, col)
+            raise self.error(GcodeSyntaxError, f"{name} needs both I and J, or neither", lineno, col)
         unit = st.unit_mm
         if "F" in vals:
             st.feed = vals["F"][0]
@@ -218,19 +218,19 @@ class MotionMixin(InterpreterCore):
         p3 = (q1[0], q1[1])
         if key == 50:
             if "P" not in vals or "Q" not in vals:
-                raise self._err(GcodeSyntaxError, "G5 needs both P and Q", lineno, col)
+                raise self.error(GcodeSyntaxError, "G5 needs both P and Q", lineno, col)
             if "I" in vals:
                 ij = (vals["I"][0] * unit, vals["J"][0] * unit)
             elif self._last_pq is not None:
                 ij = (-self._last_pq[0], -self._last_pq[1])
             else:
-                raise self._err(GcodeSyntaxError, "the first G5 of a series needs I and J", lineno, col)
+                raise self.error(GcodeSyntaxError, "the first G5 of a series needs I and J", lineno, col)
             pq = (vals["P"][0] * unit, vals["Q"][0] * unit)
             self._last_pq = pq
             ctrl = [p0, (p0[0] + ij[0], p0[1] + ij[1]), (p3[0] + pq[0], p3[1] + pq[1]), p3]
         else:
             if "I" not in vals or (vals["I"][0] == 0 and vals["J"][0] == 0):
-                raise self._err(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
+                raise self.error(GcodeSyntaxError, "G5.1 needs I and J, not both zero", lineno, col)
             ctrl = [p0, (p0[0] + vals["I"][0] * unit, p0[1] + vals["J"][0] * unit), p3]
         st.pos = q1
         return Move(lineno=lineno, kind=LINE, q0=q0, q1=(q1[0], q1[1], q1[2]), r=self.tool_r(), shift=shift,
@@ -252,9 +252,9 @@ class MotionMixin(InterpreterCore):
         p = vals["P"][0]
         p_col = words[vals["P"][1]][4] + 1
         if not (math.isfinite(p) and p >= 1 and p == math.floor(p)):
-            raise self._err(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
+            raise self.error(GcodeSyntaxError, "arc P (turns) must be a positive integer", lineno, p_col)
         if p > self.max_arc_turns:
-            raise self._err(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
+            raise self.error(ResourceLimitError, f"arc of {p:.0f} turns: more than {self.max_arc_turns:,} "
                             "(--max-arc-turns)", lineno, p_col,
                             hint="raise --max-arc-turns if the helix is meant to turn this often")
         return int(p)
@@ -268,12 +268,12 @@ class MotionMixin(InterpreterCore):
         named = [vals[a][1] for a in AXES + "IJKR" if a in vals]
         if not named:  # an arc mode block of rotary words only (rs274: "R, I, J, K words all missing for arc")
             first = next((w for w in words if w.letter != "N"), words[0])
-            raise self._err(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, first.letter_pos + 1,
+            raise self.error(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, first.letter_pos + 1,
                             hint="give the arc's end and centre words, or a G0/G1 before a move of rotary axes only")
         col = words[min(named)][4] + 1
         self._lathe_arc(vals, q0, lineno, col)
         if math.isnan(q0[a1]) or math.isnan(q0[a2]) or (math.isnan(q0[an]) and not math.isnan(q1[an])):
-            raise self._err(MissingSetupError, "arc from an unknown start position", lineno, col,
+            raise self.error(MissingSetupError, "arc from an unknown start position", lineno, col,
                             hint="position all axes with a G90 move before the first arc, or give their "
                                  "machine positions at program start with --start")
         turns = self._turns(vals, words, lineno) if "P" in vals else 1
@@ -287,20 +287,20 @@ class MotionMixin(InterpreterCore):
               and all(vals[k][0] == 0 for k in wrong)):
             wrong = []  # a zero offset off the plane (K0 on a G17 arc) means nothing
         if wrong:
-            raise self._err(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
+            raise self.error(GcodeSyntaxError, f"{wrong[0]} word is not an arc offset in this plane", lineno,
                             words[vals[wrong[0]][1]][4] + 1,
                             hint="LinuxCNC rejects it, and Grbl beside R (Grbl ignores it beside I/J/K "
                                  "centre words; Fanuc, Haas and Mach3 ignore it: choose that --dialect if "
                                  "the program is for one of them)")
         if "R" in vals:
             if l1 in vals or l2 in vals:
-                raise self._err(GcodeSyntaxError, "arc with both R and centre offsets", lineno, col)
+                raise self.error(GcodeSyntaxError, "arc with both R and centre offsets", lineno, col)
             c1, c2 = self._r_centre(b, col, s, e)
             idx = (-1, -1)
             r_idx = vals["R"][1]
         else:
             if l1 not in vals and l2 not in vals:
-                raise self._err(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, col)
+                raise self.error(GcodeSyntaxError, "arc without centre (I/J/K) or radius (R)", lineno, col)
             c1, c2 = self._offset_centre(b, col, (s, e), (t.shift[a1], t.shift[a2]))
             idx = (vals[l1][1] if l1 in vals else -1, vals[l2][1] if l2 in vals else -1)
             r_idx = -1
@@ -318,10 +318,10 @@ class MotionMixin(InterpreterCore):
         e1, e2 = e
         R = vals["R"][0] * unit
         if math.hypot(e1 - s1, e2 - s2) < MIN_ARC_RADIUS_MM:
-            raise self._err(GcodeSyntaxError, "R arc with start = end (a full circle needs I/J/K)", lineno, col)
+            raise self.error(GcodeSyntaxError, "R arc with start = end (a full circle needs I/J/K)", lineno, col)
         c = r_center(s1, s2, e1, e2, R, clockwise)
         if c is None:
-            raise self._err(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
+            raise self.error(GcodeSyntaxError, f"arc radius R {abs(R) / unit:g} is smaller than half the chord",
                             lineno, words[vals["R"][1]][4] + 1)
         return c
 
@@ -344,10 +344,10 @@ class MotionMixin(InterpreterCore):
         rs = math.hypot(s1 - c1, s2 - c2)
         re_ = math.hypot(e1 - c1, e2 - c2)
         if rs < MIN_ARC_RADIUS_MM:
-            raise self._err(GcodeSyntaxError, "arc of zero radius", lineno, col)
+            raise self.error(GcodeSyntaxError, "arc of zero radius", lineno, col)
         ctrl = self.arc_dialect()
         if not ctrl.arc_end_radius_ok(rs, re_, unit):
-            raise self._err(GcodeSyntaxError,
+            raise self.error(GcodeSyntaxError,
                             f"arc end radius differs from start radius by {abs(rs - re_):.4f} mm, more than "
                             f"{ctrl.title} accepts", lineno, col,
                             hint="the end point is not on the arc's circle, so the controller refuses the arc; "

@@ -18,7 +18,7 @@ class OffsetsMixin(InterpreterCore):
     def set_tool_length(self, h: int, lineno: int, col: int) -> None:
         """What ``G43 H<h>`` does to the state, for the readers that take such a line as
         columns (as :meth:`_block` reads it)."""
-        self._g43({"H": (float(h), -1)}, lineno, col)
+        self.apply_g43({"H": (float(h), -1)}, lineno, col)
         self.run_shift = None
 
     def _offset_settings(self, b: Block) -> bool:
@@ -44,7 +44,7 @@ class OffsetsMixin(InterpreterCore):
             return True
         return False
 
-    def _motion_home(self, b: Block) -> Move | None:
+    def motion_home(self, b: Block) -> Move | None:
         """G28/G30, the home family of :data:`~postproc.gcode.interp.MOTIONS`."""
         home_code = b.home_code
         if home_code is None:  # pragma: no cover - MOTIONS calls this for a G28/G30 block
@@ -58,11 +58,11 @@ class OffsetsMixin(InterpreterCore):
         name = HOME_CODES[key]
         st = self.state
         if any(a in vals for a in ROTARY):
-            raise self._err(UnsupportedGcodeError, f"{name} with rotary axis words", lineno, col,
+            raise self.error(UnsupportedGcodeError, f"{name} with rotary axis words", lineno, col,
                             hint="the stored rotary positions are not known to postproc; home the rotary "
                                  "axes on a line of their own before or after correcting")
         if any(k in vals for k in "IJKR"):
-            raise self._err(GcodeSyntaxError, f"{name} with arc words", lineno, col)
+            raise self.error(GcodeSyntaxError, f"{name} with arc words", lineno, col)
         unit = st.unit_mm
         named = [k for k, a in enumerate(AXES) if a in vals]
         pos = st.pos
@@ -75,7 +75,7 @@ class OffsetsMixin(InterpreterCore):
             axis_idx[k] = i
             if st.incremental:
                 if v != 0.0 and math.isnan(inter[k]):
-                    raise self._err(MissingSetupError, f"incremental {name} on {AXES[k]} from an unknown position",
+                    raise self.error(MissingSetupError, f"incremental {name} on {AXES[k]} from an unknown position",
                                     lineno, col_of_word(words, i),
                                     hint=f"give the machine position at program start with --start {AXES[k]}..")
                 if v != 0.0:
@@ -110,12 +110,12 @@ class OffsetsMixin(InterpreterCore):
         """G52 local offset: added to the work offset for the named axes (LinuxCNC keeps it with G92's)."""
         st = self.state
         if any(a in vals for a in ROTARY):
-            raise self._err(UnsupportedGcodeError, "G52 on a rotary axis", lineno, col)
+            raise self.error(UnsupportedGcodeError, "G52 on a rotary axis", lineno, col)
         for k, a in enumerate(AXES):
             if a in vals:
                 st.g92[k] = vals[a][0] * st.unit_mm
 
-    def _g43(self, vals: Vals, lineno: int, col: int) -> None:
+    def apply_g43(self, vals: Vals, lineno: int, col: int) -> None:
         st = self.state
         h: int | None
         if "H" in vals:
@@ -123,7 +123,7 @@ class OffsetsMixin(InterpreterCore):
         else:
             h = st.spindle_tool if st.spindle_tool is not None else st.tool
             if h is None:
-                raise self._err(MissingSetupError, "G43 without H and no tool selected (T word)", lineno, col,
+                raise self.error(MissingSetupError, "G43 without H and no tool selected (T word)", lineno, col,
                                 hint="add H<n> to the G43 block or select the tool with T<n> M6")
         if h == 0:
             st.tlo, st.tlo_active = 0.0, True
@@ -133,7 +133,7 @@ class OffsetsMixin(InterpreterCore):
             st.tlo, st.tlo_active = 0.0, True
             return
         if h not in lengths:
-            raise self._err(MissingSetupError, f"tool length of tool {h} is used (G43) but was not given",
+            raise self.error(MissingSetupError, f"tool length of tool {h} is used (G43) but was not given",
                             lineno, col, hint=f"give it with --tool-length {h}=L (mm) or --tool-table FILE")
         st.tlo, st.tlo_active = float(lengths[h]), True
 
@@ -149,12 +149,12 @@ class OffsetsMixin(InterpreterCore):
         if not any(a in vals for a in AXES):
             if any(a in vals for a in ROTARY):
                 return
-            raise self._err(GcodeSyntaxError, "G92 needs at least one axis word", lineno, col)
+            raise self.error(GcodeSyntaxError, "G92 needs at least one axis word", lineno, col)
         unit = st.unit_mm
         for k, a in enumerate(AXES):
             if a in vals:
                 if math.isnan(st.pos[k]):
-                    raise self._err(MissingSetupError, f"G92 on {a} at an unknown position", lineno,
+                    raise self.error(MissingSetupError, f"G92 on {a} at an unknown position", lineno,
                                     col, hint="position the axis with a G90 move before G92, or give its machine "
                                  "position at program start with --start")
                 st.g92[k] = 0.0
@@ -168,12 +168,12 @@ class OffsetsMixin(InterpreterCore):
             self._g10_tool(L, vals, lineno, col)
             return
         if L not in (2, 20) or "R" in vals:
-            raise self._err(UnsupportedGcodeError, "G10 other than L2/L20 work offset setting (or with R rotation)",
+            raise self.error(UnsupportedGcodeError, "G10 other than L2/L20 work offset setting (or with R rotation)",
                             lineno, col)
         p = int(vals["P"][0]) if "P" in vals else 0
         name = st.work if p == 0 else P_SYSTEMS.get(p)
         if name is None:
-            raise self._err(GcodeSyntaxError, f"G10 P{p}: no such coordinate system", lineno, col)
+            raise self.error(GcodeSyntaxError, f"G10 P{p}: no such coordinate system", lineno, col)
         current = None
         if name in self.program_offsets:
             current = list(self.program_offsets[name])
@@ -188,10 +188,10 @@ class OffsetsMixin(InterpreterCore):
                     new[k] = v
                 else:
                     if math.isnan(st.pos[k]):
-                        raise self._err(MissingSetupError, f"G10 L20 on {a} at an unknown position", lineno, col)
+                        raise self.error(MissingSetupError, f"G10 L20 on {a} at an unknown position", lineno, col)
                     new[k] = st.pos[k] - st.g92[k] - (st.tlo if k == 2 else 0.0) - v
         if any(math.isnan(v) for v in new):
-            raise self._err(MissingSetupError, f"G10 sets only some axes of {name}, whose other values were not given",
+            raise self.error(MissingSetupError, f"G10 sets only some axes of {name}, whose other values were not given",
                             lineno, col, hint=f"give --offset {name}=X..,Y..,Z..")
         self.program_offsets[name] = new
 
@@ -199,7 +199,7 @@ class OffsetsMixin(InterpreterCore):
         """G10 L1/L10/L11 P<tool> Z..: write a tool length (used by later G43)."""
         st = self.state
         if "P" not in vals:
-            raise self._err(GcodeSyntaxError, f"G10 L{L} needs a P word (tool number)", lineno, col)
+            raise self.error(GcodeSyntaxError, f"G10 L{L} needs a P word (tool number)", lineno, col)
         tool = int(vals["P"][0])
         if "Z" not in vals:
             return  # X (lathe), R (radius), Q (orientation): no tool length written
@@ -208,7 +208,7 @@ class OffsetsMixin(InterpreterCore):
             self.tool_lengths[tool] = z
             return
         if math.isnan(st.pos[2]):
-            raise self._err(MissingSetupError, f"G10 L{L} at an unknown Z position", lineno, col,
+            raise self.error(MissingSetupError, f"G10 L{L} at an unknown Z position", lineno, col,
                             hint="position Z with an absolute move first, or give --start Z..")
         if L == 10:
             w = self._work_offset(lineno, col)
@@ -216,6 +216,6 @@ class OffsetsMixin(InterpreterCore):
         else:
             g593 = self.program_offsets.get("G59.3") or self.offsets.get("G59.3")
             if g593 is None:
-                raise self._err(MissingSetupError, "G10 L11 uses the work offset G59.3, whose value was not given",
+                raise self.error(MissingSetupError, "G10 L11 uses the work offset G59.3, whose value was not given",
                                 lineno, col, hint="give --offset G59.3=X..,Y..,Z..")
             self.tool_lengths[tool] = st.pos[2] - g593[2] - z

@@ -98,13 +98,13 @@ class WordsMixin(InterpreterCore):
             self._foreign(line, lineno)
             what, hint = classify_construct(line)
             if what:
-                raise self._err(self._construct_error(what), what, lineno, 1, hint=hint) from None
+                raise self.error(self._construct_error(what), what, lineno, 1, hint=hint) from None
             raise
         first = next((t for t in tokens if t.kind != lexer.SPACE), None)
         if first is not None and first.kind == lexer.PERCENT and len(tokens) > 2:
             if self.d.text_after_percent == "ignored":
                 return [], False  # '%' tape mark: the controller ignores the rest of the line
-            raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
+            raise self.error(GcodeSyntaxError, "'%' must stand alone on its line", lineno, first.col,
                             hint="LinuxCNC rejects text after '%' (\"Bad character '%' used\")")
         if _is_program_number(tokens, self.d.numbered_program_line):
             return [], False
@@ -114,10 +114,10 @@ class WordsMixin(InterpreterCore):
                     self._foreign(line, lineno)  # the dialect's own constructs first (Fadal's # macros)
                 what, hint = classify_construct(line)
                 if what:
-                    raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
+                    raise self.error(self._construct_error(what), what, lineno, tok.col, hint=hint)
             if tok.kind in (lexer.WORD, lexer.LETTER) and tok.letter == "O":
                 self._foreign(line, lineno)
-                raise self._err(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
+                raise self.error(self._construct_error("O-word"), "O-word (subroutine or flow control)", lineno,
                                 tok.col,
                                 hint="O words other than a program number are expanded only when their "
                                      "subroutine is in the program or on --subroutine-path")
@@ -135,7 +135,7 @@ class WordsMixin(InterpreterCore):
             blk = sinumerik.read_block(line, self.path, lineno, self.variables)
         except UnsupportedGcodeError as exc:
             if self.may_expand and _SINUMERIK_NAME_CALL.match(code):  # NAME or NAME(...): a subprogram call?
-                raise self._err(NeedsExpansion, exc.message, lineno, exc.col or 1, hint=exc.hint) from None
+                raise self.error(NeedsExpansion, exc.message, lineno, exc.col or 1, hint=exc.hint) from None
             raise
         g = {gkey(w.number) for w in blk.words if w.letter == "G"}
         incremental = True if 910 in g else False if 900 in g else self.state.incremental
@@ -144,23 +144,23 @@ class WordsMixin(InterpreterCore):
             given = [w.letter for w in blk.words if w.letter in "IJK"]
             if len(centre_ac) != len(given):
                 col = next(c for letter, c in blk.absolute if letter in "IJK")
-                raise self._err(UnsupportedGcodeError, "Sinumerik centre words partly =AC() (absolute) and partly "
+                raise self.error(UnsupportedGcodeError, "Sinumerik centre words partly =AC() (absolute) and partly "
                                 "incremental", lineno, col, hint="give every centre word of the arc as =AC(), or none")
             self._arc_absolute_once = True  # I=AC() J=AC(): the centre in work coordinates, this block
         for letter, col in blk.absolute:
             if incremental and letter not in "IJK":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in G91",
+                raise self.error(UnsupportedGcodeError, f"Sinumerik {letter}=AC() (absolute for one word) in G91",
                                 lineno, col,
                                 hint="post the coordinate in the program's distance mode (G90/G91)")
         for letter, col in blk.incremental:
             if not incremental and letter in "XYZABC":
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
+                raise self.error(UnsupportedGcodeError, f"Sinumerik {letter}=IC() (incremental for one word) in G90",
                                 lineno, col, hint="post the coordinate in the program's distance mode (G90/G91)")
         if blk.call is not None:
             name = f"MCALL {blk.call.name}" if blk.mcall else blk.call.name
             others = [w for w in blk.words if w.letter != "N"]
             if others or blk.frame:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
+                raise self.error(UnsupportedGcodeError, f"Sinumerik {name} with other words in its block", lineno,
                                 blk.call.col, hint="write the cycle call in a block of its own")
             self.call_line, self.call_col = name, blk.mcall_col if blk.mcall else blk.call.col
             if blk.mcall:
@@ -190,23 +190,23 @@ class WordsMixin(InterpreterCore):
         given = {w.letter: (float(w.number), w.letter_pos + 1) for w in words if w.letter != "N"}
         bad = [k for k in given if k not in AXES]
         if bad:
-            raise self._err(UnsupportedGcodeError, f"Sinumerik frame with {bad[0]} (the frame's X, Y, Z are read)",
+            raise self.error(UnsupportedGcodeError, f"Sinumerik frame with {bad[0]} (the frame's X, Y, Z are read)",
                             lineno, given[bad[0]][1], hint="post the program in the coordinates the frame gives")
         angle = None
         if kind.endswith("ROT"):
             tilt = next((a for a in "XY" if a in given), None)
             if tilt is not None:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} {tilt} (a rotation about {tilt} tilts the "
+                raise self.error(UnsupportedGcodeError, f"Sinumerik {kind} {tilt} (a rotation about {tilt} tilts the "
                                 "plane; rotations about Z are read)", lineno, given[tilt][1],
                                 hint="post the program in the coordinates the frame gives")
             if rpl is not None and "Z" in given:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} with both Z and RPL", lineno, rpl[1])
+                raise self.error(UnsupportedGcodeError, f"Sinumerik {kind} with both Z and RPL", lineno, rpl[1])
             if rpl is not None and st.plane != 170:
-                raise self._err(UnsupportedGcodeError, f"Sinumerik {kind} RPL= in a plane other than G17 "
+                raise self.error(UnsupportedGcodeError, f"Sinumerik {kind} RPL= in a plane other than G17 "
                                 "(a rotation about X or Y)", lineno, rpl[1])
             angle = rpl[0] if rpl is not None else given["Z"][0] if "Z" in given else None
         if kind.endswith("SCALE") and any(v == 0.0 for v, _c in given.values()):
-            raise self._err(GcodeSyntaxError, f"Sinumerik {kind} with a factor 0", lineno,
+            raise self.error(GcodeSyntaxError, f"Sinumerik {kind} with a factor 0", lineno,
                             min(c for _v, c in given.values()))
         st.frame, st.g92 = frames.next_frame(kind, st.frame, st.g92, {a: v for a, (v, _c) in given.items()}, angle,
                                              st.unit_mm)
@@ -227,7 +227,7 @@ class WordsMixin(InterpreterCore):
                 words.append(lexer.Word(tok.letter, num, start, start + len(num), tok.col - 1))
             elif kind == lexer.SLASH:
                 if seen_content:
-                    raise self._err(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
+                    raise self.error(UnsupportedGcodeError, "'/' inside a block (division in an expression)",
                                     lineno, tok.col)
                 block_delete = True
             elif kind not in _BLANK_KINDS:
@@ -241,24 +241,24 @@ class WordsMixin(InterpreterCore):
         kind = tok.kind
         if kind == lexer.PERCENT:
             if seen_content or any(t.kind in (lexer.WORD, lexer.LETTER, lexer.SYMBOL, lexer.NUMBER) for t in tokens):
-                raise self._err(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
+                raise self.error(GcodeSyntaxError, "'%' must stand alone on its line", lineno, tok.col)
         elif kind == lexer.OPEN_COMMENT:
-            raise self._err(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
+            raise self.error(GcodeSyntaxError, "comment '(' is not closed on its line", lineno, tok.col,
                             hint="add the closing ')'")
         elif kind == lexer.LETTER:
             self._foreign(line, lineno)
             what, hint = classify_construct(line)
             if what:
-                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            raise self._err(UnsupportedGcodeError,
+                raise self.error(self._construct_error(what), what, lineno, tok.col, hint=hint)
+            raise self.error(UnsupportedGcodeError,
                             f"word {tok.letter} without a plain number (macro, expression or parameter)",
                             lineno, tok.col, hint="expand macros and expressions before correcting")
         elif kind == lexer.SYMBOL:
             self._foreign(line, lineno)
             what, hint = classify_construct(line) if tok.text in "#[]@^<" else ("", "")
             if what:
-                raise self._err(self._construct_error(what), what, lineno, tok.col, hint=hint)
-            raise self._err(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
+                raise self.error(self._construct_error(what), what, lineno, tok.col, hint=hint)
+            raise self.error(GcodeSyntaxError, f"unexpected character {tok.text!r}", lineno, tok.col)
         elif kind == lexer.NUMBER:
-            raise self._err(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
+            raise self.error(GcodeSyntaxError, f"number {tok.text!r} without a letter", lineno, tok.col)
 

@@ -93,14 +93,13 @@ def word_texts(values: list[float], own: list[float], own_decimals: list[int], d
     new: list[float] = []
     dout: list[int] = []
     d, half = -1, 0.0
-    k = 0
-    for v, o, dk in zip(values, own, decimals):
+    for k in range(len(values)):
+        v, dk = values[k], decimals[k]
         if dk != d:
             d, half = dk, half_unit(dk)
-        if not abs(v - o) < half:
+        if not abs(v - own[k]) < half:
             changed.append(k)
             new.append(v)
             od = own_decimals[k]
             dout.append(od if od > dk else dk)
-        k += 1
     return changed, fmt_all(new, dout, "")

@@ -87,7 +87,7 @@ class CycleCall:
     col: int
 
 
-def _code_end(line: str) -> int:
+def code_end(line: str) -> int:
     """Where the block's code ends: the ';' comment (outside a string) or the line ending."""
     quoted = False
     for k, c in enumerate(line):
@@ -152,10 +152,10 @@ def number_text(v: float) -> str:
     return "0" if text in ("", "-0") else text
 
 
-class _Reader:
+class BlockReader:
     def __init__(self, line: str, path: str | None, lineno: int, env: dict[str, float] | None = None) -> None:
         self.line = line
-        self.code = line[:_code_end(line)]
+        self.code = line[:code_end(line)]
         self.path, self.lineno = path, lineno
         self.block = SinumerikBlock()
         self.env = {} if env is None else env  # R parameters ("R1") and DEF variables, upper case
@@ -329,7 +329,7 @@ class _Reader:
             if k >= close or code[k] == ",":
                 args.append(None)
             else:
-                value, k = self._sum(k, True)
+                value, k = self.expression_at(k, True)
                 args.append(value)
                 k = _skip(code, k)
             if k >= close:
@@ -347,10 +347,10 @@ class _Reader:
     def expression(self, k: int) -> tuple[float, int]:
         """The value of the expression at ``k`` and the index after it (no blanks outside
         parentheses: a blank ends it, as the next word follows)."""
-        value, e = self._sum(k, False)
+        value, e = self.expression_at(k, False)
         return value, e
 
-    def _sum(self, k: int, blanks: bool) -> tuple[float, int]:
+    def expression_at(self, k: int, blanks: bool) -> tuple[float, int]:
         value, k = self._product(k, blanks)
         while True:
             j = _skip(self.code, k) if blanks else k
@@ -387,7 +387,7 @@ class _Reader:
             value, e = self._factor(k + 1, blanks)
             return (-value if c == "-" else value), e
         if c == "(":
-            value, e = self._sum(k + 1, True)
+            value, e = self.expression_at(k + 1, True)
             e = _skip(code, e)
             if code[e:e + 1] != ")":
                 raise GcodeSyntaxError("')' missing in the expression", path=self.path, lineno=self.lineno,
@@ -406,7 +406,7 @@ class _Reader:
         if name in FUNCTIONS and code[j:j + 1] == "(":
             args, e = [], j + 1
             while True:
-                a, e = self._sum(e, True)
+                a, e = self.expression_at(e, True)
                 args.append(a)
                 e = _skip(code, e)
                 if code[e:e + 1] == ",":
@@ -431,7 +431,7 @@ class _Reader:
 
 def code_of(line: str) -> str:
     """The block without its comment, strings blanked (what the refusals are matched on)."""
-    code = line[:_code_end(line)]
+    code = line[:code_end(line)]
     out, quoted = [], False
     for c in code:
         if c == '"':
@@ -445,4 +445,4 @@ def code_of(line: str) -> str:
 def read_block(line: str, path: str | None, lineno: int, env: dict[str, float] | None = None) -> SinumerikBlock:
     """The words of one Sinumerik block (``line`` with or without its ending); ``env``
     holds the R parameters and DEF variables set so far, and gets the block's settings."""
-    return _Reader(line, path, lineno, env).read()
+    return BlockReader(line, path, lineno, env).read()

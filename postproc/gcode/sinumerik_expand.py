@@ -136,8 +136,8 @@ class SinumerikExpander:
 
     # -- values ----------------------------------------------------------------------------
     def value(self, text: str, k: int) -> float:
-        r = sinumerik._Reader(text, self.path, k + 1, self.env)
-        v, e = r._sum(0, True)
+        r = sinumerik.BlockReader(text, self.path, k + 1, self.env)
+        v, e = r.expression_at(0, True)
         if r.code[e:].strip():
             raise self.error(k, 1, f"unexpected {r.code[e:].strip()!r} in the expression {text!r}")
         return v
@@ -241,7 +241,7 @@ class SinumerikExpander:
         m = _L_CALL.match(code)
         if m:
             return f"L{m.group(1)}", [], int(m.group(2) or 1), code.upper().index("L") + 1
-        m = _NAME_CALL.match(self.lines[k][:sinumerik._code_end(self.lines[k])])  # CALL "NAME": the string kept
+        m = _NAME_CALL.match(self.lines[k][:sinumerik.code_end(self.lines[k])])  # CALL "NAME": the string kept
         if not m:
             return None
         name = (m.group(1) or m.group(2)).upper()
