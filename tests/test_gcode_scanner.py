@@ -147,6 +147,13 @@ def test_word_texts_is_word_text(words):
     values = [own + dv for own, dv, _, _ in words]
     own = [w[0] for w in words]
     own_dec, dec = [w[2] for w in words], [w[3] for w in words]
+    # half a step exactly (written anew), and just within it (kept)
+    for d in (2, 3, 4):
+        h = numfmt.half_unit(d)
+        values += [h, -h, 0.75 * h]
+        own += [0.0, 0.0, 0.0]
+        own_dec += [d, 0, 1]
+        dec += [d, d, d]
     changed, texts = numfmt.word_texts(values, own, own_dec, dec)
     one = [numfmt.word_text(*w) for w in zip(values, own, own_dec, dec, strict=True)]
     assert changed == [k for k, t in enumerate(one) if t]
