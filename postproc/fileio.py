@@ -129,21 +129,40 @@ class Lines:
 
     def take(self, n: int) -> list[str]:
         """The next ``n`` lines (fewer at the end, none after it), as ``list(islice(self, n))``."""
-        at = self._at
-        out = self._buf[at:at + n]
-        self._at = at + len(out)
-        self.taken += len(out)
-        while len(out) < n:
+        out: list[str] = []
+        while len(out) < n and (piece := self._piece(n - len(out))):
+            out += piece
+        return out
+
+    def lists(self, n: int) -> Iterator[list[str]]:
+        """The lines not taken yet, in lists of ``n`` (the last shorter); where
+        :meth:`take` raises an error of ``blocks`` at once, this gives the list of the
+        lines before it first."""
+        while True:
+            out: list[str] = []
+            try:
+                while len(out) < n and (piece := self._piece(n - len(out))):
+                    out += piece
+            except Exception:
+                if out:
+                    yield out
+                raise
+            if not out:
+                return
+            yield out
+
+    def _piece(self, n: int) -> list[str]:
+        """Up to ``n`` lines of the block taken from, else of the next (none at the end)."""
+        while self._at >= len(self._buf):
             block = next(self._blocks, None)
             if block is None:
-                break
-            need = n - len(out)
-            if len(block) > need:
-                self._buf, self._at = block, need
-                block = block[:need]
-            out += block
-            self.taken += len(block)
-        return out
+                return []
+            self._buf, self._at = block, 0
+        at = self._at
+        piece = self._buf[at:at + n]
+        self._at = at + len(piece)
+        self.taken += len(piece)
+        return piece
 
     def close(self) -> None:
         """Let go of the lines not taken (a file read by a generator is closed)."""

@@ -6,6 +6,7 @@ lines a block at a time writes, counts and reports what it does given them one a
 from __future__ import annotations
 
 import io
+from contextlib import nullcontext
 from itertools import islice
 
 import pytest
@@ -89,6 +90,15 @@ def test_blocks_are_the_lines_read_lines_gives(pieces, limit, size, n, chunk, ah
     assert got == want
     assert _place(got_err) == _place(want_err)
     assert src.taken == len(lines)  # every line given was taken, those of a block cut short by the refusal too
+
+    # in lists of n, the refusal after the list of the lines before it (the path reader's)
+    got = []
+    with pytest.raises(PostprocError) if err else nullcontext() as refused:
+        got += Lines(read_blocks(_open(data, chunk), "p.nc", limit, size)).lists(n)
+    assert [line for block in got for line in block] == lines
+    assert all(len(block) == n for block in got[:-1])
+    assert all(got)
+    assert _place(refused and refused.value) == _place(err)
 
     # one at a time first (the lines before a program's header), then n at a time
     ref = read_lines(_open(data, chunk), "p.nc", limit)
