@@ -4,8 +4,9 @@ file beside the target, renamed at the end).
 Input: :func:`read_lines` yields a file's lines with their endings and refuses a line
 longer than :data:`MAX_INPUT_LINE_CHARS` after reading at most that many characters of it,
 so a file without line ends (``/dev/zero``, a binary) is refused at once instead of
-being read whole into memory; :func:`copy_lines` copies a stream (stdin) with the same
-bound.
+being read whole into memory; :func:`read_blocks` gives the same lines a read at a time,
+with the same refusal, for the readers that take a program's lines in blocks
+(:class:`Lines`); :func:`copy_lines` copies a stream (stdin) with the same bound.
 
 Output:
 
@@ -22,11 +23,12 @@ postproc goes through :func:`output_path`:
 from __future__ import annotations
 
 import errno
+import io
 import os
 import shutil
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import BinaryIO, TextIO
@@ -41,6 +43,9 @@ from postproc.errors import EXIT_USAGE, DiskFullError, OutputError, PostprocErro
 MAX_INPUT_LINE_CHARS = 65_536
 # Bytes read at a time when copying a stream (stdin) to a file.
 _COPY_BLOCK = 1 << 16
+# Characters read at a time by read_blocks: some 2,500 lines of a CAM program, a
+# block's worth (larger reads gain nothing measurable).
+_READ_CHARS = 1 << 16
 
 
 def _line_too_long(path: str | None, lineno: int, limit: int) -> PostprocError:
@@ -64,6 +69,107 @@ def read_lines(fh: TextIO, path: str | None = None, limit: int = MAX_INPUT_LINE_
         if len(line) > limit:
             raise _line_too_long(path, lineno, limit)
         yield line
+
+
+def read_blocks(fh: TextIO, path: str | None = None, limit: int = MAX_INPUT_LINE_CHARS,
+                size: int = _READ_CHARS) -> Iterator[list[str]]:
+    """The lines :func:`read_lines` gives of ``fh`` (opened with ``newline=''``), in
+    lists: each read of ``size`` characters gives the lines it completes. The lines end
+    where ``readline`` ends them ("\\n", "\\r\\n", a lone "\\r", a "\\r\\n" cut between two
+    reads included), each keeps its ending, and a last line without one is given as it
+    is. A line of more than ``limit`` characters is refused with the same PostprocError,
+    after the lines before it are given and at most ``limit + size`` characters of it
+    are read."""
+    lineno = 0  # lines given
+    rest = ""  # the start of a line not ended yet (or ended by a "\r" the next read may follow with "\n")
+    while text := fh.read(size):
+        # the universal line ends of readline with newline='' (the same C routine)
+        lines = io.StringIO(rest + text, newline="").readlines()
+        rest = "" if lines[-1][-1] == "\n" else lines.pop()
+        # only the first line holds more than one read: the others are checked where a read is longer than a line may be
+        if lines and (len(lines[0]) > limit or (size > limit and max(map(len, lines)) > limit)):
+            k = next(k for k, line in enumerate(lines) if len(line) > limit)
+            if k:
+                yield lines[:k]
+            raise _line_too_long(path, lineno + k + 1, limit)
+        if lines:
+            lineno += len(lines)
+            yield lines
+        if len(rest) > limit:
+            raise _line_too_long(path, lineno + 1, limit)
+    if rest:
+        yield [rest]
+
+
+class Lines:
+    """A program's lines from the lists ``blocks`` gives (:func:`read_blocks`), taken one
+    at a time (it is an iterator of lines) or ``n`` at a time (:meth:`take`), the same
+    lines either way; ``taken``: the lines taken so far. An error of ``blocks`` is raised
+    where the line after the last it gave is taken, as by an iterator of the lines."""
+
+    __slots__ = ("_blocks", "_buf", "_at", "taken")
+
+    def __init__(self, blocks: Iterable[list[str]]) -> None:
+        self._blocks = iter(blocks)
+        self._buf: list[str] = []  # the block taken from
+        self._at = 0  # where its next line is
+        self.taken = 0
+
+    def __iter__(self) -> Lines:
+        return self
+
+    def __next__(self) -> str:
+        while self._at >= len(self._buf):
+            self._buf = next(self._blocks)
+            self._at = 0
+        line = self._buf[self._at]
+        self._at += 1
+        self.taken += 1
+        return line
+
+    def take(self, n: int) -> list[str]:
+        """The next ``n`` lines (fewer at the end, none after it), as ``list(islice(self, n))``."""
+        out: list[str] = []
+        while len(out) < n and (piece := self._piece(n - len(out))):
+            out += piece
+        return out
+
+    def lists(self, n: int) -> Iterator[list[str]]:
+        """The lines not taken yet, in lists of ``n`` (the last shorter); where
+        :meth:`take` raises an error of ``blocks`` at once, this gives the list of the
+        lines before it first."""
+        while True:
+            out: list[str] = []
+            try:
+                while len(out) < n and (piece := self._piece(n - len(out))):
+                    out += piece
+            except Exception:
+                if out:
+                    yield out
+                raise
+            if not out:
+                return
+            yield out
+
+    def _piece(self, n: int) -> list[str]:
+        """Up to ``n`` lines of the block taken from, else of the next (none at the end)."""
+        while self._at >= len(self._buf):
+            block = next(self._blocks, None)
+            if block is None:
+                return []
+            self._buf, self._at = block, 0
+        at = self._at
+        piece = self._buf[at:at + n]
+        self._at = at + len(piece)
+        self.taken += len(piece)
+        return piece
+
+    def close(self) -> None:
+        """Let go of the lines not taken (a file read by a generator is closed)."""
+        close = getattr(self._blocks, "close", None)
+        if close is not None:
+            close()
+        self._buf, self._at = [], 0
 
 
 def bounded_blocks(src: BinaryIO, path: str | None = None, limit: int = MAX_INPUT_LINE_CHARS) -> Iterator[bytes]:

@@ -24,7 +24,13 @@ from postproc.errors import (
     GcodeSyntaxError,
     PostprocError,
 )
-from postproc.fileio import MAX_INPUT_LINE_CHARS, bounded_blocks, count_lines, read_lines
+from postproc.fileio import (
+    MAX_INPUT_LINE_CHARS,
+    bounded_blocks,
+    count_lines,
+    read_blocks,
+    read_lines,
+)
 from postproc.gcode.expand import expand
 from postproc.gcode.lexer import split_lines
 
@@ -253,14 +259,15 @@ class _Endless(io.RawIOBase):
         return n
 
 
-def test_reading_a_stream_without_line_ends_stops_at_the_line_bound():
+@pytest.mark.parametrize("reader", [read_lines, read_blocks])
+def test_reading_a_stream_without_line_ends_stops_at_the_line_bound(reader):
     raw = _Endless(b"G")
     text = io.TextIOWrapper(io.BufferedReader(raw, buffer_size=4096), encoding="utf-8", newline="")
     with pytest.raises(PostprocError) as err:
-        list(read_lines(text, "p.nc", limit=100_000))
+        list(reader(text, "p.nc", limit=100_000))
     assert (err.value.path, err.value.lineno, err.value.col) == ("p.nc", 1, 1)
     assert "line longer than 100,000 characters" in err.value.message
-    assert raw.given < 100_000 + 2 * 65_536  # the bound, and the decoder's read-ahead
+    assert raw.given < 100_000 + 2 * 65_536  # the bound, a read of read_blocks, and the decoder's read-ahead
     raw = _Endless()
     with pytest.raises(PostprocError):
         for _ in bounded_blocks(raw, "<stdin>"):

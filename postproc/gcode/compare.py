@@ -55,7 +55,7 @@ from typing import Any, NamedTuple, TypeAlias
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.fileio import read_lines
+from postproc.fileio import Lines, read_blocks
 from postproc.gcode import bulk, emit, forking
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.lexer import Word
@@ -807,13 +807,11 @@ class _Reader:
         if self.path is None:
             yield from self._chunks(self._lines)
             return
-        close = getattr(self._lines, "close", None)  # (a file's generator, not started)
-        if close is not None:
-            close()
+        self._lines.close()  # (a file's, not started)
         with open_source(self.path) as fh:  # its lines taken from the file, a chunk at a time, each bounded
-            yield from self._chunks(read_lines(fh, self.path))
+            yield from self._chunks(Lines(read_blocks(fh, self.path)))
 
-    def _chunks(self, it: Iterator[str]):
+    def _chunks(self, it: Lines):
         """:meth:`chunks` of the lines of ``it``."""
         rd = self._rd
         if self.options.drop_header:
@@ -833,7 +831,7 @@ class _Reader:
         if self.options.expand:
             yield from self._expanded_chunks(it)
             return
-        for lines in iter(lambda: list(islice(it, CHUNK_LINES)), []):
+        for lines in iter(partial(it.take, CHUNK_LINES), []):
             yield from self._read(partial(self._blocks, lines))
 
     def _blocks(self, lines: list[str]) -> None:

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, TypeAlias, TypeVar
 
 import numpy as np
 
+from postproc.fileio import Lines
 from postproc.gcode import bulk
 from postproc.gcode.geometry import ArcColumns, arc_chord_steps, arc_length, arc_params, arcs_points
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, plain_moves, start_position
@@ -44,6 +45,13 @@ Point: TypeAlias = tuple[float, float, float]
 def _blocks(lines: Iterable, n: int) -> Iterator[list]:
     """``lines`` in lists of ``n``; an error while taking them (a line too long, an
     expansion refused) comes after the list of the lines before it."""
+    if isinstance(lines, Lines):  # a program's lines, a block at a time
+        return lines.lists(n)
+    return _guarded_blocks(lines, n)
+
+
+def _guarded_blocks(lines: Iterable, n: int) -> Iterator[list]:
+    """:func:`_blocks` of lines taken one at a time (the expanded program's)."""
     failed: list[Exception] = []
 
     def guarded() -> Iterator:

@@ -18,6 +18,7 @@ import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeAlias, cast
@@ -30,6 +31,7 @@ from postproc.errors import (
     MissingSetupError,
     PostprocError,
 )
+from postproc.fileio import Lines
 from postproc.gcode import bulk, cutter, emit
 from postproc.gcode.emitter import PlanNeeded, Subdivided
 from postproc.gcode.engine_use import accept_residual, prepare_engine
@@ -152,10 +154,13 @@ class Corrector:
     def _run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
              source: deque[tuple[int, str | None]] | None = None, skip_until: int = 0,
              boundary: Callable[[int], bool] | None = None) -> CorrectReport:
-        """``source``: for an expanded program, the (line, file) each of ``lines`` comes
+        """``lines``: taken a chunk at a time, as a list (:meth:`postproc.fileio.Lines.take`
+        where they are :class:`~postproc.fileio.Lines`, the same lists either way);
+        ``source``: for an expanded program, the (line, file) each of ``lines`` comes
         from, in order, given as the lines are (its runs of plain lines are read in bulk
         too, each line numbered by its source)."""
         it = iter(lines)
+        take = it.take if isinstance(it, Lines) else partial(_take, it)
         rd = self.reader
         self.interp.may_expand = source is None and self.opt.expand
         if source is not None:
@@ -166,7 +171,7 @@ class Corrector:
             rd.line(line)
         pending = len(head) - keep  # lines in the chunk read
         chunk = self.chunk_lines
-        for block in iter(lambda: list(islice(it, chunk)), []):
+        for block in iter(partial(take, chunk), []):
             self._read_block(block)
             pending += len(block)
             if pending > UNKNOWN_AXIS_LINES:  # the lines wait for an axis to be positioned: bounded
@@ -381,6 +386,11 @@ class Corrector:
                 self.planner.provide(need, tab, plans, subdivided)
 
 
+def _take(it: Iterator[str], n: int) -> list[str]:
+    """The next ``n`` lines of ``it`` (fewer at its end)."""
+    return list(islice(it, n))
+
+
 def _last_target(entries: list[Entry | bulk.Run]) -> Sequence[float] | None:
     """The nominal target of the last move of a chunk's entries (None: it has none)."""
     for e in reversed(entries):
@@ -402,7 +412,8 @@ def correct_text(text: str, engine: Engine, setup: Setup | None = None, options:
     out: list[str] = []
     lines = split_lines(text)
     job = _Job(engine, setup or Setup(), options or CorrectOptions(), path, calibration_name, calibration_sha256)
-    report = _correct_lines(_Program(lambda: lines, None, len(lines), len(text)), out.append, out.clear, job)
+    report = _correct_lines(_Program(lambda: Lines([lines]), None, len(lines), len(text)), out.append, out.clear,
+                            job)
     return "".join(out), report
 
 
@@ -431,21 +442,25 @@ class _Program:
     """The program a run reads: ``get_lines()`` gives its lines (again on each call);
     ``count``: their number when it may be cut into parts corrected in several processes
     (:mod:`postproc.gcode.split`); ``lines``, ``chars``: its size, for the bounds on the
-    output's (``options.limits``); ``read``: the lines read so far; ``at``: the expanded
-    line read last and its file."""
+    output's (``options.limits``); :attr:`read`: the lines read so far; ``at``: the
+    expanded line read last and its file."""
 
-    get_lines: Callable[[], Iterable[str]]
+    get_lines: Callable[[], Lines]
     count: int | None = None
     lines: int = 0
     chars: int = 0
-    read: int = 0
     at: tuple[int, str | None] = (0, None)
+    _counted: Lines | None = field(default=None, repr=False)  # the lines counted() gave last
 
-    def counted(self) -> Iterator[str]:
-        """The lines, each counted as it is read."""
-        for n, line in enumerate(self.get_lines(), start=1):
-            self.read = n
-            yield line
+    @property
+    def read(self) -> int:
+        """The lines read so far of those :meth:`counted` gave last."""
+        return 0 if self._counted is None else self._counted.taken
+
+    def counted(self) -> Lines:
+        """The lines, counted as they are read (:attr:`read`)."""
+        self._counted = self.get_lines()
+        return self._counted
 
 
 def _correct_lines(prog: _Program, write: Write, restart: Callable[[], None], job: _Job,

@@ -20,6 +20,7 @@ from typing import TextIO
 import numpy as np
 
 from postproc.errors import MissingSetupError, PostprocError
+from postproc.fileio import Lines, read_blocks
 from postproc.gcode.places import PathArray, file_of
 
 
@@ -87,19 +88,20 @@ def open_source(path: str) -> TextIO:
         raise PostprocError(f"cannot read program: {exc.strerror}", path=path) from None
 
 
-def iter_source_lines(source) -> tuple[str | None, Iterator[str]]:
-    """``(path_or_None, iterator of lines with endings)`` for a path or G-code text."""
+def iter_source_lines(source) -> tuple[str | None, Lines]:
+    """``(path_or_None, its lines with endings)`` for a path or G-code text: an iterator
+    of lines that also gives them a block at a time (:class:`postproc.fileio.Lines`); a
+    file is opened when its first line is taken, read a block at a time, and closed at
+    its end (or by ``close()``)."""
     if isinstance(source, os.PathLike) or (isinstance(source, str) and _looks_like_path(source)):
         path = str(source)
 
-        def gen():
-            from postproc.fileio import read_lines
-
+        def gen() -> Iterator[list[str]]:
             with open_source(path) as fh:
-                yield from read_lines(fh, path)  # a line without end is refused, not read whole
+                yield from read_blocks(fh, path)  # a line without end is refused, not read whole
 
-        return path, gen()
-    return None, iter(_LINE_RE.findall(str(source)))
+        return path, Lines(gen())
+    return None, Lines([_LINE_RE.findall(str(source))])
 
 
 def backfill_unknown(q: np.ndarray, lineno: np.ndarray, path: str | None,
