@@ -225,8 +225,10 @@ def private_names(tree: ast.Module) -> set[str]:
             names.add(node.target.id)
         elif isinstance(node, (ast.Import, ast.ImportFrom)):
             names.update(a.asname or a.name for a in node.names)
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
-            names.update(s for s in re.findall(r"\b_\w+", node.value))  # __slots__ entries
+        elif (isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__slots__"
+                                                   for t in node.targets)):
+            names.update(c.value for c in ast.walk(node.value)
+                         if isinstance(c, ast.Constant) and isinstance(c.value, str))
     return {n for n in names if n.startswith("_") and not n.startswith("__")}
 
 
@@ -263,5 +265,6 @@ def test_foreign_private_uses_are_found(tmp_path):
     (pkg / "__init__.py").write_text("")
     (pkg / "a.py").write_text("class A:\n    def _own(self):\n        return self._x\n")
     (pkg / "b.py").write_text("from postproc import a\n\ndef f(o):\n    return o._own() + a.A()._x\n")
-    (pkg / "c.py").write_text("class C:\n    _y = 1\n\ndef g(o):\n    return o._y\n")
-    assert foreign_private_uses(tmp_path) == ["postproc.b:4 a.A()._x", "postproc.b:4 o._own"]
+    (pkg / "c.py").write_text("class C:\n    __slots__ = ('_z',)\n    _y = 1\n\ndef g(o):\n    return o._y + o._z\n")
+    (pkg / "d.py").write_text('"""About o._y and o._w."""\n\ndef h(o):\n    return o._w\n')
+    assert foreign_private_uses(tmp_path) == ["postproc.b:4 a.A()._x", "postproc.b:4 o._own", "postproc.d:4 o._w"]
