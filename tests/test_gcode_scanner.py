@@ -177,3 +177,16 @@ def test_a_chunk_with_a_long_number_in_a_word_is_the_interpreters():
     assert bulk.scan(["G0 X1 Y1 Z1\n", "G1 X-0123456789\n"]) is None
     assert bulk.scan(["G0 X1 Y1 Z1\n", "G1 X123456789.0123456789\n"]) is not None
     assert bulk.scan(["G0 X1 Y1 Z1\n", "(part 12345678901)\n", "G1 X2\n"]) is not None  # in a comment: no word
+
+
+def test_edit_line_puts_texts_at_spans_in_any_order():
+    from postproc.gcode import runwords
+
+    line = "N10 G1 X1.5 Y-2 (keep) F100\r\n"
+    assert runwords.edit_line(line, []) is line
+    # the spans of X's and Y's numbers, and an insertion after Y's
+    edits = [(13, 15, "-2.25"), (8, 11, "1.499"), (15, 15, " Z3")]
+    assert runwords.edit_line(line, edits) == "N10 G1 X1.499 Y-2.25 Z3 (keep) F100\r\n"
+    assert runwords.edit_line(line, list(reversed(edits))) == runwords.edit_line(line, edits)
+    # a word added at the ")" of X=AC(10) (Sinumerik) goes after it
+    assert runwords.edit_line("G1 X=AC(10)\n", [(10, 10, " Y2")]) == "G1 X=AC(10) Y2\n"

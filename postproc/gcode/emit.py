@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, TypeAlias
 from postproc import __version__
 from postproc.gcode import numfmt
 from postproc.gcode.numfmt import fmt as fmt  # the one formatter (compiled), re-exported
+from postproc.gcode.runwords import edit_line as edit_line  # the one line editor, re-exported
 from postproc.gcode.state import DWELL, RAPID
 
 if TYPE_CHECKING:
@@ -44,24 +45,6 @@ def decimals_of(number_text: str) -> int:
     """Digits after the point in a word's raw number text (``"1.50"`` -> 2)."""
     _, dot, frac = number_text.partition(".")
     return len(frac) if dot else 0
-
-
-def edit_line(line: str, edits: list[tuple[int, int, str]]) -> str:
-    """Replace ``line[start:end]`` by text for each (start, end, text); spans must not overlap."""
-    if not edits:
-        return line
-    out = []
-    pos = 0
-    if len(edits) > 1:
-        edits = sorted(edits)
-    for start, end, text in edits:
-        if start == end and line[start:start + 1] == ")":  # a word added after X=AC(10) (Sinumerik), not in it
-            start = end = start + 1
-        out.append(line[pos:start])
-        out.append(text)
-        pos = end
-    out.append(line[pos:])
-    return "".join(out)
 
 
 def line_ending(line: str) -> str:

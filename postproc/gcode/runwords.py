@@ -9,7 +9,8 @@ position reached before it, so the lines are decided in order, one axis at a tim
 block beforehand (:func:`postproc.gcode.bulk.prepare_emission`), the text of each only
 where it is added. :func:`join_rows` then writes the lines: each line's own text with
 the numbers that change and the words added put in at their offsets
-(:mod:`postproc.gcode.plainscan`), every other byte as it was.
+(:mod:`postproc.gcode.plainscan`), every other byte as it was; every other line is
+written by :func:`edit_line` in the same way, from the edits the general writer makes.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 It imports nothing of the package but :mod:`postproc.gcode.numfmt`, compiled with it.
@@ -139,6 +140,23 @@ def join_rows(lines: list[str], span: tuple[int, int], at: list[list[int]], nums
         if tj:
             p = _put(out, line, p, js[y], je[y], tj)
         out.append(line[p:])
+    return "".join(out)
+
+
+def edit_line(line: str, edits: list[tuple[int, int, str]]) -> str:
+    """``line`` with ``line[start:end]`` replaced by ``text`` for each ``(start, end,
+    text)`` of ``edits`` (spans that do not overlap, in any order): the general writer's
+    lines, written as :func:`join_rows` writes a run's. A word added after ``X=AC(10)``
+    (Sinumerik: an insertion at a ")") goes after it, not in it."""
+    if not edits:
+        return line
+    out: list[str] = []
+    p = 0
+    for start, end, text in (sorted(edits) if len(edits) > 1 else edits):
+        if start == end and line[start:start + 1] == ")":
+            start = end = start + 1
+        p = _put(out, line, p, start, end, text)
+    out.append(line[p:])
     return "".join(out)
 
 
