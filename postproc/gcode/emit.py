@@ -14,7 +14,6 @@ from itertools import chain, islice
 from typing import TYPE_CHECKING, TypeAlias
 
 from postproc import __version__
-from postproc.gcode import numfmt
 from postproc.gcode.numfmt import fmt as fmt  # the one formatter (compiled), re-exported
 from postproc.gcode.runwords import edit_line as edit_line  # the one line editor, re-exported
 from postproc.gcode.state import DWELL, RAPID
@@ -26,16 +25,6 @@ if TYPE_CHECKING:
 #: a G0/G1 step of an expanded canned cycle (cycle_lines): motion, from, to (machine mm),
 #: the axes it names, whether it carries the block's F word
 CycleStep: TypeAlias = tuple[int, tuple[float, float, float], tuple[float, float, float], tuple[int, ...], bool]
-
-class _HalfUnits(dict):
-    """Half a unit of the last decimal, by decimals (:func:`postproc.gcode.numfmt.half_unit`,
-    looked up)."""
-
-    def __missing__(self, d: int) -> float:
-        return numfmt.half_unit(d)
-
-
-HALF_UNIT = _HalfUnits({d: numfmt.half_unit(d) for d in range(0, 330)})
 
 HEADER_TAG = "(postproc "
 HEADER_MARK = " corrected "

@@ -27,7 +27,7 @@ import numpy as np
 
 from postproc.constants import MM_PER_INCH
 from postproc.errors import UnsupportedGcodeError
-from postproc.gcode import bulk, emit
+from postproc.gcode import bulk, emit, numfmt
 from postproc.gcode.emitter import _unit_decimals
 from postproc.gcode.interp import Interpreter
 from postproc.gcode.moves import Cycle, Move, Role
@@ -308,7 +308,7 @@ class ChunkReader(LineReader[Entry]):
                            np.broadcast_to(self.planner.dirs, pts.shape), [mv.rotary] * n, np.full(n, mv.lineno),
                            repeated(mv.path, n))
         d = _unit_decimals(self.opt, mv.unit)
-        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
+        return bool(np.abs(t - pts).max() / mv.unit < numfmt.half_unit(d))
 
     def _feed_cycle(self, line: str, mv: Move, c: Cycle, motion: int | None) -> None:
         """Queue the cycle block ``c`` of ``mv``: kept (its bottom and R point corrected) or
@@ -359,7 +359,7 @@ class ChunkReader(LineReader[Entry]):
             drift = math.hypot(t[1, 0] - t[0, 0], t[1, 1] - t[0, 1])
             return drift <= CYCLE_KEEP_SHARE * (self.opt.tolerance_mm - self.planner.round_err(mv.unit))
         d = _unit_decimals(self.opt, mv.unit)
-        return bool(np.abs(t - pts).max() / mv.unit < emit.HALF_UNIT[d])
+        return bool(np.abs(t - pts).max() / mv.unit < numfmt.half_unit(d))
 
     def _feed_drill_cycle(self, line: str, mv: Move | None,
                           interp: Interpreter, lineno: int) -> None:

@@ -329,7 +329,7 @@ class ChunkWriter(EmitterMixin):
         when a hole's correction does not round to nothing."""
         d = _unit_decimals(self.opt, mv.unit)
         moved = max(abs(t - q) for t, q in zip(target, mv.q1, strict=True)) / mv.unit
-        if moved >= emit.HALF_UNIT[d]:
+        if moved >= numfmt.half_unit(d):
             how = "in G91 (incremental)" if mv.incremental else "with L/K repeats"
             raise SafetyError(
                 f"canned cycle G{mv.kind / 10:g} {how}: one line drills several holes or moves by increments, "
