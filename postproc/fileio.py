@@ -130,8 +130,7 @@ class Lines:
     def take(self, n: int) -> list[str]:
         """The next ``n`` lines (fewer at the end, none after it), as ``list(islice(self, n))``."""
         out: list[str] = []
-        while len(out) < n and (piece := self._piece(n - len(out))):
-            out += piece
+        self._fill(out, n)
         return out
 
     def lists(self, n: int) -> Iterator[list[str]]:
@@ -141,8 +140,7 @@ class Lines:
         while True:
             out: list[str] = []
             try:
-                while len(out) < n and (piece := self._piece(n - len(out))):
-                    out += piece
+                self._fill(out, n)
             except Exception:
                 if out:
                     yield out
@@ -150,6 +148,12 @@ class Lines:
             if not out:
                 return
             yield out
+
+    def _fill(self, out: list[str], n: int) -> None:
+        """Take lines into ``out`` until it holds ``n`` or the lines end (those taken
+        before an error of ``blocks`` stay in ``out``)."""
+        while len(out) < n and (piece := self._piece(n - len(out))):
+            out += piece
 
     def _piece(self, n: int) -> list[str]:
         """Up to ``n`` lines of the block taken from, else of the next (none at the end)."""
