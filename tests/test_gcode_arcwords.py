@@ -227,7 +227,7 @@ def test_the_planners_guess_is_the_writers_answer_in_every_plane(seed, monkeypat
         failing += len(got)
         answered += len(arcs) - len(got)
         with monkeypatch.context() as m:
-            m.setattr(vplan.ArcHint, "_words", lambda *_a: pytest.fail("asked again"))
+            m.setattr(vplan.hintcore, "centre_words", lambda *_a: pytest.fail("asked again"))
             for (_view, hint), (*args, ref) in zip(arcs, asked, strict=True):
                 assert _bits(hint.words(*args)) == _bits(ref)
     assert failing > 100

@@ -8,9 +8,10 @@ and the corrected ends it was fitted between). Where the arc's end points are wr
 to the words' decimals (or takes the nearest rounded centre around it whose start and end
 radii agree within half a step) and bounds the arc a controller then draws
 (:func:`arc_bound`). The planner asks it for every arc of a chunk with the corrected ends
-rounded as words are (:func:`rounded_centre_words`, its guess of which arcs need a plan of
+rounded as words are (:func:`rounded_words`, its guess of which arcs need a plan of
 their own) and the run writer with the ends as written; both get the same answer for the
-same ends, as there is one computation.
+same ends, as there is one computation: the planner's answers are kept with the question
+(:data:`Key`) and the writer's same question takes them.
 
 The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round``, the
 floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
@@ -35,6 +36,15 @@ ORDER: Final = tuple(sorted(((k1, k2) for k1 in range(-LATTICE, LATTICE + 1) for
 Circle = tuple[float, float, float, float, float]
 #: an arc's ends in the plane's order: (s1, s2, sn, e1, e2, en)
 Ends = tuple[float, float, float, float, float, float]
+#: the centre words' values (``float`` of their text), their radius mismatch and bound
+Words = tuple[float, float, float, float]
+#: a question to :func:`centre_words`: the written ends, clockwise, the words' decimals,
+#: mm per program unit, what they are relative to (b1, b2) and the budget
+Key = tuple[Ends, bool, int, float, float, float, float]
+#: what the planner's guess reads of an arc: the hint's circle and fitted ends, clockwise,
+#: the words' decimals, mm per program unit, the shifts of the plane's two axes and its
+#: normal (machine mm) and whether the centre words are absolute
+Guess = tuple[Circle, Ends, bool, int, float, tuple[float, float, float], bool]
 
 
 def arc_bound(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, c1: float, c2: float
@@ -129,3 +139,24 @@ def centre_words(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, w
     if min(rs, re) < min_radius or not turn >= min_sweep:
         return None
     return w1, w2, mism, bound
+
+
+def rounded_words(arcs: list[Guess], limits: tuple[float, float, float]) -> list[tuple[Key, Words | None]]:
+    """The planner's guess (``limits``: as :func:`centre_words`'): for each arc, the
+    question :func:`centre_words` is asked when the arc's fitted ends are written as its
+    words round them (``round((q - shift) / unit, d) * unit + shift`` on each axis) and
+    its answer, None where no centre words pass there."""
+    out: list[tuple[Key, Words | None]] = []
+    for circle, fitted, clockwise, d, unit, shift, absolute in arcs:
+        h1, h2, hn = shift
+        s1 = round((fitted[0] - h1) / unit, d) * unit + h1
+        s2 = round((fitted[1] - h2) / unit, d) * unit + h2
+        sn = round((fitted[2] - hn) / unit, d) * unit + hn
+        e1 = round((fitted[3] - h1) / unit, d) * unit + h1
+        e2 = round((fitted[4] - h2) / unit, d) * unit + h2
+        en = round((fitted[5] - hn) / unit, d) * unit + hn
+        written = (s1, s2, sn, e1, e2, en)
+        b1, b2 = (h1, h2) if absolute else (s1, s2)
+        key = (written, clockwise, d, unit, b1, b2, limits[0])
+        out.append((key, centre_words(circle, fitted, clockwise, written, (d, unit, b1, b2), limits)))
+    return out

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from postproc.errors import SolverError
-from postproc.gcode import bulk, vplan
+from postproc.gcode import bulk, hintcore, vplan
 from postproc.gcode.directions import (
     direction_axes,
 )
@@ -50,9 +50,8 @@ from postproc.gcode.sampling import (
     _sample_moves,
     _Sampled,
 )
-from postproc.gcode.segment import Curve, quadrant_breaks
+from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD, Curve, quadrant_breaks
 from postproc.gcode.source import backfill_unknown
-from postproc.gcode.state import PLANES
 from postproc.gcode.table import Table
 from postproc.gcode.vplan import (
     ArcHint,
@@ -317,23 +316,24 @@ class Planner(EngineCalls):
         beyond the other's across a short chord). A guess for planning only: what is
         written is settled by the hint or the plan either way. The writer, asking with
         the same ends, gets the answer given here (:meth:`ArcHint.words`)."""
-        failing: set[int] = set()
+        decimals: dict[float, int] = {}
+        asked: list[tuple[int, ArcHint]] = []
+        questions: list[hintcore.Guess] = []
         for i, mv, hint in arcs:
             arc = mv.arc
             if arc is None:
                 continue
-            axes = PLANES[arc.plane][0]
-            unit, shift, ends = mv.unit, mv.shift, hint.ends
-            d = _unit_decimals(self.opt, unit)
-            # the corrected ends rounded as words are: round((q - shift) / unit, d) * unit + shift
-            S, E = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-            for k in range(3):
-                a, sh = axes[k], shift[axes[k]]
-                S[a] = round((ends[k] - sh) / unit, d) * unit + sh
-                E[a] = round((ends[3 + k] - sh) / unit, d) * unit + sh
-            a1, a2 = axes[0], axes[1]
-            base = (shift[a1], shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
-            if hint.words(S, E, axes, arc.clockwise, d, unit, base, budget) is None:
+            unit = mv.unit
+            d = decimals.get(unit)
+            if d is None:
+                d = decimals[unit] = _unit_decimals(self.opt, unit)
+            asked.append((i, hint))
+            questions.append(hint.guess(arc, d, unit, mv.shift, mv.arc_absolute))
+        failing: set[int] = set()
+        answers = hintcore.rounded_words(questions, (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
+        for (i, hint), answer in zip(asked, answers, strict=True):
+            hint.last = answer  # the writer asking the same gets this answer
+            if answer[1] is None:
                 failing.add(i)
         return failing
 

@@ -173,7 +173,7 @@ class Sampling:
 class ArcHint:
     """What the bulk planner found for one arc (see the module docstring)."""
 
-    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "row", "edge", "_last")
+    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "row", "edge", "last")
 
     def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
                  row: int, mismatch: float = 0.0) -> None:
@@ -187,7 +187,8 @@ class ArcHint:
         # the planner expects the hint may fail where written (its general plan is made with
         # the chunk): the run writer ends a stretch at this arc
         self.edge = False
-        self._last: tuple | None = None  # (arguments, result) of the last call of words
+        # the last question to words and its answer (the planner's guess puts its own here)
+        self.last: tuple[hintcore.Key, hintcore.Words | None] | None = None
 
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
         """The arc words for the move written from S to E (machine mm, as written):
@@ -221,26 +222,28 @@ class ArcHint:
         limits decide)."""
         # the planner's guess (Planner._hints_failing_rounded) and the writer usually ask
         # with the same ends: the second time is the first one's answer
-        key = (tuple(S), tuple(E), axes, clockwise, d, unit, base, budget)
-        last = self._last
+        a1, a2, an = axes
+        written = (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]), float(E[an]))
+        key = (written, clockwise, d, float(unit), float(base[0]), float(base[1]), budget)
+        last = self.last
         if last is not None and last[0] == key:
             return last[1]
-        result = self._words(S, E, axes, clockwise, d, unit, base, budget)
-        self._last = (key, result)
+        result = hintcore.centre_words(self._circle(), self.ends, clockwise, written, key[2:6],
+                                       (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
+        self.last = (key, result)
         return result
 
     def _circle(self) -> hintcore.Circle:
         """The fitted circle as :mod:`postproc.gcode.hintcore` takes it."""
         return self.c1, self.c2, self.rho, self.worst, self.nsweep
 
-    def _words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
-               unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
-        """:meth:`words`, computed (:func:`postproc.gcode.hintcore.centre_words`)."""
-        a1, a2, an = axes
-        return hintcore.centre_words(self._circle(), self.ends, clockwise,
-                                     (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]),
-                                      float(E[an])), (d, float(unit), float(base[0]), float(base[1])),
-                                     (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
+    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: bool) -> hintcore.Guess:
+        """What :func:`postproc.gcode.hintcore.rounded_words` reads of the arc ``arc`` of
+        this hint, its words written with ``d`` decimals in ``unit`` (mm per program unit)
+        with the machine ``shift`` of each axis, its centre words ``absolute`` or not."""
+        a1, a2, an = PLANES[arc.plane][0]
+        return (self._circle(), self.ends, arc.clockwise, d, float(unit),
+                (float(shift[a1]), float(shift[a2]), float(shift[an])), absolute)
 
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
              budget: float) -> ArcSpec | None:
