@@ -85,10 +85,15 @@ def arcs_points(owner: np.ndarray, s: np.ndarray, arcs: ArcColumns) -> np.ndarra
     th = arcs.t0[owner] + s * arcs.sweep[owner]
     rad = arcs.r0[owner] + (arcs.r1 - arcs.r0)[owner] * s
     out = np.empty((len(s), 3))
+    centre, q0, q1 = arcs.centre, arcs.q0, arcs.q1
+    if (arcs.axes == (0, 1, 2)).all():  # every arc in the XY plane: the columns
+        out[:, 0] = centre[owner, 0] + rad * np.cos(th)
+        out[:, 1] = centre[owner, 1] + rad * np.sin(th)
+        out[:, 2] = q0[owner, 2] + (q1 - q0)[owner, 2] * s
+        return out
     idx = np.arange(len(s))
     ax = arcs.axes[owner]
     a1, a2, an = ax[:, 0], ax[:, 1], ax[:, 2]
-    centre, q0, q1 = arcs.centre, arcs.q0, arcs.q1
     out[idx, a1] = centre[owner, a1] + rad * np.cos(th)
     out[idx, a2] = centre[owner, a2] + rad * np.sin(th)
     out[idx, an] = q0[owner, an] + (q1 - q0)[owner, an] * s

@@ -420,7 +420,8 @@ class _ArcSamples:
     """The arcs :func:`plan_chunk` fits (k): their ``rows``, geometry ``cols``, sense
     ``clockwise`` and sample counts ``n`` (ends included); the interior samples (owner
     ``own``, parameter ``s``, nominal points ``nom``) and the middles of all the sample
-    intervals (owner ``mid_own``, interval ``mid_pos``, parameter ``mid_s``)."""
+    intervals (owner ``mid_own``, interval ``mid_pos``, parameter ``mid_s``; ``mid_start``:
+    each arc's first)."""
 
     rows: IntArray
     cols: ArcColumns
@@ -432,6 +433,7 @@ class _ArcSamples:
     mid_own: IntArray
     mid_pos: IntArray
     mid_s: FloatArray
+    mid_start: IntArray
 
 
 def _arc_samples(arcs_i: Sequence[tuple[int, PlanMove, Arc]], arc_prm: dict[int, ArcParams], ends: MoveEnds,
@@ -455,20 +457,21 @@ def _arc_samples(arcs_i: Sequence[tuple[int, PlanMove, Arc]], arc_prm: dict[int,
     ao, ap, _astart = _ragged(na - 2)
     s_a = (ap + 1) / (na[ao] - 1)
     # and the middles of the sample intervals (all of them), for the nominal bulge
-    mo, mp, _mstart = _ragged(na - 1)
+    mo, mp, mstart = _ragged(na - 1)
     s_m = (mp + 0.5) / (na[mo] - 1)
     centre = np.array([arc.center for _i, _m, arc in arcs_i], dtype=float).reshape(-1, 3)
     cols = ArcColumns(axes, t0, sweep, r0, r1, centre, Q0[ai], Q1[ai])
     cw = np.array([arc.clockwise for _i, _m, arc in arcs_i])
-    return _ArcSamples(ai, cols, cw, na, ao, s_a, arcs_points(ao, s_a, cols), mo, mp, s_m)
+    return _ArcSamples(ai, cols, cw, na, ao, s_a, arcs_points(ao, s_a, cols), mo, mp, s_m, mstart)
 
 
 @dataclass(frozen=True, eq=False)
 class _PlanePoints:
     """The points each arc is fitted to, in its plane: every sample with its ends and the
     bulged middle of every interval (``P1``, ``P2`` in the plane, ``Pn`` along the normal;
-    ``owner``: the arc, ``frac``: the point's parameter), the corrected ends of each arc
-    (``S1`` .. ``En``) and the first guess of its centre (``c01``, ``c02``)."""
+    ``owner``: the arc, ``frac``: the point's parameter; the samples arc by arc, then the
+    middles arc by arc, ``full_start``: each arc's first sample), the corrected ends of
+    each arc (``S1`` .. ``En``) and the first guess of its centre (``c01``, ``c02``)."""
 
     P1: FloatArray
     P2: FloatArray
@@ -483,6 +486,7 @@ class _PlanePoints:
     En: FloatArray
     c01: FloatArray
     c02: FloatArray
+    full_start: IntArray
 
 
 def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlanePoints:
@@ -517,8 +521,11 @@ def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlaneP
     ax1, ax2, axn = axes[:, 0], axes[:, 1], axes[:, 2]
     S1, S2, Sn = S[ai, ax1], S[ai, ax2], S[ai, axn]
     E1, E2, En = T[ai, ax1], T[ai, ax2], T[ai, axn]
-    P1, P2, Pn = pts[np.arange(len(pts)), ax1[owner]], pts[np.arange(len(pts)), ax2[owner]], \
-        pts[np.arange(len(pts)), axn[owner]]
+    if (axes == (0, 1, 2)).all():  # every arc in the XY plane (as CAM programs are): the columns
+        P1, P2, Pn = pts[:, 0].copy(), pts[:, 1].copy(), pts[:, 2].copy()
+    else:
+        at = np.arange(len(pts))
+        P1, P2, Pn = pts[at, ax1[owner]], pts[at, ax2[owner]], pts[at, axn[owner]]
     # first guess: the nominal centre moved by the mean correction
     off = np.zeros((k, 3))
     cnt = np.bincount(full_o, minlength=k)
@@ -526,7 +533,7 @@ def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlaneP
         off[:, c] = np.bincount(full_o, Pf[:, c] - nom_f[:, c], minlength=k) / cnt
     c01 = cols.centre[j, ax1] + off[j, ax1]
     c02 = cols.centre[j, ax2] + off[j, ax2]
-    return _PlanePoints(P1, P2, Pn, owner, frac, S1, S2, Sn, E1, E2, En, c01, c02)
+    return _PlanePoints(P1, P2, Pn, owner, frac, S1, S2, Sn, E1, E2, En, c01, c02, full_start)
 
 
 @dataclass(frozen=True, eq=False)
@@ -601,6 +608,8 @@ def _worst_deviations(p: _PlanePoints, circles: _Circles, arcs: _ArcSamples) -> 
     f = alpha / asw[owner]
     nrm = Sn[owner] + (En - Sn)[owner] * f
     dev = np.hypot(np.hypot(v1, v2) - rho[owner], p.Pn - nrm)
-    worst = np.full(len(S1), -np.inf)
-    np.maximum.at(worst, owner, dev)
+    # the points are every arc's samples (arc by arc), then every arc's interval middles:
+    # each arc's largest of both
+    n_full = len(owner) - len(arcs.mid_own)
+    worst = np.maximum(_group_max(dev[:n_full], p.full_start), _group_max(dev[n_full:], arcs.mid_start))
     return worst, turning
