@@ -154,10 +154,14 @@ def test_word_texts_is_word_text(words):
         own += [0.0, 0.0, 0.0]
         own_dec += [d, 0, 1]
         dec += [d, d, d]
-    changed, texts = numfmt.word_texts(values, own, own_dec, dec)
+    at = [3 * k + 1 for k in range(len(values))]  # each word's place in the texts put into
+    put = ["."] * (3 * len(values) + 1)
+    changed, texts = numfmt.word_texts(values, own, own_dec, dec, (put, at))
     one = [numfmt.word_text(*w) for w in zip(values, own, own_dec, dec, strict=True)]
     assert changed == [k for k, t in enumerate(one) if t]
     assert texts == [one[k] for k in changed]
+    assert put == ["."] + [x for t in one for x in (t or ".", ".", ".")]
+    assert numfmt.word_texts(values, own, own_dec, dec) == (changed, texts)
 
 
 @pytest.mark.parametrize(("text", "longest"), [

@@ -677,14 +677,12 @@ def prepare_emission(block: Block, T: FloatArray) -> Emission:
         # text); "" where the line's own stays
         on = np.flatnonzero(has)
         rows_on = idx[on]
-        changed, texts = numfmt.word_texts(v[on].tolist(), block.ov[k][rows_on].tolist(),
-                                           block.frac[k][rows_on].tolist(), dec[on].tolist())
         nums = [""] * n
+        changed, _texts = numfmt.word_texts(v[on].tolist(), block.ov[k][rows_on].tolist(),
+                                            block.frac[k][rows_on].tolist(), dec[on].tolist(),
+                                            (nums, rows_on.tolist()))
         if changed:
-            sel = rows_on[changed]
-            for y, t in zip(sel.tolist(), texts, strict=True):
-                nums[y] = t
-            named[sel] += 1
+            named[rows_on[changed]] += 1
         em.nums.append(nums)
         miss = np.flatnonzero(~has & ~block.neutral[idx])  # an inert line gets no word
         vm = v[miss]
@@ -703,8 +701,9 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     (``q0``, ``q1``: its start and target, when the caller has them)."""
     blk = run.block
     y = run.a + j
-    motion, feed = _modal_at(run, y)
-    if blk.motion_l[y] >= 0:
+    named, has_f = blk.motion_l[y] >= 0, blk.f_has[y]
+    motion, feed = (None, 0.0) if named and has_f else _modal_at(run, y)  # what the line does not name
+    if named:
         motion = blk.code(y)
     elif motion is None:  # a run's first line names its motion when none is modal
         raise AssertionError(f"line {run.line(j)} of a run without a motion")
@@ -712,7 +711,7 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
         q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
-    mv = RunMove(run, run.line(j), motion, q0, q1, blk.f_value[y] if blk.f_has[y] else feed)
+    mv = RunMove(run, run.line(j), motion, q0, q1, blk.f_value[y] if has_f else feed)
     mv.path = run.path(j)
     if run.rot is not None:
         mv.rotary = run.rot[j]
@@ -882,12 +881,9 @@ def _write_stretch(corrector: Corrector, st: _Stretch, stop: int, arc_edit: dict
     blk, a = run.block, run.a
     rep = corrector.report
     c = stop - s
-    rows_added = newly_changed = arc_words = 0
     named = em.named_edits
-    for col_i, txt in enumerate(add_col[:c]):
-        if txt:
-            rows_added += 1
-            newly_changed += named[s + col_i] == 0
+    rows_added, newly_changed = runwords.added_counts(add_col, c, named, s)
+    arc_words = 0
     centre_i = centre_j = [""] * c  # the new I and J number texts ("": the line's own stays)
     if arc_edit:
         centre_i, centre_j = [""] * c, [""] * c

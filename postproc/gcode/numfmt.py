@@ -85,10 +85,11 @@ def reached(text: str, value: float) -> float:
     return math.copysign(0.0, value) if r == 0.0 else r
 
 
-def word_texts(values: list[float], own: list[float], own_decimals: list[int], decimals: list[int]
-               ) -> tuple[list[int], list[str]]:
+def word_texts(values: list[float], own: list[float], own_decimals: list[int], decimals: list[int],
+               into: tuple[list[str], list[int]] | None = None) -> tuple[list[int], list[str]]:
     """:func:`word_text` of each word: the indices of those whose text changes and their
-    new texts (one :func:`fmt_all` over them)."""
+    new texts (one :func:`fmt_all` over them). ``into`` (``texts``, ``at``): each new
+    text is also put in ``texts`` at the place ``at`` gives its word."""
     changed: list[int] = []
     new: list[float] = []
     dout: list[int] = []
@@ -102,4 +103,9 @@ def word_texts(values: list[float], own: list[float], own_decimals: list[int], d
             new.append(v)
             od = own_decimals[k]
             dout.append(od if od > dk else dk)
-    return changed, fmt_all(new, dout, "")
+    texts = fmt_all(new, dout, "")
+    if into is not None:
+        dest, at = into
+        for k in range(len(changed)):
+            dest[at[changed[k]]] = texts[k]
+    return changed, texts

@@ -296,6 +296,7 @@ class Corrector:
         # the chunk's moves in order: runs of plain lines as blocks, other moves one by one
         rot: list[dict[str, float]] = []
         general: list[tuple[int, PlanMove]] = []
+        read: list[tuple[int, Move]] = []  # the moves read one at a time
         M = 0
         runs: list[bulk.Run] = []
         for e in entries:
@@ -309,6 +310,7 @@ class Corrector:
             elif type(mv := e[1]) is Move:
                 rot.append(mv.rotary)
                 general.append((M, mv))
+                read.append((M, mv))
                 M += 1
         # every move's nominal target, line and tool vector: runs by slices, the others at once
         Q1 = np.empty((M, 3))
@@ -321,18 +323,18 @@ class Corrector:
             lns[sl] = e.linenos()
             Rt[sl] = e.r
             kind[sl] = e.kinds()
-        if general:
-            at = [i for i, _m in general]
-            Q1[at] = [m.q1 for _i, m in general]
-            lns[at] = [m.lineno for _i, m in general]
-            Rt[at] = [m.r for _i, m in general]
-            kind[at] = [kind_of(m.role, m.kind) for _i, m in general]
+        if read:
+            at = [i for i, _m in read]
+            Q1[at] = [m.q1 for _i, m in read]
+            lns[at] = [m.lineno for _i, m in read]
+            Rt[at] = [m.r for _i, m in read]
+            kind[at] = [kind_of(m.role, m.kind) for _i, m in read]
         files = None
         if self.reader.source is not None:  # an expanded program: the file of each row too
             files = np.full(M, self.path, dtype=object)
-            if general:
-                files[at] = [getattr(m, "path", None) or self.path for _i, m in general]
-            for e in runs:  # (after the moves: a run's arcs are among them)
+            if read:
+                files[at] = [m.path or self.path for _i, m in read]
+            for e in runs:
                 paths = e.paths()
                 if paths is not None:
                     files[e.trow:e.trow + len(e)] = paths

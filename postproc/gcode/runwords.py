@@ -106,6 +106,19 @@ class Unnamed:
         return qk
 
 
+def added_counts(add_col: list[str], c: int, named: list[int], s: int) -> tuple[int, int]:
+    """Of the first ``c`` lines of ``add_col`` (words added per line, from block line
+    ``s``): how many have words added, and how many of those change no word they name
+    (``named``: by block line, the named words that change)."""
+    rows = newly = 0
+    for k in range(c):
+        if add_col[k]:
+            rows += 1
+            if named[s + k] == 0:
+                newly += 1
+    return rows, newly
+
+
 def join_rows(lines: list[str], span: tuple[int, int], at: list[list[int]], nums: list[list[str]],
               added: list[str], centres: tuple[list[str], list[str]]) -> str:
     """Lines ``s:stop`` (``span``) of ``lines`` as written: each line's own text, line
