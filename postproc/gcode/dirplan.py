@@ -57,6 +57,7 @@ class _Planner(Protocol):
     def corrected(self, q_nom: FloatArray, r: FloatArray, dirs: FloatArray, rotary: Sequence[dict[str, float]],
                   lineno: IntArray, files: PathArray | None = None) -> FloatArray: ...
 
+    def rotary_at(self, rot: Sequence[dict[str, float]], rows: IntArray) -> list[dict[str, float]]: ...
     def round_err(self, unit: float) -> float: ...
 
 
@@ -140,7 +141,7 @@ def _settle(pl: _Planner, planned: list[tuple[int, PlanMove]], tab: Table) -> _S
     def solve(rows: IntArray, dirs: FloatArray, at: FloatArray | None = None) -> FloatArray:
         own = owner[rows]
         return pl.corrected(nominal[rows] if at is None else at, R[own], dirs,
-                            [rot[j] for j in own.tolist()], linenos[own], pick(tab.files, own))
+                            pl.rotary_at(rot, own), linenos[own], pick(tab.files, own))
 
     inner = np.flatnonzero(counts[owner] > 1)
     if len(inner):

@@ -67,6 +67,11 @@ class EngineCalls:
         self.accept_residual_mm = accept_residual_mm
         self.units_checked: set[float] = set()
 
+    def rotary_at(self, rot: Sequence[dict[str, float]], rows: IntArray) -> list[dict[str, float]]:
+        """The rotary positions (``rot``, by row) of ``rows``, for :meth:`corrected`; none
+        where the program names no rotary axis (the engine's context then has none)."""
+        return [rot[i] for i in rows.tolist()] if self.rotary else []
+
     def context(self, dirs: FloatArray, rotary: Sequence[dict[str, float]]) -> dict[str, FloatArray]:
         ctx: dict[str, FloatArray] = {"dirx": dirs[:, 0], "diry": dirs[:, 1], "dirz": dirs[:, 2]}
         for a in sorted(self.rotary):

@@ -146,7 +146,7 @@ class Planner(EngineCalls):
             live[fixed_rows] = False
             live[inert] = False
             T = np.empty_like(Q1)
-            T[live] = self.corrected(Q1[live], R[live], D[live], [rot[i] for i in np.flatnonzero(live)],
+            T[live] = self.corrected(Q1[live], R[live], D[live], self.rotary_at(rot, np.flatnonzero(live)),
                                      linenos[live], pick(tab.files, live))
             if fixed_rows:
                 T[fixed_rows] = fixed_q
@@ -171,7 +171,7 @@ class Planner(EngineCalls):
         hints: dict[int, ArcHint] = {}
 
         def corr(rows: IntArray, nom: FloatArray) -> FloatArray:
-            return self.corrected(nom, R[rows], D[rows], [rot[i] for i in rows.tolist()], linenos[rows],
+            return self.corrected(nom, R[rows], D[rows], self.rotary_at(rot, rows), linenos[rows],
                                   pick(tab.files, rows))
 
         def curvature(rows: IntArray) -> FloatArray:
@@ -351,7 +351,7 @@ class Planner(EngineCalls):
         smp = _sample_moves(planned, tab)
         owner = np.repeat(np.array(smp.piece_move, dtype=int), smp.counts)
         corr = self.corrected(smp.nom, R[owner], np.repeat(smp.dirs, smp.counts, axis=0),
-                              [rot[i] for i in owner.tolist()], linenos[owner], pick(tab.files, owner))
+                              self.rotary_at(rot, owner), linenos[owner], pick(tab.files, owner))
         takeup = _takeups(smp, corr, S, d_in)
         layout = [(i, m, [(smp.s[a:b], smp.nom[a:b], takeup[p], smp.bulge[a - p:b - p - 1])
                           for p, a, b in pieces])
