@@ -316,3 +316,43 @@ def test_a_real_program_with_lone_carriage_returns_reads_in_bulk_as_the_interpre
     assert taken > text.count("\r\r\n") // 2
     a, b = both_lanes(text, engine, INSIDE, extrapolate="linear")
     assert a == b == out
+
+
+@pytest.mark.parametrize("head", ["G21 G90 G17", "G20 G90 G17", "G21 G90 G17 G90.1"])
+def test_a_run_arcs_turn_is_its_arc_params(monkeypatch, head):
+    # the turn a run's arc is read with (plainscan.run_arcs) is the one arc_params gives
+    # its move, to the bit: the planner takes it in its place
+    from postproc.gcode.geometry import arc_params
+
+    rng = np.random.default_rng(7)
+    lines = [head, "G0 X1 Y2 Z0.5"]
+    x, y = 1.0, 2.0
+    for k in range(300):
+        g = "G2" if k % 2 else "G3"
+        r = float(rng.uniform(0.5, 3))
+        a0, a1 = (float(v) for v in rng.uniform(0, 2 * math.pi, 2))
+        cx, cy = x - r * math.cos(a0), y - r * math.sin(a0)
+        i, j = (cx, cy) if head.endswith("G90.1") else (cx - x, cy - y)
+        x, y = round(cx + r * math.cos(a1), 4), round(cy + r * math.sin(a1), 4)
+        if k % 7 == 0:
+            lines.append(f"{g} X{x:.4f} Y{y:.4f} R{r:.4f} F500")
+        elif k % 5 == 0:
+            lines.append(f"G1 X{x:.4f} Y{y:.4f} Z{float(rng.uniform(0, 1)):.4f}")
+        else:
+            lines.append(f"{g} X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}")
+    lines.append("M2")
+    seen = []
+    arc_moves = bulk.arc_moves
+
+    def spy(run):
+        got = arc_moves(run)
+        for j, mv in got:
+            seen.append((run.arcs[j][2], arc_params(mv.arc, mv.q0, mv.q1)))
+        return got
+
+    monkeypatch.setattr(bulk, "arc_moves", spy)
+    correct_text("\n".join(lines) + "\n", ENGINE, Setup(), CorrectOptions(chunk_lines=40, extrapolate="linear"))
+    assert len(seen) > 100
+    for turn, prm in seen:
+        assert prm[0] == (0, 1, 2)
+        assert [v.hex() for v in turn] == [float(v).hex() for v in prm[1:]]

@@ -108,7 +108,7 @@ class Mark(Protocol):
 
 Point: TypeAlias = tuple[float, float, float]
 #: an arc of a run: its centre (machine mm) and whether it turns clockwise
-RunArc: TypeAlias = tuple[Point, bool]
+RunArc: TypeAlias = plainscan.RunArc
 # the r_idx of a run's R-form arc (RunMove.arc) until its Move is made (RunMove.to_move):
 # not a word index, only >= 0 (the bulk planner leaves an R-form arc to the general one)
 R_FORM = 1 << 30
@@ -505,7 +505,7 @@ class Run:
 
 def _arc_rows(interp: Interpreter, block: Block, a: int, b: int, unit: float, shift: Point,
               q0: Point) -> tuple[int, dict[int, RunArc]]:
-    """The arcs among lines ``a:b``: ``(end, {line within the run: (centre, clockwise)})``,
+    """The arcs among lines ``a:b``: ``(end, {line within the run: (centre, clockwise, turn)})``,
     ``end`` the first line the run cannot take (b when it takes every line): an arc out
     of the XY plane, of zero radius, whose end radius its controller refuses, or an R
     arc whose ends coincide or whose radius is short of half its chord (the interpreter
@@ -911,7 +911,7 @@ def _arc_words(corrector: Corrector, run: Run, hints: Mapping[int, ArcHint], y: 
     blk = run.block
     j = y - run.a
     hint = hints[run.trow + j]
-    centre, cw = run.arcs[j]
+    centre, cw, _turn = run.arcs[j]
     budget = corrector.opt.tolerance_mm * FIT_BUDGET
     unit = run.unit
     base = (run.shift[0], run.shift[1]) if run.arc_absolute else (S[0], S[1])

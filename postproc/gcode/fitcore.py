@@ -258,6 +258,37 @@ def bisector_centre(S2: tuple[float, float], E2: tuple[float, float], us: list[f
     return m0 + t * n0, m1 + t * n1
 
 
+# -- an arc's turn ---------------------------------------------------------------------
+
+# Start and end closer than this in the plane make a full circle (I/J/K arcs).
+FULL_CIRCLE_MM: Final = 1e-9
+
+
+def arc_sweep(centre: tuple[float, float], start: tuple[float, float], end: tuple[float, float], clockwise: bool,
+              turns: int) -> tuple[float, float, float, float]:
+    """``(theta0, sweep, r0, r1)`` of an arc about ``centre`` from ``start`` to ``end``
+    (plane coordinates): the start angle, the signed sweep (negative clockwise; a full
+    turn where the ends coincide, and ``turns - 1`` more), and the start and end radii
+    (Python's ``math.atan2``, ``math.hypot`` and floored ``%``, as
+    :func:`postproc.gcode.geometry.arc_params` gives them)."""
+    c1, c2 = centre
+    s1, s2 = start
+    e1, e2 = end
+    t0 = math.atan2(s2 - c2, s1 - c1)
+    t1 = math.atan2(e2 - c2, e1 - c1)
+    r0 = math.hypot(s1 - c1, s2 - c2)
+    r1 = math.hypot(e1 - c1, e2 - c2)
+    if clockwise:
+        sweep = -((t0 - t1) % TWO_PI)
+    else:
+        sweep = (t1 - t0) % TWO_PI
+    if abs(sweep) < 1e-12 or math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM:
+        sweep = -TWO_PI if clockwise else TWO_PI
+    extra = (turns - 1) * TWO_PI
+    sweep += -extra if clockwise else extra
+    return t0, sweep, r0, r1
+
+
 # -- R-form arcs ------------------------------------------------------------------------
 
 def r_center(s1: float, s2: float, e1: float, e2: float, R: float, clockwise: bool, abs_tol: float,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 
@@ -18,26 +19,20 @@ from postproc.gcode.moves import Arc
 from postproc.gcode.state import PLANES
 
 TWO_PI = 2.0 * math.pi
-# Start and end closer than this in the plane make a full circle (I/J/K arcs).
-FULL_CIRCLE_MM = 1e-9
+FULL_CIRCLE_MM = fitcore.FULL_CIRCLE_MM  # start and end closer than this make a full circle (I/J/K arcs)
 
 
-def arc_params(arc: Arc, q0, q1) -> tuple[tuple[int, int, int], float, float, float, float]:
-    """``((a1, a2, an), theta0, sweep, r0, r1)`` of an arc from q0 to q1 (signed sweep)."""
+#: ``arc_params`` of an arc: (plane axes, start angle, sweep, start radius, end radius)
+ArcParams: TypeAlias = tuple[tuple[int, int, int], float, float, float, float]
+
+
+def arc_params(arc: Arc, q0, q1) -> ArcParams:
+    """``((a1, a2, an), theta0, sweep, r0, r1)`` of an arc from q0 to q1 (signed sweep;
+    :func:`postproc.gcode.fitcore.arc_sweep`)."""
     (a1, a2, an), _ = PLANES[arc.plane]
-    c1, c2 = arc.center[a1], arc.center[a2]
-    t0 = math.atan2(q0[a2] - c2, q0[a1] - c1)
-    t1 = math.atan2(q1[a2] - c2, q1[a1] - c1)
-    r0 = math.hypot(q0[a1] - c1, q0[a2] - c2)
-    r1 = math.hypot(q1[a1] - c1, q1[a2] - c2)
-    if arc.clockwise:
-        sweep = -((t0 - t1) % TWO_PI)
-    else:
-        sweep = (t1 - t0) % TWO_PI
-    if abs(sweep) < 1e-12 or math.hypot(q1[a1] - q0[a1], q1[a2] - q0[a2]) < FULL_CIRCLE_MM:
-        sweep = -TWO_PI if arc.clockwise else TWO_PI
-    extra = (arc.turns - 1) * TWO_PI
-    sweep += -extra if arc.clockwise else extra
+    c = arc.center
+    t0, sweep, r0, r1 = fitcore.arc_sweep((c[a1], c[a2]), (q0[a1], q0[a2]), (q1[a1], q1[a2]), arc.clockwise,
+                                          arc.turns)
     return (a1, a2, an), t0, sweep, r0, r1
 
 
@@ -107,9 +102,10 @@ def line_points(q0, q1, s: np.ndarray) -> np.ndarray:
     return q0 + (q1 - q0) * s
 
 
-def arc_chord_steps(arc: Arc, q0, q1, tol_mm: float) -> int:
-    """Number of equal chords whose sagitta is below ``tol_mm``."""
-    (_, _, _), _t0, sweep, r0, r1 = arc_params(arc, q0, q1)
+def arc_chord_steps(arc: Arc, q0, q1, tol_mm: float, params: ArcParams | None = None) -> int:
+    """Number of equal chords whose sagitta is below ``tol_mm`` (``params``: the arc's
+    :func:`arc_params`, when already known)."""
+    (_, _, _), _t0, sweep, r0, r1 = params or arc_params(arc, q0, q1)
     r = max(r0, r1)
     if r <= tol_mm:
         return max(1, math.ceil(abs(sweep) / (math.pi / 2)))

@@ -23,13 +23,20 @@ import numpy as np
 
 from postproc.fileio import Lines
 from postproc.gcode import bulk
-from postproc.gcode.geometry import ArcColumns, arc_chord_steps, arc_length, arc_params, arcs_points
+from postproc.gcode.geometry import (
+    ArcColumns,
+    ArcParams,
+    arc_chord_steps,
+    arc_length,
+    arc_params,
+    arcs_points,
+)
 from postproc.gcode.interp import Interpreter, Move, NeedsExpansion, plain_moves, start_position
 from postproc.gcode.moves import Arc
 from postproc.gcode.options import CorrectOptions
 from postproc.gcode.places import PathArray, file_of
 from postproc.gcode.reader import LineReader
-from postproc.gcode.state import RAPID
+from postproc.gcode.state import PLANES, RAPID
 from postproc.limits import Limits, ResourceLimitError
 
 if TYPE_CHECKING:
@@ -218,13 +225,13 @@ class Sampler(LineReader[tuple[int, Move, "str | None"]]):
         arr[own] = None
         return None if own.all() else arr
 
-    def _arc_samples(self, arc: Arc, q0: Point, q1: Point) -> tuple[int, tuple]:
+    def _arc_samples(self, arc: Arc, q0: Point, q1: Point, params: ArcParams | None = None) -> tuple[int, tuple]:
         """An arc's samples (every ``step_mm`` of its length and, with ``chord_mm``, every
-        chord within it: the finer) and its arc_params."""
-        params = arc_params(arc, q0, q1)
+        chord within it: the finer) and its arc_params (``params``: when known)."""
+        params = params or arc_params(arc, q0, q1)
         step_mm, chord_mm = self.step_mm, self.chord_mm
         n = max(1, _steps(arc_length(arc, q0, q1, params), step_mm) if step_mm else 1,
-                arc_chord_steps(arc, q0, q1, chord_mm) if chord_mm else 1)
+                arc_chord_steps(arc, q0, q1, chord_mm, params) if chord_mm else 1)
         return n, params
 
     def _take(self) -> None:
@@ -368,11 +375,12 @@ class Sampler(LineReader[tuple[int, Move, "str | None"]]):
         arcs: list[_ArcToSample] = []
         if arc_rows:
             a0, a1 = q0[arc_rows].tolist(), q1[arc_rows].tolist()
-            centres = [r.arcs[j] for r in runs for j in r.arcs]  # (centre, clockwise), in the order of arc_rows
-            for row, (centre, clockwise), p0, p1 in zip(arc_rows, centres, a0, a1, strict=True):
+            xy = PLANES[170][0]
+            read = [r.arcs[j] for r in runs for j in r.arcs]  # (centre, clockwise, turn), in the order of arc_rows
+            for row, (centre, clockwise, turn), p0, p1 in zip(arc_rows, read, a0, a1, strict=True):
                 arc = Arc(centre, 170, clockwise, 1, (-1, -1), -1)
                 p0t, p1t = (p0[0], p0[1], p0[2]), (p1[0], p1[1], p1[2])
-                c, params = self._arc_samples(arc, p0t, p1t)
+                c, params = self._arc_samples(arc, p0t, p1t, (xy, *turn))
                 n[row] = c
                 arcs.append((row, arc, p0t, p1t, c, params))
         q0 = np.where(rapid[:, None], q1, q0)

@@ -27,7 +27,7 @@ import math
 from collections.abc import Callable
 from typing import Final
 
-from postproc.gcode.fitcore import r_center
+from postproc.gcode.fitcore import arc_sweep, r_center
 from postproc.gcode.scanner import Columns
 
 SPANS: Final = 11  # head end, then the start and end of X, Y, Z, I and J's numbers
@@ -183,6 +183,9 @@ def pieces(text: str, cols: Columns) -> Pieces:
 
 
 Point = tuple[float, float, float]
+#: a run's arc: its centre (machine mm), whether clockwise, and its turn
+#: (:func:`postproc.gcode.fitcore.arc_sweep`: start angle, sweep, start and end radii)
+RunArc = tuple[Point, bool, tuple[float, float, float, float]]
 #: per line of a block: the last line at or before it naming X, Y, Z, and their values
 Axes = tuple[list[int], list[int], list[int], list[float], list[float], list[float]]
 #: per line: the I and J values, whether it names I, J and R, and R's value
@@ -191,10 +194,10 @@ Centres = tuple[list[float], list[float], list[bool], list[bool], list[bool], li
 
 def run_arcs(rows: list[int], axes: Axes, centres: Centres, motion: tuple[list[int], list[int], bool],
              frame: tuple[int, float, Point, Point, bool], limits: tuple[float, float, float, float],
-             radius_ok: Callable[[float, float, float], bool]) -> tuple[int, dict[int, tuple[Point, bool]]]:
+             radius_ok: Callable[[float, float, float], bool]) -> tuple[int, dict[int, RunArc]]:
     """The XY arcs on the block lines ``rows`` of a run starting at block line ``a``:
     ``(the first of them the run cannot take, or -1; {line within the run: (centre,
-    clockwise)})`` for those before it. ``motion``: each line's G number, the last line
+    clockwise, turn)})`` for those before it (:data:`RunArc`). ``motion``: each line's G number, the last line
     at or before it naming one, and whether the run starts under G2; ``frame``: ``a``,
     mm per program unit, the shift of absolute words (machine mm), the position before
     the run and whether centre words are absolute (G90.1); ``limits``: the least radius,
@@ -210,7 +213,7 @@ def run_arcs(rows: list[int], axes: Axes, centres: Centres, motion: tuple[list[i
     min_radius, sure, abs_tol, rel_tol = limits
     sx, sy, sz = shift
     hyp = math.hypot
-    arcs: dict[int, tuple[Point, bool]] = {}
+    arcs: dict[int, RunArc] = {}
     for y in rows:
         # the start: where the line before left each axis (the run's start before its first word)
         p = lx[y - 1] if y > a else -1
@@ -230,15 +233,16 @@ def run_arcs(rows: list[int], axes: Axes, centres: Centres, motion: tuple[list[i
                                                                             abs_tol, rel_tol)
             if c is None:
                 return y, arcs
-            arcs[y - a] = ((c[0], c[1], z0), clockwise)
+            arcs[y - a] = ((c[0], c[1], z0), clockwise, arc_sweep(c, (x0, y0), (x1, y1), clockwise, 1))
             continue
         if absolute:
             c1 = vi[y] * unit + sx if has_i[y] else x0
             c2 = vj[y] * unit + sy if has_j[y] else y0
         else:
             c1, c2 = x0 + vi[y] * unit, y0 + vj[y] * unit
-        rs, re = hyp(x0 - c1, y0 - c2), hyp(x1 - c1, y1 - c2)
+        turn = arc_sweep((c1, c2), (x0, y0), (x1, y1), clockwise, 1)
+        rs, re = turn[2], turn[3]
         if not (rs >= min_radius and (abs(rs - re) <= sure or radius_ok(rs, re, unit))):
             return y, arcs
-        arcs[y - a] = ((c1, c2, z0), clockwise)
+        arcs[y - a] = ((c1, c2, z0), clockwise, turn)
     return -1, arcs

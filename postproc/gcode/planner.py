@@ -52,6 +52,7 @@ from postproc.gcode.sampling import (
 )
 from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD, Curve, quadrant_breaks
 from postproc.gcode.source import backfill_unknown
+from postproc.gcode.state import PLANES
 from postproc.gcode.table import Table
 from postproc.gcode.vplan import (
     ArcHint,
@@ -226,7 +227,10 @@ class Planner(EngineCalls):
         d = Q1 - Q0
         sign = np.sign(np.where(np.abs(d) > 1e-9, d, 0.0))
         arcs = [(i, m, m.arc) for i, m in general if m.arc is not None] if arc_ends else []
-        arc_prm = {i: arc_params(arc, m.q0, m.q1) for i, m, arc in arcs}
+        # a run's arcs have their turn from their reading (plainscan.run_arcs), in the XY plane
+        turns = {r.trow + j: arc[2] for r in tab.runs for j, arc in r.arcs.items()} if arcs else {}
+        xy = PLANES[170][0]
+        arc_prm = {i: (xy, *turns[i]) if i in turns else arc_params(arc, m.q0, m.q1) for i, m, arc in arcs}
         breaks: dict[int, FloatArray] = {}  # of the arcs the general planner cuts (made when needed)
         # the approach directions at arc ends matter only to a correction that reads them
         for i, m, arc in arcs if self.engine.direction_dependent or self.opt.added else ():

@@ -49,6 +49,7 @@ import numpy.typing as npt
 
 from postproc.gcode import emit, hintcore
 from postproc.gcode.geometry import ArcColumns, arcs_points
+from postproc.gcode.geometry import ArcParams as ArcParams  # (the planner's name for them)
 from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
@@ -133,8 +134,6 @@ class PlanMove(Protocol):
 
 
 _M = TypeVar("_M", bound=PlanMove)
-#: ``arc_params`` of an arc: (plane axes, start angle, sweep, start radius, end radius)
-ArcParams: TypeAlias = tuple[tuple[int, int, int], float, float, float, float]
 #: ``corrected(rows, nominal points (N, 3))``: the engine's corrected points (N, 3)
 Corrected: TypeAlias = Callable[[IntArray, FloatArray], FloatArray]
 #: ``curvature(rows)``: the engine's bound on the correction's curvature along each move
