@@ -480,10 +480,10 @@ def test_no_process_to_be_had(tmp_path, engines, monkeypatch):
 
 def test_a_process_is_added_only_where_it_gains(monkeypatch):
     # each child repeats the reading of the program before its part: with an affine
-    # calibration read at 0.4 of correcting (the uncompiled reader's share) a fourth
+    # calibration read at 0.5 of correcting (the uncompiled reader's share) a fourth
     # process would shorten the first part by less than MIN_GAIN, at 0.3 (the compiled
     # one's) a fifth; with a sampled one (0.1) six processes still gain
-    monkeypatch.setattr(split, "READ_SHARE_AFFINE", 0.4)
+    monkeypatch.setattr(split, "READ_SHARE_AFFINE", 0.5)
     assert len(split.cuts(1_000_000, 5000, True, 64)) + 1 == 3
     monkeypatch.setattr(split, "READ_SHARE_AFFINE", 0.3)
     assert len(split.cuts(1_000_000, 5000, True, 64)) + 1 == 4

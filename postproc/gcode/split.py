@@ -80,11 +80,11 @@ MIN_CHUNKS = 8
 WARMUP_CHUNKS = 2
 #: the cost of reading a line without correcting it, as a share of correcting it; sets
 #: where the program is cut so that all parts end together. Measured on the gencam
-#: program: with an affine engine about 0.3 where the reader is compiled (gencam 1M lines,
-#: two processes: 0.3 corrects it in 9.35 s against 9.9 s at 0.4, median of 8 alternated
-#: runs) and about half uncompiled, where 0.4 did as well as 0.5; about 0.1 with a model
-#: whose moves are sampled
-READ_SHARE_AFFINE = 0.4 if scanner.__file__.endswith(".py") else 0.3
+#: program, 1M lines, two processes, alternated runs: with an affine engine about 0.3
+#: where the reader is compiled (0.3 against 0.4: 9.35 s against 9.9 s, medians of 8;
+#: 0.2 did as well as 0.3) and about half uncompiled (0.5 against 0.4 and 0.6: 15.9 s
+#: against 16.3 and 17.2 s, medians of 3); about 0.1 with a model whose moves are sampled
+READ_SHARE_AFFINE = 0.5 if scanner.__file__.endswith(".py") else 0.3
 READ_SHARE_SAMPLED = 0.1
 #: a further process is used only where it shortens the first part by this share
 MIN_GAIN = 0.1
