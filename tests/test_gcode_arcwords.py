@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from arcwords_reference import decision  # noqa: I001  (the tests' own reference, a sibling module)
 
-from postproc.gcode import emit, vplan
+from postproc.gcode import emit, hintcore, vplan
 from postproc.gcode.interp import Arc
 from postproc.gcode.segment import MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
@@ -37,7 +37,7 @@ def _case(rng, kind):
     step = 10.0 ** -d * unit
     r = float(rng.choice([0.002, 0.05, 0.5, 4.0, 40.0, 700.0]))
     if kind == "small":  # about the controllers' smallest radius
-        r = vplan.MIN_ARC_RADIUS_MM * float(rng.uniform(0.9, 1.6))
+        r = hintcore.MIN_ARC_RADIUS_MM * float(rng.uniform(0.9, 1.6))
     # Python floats throughout, as the planner and the writers ask (a numpy float rounds as numpy does)
     cx, cy = (float(v) for v in rng.uniform(-300, 300, 2))
     a0 = float(rng.uniform(-math.pi, math.pi))
@@ -226,9 +226,9 @@ def test_the_planners_guess_is_the_writers_answer_in_every_plane(seed, monkeypat
         assert got == {k for k, q in enumerate(asked) if q[-1] is None}
         failing += len(got)
         answered += len(arcs) - len(got)
-        with monkeypatch.context() as m:
-            m.setattr(vplan.hintcore, "centre_words", lambda *_a: pytest.fail("asked again"))
-            for (_view, hint), (*args, ref) in zip(arcs, asked, strict=True):
-                assert _bits(hint.words(*args)) == _bits(ref)
+        for (_view, hint), (*args, ref) in zip(arcs, asked, strict=True):
+            kept = hint.last  # the guess's question and answer
+            assert _bits(hint.words(*args)) == _bits(ref)
+            assert hint.last is kept  # the same question: the guess's answer, not asked again
     assert failing > 100
     assert answered > 300

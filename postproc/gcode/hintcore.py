@@ -1,9 +1,9 @@
 """The bulk planner's arc hint in plain floats: the centre words of an arc as written,
 and how far the arc they give can lie from the corrected samples.
 
-The planner fits one circle to each arc's corrected samples
-(:class:`postproc.gcode.vplan.ArcHint`: its centre, radius, deviation and nominal sweep,
-and the corrected ends it was fitted between). Where the arc's end points are written,
+The planner fits one circle to each arc's corrected samples (:mod:`postproc.gcode.vplan`)
+and keeps it as the arc's :class:`ArcHint`: its centre, radius, deviation and nominal
+sweep, and the corrected ends it was fitted between. Where the arc's end points are written,
 :func:`centre_words` moves that centre onto the bisector of the written ends, rounds it
 to the words' decimals (or takes the nearest rounded centre around it whose start and end
 radii agree within half a step) and bounds the arc a controller then draws
@@ -15,13 +15,32 @@ same ends, as there is one computation: the planner's answers are kept with the 
 
 The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round``, the
 floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
-(``setup.py``); runs unchanged uncompiled. It imports nothing of the package.
+(``setup.py``); runs unchanged uncompiled. Of the package it imports the formatter
+(:mod:`postproc.gcode.numfmt`, compiled with it), the planes' axes
+(:data:`postproc.gcode.state.PLANES`) and the least radius and sweep a controller cuts
+as meant (:mod:`postproc.gcode.segment`).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Final
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Final, Protocol
+
+from postproc.gcode.numfmt import fmt
+from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
+from postproc.gcode.state import PLANES
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from postproc.gcode.moves import Arc
+    from postproc.gcode.segment import ArcSpec
+
+# The input's own arc words are kept when their radius mismatch is at most the input's
+# own (which its controller accepts) plus this (float noise of the two readings).
+KEEP_MISMATCH_SLACK_MM: Final = 1e-9
 
 TWO_PI: Final = 2.0 * math.pi
 # Rounded centre candidates tried on each side of the centre moved onto the bisector of
@@ -160,3 +179,133 @@ def rounded_words(arcs: list[Guess], limits: tuple[float, float, float]) -> list
         key = (written, clockwise, d, unit, b1, b2, limits[0])
         out.append((key, centre_words(circle, fitted, clockwise, written, (d, unit, b1, b2), limits)))
     return out
+
+
+class ArcMove(Protocol):
+    """What :class:`ArcHint` reads of the move it writes (a
+    :class:`postproc.gcode.interp.Move`, or the bulk writer's view of a line of a run)."""
+
+    @property
+    def arc(self) -> Arc | None: ...
+    @property
+    def unit(self) -> float: ...
+    @property
+    def arc_absolute(self) -> bool: ...
+    @property
+    def shift(self) -> Sequence[float]: ...
+
+
+class ArcHint:
+    """What the bulk planner found for one arc (:mod:`postproc.gcode.vplan`): the circle
+    fitted to its corrected samples between its corrected ends, and what the writer asks
+    of it (:meth:`words`, :meth:`spec`, :meth:`keep`)."""
+
+    c1: float
+    c2: float
+    rho: float
+    worst: float
+    nsweep: float
+    mismatch: float
+    ends: Ends
+    row: int
+    edge: bool
+    last: tuple[Key, Words | None] | None
+
+    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Sequence[float],
+                 row: int, mismatch: float = 0.0) -> None:
+        # Python floats (a numpy float would round as numpy does: hintcore's arithmetic is Python's)
+        self.c1, self.c2, self.rho, self.worst, self.nsweep = float(c1), float(c2), float(rho), float(worst), float(nsweep)
+        self.mismatch = float(mismatch)  # the nominal arc's own end-radius mismatch (mm)
+        # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
+        self.ends = (float(ends[0]), float(ends[1]), float(ends[2]), float(ends[3]), float(ends[4]),
+                           float(ends[5]))
+        self.row = row  # the arc's row of the table (its general plan's, when the hint does not do)
+        # the planner expects the hint may fail where written (its general plan is made with
+        # the chunk): the run writer ends a stretch at this arc
+        self.edge = False
+        # the last question to words and its answer (the planner's guess puts its own here)
+        self.last = None
+
+    def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
+        """The arc words for the move written from S to E (machine mm, as written):
+        ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None where :meth:`words`
+        gives none."""
+        arc = mv.arc
+        if arc is None:
+            raise AssertionError("an arc hint asked for a move that is no arc")
+        axes, (l1, l2) = PLANES[arc.plane]
+        a1, a2 = axes[0], axes[1]
+        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
+        w = self.words(S, E, axes, arc.clockwise, d, mv.unit, base, budget)
+        if w is None:
+            return None
+        w1, w2, mism, bound = w
+        return {"form": "ij", "vals": ((l1, fmt(w1, d)), (l2, fmt(w2, d))), "turns": 1,
+                "dev": bound + mism, "mismatch": mism}
+
+    def words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
+              unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
+        """The centre words of the arc written from S to E (machine mm, as written; ``axes``:
+        the plane's two axes and its normal; ``base``: what the centre words are relative
+        to, machine mm): ``(w1, w2, mismatch, bound)``, the words' values (``float`` of
+        their text, ``d`` decimals), the radius mismatch of the centre they give and the
+        bound on the arc's distance from the corrected samples (:meth:`_bound`). The
+        centre is the fitted one moved onto the written ends' bisector and rounded, or
+        the nearest lattice point around it whose radii agree within half a step. None
+        when no such centre stays within ``budget`` or a controller would not cut the
+        arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
+        :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
+        limits decide)."""
+        # the planner's guess (Planner._hints_failing_rounded) and the writer usually ask
+        # with the same ends: the second time is the first one's answer
+        a1, a2, an = axes
+        written = (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]), float(E[an]))
+        key = (written, clockwise, d, float(unit), float(base[0]), float(base[1]), budget)
+        last = self.last
+        if last is not None and last[0] == key:
+            return last[1]
+        result = centre_words(self.circle(), self.ends, clockwise, written, (d, key[3], key[4], key[5]),
+                              (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
+        self.last = (key, result)
+        return result
+
+    def circle(self) -> Circle:
+        """The fitted circle as :func:`centre_words` and :func:`arc_bound` take it."""
+        return self.c1, self.c2, self.rho, self.worst, self.nsweep
+
+    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: bool) -> Guess:
+        """What :func:`rounded_words` reads of the arc ``arc`` of this hint, its words
+        written with ``d`` decimals in ``unit`` (mm per program unit) with the machine
+        ``shift`` of each axis, its centre words ``absolute`` or not."""
+        a1, a2, an = PLANES[arc.plane][0]
+        return (self.circle(), self.ends, arc.clockwise, d, float(unit),
+                (float(shift[a1]), float(shift[a2]), float(shift[an])), absolute)
+
+    def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | npt.NDArray[np.float64],
+             budget: float) -> ArcSpec | None:
+        """``{"form": "keep", "turns": 1}`` when the input's own arc words, around
+        ``centre`` from S to E (as written), still pass: their radius mismatch no larger
+        than the input's own (:attr:`mismatch`, which its controller accepts) and the arc
+        within ``budget`` of the samples; else None."""
+        arc = mv.arc
+        if arc is None:
+            raise AssertionError("an arc hint asked for a move that is no arc")
+        (a1, a2, an), _ = PLANES[arc.plane]
+        C1, C2 = float(centre[0]), float(centre[1])
+        mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
+        if not mism <= self.mismatch + KEEP_MISMATCH_SLACK_MM:
+            return None
+        got = self._bound(arc.clockwise, (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]),
+                                          float(E[an])), C1, C2)
+        if got is None or not got[0] <= budget:
+            return None
+        return {"form": "keep", "turns": 1}
+
+    def _bound(self, clockwise: bool, written: Ends, C1: float, C2: float
+               ) -> tuple[float, float, float, float] | None:
+        """How far the arc a controller draws from S to E (``written``: (s1, s2, sn, e1,
+        e2, en), the plane coordinates and the normal one of each, as :attr:`ends`) around
+        (C1, C2) can lie from the corrected samples, with its start and end radii and
+        turn (:func:`postproc.gcode.arc_bound`); None when it does not turn as
+        the nominal arc does."""
+        return arc_bound(self.circle(), self.ends, clockwise, written, C1, C2)

@@ -41,22 +41,23 @@ from typing import (
     TypeAlias,
     TypedDict,
     TypeVar,
-    final,
 )
 
 import numpy as np
 import numpy.typing as npt
 
-from postproc.gcode import emit, hintcore
+from postproc.gcode import hintcore
 from postproc.gcode.geometry import ArcColumns, arcs_points
 from postproc.gcode.geometry import ArcParams as ArcParams  # (the planner's name for them)
-from postproc.gcode.segment import CENTRE_SETTLED_MM, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
+from postproc.gcode.hintcore import ArcHint as ArcHint  # (the hints the planner makes)
+from postproc.gcode.hintcore import ArcMove as ArcMove
+from postproc.gcode.segment import CENTRE_SETTLED_MM
 from postproc.gcode.state import PLANES
 
 if TYPE_CHECKING:
     from postproc.gcode.interp import Arc
     from postproc.gcode.moves import Role
-    from postproc.gcode.segment import ArcSpec, Curve
+    from postproc.gcode.segment import Curve
 
 FloatArray: TypeAlias = npt.NDArray[np.float64]
 IntArray: TypeAlias = npt.NDArray[np.intp]
@@ -70,9 +71,6 @@ BETWEEN_SAMPLES_SHARE = 0.1
 # Gauss-Newton steps of the bisector centre fit (it converges in 3-5 on real arcs; the
 # fit only seeds the rounded centre, whose deviation is bounded separately).
 CENTRE_ITERATIONS = 8
-# The input's own arc words are kept when their radius mismatch is at most the input's
-# own (which its controller accepts) plus this (float noise of the two readings).
-KEEP_MISMATCH_SLACK_MM = 1e-9
 
 # -- what the planner hands the emitter ------------------------------------------------
 #: A step of a general plan: a take-up to a point (the corrected point before a reversal,
@@ -93,20 +91,6 @@ class Plan(TypedDict):
     curve: Curve
     nsweep: NotRequired[float]
     mismatch: NotRequired[float]
-
-
-class ArcMove(Protocol):
-    """What :class:`ArcHint` reads of the move it writes (a
-    :class:`postproc.gcode.interp.Move`, or the bulk writer's view of a line of a run)."""
-
-    @property
-    def arc(self) -> Arc | None: ...
-    @property
-    def unit(self) -> float: ...
-    @property
-    def arc_absolute(self) -> bool: ...
-    @property
-    def shift(self) -> tuple[float, float, float]: ...
 
 
 class PlanMove(Protocol):
@@ -166,113 +150,6 @@ class Sampling:
     min_arc_samples: int
     budget: float
     rounding: float
-
-
-@final
-class ArcHint:
-    """What the bulk planner found for one arc (see the module docstring)."""
-
-    __slots__ = ("c1", "c2", "rho", "worst", "nsweep", "ends", "mismatch", "row", "edge", "last")
-
-    def __init__(self, c1: float, c2: float, rho: float, worst: float, nsweep: float, ends: Ends,
-                 row: int, mismatch: float = 0.0) -> None:
-        # Python floats (a numpy float would round as numpy does: hintcore's arithmetic is Python's)
-        self.c1, self.c2, self.rho, self.worst, self.nsweep = float(c1), float(c2), float(rho), float(worst), float(nsweep)
-        self.mismatch = mismatch  # the nominal arc's own end-radius mismatch (mm)
-        # the corrected ends the fit used: (s1, s2, sn, e1, e2, en), plane axes first
-        self.ends: Ends = (float(ends[0]), float(ends[1]), float(ends[2]), float(ends[3]), float(ends[4]),
-                           float(ends[5]))
-        self.row = row  # the arc's row of the table (its general plan's, when the hint does not do)
-        # the planner expects the hint may fail where written (its general plan is made with
-        # the chunk): the run writer ends a stretch at this arc
-        self.edge = False
-        # the last question to words and its answer (the planner's guess puts its own here)
-        self.last: tuple[hintcore.Key, hintcore.Words | None] | None = None
-
-    def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
-        """The arc words for the move written from S to E (machine mm, as written):
-        ``{"form": "ij", "vals": ..., "turns": 1, ...}``, or None where :meth:`words`
-        gives none."""
-        arc = mv.arc
-        if arc is None:
-            raise AssertionError("an arc hint asked for a move that is no arc")
-        axes, (l1, l2) = PLANES[arc.plane]
-        a1, a2 = axes[0], axes[1]
-        base = (mv.shift[a1], mv.shift[a2]) if mv.arc_absolute else (S[a1], S[a2])
-        w = self.words(S, E, axes, arc.clockwise, d, mv.unit, base, budget)
-        if w is None:
-            return None
-        w1, w2, mism, bound = w
-        return {"form": "ij", "vals": ((l1, emit.fmt(w1, d)), (l2, emit.fmt(w2, d))), "turns": 1,
-                "dev": bound + mism, "mismatch": mism}
-
-    def words(self, S: Sequence[float], E: Sequence[float], axes: tuple[int, int, int], clockwise: bool, d: int,
-              unit: float, base: tuple[float, float], budget: float) -> tuple[float, float, float, float] | None:
-        """The centre words of the arc written from S to E (machine mm, as written; ``axes``:
-        the plane's two axes and its normal; ``base``: what the centre words are relative
-        to, machine mm): ``(w1, w2, mismatch, bound)``, the words' values (``float`` of
-        their text, ``d`` decimals), the radius mismatch of the centre they give and the
-        bound on the arc's distance from the corrected samples (:meth:`_bound`). The
-        centre is the fitted one moved onto the written ends' bisector and rounded, or
-        the nearest lattice point around it whose radii agree within half a step. None
-        when no such centre stays within ``budget`` or a controller would not cut the
-        arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
-        :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
-        limits decide)."""
-        # the planner's guess (Planner._hints_failing_rounded) and the writer usually ask
-        # with the same ends: the second time is the first one's answer
-        a1, a2, an = axes
-        written = (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]), float(E[an]))
-        key = (written, clockwise, d, float(unit), float(base[0]), float(base[1]), budget)
-        last = self.last
-        if last is not None and last[0] == key:
-            return last[1]
-        result = hintcore.centre_words(self._circle(), self.ends, clockwise, written, key[2:6],
-                                       (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
-        self.last = (key, result)
-        return result
-
-    def _circle(self) -> hintcore.Circle:
-        """The fitted circle as :mod:`postproc.gcode.hintcore` takes it."""
-        return self.c1, self.c2, self.rho, self.worst, self.nsweep
-
-    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: bool) -> hintcore.Guess:
-        """What :func:`postproc.gcode.hintcore.rounded_words` reads of the arc ``arc`` of
-        this hint, its words written with ``d`` decimals in ``unit`` (mm per program unit)
-        with the machine ``shift`` of each axis, its centre words ``absolute`` or not."""
-        a1, a2, an = PLANES[arc.plane][0]
-        return (self._circle(), self.ends, arc.clockwise, d, float(unit),
-                (float(shift[a1]), float(shift[a2]), float(shift[an])), absolute)
-
-    def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | FloatArray,
-             budget: float) -> ArcSpec | None:
-        """``{"form": "keep", "turns": 1}`` when the input's own arc words, around
-        ``centre`` from S to E (as written), still pass: their radius mismatch no larger
-        than the input's own (:attr:`mismatch`, which its controller accepts) and the arc
-        within ``budget`` of the samples; else None."""
-        arc = mv.arc
-        if arc is None:
-            raise AssertionError("an arc hint asked for a move that is no arc")
-        (a1, a2, an), _ = PLANES[arc.plane]
-        C1, C2 = float(centre[0]), float(centre[1])
-        mism = abs(math.hypot(S[a1] - C1, S[a2] - C2) - math.hypot(E[a1] - C1, E[a2] - C2))
-        if not mism <= self.mismatch + KEEP_MISMATCH_SLACK_MM:
-            return None
-        got = self._bound(arc.clockwise, (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]),
-                                          float(E[an])), C1, C2)
-        if got is None or not got[0] <= budget:
-            return None
-        return {"form": "keep", "turns": 1}
-
-    def _bound(self, clockwise: bool, written: Ends, C1: float, C2: float
-               ) -> tuple[float, float, float, float] | None:
-        """How far the arc a controller draws from S to E (``written``: (s1, s2, sn, e1,
-        e2, en), the plane coordinates and the normal one of each, as :attr:`ends`) around
-        (C1, C2) can lie from the corrected samples, with its start and end radii and
-        turn (:func:`postproc.gcode.hintcore.arc_bound`); None when it does not turn as
-        the nominal arc does."""
-        return hintcore.arc_bound(self._circle(), self.ends, clockwise,
-                                  written, C1, C2)
 
 
 def _ragged(n: IntArray) -> tuple[IntArray, IntArray, IntArray]:
