@@ -232,3 +232,27 @@ def test_the_planners_guess_is_the_writers_answer_in_every_plane(seed, monkeypat
             assert hint.last is kept  # the same question: the guess's answer, not asked again
     assert failing > 100
     assert answered > 300
+
+
+def test_the_hint_takes_what_moves_carry():
+    # compiled, the hint checks the types it reads: a move's shift may be a list, a tuple
+    # or an array, its unit an int or a numpy float, its G90.1 flag numpy's bool, the
+    # written ends lists or arrays of ints or numpy floats: the answers are the plain floats'
+    from types import SimpleNamespace
+
+    hint = vplan.ArcHint(np.float64(0.0), 0.0, 1.0, 0.0, 1.5707963, np.array([1.0, 0.0, 0.0, 0.0, 1.0, 0.0]), 3)
+    arc = Arc((0.0, 0.0, 0.0), 170, False, 1, (-1, -1), -1)
+    plain = SimpleNamespace(arc=arc, unit=1.0, arc_absolute=False, shift=(0.0, 0.0, 0.0))
+    want = (hint.spec(plain, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 4, 1e-3),
+            hint.keep(plain, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], (0.0, 0.0), 1e-3),
+            hint.guess(arc, 4, 1.0, (0.0, 0.0, 0.0), False))
+    assert want[0] is not None
+    assert want[1] is not None
+    for unit, flag, shift, S, E, centre in [
+        (1, np.bool_(False), [0, 0, 0], [1, 0, 0], [0, 1, 0], np.zeros(2)),
+        (np.float64(1.0), np.bool_(False), np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
+         [0.0, 0.0]),
+    ]:
+        mv = SimpleNamespace(arc=arc, unit=unit, arc_absolute=flag, shift=shift)
+        got = (hint.spec(mv, S, E, 4, 1e-3), hint.keep(mv, S, E, centre, 1e-3), hint.guess(arc, 4, unit, shift, flag))
+        assert got == want

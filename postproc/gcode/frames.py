@@ -89,7 +89,7 @@ def reverses_arcs(a: Frame, axes: tuple[int, int, int] = (0, 1, 2)) -> bool:
     """Whether ``a`` turns the arcs of the plane of ``axes`` the other way (a mirror of one of
     its two axes: G2 becomes G3; a mirror of the normal alone does not)."""
     p, q, _n = axes
-    return a[3 * p + p] * a[3 * q + q] - a[3 * p + q] * a[3 * q + p] < 0
+    return bool(a[3 * p + p] * a[3 * q + q] - a[3 * p + q] * a[3 * q + p] < 0)  # (a bool, not numpy's)
 
 
 def next_frame(kind: str, frame: Frame | None, translation: Sequence[float], given: dict[str, float],

@@ -190,7 +190,7 @@ class ArcMove(Protocol):
     @property
     def unit(self) -> float: ...
     @property
-    def arc_absolute(self) -> bool: ...
+    def arc_absolute(self) -> object: ...  # (true where the centre words are absolute: G90.1)
     @property
     def shift(self) -> Sequence[float]: ...
 
@@ -273,13 +273,13 @@ class ArcHint:
         """The fitted circle as :func:`centre_words` and :func:`arc_bound` take it."""
         return self.c1, self.c2, self.rho, self.worst, self.nsweep
 
-    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: bool) -> Guess:
+    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: object) -> Guess:
         """What :func:`rounded_words` reads of the arc ``arc`` of this hint, its words
         written with ``d`` decimals in ``unit`` (mm per program unit) with the machine
         ``shift`` of each axis, its centre words ``absolute`` or not."""
         a1, a2, an = PLANES[arc.plane][0]
         return (self.circle(), self.ends, arc.clockwise, d, float(unit),
-                (float(shift[a1]), float(shift[a2]), float(shift[an])), absolute)
+                (float(shift[a1]), float(shift[a2]), float(shift[an])), bool(absolute))
 
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | npt.NDArray[np.float64],
              budget: float) -> ArcSpec | None:
