@@ -256,3 +256,14 @@ def test_the_hint_takes_what_moves_carry():
         mv = SimpleNamespace(arc=arc, unit=unit, arc_absolute=flag, shift=shift)
         got = (hint.spec(mv, S, E, 4, 1e-3), hint.keep(mv, S, E, centre, 1e-3), hint.guess(arc, 4, unit, shift, flag))
         assert got == want
+
+
+def test_an_arcs_turn_takes_numpy_scalars():
+    # geometry.arc_params hands the compiled formula plain floats, a bool and an int,
+    # whatever a move carries (a framed arc's centre is an array, numpy's bool a flag)
+    from postproc.gcode.geometry import arc_params
+
+    arc = Arc((0.5, -0.25, 0.0), 170, True, 2, (-1, -1), -1)
+    want = arc_params(arc, (1.5, -0.25, 0.0), (0.5, 0.75, 1.0))
+    odd = Arc(np.array([0.5, -0.25, 0.0]), 170, np.bool_(True), np.int64(2), (-1, -1), -1)
+    assert arc_params(odd, np.array([1.5, -0.25, 0.0]), (np.float64(0.5), np.float64(0.75), 1)) == want

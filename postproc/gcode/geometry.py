@@ -31,8 +31,9 @@ def arc_params(arc: Arc, q0, q1) -> ArcParams:
     :func:`postproc.gcode.fitcore.arc_sweep`)."""
     (a1, a2, an), _ = PLANES[arc.plane]
     c = arc.center
-    t0, sweep, r0, r1 = fitcore.arc_sweep((c[a1], c[a2]), (q0[a1], q0[a2]), (q1[a1], q1[a2]), arc.clockwise,
-                                          arc.turns)
+    # (plain floats, a bool and an int: the compiled formula takes no numpy scalar)
+    t0, sweep, r0, r1 = fitcore.arc_sweep((float(c[a1]), float(c[a2])), (float(q0[a1]), float(q0[a2])),
+                                          (float(q1[a1]), float(q1[a2])), bool(arc.clockwise), int(arc.turns))
     return (a1, a2, an), t0, sweep, r0, r1
 
 
