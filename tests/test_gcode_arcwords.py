@@ -245,7 +245,7 @@ def test_the_hint_takes_what_moves_carry():
     plain = SimpleNamespace(arc=arc, unit=1.0, arc_absolute=False, shift=(0.0, 0.0, 0.0))
     want = (hint.spec(plain, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 4, 1e-3),
             hint.keep(plain, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], (0.0, 0.0), 1e-3),
-            hint.guess(arc, 4, 1.0, (0.0, 0.0, 0.0), False))
+            hint.guess(arc, 4, 1.0, (0.0, 0.0, 0.0), False, 1e-3))
     assert want[0] is not None
     assert want[1] is not None
     for unit, flag, shift, S, E, centre in [
@@ -254,7 +254,7 @@ def test_the_hint_takes_what_moves_carry():
          [0.0, 0.0]),
     ]:
         mv = SimpleNamespace(arc=arc, unit=unit, arc_absolute=flag, shift=shift)
-        got = (hint.spec(mv, S, E, 4, 1e-3), hint.keep(mv, S, E, centre, 1e-3), hint.guess(arc, 4, unit, shift, flag))
+        got = (hint.spec(mv, S, E, 4, 1e-3), hint.keep(mv, S, E, centre, 1e-3), hint.guess(arc, 4, unit, shift, flag, 1e-3))
         assert got == want
 
 

@@ -8,10 +8,10 @@ sweep, and the corrected ends it was fitted between. Where the arc's end points 
 to the words' decimals (or takes the nearest rounded centre around it whose start and end
 radii agree within half a step) and bounds the arc a controller then draws
 (:func:`arc_bound`). The planner asks it for every arc of a chunk with the corrected ends
-rounded as words are (:func:`rounded_words`, its guess of which arcs need a plan of
-their own) and the run writer with the ends as written; both get the same answer for the
-same ends, as there is one computation: the planner's answers are kept with the question
-(:data:`Key`) and the writer's same question takes them.
+rounded as words are (:meth:`ArcHint.guess`, its guess of which arcs need a plan of
+their own) and the run writer with the ends as written (:meth:`ArcHint.words`); both get
+the same answer for the same ends, as there is one computation: the hint keeps its last
+question (:data:`Key`) with its answer, and the writer's same question takes it.
 
 The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round``, the
 floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
@@ -60,10 +60,6 @@ Words = tuple[float, float, float, float]
 #: a question to :func:`centre_words`: the written ends, clockwise, the words' decimals,
 #: mm per program unit, what they are relative to (b1, b2) and the budget
 Key = tuple[Ends, bool, int, float, float, float, float]
-#: what the planner's guess reads of an arc: the hint's circle and fitted ends, clockwise,
-#: the words' decimals, mm per program unit, the shifts of the plane's two axes and its
-#: normal (machine mm) and whether the centre words are absolute
-Guess = tuple[Circle, Ends, bool, int, float, tuple[float, float, float], bool]
 
 
 def arc_bound(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, c1: float, c2: float
@@ -160,27 +156,6 @@ def centre_words(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, w
     return w1, w2, mism, bound
 
 
-def rounded_words(arcs: list[Guess], limits: tuple[float, float, float]) -> list[tuple[Key, Words | None]]:
-    """The planner's guess (``limits``: as :func:`centre_words`'): for each arc, the
-    question :func:`centre_words` is asked when the arc's fitted ends are written as its
-    words round them (``round((q - shift) / unit, d) * unit + shift`` on each axis) and
-    its answer, None where no centre words pass there."""
-    out: list[tuple[Key, Words | None]] = []
-    for circle, fitted, clockwise, d, unit, shift, absolute in arcs:
-        h1, h2, hn = shift
-        s1 = round((fitted[0] - h1) / unit, d) * unit + h1
-        s2 = round((fitted[1] - h2) / unit, d) * unit + h2
-        sn = round((fitted[2] - hn) / unit, d) * unit + hn
-        e1 = round((fitted[3] - h1) / unit, d) * unit + h1
-        e2 = round((fitted[4] - h2) / unit, d) * unit + h2
-        en = round((fitted[5] - hn) / unit, d) * unit + hn
-        written = (s1, s2, sn, e1, e2, en)
-        b1, b2 = (h1, h2) if absolute else (s1, s2)
-        key = (written, clockwise, d, unit, b1, b2, limits[0])
-        out.append((key, centre_words(circle, fitted, clockwise, written, (d, unit, b1, b2), limits)))
-    return out
-
-
 class ArcMove(Protocol):
     """What :class:`ArcHint` reads of the move it writes (a
     :class:`postproc.gcode.interp.Move`, or the bulk writer's view of a line of a run)."""
@@ -223,7 +198,7 @@ class ArcHint:
         # the planner expects the hint may fail where written (its general plan is made with
         # the chunk): the run writer ends a stretch at this arc
         self.edge = False
-        # the last question to words and its answer (the planner's guess puts its own here)
+        # the last question to centre_words and its answer (:meth:`_answer`)
         self.last = None
 
     def spec(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], d: int, budget: float) -> ArcSpec | None:
@@ -256,15 +231,39 @@ class ArcHint:
         arc as meant (radius and sweep below :data:`MIN_ARC_RADIUS_MM` and
         :data:`MIN_ARC_SWEEP_RAD`, as :func:`postproc.gcode.segment.arc_candidates`' controller
         limits decide)."""
-        # the planner's guess (Planner._hints_failing_rounded) and the writer usually ask
-        # with the same ends: the second time is the first one's answer
         a1, a2, an = axes
-        written = (float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]), float(E[an]))
-        key = (written, clockwise, d, float(unit), float(base[0]), float(base[1]), budget)
+        return self._answer((float(S[a1]), float(S[a2]), float(S[an]), float(E[a1]), float(E[a2]), float(E[an])),
+                            clockwise, d, float(unit), (float(base[0]), float(base[1])), budget)
+
+    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: object,
+              budget: float) -> Words | None:
+        """The planner's guess: :meth:`words` for the arc ``arc`` of this hint written
+        from its fitted ends rounded as its words round them (``round((q - shift) / unit,
+        d) * unit + shift`` on each axis: ``d`` decimals, ``unit`` mm per program unit, the
+        machine ``shift`` of each axis; its centre words ``absolute`` or not)."""
+        a1, a2, an = PLANES[arc.plane][0]
+        u = float(unit)
+        h1, h2, hn = float(shift[a1]), float(shift[a2]), float(shift[an])
+        f = self.ends
+        s1 = round((f[0] - h1) / u, d) * u + h1
+        s2 = round((f[1] - h2) / u, d) * u + h2
+        sn = round((f[2] - hn) / u, d) * u + hn
+        e1 = round((f[3] - h1) / u, d) * u + h1
+        e2 = round((f[4] - h2) / u, d) * u + h2
+        en = round((f[5] - hn) / u, d) * u + hn
+        return self._answer((s1, s2, sn, e1, e2, en), arc.clockwise, d, u, (h1, h2) if absolute else (s1, s2),
+                            budget)
+
+    def _answer(self, written: Ends, clockwise: bool, d: int, unit: float, base: tuple[float, float],
+                budget: float) -> Words | None:
+        """:func:`centre_words` of the arc through the ``written`` ends; the same question
+        as the last one (the planner's guess, then the writer, usually ask with the same
+        ends) gets the last one's answer."""
+        key = (written, clockwise, d, unit, base[0], base[1], budget)
         last = self.last
         if last is not None and last[0] == key:
             return last[1]
-        result = centre_words(self.circle(), self.ends, clockwise, written, (d, key[3], key[4], key[5]),
+        result = centre_words(self.circle(), self.ends, clockwise, written, (d, unit, base[0], base[1]),
                               (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
         self.last = (key, result)
         return result
@@ -272,14 +271,6 @@ class ArcHint:
     def circle(self) -> Circle:
         """The fitted circle as :func:`centre_words` and :func:`arc_bound` take it."""
         return self.c1, self.c2, self.rho, self.worst, self.nsweep
-
-    def guess(self, arc: Arc, d: int, unit: float, shift: Sequence[float], absolute: object) -> Guess:
-        """What :func:`rounded_words` reads of the arc ``arc`` of this hint, its words
-        written with ``d`` decimals in ``unit`` (mm per program unit) with the machine
-        ``shift`` of each axis, its centre words ``absolute`` or not."""
-        a1, a2, an = PLANES[arc.plane][0]
-        return (self.circle(), self.ends, arc.clockwise, d, float(unit),
-                (float(shift[a1]), float(shift[a2]), float(shift[an])), bool(absolute))
 
     def keep(self, mv: ArcMove, S: Sequence[float], E: Sequence[float], centre: Sequence[float] | npt.NDArray[np.float64],
              budget: float) -> ArcSpec | None:

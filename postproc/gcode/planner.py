@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from postproc.errors import SolverError
-from postproc.gcode import bulk, hintcore, vplan
+from postproc.gcode import bulk, vplan
 from postproc.gcode.directions import (
     direction_axes,
 )
@@ -50,7 +50,7 @@ from postproc.gcode.sampling import (
     _sample_moves,
     _Sampled,
 )
-from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD, Curve, quadrant_breaks
+from postproc.gcode.segment import Curve, quadrant_breaks
 from postproc.gcode.source import backfill_unknown
 from postproc.gcode.state import PLANES
 from postproc.gcode.table import Table
@@ -321,8 +321,7 @@ class Planner(EngineCalls):
         written is settled by the hint or the plan either way. The writer, asking with
         the same ends, gets the answer given here (:meth:`ArcHint.words`)."""
         decimals: dict[float, int] = {}
-        asked: list[tuple[int, ArcHint]] = []
-        questions: list[hintcore.Guess] = []
+        failing: set[int] = set()
         for i, mv, hint in arcs:
             arc = mv.arc
             if arc is None:
@@ -331,13 +330,7 @@ class Planner(EngineCalls):
             d = decimals.get(unit)
             if d is None:
                 d = decimals[unit] = _unit_decimals(self.opt, unit)
-            asked.append((i, hint))
-            questions.append(hint.guess(arc, d, unit, mv.shift, mv.arc_absolute))
-        failing: set[int] = set()
-        answers = hintcore.rounded_words(questions, (budget, MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD))
-        for (i, hint), answer in zip(asked, answers, strict=True):
-            hint.last = answer  # the writer asking the same gets this answer
-            if answer[1] is None:
+            if hint.guess(arc, d, unit, mv.shift, mv.arc_absolute, budget) is None:
                 failing.add(i)
         return failing
 
