@@ -82,10 +82,11 @@ def arcs_points(owner: np.ndarray, s: np.ndarray, arcs: ArcColumns) -> np.ndarra
     rad = arcs.r0[owner] + (arcs.r1 - arcs.r0)[owner] * s
     out = np.empty((len(s), 3))
     centre, q0, q1 = arcs.centre, arcs.q0, arcs.q1
-    if (arcs.axes == (0, 1, 2)).all():  # every arc in the XY plane: the columns
-        out[:, 0] = centre[owner, 0] + rad * np.cos(th)
-        out[:, 1] = centre[owner, 1] + rad * np.sin(th)
-        out[:, 2] = q0[owner, 2] + (q1 - q0)[owner, 2] * s
+    if len(arcs.axes) and (arcs.axes == arcs.axes[0]).all():  # every arc in one plane: by columns
+        b1, b2, bn = arcs.axes[0].tolist()
+        out[:, b1] = centre[owner, b1] + rad * np.cos(th)
+        out[:, b2] = centre[owner, b2] + rad * np.sin(th)
+        out[:, bn] = q0[owner, bn] + (q1 - q0)[owner, bn] * s
         return out
     idx = np.arange(len(s))
     ax = arcs.axes[owner]

@@ -397,8 +397,9 @@ def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlaneP
     ax1, ax2, axn = axes[:, 0], axes[:, 1], axes[:, 2]
     S1, S2, Sn = S[ai, ax1], S[ai, ax2], S[ai, axn]
     E1, E2, En = T[ai, ax1], T[ai, ax2], T[ai, axn]
-    if (axes == (0, 1, 2)).all():  # every arc in the XY plane (as CAM programs are): the columns
-        P1, P2, Pn = pts[:, 0].copy(), pts[:, 1].copy(), pts[:, 2].copy()
+    if (axes == axes[0]).all():  # every arc in one plane (as CAM programs are): by columns
+        b1, b2, bn = axes[0].tolist()
+        P1, P2, Pn = pts[:, b1].copy(), pts[:, b2].copy(), pts[:, bn].copy()
     else:
         at = np.arange(len(pts))
         P1, P2, Pn = pts[at, ax1[owner]], pts[at, ax2[owner]], pts[at, axn[owner]]
