@@ -1,6 +1,6 @@
 """The chunk scanner reads the lexer's grammar: the same lines, words, spans and values;
-plainscan's pieces join back to their line; numfmt's batch equals its one-value form, and
-its word rules are what they say."""
+plainscan's pieces join back to their line; numfmt's batch equals its one-value form, its
+rounding is Python's, and its word rules are what they say."""
 
 import math
 import random
@@ -115,6 +115,39 @@ def test_fmt_all_is_fmt(values, d, mixed):
     assert numfmt.fmt_all(values, decimals, "X") == ["X" + numfmt.fmt(v, k) for v, k in zip(values, decimals, strict=True)]
     assert all(not t.startswith("X-") or t.strip("X-0.") for t in numfmt.fmt_all(values, decimals, "X"))
 
+
+
+def _bits(x: float) -> bytes:
+    return struct.pack("<d", x)
+
+
+@given(st.floats(allow_nan=True, allow_infinity=True), st.integers(-3, 30))
+@settings(max_examples=2000, deadline=None)
+def test_round_to_is_round(x, d):
+    assert _bits(numfmt.round_to(x, d)) == _bits(round(x, d))
+
+
+def test_round_to_is_round_at_and_beside_halves():
+    """Near a half of the last digit the product x 10^d is off by its rounding: there the
+    answer must still be round's, bit for bit (the doubles beside each half, and beside
+    the values a half rounds to)."""
+    rng = random.Random(7)
+    checked = 0
+    for _ in range(20000):
+        d = rng.randrange(0, 9)
+        k = rng.randrange(-10**9, 10**9)
+        for centre in ((k + 0.5) / 10**d, k / 10**d, (k + 0.5) * 10.0 ** -d):
+            x = centre
+            for _step in range(3):
+                x = math.nextafter(x, math.inf)
+            for _step in range(7):
+                assert _bits(numfmt.round_to(x, d)) == _bits(round(x, d)), (x, d)
+                x = math.nextafter(x, -math.inf)
+                checked += 1
+    for x, d in ((0.125, 2), (0.375, 2), (2.675, 2), (-2.5, 0), (2.5, 0), (-0.0004, 3), (-0.0, 2),
+                 (4503599627370495.5, 0), (1e300, 22), (5e-324, 22), (1.5, 23), (15.0, -1)):
+        assert _bits(numfmt.round_to(x, d)) == _bits(round(x, d)), (x, d)
+    assert checked == 20000 * 3 * 7
 
 def test_a_word_within_half_a_step_keeps_its_text():
     half = numfmt.half_unit(3)

@@ -21,7 +21,7 @@ any others, so the arc written is then another one within the same bounds.
 The R form (:meth:`ArcTry.r_form`) tries rounded radii about the one a centre gives:
 each is written as a word, read back, and its centre is the one a controller computes
 from it (:func:`r_center`, the package's one formula for it), with Python's own rounding
-(``round``), formatting (:func:`postproc.gcode.numfmt.fmt`) and ``math.hypot``, as the
+(``round``, through :func:`postproc.gcode.numfmt.round_to`), formatting (:func:`postproc.gcode.numfmt.fmt`) and ``math.hypot``, as the
 readers use them.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from typing import Final
 
-from postproc.gcode.numfmt import fmt
+from postproc.gcode.numfmt import fmt, round_to
 
 TWO_PI: Final = 2.0 * math.pi
 
@@ -320,9 +320,9 @@ def r_radii(rho: float, half: float, unit: float, d: int, reach: int) -> list[fl
     arc tries, in increasing order: ``rho`` (mm) rounded and ``reach`` steps on each side
     of it, and the three smallest steps above ``half`` (mm, half the chord)."""
     step = 10.0 ** (-d)
-    r0 = round(rho / unit, d)
-    vals = {round(r0 + k * step, d) for k in range(-reach, reach + 1)}
-    vals |= {round(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
+    r0 = round_to(rho / unit, d)
+    vals = {round_to(r0 + k * step, d) for k in range(-reach, reach + 1)}
+    vals |= {round_to(math.ceil(half / unit / step) * step + k * step, d) for k in (0, 1, 2)}
     return sorted(vals)
 
 

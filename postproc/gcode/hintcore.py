@@ -13,8 +13,8 @@ their own) and the run writer with the ends as written (:meth:`ArcHint.words`); 
 the same answer for the same ends, as there is one computation: the hint keeps its last
 question (:data:`Key`) with its answer, and the writer's same question takes it.
 
-The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round``, the
-floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
+The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round`` through
+:func:`postproc.gcode.numfmt.round_to`, the floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
 (``setup.py``); runs unchanged uncompiled. Of the package it imports the formatter
 (:mod:`postproc.gcode.numfmt`, compiled with it), the planes' axes
 (:data:`postproc.gcode.state.PLANES`) and the least radius and sweep a controller cuts
@@ -27,7 +27,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Final, Protocol
 
-from postproc.gcode.numfmt import fmt
+from postproc.gcode.numfmt import fmt, round_to
 from postproc.gcode.segment import MIN_ARC_RADIUS_MM, MIN_ARC_SWEEP_RAD
 from postproc.gcode.state import PLANES
 
@@ -118,8 +118,8 @@ def centre_words(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, w
     t = (circle[0] - m1) * n1 + (circle[1] - m2) * n2
     step = 10.0 ** (-d)
     agree = 0.5 * step * unit
-    v1 = round((m1 + t * n1 - b1) / unit, d)
-    v2 = round((m2 + t * n2 - b2) / unit, d)
+    v1 = round_to((m1 + t * n1 - b1) / unit, d)
+    v2 = round_to((m2 + t * n2 - b2) / unit, d)
     # the first candidate, round(v + 0 * step, d), is v + 0.0 (v is rounded already)
     w1, w2 = v1 + 0.0, v2 + 0.0
     C1, C2 = b1 + w1 * unit, b2 + w2 * unit
@@ -128,7 +128,7 @@ def centre_words(circle: Circle, fitted: Ends, clockwise: bool, written: Ends, w
         found = False
         for k in range(1, len(ORDER)):
             k1, k2 = ORDER[k]
-            w1, w2 = round(v1 + k1 * step, d), round(v2 + k2 * step, d)
+            w1, w2 = round_to(v1 + k1 * step, d), round_to(v2 + k2 * step, d)
             C1, C2 = b1 + w1 * unit, b2 + w2 * unit
             mism = abs(hyp(s1 - C1, s2 - C2) - hyp(e1 - C1, e2 - C2))
             if mism <= agree:
@@ -245,12 +245,12 @@ class ArcHint:
         u = float(unit)
         h1, h2, hn = float(shift[a1]), float(shift[a2]), float(shift[an])
         f = self.ends
-        s1 = round((f[0] - h1) / u, d) * u + h1
-        s2 = round((f[1] - h2) / u, d) * u + h2
-        sn = round((f[2] - hn) / u, d) * u + hn
-        e1 = round((f[3] - h1) / u, d) * u + h1
-        e2 = round((f[4] - h2) / u, d) * u + h2
-        en = round((f[5] - hn) / u, d) * u + hn
+        s1 = round_to((f[0] - h1) / u, d) * u + h1
+        s2 = round_to((f[1] - h2) / u, d) * u + h2
+        sn = round_to((f[2] - hn) / u, d) * u + hn
+        e1 = round_to((f[3] - h1) / u, d) * u + h1
+        e2 = round_to((f[4] - h2) / u, d) * u + h2
+        en = round_to((f[5] - hn) / u, d) * u + hn
         return self._answer((s1, s2, sn, e1, e2, en), arc.clockwise, d, u, (h1, h2) if absolute else (s1, s2),
                             budget)
 

@@ -109,3 +109,26 @@ def word_texts(values: list[float], own: list[float], own_decimals: list[int], d
         for k in range(len(changed)):
             dest[at[changed[k]]] = texts[k]
     return changed, texts
+
+#: 10**d as doubles, exact for d <= 22 (their products and quotients rounded once)
+_POWERS: Final = tuple(10.0 ** d for d in range(23))
+#: 2**52: at and beyond it every double is an integer
+_TWO_52: Final = 4503599627370496.0
+
+
+def round_to(x: float, d: int) -> float:
+    """``round(x, d)``, equal to it bit for bit, without its decimal conversion where
+    that is not needed. x 10^d rounded once to a double lies on the same side of every
+    half as the exact product (rounding is monotonic and the halves below 2^52 are
+    doubles), so where it is no half its nearest integer is the exact product's; that
+    divided by 10^d (both exact, the quotient rounded once) is the double nearest the
+    decimal, as round's conversion back gives. Python's ``round`` for the rest: a half,
+    x 10^d at or over 2^52, d beyond 22 or below 0 (10^d no longer exact), not finite."""
+    if 0 <= d <= 22:
+        p = _POWERS[d]
+        a = math.fabs(x * p)
+        if a < _TWO_52:
+            n = (a + _TWO_52) - _TWO_52  # the nearest integer (a half goes to Python's round)
+            if math.fabs(a - n) != 0.5:  # (the difference is exact)
+                return math.copysign(n / p, x)
+    return round(x, d)
