@@ -356,3 +356,79 @@ def test_a_run_arcs_turn_is_its_arc_params(monkeypatch, head):
     for turn, prm in seen:
         assert prm[0] == (0, 1, 2)
         assert [v.hex() for v in turn] == [float(v).hex() for v in prm[1:]]
+
+
+def _run_move_fields(mv):
+    return {k: getattr(mv, k) for k in bulk.RunMove.__slots__}
+
+
+@pytest.mark.parametrize("head", ["G21 G90 G17", "G20 G90 G17 G90.1"])
+def test_a_runs_arcs_are_the_moves_of_their_lines(monkeypatch, head):
+    # arc_moves reads all of a run's arcs at once; each is the move _row_move makes of
+    # its line: motion (named, or modal with no G word), feed (on the line, on a line
+    # before, alone on a line, or from before the run), rotary positions, R form
+    rng = np.random.default_rng(11)
+    lines = [head, "G0 X1 Y2 Z0.5 A0", "F300"]
+    x, y = 1.0, 2.0
+    for k in range(240):
+        g = "G2" if k % 3 else "G3"
+        r = float(rng.uniform(0.5, 3))
+        a0, a1 = (float(v) for v in rng.uniform(0, 2 * math.pi, 2))
+        cx, cy = x - r * math.cos(a0), y - r * math.sin(a0)
+        i, j = (cx, cy) if head.endswith("G90.1") else (cx - x, cy - y)
+        x, y = round(cx + r * math.cos(a1), 4), round(cy + r * math.sin(a1), 4)
+        feed = f" F{100 + k}" if k % 4 == 0 else ""
+        if k % 11 == 0:
+            lines.append(f"{g} X{x:.4f} Y{y:.4f} R{r:.4f}{feed}")
+        elif k % 9 == 0:
+            lines.append(f"G1 X{x:.4f} Y{y:.4f} Z{float(rng.uniform(0, 1)):.4f} A{k}")
+        elif k % 13 == 0:
+            lines.append(f"F{50 + k}")
+            lines.append(f"{g} X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}")
+        elif k % 2 and not lines[-1].startswith(("G1", "F")):
+            lines.append(f"X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}{feed}")  # the modal arc's own sense
+        else:
+            lines.append(f"{g} X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}{feed}")
+    lines.append("M2")
+    compared = []
+    arc_moves = bulk.arc_moves
+
+    def spy(run):
+        got = arc_moves(run)
+        for j, mv in got:
+            q0 = tuple(run.q1[j - 1].tolist()) if j else run.q0
+            compared.append((_run_move_fields(mv), _run_move_fields(bulk._row_move(run, j, q0))))
+        return got
+
+    monkeypatch.setattr(bulk, "arc_moves", spy)
+    correct_text("\n".join(lines) + "\n", ENGINE, Setup(), CorrectOptions(chunk_lines=40, extrapolate="linear"))
+    assert len(compared) > 150
+    assert {f["kind"] for f, _ in compared} == {20, 30}
+    assert len({f["feed"] for f, _ in compared}) > 20
+    assert any(f["arc"].r_idx >= 0 for f, _ in compared)
+    assert any(f["rotary"] for f, _ in compared)
+    for fast, one in compared:
+        assert fast == one
+
+
+def test_a_loops_arcs_are_the_moves_of_their_source_lines(monkeypatch):
+    # in an expanded program the arcs of a run carry their source lines, as _row_move's
+    text = ("G21 G90 G17\nG0 X10 Y0 Z1\n#1 = 0\no100 while [#1 LT 5]\n"
+            "G2 X0 Y-10 I-10 J0 F[100 + #1]\nX-10 Y0 I0 J10\nG1 X-10 Y1\nG3 X-11 Y0 R1\nG1 X-10 Y0\nG2 X10 Y0 I10 J0\n"
+            "#1 = [#1 + 1]\no100 endwhile\nM2\n")
+    compared = []
+    arc_moves = bulk.arc_moves
+
+    def spy(run):
+        got = arc_moves(run)
+        for j, mv in got:
+            q0 = tuple(run.q1[j - 1].tolist()) if j else run.q0
+            compared.append((_run_move_fields(mv), _run_move_fields(bulk._row_move(run, j, q0))))
+        return got
+
+    monkeypatch.setattr(bulk, "arc_moves", spy)
+    correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=7, extrapolate="linear"))
+    assert len(compared) >= 10
+    assert len({f["lineno"] for f, _ in compared}) == 4  # four source lines, read five times
+    for fast, one in compared:
+        assert fast == one

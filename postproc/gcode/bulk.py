@@ -608,11 +608,29 @@ def _rotary_rows(interp: Interpreter, block: Block, a: int, b: int) -> list[dict
 
 
 def arc_moves(run: Run) -> list[tuple[int, RunMove]]:
-    """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove)."""
+    """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove):
+    what :func:`_row_move` makes of each, read for all of them at once (an arc's motion
+    is the sense its centre was found for; its feed the last F at or before it)."""
     if not run.arcs:
         return []
+    blk, a = run.block, run.a
     q1 = run.q1.tolist()  # the targets as tuples of floats, converted at once
-    return [(j, _row_move(run, j, tuple(q1[j - 1]) if j else run.q0, tuple(q1[j]))) for j in run.arcs]
+    last_f, f_value, feed0 = blk.last_f, blk.f_value, run.feed0
+    src, files, rot = blk.src, blk.src_files, run.rot
+    has_r = blk.has_r[a:run.b].tolist()
+    out: list[tuple[int, RunMove]] = []
+    for j, (centre, cw, _turn) in run.arcs.items():
+        y = a + j
+        f = last_f[y]
+        mv = RunMove(run, run.lineno + j if src is None else src[y], ARC_CW if cw else ARC_CCW,
+                     tuple(q1[j - 1]) if j else run.q0, tuple(q1[j]), f_value[f] if f >= a else feed0)
+        if files is not None:
+            mv.path = files[y]
+        if rot is not None:
+            mv.rotary = rot[j]
+        mv.arc = Arc(centre, 170, cw, 1, (-1, -1), R_FORM if has_r[j] else -1)
+        out.append((j, mv))
+    return out
 
 
 def finish_block(block: Block) -> None:
