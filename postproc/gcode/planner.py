@@ -111,8 +111,9 @@ class Planner(EngineCalls):
         # the moves that may have to be split: arcs, and straight ones unless lines stay lines
         split = {Kind.ARC_CW, Kind.ARC_CCW} if self.linear_exact else {Kind.ARC_CW, Kind.ARC_CCW, Kind.FEED}
         kinds = tab.kind.tolist()
+        # (a start's coordinates are finite or NaN: unknown; their sum is NaN where one is)
         planned = [(i, m) for i, m in tab.moves
-                   if kinds[i] in split and not start_unknown[i] and not any(math.isnan(v) for v in m.q0)]
+                   if kinds[i] in split and not start_unknown[i] and not math.isnan(m.q0[0] + m.q0[1] + m.q0[2])]
         plans: dict[int, Plan] = {}
         hints: dict[int, ArcHint] = {}
         if direction_axes(self.engine):  # the directions the corrected commands take
@@ -260,8 +261,9 @@ class Planner(EngineCalls):
         budget = self.opt.tolerance_mm * FIT_BUDGET
         near = HINT_PREPLAN_SHARE * budget
         # a hint is only ever made for an arc (a Move or a RunMove: an ArcMove)
-        fails = self._hints_failing_rounded([(i, cast("ArcMove", moves[i]), hint) for i, hint in hints.items()
-                                             if not hint.worst > near], budget)
+        arcs = cast("dict[int, ArcMove]", moves)
+        fails = self._hints_failing_rounded([(i, arcs[i], hint) for i, hint in hints.items() if not hint.worst > near],
+                                            budget)
         marginal = [(i, moves[i]) for i, hint in hints.items() if hint.worst > near or i in fails]
         if marginal:
             self._plan_moves(marginal, tab, plans)
