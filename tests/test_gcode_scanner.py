@@ -23,12 +23,12 @@ def _check_chunk(text: str) -> None:
     assert len(cols) == len(lines)
     assert cols.line_start == [sum(map(len, lines[:i])) for i in range(len(lines) + 1)]
     for li, line in enumerate(lines):
-        s = cols.line_start[li]
-        got = [(cols.letter[k], text[cols.start[k]:cols.end[k]], cols.start[k] - s, scanner.letter_pos(text, cols.start[k]) - s)
+        # a word's span is within its line, counted from the line's start
+        got = [(cols.letter[k], line[cols.start[k]:cols.end[k]], cols.start[k], scanner.letter_pos(line, cols.start[k]))
                for k in range(cols.first_word[li], cols.first_word[li + 1])]
         for k in range(cols.first_word[li], cols.first_word[li + 1]):
-            assert s <= scanner.letter_pos(text, cols.start[k]) < cols.end[k] <= cols.line_start[li + 1]  # within its line
-            num = text[cols.start[k]:cols.end[k]]
+            assert 0 <= scanner.letter_pos(line, cols.start[k]) < cols.end[k] <= len(line)
+            num = line[cols.start[k]:cols.end[k]]
             assert math.copysign(1, cols.value[k]) == math.copysign(1, float(num))
             assert cols.value[k] == float(num)
         try:

@@ -132,18 +132,18 @@ def pieces(text: str, cols: Columns) -> Pieces:
         we = first_word[li + 1]
         if e > s and text[e - 1] == "\n":
             e -= 1
-        head = _leading_blanks(text, s, e)
+        head = _leading_blanks(text, s, e) - s  # (offsets from the line's start, as the spans are)
         if w < we and letter[w] == "N":
             head = end[w]
             w += 1
         if w < we and letter[w] == "G":
-            g = text[start[w]:end[w]]
+            g = text[s + start[w]:s + end[w]]
             if g in _MOTIONS:
                 res.motion[li] = ord(g[-1]) - 48
                 head = end[w]
                 w += 1
-        if w + 1 < we and letter[w] == "G" and letter[w + 1] == "H" and text[start[w]:end[w]] == "43":
-            h = _digits(text, start[w + 1], end[w + 1])
+        if w + 1 < we and letter[w] == "G" and letter[w + 1] == "H" and text[s + start[w]:s + end[w]] == "43":
+            h = _digits(text, s + start[w + 1], s + end[w + 1])
             if h >= 0:
                 res.tlo[li] = h
                 head = end[w + 1]
@@ -153,14 +153,14 @@ def pieces(text: str, cols: Columns) -> Pieces:
             _name(cols, res, F, li, w)
             head = end[w]
             w += 1
-        prev = head - s
+        prev = head
         at[0][li] = prev
         for k in range(5):
             if k == 3:
                 w = _after_z(cols, res, li, w, we)
             if w < we and letter[w] == _AXES[k]:
-                a = start[w] - s
-                b = end[w] - s
+                a = start[w]
+                b = end[w]
                 at[1 + 2 * k][li] = a
                 at[2 + 2 * k][li] = b
                 has[k][li] = True

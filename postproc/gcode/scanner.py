@@ -3,7 +3,7 @@
 One pass over the text of any number of lines gives, per line, where it starts and
 whether it is *plain* (words and ``[ \\t]`` blanks only, which the interpreter and the
 writers read from the columns), and per word its upper-case letter, the span of its
-number text and the number's value (``float`` of the text: correctly rounded); the
+number text in its line and the number's value (``float`` of the text: correctly rounded); the
 index of the letter is read back from the span (:func:`letter_pos`). Comments, symbols
 and letters without a number make a line not plain; they are skipped here and read,
 where needed, by :func:`postproc.gcode.lexer.lex`, which also names the place of
@@ -43,8 +43,8 @@ class Columns:
 
     line_start: list[int]  # where each line starts; one more entry: the end of the text
     plain: list[bool]  # by line: words and [ \t] blanks only
-    letter: list[str]  # upper case; where it stands: letter_pos(text, start)
-    start: list[int]  # the span of the number text
+    letter: list[str]  # upper case; where it stands: letter_pos(line, start)
+    start: list[int]  # the span of the number text in its line (from the line's start)
     end: list[int]
     value: list[float]
     first_word: list[int]  # by line: its first word's index; one more entry: the word count
@@ -147,6 +147,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
     c: i64
     j: i64
     e: i64
+    ls: i64 = 0  # where the line starts (a word's span is kept from there: small numbers)
     while i < n:
         c = text[i]
         if c == 32 or c == 9:  # blank
@@ -158,6 +159,7 @@ def scan_into(text: bytes, cols: Columns) -> None:
             plain_col.append(plain)
             plain = True
             if i < n:
+                ls = i
                 line_start.append(i)
                 first_word.append(len(letter_col))
         elif (65 <= c <= 90) or (97 <= c <= 122):  # a letter: a word, or a letter alone
@@ -170,8 +172,8 @@ def scan_into(text: bytes, cols: Columns) -> None:
                 i += 1
             else:
                 letter_col.append(chr(c - 32) if c >= 97 else chr(c))
-                start_col.append(j)
-                end_col.append(e)
+                start_col.append(j - ls)
+                end_col.append(e - ls)
                 i = e
         elif c == 40:  # ( comment ), or open to the end of the line
             plain = False
