@@ -1,7 +1,8 @@
-"""postproc.gcode.fitcore, the fit's measures in plain floats: its hypot and rint are
-numpy's bit for bit, its centre lattice is the one numpy rounded, the compiled module
-(where it is compiled) gives the floats its source gives, and a measure that stops early
-keeps the answers the fit takes from it."""
+"""postproc.gcode.fitcore, the fit's measures in plain floats: its hypot is the C
+library's bit for bit, its rint rounds half to even, its centre lattice holds the words as
+they are written (each reads back as its value), the compiled module (where it is
+compiled) gives the floats its source gives, and a measure that stops early keeps the
+answers the fit takes from it."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import bisector_cases
 
-from postproc.gcode import arcfit, fitcore, geometry, segment
+from postproc.gcode import arcfit, emit, fitcore, geometry, segment
 from postproc.gcode.segment import CENTRE_LATTICE, controller_limits_of
 
 _SOURCE = fitcore.__file__ if fitcore.__file__.endswith(".py") else fitcore.__file__.split(".")[0] + ".py"
@@ -46,14 +47,15 @@ def _pairs(seed: int, n: int = 20000):
 
 
 @pytest.mark.parametrize("seed", range(2))
-def test_hypot_is_numpys_bit_for_bit(seed):
+def test_hypot_is_the_c_librarys_bit_for_bit(seed):
+    # (numpy's hypot is the C library's)
     for x, y in _pairs(seed):
         ours = [fitcore.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)]
         with np.errstate(over="ignore"):  # the largest overflow to inf (as ours do)
             assert _bits(ours) == _bits(np.hypot(x, y))
 
 
-def test_rint_is_numpys_bit_for_bit():
+def test_rint_rounds_half_to_even_as_np_rint():
     rng = np.random.default_rng(5)
     x = np.concatenate([rng.normal(size=20000) * 10.0 ** rng.uniform(-3, 17, 20000),
                         np.arange(-10, 10) + 0.5, [0.0, -0.0, 2.0 ** 52, -(2.0 ** 52), 2.0 ** 52 - 0.5,
@@ -63,23 +65,26 @@ def test_rint_is_numpys_bit_for_bit():
 
 
 @pytest.mark.parametrize("d", [0, 3, 4, 5, 6])
-def test_centre_lattice_is_the_one_numpy_rounded(d):
+def test_centre_lattice_holds_the_words_as_written(d):
+    # each word is its value rounded to d decimals as Python rounds (the value a
+    # controller reads of its text), the lattice steps of one last digit about the rounded
+    # centre, each centre the one its words mean
     rng = np.random.default_rng(d)
-    k = np.arange(-3, 4) * 10.0 ** (-d)
-    lattice = np.stack(np.meshgrid(k, k, indexing="ij"), axis=-1).reshape(-1, 2)
+    step = 10.0 ** (-d)
     for _ in range(300):
         centre = rng.uniform(-500, 500, 2)
         base = rng.uniform(-500, 500, 2) * (rng.random() < 0.5)
         unit = 25.4 if rng.random() < 0.3 else 1.0
-        v0 = np.array([(centre[0] - base[0]) / unit, (centre[1] - base[1]) / unit]).round(d)
-        V = (v0 + lattice).round(d)
-        C = base[None, :] + V * unit
+        v = [round(float((centre[a] - base[a]) / unit), d) for a in range(2)]
+        x1 = [round(v[0] + k * step, d) for k in range(-3, 4)]
+        x2 = [round(v[1] + k * step, d) for k in range(-3, 4)]
         w1, w2, c1, c2 = fitcore.centre_lattice((float(centre[0]), float(centre[1])),
                                                 (float(base[0]), float(base[1])), unit, d, 3)
-        assert _bits(w1) == _bits(V[:, 0])
-        assert _bits(w2) == _bits(V[:, 1])
-        assert _bits(c1) == _bits(C[:, 0])
-        assert _bits(c2) == _bits(C[:, 1])
+        assert _bits(w1) == _bits([a for a in x1 for _b in x2])
+        assert _bits(w2) == _bits([b for _a in x1 for b in x2])
+        assert _bits(c1) == _bits([float(base[0]) + a * unit for a in w1])
+        assert _bits(c2) == _bits([float(base[1]) + b * unit for b in w2])
+        assert all(float(emit.fmt(w, d)) == w for w in w1 + w2)  # the text reads back as the value
 
 
 def _chord_reference(S, E, Q):

@@ -473,28 +473,19 @@ class MoveFit:
             if passing.count(best) == 1:
                 k = meas.worst.index(best)
                 j = meas.idx[k]
-                texts = (emit.fmt(V1[j], d), emit.fmt(V2[j], d))
-                if float(texts[0]) == V1[j] and float(texts[1]) == V2[j]:
-                    return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": meas.turns[k],
-                            "dev": best, "mismatch": meas.mism[k]}
+                # (the words' text reads back as the lattice's value: it is the centre measured)
+                return {"form": "ij", "vals": ((l1, emit.fmt(V1[j], d)), (l2, emit.fmt(V2[j], d))),
+                        "turns": meas.turns[k], "dev": best, "mismatch": meas.mism[k]}
         # the order of all those within the budget
         worst, mism, turns = full_of(tr.measure(C1, C2, agree, limits, budget))
         ok = (mism <= agree) & (worst <= budget)
         if not ok.any():
             return None
-        order = np.argsort(np.where(ok, worst, np.inf))
-        # the three best candidates that pass (never one that fails: its radii disagree or
-        # it leaves the budget)
-        for j in order[:min(3, int(ok.sum()))].tolist():
-            texts = (emit.fmt(V1[j], d), emit.fmt(V2[j], d))
-            if float(texts[0]) == V1[j] and float(texts[1]) == V2[j]:
-                # the written centre is the candidate measured (numpy's rounding agreed)
-                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": int(turns[j]),
-                        "dev": float(worst[j]), "mismatch": float(mism[j])}
-            w, m, t = _one(tr, base[0] + float(texts[0]) * unit, base[1] + float(texts[1]) * unit, True)
-            if m <= agree and w <= budget:
-                return {"form": "ij", "vals": ((l1, texts[0]), (l2, texts[1])), "turns": t, "dev": w, "mismatch": m}
-        return None
+        # the best candidate that passes (never one that fails: its radii disagree or it
+        # leaves the budget); the first of equals
+        j = int(np.argmin(np.where(ok, worst, np.inf)))
+        return {"form": "ij", "vals": ((l1, emit.fmt(V1[j], d)), (l2, emit.fmt(V2[j], d))), "turns": int(turns[j]),
+                "dev": float(worst[j]), "mismatch": float(mism[j])}
 
     def _r_candidates(self, tr: fitcore.ArcTry, centre: tuple[float, float], nsw: float) -> ArcSpec | None:
         """The written R-form arc of the try ``tr`` nearest ``centre`` that passes (see

@@ -7,22 +7,26 @@ candidate centre (:func:`centre_lattice`, :meth:`ArcTry.measure`), after the fit
 centre on the bisector of the try's ends (:func:`bisector_centre`). The samples are
 columns of floats (lists), one per axis; the loops run over them one sample at a time.
 
-Each operation is the one numpy did element by element on the samples' arrays, so the
-values are the same: ``%`` is np.mod's floored remainder, :func:`rint` np.rint's round
-half to even, :func:`hypot` numpy's (the C library's) hypot, ``math.atan2`` numpy's
-arctan2. Sums of products (the chord's, the centre fit's) are taken in order: numpy's
-went through BLAS, which may fuse a multiply and an add or reorder the sum, so they may
-differ from numpy's in the last place. The chord's deviation is only compared with
-limits far from it. The centre fit's Gauss-Newton steps amplify a last place where the
-centre is ill-defined (a circle of kilometres through a few millimetres of path): the
-circle fits the samples as closely, and the rounded candidates about it are measured as
-any others, so the arc written is then another one within the same bounds.
+The arithmetic is Python's on floats: ``math.atan2``, the floored ``%``, sums taken in
+order, a turn count rounded half to even (:func:`rint`), the centre words rounded as they
+are written (:func:`postproc.gcode.numfmt.round_to`, Python's ``round``: the value a
+controller reads of the word), and the C library's hypot (:func:`hypot`, GNU libc's
+algorithm in plain floats; Python's ``math.hypot`` is another, a last place off it now and
+then). The bulk planner measures its arcs with numpy (:mod:`postproc.gcode.vplan`); the
+two need not agree in the last place, as each of their decisions is bounded on its own.
+The centre fit's Gauss-Newton steps amplify a last place where the centre is ill-defined
+(a circle of kilometres through a few millimetres of path): the circle fits the samples
+as closely, and the rounded candidates about it are measured as any others, so the arc
+written is then another one within the same bounds. That is why the fit's distances keep
+one hypot: with ``math.hypot`` in its place, two corpus programs' arcs of 12 and 48 km
+radius got centre words a few last digits apart under a uniform scale, whose outputs are
+pinned byte for byte.
 
 The R form (:meth:`ArcTry.r_form`) tries rounded radii about the one a centre gives:
 each is written as a word, read back, and its centre is the one a controller computes
-from it (:func:`r_center`, the package's one formula for it), with Python's own rounding
-(``round``, through :func:`postproc.gcode.numfmt.round_to`), formatting (:func:`postproc.gcode.numfmt.fmt`) and ``math.hypot``, as the
-readers use them.
+from it (:func:`r_center`, the package's one formula for it), with the rounding and
+formatting of the writers (:func:`postproc.gcode.numfmt.round_to`,
+:func:`postproc.gcode.numfmt.fmt`) and ``math.hypot``, as the readers use them.
 
 Compiled at install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled.
 It imports nothing of the package but :mod:`postproc.gcode.numfmt`, compiled with it.
@@ -50,7 +54,7 @@ _HYPOT_EPS: Final = 2.0 ** -54
 
 
 def rint(x: float) -> float:
-    """``x`` rounded to an integer, half to even (np.rint); -0.0, inf and nan as they are."""
+    """The integer nearest ``x``, half to even, as a float; -0.0, inf and nan as they are."""
     if x > 0.0:
         return (x + _TWO52) - _TWO52 if x < _TWO52 else x
     if x < 0.0:
@@ -59,10 +63,10 @@ def rint(x: float) -> float:
 
 
 def hypot(x: float, y: float) -> float:
-    """sqrt(x * x + y * y) as the C library computes it, and numpy's hypot with it: GNU
-    libc's algorithm (2.35 and later, without fused multiply-add: C. F. Borges, "An
-    improved algorithm for hypot(a, b)", its correction of the square root). Python's
-    math.hypot is another algorithm, a last place off it now and then."""
+    """sqrt(x * x + y * y) as the C library computes it (numpy's hypot too): GNU libc's
+    algorithm (2.35 and later, without fused multiply-add: C. F. Borges, "An improved
+    algorithm for hypot(a, b)", its correction of the square root). Python's math.hypot
+    is another algorithm, a last place off it now and then (see the module's docstring)."""
     ax = abs(x)
     ay = abs(y)
     if ax < ay:
@@ -174,13 +178,12 @@ def centre_lattice(ideal: tuple[float, float], base: tuple[float, float], unit: 
     mm) and the ``reach`` steps on each side of them on both axes, as they are written
     from ``base`` (mm; the words are offsets from it), and the centres they mean:
     ``(w1, w2, c1, c2)``, the second axis's step varying fastest."""
-    f = 10.0 ** d
     step = 10.0 ** (-d)
-    v1 = rint((ideal[0] - base[0]) / unit * f) / f
-    v2 = rint((ideal[1] - base[1]) / unit * f) / f
+    v1 = round_to((ideal[0] - base[0]) / unit, d)
+    v2 = round_to((ideal[1] - base[1]) / unit, d)
     # each axis's words and centres (one rounding per step), then every pair of them
-    x1 = [rint((v1 + k * step) * f) / f for k in range(-reach, reach + 1)]
-    x2 = [rint((v2 + k * step) * f) / f for k in range(-reach, reach + 1)]
+    x1 = [round_to(v1 + k * step, d) for k in range(-reach, reach + 1)]
+    x2 = [round_to(v2 + k * step, d) for k in range(-reach, reach + 1)]
     y1 = [base[0] + x * unit for x in x1]
     y2 = [base[1] + x * unit for x in x2]
     w1: list[float] = []
@@ -498,7 +501,7 @@ class ArcTry:
             v2 = vs[i] - cy
             phi = _atan2(v2, v1)
             # the angle from the start the way the arc turns, then the turns that bring it
-            # nearest the sample's share of the sweep (np.rint inline: alpha is never -0.0,
+            # nearest the sample's share of the sweep (rint inline: alpha is never -0.0,
             # so the sign of a zero turn does not count)
             alpha = (t0 - phi) % TWO_PI if clockwise else (phi - t0) % TWO_PI
             turn = (frac[i] * asw - alpha) / TWO_PI
@@ -573,7 +576,7 @@ def interleave(cols: list[list[float]], ss: list[float],
     """The n samples (``cols``: n coordinates an axis, at the parameters ``ss``) and the
     middles of their intervals, interleaved (2n - 1 an axis): a middle is the mean of its
     ends (``0.5 * (a + b)``) moved by its ``bulge`` (its first n - 1 an axis), its
-    parameter the mean of theirs; as numpy took them, element by element."""
+    parameter the mean of theirs."""
     n = len(ss)
     out: list[list[float]] = []
     for axis in range(len(cols)):
@@ -592,9 +595,7 @@ def interleave(cols: list[list[float]], ss: list[float],
 
 
 def mean_between(col: list[float], a: int, b: int) -> float:
-    """The mean of ``col[a:b + 1]``: the sum in order divided by the count (as numpy's
-    sum over the rows of a (k, 3) array, ``np.add.reduce(x[a:b + 1], axis=0)``, adds them,
-    one row after another)."""
+    """The mean of ``col[a:b + 1]``: the sum in order divided by the count."""
     total = col[a]
     for i in range(a + 1, b + 1):
         total += col[i]
