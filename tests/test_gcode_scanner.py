@@ -149,39 +149,6 @@ def test_round_to_is_round_at_and_beside_halves():
         assert _bits(numfmt.round_to(x, d)) == _bits(round(x, d)), (x, d)
     assert checked == 20000 * 3 * 7
 
-
-def _percent(x: float, d: int) -> str:
-    """``%.*f`` of x, ``-0.000`` as ``0.000``: what fmt writes."""
-    text = "%.*f" % (d, x)  # noqa: UP031
-    return text[1:] if text[0] == "-" and not text.strip("-0.") else text
-
-
-@given(st.floats(allow_nan=False, allow_infinity=False), st.integers(0, 25))
-@settings(max_examples=2000, deadline=None)
-def test_fmt_is_percent_f(x, d):
-    assert numfmt.fmt(x, d) == _percent(x, d)
-    assert numfmt.fmt_all([x, -x], [d, d], "Y") == ["Y" + _percent(x, d), "Y" + _percent(-x, d)]
-
-
-def test_fmt_is_percent_f_at_and_beside_halves():
-    rng = random.Random(9)
-    for _ in range(20000):
-        d = rng.randrange(0, 9)
-        k = rng.randrange(-10**9, 10**9)
-        for centre in ((k + 0.5) / 10**d, k / 10**d, rng.uniform(-1, 1) * 10.0 ** -rng.randrange(0, 12)):
-            x = centre
-            for _step in range(3):
-                x = math.nextafter(x, math.inf)
-            for _step in range(7):
-                assert numfmt.fmt(x, d) == _percent(x, d), (x, d)
-                x = math.nextafter(x, -math.inf)
-    for x, d in ((0.125, 2), (2.675, 2), (-0.0004, 3), (-0.0, 2), (0.0, 0), (5e-324, 4), (-5e-324, 4),
-                 (4503599627370495.5, 0), (1e300, 3), (123.0, 0), (-7.0, 0), (0.5, 0), (1.5, 0), (1.5, 23),
-                 (0.49999999999999994, 0), (-0.49999999999999994, 0), (0.00049999999999999996, 3)):
-        assert numfmt.fmt(x, d) == _percent(x, d), (x, d)
-    with pytest.raises(ValueError, match="cannot write"):
-        numfmt.fmt(math.inf, 3)
-
 def test_a_word_within_half_a_step_keeps_its_text():
     half = numfmt.half_unit(3)
     assert half == 0.0005

@@ -11,40 +11,11 @@ from __future__ import annotations
 import math
 from typing import Final
 
-#: 10**d as doubles, exact for d <= 22 (their products and quotients rounded once)
-_POWERS: Final = tuple(10.0 ** d for d in range(23))
-#: 2**52: at and beyond it every double is an integer
-_TWO_52: Final = 4503599627370496.0
-_ZEROS: Final = "0" * 23
-
-
-def _fixed(value: float, d: int) -> str:
-    """``%.*f`` of ``value`` with ``d`` digits (never ``-0``) from the integer nearest
-    value 10^d, where that is found in doubles (see :func:`round_to`: the product rounded
-    once is no half, below 2^52, d at most 22); "" elsewhere (a half, a large or
-    non-finite value: ``%`` formats it). Its digits are those of the correctly rounded
-    decimal, as ``%``'s are."""
-    if 0 <= d <= 22:
-        a = math.fabs(value * _POWERS[d])
-        if a < _TWO_52:
-            n = (a + _TWO_52) - _TWO_52  # the nearest integer
-            if math.fabs(a - n) != 0.5:
-                digits = str(int(n))
-                if d > 0:
-                    if len(digits) <= d:
-                        digits = _ZEROS[:d + 1 - len(digits)] + digits
-                    digits = digits[:-d] + "." + digits[-d:]
-                return "-" + digits if value < 0.0 and n != 0.0 else digits
-    return ""
-
 
 def fmt(value: float, decimals: int) -> str:
     """Fixed-point text of ``value`` with ``decimals`` digits (correctly rounded, as
     ``%.*f`` is); ``-0.000`` becomes ``0.000``; a non-finite value is refused."""
-    text = _fixed(value, decimals)
-    if text:
-        return text
-    text = "%.*f" % (decimals, value)  # noqa: UP031
+    text = "%.*f" % (decimals, value)  # noqa: UP031  (the fastest fixed-point formatting)
     if text[0] == "-" and not text.strip("-0."):
         return text[1:]
     if not math.isfinite(value):
@@ -53,13 +24,26 @@ def fmt(value: float, decimals: int) -> str:
 
 
 def fmt_all(values: list[float], decimals: list[int], prefix: str) -> list[str]:
-    """``prefix + fmt(v, d)`` for each value and its number of decimals."""
-    out: list[str] = []
-    for k in range(len(values)):
-        v, d = values[k], decimals[k]
-        text = _fixed(v, d)
-        out.append(prefix + (text if text else fmt(v, d)))
-    return out
+    """``prefix + fmt(v, d)`` for each value and its number of decimals (in one ``%``
+    over all the values where they share their decimals)."""
+    n = len(values)
+    if n == 0:
+        return []
+    d = decimals[0]
+    for k in range(n):
+        if decimals[k] != d:
+            return [prefix + fmt(values[k], decimals[k]) for k in range(n)]
+    for v in values:
+        if not math.isfinite(v):
+            raise ValueError(f"cannot write {v} into a program")
+    texts = ((prefix + "%." + str(d) + "f\n") * n % tuple(values)).split("\n")
+    texts.pop()
+    low = -(10.0 ** -d)  # a value above it and not above 0 may be written -0.000
+    for k in range(n):
+        v = values[k]
+        if v <= 0.0 and v > low:
+            texts[k] = prefix + fmt(v, d)
+    return texts
 
 
 #: half a unit of the last of d decimals, by d (beyond these, 0: below a double's smallest step)
@@ -125,6 +109,11 @@ def word_texts(values: list[float], own: list[float], own_decimals: list[int], d
         for k in range(len(changed)):
             dest[at[changed[k]]] = texts[k]
     return changed, texts
+
+#: 10**d as doubles, exact for d <= 22 (their products and quotients rounded once)
+_POWERS: Final = tuple(10.0 ** d for d in range(23))
+#: 2**52: at and beyond it every double is an integer
+_TWO_52: Final = 4503599627370496.0
 
 
 def round_to(x: float, d: int) -> float:
