@@ -362,6 +362,24 @@ def _run_move_fields(mv):
     return {k: getattr(mv, k) for k in bulk.RunMove.__slots__}
 
 
+def _arc_moves_compared(monkeypatch, text: str, chunk_lines: int) -> list[tuple[dict, dict]]:
+    """``text`` corrected, each run arc's move from arc_moves beside the one _row_move
+    makes of its line (fields by name)."""
+    compared = []
+    arc_moves = bulk.arc_moves
+
+    def spy(run):
+        got = arc_moves(run)
+        for j, mv in got:
+            q0 = tuple(run.q1[j - 1].tolist()) if j else run.q0
+            compared.append((_run_move_fields(mv), _run_move_fields(bulk._row_move(run, j, q0))))
+        return got
+
+    monkeypatch.setattr(bulk, "arc_moves", spy)
+    correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=chunk_lines, extrapolate="linear"))
+    return compared
+
+
 @pytest.mark.parametrize("head", ["G21 G90 G17", "G20 G90 G17 G90.1"])
 def test_a_runs_arcs_are_the_moves_of_their_lines(monkeypatch, head):
     # arc_moves reads all of a run's arcs at once; each is the move _row_move makes of
@@ -390,18 +408,7 @@ def test_a_runs_arcs_are_the_moves_of_their_lines(monkeypatch, head):
         else:
             lines.append(f"{g} X{x:.4f} Y{y:.4f} I{i:.4f} J{j:.4f}{feed}")
     lines.append("M2")
-    compared = []
-    arc_moves = bulk.arc_moves
-
-    def spy(run):
-        got = arc_moves(run)
-        for j, mv in got:
-            q0 = tuple(run.q1[j - 1].tolist()) if j else run.q0
-            compared.append((_run_move_fields(mv), _run_move_fields(bulk._row_move(run, j, q0))))
-        return got
-
-    monkeypatch.setattr(bulk, "arc_moves", spy)
-    correct_text("\n".join(lines) + "\n", ENGINE, Setup(), CorrectOptions(chunk_lines=40, extrapolate="linear"))
+    compared = _arc_moves_compared(monkeypatch, "\n".join(lines) + "\n", 40)
     assert len(compared) > 150
     assert {f["kind"] for f, _ in compared} == {20, 30}
     assert len({f["feed"] for f, _ in compared}) > 20
@@ -416,18 +423,7 @@ def test_a_loops_arcs_are_the_moves_of_their_source_lines(monkeypatch):
     text = ("G21 G90 G17\nG0 X10 Y0 Z1\n#1 = 0\no100 while [#1 LT 5]\n"
             "G2 X0 Y-10 I-10 J0 F[100 + #1]\nX-10 Y0 I0 J10\nG1 X-10 Y1\nG3 X-11 Y0 R1\nG1 X-10 Y0\nG2 X10 Y0 I10 J0\n"
             "#1 = [#1 + 1]\no100 endwhile\nM2\n")
-    compared = []
-    arc_moves = bulk.arc_moves
-
-    def spy(run):
-        got = arc_moves(run)
-        for j, mv in got:
-            q0 = tuple(run.q1[j - 1].tolist()) if j else run.q0
-            compared.append((_run_move_fields(mv), _run_move_fields(bulk._row_move(run, j, q0))))
-        return got
-
-    monkeypatch.setattr(bulk, "arc_moves", spy)
-    correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=7, extrapolate="linear"))
+    compared = _arc_moves_compared(monkeypatch, text, 7)
     assert len(compared) >= 10
     assert len({f["lineno"] for f, _ in compared}) == 4  # four source lines, read five times
     for fast, one in compared:
