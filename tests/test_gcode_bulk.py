@@ -318,6 +318,20 @@ def test_a_real_program_with_lone_carriage_returns_reads_in_bulk_as_the_interpre
     assert a == b == out
 
 
+def _arc_chain(rng, n: int, absolute: bool):
+    """``n`` arcs chained from (1, 2), each of a random radius and start and end angles:
+    its end (rounded to 4 decimals), its centre words (absolute or from its start) and
+    its radius."""
+    x, y = 1.0, 2.0
+    for _ in range(n):
+        r = float(rng.uniform(0.5, 3))
+        a0, a1 = (float(v) for v in rng.uniform(0, 2 * math.pi, 2))
+        cx, cy = x - r * math.cos(a0), y - r * math.sin(a0)
+        i, j = (cx, cy) if absolute else (cx - x, cy - y)
+        x, y = round(cx + r * math.cos(a1), 4), round(cy + r * math.sin(a1), 4)
+        yield x, y, i, j, r
+
+
 @pytest.mark.parametrize("head", ["G21 G90 G17", "G20 G90 G17", "G21 G90 G17 G90.1"])
 def test_a_run_arcs_turn_is_its_arc_params(monkeypatch, head):
     # the turn a run's arc is read with (plainscan.run_arcs) is the one arc_params gives
@@ -326,14 +340,8 @@ def test_a_run_arcs_turn_is_its_arc_params(monkeypatch, head):
 
     rng = np.random.default_rng(7)
     lines = [head, "G0 X1 Y2 Z0.5"]
-    x, y = 1.0, 2.0
-    for k in range(300):
+    for k, (x, y, i, j, r) in enumerate(_arc_chain(rng, 300, head.endswith("G90.1"))):
         g = "G2" if k % 2 else "G3"
-        r = float(rng.uniform(0.5, 3))
-        a0, a1 = (float(v) for v in rng.uniform(0, 2 * math.pi, 2))
-        cx, cy = x - r * math.cos(a0), y - r * math.sin(a0)
-        i, j = (cx, cy) if head.endswith("G90.1") else (cx - x, cy - y)
-        x, y = round(cx + r * math.cos(a1), 4), round(cy + r * math.sin(a1), 4)
         if k % 7 == 0:
             lines.append(f"{g} X{x:.4f} Y{y:.4f} R{r:.4f} F500")
         elif k % 5 == 0:
@@ -387,14 +395,8 @@ def test_a_runs_arcs_are_the_moves_of_their_lines(monkeypatch, head):
     # before, alone on a line, or from before the run), rotary positions, R form
     rng = np.random.default_rng(11)
     lines = [head, "G0 X1 Y2 Z0.5 A0", "F300"]
-    x, y = 1.0, 2.0
-    for k in range(240):
+    for k, (x, y, i, j, r) in enumerate(_arc_chain(rng, 240, head.endswith("G90.1"))):
         g = "G2" if k % 3 else "G3"
-        r = float(rng.uniform(0.5, 3))
-        a0, a1 = (float(v) for v in rng.uniform(0, 2 * math.pi, 2))
-        cx, cy = x - r * math.cos(a0), y - r * math.sin(a0)
-        i, j = (cx, cy) if head.endswith("G90.1") else (cx - x, cy - y)
-        x, y = round(cx + r * math.cos(a1), 4), round(cy + r * math.sin(a1), 4)
         feed = f" F{100 + k}" if k % 4 == 0 else ""
         if k % 11 == 0:
             lines.append(f"{g} X{x:.4f} Y{y:.4f} R{r:.4f}{feed}")
