@@ -366,33 +366,52 @@ def test_a_run_arcs_turn_is_its_arc_params(monkeypatch, head):
         assert [v.hex() for v in turn] == [float(v).hex() for v in prm[1:]]
 
 
-def _run_move_fields(mv):
-    return {k: getattr(mv, k) for k in bulk.RunMove.__slots__}
+def _planned_arcs(monkeypatch, text: str, chunk_lines: int, bulk_lane: bool, **options) -> list:
+    """``text`` corrected (``options``: more of CorrectOptions), the arcs the planner is
+    given, in program order (Move or RunMove)."""
+    from postproc.gcode.planner import Planner
+
+    seen = []
+    plan = Planner.plan
+
+    def spy(self, tab):
+        seen.extend(m for _i, m in sorted(tab.moves, key=lambda im: im[0]) if m.arc is not None)
+        return plan(self, tab)
+
+    monkeypatch.setattr(Planner, "plan", spy)
+    correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=chunk_lines, extrapolate="linear",
+                                                       bulk_lane=bulk_lane, **options), path="main.ngc")
+    monkeypatch.setattr(Planner, "plan", plan)
+    return seen
 
 
-def _arc_moves_compared(monkeypatch, text: str, chunk_lines: int) -> list[tuple[dict, dict]]:
-    """``text`` corrected, each run arc's move from arc_moves beside the one _row_move
-    makes of its line (fields by name)."""
+def _arc_fields(mv) -> tuple:
+    return (mv.lineno, mv.kind, mv.feed, mv.rotary, mv.path, mv.unit, tuple(mv.shift), bool(mv.arc_absolute),
+            mv.arc.clockwise, mv.arc.r_idx >= 0)
+
+
+def _arc_moves_compared(monkeypatch, text: str, chunk_lines: int, **options) -> list[tuple]:
+    """The arcs of ``text`` as the planner gets them read in runs (RunMove) beside those
+    the interpreter reads line by line (Move): (run's, interpreter's) of each run arc."""
+    fast = _planned_arcs(monkeypatch, text, chunk_lines, True, **options)
+    slow = _planned_arcs(monkeypatch, text, chunk_lines, False, **options)
+    assert len(fast) == len(slow)
     compared = []
-    arc_moves = bulk.arc_moves
-
-    def spy(run):
-        got = arc_moves(run)
-        for j, mv in got:
-            q0 = tuple(run.q1[j - 1].tolist()) if j else run.q0
-            compared.append((_run_move_fields(mv), _run_move_fields(bulk._row_move(run, j, q0))))
-        return got
-
-    monkeypatch.setattr(bulk, "arc_moves", spy)
-    correct_text(text, ENGINE, Setup(), CorrectOptions(chunk_lines=chunk_lines, extrapolate="linear"))
+    for f, s in zip(fast, slow, strict=True):
+        assert type(s) is not bulk.RunMove
+        assert np.allclose(f.q0, s.q0, rtol=0, atol=1e-9)
+        assert np.allclose(f.q1, s.q1, rtol=0, atol=1e-9)
+        assert np.allclose(f.arc.center, s.arc.center, rtol=0, atol=1e-9)
+        if type(f) is bulk.RunMove:
+            compared.append((_arc_fields(f), _arc_fields(s)))
     return compared
 
 
 @pytest.mark.parametrize("head", ["G21 G90 G17", "G20 G90 G17 G90.1"])
 def test_a_runs_arcs_are_the_moves_of_their_lines(monkeypatch, head):
-    # arc_moves reads all of a run's arcs at once; each is the move _row_move makes of
-    # its line: motion (named, or modal with no G word), feed (on the line, on a line
-    # before, alone on a line, or from before the run), rotary positions, R form
+    # a run's arcs are the moves the interpreter makes of their lines: motion (named, or
+    # modal with no G word), feed (on the line, on a line before, alone on a line, or
+    # from before the run), rotary positions, R form
     rng = np.random.default_rng(11)
     lines = [head, "G0 X1 Y2 Z0.5 A0", "F300"]
     for k, (x, y, i, j, r) in enumerate(_arc_chain(rng, 240, head.endswith("G90.1"))):
@@ -412,21 +431,36 @@ def test_a_runs_arcs_are_the_moves_of_their_lines(monkeypatch, head):
     lines.append("M2")
     compared = _arc_moves_compared(monkeypatch, "\n".join(lines) + "\n", 40)
     assert len(compared) > 150
-    assert {f["kind"] for f, _ in compared} == {20, 30}
-    assert len({f["feed"] for f, _ in compared}) > 20
-    assert any(f["arc"].r_idx >= 0 for f, _ in compared)
-    assert any(f["rotary"] for f, _ in compared)
+    assert {f[1] for f, _ in compared} == {20, 30}
+    assert len({f[2] for f, _ in compared}) > 20
+    assert any(f[9] for f, _ in compared)  # R form
+    assert any(f[3] for f, _ in compared)  # rotary positions
     for fast, one in compared:
         assert fast == one
 
 
 def test_a_loops_arcs_are_the_moves_of_their_source_lines(monkeypatch):
-    # in an expanded program the arcs of a run carry their source lines, as _row_move's
+    # in an expanded program the arcs of a run carry their source lines, as the
+    # interpreter's moves do
     text = ("G21 G90 G17\nG0 X10 Y0 Z1\n#1 = 0\no100 while [#1 LT 5]\n"
             "G2 X0 Y-10 I-10 J0 F[100 + #1]\nX-10 Y0 I0 J10\nG1 X-10 Y1\nG3 X-11 Y0 R1\nG1 X-10 Y0\nG2 X10 Y0 I10 J0\n"
             "#1 = [#1 + 1]\no100 endwhile\nM2\n")
     compared = _arc_moves_compared(monkeypatch, text, 7)
     assert len(compared) >= 10
-    assert len({f["lineno"] for f, _ in compared}) == 4  # four source lines, read five times
+    assert len({f[0] for f, _ in compared}) == 4  # four source lines, read five times
+    for fast, one in compared:
+        assert fast == one
+
+
+def test_a_subprograms_arcs_carry_its_file(monkeypatch, tmp_path):
+    # the arcs a run reads from a subprogram's own file name that file, as the
+    # interpreter's moves do
+    (tmp_path / "arcs.ngc").write_text("o<arcs> sub\nG2 X0 Y-10 I-10 J0 F300\nX-10 Y0 I0 J10\nG3 X0 Y10 I10 J0\n"
+                                       "G1 X10 Y0\no<arcs> endsub\nM2\n")
+    text = ("G21 G90 G17\nG0 X10 Y0 Z1\n#1 = 0\no100 while [#1 LT 4]\no<arcs> call\n#1 = [#1 + 1]\n"
+            "o100 endwhile\nM2\n")
+    compared = _arc_moves_compared(monkeypatch, text, 5, subroutine_path=[str(tmp_path)])
+    assert len(compared) >= 6
+    assert {f[4] for f, _ in compared} == {str(tmp_path / "arcs.ngc")}
     for fast, one in compared:
         assert fast == one

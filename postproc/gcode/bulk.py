@@ -608,29 +608,11 @@ def _rotary_rows(interp: Interpreter, block: Block, a: int, b: int) -> list[dict
 
 
 def arc_moves(run: Run) -> list[tuple[int, RunMove]]:
-    """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove):
-    what :func:`_row_move` makes of each, read for all of them at once (an arc's motion
-    is the sense its centre was found for; its feed the last F at or before it)."""
+    """The arcs of a run (after :func:`finish_block`) as (line within the run, RunMove)."""
     if not run.arcs:
         return []
-    blk, a = run.block, run.a
     q1 = run.q1.tolist()  # the targets as tuples of floats, converted at once
-    last_f, f_value, feed0 = blk.last_f, blk.f_value, run.feed0
-    src, files, rot = blk.src, blk.src_files, run.rot
-    has_r = blk.has_r[a:run.b].tolist()
-    out: list[tuple[int, RunMove]] = []
-    for j, (centre, cw, _turn) in run.arcs.items():
-        y = a + j
-        f = last_f[y]
-        mv = RunMove(run, run.lineno + j if src is None else src[y], ARC_CW if cw else ARC_CCW,
-                     tuple(q1[j - 1]) if j else run.q0, tuple(q1[j]), f_value[f] if f >= a else feed0)
-        if files is not None:
-            mv.path = files[y]
-        if rot is not None:
-            mv.rotary = rot[j]
-        mv.arc = Arc(centre, 170, cw, 1, (-1, -1), R_FORM if has_r[j] else -1)
-        out.append((j, mv))
-    return out
+    return [(j, _row_move(run, j, tuple(q1[j - 1]) if j else run.q0, tuple(q1[j]))) for j in run.arcs]
 
 
 def finish_block(block: Block) -> None:
@@ -718,19 +700,23 @@ def _row_move(run: Run, j: int, q0: Point | None = None, q1: Point | None = None
     """Line ``j`` of a run (an index within it) as a RunMove, for the general emitter
     (``q0``, ``q1``: its start and target, when the caller has them)."""
     blk = run.block
-    y = run.a + j
-    named, has_f = blk.motion_l[y] >= 0, blk.f_has[y]
-    motion, feed = (None, 0.0) if named and has_f else _modal_at(run, y)  # what the line does not name
-    if named:
-        motion = blk.code(y)
-    elif motion is None:  # a run's first line names its motion when none is modal
+    a = run.a
+    y = a + j
+    # the motion and feed in force at the line: its own words, or the last ones before it
+    # in the run, or those the run started with
+    g, f = blk.last_g[y], blk.last_f[y]
+    motion = blk.code(g) if g >= a else run.motion0
+    if motion is None:  # a run's first line names its motion when none is modal
         raise AssertionError(f"line {run.line(j)} of a run without a motion")
     if q0 is None:
         q0 = run.q0 if j == 0 else tuple(run.q1[j - 1].tolist())
     if q1 is None:
         q1 = tuple(run.q1[j].tolist())
-    mv = RunMove(run, run.line(j), motion, q0, q1, blk.f_value[y] if has_f else feed)
-    mv.path = run.path(j)
+    src, files = blk.src, blk.src_files  # (Run.line and Run.path of line j)
+    mv = RunMove(run, run.lineno + j if src is None else src[y], motion, q0, q1,
+                 blk.f_value[f] if f >= a else run.feed0)
+    if files is not None:
+        mv.path = files[y]
     if run.rot is not None:
         mv.rotary = run.rot[j]
     arc = run.arcs.get(j)
