@@ -110,6 +110,7 @@ def word_texts(values: list[float], own: list[float], own_decimals: list[int], d
             dest[at[changed[k]]] = texts[k]
     return changed, texts
 
+
 #: 10**d as doubles, exact for d <= 22 (their products and quotients rounded once)
 _POWERS: Final = tuple(10.0 ** d for d in range(23))
 #: 2**52: at and beyond it every double is an integer
