@@ -54,6 +54,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -121,25 +122,35 @@ def tree_memory(pid: int) -> float:
 def run_child(cmd: list[str], log: Path) -> tuple[float, float, float]:
     """Run ``cmd`` (cwd: the repository, so that its own postproc is imported): wall
     seconds, the peak RSS of its largest process in MB and the peak summed PSS of its
-    processes (sampled every 0.5 s; ``diff`` reads large programs in child processes).
-    A failing child stops the benchmark."""
+    processes. A failing child stops the benchmark.
+
+    The wall time ends when the child exits: this thread waits for it (``wait4``, which
+    also gives its peak RSS), while another samples the PSS of it and its children
+    (``diff`` reads large programs in child processes) every 0.05 s for the first second
+    and every 0.5 s after, without delaying the end of the measurement."""
     with open(log, "wb") as out:
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 env=CHILD_ENV)
-        pss = 0.0
-        while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                break
-            pss = max(pss, tree_memory(proc.pid))
-            time.sleep(0.5 if time.perf_counter() - t0 > 1.0 else 0.05)
+        done = threading.Event()
+        pss = [0.0]
+
+        def sample() -> None:
+            while not done.is_set():
+                pss[0] = max(pss[0], tree_memory(proc.pid))
+                done.wait(0.5 if time.perf_counter() - t0 > 1.0 else 0.05)
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
+        _pid, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
+        done.set()
+        sampler.join()
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode:
         sys.exit(f"benchmark case failed (exit code {proc.returncode}): {' '.join(cmd)}\n"
                  + log.read_text(errors="replace")[-2000:])
-    return wall, usage.ru_maxrss / 1024.0, pss
+    return wall, usage.ru_maxrss / 1024.0, pss[0]
 
 
 def measure(cmd: list[str], repeats: int, log: Path) -> dict:
