@@ -90,8 +90,10 @@ class BoundedWriter:
         self.where = where
 
     def __call__(self, text: str) -> None:
-        # line ends: LF, CRLF and a lone CR
-        self.lines += text.count("\n") + text.count("\r") - text.count("\r\n")
+        # line ends: LF, CRLF and a lone CR (looked for only where a CR is)
+        self.lines += text.count("\n")
+        if "\r" in text:
+            self.lines += text.count("\r") - text.count("\r\n")
         self.chars += len(text)
         if self.lines > self.limit:
             self._refuse(f"more than {self.limit:,} lines", "--max-output-lines")

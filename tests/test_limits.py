@@ -132,6 +132,22 @@ def test_output_lines_are_bounded_and_nothing_is_returned():
     assert out.count("G1 X1") == 500
 
 
+@pytest.mark.parametrize("ending", ["\n", "\r\n", "\r"])
+def test_output_lines_are_counted_whatever_their_ending(ending):
+    from postproc.limits import BoundedWriter
+
+    written: list[str] = []
+    w = BoundedWriter(written.append, 3, lambda: ("p.ngc", 7))
+    w(f"G0 X1{ending}G1 X2{ending}")
+    w("(no line end yet)")
+    w(f"{ending}")  # the third line
+    assert w.lines == 3
+    with pytest.raises(ResourceLimitError, match="more than 3 lines") as err:
+        w(f"M2{ending}")
+    assert (err.value.path, err.value.lineno) == ("p.ngc", 7)
+    assert "".join(written) == f"G0 X1{ending}G1 X2{ending}(no line end yet){ending}"
+
+
 def test_the_default_output_bound_grows_with_the_input():
     assert Limits().output_lines(1000) == OUTPUT_GROWTH * 1000 + OUTPUT_LINES_EXTRA
     assert Limits(max_output_lines=7).output_lines(10**9) == 7
