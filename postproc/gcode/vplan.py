@@ -318,13 +318,12 @@ def _arc_samples(arcs_i: Sequence[tuple[int, PlanMove, Arc]], arc_prm: dict[int,
     at least ``min_arc_samples``."""
     Q0, Q1 = ends.q0, ends.q1
     step_mm, step_rad = sampling.step_mm, sampling.step_rad
-    ai = np.array([i for i, _m, _a in arcs_i], dtype=int)
-    prm = [arc_prm[i] for i in ai.tolist()]
-    sweep = np.array([p[2] for p in prm])
-    r0 = np.array([p[3] for p in prm])
-    r1 = np.array([p[4] for p in prm])
-    t0 = np.array([p[1] for p in prm])
-    axes = np.array([p[0] for p in prm], dtype=int).reshape(-1, 3)
+    rows = [i for i, _m, _a in arcs_i]
+    ai = np.array(rows, dtype=int)
+    # the arcs' parameters by column: planes, start angles, sweeps, start and end radii
+    prm = list(zip(*[arc_prm[i] for i in rows], strict=True)) or [(), (), (), (), ()]
+    axes = np.array(prm[0], dtype=int).reshape(-1, 3)
+    t0, sweep, r0, r1 = (np.array(c, dtype=float) for c in prm[1:5])
     dn = Q1[ai, axes[:, 2]] - Q0[ai, axes[:, 2]] if len(ai) else np.zeros(0)
     length = np.hypot(np.abs(sweep) * 0.5 * (r0 + r1), dn)
     na = np.maximum.reduce([np.full(len(ai), sampling.min_arc_samples), np.ceil(length / step_mm).astype(int) + 1,
@@ -376,19 +375,27 @@ def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlaneP
     Pf = np.empty((len(full_o), 3))
     first = full_p == 0
     last = full_p == na[full_o] - 1
+    inner = ~(first | last)
     Pf[first] = S[ai]
     Pf[last] = T[ai]
-    Pf[~first & ~last] = P_a
+    Pf[inner] = P_a
     nom_m = arcs_points(mo, s_m, cols)
     nom_f = np.empty_like(Pf)
     nom_f[first] = ends.q0[ai]
     nom_f[last] = ends.q1[ai]
-    nom_f[~first & ~last] = arcs.nom
-    # interval k of arc j lies between full slots full_start[j] + k and + k + 1
+    nom_f[inner] = arcs.nom
+    # interval k of arc j lies between full slots full_start[j] + k and + k + 1; its
+    # bulge nom_m - (its ends' mean) and middle (its corrected ends' mean) + bulge, in
+    # place (the same operations, in order)
     a_idx = full_start[mo] + mp
-    bulge = nom_m - 0.5 * (nom_f[a_idx] + nom_f[a_idx + 1])
-    mid = 0.5 * (Pf[a_idx] + Pf[a_idx + 1]) + bulge
-    pts = np.vstack([Pf, mid])
+    bulge = nom_f[a_idx]
+    bulge += nom_f[a_idx + 1]
+    bulge *= 0.5
+    np.subtract(nom_m, bulge, out=bulge)
+    mid = Pf[a_idx]
+    mid += Pf[a_idx + 1]
+    mid *= 0.5
+    mid += bulge
     owner = np.concatenate([full_o, mo])
     frac = np.concatenate([full_p / (na[full_o] - 1), s_m])
     k = len(ai)
@@ -398,9 +405,9 @@ def _plane_points(arcs: _ArcSamples, ends: MoveEnds, P_a: FloatArray) -> _PlaneP
     S1, S2, Sn = S[ai, ax1], S[ai, ax2], S[ai, axn]
     E1, E2, En = T[ai, ax1], T[ai, ax2], T[ai, axn]
     if (axes == axes[0]).all():  # every arc in one plane (as CAM programs are): by columns
-        b1, b2, bn = axes[0].tolist()
-        P1, P2, Pn = pts[:, b1].copy(), pts[:, b2].copy(), pts[:, bn].copy()
+        P1, P2, Pn = (np.concatenate([Pf[:, b], mid[:, b]]) for b in axes[0].tolist())
     else:
+        pts = np.vstack([Pf, mid])
         at = np.arange(len(pts))
         P1, P2, Pn = pts[at, ax1[owner]], pts[at, ax2[owner]], pts[at, axn[owner]]
     # first guess: the nominal centre moved by the mean correction
@@ -441,6 +448,7 @@ def _fit_centres(p: _PlanePoints) -> _Circles:
     # rounding noise), as segment.bisector_centre's does: what an arc gets does not
     # depend on the arcs fitted with it
     active = np.ones(k, dtype=bool)
+    n1o, n2o = n1[owner], n2[owner]  # each point's arc's bisector direction
     for _ in range(CENTRE_ITERATIONS):
         c1, c2 = M1 + t * n1, M2 + t * n2
         v1, v2 = P1 - c1[owner], P2 - c2[owner]
@@ -448,9 +456,14 @@ def _fit_centres(p: _PlanePoints) -> _Circles:
         dist = np.where(dist > 0, dist, 1e-300)
         rho = np.hypot(h, t)
         res = dist - rho[owner]
-        J = -(v1 * n1[owner] + v2 * n2[owner]) / dist - (t / rho)[owner]
-        den = np.bincount(owner, J * J, minlength=k)
-        num = np.bincount(owner, J * res, minlength=k)
+        # J = -(v1 n1 + v2 n2) / dist - t / rho, in place (the same operations, in order)
+        J = np.multiply(v1, n1o, out=v1)
+        J += np.multiply(v2, n2o, out=v2)
+        np.negative(J, out=J)
+        J /= dist
+        J -= (t / rho)[owner]
+        den = np.bincount(owner, np.multiply(J, J, out=v2), minlength=k)
+        num = np.bincount(owner, np.multiply(J, res, out=v2), minlength=k)
         dt = np.where(den > 0, -num / np.where(den > 0, den, 1.0), 0.0)
         flip = ((t + dt) * t < 0) & (t != 0)
         step = np.where(flip, -0.5 * t, dt)
@@ -479,12 +492,24 @@ def _worst_deviations(p: _PlanePoints, circles: _Circles, arcs: _ArcSamples) -> 
     asw = np.where(asw > 0, asw, 1.0)
     v1, v2 = p.P1 - c1[owner], p.P2 - c2[owner]
     phi = np.arctan2(v2, v1)
-    alpha = np.mod((phi - th0[owner]) * sgn[owner], TWO_PI)
-    target = p.frac * asw[owner]
-    alpha = alpha + TWO_PI * np.round((target - alpha) / TWO_PI)
-    f = alpha / asw[owner]
-    nrm = Sn[owner] + (En - Sn)[owner] * f
-    dev = np.hypot(np.hypot(v1, v2) - rho[owner], p.Pn - nrm)
+    phi -= th0[owner]
+    phi *= sgn[owner]
+    alpha = np.mod(phi, TWO_PI, out=phi)
+    asw_o = asw[owner]
+    # alpha + 2 pi round((frac asw - alpha) / 2 pi), in place (the same operations, in order)
+    turns = np.multiply(p.frac, asw_o)
+    turns -= alpha
+    turns /= TWO_PI
+    np.round(turns, out=turns)
+    turns *= TWO_PI
+    alpha += turns
+    alpha /= asw_o  # the share of the turn
+    nrm = (En - Sn)[owner]
+    nrm *= alpha
+    nrm += Sn[owner]
+    dev = np.hypot(v1, v2)
+    dev -= rho[owner]
+    dev = np.hypot(dev, np.subtract(p.Pn, nrm, out=nrm), out=dev)
     # the points are every arc's samples (arc by arc), then every arc's interval middles:
     # each arc's largest of both
     n_full = len(owner) - len(arcs.mid_own)
