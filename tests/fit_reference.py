@@ -7,7 +7,12 @@ in order where numpy's went through BLAS (it fits the points as closely).
 
 Also the R form's candidates as the writer chose them in Python (:func:`r_candidates`,
 with :func:`r_center` as geometry had it), the reference ``tests/test_fitcore.py``
-holds :meth:`postproc.gcode.fitcore.ArcTry.r_form` to, bit for bit."""
+holds :meth:`postproc.gcode.fitcore.ArcTry.r_form` to, bit for bit.
+
+Angles are the C library's ``atan2`` (:func:`_arctan2`), as numpy's ``arctan2`` gave them
+where these measures were written: where the CPU has AVX-512, numpy takes its own
+vectorised ``arctan2`` instead, which differs from the C library's in the last bit of
+about 2 % of the angles, and the reference would then move with the machine."""
 
 from __future__ import annotations
 
@@ -26,6 +31,13 @@ from postproc.gcode.segment import (
     controller_limits_of,
     full_of,
 )
+
+_ATAN2 = np.frompyfunc(math.atan2, 2, 1)
+
+
+def _arctan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``np.arctan2`` element by element with the C library's ``atan2`` (math.atan2)."""
+    return np.asarray(_ATAN2(y, x), dtype=float)
 
 
 def bisector_centre(S2, E2, P2, c0):
@@ -104,7 +116,7 @@ def arc_candidates(S, E, C, axes, clockwise, nominal_sweep,
     if mismatch_limit is not None:
         return _limited_candidates(S, E, C, dx, dy, rad, mismatch, mismatch_limit, axes, clockwise, nominal_sweep,
                                    Q, frac_nominal, controller_limits)
-    ang = np.arctan2(dy, dx)
+    ang = _arctan2(dy, dx)
     t0, t1 = ang[0], ang[1]
     if clockwise:
         base = -np.mod(t0 - t1, TWO_PI)
@@ -141,7 +153,7 @@ def _limited_candidates(S, E, C, dx, dy, rad,
         return worst, mismatch, turns
     a1, a2, _an = axes
     s1, s2, e1, e2 = S[a1], S[a2], E[a1], E[a2]
-    ang = np.arctan2(dy[:, sel], dx[:, sel])
+    ang = _arctan2(dy[:, sel], dx[:, sel])
     full_chord = math.hypot(e1 - s1, e2 - s2) < FULL_CIRCLE_MM
     full_sweep = -TWO_PI if clockwise else TWO_PI
     nsw = abs(nominal_sweep)
@@ -180,7 +192,7 @@ def _deviation(S, E, C, t0, sweep, r0,
     asw = np.abs(sweep)[:, None]
     # the angle from the start the way the arc turns ((phi - t0) * -1 is t0 - phi exactly);
     # the arithmetic in place (the same operations, fewer temporary arrays)
-    phi = np.arctan2(v2, v1)
+    phi = _arctan2(v2, v1)
     if clockwise:
         alpha = np.subtract(t0[:, None], phi, out=phi)
     else:
