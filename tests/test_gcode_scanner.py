@@ -116,6 +116,17 @@ def test_fmt_all_is_fmt(values, d, mixed):
     assert all(not t.startswith("X-") or t.strip("X-0.") for t in numfmt.fmt_all(values, decimals, "X"))
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("mixed", [False, True])
+def test_fmt_all_refuses_what_is_not_finite(bad, mixed):
+    values = [1.5, 1e308, 1e308, bad, -2.0]
+    decimals = [4, 4, 4, 4, 5 if mixed else 4]
+    with pytest.raises(ValueError, match="cannot write"):
+        numfmt.fmt_all(values, decimals, "X")
+    # finite values whose sum overflows are written
+    assert numfmt.fmt_all([1e308, 1e308, -0.0], [1, 1, 1], "")[1:] == ["%.1f" % 1e308, "0.0"]  # noqa: UP031
+
+
 
 def _bits(x: float) -> bytes:
     return struct.pack("<d", x)

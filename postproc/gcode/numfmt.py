@@ -30,19 +30,23 @@ def fmt_all(values: list[float], decimals: list[int], prefix: str) -> list[str]:
     if n == 0:
         return []
     d = decimals[0]
-    for k in range(n):
-        if decimals[k] != d:
-            return [prefix + fmt(values[k], decimals[k]) for k in range(n)]
-    for v in values:
-        if not math.isfinite(v):
-            raise ValueError(f"cannot write {v} into a program")
-    texts = ((prefix + "%." + str(d) + "f\n") * n % tuple(values)).split("\n")
+    if decimals.count(d) != n:
+        return [prefix + fmt(values[k], decimals[k]) for k in range(n)]
+    if not math.isfinite(sum(values)):  # (finite values may overflow the sum: looked at one by one)
+        for v in values:
+            if not math.isfinite(v):
+                raise ValueError(f"cannot write {v} into a program")
+    text = (prefix + "%." + str(d) + "f\n") * n % tuple(values)
+    texts = text.split("\n")
     texts.pop()
-    low = -(10.0 ** -d)  # a value above it and not above 0 may be written -0.000
-    for k in range(n):
-        v = values[k]
-        if v <= 0.0 and v > low:
-            texts[k] = prefix + fmt(v, d)
+    # a value above -10^-d and not above 0 is written -0.000 or 0.000: where no -0.000 is
+    # written, none is to be mended
+    if ("-0." + "0" * d if d else "-0") + "\n" in text:
+        low = -(10.0 ** -d)
+        for k in range(n):
+            v = values[k]
+            if v <= 0.0 and v > low:
+                texts[k] = prefix + fmt(v, d)
     return texts
 
 
