@@ -16,7 +16,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 STATIC = str(ROOT / "calibrations" / "s500_static.json")
-GENCAM = Path("/work/shared/bench/gencam.py")
+GENCAM = ROOT.parent / "shared" / "bench" / "gencam.py"  # ../shared, as every test finds it
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
 
 
