@@ -254,7 +254,8 @@ def test_the_hint_takes_what_moves_carry():
          [0.0, 0.0]),
     ]:
         mv = SimpleNamespace(arc=arc, unit=unit, arc_absolute=flag, shift=shift)
-        got = (hint.spec(mv, S, E, 4, 1e-3), hint.keep(mv, S, E, centre, 1e-3), hint.guess(arc, 4, unit, shift, flag, 1e-3))
+        got = (hint.spec(mv, S, E, 4, 1e-3), hint.keep(mv, S, E, centre, 1e-3),
+               hint.guess(arc, 4, unit, shift, flag, 1e-3))
         assert got == want
 
 

@@ -14,8 +14,9 @@ the same answer for the same ends, as there is one computation: the hint keeps i
 question (:data:`Key`) with its answer, and the writer's same question takes it.
 
 The arithmetic is Python's on floats (``math.hypot``, ``math.atan2``, ``round`` through
-:func:`postproc.gcode.numfmt.round_to`, the floored ``%``), compiled or not. Compiled at install by mypyc with the scanner
-(``setup.py``); runs unchanged uncompiled. Of the package it imports the formatter
+:func:`postproc.gcode.numfmt.round_to`, the floored ``%``), compiled or not. Compiled at
+install by mypyc with the scanner (``setup.py``); runs unchanged uncompiled. Of the
+package it imports the formatter
 (:mod:`postproc.gcode.numfmt`, compiled with it), the planes' axes
 (:data:`postproc.gcode.state.PLANES`) and the least radius and sweep a controller cuts
 as meant (:mod:`postproc.gcode.segment`).
