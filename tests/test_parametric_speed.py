@@ -2,6 +2,10 @@
 located points, vectorised 3 x 3 solves) against the straightforward evaluation it
 replaced (tests/parametric_reference.py): the same bits, not merely close values."""
 
+import os
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -194,11 +198,6 @@ def _lapack_solve(J: np.ndarray, f: np.ndarray) -> np.ndarray:
     ones it runs on AVX2 machines, so that the reference is one on every such machine."""
     if not _avx2_fma():
         return np.linalg.solve(J, f[:, :, None])[:, :, 0]
-    import os
-    import subprocess
-    import sys
-    import tempfile
-
     with tempfile.TemporaryDirectory() as tmp:
         np.save(f"{tmp}/J.npy", J)
         np.save(f"{tmp}/f.npy", f)
