@@ -131,6 +131,69 @@ def test_a_state_that_disagrees_leaves_the_run_to_this_process(tmp_path, engines
     assert not multiprocessing.active_children()
 
 
+@pytest.fixture
+def plans(monkeypatch):
+    """The cuts and the lines the children go on reading from (split.plan)."""
+    seen: list[tuple[list[int], list[int]] | None] = []
+    plan = split.plan
+
+    def record(*args):
+        seen.append(plan(*args))
+        return seen[-1]
+
+    monkeypatch.setattr(split, "plan", record)
+    return seen
+
+
+@pytest.mark.parametrize("cal", ["static", "parametric"])
+def test_a_child_skips_to_the_last_tool_change_before_its_warm_up(tmp_path, engines, agreements, plans, cal):
+    text = program(900, seed=3)
+    one = correct(tmp_path, text, engines[cal], 1, 40)
+    two = correct(tmp_path, text, engines[cal], 2, 40)
+    [(at, go)] = plans
+    warm_up = at[0] - split.WARMUP_CHUNKS * 40
+    lines = text.splitlines()
+    assert 2 * 40 < go[0] <= warm_up
+    assert "M6" in lines[go[0] - 1]
+    assert not any("M6" in line for line in lines[go[0]:warm_up])
+    assert agreements == [True]
+    assert two == one
+
+
+def _one_tool(n_moves: int, extra: dict[int, str]) -> str:
+    """A program with one tool: feed moves, a rapid every 25 moves, ``extra`` before move k."""
+    out = ["%", "G90 G21 G17 G40 G49 G80", "G54", "T1 M6", "G0 X150 Y150", "G0 G43 H1 Z25", "G1 Z-2 F700"]
+    for k in range(n_moves):
+        out.append(extra.get(k, ""))
+        x, y = 150 + 40 * math.sin(k / 9.0), 150 + 40 * math.cos(k / 7.0)
+        out.append(f"G0 X{x:.3f} Y{y:.3f} Z2" if k % 25 == 0 else f"G1 X{x:.3f} Y{y:.3f} Z-2")
+    out += ["M30", "%"]
+    return "\n".join(line for line in out if line) + "\n"
+
+
+def test_a_state_the_skipped_lines_left_is_caught_at_the_cut(tmp_path, engines, agreements, plans):
+    # G49 (tool length off, for good) is no word the scan looks for: the child skips it and
+    # reaches the cut with the tool length on; the states differ and this process goes on
+    # alone, with the same output
+    text = _one_tool(900, {300: "G49"})
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+    two = correct(tmp_path, text, engines["static"], 2, 40)
+    [(_at, go)] = plans
+    assert go[0] > text.splitlines().index("G49") + 1  # a rapid after it
+    assert agreements == [False]
+    assert two == one
+
+
+def test_a_durable_word_before_the_warm_up_is_read(tmp_path, engines, agreements, plans):
+    text = _one_tool(900, {300: "G92 X145 Y145", 310: "G92.1"})
+    one = correct(tmp_path, text, engines["static"], 1, 40)
+    two = correct(tmp_path, text, engines["static"], 2, 40)
+    [(_at, go)] = plans
+    assert 0 < go[0] <= text.splitlines().index("G92 X145 Y145") + 1
+    assert agreements == [True]
+    assert two == one
+
+
 @pytest.mark.parametrize("z_on_every_line", [True, False])
 def test_an_axis_that_never_moves_in_the_window(tmp_path, engines, agreements, z_on_every_line):
     # Z moves once, at the start. Named on every line (as some posts write every axis),

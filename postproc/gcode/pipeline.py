@@ -54,6 +54,8 @@ from postproc.limits import BoundedWriter
 # each: 1.5 million held took 3.7 GB). Real programs position every axis in their first
 # lines; one that never does is refused at its end anyway, this refuses it in bounded memory.
 UNKNOWN_AXIS_LINES = 200_000
+# Lines taken at a time where a later part's process skips lines (a bound on its memory).
+SKIP_LINES = 50_000
 
 if TYPE_CHECKING:
     from postproc.engine.base import Engine
@@ -131,18 +133,19 @@ class Corrector:
 
     def run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
             source: deque[tuple[int, str | None]] | None = None, *, skip_until: int = 0,
-            boundary: Callable[[int], bool] | None = None) -> CorrectReport:
+            boundary: Callable[[int], bool] | None = None, go_on_from: int = 0) -> CorrectReport:
         """Correct ``lines`` into ``write``. For a program corrected in several processes
         (:mod:`postproc.gcode.split`): the chunks that end at or before line ``skip_until``
-        are read but not corrected (the modal state advances, nothing is written), and
-        ``boundary(lines read)`` is asked after each chunk: True stops the run there (the
-        rest is another process's)."""
+        are read but not corrected (the modal state advances, nothing is written); after
+        the first chunk, the lines before line ``go_on_from`` are not read at all
+        (:mod:`postproc.gcode.skipahead`); and ``boundary(lines read)`` is asked after
+        each chunk: True stops the run there (the rest is another process's)."""
         # Millions of small short-lived objects, none of them cyclic: the cyclic
         # garbage collector only costs time here (the chunks bound the memory).
         was_enabled = gc.isenabled()
         gc.disable()
         try:
-            report = self._run(lines, write, progress, source, skip_until, boundary)
+            report = self._run(lines, write, progress, source, skip_until, boundary, go_on_from)
             if self.cutter.moves and self.cutter_known is None:
                 raise cutter.Rerun(self.cutter)  # the header must carry the bound
             report.cutter = self.cutter if self.cutter.moves else None
@@ -153,7 +156,7 @@ class Corrector:
 
     def _run(self, lines: Iterable[str], write: Write, progress: Callable[[int], None] | None = None,
              source: deque[tuple[int, str | None]] | None = None, skip_until: int = 0,
-             boundary: Callable[[int], bool] | None = None) -> CorrectReport:
+             boundary: Callable[[int], bool] | None = None, go_on_from: int = 0) -> CorrectReport:
         """``lines``: taken a chunk at a time, as a list (:meth:`postproc.fileio.Lines.take`
         where they are :class:`~postproc.fileio.Lines`, the same lists either way);
         ``source``: for an expanded program, the (line, file) each of ``lines`` comes
@@ -170,8 +173,9 @@ class Corrector:
         for line in head[keep:]:
             rd.line(line)
         pending = len(head) - keep  # lines in the chunk read
-        chunk = self.chunk_lines
-        for block in iter(partial(take, chunk), []):
+        chunk = size = self.chunk_lines
+        while block := take(size):
+            size = chunk
             self._read_block(block)
             pending += len(block)
             if pending > UNKNOWN_AXIS_LINES:  # the lines wait for an axis to be positioned: bounded
@@ -188,12 +192,27 @@ class Corrector:
                 if boundary is not None and boundary(rd.lineno - 1):
                     self.report.lines_in = rd.lineno - 1
                     return self.report
+                if go_on_from > rd.lineno and source is None:
+                    pending = self._skip_to(go_on_from, take)
+                    size = chunk - pending  # the chunks after end where they would have
+                go_on_from = 0
         self._chunk(rd.entries, write)
         if progress is not None:
             progress(rd.lineno - 1)
         self.report.lines_in = rd.lineno - 1
         self.report.g54_assumed_zero = self.interp.implicit_g54
         return self.report
+
+    def _skip_to(self, line: int, take: Callable[[int], list[str]]) -> int:
+        """Go on from line ``line``: the lines before it are taken and not read (a later
+        part's process, :mod:`postproc.gcode.skipahead`); returns how many were skipped,
+        modulo the chunk size."""
+        rd = self.reader
+        skipped = 0
+        while rd.lineno < line and (got := len(take(min(line - rd.lineno, SKIP_LINES)))):
+            rd.lineno += got
+            skipped += got
+        return skipped % self.chunk_lines
 
     def _read_block(self, block: list[str]) -> None:
         """Read a block of lines into the chunk; on an error, the lines read before it are

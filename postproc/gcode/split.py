@@ -39,7 +39,7 @@ from typing import IO, Any, Protocol
 import numpy as np
 
 from postproc.errors import PostprocError
-from postproc.gcode import forking, scanner
+from postproc.gcode import forking, scanner, skipahead
 from postproc.gcode.cutter import merge_bounds
 
 #: a run's report (:class:`postproc.gcode.pipeline.CorrectReport`, a dataclass)
@@ -71,7 +71,7 @@ class Corrector(Protocol):
 
     def run(self, lines: Iterable[str], write: Callable[[str], object],
             progress: Callable[[int], None] | None = None, source: Any = None, *, skip_until: int = 0,
-            boundary: Callable[[int], bool] | None = None) -> CorrectReport: ...
+            boundary: Callable[[int], bool] | None = None, go_on_from: int = 0) -> CorrectReport: ...
 
 
 #: a program is cut only when it has at least this many chunks
@@ -86,6 +86,8 @@ WARMUP_CHUNKS = 2
 #: against 16.3 and 17.2 s, medians of 3); about 0.1 with a model whose moves are sampled
 READ_SHARE_AFFINE = 0.5 if scanner.__file__.endswith(".py") else 0.3
 READ_SHARE_SAMPLED = 0.1
+#: the cost of a line skipped unread (:mod:`postproc.gcode.skipahead`), the same way
+READ_SHARE_SKIP = 0.02
 #: a further process is used only where it shortens the first part by this share
 MIN_GAIN = 0.1
 #: and never more processes than this (each holds its own chunk: some 60 MB)
@@ -114,7 +116,7 @@ def count_lines(path: str) -> int:
     return bounded_count(path)
 
 
-def cuts(lines: int, chunk: int, affine: bool, processes: int) -> list[int] | None:
+def cuts(lines: int, chunk: int, affine: bool, processes: int, share: float | None = None) -> list[int] | None:
     """The cuts S1 < S2 < ... for at most ``processes`` processes (each part ends at the
     first chunk boundary at or after its cut), or None when the program is too short to
     gain. This process corrects S1 lines; child j reads W_j = S_j - (the window) lines at
@@ -122,10 +124,11 @@ def cuts(lines: int, chunk: int, affine: bool, processes: int) -> list[int] | No
     equal, S(j+1) = S1 + (1 - r) W_j, the last part ending at the program's end. A process
     is added only while it shortens the first part by :data:`MIN_GAIN` at least (the
     reading every child repeats makes each one gain less), and only while no part is
-    shorter than the window."""
+    shorter than the window. ``share``: r where it is not the reader's (children that
+    skip lines)."""
     if lines < MIN_CHUNKS * chunk:
         return None
-    r = READ_SHARE_AFFINE if affine else READ_SHARE_SAMPLED
+    r = share if share is not None else READ_SHARE_AFFINE if affine else READ_SHARE_SAMPLED
     window = WARMUP_CHUNKS * chunk
     best: list[int] | None = None
     for k in range(2, min(processes, MAX_PROCESSES) + 1):
@@ -139,6 +142,28 @@ def cuts(lines: int, chunk: int, affine: bool, processes: int) -> list[int] | No
             break
         best = at
     return best
+
+
+def plan(lines: int, chunk: int, affine: bool, processes: int, path: str | None
+         ) -> tuple[list[int], list[int]] | None:
+    """The cuts (:func:`cuts`) and the line each child goes on reading from after its first
+    chunk (:func:`postproc.gcode.skipahead.go_on_from`; 0: it reads every line), or None
+    when the program stays in one process. The cuts are placed for what each child reads:
+    the lines it skips at :data:`READ_SHARE_SKIP`, the others at the reader's share."""
+    read = READ_SHARE_AFFINE if affine else READ_SHARE_SAMPLED
+    window = WARMUP_CHUNKS * chunk
+    at = cuts(lines, chunk, affine, processes)
+    if at is None or path is None:
+        return None if at is None else (at, [0] * len(at))
+    first = cuts(lines, chunk, affine, processes, READ_SHARE_SKIP) or at
+    sc = skipahead.scan(path, chunk, max(*at, *first) - window)
+    share = READ_SHARE_SKIP
+    for _ in range(2):  # the cuts for the lines skipped, then for those the children skip there
+        at = cuts(lines, chunk, affine, processes, share) or at
+        go = [skipahead.go_on_from(path, sc, s - window, chunk) for s in at]
+        share = max(read if not g else (READ_SHARE_SKIP * g + read * (s - window - g)) / (s - window)
+                    for g, s in zip(go, at, strict=True))
+    return at, go
 
 
 def _ends(s1: float, k: int, r: float, window: int) -> list[float]:
@@ -228,9 +253,10 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
     come from different versions of it)."""
     before = _identity(path)
     first = make()
-    at = cuts(lines, first.chunk_lines, first.linear_exact, processes)
-    if at is None:
+    planned = plan(lines, first.chunk_lines, first.linear_exact, processes, path)
+    if planned is None:
         return first.run(get_lines(), write, progress=progress)
+    at, go = planned
     window = WARMUP_CHUNKS * first.chunk_lines
     ctx = multiprocessing.get_context("fork")
     every = max(1, lines // 100)
@@ -242,8 +268,8 @@ def run(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], w
             part = tempfile.TemporaryFile("w+", encoding="utf-8", errors="surrogateescape", newline="")
             recv, send = ctx.Pipe(duplex=False)
             stop = at[j + 1] if j + 1 < len(at) else None
-            child = ctx.Process(target=_child, args=(make, get_lines, part, start, stop, max(0, start - window),
-                                                     every, send), daemon=True)
+            child = ctx.Process(target=_child, args=(make, get_lines, part, start, stop,
+                                                     (max(0, start - window), go[j]), every, send), daemon=True)
             children.append((child, recv, part))
             try:
                 forking.start(child)
@@ -360,8 +386,9 @@ def _stop(child) -> None:
 
 
 def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]], part: IO[str], start: int,
-           stop: int | None, w: int, every: int, conn) -> None:
-    """A child's side of :func:`run`: read to line W, correct to the first boundary at or
+           stop: int | None, reading: tuple[int, int], every: int, conn) -> None:
+    """A child's side of :func:`run`: read to line W (``reading``: W, and the line it goes
+    on from after the first chunk, skipping those before), correct to the first boundary at or
     after ``start`` throwing the output away, send the state there, then write its part
     to ``part`` up to the first boundary at or after ``stop`` (None: the end), where it
     sends the state again; send progress (about every ``every`` lines: the parent reads
@@ -401,7 +428,7 @@ def _child(make: Callable[[], Corrector], get_lines: Callable[[], Iterable[str]]
                                           accept_residual_mm=c.report.accept_residual_mm)
             return False
 
-        report = c.run(get_lines(), write, skip_until=w, boundary=boundary)
+        report = c.run(get_lines(), write, skip_until=reading[0], boundary=boundary, go_on_from=reading[1])
         part.flush()
         conn.send(("done", report) if live else ("abandoned", None))
     except _Abandon:

@@ -1,0 +1,168 @@
+"""Where a process correcting a later part of a program may go on reading from.
+
+A child of :mod:`postproc.gcode.split` must reach its warm-up with the modal state one
+process would have there. Reading every line before it costs about a third of
+correcting them, and most of those lines only move the machine: the position, motion
+and feed they leave are set again by the lines that follow. So the child reads the
+first chunk (the program's setup), then skips to the last tool change before its
+warm-up (where the program sets the tool, its length and the spindle again) or, in a
+program with none there, to a rapid move naming X and Y in the chunk before the warm-up,
+and reads on from there.
+
+It skips only lines in which a byte scan of the file finds none of the words that set
+state the lines after them need not set again: work offsets and G92, units, cutter
+compensation, frames, parameters, assignments and subprograms (:data:`DURABLE_G`,
+:data:`DURABLE_BYTES`, :data:`DURABLE_WORDS`); where it finds one, the child skips only
+up to that line. This is a guess at where reading can start, not a promise: the state at
+the cut is still compared value for value with the process that corrected up to it, and
+a child whose state differs is not used (:func:`postproc.gcode.split.run`); the output
+is the same either way.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+#: two-digit G codes (and their .n forms) whose state outlasts the lines after them:
+#: local and work offsets, G92, units, cutter compensation, polar coordinates,
+#: scaling and rotation, macro calls, stored positions, canned cycles (their Z, R, P and
+#: Q stay after G80)
+DURABLE_G = frozenset({
+    b"G10", b"G15", b"G16", b"G20", b"G21", b"G41", b"G42", b"G50", b"G51", b"G52", b"G54", b"G55", b"G56",
+    b"G57", b"G58", b"G59", b"G65", b"G66", b"G68", b"G69", b"G92", b"G28.1", b"G30.1", b"G54.1",
+    b"G73", b"G74", b"G76", b"G81", b"G82", b"G83", b"G84", b"G85", b"G86", b"G87", b"G88", b"G89",
+})
+#: characters of parameters, expressions and assignments
+DURABLE_BYTES = b"#=["
+#: words of subprograms and of calls (the file upper-cased): O words, M98 and M99 (each
+#: pattern on its own: one with a literal start is searched for much faster)
+DURABLE_WORDS = (re.compile(rb"O[0-9]"), re.compile(rb"M9[89](?![0-9])"))
+_G_CODE = re.compile(rb"G[1-9][0-9](?:\.[0-9])?")
+_TOOL_CHANGE = re.compile(rb"M0?6(?![0-9])")
+_T_WORD = re.compile(rb"(?<![A-Z])T[0-9]")
+_RAPID_XY = re.compile(rb"^[ \t]*(?:N[0-9]+[ \t]*)?G0?0(?![0-9.])[^(;\n]*X[^(;\n]*Y", re.M)
+#: lines read a block at a time by the scan (bytes)
+_BLOCK = 1 << 17
+#: how many lines before a tool change a T word of it may stand
+_T_BEFORE = 3
+_ALL = bytes(range(256))
+_NOT_DURABLE = _ALL.translate(None, DURABLE_BYTES)
+
+
+@dataclass
+class Scan:
+    """What the scan of a program's lines up to ``upto`` found: the line of its first
+    durable word after ``since`` (0: none), the lines where tool changes start, and where
+    each block of lines starts (line, byte offset)."""
+
+    since: int
+    upto: int
+    durable: int = 0
+    tool_starts: list[int] = field(default_factory=list)
+    blocks: list[tuple[int, int]] = field(default_factory=list)
+    usable: bool = True  # False: a line ends in a lone CR (lines counted otherwise than read)
+
+
+def scan(path: str, since: int, upto: int) -> Scan:
+    """Scan the lines ``1..upto`` of the program at ``path`` (lines numbered from 1, a line
+    ended by LF; durable words looked for after line ``since``)."""
+    out = Scan(since, upto)
+    line = 0  # lines before the block
+    rest = b""
+    with open(path, "rb") as fh:
+        while line < upto:
+            offset = fh.tell() - len(rest)
+            raw = fh.read(_BLOCK)
+            data = rest + raw
+            cut = data.rfind(b"\n") + 1 if raw else len(data)
+            if not data:
+                break
+            data, rest = data[:cut], data[cut:]
+            if not data:  # a line longer than a block: read on
+                rest = data + rest
+                continue
+            n = data.count(b"\n") + (not data.endswith(b"\n"))
+            data = data.upper()
+            out.blocks.append((line + 1, offset))
+            if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
+                out.usable = False
+                return out
+            first = _first_durable(data, since - line) if line + n > since and _has_durable(data) else 0
+            out.tool_starts += [line + t for t in _tool_changes(data) if not first or t <= first]
+            if first:
+                out.durable = line + first
+                return out  # nothing after it is skipped
+            line += n
+    return out
+
+
+def _first_durable(data: bytes, after: int) -> int:
+    """The first line of a block (numbered from 1 in it) after its line ``after`` with a
+    durable word, or 0."""
+    for k, text in enumerate(data.split(b"\n")):
+        if k >= after and _has_durable(text):
+            return k + 1
+    return 0
+
+
+def _has_durable(data: bytes) -> bool:
+    if len(data.translate(None, _NOT_DURABLE)):
+        return True
+    if any(p.search(data) for p in DURABLE_WORDS):
+        return True
+    return any(g in DURABLE_G for g in set(_G_CODE.findall(data)))
+
+
+def _tool_changes(data: bytes) -> list[int]:
+    """The lines (numbered from 1 in the block) where the block's tool changes start: the
+    line of an M6, or of a T word up to :data:`_T_BEFORE` lines before it."""
+    out: list[int] = []
+    at, last = 1, 0  # the line of position ``last``
+    for m in _TOOL_CHANGE.finditer(data):
+        p = m.start()
+        at += data.count(b"\n", last, p)
+        last = p
+        begin = data.rfind(b"\n", 0, p) + 1
+        start = at
+        for back in range(_T_BEFORE + 1):
+            end = data.find(b"\n", begin)
+            if _T_WORD.search(data, begin, len(data) if end < 0 else end):
+                start = at - back
+                break
+            if begin == 0:
+                break
+            begin = data.rfind(b"\n", 0, begin - 1) + 1
+        out.append(start)
+    return out
+
+
+def go_on_from(path: str, sc: Scan, warm_up: int, chunk: int) -> int:
+    """The line a child whose warm-up starts after line ``warm_up`` goes on reading from
+    (0: it reads every line): the last tool change before it, else a rapid move naming X
+    and Y in the chunk before it; never one past the first durable word, and never in the
+    first two chunks (the first is read in any case)."""
+    if not sc.usable:
+        return 0
+    limit = warm_up if not sc.durable else min(warm_up, sc.durable)
+    tools = [t for t in sc.tool_starts if sc.since < t <= limit]
+    at = tools[-1] if tools else _rapid_before(path, sc, limit, chunk)
+    return at if at > 2 * chunk else 0
+
+
+def _rapid_before(path: str, sc: Scan, limit: int, chunk: int) -> int:
+    """The first rapid move naming X and Y in the ``chunk`` lines up to ``limit`` (0: none)."""
+    first = max(1, limit - chunk + 1)
+    starts = [b for b in sc.blocks if b[0] <= first]
+    if not starts:
+        return 0
+    line, offset = starts[-1]
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        for raw in fh:
+            if line > limit:
+                break
+            if line >= first and _RAPID_XY.match(raw.upper()):
+                return line
+            line += 1
+    return 0
