@@ -28,14 +28,22 @@ def write(tmp_path, lines: list[str], ending: str = "\n", name: str = "p.nc") ->
 
 def go_on(tmp_path, lines: list[str], warm_up: int, ending: str = "\n") -> int:
     path = write(tmp_path, lines, ending)
-    return skipahead.go_on_from(path, skipahead.scan(path, CHUNK, warm_up), warm_up, CHUNK)
+    cut = warm_up + 2 * CHUNK
+    return skipahead.go_on_from(path, skipahead.scan(path, CHUNK, cut), warm_up, cut, CHUNK)
 
 
 def test_the_last_tool_change_before_the_warm_up(tmp_path):
-    lines = HEADER + moves(40) + ["G0 Z25", "T2 M6", "G0 G43 H2 Z25"] + moves(30) + ["T3 M6"] + moves(40)
+    lines = (HEADER + moves(40) + ["G0 Z25", "T2 M6", "G0 G43 H2 Z25"] + moves(30) + ["T3 M6", "G0 G43 H3 Z25"]
+             + moves(40))
     first, second = lines.index("T2 M6") + 1, lines.index("T3 M6") + 1
     assert go_on(tmp_path, lines, second + 5) == second
     assert go_on(tmp_path, lines, second - 1) == first  # (the later one is not before it)
+
+
+def test_never_after_the_last_line_naming_an_axis(tmp_path):
+    # after T3 no line names Z: Z is where "G0 G43 H2 Z25" put it, which must be read
+    lines = HEADER + moves(40) + ["T2 M6", "G0 G43 H2 Z25"] + moves(30) + ["T3 M6"] + moves(40)
+    assert go_on(tmp_path, lines, lines.index("T3 M6") + 5) == lines.index("T2 M6") + 1
 
 
 def test_a_t_word_a_line_or_two_before_its_m6(tmp_path):
@@ -45,15 +53,17 @@ def test_a_t_word_a_line_or_two_before_its_m6(tmp_path):
 
 @pytest.mark.parametrize("word", ["M62 P1", "M60", "M61", "M600"])
 def test_words_that_are_not_a_tool_change(tmp_path, word):
-    lines = HEADER + moves(40) + [word] + moves(40)
-    assert go_on(tmp_path, lines, 85) == 0  # no tool change and no rapid: every line is read
+    lines = HEADER + moves(40) + ["T2 M6", word] + moves(40)
+    path = write(tmp_path, lines)
+    assert skipahead.scan(path, CHUNK, len(lines)).tool_starts == [5, lines.index("T2 M6") + 1]  # (T1 M6 first)
 
 
 def test_an_m6_in_a_comment_counts(tmp_path):
     # the scan does not read comments: it reads on from there, and the state at the cut
     # is compared as ever
     lines = HEADER + moves(40) + ["(THEN M6 AGAIN)"] + moves(40)
-    assert go_on(tmp_path, lines, 85) == lines.index("(THEN M6 AGAIN)") + 1
+    path = write(tmp_path, lines)
+    assert skipahead.scan(path, CHUNK, len(lines)).tool_starts[-1] == lines.index("(THEN M6 AGAIN)") + 1
 
 
 def test_lower_case_and_leading_zeros(tmp_path):
@@ -76,12 +86,26 @@ def test_a_durable_word_in_the_first_chunk_is_read_anyway(tmp_path):
     assert go_on(tmp_path, lines, 85) == lines.index("T2 M6") + 1
 
 
-def test_without_a_tool_change_a_rapid_naming_x_and_y_before_the_warm_up(tmp_path):
-    lines = (HEADER + moves(40) + ["G0 X20 Y20 Z5"] + moves(25) + ["G0 Z5", "G00 X30.5 Y31 Z5", "N12 G0 X31 Y32"]
-             + moves(30))
+ARC = "G2 X12.5 Y20.25 I1 J0"
+
+
+def test_without_a_tool_change_the_last_straight_line_where_no_arc_follows(tmp_path):
+    lines = HEADER + moves(40) + [ARC] + moves(20) + ["X11 Y12", "G0 X20 Y20"] + moves(3) + ["X11 Y12"] * 5
+    assert go_on(tmp_path, lines, len(lines) - 1) == len(lines) - 5  # the last with G0 or G1, after the arc
+
+
+def test_where_an_arc_follows_a_rapid_naming_x_and_y(tmp_path):
+    lines = (HEADER + moves(40) + ["G0 X20 Y20 Z5", "G1 Z-1"] + moves(25) + ["G0 Z5", "G00 X30.5 Y31 Z5", "G1 Z-1"]
+             + moves(3) + [ARC] + moves(30))
     rapid = lines.index("G00 X30.5 Y31 Z5") + 1
-    assert go_on(tmp_path, lines, rapid + 3) == rapid  # the first in the chunk before the warm-up
-    assert go_on(tmp_path, lines, rapid + CHUNK + 5) == 0  # none in the chunk before: every line read
+    for warm_up in (rapid, rapid + 3, rapid + 8):  # the last before the warm-up
+        assert go_on(tmp_path, lines, warm_up) == rapid
+    assert go_on(tmp_path, lines, rapid - 3) == lines.index("G0 X20 Y20 Z5") + 1
+
+
+def test_where_an_arc_follows_and_no_rapid_names_x_and_y_every_line_is_read(tmp_path):
+    lines = HEADER + moves(60) + ["G0 Z5", "G0 X30"] + moves(3) + [ARC] + moves(30)
+    assert go_on(tmp_path, lines, 70) == 0
 
 
 def test_never_in_the_first_two_chunks(tmp_path):

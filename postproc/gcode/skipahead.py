@@ -4,19 +4,22 @@ A child of :mod:`postproc.gcode.split` must reach its warm-up with the modal sta
 process would have there. Reading every line before it costs about a third of
 correcting them, and most of those lines only move the machine: the position, motion
 and feed they leave are set again by the lines that follow. So the child reads the
-first chunk (the program's setup), then skips to the last tool change before its
-warm-up (where the program sets the tool, its length and the spindle again) or, in a
-program with none there, to a rapid move naming X and Y in the chunk before the warm-up,
-and reads on from there.
+first chunk (the program's setup), skips the lines up to a line from which the state
+at its cut is most likely set again, and reads on from there: the last tool change (the
+program sets the tool, its length, the spindle and the position again after it); in a
+program with none there, the last rapid move naming X and Y, or, where no arc follows
+up to the cut, the last line with a G0 or G1 word; in either case no later than the last
+line naming each axis before the cut (a 2D contour leaves Z where a line long before
+put it).
 
 It skips only lines in which a byte scan of the file finds none of the words that set
 state the lines after them need not set again: work offsets and G92, units, cutter
-compensation, frames, parameters, assignments and subprograms (:data:`DURABLE_G`,
-:data:`DURABLE_BYTES`, :data:`DURABLE_WORDS`); where it finds one, the child skips only
-up to that line. This is a guess at where reading can start, not a promise: the state at
-the cut is still compared value for value with the process that corrected up to it, and
-a child whose state differs is not used (:func:`postproc.gcode.split.run`); the output
-is the same either way.
+compensation, frames, canned cycles, parameters, assignments and subprograms
+(:data:`DURABLE_G`, :data:`DURABLE_BYTES`, :data:`DURABLE_WORDS`). All of this is a
+guess at where reading can start, not a promise: the state at the cut is still compared
+value for value with the process that corrected up to it, and a child whose state
+differs is not used (:func:`postproc.gcode.split.run`); the output is the same either
+way, only the time differs.
 """
 
 from __future__ import annotations
@@ -41,7 +44,14 @@ DURABLE_WORDS = (re.compile(rb"O[0-9]"), re.compile(rb"M9[89](?![0-9])"))
 _G_CODE = re.compile(rb"G[1-9][0-9](?:\.[0-9])?")
 _TOOL_CHANGE = re.compile(rb"M0?6(?![0-9])")
 _T_WORD = re.compile(rb"(?<![A-Z])T[0-9]")
-_RAPID_XY = re.compile(rb"^[ \t]*(?:N[0-9]+[ \t]*)?G0?0(?![0-9.])[^(;\n]*X[^(;\n]*Y", re.M)
+_RAPID_XY = re.compile(rb"^[ \t]*(?:N[0-9]+[ \t]*)?G0?0(?![0-9.])[^(;\n]*X[^(;\n]*Y")
+_STRAIGHT = re.compile(rb"(?<![A-Z])G0?[01](?![0-9.])")
+_ARC = re.compile(rb"(?<![A-Z])G0?[23](?![0-9.])")
+#: the axes whose last position a skipped line may have set
+_AXES = {a: re.compile(a + rb"[ \t]*[-+.0-9]") for a in (b"X", b"Y", b"Z", b"A", b"B", b"C")}
+#: lines looked at before a cut for the line to go on from (the child reads them all where
+#: this is not enough)
+LOOK_BACK = 50_000
 #: lines read a block at a time by the scan (bytes)
 _BLOCK = 1 << 17
 #: how many lines before a tool change a T word of it may stand
@@ -54,13 +64,14 @@ _NOT_DURABLE = _ALL.translate(None, DURABLE_BYTES)
 class Scan:
     """What the scan of a program's lines up to ``upto`` found: the line of its first
     durable word after ``since`` (0: none), the lines where tool changes start, and where
-    each block of lines starts (line, byte offset)."""
+    each block of lines starts (line, byte offset), and the axes named after ``since``."""
 
     since: int
     upto: int
     durable: int = 0
     tool_starts: list[int] = field(default_factory=list)
     blocks: list[tuple[int, int]] = field(default_factory=list)
+    axes: set[bytes] = field(default_factory=set)
     usable: bool = True  # False: a line ends in a lone CR (lines counted otherwise than read)
 
 
@@ -88,6 +99,9 @@ def scan(path: str, since: int, upto: int) -> Scan:
             if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
                 out.usable = False
                 return out
+            if line + n > since:
+                sc_axes = out.axes
+                sc_axes.update(a for a, p in _AXES.items() if a not in sc_axes and p.search(data))
             first = _first_durable(data, since - line) if line + n > since and _has_durable(data) else 0
             out.tool_starts += [line + t for t in _tool_changes(data) if not first or t <= first]
             if first:
@@ -137,32 +151,52 @@ def _tool_changes(data: bytes) -> list[int]:
     return out
 
 
-def go_on_from(path: str, sc: Scan, warm_up: int, chunk: int) -> int:
-    """The line a child whose warm-up starts after line ``warm_up`` goes on reading from
-    (0: it reads every line): the last tool change before it, else a rapid move naming X
-    and Y in the chunk before it; never one past the first durable word, and never in the
-    first two chunks (the first is read in any case)."""
+def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
+    """The line a child whose warm-up starts after line ``warm_up`` and whose part starts
+    after line ``cut`` goes on reading from (0: it reads every line); never in the first
+    two chunks (the first is read in any case)."""
     if not sc.usable:
         return 0
-    limit = warm_up if not sc.durable else min(warm_up, sc.durable)
+    top = min(cut, sc.upto)
+    first = max(sc.since + 1, top - LOOK_BACK + 1)
+    lines = _lines(path, sc, first, top)
+    limit = min(warm_up, top) if not sc.durable else min(warm_up, top, sc.durable)
+    last_arc = 0
+    named: dict[bytes, int] = {}
+    for k in range(len(lines) - 1, -1, -1):  # the last line naming each axis, and the last arc
+        text = lines[k]
+        if not last_arc and _ARC.search(text):
+            last_arc = first + k
+        named.update((a, first + k) for a in sc.axes if a not in named and _AXES[a].search(text))
+        if last_arc and len(named) == len(sc.axes):
+            break
+    # an axis not named in the lines looked at: named in the first chunk (read) or never,
+    # where they reach it; else somewhere before them
+    unseen = first if first > sc.since + 1 and len(named) < len(sc.axes) else limit
+    limit = min(limit, unseen, *named.values())
     tools = [t for t in sc.tool_starts if sc.since < t <= limit]
-    at = tools[-1] if tools else _rapid_before(path, sc, limit, chunk)
+    at = tools[-1] if tools else 0
+    for k in range(min(limit, top) - first, -1, -1) if not tools else ():
+        text = lines[k]
+        if _RAPID_XY.match(text) or (first + k > last_arc and _STRAIGHT.search(text)):
+            at = first + k
+            break
     return at if at > 2 * chunk else 0
 
 
-def _rapid_before(path: str, sc: Scan, limit: int, chunk: int) -> int:
-    """The first rapid move naming X and Y in the ``chunk`` lines up to ``limit`` (0: none)."""
-    first = max(1, limit - chunk + 1)
+def _lines(path: str, sc: Scan, first: int, last: int) -> list[bytes]:
+    """Lines ``first..last`` of the program (upper case, without their endings)."""
     starts = [b for b in sc.blocks if b[0] <= first]
-    if not starts:
-        return 0
+    if not starts or last < first:
+        return []
     line, offset = starts[-1]
+    out: list[bytes] = []
     with open(path, "rb") as fh:
         fh.seek(offset)
         for raw in fh:
-            if line > limit:
+            if line > last:
                 break
-            if line >= first and _RAPID_XY.match(raw.upper()):
-                return line
+            if line >= first:
+                out.append(raw.rstrip(b"\r\n").upper())
             line += 1
-    return 0
+    return out
