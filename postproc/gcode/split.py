@@ -86,7 +86,9 @@ WARMUP_CHUNKS = 2
 #: against 16.3 and 17.2 s, medians of 3); about 0.1 with a model whose moves are sampled
 READ_SHARE_AFFINE = 0.5 if scanner.__file__.endswith(".py") else 0.3
 READ_SHARE_SAMPLED = 0.1
-#: the cost of a line skipped unread (:mod:`postproc.gcode.skipahead`), the same way
+#: the cost of a line skipped unread (:mod:`postproc.gcode.skipahead`), the same way:
+#: gencam 1M lines, static, two processes: 498,885 lines skipped in 0.043 s, and then the
+#: two processes took 3.74 and 3.78 s
 READ_SHARE_SKIP = 0.02
 #: a further process is used only where it shortens the first part by this share
 MIN_GAIN = 0.1
