@@ -89,18 +89,23 @@ def correct(tmp_path, text: str, engine, processes: int, chunk: int, name: str =
     return dst.read_bytes(), rep
 
 
+def _returns(monkeypatch, name: str) -> list:
+    """What ``split.<name>`` returns, call by call (it is wrapped to record it)."""
+    seen: list = []
+    function = getattr(split, name)
+
+    def record(*args):
+        seen.append(function(*args))
+        return seen[-1]
+
+    monkeypatch.setattr(split, name, record)
+    return seen
+
+
 @pytest.fixture
 def agreements(monkeypatch):
     """The decisions at the cut (True: the child's part taken)."""
-    seen: list[bool] = []
-    agree = split._agree
-
-    def record(*args):
-        seen.append(agree(*args))
-        return seen[-1]
-
-    monkeypatch.setattr(split, "_agree", record)
-    return seen
+    return _returns(monkeypatch, "_agree")
 
 
 @pytest.mark.parametrize(("cal", "chunk"), [("static", 40), ("static", 97), ("parametric", 40)])
@@ -134,15 +139,7 @@ def test_a_state_that_disagrees_leaves_the_run_to_this_process(tmp_path, engines
 @pytest.fixture
 def plans(monkeypatch):
     """The cuts and the lines the children go on reading from (split.plan)."""
-    seen: list[tuple[list[int], list[int]] | None] = []
-    plan = split.plan
-
-    def record(*args):
-        seen.append(plan(*args))
-        return seen[-1]
-
-    monkeypatch.setattr(split, "plan", record)
-    return seen
+    return _returns(monkeypatch, "plan")
 
 
 @pytest.mark.parametrize("cal", ["static", "parametric"])
