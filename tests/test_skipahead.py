@@ -55,7 +55,7 @@ def test_a_t_word_a_line_or_two_before_its_m6(tmp_path):
 def test_words_that_are_not_a_tool_change(tmp_path, word):
     lines = HEADER + moves(40) + ["T2 M6", word] + moves(40)
     path = write(tmp_path, lines)
-    assert skipahead.scan(path, CHUNK, len(lines)).tool_starts == [5, lines.index("T2 M6") + 1]  # (T1 M6 first)
+    assert skipahead.scan(path, CHUNK, len(lines)).tool_starts(path) == [5, lines.index("T2 M6") + 1]  # (T1 M6 first)
 
 
 def test_an_m6_in_a_comment_counts(tmp_path):
@@ -63,7 +63,7 @@ def test_an_m6_in_a_comment_counts(tmp_path):
     # is compared as ever
     lines = HEADER + moves(40) + ["(THEN M6 AGAIN)"] + moves(40)
     path = write(tmp_path, lines)
-    assert skipahead.scan(path, CHUNK, len(lines)).tool_starts[-1] == lines.index("(THEN M6 AGAIN)") + 1
+    assert skipahead.scan(path, CHUNK, len(lines)).tool_starts(path)[-1] == lines.index("(THEN M6 AGAIN)") + 1
 
 
 def test_lower_case_and_leading_zeros(tmp_path):
@@ -126,7 +126,7 @@ def test_lines_are_numbered_as_they_are_counted_across_blocks(tmp_path, monkeypa
     lines = HEADER + moves(17) + [long] + moves(23) + ["T2 M6"] + moves(9) + [long, "T3 M6"] + moves(40)
     path = write(tmp_path, lines)
     sc = skipahead.scan(path, CHUNK, 200)
-    assert sc.tool_starts[-2:] == [lines.index("T2 M6") + 1, lines.index("T3 M6") + 1]
+    assert sc.tool_starts(path)[-2:] == [lines.index("T2 M6") + 1, lines.index("T3 M6") + 1]
     assert sc.blocks[0] == (1, 0)
     assert all(b[0] - a[0] >= 1 for a, b in pairwise(sc.blocks))
     with open(path, "rb") as fh:
@@ -141,4 +141,4 @@ def test_the_scan_stops_at_the_first_durable_word(tmp_path):
     path = write(tmp_path, lines)
     sc = skipahead.scan(path, CHUNK, len(lines))
     assert sc.durable == lines.index("G55") + 1
-    assert not any(t > sc.durable for t in sc.tool_starts)
+    assert not any(t > sc.durable for t in sc.tool_starts(path))

@@ -64,14 +64,41 @@ _NOT_DURABLE = _ALL.translate(None, DURABLE_BYTES)
 class Scan:
     """What the scan of a program's lines up to ``upto`` found: the line of its first
     durable word after ``since`` (0: none), the lines where tool changes start, and where
-    each block of lines starts (line, byte offset), and the axes named after ``since``."""
+    each block of lines starts (line, byte offset)."""
 
     since: int
     upto: int
     durable: int = 0
-    tool_starts: list[int] = field(default_factory=list)
     blocks: list[tuple[int, int]] = field(default_factory=list)
-    axes: set[bytes] = field(default_factory=set)
+    tools: dict[int, list[int]] = field(default_factory=dict)  # by block: where its M6 words stand
+
+    def tool_starts(self, path: str, upto: int | None = None) -> list[int]:
+        """The lines where tool changes start, up to line ``upto`` (all that were scanned)."""
+        out: list[int] = []
+        for b in sorted(self.tools):
+            out += self._starts_in(path, b)
+        last = min(upto or self.upto, self.durable or self.upto)
+        return [t for t in out if t <= last]
+
+    def last_tool_start(self, path: str, after: int, upto: int) -> int:
+        """The last line after ``after`` and up to ``upto`` where a tool change starts (0: none)."""
+        for b in sorted(self.tools, reverse=True):
+            if self.blocks[b][0] > upto:
+                continue
+            starts = [t for t in self._starts_in(path, b) if after < t <= upto]
+            if starts:
+                return starts[-1]
+            if self.blocks[b][0] <= after:
+                break
+        return 0
+
+    def _starts_in(self, path: str, b: int) -> list[int]:
+        line, offset = self.blocks[b]
+        end = self.blocks[b + 1][1] if b + 1 < len(self.blocks) else None
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            data = (fh.read(end - offset) if end is not None else fh.read(self.tools[b][-1] + _BLOCK)).upper()
+        return [line - 1 + t for t in _tool_starts(data, self.tools[b])]
     usable: bool = True  # False: a line ends in a lone CR (lines counted otherwise than read)
 
 
@@ -99,11 +126,10 @@ def scan(path: str, since: int, upto: int) -> Scan:
             if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
                 out.usable = False
                 return out
-            if line + n > since:
-                sc_axes = out.axes
-                sc_axes.update(a for a, p in _AXES.items() if a not in sc_axes and p.search(data))
             first = _first_durable(data, since - line) if line + n > since and _has_durable(data) else 0
-            out.tool_starts += [line + t for t in _tool_changes(data) if not first or t <= first]
+            at = [m.start() for m in _TOOL_CHANGE.finditer(data)]
+            if at:
+                out.tools[len(out.blocks) - 1] = at
             if first:
                 out.durable = line + first
                 return out  # nothing after it is skipped
@@ -128,21 +154,21 @@ def _has_durable(data: bytes) -> bool:
     return any(g in DURABLE_G for g in set(_G_CODE.findall(data)))
 
 
-def _tool_changes(data: bytes) -> list[int]:
-    """The lines (numbered from 1 in the block) where the block's tool changes start: the
-    line of an M6, or of a T word up to :data:`_T_BEFORE` lines before it."""
+def _tool_starts(data: bytes, at: list[int]) -> list[int]:
+    """The lines (numbered from 1 in the block ``data``) where the tool changes whose M6
+    words stand at ``at`` start: the line of the M6, or of a T word up to
+    :data:`_T_BEFORE` lines before it."""
     out: list[int] = []
-    at, last = 1, 0  # the line of position ``last``
-    for m in _TOOL_CHANGE.finditer(data):
-        p = m.start()
-        at += data.count(b"\n", last, p)
+    line, last = 1, 0  # the line of position ``last``
+    for p in at:
+        line += data.count(b"\n", last, p)
         last = p
         begin = data.rfind(b"\n", 0, p) + 1
-        start = at
+        start = line
         for back in range(_T_BEFORE + 1):
             end = data.find(b"\n", begin)
             if _T_WORD.search(data, begin, len(data) if end < 0 else end):
-                start = at - back
+                start = line - back
                 break
             if begin == 0:
                 break
@@ -161,22 +187,25 @@ def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
     first = max(sc.since + 1, top - LOOK_BACK + 1)
     lines = _lines(path, sc, first, top)
     limit = min(warm_up, top) if not sc.durable else min(warm_up, top, sc.durable)
+    # the axes: X, Y and Z, and the rotary axes the lines looked at name (one named only
+    # before them is left where the first chunk put it: a guess, as the rest)
+    joined = b"\n".join(lines)
+    axes = [a for a, p in _AXES.items() if a in b"XYZ" or p.search(joined)]
     last_arc = 0
     named: dict[bytes, int] = {}
     for k in range(len(lines) - 1, -1, -1):  # the last line naming each axis, and the last arc
         text = lines[k]
         if not last_arc and _ARC.search(text):
             last_arc = first + k
-        named.update((a, first + k) for a in sc.axes if a not in named and _AXES[a].search(text))
-        if last_arc and len(named) == len(sc.axes):
+        named.update((a, first + k) for a in axes if a not in named and _AXES[a].search(text))
+        if last_arc and len(named) == len(axes):
             break
     # an axis not named in the lines looked at: named in the first chunk (read) or never,
     # where they reach it; else somewhere before them
-    unseen = first if first > sc.since + 1 and len(named) < len(sc.axes) else limit
+    unseen = first if first > sc.since + 1 and len(named) < len(axes) else limit
     limit = min(limit, unseen, *named.values())
-    tools = [t for t in sc.tool_starts if sc.since < t <= limit]
-    at = tools[-1] if tools else 0
-    for k in range(min(limit, top) - first, -1, -1) if not tools else ():
+    at = sc.last_tool_start(path, sc.since, limit)
+    for k in range(min(limit, top) - first, -1, -1) if not at else ():
         text = lines[k]
         if _RAPID_XY.match(text) or (first + k > last_arc and _STRAIGHT.search(text)):
             at = first + k

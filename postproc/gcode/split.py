@@ -157,11 +157,12 @@ def plan(lines: int, chunk: int, affine: bool, processes: int, path: str | None
     at = cuts(lines, chunk, affine, processes)
     if at is None or path is None:
         return None if at is None else (at, [0] * len(at))
-    first = cuts(lines, chunk, affine, processes, READ_SHARE_SKIP) or at
-    sc = skipahead.scan(path, chunk, max(*at, *first))
+    sc: skipahead.Scan | None = None
     share = READ_SHARE_SKIP
     for _ in range(2):  # the cuts for the lines skipped, then for those the children skip there
         at = cuts(lines, chunk, affine, processes, share) or at
+        if sc is None or sc.upto < max(at):  # (a cut that moves little is scanned to once)
+            sc = skipahead.scan(path, chunk, max(at) + 2 * window)
         go = [skipahead.go_on_from(path, sc, s - window, s, chunk) for s in at]
         share = max(read if not g else (READ_SHARE_SKIP * g + read * (s - window - g)) / (s - window)
                     for g, s in zip(go, at, strict=True))
