@@ -142,3 +142,15 @@ def test_the_scan_stops_at_the_first_durable_word(tmp_path):
     sc = skipahead.scan(path, CHUNK, len(lines))
     assert sc.durable == lines.index("G55") + 1
     assert not any(t > sc.durable for t in sc.tool_starts(path))
+
+
+def test_never_after_the_last_line_naming_a_rotary_axis(tmp_path):
+    lines = HEADER + moves(30) + ["G1 X20 A10"] + moves(30) + ["T2 M6"] + moves(30)
+    assert go_on(tmp_path, lines, len(lines) - 5) == lines.index("G1 X20 A10") + 1
+
+
+def test_an_axis_last_named_before_the_lines_looked_at(tmp_path, monkeypatch):
+    lines = HEADER + moves(20) + ["G1 Z-1"] + moves(80) + ["T2 M6"] + moves(30)
+    assert go_on(tmp_path, lines, len(lines) - 25) == lines.index("G1 Z-1") + 1
+    monkeypatch.setattr(skipahead, "LOOK_BACK", 40)  # Z's line is out of sight: every line read
+    assert go_on(tmp_path, lines, len(lines) - 25) == 0

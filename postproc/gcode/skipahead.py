@@ -200,10 +200,11 @@ def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
         named.update((a, first + k) for a in axes if a not in named and _AXES[a].search(text))
         if last_arc and len(named) == len(axes):
             break
-    # an axis not named in the lines looked at: named in the first chunk (read) or never,
-    # where they reach it; else somewhere before them
-    unseen = first if first > sc.since + 1 and len(named) < len(axes) else limit
-    limit = min(limit, unseen, *named.values())
+    if len(named) < len(axes) and first > sc.since + 1:
+        return 0  # an axis last named before the lines looked at, no one knows where
+    # (where they reach back to the first chunk, an axis they do not name was named there,
+    # which is read, or never)
+    limit = min(limit, *named.values())
     at = sc.last_tool_start(path, sc.since, limit)
     for k in range(min(limit, top) - first, -1, -1) if not at else ():
         text = lines[k]
