@@ -27,6 +27,7 @@ import io
 import os
 import shutil
 import stat
+import sys
 import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -199,6 +200,40 @@ def copy_lines(src: BinaryIO, dst: BinaryIO, path: str | None = None, limit: int
     """Copy the byte stream ``src`` (stdin) to ``dst`` through :func:`bounded_blocks`."""
     for block in bounded_blocks(src, path, limit):
         dst.write(block)
+
+
+@contextmanager
+def as_regular_file(path: str, shown: str | None = None) -> Iterator[str]:
+    """The path of a regular file holding ``path``'s content, which can be read more than
+    once (a program is: its header, its lines, again for a second pass): ``path`` itself
+    when it is one; a pipe, FIFO, device or socket (``-``: standard input), such as a shell's
+    ``<(...)``, is read once, each line bounded, into a temporary file removed at the end.
+    An error that names the copy names ``shown`` instead (default ``path``, ``<stdin>``
+    for ``-``), with its column read while the copy is there."""
+    if path != "-":
+        try:
+            regular = stat.S_ISREG(os.stat(path).st_mode)
+        except OSError:
+            regular = True  # the reader names the problem
+        if regular:
+            yield path
+            return
+    shown = shown or ("<stdin>" if path == "-" else path)
+    with tempfile.TemporaryDirectory(prefix="postproc-") as tmp:
+        copy = os.path.join(tmp, "stdin.nc" if path == "-" else os.path.basename(path) or "program.nc")
+        with open(copy, "wb") as out:
+            if path == "-":
+                copy_lines(sys.stdin.buffer, out, shown)
+            else:
+                with open(path, "rb") as src:
+                    copy_lines(src, out, shown)
+        try:
+            yield copy
+        except PostprocError as exc:
+            if exc.path and os.path.realpath(exc.path) == os.path.realpath(copy):
+                exc.with_column()
+                exc.path = shown
+            raise
 
 
 def count_lines(path: str, limit: int = MAX_INPUT_LINE_CHARS) -> int:

@@ -74,16 +74,18 @@ def _summary(src: str, dst: str, rep, tolerance_mm: float) -> str:
 def _run_one(job: dict) -> tuple[str, str | None, int]:
     """Correct one file (runs in a worker process with -j); returns (summary, error, exit code)."""
     from postproc.calfile import load_calibration
+    from postproc.fileio import as_regular_file
     from postproc.gcode.pipeline import CorrectOptions, correct_file
     from postproc.gcode.recognise import dialect_of_file
 
     try:
         cal = load_calibration(job["calibration"])
         opts = CorrectOptions(**job["options"], added=load_maps(job["maps"]))
-        _refuse_without_code(job["src"], job["src"])
-        opts.dialect = dialect_of_file(job["src"], opts.dialect)  # generic: Sinumerik by its header
-        rep = correct_file(job["src"], job["dst"], cal.engine, job["setup"], opts,
-                           calibration_name=cal.name, calibration_sha256=cal.sha256)
+        with as_regular_file(job["src"]) as src:  # (a pipe: read once into a file)
+            _refuse_without_code(src, job["src"])
+            opts.dialect = dialect_of_file(src, opts.dialect)  # generic: Sinumerik by its header
+            rep = correct_file(src, job["dst"], cal.engine, job["setup"], opts,
+                               calibration_name=cal.name, calibration_sha256=cal.sha256)
         return _summary(job["src"], job["dst"], rep, opts.tolerance_mm), None, 0
     except PostprocError as exc:
         return "", str(exc.with_column()), exc.exit_code
@@ -303,7 +305,7 @@ def _check_not_same(src: str, dst: str) -> None:
 
 def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) -> None:
     from postproc.calfile import load_calibration
-    from postproc.fileio import copy_lines
+    from postproc.fileio import as_regular_file
     from postproc.gcode.pipeline import CorrectOptions, correct_file
     from postproc.gcode.recognise import dialect_of_file
 
@@ -313,24 +315,20 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
     progress = None
     if src != "-" and sys.stderr.isatty() and os.path.getsize(src) > PROGRESS_MIN_BYTES:
         progress = _progress_printer(src)
+    shown = "<stdin>" if src == "-" else src
     tmpdir = None
     try:
-        if src == "-":
-            tmpdir = tempfile.mkdtemp(prefix="postproc-")
-            src_path = os.path.join(tmpdir, "stdin.nc")
-            with open(src_path, "wb") as fh:  # a stream without line ends is refused, not copied forever
-                copy_lines(sys.stdin.buffer, fh, "<stdin>")
-        else:
-            src_path = src
-        _refuse_without_code(src_path, "<stdin>" if src == "-" else src)
-        opts.dialect = dialect_of_file(src_path, opts.dialect)  # generic: Sinumerik by its header
-        if dst == "-":
-            tmpdir = tmpdir or tempfile.mkdtemp(prefix="postproc-")
-            out_path = os.path.join(tmpdir, "out.nc")
-        else:
-            out_path = dst
-        rep = correct_file(src_path, out_path, cal.engine, setup, opts,
-                           calibration_name=cal.name, calibration_sha256=cal.sha256, progress=progress)
+        # a pipe or standard input is read once into a file: the program is read more than once
+        with as_regular_file(src) as src_path:
+            _refuse_without_code(src_path, shown)
+            opts.dialect = dialect_of_file(src_path, opts.dialect)  # generic: Sinumerik by its header
+            if dst == "-":
+                tmpdir = tempfile.mkdtemp(prefix="postproc-")
+                out_path = os.path.join(tmpdir, "out.nc")
+            else:
+                out_path = dst
+            rep = correct_file(src_path, out_path, cal.engine, setup, opts,
+                               calibration_name=cal.name, calibration_sha256=cal.sha256, progress=progress)
         if progress is not None:
             click.echo("", err=True)
         if dst == "-":
@@ -341,14 +339,9 @@ def _single(src: str, dst: str, calibration: str, setup, options: dict, maps) ->
                 else:
                     shutil.copyfileobj(fh, out)
                     out.flush()
-    except PostprocError as exc:
-        if src == "-" and exc.path and exc.path.endswith("stdin.nc"):
-            exc.with_column()  # while the copy of the program is there to read
-            exc.path = "<stdin>"
-        raise
     finally:
         if tmpdir:
             shutil.rmtree(tmpdir, ignore_errors=True)
-    click.echo(_summary("<stdin>" if src == "-" else src, "<stdout>" if dst == "-" else dst, rep, opts.tolerance_mm),
+    click.echo(_summary(shown, "<stdout>" if dst == "-" else dst, rep, opts.tolerance_mm),
                err=True)
 

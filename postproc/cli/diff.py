@@ -58,18 +58,22 @@ def diff(original, corrected, as_json, show_all, reading, setup, correcting):
     if sys.stderr.isatty():
         from postproc.cli.correct import PROGRESS_MIN_BYTES, _progress_printer
 
-        if os.path.getsize(original) > PROGRESS_MIN_BYTES:
+        if os.path.isfile(original) and os.path.getsize(original) > PROGRESS_MIN_BYTES:
             progress = _progress_printer(original)
     try:
         # the text report lists the largest moved blocks only: keep just those (memory
         # then does not grow with the program); --all and --json list every one
         keep = None if (as_json or show_all) else LIST_MOVED
+        from postproc.fileio import as_regular_file
         from postproc.gcode.options import CorrectOptions
         from postproc.gcode.recognise import dialect_of_file
 
-        given = CorrectOptions(**{**reading.correct_options(),
-                                  "dialect": dialect_of_file(original, reading.dialect.lower())})
-        rep = compare_programs(original, corrected, setup, progress=progress, keep=keep, options=given)
+        # a pipe (a shell's <(...)) is read once into a file: each program is read twice
+        with as_regular_file(original) as orig, as_regular_file(corrected) as corr:
+            given = CorrectOptions(**{**reading.correct_options(),
+                                      "dialect": dialect_of_file(orig, reading.dialect.lower())})
+            rep = compare_programs(orig, corr, setup, progress=progress, keep=keep, options=given)
+        rep.original, rep.corrected = original, corrected
     finally:
         if progress is not None:
             click.echo("", err=True)

@@ -87,8 +87,15 @@ def verify(program, calibrations, machine_path, points, corrected, reading, setu
 
     cals = [load_calibration(c) for c in calibrations]
     options = CorrectOptions(**correcting, **reading.correct_options())
-    report = verify_program(program, machine, cals, setup, corrected=corrected, max_step_mm=max_step,
-                            options=options)
+    from contextlib import ExitStack
+
+    from postproc.fileio import as_regular_file
+
+    with ExitStack() as stack:  # a pipe (a shell's <(...)) is read once into a file: a program is read twice
+        report = verify_program(stack.enter_context(as_regular_file(program)), machine, cals, setup,
+                                corrected=None if corrected is None else stack.enter_context(
+                                    as_regular_file(corrected)),
+                                max_step_mm=max_step, options=options)
     if plot:
         from postproc.fileio import save_figure
         from postproc.simulate.verify import plot_deviation
