@@ -4,9 +4,10 @@ The program is cut at chunk boundaries S1 < S2 < ... (weighted so that all proce
 together). This process corrects lines 1 to S1 as usual. Forked child j reads the same
 program from its first line, but corrects nothing before a warm-up window of a few
 chunks that ends at Sj: until then it only reads (the interpreter's modal state advances,
-nothing is planned or written), in the window it corrects and throws the output away,
-from Sj to S(j+1) (the last child: to the end) it writes the corrected lines to a
-temporary file.
+nothing is planned or written), and after its first chunk it skips, unread, the lines
+before the one :mod:`postproc.gcode.skipahead` finds for it (:func:`plan`); in the window
+it corrects and throws the output away, from Sj to S(j+1) (the last child: to the end)
+it writes the corrected lines to a temporary file.
 
 Whether a child's lines are the lines one process writes is checked, not assumed: at
 each cut the process that ends there and the child that starts there take the whole
