@@ -179,7 +179,8 @@ def correct(inputs, calibration, output, output_dir, jobs, reading, setup, corre
     A folder as input corrects every program in it (files ending in .nc, .ngc,
     .tap, ... or without an extension) into --output-dir, -j at a time, with a
     line per file and a tally at the end; the exit code is non-zero when any
-    file was refused.
+    file was refused. IN may be - (standard input) or a pipe such as a shell's
+    <(...): it is read once into a temporary file.
 
     Example:
 
