@@ -127,12 +127,13 @@ def test_lines_are_numbered_as_they_are_counted_across_blocks(tmp_path, monkeypa
     path = write(tmp_path, lines)
     sc = skipahead.scan(path, CHUNK, 200)
     assert sc.tool_starts(path)[-2:] == [lines.index("T2 M6") + 1, lines.index("T3 M6") + 1]
-    assert sc.blocks[0] == (1, 0)
-    assert all(b[0] - a[0] >= 1 for a, b in pairwise(sc.blocks))
+    assert sc.blocks[0][:2] == (1, 0)
+    assert all(b[0] - a[0] >= 1 and b[1] == a[1] + a[2] for a, b in pairwise(sc.blocks))
     with open(path, "rb") as fh:
         data = fh.read()
-    for line, offset in sc.blocks:  # every block starts at the line it names
+    for line, offset, size in sc.blocks:  # every block starts at the line it names, ends at a line's end
         assert data[:offset].count(b"\n") + 1 == line
+        assert data[offset + size - 1:offset + size] == b"\n"
     assert count_lines(path) == len(lines)
 
 
@@ -154,3 +155,22 @@ def test_an_axis_last_named_before_the_lines_looked_at(tmp_path, monkeypatch):
     assert go_on(tmp_path, lines, len(lines) - 25) == lines.index("G1 Z-1") + 1
     monkeypatch.setattr(skipahead, "LOOK_BACK", 40)  # Z's line is out of sight: every line read
     assert go_on(tmp_path, lines, len(lines) - 25) == 0
+
+
+def test_what_the_scan_keeps_does_not_grow_with_the_tool_changes(tmp_path):
+    lines = HEADER + ["T1 M6", "G1 X10.5 Y20.25"] * 20_000 + moves(40)
+    path = write(tmp_path, lines)
+    sc = skipahead.scan(path, CHUNK, len(lines))
+    assert len(sc.tools) == len(sc.blocks) < 20  # a block index each, not a position each
+    assert go_on(tmp_path, lines, len(lines) - 45) == len(lines) - 45  # (the last before the warm-up)
+
+
+def test_lines_looked_at_are_bounded_in_bytes(tmp_path, monkeypatch):
+    monkeypatch.setattr(skipahead, "_BLOCK", 4096)  # blocks finer than the budgets below
+    long = "G1 X10.5 Y20.25 Z-1 (" + "x" * 2000 + ")"
+    lines = HEADER + moves(40) + ["T2 M6"] + [long] * 60 + moves(5)
+    assert go_on(tmp_path, lines, len(lines) - 2) == lines.index("T2 M6") + 1
+    monkeypatch.setattr(skipahead, "LOOK_BACK_BYTES", 30_000)  # the last lines only: the same start
+    assert go_on(tmp_path, lines, len(lines) - 2) == lines.index("T2 M6") + 1
+    monkeypatch.setattr(skipahead, "LOOK_BACK_BYTES", 1_000)  # not even those: every line read
+    assert go_on(tmp_path, lines, len(lines) - 2) == 0

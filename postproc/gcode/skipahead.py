@@ -50,8 +50,9 @@ _ARC = re.compile(rb"(?<![A-Z])G0?[23](?![0-9.])")
 #: the axes whose last position a skipped line may have set
 _AXES = {a: re.compile(a + rb"[ \t]*[-+.0-9]") for a in (b"X", b"Y", b"Z", b"A", b"B", b"C")}
 #: lines looked at before a cut for the line to go on from (the child reads them all where
-#: this is not enough)
+#: this is not enough), and the most bytes of them
 LOOK_BACK = 50_000
+LOOK_BACK_BYTES = 4 << 20
 #: lines read a block at a time by the scan (bytes)
 _BLOCK = 1 << 17
 #: how many lines before a tool change a T word of it may stand
@@ -63,26 +64,26 @@ _NOT_DURABLE = _ALL.translate(None, DURABLE_BYTES)
 @dataclass
 class Scan:
     """What the scan of a program's lines up to ``upto`` found: the line of its first
-    durable word after ``since`` (0: none), the lines where tool changes start, and where
-    each block of lines starts (line, byte offset)."""
+    durable word after ``since`` (0: none), each block of lines it read (first line, byte
+    offset, size), and the blocks with a tool change (by index). Its size does not grow
+    with what a block holds: where a tool change starts is worked out again from the file
+    for the few blocks a child may go on from."""
 
     since: int
     upto: int
     durable: int = 0
-    blocks: list[tuple[int, int]] = field(default_factory=list)
-    tools: dict[int, list[int]] = field(default_factory=dict)  # by block: where its M6 words stand
+    usable: bool = True  # False: a line ends in a lone CR (lines counted otherwise than read)
+    blocks: list[tuple[int, int, int]] = field(default_factory=list)
+    tools: list[int] = field(default_factory=list)
 
     def tool_starts(self, path: str, upto: int | None = None) -> list[int]:
         """The lines where tool changes start, up to line ``upto`` (all that were scanned)."""
-        out: list[int] = []
-        for b in sorted(self.tools):
-            out += self._starts_in(path, b)
         last = min(upto or self.upto, self.durable or self.upto)
-        return [t for t in out if t <= last]
+        return [t for b in self.tools for t in self._starts_in(path, b) if t <= last]
 
     def last_tool_start(self, path: str, after: int, upto: int) -> int:
         """The last line after ``after`` and up to ``upto`` where a tool change starts (0: none)."""
-        for b in sorted(self.tools, reverse=True):
+        for b in reversed(self.tools):
             if self.blocks[b][0] > upto:
                 continue
             starts = [t for t in self._starts_in(path, b) if after < t <= upto]
@@ -93,13 +94,11 @@ class Scan:
         return 0
 
     def _starts_in(self, path: str, b: int) -> list[int]:
-        line, offset = self.blocks[b]
-        end = self.blocks[b + 1][1] if b + 1 < len(self.blocks) else None
+        line, offset, size = self.blocks[b]
         with open(path, "rb") as fh:
             fh.seek(offset)
-            data = (fh.read(end - offset) if end is not None else fh.read(self.tools[b][-1] + _BLOCK)).upper()
-        return [line - 1 + t for t in _tool_starts(data, self.tools[b])]
-    usable: bool = True  # False: a line ends in a lone CR (lines counted otherwise than read)
+            data = fh.read(size).upper()
+        return [line - 1 + t for t in _tool_starts(data, [m.start() for m in _TOOL_CHANGE.finditer(data)])]
 
 
 def scan(path: str, since: int, upto: int) -> Scan:
@@ -121,20 +120,29 @@ def scan(path: str, since: int, upto: int) -> Scan:
                 rest = data + rest
                 continue
             n = data.count(b"\n") + (not data.endswith(b"\n"))
+            out.blocks.append((line + 1, offset, len(data)))
             data = data.upper()
-            out.blocks.append((line + 1, offset))
             if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
                 out.usable = False
                 return out
             first = _first_durable(data, since - line) if line + n > since and _has_durable(data) else 0
-            at = [m.start() for m in _TOOL_CHANGE.finditer(data)]
-            if at:
-                out.tools[len(out.blocks) - 1] = at
+            if _TOOL_CHANGE.search(data, 0, _offset_of_line(data, first) if first else len(data)):
+                out.tools.append(len(out.blocks) - 1)
             if first:
                 out.durable = line + first
                 return out  # nothing after it is skipped
             line += n
     return out
+
+
+def _offset_of_line(data: bytes, k: int) -> int:
+    """Where line ``k`` (numbered from 1) of ``data`` ends."""
+    at = -1
+    for _ in range(k):
+        at = data.find(b"\n", at + 1)
+        if at < 0:
+            return len(data)
+    return at + 1
 
 
 def _first_durable(data: bytes, after: int) -> int:
@@ -185,7 +193,9 @@ def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
         return 0
     top = min(cut, sc.upto)
     first = max(sc.since + 1, top - LOOK_BACK + 1)
-    lines = _lines(path, sc, first, top)
+    first, lines = _lines(path, sc, first, top)
+    if not lines:
+        return 0  # (none, or more bytes than the budget: every line read)
     limit = min(warm_up, top) if not sc.durable else min(warm_up, top, sc.durable)
     # the axes: X, Y and Z, and the rotary axes the lines looked at name (one named only
     # before them is left where the first chunk put it: a guess, as the rest)
@@ -214,19 +224,33 @@ def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
     return at if at > 2 * chunk else 0
 
 
-def _lines(path: str, sc: Scan, first: int, last: int) -> list[bytes]:
-    """Lines ``first..last`` of the program (upper case, without their endings)."""
+def _lines(path: str, sc: Scan, first: int, last: int) -> tuple[int, list[bytes]]:
+    """Lines ``first..last`` of the program (upper case, without their endings), or only
+    the last of them where they hold more than :data:`LOOK_BACK_BYTES` (none where even
+    those hold twice as many): (the first line given, the lines)."""
     starts = [b for b in sc.blocks if b[0] <= first]
+    ends = [b for b in sc.blocks if b[0] <= last]
     if not starts or last < first:
-        return []
-    line, offset = starts[-1]
+        return first, []
+    line, offset, _size = starts[-1]
+    end_offset = ends[-1][1] + ends[-1][2]
+    if end_offset - offset > LOOK_BACK_BYTES:  # from the block where the budget starts
+        within = [b for b in sc.blocks if b[1] >= end_offset - LOOK_BACK_BYTES]
+        if not within:
+            return first, []
+        line, offset, _size = within[0]
+        first = max(first, line)
     out: list[bytes] = []
+    size = 0
     with open(path, "rb") as fh:
         fh.seek(offset)
         for raw in fh:
             if line > last:
                 break
+            if size > 2 * LOOK_BACK_BYTES:
+                return first, []
             if line >= first:
                 out.append(raw.rstrip(b"\r\n").upper())
+                size += len(raw)
             line += 1
-    return out
+    return first, out
