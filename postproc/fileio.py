@@ -203,13 +203,13 @@ def copy_lines(src: BinaryIO, dst: BinaryIO, path: str | None = None, limit: int
 
 
 @contextmanager
-def as_regular_file(path: str, shown: str | None = None) -> Iterator[str]:
+def as_regular_file(path: str) -> Iterator[str]:
     """The path of a regular file holding ``path``'s content, which can be read more than
     once (a program is: its header, its lines, again for a second pass): ``path`` itself
     when it is one; a pipe, FIFO, device or socket (``-``: standard input), such as a shell's
     ``<(...)``, is read once, each line bounded, into a temporary file removed at the end.
-    An error that names the copy names ``shown`` instead (default ``path``, ``<stdin>``
-    for ``-``), with its column read while the copy is there."""
+    An error that names the copy names ``path`` instead (``<stdin>`` for ``-``), with its
+    column read while the copy is there."""
     if path != "-":
         try:
             regular = stat.S_ISREG(os.stat(path).st_mode)
@@ -218,7 +218,7 @@ def as_regular_file(path: str, shown: str | None = None) -> Iterator[str]:
         if regular:
             yield path
             return
-    shown = shown or ("<stdin>" if path == "-" else path)
+    shown = "<stdin>" if path == "-" else path
     with tempfile.TemporaryDirectory(prefix="postproc-") as tmp:
         copy = os.path.join(tmp, "stdin.nc" if path == "-" else os.path.basename(path) or "program.nc")
         with open(copy, "wb") as out:

@@ -87,15 +87,14 @@ def verify(program, calibrations, machine_path, points, corrected, reading, setu
 
     cals = [load_calibration(c) for c in calibrations]
     options = CorrectOptions(**correcting, **reading.correct_options())
-    from contextlib import ExitStack
+    from contextlib import nullcontext
 
     from postproc.fileio import as_regular_file
 
-    with ExitStack() as stack:  # a pipe (a shell's <(...)) is read once into a file: a program is read twice
-        report = verify_program(stack.enter_context(as_regular_file(program)), machine, cals, setup,
-                                corrected=None if corrected is None else stack.enter_context(
-                                    as_regular_file(corrected)),
-                                max_step_mm=max_step, options=options)
+    # a pipe (a shell's <(...)) is read once into a file: a program is read twice
+    with as_regular_file(program) as prog, \
+            (nullcontext() if corrected is None else as_regular_file(corrected)) as corr:
+        report = verify_program(prog, machine, cals, setup, corrected=corr, max_step_mm=max_step, options=options)
     if plot:
         from postproc.fileio import save_figure
         from postproc.simulate.verify import plot_deviation

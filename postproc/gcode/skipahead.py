@@ -116,8 +116,7 @@ def scan(path: str, since: int, upto: int) -> Scan:
             if not data:
                 break
             data, rest = data[:cut], data[cut:]
-            if not data:  # a line longer than a block: read on
-                rest = data + rest
+            if not data:  # a line longer than a block: read on (it is all in ``rest``)
                 continue
             n = data.count(b"\n") + (not data.endswith(b"\n"))
             out.blocks.append((line + 1, offset, len(data)))
@@ -196,7 +195,7 @@ def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
     first, lines = _lines(path, sc, first, top)
     if not lines:
         return 0  # (none, or more bytes than the budget: every line read)
-    limit = min(warm_up, top) if not sc.durable else min(warm_up, top, sc.durable)
+    limit = min(warm_up, top, sc.durable or top)
     # the axes: X, Y and Z, and the rotary axes the lines looked at name (one named only
     # before them is left where the first chunk put it: a guess, as the rest)
     joined = b"\n".join(lines)
@@ -216,7 +215,7 @@ def go_on_from(path: str, sc: Scan, warm_up: int, cut: int, chunk: int) -> int:
     # which is read, or never)
     limit = min(limit, *named.values())
     at = sc.last_tool_start(path, sc.since, limit)
-    for k in range(min(limit, top) - first, -1, -1) if not at else ():
+    for k in range(limit - first, -1, -1) if not at else ():
         text = lines[k]
         if _RAPID_XY.match(text) or (first + k > last_arc and _STRAIGHT.search(text)):
             at = first + k
